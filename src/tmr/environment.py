@@ -1,0 +1,974 @@
+"""Planar environments: obstacles, inflation by the robot safety radius, clearance queries and map loading.
+
+The world is an axis-aligned rectangular room ``bounds = (xmin, ymin, xmax, ymax)`` [m]; everything outside it
+is an obstacle (the walls). Obstacles are shapely geometries. A robot is a disc of radius ``safety_radius`` r
+[m], so every obstacle is grown by r and the walls are grown inward by r (Caruso 2021 §5: "the obstacles are
+grown in size accordingly"). The **free space** is what is left of the room; the **clearance** of a point is
+its signed distance [m] to the inflated obstacles: > 0 free, 0 on the boundary, < 0 inside (minus the distance
+to the free space).
+
+Two kinds of query:
+
+* grid queries (fast, vectorised, differentiable): :meth:`Environment.clearance` and
+  :meth:`Environment.clearance_and_gradient` look up a signed distance field sampled on a grid of cell size
+  ``resolution`` (bilinear interpolation). The field is built once with scipy's Euclidean distance transform
+  (feature transform to the boundary cells) refined with the exact distance to the nearest boundary segments,
+  and its gradient with ``np.gradient``. This is the "distance field and its gradient" the controller of
+  Caruso 2021 §4.2 (Figure 4) consumes for the obstacle-avoidance task (eq. 16-18).
+* exact queries (shapely/GEOS): :meth:`Environment.exact_clearance`, :meth:`Environment.segment_clearance` and
+  :meth:`Environment.is_free`, used for validity checks (path planner, metrics).
+
+Maps load from ROS ``map_server`` files (``.yaml`` + ``.pgm``/``.png``), GeoJSON (``.geojson``/``.json``) and
+WKT (``.wkt``); see :meth:`Environment.from_file`. Occupancy-grid maps are **polygonised** (occupied cells
+become unions of boxes), so every query works the same for every map source.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from collections.abc import Iterable, Sequence
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import shapely
+import shapely.affinity
+import shapely.errors
+from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
+from shapely.geometry import box
+from shapely.geometry.base import BaseGeometry
+
+from tmr.errors import MapError, ParameterError
+
+__all__ = [
+    "DEFAULT_RESOLUTION",
+    "DEFAULT_SAFETY_RADIUS",
+    "Bounds",
+    "Environment",
+    "bilinear_interpolate",
+    "read_pgm",
+    "parse_map_yaml",
+]
+
+Bounds = tuple[float, float, float, float]
+
+DEFAULT_SAFETY_RADIUS = 0.5  # m, Caruso 2021 §5 (obstacles grown by the robot size)
+DEFAULT_RESOLUTION = 0.05  # m, cell of the distance field
+QUAD_SEGS = 16  # segments per quarter circle when buffering (chord error r(1 - cos(pi/64)) = 0.06 % of r)
+# grid cells added around the room (all occupied) so that the field is defined just outside the walls
+_PAD_CELLS = 4
+# refuse grids bigger than this (e.g. 200 m x 200 m at 5 cm); building the field needs ~60 bytes per cell
+_MAX_CELLS = 16_000_000
+
+MAP_SUFFIXES = (".yaml", ".yml", ".geojson", ".json", ".wkt")
+
+
+# ------------------------------------------------------------------------------------------------------------
+# small helpers
+# ------------------------------------------------------------------------------------------------------------
+def _as_points(points: ArrayLike, what: str = "points") -> NDArray[np.float64]:
+    """``points`` as a float array of shape (..., 2); ParameterError on a wrong shape or NaN/inf."""
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim == 0 or pts.shape[-1] != 2:
+        raise ParameterError(f"{what} must have shape (..., 2) (x, y in metres), got shape {pts.shape}")
+    if not np.all(np.isfinite(pts)):
+        raise ParameterError(
+            f"{what} contain NaN or inf: {pts[~np.isfinite(pts).all(axis=-1)][:3].tolist()} ..."
+        )
+    return pts
+
+
+def _check_bounds(bounds: Any, where: str) -> Bounds:
+    try:
+        values = [float(v) for v in bounds]
+    except (TypeError, ValueError):
+        raise MapError(
+            f"{where}: bounds must be 4 numbers [xmin, ymin, xmax, ymax] in metres, got {bounds!r}"
+        ) from None
+    if len(values) != 4 or not all(math.isfinite(v) for v in values):
+        raise MapError(
+            f"{where}: bounds must be 4 finite numbers [xmin, ymin, xmax, ymax] in metres, got {bounds!r}"
+        )
+    xmin, ymin, xmax, ymax = values
+    if not (xmax > xmin and ymax > ymin):
+        raise MapError(f"{where}: empty room: bounds {tuple(values)} need xmax > xmin and ymax > ymin")
+    return (xmin, ymin, xmax, ymax)
+
+
+def _check_positive(value: Any, name: str, allow_zero: bool = False) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        raise ParameterError(
+            f"{name} must be a finite {'non-negative' if allow_zero else 'positive'} number, got {v}"
+        )
+    return v
+
+
+def _polygonal_parts(geom: BaseGeometry) -> BaseGeometry:
+    """Keep only the polygons of ``geom`` (set operations may leave stray zero-area lines or points)."""
+    parts = [g for g in shapely.get_parts(geom) if isinstance(g, shapely.Polygon) and not g.is_empty]
+    if not parts:
+        return shapely.Polygon()
+    return parts[0] if len(parts) == 1 else shapely.MultiPolygon(parts)
+
+
+def bilinear_interpolate(
+    values: ArrayLike, origin: tuple[float, float], resolution: float, points: ArrayLike
+) -> NDArray[np.float64]:
+    """Bilinear interpolation of grid samples at arbitrary points, vectorised (no Python loop over points).
+
+    ``values[i, j, ...]`` is the sample at ``(origin[0] + i * resolution, origin[1] + j * resolution)`` (the
+    first axis is x). ``points`` has shape (..., 2); the result has shape ``points.shape[:-1] +
+    values.shape[2:]``. Points outside the sampled rectangle are clamped onto it (the value of the nearest
+    border point is returned). The interpolation is exact for fields linear in x and y.
+    """
+    vals = np.asarray(values, dtype=float)
+    pts = np.asarray(points, dtype=float)
+    if vals.ndim < 2 or vals.shape[0] < 1 or vals.shape[1] < 1:
+        raise ParameterError(f"values must be a grid of shape (nx, ny, ...), got shape {vals.shape}")
+    nx, ny = vals.shape[:2]
+    fx = np.clip((pts[..., 0] - origin[0]) / resolution, 0.0, nx - 1)
+    fy = np.clip((pts[..., 1] - origin[1]) / resolution, 0.0, ny - 1)
+    ix = np.minimum(np.floor(fx).astype(np.intp), max(nx - 2, 0))
+    iy = np.minimum(np.floor(fy).astype(np.intp), max(ny - 2, 0))
+    tx = fx - ix
+    ty = fy - iy
+    ix1 = np.minimum(ix + 1, nx - 1)
+    iy1 = np.minimum(iy + 1, ny - 1)
+    extra = (np.newaxis,) * (vals.ndim - 2)
+    tx = tx[(..., *extra)]
+    ty = ty[(..., *extra)]
+    return (
+        vals[ix, iy] * (1.0 - tx) * (1.0 - ty)
+        + vals[ix1, iy] * tx * (1.0 - ty)
+        + vals[ix, iy1] * (1.0 - tx) * ty
+        + vals[ix1, iy1] * tx * ty
+    )
+
+
+# ------------------------------------------------------------------------------------------------------------
+# Environment
+# ------------------------------------------------------------------------------------------------------------
+class Environment:
+    """A rectangular room with obstacles, inflated by the robot safety radius, with clearance queries.
+
+    Build it with :meth:`from_geometry` or :meth:`from_file`. Attributes (read-only by convention):
+
+    * ``bounds`` (xmin, ymin, xmax, ymax) [m] -- the room; outside is wall.
+    * ``safety_radius`` r [m] -- robot radius; obstacles are grown by r and the walls inward by r.
+    * ``resolution`` [m] -- cell size of the signed distance field.
+    * ``obstacles`` -- raw obstacles (shapely, union, clipped to the room), for plotting.
+    * ``inflated`` -- obstacles grown by r plus the walls grown by r (a frame covering the room box grown by
+      r); everything outside the room is an obstacle too.
+    * ``free`` -- the free space (Polygon or MultiPolygon), the complement of ``inflated`` in the room;
+      prepared.
+    * ``source`` -- the map file it was loaded from, or None.
+
+    The signed distance field is built lazily on the first grid query and cached; the exact queries use a
+    prepared polygon and an STR-tree of the free-space boundary segments (also cached).
+    """
+
+    def __init__(
+        self,
+        obstacles: BaseGeometry | Iterable[BaseGeometry] | None,
+        bounds: Sequence[float],
+        safety_radius: float = DEFAULT_SAFETY_RADIUS,
+        resolution: float = DEFAULT_RESOLUTION,
+        *,
+        source: str | Path | None = None,
+    ) -> None:
+        where = str(source) if source is not None else "environment"
+        self.source: Path | None = Path(source) if source is not None else None
+        self.bounds: Bounds = _check_bounds(bounds, where)
+        self.safety_radius: float = _check_positive(safety_radius, "safety_radius [m]", allow_zero=True)
+        self.resolution: float = _check_positive(resolution, "resolution [m]")
+        xmin, ymin, xmax, ymax = self.bounds
+        r = self.safety_radius
+
+        ncells = math.prod(self._grid_shape())
+        if ncells > _MAX_CELLS:
+            raise ParameterError(
+                f"{where}: a {xmax - xmin:g} m x {ymax - ymin:g} m room at resolution {self.resolution:g} m "
+                f"needs {ncells:,} grid cells (limit {_MAX_CELLS:,}); use a coarser resolution"
+            )
+
+        self.room = box(xmin, ymin, xmax, ymax)
+        raw = _union_obstacles(obstacles, where)
+        self.obstacles: BaseGeometry = raw.intersection(self.room) if not raw.is_empty else raw
+
+        if xmax - xmin <= 2 * r or ymax - ymin <= 2 * r:
+            raise MapError(
+                f"{where}: empty room: the room {xmax - xmin:g} m x {ymax - ymin:g} m leaves no free space "
+                f"for a robot of safety radius {r:g} m (needs more than {2 * r:g} m each way)"
+            )
+        inner = box(xmin + r, ymin + r, xmax - r, ymax - r)
+        grown = (
+            self.obstacles.buffer(r, quad_segs=QUAD_SEGS) if not self.obstacles.is_empty else self.obstacles
+        )
+        free = _polygonal_parts(inner.difference(grown) if not grown.is_empty else inner)
+        if free.is_empty or free.area <= 0.0:
+            raise MapError(
+                f"{where}: no free space: the obstacles grown by the safety radius {r:g} m cover the "
+                f"whole room {self.bounds}"
+            )
+        shapely.prepare(free)
+        self.free: BaseGeometry = free
+        self.inflated: BaseGeometry = box(xmin - r, ymin - r, xmax + r, ymax + r).difference(free)
+
+    # --------------------------------------------------------------------------------------------------------
+    # constructors
+    @classmethod
+    def from_geometry(
+        cls,
+        obstacles: BaseGeometry | Iterable[BaseGeometry] | None,
+        bounds: Sequence[float],
+        safety_radius: float = DEFAULT_SAFETY_RADIUS,
+        resolution: float = DEFAULT_RESOLUTION,
+    ) -> Environment:
+        """Environment from shapely obstacles (one geometry, a list of them, or None for an empty room).
+
+        Polygons are solid obstacles; lines and points are zero-thickness obstacles (they still block a band
+        of width 2 r once inflated). ``bounds`` = (xmin, ymin, xmax, ymax) [m]; ``safety_radius`` [m];
+        ``resolution`` [m] cell of the distance field. Invalid geometry raises MapError.
+        """
+        return cls(obstacles, bounds, safety_radius, resolution)
+
+    @classmethod
+    def from_file(
+        cls,
+        path: str | Path,
+        bounds: Sequence[float] | None = None,
+        safety_radius: float = DEFAULT_SAFETY_RADIUS,
+        resolution: float = DEFAULT_RESOLUTION,
+    ) -> Environment:
+        """Load a map file; raises MapError naming the file and the problem.
+
+        * ``.yaml``/``.yml``: ROS ``map_server`` metadata (``image``, ``resolution``, ``origin: [x, y, yaw]``,
+          ``negate``, ``occupied_thresh``, ``free_thresh``, ``mode``) with a PGM (P5 binary or P2 ASCII, 8 or
+          16 bit) or PNG image. Occupied **and unknown** cells are obstacles (conservative). The room is the
+          image footprint unless ``bounds`` is given.
+        * ``.geojson``/``.json``: a FeatureCollection, Feature, GeometryCollection or bare geometry. Polygons
+          and multipolygons are obstacles; a Point (or MultiPoint) with a ``radius`` property [m] is a disc; a
+          LineString with a ``width`` property [m] is a wall of that thickness (flat ends); points/lines
+          without them are zero-thickness obstacles. The room is ``bounds`` or else a top-level ``"bounds":
+          [xmin, ymin, xmax, ymax]`` member of the document.
+        * ``.wkt``: one WKT geometry (e.g. a GEOMETRYCOLLECTION or MULTIPOLYGON), or one per line; ``#``
+          starts a comment line; a comment ``# bounds: xmin ymin xmax ymax`` gives the room when ``bounds`` is
+          None.
+        """
+        p = Path(path)
+        if not p.exists():
+            raise MapError(f"{p}: map file not found")
+        if not p.is_file():
+            raise MapError(f"{p}: not a file")
+        suffix = p.suffix.lower()
+        if suffix in (".yaml", ".yml"):
+            obstacles, file_bounds = _load_ros_map(p)
+        elif suffix in (".geojson", ".json"):
+            obstacles, file_bounds = _load_geojson(p)
+        elif suffix == ".wkt":
+            obstacles, file_bounds = _load_wkt(p)
+        elif suffix in (".pgm", ".png"):
+            raise MapError(
+                f"{p}: give the ROS map_server .yaml file that describes this image (resolution, origin)"
+            )
+        else:
+            raise MapError(f"{p}: unknown map format {suffix!r}; supported: {', '.join(MAP_SUFFIXES)}")
+        room = bounds if bounds is not None else file_bounds
+        if room is None:
+            raise MapError(
+                f"{p}: no room bounds: pass bounds=(xmin, ymin, xmax, ymax) or put them in the file "
+                f"(GeoJSON: top-level \"bounds\" member; WKT: a '# bounds: xmin ymin xmax ymax' comment)"
+            )
+        return cls(obstacles, room, safety_radius, resolution, source=p)
+
+    # --------------------------------------------------------------------------------------------------------
+    # pickling
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        for key in ("_grid", "_tree"):  # cached heavy objects; rebuilt on demand
+            state.pop(key, None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        shapely.prepare(self.free)
+
+    def __repr__(self) -> str:
+        src = f", source={str(self.source)!r}" if self.source is not None else ""
+        return (
+            f"Environment(bounds={self.bounds}, safety_radius={self.safety_radius:g}, "
+            f"resolution={self.resolution:g}, obstacle_area={self.obstacles.area:.3f} m^2{src})"
+        )
+
+    # --------------------------------------------------------------------------------------------------------
+    # grid field
+    def _grid_shape(self) -> tuple[int, int]:
+        """Number of grid cells (nx, ny): the room plus _PAD_CELLS on every side."""
+        xmin, ymin, xmax, ymax = self.bounds
+        return (
+            math.ceil((xmax - xmin) / self.resolution - 1e-9) + 2 * _PAD_CELLS,
+            math.ceil((ymax - ymin) / self.resolution - 1e-9) + 2 * _PAD_CELLS,
+        )
+
+    @cached_property
+    def _grid(self) -> tuple[NDArray[np.float64], tuple[float, float], NDArray[np.bool_]]:
+        """(field (nx, ny, 3) = [signed distance, d/dx, d/dy], centre of cell (0, 0), occupancy (nx, ny))."""
+        xmin, ymin, _, _ = self.bounds
+        res = self.resolution
+        nx, ny = self._grid_shape()
+        x0 = xmin - (_PAD_CELLS - 0.5) * res
+        y0 = ymin - (_PAD_CELLS - 0.5) * res
+        xs = x0 + res * np.arange(nx)
+        ys = y0 + res * np.arange(ny)
+        X, Y = np.meshgrid(xs, ys, indexing="ij")
+        free = shapely.contains_xy(self.free, X, Y)
+        if not free.any():
+            raise MapError(
+                f"{self.source or 'environment'}: the free space is narrower than one grid cell "
+                f"({res:g} m); use a finer resolution"
+            )
+        sdf = np.where(free, 1.0, -1.0) * self._unsigned_field(free, x0, y0)
+        gx, gy = np.gradient(sdf, res)
+        field = np.stack([sdf, gx, gy], axis=-1)
+        field.setflags(write=False)
+        return field, (float(x0), float(y0)), ~free
+
+    def _unsigned_field(self, free: NDArray[np.bool_], x0: float, y0: float) -> NDArray[np.float64]:
+        """Distance [m] of every cell centre to the free-space boundary (EDT feature transform + exact).
+
+        1. boundary band = cells with a 4-neighbour on the other side of the boundary, and the cells the
+           boundary passes through;
+        2. for each band cell, the nearest boundary segment (STR-tree, exact);
+        3. ``distance_transform_edt(..., return_indices=True)`` gives every cell its nearest band cell;
+        4. the cell's distance is the exact distance to the segments of that band cell and of its 8
+           neighbours.
+
+        Compared with the plain raster EDT (distances between cell centres, free minus occupied) this removes
+        the staircase error: on the built-in scenarios the 99th percentile of the field error drops from 0.45
+        to 0.05-0.2 cell and the 95th percentile of the gradient error from 0.09 to 0.01.
+        """
+        res = self.resolution
+        nx, ny = free.shape
+        band = np.zeros_like(free)
+        band[1:] |= free[1:] != free[:-1]
+        band[:-1] |= free[:-1] != free[1:]
+        band[:, 1:] |= free[:, 1:] != free[:, :-1]
+        band[:, :-1] |= free[:, :-1] != free[:, 1:]
+        # plus the cells the boundary passes through (sampled every half cell), so that free pockets or
+        # slivers thinner than a cell, invisible to the occupancy raster, still attract the nearby distances
+        tree, segments = self._tree
+        seg = shapely.get_coordinates(segments).reshape(-1, 2, 2)
+        n = np.ceil(np.hypot(*(seg[:, 1] - seg[:, 0]).T) / (0.5 * res)).astype(np.intp) + 1
+        sid = np.repeat(np.arange(len(seg)), n)
+        t = (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n)
+        samples = seg[sid, 0] + t[:, None] * (seg[sid, 1] - seg[sid, 0])
+        si = np.clip(np.rint((samples[:, 0] - x0) / res).astype(np.intp), 0, nx - 1)
+        sj = np.clip(np.rint((samples[:, 1] - y0) / res).astype(np.intp), 0, ny - 1)
+        band[si, sj] = True
+        bi, bj = np.nonzero(band)
+        centres = shapely.points(x0 + res * bi, y0 + res * bj)
+        hit_idx, hit_seg = tree.query_nearest(centres, all_matches=False)
+        seg_of = np.empty(len(bi), dtype=np.intp)
+        seg_of[hit_idx] = hit_seg
+        ax, ay = seg[seg_of, 0, 0], seg[seg_of, 0, 1]  # per band cell: its nearest segment A + t (B - A)
+        ux, uy = seg[seg_of, 1, 0] - ax, seg[seg_of, 1, 1] - ay
+        uu = np.maximum(ux * ux + uy * uy, 1e-300)
+        label = np.full(free.shape, -1, dtype=np.intp)
+        label[bi, bj] = np.arange(len(bi))
+        near = ndimage.distance_transform_edt(~band, return_distances=False, return_indices=True)
+        out = np.empty(free.shape)
+        step = max(1, 2_000_000 // (9 * ny))  # rows per slab: bounds the temporaries to a few tens of MB
+        for r0 in range(0, nx, step):
+            ni, nj = near[0, r0 : r0 + step], near[1, r0 : r0 + step]
+            px = (x0 + res * np.arange(r0, r0 + ni.shape[0]))[:, None]
+            py = (y0 + res * np.arange(ny))[None, :]
+            best = np.full(ni.shape, np.inf)
+            for di in (-1, 0, 1):
+                for dj in (-1, 0, 1):
+                    k = label[np.clip(ni + di, 0, nx - 1), np.clip(nj + dj, 0, ny - 1)]
+                    ok = k >= 0
+                    k = np.where(ok, k, 0)
+                    dx, dy = px - ax[k], py - ay[k]
+                    t = np.clip((dx * ux[k] + dy * uy[k]) / uu[k], 0.0, 1.0)
+                    d = np.hypot(dx - t * ux[k], dy - t * uy[k])
+                    best = np.where(ok & (d < best), d, best)
+            out[r0 : r0 + step] = best
+        return out
+
+    @property
+    def distance_field(self) -> NDArray[np.float64]:
+        """Signed distance field [m], shape (nx, ny); [i, j] is at the cell centre (x0 + i h, y0 + j h)."""
+        return self._grid[0][..., 0]
+
+    @property
+    def occupancy(self) -> NDArray[np.bool_]:
+        """Occupied cells (inflated obstacles and walls), shape (nx, ny), indexed like the field."""
+        return self._grid[2]
+
+    @property
+    def grid_origin(self) -> tuple[float, float]:
+        """Centre (x0, y0) [m] of grid cell (0, 0)."""
+        return self._grid[1]
+
+    def _lookup(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        pts = _as_points(points)
+        field, origin, _ = self._grid
+        nx, ny = field.shape[:2]
+        res = self.resolution
+        lo = np.array(origin)
+        hi = lo + res * np.array([nx - 1, ny - 1])
+        clamped = np.clip(pts, lo, hi)
+        vals = bilinear_interpolate(field, origin, res, clamped)
+        d = vals[..., 0]
+        grad = vals[..., 1:]
+        off = pts - clamped
+        out = np.hypot(off[..., 0], off[..., 1])
+        if np.any(out > 0):
+            # beyond the grid (deep in the walls): keep decreasing linearly with the distance to the grid, and
+            # differentiate that term in the clamped coordinates
+            d = d - out
+            unit = off / np.where(out > 0, out, 1.0)[..., None]
+            grad = np.where(off != 0.0, -unit, grad)
+        return d, grad
+
+    def clearance(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Clearance [m] of points (..., 2), shape (...): bilinear lookup of the signed distance field.
+
+        > 0 free, < 0 inside an inflated obstacle or wall. Agrees with :meth:`exact_clearance` to within about
+        half a grid cell (the bilinear interpolation error at kinks of the distance: medial axis, corners).
+        Points beyond the grid are clamped onto it and lose one metre of clearance per metre outside.
+        """
+        return self._lookup(points)[0]
+
+    def clearance_and_gradient(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Clearance [m] (shape (...)) and its gradient (shape (..., 2), dimensionless) at points (..., 2).
+
+        The gradient is the bilinear interpolation of the central-difference gradient of the field
+        (``np.gradient``); it has unit length away from the medial axis and points away from the nearest
+        obstacle -- the direction of the distance gradient used by the obstacle-avoidance task (Caruso 2021
+        eq. 16-18). It is shorter than one near the medial axis, where the nearest obstacle changes.
+        """
+        return self._lookup(points)
+
+    # --------------------------------------------------------------------------------------------------------
+    # exact
+    @cached_property
+    def _tree(self) -> tuple[shapely.STRtree, NDArray[np.object_]]:
+        """STR-tree over the straight segments of the free-space boundary (exact nearest distances)."""
+        boundary = shapely.get_parts(shapely.boundary(self.free))
+        coords, index = shapely.get_coordinates(boundary, return_index=True)
+        same = index[1:] == index[:-1]
+        segments = shapely.linestrings(np.stack([coords[:-1][same], coords[1:][same]], axis=1))
+        return shapely.STRtree(segments), segments
+
+    def _boundary_distance(self, geoms: NDArray[np.object_]) -> NDArray[np.float64]:
+        tree, _ = self._tree
+        dist = np.empty(len(geoms))
+        if len(geoms) == 0:
+            return dist
+        (idx, _), d = tree.query_nearest(geoms, return_distance=True, all_matches=False)
+        dist[idx] = d
+        return dist
+
+    def exact_clearance(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Exact signed distance [m] of points (..., 2) to the inflated obstacles and walls; shape (...).
+
+        Distance to the boundary of the free space (nearest boundary segment, STR-tree, vectorised), positive
+        inside the free space and negative outside it (``shapely.contains_xy``). Buffered arcs are polygons
+        with 16 segments per quarter circle, so round obstacles are exact to 0.06 % of their inflated radius.
+        """
+        pts = _as_points(points)
+        flat = pts.reshape(-1, 2)
+        d = self._boundary_distance(shapely.points(flat))
+        inside = shapely.contains_xy(self.free, flat[:, 0], flat[:, 1])
+        return np.where(inside, d, -d).reshape(pts.shape[:-1])
+
+    def segment_clearance(self, a: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
+        """Clearance [m] of the straight segments a-b (a, b broadcast to (..., 2)); shape (...).
+
+        Definition: if the segment lies in the free space (closure included), its exact distance to the
+        inflated obstacles, i.e. the minimum clearance over the segment (>= 0). Otherwise the segment touches
+        or crosses an inflated obstacle and the result is ``min(0, min_k exact_clearance(p_k))`` over points
+        p_k spaced at most ``resolution / 2`` along it (end points included): <= 0, minus (approximately, from
+        below) the deepest penetration. So ``segment_clearance > m`` (m >= 0) is an exact test that the whole
+        segment keeps a clearance above m. Zero-length segments give the point clearance.
+        """
+        pa = _as_points(a, "a")
+        pb = _as_points(b, "b")
+        pa, pb = np.broadcast_arrays(pa, pb)
+        shape = pa.shape[:-1]
+        A = pa.reshape(-1, 2)
+        B = pb.reshape(-1, 2)
+        out = np.empty(len(A))
+        degenerate = np.all(A == B, axis=1)
+        if degenerate.any():
+            out[degenerate] = self.exact_clearance(A[degenerate])
+        seg = ~degenerate
+        if seg.any():
+            lines = shapely.linestrings(np.stack([A[seg], B[seg]], axis=1))
+            dist = self._boundary_distance(lines)
+            covered = shapely.covers(self.free, lines)
+            res = np.where(covered, dist, 0.0)
+            if not covered.all():
+                res[~covered] = self._penetration(A[seg][~covered], B[seg][~covered])
+            out[seg] = res
+        return out.reshape(shape)
+
+    def _penetration(self, A: NDArray[np.float64], B: NDArray[np.float64]) -> NDArray[np.float64]:
+        """min(0, min exact clearance over points spaced <= resolution/2 along each segment A-B)."""
+        h = 0.5 * self.resolution
+        length = np.hypot(*(B - A).T)
+        n = np.maximum(2, np.ceil(length / h).astype(np.intp) + 1)
+        starts = np.concatenate([[0], np.cumsum(n)[:-1]])
+        seg_id = np.repeat(np.arange(len(A)), n)
+        t = (np.arange(n.sum()) - starts[seg_id]) / (n[seg_id] - 1)
+        pts = A[seg_id] + t[:, None] * (B - A)[seg_id]
+        d = self.exact_clearance(pts)
+        return np.minimum(np.minimum.reduceat(d, starts), 0.0)
+
+    def is_free(self, points: ArrayLike, margin: float = 0.0) -> NDArray[np.bool_]:
+        """True where ``exact_clearance(points) > margin`` [m]; shape (...). Fast path for margin >= 0."""
+        pts = _as_points(points)
+        margin = float(margin)
+        if not math.isfinite(margin):
+            raise ParameterError(f"margin must be finite, got {margin}")
+        if margin < 0.0:
+            return self.exact_clearance(pts) > margin
+        flat = pts.reshape(-1, 2)
+        inside = shapely.contains_xy(self.free, flat[:, 0], flat[:, 1])
+        if margin > 0.0 and inside.any():
+            tree, _ = self._tree
+            idx = np.flatnonzero(inside)
+            hits = tree.query(shapely.points(flat[idx]), predicate="dwithin", distance=margin)
+            inside[idx[np.unique(hits[0])]] = False
+        return inside.reshape(pts.shape[:-1])
+
+
+# ------------------------------------------------------------------------------------------------------------
+# geometry input
+# ------------------------------------------------------------------------------------------------------------
+def _union_obstacles(obstacles: BaseGeometry | Iterable[BaseGeometry] | None, where: str) -> BaseGeometry:
+    if obstacles is None:
+        return shapely.GeometryCollection()
+    geoms = [obstacles] if isinstance(obstacles, BaseGeometry) else list(obstacles)
+    for k, g in enumerate(geoms):
+        if not isinstance(g, BaseGeometry):
+            raise MapError(f"{where}: obstacle #{k} is not a shapely geometry: {type(g).__name__}")
+        _check_geometry(g, f"{where}: obstacle #{k}")
+    if not geoms:
+        return shapely.GeometryCollection()
+    return shapely.union_all(geoms)
+
+
+def _check_geometry(g: BaseGeometry, what: str) -> None:
+    if g.is_empty:
+        return
+    coords = shapely.get_coordinates(g)
+    if not np.all(np.isfinite(coords)):
+        raise MapError(f"{what}: coordinates contain NaN or inf")
+    if not shapely.is_valid(g):
+        raise MapError(
+            f"{what}: invalid geometry ({shapely.is_valid_reason(g)}); fix the polygon "
+            f"(no self-intersections, closed rings, holes inside the shell), e.g. with shapely.make_valid"
+        )
+
+
+# ------------------------------------------------------------------------------------------------------------
+# ROS map_server maps
+# ------------------------------------------------------------------------------------------------------------
+_YAML_KEY = re.compile(r"^([A-Za-z_][A-Za-z0-9_\-]*)\s*:(?:\s+(.*)|\s*)$")
+
+
+def _strip_comment(line: str) -> str:
+    """Remove a ``#`` comment that is not inside quotes."""
+    quote = None
+    for k, ch in enumerate(line):
+        if quote:
+            if ch == quote:
+                quote = None
+        elif ch in "'\"":
+            quote = ch
+        elif ch == "#" and (k == 0 or line[k - 1] in " \t"):
+            return line[:k]
+    return line
+
+
+def _yaml_scalar(text: str) -> Any:
+    text = text.strip()
+    if len(text) >= 2 and text[0] == text[-1] and text[0] in "'\"":
+        return text[1:-1]
+    low = text.lower()
+    if low in ("true", "yes", "on"):
+        return True
+    if low in ("false", "no", "off"):
+        return False
+    if low in ("null", "~", ""):
+        return None
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def _yaml_flow_list(text: str, where: str) -> list[Any]:
+    inner = text.strip()[1:-1].strip()
+    if not inner:
+        return []
+    if "[" in inner or "{" in inner:
+        raise MapError(f"{where}: nested lists are not supported in a map_server yaml: {text!r}")
+    return [_yaml_scalar(item) for item in inner.split(",")]
+
+
+def parse_map_yaml(text: str, path: str | Path = "<yaml>") -> dict[str, Any]:
+    """Parse the flat ``key: value`` YAML of a ROS map_server map (no PyYAML needed).
+
+    Supports comments, quoted strings, numbers, booleans, flow lists ``[x, y, yaw]`` and block lists
+    (``- item`` lines under an empty ``key:``). Anything else (nested mappings, a line without ``key:``,
+    duplicate keys) raises MapError naming the file and the line.
+    """
+    result: dict[str, Any] = {}
+    pending: str | None = None  # key waiting for block-list items
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        line = _strip_comment(raw).rstrip()
+        stripped = line.strip()
+        if not stripped or stripped in ("---", "..."):
+            continue
+        where = f"{path}: line {lineno}"
+        if stripped.startswith("- "):
+            if pending is None:
+                raise MapError(f"{where}: list item {stripped!r} does not follow a 'key:' line")
+            if result[pending] is None:
+                result[pending] = []
+            result[pending].append(_yaml_scalar(stripped[2:]))
+            continue
+        if line[0] in " \t":
+            raise MapError(
+                f"{where}: nested mappings are not supported in a map_server yaml: {raw.strip()!r}"
+            )
+        m = _YAML_KEY.match(line)
+        if m is None:
+            raise MapError(f"{where}: expected 'key: value', got {raw.strip()[:60]!r}")
+        key, value = m.group(1), (m.group(2) or "").strip()
+        if key in result:
+            raise MapError(f"{where}: duplicate key {key!r}")
+        if value.startswith("["):
+            if not value.endswith("]"):
+                raise MapError(f"{where}: unterminated list {value!r}")
+            result[key] = _yaml_flow_list(value, where)
+            pending = None
+        elif value.startswith("{"):
+            raise MapError(f"{where}: nested mappings are not supported in a map_server yaml: {value!r}")
+        elif value == "":
+            result[key] = None
+            pending = key
+        else:
+            result[key] = _yaml_scalar(value)
+            pending = None
+    return result
+
+
+def read_pgm(path: str | Path) -> tuple[NDArray[np.int64], int]:
+    """Read a PGM image (P5 binary or P2 ASCII, 8 or 16 bit) -> (pixels (height, width), maxval).
+
+    Row 0 is the top of the image. Raises MapError naming the file and what is wrong with the header or data.
+    """
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise MapError(f"{p}: cannot read image: {exc.strerror or exc}") from None
+    magic = data[:2]
+    if magic not in (b"P5", b"P2"):
+        kind = {b"P1": "PBM", b"P4": "PBM", b"P3": "PPM (colour)", b"P6": "PPM (colour)"}.get(magic)
+        hint = f" (this is a {kind} image; save it as greyscale PGM)" if kind else ""
+        raise MapError(f"{p}: not a PGM image: magic number {magic!r}, expected b'P5' or b'P2'{hint}")
+    pos = 2
+    fields: list[int] = []
+    n = len(data)
+    while len(fields) < 3:
+        while pos < n and data[pos : pos + 1].isspace():
+            pos += 1
+        if pos < n and data[pos : pos + 1] == b"#":
+            while pos < n and data[pos : pos + 1] not in (b"\n", b"\r"):
+                pos += 1
+            continue
+        start = pos
+        while pos < n and data[pos : pos + 1].isdigit():
+            pos += 1
+        if start == pos:
+            got = data[start : start + 10]
+            name = ("width", "height", "maxval")[len(fields)]
+            raise MapError(f"{p}: bad PGM header: expected the {name} (a positive integer), got {got!r}")
+        fields.append(int(data[start:pos]))
+    width, height, maxval = fields
+    if width <= 0 or height <= 0:
+        raise MapError(f"{p}: bad PGM header: image size {width} x {height}")
+    if not 0 < maxval < 65536:
+        raise MapError(f"{p}: bad PGM header: maxval {maxval} must be in 1..65535")
+    count = width * height
+    if magic == b"P5":
+        if pos >= n or not data[pos : pos + 1].isspace():
+            raise MapError(f"{p}: bad PGM header: no whitespace after maxval")
+        pos += 1
+        dtype = np.dtype(">u2") if maxval > 255 else np.dtype("u1")
+        raster = data[pos:]
+        if len(raster) < count * dtype.itemsize:
+            raise MapError(
+                f"{p}: truncated PGM: {width} x {height} pixels need {count * dtype.itemsize} bytes, "
+                f"found {len(raster)}"
+            )
+        pixels = np.frombuffer(raster, dtype=dtype, count=count).astype(np.int64)
+    else:
+        body = re.sub(rb"#[^\n\r]*", b" ", data[pos:])
+        try:
+            values = np.array(body.split(), dtype=np.int64)
+        except (ValueError, OverflowError):
+            raise MapError(f"{p}: bad P2 PGM data: non-integer pixel values") from None
+        if len(values) < count:
+            raise MapError(f"{p}: truncated PGM: {width} x {height} pixels, found {len(values)} values")
+        pixels = values[:count]
+    if pixels.size and (pixels.max() > maxval or pixels.min() < 0):
+        raise MapError(f"{p}: PGM pixel values outside 0..{maxval}")
+    return pixels.reshape(height, width), maxval
+
+
+def _read_png(path: Path) -> tuple[NDArray[np.float64], int]:
+    import matplotlib.image as mpimg  # matplotlib is a dependency; it reads PNG through Pillow
+
+    try:
+        img = np.asarray(mpimg.imread(path), dtype=float)
+    except Exception as exc:  # any decoder error means a bad map image
+        raise MapError(f"{path}: cannot read PNG image: {exc}") from None
+    if img.ndim == 3:
+        img = img[..., :3].mean(axis=-1)  # map_server averages the colour channels
+    return img * 255.0, 255
+
+
+def _number(meta: dict[str, Any], key: str, where: str, default: float | None = None) -> float:
+    if key not in meta or meta[key] is None:
+        if default is None:
+            raise MapError(f"{where}: missing required key {key!r}")
+        return default
+    v = meta[key]
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        raise MapError(f"{where}: {key} must be a finite number, got {v!r}")
+    return float(v)
+
+
+def _load_ros_map(path: Path) -> tuple[BaseGeometry, Bounds]:
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise MapError(f"{path}: not a text file (map_server yaml expected)") from None
+    meta = parse_map_yaml(text, path)
+    if not meta:
+        raise MapError(f"{path}: empty map yaml (needs image, resolution, origin)")
+    where = str(path)
+    image = meta.get("image")
+    if not isinstance(image, str) or not image.strip():
+        raise MapError(f"{where}: missing required key 'image' (path of the .pgm/.png, relative to the yaml)")
+    res = _number(meta, "resolution", where)
+    if res <= 0:
+        raise MapError(f"{where}: resolution must be a positive number of metres per pixel, got {res}")
+    origin = meta.get("origin")
+    if (
+        not isinstance(origin, list)
+        or len(origin) not in (2, 3)
+        or not all(
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in origin
+        )
+    ):
+        raise MapError(f"{where}: origin must be a list [x, y, yaw] of finite numbers, got {origin!r}")
+    ox, oy = float(origin[0]), float(origin[1])
+    yaw = float(origin[2]) if len(origin) == 3 else 0.0
+    negate = meta.get("negate", 0)
+    if negate not in (0, 1, True, False):
+        raise MapError(f"{where}: negate must be 0 or 1, got {negate!r}")
+    occ_th = _number(meta, "occupied_thresh", where, 0.65)
+    free_th = _number(meta, "free_thresh", where, 0.196)
+    if not 0.0 <= free_th <= occ_th <= 1.0:
+        raise MapError(f"{where}: need 0 <= free_thresh <= occupied_thresh <= 1, got {free_th} and {occ_th}")
+    mode = str(meta.get("mode", "trinary")).lower()
+    if mode not in ("trinary", "scale", "raw"):
+        raise MapError(f"{where}: mode must be trinary, scale or raw, got {meta.get('mode')!r}")
+
+    img_path = Path(image.strip())
+    if not img_path.is_absolute():
+        img_path = path.parent / img_path
+    if not img_path.is_file():
+        raise MapError(f"{where}: image file {img_path} not found")
+    if img_path.suffix.lower() == ".png":
+        pixels, maxval = _read_png(img_path)
+    elif img_path.suffix.lower() == ".pgm":
+        pixels, maxval = read_pgm(img_path)
+    else:
+        raise MapError(f"{where}: unsupported image format {img_path.suffix!r}; use PGM (P5/P2) or PNG")
+
+    if mode == "raw":
+        # raw: the pixel value is the occupancy in percent (values above 100, e.g. 255, are unknown)
+        p_occ = np.where(pixels > 100, np.nan, pixels / 100.0)
+    else:
+        p_occ = pixels / maxval if negate else (maxval - pixels) / maxval
+    # occupied above occupied_thresh, free below free_thresh; unknown in between (all modes): obstacle
+    free = p_occ < free_th
+    occupied = ~free
+    height, width = occupied.shape
+    geom = _polygonise(occupied, res, ox, oy)
+    footprint = box(ox, oy, ox + width * res, oy + height * res)
+    if yaw != 0.0:
+        geom = shapely.affinity.rotate(geom, yaw, origin=(ox, oy), use_radians=True)
+        footprint = shapely.affinity.rotate(footprint, yaw, origin=(ox, oy), use_radians=True)
+        rect = box(*footprint.bounds)
+        geom = shapely.union(geom, rect.difference(footprint))
+    return geom, tuple(float(v) for v in footprint.bounds)  # type: ignore[return-value]
+
+
+def _polygonise(occupied: NDArray[np.bool_], res: float, ox: float, oy: float) -> BaseGeometry:
+    """Union of boxes covering the occupied cells; image row 0 is the top (largest y)."""
+    height, width = occupied.shape
+    if not occupied.any():
+        return shapely.GeometryCollection()
+    padded = np.zeros((height, width + 2), dtype=np.int8)
+    padded[:, 1:-1] = occupied
+    diff = np.diff(padded, axis=1)
+    rows_s, cols_s = np.nonzero(diff == 1)
+    _, cols_e = np.nonzero(diff == -1)  # same row-major order as the starts
+    # merge identical runs of consecutive rows into one rectangle
+    rects: list[list[int]] = []  # [col_start, col_end, row_top, row_bottom]
+    open_runs: dict[tuple[int, int], list[int]] = {}
+    for r, c0, c1 in zip(rows_s.tolist(), cols_s.tolist(), cols_e.tolist(), strict=True):
+        rect = open_runs.get((c0, c1))
+        if rect is not None and rect[3] == r - 1:
+            rect[3] = r
+        else:
+            rect = [c0, c1, r, r]
+            rects.append(rect)
+            open_runs[(c0, c1)] = rect
+    arr = np.array(rects, dtype=float)
+    x0 = ox + arr[:, 0] * res
+    x1 = ox + arr[:, 1] * res
+    y1 = oy + (height - arr[:, 2]) * res
+    y0 = oy + (height - arr[:, 3] - 1) * res
+    return shapely.union_all(shapely.box(x0, y0, x1, y1))
+
+
+# ------------------------------------------------------------------------------------------------------------
+# GeoJSON and WKT
+# ------------------------------------------------------------------------------------------------------------
+def _positive_property(props: dict[str, Any], key: str, what: str) -> float | None:
+    if key not in props or props[key] is None:
+        return None
+    v = props[key]
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or v <= 0:
+        raise MapError(f"{what}: property {key!r} must be a positive number of metres, got {v!r}")
+    return float(v)
+
+
+def _geojson_geometry(obj: Any, props: dict[str, Any], what: str) -> list[BaseGeometry]:
+    if not isinstance(obj, dict) or "type" not in obj:
+        raise MapError(f"{what}: expected a GeoJSON geometry object with a 'type', got {str(obj)[:60]!r}")
+    kind = obj["type"]
+    if kind == "GeometryCollection":
+        out: list[BaseGeometry] = []
+        for k, g in enumerate(obj.get("geometries") or []):
+            out += _geojson_geometry(g, props, f"{what} geometry #{k}")
+        return out
+    if kind not in ("Point", "MultiPoint", "LineString", "MultiLineString", "Polygon", "MultiPolygon"):
+        raise MapError(f"{what}: unsupported geometry type {kind!r}")
+    try:
+        geom = shapely.geometry.shape(obj)
+    except Exception as exc:  # shapely raises various errors on bad coordinates
+        raise MapError(f"{what}: malformed {kind} coordinates: {exc}") from None
+    _check_geometry(geom, what)
+    if kind in ("Point", "MultiPoint"):
+        radius = _positive_property(props, "radius", what)
+        if radius is not None:
+            geom = geom.buffer(radius, quad_segs=QUAD_SEGS)
+    elif kind in ("LineString", "MultiLineString"):
+        width = _positive_property(props, "width", what)
+        if width is not None:
+            geom = geom.buffer(width / 2.0, quad_segs=QUAD_SEGS, cap_style="flat", join_style="mitre")
+    return [geom]
+
+
+def _load_geojson(path: Path) -> tuple[list[BaseGeometry], Bounds | None]:
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8-sig"))
+    except UnicodeDecodeError:
+        raise MapError(f"{path}: not a text file (GeoJSON expected)") from None
+    except json.JSONDecodeError as exc:
+        raise MapError(f"{path}: not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
+    if not isinstance(doc, dict) or "type" not in doc:
+        raise MapError(f"{path}: not a GeoJSON object (a JSON object with a 'type' member expected)")
+    bounds = None
+    if "bounds" in doc:
+        bounds = _check_bounds(doc["bounds"], f"{path}: top-level 'bounds'")
+    geoms: list[BaseGeometry] = []
+    kind = doc["type"]
+    if kind == "FeatureCollection":
+        features = doc.get("features")
+        if not isinstance(features, list):
+            raise MapError(f"{path}: FeatureCollection without a 'features' list")
+    elif kind == "Feature":
+        features = [doc]
+    else:
+        return _geojson_geometry(doc, {}, str(path)), bounds
+    for k, feat in enumerate(features):
+        what = f"{path}: feature #{k}"
+        if not isinstance(feat, dict) or feat.get("type") != "Feature":
+            raise MapError(f"{what}: not a GeoJSON Feature")
+        props = feat.get("properties") or {}
+        if not isinstance(props, dict):
+            raise MapError(f"{what}: 'properties' must be an object")
+        if props.get("name"):
+            what += f" ({props['name']})"
+        if feat.get("geometry") is None:
+            continue  # GeoJSON allows unlocated features
+        geoms += _geojson_geometry(feat["geometry"], props, what)
+    return geoms, bounds
+
+
+_WKT_BOUNDS = re.compile(r"^#\s*bounds\s*[:=]\s*(.*)$", re.IGNORECASE)
+
+
+def _load_wkt(path: Path) -> tuple[list[BaseGeometry], Bounds | None]:
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise MapError(f"{path}: not a text file (WKT expected)") from None
+    bounds = None
+    body: list[tuple[int, str]] = []
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        s = line.strip()
+        m = _WKT_BOUNDS.match(s)
+        if m:
+            numbers = m.group(1).replace(",", " ").replace("[", " ").replace("]", " ").split()
+            bounds = _check_bounds(numbers, f"{path}: line {lineno}")
+        elif s and not s.startswith("#"):
+            body.append((lineno, s))
+    if not body:
+        return [], bounds
+    try:
+        geoms = [shapely.from_wkt(" ".join(s for _, s in body))]
+    except shapely.errors.GEOSException:
+        geoms = []
+        for lineno, s in body:  # one geometry per line: find the bad one
+            try:
+                geoms.append(shapely.from_wkt(s))
+            except shapely.errors.GEOSException as exc:
+                raise MapError(f"{path}: line {lineno}: not valid WKT ({exc}): {s[:60]!r}") from None
+    for k, g in enumerate(geoms):
+        _check_geometry(g, f"{path}: geometry #{k}")
+    return geoms, bounds

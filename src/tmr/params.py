@@ -1,0 +1,150 @@
+"""Parameters of the tethered-chain planner, with the paper's values as defaults (Caruso 2021, DESIGN seed values).
+
+Every field is in SI units. Values the paper leaves out are chosen here and documented in ``formulations/pinv.md``.
+Scenario files override any field by name in their ``[params]`` table (see :func:`apply_overrides`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any, TypeVar
+
+from tmr.errors import ParameterError
+
+T = TypeVar("T")
+
+
+def _validate(obj: Any) -> None:
+    for f in fields(obj):
+        v = getattr(obj, f.name)
+        if isinstance(v, bool):
+            continue
+        if isinstance(v, (int, float)) and not math.isfinite(v):
+            raise ParameterError(f"{type(obj).__name__}.{f.name} must be finite, got {v!r}")
+
+
+@dataclass(frozen=True)
+class ChainParams:
+    """Physical chain parameters (Caruso 2021 §4 and §4.2.1).
+
+    Attributes:
+        safety_radius: robot safety bubble r [m]; obstacles are grown by it, two robots must stay ≥ 2r apart.
+        exit_height: height H where a tether leaves a robot [m].
+        base_height: height of the fixed tether anchor [m].
+        pulley_torque: winch pulley resisting torque [N m].
+        pulley_radius: winch pulley radius [m]; horizontal tension T0 = torque / radius.
+        cable_mass_per_length: ρ [kg/m].
+        ground_clearance: lowest allowed height of the cable [m].
+    """
+
+    safety_radius: float = 0.5
+    exit_height: float = 0.43
+    base_height: float = 0.43
+    pulley_torque: float = 1.35
+    pulley_radius: float = 0.1
+    cable_mass_per_length: float = 0.15
+    ground_clearance: float = 0.0
+
+    def __post_init__(self) -> None:
+        _validate(self)
+        for name in ("safety_radius", "exit_height", "pulley_torque", "pulley_radius", "cable_mass_per_length"):
+            if getattr(self, name) <= 0:
+                raise ParameterError(f"ChainParams.{name} must be > 0, got {getattr(self, name)!r}")
+
+    @property
+    def horizontal_tension(self) -> float:
+        """T0 = pulley torque / pulley radius [N] (Caruso 2021 §4.2.1: 13.5 N)."""
+        return self.pulley_torque / self.pulley_radius
+
+
+@dataclass(frozen=True)
+class TimeParams:
+    """Time law of the leader (Caruso 2021 §4.2): duration T_end [s] and sampling period Ts [s]."""
+
+    T_end: float = 15.0
+    Ts: float = 0.05
+
+    def __post_init__(self) -> None:
+        _validate(self)
+        if self.T_end <= 0 or self.Ts <= 0 or self.Ts > self.T_end:
+            raise ParameterError(f"need 0 < Ts ≤ T_end, got Ts={self.Ts}, T_end={self.T_end}")
+
+    @property
+    def steps(self) -> int:
+        """Number of integration steps K = T_end / Ts (300 for the paper)."""
+        return int(round(self.T_end / self.Ts))
+
+
+@dataclass(frozen=True)
+class PinvParams:
+    """Gains of the faithful task-priority CLIK baseline (Caruso 2021 §4.1–4.2).
+
+    Attributes:
+        clik_gain: K of eq. 20 (scalar times identity) [1/s].
+        dls_damping: λ of the damped least-squares pseudoinverse J# = Jᵀ(JJᵀ + λI)⁻¹, λ ∈ ]0, 1[ (§3).
+        d_min: activation distance of the obstacle task (eq. 17), measured from the inflated obstacles [m].
+        k_v0: evasion speed constant, v0 = k_v0 / ‖d_c − x_c‖ [m²/s] (§4.1.3).
+        hysteresis: ε of eq. 17 — the task is released at d_min + ε [m].
+        min_evasion_distance: floor on ‖d_c − x_c‖ in v0 so the speed stays finite at contact [m] (not in the paper).
+        samples_per_link: points per tether where the critical point is searched (robots included).
+        span_target_fraction: q_t of eq. 13 as a fraction of [d_lo, d_max]; 0.5 is the range midpoint of the
+            joint-range criterion the paper cites (Siciliano 2009).
+        gain_floor: G of eq. 23 [1/s].
+        gain_edge: extra gain of each exponential of eq. 23 at its limit [1/s].
+        gain_length: decay length 1/|b| of the exponentials of eq. 23 [m].
+    """
+
+    clik_gain: float = 5.0
+    dls_damping: float = 0.01
+    d_min: float = 0.5
+    k_v0: float = 0.05
+    hysteresis: float = 0.1
+    min_evasion_distance: float = 0.05
+    samples_per_link: int = 20
+    span_target_fraction: float = 0.5
+    gain_floor: float = 0.5
+    gain_edge: float = 5.0
+    gain_length: float = 0.2
+
+    def __post_init__(self) -> None:
+        _validate(self)
+        if not 0 < self.dls_damping < 1:
+            raise ParameterError(f"dls_damping λ must be in ]0, 1[ (Caruso 2021 §3), got {self.dls_damping}")
+        for name in ("clik_gain", "d_min", "k_v0", "hysteresis", "min_evasion_distance", "gain_length"):
+            if getattr(self, name) <= 0:
+                raise ParameterError(f"PinvParams.{name} must be > 0, got {getattr(self, name)!r}")
+        if self.samples_per_link < 1:
+            raise ParameterError(f"samples_per_link must be ≥ 1, got {self.samples_per_link}")
+        if not 0 <= self.span_target_fraction <= 1:
+            raise ParameterError(f"span_target_fraction must be in [0, 1], got {self.span_target_fraction}")
+
+
+def apply_overrides(obj: T, overrides: dict[str, Any], *, strict: bool = False) -> tuple[T, dict[str, Any]]:
+    """Return ``obj`` with the fields named in ``overrides`` replaced, and the overrides it did not use.
+
+    With ``strict=True`` an unknown name raises ``ParameterError``. Types follow the field's default type.
+    """
+    names = {f.name: f for f in fields(obj)}  # type: ignore[arg-type]
+    used: dict[str, Any] = {}
+    rest: dict[str, Any] = {}
+    for key, value in overrides.items():
+        if key in names:
+            default = getattr(obj, key)
+            try:
+                used[key] = type(default)(value)
+            except (TypeError, ValueError) as exc:
+                raise ParameterError(f"parameter {key}={value!r} is not a valid {type(default).__name__}") from exc
+        else:
+            rest[key] = value
+    if strict and rest:
+        raise ParameterError(f"unknown parameter(s) {sorted(rest)}")
+    return replace(obj, **used), rest  # type: ignore[type-var]
+
+
+def as_dict(*objs: Any) -> dict[str, Any]:
+    """Flatten parameter dataclasses into one JSON-ready dict (for metrics.json)."""
+    out: dict[str, Any] = {}
+    for o in objs:
+        out.update(asdict(o))
+    return out

@@ -1,0 +1,194 @@
+"""From a scenario to a checked plan: scenario → chain, limits, start → leader path → formulation → plan → metrics.
+
+This is the library entry point behind ``python -m tmr.plan``::
+
+    import tmr
+    problem = tmr.build_problem(tmr.load_scenario("A"), seed=0)
+    plan, metrics = tmr.solve(problem, "pinv")
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tmr import catenary
+from tmr.chain import Chain
+from tmr.clik import Plan, run
+from tmr.errors import ParameterError, ScenarioError
+from tmr.formulations.pinv import PinvController
+from tmr.metrics import Metrics, evaluate
+from tmr.params import ChainParams, PinvParams, TimeParams, apply_overrides, as_dict
+from tmr.path import Trajectory, leader_trajectory
+from tmr.scenario import Scenario
+from tmr.tasks import LeaderTracking, ObstacleEvasion, TetherRegulation
+
+Array = NDArray[np.float64]
+
+METHODS = ("pinv",)
+
+
+@dataclass
+class Problem:
+    """Everything a formulation needs, built once from a scenario (see :func:`build_problem`)."""
+
+    scenario: Scenario
+    chain: Chain
+    chain_params: ChainParams
+    time_params: TimeParams
+    pinv_params: PinvParams
+    span_limits: Array  # (N, 2) [d_lo, d_max] [m]
+    q0: Array
+    trajectory: Trajectory
+    seed: int
+
+    @property
+    def env(self) -> Any:
+        return self.scenario.environment
+
+    def params_dict(self) -> dict[str, Any]:
+        out = as_dict(self.chain_params, self.time_params, self.pinv_params)
+        out.update(seed=self.seed, n_robots=self.chain.n_robots, d_max=float(self.span_limits[0, 1]))
+        return out
+
+
+def span_limits(n_robots: int, params: ChainParams) -> Array:
+    """Per-tether [d_lo, d_max] [m]: d_lo from the safety bubbles (r for the anchor link, 2r between robots),
+    d_max the catenary limit of Caruso 2021 §4.2.1 (lowest point of the cable above the floor)."""
+    cat = catenary.CatenaryParams(
+        horizontal_tension=params.horizontal_tension,
+        mass_per_length=params.cable_mass_per_length,
+        end_height=params.exit_height,
+        base_height=params.base_height,
+        ground_clearance=params.ground_clearance,
+    )
+    lim = np.empty((n_robots, 2))
+    lim[:, 0] = 2 * params.safety_radius
+    lim[0, 0] = params.safety_radius
+    lim[0, 1] = catenary.max_span(params.base_height, params.exit_height, cat)
+    if n_robots > 1:
+        lim[1:, 1] = catenary.max_span(params.exit_height, params.exit_height, cat)
+    if np.any(lim[:, 0] >= lim[:, 1]):
+        raise ParameterError(
+            f"the catenary limit d_max = {lim[:, 1].min():.2f} m is below the minimum span {lim[:, 0].max():.2f} m "
+            "from the safety bubbles: increase the tension or the exit height"
+        )
+    return lim
+
+
+def default_start(chain: Chain, env: Any, goal: Array, limits: Array, margin: float = 0.2) -> Array:
+    """A feasible initial placement near the base: robots on a straight ray from the anchor.
+
+    Robots are spaced by ``d_lo + margin`` along the free ray whose heading is closest to the goal direction
+    (72 headings tried); the ray's robots and tethers must be free by ``margin``. ``ScenarioError`` if none is.
+    """
+    spacing = limits[:, 0] + margin
+    offsets = np.cumsum(spacing)
+    to_goal = np.arctan2(goal[1] - chain.base[1], goal[0] - chain.base[0])
+    steps = np.arange(72) * (2 * np.pi / 72)
+    headings = to_goal + np.where(np.arange(72) % 2 == 0, 1, -1) * steps[(np.arange(72) + 1) // 2]
+    for h in headings:
+        u = np.array([np.cos(h), np.sin(h)])
+        P = chain.base + offsets[:, None] * u
+        starts = np.vstack([chain.base, P[:-1]])
+        if np.all(env.exact_clearance(P) > margin) and np.all(env.segment_clearance(starts, P) > margin):
+            return P
+    raise ScenarioError(
+        "no free straight placement of the robots near the base was found; give the start positions explicitly "
+        "(scenario 'start' or --start)"
+    )
+
+
+def build_problem(
+    scenario: Scenario,
+    *,
+    seed: int = 0,
+    n_robots: int | None = None,
+    start: ArrayLike | None = None,
+    overrides: dict[str, Any] | None = None,
+    path_iterations: int | None = None,
+) -> Problem:
+    """Assemble chain, limits, start configuration and leader trajectory for ``scenario``.
+
+    Args:
+        scenario: loaded scenario; its ``params`` table overrides parameter defaults by field name.
+        seed: seed of the leader's RRT* (same seed → same plan, byte for byte).
+        n_robots: override the scenario's number of robots (then the start placement is recomputed).
+        start: (N, 2) robot positions overriding the scenario's.
+        overrides: extra parameter overrides (after the scenario's).
+        path_iterations: RRT* iterations (default of :func:`tmr.path.plan_leader_path` if None).
+    """
+    values = dict(scenario.params or {})
+    values.update(overrides or {})
+    chain_params, rest = apply_overrides(ChainParams(), values)
+    time_params, rest = apply_overrides(TimeParams(), rest)
+    pinv_params, rest = apply_overrides(PinvParams(), rest)
+    if rest:
+        raise ScenarioError(f"unknown parameter(s) {sorted(rest)} in scenario {scenario.name!r}")
+    N = int(n_robots if n_robots is not None else scenario.n_robots)
+    chain = Chain(N, base=scenario.base)
+    limits = span_limits(N, chain_params)
+    env = scenario.environment
+    if start is not None:
+        P = np.asarray(start, dtype=float)
+    elif scenario.start is not None and n_robots in (None, scenario.n_robots):
+        P = np.asarray(scenario.start, dtype=float)
+    else:
+        P = default_start(chain, env, np.asarray(scenario.goal, float), limits)
+    if P.shape != (N, 2) or not np.all(np.isfinite(P)):
+        raise ScenarioError(f"start must be {N} finite (x, y) positions, got shape {P.shape}")
+    clear = env.exact_clearance(P)
+    if np.any(clear <= 0):
+        k = int(np.argmin(clear))
+        raise ScenarioError(
+            f"start position of robot {k + 1} {P[k].tolist()} is inside an (inflated) obstacle "
+            f"(clearance {clear[k]:.3f} m)"
+        )
+    q0 = chain.q_from_positions(P)
+    kwargs: dict[str, Any] = {"seed": seed, "T_end": time_params.T_end, "Ts": time_params.Ts}
+    if path_iterations is not None:
+        kwargs["iterations"] = path_iterations
+    traj = leader_trajectory(env, P[-1], np.asarray(scenario.goal, float), **kwargs)
+    return Problem(scenario, chain, chain_params, time_params, pinv_params, limits, q0, traj, int(seed))
+
+
+def make_pinv(problem: Problem) -> PinvController:
+    """The faithful baseline controller with the problem's parameters (Caruso 2021 §4)."""
+    p = problem.pinv_params
+    return PinvController(
+        leader=LeaderTracking(p.clik_gain),
+        tether=TetherRegulation(
+            problem.chain, problem.span_limits, p.span_target_fraction, p.gain_floor, p.gain_edge, p.gain_length
+        ),
+        obstacle=ObstacleEvasion(p.d_min, p.k_v0, p.hysteresis, p.min_evasion_distance),
+        damping=p.dls_damping,
+    )
+
+
+def solve(problem: Problem, method: str = "pinv") -> tuple[Plan, Metrics]:
+    """Plan with ``method`` and check every hard constraint on the recorded states.
+
+    Returns the plan (``success`` False with the reason if a constraint is violated anywhere) and its metrics.
+    """
+    if method == "pinv":
+        formulation = make_pinv(problem)
+    else:
+        raise ParameterError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
+    plan = run(
+        problem.chain,
+        problem.env,
+        problem.trajectory,
+        formulation,
+        problem.q0,
+        span_limits=problem.span_limits,
+        safety_radius=problem.chain_params.safety_radius,
+        samples_per_link=problem.pinv_params.samples_per_link,
+        scenario=problem.scenario.name,
+        params=problem.params_dict(),
+        goal=np.asarray(problem.scenario.goal, float),
+    )
+    metrics = evaluate(plan, problem.env)
+    return plan, metrics

@@ -1,0 +1,274 @@
+"""Scenarios: an environment, the tether anchor (base), the leader's goal and the team size.
+
+The four built-in scenarios A-D reproduce the settings of Caruso 2021 §5 (three omnidirectional robots
+tethered in a chain to a fixed base): A square room with five disc columns, goal behind the middle one; B a
+curved high-curvature corridor leaving the room, goal at its end; C a small maze, goal in the top-right
+corner; D a hangar with a Cessna C-172, the leader goes round the plane to the opposite side. They are data
+files in ``tmr/scenarios/`` (TOML + GeoJSON, format in ``tmr/scenarios/README.md``); any TOML file of the same
+format loads with :func:`load_scenario`.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import shapely
+from numpy.typing import ArrayLike, NDArray
+
+from tmr.environment import DEFAULT_RESOLUTION, DEFAULT_SAFETY_RADIUS, Environment
+from tmr.errors import ParameterError, ScenarioError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - python 3.10
+    import tomli as tomllib
+
+__all__ = ["SCENARIO_DIR", "Scenario", "builtin_scenarios", "load_scenario", "scenario_from_map"]
+
+SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+
+_TOP_KEYS = {"name", "description", "robots", "base", "goal", "start", "map", "params"}
+_MAP_KEYS = {"file", "bounds", "safety_radius", "resolution"}
+
+
+@dataclass
+class Scenario:
+    """A planning problem: environment, base (tether anchor), leader goal, optional start, team size.
+
+    ``base`` and ``goal`` are (2,) [m]; ``start`` is (N, 2) [m], robot 1..N with robot N the leader, or None
+    when the planner chooses the initial chain; ``params`` holds optional overrides of chain/controller
+    parameters (the TOML ``[params]`` table). Validated on construction: N >= 1 integer, finite coordinates
+    (ParameterError); base, goal and start points in free space (exact clearance > 0) and in one connected
+    free region (ScenarioError).
+    """
+
+    name: str
+    description: str
+    environment: Environment
+    base: NDArray[np.float64]
+    goal: NDArray[np.float64]
+    start: NDArray[np.float64] | None
+    n_robots: int
+    params: dict[str, Any] = field(default_factory=dict)
+    source: Path | None = None
+
+    def __post_init__(self) -> None:
+        label = self._label()
+        if isinstance(self.n_robots, bool | np.bool_) or not isinstance(self.n_robots, int | np.integer):
+            raise ParameterError(f"{label}: robots must be an integer >= 1, got {self.n_robots!r}")
+        if self.n_robots < 1:
+            raise ParameterError(
+                f"{label}: robots must be >= 1 (number of tethered robots), got {self.n_robots}"
+            )
+        self.n_robots = int(self.n_robots)
+        self.base = _point(self.base, "base", label)
+        self.goal = _point(self.goal, "goal", label)
+        if self.start is not None:
+            start = _finite_array(self.start, "start", label)
+            if start.shape != (self.n_robots, 2):
+                raise ParameterError(
+                    f"{label}: start must list one [x, y] per robot, shape ({self.n_robots}, 2); got shape "
+                    f"{start.shape}"
+                )
+            self.start = start
+        _check_params(self.params, label)
+        self._check_free()
+
+    def _label(self) -> str:
+        return f"scenario {self.name!r}" + (f" ({self.source})" if self.source is not None else "")
+
+    def _check_free(self) -> None:
+        env = self.environment
+        label = self._label()
+        names = ["base", "goal"]
+        pts = [self.base, self.goal]
+        if self.start is not None:
+            names += [f"start of robot {k + 1}" for k in range(self.n_robots)]
+            pts += list(self.start)
+        P = np.array(pts)
+        clear = env.exact_clearance(P)
+        for nm, p, c in zip(names, P, clear, strict=True):
+            if not c > 0.0:
+                raise ScenarioError(
+                    f"{label}: {nm} ({p[0]:g}, {p[1]:g}) m is not in free space: clearance {c:.3f} m to the "
+                    f"obstacles and walls grown by the safety radius {env.safety_radius:g} m (must be > 0); "
+                    f"move it away from the obstacles or inside the room {env.bounds}"
+                )
+        # every point must lie in the same connected piece of free space as the base
+        parts = shapely.get_parts(env.free)
+        region = np.full(len(P), -1)
+        for k, part in enumerate(parts):
+            region[shapely.contains_xy(part, P[:, 0], P[:, 1])] = k
+        for nm, p, reg in zip(names[1:], P[1:], region[1:], strict=True):
+            if reg != region[0]:
+                raise ScenarioError(
+                    f"{label}: {nm} ({p[0]:g}, {p[1]:g}) m cannot be reached from the base: it lies in a "
+                    f"different connected region of free space (the obstacles grown by "
+                    f"{env.safety_radius:g} m separate them)"
+                )
+
+
+def _finite_array(value: Any, what: str, label: str) -> NDArray[np.float64]:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{label}: {what} must be numbers [m], got {value!r}") from None
+    if not np.all(np.isfinite(arr)):
+        raise ParameterError(f"{label}: {what} contains NaN or inf: {arr.tolist()}")
+    return arr
+
+
+def _point(value: Any, what: str, label: str) -> NDArray[np.float64]:
+    arr = _finite_array(value, what, label)
+    if arr.shape != (2,):
+        raise ParameterError(f"{label}: {what} must be [x, y] in metres, got {np.asarray(value).tolist()!r}")
+    return arr
+
+
+def _check_params(params: Any, label: str, prefix: str = "params") -> None:
+    if not isinstance(params, dict):
+        raise ParameterError(
+            f"{label}: {prefix} must be a table of name = value, got {type(params).__name__}"
+        )
+    for key, val in params.items():
+        _check_param_value(val, f"{prefix}.{key}", label)
+
+
+def _check_param_value(val: Any, name: str, label: str) -> None:
+    if isinstance(val, dict):
+        _check_params(val, label, name)
+    elif isinstance(val, list | tuple):
+        for k, v in enumerate(val):
+            _check_param_value(v, f"{name}[{k}]", label)
+    elif isinstance(val, float) and not math.isfinite(val):
+        raise ParameterError(f"{label}: {name} = {val} is not a finite number")
+
+
+def builtin_scenarios() -> list[str]:
+    """Names of the built-in scenarios (``["A", "B", "C", "D"]``): the TOML files in ``tmr/scenarios/``."""
+    return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """Load a built-in scenario by name ("A".."D", case-insensitive) or a scenario TOML file by path.
+
+    Raises ScenarioError for an unknown name, a missing or malformed TOML, missing keys or points not in free
+    space; ParameterError for N < 1 robots or NaN/inf numbers; MapError for a bad map file.
+    """
+    if (
+        isinstance(name_or_path, str)
+        and not any(sep in name_or_path for sep in "/\\")
+        and "." not in name_or_path
+    ):
+        builtins = builtin_scenarios()
+        match = [b for b in builtins if b.lower() == name_or_path.strip().lower()]
+        if match:
+            return _load_toml(SCENARIO_DIR / f"{match[0]}.toml")
+        if not Path(name_or_path).is_file():
+            raise ScenarioError(
+                f"unknown scenario {name_or_path!r}: built-in scenarios are {', '.join(builtins)}; "
+                f"or give the path of a scenario .toml file"
+            )
+    path = Path(name_or_path)
+    if not path.is_file():
+        raise ScenarioError(
+            f"{path}: scenario file not found (built-in scenarios are {', '.join(builtin_scenarios())})"
+        )
+    return _load_toml(path)
+
+
+def _load_toml(path: Path) -> Scenario:
+    try:
+        with path.open("rb") as fh:
+            doc = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise ScenarioError(f"{path}: cannot read scenario file: {exc.strerror or exc}") from None
+    label = f"scenario file {path}"
+    unknown = set(doc) - _TOP_KEYS
+    if unknown:
+        raise ScenarioError(f"{label}: unknown keys {sorted(unknown)}; allowed: {sorted(_TOP_KEYS)}")
+    for key in ("base", "goal", "map"):
+        if key not in doc:
+            raise ScenarioError(f"{label}: missing required key {key!r}")
+    name = doc.get("name", path.stem)
+    description = doc.get("description", "")
+    if not isinstance(name, str) or not isinstance(description, str):
+        raise ScenarioError(f"{label}: name and description must be strings")
+    robots = doc.get("robots", 3)
+    if isinstance(robots, float) and robots.is_integer():
+        robots = int(robots)
+
+    m = doc["map"]
+    if not isinstance(m, dict):
+        raise ScenarioError(f"{label}: [map] must be a table with file, bounds, safety_radius, resolution")
+    unknown = set(m) - _MAP_KEYS
+    if unknown:
+        raise ScenarioError(f"{label}: unknown keys in [map] {sorted(unknown)}; allowed: {sorted(_MAP_KEYS)}")
+    if not isinstance(m.get("file"), str):
+        raise ScenarioError(f'{label}: [map] needs file = "<map file relative to the TOML>"')
+    map_path = Path(m["file"])
+    if not map_path.is_absolute():
+        map_path = path.parent / map_path
+    env = Environment.from_file(
+        map_path,
+        bounds=m.get("bounds"),
+        safety_radius=_number(m.get("safety_radius", DEFAULT_SAFETY_RADIUS), "map.safety_radius", label),
+        resolution=_number(m.get("resolution", DEFAULT_RESOLUTION), "map.resolution", label),
+    )
+    return Scenario(
+        name=name,
+        description=description,
+        environment=env,
+        base=doc["base"],
+        goal=doc["goal"],
+        start=doc.get("start"),
+        n_robots=robots,
+        params=dict(doc.get("params", {})),
+        source=path,
+    )
+
+
+def _number(value: Any, what: str, label: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ParameterError(f"{label}: {what} must be a number, got {value!r}")
+    if not math.isfinite(value):
+        raise ParameterError(f"{label}: {what} = {value} is not a finite number")
+    return float(value)
+
+
+def scenario_from_map(
+    map_path: str | Path,
+    base: ArrayLike,
+    goal: ArrayLike,
+    start: ArrayLike | None = None,
+    n_robots: int = 3,
+    *,
+    bounds: tuple[float, float, float, float] | None = None,
+    safety_radius: float = DEFAULT_SAFETY_RADIUS,
+    resolution: float = DEFAULT_RESOLUTION,
+    name: str | None = None,
+) -> Scenario:
+    """Scenario from a map file plus base and goal [m] (the ``--map --base --goal`` command-line use).
+
+    ``map_path``: any format of :meth:`Environment.from_file`; ``bounds`` is needed for GeoJSON/WKT files that
+    do not carry their own. Validated like a scenario file (ScenarioError / ParameterError / MapError).
+    """
+    p = Path(map_path)
+    env = Environment.from_file(p, bounds=bounds, safety_radius=safety_radius, resolution=resolution)
+    return Scenario(
+        name=name if name is not None else p.stem,
+        description=f"map {p.name}",
+        environment=env,
+        base=base,  # type: ignore[arg-type]  # converted and validated in Scenario.__post_init__
+        goal=goal,  # type: ignore[arg-type]
+        start=start,  # type: ignore[arg-type]
+        n_robots=n_robots,
+        source=p,
+    )

@@ -1,0 +1,231 @@
+"""Tasks of the tethered chain: each one returns cost rows ``J q̇ ≈ v`` for the current step.
+
+The same task objects feed every formulation: the pseudoinverse baseline stacks them by priority (Caruso 2021 eq. 5),
+the QP formulations use their rows as least-squares objectives. A task reads everything it needs from a
+:class:`StepContext`, which computes the chain geometry and the distance-field samples once per step.
+
+Write your own task by subclassing :class:`Task` and returning :class:`TaskRows` from :meth:`Task.compute`.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tmr.chain import Chain
+from tmr.errors import ParameterError
+
+Array = NDArray[np.float64]
+
+
+class TaskRows(NamedTuple):
+    """Cost rows of a task: find q̇ with ``J q̇ ≈ v``; ``J`` is (m, n) and ``v`` (m,) in task units per second."""
+
+    J: Array
+    v: Array
+
+
+class StepContext:
+    """Per-step state shared by tasks and constraints: joint vector, chain geometry, reference, distance samples.
+
+    Args:
+        chain: the planar chain.
+        env: environment with ``clearance_and_gradient(points)`` (signed distance to inflated obstacles [m]).
+        reference: leader reference positions ``(K+1, 2)`` [m] and velocities ``(K+1, 2)`` [m/s].
+        Ts: sampling period [s].
+        samples_per_link: points per tether where clearance is sampled (fractions k/m, k = 1..m; s = 1 is the robot).
+        span_limits: ``(N, 2)`` array of [d_lo, d_max] per tether [m].
+    """
+
+    def __init__(
+        self,
+        chain: Chain,
+        env: object,
+        reference: Array,
+        reference_velocity: Array,
+        Ts: float,
+        samples_per_link: int,
+        span_limits: ArrayLike,
+    ) -> None:
+        self.chain = chain
+        self.env = env
+        self.reference = np.asarray(reference, dtype=float)
+        self.reference_velocity = np.asarray(reference_velocity, dtype=float)
+        self.Ts = float(Ts)
+        m = int(samples_per_link)
+        n_links = chain.n_robots
+        self.sample_links = np.repeat(np.arange(1, n_links + 1), m)
+        self.sample_fractions = np.tile(np.arange(1, m + 1) / m, n_links)
+        self.span_limits = np.broadcast_to(np.asarray(span_limits, dtype=float), (n_links, 2)).copy()
+        self.k = 0
+        self.q = np.zeros(chain.dof)
+        self.qdot_prev = np.zeros(chain.dof)
+
+    def update(self, k: int, q: Array, qdot_prev: Array) -> None:
+        """Recompute the per-step quantities at step ``k`` for joint vector ``q``."""
+        self.k = k
+        self.q = q
+        self.qdot_prev = qdot_prev
+        self.points = self.chain.points(q)
+        self.x_e = self.points[-1]
+        self.x_d = self.reference[k]
+        self.xd_d = self.reference_velocity[k]
+        P = self.points
+        li = self.sample_links
+        self.sample_points = P[li - 1] + self.sample_fractions[:, None] * (P[li] - P[li - 1])
+        self.sample_clearance, self.sample_gradient = self.env.clearance_and_gradient(self.sample_points)
+        self._J_e: Array | None = None
+
+    @property
+    def J_e(self) -> Array:
+        """Leader Jacobian (2, n), Caruso 2021 eq. 9 (cached for the step)."""
+        if self._J_e is None:
+            self._J_e = self.chain.end_effector_jacobian(self.q)
+        return self._J_e
+
+    @property
+    def spans(self) -> Array:
+        """Tether spans d_i [m] (the prismatic joints)."""
+        return self.q[self.chain.prismatic_index]
+
+
+class Task(ABC):
+    """A task: desired velocity ``v`` of a quantity with Jacobian ``J`` (cost rows)."""
+
+    name: str = "task"
+
+    @abstractmethod
+    def compute(self, ctx: StepContext) -> TaskRows:
+        """Cost rows for the step described by ``ctx``."""
+
+    def reset(self) -> None:
+        """Forget any internal state (called before a new plan)."""
+
+
+class LeaderTracking(Task):
+    """Primary task: the leader tracks the reference with the CLIK law (Caruso 2021 eq. 19–20).
+
+    ``v = ẋ_d + K e`` with ``e = x_d − x_e``; J is the leader Jacobian J_e (eq. 9).
+
+    Args:
+        gain: K [1/s] (scalar gain times identity).
+    """
+
+    name = "leader"
+
+    def __init__(self, gain: float) -> None:
+        if not np.isfinite(gain) or gain <= 0:
+            raise ParameterError(f"CLIK gain must be a positive finite number [1/s], got {gain!r}")
+        self.gain = float(gain)
+
+    def compute(self, ctx: StepContext) -> TaskRows:
+        return TaskRows(ctx.J_e, ctx.xd_d + self.gain * (ctx.x_d - ctx.x_e))
+
+
+def joint_limit_gain_coefficients(d_lo: float, d_max: float, edge: float, length: float) -> tuple[float, ...]:
+    """Coefficients ``(a1, b1, a2, b2)`` of Caruso 2021 eq. 23 so each exponential equals ``edge`` at its limit.
+
+    ``a1 e^{b1 d}`` grows towards d_max (b1 = 1/length > 0), ``a2 e^{b2 d}`` towards d_lo (b2 = −1/length).
+    """
+    b1 = 1.0 / length
+    return (edge * np.exp(-b1 * d_max), b1, edge * np.exp(b1 * d_lo), -b1)
+
+
+class TetherRegulation(Task):
+    """Joint-limit avoidance on the tether spans (Caruso 2021 eq. 13 and eq. 23).
+
+    Rows select the prismatic joints; ``v_i = K_ii(d_i) (d_t,i − d_i)`` with the gain of eq. 23
+    ``K_ii(d) = a1 e^{b1 d} + a2 e^{b2 d} + G`` growing near both limits. Used as the gradient-projection term
+    ``q̇_opt = Jᵀ v`` by the pseudoinverse baseline (eq. 7, 13) and as a least-squares task by the QP.
+
+    Args:
+        chain: the chain (for the joint layout).
+        span_limits: (N, 2) [d_lo, d_max] per tether [m].
+        target_fraction: target d_t = d_lo + f (d_max − d_lo); 0.5 is the midpoint of eq. 13's joint range.
+        gain_floor: G [1/s]; gain_edge: value of each exponential at its limit [1/s]; gain_length: 1/|b| [m].
+    """
+
+    name = "tether"
+
+    def __init__(
+        self,
+        chain: Chain,
+        span_limits: ArrayLike,
+        target_fraction: float = 0.5,
+        gain_floor: float = 0.5,
+        gain_edge: float = 5.0,
+        gain_length: float = 0.2,
+    ) -> None:
+        lim = np.broadcast_to(np.asarray(span_limits, dtype=float), (chain.n_robots, 2))
+        if np.any(lim[:, 0] >= lim[:, 1]):
+            raise ParameterError(f"every tether needs d_lo < d_max, got {lim.tolist()}")
+        self.limits = lim.copy()
+        self.target = lim[:, 0] + target_fraction * (lim[:, 1] - lim[:, 0])
+        coeffs = np.array(
+            [joint_limit_gain_coefficients(lo, hi, gain_edge, gain_length) for lo, hi in lim]
+        )  # (N, 4)
+        self.a1, self.b1, self.a2, self.b2 = coeffs.T
+        self.G = float(gain_floor)
+        self.S = np.zeros((chain.n_robots, chain.dof))
+        self.S[np.arange(chain.n_robots), chain.prismatic_index] = 1.0
+
+    def gain(self, d: Array) -> Array:
+        """K_ii(d) of Caruso 2021 eq. 23 [1/s]."""
+        return self.a1 * np.exp(self.b1 * d) + self.a2 * np.exp(self.b2 * d) + self.G
+
+    def compute(self, ctx: StepContext) -> TaskRows:
+        d = ctx.spans
+        return TaskRows(self.S, self.gain(d) * (self.target - d))
+
+
+class ObstacleEvasion(Task):
+    """Obstacle avoidance at the critical point of the whole chain (Caruso 2021 eq. 14–18).
+
+    The critical point x_c is the sample point of the tethers closest to the inflated obstacles (the leader itself is
+    excluded: its path is the planner's). When its clearance drops below ``d_min`` the task activates and asks the
+    point to move along the distance gradient n_c at ``v0 = k_v0 / ‖d_c − x_c‖``: one row ``J_n = n_cᵀ J_c`` (eq. 18)
+    with ``J_c`` the point Jacobian with the paper's zero columns (eq. 15, fixed distance along the link).
+    It is released only when every point is beyond ``d_min + ε`` (hysteresis of eq. 17).
+
+    Args:
+        d_min: activation distance [m]; k_v0: evasion constant [m²/s]; hysteresis: ε [m];
+        min_distance: floor on the distance in v0 [m].
+    """
+
+    name = "obstacle"
+
+    def __init__(self, d_min: float, k_v0: float, hysteresis: float, min_distance: float = 0.05) -> None:
+        self.d_min, self.k_v0, self.eps, self.floor = float(d_min), float(k_v0), float(hysteresis), float(min_distance)
+        self.active = False
+        self.critical_index = -1
+        self.critical_clearance = np.inf
+
+    def reset(self) -> None:
+        self.active = False
+        self.critical_index = -1
+        self.critical_clearance = np.inf
+
+    def update(self, ctx: StepContext) -> bool:
+        """Find the critical point and update the two-state activation (eq. 17). Returns whether active."""
+        d = ctx.sample_clearance[:-1]  # the last sample is the leader
+        i = int(np.argmin(d))
+        self.critical_index, self.critical_clearance = i, float(d[i])
+        if self.active:
+            self.active = bool(np.any(d < self.d_min + self.eps))
+        else:
+            self.active = bool(d[i] < self.d_min)
+        return self.active
+
+    def compute(self, ctx: StepContext) -> TaskRows:
+        i = self.critical_index
+        g = ctx.sample_gradient[i]
+        norm = float(np.hypot(g[0], g[1]))
+        n_c = g / norm if norm > 1e-12 else np.zeros(2)
+        J_c = ctx.chain.point_jacobians(
+            ctx.q, ctx.sample_links[i : i + 1], ctx.sample_fractions[i : i + 1], fixed="distance"
+        )[0]
+        v0 = self.k_v0 / max(self.critical_clearance, self.floor)
+        return TaskRows((n_c @ J_c)[None, :], np.array([v0]))

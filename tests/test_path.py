@@ -1,0 +1,297 @@
+"""Tests of tmr.path: RRT* leader path (OMPL) and the B-spline / minimum-jerk time law (Caruso 2021 §4.2)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import shapely
+
+from tmr.errors import ParameterError, PathError
+from tmr.path import Trajectory, leader_trajectory, path_length, plan_leader_path, time_law
+
+BOUNDS = (0.0, 0.0, 10.0, 10.0)
+DISC_CENTRES = [(5.0, 5.0), (3.0, 3.0), (7.0, 7.0), (3.0, 7.0), (7.0, 3.0)]
+
+
+class ShapelyEnv:
+    """Exact geometric checker with the conventions of tmr.environment (obstacles and walls grown by r)."""
+
+    def __init__(self, obstacles, bounds, safety_radius=0.5):
+        self.bounds = tuple(float(b) for b in bounds)
+        xmin, ymin, xmax, ymax = self.bounds
+        outside = shapely.difference(
+            shapely.box(xmin - 5, ymin - 5, xmax + 5, ymax + 5), shapely.box(*self.bounds)
+        )
+        geoms = [shapely.buffer(g, safety_radius) for g in obstacles] + [
+            shapely.buffer(outside, safety_radius)
+        ]
+        self.inflated = shapely.union_all(geoms)
+        self._boundary = self.inflated.boundary
+        shapely.prepare(self.inflated)
+
+    def exact_clearance(self, points):
+        p = np.asarray(points, float)
+        d = shapely.distance(self._boundary, shapely.points(p))
+        return np.where(shapely.contains_xy(self.inflated, p[..., 0], p[..., 1]), -d, d)
+
+    def segment_clearance(self, a, b):
+        a, b = np.broadcast_arrays(np.asarray(a, float), np.asarray(b, float))
+        lines = shapely.linestrings(np.stack([a, b], axis=-2))
+        hit = shapely.intersects(self.inflated, lines)
+        out = np.where(hit, 0.0, shapely.distance(self.inflated, lines))
+        flat_a, flat_b, flat_out = a.reshape(-1, 2), b.reshape(-1, 2), np.atleast_1d(out).reshape(-1)
+        for i in np.flatnonzero(
+            np.atleast_1d(hit)
+        ):  # penetration depth: deepest of 201 points on the segment
+            f = np.linspace(0.0, 1.0, 201)[:, None]
+            flat_out[i] = min(0.0, float(self.exact_clearance(flat_a[i] + f * (flat_b[i] - flat_a[i])).min()))
+        return flat_out.reshape(out.shape)
+
+    def is_free(self, points, margin=0.0):
+        return self.exact_clearance(points) > margin
+
+
+def make_env(obstacles, bounds=BOUNDS):
+    return ShapelyEnv(obstacles, bounds)
+
+
+@pytest.fixture(scope="module")
+def discs_env():
+    return make_env([shapely.Point(c).buffer(0.6) for c in DISC_CENTRES])
+
+
+@pytest.fixture(scope="module")
+def discs_path(discs_env):
+    return plan_leader_path(discs_env, (1.0, 5.0), (9.0, 5.2), seed=0, iterations=400)
+
+
+@pytest.fixture(scope="module")
+def square_env():
+    return make_env([shapely.box(3.0, 3.0, 7.0, 7.0)])
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# plan_leader_path
+
+
+def test_path_endpoints_exact_and_segments_free(discs_env, discs_path):
+    W = discs_path
+    assert W.ndim == 2 and W.shape[1] == 2 and len(W) >= 3  # the straight line is blocked by the middle disc
+    assert np.array_equal(W[0], [1.0, 5.0]) and np.array_equal(W[-1], [9.0, 5.2])
+    assert np.all(discs_env.segment_clearance(W[:-1], W[1:]) > 0.1)  # exact, with the default extra margin
+    assert np.all(discs_env.is_free(W, margin=0.1))
+    # detour round the middle disc (inflated radius 1.1 m): longer than the straight line, far from a wander
+    straight = np.hypot(8.0, 0.2)
+    assert straight < path_length(W) < 1.15 * straight
+
+
+def test_raw_rrt_path_is_free_and_not_shorter_than_simplified(discs_env, discs_path):
+    raw = plan_leader_path(discs_env, (1.0, 5.0), (9.0, 5.2), seed=0, iterations=400, simplify=False)
+    assert np.array_equal(raw[0], [1.0, 5.0]) and np.array_equal(raw[-1], [9.0, 5.2])
+    assert np.all(discs_env.segment_clearance(raw[:-1], raw[1:]) > 0.1)
+    assert path_length(discs_path) <= path_length(raw) + 1e-12
+
+
+def test_same_seed_same_bytes_other_seed_still_valid(discs_env, discs_path):
+    again = plan_leader_path(discs_env, (1.0, 5.0), (9.0, 5.2), seed=0, iterations=400)
+    assert again.tobytes() == discs_path.tobytes()
+    other = plan_leader_path(
+        discs_env, (1.0, 5.0), (9.0, 5.2), seed=7, iterations=400
+    )  # may differ, must be valid
+    assert np.all(discs_env.segment_clearance(other[:-1], other[1:]) > 0.1)
+    third = plan_leader_path(discs_env, (1.0, 5.0), (9.0, 5.2), seed=0, iterations=400)  # after another seed
+    assert third.tobytes() == discs_path.tobytes()
+
+
+def test_straight_line_when_free(square_env):
+    W = plan_leader_path(square_env, (1.0, 1.0), (9.0, 1.5))
+    assert np.array_equal(W, [[1.0, 1.0], [9.0, 1.5]])
+
+
+def test_start_equal_goal_gives_two_equal_points(square_env):
+    W = plan_leader_path(square_env, (1.0, 1.0), (1.0, 1.0))
+    assert W.shape == (2, 2) and np.array_equal(W[0], W[1])
+
+
+def test_clearance_margin_lowered_near_a_close_start(square_env):
+    # start 0.04 m from the inflated square (< clearance 0.1): the margin drops to 0.02 m instead of failing
+    W = plan_leader_path(square_env, (2.46, 5.0), (8.0, 5.0), iterations=300, clearance=0.1)
+    assert np.array_equal(W[0], [2.46, 5.0])
+    assert np.all(square_env.segment_clearance(W[:-1], W[1:]) > 0.02)
+
+
+def test_start_inside_obstacle_raises(square_env):
+    with pytest.raises(PathError, match=r"start \[5\.0, 5\.0\] is inside .*clearance -2\.500 m"):
+        plan_leader_path(square_env, (5.0, 5.0), (9.0, 9.0))
+    with pytest.raises(PathError, match=r"goal .* inside"):
+        plan_leader_path(square_env, (1.0, 1.0), (2.7, 5.0))
+    with pytest.raises(PathError, match="outside the room"):
+        plan_leader_path(square_env, (1.0, 1.0), (11.0, 5.0))
+
+
+def test_goal_enclosed_by_ring_raises():
+    ring = shapely.Point(5.0, 5.0).buffer(3.0).difference(shapely.Point(5.0, 5.0).buffer(2.0))
+    env = make_env([ring])
+    with pytest.raises(
+        PathError, match=r"no collision-free path.*200 iterations.*more iterations.*different goal"
+    ):
+        plan_leader_path(env, (0.8, 0.8), (5.0, 5.0), iterations=200)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"start": (np.nan, 1.0)},
+        {"goal": (1.0, 2.0, 3.0)},
+        {"iterations": 0},
+        {"iterations": 2.5},
+        {"seed": -1},
+        {"clearance": -0.1},
+        {"clearance": float("inf")},
+        {"range": 0.0},
+    ],
+)
+def test_plan_parameter_errors(square_env, kwargs):
+    args = {"start": (1.0, 1.0), "goal": (9.0, 9.0)} | kwargs
+    start, goal = args.pop("start"), args.pop("goal")
+    with pytest.raises(ParameterError):
+        plan_leader_path(square_env, start, goal, **args)
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# time_law
+
+
+def test_time_law_samples_endpoints_and_rest(discs_path):
+    tr = time_law(discs_path)
+    assert isinstance(tr, Trajectory)
+    assert tr.t.shape == (301,) and tr.x.shape == tr.xd.shape == tr.xdd.shape == (301, 2)
+    assert tr.t[0] == 0.0 and tr.t[-1] == 15.0
+    np.testing.assert_allclose(np.diff(tr.t), 0.05, rtol=0, atol=1e-12)
+    assert np.array_equal(tr.x[0], [1.0, 5.0]) and np.array_equal(tr.x[-1], [9.0, 5.2])
+    assert np.array_equal(tr.waypoints, discs_path)
+    for k in (0, -1):  # minimum-jerk law: at rest at both ends
+        np.testing.assert_allclose(tr.xd[k], 0.0, atol=1e-12)
+        np.testing.assert_allclose(tr.xdd[k], 0.0, atol=1e-12)
+    assert np.all(np.isfinite(tr.xd)) and np.all(np.isfinite(tr.xdd))
+
+
+def test_time_law_derivatives_match_finite_differences(discs_path):
+    tr = time_law(discs_path)
+    h = 0.05
+    # Fine sampling (Ts/10) of the same trajectory: same positions at common times, and a jerk bound.
+    fine = time_law(discs_path, Ts=h / 10)
+    np.testing.assert_allclose(fine.x[::10], tr.x, atol=1e-12)
+    jerk = np.max(np.linalg.norm(np.diff(fine.xdd, axis=0), axis=1)) / (h / 10)
+    snap_scale = jerk / h  # |x''''| is bounded by jerk jumps over one coarse step at most (spline knots)
+    # Central differences: |(f(t+h) - f(t-h)) / 2h - f'(t)| <= h^2/6 sup|f'''| (Taylor, integral remainder).
+    fd_v = (tr.x[2:] - tr.x[:-2]) / (2 * h)
+    err_v = np.max(np.linalg.norm(fd_v - tr.xd[1:-1], axis=1))
+    assert err_v <= 1.2 * h**2 / 6 * jerk + 1e-9
+    assert err_v < 1e-2 * np.max(np.linalg.norm(tr.xd, axis=1))
+    # For xdd, xd has a piecewise-continuous third derivative (jumps at spline knots): |error| <= h/2 sup|x'''| jump
+    # part, plus the h^2/6 smooth part; the same jerk estimate bounds both.
+    fd_a = (tr.xd[2:] - tr.xd[:-2]) / (2 * h)
+    err_a = np.max(np.linalg.norm(fd_a - tr.xdd[1:-1], axis=1))
+    assert err_a <= 1.2 * min(h / 2 * jerk, h**2 / 6 * snap_scale) + 1e-9
+    assert err_a < 5e-2 * np.max(np.linalg.norm(tr.xdd, axis=1))
+    # arc-length parametrisation: speed = s_dot of the minimum-jerk law, and its integral = spline length
+    L = np.sum(np.linalg.norm(np.diff(fine.x, axis=0), axis=1))
+    tau = tr.t / 15.0
+    np.testing.assert_allclose(
+        np.linalg.norm(tr.xd, axis=1), 30 * L / 15.0 * tau**2 * (1 - tau) ** 2, atol=1e-5
+    )
+
+
+def test_time_law_straight_line_is_minimum_jerk():
+    tr = time_law([[0.0, 0.0], [3.0, 4.0]], T_end=10.0, Ts=0.1)
+    assert tr.x.shape == (101, 2)
+    u = np.array([0.6, 0.8])
+    tau = tr.t / 10.0
+    s = 5.0 * (10 * tau**3 - 15 * tau**4 + 6 * tau**5)
+    np.testing.assert_allclose(tr.x, s[:, None] * u, atol=1e-12)
+    np.testing.assert_allclose(tr.xd, (5.0 / 10.0 * 30 * tau**2 * (1 - tau) ** 2)[:, None] * u, atol=1e-12)
+    sdd = 5.0 / 100.0 * 60 * tau * (1 - tau) * (1 - 2 * tau)
+    np.testing.assert_allclose(tr.xdd, sdd[:, None] * u, atol=1e-12)
+    assert np.linalg.norm(tr.xd[50]) == pytest.approx(1.875 * 5.0 / 10.0, abs=1e-12)  # peak speed 15/8 L/T
+
+
+@pytest.mark.parametrize("wp", [[[1.0, 2.0], [1.0, 2.0]], [[1.0, 2.0], [1.0, 2.0], [1.0, 2.0 + 1e-12]]])
+def test_time_law_zero_length_is_constant(wp):
+    tr = time_law(wp)
+    assert tr.x.shape == (301, 2)
+    assert np.all(tr.x == [1.0, 2.0]) and np.all(tr.xd == 0.0) and np.all(tr.xdd == 0.0)
+
+
+def test_time_law_duplicate_waypoints_are_merged():
+    a = time_law([[0.0, 0.0], [1.0, 1.0], [1.0, 1.0], [2.0, 0.5], [4.0, 1.0]])
+    b = time_law([[0.0, 0.0], [1.0, 1.0], [2.0, 0.5], [4.0, 1.0]])
+    np.testing.assert_allclose(a.x, b.x, atol=1e-12)
+    assert np.all(np.isfinite(a.xdd))
+
+
+@pytest.mark.parametrize(
+    "wp",
+    [
+        [(1.0, 2.4), (7.6, 2.4), (7.6, 9.0)],  # tight 90 degree corner round the inflated square
+        [(1.0, 1.0), (2.4, 2.4), (2.4, 7.6), (9.0, 9.0)],  # zig-zag along the side
+        [(1.0, 2.4), (7.6, 2.4), (7.65, 7.6), (9.0, 7.6)],  # S-bend
+    ],
+)
+def test_time_law_spline_kept_free_on_corner_map(square_env, wp):
+    wp = np.array(wp)
+    dense_t = 0.005
+    # the plain spline (no env) cuts into the 0.05 m margin: the check is needed
+    free_spline = time_law(wp, Ts=dense_t)
+    assert np.min(square_env.exact_clearance(free_spline.x)) < 0.05
+    tr = time_law(wp, env=square_env, clearance=0.05)
+    assert np.min(square_env.exact_clearance(tr.x)) >= 0.05
+    dense = time_law(
+        wp, Ts=dense_t, env=square_env, clearance=0.05
+    )  # same spline, sampled every ~1 cm or less
+    np.testing.assert_allclose(dense.x[::10], tr.x, atol=1e-12)
+    assert np.min(square_env.segment_clearance(dense.x[:-1], dense.x[1:])) >= 0.05 - 1e-6
+    assert np.array_equal(tr.x[0], wp[0]) and np.array_equal(tr.x[-1], wp[-1])
+    again = time_law(wp, env=square_env, clearance=0.05)
+    assert again.x.tobytes() == tr.x.tobytes()  # refinement is deterministic
+
+
+def test_time_law_polyline_too_close_raises(square_env):
+    with pytest.raises(PathError, match="clearance 0.100 m < the required 0.2"):
+        time_law([(1.0, 2.4), (7.6, 2.4)], env=square_env, clearance=0.2)
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        {"waypoints": [[0.0, 0.0]]},
+        {"waypoints": [[0.0, 0.0], [np.nan, 1.0]]},
+        {"waypoints": [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]},
+        {"waypoints": [0.0, 1.0]},
+        {"Ts": 0.0},
+        {"Ts": -0.05},
+        {"Ts": 0.07},  # 15 / 0.07 is not an integer number of steps
+        {"Ts": 20.0},
+        {"T_end": 0.0},
+        {"T_end": float("nan")},
+        {"clearance": -1.0},
+    ],
+)
+def test_time_law_parameter_errors(args):
+    kwargs = {"waypoints": [[0.0, 0.0], [1.0, 1.0]]} | args
+    with pytest.raises(ParameterError):
+        time_law(**kwargs)
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# leader_trajectory
+
+
+def test_leader_trajectory_combines_planner_and_time_law(discs_env, discs_path):
+    tr = leader_trajectory(discs_env, (1.0, 5.0), (9.0, 5.2), seed=0, iterations=400)
+    assert np.array_equal(tr.waypoints, discs_path)
+    assert tr.t.shape == (301,)
+    assert np.array_equal(tr.x[0], [1.0, 5.0]) and np.array_equal(tr.x[-1], [9.0, 5.2])
+    assert np.min(discs_env.segment_clearance(tr.x[:-1], tr.x[1:])) >= 0.05 - 1e-6
+    again = leader_trajectory(discs_env, (1.0, 5.0), (9.0, 5.2), seed=0, iterations=400)
+    assert again.x.tobytes() == tr.x.tobytes() and again.xdd.tobytes() == tr.xdd.tobytes()
