@@ -143,7 +143,7 @@ def distance_errors(plan: Any) -> np.ndarray:
 # ----------------------------------------------------------------------------------------------------------
 # fitness functions
 # ----------------------------------------------------------------------------------------------------------
-def fitness(plan: Any, Ts: float | None = None) -> tuple[float, float, float, float]:
+def fitness(plan: Any, Ts: float | None = None, *, penalize: bool = True) -> tuple[float, float, float, float]:
     """Fitness functions f1..f4 of Caruso 2021 eq. 24–27 (all to be minimised).
 
     With samples k = 0..K at t = k Ts:
@@ -159,7 +159,8 @@ def fitness(plan: Any, Ts: float | None = None) -> tuple[float, float, float, fl
     - ``f4 = Σ_{k=1..K} q̈_kᵀ q̈_k`` with ``q̈_k = (q̇_k − q̇_{k−1}) / Ts`` (eq. 27; mixed units rad²/s⁴ +
       m²/s⁴).
 
-    Blind penalty (Caruso 2021 §4.2.2): if ``plan.success`` is False every f_i is ``+inf``.
+    Blind penalty (Caruso 2021 §4.2.2): if ``plan.success`` is False every f_i is ``+inf`` (unless
+    ``penalize=False``, which gives the values of the recorded motion, e.g. to compare failed baselines).
 
     Args:
         plan: a :class:`tmr.clik.Plan` (fields ``qdot``, ``spans``, ``robots``, ``reference``, ``t``,
@@ -169,7 +170,7 @@ def fitness(plan: Any, Ts: float | None = None) -> tuple[float, float, float, fl
     Returns:
         ``(f1, f2, f3, f4)`` as Python floats.
     """
-    if not plan.success:
+    if penalize and not plan.success:
         return (math.inf, math.inf, math.inf, math.inf)
     Ts = _plan_ts(plan, Ts)
     qdot = np.asarray(plan.qdot, dtype=float)
@@ -262,6 +263,8 @@ class Metrics:
     f2: float
     f3: float
     f4: float
+    #: eq. 24–27 of the recorded motion without the failure penalty (to compare failed plans)
+    fitness_raw: list[float]
     # clearances to the inflated obstacles [m]
     min_robot_clearance: float
     min_robot_clearance_step: int | None
@@ -361,6 +364,7 @@ def evaluate(
     r = float(plan.safety_radius)
 
     f1, f2, f3, f4 = fitness(plan, Ts)
+    raw = list(fitness(plan, Ts, penalize=False)) if t.size >= 2 else [math.nan] * 4
 
     # clearances
     clr = clearances(plan, env)
@@ -414,6 +418,7 @@ def evaluate(
         f2=f2,
         f3=f3,
         f4=f4,
+        fitness_raw=raw,
         min_robot_clearance=min_rc,
         min_robot_clearance_step=min_rc_k,
         min_tether_clearance=min_tc,

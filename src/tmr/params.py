@@ -77,6 +77,38 @@ class TimeParams:
 
 
 @dataclass(frozen=True)
+class PathParams:
+    """Leader path planning (Caruso 2021 §4.2 "Planner": RRT*).
+
+    Attributes:
+        path_clearance: margin [m] the leader's RRT* path keeps from the inflated obstacles. The default keeps the
+            leader outside the obstacle task's danger zone (d_min + ε) where the map allows; if no path exists with
+            it, the planner retries with half of it, then with ``path_clearance_min``.
+        path_clearance_min: smallest margin tried [m].
+        path_iterations: RRT* iterations (termination by count, so the path is a function of the seed).
+        goal_tolerance: the plan fails if the leader ends farther than this from the goal [m].
+    """
+
+    path_clearance: float = 0.6
+    path_clearance_min: float = 0.05
+    path_iterations: int = 1000
+    goal_tolerance: float = 0.1
+
+    def __post_init__(self) -> None:
+        _validate(self)
+        if self.path_clearance < 0 or self.path_clearance_min < 0 or self.path_iterations < 1:
+            raise ParameterError(
+                f"need path_clearance ≥ 0, path_clearance_min ≥ 0, path_iterations ≥ 1; got {self}"
+            )
+
+    @property
+    def clearances(self) -> tuple[float, ...]:
+        """Margins tried in order [m]."""
+        c = self.path_clearance
+        return tuple(sorted({c, max(c / 2, self.path_clearance_min), min(c, self.path_clearance_min)}, reverse=True))
+
+
+@dataclass(frozen=True)
 class PinvParams:
     """Gains of the faithful task-priority CLIK baseline (Caruso 2021 §4.1–4.2).
 

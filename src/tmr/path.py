@@ -1,17 +1,18 @@
-"""Leader (end-effector) path and trajectory: the "Planner" and "Trajectory Generator" blocks of Caruso 2021 §4.2.
+"""Leader path and trajectory: the "Planner" and "Trajectory Generator" blocks of Caruso 2021 §4.2.
 
-* :func:`plan_leader_path` — collision-free polyline from start to goal with OMPL's RRT* (the planner of Caruso 2021
-  §4.2, ref. [41]), seeded and terminated by an **iteration count** so that the same seed gives the same path, byte for
-  byte.  Every state and every straight segment of the tree is checked exactly against the inflated obstacles of the
-  environment (``env.is_free`` / ``env.segment_clearance``), so the returned polyline is free, not just sampled free.
-* :func:`time_law` — cubic B-spline through the waypoints (chord-length parametrisation), re-parametrised by arc
-  length and traversed with a quintic minimum-jerk time law ``s(t)`` (zero velocity and acceleration at both ends),
-  sampled at ``t = 0, Ts, ..., T_end``; position, velocity and acceleration are analytic (chain rule).
-* :func:`leader_trajectory` — both, i.e. ``w = [X, Xdot, Xddot] = f(T_end, Ts, z)`` of Caruso 2021 §4.2.
+* :func:`plan_leader_path` -- collision-free polyline from start to goal with OMPL's RRT* (the planner of
+  Caruso 2021 §4.2, ref. [41]), seeded and stopped after a fixed **number of iterations**, so the same seed
+  gives the same path, byte for byte. Every state and every straight motion is checked exactly against the
+  inflated obstacles (``env.is_free`` / ``env.segment_clearance``): the polyline is free, not sampled free.
+* :func:`time_law` -- cubic B-spline through the waypoints (chord-length parametrisation), re-parametrised by
+  arc length and traversed with the quintic minimum-jerk law ``s(t)`` (zero velocity and acceleration at both
+  ends), sampled at ``t = 0, Ts, ..., T_end``; position, velocity and acceleration are analytic.
+* :func:`leader_trajectory` -- both: ``w = [X, Xdot, Xddot] = f(T_end, Ts, z)`` of Caruso 2021 §4.2.
 
-The environment is duck-typed: only ``env.bounds``, ``env.is_free(points, margin)``, ``env.exact_clearance(points)`` and
-``env.segment_clearance(a, b)`` are used (see :class:`tmr.environment.Environment`); clearances are signed distances
-[m] to the obstacles inflated by the robot safety radius.
+The environment is duck-typed: only ``env.bounds``, ``env.is_free(points, margin)``,
+``env.exact_clearance(points)`` and ``env.segment_clearance(a, b)`` are used (see
+:class:`tmr.environment.Environment`). Clearances are signed distances [m] to the obstacles inflated by the
+robot safety radius.
 """
 
 from __future__ import annotations
@@ -19,26 +20,35 @@ from __future__ import annotations
 import contextlib
 import math
 import operator
+import threading
 from collections.abc import Iterator
 from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from ompl import base as ob
+from ompl import geometric as og
+from ompl import util as ou
 from scipy.interpolate import CubicHermiteSpline, make_interp_spline
 
 from tmr.errors import ParameterError, PathError
 
 Array = NDArray[np.float64]
 
-__all__ = ["Trajectory", "plan_leader_path", "time_law", "leader_trajectory", "path_length"]
+__all__ = ["Trajectory", "leader_trajectory", "path_length", "plan_leader_path", "time_law"]
 
-#: Largest step [m] of OMPL's discrete motion checking (only used by OMPL helpers that interpolate states; the
-#: motion validator itself is exact).
+#: Default number of RRT* iterations of :func:`plan_leader_path`.
+DEFAULT_ITERATIONS = 3000
+#: Spacing [m] of the points tested with ``env.is_free`` before a motion's exact check (a cheap, exact
+#: rejection: one point too close means the segment is too close); also OMPL's state-checking step.
 CHECK_STEP = 0.05
 #: Arc-length spacing [m] of the dense spline samples checked against the obstacles in :func:`time_law`.
 DENSE_STEP = 0.02
 #: Points closer than this [m] are the same waypoint.
 SAME_POINT = 1e-9
+#: OMPL's seed generator and log level are process-global: planning calls are serialised so that concurrent
+#: threads still get their seed's path.
+_OMPL_LOCK = threading.Lock()
 #: Rounds of local waypoint refinement :func:`time_law` tries before giving up on a spline that cuts a corner.
 MAX_REFINEMENTS = 12
 
@@ -47,11 +57,11 @@ class Trajectory(NamedTuple):
     """Leader reference of Caruso 2021 §4.2, ``w = [X, Xdot, Xddot]`` sampled at ``t``.
 
     Attributes:
-        t: (K+1,) sample times [s], ``0, Ts, ..., T_end`` (K = round(T_end / Ts); 300 steps for the defaults).
+        t: (K+1,) sample times [s], ``0, Ts, ..., T_end`` (K = round(T_end / Ts); 300 for the defaults).
         x: (K+1, 2) leader reference position [m].
         xd: (K+1, 2) velocity [m/s].
         xdd: (K+1, 2) acceleration [m/s^2].
-        waypoints: (M, 2) the path (e.g. RRT*) the trajectory was built from [m].
+        waypoints: (M, 2) the path (e.g. from RRT*) the trajectory was built from [m].
     """
 
     t: Array
@@ -61,7 +71,7 @@ class Trajectory(NamedTuple):
     waypoints: Array
 
 
-# ----------------------------------------------------------------------------------------------------------------------
+# ------------------------------------------------------------------------------------------------------------
 # input validation
 
 
@@ -71,9 +81,7 @@ def _as_point(p: ArrayLike, name: str) -> Array:
     except (TypeError, ValueError) as exc:
         raise ParameterError(f"{name} must be an (x, y) position in metres, got {p!r}") from exc
     if a.shape != (2,) or not np.all(np.isfinite(a)):
-        raise ParameterError(
-            f"{name} must be a finite (x, y) position in metres, got {np.asarray(p).tolist()!r}"
-        )
+        raise ParameterError(f"{name} must be a finite (x, y) position in metres, got {a.tolist()!r}")
     return a
 
 
@@ -83,8 +91,8 @@ def _as_int(v: Any, name: str, lo: int, hi: int | None = None) -> int:
     except TypeError as exc:
         raise ParameterError(f"{name} must be an integer, got {v!r}") from exc
     if i < lo or (hi is not None and i > hi):
-        rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
-        raise ParameterError(f"{name} must be {rng}, got {i}")
+        allowed = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+        raise ParameterError(f"{name} must be {allowed}, got {i}")
     return int(i)
 
 
@@ -117,12 +125,60 @@ def path_length(waypoints: ArrayLike) -> float:
     return float(np.sum(np.linalg.norm(np.diff(w, axis=0), axis=1))) if len(w) > 1 else 0.0
 
 
-# ----------------------------------------------------------------------------------------------------------------------
+# ------------------------------------------------------------------------------------------------------------
+# exact segment tests
+
+
+def _segment_clearance(env: Any, a: ArrayLike, b: ArrayLike) -> Array:
+    return np.asarray(env.segment_clearance(a, b), dtype=float)
+
+
+def _segments_free(env: Any, a: Array, b: Array, margin: float) -> NDArray[np.bool_]:
+    """Exact test ``segment_clearance(a_i, b_i) > margin`` of (n, 2) segment ends, cheap rejection first.
+
+    Points every <= CHECK_STEP along each segment (ends included) are tested with ``env.is_free(p, margin)``;
+    a segment with a point at clearance <= margin is rejected (exactly: its minimum clearance is <= margin).
+    The survivors get the exact ``env.segment_clearance``, which is slow on segments crossing obstacles.
+    """
+    a = np.atleast_2d(a)
+    b = np.atleast_2d(b)
+    length = np.linalg.norm(b - a, axis=1)
+    n = np.maximum(2, np.ceil(length / CHECK_STEP).astype(np.intp) + 1)
+    starts = np.concatenate([[0], np.cumsum(n)[:-1]])
+    seg = np.repeat(np.arange(len(a)), n)
+    f = (np.arange(n.sum()) - starts[seg]) / (n[seg] - 1)
+    pts = a[seg] + f[:, None] * (b - a)[seg]
+    free = np.logical_and.reduceat(np.asarray(env.is_free(pts, margin=margin), dtype=bool), starts)
+    if free.any():
+        free[free] = _segment_clearance(env, a[free], b[free]) > margin
+    return free
+
+
+class _ExactMotionValidator(ob.MotionValidator):
+    """OMPL motion validator: a straight motion is valid iff its exact clearance exceeds ``margin`` [m]."""
+
+    def __init__(self, si: Any, env: Any, margin: float) -> None:
+        super().__init__(si)
+        self._env = env
+        self._margin = margin
+
+    def checkMotion(self, s1: Any, s2: Any) -> bool:  # OMPL's method name
+        # single-segment version of _segments_free (this is the planner's hot path)
+        a = np.array((s1[0], s1[1]))
+        b = np.array((s2[0], s2[1]))
+        n = max(2, math.ceil(math.hypot(b[0] - a[0], b[1] - a[1]) / CHECK_STEP) + 1)
+        pts = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
+        if not np.all(self._env.is_free(pts, margin=self._margin)):
+            return False
+        return bool(self._env.segment_clearance(a, b) > self._margin)
+
+
+# ------------------------------------------------------------------------------------------------------------
 # planner: OMPL RRT*
 
 
 @contextlib.contextmanager
-def _ompl_log_level(ou: Any, level: Any) -> Iterator[None]:
+def _ompl_log_level(level: Any) -> Iterator[None]:
     """Set OMPL's (process-global) log level for the duration of the block, then restore the caller's."""
     previous = ou.getLogLevel()
     ou.setLogLevel(level)
@@ -132,8 +188,8 @@ def _ompl_log_level(ou: Any, level: Any) -> Iterator[None]:
         ou.setLogLevel(previous)
 
 
-def _segment_clearance(env: Any, a: Array, b: Array) -> Array:
-    return np.asarray(env.segment_clearance(a, b), dtype=float)
+def _states(path: Any) -> Array:
+    return np.array([(st[0], st[1]) for st in path.getStates()], dtype=float).reshape(-1, 2)
 
 
 def _rrt_star(
@@ -146,28 +202,14 @@ def _rrt_star(
     margin: float,
     range_: float | None,
     simplify: bool,
-) -> tuple[Array, Array, bool]:
-    """Run RRT* (and optionally OMPL's path simplifier); return (raw path, simplified path, exact solution found)."""
-    from ompl import base as ob
-    from ompl import geometric as og
-    from ompl import util as ou
-
-    class _ExactMotionValidator(ob.MotionValidator):
-        """A straight motion is valid iff its exact clearance to the inflated obstacles exceeds ``margin``."""
-
-        def __init__(self, si: Any) -> None:
-            super().__init__(si)
-
-        def checkMotion(self, s1: Any, s2: Any) -> bool:  # OMPL's name
-            a = np.array((s1[0], s1[1]))
-            b = np.array((s2[0], s2[1]))
-            return bool(_segment_clearance(env, a, b) > margin)
+) -> tuple[Array, Array] | None:
+    """RRT*, then optionally OMPL's simplifier: (raw path, simplified path), or None if no exact solution."""
+    xmin, ymin, xmax, ymax = _env_bounds(env)
 
     def state_valid(s: Any) -> bool:
         return bool(env.is_free(np.array((s[0], s[1])), margin=margin))
 
-    xmin, ymin, xmax, ymax = _env_bounds(env)
-    with _ompl_log_level(ou, ou.LOG_WARN):
+    with _OMPL_LOCK, _ompl_log_level(ou.LOG_WARN):
         space = ob.RealVectorStateSpace(2)
         bounds = ob.RealVectorBounds(2)
         bounds.setLow(0, xmin)
@@ -177,8 +219,9 @@ def _rrt_star(
         space.setBounds(bounds)
         si = ob.SpaceInformation(space)
         si.setStateValidityChecker(state_valid)
-        si.setMotionValidator(_ExactMotionValidator(si))
-        # Discrete checking step <= CHECK_STEP metres (the resolution is a fraction of the space's extent).
+        si.setMotionValidator(_ExactMotionValidator(si, env, margin))
+        # State-checking step <= CHECK_STEP [m] (OMPL takes it as a fraction of the space's extent); only
+        # used by OMPL helpers that interpolate states, motions are validated exactly.
         si.setStateValidityCheckingResolution(min(0.5, CHECK_STEP / si.getMaximumExtent()))
         si.setup()
 
@@ -192,36 +235,35 @@ def _rrt_star(
         objective = ob.PathLengthOptimizationObjective(si)
         pdef.setOptimizationObjective(objective)
 
-        # OMPL seeds every RNG it constructs from one global seed generator; re-seeding it right before the planner
-        # (and the simplifier) are built makes their samples a function of ``seed`` only.  OMPL reports an error when
-        # the generator had already been used in this process, but it does reseed it (tested: same seed, same
-        # path), so that message is silenced.  OMPL rejects seed 0, hence seed + 1.
-        with _ompl_log_level(ou, ou.LOG_NONE):
+        # OMPL seeds every RNG it constructs from one global seed generator. Re-seeding it right before the
+        # planner and the simplifier are built makes their samples a function of ``seed`` only. OMPL logs an
+        # error if the generator was used before in this process, but it does reseed it (tested: same seed,
+        # same path), so that message is silenced. OMPL rejects seed 0, hence seed + 1.
+        with _ompl_log_level(ou.LOG_NONE):
             ou.RNG.setSeed(seed + 1)
         planner = og.RRTstar(si)
         if range_ is not None:
             planner.setRange(range_)
         planner.setProblemDefinition(pdef)
         planner.setup()
-        # Termination by iteration count, not wall-clock: the condition is evaluated once per RRT* iteration.
+        # Termination by iteration count, never wall-clock: OMPL evaluates the condition once per iteration.
         ptc = ob.PlannerTerminationCondition(lambda: planner.numIterations() >= iterations)
         planner.solve(ptc)
-        exact = bool(pdef.hasExactSolution())
-        if not exact:
-            return np.empty((0, 2)), np.empty((0, 2)), False
+        if not pdef.hasExactSolution():
+            return None
         path = pdef.getSolutionPath()
-        raw = np.array([(st[0], st[1]) for st in path.getStates()], dtype=float)
+        raw = _states(path)
         simplified = raw
         if simplify:
-            # Deterministic: no time limit (simplifyMax) and the simplifier's RNG comes from the seeded generator.
+            # Deterministic: no time limit (simplifyMax); the simplifier's RNG is from the seeded generator.
             simplifier = og.PathSimplifier(si, pdef.getGoal(), objective)
             simplifier.simplifyMax(path)
-            simplified = np.array([(st[0], st[1]) for st in path.getStates()], dtype=float)
-    return raw, simplified, True
+            simplified = _states(path)
+    return raw, simplified
 
 
 def _dedupe(points: Array) -> Array:
-    """Merge consecutive points closer than SAME_POINT; the last point is kept exactly (unless all coincide)."""
+    """Merge consecutive points closer than SAME_POINT; the last point is kept exactly unless all coincide."""
     keep = [points[0]]
     for p in points[1:]:
         if np.linalg.norm(p - keep[-1]) > SAME_POINT:
@@ -233,31 +275,29 @@ def _dedupe(points: Array) -> Array:
 
 
 def _densify(points: Array, step: float) -> Array:
-    """Insert equally spaced points on every segment so that no segment is longer than ``step`` [m]."""
+    """Insert equally spaced points on every segment so that none is longer than ``step`` [m]."""
     out = [points[:1]]
-    for a, b in zip(points[:-1], points[1:]):
+    for a, b in zip(points[:-1], points[1:], strict=True):
         n = max(1, math.ceil(np.linalg.norm(b - a) / step))
-        f = np.arange(1, n + 1)[:, None] / n
-        out.append(a + f * (b - a))
+        out.append(a + (np.arange(1, n + 1)[:, None] / n) * (b - a))
     res = np.vstack(out)
     res[-1] = points[-1]
     return res
 
 
 def _string_pull(env: Any, points: Array, margin: float, step: float = 0.1) -> Array:
-    """Deterministic shortcutting: from each kept point jump to the farthest point of the densified path that is
-    visible through an exactly free segment (clearance > ``margin``); repeat from there."""
+    """Deterministic shortcutting with exact segment tests: from the current point, jump to the farthest point
+    of the path (densified every ``step`` [m]) joined to it by a free segment (clearance > ``margin``)."""
     dense = _densify(points, step)
     keep = [0]
     i = 0
     n = len(dense)
     while i < n - 1:
         cands = np.arange(i + 1, n)
-        clear = _segment_clearance(env, np.broadcast_to(dense[i], (len(cands), 2)), dense[cands])
-        ok = cands[clear > margin]
-        j = int(ok.max()) if len(ok) else i + 1  # i + 1 is always valid (sub-segment of a valid segment)
-        keep.append(j)
-        i = j
+        ok = cands[_segments_free(env, np.repeat(dense[i : i + 1], len(cands), axis=0), dense[cands], margin)]
+        # dense[i] -> dense[i + 1] lies on a free segment of the input path, so it is free too
+        i = int(ok.max()) if len(ok) else i + 1
+        keep.append(i)
     return dense[keep]
 
 
@@ -267,38 +307,41 @@ def plan_leader_path(
     goal: ArrayLike,
     *,
     seed: int = 0,
-    iterations: int = 3000,
+    iterations: int = DEFAULT_ITERATIONS,
     clearance: float = 0.1,
-    range: float | None = None,  # OMPL's name for the RRT* step
+    range: float | None = None,  # OMPL's name for the RRT* extension length
     simplify: bool = True,
 ) -> Array:
     """Collision-free leader path with RRT* (Caruso 2021 §4.2, "Planner", ref. [41]) via OMPL.
 
-    States must have ``env.is_free(p, margin=clearance)`` and straight motions ``env.segment_clearance > clearance``
-    (exact, a custom OMPL motion validator), i.e. ``clearance`` [m] is an extra margin beyond the obstacles inflated by
-    the safety radius (RRT* paths hug obstacles).  If the start or the goal is free but closer than ``clearance`` to an
-    obstacle, the margin is lowered to half of its clearance so that a path can leave it.  RRT* runs exactly
-    ``iterations`` iterations (termination by count, never by wall-clock), seeded with ``seed``; with ``simplify`` the
-    path is shortened by OMPL's ``PathSimplifier.simplifyMax`` (seeded, no time limit) and by a deterministic
-    string-pulling pass with exact segment checks.  Same inputs give the same path, byte for byte.
+    States need ``env.is_free(p, margin)`` and straight motions ``env.segment_clearance > margin`` (an exact
+    OMPL motion validator), with ``margin = clearance`` [m]: an extra margin beyond the obstacles inflated by
+    the safety radius (RRT* paths hug obstacles). If the start or the goal is free but closer than
+    ``clearance`` to an obstacle, the margin is lowered to half its clearance so that a path can leave it.
+
+    RRT* runs exactly ``iterations`` iterations (termination by count, never by wall-clock), seeded with
+    ``seed``. With ``simplify`` the path is shortened by OMPL's ``PathSimplifier.simplifyMax`` (seeded RNG, no
+    time limit) and a string-pulling pass with exact segment tests. Same inputs give the same path, byte for
+    byte. If the straight segment start-goal is free it is returned without planning.
 
     Args:
         env: environment (``bounds``, ``is_free``, ``exact_clearance``, ``segment_clearance``); the RRT* state
             space is the rectangle ``env.bounds`` [m].
         start, goal: (2,) positions [m].
-        seed: integer in [0, 2**32 - 2] (OMPL is seeded with ``seed + 1``; it rejects 0).
+        seed: integer in [0, 2**32 - 2]; OMPL is seeded with ``seed + 1`` (it rejects 0).
         iterations: RRT* iterations (>= 1).
-        clearance: extra margin [m] (>= 0) of every state and segment of the path.
-        range: RRT* maximum extension [m] (None: OMPL's default, 20 % of the map diagonal).
-        simplify: shorten the path (True) or return the raw RRT* tree path.
+        clearance: extra margin [m] (>= 0) kept by every state and segment of the path.
+        range: RRT* maximum extension [m] (None: OMPL's default, 20 % of the room's diagonal).
+        simplify: shorten the path (True) or return the raw RRT* path.
 
     Returns:
-        (M, 2) waypoints [m], ``M >= 2``, first exactly ``start``, last exactly ``goal``; every segment has exact
+        (M, 2) waypoints [m], M >= 2, first exactly ``start``, last exactly ``goal``; every segment has exact
         clearance > the margin used.
 
     Raises:
         ParameterError: malformed arguments.
-        PathError: the start or the goal is in collision, or RRT* found no exact solution within ``iterations``.
+        PathError: start or goal outside the room or in collision (with its clearance), or RRT* found no
+            exact solution within ``iterations``.
     """
     start = _as_point(start, "start")
     goal = _as_point(goal, "goal")
@@ -315,83 +358,85 @@ def plan_leader_path(
         if not inside or c <= 0.0:
             where = "outside the room" if not inside else "inside an (inflated) obstacle"
             raise PathError(
-                f"{name} {p.tolist()} is {where}: clearance {c:.3f} m to the obstacles grown by the safety radius "
-                f"(must be > 0); move the {name} into free space"
+                f"{name} {p.tolist()} is {where}: clearance {c:.3f} m to the obstacles grown by the safety "
+                f"radius (must be > 0); move the {name} into free space"
             )
         margin = min(margin, 0.5 * c)
 
     if np.linalg.norm(goal - start) <= SAME_POINT:
         return np.vstack([start, goal])
-    if float(_segment_clearance(env, start, goal)) > margin:
-        return np.vstack([start, goal])  # the straight line is free: it is the optimal path
+    if _segments_free(env, start[None], goal[None], margin)[0]:
+        return np.vstack([start, goal])  # the straight line is free: it is the shortest path
 
-    raw, simplified, exact = _rrt_star(
+    found = _rrt_star(
         env, start, goal, seed=seed, iterations=iterations, margin=margin, range_=range_, simplify=simplify
     )
-    if not exact:
+    if found is None:
         raise PathError(
-            f"RRT* found no collision-free path from start {start.tolist()} to goal {goal.tolist()} in {iterations} "
-            f"iterations (seed {seed}, clearance margin {margin:.3f} m); the goal may be unreachable (enclosed by "
-            "obstacles or behind a gap narrower than the robot). Try more iterations, a smaller clearance, or a "
-            "different goal"
+            f"RRT* found no collision-free path from start {start.tolist()} to goal {goal.tolist()} in "
+            f"{iterations} iterations (seed {seed}, clearance margin {margin:.3f} m): the goal may be "
+            "unreachable (enclosed by obstacles, or behind a gap too narrow for the robot). Try more "
+            "iterations, a smaller clearance, or a different goal"
         )
-
-    candidates = [simplified, raw] if simplify else [raw]
-    for k, path in enumerate(candidates):
-        if simplify and k == 0:
-            path = _string_pull(env, path, margin)
+    raw, simplified = found
+    candidates = [_string_pull(env, simplified, margin), raw] if simplify else [raw]
+    for path in candidates:
         path = _dedupe(path)
-        if np.linalg.norm(path[0] - start) > 1e-9 or np.linalg.norm(path[-1] - goal) > 1e-9:
+        if len(path) < 2 or np.linalg.norm(path[0] - start) > 1e-9 or np.linalg.norm(path[-1] - goal) > 1e-9:
             continue
         path[0], path[-1] = start, goal
-        if len(path) < 2:
-            path = np.vstack([start, goal])
+        # final exact check of every segment (the motion validator is exact, so this is a safeguard)
         if np.all(_segment_clearance(env, path[:-1], path[1:]) > margin):
             return np.ascontiguousarray(path)
-    raise PathError(  # pragma: no cover - the motion validator is exact, so this means an inconsistent env
-        f"the RRT* path from {start.tolist()} to {goal.tolist()} failed the exact segment check; the environment's "
-        "segment_clearance and is_free disagree"
+    raise PathError(  # pragma: no cover - the motion validator is exact: an inconsistent env gets here
+        f"the RRT* path from {start.tolist()} to {goal.tolist()} failed the final exact segment check; "
+        "env.is_free and env.segment_clearance disagree"
     )
 
 
-# ----------------------------------------------------------------------------------------------------------------------
-# trajectory generator: B-spline + arc length + quintic time law
+# ------------------------------------------------------------------------------------------------------------
+# trajectory generator: B-spline, arc length, minimum-jerk time law
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
 
 
 class _ArcLengthSpline:
-    """Cubic interpolating B-spline p(u) through the points, u = cumulative chord length, with its arc length s(u)
-    and the inverse u(s) (Hermite guess + Newton on the exact Gauss-Legendre arc length)."""
+    """Cubic interpolating B-spline p(u) through the points (u = cumulative chord length [m]), its arc length
+    s(u) (Gauss-Legendre) and the inverse u(s) (Hermite interpolation of a table, then Newton steps)."""
 
     def __init__(self, points: Array) -> None:
-        self.points = points
         chords = np.linalg.norm(np.diff(points, axis=0), axis=1)
         self.u_knots = np.concatenate([[0.0], np.cumsum(chords)])
         self.p = make_interp_spline(self.u_knots, points, k=3)  # not-a-knot cubic B-spline
         self.dp = self.p.derivative(1)
         self.ddp = self.p.derivative(2)
-        # arc-length table on a grid fine enough for an accurate Hermite inverse (<= 0.02 in u, 8 per interval)
-        grid = []
-        for a, b in zip(self.u_knots[:-1], self.u_knots[1:]):
-            n = max(8, math.ceil((b - a) / 0.02))
-            grid.append(np.linspace(a, b, n + 1)[:-1])
-        grid.append(self.u_knots[-1:])
-        self.u_grid = np.concatenate(grid)
+        grid = [
+            np.linspace(a, b, max(8, math.ceil((b - a) / 0.02)) + 1)[:-1]
+            for a, b in zip(self.u_knots[:-1], self.u_knots[1:], strict=True)
+        ]
+        self.u_grid = np.concatenate([*grid, self.u_knots[-1:]])
+        d1 = self.dp(self.u_grid)
+        speed = np.linalg.norm(d1, axis=1)
+        turn = np.sum(d1[:-1] * d1[1:], axis=1)  # <= 0: the tangent turns >= 90 deg within 0.02 m: a cusp
+        if np.min(speed) < 1e-9 or np.any(turn <= 0.0):
+            i = int(np.argmin(turn))
+            raise ParameterError(
+                f"the waypoints turn back on themselves near {self.p(self.u_grid[i]).tolist()} (a cusp "
+                "of the B-spline); remove the reversal from the waypoints"
+            )
         ds = self._integrate(self.u_grid[:-1], self.u_grid[1:])
         self.s_grid = np.concatenate([[0.0], np.cumsum(ds)])
         self.length = float(self.s_grid[-1])
-        self._u_of_s = CubicHermiteSpline(self.s_grid, self.u_grid, 1.0 / self.speed(self.u_grid))
+        self._u_of_s = CubicHermiteSpline(self.s_grid, self.u_grid, 1.0 / speed)
 
     def speed(self, u: Array) -> Array:
-        """|dp/du| (dimensionless, ~1 for the chord-length parametrisation)."""
+        """|dp/du| (dimensionless, about 1 for the chord-length parametrisation)."""
         return np.linalg.norm(self.dp(u), axis=-1)
 
     def _integrate(self, a: Array, b: Array) -> Array:
-        """Arc length between parameters a and b (8-point Gauss-Legendre, exact to ~1e-12 on these spans)."""
+        """Arc length [m] from parameter a to b (8-point Gauss-Legendre on spans <= 0.02)."""
         half = 0.5 * (b - a)
-        mid = 0.5 * (b + a)
-        u = mid[:, None] + half[:, None] * _GL_X[None, :]
+        u = (0.5 * (b + a))[:, None] + half[:, None] * _GL_X[None, :]
         return half * (self.speed(u.ravel()).reshape(u.shape) @ _GL_W)
 
     def arc_length(self, u: Array) -> Array:
@@ -406,21 +451,20 @@ class _ArcLengthSpline:
         return u
 
     def geometry(self, s: Array) -> tuple[Array, Array, Array, Array]:
-        """Position, unit tangent dx/ds and d2x/ds2 at arc lengths s, and the parameters u."""
+        """At arc lengths s [m]: position x, unit tangent dx/ds, curvature vector d2x/ds2 [1/m], and u."""
         u = self.u_of_s(s)
         x = self.p(u)
         d1 = self.dp(u)
         d2 = self.ddp(u)
         sp2 = np.sum(d1 * d1, axis=-1, keepdims=True)
-        sp = np.sqrt(sp2)
-        tangent = d1 / sp
+        tangent = d1 / np.sqrt(sp2)
         x_ss = (d2 - tangent * np.sum(tangent * d2, axis=-1, keepdims=True)) / sp2
         return x, tangent, x_ss, u
 
 
 def _min_jerk(t: Array, T_end: float, L: float) -> tuple[Array, Array, Array]:
-    """Quintic minimum-jerk time law s(t) = L (10 tau^3 - 15 tau^4 + 6 tau^5), tau = t / T_end, and its derivatives;
-    zero velocity and acceleration at t = 0 and t = T_end."""
+    """Quintic minimum-jerk law s = L (10 tau^3 - 15 tau^4 + 6 tau^5), tau = t / T_end [m], with s_dot [m/s]
+    and s_ddot [m/s^2]; zero velocity and acceleration at t = 0 and t = T_end."""
     tau = np.clip(t / T_end, 0.0, 1.0)
     s = L * tau**3 * (10.0 + tau * (-15.0 + 6.0 * tau))
     sd = (L / T_end) * 30.0 * tau**2 * (1.0 - tau) ** 2
@@ -438,8 +482,8 @@ def _ensure_four(points: Array) -> Array:
 
 
 def _check_spline(env: Any, spline: _ArcLengthSpline, clearance: float) -> tuple[bool, Array, float]:
-    """Exact clearance of the spline, sampled every <= DENSE_STEP of arc length (segments between samples, minus the
-    chord sagitta bound). Returns (ok, parameters u of the offending samples, min clearance)."""
+    """Exact clearance of the whole spline: segments between samples every <= DENSE_STEP of arc length, minus
+    the chord-to-arc gap bound h^2 kappa_max / 8. Returns (ok, parameters u of offending spans, min)."""
     n = max(50, math.ceil(spline.length / DENSE_STEP))
     s = np.linspace(0.0, spline.length, n + 1)
     x, _, x_ss, u = spline.geometry(s)
@@ -451,11 +495,10 @@ def _check_spline(env: Any, spline: _ArcLengthSpline, clearance: float) -> tuple
 
 
 def _refine(points: Array, u_knots: Array, u_bad: Array) -> Array:
-    """Insert the midpoint of every waypoint interval containing an offending parameter, and of its neighbours."""
+    """Insert the midpoint of each waypoint interval holding an offending parameter and of its neighbours."""
     idx = np.clip(np.searchsorted(u_knots, u_bad, side="right") - 1, 0, len(points) - 2)
     marked = np.unique(np.clip(np.concatenate([idx - 1, idx, idx + 1]), 0, len(points) - 2))
-    mids = 0.5 * (points[marked] + points[marked + 1])
-    return np.insert(points, marked + 1, mids, axis=0)
+    return np.insert(points, marked + 1, 0.5 * (points[marked] + points[marked + 1]), axis=0)
 
 
 def time_law(
@@ -465,31 +508,33 @@ def time_law(
     env: Any = None,
     clearance: float = 0.05,
 ) -> Trajectory:
-    """Leader trajectory through ``waypoints`` (Caruso 2021 §4.2, "Trajectory Generator": B-spline, T_end, Ts).
+    """Leader trajectory through ``waypoints`` (Caruso 2021 §4.2, "Trajectory Generator").
 
-    Cubic interpolating B-spline p(u) (scipy ``make_interp_spline``, not-a-knot) on the cumulative chord length u,
-    re-parametrised by its arc length s (Gauss-Legendre quadrature, Newton inverse), traversed with the quintic
-    minimum-jerk law s(t) = L (10 tau^3 - 15 tau^4 + 6 tau^5), tau = t / T_end, so the leader starts and stops with zero
-    velocity and acceleration.  Derivatives are analytic: ``xd = x'(s) s_dot``, ``xdd = x''(s) s_dot^2 + x'(s) s_ddot``.
+    Cubic interpolating B-spline p(u) (scipy ``make_interp_spline``, not-a-knot) on the cumulative chord
+    length u, re-parametrised by its arc length s (Gauss-Legendre quadrature, Newton inverse), traversed with
+    the quintic minimum-jerk law s(t) = L (10 tau^3 - 15 tau^4 + 6 tau^5), tau = t / T_end: the leader starts
+    and stops with zero velocity and acceleration. Derivatives are analytic (chain rule):
+    ``xd = x'(s) s_dot`` and ``xdd = x''(s) s_dot^2 + x'(s) s_ddot``.
 
-    If ``env`` is given, the whole spline (not only the samples) must have exact clearance >= ``clearance`` [m]; where
-    it cuts a corner, midpoints are inserted into the offending waypoint intervals and the spline is rebuilt (at most
-    MAX_REFINEMENTS rounds, deterministic).
+    If ``env`` is given, the whole spline (not only the samples) must keep exact clearance >= ``clearance``
+    [m]. Where it cuts a corner, midpoints are inserted into the offending waypoint intervals and the spline
+    is rebuilt (at most MAX_REFINEMENTS rounds, deterministic).
 
     Args:
-        waypoints: (M, 2) positions [m], M >= 2 (e.g. from :func:`plan_leader_path`); coincident consecutive points
-            are merged; if all coincide the trajectory is constant.
-        T_end: duration [s] (> 0).
-        Ts: sampling period [s] (> 0); T_end / Ts must be an integer K (within 1e-6).
-        env: optional environment (``segment_clearance``, ``exact_clearance``) to keep the spline free.
-        clearance: required clearance [m] of the spline when ``env`` is given (>= 0).
+        waypoints: (M, 2) positions [m], M >= 2 (e.g. from :func:`plan_leader_path`). Coincident consecutive
+            points are merged; if all coincide the trajectory is constant (the leader stays put).
+        T_end: duration [s] (> 0); Caruso 2021 uses 15 s.
+        Ts: sampling period [s] (> 0); T_end / Ts must be an integer K (within 1e-6); Caruso 2021 uses 0.05 s.
+        env: optional environment (``segment_clearance``, ``exact_clearance``) the spline must stay free in.
+        clearance: clearance [m] (>= 0) the spline must keep when ``env`` is given.
 
     Returns:
-        :class:`Trajectory` with K + 1 samples at ``t = linspace(0, T_end, K + 1)`` (step T_end / K = Ts); ``x[0]`` and
-        ``x[-1]`` are exactly the first and last waypoint; ``waypoints`` is the input (M, 2).
+        :class:`Trajectory` with K + 1 samples at ``t = linspace(0, T_end, K + 1)`` (step T_end / K = Ts).
+        ``x[0]`` and ``x[-1]`` are exactly the first and last waypoint; ``waypoints`` is the input.
 
     Raises:
-        ParameterError: NaN/inf, fewer than 2 waypoints, T_end or Ts <= 0, T_end / Ts not an integer.
+        ParameterError: NaN/inf, fewer than 2 waypoints, T_end or Ts <= 0, T_end / Ts not an integer,
+            waypoints reversing onto themselves (cusp).
         PathError: the waypoint polyline itself, or the spline after refinement, violates ``clearance``.
     """
     try:
@@ -507,19 +552,18 @@ def time_law(
     K = round(ratio)
     if K < 1 or abs(ratio - K) > 1e-6 * max(1.0, ratio):
         raise ParameterError(
-            f"T_end / Ts must be a positive integer number of steps, got T_end={T_end} s, Ts={Ts} s (ratio {ratio:.6g})"
+            f"T_end / Ts must be a whole number of steps, got T_end = {T_end} s, Ts = {Ts} s "
+            f"(ratio {ratio:.6g}); choose Ts dividing T_end"
         )
     t = np.linspace(0.0, T_end, K + 1)
 
     pts = _dedupe(wp)
-    if len(pts) == 1:  # start == goal: stand still
+    if len(pts) == 1:  # zero-length path (start == goal): stand still
         if env is not None:
             c = float(np.asarray(env.exact_clearance(pts[0]), dtype=float))
             if c < clearance:
-                raise PathError(
-                    f"the (single) waypoint {pts[0].tolist()} has clearance {c:.3f} m < {clearance} m"
-                )
-        x = np.repeat(pts[:1], K + 1, axis=0)
+                raise PathError(f"the waypoint {pts[0].tolist()} has clearance {c:.3f} m < {clearance} m")
+        x = np.repeat(wp[:1], K + 1, axis=0)
         return Trajectory(t, x, np.zeros_like(x), np.zeros_like(x), wp)
 
     if env is not None:
@@ -527,9 +571,9 @@ def time_law(
         if np.any(poly < clearance):
             i = int(np.argmin(poly))
             raise PathError(
-                f"waypoint segment {i} {pts[i].tolist()} -> {pts[i + 1].tolist()} has clearance {poly[i]:.3f} m < the "
-                f"required {clearance} m, so no spline through the waypoints can keep it; plan the path with a larger "
-                "clearance or pass a smaller one"
+                f"waypoint segment {i} {pts[i].tolist()} -> {pts[i + 1].tolist()} has clearance "
+                f"{poly[i]:.3f} m < the required {clearance} m, so no spline through the waypoints can keep "
+                "it; plan the path with a larger clearance or pass a smaller one"
             )
 
     pts = _ensure_four(pts)
@@ -543,8 +587,8 @@ def time_law(
         pts = _refine(pts, spline.u_knots, u_bad)
     else:
         raise PathError(
-            f"the B-spline through the waypoints cuts a corner (clearance {cmin:.3f} m < {clearance} m) even after "
-            f"{MAX_REFINEMENTS} refinements; pass a smaller clearance or waypoints with more clearance"
+            f"the B-spline through the waypoints cuts a corner (clearance {cmin:.3f} m < {clearance} m) even "
+            f"after {MAX_REFINEMENTS} refinements; pass a smaller clearance or waypoints with more clearance"
         )
 
     s, sd, sdd = _min_jerk(t, T_end, spline.length)
@@ -563,25 +607,24 @@ def leader_trajectory(
     seed: int = 0,
     T_end: float = 15.0,
     Ts: float = 0.05,
-    iterations: int = 3000,
+    iterations: int = DEFAULT_ITERATIONS,
     clearance: float = 0.1,
     spline_clearance: float | None = None,
     range: float | None = None,
 ) -> Trajectory:
-    """Leader trajectory from ``start`` to ``goal``: :func:`plan_leader_path` then :func:`time_law` (Caruso 2021 §4.2).
+    """Leader trajectory from ``start`` to ``goal`` (Caruso 2021 §4.2): :func:`plan_leader_path`, then
+    :func:`time_law` with the environment.
 
     Args:
         env, start, goal, seed, iterations, clearance, range: see :func:`plan_leader_path`.
-        T_end, Ts: see :func:`time_law`.
-        spline_clearance: clearance [m] the spline must keep (default: half of the smallest segment clearance of the
-            planned path, at most ``clearance / 2``), so the spline may cut corners into the planning margin only.
+        T_end, Ts: see :func:`time_law` (defaults 15 s and 0.05 s as in Caruso 2021).
+        spline_clearance: clearance [m] the spline must keep. Default: half the planning margin actually
+            kept by the path (at most ``clearance / 2``), so the spline may only cut into that margin.
     """
     waypoints = plan_leader_path(
         env, start, goal, seed=seed, iterations=iterations, clearance=clearance, range=range
     )
     if spline_clearance is None:
-        seg = _segment_clearance(env, waypoints[:-1], waypoints[1:])
-        spline_clearance = max(
-            0.0, min(0.5 * _as_float(clearance, "clearance", nonneg=True), 0.5 * float(seg.min()))
-        )
+        kept = float(np.min(_segment_clearance(env, waypoints[:-1], waypoints[1:])))
+        spline_clearance = max(0.0, 0.5 * min(float(clearance), kept))
     return time_law(waypoints, T_end=T_end, Ts=Ts, env=env, clearance=spline_clearance)

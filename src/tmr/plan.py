@@ -150,14 +150,16 @@ def write_outputs(out: Path, plan: Any, metrics: Any, env: Any, filtered: np.nda
 
 def summary(plan: Any, metrics: Any) -> str:
     d = metrics.to_dict()
-    keys = ["success", "failure", "f1", "f2", "f3", "f4", "min_robot_clearance", "min_tether_clearance",
-            "max_span_ratio", "min_robot_distance", "violation_steps", "final_leader_error", "wall_time"]
+    d["violations"] = {kind: len(steps) for kind, steps in d.pop("violation_steps").items()}
+    d["fitness_raw"] = " ".join(f"{float(v):.6g}" for v in d["fitness_raw"])
+    keys = ["success", "failure", "f1", "f2", "f3", "f4", "fitness_raw", "min_robot_clearance",
+            "min_tether_clearance", "max_span_ratio", "min_separation", "peak_speed", "peak_acceleration",
+            "max_abs_distance_error", "final_leader_error", "violations", "wall_time", "ms_per_step"]
     lines = [f"tmr plan: scenario {plan.scenario}, method {plan.method}, {plan.n_robots} robots, "
              f"{plan.t.size - 1} steps"]
     for k in keys:
-        if k in d:
-            v = d[k]
-            lines.append(f"  {k:22s} {v:.6g}" if isinstance(v, float) else f"  {k:22s} {v}")
+        v = d[k]
+        lines.append(f"  {k:24s} {v:.6g}" if isinstance(v, float) else f"  {k:24s} {v}")
     return "\n".join(lines)
 
 

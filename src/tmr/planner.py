@@ -9,7 +9,7 @@ This is the library entry point behind ``python -m tmr.plan``::
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -18,10 +18,10 @@ from numpy.typing import ArrayLike, NDArray
 from tmr import catenary
 from tmr.chain import Chain
 from tmr.clik import Plan, run
-from tmr.errors import ParameterError, ScenarioError
+from tmr.errors import ParameterError, PathError, ScenarioError
 from tmr.formulations.pinv import PinvController
 from tmr.metrics import Metrics, evaluate
-from tmr.params import ChainParams, PinvParams, TimeParams, apply_overrides, as_dict
+from tmr.params import ChainParams, PathParams, PinvParams, TimeParams, apply_overrides, as_dict
 from tmr.path import Trajectory, leader_trajectory
 from tmr.scenario import Scenario
 from tmr.tasks import LeaderTracking, ObstacleEvasion, TetherRegulation
@@ -39,6 +39,7 @@ class Problem:
     chain: Chain
     chain_params: ChainParams
     time_params: TimeParams
+    path_params: PathParams
     pinv_params: PinvParams
     span_limits: Array  # (N, 2) [d_lo, d_max] [m]
     q0: Array
@@ -50,7 +51,7 @@ class Problem:
         return self.scenario.environment
 
     def params_dict(self) -> dict[str, Any]:
-        out = as_dict(self.chain_params, self.time_params, self.pinv_params)
+        out = as_dict(self.chain_params, self.time_params, self.path_params, self.pinv_params)
         out.update(seed=self.seed, n_robots=self.chain.n_robots, d_max=float(self.span_limits[0, 1]))
         return out
 
@@ -82,11 +83,10 @@ def span_limits(n_robots: int, params: ChainParams) -> Array:
 def default_start(chain: Chain, env: Any, goal: Array, limits: Array, margin: float = 0.2) -> Array:
     """A feasible initial placement near the base: robots on a straight ray from the anchor.
 
-    Robots are spaced by ``d_lo + margin`` along the free ray whose heading is closest to the goal direction
+    Robots are evenly spaced by the largest ``d_lo`` plus ``margin`` along the free ray whose heading is closest to the goal direction
     (72 headings tried); the ray's robots and tethers must be free by ``margin``. ``ScenarioError`` if none is.
     """
-    spacing = limits[:, 0] + margin
-    offsets = np.cumsum(spacing)
+    offsets = np.arange(1, chain.n_robots + 1) * (limits[:, 0].max() + margin)
     to_goal = np.arctan2(goal[1] - chain.base[1], goal[0] - chain.base[0])
     steps = np.arange(72) * (2 * np.pi / 72)
     headings = to_goal + np.where(np.arange(72) % 2 == 0, 1, -1) * steps[(np.arange(72) + 1) // 2]
@@ -119,12 +119,13 @@ def build_problem(
         n_robots: override the scenario's number of robots (then the start placement is recomputed).
         start: (N, 2) robot positions overriding the scenario's.
         overrides: extra parameter overrides (after the scenario's).
-        path_iterations: RRT* iterations (default of :func:`tmr.path.plan_leader_path` if None).
+        path_iterations: RRT* iterations (overrides ``PathParams.path_iterations``).
     """
     values = dict(scenario.params or {})
     values.update(overrides or {})
     chain_params, rest = apply_overrides(ChainParams(), values)
     time_params, rest = apply_overrides(TimeParams(), rest)
+    path_params, rest = apply_overrides(PathParams(), rest)
     pinv_params, rest = apply_overrides(PinvParams(), rest)
     if rest:
         raise ScenarioError(f"unknown parameter(s) {sorted(rest)} in scenario {scenario.name!r}")
@@ -148,11 +149,23 @@ def build_problem(
             f"(clearance {clear[k]:.3f} m)"
         )
     q0 = chain.q_from_positions(P)
-    kwargs: dict[str, Any] = {"seed": seed, "T_end": time_params.T_end, "Ts": time_params.Ts}
     if path_iterations is not None:
-        kwargs["iterations"] = path_iterations
-    traj = leader_trajectory(env, P[-1], np.asarray(scenario.goal, float), **kwargs)
-    return Problem(scenario, chain, chain_params, time_params, pinv_params, limits, q0, traj, int(seed))
+        path_params = replace(path_params, path_iterations=int(path_iterations))
+    traj = None
+    for clearance in path_params.clearances:
+        try:
+            traj = leader_trajectory(
+                env, P[-1], np.asarray(scenario.goal, float), seed=seed, T_end=time_params.T_end,
+                Ts=time_params.Ts, iterations=path_params.path_iterations, clearance=clearance,
+            )
+            break
+        except PathError:
+            if clearance == path_params.clearances[-1]:
+                raise
+    assert traj is not None
+    return Problem(
+        scenario, chain, chain_params, time_params, path_params, pinv_params, limits, q0, traj, int(seed)
+    )
 
 
 def make_pinv(problem: Problem) -> PinvController:
@@ -161,9 +174,12 @@ def make_pinv(problem: Problem) -> PinvController:
     return PinvController(
         leader=LeaderTracking(p.clik_gain),
         tether=TetherRegulation(
-            problem.chain, problem.span_limits, p.span_target_fraction, p.gain_floor, p.gain_edge, p.gain_length
+            problem.chain, problem.span_limits, p.span_target_fraction, p.gain_floor, p.gain_edge, p.gain_length,
+            max_gain=1.0 / problem.time_params.Ts,
         ),
-        obstacle=ObstacleEvasion(p.d_min, p.k_v0, p.hysteresis, p.min_evasion_distance),
+        obstacle=ObstacleEvasion(
+            p.d_min, p.k_v0, p.hysteresis, p.min_evasion_distance, problem.chain_params.safety_radius
+        ),
         damping=p.dls_damping,
     )
 
@@ -190,5 +206,28 @@ def solve(problem: Problem, method: str = "pinv") -> tuple[Plan, Metrics]:
         params=problem.params_dict(),
         goal=np.asarray(problem.scenario.goal, float),
     )
-    metrics = evaluate(plan, problem.env)
-    return plan, metrics
+    return plan, check(plan, problem.env, goal_tolerance=problem.path_params.goal_tolerance)
+
+
+def check(plan: Plan, env: Any, goal_tolerance: float = 0.1) -> Metrics:
+    """Check every hard constraint on the plan's recorded states and return its metrics.
+
+    A plan that completed its steps fails (``plan.success = False``, f1–f4 = +∞ as in Caruso 2021 §4.2.2) if at any
+    step a robot or a tether enters the inflated obstacles, a span leaves [d_lo, d_max], two robots come closer than
+    2r, or if the leader ends farther than ``goal_tolerance`` [m] from the goal.
+    """
+    metrics = evaluate(plan, env)
+    if not plan.success:
+        return metrics
+    reasons = [
+        f"{kind} violated at {len(steps)} step(s), first at t = {plan.t[steps[0]]:.2f} s"
+        for kind, steps in metrics.violation_steps.items()
+        if steps
+    ]
+    if metrics.final_leader_error > goal_tolerance:
+        reasons.append(f"leader ends {metrics.final_leader_error:.3f} m from the goal (tolerance {goal_tolerance} m)")
+    if reasons:
+        plan.success = False
+        plan.failure = "; ".join(reasons)
+        metrics = evaluate(plan, env)
+    return metrics

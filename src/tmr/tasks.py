@@ -144,8 +144,11 @@ class TetherRegulation(Task):
     Args:
         chain: the chain (for the joint layout).
         span_limits: (N, 2) [d_lo, d_max] per tether [m].
-        target_fraction: target d_t = d_lo + f (d_max − d_lo); 0.5 is the midpoint of eq. 13's joint range.
-        gain_floor: G [1/s]; gain_edge: value of each exponential at its limit [1/s]; gain_length: 1/|b| [m].
+        target_fraction: common target d_t = d_lo + f (d_max − d_lo) of every tether, on the range shared by all
+            tethers (largest d_lo, smallest d_max); 0.5 is the midpoint of eq. 13's joint range.
+        gain_floor: G [1/s]; gain_edge: value of each exponential at its limit [1/s]; gain_length: 1/|b| [m];
+        max_gain: cap on K_ii [1/s] (not in the paper: beyond a limit the exponentials grow without bound and an
+            explicit Euler step with K_ii·Ts > 2 diverges; the planner sets it to 1/Ts).
     """
 
     name = "tether"
@@ -158,23 +161,29 @@ class TetherRegulation(Task):
         gain_floor: float = 0.5,
         gain_edge: float = 5.0,
         gain_length: float = 0.2,
+        max_gain: float = 20.0,
     ) -> None:
         lim = np.broadcast_to(np.asarray(span_limits, dtype=float), (chain.n_robots, 2))
         if np.any(lim[:, 0] >= lim[:, 1]):
             raise ParameterError(f"every tether needs d_lo < d_max, got {lim.tolist()}")
         self.limits = lim.copy()
-        self.target = lim[:, 0] + target_fraction * (lim[:, 1] - lim[:, 0])
+        # one target for every tether (uniform spans, the f2 objective), inside every tether's range
+        lo, hi = lim[:, 0].max(), lim[:, 1].min()
+        self.target = np.full(chain.n_robots, lo + target_fraction * (hi - lo))
         coeffs = np.array(
             [joint_limit_gain_coefficients(lo, hi, gain_edge, gain_length) for lo, hi in lim]
         )  # (N, 4)
         self.a1, self.b1, self.a2, self.b2 = coeffs.T
         self.G = float(gain_floor)
+        self.max_gain = float(max_gain)
         self.S = np.zeros((chain.n_robots, chain.dof))
         self.S[np.arange(chain.n_robots), chain.prismatic_index] = 1.0
 
     def gain(self, d: Array) -> Array:
-        """K_ii(d) of Caruso 2021 eq. 23 [1/s]."""
-        return self.a1 * np.exp(self.b1 * d) + self.a2 * np.exp(self.b2 * d) + self.G
+        """K_ii(d) of Caruso 2021 eq. 23 [1/s], capped at ``max_gain``."""
+        with np.errstate(over="ignore"):
+            k = self.a1 * np.exp(self.b1 * d) + self.a2 * np.exp(self.b2 * d) + self.G
+        return np.minimum(k, self.max_gain)
 
     def compute(self, ctx: StepContext) -> TaskRows:
         d = ctx.spans
@@ -184,21 +193,25 @@ class TetherRegulation(Task):
 class ObstacleEvasion(Task):
     """Obstacle avoidance at the critical point of the whole chain (Caruso 2021 eq. 14–18).
 
-    The critical point x_c is the sample point of the tethers closest to the inflated obstacles (the leader itself is
-    excluded: its path is the planner's). When its clearance drops below ``d_min`` the task activates and asks the
+    The critical point x_c is the sample point of the tethers closest to the inflated obstacles, except the samples
+    within ``end_radius`` of the fixed anchor (no joint moves them away from it) or of the leader (its clearance is
+    its path's, which the primary task follows). When its clearance drops below ``d_min`` the task activates and asks the
     point to move along the distance gradient n_c at ``v0 = k_v0 / ‖d_c − x_c‖``: one row ``J_n = n_cᵀ J_c`` (eq. 18)
     with ``J_c`` the point Jacobian with the paper's zero columns (eq. 15, fixed distance along the link).
     It is released only when every point is beyond ``d_min + ε`` (hysteresis of eq. 17).
 
     Args:
         d_min: activation distance [m]; k_v0: evasion constant [m²/s]; hysteresis: ε [m];
-        min_distance: floor on the distance in v0 [m].
+        min_distance: floor on the distance in v0 [m]; end_radius: exclusion radius around the anchor and the leader [m].
     """
 
     name = "obstacle"
 
-    def __init__(self, d_min: float, k_v0: float, hysteresis: float, min_distance: float = 0.05) -> None:
+    def __init__(
+        self, d_min: float, k_v0: float, hysteresis: float, min_distance: float = 0.05, end_radius: float = 0.5
+    ) -> None:
         self.d_min, self.k_v0, self.eps, self.floor = float(d_min), float(k_v0), float(hysteresis), float(min_distance)
+        self.end_radius = float(end_radius)
         self.active = False
         self.critical_index = -1
         self.critical_clearance = np.inf
@@ -210,7 +223,14 @@ class ObstacleEvasion(Task):
 
     def update(self, ctx: StepContext) -> bool:
         """Find the critical point and update the two-state activation (eq. 17). Returns whether active."""
-        d = ctx.sample_clearance[:-1]  # the last sample is the leader
+        d = ctx.sample_clearance.copy()
+        # samples within one safety radius of the fixed anchor or of the leader are not candidates: no joint can move
+        # them away from the anchor, and the leader's clearance is its path's (the primary task)
+        along = ctx.sample_fractions * np.abs(ctx.spans)[ctx.sample_links - 1]
+        last = ctx.sample_links == ctx.chain.n_robots
+        near_anchor = (ctx.sample_links == 1) & (along < self.end_radius)
+        near_leader = last & (np.abs(ctx.spans[-1]) - along < self.end_radius)
+        d[near_anchor | near_leader] = np.inf
         i = int(np.argmin(d))
         self.critical_index, self.critical_clearance = i, float(d[i])
         if self.active:
