@@ -53,9 +53,7 @@ def _ode(c: float):
 
 def _integrate(cat: Catenary, slope0: float | None = None):
     slope = cat.slope_1 if slope0 is None else slope0
-    return solve_ivp(
-        _ode(cat.c), (0.0, cat.span), [cat.h1, slope], dense_output=True, method="DOP853", **ODE_TOL
-    )
+    return solve_ivp(_ode(cat.c), (0.0, cat.span), [cat.h1, slope], dense_output=True, method="DOP853", **ODE_TOL)
 
 
 # ------------------------------------------------------------------------------------------------ parameters

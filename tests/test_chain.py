@@ -110,7 +110,9 @@ def test_table1_geometry_example():
 def test_spatial_zero_pose_is_straight_and_yaw_matches_planar():
     sp = Chain(3, base=(0, 0, 0), spatial=True)
     pl = Chain(3, base=(0, 0))
-    np.testing.assert_allclose(sp.points(np.tile([0, 0, 1.0], 3)), [[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]], atol=1e-12)
+    np.testing.assert_allclose(
+        sp.points(np.tile([0, 0, 1.0], 3)), [[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]], atol=1e-12
+    )
     yaw = np.array([0.3, 0.5, -0.2])
     d = np.array([1.0, 2.0, 1.5])
     qs = np.column_stack([yaw, np.zeros(3), d]).ravel()

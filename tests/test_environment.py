@@ -34,9 +34,7 @@ def builtin_envs() -> dict[str, Environment]:
 def test_exact_clearance_disc_and_walls(disc_env: Environment) -> None:
     pts = np.array([[8.0, 5.0], [5.0, 5.0], [5.0, 6.5], [2.0, 2.0], [0.2, 5.0], [-1.0, 5.0], [5.0, 1.0]])
     # disc grown to radius 1.5; walls grown inward to 0.5 from each side
-    expected = np.array(
-        [min(3.0 - 1.5, 10 - 8.0 - R), -1.5, 0.0, min(math.hypot(3, 3) - 1.5, 2 - R), -0.3, -1.5, 0.5]
-    )
+    expected = np.array([min(3.0 - 1.5, 10 - 8.0 - R), -1.5, 0.0, min(math.hypot(3, 3) - 1.5, 2 - R), -0.3, -1.5, 0.5])
     got = disc_env.exact_clearance(pts)
     np.testing.assert_allclose(got, expected, atol=2e-3)  # the buffered circle is a 64-gon per quarter
     assert got[1] < 0 and got[5] < 0 and got[0] > 0
@@ -107,9 +105,7 @@ def test_bilinear_exact_on_linear_field() -> None:
     expected = np.stack([2 * pts[:, 0] - 3 * pts[:, 1] + 0.5, -pts[:, 0] + 0.25 * pts[:, 1]], axis=-1)
     np.testing.assert_allclose(got, expected, atol=1e-12)
     # outside points are clamped onto the grid rectangle
-    np.testing.assert_allclose(
-        bilinear_interpolate(grid[..., 0], origin, h, [[-5.0, 2.0]]), [2.0 * -1.0 - 6 + 0.5]
-    )
+    np.testing.assert_allclose(bilinear_interpolate(grid[..., 0], origin, h, [[-5.0, 2.0]]), [2.0 * -1.0 - 6 + 0.5])
 
 
 def test_field_is_linear_near_a_wall() -> None:
@@ -334,9 +330,7 @@ def test_ros_map_16bit_and_png(tmp_path: Path) -> None:
 
 def test_ros_map_yaw_rotates(tmp_path: Path) -> None:
     _write_pgm_p5(tmp_path / "map.pgm", _ros_image())
-    (tmp_path / "map.yaml").write_text(
-        f"image: map.pgm\nresolution: 0.05\norigin: [0.0, 0.0, {math.pi / 2}]\n"
-    )
+    (tmp_path / "map.yaml").write_text(f"image: map.pgm\nresolution: 0.05\norigin: [0.0, 0.0, {math.pi / 2}]\n")
     env = Environment.from_file(tmp_path / "map.yaml")
     # rotated by +90 deg about the origin: the 3 m x 2 m image covers x in [-2, 0], y in [0, 3]
     assert env.bounds == pytest.approx((-2.0, 0.0, 0.0, 3.0), abs=1e-9)
@@ -458,9 +452,7 @@ def test_geojson_loader(tmp_path: Path) -> None:
     (tmp_path / "g.json").write_text(json.dumps(doc["features"][0]["geometry"]))
     with pytest.raises(MapError, match="no room bounds"):
         Environment.from_file(tmp_path / "g.json")
-    assert Environment.from_file(tmp_path / "g.json", bounds=(0, 0, 5, 5)).obstacles.area == pytest.approx(
-        2.0
-    )
+    assert Environment.from_file(tmp_path / "g.json", bounds=(0, 0, 5, 5)).obstacles.area == pytest.approx(2.0)
 
 
 def test_wkt_loader(tmp_path: Path) -> None:
@@ -470,12 +462,8 @@ def test_wkt_loader(tmp_path: Path) -> None:
     env = Environment.from_file(tmp_path / "a.wkt")
     assert env.bounds == (0.0, 0.0, 10.0, 10.0)
     assert env.obstacles.area == pytest.approx(4.0)
-    np.testing.assert_allclose(
-        env.exact_clearance([[5.0, 7.0]]), [0.5], atol=2e-3
-    )  # above the grown line end
-    (tmp_path / "b.wkt").write_text(
-        "GEOMETRYCOLLECTION (\n  POLYGON ((1 1, 3 1, 3 3, 1 3, 1 1)),\n  POINT (7 7))\n"
-    )
+    np.testing.assert_allclose(env.exact_clearance([[5.0, 7.0]]), [0.5], atol=2e-3)  # above the grown line end
+    (tmp_path / "b.wkt").write_text("GEOMETRYCOLLECTION (\n  POLYGON ((1 1, 3 1, 3 3, 1 3, 1 1)),\n  POINT (7 7))\n")
     env = Environment.from_file(tmp_path / "b.wkt", bounds=(0, 0, 10, 10))
     assert env.exact_clearance([7.0, 7.0]) == pytest.approx(-R, abs=1e-3)  # 64-gon disc
     with pytest.raises(MapError, match="no room bounds"):

@@ -245,9 +245,7 @@ def test_evaluate_speeds_errors_timing(disc_env):
     assert m.n_steps == 15 and m.Ts == pytest.approx(0.05) and m.duration == pytest.approx(0.75)
     assert m.ms_per_step == pytest.approx(40.0)  # 0.6 s / 15 steps
     np.testing.assert_allclose(distance_errors(plan)[3], [-1.5, 1.5])
-    assert evaluate(plan, disc_env, goal=(4.05, 5.3)).final_leader_error == pytest.approx(
-        0.3
-    )  # explicit goal wins
+    assert evaluate(plan, disc_env, goal=(4.05, 5.3)).final_leader_error == pytest.approx(0.3)  # explicit goal wins
     plan.goal = None
     assert evaluate(plan, disc_env).final_leader_error == 0.0  # falls back to the reference's end
 

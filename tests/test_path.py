@@ -60,9 +60,7 @@ def test_raw_rrt_path_is_free_and_not_shorter_than_simplified(discs_env, discs_p
 def test_same_seed_same_bytes_other_seed_still_valid(discs_env, discs_path):
     again = plan_leader_path(discs_env, (1.0, 5.0), (9.0, 5.2), seed=0, iterations=400)
     assert again.tobytes() == discs_path.tobytes()
-    other = plan_leader_path(
-        discs_env, (1.0, 5.0), (9.0, 5.2), seed=7, iterations=400
-    )  # may differ, must be valid
+    other = plan_leader_path(discs_env, (1.0, 5.0), (9.0, 5.2), seed=7, iterations=400)  # may differ, must be valid
     assert np.all(discs_env.segment_clearance(other[:-1], other[1:]) > 0.1)
     third = plan_leader_path(discs_env, (1.0, 5.0), (9.0, 5.2), seed=0, iterations=400)  # after another seed
     assert third.tobytes() == discs_path.tobytes()
@@ -120,9 +118,7 @@ def test_ompl_log_level_restored(discs_env):
 def test_goal_enclosed_by_ring_raises():
     ring = shapely.Point(5.0, 5.0).buffer(3.0).difference(shapely.Point(5.0, 5.0).buffer(2.0))
     env = make_env([ring])
-    with pytest.raises(
-        PathError, match=r"no collision-free path.*200 iterations.*more iterations.*different goal"
-    ):
+    with pytest.raises(PathError, match=r"no collision-free path.*200 iterations.*more iterations.*different goal"):
         plan_leader_path(env, (0.8, 0.8), (5.0, 5.0), iterations=200)
 
 
@@ -186,9 +182,7 @@ def test_time_law_derivatives_match_finite_differences(discs_path):
     # arc-length parametrisation: speed = s_dot of the minimum-jerk law, L = length of the fine polyline
     L = np.sum(np.linalg.norm(np.diff(fine.x, axis=0), axis=1))
     tau = tr.t / 15.0
-    np.testing.assert_allclose(
-        np.linalg.norm(tr.xd, axis=1), 30 * L / 15.0 * tau**2 * (1 - tau) ** 2, atol=1e-5
-    )
+    np.testing.assert_allclose(np.linalg.norm(tr.xd, axis=1), 30 * L / 15.0 * tau**2 * (1 - tau) ** 2, atol=1e-5)
 
 
 def test_time_law_straight_line_is_minimum_jerk():
@@ -261,9 +255,7 @@ def test_time_law_spline_kept_free_on_corner_map(square_env, wp):
     assert np.min(square_env.exact_clearance(free_spline.x)) < 0.05
     tr = time_law(wp, env=square_env, clearance=0.05)
     assert np.min(square_env.exact_clearance(tr.x)) >= 0.05
-    dense = time_law(
-        wp, Ts=dense_t, env=square_env, clearance=0.05
-    )  # same spline, sampled every ~1 cm or less
+    dense = time_law(wp, Ts=dense_t, env=square_env, clearance=0.05)  # same spline, sampled every ~1 cm or less
     np.testing.assert_allclose(dense.x[::10], tr.x, atol=1e-12)
     assert np.min(square_env.segment_clearance(dense.x[:-1], dense.x[1:])) >= 0.05 - 1e-6
     assert np.array_equal(tr.x[0], wp[0]) and np.array_equal(tr.x[-1], wp[-1])

@@ -76,8 +76,16 @@ def test_tracking_in_free_space_and_integration(open_room):
     chain = Chain(3, base=(1.0, 6.0))
     start = np.array([[2.0, 6.0], [3.5, 6.0], [5.0, 6.0]])
     traj = straight_trajectory(start[-1], [10.0, 8.0])
-    plan = run(chain, open_room, traj, controller(chain), chain.q_from_positions(start),
-               span_limits=LIMITS, safety_radius=0.5, samples_per_link=20)
+    plan = run(
+        chain,
+        open_room,
+        traj,
+        controller(chain),
+        chain.q_from_positions(start),
+        span_limits=LIMITS,
+        safety_radius=0.5,
+        samples_per_link=20,
+    )
     assert plan.success and plan.q.shape == (301, 6) and plan.robots.shape == (301, 3, 2)
     # explicit Euler: q_{k+1} = q_k + Ts q̇_k; robots are FK(q); q̇_K = 0
     np.testing.assert_allclose(plan.q[1:], plan.q[:-1] + 0.05 * plan.qdot[:-1], atol=1e-12)
@@ -93,8 +101,16 @@ def test_tether_regulation_converges_with_the_leader_still(open_room):
     chain = Chain(3, base=(1.0, 6.0))
     start = np.array([[2.0, 6.0], [4.0, 7.0], [6.0, 6.0]])
     traj = straight_trajectory(start[-1], start[-1])  # leader holds its position
-    plan = run(chain, open_room, traj, controller(chain, obstacle=False, target=0.0), chain.q_from_positions(start),
-               span_limits=LIMITS, safety_radius=0.5, samples_per_link=20)
+    plan = run(
+        chain,
+        open_room,
+        traj,
+        controller(chain, obstacle=False, target=0.0),
+        chain.q_from_positions(start),
+        span_limits=LIMITS,
+        safety_radius=0.5,
+        samples_per_link=20,
+    )
     # targets are the lower limits, but the leader 5 m from the base holds still: the null-space motion pulls the
     # slack chain (5.47 m of tether) taut along the straight line to the leader (5 m)
     assert np.linalg.norm(plan.robots[-1, -1] - start[-1]) < 1e-3
@@ -115,7 +131,15 @@ def test_divergence_is_reported_not_hidden(open_room):
 
     chain = Chain(2, base=(1.0, 6.0))
     traj = straight_trajectory([3.0, 6.0], [5.0, 6.0])
-    plan = run(chain, open_room, traj, Exploding(), chain.q_from_positions([[2.0, 6.0], [3.0, 6.0]]),
-               span_limits=LIMITS[:2], safety_radius=0.5, samples_per_link=5)
+    plan = run(
+        chain,
+        open_room,
+        traj,
+        Exploding(),
+        chain.q_from_positions([[2.0, 6.0], [3.0, 6.0]]),
+        span_limits=LIMITS[:2],
+        safety_radius=0.5,
+        samples_per_link=5,
+    )
     assert not plan.success and "step 7" in plan.failure
     assert plan.q.shape[0] == 8 and np.all(np.isfinite(plan.q))

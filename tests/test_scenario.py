@@ -221,18 +221,12 @@ def test_bad_toml_and_map(tmp_path: Path) -> None:
     with pytest.raises(ScenarioError, match="missing required key 'map'"):
         load_scenario(_write_toml(tmp_path, "base = [1.0, 5.0]\ngoal = [2.0, 5.0]\n"))
     with pytest.raises(MapError, match="map file not found"):
-        load_scenario(
-            _write_toml(tmp_path, 'base = [1, 5]\ngoal = [2, 5]\n[map]\nfile = "nowhere.geojson"\n')
-        )
+        load_scenario(_write_toml(tmp_path, 'base = [1, 5]\ngoal = [2, 5]\n[map]\nfile = "nowhere.geojson"\n'))
     with pytest.raises(ScenarioError, match="unknown keys in \\[map\\]"):
-        load_scenario(
-            _write_toml(tmp_path, f'base = [1, 5]\ngoal = [2, 5]\n[map]\nfile = "{MAP_A}"\nres = 1\n')
-        )
+        load_scenario(_write_toml(tmp_path, f'base = [1, 5]\ngoal = [2, 5]\n[map]\nfile = "{MAP_A}"\nres = 1\n'))
     with pytest.raises(ParameterError, match="map.resolution"):
         load_scenario(
-            _write_toml(
-                tmp_path, f'base = [1, 5]\ngoal = [2, 5]\n[map]\nfile = "{MAP_A}"\nresolution = nan\n'
-            )
+            _write_toml(tmp_path, f'base = [1, 5]\ngoal = [2, 5]\n[map]\nfile = "{MAP_A}"\nresolution = nan\n')
         )
 
 
@@ -247,9 +241,7 @@ def test_scenario_from_map(tmp_path: Path) -> None:
     sc = scenario_from_map(SCENARIO_DIR / "D.geojson", base=(6.8, 10.5), goal=[6.8, 3.5])
     assert sc.name == "D" and sc.n_robots == 3 and sc.environment.bounds == (0.0, 0.0, 16.0, 14.0)
     np.testing.assert_allclose(sc.goal, [6.8, 3.5])
-    (tmp_path / "room.wkt").write_text(
-        "POLYGON ((4 0, 4.2 0, 4.2 10, 4 10, 4 0))\n"
-    )  # wall splitting the room
+    (tmp_path / "room.wkt").write_text("POLYGON ((4 0, 4.2 0, 4.2 10, 4 10, 4 0))\n")  # wall splitting the room
     sc = scenario_from_map(tmp_path / "room.wkt", (1, 1), (3, 9), n_robots=1, bounds=(0, 0, 10, 10))
     assert sc.n_robots == 1
     with pytest.raises(ScenarioError, match="cannot be reached from the base"):

@@ -96,9 +96,7 @@ class CatenaryParams:
             if value <= 0.0:
                 raise ParameterError(f"CatenaryParams.{name} must be > 0 {unit}, got {value!r}")
         if self.ground_clearance < 0.0:
-            raise ParameterError(
-                f"CatenaryParams.ground_clearance must be >= 0 m, got {self.ground_clearance!r}"
-            )
+            raise ParameterError(f"CatenaryParams.ground_clearance must be >= 0 m, got {self.ground_clearance!r}")
         lowest_end = min(self.end_height, self.base_height)
         if self.ground_clearance >= lowest_end:
             raise ParameterError(
@@ -201,9 +199,7 @@ def _vertex(h1: np.ndarray, h2: np.ndarray, span: np.ndarray, c: float) -> np.nd
     return 0.5 * span - c * np.arcsinh((h2 - h1) / (2.0 * c * np.sinh(span / (2.0 * c))))
 
 
-def solve(
-    h1: ArrayLike, h2: ArrayLike, span: ArrayLike, params: CatenaryParams = _DEFAULT_PARAMS
-) -> Catenary:
+def solve(h1: ArrayLike, h2: ArrayLike, span: ArrayLike, params: CatenaryParams = _DEFAULT_PARAMS) -> Catenary:
     """Closed-form catenary of an inextensible cable with known horizontal tension (Caruso 2021 eq. 22).
 
     Args:

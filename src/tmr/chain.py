@@ -95,7 +95,9 @@ class Chain:
         """Return ``q`` as a float array of shape ``(dof,)``; ``ParameterError`` if wrong size or not finite."""
         qa = np.asarray(q, dtype=float)
         if qa.shape != (self.dof,):
-            raise ParameterError(f"joint vector must have shape ({self.dof},) for {self.n_robots} robots, got {qa.shape}")
+            raise ParameterError(
+                f"joint vector must have shape ({self.dof},) for {self.n_robots} robots, got {qa.shape}"
+            )
         if not np.all(np.isfinite(qa)):
             raise ParameterError(f"joint vector contains NaN or inf: {qa}")
         return qa
@@ -162,9 +164,7 @@ class Chain:
         return P[li - 1] + sa[:, None] * (P[li] - P[li - 1])
 
     # ------------------------------------------------------------------ Jacobians (eq. 10–12, 15)
-    def point_jacobians(
-        self, q: ArrayLike, links: ArrayLike, s: ArrayLike, fixed: Fixed = "fraction"
-    ) -> Array:
+    def point_jacobians(self, q: ArrayLike, links: ArrayLike, s: ArrayLike, fixed: Fixed = "fraction") -> Array:
         """Jacobians of points on links, shape ``(M, dim, dof)`` (Caruso 2021 eq. 10–12, 15).
 
         Args:

@@ -76,9 +76,7 @@ def _as_points(points: ArrayLike, what: str = "points") -> NDArray[np.float64]:
     if pts.ndim == 0 or pts.shape[-1] != 2:
         raise ParameterError(f"{what} must have shape (..., 2) (x, y in metres), got shape {pts.shape}")
     if not np.all(np.isfinite(pts)):
-        raise ParameterError(
-            f"{what} contain NaN or inf: {pts[~np.isfinite(pts).all(axis=-1)][:3].tolist()} ..."
-        )
+        raise ParameterError(f"{what} contain NaN or inf: {pts[~np.isfinite(pts).all(axis=-1)][:3].tolist()} ...")
     return pts
 
 
@@ -90,9 +88,7 @@ def _check_bounds(bounds: Any, where: str) -> Bounds:
             f"{where}: bounds must be 4 numbers [xmin, ymin, xmax, ymax] in metres, got {bounds!r}"
         ) from None
     if len(values) != 4 or not all(math.isfinite(v) for v in values):
-        raise MapError(
-            f"{where}: bounds must be 4 finite numbers [xmin, ymin, xmax, ymax] in metres, got {bounds!r}"
-        )
+        raise MapError(f"{where}: bounds must be 4 finite numbers [xmin, ymin, xmax, ymax] in metres, got {bounds!r}")
     xmin, ymin, xmax, ymax = values
     if not (xmax > xmin and ymax > ymin):
         raise MapError(f"{where}: empty room: bounds {tuple(values)} need xmax > xmin and ymax > ymin")
@@ -105,9 +101,7 @@ def _check_positive(value: Any, name: str, allow_zero: bool = False) -> float:
     except (TypeError, ValueError):
         raise ParameterError(f"{name} must be a number, got {value!r}") from None
     if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        raise ParameterError(
-            f"{name} must be a finite {'non-negative' if allow_zero else 'positive'} number, got {v}"
-        )
+        raise ParameterError(f"{name} must be a finite {'non-negative' if allow_zero else 'positive'} number, got {v}")
     return v
 
 
@@ -209,9 +203,7 @@ class Environment:
                 f"for a robot of safety radius {r:g} m (needs more than {2 * r:g} m each way)"
             )
         inner = box(xmin + r, ymin + r, xmax - r, ymax - r)
-        grown = (
-            self.obstacles.buffer(r, quad_segs=QUAD_SEGS) if not self.obstacles.is_empty else self.obstacles
-        )
+        grown = self.obstacles.buffer(r, quad_segs=QUAD_SEGS) if not self.obstacles.is_empty else self.obstacles
         free = _polygonal_parts(inner.difference(grown) if not grown.is_empty else inner)
         if free.is_empty or free.area <= 0.0:
             raise MapError(
@@ -276,9 +268,7 @@ class Environment:
         elif suffix == ".wkt":
             obstacles, file_bounds = _load_wkt(p)
         elif suffix in (".pgm", ".png"):
-            raise MapError(
-                f"{p}: give the ROS map_server .yaml file that describes this image (resolution, origin)"
-            )
+            raise MapError(f"{p}: give the ROS map_server .yaml file that describes this image (resolution, origin)")
         else:
             raise MapError(f"{p}: unknown map format {suffix!r}; supported: {', '.join(MAP_SUFFIXES)}")
         room = bounds if bounds is not None else file_bounds
@@ -654,9 +644,7 @@ def parse_map_yaml(text: str, path: str | Path = "<yaml>") -> dict[str, Any]:
             result[pending].append(_yaml_scalar(stripped[2:]))
             continue
         if line[0] in " \t":
-            raise MapError(
-                f"{where}: nested mappings are not supported in a map_server yaml: {raw.strip()!r}"
-            )
+            raise MapError(f"{where}: nested mappings are not supported in a map_server yaml: {raw.strip()!r}")
         m = _YAML_KEY.match(line)
         if m is None:
             raise MapError(f"{where}: expected 'key: value', got {raw.strip()[:60]!r}")
@@ -786,9 +774,7 @@ def _load_ros_map(path: Path) -> tuple[BaseGeometry, Bounds]:
     if (
         not isinstance(origin, list)
         or len(origin) not in (2, 3)
-        or not all(
-            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in origin
-        )
+        or not all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in origin)
     ):
         raise MapError(f"{where}: origin must be a list [x, y, yaw] of finite numbers, got {origin!r}")
     ox, oy = float(origin[0]), float(origin[1])

@@ -93,9 +93,7 @@ def atomic_write_text(path: str | os.PathLike[str], text: str, encoding: str = "
 def _positions(robots: np.ndarray, name: str, n_samples: int, n_robots: int) -> np.ndarray:
     arr = np.asarray(robots, dtype=float)
     if arr.shape != (n_samples, n_robots, 2):
-        raise ParameterError(
-            f"{name} must have shape ({n_samples}, {n_robots}, 2) like plan.robots, got {arr.shape}"
-        )
+        raise ParameterError(f"{name} must have shape ({n_samples}, {n_robots}, 2) like plan.robots, got {arr.shape}")
     if not np.all(np.isfinite(arr)):
         k = int(np.flatnonzero(~np.isfinite(arr).all(axis=(1, 2)))[0])
         raise ParameterError(f"{name} has a non-finite position at sample {k}; cannot export the trajectory")
@@ -173,10 +171,7 @@ def _dumps_readable(doc: Any, level: int = 0, indent: int = 2) -> str:
     if isinstance(doc, dict):
         if not doc:
             return "{}"
-        items = [
-            f"{inner}{_dumps(str(k), None)[:-1]}: {_dumps_readable(v, level + 1, indent)}"
-            for k, v in doc.items()
-        ]
+        items = [f"{inner}{_dumps(str(k), None)[:-1]}: {_dumps_readable(v, level + 1, indent)}" for k, v in doc.items()]
         return "{\n" + ",\n".join(items) + "\n" + pad + "}"
     if isinstance(doc, list) and any(isinstance(v, (dict, list)) for v in doc):
         items = [inner + _dumps_readable(v, level + 1, indent) for v in doc]
@@ -184,16 +179,12 @@ def _dumps_readable(doc: Any, level: int = 0, indent: int = 2) -> str:
     return json.dumps(doc, ensure_ascii=False, allow_nan=False)
 
 
-def write_trajectories_json(
-    plan: Any, path: str | os.PathLike[str], filtered: np.ndarray | None = None
-) -> Path:
+def write_trajectories_json(plan: Any, path: str | os.PathLike[str], filtered: np.ndarray | None = None) -> Path:
     """Write :func:`trajectories_dict` to ``path`` as compact JSON (atomic, deterministic)."""
     return atomic_write_text(path, _dumps(trajectories_dict(plan, filtered), indent=None))
 
 
-def write_trajectories_csv(
-    plan: Any, path: str | os.PathLike[str], filtered: np.ndarray | None = None
-) -> Path:
+def write_trajectories_csv(plan: Any, path: str | os.PathLike[str], filtered: np.ndarray | None = None) -> Path:
     """Write the trajectories as CSV (atomic, deterministic).
 
     Columns: ``t`` [s], then ``robot1_x, robot1_y, ..., robotN_x, robotN_y`` [m] (raw), then if ``filtered``

@@ -87,8 +87,7 @@ def span_limits(plan: Any) -> tuple[np.ndarray, np.ndarray]:
         lim = np.broadcast_to(lim, (n, 2))
     if lim.shape != (n, 2):
         raise ParameterError(
-            f"plan.span_limits must be (d_lo, d_max) or an ({n}, 2) array for {n} tethers, "
-            f"got shape {lim.shape}"
+            f"plan.span_limits must be (d_lo, d_max) or an ({n}, 2) array for {n} tethers, got shape {lim.shape}"
         )
     return lim[:, 0].copy(), lim[:, 1].copy()
 
@@ -208,9 +207,7 @@ def clearances(plan: Any, env: Any) -> Clearances:
     """
     pts = chain_points(plan)
     robot_c = np.asarray(env.exact_clearance(pts[:, 1:, :]), dtype=float).reshape(pts.shape[0], -1)
-    tether_c = np.asarray(env.segment_clearance(pts[:, :-1, :], pts[:, 1:, :]), dtype=float).reshape(
-        pts.shape[0], -1
-    )
+    tether_c = np.asarray(env.segment_clearance(pts[:, :-1, :], pts[:, 1:, :]), dtype=float).reshape(pts.shape[0], -1)
     return Clearances(robots=robot_c, tethers=tether_c)
 
 
@@ -293,9 +290,7 @@ class Metrics:
     # violations (with tolerance ``tolerance``)
     tolerance: float
     n_violation_steps: int  #: number of samples with at least one violation of any kind
-    violation_steps: dict[str, list[int]] = field(
-        default_factory=dict
-    )  #: kind -> samples with that violation
+    violation_steps: dict[str, list[int]] = field(default_factory=dict)  #: kind -> samples with that violation
     first_violation: dict[str, int | None] = field(default_factory=dict)  #: kind -> first sample or None
     # timing
     wall_time: float = math.nan  #: planner wall time [s]

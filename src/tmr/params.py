@@ -48,7 +48,13 @@ class ChainParams:
 
     def __post_init__(self) -> None:
         _validate(self)
-        for name in ("safety_radius", "exit_height", "pulley_torque", "pulley_radius", "cable_mass_per_length"):
+        for name in (
+            "safety_radius",
+            "exit_height",
+            "pulley_torque",
+            "pulley_radius",
+            "cable_mass_per_length",
+        ):
             if getattr(self, name) <= 0:
                 raise ParameterError(f"ChainParams.{name} must be > 0, got {getattr(self, name)!r}")
 
@@ -97,9 +103,7 @@ class PathParams:
     def __post_init__(self) -> None:
         _validate(self)
         if self.path_clearance < 0 or self.path_clearance_min < 0 or self.path_iterations < 1:
-            raise ParameterError(
-                f"need path_clearance ≥ 0, path_clearance_min ≥ 0, path_iterations ≥ 1; got {self}"
-            )
+            raise ParameterError(f"need path_clearance ≥ 0, path_clearance_min ≥ 0, path_iterations ≥ 1; got {self}")
 
     @property
     def clearances(self) -> tuple[float, ...]:

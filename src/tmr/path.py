@@ -46,9 +46,9 @@ CHECK_STEP = 0.05
 DENSE_STEP = 0.02
 #: Points closer than this [m] are the same waypoint.
 SAME_POINT = 1e-9
-#: OMPL's seed generator and log level are process-global: planning calls are serialised so that concurrent
-#: threads still get their seed's path.
-_OMPL_LOCK = threading.Lock()
+#: OMPL's seed generator and log level are process-global, and the environment's prepared shapely geometry is
+#: not thread-safe: whole planning calls are serialised so that concurrent threads still get their seed's path.
+_OMPL_LOCK = threading.RLock()
 #: Rounds of local waypoint refinement :func:`time_law` tries before giving up on a spline that cuts a corner.
 MAX_REFINEMENTS = 12
 
@@ -113,9 +113,7 @@ def _as_float(v: Any, name: str, *, positive: bool = False, nonneg: bool = False
 def _env_bounds(env: Any) -> tuple[float, float, float, float]:
     b = np.asarray(env.bounds, dtype=float)
     if b.shape != (4,) or not np.all(np.isfinite(b)) or b[2] <= b[0] or b[3] <= b[1]:
-        raise ParameterError(
-            f"env.bounds must be finite (xmin, ymin, xmax, ymax) with max > min, got {env.bounds!r}"
-        )
+        raise ParameterError(f"env.bounds must be finite (xmin, ymin, xmax, ymax) with max > min, got {env.bounds!r}")
     return float(b[0]), float(b[1]), float(b[2]), float(b[3])
 
 
@@ -343,6 +341,31 @@ def plan_leader_path(
         PathError: start or goal outside the room or in collision (with its clearance), or RRT* found no
             exact solution within ``iterations``.
     """
+    with _OMPL_LOCK:
+        return _plan_leader_path(
+            env,
+            start,
+            goal,
+            seed=seed,
+            iterations=iterations,
+            clearance=clearance,
+            range=range,
+            simplify=simplify,
+        )
+
+
+def _plan_leader_path(
+    env: Any,
+    start: ArrayLike,
+    goal: ArrayLike,
+    *,
+    seed: int = 0,
+    iterations: int = DEFAULT_ITERATIONS,
+    clearance: float = 0.1,
+    range: float | None = None,  # OMPL's name for the RRT* extension length
+    simplify: bool = True,
+) -> Array:
+    """Unlocked body of :func:`plan_leader_path`."""
     start = _as_point(start, "start")
     goal = _as_point(goal, "goal")
     seed = _as_int(seed, "seed", 0, 2**32 - 2)
@@ -621,9 +644,7 @@ def leader_trajectory(
         spline_clearance: clearance [m] the spline must keep. Default: half the planning margin actually
             kept by the path (at most ``clearance / 2``), so the spline may only cut into that margin.
     """
-    waypoints = plan_leader_path(
-        env, start, goal, seed=seed, iterations=iterations, clearance=clearance, range=range
-    )
+    waypoints = plan_leader_path(env, start, goal, seed=seed, iterations=iterations, clearance=clearance, range=range)
     if spline_clearance is None:
         kept = float(np.min(_segment_clearance(env, waypoints[:-1], waypoints[1:])))
         spline_clearance = max(0.0, 0.5 * min(float(clearance), kept))

@@ -79,8 +79,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", default="pinv", choices=["pinv"], help="formulation (default: pinv)")
     p.add_argument("--seed", type=int, default=0, help="seed of the leader's RRT* (default 0)")
     p.add_argument("--iterations", type=_positive_int, help="RRT* iterations (default: tmr.path's)")
-    p.add_argument("--set", type=_param, action="append", default=[], metavar="NAME=VALUE",
-                   help="override a parameter, e.g. --set d_min=0.6 (repeatable)")
+    p.add_argument(
+        "--set",
+        type=_param,
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="override a parameter, e.g. --set d_min=0.6 (repeatable)",
+    )
     p.add_argument("--filter-cutoff", type=float, default=1.0, help="cut-off of the trajectory filter [Hz]")
     p.add_argument("--out", default="runs/plan", help="output directory (default runs/plan)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
@@ -152,11 +158,29 @@ def summary(plan: Any, metrics: Any) -> str:
     d = metrics.to_dict()
     d["violations"] = {kind: len(steps) for kind, steps in d.pop("violation_steps").items()}
     d["fitness_raw"] = " ".join(f"{float(v):.6g}" for v in d["fitness_raw"])
-    keys = ["success", "failure", "f1", "f2", "f3", "f4", "fitness_raw", "min_robot_clearance",
-            "min_tether_clearance", "max_span_ratio", "min_separation", "peak_speed", "peak_acceleration",
-            "max_abs_distance_error", "final_leader_error", "violations", "wall_time", "ms_per_step"]
-    lines = [f"tmr plan: scenario {plan.scenario}, method {plan.method}, {plan.n_robots} robots, "
-             f"{plan.t.size - 1} steps"]
+    keys = [
+        "success",
+        "failure",
+        "f1",
+        "f2",
+        "f3",
+        "f4",
+        "fitness_raw",
+        "min_robot_clearance",
+        "min_tether_clearance",
+        "max_span_ratio",
+        "min_separation",
+        "peak_speed",
+        "peak_acceleration",
+        "max_abs_distance_error",
+        "final_leader_error",
+        "violations",
+        "wall_time",
+        "ms_per_step",
+    ]
+    lines = [
+        f"tmr plan: scenario {plan.scenario}, method {plan.method}, {plan.n_robots} robots, {plan.t.size - 1} steps"
+    ]
     for k in keys:
         v = d[k]
         lines.append(f"  {k:24s} {v:.6g}" if isinstance(v, float) else f"  {k:24s} {v}")

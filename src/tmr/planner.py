@@ -83,8 +83,9 @@ def span_limits(n_robots: int, params: ChainParams) -> Array:
 def default_start(chain: Chain, env: Any, goal: Array, limits: Array, margin: float = 0.2) -> Array:
     """A feasible initial placement near the base: robots on a straight ray from the anchor.
 
-    Robots are evenly spaced by the largest ``d_lo`` plus ``margin`` along the free ray whose heading is closest to the goal direction
-    (72 headings tried); the ray's robots and tethers must be free by ``margin``. ``ScenarioError`` if none is.
+    Robots are evenly spaced by the largest ``d_lo`` plus ``margin`` along the free ray whose heading is closest to
+    the goal direction (72 headings tried); the ray's robots and tethers must be free by ``margin``.
+    ``ScenarioError`` if none is.
     """
     offsets = np.arange(1, chain.n_robots + 1) * (limits[:, 0].max() + margin)
     to_goal = np.arctan2(goal[1] - chain.base[1], goal[0] - chain.base[0])
@@ -155,17 +156,21 @@ def build_problem(
     for clearance in path_params.clearances:
         try:
             traj = leader_trajectory(
-                env, P[-1], np.asarray(scenario.goal, float), seed=seed, T_end=time_params.T_end,
-                Ts=time_params.Ts, iterations=path_params.path_iterations, clearance=clearance,
+                env,
+                P[-1],
+                np.asarray(scenario.goal, float),
+                seed=seed,
+                T_end=time_params.T_end,
+                Ts=time_params.Ts,
+                iterations=path_params.path_iterations,
+                clearance=clearance,
             )
             break
         except PathError:
             if clearance == path_params.clearances[-1]:
                 raise
     assert traj is not None
-    return Problem(
-        scenario, chain, chain_params, time_params, path_params, pinv_params, limits, q0, traj, int(seed)
-    )
+    return Problem(scenario, chain, chain_params, time_params, path_params, pinv_params, limits, q0, traj, int(seed))
 
 
 def make_pinv(problem: Problem) -> PinvController:
@@ -174,7 +179,12 @@ def make_pinv(problem: Problem) -> PinvController:
     return PinvController(
         leader=LeaderTracking(p.clik_gain),
         tether=TetherRegulation(
-            problem.chain, problem.span_limits, p.span_target_fraction, p.gain_floor, p.gain_edge, p.gain_length,
+            problem.chain,
+            problem.span_limits,
+            p.span_target_fraction,
+            p.gain_floor,
+            p.gain_edge,
+            p.gain_length,
             max_gain=1.0 / problem.time_params.Ts,
         ),
         obstacle=ObstacleEvasion(

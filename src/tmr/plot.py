@@ -103,9 +103,7 @@ def _draw_environment(ax: Any, env: Any) -> list[Any]:
             zorder=1,
         )
         ax.add_patch(patch)
-        handles.append(
-            Rectangle((0, 0), 1, 1, facecolor=OBSTACLE_FACE, edgecolor="#424242", label="obstacle")
-        )
+        handles.append(Rectangle((0, 0), 1, 1, facecolor=OBSTACLE_FACE, edgecolor="#424242", label="obstacle"))
     inflated = getattr(env, "inflated", None)
     if inflated is not None:
         segs = _boundary_segments(inflated.intersection(room))
@@ -306,9 +304,7 @@ def plot_distance_errors(plan: Any) -> Figure:
     ax_e.set_title(f"distance errors (max |e| = {np.abs(err).max():.3g} m)", fontsize=10)
     handles, _ = ax_e.get_legend_handles_labels()
     if shaded:
-        handles.append(
-            Rectangle((0, 0), 1, 1, color="#ffbb78", alpha=0.35, label="obstacle avoidance active")
-        )
+        handles.append(Rectangle((0, 0), 1, 1, color="#ffbb78", alpha=0.35, label="obstacle avoidance active"))
     ax_e.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
 
     if np.allclose(d_max, d_max[0]) and np.allclose(d_lo, d_lo[0]):

@@ -62,9 +62,7 @@ class Scenario:
         if isinstance(self.n_robots, bool | np.bool_) or not isinstance(self.n_robots, int | np.integer):
             raise ParameterError(f"{label}: robots must be an integer >= 1, got {self.n_robots!r}")
         if self.n_robots < 1:
-            raise ParameterError(
-                f"{label}: robots must be >= 1 (number of tethered robots), got {self.n_robots}"
-            )
+            raise ParameterError(f"{label}: robots must be >= 1 (number of tethered robots), got {self.n_robots}")
         self.n_robots = int(self.n_robots)
         self.base = _point(self.base, "base", label)
         self.goal = _point(self.goal, "goal", label)
@@ -132,9 +130,7 @@ def _point(value: Any, what: str, label: str) -> NDArray[np.float64]:
 
 def _check_params(params: Any, label: str, prefix: str = "params") -> None:
     if not isinstance(params, dict):
-        raise ParameterError(
-            f"{label}: {prefix} must be a table of name = value, got {type(params).__name__}"
-        )
+        raise ParameterError(f"{label}: {prefix} must be a table of name = value, got {type(params).__name__}")
     for key, val in params.items():
         _check_param_value(val, f"{prefix}.{key}", label)
 
@@ -160,11 +156,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     Raises ScenarioError for an unknown name, a missing or malformed TOML, missing keys or points not in free
     space; ParameterError for N < 1 robots or NaN/inf numbers; MapError for a bad map file.
     """
-    if (
-        isinstance(name_or_path, str)
-        and not any(sep in name_or_path for sep in "/\\")
-        and "." not in name_or_path
-    ):
+    if isinstance(name_or_path, str) and not any(sep in name_or_path for sep in "/\\") and "." not in name_or_path:
         builtins = builtin_scenarios()
         match = [b for b in builtins if b.lower() == name_or_path.strip().lower()]
         if match:

@@ -101,7 +101,7 @@ class Task(ABC):
     def compute(self, ctx: StepContext) -> TaskRows:
         """Cost rows for the step described by ``ctx``."""
 
-    def reset(self) -> None:
+    def reset(self) -> None:  # noqa: B027 - optional hook, stateless tasks need nothing
         """Forget any internal state (called before a new plan)."""
 
 
@@ -170,9 +170,7 @@ class TetherRegulation(Task):
         # one target for every tether (uniform spans, the f2 objective), inside every tether's range
         lo, hi = lim[:, 0].max(), lim[:, 1].min()
         self.target = np.full(chain.n_robots, lo + target_fraction * (hi - lo))
-        coeffs = np.array(
-            [joint_limit_gain_coefficients(lo, hi, gain_edge, gain_length) for lo, hi in lim]
-        )  # (N, 4)
+        coeffs = np.array([joint_limit_gain_coefficients(lo, hi, gain_edge, gain_length) for lo, hi in lim])  # (N, 4)
         self.a1, self.b1, self.a2, self.b2 = coeffs.T
         self.G = float(gain_floor)
         self.max_gain = float(max_gain)
@@ -195,22 +193,33 @@ class ObstacleEvasion(Task):
 
     The critical point x_c is the sample point of the tethers closest to the inflated obstacles, except the samples
     within ``end_radius`` of the fixed anchor (no joint moves them away from it) or of the leader (its clearance is
-    its path's, which the primary task follows). When its clearance drops below ``d_min`` the task activates and asks the
-    point to move along the distance gradient n_c at ``v0 = k_v0 / ‖d_c − x_c‖``: one row ``J_n = n_cᵀ J_c`` (eq. 18)
-    with ``J_c`` the point Jacobian with the paper's zero columns (eq. 15, fixed distance along the link).
+    its path's, which the primary task follows). When its clearance drops below ``d_min`` the task activates and asks
+    the point to move along the distance gradient n_c at ``v0 = k_v0 / ‖d_c − x_c‖``: one row ``J_n = n_cᵀ J_c``
+    (eq. 18) with ``J_c`` the point Jacobian with the paper's zero columns (eq. 15, fixed distance along the link).
     It is released only when every point is beyond ``d_min + ε`` (hysteresis of eq. 17).
 
     Args:
         d_min: activation distance [m]; k_v0: evasion constant [m²/s]; hysteresis: ε [m];
-        min_distance: floor on the distance in v0 [m]; end_radius: exclusion radius around the anchor and the leader [m].
+        min_distance: floor on the distance in v0 [m];
+        end_radius: exclusion radius around the anchor and the leader [m].
     """
 
     name = "obstacle"
 
     def __init__(
-        self, d_min: float, k_v0: float, hysteresis: float, min_distance: float = 0.05, end_radius: float = 0.5
+        self,
+        d_min: float,
+        k_v0: float,
+        hysteresis: float,
+        min_distance: float = 0.05,
+        end_radius: float = 0.5,
     ) -> None:
-        self.d_min, self.k_v0, self.eps, self.floor = float(d_min), float(k_v0), float(hysteresis), float(min_distance)
+        self.d_min, self.k_v0, self.eps, self.floor = (
+            float(d_min),
+            float(k_v0),
+            float(hysteresis),
+            float(min_distance),
+        )
         self.end_radius = float(end_radius)
         self.active = False
         self.critical_index = -1
