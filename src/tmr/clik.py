@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tmr.chain import Chain
-from tmr.errors import ParameterError
+from tmr.errors import InfeasibleStep, ParameterError
 from tmr.tasks import StepContext
 
 Array = NDArray[np.float64]
@@ -104,8 +104,10 @@ def run(
         formulation: object with ``reset()`` and ``step(ctx)``.
         span_limits: (N, 2) [d_lo, d_max]; safety_radius [m]; samples_per_link: clearance samples per tether.
 
-    The run stops early only if the formulation returns non-finite velocities (numerical divergence); the plan is
-    then marked failed. Constraint checks are done afterwards on the recorded states (:func:`tmr.metrics.evaluate`).
+    The run stops early only if the formulation raises :class:`InfeasibleStep` (no motion satisfies its hard
+    constraints) or returns non-finite velocities (numerical divergence); the plan is then marked failed, with the
+    reason, and holds the steps done so far. Constraint checks are done afterwards on the recorded states
+    (:func:`tmr.planner.check`).
     """
     q = chain.check_q(q0).copy()
     t = np.asarray(trajectory.t, dtype=float)
@@ -127,7 +129,12 @@ def run(
         if k == K:
             break
         ctx.update(k, q, qdot_prev)
-        qdot, d = formulation.step(ctx)
+        try:
+            qdot, d = formulation.step(ctx)
+        except InfeasibleStep as exc:
+            failure = f"{formulation.name}: {exc}"
+            k_done = k
+            break
         for key, val in d.items():
             diag.setdefault(key, np.full(K + 1, np.nan))[k] = val
         if not np.all(np.isfinite(qdot)):

@@ -113,18 +113,13 @@ class PathParams:
 
 
 @dataclass(frozen=True)
-class PinvParams:
-    """Gains of the faithful task-priority CLIK baseline (Caruso 2021 §4.1–4.2).
+class TaskParams:
+    """Parameters of the tasks shared by every formulation (Caruso 2021 §4.1).
 
     Attributes:
         clik_gain: K of eq. 20 (scalar times identity) [1/s].
-        dls_damping: λ of the damped least-squares pseudoinverse J# = Jᵀ(JJᵀ + λI)⁻¹, λ ∈ ]0, 1[ (§3).
-        d_min: activation distance of the obstacle task (eq. 17), measured from the inflated obstacles [m].
-        k_v0: evasion speed constant, v0 = k_v0 / ‖d_c − x_c‖ [m²/s] (§4.1.3).
-        hysteresis: ε of eq. 17 — the task is released at d_min + ε [m].
-        min_evasion_distance: floor on ‖d_c − x_c‖ in v0 so the speed stays finite at contact [m] (not in the paper).
-        samples_per_link: points per tether where the critical point is searched (robots included).
-        span_target_fraction: q_t of eq. 13 as a fraction of [d_lo, d_max]; 0.5 is the range midpoint of the
+        samples_per_link: points per tether where clearance is sampled (critical point, clearance rows).
+        span_target_fraction: target d_t of eq. 13 as a fraction of [d_lo, d_max]; 0.5 is the range midpoint of the
             joint-range criterion the paper cites (Siciliano 2009).
         gain_floor: G of eq. 23 [1/s].
         gain_edge: extra gain of each exponential of eq. 23 at its limit [1/s].
@@ -132,11 +127,6 @@ class PinvParams:
     """
 
     clik_gain: float = 5.0
-    dls_damping: float = 0.01
-    d_min: float = 0.5
-    k_v0: float = 0.05
-    hysteresis: float = 0.1
-    min_evasion_distance: float = 0.05
     samples_per_link: int = 20
     span_target_fraction: float = 0.5
     gain_floor: float = 0.5
@@ -145,15 +135,108 @@ class PinvParams:
 
     def __post_init__(self) -> None:
         _validate(self)
-        if not 0 < self.dls_damping < 1:
-            raise ParameterError(f"dls_damping λ must be in ]0, 1[ (Caruso 2021 §3), got {self.dls_damping}")
-        for name in ("clik_gain", "d_min", "k_v0", "hysteresis", "min_evasion_distance", "gain_length"):
+        for name in ("clik_gain", "gain_length"):
             if getattr(self, name) <= 0:
-                raise ParameterError(f"PinvParams.{name} must be > 0, got {getattr(self, name)!r}")
+                raise ParameterError(f"TaskParams.{name} must be > 0, got {getattr(self, name)!r}")
         if self.samples_per_link < 1:
             raise ParameterError(f"samples_per_link must be ≥ 1, got {self.samples_per_link}")
         if not 0 <= self.span_target_fraction <= 1:
             raise ParameterError(f"span_target_fraction must be in [0, 1], got {self.span_target_fraction}")
+
+
+@dataclass(frozen=True)
+class PinvParams:
+    """Parameters of the faithful task-priority CLIK baseline (Caruso 2021 §3, §4.1.3).
+
+    Attributes:
+        dls_damping: λ of the damped least-squares pseudoinverse J# = Jᵀ(JJᵀ + λI)⁻¹, λ ∈ ]0, 1[ (§3).
+        d_min: activation distance of the obstacle task (eq. 17), measured from the inflated obstacles [m].
+        k_v0: evasion speed constant, v0 = k_v0 / ‖d_c − x_c‖ [m²/s] (§4.1.3).
+        hysteresis: ε of eq. 17 — the task is released at d_min + ε [m].
+        min_evasion_distance: floor on ‖d_c − x_c‖ in v0 so the speed stays finite at contact [m] (not in the paper).
+    """
+
+    dls_damping: float = 0.01
+    d_min: float = 0.5
+    k_v0: float = 0.05
+    hysteresis: float = 0.1
+    min_evasion_distance: float = 0.05
+
+    def __post_init__(self) -> None:
+        _validate(self)
+        if not 0 < self.dls_damping < 1:
+            raise ParameterError(f"dls_damping λ must be in ]0, 1[ (Caruso 2021 §3), got {self.dls_damping}")
+        for name in ("d_min", "k_v0", "hysteresis", "min_evasion_distance"):
+            if getattr(self, name) <= 0:
+                raise ParameterError(f"PinvParams.{name} must be > 0, got {getattr(self, name)!r}")
+
+
+@dataclass(frozen=True)
+class QPParams:
+    """Parameters of the lexicographic QP (``formulations/qp.md``). Units: m, s, rad.
+
+    Attributes:
+        d_safe: clearance every robot and tether sample keeps from the inflated obstacles [m].
+        clearance_rows_per_link: clearance rows per tether (lowest local minima of its clearance profile).
+        clearance_activation: samples farther than this from the obstacles give inactive rows [m].
+        approach_rate: a distance to its limit (clearance, separation) may shrink at most at this rate times the
+            remaining margin [1/s] (velocity damper), so the acceleration bound can always stop an approach.
+        separation_margin: robots keep 2r + this from each other [m].
+        separation_neighbours: separation rows per robot (its nearest robots; ≥ N−1 means every pair).
+        robot_speed_max: Cartesian speed bound of every robot, per axis [m/s].
+        joint_speed_max: |θ̇| bound [rad/s].
+        span_speed_max: |ḋ| bound [m/s].
+        accel_max: |q̇_k − q̇_{k−1}| ≤ accel_max · Ts [rad/s², m/s²].
+        robot_accel_max: Cartesian acceleration bound of every robot, per axis [m/s²].
+        span_margin: spans stay in [d_lo + margin, d_max − margin] [m].
+        uniformity_gain: rate at which adjacent span differences decay (level 2) [1/s].
+        tether_smoothness: weight of ‖q̇ − q̇_{k−1}‖² inside level 2 (next to the tether regulation, weight 1): the
+            tether level fixes N of the 2N − 2 joint velocities left by the leader, so smoothness must act there too.
+        energy_weight: weight of ‖q̇‖² at level 3; smoothness_weight: weight of ‖q̇ − q̇_{k−1}‖² at level 3.
+        solver: "osqp" (persistent workspace) or a qpsolvers backend.
+    """
+
+    d_safe: float = 0.05
+    clearance_rows_per_link: int = 2
+    clearance_activation: float = 1.5
+    approach_rate: float = 2.0
+    separation_margin: float = 0.02
+    separation_neighbours: int = 2
+    robot_speed_max: float = 2.5
+    joint_speed_max: float = 3.0
+    span_speed_max: float = 3.0
+    accel_max: float = 20.0
+    robot_accel_max: float = 6.0
+    span_margin: float = 0.01
+    uniformity_gain: float = 1.0
+    tether_smoothness: float = 100.0
+    energy_weight: float = 1.0
+    smoothness_weight: float = 10.0
+    solver: str = "osqp"
+
+    def __post_init__(self) -> None:
+        _validate(self)
+        for name in (
+            "robot_speed_max",
+            "joint_speed_max",
+            "span_speed_max",
+            "accel_max",
+            "approach_rate",
+        ):
+            if getattr(self, name) <= 0:
+                raise ParameterError(f"QPParams.{name} must be > 0, got {getattr(self, name)!r}")
+        for name in (
+            "d_safe",
+            "separation_margin",
+            "span_margin",
+            "energy_weight",
+            "smoothness_weight",
+            "tether_smoothness",
+        ):
+            if getattr(self, name) < 0:
+                raise ParameterError(f"QPParams.{name} must be ≥ 0, got {getattr(self, name)!r}")
+        if self.clearance_rows_per_link < 1 or self.separation_neighbours < 1:
+            raise ParameterError("clearance_rows_per_link and separation_neighbours must be ≥ 1")
 
 
 def apply_overrides(obj: T, overrides: dict[str, Any], *, strict: bool = False) -> tuple[T, dict[str, Any]]:

@@ -76,7 +76,12 @@ def build_parser() -> argparse.ArgumentParser:
     src.add_argument("--goal", type=_xy, help="leader goal X,Y [m]")
     src.add_argument("--start", type=_points, help="robot start positions 'x1,y1;x2,y2;...' [m] (default: computed)")
     src.add_argument("--robots", type=_positive_int, help="number of robots N (default: the scenario's, 3)")
-    p.add_argument("--method", default="pinv", choices=["pinv"], help="formulation (default: pinv)")
+    p.add_argument("--method", default="pinv", choices=["pinv", "qp"], help="formulation (default: pinv)")
+    p.add_argument(
+        "--solver",
+        help="QP solver for --method qp: osqp (persistent workspace, default) or a qpsolvers "
+        "backend (daqp, proxqp, clarabel, qpsolvers-osqp, ...)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the leader's RRT* (default 0)")
     p.add_argument("--iterations", type=_positive_int, help="RRT* iterations (default: tmr.path's)")
     p.add_argument(
@@ -200,7 +205,7 @@ def main(argv: list[str] | None = None) -> int:
             seed=args.seed,
             n_robots=args.robots,
             start=args.start,
-            overrides=dict(args.set),
+            overrides=dict(args.set) | ({"solver": args.solver} if args.solver else {}),
             path_iterations=args.iterations,
         )
         plan, metrics = solve(problem, args.method)

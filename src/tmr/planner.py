@@ -20,15 +20,26 @@ from tmr.chain import Chain
 from tmr.clik import Plan, run
 from tmr.errors import ParameterError, PathError, ScenarioError
 from tmr.formulations.pinv import PinvController
+from tmr.formulations.qp import Level, LexicographicQP
+from tmr.limits import JointBox, Limit, ObstacleClearance, RobotAcceleration, RobotSeparation, RobotSpeed
 from tmr.metrics import Metrics, evaluate
-from tmr.params import ChainParams, PathParams, PinvParams, TimeParams, apply_overrides, as_dict
-from tmr.path import Trajectory, leader_trajectory
+from tmr.params import (
+    ChainParams,
+    PathParams,
+    PinvParams,
+    QPParams,
+    TaskParams,
+    TimeParams,
+    apply_overrides,
+    as_dict,
+)
+from tmr.path import Trajectory, leader_trajectory, plan_leader_path
 from tmr.scenario import Scenario
-from tmr.tasks import LeaderTracking, ObstacleEvasion, TetherRegulation
+from tmr.tasks import Damping, LeaderTracking, ObstacleEvasion, Smoothness, SpanUniformity, TetherRegulation
 
 Array = NDArray[np.float64]
 
-METHODS = ("pinv",)
+METHODS = ("pinv", "qp")
 
 
 @dataclass
@@ -40,7 +51,9 @@ class Problem:
     chain_params: ChainParams
     time_params: TimeParams
     path_params: PathParams
+    task_params: TaskParams
     pinv_params: PinvParams
+    qp_params: QPParams
     span_limits: Array  # (N, 2) [d_lo, d_max] [m]
     q0: Array
     trajectory: Trajectory
@@ -51,7 +64,9 @@ class Problem:
         return self.scenario.environment
 
     def params_dict(self) -> dict[str, Any]:
-        out = as_dict(self.chain_params, self.time_params, self.path_params, self.pinv_params)
+        out = as_dict(
+            self.chain_params, self.time_params, self.path_params, self.task_params, self.pinv_params, self.qp_params
+        )
         out.update(seed=self.seed, n_robots=self.chain.n_robots, d_max=float(self.span_limits[0, 1]))
         return out
 
@@ -80,25 +95,52 @@ def span_limits(n_robots: int, params: ChainParams) -> Array:
     return lim
 
 
-def default_start(chain: Chain, env: Any, goal: Array, limits: Array, margin: float = 0.2) -> Array:
-    """A feasible initial placement near the base: robots on a straight ray from the anchor.
+def default_start(
+    chain: Chain,
+    env: Any,
+    goal: Array,
+    limits: Array,
+    margin: float = 0.2,
+    *,
+    clear: float = 0.05,
+    seed: int = 0,
+    iterations: int = 1000,
+    path_clearance: float = 0.6,
+) -> Array:
+    """A feasible initial placement near the base, with the chain already pointing the way the leader will go.
 
-    Robots are evenly spaced by the largest ``d_lo`` plus ``margin`` along the free ray whose heading is closest to
-    the goal direction (72 headings tried); the ray's robots and tethers must be free by ``margin``.
-    ``ScenarioError`` if none is.
+    Robots are evenly spaced by the largest ``d_lo`` plus ``margin`` along the RRT* path (``path_clearance`` from the
+    obstacles where possible) from the anchor to the goal, so the chain does not have to turn round at the start; if
+    that path is too short or a tether chord is not free,
+    along the free straight ray from the anchor whose heading is closest to the goal direction (72 headings tried).
+    Robots and tethers must be free by ``clear`` [m]. ``ScenarioError`` if no placement is found.
     """
-    offsets = np.arange(1, chain.n_robots + 1) * (limits[:, 0].max() + margin)
+    spacing = limits[:, 0].max() + margin
+    offsets = np.arange(1, chain.n_robots + 1) * spacing
+
+    def free(P: Array) -> bool:
+        starts = np.vstack([chain.base, P[:-1]])
+        return bool(np.all(env.exact_clearance(P) > clear) and np.all(env.segment_clearance(starts, P) > clear))
+
+    try:
+        W = plan_leader_path(env, chain.base, goal, seed=seed, iterations=iterations, clearance=path_clearance)
+    except PathError:
+        W = None
+    if W is not None:
+        arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(W, axis=0), axis=1))]
+        if arc[-1] > offsets[-1] + spacing:  # leave the leader some path to follow
+            P = np.column_stack([np.interp(offsets, arc, W[:, 0]), np.interp(offsets, arc, W[:, 1])])
+            if free(P):
+                return P
     to_goal = np.arctan2(goal[1] - chain.base[1], goal[0] - chain.base[0])
     steps = np.arange(72) * (2 * np.pi / 72)
     headings = to_goal + np.where(np.arange(72) % 2 == 0, 1, -1) * steps[(np.arange(72) + 1) // 2]
     for h in headings:
-        u = np.array([np.cos(h), np.sin(h)])
-        P = chain.base + offsets[:, None] * u
-        starts = np.vstack([chain.base, P[:-1]])
-        if np.all(env.exact_clearance(P) > margin) and np.all(env.segment_clearance(starts, P) > margin):
+        P = chain.base + offsets[:, None] * np.array([np.cos(h), np.sin(h)])
+        if free(P):
             return P
     raise ScenarioError(
-        "no free straight placement of the robots near the base was found; give the start positions explicitly "
+        "no free placement of the robots near the base was found; give the start positions explicitly "
         "(scenario 'start' or --start)"
     )
 
@@ -127,9 +169,13 @@ def build_problem(
     chain_params, rest = apply_overrides(ChainParams(), values)
     time_params, rest = apply_overrides(TimeParams(), rest)
     path_params, rest = apply_overrides(PathParams(), rest)
+    task_params, rest = apply_overrides(TaskParams(), rest)
     pinv_params, rest = apply_overrides(PinvParams(), rest)
+    qp_params, rest = apply_overrides(QPParams(), rest)
     if rest:
         raise ScenarioError(f"unknown parameter(s) {sorted(rest)} in scenario {scenario.name!r}")
+    if path_iterations is not None:
+        path_params = replace(path_params, path_iterations=int(path_iterations))
     N = int(n_robots if n_robots is not None else scenario.n_robots)
     chain = Chain(N, base=scenario.base)
     limits = span_limits(N, chain_params)
@@ -139,7 +185,15 @@ def build_problem(
     elif scenario.start is not None and n_robots in (None, scenario.n_robots):
         P = np.asarray(scenario.start, dtype=float)
     else:
-        P = default_start(chain, env, np.asarray(scenario.goal, float), limits)
+        P = default_start(
+            chain,
+            env,
+            np.asarray(scenario.goal, float),
+            limits,
+            seed=seed,
+            iterations=path_params.path_iterations,
+            path_clearance=path_params.path_clearance,
+        )
     if P.shape != (N, 2) or not np.all(np.isfinite(P)):
         raise ScenarioError(f"start must be {N} finite (x, y) positions, got shape {P.shape}")
     clear = env.exact_clearance(P)
@@ -150,8 +204,6 @@ def build_problem(
             f"(clearance {clear[k]:.3f} m)"
         )
     q0 = chain.q_from_positions(P)
-    if path_iterations is not None:
-        path_params = replace(path_params, path_iterations=int(path_iterations))
     traj = None
     for clearance in path_params.clearances:
         try:
@@ -170,23 +222,45 @@ def build_problem(
             if clearance == path_params.clearances[-1]:
                 raise
     assert traj is not None
-    return Problem(scenario, chain, chain_params, time_params, path_params, pinv_params, limits, q0, traj, int(seed))
+    return Problem(
+        scenario,
+        chain,
+        chain_params,
+        time_params,
+        path_params,
+        task_params,
+        pinv_params,
+        qp_params,
+        limits,
+        q0,
+        traj,
+        int(seed),
+    )
+
+
+def make_tasks(problem: Problem) -> tuple[LeaderTracking, TetherRegulation]:
+    """The tasks every formulation shares: leader tracking (eq. 20) and tether regulation (eq. 13, 23)."""
+    p = problem.task_params
+    leader = LeaderTracking(p.clik_gain)
+    tether = TetherRegulation(
+        problem.chain,
+        problem.span_limits,
+        p.span_target_fraction,
+        p.gain_floor,
+        p.gain_edge,
+        p.gain_length,
+        max_gain=1.0 / problem.time_params.Ts,
+    )
+    return leader, tether
 
 
 def make_pinv(problem: Problem) -> PinvController:
     """The faithful baseline controller with the problem's parameters (Caruso 2021 §4)."""
     p = problem.pinv_params
+    leader, tether = make_tasks(problem)
     return PinvController(
-        leader=LeaderTracking(p.clik_gain),
-        tether=TetherRegulation(
-            problem.chain,
-            problem.span_limits,
-            p.span_target_fraction,
-            p.gain_floor,
-            p.gain_edge,
-            p.gain_length,
-            max_gain=1.0 / problem.time_params.Ts,
-        ),
+        leader=leader,
+        tether=tether,
         obstacle=ObstacleEvasion(
             p.d_min, p.k_v0, p.hysteresis, p.min_evasion_distance, problem.chain_params.safety_radius
         ),
@@ -194,13 +268,48 @@ def make_pinv(problem: Problem) -> PinvController:
     )
 
 
+def make_qp(problem: Problem, extra_limits: tuple[Limit, ...] = ()) -> LexicographicQP:
+    """The lexicographic QP with hard clearance, span, separation and speed limits (``formulations/qp.md``)."""
+    p, chain = problem.qp_params, problem.chain
+    leader, tether = make_tasks(problem)
+    levels = [
+        Level([(leader, 1.0)], "leader"),
+        Level(
+            [(tether, 1.0), (SpanUniformity(chain, p.uniformity_gain), 1.0), (Smoothness(chain), p.tether_smoothness)],
+            "tethers",
+        ),
+        Level([(Damping(chain), p.energy_weight), (Smoothness(chain), p.smoothness_weight)], "energy"),
+    ]
+    limits: list[Limit] = [
+        ObstacleClearance(chain, p.d_safe, p.clearance_rows_per_link, p.clearance_activation, p.approach_rate),
+        RobotSpeed(chain, p.robot_speed_max),
+        RobotAcceleration(chain, p.robot_accel_max),
+    ]
+    if chain.n_robots > 1:
+        limits.append(
+            RobotSeparation(
+                chain,
+                problem.chain_params.safety_radius,
+                p.separation_margin,
+                p.separation_neighbours,
+                approach_rate=p.approach_rate,
+            )
+        )
+    limits.extend(extra_limits)
+    box = JointBox(chain, problem.span_limits, p.joint_speed_max, p.span_speed_max, p.accel_max, p.span_margin)
+    return LexicographicQP(chain, levels, limits, box, solver=p.solver)
+
+
 def solve(problem: Problem, method: str = "pinv") -> tuple[Plan, Metrics]:
     """Plan with ``method`` and check every hard constraint on the recorded states.
 
     Returns the plan (``success`` False with the reason if a constraint is violated anywhere) and its metrics.
     """
+    formulation: Any
     if method == "pinv":
         formulation = make_pinv(problem)
+    elif method == "qp":
+        formulation = make_qp(problem)
     else:
         raise ParameterError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
     plan = run(
@@ -211,7 +320,7 @@ def solve(problem: Problem, method: str = "pinv") -> tuple[Plan, Metrics]:
         problem.q0,
         span_limits=problem.span_limits,
         safety_radius=problem.chain_params.safety_radius,
-        samples_per_link=problem.pinv_params.samples_per_link,
+        samples_per_link=problem.task_params.samples_per_link,
         scenario=problem.scenario.name,
         params=problem.params_dict(),
         goal=np.asarray(problem.scenario.goal, float),

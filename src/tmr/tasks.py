@@ -78,6 +78,7 @@ class StepContext:
         self.sample_points = P[li - 1] + self.sample_fractions[:, None] * (P[li] - P[li - 1])
         self.sample_clearance, self.sample_gradient = self.env.clearance_and_gradient(self.sample_points)
         self._J_e: Array | None = None
+        self._J_r: Array | None = None
 
     @property
     def J_e(self) -> Array:
@@ -85,6 +86,14 @@ class StepContext:
         if self._J_e is None:
             self._J_e = self.chain.end_effector_jacobian(self.q)
         return self._J_e
+
+    @property
+    def robot_jacobians(self) -> Array:
+        """Jacobians of every robot (N, 2, n), Caruso 2021 eq. 10–12 (cached for the step)."""
+        if self._J_r is None:
+            self._J_r = self.chain.robot_jacobians(self.q)
+            self._J_e = self._J_r[-1]
+        return self._J_r
 
     @property
     def spans(self) -> Array:
@@ -258,3 +267,47 @@ class ObstacleEvasion(Task):
         )[0]
         v0 = self.k_v0 / max(self.critical_clearance, self.floor)
         return TaskRows((n_c @ J_c)[None, :], np.array([v0]))
+
+
+class SpanUniformity(Task):
+    """Equal tether spans (the spirit of Caruso 2021 eq. 25, f2): differences of adjacent spans decay at ``gain``.
+
+    Rows ``ḋ_i − ḋ_{i+1} ≈ −gain (d_i − d_{i+1})``, i = 1..N−1 [m/s]; no rows for a single robot.
+    """
+
+    name = "uniformity"
+
+    def __init__(self, chain: Chain, gain: float = 1.0) -> None:
+        N = chain.n_robots
+        self.gain = float(gain)
+        self.D = np.zeros((max(N - 1, 0), chain.dof))
+        rows = np.arange(N - 1)
+        self.D[rows, chain.prismatic_index[:-1]] = 1.0
+        self.D[rows, chain.prismatic_index[1:]] = -1.0
+
+    def compute(self, ctx: StepContext) -> TaskRows:
+        return TaskRows(self.D, -self.gain * (self.D @ ctx.q))
+
+
+class Damping(Task):
+    """Minimum joint velocity (the energy f1 of Caruso 2021 eq. 24): rows ``q̇ ≈ 0``."""
+
+    name = "energy"
+
+    def __init__(self, chain: Chain) -> None:
+        self.I = np.eye(chain.dof)
+
+    def compute(self, ctx: StepContext) -> TaskRows:
+        return TaskRows(self.I, np.zeros(ctx.chain.dof))
+
+
+class Smoothness(Task):
+    """Small joint acceleration (the jerk-like f4 of Caruso 2021 eq. 27): rows ``q̇_k ≈ q̇_{k−1}``."""
+
+    name = "smoothness"
+
+    def __init__(self, chain: Chain) -> None:
+        self.I = np.eye(chain.dof)
+
+    def compute(self, ctx: StepContext) -> TaskRows:
+        return TaskRows(self.I, ctx.qdot_prev)

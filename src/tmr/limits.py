@@ -1,0 +1,317 @@
+"""Hard limits of the chain: each one returns inequality rows ``lower ≤ A q̇ ≤ upper`` for the current step.
+
+Limits are linearised at q_k and valid over one sampling period Ts: a quantity g(q) must satisfy
+``g(q_k) + Ts ∇g(q_k) q̇ ≥ g_min``. Every limit declares a **fixed number of rows and a fixed sparsity pattern** at
+construction (:meth:`Limit.pattern`), so a QP solver can keep one workspace for the whole plan and only update values.
+
+Write your own by subclassing :class:`Limit` (see ``KeepInPolygon`` for a small example).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tmr.chain import Chain
+from tmr.errors import ParameterError
+from tmr.tasks import StepContext
+
+Array = NDArray[np.float64]
+
+
+class LimitRows(NamedTuple):
+    """Inequality rows ``lower ≤ A q̇ ≤ upper``; ``A`` is (m, n), bounds (m,) (±inf allowed)."""
+
+    A: Array
+    lower: Array
+    upper: Array
+
+
+def link_pattern(chain: Chain, links: ArrayLike) -> NDArray[np.bool_]:
+    """Sparsity of the Jacobian rows of points on ``links`` (1-based): the joints of links 1..j (eq. 15)."""
+    li = np.asarray(links, dtype=int).reshape(-1)
+    return chain.joint_link[None, :] <= li[:, None]
+
+
+def approach_bound(g: Array, g_min: float, rate: float, Ts: float) -> Array:
+    """Lower bound on the change ``Ts ġ`` of a distance g ≥ g_min over one step (velocity damper).
+
+    ``ġ ≥ −rate (g − g_min)``: the distance may shrink at most exponentially towards g_min with time constant
+    1/rate [s], so that bounded accelerations can always stop the approach; ``rate ≥ 1/Ts`` gives the plain one-step
+    constraint ``g + Ts ġ ≥ g_min``. A distance already below g_min must not shrink (ġ ≥ 0).
+    """
+    return -np.minimum(rate * Ts, 1.0) * np.maximum(g - g_min, 0.0)
+
+
+class Limit(ABC):
+    """A hard limit: ``lower ≤ A q̇ ≤ upper`` rows with a fixed pattern.
+
+    ``relaxable = True`` marks a comfort limit (e.g. an acceleration bound) that a formulation may drop for a step
+    when the limits have no common solution, so that the safety limits can still be met.
+    """
+
+    name: str = "limit"
+    relaxable: bool = False
+
+    @abstractmethod
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        """(m, n) boolean mask of the entries of ``A`` that may be nonzero (fixed for the whole plan)."""
+
+    @abstractmethod
+    def compute(self, ctx: StepContext) -> LimitRows:
+        """Rows for the step described by ``ctx``; ``A`` must be zero outside :meth:`pattern`."""
+
+    def reset(self) -> None:  # noqa: B027 - optional hook
+        """Forget any internal state (called before a new plan)."""
+
+
+class ObstacleClearance(Limit):
+    """Every robot and every tether stays out of the inflated obstacles (hard, Caruso 2021 objectives 2–3).
+
+    Along each tether the distance field is sampled at ``ctx.sample_fractions``; the ``per_link`` lowest local minima
+    of each tether become rows ``Ts ∇d(p)ᵀ J_p q̇ ≥ −min(rate Ts, 1)(d(p) − d_safe)`` (a velocity damper, see
+    :func:`approach_bound`; it keeps d(p) + Ts ḋ ≥ d_safe) with ``J_p`` the Jacobian of the point at a fixed
+    fraction of the tether (it slides with the tether length). Robots are the end samples (s = 1) of their link.
+
+    Between samples spaced δ a straight tether can cut into a convex obstacle corner by at most δ²/(8ρ), where ρ ≥ r
+    (inflation rounds every convex corner with the safety radius r); ``d_safe`` should cover it plus the distance-field
+    interpolation error (see ``formulations/qp.md``). A sample already closer than ``d_safe`` (e.g. next to an anchor
+    placed near a wall) only has to not get closer: ``∇dᵀ J q̇ ≥ 0``. ``approach_rate`` [1/s] bounds how fast a
+    sample may approach ``d_safe``.
+
+    Args:
+        chain: the chain.
+        d_safe: clearance kept from the inflated obstacles [m].
+        per_link: rows per tether (local minima of the clearance profile).
+        activation: samples farther than this [m] give inactive rows (lower bound −inf).
+    """
+
+    name = "clearance"
+
+    def __init__(
+        self,
+        chain: Chain,
+        d_safe: float = 0.05,
+        per_link: int = 2,
+        activation: float = 1.5,
+        approach_rate: float = 2.0,
+    ) -> None:
+        if d_safe < 0 or per_link < 1 or activation <= d_safe or approach_rate <= 0:
+            raise ParameterError(
+                "need d_safe ≥ 0, per_link ≥ 1, activation > d_safe, approach_rate > 0; got "
+                f"{d_safe}, {per_link}, {activation}, {approach_rate}"
+            )
+        self.d_safe, self.per_link, self.activation = float(d_safe), int(per_link), float(activation)
+        self.rate = float(approach_rate)
+        self.links = np.repeat(np.arange(1, chain.n_robots + 1), self.per_link)
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        return link_pattern(chain, self.links)
+
+    def select(self, ctx: StepContext) -> tuple[Array, Array]:
+        """Indices (into the samples) of the rows' points: the lowest local minima per link, (N·per_link,)."""
+        N, c = ctx.chain.n_robots, self.per_link
+        d = ctx.sample_clearance.reshape(N, -1)
+        m = d.shape[1]
+        # local minima along each link (ends count as minima if lower than their only neighbour)
+        left = np.concatenate([np.full((N, 1), np.inf), d[:, :-1]], axis=1)
+        right = np.concatenate([d[:, 1:], np.full((N, 1), np.inf)], axis=1)
+        score = np.where((d <= left) & (d <= right), d, np.inf)
+        order = np.argsort(score, axis=1, kind="stable")[:, :c]
+        chosen = np.take_along_axis(score, order, axis=1)
+        # links with fewer minima than rows repeat their lowest one (the row is then duplicated, harmless)
+        fallback = np.broadcast_to(order[:, :1], order.shape)
+        order = np.where(np.isfinite(chosen), order, fallback)
+        return (order + (np.arange(N) * m)[:, None]).reshape(-1), m
+
+    def compute(self, ctx: StepContext) -> LimitRows:
+        idx, _ = self.select(ctx)
+        links = ctx.sample_links[idx]
+        s = ctx.sample_fractions[idx]
+        d = ctx.sample_clearance[idx]
+        g = ctx.sample_gradient[idx]
+        J = ctx.chain.point_jacobians(ctx.q, links, s, fixed="fraction")
+        A = ctx.Ts * np.einsum("mi,min->mn", g, J)
+        lower = approach_bound(d, self.d_safe, self.rate, ctx.Ts)
+        lower = np.where(d > self.activation, -np.inf, lower)
+        return LimitRows(A, lower, np.full(idx.size, np.inf))
+
+
+class RobotSeparation(Limit):
+    """Robots keep at least ``2 r + margin`` from each other, for every pair (hard).
+
+    For each robot the ``neighbours`` nearest other robots give rows
+    ``Ts n_ijᵀ (J_i − J_j) q̇ ≥ −min(rate Ts, 1)(‖p_i − p_j‖ − 2r − margin)`` (n_ij the unit vector from j to i; a
+    velocity damper as in :class:`ObstacleClearance`). With
+    ``neighbours ≥ N − 1`` every pair is a row. Rows are dense (the pair changes from step to step).
+    Pairs farther than ``activation`` [m] give inactive rows.
+    """
+
+    name = "separation"
+
+    def __init__(
+        self,
+        chain: Chain,
+        safety_radius: float,
+        margin: float = 0.02,
+        neighbours: int = 2,
+        activation: float = 3.0,
+        approach_rate: float = 2.0,
+    ) -> None:
+        self.min_distance = 2 * float(safety_radius) + float(margin)
+        self.rate = float(approach_rate)
+        self.k = max(1, min(int(neighbours), chain.n_robots - 1))
+        self.activation = float(activation)
+        self.rows = chain.n_robots * self.k if chain.n_robots > 1 else 0
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        return np.ones((self.rows, chain.dof), dtype=bool)
+
+    def compute(self, ctx: StepContext) -> LimitRows:
+        n = ctx.chain.dof
+        if self.rows == 0:
+            return LimitRows(np.zeros((0, n)), np.zeros(0), np.zeros(0))
+        P = ctx.points[1:]
+        N = P.shape[0]
+        diff = P[:, None, :] - P[None, :, :]
+        dist = np.linalg.norm(diff, axis=-1)
+        np.fill_diagonal(dist, np.inf)
+        j = np.argsort(dist, axis=1, kind="stable")[:, : self.k]  # (N, k)
+        i = np.repeat(np.arange(N), self.k)
+        j = j.reshape(-1)
+        dij = dist[i, j]
+        nij = diff[i, j] / dij[:, None]
+        Jr = ctx.robot_jacobians
+        A = ctx.Ts * np.einsum("mi,min->mn", nij, Jr[i] - Jr[j])
+        lower = approach_bound(dij, self.min_distance, self.rate, ctx.Ts)
+        lower = np.where(dij > self.activation, -np.inf, lower)
+        return LimitRows(A, lower, np.full(i.size, np.inf))
+
+
+class RobotSpeed(Limit):
+    """Cartesian speed of every robot, per axis: ``|(J_i q̇)_x|, |(J_i q̇)_y| ≤ v_max`` [m/s] (hard)."""
+
+    name = "robot_speed"
+
+    def __init__(self, chain: Chain, v_max: float) -> None:
+        if not v_max > 0:
+            raise ParameterError(f"v_max must be > 0 m/s, got {v_max}")
+        self.v_max = float(v_max)
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        return link_pattern(chain, np.repeat(np.arange(1, chain.n_robots + 1), 2))
+
+    def compute(self, ctx: StepContext) -> LimitRows:
+        A = ctx.robot_jacobians.reshape(-1, ctx.chain.dof)
+        v = np.full(A.shape[0], self.v_max)
+        return LimitRows(A, -v, v)
+
+
+class RobotAcceleration(Limit):
+    """Cartesian acceleration of every robot, per axis: ``|J_i (q̇ − q̇_{k−1})| ≤ a_max Ts`` [m/s²] (hard).
+
+    ``J_i(q_k) q̇_{k−1}`` stands for the robot's previous velocity (the change of J over one step is second order).
+    """
+
+    name = "robot_acceleration"
+    relaxable = True
+
+    def __init__(self, chain: Chain, a_max: float) -> None:
+        if not a_max > 0:
+            raise ParameterError(f"a_max must be > 0 m/s², got {a_max}")
+        self.a_max = float(a_max)
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        return link_pattern(chain, np.repeat(np.arange(1, chain.n_robots + 1), 2))
+
+    def compute(self, ctx: StepContext) -> LimitRows:
+        A = ctx.robot_jacobians.reshape(-1, ctx.chain.dof)
+        v_prev = A @ ctx.qdot_prev
+        dv = self.a_max * ctx.Ts
+        return LimitRows(A, v_prev - dv, v_prev + dv)
+
+
+class JointBox:
+    """Box bounds on q̇ (solver bounds): joint speeds, the acceleration bound and the tether span limits.
+
+    ``lb ≤ q̇ ≤ ub`` with, per joint, the tightest of
+      - speed: ``|θ̇| ≤ omega_max`` [rad/s], ``|ḋ| ≤ v_span_max`` [m/s];
+      - acceleration: ``|q̇ − q̇_{k−1}| ≤ a_max Ts`` (a_max in rad/s² and m/s²);
+      - span (hard, catenary): ``d_lo + margin ≤ d + Ts ḋ ≤ d_max − margin``.
+    A span already outside its band is only asked not to get worse; where the acceleration bound cannot reach the span
+    band, the span band wins (the box is never empty).
+    """
+
+    def __init__(
+        self,
+        chain: Chain,
+        span_limits: ArrayLike,
+        omega_max: float,
+        v_span_max: float,
+        a_max: float,
+        span_margin: float = 0.01,
+    ) -> None:
+        self.chain = chain
+        self.limits = np.broadcast_to(np.asarray(span_limits, float), (chain.n_robots, 2)).copy()
+        self.vmax = np.where(chain.is_prismatic, v_span_max, omega_max).astype(float)
+        self.a_max = float(a_max)
+        self.margin = float(span_margin)
+
+    def compute(self, ctx: StepContext, relax: bool = False) -> tuple[Array, Array]:
+        """Bounds (lb, ub) on q̇; ``relax=True`` drops the acceleration bound (speed and span bounds stay)."""
+        Ts = ctx.Ts
+        if relax:
+            lb, ub = -self.vmax.copy(), self.vmax.copy()
+        else:
+            lb = np.maximum(-self.vmax, ctx.qdot_prev - self.a_max * Ts)
+            ub = np.minimum(self.vmax, ctx.qdot_prev + self.a_max * Ts)
+        pi = self.chain.prismatic_index
+        d = ctx.q[pi]
+        band_lo = (np.minimum(self.limits[:, 0] + self.margin, d) - d) / Ts  # ≤ 0: a span outside only must not
+        band_hi = (np.maximum(self.limits[:, 1] - self.margin, d) - d) / Ts  # ≥ 0: get worse
+        lo, hi = np.maximum(lb[pi], band_lo), np.minimum(ub[pi], band_hi)
+        # where speed/acceleration and the span band do not meet, the span band (the safety limit) wins
+        empty = lo > hi
+        edge = np.where(lb[pi] > band_hi, band_hi, band_lo)
+        lo, hi = np.where(empty, edge, lo), np.where(empty, edge, hi)
+        lb[pi], ub[pi] = lo, hi
+        return lb, ub
+
+
+class KeepInPolygon(Limit):
+    """Keep one robot inside a convex polygon (an example of a user-defined limit).
+
+    Each edge with outward normal a and offset b (aᵀx ≤ b inside) gives ``Ts aᵀ J_i q̇ ≤ b − margin − aᵀ p_i``.
+
+    Args:
+        chain: the chain; robot: 1-based index of the robot; polygon: (M, 2) vertices of a convex polygon [m].
+    """
+
+    name = "keep_in_polygon"
+
+    def __init__(self, chain: Chain, robot: int, polygon: ArrayLike, margin: float = 0.0) -> None:
+        V = np.asarray(polygon, dtype=float)
+        if V.ndim != 2 or V.shape[0] < 3 or V.shape[1] != 2 or not np.all(np.isfinite(V)):
+            raise ParameterError("polygon must be (M ≥ 3, 2) finite vertices")
+        if not 1 <= robot <= chain.n_robots:
+            raise ParameterError(f"robot must be in 1..{chain.n_robots}, got {robot}")
+        area2 = np.sum(V[:, 0] * np.roll(V[:, 1], -1) - np.roll(V[:, 0], -1) * V[:, 1])
+        if area2 < 0:
+            V = V[::-1]  # counter-clockwise
+        E = np.roll(V, -1, axis=0) - V
+        self.normals = np.column_stack([E[:, 1], -E[:, 0]]) / np.linalg.norm(E, axis=1)[:, None]
+        self.offsets = np.einsum("ij,ij->i", self.normals, V)
+        self.robot, self.margin = int(robot), float(margin)
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        return link_pattern(chain, np.full(self.normals.shape[0], self.robot))
+
+    def compute(self, ctx: StepContext) -> LimitRows:
+        p = ctx.points[self.robot]
+        J = ctx.robot_jacobians[self.robot - 1]
+        A = ctx.Ts * self.normals @ J
+        upper = np.maximum(self.offsets - self.margin - self.normals @ p, 0.0)  # outside: do not get worse
+        return LimitRows(A, np.full(A.shape[0], -np.inf), upper)

@@ -1,0 +1,122 @@
+"""`python -m tmr.plan`: outputs, determinism, and bad inputs (clear error, exit code ≠ 0, no output files)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tmr.plan import main
+
+FAST = ["--iterations", "300"]
+
+
+def run_cli(args: list[str], capsys) -> tuple[int, str, str]:
+    try:
+        code = main(args)
+    except SystemExit as exc:  # argparse errors
+        code = int(exc.code)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_scenario_a_writes_every_output(tmp_path, capsys):
+    out = tmp_path / "runs" / "A"
+    code, stdout, _ = run_cli(["--scenario", "A", "--method", "pinv", "--out", str(out), *FAST], capsys)
+    assert code in (0, 1)  # 1 = planned but a constraint failed (reported, outputs still written)
+    names = sorted(p.name for p in out.iterdir())
+    assert names == sorted(
+        [
+            "chain_poses.png",
+            "distance_errors.png",
+            "metrics.json",
+            "speeds.png",
+            "trajectories.csv",
+            "trajectories.json",
+            "trajectories.png",
+        ]
+    )
+    for png in out.glob("*.png"):
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    traj = json.loads((out / "trajectories.json").read_text())
+    assert [r["name"] for r in traj["robots"]] == ["robot1", "robot2", "robot3"]
+    assert len(traj["robots"][0]["t"]) == 301 and traj["robots"][2]["t"][-1] == pytest.approx(15.0)
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["scenario"] == "A" and metrics["method"] == "pinv" and metrics["n_steps"] == 300
+    assert metrics["success"] == (code == 0)
+    assert "f1" in stdout and "min_tether_clearance" in stdout
+    # no temporary directory left next to the output
+    assert [p.name for p in out.parent.iterdir()] == ["A"]
+
+
+def test_same_seed_same_bytes(tmp_path, capsys):
+    outs = [tmp_path / "a", tmp_path / "b"]
+    for out in outs:
+        run_cli(["--scenario", "C", "--seed", "4", "--no-plots", "--out", str(out), *FAST], capsys)
+    for name in ("trajectories.json", "trajectories.csv"):
+        assert (outs[0] / name).read_bytes() == (outs[1] / name).read_bytes()
+    assert not list(outs[0].glob("*.png"))
+
+
+def test_robots_override_and_start(tmp_path, capsys):
+    out = tmp_path / "n5"
+    code, _, _ = run_cli(["--scenario", "A", "--robots", "5", "--no-plots", "--out", str(out), *FAST], capsys)
+    traj = json.loads((out / "trajectories.json").read_text())
+    assert code in (0, 1) and len(traj["robots"]) == 5
+    out = tmp_path / "start"
+    start = "2.0,5.0;3.2,5.0;4.4,4.0"
+    run_cli(["--scenario", "A", "--start", start, "--no-plots", "--out", str(out), *FAST], capsys)
+    traj = json.loads((out / "trajectories.json").read_text())
+    first = np.array([[r["x"][0], r["y"][0]] for r in traj["robots"]])
+    np.testing.assert_allclose(first, [[2.0, 5.0], [3.2, 5.0], [4.4, 4.0]], atol=1e-12)
+
+
+def _garbage_yaml(tmp_path: Path) -> Path:
+    p = tmp_path / "map.yaml"
+    p.write_text("image: [unclosed\nresolution: banana\n::::\n")
+    return p
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--map", "/nonexistent/room.yaml", "--base", "1,1", "--goal", "3,3"], "room.yaml"),
+        (["--map", "GARBAGE", "--base", "1,1", "--goal", "3,3"], "map.yaml"),
+        (["--scenario", "A", "--start", "5.0,5.0;6.0,5.0;7.0,5.0"], "obstacle"),
+        (["--scenario", "A", "--robots", "0"], "at least 1"),
+        (["--scenario", "A", "--set", "k_v0=nan"], "finite"),
+        (["--scenario", "A", "--base", "nan,1"], "finite"),
+        (["--scenario", "A", "--set", "no_such_parameter=1"], "no_such_parameter"),
+        (["--scenario", "Z"], "A"),
+        (["--scenario", "A", "--goal", "5.0,5.0"], "goal"),
+        (["--map", "/nonexistent/room.geojson"], "--base"),
+    ],
+)
+def test_bad_input_clear_error_no_output(tmp_path, capsys, args, message):
+    args = [str(_garbage_yaml(tmp_path)) if a == "GARBAGE" else a for a in args]
+    out = tmp_path / "out"
+    code, _, err = run_cli([*args, "--out", str(out), *FAST], capsys)
+    assert code == 2
+    assert message in err
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) in ([], ["map.yaml"])
+
+
+def test_bad_scenario_file(tmp_path, capsys):
+    bad = tmp_path / "room.toml"
+    bad.write_text('name = "x"\nrobots = 3\nbase = [1.0, nan]\ngoal = [5.0, 5.0]\n[map]\nfile = "none.geojson"\n')
+    out = tmp_path / "out"
+    code, _, err = run_cli(["--scenario", str(bad), "--out", str(out)], capsys)
+    assert code == 2 and "room.toml" in err or "none.geojson" in err
+    assert not out.exists()
+
+
+def test_module_entry_point_help():
+    res = subprocess.run([sys.executable, "-m", "tmr.plan", "--help"], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0
+    for flag in ("--scenario", "--map", "--base", "--goal", "--start", "--robots", "--method", "--seed", "--out"):
+        assert flag in res.stdout

@@ -1,0 +1,80 @@
+"""Scenario → problem → plan: limits from the catenary, start placement, the plan verdict."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tmr import catenary
+from tmr.chain import Chain
+from tmr.errors import ParameterError, ScenarioError
+from tmr.params import ChainParams, PathParams, PinvParams, TimeParams, apply_overrides
+from tmr.planner import build_problem, check, default_start, solve, span_limits
+from tmr.scenario import load_scenario
+
+
+def test_span_limits_from_bubbles_and_catenary():
+    lim = span_limits(3, ChainParams())
+    np.testing.assert_allclose(lim[:, 0], [0.5, 1.0, 1.0])
+    np.testing.assert_allclose(lim[:, 1], catenary.max_span(0.43, 0.43), rtol=1e-12)
+    assert lim[0, 1] == pytest.approx(5.596, abs=1e-3)
+    # a heavier cable shortens d_max; when it drops below 2r there is no feasible chain
+    heavy = span_limits(2, ChainParams(cable_mass_per_length=0.6))
+    assert heavy[1, 1] < lim[1, 1]
+    with pytest.raises(ParameterError, match="catenary limit"):
+        span_limits(2, ChainParams(cable_mass_per_length=40.0))
+
+
+def test_params_validation_and_overrides():
+    with pytest.raises(ParameterError):
+        PinvParams(dls_damping=1.5)
+    with pytest.raises(ParameterError):
+        TimeParams(Ts=-0.1)
+    with pytest.raises(ParameterError, match="finite"):
+        ChainParams(safety_radius=float("nan"))
+    p, rest = apply_overrides(PinvParams(), {"k_v0": 0.1, "other": 1})
+    assert p.k_v0 == 0.1 and rest == {"other": 1}
+    assert TimeParams().steps == 300
+    assert PathParams(path_clearance=0.6).clearances == (0.6, 0.3, 0.05)
+
+
+def test_default_start_is_free_and_heads_for_the_goal(open_room, column_room):
+    chain = Chain(3, base=(1.0, 6.0))
+    lim = span_limits(3, ChainParams())
+    P = default_start(chain, open_room, np.array([10.0, 6.0]), lim)
+    np.testing.assert_allclose(P, [[2.2, 6.0], [3.4, 6.0], [4.6, 6.0]], atol=1e-12)
+    # blocked straight ahead by the column: another heading, still free
+    chain = Chain(3, base=(3.0, 6.0))
+    P = default_start(chain, column_room, np.array([10.0, 6.0]), lim)
+    assert np.all(column_room.exact_clearance(P) > 0.2)
+    assert np.all(column_room.segment_clearance(np.vstack([chain.base, P[:-1]]), P) > 0.2)
+
+
+def test_build_problem_rejects_unknown_parameters_and_bad_start():
+    sc = load_scenario("A")
+    with pytest.raises(ScenarioError, match="unknown parameter"):
+        build_problem(sc, overrides={"kv0": 1.0}, path_iterations=200)
+    with pytest.raises(ScenarioError, match="inside an"):
+        build_problem(sc, start=[[5.0, 5.0], [6.0, 6.0], [7.0, 7.0]], path_iterations=200)
+    with pytest.raises(ScenarioError, match="3 finite"):
+        build_problem(sc, start=[[2.0, 5.0]], path_iterations=200)
+
+
+def test_plan_verdict_is_taken_from_recorded_states():
+    sc = load_scenario("A")
+    problem = build_problem(sc, seed=0, path_iterations=300)
+    plan, metrics = solve(problem, "pinv")
+    assert problem.trajectory.t.size == 301
+    np.testing.assert_allclose(plan.robots[0], problem.chain.robots(problem.q0))
+    assert metrics.final_leader_error < 0.01
+    # the verdict agrees with the recorded states
+    assert plan.success == (metrics.n_violation_steps == 0)
+    if not plan.success:
+        assert np.isinf(metrics.f1) and np.all(np.isfinite(metrics.fitness_raw))
+    # push a robot into a column at one step: the checker must catch exactly that
+    plan.success, plan.failure = True, None
+    plan.robots = plan.robots.copy()
+    plan.robots[150, 1] = [5.0, 5.0]
+    m = check(plan, problem.env)
+    assert not plan.success and "robot_clearance" in plan.failure
+    assert 150 in m.violation_steps["robot_clearance"] and np.isinf(m.f4)
