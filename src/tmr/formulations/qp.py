@@ -94,7 +94,7 @@ class _OsqpLevel:
             self.shape = A.shape
         else:
             self.solver.update(q=q, l=lo, u=up, Px=self.P_pat.data(P), Ax=self.A_pat.data(A))
-        res = self.solver.solve()
+        res = self.solver.solve(raise_error=False)  # the status is checked by the caller
         status = str(res.info.status)
         x = res.x if res.x is not None and np.all(np.isfinite(res.x)) else None
         return x, status, int(res.info.iter)
@@ -103,15 +103,24 @@ class _OsqpLevel:
 class _QpsolversLevel:
     """One level solved by a qpsolvers backend with the same matrices (a fresh problem each call)."""
 
+    #: tolerances passed to the backends whose defaults are too loose for strict priority
+    OPTIONS: dict[str, dict[str, float]] = {
+        "osqp": {"eps_abs": 1e-8, "eps_rel": 1e-8, "max_iter": 20000, "polishing": False},
+        "proxqp": {"eps_abs": 1e-9, "eps_rel": 0.0},
+    }
+
     def __init__(self, solver: str) -> None:
         self.solver = solver
+        self.options = self.OPTIONS.get(solver, {})
 
     def solve(self, P: Array, q: Array, A: Array, lo: Array, up: Array) -> tuple[Array | None, str, int]:
         has_u, has_l = np.isfinite(up), np.isfinite(lo)
         G = np.vstack([A[has_u], -A[has_l]])
         h = np.concatenate([up[has_u], -lo[has_l]])
+        if self.solver in qpsolvers.sparse_solvers and self.solver not in qpsolvers.dense_solvers:
+            P, G = sp.csc_matrix(P), sp.csc_matrix(G)
         try:
-            x = qpsolvers.solve_qp(P, q, G, h, solver=self.solver)
+            x = qpsolvers.solve_qp(P, q, G, h, solver=self.solver, **self.options)
         except Exception as exc:  # a backend error is a failed solve, reported by the caller
             return None, f"{self.solver} error: {exc}", 0
         if x is None or not np.all(np.isfinite(x)):

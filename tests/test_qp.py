@@ -1,0 +1,193 @@
+"""Lexicographic QP: strict priority, hard limits on the recorded states, lag instead of violation, backends."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from shapely.geometry import Point
+
+from tmr.chain import Chain
+from tmr.clik import run
+from tmr.environment import Environment
+from tmr.errors import InfeasibleStep, ParameterError
+from tmr.formulations.qp import Level, LexicographicQP, null_space, solvers
+from tmr.limits import JointBox, Limit, LimitRows, ObstacleClearance, RobotSeparation, RobotSpeed, link_pattern
+from tmr.planner import build_problem, make_qp, solve
+from tmr.scenario import Scenario
+from tmr.tasks import Damping, LeaderTracking, Smoothness, SpanUniformity, StepContext, TaskRows, TetherRegulation
+
+from .conftest import straight_trajectory
+
+LIMITS = np.array([[0.5, 5.596], [1.0, 5.596], [1.0, 5.596]])
+
+
+def stack(chain, levels="all", solver="osqp", extra=()):
+    leader, tether = LeaderTracking(5.0), TetherRegulation(chain, LIMITS[: chain.n_robots], max_gain=20.0)
+    lv = [Level([(leader, 1.0)])]
+    if levels == "all":
+        lv += [
+            Level([(tether, 1.0), (SpanUniformity(chain), 1.0), (Smoothness(chain), 100.0)]),
+            Level([(Damping(chain), 1.0), (Smoothness(chain), 10.0)]),
+        ]
+    lv += list(extra)
+    limits = [ObstacleClearance(chain), RobotSpeed(chain, 2.5), RobotSeparation(chain, 0.5)]
+    box = JointBox(chain, LIMITS[: chain.n_robots], 3.0, 3.0, 20.0)
+    return LexicographicQP(chain, lv, limits, box, solver=solver)
+
+
+def context(env, positions, base, ref, refv, qdot_prev=None):
+    chain = Chain(len(positions), base=base)
+    q = chain.q_from_positions(positions)
+    ctx = StepContext(chain, env, np.atleast_2d(ref), np.atleast_2d(refv), 0.05, 20, LIMITS[: len(positions)])
+    ctx.update(0, q, np.zeros(chain.dof) if qdot_prev is None else qdot_prev)
+    return chain, ctx
+
+
+class PullRobot1(object):
+    """A lower-priority task that drags robot 1 sideways (to check it cannot disturb the leader)."""
+
+    name = "pull"
+
+    def compute(self, ctx):
+        return TaskRows(ctx.robot_jacobians[0], np.array([0.0, -3.0]))
+
+    def reset(self):
+        pass
+
+
+def test_null_space_basis():
+    rng = np.random.default_rng(0)
+    M = rng.normal(size=(2, 6))
+    Z = null_space(M)
+    assert Z.shape == (6, 4)
+    np.testing.assert_allclose(M @ Z, 0, atol=1e-12)
+    np.testing.assert_allclose(Z.T @ Z, np.eye(4), atol=1e-12)
+    assert null_space(np.vstack([M, M])).shape == (6, 4)  # redundant rows do not remove dimensions
+
+
+def test_strict_priority_lower_levels_never_change_the_leader_residual(column_room):
+    chain, ctx = context(column_room, [[3.0, 7.3], [6.0, 7.4], [9.0, 7.3]], (1.0, 7.3), [[9.3, 7.0]], [[0.5, -0.2]])
+    J_e = chain.end_effector_jacobian(ctx.q)
+    v1 = np.array([0.5, -0.2]) + 5.0 * (np.array([9.3, 7.0]) - ctx.x_e)
+    only = stack(chain, levels="leader")
+    x1, _ = only.step(ctx)
+    for extra in ([], [Level([(PullRobot1(), 1.0)])]):
+        full = stack(chain, extra=extra)
+        x, diag = full.step(ctx)
+        assert np.linalg.norm(J_e @ x - v1) == pytest.approx(np.linalg.norm(J_e @ x1 - v1), abs=1e-6)
+        np.testing.assert_allclose(J_e @ x, J_e @ x1, atol=1e-5)
+        assert diag["leader_residual"] == pytest.approx(np.linalg.norm(J_e @ x1 - v1), abs=1e-6)
+    # ... while the lower levels do change the motion
+    assert not np.allclose(x, x1, atol=1e-3)
+
+
+def test_hard_limits_hold_and_the_leader_lags_instead(column_room):
+    """The reference runs straight through the column: the leader stops at the limit and lags; nothing is violated."""
+    chain = Chain(3, base=(1.0, 6.0))
+    start = np.array([[2.2, 6.0], [3.4, 6.0], [4.6, 6.0]])
+    traj = straight_trajectory(start[-1], [8.0, 6.0], T_end=6.0)
+    qp = stack(chain)
+    plan = run(
+        chain,
+        column_room,
+        traj,
+        qp,
+        chain.q_from_positions(start),
+        span_limits=LIMITS,
+        safety_radius=0.5,
+        samples_per_link=20,
+    )
+    assert plan.success, plan.failure
+    clear = column_room.exact_clearance(plan.robots.reshape(-1, 2))
+    assert clear.min() > 0.0
+    lag = np.linalg.norm(plan.robots[:, -1] - plan.reference, axis=1)
+    assert lag.max() > 1.0  # the leader could not follow through the column ...
+    assert np.nanmax(plan.diagnostics["leader_residual"]) > 0.1  # ... and the formulation reported it
+
+
+def test_qp_backends_agree(column_room):
+    chain, ctx = context(column_room, [[3.0, 7.3], [6.0, 7.4], [9.0, 7.3]], (1.0, 7.3), [[9.3, 7.0]], [[0.5, -0.2]])
+    x_ref, _ = stack(chain).step(ctx)
+    for name in ("daqp", "proxqp", "qpsolvers-osqp"):
+        if name not in solvers():
+            continue
+        x, _ = stack(chain, solver=name).step(ctx)
+        np.testing.assert_allclose(x, x_ref, atol=2e-3)
+    with pytest.raises(ParameterError, match="unknown QP solver"):
+        stack(chain, solver="nope")
+
+
+class Sprint(Limit):
+    """Robot 3 must move along +x at 100 m/s — incompatible with the 2.5 m/s speed limit."""
+
+    name = "sprint"
+
+    def pattern(self, chain):
+        return link_pattern(chain, [3])
+
+    def compute(self, ctx):
+        return LimitRows(ctx.robot_jacobians[2][:1], np.array([100.0]), np.array([np.inf]))
+
+
+def test_infeasible_safety_limits_raise_a_clear_error(open_room):
+    chain, ctx = context(open_room, [[2.2, 6.0], [3.4, 6.0], [4.6, 6.0]], (1.0, 6.0), [[4.6, 6.0]], [[0.0, 0.0]])
+    qp = stack(chain)
+    qp.limits.append(Sprint())
+    with pytest.raises(InfeasibleStep, match=r"step 0 .*sprint"):
+        qp.step(ctx)
+    # in a plan, the loop stops there and reports it (no output is silently wrong)
+    traj = straight_trajectory([4.6, 6.0], [8.0, 6.0])
+    qp = stack(chain)
+    qp.limits.append(Sprint())
+    plan = run(chain, open_room, traj, qp, ctx.q, span_limits=LIMITS, safety_radius=0.5, samples_per_link=20)
+    assert not plan.success and "no common solution" in plan.failure and plan.q.shape[0] == 1
+
+
+def random_scenario(seed: int) -> Scenario:
+    rng = np.random.default_rng(seed)
+    discs = []
+    while len(discs) < 7:
+        c = rng.uniform([3.0, 1.0], [11.0, 11.0])
+        if np.linalg.norm(c - [1.5, 6.0]) > 3.5 and np.linalg.norm(c - [11.0, 6.0]) > 2.0:
+            discs.append(Point(*c).buffer(rng.uniform(0.3, 0.7)))
+    env = Environment.from_geometry(discs, (0.0, 0.0, 12.5, 12.0), resolution=0.05)
+    return Scenario(
+        name=f"random{seed}",
+        description="seeded clutter",
+        environment=env,
+        base=np.array([1.5, 6.0]),
+        goal=np.array([11.0, 6.0]),
+        start=None,
+        n_robots=3,
+    )
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_random_clutter_never_violates_silently(seed):
+    problem = build_problem(random_scenario(seed), seed=seed, path_iterations=400)
+    plan, metrics = solve(problem, "qp")
+    # every recorded state satisfies every hard constraint, whether the plan completed or stopped infeasible
+    assert metrics.n_violation_steps == 0, metrics.first_violation
+    if not plan.success:
+        assert "hard constraints have no common solution" in plan.failure or "from the goal" in plan.failure
+    else:
+        assert metrics.final_leader_error < 0.1
+
+
+def test_same_problem_same_plan():
+    problem = build_problem(random_scenario(11), seed=3, path_iterations=300)
+    a, _ = solve(problem, "qp")
+    b, _ = solve(problem, "qp")
+    assert a.q.tobytes() == b.q.tobytes()
+
+
+def test_make_qp_with_user_limit_and_params():
+    problem = build_problem(random_scenario(2), seed=0, path_iterations=300)
+    problem = dataclasses.replace(problem, qp_params=dataclasses.replace(problem.qp_params, robot_speed_max=1.0))
+    qp = make_qp(problem)
+    assert [lim.name for lim in qp.limits][:3] == ["clearance", "robot_speed", "robot_acceleration"]
+    plan, metrics = solve(problem, "qp")
+    speeds = np.abs(np.diff(plan.robots, axis=0) / 0.05)
+    assert speeds.max() < 1.0 + 0.05  # the per-axis speed bound holds on the recorded motion (linearisation)
