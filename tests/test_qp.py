@@ -45,7 +45,7 @@ def context(env, positions, base, ref, refv, qdot_prev=None):
     return chain, ctx
 
 
-class PullRobot1(object):
+class PullRobot1:
     """A lower-priority task that drags robot 1 sideways (to check it cannot disturb the leader)."""
 
     name = "pull"
