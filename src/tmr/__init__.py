@@ -21,18 +21,33 @@ from tmr.errors import (
     ScenarioError,
     TmrError,
 )
+from tmr.formulations.qp import Level, LexicographicQP
+from tmr.limits import KeepInPolygon, Limit, LimitRows, link_pattern
 from tmr.metrics import Metrics, evaluate
-from tmr.planner import Problem, build_problem, solve
+from tmr.planner import Problem, build_problem, check, make_pinv, make_qp, solve
 from tmr.scenario import Scenario, builtin_scenarios, load_scenario
 from tmr.tasks import LeaderTracking, ObstacleEvasion, StepContext, Task, TaskRows, TetherRegulation
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "build_problem",
+    "builtin_scenarios",
     "Chain",
+    "check",
     "Environment",
+    "evaluate",
     "InfeasibleStep",
+    "KeepInPolygon",
     "LeaderTracking",
+    "Level",
+    "LexicographicQP",
+    "Limit",
+    "LimitRows",
+    "link_pattern",
+    "load_scenario",
+    "make_pinv",
+    "make_qp",
     "MapError",
     "Metrics",
     "ObstacleEvasion",
@@ -40,17 +55,13 @@ __all__ = [
     "PathError",
     "Plan",
     "Problem",
+    "run",
     "Scenario",
     "ScenarioError",
+    "solve",
     "StepContext",
     "Task",
     "TaskRows",
     "TetherRegulation",
     "TmrError",
-    "build_problem",
-    "builtin_scenarios",
-    "evaluate",
-    "load_scenario",
-    "run",
-    "solve",
 ]

@@ -83,7 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
         "backend (daqp, proxqp, clarabel, qpsolvers-osqp, ...)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the leader's RRT* (default 0)")
-    p.add_argument("--iterations", type=_positive_int, help="RRT* iterations (default: tmr.path's)")
+    p.add_argument("--iterations", type=_positive_int, help="RRT* iterations (default 1000)")
     p.add_argument(
         "--set",
         type=_param,

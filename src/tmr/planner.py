@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tmr import catenary
 from tmr.chain import Chain
-from tmr.clik import Plan, run
+from tmr.clik import Formulation, Plan, run
 from tmr.errors import ParameterError, PathError, ScenarioError
 from tmr.formulations.pinv import PinvController
 from tmr.formulations.qp import Level, LexicographicQP
@@ -35,7 +35,15 @@ from tmr.params import (
 )
 from tmr.path import Trajectory, leader_trajectory, plan_leader_path
 from tmr.scenario import Scenario
-from tmr.tasks import Damping, LeaderTracking, ObstacleEvasion, Smoothness, SpanUniformity, TetherRegulation
+from tmr.tasks import (
+    Damping,
+    LeaderTracking,
+    ObstacleEvasion,
+    Smoothness,
+    SpanUniformity,
+    Task,
+    TetherRegulation,
+)
 
 Array = NDArray[np.float64]
 
@@ -254,8 +262,11 @@ def make_tasks(problem: Problem) -> tuple[LeaderTracking, TetherRegulation]:
     return leader, tether
 
 
-def make_pinv(problem: Problem) -> PinvController:
-    """The faithful baseline controller with the problem's parameters (Caruso 2021 §4)."""
+def make_pinv(problem: Problem, extra_tasks: tuple[Task, ...] = ()) -> PinvController:
+    """The faithful baseline controller with the problem's parameters (Caruso 2021 §4).
+
+    ``extra_tasks`` are appended to the priority stack after the obstacle task (eq. 5), highest first.
+    """
     p = problem.pinv_params
     leader, tether = make_tasks(problem)
     return PinvController(
@@ -265,15 +276,23 @@ def make_pinv(problem: Problem) -> PinvController:
             p.d_min, p.k_v0, p.hysteresis, p.min_evasion_distance, problem.chain_params.safety_radius
         ),
         damping=p.dls_damping,
+        extra=tuple(extra_tasks),
     )
 
 
-def make_qp(problem: Problem, extra_limits: tuple[Limit, ...] = ()) -> LexicographicQP:
-    """The lexicographic QP with hard clearance, span, separation and speed limits (``formulations/qp.md``)."""
+def make_qp(
+    problem: Problem, extra_limits: tuple[Limit, ...] = (), extra_levels: tuple[Level, ...] = ()
+) -> LexicographicQP:
+    """The lexicographic QP with hard clearance, span, separation and speed limits (``formulations/qp.md``).
+
+    ``extra_limits`` are added to the hard limits of every level; ``extra_levels`` are inserted after the leader
+    level (so they outrank tether regulation and energy), highest first.
+    """
     p, chain = problem.qp_params, problem.chain
     leader, tether = make_tasks(problem)
     levels = [
         Level([(leader, 1.0)], "leader"),
+        *extra_levels,
         Level(
             [(tether, 1.0), (SpanUniformity(chain, p.uniformity_gain), 1.0), (Smoothness(chain), p.tether_smoothness)],
             "tethers",
@@ -300,8 +319,13 @@ def make_qp(problem: Problem, extra_limits: tuple[Limit, ...] = ()) -> Lexicogra
     return LexicographicQP(chain, levels, limits, box, solver=p.solver)
 
 
-def solve(problem: Problem, method: str = "pinv") -> tuple[Plan, Metrics]:
+def solve(problem: Problem, method: str | Formulation = "pinv") -> tuple[Plan, Metrics]:
     """Plan with ``method`` and check every hard constraint on the recorded states.
+
+    Args:
+        problem: from :func:`build_problem`.
+        method: ``"pinv"``, ``"qp"``, or any formulation object with ``name``, ``reset()`` and ``step(ctx)`` (e.g.
+            ``make_qp(problem, extra_limits=...)`` or your own).
 
     Returns the plan (``success`` False with the reason if a constraint is violated anywhere) and its metrics.
     """
@@ -310,8 +334,10 @@ def solve(problem: Problem, method: str = "pinv") -> tuple[Plan, Metrics]:
         formulation = make_pinv(problem)
     elif method == "qp":
         formulation = make_qp(problem)
-    else:
+    elif isinstance(method, str):
         raise ParameterError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
+    else:
+        formulation = method
     plan = run(
         problem.chain,
         problem.env,

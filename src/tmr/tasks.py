@@ -95,6 +95,14 @@ class StepContext:
             self._J_e = self._J_r[-1]
         return self._J_r
 
+    def robot_position(self, i: int) -> Array:
+        """Position of robot ``i`` (1-based; 0 is the anchor) [m]."""
+        return self.points[i]
+
+    def robot_jacobian(self, i: int) -> Array:
+        """Jacobian (2, n) of robot ``i`` (1-based), Caruso 2021 eq. 10–12."""
+        return self.robot_jacobians[i - 1]
+
     @property
     def spans(self) -> Array:
         """Tether spans d_i [m] (the prismatic joints)."""
