@@ -12,7 +12,7 @@ from tmr.chain import Chain
 from tmr.clik import run
 from tmr.environment import Environment
 from tmr.errors import InfeasibleStep, ParameterError
-from tmr.formulations.qp import Level, LexicographicQP, null_space, solvers
+from tmr.formulations.qp import Level, LexicographicQP, orthonormal_rows, solvers
 from tmr.limits import JointBox, Limit, LimitRows, ObstacleClearance, RobotSeparation, RobotSpeed, link_pattern
 from tmr.planner import build_problem, make_qp, solve
 from tmr.scenario import Scenario
@@ -57,14 +57,21 @@ class PullRobot1:
         pass
 
 
-def test_null_space_basis():
+def test_orthonormal_rows_drop_redundant_rows():
     rng = np.random.default_rng(0)
-    M = rng.normal(size=(2, 6))
-    Z = null_space(M)
-    assert Z.shape == (6, 4)
-    np.testing.assert_allclose(M @ Z, 0, atol=1e-12)
-    np.testing.assert_allclose(Z.T @ Z, np.eye(4), atol=1e-12)
-    assert null_space(np.vstack([M, M])).shape == (6, 4)  # redundant rows do not remove dimensions
+    J1 = rng.normal(size=(2, 6))
+    F = orthonormal_rows(J1, np.zeros((0, 6)))
+    assert F.shape == (2, 6)
+    np.testing.assert_allclose(F @ F.T, np.eye(2), atol=1e-12)
+    # same row space: J1 = C F for some C
+    C = J1 @ F.T
+    np.testing.assert_allclose(C @ F, J1, atol=1e-12)
+    # rows already spanned (and duplicates, combinations) add nothing; one new direction adds one row
+    J2 = np.vstack([J1, 2 * J1[0] - J1[1], rng.normal(size=6)])
+    F2 = orthonormal_rows(J2, F)
+    assert F2.shape == (1, 6)
+    np.testing.assert_allclose(F2 @ F.T, 0, atol=1e-12)
+    assert orthonormal_rows(np.eye(6), np.vstack([F, F2])).shape == (3, 6)
 
 
 def test_strict_priority_lower_levels_never_change_the_leader_residual(column_room):

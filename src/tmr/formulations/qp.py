@@ -9,8 +9,8 @@ Each step solves one QP per priority level in the joint velocities q̇ (2N plana
 
 where y_j* = J_j q̇_j* is the optimal task value of level j. The objective of a level is strictly convex in its task
 value y = J q̇, so the set of level-j optima is exactly {q̇ feasible : J_j q̇ = y_j*}: freezing y_j* means no lower
-level can degrade a higher one. The equalities are eliminated by solving level i in the null space of the higher
-levels' rows, q̇ = q̇_{i−1}* + Z z. Level 1 (leader tracking) is an objective, never a constraint, so when the
+level can degrade a higher one. The equalities use an orthonormal basis of the higher levels' task rows (no
+redundant rows), and a level is skipped once the levels above fix every degree of freedom. Level 1 (leader tracking) is an objective, never a constraint, so when the
 hard constraints forbid following the reference the leader lags instead of breaking them; the lag is reported.
 
 Solvers: the default ``"osqp"`` keeps one persistent ``osqp.OSQP`` workspace per level with a fixed sparsity pattern
@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import osqp
 import qpsolvers
+import scipy.linalg
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
@@ -40,6 +41,8 @@ Array = NDArray[np.float64]
 #: OSQP settings (polishing is off: osqp 1.1 prints a line on stdout for every polish that finds no active set,
 #: even with verbose=False).
 OSQP_SETTINGS = dict(eps_abs=1e-8, eps_rel=1e-8, polishing=False, max_iter=20000, verbose=False, warm_starting=True)
+#: OSQP's infinity: bounds beyond it are clipped.
+OSQP_INFTY = 1e30
 
 
 def solvers() -> list[str]:
@@ -76,22 +79,47 @@ class _Pattern:
 
 
 class _OsqpLevel:
-    """Persistent OSQP workspace of one level; rebuilt only if the level's dimension changes (rank change)."""
+    """Persistent OSQP workspace of one level.
+
+    The sparsity patterns of P (upper triangle) and A are taken from the first step's matrices together with the
+    declared patterns (``A_mask``); the workspace is set up once and only its values are updated afterwards. If a
+    later step has a nonzero outside the pattern (a task whose Jacobian pattern changed) or a different number of
+    rows, the workspace is set up again with the union of the patterns.
+    """
 
     def __init__(self, A_mask: NDArray[np.bool_]) -> None:
         self.A_mask = A_mask
         self.solver: osqp.OSQP | None = None
-        self.shape: tuple[int, int] = (-1, -1)
+        self.setups = 0
 
-    def solve(self, P: Array, q: Array, A: Array, lo: Array, up: Array) -> tuple[Array | None, str, int]:
-        k = P.shape[0]
-        if self.solver is None or self.shape != A.shape:
-            mask = self.A_mask if self.A_mask.shape == A.shape else np.ones(A.shape, dtype=bool)
-            self.P_pat, self.A_pat = _Pattern(np.triu(np.ones((k, k), dtype=bool))), _Pattern(mask)
+    def _fits(self, P: Array, A: Array) -> bool:
+        return (
+            self.solver is not None
+            and A.shape == self.A_pat.shape
+            and not np.any(np.triu(P)[~self.P_mask])
+            and not np.any(A[~self.A_full])
+        )
+
+    def solve(self, P: Array, q: Array, A: Array, lo: Array, up: Array, n_eq: int = 0) -> tuple[Array | None, str, int]:
+        lo = np.maximum(lo, -OSQP_INFTY)
+        up = np.minimum(up, OSQP_INFTY)
+        if not self._fits(P, A):
+            n = P.shape[0]
+            P_mask = (np.triu(P) != 0) | np.eye(n, dtype=bool)
+            A_full = np.zeros(A.shape, dtype=bool)
+            rows = min(self.A_mask.shape[0], A.shape[0])
+            A_full[:rows] = self.A_mask[:rows]
+            A_full |= A != 0
+            if self.solver is not None:  # grow, never shrink, the pattern
+                P_mask |= self.P_mask
+                if self.A_full.shape == A.shape:
+                    A_full |= self.A_full
+            self.P_mask, self.A_full = P_mask, A_full
+            self.P_pat, self.A_pat = _Pattern(P_mask), _Pattern(A_full)
             self.solver = osqp.OSQP()
             self.solver.setup(self.P_pat.matrix(P), q, self.A_pat.matrix(A), lo, up, **OSQP_SETTINGS)
             self.solver.update(Px=self.P_pat.data(P), Ax=self.A_pat.data(A))
-            self.shape = A.shape
+            self.setups += 1
         else:
             self.solver.update(q=q, l=lo, u=up, Px=self.P_pat.data(P), Ax=self.A_pat.data(A))
         res = self.solver.solve(raise_error=False)  # the status is checked by the caller
@@ -112,15 +140,21 @@ class _QpsolversLevel:
     def __init__(self, solver: str) -> None:
         self.solver = solver
         self.options = self.OPTIONS.get(solver, {})
+        self.setups = 0
 
-    def solve(self, P: Array, q: Array, A: Array, lo: Array, up: Array) -> tuple[Array | None, str, int]:
-        has_u, has_l = np.isfinite(up), np.isfinite(lo)
-        G = np.vstack([A[has_u], -A[has_l]])
-        h = np.concatenate([up[has_u], -lo[has_l]])
+    def solve(self, P: Array, q: Array, A: Array, lo: Array, up: Array, n_eq: int = 0) -> tuple[Array | None, str, int]:
+        m = A.shape[0] - n_eq
+        Ai, li, ui = A[:m], lo[:m], up[:m]
+        has_u, has_l = np.isfinite(ui), np.isfinite(li)
+        G = np.vstack([Ai[has_u], -Ai[has_l]])
+        h = np.concatenate([ui[has_u], -li[has_l]])
+        Aeq = A[m:] if n_eq else None
+        beq = lo[m:] if n_eq else None
         if self.solver in qpsolvers.sparse_solvers and self.solver not in qpsolvers.dense_solvers:
             P, G = sp.csc_matrix(P), sp.csc_matrix(G)
+            Aeq = sp.csc_matrix(Aeq) if Aeq is not None else None
         try:
-            x = qpsolvers.solve_qp(P, q, G, h, solver=self.solver, **self.options)
+            x = qpsolvers.solve_qp(P, q, G, h, Aeq, beq, solver=self.solver, **self.options)
         except Exception as exc:  # a backend error is a failed solve, reported by the caller
             return None, f"{self.solver} error: {exc}", 0
         if x is None or not np.all(np.isfinite(x)):
@@ -128,22 +162,31 @@ class _QpsolversLevel:
         return np.asarray(x, dtype=float), "solved", 0
 
 
-def null_space(M: Array, rtol: float = 1e-9) -> Array:
-    """Orthonormal basis (columns) of the null space of ``M`` (SVD with a relative rank tolerance)."""
-    k = M.shape[1]
-    if M.shape[0] == 0:
-        return np.eye(k)
-    _, S, Vt = np.linalg.svd(M, full_matrices=True)
-    rank = int(np.count_nonzero(S > rtol * max(1.0, S[0] if S.size else 0.0)))
-    return Vt[rank:].T
+def orthonormal_rows(J: Array, F: Array, rtol: float = 1e-9) -> Array:
+    """Orthonormal rows spanning the part of the row space of ``J`` not already spanned by the orthonormal ``F``.
+
+    QR of the projected rows; rows whose |R_kk| fall below ``rtol`` times the largest are dependent and dropped.
+    """
+    G = J - (J @ F.T) @ F if F.shape[0] else J
+    if G.shape[0] == 0:
+        return np.zeros((0, J.shape[1]))
+    Q, R, _ = scipy.linalg.qr(G.T, mode="economic", pivoting=True)  # columns of Q span the row space of G
+    d = np.abs(np.diag(R))
+    keep = d > rtol * max(1.0, float(d.max()) if d.size else 0.0)
+    rows = Q[:, keep].T
+    if F.shape[0]:  # one re-orthogonalisation pass against F (QR of nearly dependent rows)
+        rows = rows - (rows @ F.T) @ F
+        rows /= np.linalg.norm(rows, axis=1, keepdims=True)
+    return rows
 
 
 class LexicographicQP:
     """Strict-priority stack of QPs solved every step (see the module docstring).
 
-    Level i is solved in the null space of every higher level's task rows: ``q̇ = x_{i−1} + Z_{i−1} z`` with
-    ``J_j Z_{i−1} = 0`` for all j < i, so the higher levels' task values are kept exactly (strict priority) and each
-    QP has only inequality rows, which OSQP solves quickly.
+    Level i keeps the task values of every higher level j < i with equality rows ``F q̇ = F q̇*_{i−1}``, where F is an
+    orthonormal basis of the span of the higher levels' task rows (redundant rows, e.g. span differences next to the
+    spans, are removed: OSQP converges poorly on inconsistent near-duplicate equalities). The last level freezes
+    nothing, and a level is skipped once the higher ones fix every degree of freedom.
 
     Args:
         chain: the chain.
@@ -153,6 +196,7 @@ class LexicographicQP:
         solver: ``"osqp"`` (persistent workspace) or a qpsolvers backend name (see :func:`solvers`).
         regularization: ε added to every level's Hessian [dimensionless].
         feasibility_tolerance: largest violation of a hard row accepted from a solver [row units].
+        lex_tolerance: largest relative change of a frozen higher-level task value accepted from a solver.
     """
 
     name = "qp"
@@ -167,6 +211,7 @@ class LexicographicQP:
         solver: str = "osqp",
         regularization: float = 1e-9,
         feasibility_tolerance: float = 1e-5,
+        lex_tolerance: float = 1e-6,
     ) -> None:
         if not levels or any(not level.tasks for level in levels):
             raise ParameterError("the QP stack needs at least one level, and every level at least one task")
@@ -174,7 +219,11 @@ class LexicographicQP:
             raise ParameterError(f"unknown QP solver {solver!r}; available: {', '.join(solvers())}")
         self.chain, self.levels, self.limits, self.box = chain, list(levels), list(limits), box
         self.solver = solver
-        self.eps, self.feas_tol = float(regularization), float(feasibility_tolerance)
+        self.eps, self.feas_tol, self.lex_tol = (
+            float(regularization),
+            float(feasibility_tolerance),
+            float(lex_tolerance),
+        )
         self.widen = 0.1 * self.feas_tol / max(1, len(self.levels))
         self._workspaces: list[_OsqpLevel | _QpsolversLevel] | None = None
 
@@ -203,11 +252,11 @@ class LexicographicQP:
 
     def _build_workspaces(self, hard_mask: NDArray[np.bool_]) -> None:
         n = self.chain.dof
-        first = np.vstack([np.eye(n, dtype=bool), hard_mask])  # level 1 keeps the sparse pattern of the rows
+        base_mask = np.vstack([np.eye(n, dtype=bool), hard_mask])  # box rows, then the limits' declared patterns
         ws: list[_OsqpLevel | _QpsolversLevel] = []
-        for i in range(len(self.levels)):
+        for _ in self.levels:
             if self.solver == "osqp":
-                ws.append(_OsqpLevel(first if i == 0 else np.ones((first.shape[0], 0), dtype=bool)))
+                ws.append(_OsqpLevel(base_mask))
             else:
                 ws.append(_QpsolversLevel(self.solver.removeprefix("qpsolvers-")))
         self._workspaces = ws
@@ -249,6 +298,7 @@ class LexicographicQP:
     def _solve_levels(
         self, ctx: StepContext, H: Array, rows: list, objectives: list, relax: bool
     ) -> tuple[Array, float, int]:
+        """Solve the levels in order; each freezes an orthonormal basis F of its task rows' span: F q̇ = F q̇*."""
         assert self._workspaces is not None
         n = self.chain.dof
         lb, ub = self.box.compute(ctx, relax=relax)
@@ -261,33 +311,39 @@ class LexicographicQP:
         )
         A0 = np.vstack([np.eye(n), H])
         lo0, up0 = np.concatenate([lb, h_lo]), np.concatenate([ub, h_up])
-        x = np.zeros(n)
-        Z = np.eye(n)
+        F = np.zeros((0, n))
+        y = np.zeros(0)
+        x: Array | None = None
         iters = 0
         lag = 0.0
+        last = len(objectives) - 1
         for i, (P, c, J, v) in enumerate(objectives):
-            k = Z.shape[1]
-            if k == 0:
-                break  # the higher levels use every degree of freedom
-            Az = A0 if i == 0 else A0 @ Z
-            base = A0 @ x
+            if F.shape[0] >= n:
+                break  # the higher levels fix every degree of freedom
             # lower levels start from the higher optimum, which sits on active rows up to the solver accuracy: a
-            # small widening keeps z = 0 feasible so the solver is not asked for more accuracy than it delivered
-            widen = self.widen * i  # level i may inherit level i−1's widening: widen cumulatively
-            z, status, it = self._workspaces[i].solve(
-                Z.T @ P @ Z, Z.T @ (P @ x + c), Az, lo0 - base - widen, up0 - base + widen
-            )
+            # small widening (growing with the level, as violations may accumulate) keeps that optimum feasible
+            widen = self.widen * i
+            A = np.vstack([A0, F])
+            lo = np.concatenate([lo0 - widen, y])
+            up = np.concatenate([up0 + widen, y])
+            z, status, it = self._workspaces[i].solve(P, c, A, lo, up, n_eq=F.shape[0])
             iters += it
-            cand = x + Z @ z if z is not None else None
-            if cand is None or not self._feasible(A0, lo0, up0, cand):
+            if z is None or not self._feasible(A0, lo0, up0, z) or not self._kept(F, y, z):
                 if i == 0:
                     raise InfeasibleStep(self._explain(ctx, status, lb, ub, rows, relax))
                 break  # a lower level failed numerically: keep the higher levels' optimum (strict priority holds)
-            x = cand
+            x = z
             if i == 0:
                 lag = float(np.linalg.norm(J @ x - v))  # > 0 when the limits hold the leader back
-            Z = Z @ null_space(J @ Z)
+            if i < last:
+                Fn = orthonormal_rows(J, F)
+                F, y = np.vstack([F, Fn]), np.concatenate([y, Fn @ x])
+        assert x is not None
         return x, lag, iters
+
+    def _kept(self, F: Array, y: Array, x: Array) -> bool:
+        """Whether x keeps the frozen task values of the higher levels (strict priority) to solver accuracy."""
+        return bool(np.all(np.abs(F @ x - y) <= self.lex_tol * (1.0 + np.abs(y))))
 
     def _feasible(self, A: Array, lo: Array, up: Array, x: Array) -> bool:
         r = A @ x
