@@ -319,6 +319,34 @@ def make_qp(
     return LexicographicQP(chain, levels, limits, box, solver=p.solver)
 
 
+def formulation(problem: Problem, method: str | Formulation) -> Formulation:
+    """The formulation object for ``method``: ``"pinv"``, ``"qp"``, or a formulation object (returned as is)."""
+    if method == "pinv":
+        return make_pinv(problem)
+    if method == "qp":
+        return make_qp(problem)
+    if isinstance(method, str):
+        raise ParameterError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
+    return method
+
+
+def plan(problem: Problem, method: str | Formulation = "pinv") -> Plan:
+    """Run ``method`` along the problem's leader trajectory (:func:`tmr.clik.run`); the plan is not checked yet."""
+    return run(
+        problem.chain,
+        problem.env,
+        problem.trajectory,
+        formulation(problem, method),
+        problem.q0,
+        span_limits=problem.span_limits,
+        safety_radius=problem.chain_params.safety_radius,
+        samples_per_link=problem.task_params.samples_per_link,
+        scenario=problem.scenario.name,
+        params=problem.params_dict(),
+        goal=np.asarray(problem.scenario.goal, float),
+    )
+
+
 def solve(problem: Problem, method: str | Formulation = "pinv") -> tuple[Plan, Metrics]:
     """Plan with ``method`` and check every hard constraint on the recorded states.
 
@@ -329,29 +357,8 @@ def solve(problem: Problem, method: str | Formulation = "pinv") -> tuple[Plan, M
 
     Returns the plan (``success`` False with the reason if a constraint is violated anywhere) and its metrics.
     """
-    formulation: Any
-    if method == "pinv":
-        formulation = make_pinv(problem)
-    elif method == "qp":
-        formulation = make_qp(problem)
-    elif isinstance(method, str):
-        raise ParameterError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
-    else:
-        formulation = method
-    plan = run(
-        problem.chain,
-        problem.env,
-        problem.trajectory,
-        formulation,
-        problem.q0,
-        span_limits=problem.span_limits,
-        safety_radius=problem.chain_params.safety_radius,
-        samples_per_link=problem.task_params.samples_per_link,
-        scenario=problem.scenario.name,
-        params=problem.params_dict(),
-        goal=np.asarray(problem.scenario.goal, float),
-    )
-    return plan, check(plan, problem.env, goal_tolerance=problem.path_params.goal_tolerance)
+    result = plan(problem, method)
+    return result, check(result, problem.env, goal_tolerance=problem.path_params.goal_tolerance)
 
 
 def check(plan: Plan, env: Any, goal_tolerance: float = 0.1) -> Metrics:
