@@ -41,7 +41,7 @@ def test_approach_bound_is_a_velocity_damper():
 
 def test_clearance_rows_match_finite_differences_and_pattern(column_room):
     chain, q, ctx = context(column_room, [[3.0, 7.2], [6.0, 7.4], [9.0, 7.2]])
-    lim = ObstacleClearance(chain, d_safe=0.05, per_link=2, activation=1.5)
+    lim = ObstacleClearance(chain, 20, d_safe=0.05, per_link=2, activation=1.5)
     A, lower, upper = lim.compute(ctx)
     mask = lim.pattern(chain)
     assert A.shape == mask.shape == (6, chain.dof)
@@ -66,7 +66,7 @@ def test_clearance_rows_match_finite_differences_and_pattern(column_room):
 
 def test_clearance_picks_local_minima_per_link(column_room):
     chain, q, ctx = context(column_room, [[3.0, 7.2], [6.0, 7.4], [9.0, 7.2]])
-    lim = ObstacleClearance(chain, per_link=2)
+    lim = ObstacleClearance(chain, 20, per_link=2)
     idx, m = lim.select(ctx)
     d = ctx.sample_clearance
     for link in range(chain.n_robots):
@@ -74,7 +74,7 @@ def test_clearance_picks_local_minima_per_link(column_room):
         chosen = idx[2 * link : 2 * link + 2] - link * m
         assert seg[chosen[0]] == pytest.approx(seg.min())  # the lowest sample of every link has a row
     with pytest.raises(ParameterError):
-        ObstacleClearance(chain, d_safe=-0.1)
+        ObstacleClearance(chain, 20, d_safe=-0.1)
 
 
 def test_separation_rows_match_finite_differences(open_room):

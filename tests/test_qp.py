@@ -32,7 +32,7 @@ def stack(chain, levels="all", solver="osqp", extra=()):
             Level([(Damping(chain), 1.0), (Smoothness(chain), 10.0)]),
         ]
     lv += list(extra)
-    limits = [ObstacleClearance(chain), RobotSpeed(chain, 2.5), RobotSeparation(chain, 0.5)]
+    limits = [ObstacleClearance(chain, 20), RobotSpeed(chain, 2.5), RobotSeparation(chain, 0.5)]
     box = JointBox(chain, LIMITS[: chain.n_robots], 3.0, 3.0, 20.0)
     return LexicographicQP(chain, lv, limits, box, solver=solver)
 
@@ -117,7 +117,8 @@ def test_hard_limits_hold_and_the_leader_lags_instead(column_room):
 def test_qp_backends_agree(column_room):
     chain, ctx = context(column_room, [[3.0, 7.3], [6.0, 7.4], [9.0, 7.3]], (1.0, 7.3), [[9.3, 7.0]], [[0.5, -0.2]])
     x_ref, _ = stack(chain).step(ctx)
-    for name in ("daqp", "proxqp", "qpsolvers-osqp"):
+    # proxqp 0.8 is left out: it reports these (feasible) problems as primal infeasible (formulations/qp.md)
+    for name in ("daqp", "clarabel", "qpsolvers-osqp"):
         if name not in solvers():
             continue
         x, _ = stack(chain, solver=name).step(ctx)

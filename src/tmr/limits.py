@@ -71,10 +71,15 @@ class Limit(ABC):
 class ObstacleClearance(Limit):
     """Every robot and every tether stays out of the inflated obstacles (hard, Caruso 2021 objectives 2–3).
 
-    Along each tether the distance field is sampled at ``ctx.sample_fractions``; the ``per_link`` lowest local minima
-    of each tether become rows ``Ts ∇d(p)ᵀ J_p q̇ ≥ −min(rate Ts, 1)(d(p) − d_safe)`` (a velocity damper, see
-    :func:`approach_bound`; it keeps d(p) + Ts ḋ ≥ d_safe) with ``J_p`` the Jacobian of the point at a fixed
-    fraction of the tether (it slides with the tether length). Robots are the end samples (s = 1) of their link.
+    Along each tether the distance field is sampled at ``ctx.sample_fractions`` (``samples_per_link`` points, robots
+    are the end samples s = 1); every sample closer than ``activation`` becomes a row
+    ``Ts ∇d(p)ᵀ J_p q̇ ≥ −min(rate Ts, 1)(d(p) − d_safe)`` (a velocity damper, see :func:`approach_bound`; it keeps
+    d(p) + Ts ḋ ≥ d_safe) with ``J_p`` the Jacobian of the point at a fixed fraction of the tether (it slides with
+    the tether length). Linearising the distance to a convex obstacle is conservative (the distance is convex).
+
+    With ``per_link > 0`` only that many samples per tether get rows: the lowest local minima of its clearance
+    profile (fewer rows for long chains). Then a sample on a slope of the profile has no row and a second obstacle
+    can reach it within one step (seen on dense clutter): the default, every sample, is the safe choice.
 
     Between samples spaced δ a straight tether can cut into a convex obstacle corner by at most δ²/(8ρ), where ρ ≥ r
     (inflation rounds every convex corner with the safety radius r); ``d_safe`` should cover it plus the distance-field
@@ -84,8 +89,9 @@ class ObstacleClearance(Limit):
 
     Args:
         chain: the chain.
+        samples_per_link: clearance samples per tether (``StepContext``'s).
         d_safe: clearance kept from the inflated obstacles [m].
-        per_link: rows per tether (local minima of the clearance profile).
+        per_link: rows per tether; 0 = every sample (default).
         activation: samples farther than this [m] give inactive rows (lower bound −inf).
     """
 
@@ -94,17 +100,20 @@ class ObstacleClearance(Limit):
     def __init__(
         self,
         chain: Chain,
+        samples_per_link: int,
         d_safe: float = 0.05,
-        per_link: int = 2,
+        per_link: int = 0,
         activation: float = 1.5,
         approach_rate: float = 2.0,
     ) -> None:
-        if d_safe < 0 or per_link < 1 or activation <= d_safe or approach_rate <= 0:
+        if d_safe < 0 or per_link < 0 or samples_per_link < 1 or activation <= d_safe or approach_rate <= 0:
             raise ParameterError(
-                "need d_safe ≥ 0, per_link ≥ 1, activation > d_safe, approach_rate > 0; got "
-                f"{d_safe}, {per_link}, {activation}, {approach_rate}"
+                "need d_safe ≥ 0, per_link ≥ 0, samples_per_link ≥ 1, activation > d_safe, approach_rate > 0; got "
+                f"{d_safe}, {per_link}, {samples_per_link}, {activation}, {approach_rate}"
             )
-        self.d_safe, self.per_link, self.activation = float(d_safe), int(per_link), float(activation)
+        self.samples = int(samples_per_link)
+        self.per_link = self.samples if per_link == 0 else min(int(per_link), self.samples)
+        self.d_safe, self.activation = float(d_safe), float(activation)
         self.rate = float(approach_rate)
         self.links = np.repeat(np.arange(1, chain.n_robots + 1), self.per_link)
 
@@ -112,10 +121,14 @@ class ObstacleClearance(Limit):
         return link_pattern(chain, self.links)
 
     def select(self, ctx: StepContext) -> tuple[Array, Array]:
-        """Indices (into the samples) of the rows' points: the lowest local minima per link, (N·per_link,)."""
+        """Indices (into the samples) of the rows' points, (N·per_link,): every sample, or the lowest local minima."""
         N, c = ctx.chain.n_robots, self.per_link
         d = ctx.sample_clearance.reshape(N, -1)
         m = d.shape[1]
+        if m != self.samples:
+            raise ParameterError(f"the step samples {m} points per tether, this limit was built for {self.samples}")
+        if c == m:
+            return np.arange(N * m), m
         # local minima along each link (ends count as minima if lower than their only neighbour)
         left = np.concatenate([np.full((N, 1), np.inf), d[:, :-1]], axis=1)
         right = np.concatenate([d[:, 1:], np.full((N, 1), np.inf)], axis=1)

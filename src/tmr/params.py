@@ -177,7 +177,8 @@ class QPParams:
 
     Attributes:
         d_safe: clearance every robot and tether sample keeps from the inflated obstacles [m].
-        clearance_rows_per_link: clearance rows per tether (lowest local minima of its clearance profile).
+        clearance_rows_per_link: clearance rows per tether: 0 = every sample (safe default); k > 0 = the k lowest
+            local minima of its clearance profile (fewer rows for long chains, see ``ObstacleClearance``).
         clearance_activation: samples farther than this from the obstacles give inactive rows [m].
         approach_rate: a distance to its limit (clearance, separation) may shrink at most at this rate times the
             remaining margin [1/s] (velocity damper), so the acceleration bound can always stop an approach.
@@ -197,7 +198,7 @@ class QPParams:
     """
 
     d_safe: float = 0.05
-    clearance_rows_per_link: int = 2
+    clearance_rows_per_link: int = 0
     clearance_activation: float = 1.5
     approach_rate: float = 2.0
     separation_margin: float = 0.02
@@ -235,8 +236,8 @@ class QPParams:
         ):
             if getattr(self, name) < 0:
                 raise ParameterError(f"QPParams.{name} must be ≥ 0, got {getattr(self, name)!r}")
-        if self.clearance_rows_per_link < 1 or self.separation_neighbours < 1:
-            raise ParameterError("clearance_rows_per_link and separation_neighbours must be ≥ 1")
+        if self.clearance_rows_per_link < 0 or self.separation_neighbours < 1:
+            raise ParameterError("need clearance_rows_per_link ≥ 0 and separation_neighbours ≥ 1")
 
 
 def apply_overrides(obj: T, overrides: dict[str, Any], *, strict: bool = False) -> tuple[T, dict[str, Any]]:

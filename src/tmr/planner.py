@@ -300,7 +300,14 @@ def make_qp(
         Level([(Damping(chain), p.energy_weight), (Smoothness(chain), p.smoothness_weight)], "energy"),
     ]
     limits: list[Limit] = [
-        ObstacleClearance(chain, p.d_safe, p.clearance_rows_per_link, p.clearance_activation, p.approach_rate),
+        ObstacleClearance(
+            chain,
+            problem.task_params.samples_per_link,
+            p.d_safe,
+            p.clearance_rows_per_link,
+            p.clearance_activation,
+            p.approach_rate,
+        ),
         RobotSpeed(chain, p.robot_speed_max),
         RobotAcceleration(chain, p.robot_accel_max),
     ]
