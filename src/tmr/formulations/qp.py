@@ -10,8 +10,9 @@ Each step solves one QP per priority level in the joint velocities q̇ (2N plana
 where y_j* = J_j q̇_j* is the optimal task value of level j. The objective of a level is strictly convex in its task
 value y = J q̇, so the set of level-j optima is exactly {q̇ feasible : J_j q̇ = y_j*}: freezing y_j* means no lower
 level can degrade a higher one. The equalities use an orthonormal basis of the higher levels' task rows (no
-redundant rows), and a level is skipped once the levels above fix every degree of freedom. Level 1 (leader tracking) is an objective, never a constraint, so when the
-hard constraints forbid following the reference the leader lags instead of breaking them; the lag is reported.
+redundant rows), and a level is skipped once the levels above fix every degree of freedom. Level 1 (leader
+tracking) is an objective, never a constraint, so when the hard constraints forbid following the reference the
+leader lags instead of breaking them; the lag is reported.
 
 Solvers: the default ``"osqp"`` keeps one persistent ``osqp.OSQP`` workspace per level with a fixed sparsity pattern
 and only updates its values each step; any qpsolvers backend (``"daqp"``, ``"proxqp"``, ``"clarabel"``, …, or
