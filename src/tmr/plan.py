@@ -76,7 +76,13 @@ def build_parser() -> argparse.ArgumentParser:
     src.add_argument("--goal", type=_xy, help="leader goal X,Y [m]")
     src.add_argument("--start", type=_points, help="robot start positions 'x1,y1;x2,y2;...' [m] (default: computed)")
     src.add_argument("--robots", type=_positive_int, help="number of robots N (default: the scenario's, 3)")
-    p.add_argument("--method", default="pinv", choices=["pinv", "qp"], help="formulation (default: pinv)")
+    p.add_argument(
+        "--method",
+        default="pinv",
+        choices=["pinv", "qp", "horizon"],
+        help="pinv: the paper's pseudoinverse CLIK; qp: lexicographic QP with hard constraints; horizon: whole-horizon "
+        "NLP (CasADi/IPOPT) warm-started from qp (default: pinv)",
+    )
     p.add_argument(
         "--solver",
         help="QP solver for --method qp: osqp (persistent workspace, default) or a qpsolvers "

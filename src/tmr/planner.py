@@ -47,7 +47,7 @@ from tmr.tasks import (
 
 Array = NDArray[np.float64]
 
-METHODS = ("pinv", "qp")
+METHODS = ("pinv", "qp", "horizon")
 
 
 @dataclass
@@ -359,12 +359,18 @@ def solve(problem: Problem, method: str | Formulation = "pinv") -> tuple[Plan, M
 
     Args:
         problem: from :func:`build_problem`.
-        method: ``"pinv"``, ``"qp"``, or any formulation object with ``name``, ``reset()`` and ``step(ctx)`` (e.g.
-            ``make_qp(problem, extra_limits=...)`` or your own).
+        method: ``"pinv"``, ``"qp"``, ``"horizon"`` (the whole-horizon NLP of ``formulations/horizon.md``, warm
+            started from the ``qp`` plan), or any per-step formulation object with ``name``, ``reset()`` and
+            ``step(ctx)`` (e.g. ``make_qp(problem, extra_limits=...)`` or your own).
 
     Returns the plan (``success`` False with the reason if a constraint is violated anywhere) and its metrics.
     """
-    result = plan(problem, method)
+    if method == "horizon":  # a whole-trajectory NLP, not a per-step formulation
+        from tmr.formulations.horizon import plan_horizon  # casadi is imported only when used
+
+        result = plan_horizon(problem)
+    else:
+        result = plan(problem, method)
     return result, check(result, problem.env, goal_tolerance=problem.path_params.goal_tolerance)
 
 

@@ -102,8 +102,9 @@ class HorizonOptions:
         retry: if IPOPT stops without a solution, solve the round once more from the same start with ``retry_ipopt``
             merged into the options and least-squares multipliers of the leader rows (another path to the optimum;
             the error is raised only if both attempts fail).
-        expand: expand the MX graph to SX (default False: measured slower here, the B-spline stays a call node).
-        scale_objective: divide the cost by its warm-start value, so IPOPT sees O(1) (measured: half the iterations).
+        expand: expand the MX graph to SX (default False: measured 3× slower, the B-spline is one call node per point).
+        scale_objective: divide the cost by its warm-start value, so IPOPT sees O(1) (without: 35–80 % more
+            iterations on A–D).
         ipopt: extra IPOPT options, merged last.
     """
 
@@ -599,10 +600,10 @@ def _describe(violations: list[Violation], worst: int = 3) -> str:
             continue
         top = sorted(vs, key=lambda v: -v.amount)[:worst]
         w = "; ".join(f"{v.item} at knot {v.knot} (t = {v.t:.2f} s) by {v.amount:.3g} {v.unit}" for v in top)
-        parts.append(
-            f"{name}: {len(vs)} knot(s), k = {min(v.knot for v in vs)}–{max(v.knot for v in vs)} "
-            f"(t = {min(v.t for v in vs):.2f}–{max(v.t for v in vs):.2f} s), worst: {w}"
-        )
+        k0, k1 = min(v.knot for v in vs), max(v.knot for v in vs)
+        t0, t1 = min(v.t for v in vs), max(v.t for v in vs)
+        where = f"k = {k0} (t = {t0:.2f} s)" if k0 == k1 else f"k = {k0}–{k1} (t = {t0:.2f}–{t1:.2f} s)"
+        parts.append(f"{name}: {len(vs)} knot(s), {where}, worst: {w}")
     return " | ".join(parts)
 
 
