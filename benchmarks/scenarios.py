@@ -65,9 +65,22 @@ def run_one(scenario: str, method: str, seed: int, repeats: int) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
         subprocess.run(
-            [sys.executable, "-m", "tmr.plan", "--scenario", scenario, "--method", method, "--seed", str(seed),
-             "--out", tmp, "--no-plots"],
-            check=False, capture_output=True,
+            [
+                sys.executable,
+                "-m",
+                "tmr.plan",
+                "--scenario",
+                scenario,
+                "--method",
+                method,
+                "--seed",
+                str(seed),
+                "--out",
+                tmp,
+                "--no-plots",
+            ],
+            check=False,
+            capture_output=True,
         )
         row["total_s"] = time.perf_counter() - t0
     save_figure(plot_chain_poses(plan, problem.env), RESULTS / f"{scenario}_{method}_chain_poses.png")

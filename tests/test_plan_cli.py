@@ -120,3 +120,12 @@ def test_module_entry_point_help():
     assert res.returncode == 0
     for flag in ("--scenario", "--map", "--base", "--goal", "--start", "--robots", "--method", "--seed", "--out"):
         assert flag in res.stdout
+
+
+@pytest.mark.parametrize("method", ["qp", "horizon"])
+def test_hard_constraint_methods_on_scenario_a(tmp_path, capsys, method):
+    out = tmp_path / method
+    code, stdout, _ = run_cli(["--scenario", "A", "--method", method, "--no-plots", "--out", str(out), *FAST], capsys)
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert code == 0 and metrics["success"] and metrics["method"] == method
+    assert metrics["n_violation_steps"] == 0 and metrics["min_tether_clearance"] > 0
