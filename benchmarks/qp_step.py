@@ -55,10 +55,10 @@ if PINNED:
 import numpy as np  # noqa: E402
 from shapely.geometry import Point  # noqa: E402
 
-from tmr.clik import run  # noqa: E402
 from tmr.environment import Environment  # noqa: E402
 from tmr.formulations.qp import solvers as qp_solvers  # noqa: E402
 from tmr.planner import Problem, build_problem, check, make_pinv, make_qp  # noqa: E402
+from tmr.planner import plan as run_formulation  # noqa: E402
 from tmr.scenario import Scenario  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -191,19 +191,7 @@ def outcome(plan: Any, metrics: Any, planned: int) -> str:
 
 def run_once(problem: Problem, method: str, solver: str, full: bool) -> dict[str, Any]:
     wrapped = Timed(formulation(problem, method, solver))
-    plan = run(
-        problem.chain,
-        problem.env,
-        problem.trajectory,
-        wrapped,
-        problem.q0,
-        span_limits=problem.span_limits,
-        safety_radius=problem.chain_params.safety_radius,
-        samples_per_link=problem.task_params.samples_per_link,
-        scenario=problem.scenario.name,
-        params=problem.params_dict(),
-        goal=np.asarray(problem.scenario.goal, float),
-    )
+    plan = run_formulation(problem, wrapped)
     metrics = check(plan, problem.env, goal_tolerance=problem.path_params.goal_tolerance if full else math.inf)
     diag = plan.diagnostics
     n_attempted = len(wrapped.times)
