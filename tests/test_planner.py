@@ -8,7 +8,7 @@ import pytest
 from tmr import catenary
 from tmr.chain import Chain
 from tmr.errors import ParameterError, ScenarioError
-from tmr.params import ChainParams, PathParams, PinvParams, TimeParams, apply_overrides
+from tmr.params import ChainParams, PathParams, PinvParams, QPParams, TimeParams, apply_overrides
 from tmr.planner import build_problem, check, default_start, solve, span_limits
 from tmr.scenario import load_scenario
 
@@ -78,3 +78,12 @@ def test_plan_verdict_is_taken_from_recorded_states():
     m = check(plan, problem.env)
     assert not plan.success and "robot_clearance" in plan.failure
     assert 150 in m.violation_steps["robot_clearance"] and np.isinf(m.f4)
+
+
+@pytest.mark.parametrize(
+    ("cls", "field"),
+    [(ChainParams, "safety_radius"), (QPParams, "robot_accel_max"), (QPParams, "accel_max"), (PinvParams, "k_v0")],
+)
+def test_bounds_of_every_parameter_set(cls, field):
+    with pytest.raises(ParameterError, match=field):
+        cls(**{field: -1.0})

@@ -15,13 +15,21 @@ from tmr.errors import ParameterError
 T = TypeVar("T")
 
 
-def _validate(obj: Any) -> None:
+def _validate(obj: Any, positive: tuple[str, ...] = (), nonnegative: tuple[str, ...] = ()) -> None:
+    """Every numeric field finite; the fields named in ``positive`` > 0 and in ``nonnegative`` ≥ 0."""
+    cls = type(obj).__name__
     for f in fields(obj):
         v = getattr(obj, f.name)
         if isinstance(v, bool):
             continue
         if isinstance(v, (int, float)) and not math.isfinite(v):
-            raise ParameterError(f"{type(obj).__name__}.{f.name} must be finite, got {v!r}")
+            raise ParameterError(f"{cls}.{f.name} must be finite, got {v!r}")
+    for name in positive:
+        if getattr(obj, name) <= 0:
+            raise ParameterError(f"{cls}.{name} must be > 0, got {getattr(obj, name)!r}")
+    for name in nonnegative:
+        if getattr(obj, name) < 0:
+            raise ParameterError(f"{cls}.{name} must be ≥ 0, got {getattr(obj, name)!r}")
 
 
 @dataclass(frozen=True)
@@ -47,16 +55,10 @@ class ChainParams:
     ground_clearance: float = 0.0
 
     def __post_init__(self) -> None:
-        _validate(self)
-        for name in (
-            "safety_radius",
-            "exit_height",
-            "pulley_torque",
-            "pulley_radius",
-            "cable_mass_per_length",
-        ):
-            if getattr(self, name) <= 0:
-                raise ParameterError(f"ChainParams.{name} must be > 0, got {getattr(self, name)!r}")
+        _validate(
+            self,
+            positive=("safety_radius", "exit_height", "pulley_torque", "pulley_radius", "cable_mass_per_length"),
+        )
 
     @property
     def horizontal_tension(self) -> float:
@@ -134,10 +136,7 @@ class TaskParams:
     gain_length: float = 0.2
 
     def __post_init__(self) -> None:
-        _validate(self)
-        for name in ("clik_gain", "gain_length"):
-            if getattr(self, name) <= 0:
-                raise ParameterError(f"TaskParams.{name} must be > 0, got {getattr(self, name)!r}")
+        _validate(self, positive=("clik_gain", "gain_length"))
         if self.samples_per_link < 1:
             raise ParameterError(f"samples_per_link must be ≥ 1, got {self.samples_per_link}")
         if not 0 <= self.span_target_fraction <= 1:
@@ -163,12 +162,9 @@ class PinvParams:
     min_evasion_distance: float = 0.05
 
     def __post_init__(self) -> None:
-        _validate(self)
+        _validate(self, positive=("d_min", "k_v0", "hysteresis", "min_evasion_distance"))
         if not 0 < self.dls_damping < 1:
             raise ParameterError(f"dls_damping λ must be in ]0, 1[ (Caruso 2021 §3), got {self.dls_damping}")
-        for name in ("d_min", "k_v0", "hysteresis", "min_evasion_distance"):
-            if getattr(self, name) <= 0:
-                raise ParameterError(f"PinvParams.{name} must be > 0, got {getattr(self, name)!r}")
 
 
 @dataclass(frozen=True)
@@ -216,26 +212,27 @@ class QPParams:
     solver: str = "osqp"
 
     def __post_init__(self) -> None:
-        _validate(self)
-        for name in (
-            "robot_speed_max",
-            "joint_speed_max",
-            "span_speed_max",
-            "accel_max",
-            "approach_rate",
-        ):
-            if getattr(self, name) <= 0:
-                raise ParameterError(f"QPParams.{name} must be > 0, got {getattr(self, name)!r}")
-        for name in (
-            "d_safe",
-            "separation_margin",
-            "span_margin",
-            "energy_weight",
-            "smoothness_weight",
-            "tether_smoothness",
-        ):
-            if getattr(self, name) < 0:
-                raise ParameterError(f"QPParams.{name} must be ≥ 0, got {getattr(self, name)!r}")
+        _validate(
+            self,
+            positive=(
+                "robot_speed_max",
+                "joint_speed_max",
+                "span_speed_max",
+                "accel_max",
+                "robot_accel_max",
+                "approach_rate",
+                "clearance_activation",
+            ),
+            nonnegative=(
+                "d_safe",
+                "separation_margin",
+                "span_margin",
+                "uniformity_gain",
+                "energy_weight",
+                "smoothness_weight",
+                "tether_smoothness",
+            ),
+        )
         if self.clearance_rows_per_link < 0 or self.separation_neighbours < 1:
             raise ParameterError("need clearance_rows_per_link ≥ 0 and separation_neighbours ≥ 1")
 
