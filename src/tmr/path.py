@@ -18,6 +18,7 @@ robot safety radius.
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import operator
 import threading
@@ -49,6 +50,19 @@ SAME_POINT = 1e-9
 #: OMPL's seed generator and log level are process-global, and the environment's prepared shapely geometry is
 #: not thread-safe: whole planning calls are serialised so that concurrent threads still get their seed's path.
 _OMPL_LOCK = threading.RLock()
+
+
+def _serialised(fn: Any) -> Any:
+    """Run ``fn`` under :data:`_OMPL_LOCK`."""
+
+    @functools.wraps(fn)
+    def locked(*args: Any, **kwargs: Any) -> Any:
+        with _OMPL_LOCK:
+            return fn(*args, **kwargs)
+
+    return locked
+
+
 #: Rounds of local waypoint refinement :func:`time_law` tries before giving up on a spline that cuts a corner.
 MAX_REFINEMENTS = 12
 
@@ -299,6 +313,7 @@ def _string_pull(env: Any, points: Array, margin: float, step: float = 0.1) -> A
     return dense[keep]
 
 
+@_serialised
 def plan_leader_path(
     env: Any,
     start: ArrayLike,
@@ -341,31 +356,6 @@ def plan_leader_path(
         PathError: start or goal outside the room or in collision (with its clearance), or RRT* found no
             exact solution within ``iterations``.
     """
-    with _OMPL_LOCK:
-        return _plan_leader_path(
-            env,
-            start,
-            goal,
-            seed=seed,
-            iterations=iterations,
-            clearance=clearance,
-            range=range,
-            simplify=simplify,
-        )
-
-
-def _plan_leader_path(
-    env: Any,
-    start: ArrayLike,
-    goal: ArrayLike,
-    *,
-    seed: int = 0,
-    iterations: int = DEFAULT_ITERATIONS,
-    clearance: float = 0.1,
-    range: float | None = None,  # OMPL's name for the RRT* extension length
-    simplify: bool = True,
-) -> Array:
-    """Unlocked body of :func:`plan_leader_path`."""
     start = _as_point(start, "start")
     goal = _as_point(goal, "goal")
     seed = _as_int(seed, "seed", 0, 2**32 - 2)
