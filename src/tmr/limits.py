@@ -204,7 +204,14 @@ class RobotSeparation(Limit):
         return LimitRows(A, lower, np.full(i.size, np.inf))
 
 
-class RobotSpeed(Limit):
+class _RobotVelocityRows(Limit):
+    """Rows on the Cartesian velocity of every robot, x and y: ``J_i q̇`` (pattern: links 1..i, eq. 15)."""
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        return link_pattern(chain, np.repeat(np.arange(1, chain.n_robots + 1), 2))
+
+
+class RobotSpeed(_RobotVelocityRows):
     """Cartesian speed of every robot, per axis: ``|(J_i q̇)_x|, |(J_i q̇)_y| ≤ v_max`` [m/s] (hard)."""
 
     name = "robot_speed"
@@ -214,16 +221,13 @@ class RobotSpeed(Limit):
             raise ParameterError(f"v_max must be > 0 m/s, got {v_max}")
         self.v_max = float(v_max)
 
-    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
-        return link_pattern(chain, np.repeat(np.arange(1, chain.n_robots + 1), 2))
-
     def compute(self, ctx: StepContext) -> LimitRows:
         A = ctx.robot_jacobians.reshape(-1, ctx.chain.dof)
         v = np.full(A.shape[0], self.v_max)
         return LimitRows(A, -v, v)
 
 
-class RobotAcceleration(Limit):
+class RobotAcceleration(_RobotVelocityRows):
     """Cartesian acceleration of every robot, per axis: ``|J_i (q̇ − q̇_{k−1})| ≤ a_max Ts`` [m/s²] (hard).
 
     ``J_i(q_k) q̇_{k−1}`` stands for the robot's previous velocity (the change of J over one step is second order).
@@ -236,9 +240,6 @@ class RobotAcceleration(Limit):
         if not a_max > 0:
             raise ParameterError(f"a_max must be > 0 m/s², got {a_max}")
         self.a_max = float(a_max)
-
-    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
-        return link_pattern(chain, np.repeat(np.arange(1, chain.n_robots + 1), 2))
 
     def compute(self, ctx: StepContext) -> LimitRows:
         A = ctx.robot_jacobians.reshape(-1, ctx.chain.dof)

@@ -281,7 +281,7 @@ class LexicographicQP:
             if hard_mask.shape != H.shape or np.any(H[~hard_mask] != 0):
                 raise ParameterError("limit rows do not match their declared sparsity patterns")
             self._build_workspaces(hard_mask)
-        objectives = [self._objective(level, ctx) for level in self.levels]
+        objectives: dict[int, tuple[Array, Array, Array, Array]] = {}  # built on first use: skipped levels cost nothing
         try:
             x, lag, iters = self._solve_levels(ctx, H, rows, objectives, relax=False)
             relaxed = 0.0
@@ -297,7 +297,7 @@ class LexicographicQP:
         return x, diag
 
     def _solve_levels(
-        self, ctx: StepContext, H: Array, rows: list, objectives: list, relax: bool
+        self, ctx: StepContext, H: Array, rows: list, objectives: dict, relax: bool
     ) -> tuple[Array, float, int]:
         """Solve the levels in order; each freezes an orthonormal basis F of its task rows' span: F q̇ = F q̇*."""
         assert self._workspaces is not None
@@ -317,10 +317,13 @@ class LexicographicQP:
         x: Array | None = None
         iters = 0
         lag = 0.0
-        last = len(objectives) - 1
-        for i, (P, c, J, v) in enumerate(objectives):
+        last = len(self.levels) - 1
+        for i, level in enumerate(self.levels):
             if F.shape[0] >= n:
                 break  # the higher levels fix every degree of freedom
+            if i not in objectives:
+                objectives[i] = self._objective(level, ctx)
+            P, c, J, v = objectives[i]
             # lower levels start from the higher optimum, which sits on active rows up to the solver accuracy: a
             # small widening (growing with the level, as violations may accumulate) keeps that optimum feasible
             widen = self.widen * i
