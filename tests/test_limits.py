@@ -16,6 +16,7 @@ from tmr.limits import (
     RobotSpeed,
     approach_bound,
     link_pattern,
+    robot_link_pattern,
 )
 from tmr.tasks import StepContext
 
@@ -44,8 +45,13 @@ def test_clearance_rows_match_finite_differences_and_pattern(column_room):
     lim = ObstacleClearance(chain, 20, d_safe=0.05, per_link=2, activation=1.5)
     A, lower, upper = lim.compute(ctx)
     mask = lim.pattern(chain)
-    assert A.shape == mask.shape == (6, chain.dof)
+    assert lim.space == "robot" and A.shape == mask.shape == (6, chain.dof)
     assert np.all(A[~mask] == 0) and np.all(np.isinf(upper))
+    # rows on robot velocities are local: a point of link j moves with robots j−1 and j only
+    assert np.array_equal(mask, robot_link_pattern(chain, [1, 1, 2, 2, 3, 3]))
+    assert not mask[:2, 2:].any() and mask[:2, :2].all()
+    A = ctx.rows_in("joint", A, lim.space)  # the same rows on joint rates, checked against the motion q + h q̇
+    assert np.all(A[~link_pattern(chain, [1, 1, 2, 2, 3, 3])] == 0)  # eq. 15: no joint after the point's link
     idx, _ = lim.select(ctx)
     rng = np.random.default_rng(0)
     for _ in range(3):
@@ -82,6 +88,8 @@ def test_separation_rows_match_finite_differences(open_room):
     lim = RobotSeparation(chain, safety_radius=0.5, margin=0.02, neighbours=2)
     A, lower, _ = lim.compute(ctx)
     assert A.shape == lim.pattern(chain).shape == (6, chain.dof)
+    assert np.all(np.count_nonzero(A, axis=1) == 4)  # one pair of robots per row, in robot velocities
+    A = ctx.rows_in("joint", A, lim.space)
     qdot = np.random.default_rng(1).normal(size=chain.dof)
     h = 1e-6
 
@@ -106,10 +114,11 @@ def test_speed_and_acceleration_rows(open_room):
     qprev = np.array([0.1, 0.2, -0.1, 0.3, 0.2, -0.1])
     chain, q, ctx = context(open_room, [[3.0, 6.0], [4.5, 6.5], [6.0, 6.0]], base=(1.0, 6.0), qdot_prev=qprev)
     A, lo, up = RobotSpeed(chain, 2.0).compute(ctx)
-    np.testing.assert_allclose(A, chain.robot_jacobians(q).reshape(-1, chain.dof))
+    np.testing.assert_allclose(ctx.rows_in("joint", A, "robot"), chain.robot_jacobians(q).reshape(-1, chain.dof))
+    np.testing.assert_array_equal(A, np.eye(chain.dof))  # the identity on robot velocities
     assert np.all(lo == -2.0) and np.all(up == 2.0)
     A2, lo2, up2 = RobotAcceleration(chain, 4.0).compute(ctx)
-    np.testing.assert_allclose((lo2 + up2) / 2, A2 @ qprev)
+    np.testing.assert_allclose((lo2 + up2) / 2, chain.robot_jacobians(q).reshape(-1, chain.dof) @ qprev)
     np.testing.assert_allclose(up2 - lo2, 2 * 4.0 * 0.05)
     assert RobotAcceleration.relaxable and not RobotSpeed.relaxable
     assert np.all(A2[~RobotAcceleration(chain, 4.0).pattern(chain)] == 0)
@@ -137,6 +146,8 @@ def test_keep_in_polygon_rows_and_example_limit(open_room):
     A, lo, up = lim.compute(ctx)
     assert A.shape == (4, chain.dof) and np.all(np.isneginf(lo))
     np.testing.assert_allclose(np.sort(up), [0.5, 0.5, 1.0, 1.0])  # distances of (4.5, 6) to the four edges
-    assert np.array_equal(lim.pattern(chain), link_pattern(chain, [2, 2, 2, 2]))
+    assert np.array_equal(lim.pattern(chain), np.repeat([[False, True, False]], 4, axis=0).repeat(2, axis=1))
+    Jq = ctx.rows_in("joint", A, lim.space)  # in joint rates: Ts aᵀ J_2, zero after link 2 (eq. 15)
+    np.testing.assert_allclose(Jq, 0.05 * lim.normals @ chain.robot_jacobians(q)[1], atol=1e-12)
     with pytest.raises(ParameterError):
         KeepInPolygon(chain, robot=4, polygon=square)

@@ -30,8 +30,11 @@ def make_ctx(env, positions, base=(1.0, 6.0), ref=None, refv=None):
 
 def test_leader_tracking_rows_are_clik_eq20(open_room):
     chain, q, ctx = make_ctx(open_room, [[2.0, 6.0], [3.5, 6.0], [5.0, 6.0]], ref=[[5.2, 6.1]], refv=[[0.3, -0.1]])
-    J, v = LeaderTracking(gain=4.0).compute(ctx)
-    np.testing.assert_allclose(J, chain.end_effector_jacobian(q))
+    task = LeaderTracking(gain=4.0)
+    J, v = task.compute(ctx)
+    assert task.space == "robot"
+    np.testing.assert_array_equal(J, [[0, 0, 0, 0, 1, 0], [0, 0, 0, 0, 0, 1]])  # selects the leader's velocity
+    np.testing.assert_allclose(ctx.rows_in("joint", J, task.space), chain.end_effector_jacobian(q))  # J_e, eq. 9
     np.testing.assert_allclose(v, [0.3 + 4.0 * 0.2, -0.1 + 4.0 * 0.1])
     with pytest.raises(ParameterError):
         LeaderTracking(gain=-1.0)

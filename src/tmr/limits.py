@@ -1,8 +1,11 @@
-"""Hard limits of the chain: each one returns inequality rows ``lower ≤ A q̇ ≤ upper`` for the current step.
+"""Hard limits of the chain: each one returns inequality rows ``lower ≤ A x ≤ upper`` for the current step.
 
-Limits are linearised at q_k and valid over one sampling period Ts: a quantity g(q) must satisfy
-``g(q_k) + Ts ∇g(q_k) q̇ ≥ g_min``. Every limit declares a **fixed number of rows and a fixed sparsity pattern** at
-construction (:meth:`Limit.pattern`), so a QP solver can keep one workspace for the whole plan and only update values.
+Limits are linearised at q_k and valid over one sampling period Ts: a quantity g must satisfy
+``g(q_k) + Ts ġ ≥ g_min`` with ġ linear in the velocities x. A limit writes its rows in the velocity coordinates
+named by its ``space``: ``"joint"`` (joint rates q̇, the default, natural for joint quantities) or ``"robot"``
+(robot velocities v = [ṗ1, …, ṗN], :mod:`tmr.velocity`), where every row on a robot or a tether point is local —
+the built-in limits use it. Every limit declares a **fixed number of rows and a sparsity pattern** in its space
+(:meth:`Limit.pattern`), so a QP solver can keep one workspace for the whole plan and only update values.
 
 Write your own by subclassing :class:`Limit` (see ``KeepInPolygon`` for a small example).
 """
@@ -18,6 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 from tmr.chain import Chain
 from tmr.errors import ParameterError
 from tmr.tasks import StepContext
+from tmr.velocity import robot_pattern
 
 Array = NDArray[np.float64]
 
@@ -31,9 +35,21 @@ class LimitRows(NamedTuple):
 
 
 def link_pattern(chain: Chain, links: ArrayLike) -> NDArray[np.bool_]:
-    """Sparsity of the Jacobian rows of points on ``links`` (1-based): the joints of links 1..j (eq. 15)."""
+    """Sparsity in q̇ of the Jacobian rows of points on ``links`` (1-based): the joints of links 1..j (eq. 15)."""
     li = np.asarray(links, dtype=int).reshape(-1)
     return chain.joint_link[None, :] <= li[:, None]
+
+
+def robot_link_pattern(chain: Chain, links: ArrayLike) -> NDArray[np.bool_]:
+    """Sparsity in robot velocities of rows on points of ``links`` (1-based): robots j−1 (not the anchor) and j."""
+    li = np.asarray(links, dtype=int).reshape(-1)
+    robot = np.repeat(np.arange(1, chain.n_robots + 1), 2)[None, :]
+    return (robot == li[:, None]) | (robot == li[:, None] - 1)
+
+
+def _robot_rows(m: int, n_robots: int) -> Array:
+    """Zero rows on robot velocities indexed by robot (0 = the fixed anchor): (m, N+1, 2)."""
+    return np.zeros((m, n_robots + 1, 2))
 
 
 def approach_bound(g: Array, g_min: float, rate: float, Ts: float) -> Array:
@@ -55,10 +71,20 @@ class Limit(ABC):
 
     name: str = "limit"
     relaxable: bool = False
+    space: str = "joint"
 
     @abstractmethod
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
-        """(m, n) boolean mask of the entries of ``A`` that may be nonzero (fixed for the whole plan)."""
+        """(m, 2N) boolean mask of the entries of ``A`` that may be nonzero, in the limit's ``space``.
+
+        A QP keeps it as the initial sparsity of its workspace; an entry outside it makes the workspace grow (a new
+        factorisation), so a declared pattern saves time but is not a promise the solver relies on.
+        """
+
+    def robot_pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        """:meth:`pattern` in robot velocities."""
+        mask = self.pattern(chain)
+        return mask if self.space == "robot" else robot_pattern(mask)
 
     @abstractmethod
     def compute(self, ctx: StepContext) -> LimitRows:
@@ -73,9 +99,10 @@ class ObstacleClearance(Limit):
 
     Along each tether the distance field is sampled at ``ctx.sample_fractions`` (``samples_per_link`` points, robots
     are the end samples s = 1); every sample closer than ``activation`` becomes a row
-    ``Ts ∇d(p)ᵀ J_p q̇ ≥ −min(rate Ts, 1)(d(p) − d_safe)`` (a velocity damper, see :func:`approach_bound`; it keeps
-    d(p) + Ts ḋ ≥ d_safe) with ``J_p`` the Jacobian of the point at a fixed fraction of the tether (it slides with
-    the tether length). Linearising the distance to a convex obstacle is conservative (the distance is convex).
+    ``Ts ∇d(p)ᵀ ṗ ≥ −min(rate Ts, 1)(d(p) − d_safe)`` (a velocity damper, see :func:`approach_bound`; it keeps
+    d(p) + Ts ḋ ≥ d_safe) with ṗ = (1 − s) ṗ_{j−1} + s ṗ_j the velocity of the point at fraction s of link j (it
+    slides with the tether length; in joint rates ṗ = J_p q̇, eq. 15). Rows are on robot velocities. Linearising the
+    distance to a convex obstacle is conservative (the distance is convex).
 
     With ``per_link > 0`` only that many samples per tether get rows: the lowest local minima of its clearance
     profile (fewer rows for long chains). Then a sample on a slope of the profile has no row and a second obstacle
@@ -96,6 +123,7 @@ class ObstacleClearance(Limit):
     """
 
     name = "clearance"
+    space = "robot"
 
     def __init__(
         self,
@@ -118,7 +146,7 @@ class ObstacleClearance(Limit):
         self.links = np.repeat(np.arange(1, chain.n_robots + 1), self.per_link)
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
-        return link_pattern(chain, self.links)
+        return robot_link_pattern(chain, self.links)
 
     def select(self, ctx: StepContext) -> tuple[Array, Array]:
         """Indices (into the samples) of the rows' points, (N·per_link,): every sample, or the lowest local minima."""
@@ -146,8 +174,11 @@ class ObstacleClearance(Limit):
         s = ctx.sample_fractions[idx]
         d = ctx.sample_clearance[idx]
         g = ctx.sample_gradient[idx]
-        J = ctx.chain.point_jacobians(ctx.q, links, s, fixed="fraction")
-        A = ctx.Ts * np.einsum("mi,min->mn", g, J)
+        r = np.arange(idx.size)
+        A = _robot_rows(idx.size, ctx.chain.n_robots)
+        A[r, links - 1] = (ctx.Ts * (1.0 - s))[:, None] * g
+        A[r, links] = (ctx.Ts * s)[:, None] * g
+        A = A[:, 1:].reshape(idx.size, -1)
         lower = approach_bound(d, self.d_safe, self.rate, ctx.Ts)
         lower = np.where(d > self.activation, -np.inf, lower)
         return LimitRows(A, lower, np.full(idx.size, np.inf))
@@ -157,13 +188,15 @@ class RobotSeparation(Limit):
     """Robots keep at least ``2 r + margin`` from each other, for every pair (hard).
 
     For each robot the ``neighbours`` nearest other robots give rows
-    ``Ts n_ijᵀ (J_i − J_j) q̇ ≥ −min(rate Ts, 1)(‖p_i − p_j‖ − 2r − margin)`` (n_ij the unit vector from j to i; a
-    velocity damper as in :class:`ObstacleClearance`). With
-    ``neighbours ≥ N − 1`` every pair is a row. Rows are dense (the pair changes from step to step).
-    Pairs farther than ``activation`` [m] give inactive rows.
+    ``Ts n_ijᵀ (ṗ_i − ṗ_j) ≥ −min(rate Ts, 1)(‖p_i − p_j‖ − 2r − margin)`` (n_ij the unit vector from j to i; a
+    velocity damper as in :class:`ObstacleClearance`), on robot velocities. With ``neighbours ≥ N − 1`` every pair
+    is a row. The declared pattern of robot i's rows covers the robots within ``neighbours`` of it along the chain;
+    a pair outside it (the chain folded back) grows the QP's pattern. Pairs farther than ``activation`` [m] give
+    inactive rows.
     """
 
     name = "separation"
+    space = "robot"
 
     def __init__(
         self,
@@ -181,7 +214,10 @@ class RobotSeparation(Limit):
         self.rows = chain.n_robots * self.k if chain.n_robots > 1 else 0
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
-        return np.ones((self.rows, chain.dof), dtype=bool)
+        N = chain.n_robots
+        i = np.repeat(np.arange(N), self.k)
+        robot = np.repeat(np.arange(N), 2)[None, :]
+        return np.abs(robot - i[:, None]) <= self.k
 
     def compute(self, ctx: StepContext) -> LimitRows:
         n = ctx.chain.dof
@@ -197,18 +233,23 @@ class RobotSeparation(Limit):
         j = j.reshape(-1)
         dij = dist[i, j]
         nij = diff[i, j] / dij[:, None]
-        Jr = ctx.robot_jacobians
-        A = ctx.Ts * np.einsum("mi,min->mn", nij, Jr[i] - Jr[j])
+        r = np.arange(i.size)
+        A = np.zeros((i.size, N, 2))
+        A[r, i] = ctx.Ts * nij
+        A[r, j] = -ctx.Ts * nij
+        A = A.reshape(i.size, -1)
         lower = approach_bound(dij, self.min_distance, self.rate, ctx.Ts)
         lower = np.where(dij > self.activation, -np.inf, lower)
         return LimitRows(A, lower, np.full(i.size, np.inf))
 
 
 class _RobotVelocityRows(Limit):
-    """Rows on the Cartesian velocity of every robot, x and y: ``J_i q̇`` (pattern: links 1..i, eq. 15)."""
+    """Rows on the Cartesian velocity of every robot, x and y: the identity on robot velocities (``J_i q̇``)."""
+
+    space = "robot"
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
-        return link_pattern(chain, np.repeat(np.arange(1, chain.n_robots + 1), 2))
+        return np.eye(2 * chain.n_robots, dtype=bool)
 
 
 class RobotSpeed(_RobotVelocityRows):
@@ -222,15 +263,16 @@ class RobotSpeed(_RobotVelocityRows):
         self.v_max = float(v_max)
 
     def compute(self, ctx: StepContext) -> LimitRows:
-        A = ctx.robot_jacobians.reshape(-1, ctx.chain.dof)
-        v = np.full(A.shape[0], self.v_max)
-        return LimitRows(A, -v, v)
+        n = 2 * ctx.chain.n_robots
+        v = np.full(n, self.v_max)
+        return LimitRows(np.eye(n), -v, v)
 
 
 class RobotAcceleration(_RobotVelocityRows):
     """Cartesian acceleration of every robot, per axis: ``|J_i (q̇ − q̇_{k−1})| ≤ a_max Ts`` [m/s²] (hard).
 
     ``J_i(q_k) q̇_{k−1}`` stands for the robot's previous velocity (the change of J over one step is second order).
+    Rows on robot velocities: ``|ṗ_i − J_i q̇_{k−1}| ≤ a_max Ts``.
     """
 
     name = "robot_acceleration"
@@ -242,10 +284,9 @@ class RobotAcceleration(_RobotVelocityRows):
         self.a_max = float(a_max)
 
     def compute(self, ctx: StepContext) -> LimitRows:
-        A = ctx.robot_jacobians.reshape(-1, ctx.chain.dof)
-        v_prev = A @ ctx.qdot_prev
+        v_prev = ctx.velocity_map.robot_velocities(ctx.qdot_prev)
         dv = self.a_max * ctx.Ts
-        return LimitRows(A, v_prev - dv, v_prev + dv)
+        return LimitRows(np.eye(v_prev.size), v_prev - dv, v_prev + dv)
 
 
 class JointBox:
@@ -298,13 +339,15 @@ class JointBox:
 class KeepInPolygon(Limit):
     """Keep one robot inside a convex polygon (an example of a user-defined limit).
 
-    Each edge with outward normal a and offset b (aᵀx ≤ b inside) gives ``Ts aᵀ J_i q̇ ≤ b − margin − aᵀ p_i``.
+    Each edge with outward normal a and offset b (aᵀx ≤ b inside) gives ``Ts aᵀ ṗ_i ≤ b − margin − aᵀ p_i`` on robot
+    velocities (``ṗ_i = J_i q̇`` in joint rates).
 
     Args:
         chain: the chain; robot: 1-based index of the robot; polygon: (M, 2) vertices of a convex polygon [m].
     """
 
     name = "keep_in_polygon"
+    space = "robot"
 
     def __init__(self, chain: Chain, robot: int, polygon: ArrayLike, margin: float = 0.0) -> None:
         V = np.asarray(polygon, dtype=float)
@@ -321,11 +364,13 @@ class KeepInPolygon(Limit):
         self.robot, self.margin = int(robot), float(margin)
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
-        return link_pattern(chain, np.full(self.normals.shape[0], self.robot))
+        mask = np.zeros((self.normals.shape[0], 2 * chain.n_robots), dtype=bool)
+        mask[:, StepContext.robot_columns(self.robot)] = True
+        return mask
 
     def compute(self, ctx: StepContext) -> LimitRows:
         p = ctx.points[self.robot]
-        J = ctx.robot_jacobians[self.robot - 1]
-        A = ctx.Ts * self.normals @ J
+        A = np.zeros((self.normals.shape[0], 2 * ctx.chain.n_robots))
+        A[:, ctx.robot_columns(self.robot)] = ctx.Ts * self.normals
         upper = np.maximum(self.offsets - self.margin - self.normals @ p, 0.0)  # outside: do not get worse
         return LimitRows(A, np.full(A.shape[0], -np.inf), upper)

@@ -17,12 +17,19 @@ from numpy.typing import ArrayLike, NDArray
 
 from tmr.chain import Chain
 from tmr.errors import ParameterError
+from tmr.velocity import VelocityMap
 
 Array = NDArray[np.float64]
 
 
+#: Velocity coordinates a task's or a limit's rows are written in (``space`` attribute): ``"joint"`` — joint rates
+#: q̇ (2N planar); ``"robot"`` — robot velocities v = [ṗ1, …, ṗN] (2N, see :mod:`tmr.velocity`).
+SPACES = ("joint", "robot")
+
+
 class TaskRows(NamedTuple):
-    """Cost rows of a task: find q̇ with ``J q̇ ≈ v``; ``J`` is (m, n) and ``v`` (m,) in task units per second."""
+    """Cost rows of a task: ``J x ≈ v`` with x the task's velocity coordinates (its ``space``: q̇ or robot
+    velocities); ``J`` is (m, 2N) and ``v`` (m,) in task units per second."""
 
     J: Array
     v: Array
@@ -79,6 +86,7 @@ class StepContext:
         self.sample_clearance, self.sample_gradient = self.env.clearance_and_gradient(self.sample_points)
         self._J_e: Array | None = None
         self._J_r: Array | None = None
+        self._vmap: VelocityMap | None = None
 
     @property
     def J_e(self) -> Array:
@@ -95,6 +103,28 @@ class StepContext:
             self._J_e = self._J_r[-1]
         return self._J_r
 
+    @property
+    def velocity_map(self) -> VelocityMap:
+        """Maps between joint rates and robot velocities at this step (planar chains; cached for the step)."""
+        if self._vmap is None:
+            self._vmap = VelocityMap(self.points, self.spans)
+        return self._vmap
+
+    def rows_in(self, space: str, A: Array, source: str) -> Array:
+        """Rows ``A`` written in velocity coordinates ``source`` expressed in ``space`` ("joint" or "robot")."""
+        if source == space:
+            return A
+        if source == "joint":
+            return self.velocity_map.to_robot(A)
+        if source == "robot":
+            return VelocityMap.to_joint(A, self.robot_jacobians)
+        raise ParameterError(f"unknown velocity coordinates {source!r}; use one of {SPACES}")
+
+    @staticmethod
+    def robot_columns(i: int) -> slice:
+        """Columns of robot ``i`` (1-based) in rows on robot velocities: ``A[:, ctx.robot_columns(i)]``."""
+        return slice(2 * (i - 1), 2 * i)
+
     def robot_position(self, i: int) -> Array:
         """Position of robot ``i`` (1-based; 0 is the anchor) [m]."""
         return self.points[i]
@@ -110,9 +140,17 @@ class StepContext:
 
 
 class Task(ABC):
-    """A task: desired velocity ``v`` of a quantity with Jacobian ``J`` (cost rows)."""
+    """A task: desired velocity ``v`` of a quantity with Jacobian ``J`` (cost rows).
+
+    ``space`` names the velocity coordinates of ``J``: ``"joint"`` (q̇, the default) or ``"robot"`` (robot
+    velocities); every formulation converts the rows to its own coordinates (:meth:`StepContext.rows_in`).
+    ``full_rank = True`` declares that the rows always have rank 2N (e.g. all joint rates): a priority level holding
+    such a task has a unique optimum, so the lexicographic QP skips the levels below it.
+    """
 
     name: str = "task"
+    space: str = "joint"
+    full_rank: bool = False
 
     @abstractmethod
     def compute(self, ctx: StepContext) -> TaskRows:
@@ -125,21 +163,28 @@ class Task(ABC):
 class LeaderTracking(Task):
     """Primary task: the leader tracks the reference with the CLIK law (Caruso 2021 eq. 19–20).
 
-    ``v = ẋ_d + K e`` with ``e = x_d − x_e``; J is the leader Jacobian J_e (eq. 9).
+    ``v = ẋ_d + K e`` with ``e = x_d − x_e``. Its rows are written on robot velocities (they select the leader's
+    velocity); in joint rates they are the leader Jacobian J_e of eq. 9.
 
     Args:
         gain: K [1/s] (scalar gain times identity).
     """
 
     name = "leader"
+    space = "robot"
 
     def __init__(self, gain: float) -> None:
         if not np.isfinite(gain) or gain <= 0:
             raise ParameterError(f"CLIK gain must be a positive finite number [1/s], got {gain!r}")
         self.gain = float(gain)
+        self._S: Array | None = None
 
     def compute(self, ctx: StepContext) -> TaskRows:
-        return TaskRows(ctx.J_e, ctx.xd_d + self.gain * (ctx.x_d - ctx.x_e))
+        n = 2 * ctx.chain.n_robots
+        if self._S is None or self._S.shape[1] != n:
+            self._S = np.zeros((2, n))
+            self._S[:, n - 2 :] = np.eye(2)
+        return TaskRows(self._S, ctx.xd_d + self.gain * (ctx.x_d - ctx.x_e))
 
 
 def joint_limit_gain_coefficients(d_lo: float, d_max: float, edge: float, length: float) -> tuple[float, ...]:
@@ -301,6 +346,7 @@ class Damping(Task):
     """Minimum joint velocity (the energy f1 of Caruso 2021 eq. 24): rows ``q̇ ≈ 0``."""
 
     name = "energy"
+    full_rank = True
 
     def __init__(self, chain: Chain) -> None:
         self.I = np.eye(chain.dof)
@@ -313,6 +359,7 @@ class Smoothness(Task):
     """Small joint acceleration (the jerk-like f4 of Caruso 2021 eq. 27): rows ``q̇_k ≈ q̇_{k−1}``."""
 
     name = "smoothness"
+    full_rank = True
 
     def __init__(self, chain: Chain) -> None:
         self.I = np.eye(chain.dof)

@@ -1,22 +1,29 @@
 """Lexicographic QP per step with hard safety constraints (``--method qp``; math in ``formulations/qp.md``).
 
-Each step solves one QP per priority level in the joint velocities q̇ (2N planar):
+Each step solves one QP per priority level in the robot velocities v = [ṗ1, …, ṗN] (2N, planar; the joint rates
+are q̇ = T v, :mod:`tmr.velocity`), where every row on a robot or a tether point is local and the QP is sparse:
 
-    level i:  min_q̇ Σ_t w_t ‖J_t q̇ − v_t‖² + ε‖q̇‖²
-              s.t.  lb ≤ q̇ ≤ ub                               (joint speed, acceleration, tether span: JointBox)
-                    lower ≤ A q̇ ≤ upper                       (every Limit: clearance, separation, robot speed, …)
-                    J_j q̇ = y_j*          for every level j < i  (strict priority: higher optima are frozen)
+    level i:  min_v Σ_t w_t ‖J_t v − v_t‖² + ε‖v‖²
+              s.t.  lb ≤ T v ≤ ub                             (joint speed, acceleration, tether span: JointBox)
+                    lower ≤ A v ≤ upper                       (every Limit: clearance, separation, robot speed, …)
+                    F v = F v*                               (strict priority: the higher levels' optima are frozen)
 
-where y_j* = J_j q̇_j* is the optimal task value of level j. The objective of a level is strictly convex in its task
-value y = J q̇, so the set of level-j optima is exactly {q̇ feasible : J_j q̇ = y_j*}: freezing y_j* means no lower
-level can degrade a higher one. The equalities use an orthonormal basis of the higher levels' task rows (no
-redundant rows), and a level is skipped once the levels above fix every degree of freedom. Level 1 (leader
-tracking) is an objective, never a constraint, so when the hard constraints forbid following the reference the
-leader lags instead of breaking them; the lag is reported.
+Tasks and limits written on joint rates are converted (``A T``). The least squares are posed with residual variables
+r = √w (J v − v_t) (OSQP: ``min ½(ε‖v‖² + ‖r‖²)`` subject to ``√w J v − r = √w v_t``), so no JᵀJ is ever formed and
+every matrix keeps the rows' sparsity. F is an orthonormal basis of the higher levels' task rows and y* = F v* their
+optimal values: a level's objective is strictly convex in its task value, so freezing it means no lower level can
+degrade a higher one. A level holding a full-rank task (``Task.full_rank``) has a unique optimum, and the levels
+below it are skipped.
+
+**Optimistic first level.** Level 1 (leader tracking) usually reaches zero residual. So each step first solves level
+2 with level 1's rows as equalities at their targets (``J_1 v = v_1``): if that QP is feasible its solution is exactly
+the lexicographic one (level 1's optimum is then the zero residual), and one QP replaces two. Only if it is
+infeasible (the limits hold the leader back) is level 1 solved on its own, as an objective: the leader lags instead of
+breaking a hard limit, and the lag is reported. After a lagging step the next one starts with level 1 directly.
 
 Solvers: the default ``"osqp"`` keeps one persistent ``osqp.OSQP`` workspace per level with a fixed sparsity pattern
 and only updates its values each step; any qpsolvers backend (``"daqp"``, ``"proxqp"``, ``"clarabel"``, …, or
-``"qpsolvers-osqp"``) is reached through :func:`qpsolvers.solve_qp` with the same matrices.
+``"qpsolvers-osqp"``) is reached through :func:`qpsolvers.solve_qp` with the same problem (condensed: P = Σ w JᵀJ).
 """
 
 from __future__ import annotations
@@ -36,12 +43,15 @@ from tmr.chain import Chain
 from tmr.errors import InfeasibleStep, ParameterError
 from tmr.limits import JointBox, Limit
 from tmr.tasks import StepContext, Task
+from tmr.velocity import robot_pattern
 
 Array = NDArray[np.float64]
 
 #: OSQP settings (polishing is off: osqp 1.1 prints a line on stdout for every polish that finds no active set,
 #: even with verbose=False).
 OSQP_SETTINGS = dict(eps_abs=1e-8, eps_rel=1e-8, polishing=False, max_iter=20000, verbose=False, warm_starting=True)
+#: Backend that settles a level OSQP leaves unsolved (iteration limit): dense active set, exact.
+FALLBACK_SOLVER = "daqp"
 #: OSQP's infinity: bounds beyond it are clipped.
 OSQP_INFTY = 1e30
 
@@ -60,7 +70,7 @@ class Level:
 
 
 class _Pattern:
-    """A fixed sparsity pattern and the map from a dense matrix to its CSC data vector."""
+    """A fixed sparsity pattern of a dense (m, n) block and the map from the block to its CSC data vector."""
 
     def __init__(self, mask: NDArray[np.bool_]) -> None:
         csc = sp.csc_matrix(mask.astype(float))
@@ -69,6 +79,7 @@ class _Pattern:
         self.indptr, self.indices = csc.indptr.copy(), csc.indices.copy()
         cols = np.repeat(np.arange(mask.shape[1]), np.diff(self.indptr))
         self.flat = self.indices * mask.shape[1] + cols
+        self.mask = mask
 
     def data(self, dense: Array) -> Array:
         return dense.ravel()[self.flat]
@@ -80,57 +91,89 @@ class _Pattern:
 
 
 class _OsqpLevel:
-    """Persistent OSQP workspace of one level.
+    """Persistent OSQP workspace of one level (see the module docstring for the problem it holds).
 
-    The sparsity patterns of P (upper triangle) and A are taken from the first step's matrices together with the
-    declared patterns (``A_mask``); the workspace is set up once and only its values are updated afterwards. If a
-    later step has a nonzero outside the pattern (a task whose Jacobian pattern changed) or a different number of
-    rows, the workspace is set up again with the union of the patterns.
+    C (dense, (m, n)) stacks the hard and frozen rows on v, then the level's m_r weighted task rows Jw with targets
+    tw (given as ``lo = up`` of those rows). Condensed form: ``P = JwᵀJw + εI`` (upper triangle), ``q = −Jwᵀ tw``,
+    ``A`` = the hard and frozen rows. The sparsity of A is the declared pattern of the hard rows together with the
+    nonzeros of the first step, that of P the nonzeros of the first step; the workspace is set up once and only its
+    values are updated afterwards. A later step with a nonzero outside the pattern (a pair of robots that was never
+    close before, a task whose rows changed shape) sets it up again with the union of the patterns — it never
+    shrinks. For long chains (``n > sparse_above``) JwᵀJw is formed with scipy.sparse (it is banded).
     """
 
-    def __init__(self, A_mask: NDArray[np.bool_]) -> None:
-        self.A_mask = A_mask
+    sparse_above = 48
+
+    def __init__(self, eps: float) -> None:
+        self.eps = float(eps)
         self.solver: osqp.OSQP | None = None
         self.setups = 0
+        self.A_pat: _Pattern | None = None
+        self.P_pat: _Pattern | None = None
 
-    def _fits(self, P: Array, A: Array) -> bool:
-        return (
-            self.solver is not None
-            and A.shape == self.A_pat.shape
-            and not np.any(np.triu(P)[~self.P_mask])
-            and not np.any(A[~self.A_full])
-        )
-
-    def solve(self, P: Array, q: Array, A: Array, lo: Array, up: Array, n_eq: int = 0) -> tuple[Array | None, str, int]:
-        lo = np.maximum(lo, -OSQP_INFTY)
-        up = np.minimum(up, OSQP_INFTY)
-        if not self._fits(P, A):
-            n = P.shape[0]
-            P_mask = (np.triu(P) != 0) | np.eye(n, dtype=bool)
-            A_full = np.zeros(A.shape, dtype=bool)
-            rows = min(self.A_mask.shape[0], A.shape[0])
-            A_full[:rows] = self.A_mask[:rows]
-            A_full |= A != 0
-            if self.solver is not None:  # grow, never shrink, the pattern
-                P_mask |= self.P_mask
-                if self.A_full.shape == A.shape:
-                    A_full |= self.A_full
-            self.P_mask, self.A_full = P_mask, A_full
-            self.P_pat, self.A_pat = _Pattern(P_mask), _Pattern(A_full)
-            self.solver = osqp.OSQP()
-            self.solver.setup(self.P_pat.matrix(P), q, self.A_pat.matrix(A), lo, up, **OSQP_SETTINGS)
-            self.solver.update(Px=self.P_pat.data(P), Ax=self.A_pat.data(A))
-            self.setups += 1
+    def _hessian(self, Jw: Array, tw: Array) -> tuple[Array, Array]:
+        n = Jw.shape[1]
+        if n > self.sparse_above:
+            Js = sp.csr_matrix(Jw)
+            P = (Js.T @ Js).toarray()
         else:
-            self.solver.update(q=q, l=lo, u=up, Px=self.P_pat.data(P), Ax=self.A_pat.data(A))
-        res = self.solver.solve(raise_error=False)  # the status is checked by the caller
-        status = str(res.info.status)
-        x = res.x if res.x is not None and np.all(np.isfinite(res.x)) else None
-        return x, status, int(res.info.iter)
+            P = Jw.T @ Jw
+        P.flat[:: n + 1] += self.eps
+        return P, -(tw @ Jw)
+
+    def _setup(self, P: Array, q: Array, A: Array, lo: Array, up: Array, declared: NDArray[np.bool_] | None) -> None:
+        n = A.shape[1]
+        A_mask = A != 0
+        if declared is not None:
+            A_mask[: declared.shape[0]] |= declared
+        P_mask = np.triu(P != 0) | np.eye(n, dtype=bool)
+        if self.A_pat is not None and self.A_pat.shape == A.shape:  # grow, never shrink
+            A_mask |= self.A_pat.mask
+            P_mask |= self.P_pat.mask
+        self.A_pat, self.P_pat = _Pattern(A_mask), _Pattern(P_mask)
+        self.Ax, self.Px = self.A_pat.data(A), self.P_pat.data(P)
+        self.solver = osqp.OSQP()
+        self.solver.setup(self.P_pat.matrix(P), q, self.A_pat.matrix(A), lo, up, **OSQP_SETTINGS)
+        self.solver.update(Px=self.Px, Ax=self.Ax)
+        self.core = getattr(self.solver, "_solver", None)  # the extension object: no per-call Python overhead
+        self.setups += 1
+
+    @staticmethod
+    def _gather(pat: _Pattern, dense: Array, out: Array) -> bool:
+        """Copy the pattern entries of ``dense`` into ``out``; False if ``dense`` has a nonzero outside the pattern."""
+        np.take(dense.ravel(), pat.flat, out=out)
+        return np.count_nonzero(dense) == np.count_nonzero(out)
+
+    def solve(
+        self, C: Array, m_r: int, lo: Array, up: Array, declared: NDArray[np.bool_] | None = None
+    ) -> tuple[Array | None, str, int]:
+        m = C.shape[0] - m_r
+        P, q = self._hessian(C[m:], lo[m:])
+        A = C[:m]
+        lo = np.maximum(lo[:m], -OSQP_INFTY)
+        up = np.minimum(up[:m], OSQP_INFTY)
+        fits = self.A_pat is not None and self.A_pat.shape == A.shape
+        fits = fits and self._gather(self.A_pat, A, self.Ax) and self._gather(self.P_pat, np.triu(P), self.Px)
+        if not fits:
+            self._setup(P, q, A, lo, up, declared)
+        elif self.core is not None:
+            self.core.update_data_vec(q=q, l=lo, u=up)
+            self.core.update_data_mat(P_x=self.Px, P_i=None, A_x=self.Ax, A_i=None)
+        else:  # pragma: no cover - an osqp without the extension attribute
+            self.solver.update(q=q, l=lo, u=up, Px=self.Px, Ax=self.Ax)
+        if self.core is not None:
+            self.core.solve()
+            info = self.core.info
+            x = self.core.solution.x
+        else:  # pragma: no cover
+            res = self.solver.solve(raise_error=False)
+            info, x = res.info, res.x
+        x = np.array(x) if x is not None and np.all(np.isfinite(x)) else None
+        return x, str(info.status), int(info.iter)
 
 
 class _QpsolversLevel:
-    """One level solved by a qpsolvers backend with the same matrices (a fresh problem each call)."""
+    """One level solved by a qpsolvers backend, condensed (``P = Σ w JᵀJ + εI``), a fresh problem each call."""
 
     #: tolerances passed to the backends whose defaults are too loose for strict priority
     OPTIONS: dict[str, dict[str, float]] = {
@@ -138,19 +181,28 @@ class _QpsolversLevel:
         "proxqp": {"eps_abs": 1e-9, "eps_rel": 0.0},
     }
 
-    def __init__(self, solver: str) -> None:
+    def __init__(self, solver: str, eps: float) -> None:
         self.solver = solver
+        self.eps = float(eps)
         self.options = self.OPTIONS.get(solver, {})
         self.setups = 0
 
-    def solve(self, P: Array, q: Array, A: Array, lo: Array, up: Array, n_eq: int = 0) -> tuple[Array | None, str, int]:
-        m = A.shape[0] - n_eq
-        Ai, li, ui = A[:m], lo[:m], up[:m]
-        has_u, has_l = np.isfinite(ui), np.isfinite(li)
+    def solve(
+        self, C: Array, m_r: int, lo: Array, up: Array, declared: NDArray[np.bool_] | None = None
+    ) -> tuple[Array | None, str, int]:
+        m, n = C.shape
+        m_h = m - m_r
+        Jw, tw = C[m_h:], lo[m_h:]
+        P = Jw.T @ Jw + self.eps * np.eye(n)
+        q = -Jw.T @ tw
+        Ai, li, ui = C[:m_h], lo[:m_h], up[:m_h]
+        eq = li == ui
+        has_u = ~eq & np.isfinite(ui) & (ui < OSQP_INFTY)
+        has_l = ~eq & np.isfinite(li) & (li > -OSQP_INFTY)
         G = np.vstack([Ai[has_u], -Ai[has_l]])
         h = np.concatenate([ui[has_u], -li[has_l]])
-        Aeq = A[m:] if n_eq else None
-        beq = lo[m:] if n_eq else None
+        Aeq = Ai[eq] if eq.any() else None
+        beq = li[eq] if eq.any() else None
         if self.solver in qpsolvers.sparse_solvers and self.solver not in qpsolvers.dense_solvers:
             P, G = sp.csc_matrix(P), sp.csc_matrix(G)
             Aeq = sp.csc_matrix(Aeq) if Aeq is not None else None
@@ -182,22 +234,23 @@ def orthonormal_rows(J: Array, F: Array, rtol: float = 1e-9) -> Array:
 
 
 class LexicographicQP:
-    """Strict-priority stack of QPs solved every step (see the module docstring).
+    """Strict-priority stack of QPs solved every step, in robot velocities (see the module docstring).
 
-    Level i keeps the task values of every higher level j < i with equality rows ``F q̇ = F q̇*_{i−1}``, where F is an
+    Level i keeps the task values of every higher level j < i with equality rows ``F v = F v*_{i−1}``, where F is an
     orthonormal basis of the span of the higher levels' task rows (redundant rows, e.g. span differences next to the
     spans, are removed: OSQP converges poorly on inconsistent near-duplicate equalities). The last level freezes
-    nothing, and a level is skipped once the higher ones fix every degree of freedom.
+    nothing, and the levels below one holding a full-rank task are skipped.
 
     Args:
-        chain: the chain.
+        chain: the chain (planar).
         levels: priority levels, highest first; each a :class:`Level` of (task, weight) pairs.
         limits: hard limits shared by every level.
-        box: joint box bounds (speed, acceleration, span).
+        box: joint box bounds (speed, acceleration, span), imposed as rows ``lb ≤ T v ≤ ub``.
         solver: ``"osqp"`` (persistent workspace) or a qpsolvers backend name (see :func:`solvers`).
         regularization: ε added to every level's Hessian [dimensionless].
         feasibility_tolerance: largest violation of a hard row accepted from a solver [row units].
         lex_tolerance: largest relative change of a frozen higher-level task value accepted from a solver.
+        optimistic: try each step first with level 1 met exactly (one QP instead of two; exact when feasible).
     """
 
     name = "qp"
@@ -213,11 +266,14 @@ class LexicographicQP:
         regularization: float = 1e-9,
         feasibility_tolerance: float = 1e-5,
         lex_tolerance: float = 1e-6,
+        optimistic: bool = True,
     ) -> None:
         if not levels or any(not level.tasks for level in levels):
             raise ParameterError("the QP stack needs at least one level, and every level at least one task")
         if solver not in solvers():
             raise ParameterError(f"unknown QP solver {solver!r}; available: {', '.join(solvers())}")
+        if chain.spatial:
+            raise ParameterError("the lexicographic QP plans planar chains (robot-velocity coordinates)")
         self.chain, self.levels, self.limits, self.box = chain, list(levels), list(limits), box
         self.solver = solver
         self.eps, self.feas_tol, self.lex_tol = (
@@ -225,11 +281,19 @@ class LexicographicQP:
             float(feasibility_tolerance),
             float(lex_tolerance),
         )
+        self.optimistic = bool(optimistic)
         self.widen = 0.1 * self.feas_tol / max(1, len(self.levels))
-        self._workspaces: list[_OsqpLevel | _QpsolversLevel] | None = None
+        self._workspaces: dict[tuple[int, int], _OsqpLevel | _QpsolversLevel] = {}
+        self._declared: NDArray[np.bool_] | None = None
+        self._lagging = False
+        self._fallback = _QpsolversLevel(FALLBACK_SOLVER, self.eps)
+        self.fallbacks = 0
 
     def reset(self) -> None:
-        self._workspaces = None
+        self._workspaces = {}
+        self._declared = None
+        self._lagging = False
+        self.fallbacks = 0
         for level in self.levels:
             for task, _ in level.tasks:
                 task.reset()
@@ -237,30 +301,55 @@ class LexicographicQP:
             lim.reset()
 
     # ------------------------------------------------------------------ assembly
-    def _objective(self, level: Level, ctx: StepContext) -> tuple[Array, Array, Array, Array]:
-        """(P, q, J, v) of a level: P = Σ w JᵀJ + εI, q = −Σ w Jᵀv; J, v stack the task rows."""
-        n = self.chain.dof
-        P = self.eps * np.eye(n)
-        c = np.zeros(n)
-        Js, vs = [], []
-        for task, w in level.tasks:
-            J, v = task.compute(ctx)
-            P += w * (J.T @ J)
-            c -= w * (J.T @ v)
-            Js.append(J)
-            vs.append(v)
-        return P, c, np.vstack(Js), np.concatenate(vs)
+    def _embed(self, A: Array, space: str) -> Array:
+        """Rows on v or on q̇ as rows on x = [v, q̇] (zeros in the other half)."""
+        n = A.shape[1]
+        X = np.zeros((A.shape[0], 2 * n))
+        if space == "robot":
+            X[:, :n] = A
+        elif space == "joint":
+            X[:, n:] = A
+        else:
+            raise ParameterError(f"unknown velocity coordinates {space!r}; use 'joint' or 'robot'")
+        return X
 
-    def _build_workspaces(self, hard_mask: NDArray[np.bool_]) -> None:
-        n = self.chain.dof
-        base_mask = np.vstack([np.eye(n, dtype=bool), hard_mask])  # box rows, then the limits' declared patterns
-        ws: list[_OsqpLevel | _QpsolversLevel] = []
-        for _ in self.levels:
+    def _objective(self, level: Level, ctx: StepContext) -> tuple[Array, Array, Array, Array, bool]:
+        """Rows of a level on x = [v, q̇]: weighted (√w J, √w t), plain (J, t), and whether it is full rank."""
+        Js, ts, ws = [], [], []
+        full = False
+        for task, w in level.tasks:
+            J, t = task.compute(ctx)
+            Js.append(self._embed(J, task.space))
+            ts.append(t)
+            ws.append(np.full(t.size, np.sqrt(w)))
+            full = full or (task.full_rank and w > 0)
+        J, t, sw = np.vstack(Js), np.concatenate(ts), np.concatenate(ws)
+        return sw[:, None] * J, sw * t, J, t, full
+
+    def _workspace(self, i: int, n_frozen: int) -> _OsqpLevel | _QpsolversLevel:
+        key = (i, n_frozen)
+        ws = self._workspaces.get(key)
+        if ws is None:
             if self.solver == "osqp":
-                ws.append(_OsqpLevel(base_mask))
+                ws = _OsqpLevel(self.eps)
             else:
-                ws.append(_QpsolversLevel(self.solver.removeprefix("qpsolvers-")))
-        self._workspaces = ws
+                ws = _QpsolversLevel(self.solver.removeprefix("qpsolvers-"), self.eps)
+            self._workspaces[key] = ws
+        return ws
+
+    @property
+    def setups(self) -> int:
+        """Number of solver workspace set-ups so far (OSQP: one per level, plus one per pattern growth)."""
+        return sum(ws.setups for ws in self._workspaces.values())
+
+    def _coupling(self, ctx: StepContext) -> Array:
+        """Rows ``[T, −I; 0, I]``: q̇ = T v (equalities), then the joint box on q̇."""
+        n = 2 * self.chain.n_robots
+        K = np.zeros((2 * n, 2 * n))
+        K[:n, :n] = ctx.velocity_map.T
+        K[:n, n:] = -np.eye(n)
+        K[n:, n:] = np.eye(n)
+        return K
 
     # ------------------------------------------------------------------ one step
     def step(self, ctx: StepContext) -> tuple[Array, dict[str, float]]:
@@ -271,77 +360,119 @@ class LexicographicQP:
         :class:`InfeasibleStep` is raised.
         """
         t0 = time.perf_counter()
-        n = self.chain.dof
+        n = 2 * self.chain.n_robots
+        fallbacks = self.fallbacks
         rows = [lim.compute(ctx) for lim in self.limits]
-        H = np.vstack([r.A for r in rows]) if rows else np.zeros((0, n))
-        if self._workspaces is None:
-            hard_mask = (
-                np.vstack([lim.pattern(self.chain) for lim in self.limits]) if self.limits else np.zeros((0, n), bool)
-            )
-            if hard_mask.shape != H.shape or np.any(H[~hard_mask] != 0):
-                raise ParameterError("limit rows do not match their declared sparsity patterns")
-            self._build_workspaces(hard_mask)
-        objectives: dict[int, tuple[Array, Array, Array, Array]] = {}  # built on first use: skipped levels cost nothing
+        blocks = [self._embed(r.A, lim.space) for r, lim in zip(rows, self.limits, strict=True)]
+        K = self._coupling(ctx)
+        if self._declared is None:
+            declared = [self._embed(lim.pattern(self.chain), lim.space) != 0 for lim in self.limits]
+            for lim, b, d in zip(self.limits, blocks, declared, strict=True):
+                if b.shape != d.shape:
+                    raise ParameterError(
+                        f"limit {lim.name!r} returned {b.shape[0]} rows, its pattern declares {d.shape[0]}"
+                    )
+            T_mask = robot_pattern(np.eye(n, dtype=bool))
+            K_mask = (np.abs(self._coupling(ctx)) > 0) | False
+            K_mask[:n, :n] |= T_mask
+            self._declared = np.vstack([K_mask, *declared])
+        A0 = np.vstack([K, *blocks])
+        objectives: dict[int, tuple] = {}  # built on first use: skipped levels cost nothing
+        solves = [0]
+        result = None
         try:
-            x, lag, iters = self._solve_levels(ctx, H, rows, objectives, relax=False)
+            if self.optimistic and len(self.levels) > 1 and not self._lagging:
+                result = self._solve_levels(ctx, A0, rows, objectives, relax=False, optimistic=True, solves=solves)
+            if result is None:
+                result = self._solve_levels(ctx, A0, rows, objectives, relax=False, optimistic=False, solves=solves)
             relaxed = 0.0
         except InfeasibleStep:
-            x, lag, iters = self._solve_levels(ctx, H, rows, objectives, relax=True)
+            result = self._solve_levels(ctx, A0, rows, objectives, relax=True, optimistic=False, solves=solves)
             relaxed = 1.0
+        assert result is not None
+        x, lag, iters = result
+        self._lagging = lag > 1e-6
         diag = {
             "leader_residual": lag,
             "solver_iterations": float(iters),
+            "qp_solves": float(solves[0]),
+            "fallback_solves": float(self.fallbacks - fallbacks),
             "relaxed": relaxed,
             "step_time": time.perf_counter() - t0,
         }
-        return x, diag
+        # q̇ = T v exactly (the solver meets the coupling rows q̇ = T v only to its tolerance): the robots move as
+        # the rows on v, which carry the safety limits and the leader, were solved
+        return ctx.velocity_map.joint_rates(x[:n]), diag
 
     def _solve_levels(
-        self, ctx: StepContext, H: Array, rows: list, objectives: dict, relax: bool
-    ) -> tuple[Array, float, int]:
-        """Solve the levels in order; each freezes an orthonormal basis F of its task rows' span: F q̇ = F q̇*."""
-        assert self._workspaces is not None
-        n = self.chain.dof
+        self,
+        ctx: StepContext,
+        A0: Array,
+        rows: list,
+        objectives: dict,
+        relax: bool,
+        optimistic: bool,
+        solves: list[int],
+    ) -> tuple[Array, float, int] | None:
+        """Solve the levels in order; each freezes an orthonormal basis F of its task rows' span: F x = F x*.
+
+        ``optimistic``: start at level 2 with level 1's rows as equalities at their targets; returns None if that
+        QP fails (the caller then solves level 1 on its own).
+        """
+        nx = A0.shape[1]
         lb, ub = self.box.compute(ctx, relax=relax)
         drop = [relax and lim.relaxable for lim in self.limits]
-        h_lo = np.concatenate(
-            [np.full(r.lower.size, -np.inf) if d else r.lower for r, d in zip(rows, drop, strict=True)]
-        )
-        h_up = np.concatenate(
-            [np.full(r.upper.size, np.inf) if d else r.upper for r, d in zip(rows, drop, strict=True)]
-        )
-        A0 = np.vstack([np.eye(n), H])
-        lo0, up0 = np.concatenate([lb, h_lo]), np.concatenate([ub, h_up])
-        F = np.zeros((0, n))
-        y = np.zeros(0)
+        pairs = list(zip(rows, drop, strict=True))
+        zeros = np.zeros(nx // 2)
+        lo0 = np.concatenate([zeros, lb, *(np.full(r.lower.size, -np.inf) if d else r.lower for r, d in pairs)])
+        up0 = np.concatenate([zeros, ub, *(np.full(r.upper.size, np.inf) if d else r.upper for r, d in pairs)])
+        F, y = np.zeros((0, nx)), np.zeros(0)
+        start = 0
+        if optimistic:
+            if 0 not in objectives:
+                objectives[0] = self._objective(self.levels[0], ctx)
+            F, y = objectives[0][2], objectives[0][3]  # level 1 met exactly: J_1 x = t_1
+            start = 1
         x: Array | None = None
         iters = 0
         lag = 0.0
         last = len(self.levels) - 1
-        for i, level in enumerate(self.levels):
-            if F.shape[0] >= n:
-                break  # the higher levels fix every degree of freedom
+        for i in range(start, len(self.levels)):
+            if F.shape[0] >= nx // 2:
+                break  # the higher levels fix every degree of freedom (x has 2N of them: v determines q̇)
             if i not in objectives:
-                objectives[i] = self._objective(level, ctx)
-            P, c, J, v = objectives[i]
+                objectives[i] = self._objective(self.levels[i], ctx)
+            Jw, tw, J, t, full = objectives[i]
             # lower levels start from the higher optimum, which sits on active rows up to the solver accuracy: a
             # small widening (growing with the level, as violations may accumulate) keeps that optimum feasible
             widen = self.widen * i
-            A = np.vstack([A0, F])
-            lo = np.concatenate([lo0 - widen, y])
-            up = np.concatenate([up0 + widen, y])
-            z, status, it = self._workspaces[i].solve(P, c, A, lo, up, n_eq=F.shape[0])
+            C = np.vstack([A0, F, Jw])
+            lo = np.concatenate([lo0 - widen, y, tw])
+            up = np.concatenate([up0 + widen, y, tw])
+            z, status, it = self._workspace(i, F.shape[0]).solve(C, Jw.shape[0], lo, up, self._declared)
+            solves[0] += 1
             iters += it
+            if self.solver == "osqp" and status not in ("solved", "primal infeasible"):
+                # OSQP stopped without an answer (iteration limit on an ill-conditioned level): an active-set method
+                # settles it exactly
+                z, status, _ = self._fallback.solve(C, Jw.shape[0], lo, up)
+                self.fallbacks += 1
             if z is None or not self._feasible(A0, lo0, up0, z) or not self._kept(F, y, z):
+                if i == start and optimistic:
+                    return None
                 if i == 0:
-                    raise InfeasibleStep(self._explain(ctx, status, lb, ub, rows, relax))
+                    raise InfeasibleStep(self._explain(ctx, status, A0, lo0, up0, relax))
                 break  # a lower level failed numerically: keep the higher levels' optimum (strict priority holds)
             x = z
             if i == 0:
-                lag = float(np.linalg.norm(J @ x - v))  # > 0 when the limits hold the leader back
-            if i < last:
-                Fn = orthonormal_rows(J, F)
-                F, y = np.vstack([F, Fn]), np.concatenate([y, Fn @ x])
+                lag = float(np.linalg.norm(J @ x - t))  # > 0 when the limits hold the leader back
+            if i == last or full:
+                break  # nothing below, or this level's optimum is unique
+            if i == start and optimistic:  # replace level 1's raw rows by an orthonormal basis before extending it
+                F = orthonormal_rows(F, np.zeros((0, nx)))
+                y = F @ x
+            Fn = orthonormal_rows(J, F)
+            F, y = np.vstack([F, Fn]), np.concatenate([y, Fn @ x])
         assert x is not None
         return x, lag, iters
 
@@ -353,17 +484,24 @@ class LexicographicQP:
         r = A @ x
         return bool(np.all(r >= lo - self.feas_tol) and np.all(r <= up + self.feas_tol))
 
-    def _explain(self, ctx: StepContext, status: str, lb: Array, ub: Array, rows: list, relax: bool) -> str:
-        """A message naming the step, the solver status and the limits that cannot be met by the closest motion."""
-        x = np.clip(ctx.qdot_prev, lb, ub)
+    def _explain(self, ctx: StepContext, status: str, A0: Array, lo0: Array, up0: Array, relax: bool) -> str:
+        """A message naming the step, the solver status and the limits the previous motion would violate."""
+        n = 2 * self.chain.n_robots
+        x = np.concatenate([ctx.velocity_map.robot_velocities(ctx.qdot_prev), ctx.qdot_prev])
+        r = A0 @ x
+        gap = np.maximum(lo0 - r, r - up0)
         worst = []
-        for lim, r in zip(self.limits, rows, strict=True):
+        if np.max(gap[n : 2 * n], initial=0.0) > self.feas_tol:
+            worst.append(f"joint box (rows violated by up to {np.max(gap[n : 2 * n]):.3g})")
+        start = 2 * n
+        for lim in self.limits:
+            m = lim.pattern(self.chain).shape[0]
+            g = gap[start : start + m]
+            start += m
             if relax and lim.relaxable:
                 continue
-            val = r.A @ x
-            gap = np.maximum(r.lower - val, val - r.upper)
-            if gap.size and np.max(gap) > self.feas_tol:
-                worst.append(f"{lim.name} (rows violated by up to {np.max(gap):.3g})")
+            if g.size and np.max(g) > self.feas_tol:
+                worst.append(f"{lim.name} (rows violated by up to {np.max(g):.3g})")
         names = ", ".join(worst) or "the joint box bounds together with the limits"
         return (
             f"step {ctx.k} (t = {ctx.k * ctx.Ts:.2f} s): the hard constraints have no common solution "
