@@ -1,0 +1,245 @@
+"""Command line: ``python -m tmr.mcdpr plan --scene fig2 --out runs/mcdpr``.
+
+Plans a MoPICK-type MCDPR task with the two-stage planner (Rasheed 2019 sec. 5), checks the result (μ > 0, cable
+tensions within the tipping-tightened bounds, no base collision), and writes ``plan.json``, ``bases.csv``,
+``platform.csv`` and the figures ``topview.png``, ``mu.png``, ``tensions.png`` into ``--out``. Inputs are validated
+before anything is written; the files go to a temporary directory first and are moved into ``--out`` only when all
+of them are complete. The planner is deterministic (no random choices): same inputs, same bytes.
+
+Exit codes: 0 plan succeeded; 1 plan computed but a guarantee fails (outputs written, reason printed);
+2 bad input or planning error (nothing written).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import math
+import os
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tmr.errors import TmrError
+
+PLAN_FORMAT = "tmr-mcdpr-plan/1"
+
+
+def _positive(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from exc
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"expected a positive finite number, got {text!r}")
+    return v
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from exc
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"need at least 1, got {v}")
+    return v
+
+
+def _triple(text: str) -> tuple[float, float, float]:
+    try:
+        parts = [float(v) for v in text.split(",")]
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected FX,FY,FZ in newtons, got {text!r}") from exc
+    if len(parts) != 3 or not all(math.isfinite(v) and v >= 0 for v in parts):
+        raise argparse.ArgumentTypeError(f"expected three non-negative finite numbers FX,FY,FZ, got {text!r}")
+    return parts[0], parts[1], parts[2]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m tmr.mcdpr",
+        description="Mobile cable-driven parallel robot (MoPICK, Rasheed 2019) tools.",
+    )
+    sub = p.add_subparsers(dest="command", required=True)
+    pl = sub.add_parser("plan", help="two-stage path planning of the bases and the platform")
+    pl.add_argument("--scene", default="fig2", help="built-in scene name (fig2) or a scene TOML file (default fig2)")
+    pl.add_argument("--robot", help="robot TOML file (default: the shipped MoPICK description)")
+    pl.add_argument("--d-base", type=_positive, default=0.2, help="base step d_j of the stage-1 grid [m] (0.2)")
+    pl.add_argument("--min-step", type=_positive, default=0.05, help="smallest retried base step [m] (0.05)")
+    pl.add_argument("--d-platform", type=_positive, default=0.05, help="platform step d_MP of stage 2 [m] (0.05)")
+    pl.add_argument("--max-iter", type=_positive_int, default=200, help="stage-1 iterations per way-point (200)")
+    pl.add_argument("--upsample", type=_positive_int, default=10, help="B-spline samples per iterate (10)")
+    pl.add_argument("--external", type=_triple, help="external wrench box half-widths FX,FY,FZ [N] (scene's)")
+    pl.add_argument("--out", default="runs/mcdpr", help="output directory (default runs/mcdpr)")
+    pl.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    return p
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        v = float(x)
+        return v if math.isfinite(v) else None
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    return x
+
+
+def plan_dict(robot: Any, scene: Any, params: Any, result: Any, chk: Any) -> dict[str, Any]:
+    """Everything of a plan as a JSON-able mapping (no wall times, so the bytes are reproducible)."""
+    import dataclasses
+
+    return _jsonable(
+        {
+            "format": PLAN_FORMAT,
+            "robot": robot.name,
+            "scene": scene.name,
+            "params": dataclasses.asdict(params),
+            "external": scene.external,
+            "waypoints": result.waypoints,
+            "check": {
+                "ok": chk.ok,
+                "mu_min": chk.mu_min,
+                "nonpositive_samples": list(chk.nonpositive),
+                "tension_ok": chk.tension_ok,
+                "collision_free": chk.collision_free,
+                "max_tension": chk.max_tension,
+                "messages": list(chk.messages),
+            },
+            "stage1": [
+                {
+                    "iterations": len(s["mu"]) - 1,
+                    "mu": s["mu"],
+                    "smoothed": s["smoothed"],
+                    "combinations_scored": s["combinations"],
+                    "iterates": s["iterates"],
+                }
+                for s in result.stage1
+            ],
+            "samples": {
+                "segment": result.segment,
+                "bases": result.bases,
+                "headings": result.headings,
+                "platform": result.platform,
+                "mu": result.mu,
+                "tensions": result.tensions,
+                "tension_upper_bounds": result.hi,
+            },
+        }
+    )
+
+
+def _csv(header: list[str], ints: np.ndarray, floats: np.ndarray) -> str:
+    """CSV text: integer columns, then floats in shortest round-trip form (empty for NaN)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    for irow, frow in zip(ints.tolist(), floats.tolist(), strict=True):
+        w.writerow([*irow, *(repr(v) if math.isfinite(v) else "" for v in frow)])
+    return buf.getvalue()
+
+
+def write_outputs(
+    out: Path, robot: Any, scene: Any, env: Any, params: Any, result: Any, chk: Any, plots: bool
+) -> list[str]:
+    """Write all outputs into a temporary sibling directory, then move them into ``out``."""
+    from tmr.io import atomic_write_text
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        text = json.dumps(plan_dict(robot, scene, params, result, chk), indent=1, sort_keys=True)
+        atomic_write_text(tmp / "plan.json", text + "\n")
+        T, p = result.bases.shape[:2]
+        ints = np.column_stack([np.arange(T), result.segment])
+        brows = np.hstack([result.bases.reshape(T, -1), result.headings])
+        bhead = ["sample", "segment"] + [f"{c}{j + 1}" for j in range(p) for c in ("x", "y")]
+        bhead += [f"heading{j + 1}" for j in range(p)]
+        atomic_write_text(tmp / "bases.csv", _csv(bhead, ints, brows))
+        m = result.tensions.shape[1]
+        prows = np.hstack([result.platform, result.mu[:, None], result.tensions, result.hi])
+        phead = ["sample", "segment", "x", "y", "z", "mu"] + [f"t{k + 1}" for k in range(m)]
+        phead += [f"t{k + 1}_max" for k in range(m)]
+        atomic_write_text(tmp / "platform.csv", _csv(phead, ints, prows))
+        if plots:
+            from tmr.mcdpr import plot
+
+            plot.plot_topview(robot, scene, env, result, tmp / "topview.png")
+            plot.plot_mu(result, tmp / "mu.png")
+            plot.plot_tensions(robot, result, tmp / "tensions.png")
+        out.mkdir(parents=True, exist_ok=True)
+        names = sorted(q.name for q in tmp.iterdir())
+        for name in names:
+            os.replace(tmp / name, out / name)
+        return names
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        import dataclasses
+
+        from tmr.mcdpr.planner import PlannerParams, check, plan
+        from tmr.mcdpr.robot import load_robot, mopick
+        from tmr.mcdpr.scene import load_scene
+
+        robot = load_robot(args.robot) if args.robot else mopick()
+        scene = load_scene(args.scene)
+        if args.external is not None:
+            scene = dataclasses.replace(scene, external=np.array(args.external))
+        if args.min_step > args.d_base:
+            raise TmrError(f"--min-step ({args.min_step} m) must not exceed --d-base ({args.d_base} m)")
+        params = PlannerParams(
+            d_base=args.d_base,
+            min_step=args.min_step,
+            d_platform=args.d_platform,
+            max_iter=args.max_iter,
+            upsample=args.upsample,
+        )
+        env = scene.validate(robot)
+        t0 = time.perf_counter()
+        result = plan(robot, scene, params, env)
+        wall = time.perf_counter() - t0
+        chk = check(robot, env, result)
+        names = write_outputs(Path(args.out), robot, scene, env, params, result, chk, not args.no_plots)
+    except TmrError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(
+        f"tmr.mcdpr plan: robot {robot.name}, scene {scene.name}, {len(result.waypoints)} way-points, "
+        f"{len(result.mu)} samples"
+    )
+    print(f"  mu_min        {chk.mu_min:.6g} N")
+    print(f"  max_tension   {chk.max_tension:.6g} N (t_max {robot.t_max:g} N)")
+    print(f"  collision     {'none' if chk.collision_free else 'YES'}")
+    print(
+        f"  stage1        {result.times['stage1']:.3f} s, "
+        f"{sum(s['combinations'] for s in result.stage1)} combinations scored"
+    )
+    print(f"  stage2        {result.times['stage2']:.3f} s")
+    print(f"  wall_time     {wall:.3f} s")
+    print(f"  wrote {', '.join(names)} to {args.out}")
+    if not chk.ok:
+        print("plan FAILED: " + "; ".join(chk.messages), file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,124 @@
+"""Figures of an MCDPR plan: top view like Rasheed 2019 Fig. 4, capacity margin and tension profiles (matplotlib)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import shapely  # noqa: E402
+from matplotlib.patches import Circle  # noqa: E402
+from matplotlib.patches import Polygon as MplPolygon
+
+from tmr.environment import Environment  # noqa: E402
+from tmr.mcdpr.planner import Plan  # noqa: E402
+from tmr.mcdpr.robot import Robot  # noqa: E402
+from tmr.mcdpr.scene import Scene  # noqa: E402
+
+__all__ = ["plot_mu", "plot_tensions", "plot_topview"]
+
+_COLORS = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive"]
+
+
+def _polys(ax: plt.Axes, geom: shapely.Geometry, **kw: object) -> None:
+    for g in shapely.get_parts(geom):
+        if g.geom_type == "Polygon" and not g.is_empty:
+            ax.add_patch(MplPolygon(np.asarray(g.exterior.coords), closed=True, **kw))
+
+
+def plot_topview(robot: Robot, scene: Scene, env: Environment, result: Plan, path: str | Path) -> Path:
+    """Top view: tables/obstacles and their inflated safe regions, base paths, platform path, way-points, and the
+    cables at the way-points (Rasheed 2019 Fig. 2, 4). Writes a PNG to ``path``."""
+    fig, ax = plt.subplots(figsize=(10, 7.5))
+    x0, y0, x1, y1 = scene.bounds
+    grown = shapely.union_all([g.buffer(robot.base_radius) for g in (*scene.tables, *scene.obstacles)])
+    _polys(ax, grown, facecolor="0.9", edgecolor="0.7", lw=0.8, ls="--")
+    for t in scene.tables:
+        _polys(ax, t, facecolor="tan", edgecolor="saddlebrown", lw=1.0)
+    for o in scene.obstacles:
+        _polys(ax, o, facecolor="dimgray", edgecolor="black", lw=1.0)
+    ax.plot([x0, x1, x1, x0, x0], [y0, y0, y1, y1, y0], "k-", lw=1.5)
+    for j in range(robot.n_bases):
+        c = _COLORS[j % len(_COLORS)]
+        ax.plot(result.bases[:, j, 0], result.bases[:, j, 1], "-", color=c, lw=1.6, label=f"base {j + 1}")
+        for st in result.stage1:
+            ax.plot(st["iterates"][:, j, 0], st["iterates"][:, j, 1], ".", color=c, ms=3, alpha=0.6)
+        ax.add_patch(Circle(result.bases[0, j], robot.base_radius, fill=False, color=c, lw=1.0, ls=":"))
+        ax.add_patch(Circle(result.bases[-1, j], robot.base_radius, fill=False, color=c, lw=1.5))
+    ax.plot(result.platform[:, 0], result.platform[:, 1], "k-", lw=1.4, label="platform")
+    ends = np.flatnonzero(np.diff(np.r_[result.segment, -1]) != 0)
+    for r in np.r_[0, ends]:
+        for j, k in enumerate(robot.cable_base):
+            ax.plot(
+                [result.platform[r, 0], result.bases[r, k, 0]],
+                [result.platform[r, 1], result.bases[r, k, 1]],
+                "-",
+                color=_COLORS[j % len(_COLORS)],
+                lw=0.6,
+                alpha=0.7,
+            )
+    w = result.waypoints
+    ax.plot(w[:, 0], w[:, 1], "k*", ms=11, label="way-points")
+    for i, p in enumerate(w):
+        ax.annotate(f"P{i + 1}", p[:2], textcoords="offset points", xytext=(6, 6), fontsize=10)
+    bad = result.mu <= 0
+    if bad.any():
+        ax.plot(result.platform[bad, 0], result.platform[bad, 1], "rx", ms=4, label="μ ≤ 0")
+    ax.set_xlim(x0 - 0.2, x1 + 0.2)
+    ax.set_ylim(y0 - 0.2, y1 + 0.2)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(f"{robot.name} plan, scene {scene.name}: min μ = {np.min(result.mu):.3f} N")
+    ax.legend(loc="upper left", fontsize=8, ncol=2)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_mu(result: Plan, path: str | Path) -> Path:
+    """Capacity margin μ [N] along the plan (Rasheed 2019 eq. 8) and its stage-1 histories (cf. Fig. 3e)."""
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
+    a1.plot(result.mu, "k-", lw=1.2)
+    a1.axhline(0.0, color="r", lw=0.8, ls="--")
+    for s in np.flatnonzero(np.diff(result.segment)):
+        a1.axvline(s + 0.5, color="0.7", lw=0.8)
+    a1.set_xlabel("sample along the plan")
+    a1.set_ylabel("capacity margin μ [N]")
+    a1.set_title("μ along the plan (stage 2)")
+    for i, st in enumerate(result.stage1):
+        a2.plot(st["mu"], "o-", ms=3, label=f"P{i + 1}→P{i + 2}")
+    a2.axhline(0.0, color="r", lw=0.8, ls="--")
+    a2.set_xlabel("stage-1 iteration k")
+    a2.set_ylabel("μ [N]")
+    a2.set_title("stage-1 greedy search")
+    a2.legend(fontsize=8)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_tensions(robot: Robot, result: Plan, path: str | Path) -> Path:
+    """Minimum 2-norm cable tensions [N] along the plan with the tipping-tightened upper bounds (dashed)."""
+    fig, ax = plt.subplots(figsize=(11, 4))
+    for k in range(robot.n_cables):
+        c = _COLORS[k % len(_COLORS)]
+        ax.plot(result.tensions[:, k], "-", color=c, lw=1.2, label=f"t{k + 1}")
+        ax.plot(result.hi[:, k], "--", color=c, lw=0.7, alpha=0.7)
+    ax.axhline(robot.t_max, color="k", lw=0.8, ls=":", label="t_max")
+    ax.set_xlabel("sample along the plan")
+    ax.set_ylabel("tension [N]")
+    ax.set_title("tensions holding the platform weight (solid) and tipping-tightened bounds (dashed)")
+    ax.legend(fontsize=8, ncol=5)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

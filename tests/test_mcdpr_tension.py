@@ -1,0 +1,84 @@
+"""Tests of tmr.mcdpr.tension: null-space closed form vs cvxpy QP/LPs, infeasible wrenches."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tmr.errors import ParameterError
+from tmr.mcdpr.capacity import capacity, required_wrench_set
+from tmr.mcdpr.capacity_hull import box_rows
+from tmr.mcdpr.errors import InfeasibleWrench
+from tmr.mcdpr.robot import mopick
+from tmr.mcdpr.tension import TensionProblem, closed_form, closed_form_batch, wrench_feasible
+
+R = mopick()
+F = np.array([0.0, 0.0, R.platform_mass * R.gravity])
+
+
+def _feasible_poses(n: int, seed: int):
+    rng = np.random.default_rng(seed)
+    P = np.column_stack([rng.uniform(0.5, 1.5, (n, 2)), rng.uniform(0.6, 0.9, n)])
+    B = np.array([[0, 0], [2, 0], [2, 2], [0, 2.0]]) + rng.normal(0, 0.25, (n, 4, 2))
+    H = rng.uniform(-np.pi, np.pi, (n, 4))
+    return capacity(R, P, B, H, required_wrench_set(R, (1, 1, 1)))
+
+
+def test_closed_form_equals_the_min_norm_qp() -> None:
+    cap = _feasible_poses(12, 0)
+    qp = TensionProblem(3, 4, 8, "2norm")
+    res = closed_form_batch(cap.W, F, cap.lo, cap.hi)
+    assert res.feasible.all()
+    for i in range(12):
+        A, b = box_rows(cap.lo[i], cap.hi[i])
+        t_qp = qp.solve(cap.W[i], F, A, b)
+        np.testing.assert_allclose(res.t[i], t_qp, atol=1e-6)
+        np.testing.assert_allclose(cap.W[i] @ res.t[i], F, atol=1e-12)
+        assert np.all(res.t[i] >= cap.lo[i] - 1e-12) and np.all(res.t[i] <= cap.hi[i] + 1e-12)
+        np.testing.assert_allclose(closed_form(cap.W[i], F, cap.lo[i], cap.hi[i]), res.t[i], atol=1e-14)
+        # the closed form is the minimum over the null-space line: any feasible λ gives a larger norm
+        for lam in np.linspace(res.lam_lo[i], res.lam_hi[i], 7):
+            t = res.particular[i] + lam * res.null[i]
+            assert np.linalg.norm(t) >= np.linalg.norm(res.t[i]) - 1e-12
+
+
+def test_lp_objectives() -> None:
+    cap = _feasible_poses(6, 1)
+    mx = TensionProblem(3, 4, 8, "maxnorm")
+    l1 = TensionProblem(3, 4, 8, "1norm")
+    for i in range(6):
+        A, b = box_rows(cap.lo[i], cap.hi[i])
+        t_inf = mx.solve(cap.W[i], F, A, b)
+        t_1 = l1.solve(cap.W[i], F, A, b)
+        t_2 = closed_form(cap.W[i], F, cap.lo[i], cap.hi[i])
+        for t in (t_inf, t_1):
+            np.testing.assert_allclose(cap.W[i] @ t, F, atol=1e-7)
+            assert np.all(t >= cap.lo[i] - 1e-7) and np.all(t <= cap.hi[i] + 1e-7)
+        assert t_inf.max() <= t_2.max() + 1e-7
+        assert t_1.sum() <= t_2.sum() + 1e-7
+        # min-max along the null-space line, by brute force on the feasible λ interval
+        res = closed_form_batch(cap.W[i], F, cap.lo[i], cap.hi[i])
+        lam = np.linspace(res.lam_lo, res.lam_hi, 20001)
+        brute = (res.particular[None] + lam[:, None] * res.null[None]).max(axis=1).min()
+        assert t_inf.max() == pytest.approx(brute, abs=1e-3)
+
+
+def test_infeasible_wrench_raises_in_every_method() -> None:
+    cap = _feasible_poses(1, 2)
+    W, lo, hi = cap.W[0], cap.lo[0], cap.hi[0]
+    f = np.array([0.0, 0.0, 200.0])  # far more than four 15 N cables can lift
+    A, b = box_rows(lo, hi)
+    with pytest.raises(InfeasibleWrench, match="cannot be produced"):
+        closed_form(W, f, lo, hi)
+    with pytest.raises(InfeasibleWrench, match="outside the available wrench set"):
+        TensionProblem(3, 4, 8).solve(W, f, A, b)
+    assert not closed_form_batch(W, f, lo, hi).feasible
+    assert np.isnan(closed_form_batch(W, f, lo, hi).t).all()
+    assert not wrench_feasible(W, f, A, b) and wrench_feasible(W, F, A, b)
+
+
+def test_closed_form_needs_m_equal_n_plus_one() -> None:
+    with pytest.raises(ParameterError, match="m = n"):
+        closed_form_batch(np.eye(3), F, np.zeros(3), np.ones(3))
+    with pytest.raises(ParameterError, match="objective"):
+        TensionProblem(3, 4, 8, "bogus")  # type: ignore[arg-type]
