@@ -1,0 +1,310 @@
+"""Kinematic control (inverse kinematics) of a CCMA by sensitivity analysis and BFGS (Kumar 2019 §III-B, §III-C).
+
+For a target end-effector pose (p_t, R_t) find the controls u minimising (Kumar 2019 eq. 7)
+
+    O(u) = f(x*(u)) + E(x*(u), u),   f(x) = ‖p_EE(x) − p_t‖² + ℓ_R² · ½‖R_EE(x) − R_t‖_F²   [m²]
+
+where x*(u) is the forward simulation (:func:`tmr.ccma.sim.newton`) and E the residual constraint energy, which keeps
+the controls on the assemblable set. At x*(u) the energy gradient vanishes, ∇ₓE(x*(u), u) = 0 (eq. 5);
+differentiating this identity gives the sensitivity (eq. 6)
+
+    dx*/du = −(∇ₓ²E)⁻¹ ∂²E/∂x∂u,
+
+so (eq. 4, 8, 9) dO/du = ∇ₓf · dx*/du + ∂E/∂u, because dE/du = ∂E/∂u + ∇ₓE · dx*/du and ∇ₓE = 0.
+:func:`objective` evaluates it in adjoint form, λ = (∇ₓ²E)⁻¹ ∇ₓf, dO/du = ∂E/∂u − (∂²E/∂x∂u)ᵀ λ (one solve instead
+of m); :func:`sensitivity` returns the full dx*/du. The controls are updated by SciPy's BFGS (the exact Hessian of O
+would need third derivatives of E), started from the inverse of the Gauss–Newton estimate of ∇²O
+(:func:`gauss_newton_hessian`) and warm-started along a path with the previous step's controls and state.
+:func:`track` follows a sequence of small target increments (e.g. 1 mm / 0.01 rad, as in Kumar 2019 §III-D).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+from scipy.linalg import cho_factor, cho_solve
+from scipy.optimize import OptimizeResult, minimize
+
+from tmr.ccma.bodies import rotation_angle
+from tmr.ccma.energy import EnergyModel
+from tmr.ccma.sim import ASSEMBLY_TOL, SimResult, State, agent_poses, end_effector_pose, newton
+
+__all__ = [
+    "IKResult",
+    "Objective",
+    "Target",
+    "gauss_newton_hessian",
+    "reached",
+    "TrackResult",
+    "objective",
+    "sensitivity",
+    "solve_ik",
+    "track",
+]
+
+
+class Target(NamedTuple):
+    """End-effector target: position [m] and rotation matrix."""
+
+    position: np.ndarray
+    rotation: np.ndarray
+
+
+def _solve_h(h: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    try:
+        return cho_solve(cho_factor(h, check_finite=False), rhs, check_finite=False)
+    except np.linalg.LinAlgError:  # indefinite at a compromise with large residual: least squares
+        return np.linalg.lstsq(h, rhs, rcond=None)[0]
+
+
+def _positive_definite(h: np.ndarray | None) -> np.ndarray | None:
+    """Symmetric positive-definite copy of a BFGS inverse-Hessian estimate (eigenvalues clipped to ≥ 1e-12 × the
+    largest), or None if there is none; rounding in BFGS updates can leave tiny negative eigenvalues."""
+    if h is None:
+        return None
+    h = 0.5 * (h + h.T)
+    lam, v = np.linalg.eigh(h)
+    if not np.all(np.isfinite(lam)) or lam[-1] <= 0:
+        return None
+    h = (v * np.maximum(lam, 1e-12 * lam[-1])) @ v.T
+    return 0.5 * (h + h.T)  # exactly symmetric: SciPy checks with issymmetric
+
+
+def sensitivity(model: EnergyModel, state: State, u: np.ndarray) -> np.ndarray:
+    """dx*/du = −(∇ₓ²E)⁻¹ ∂²E/∂x∂u at a converged state (Kumar 2019 eq. 6); shape (6 n, m), in the coordinates of
+    ``state`` (positions [m], Cayley vectors about ``state.r_ref``)."""
+    p = model.params(state.r_ref)
+    u = np.asarray(u, float)
+    _, _, h = model.egh(state.x, u, p)
+    _, _, _, exu = model.ik(state.x, u, p, np.zeros(12))
+    return -_solve_h(h, exu)
+
+
+def gauss_newton_hessian(model: EnergyModel, sim: SimResult, u: np.ndarray, target: Target) -> np.ndarray:
+    """Estimate of ∇²O(u) [m² per unit control²] at a converged forward simulation.
+
+    Residual-energy part, exact by the implicit function theorem: d²E(x*(u), u)/du² = ∂²E/∂u² − (∂²E/∂x∂u)ᵀ
+    (∇ₓ²E)⁻¹ ∂²E/∂x∂u. Tracking part, Gauss–Newton: 2 (∂r/∂x · dx*/du)ᵀ (∂r/∂x · dx*/du) with f = ‖r‖² (the term
+    with d²x*/du², which needs third derivatives of E, is dropped; it vanishes with f at the solution).
+    """
+    p = model.params(sim.state.r_ref)
+    t = model.target_vector(target.position, target.rotation)
+    _, _, _, exu = model.ik(sim.state.x, u, p, t)
+    jr, euu = model.gn(sim.state.x, u, p, t)
+    dxdu = -_solve_h(sim.hessian, exu)
+    ju = jr @ dxdu
+    b = 2.0 * ju.T @ ju + euu + exu.T @ dxdu
+    return 0.5 * (b + b.T)
+
+
+def objective(
+    model: EnergyModel, state: State, u: np.ndarray, target: Target, **newton_kw: float
+) -> tuple[float, np.ndarray, SimResult, float]:
+    """O(u) [m²], dO/du (Kumar 2019 eq. 7–9), the forward simulation warm-started from ``state`` and f [m²]."""
+    u = np.asarray(u, dtype=float)
+    sim = newton(model, state, u, **newton_kw)  # type: ignore[arg-type]
+    p = model.params(sim.state.r_ref)
+    t = model.target_vector(target.position, target.rotation)
+    f, fx, eu, exu = model.ik(sim.state.x, u, p, t)
+    lam = _solve_h(sim.hessian, fx)
+    grad = eu - exu.T @ lam
+    return f + sim.energy, grad, sim, f
+
+
+@dataclass
+class Objective:
+    """O(u) and dO/du as a callable for :func:`scipy.optimize.minimize`, with warm starts and bookkeeping.
+
+    Every evaluation warm-starts Newton from the state of the best point evaluated so far (the BFGS iterate), so a
+    rejected line-search trial never moves the warm start.
+    """
+
+    model: EnergyModel
+    state: State
+    target: Target
+    gtol_newton: float = 1e-13
+    evaluations: int = 0
+    newton_iterations: int = 0
+    best: float = float("inf")
+    best_sim: SimResult | None = None
+    best_f: float = float("nan")
+    best_u: np.ndarray | None = None
+    history: list[tuple[float, float]] = field(default_factory=list)
+    t0: float = field(default_factory=time.perf_counter)
+
+    last: tuple[np.ndarray, float, np.ndarray] | None = None
+
+    def __call__(self, u: np.ndarray) -> tuple[float, np.ndarray]:
+        if self.last is not None and np.array_equal(self.last[0], u):  # SciPy re-evaluates the start point
+            return self.last[1], self.last[2].copy()
+        o, g, sim, f = objective(self.model, self.state, u, self.target, gtol=self.gtol_newton)
+        self.last = (np.array(u, dtype=float), o, g.copy())
+        self.evaluations += 1
+        self.newton_iterations += sim.iterations
+        if o < self.best:  # the controls returned are the best evaluated, with their own state
+            self.best, self.best_sim, self.best_f, self.best_u = o, sim, f, np.array(u, dtype=float)
+            self.state = sim.state
+        return o, g
+
+    def callback(self, intermediate_result: OptimizeResult) -> None:
+        self.history.append((time.perf_counter() - self.t0, float(intermediate_result.fun)))
+
+
+class IKResult(NamedTuple):
+    """One inverse-kinematics solve. ``objective`` = O [m²], ``tracking`` = f [m²], ``residual`` = E [m²];
+    ``history`` (k, 2): wall time since the start [s] and O after each BFGS iteration (Kumar 2019 Fig. 5)."""
+
+    u: np.ndarray
+    state: State
+    objective: float
+    tracking: float
+    residual: float
+    iterations: int
+    evaluations: int
+    newton_iterations: int
+    hess_inv: np.ndarray
+    history: np.ndarray
+    time: float
+    message: str
+
+
+def solve_ik(
+    model: EnergyModel,
+    state: State,
+    u0: np.ndarray,
+    target: Target,
+    *,
+    hess_inv0: np.ndarray | None = None,
+    gtol: float = 1e-9,
+    max_iter: int = 200,
+) -> IKResult:
+    """Controls reaching ``target`` from the warm start (``state``, ``u0``) by BFGS on O(u) (Kumar 2019 §III-B/C).
+
+    ``gtol`` [m] is the BFGS tolerance on ‖dO/du‖∞; ``hess_inv0`` an initial inverse-Hessian estimate (default: the
+    inverse of :func:`gauss_newton_hessian` at ``u0``; or pass the previous step's ``hess_inv`` along a path).
+    """
+    obj = Objective(model, state, target)
+    u0 = np.asarray(u0, dtype=float)
+    o0, _ = obj(u0)
+    obj.history.append((time.perf_counter() - obj.t0, o0))
+    if hess_inv0 is None:
+        assert obj.best_sim is not None
+        b = gauss_newton_hessian(model, obj.best_sim, u0, target)
+        hess_inv0 = _positive_definite(np.linalg.inv(_positive_definite(b)))
+    else:
+        hess_inv0 = _positive_definite(hess_inv0)
+    res = minimize(
+        obj,
+        u0,
+        jac=True,
+        method="BFGS",
+        callback=obj.callback,
+        options={"gtol": gtol, "maxiter": max_iter, "hess_inv0": hess_inv0},
+    )
+    elapsed = time.perf_counter() - obj.t0
+    sim, u = obj.best_sim, obj.best_u
+    assert sim is not None and u is not None
+    return IKResult(
+        u=u,
+        state=sim.state,
+        objective=obj.best,
+        tracking=obj.best_f,
+        residual=sim.energy,
+        iterations=int(res.nit),
+        evaluations=obj.evaluations,
+        newton_iterations=obj.newton_iterations,
+        hess_inv=np.asarray(res.hess_inv),
+        history=np.array(obj.history),
+        time=elapsed,
+        message=str(res.message),
+    )
+
+
+class TrackResult(NamedTuple):
+    """A tracked end-effector path (K targets). Arrays: ``u`` (K, m) controls; ``agents`` (K, n_agents, 3) agent
+    x, y [m], yaw [rad]; ``ee_position`` (K, 3) [m], ``ee_rotation`` (K, 3, 3) reached; ``position_error`` [m] and
+    ``rotation_error`` [rad] (K,); ``residual`` (K,) [m²]; ``iterations``, ``evaluations``, ``newton_iterations``
+    (K,) per step; ``step_time`` (K,) [s]; ``histories`` per-step BFGS convergence (time [s], O [m²])."""
+
+    u: np.ndarray
+    agents: np.ndarray
+    ee_position: np.ndarray
+    ee_rotation: np.ndarray
+    position_error: np.ndarray
+    rotation_error: np.ndarray
+    residual: np.ndarray
+    iterations: np.ndarray
+    evaluations: np.ndarray
+    newton_iterations: np.ndarray
+    step_time: np.ndarray
+    histories: list[np.ndarray]
+    states: list[State]
+
+
+def track(
+    model: EnergyModel,
+    positions: np.ndarray,
+    rotations: np.ndarray,
+    *,
+    state: State | None = None,
+    u0: np.ndarray | None = None,
+    gtol: float = 1e-9,
+    keep_states: bool = False,
+    init: str = "gauss-newton",
+) -> TrackResult:
+    """Follow the targets (positions (K, 3) [m], rotations (K, 3, 3)) one IK solve per target, warm-starting each
+    from the previous solution's controls and state. BFGS starts every step from the Gauss–Newton estimate
+    (``init="gauss-newton"``, :func:`gauss_newton_hessian`) or, after the first step, from the previous step's
+    inverse-Hessian estimate (``init="warm"``)."""
+    if init not in ("gauss-newton", "warm"):
+        raise ValueError(f"init must be 'gauss-newton' or 'warm', got {init!r}")
+    from tmr.ccma.sim import reference_state
+
+    st = state if state is not None else reference_state(model)
+    u = np.asarray(u0 if u0 is not None else model.system.u0, float).copy()
+    k = len(positions)
+    na = len(model.system.agents)
+    out_u = np.zeros((k, model.nu))
+    agents = np.zeros((k, na, 3))
+    pe = np.zeros((k, 3))
+    re = np.zeros((k, 3, 3))
+    perr, rerr, resid = np.zeros(k), np.zeros(k), np.zeros(k)
+    its, evals, nits = np.zeros(k, int), np.zeros(k, int), np.zeros(k, int)
+    times = np.zeros(k)
+    hist: list[np.ndarray] = []
+    states: list[State] = []
+    hinv = None
+    for i in range(k):
+        r = solve_ik(model, st, u, Target(positions[i], rotations[i]), hess_inv0=hinv, gtol=gtol)
+        st, u = r.state, r.u
+        hinv = r.hess_inv if init == "warm" else None
+        out_u[i] = u
+        agents[i] = agent_poses(model, st)
+        pe[i], re[i] = end_effector_pose(model, st)
+        perr[i] = np.linalg.norm(pe[i] - positions[i])
+        rerr[i] = rotation_angle(re[i], rotations[i])
+        resid[i], its[i], evals[i], nits[i], times[i] = (
+            r.residual,
+            r.iterations,
+            r.evaluations,
+            r.newton_iterations,
+            r.time,
+        )
+        hist.append(r.history)
+        if keep_states:
+            states.append(st.copy())
+    return TrackResult(out_u, agents, pe, re, perr, rerr, resid, its, evals, nits, times, hist, states)
+
+
+def reached(
+    result: TrackResult, position_tol: float = 1e-5, rotation_tol: float = 1e-4, residual_tol: float = ASSEMBLY_TOL
+) -> np.ndarray:
+    """Boolean (K,): the step reached its target within the tolerances [m], [rad] with residual energy ≤ tol [m²]."""
+    return (
+        (result.position_error <= position_tol)
+        & (result.rotation_error <= rotation_tol)
+        & (result.residual <= residual_tol)
+    )

@@ -1,0 +1,124 @@
+"""Tests of tmr.ccma.system: examples, description edits (actuation, agent count) and clear description errors."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from tmr.ccma.energy import EnergyModel
+from tmr.ccma.errors import DescriptionError
+from tmr.ccma.system import build_system, example_names, load_description, load_system
+
+
+def test_shipped_examples():
+    assert example_names() == ["4dof-complete", "4dof-reduced", "5dof-reduced", "6dof-reduced"]
+    red, comp = load_system("4dof-reduced"), load_system("4dof-complete")
+    assert red.n_controls == 6 and comp.n_controls == 9
+    assert red.control_names[:3] == ["agent_a.x", "agent_a.y", "agent_b.x"]
+    assert comp.control_names[:3] == ["agent_a.x", "agent_a.y", "agent_a.yaw"]
+    # the mount joint follows the actuation scheme
+    mounts = {j.name: j.type for j in red.joints if j.name.endswith(".mount")}
+    assert mounts == {"agent_a.mount": "revolute", "agent_b.mount": "revolute", "agent_c.mount": "revolute"}
+    assert {j.type for j in comp.joints if j.name.endswith(".mount")} == {"fixed"}
+    assert red.held_yaw.size == 3 and comp.held_yaw.size == 0
+
+
+def test_anchors_are_converted_to_body_frames():
+    s = load_system("5dof-reduced")
+    pos = s.x0.reshape(-1, 6)[:, :3]
+    for j in s.joints:
+        if j.a >= 0 and j.b >= 0:  # both anchors map back to the same world point in the reference configuration
+            wa = pos[j.a] + s.r_ref0[j.a] @ j.anchor_a
+            wb = pos[j.b] + s.r_ref0[j.b] @ j.anchor_b
+            np.testing.assert_allclose(wa, wb, atol=1e-15)
+    np.testing.assert_allclose(s.ee_offset, 0.0, atol=1e-15)
+    assert s.tilt_axes.shape == (1, 3)
+
+
+def test_swapping_actuation_is_a_description_edit():
+    desc = load_description("4dof-reduced")
+    for a in desc["agents"]:
+        a["actuation"] = "complete"
+    s = build_system(desc)
+    assert s.n_controls == 9
+    EnergyModel(s)  # still assembled and determined
+    # the same as the shipped complete example
+    assert s.control_names == load_system("4dof-complete").control_names
+
+
+def _add_fourth_leg(desc: dict) -> dict:
+    d = copy.deepcopy(desc)
+    d["bodies"] += [{"name": "post_d"}, {"name": "arm_d"}]
+    d["joints"] += [
+        {
+            "name": "elbow_d",
+            "type": "revolute",
+            "bodies": ["post_d", "arm_d"],
+            "point": [0, -0.6, 0.3],
+            "axis": [1, 0, 0],
+        },
+        {"name": "wrist_d", "type": "revolute", "bodies": ["arm_d", "ee"], "point": [0, -0.2, 0.5], "axis": [1, 0, 0]},
+    ]
+    d["agents"].append({"name": "agent_d", "position": [0.0, -0.6], "height": 0.1, "attach": "post_d"})
+    return d
+
+
+def test_adding_an_agent_is_a_description_edit():
+    s = build_system(_add_fourth_leg(load_description("4dof-reduced")))
+    assert len(s.agents) == 4 and s.n_controls == 8
+    EnergyModel(s)
+
+
+def _break(edit):
+    d = load_description("4dof-reduced")
+    edit(d)
+    return d
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda d: d["joints"][0].update(bodies=["post_a", "nope"]), "unknown body 'nope'"),
+        (lambda d: d["joints"][0].update(type="hinge"), "type 'hinge'"),
+        (lambda d: d["joints"][0].update(axis=[0, 0, 0]), "zero vector"),
+        (lambda d: d["joints"][0].update(point=[0, 1]), "3 finite numbers"),
+        (lambda d: d["agents"][0].update(actuation="partial"), "actuation 'partial'"),
+        (lambda d: d["agents"][0].update(attach="agent_b"), "'attach' must name a passive body"),
+        (lambda d: d["bodies"].append({"name": "ee"}), "duplicate"),
+        (lambda d: d["bodies"].append({"name": "lonely"}), "in no joint"),
+        (lambda d: d.pop("end_effector"), "end_effector"),
+        (lambda d: d.update(agents=[]), "at least one mobile agent"),
+        (lambda d: d.update(length_scale=-1), "length_scale"),
+    ],
+)
+def test_bad_descriptions_raise_clear_errors(edit, message):
+    with pytest.raises(DescriptionError, match=message):
+        build_system(_break(edit))
+
+
+def test_universal_axes_must_be_perpendicular():
+    d = load_description("6dof-reduced")
+    d["joints"][0]["axis2"] = [0.5, 0.5, 0]
+    with pytest.raises(DescriptionError, match="perpendicular"):
+        build_system(d)
+
+
+def test_under_constrained_mechanism_is_reported_with_its_free_bodies():
+    d = load_description("4dof-reduced")
+    d["joints"] = [j for j in d["joints"] if j["name"] != "wrist_a"]  # leg a no longer reaches the end-effector
+    with pytest.raises(DescriptionError, match=r"free bodies: .*arm_a"):
+        EnergyModel(build_system(d))
+
+
+def test_loading_files_and_bad_sources(tmp_path):
+    f = tmp_path / "sys.toml"
+    f.write_text((load_description.__globals__["_examples_dir"]() / "4dof-reduced.toml").read_text())
+    assert load_system(f).n_controls == 6
+    bad = tmp_path / "bad.toml"
+    bad.write_text("name = [")
+    with pytest.raises(DescriptionError, match="invalid TOML"):
+        load_description(bad)
+    with pytest.raises(DescriptionError, match="neither a shipped example"):
+        load_description("7dof-imaginary")
