@@ -169,19 +169,18 @@ class ObstacleClearance(Limit):
         return (order + (np.arange(N) * m)[:, None]).reshape(-1), m
 
     def compute(self, ctx: StepContext) -> LimitRows:
-        idx, _ = self.select(ctx)
-        links = ctx.sample_links[idx]
-        s = ctx.sample_fractions[idx]
-        d = ctx.sample_clearance[idx]
-        g = ctx.sample_gradient[idx]
-        r = np.arange(idx.size)
-        A = _robot_rows(idx.size, ctx.chain.n_robots)
+        links, s, d, g = ctx.sample_links, ctx.sample_fractions, ctx.sample_clearance, ctx.sample_gradient
+        if self.per_link != self.samples or d.size != links.size or d.size != self.samples * ctx.chain.n_robots:
+            idx, _ = self.select(ctx)
+            links, s, d, g = links[idx], s[idx], d[idx], g[idx]
+        M = d.size
+        r = np.arange(M)
+        A = _robot_rows(M, ctx.chain.n_robots)
         A[r, links - 1] = (ctx.Ts * (1.0 - s))[:, None] * g
         A[r, links] = (ctx.Ts * s)[:, None] * g
-        A = A[:, 1:].reshape(idx.size, -1)
         lower = approach_bound(d, self.d_safe, self.rate, ctx.Ts)
-        lower = np.where(d > self.activation, -np.inf, lower)
-        return LimitRows(A, lower, np.full(idx.size, np.inf))
+        lower[d > self.activation] = -np.inf
+        return LimitRows(A[:, 1:].reshape(M, -1), lower, np.full(M, np.inf))
 
 
 class RobotSeparation(Limit):

@@ -241,9 +241,9 @@ class TetherRegulation(Task):
 
     def gain(self, d: Array) -> Array:
         """K_ii(d) of Caruso 2021 eq. 23 [1/s], capped at ``max_gain``."""
-        with np.errstate(over="ignore"):
-            k = self.a1 * np.exp(self.b1 * d) + self.a2 * np.exp(self.b2 * d) + self.G
-        return np.minimum(k, self.max_gain)
+        # exponents clipped below overflow: beyond a limit the gain is capped anyway
+        k = self.a1 * np.exp(np.minimum(self.b1 * d, 700.0)) + self.a2 * np.exp(np.minimum(self.b2 * d, 700.0))
+        return np.minimum(k + self.G, self.max_gain)
 
     def compute(self, ctx: StepContext) -> TaskRows:
         d = ctx.spans

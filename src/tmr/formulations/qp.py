@@ -109,6 +109,7 @@ class _OsqpLevel:
         self.solver: osqp.OSQP | None = None
         self.setups = 0
         self.A_pat: _Pattern | None = None
+        self.J_pat: _Pattern | None = None
         self.P_pat: _Pattern | None = None
 
     def _hessian(self, Jw: Array, tw: Array) -> tuple[Array, Array]:
@@ -121,17 +122,20 @@ class _OsqpLevel:
         P.flat[:: n + 1] += self.eps
         return P, -(tw @ Jw)
 
-    def _setup(self, P: Array, q: Array, A: Array, lo: Array, up: Array, declared: NDArray[np.bool_] | None) -> None:
+    def _setup(
+        self, P: Array, q: Array, A: Array, Jw: Array, lo: Array, up: Array, declared: NDArray[np.bool_] | None
+    ) -> None:
         n = A.shape[1]
-        A_mask = A != 0
+        A_mask, J_mask = A != 0, Jw != 0
         if declared is not None:
             A_mask[: declared.shape[0]] |= declared
-        P_mask = np.triu(P != 0) | np.eye(n, dtype=bool)
-        if self.A_pat is not None and self.A_pat.shape == A.shape:  # grow, never shrink
-            A_mask |= self.A_pat.mask
-            P_mask |= self.P_pat.mask
-        self.A_pat, self.P_pat = _Pattern(A_mask), _Pattern(P_mask)
-        self.Ax, self.Px = self.A_pat.data(A), self.P_pat.data(P)
+        if self.A_pat is not None and self.A_pat.shape == A.shape and self.J_pat.shape == Jw.shape:
+            A_mask |= self.A_pat.mask  # grow, never shrink
+            J_mask |= self.J_pat.mask
+        Ji = J_mask.astype(float)
+        P_mask = np.triu(Ji.T @ Ji != 0) | np.eye(n, dtype=bool)  # the structure of JwᵀJw covers every P
+        self.A_pat, self.J_pat, self.P_pat = _Pattern(A_mask), _Pattern(J_mask), _Pattern(P_mask)
+        self.Ax, self.Px, self.Jx = self.A_pat.data(A), self.P_pat.data(P), self.J_pat.data(Jw)
         self.solver = osqp.OSQP()
         self.solver.setup(self.P_pat.matrix(P), q, self.A_pat.matrix(A), lo, up, **OSQP_SETTINGS)
         self.solver.update(Px=self.Px, Ax=self.Ax)
@@ -148,14 +152,17 @@ class _OsqpLevel:
         self, C: Array, m_r: int, lo: Array, up: Array, declared: NDArray[np.bool_] | None = None
     ) -> tuple[Array | None, str, int]:
         m = C.shape[0] - m_r
-        P, q = self._hessian(C[m:], lo[m:])
+        Jw = C[m:]
+        P, q = self._hessian(Jw, lo[m:])
         A = C[:m]
         lo = np.maximum(lo[:m], -OSQP_INFTY)
         up = np.minimum(up[:m], OSQP_INFTY)
-        fits = self.A_pat is not None and self.A_pat.shape == A.shape
-        fits = fits and self._gather(self.A_pat, A, self.Ax) and self._gather(self.P_pat, np.triu(P), self.Px)
+        fits = self.A_pat is not None and self.A_pat.shape == A.shape and self.J_pat.shape == Jw.shape
+        fits = fits and self._gather(self.A_pat, A, self.Ax) and self._gather(self.J_pat, Jw, self.Jx)
+        if fits:
+            np.take(P.ravel(), self.P_pat.flat, out=self.Px)
         if not fits:
-            self._setup(P, q, A, lo, up, declared)
+            self._setup(P, q, A, Jw, lo, up, declared)
         elif self.core is not None:
             self.core.update_data_vec(q=q, l=lo, u=up)
             self.core.update_data_mat(P_x=self.Px, P_i=None, A_x=self.Ax, A_i=None)
@@ -288,6 +295,7 @@ class LexicographicQP:
         self._lagging = False
         self._fallback = _QpsolversLevel(FALLBACK_SOLVER, self.eps)
         self.fallbacks = 0
+        self._K: Array | None = None
 
     def reset(self) -> None:
         self._workspaces = {}
@@ -315,15 +323,25 @@ class LexicographicQP:
 
     def _objective(self, level: Level, ctx: StepContext) -> tuple[Array, Array, Array, Array, bool]:
         """Rows of a level on x = [v, q̇]: weighted (√w J, √w t), plain (J, t), and whether it is full rank."""
-        Js, ts, ws = [], [], []
+        parts = [task.compute(ctx) for task, _ in level.tasks]
+        n = 2 * self.chain.n_robots
+        m = sum(t.size for _, t in parts)
+        J = np.zeros((m, 2 * n))
+        sw = np.empty(m)
         full = False
-        for task, w in level.tasks:
-            J, t = task.compute(ctx)
-            Js.append(self._embed(J, task.space))
-            ts.append(t)
-            ws.append(np.full(t.size, np.sqrt(w)))
+        r = 0
+        for (task, w), (Jt, t) in zip(level.tasks, parts, strict=True):
+            k = t.size
+            if task.space == "robot":
+                J[r : r + k, :n] = Jt
+            elif task.space == "joint":
+                J[r : r + k, n:] = Jt
+            else:
+                raise ParameterError(f"task {task.name!r}: unknown velocity coordinates {task.space!r}")
+            sw[r : r + k] = np.sqrt(w)
             full = full or (task.full_rank and w > 0)
-        J, t, sw = np.vstack(Js), np.concatenate(ts), np.concatenate(ws)
+            r += k
+        t = np.concatenate([t for _, t in parts])
         return sw[:, None] * J, sw * t, J, t, full
 
     def _workspace(self, i: int, n_frozen: int) -> _OsqpLevel | _QpsolversLevel:
@@ -343,12 +361,14 @@ class LexicographicQP:
         return sum(ws.setups for ws in self._workspaces.values())
 
     def _coupling(self, ctx: StepContext) -> Array:
-        """Rows ``[T, −I; 0, I]``: q̇ = T v (equalities), then the joint box on q̇."""
+        """Rows ``[T, −I; 0, I]``: q̇ = T v (equalities), then the joint box on q̇ (a new array every step)."""
         n = 2 * self.chain.n_robots
-        K = np.zeros((2 * n, 2 * n))
+        if self._K is None:
+            self._K = np.zeros((2 * n, 2 * n))
+            self._K[:n, n:] = -np.eye(n)
+            self._K[n:, n:] = np.eye(n)
+        K = self._K.copy()
         K[:n, :n] = ctx.velocity_map.T
-        K[:n, n:] = -np.eye(n)
-        K[n:, n:] = np.eye(n)
         return K
 
     # ------------------------------------------------------------------ one step
