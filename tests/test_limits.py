@@ -98,12 +98,9 @@ def test_separation_rows_match_finite_differences(open_room):
         return np.linalg.norm(P[:, None] - P[None], axis=-1)
 
     D0, D1 = dists(q), dists(q + h * qdot)
-    P = chain.robots(q)
-    Dn = np.linalg.norm(P[:, None] - P[None], axis=-1)
-    np.fill_diagonal(Dn, np.inf)
-    nearest = np.argsort(Dn, axis=1)[:, :2]
+    # with neighbours = N − 1 every pair is a row: robot i's rows are its pairs with j = 0, 1, 2 (j ≠ i) in order
     i = np.repeat(np.arange(3), 2)
-    j = nearest.ravel()
+    j = np.array([1, 2, 0, 2, 0, 1])
     np.testing.assert_allclose(A @ qdot / ctx.Ts, (D1[i, j] - D0[i, j]) / h, rtol=1e-4, atol=1e-5)
     # robots 2 and 3 are 0.61 m apart, below 2r + margin = 1.02 m: that pair must not get closer
     close = (i == 1) & (j == 2)

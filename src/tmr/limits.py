@@ -211,6 +211,14 @@ class RobotSeparation(Limit):
         self.k = max(1, min(int(neighbours), chain.n_robots - 1))
         self.activation = float(activation)
         self.rows = chain.n_robots * self.k if chain.n_robots > 1 else 0
+        self._pairs: tuple[NDArray[np.intp], NDArray[np.intp]] | None = None
+
+    @staticmethod
+    def _all_pairs(N: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Robot i's rows are its pairs with every other robot j (N·(N−1) rows, j in increasing order)."""
+        i = np.repeat(np.arange(N), N - 1)
+        j = np.array([jj for ii in range(N) for jj in range(N) if jj != ii], dtype=np.intp)
+        return i, j
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
         N = chain.n_robots
@@ -224,14 +232,21 @@ class RobotSeparation(Limit):
             return LimitRows(np.zeros((0, n)), np.zeros(0), np.zeros(0))
         P = ctx.points[1:]
         N = P.shape[0]
-        diff = P[:, None, :] - P[None, :, :]
-        dist = np.linalg.norm(diff, axis=-1)
-        np.fill_diagonal(dist, np.inf)
-        j = np.argsort(dist, axis=1, kind="stable")[:, : self.k]  # (N, k)
-        i = np.repeat(np.arange(N), self.k)
-        j = j.reshape(-1)
-        dij = dist[i, j]
-        nij = diff[i, j] / dij[:, None]
+        if self.k == N - 1:  # every pair: a fixed list, no sorting
+            if self._pairs is None or self._pairs[0].size != N * (N - 1):
+                self._pairs = self._all_pairs(N)
+            i, j = self._pairs
+            diff = P[i] - P[j]
+            dij = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+        else:
+            D = P[:, None, :] - P[None, :, :]
+            dist = np.linalg.norm(D, axis=-1)
+            np.fill_diagonal(dist, np.inf)
+            j = np.argsort(dist, axis=1, kind="stable")[:, : self.k].reshape(-1)  # the k nearest of each robot
+            i = np.repeat(np.arange(N), self.k)
+            dij = dist[i, j]
+            diff = D[i, j]
+        nij = diff / dij[:, None]
         r = np.arange(i.size)
         A = np.zeros((i.size, N, 2))
         A[r, i] = ctx.Ts * nij

@@ -49,10 +49,13 @@ class VelocityMap:
         self.d = d
         self.u = np.diff(P, axis=0) / d[:, None]  # (N, 2) link directions (signed spans keep P_j − P_{j−1} = d_j u_j)
         self.nrm = np.column_stack([-self.u[:, 1], self.u[:, 0]])
+        self._T: Array | None = None
 
     # ------------------------------------------------------------------ vectors
     def joint_rates(self, v: Array) -> Array:
         """q̇ = T v: joint rates [rad/s, m/s] of robot velocities ``v`` (2N,) [m/s]."""
+        if self._T is not None and self.n_robots <= 16:
+            return self._T @ np.asarray(v, dtype=float)
         V = np.asarray(v, dtype=float).reshape(self.n_robots, 2)
         w = V.copy()
         w[1:] -= V[:-1]
@@ -87,8 +90,20 @@ class VelocityMap:
 
     @property
     def T(self) -> Array:
-        """The matrix T of ``q̇ = T v``, (2N, 2N), banded."""
-        return self.to_robot(np.eye(2 * self.n_robots))
+        """The matrix T of ``q̇ = T v``, (2N, 2N), banded (computed once per map)."""
+        if self._T is None:
+            N = self.n_robots
+            T = np.zeros((N, 2, N + 1, 2))  # (joint j, θ/d, robot 0..N, xy); robot 0 is the fixed anchor
+            j = np.arange(N)
+            a = self.nrm / self.d[:, None]  # φ̇_j = a_jᵀ (ṗ_j − ṗ_{j−1})
+            T[j, 1, j + 1] = self.u  # ḋ_j = u_jᵀ (ṗ_j − ṗ_{j−1})
+            T[j, 1, j] = -self.u
+            T[j, 0, j + 1] = a  # θ̇_j = φ̇_j − φ̇_{j−1}
+            T[j, 0, j] = -a
+            T[j[1:], 0, j[1:]] -= a[:-1]
+            T[j[1:], 0, j[1:] - 1] += a[:-1]
+            self._T = T[:, :, 1:].reshape(2 * N, 2 * N)
+        return self._T
 
     @staticmethod
     def to_joint(B: Array, robot_jacobians: Array) -> Array:

@@ -41,6 +41,7 @@ from numpy.typing import NDArray
 
 from tmr.chain import Chain
 from tmr.errors import InfeasibleStep, ParameterError
+from tmr.formulations.activeset import WarmActiveSet, active_set
 from tmr.limits import JointBox, Limit
 from tmr.tasks import StepContext, Task
 from tmr.velocity import robot_pattern
@@ -102,25 +103,33 @@ class _OsqpLevel:
     shrinks. For long chains (``n > sparse_above``) JwᵀJw is formed with scipy.sparse (it is banded).
     """
 
-    sparse_above = 48
+    sparse_above = 80
 
-    def __init__(self, eps: float) -> None:
+    def __init__(self, eps: float, warm: WarmActiveSet | None = None) -> None:
         self.eps = float(eps)
         self.solver: osqp.OSQP | None = None
         self.setups = 0
+        self.warm = warm
+        self.guess: NDArray[np.int8] | None = None
+        self.warm_hits = 0
+        self._P: Array | sp.csr_matrix | None = None
+        self._P_of: Array | None = None
         self.A_pat: _Pattern | None = None
         self.J_pat: _Pattern | None = None
         self.P_pat: _Pattern | None = None
 
-    def _hessian(self, Jw: Array, tw: Array) -> tuple[Array, Array]:
-        n = Jw.shape[1]
-        if n > self.sparse_above:
-            Js = sp.csr_matrix(Jw)
-            P = (Js.T @ Js).toarray()
-        else:
-            P = Jw.T @ Jw
-        P.flat[:: n + 1] += self.eps
-        return P, -(tw @ Jw)
+    def _hessian(self, Jw: Array, tw: Array) -> tuple[Array | sp.csr_matrix, Array]:
+        """P = JwᵀJw + εI (scipy.sparse for long chains: it is banded) and q = −Jwᵀ tw."""
+        if Jw is not self._P_of:  # the same rows as last step (constant task rows): the same P
+            n = Jw.shape[1]
+            if n > self.sparse_above:
+                Js = sp.csr_matrix(Jw)
+                P = (Js.T @ Js + sp.identity(n, format="csr") * self.eps).tocsr()
+            else:
+                P = Jw.T @ Jw
+                P.flat[:: n + 1] += self.eps
+            self._P, self._P_of = P, Jw
+        return self._P, -(tw @ Jw)
 
     def _setup(
         self, P: Array, q: Array, A: Array, Jw: Array, lo: Array, up: Array, declared: NDArray[np.bool_] | None
@@ -149,14 +158,22 @@ class _OsqpLevel:
         return np.count_nonzero(dense) == np.count_nonzero(out)
 
     def solve(
-        self, C: Array, m_r: int, lo: Array, up: Array, declared: NDArray[np.bool_] | None = None
+        self, A: Array, lo: Array, up: Array, Jw: Array, tw: Array, declared: NDArray[np.bool_] | None = None
     ) -> tuple[Array | None, str, int]:
-        m = C.shape[0] - m_r
-        Jw = C[m:]
-        P, q = self._hessian(Jw, lo[m:])
-        A = C[:m]
-        lo = np.maximum(lo[:m], -OSQP_INFTY)
-        up = np.minimum(up[:m], OSQP_INFTY)
+        """Minimise ‖Jw x − tw‖² + ε‖x‖² subject to lo ≤ A x ≤ up (equalities where lo = up)."""
+        m = A.shape[0]
+        P, q = self._hessian(Jw, tw)
+        lo = np.maximum(lo, -OSQP_INFTY)
+        up = np.minimum(up, OSQP_INFTY)
+        if self.warm is not None:  # the previous step's active set, verified by the KKT conditions
+            guess = self.guess if self.guess is not None and self.guess.size == m else np.zeros(m, np.int8)
+            res = self.warm.solve(P, q, A, lo, up, guess)
+            if res is not None:
+                self.guess = res.active
+                self.warm_hits += 1
+                return res.x, "verified", 0
+        if sp.issparse(P):
+            P = P.toarray()
         fits = self.A_pat is not None and self.A_pat.shape == A.shape and self.J_pat.shape == Jw.shape
         fits = fits and self._gather(self.A_pat, A, self.Ax) and self._gather(self.J_pat, Jw, self.Jx)
         if fits:
@@ -171,11 +188,13 @@ class _OsqpLevel:
         if self.core is not None:
             self.core.solve()
             info = self.core.info
-            x = self.core.solution.x
+            x, y = self.core.solution.x, self.core.solution.y
         else:  # pragma: no cover
             res = self.solver.solve(raise_error=False)
-            info, x = res.info, res.x
+            info, x, y = res.info, res.x, res.y
         x = np.array(x) if x is not None and np.all(np.isfinite(x)) else None
+        if x is not None and y is not None and str(info.status) == "solved":
+            self.guess = active_set(np.asarray(y), lo, up, tol=1e-7)
         return x, str(info.status), int(info.iter)
 
 
@@ -195,14 +214,12 @@ class _QpsolversLevel:
         self.setups = 0
 
     def solve(
-        self, C: Array, m_r: int, lo: Array, up: Array, declared: NDArray[np.bool_] | None = None
+        self, A: Array, lo: Array, up: Array, Jw: Array, tw: Array, declared: NDArray[np.bool_] | None = None
     ) -> tuple[Array | None, str, int]:
-        m, n = C.shape
-        m_h = m - m_r
-        Jw, tw = C[m_h:], lo[m_h:]
+        n = A.shape[1]
         P = Jw.T @ Jw + self.eps * np.eye(n)
         q = -Jw.T @ tw
-        Ai, li, ui = C[:m_h], lo[:m_h], up[:m_h]
+        Ai, li, ui = A, lo, up
         eq = li == ui
         has_u = ~eq & np.isfinite(ui) & (ui < OSQP_INFTY)
         has_l = ~eq & np.isfinite(li) & (li > -OSQP_INFTY)
@@ -258,6 +275,8 @@ class LexicographicQP:
         feasibility_tolerance: largest violation of a hard row accepted from a solver [row units].
         lex_tolerance: largest relative change of a frozen higher-level task value accepted from a solver.
         optimistic: try each step first with level 1 met exactly (one QP instead of two; exact when feasible).
+        warm_start: with ``"osqp"``, first solve each level from the previous step's active set by one KKT solve,
+            verified by the KKT conditions (:mod:`tmr.formulations.activeset`); OSQP runs only when it fails.
     """
 
     name = "qp"
@@ -274,6 +293,7 @@ class LexicographicQP:
         feasibility_tolerance: float = 1e-5,
         lex_tolerance: float = 1e-6,
         optimistic: bool = True,
+        warm_start: bool = True,
     ) -> None:
         if not levels or any(not level.tasks for level in levels):
             raise ParameterError("the QP stack needs at least one level, and every level at least one task")
@@ -289,19 +309,24 @@ class LexicographicQP:
             float(lex_tolerance),
         )
         self.optimistic = bool(optimistic)
+        self.warm_start = bool(warm_start)
         self.widen = 0.1 * self.feas_tol / max(1, len(self.levels))
         self._workspaces: dict[tuple[int, int], _OsqpLevel | _QpsolversLevel] = {}
         self._declared: NDArray[np.bool_] | None = None
         self._lagging = False
         self._fallback = _QpsolversLevel(FALLBACK_SOLVER, self.eps)
         self.fallbacks = 0
-        self._K: Array | None = None
+        self._buffer = np.zeros((0, 0))
+        self._rows_cache: dict[int, tuple] = {}
+        self._spans: list[tuple[slice, slice]] = []
+        self._m0 = 0
 
     def reset(self) -> None:
         self._workspaces = {}
         self._declared = None
         self._lagging = False
         self.fallbacks = 0
+        self._rows_cache = {}
         for level in self.levels:
             for task, _ in level.tasks:
                 task.reset()
@@ -309,47 +334,45 @@ class LexicographicQP:
             lim.reset()
 
     # ------------------------------------------------------------------ assembly
-    def _embed(self, A: Array, space: str) -> Array:
-        """Rows on v or on q̇ as rows on x = [v, q̇] (zeros in the other half)."""
-        n = A.shape[1]
-        X = np.zeros((A.shape[0], 2 * n))
-        if space == "robot":
-            X[:, :n] = A
-        elif space == "joint":
-            X[:, n:] = A
-        else:
-            raise ParameterError(f"unknown velocity coordinates {space!r}; use 'joint' or 'robot'")
-        return X
-
     def _objective(self, level: Level, ctx: StepContext) -> tuple[Array, Array, Array, Array, bool]:
-        """Rows of a level on x = [v, q̇]: weighted (√w J, √w t), plain (J, t), and whether it is full rank."""
+        """Rows of a level on x = [v, q̇]: weighted (√w J, √w t), plain (J, t), and whether it is full rank.
+
+        Tasks whose rows are constant return the same array every step (selectors, identities); when every task of
+        the level does, the stacked matrices of the previous step are reused and only the targets are rebuilt.
+        """
         parts = [task.compute(ctx) for task, _ in level.tasks]
-        n = 2 * self.chain.n_robots
-        m = sum(t.size for _, t in parts)
-        J = np.zeros((m, 2 * n))
-        sw = np.empty(m)
-        full = False
-        r = 0
-        for (task, w), (Jt, t) in zip(level.tasks, parts, strict=True):
-            k = t.size
-            if task.space == "robot":
-                J[r : r + k, :n] = Jt
-            elif task.space == "joint":
-                J[r : r + k, n:] = Jt
-            else:
-                raise ParameterError(f"task {task.name!r}: unknown velocity coordinates {task.space!r}")
-            sw[r : r + k] = np.sqrt(w)
-            full = full or (task.full_rank and w > 0)
-            r += k
+        cached = self._rows_cache.get(id(level))
+        if cached is not None and all(Jt is c for (Jt, _), c in zip(parts, cached[0], strict=True)):
+            _, J, Jw, sw, full = cached
+        else:
+            n = 2 * self.chain.n_robots
+            m = sum(t.size for _, t in parts)
+            J = np.zeros((m, 2 * n))
+            sw = np.empty(m)
+            full = False
+            r = 0
+            for (task, w), (Jt, t) in zip(level.tasks, parts, strict=True):
+                k = t.size
+                if task.space == "robot":
+                    J[r : r + k, :n] = Jt
+                elif task.space == "joint":
+                    J[r : r + k, n:] = Jt
+                else:
+                    raise ParameterError(f"task {task.name!r}: unknown velocity coordinates {task.space!r}")
+                sw[r : r + k] = np.sqrt(w)
+                full = full or (task.full_rank and w > 0)
+                r += k
+            Jw = sw[:, None] * J
+            self._rows_cache[id(level)] = ([Jt for Jt, _ in parts], J, Jw, sw, full)
         t = np.concatenate([t for _, t in parts])
-        return sw[:, None] * J, sw * t, J, t, full
+        return Jw, sw * t, J, t, full
 
     def _workspace(self, i: int, n_frozen: int) -> _OsqpLevel | _QpsolversLevel:
         key = (i, n_frozen)
         ws = self._workspaces.get(key)
         if ws is None:
             if self.solver == "osqp":
-                ws = _OsqpLevel(self.eps)
+                ws = _OsqpLevel(self.eps, WarmActiveSet() if self.warm_start else None)
             else:
                 ws = _QpsolversLevel(self.solver.removeprefix("qpsolvers-"), self.eps)
             self._workspaces[key] = ws
@@ -360,16 +383,44 @@ class LexicographicQP:
         """Number of solver workspace set-ups so far (OSQP: one per level, plus one per pattern growth)."""
         return sum(ws.setups for ws in self._workspaces.values())
 
-    def _coupling(self, ctx: StepContext) -> Array:
-        """Rows ``[T, −I; 0, I]``: q̇ = T v (equalities), then the joint box on q̇ (a new array every step)."""
+    def _prepare(self, ctx: StepContext, rows: list) -> None:
+        """Check the limits' row counts against their patterns; allocate the row buffer and the declared pattern."""
         n = 2 * self.chain.n_robots
-        if self._K is None:
-            self._K = np.zeros((2 * n, 2 * n))
-            self._K[:n, n:] = -np.eye(n)
-            self._K[n:, n:] = np.eye(n)
-        K = self._K.copy()
-        K[:n, :n] = ctx.velocity_map.T
-        return K
+        patterns = [lim.pattern(self.chain) for lim in self.limits]
+        for lim, r, d in zip(self.limits, rows, patterns, strict=True):
+            if r.A.shape != d.shape:
+                raise ParameterError(
+                    f"limit {lim.name!r} returned rows of shape {r.A.shape}, its pattern declares {d.shape}"
+                )
+            if lim.space not in ("robot", "joint"):
+                raise ParameterError(f"limit {lim.name!r}: unknown velocity coordinates {lim.space!r}")
+        self._spans = []
+        start = 2 * n
+        for lim, d in zip(self.limits, patterns, strict=True):
+            cols = slice(0, n) if lim.space == "robot" else slice(n, 2 * n)
+            self._spans.append((slice(start, start + d.shape[0]), cols))
+            start += d.shape[0]
+        self._m0 = start
+        # rows: [T, −I] (q̇ = T v), [0, I] (joint box), the limits, then room for the frozen rows of the levels
+        self._buffer = np.zeros((start + n, 2 * n))
+        self._buffer[:n, n:] = -np.eye(n)
+        self._buffer[n : 2 * n, n:] = np.eye(n)
+        declared = np.zeros((start, 2 * n), dtype=bool)
+        declared[:n, :n] = robot_pattern(np.eye(n, dtype=bool))
+        declared[:n, n:] = np.eye(n, dtype=bool)
+        declared[n : 2 * n, n:] = np.eye(n, dtype=bool)
+        for (r, c), d in zip(self._spans, patterns, strict=True):
+            declared[r, c] = d
+        self._declared = declared
+
+    def _rows(self, ctx: StepContext, rows: list) -> Array:
+        """The hard rows on x = [v, q̇] of this step, written into the persistent buffer: a view (m0, 2n)."""
+        n = 2 * self.chain.n_robots
+        B = self._buffer
+        B[:n, :n] = ctx.velocity_map.T
+        for (r, c), lr in zip(self._spans, rows, strict=True):
+            B[r, c] = lr.A
+        return B[: self._m0]
 
     # ------------------------------------------------------------------ one step
     def step(self, ctx: StepContext) -> tuple[Array, dict[str, float]]:
@@ -383,20 +434,9 @@ class LexicographicQP:
         n = 2 * self.chain.n_robots
         fallbacks = self.fallbacks
         rows = [lim.compute(ctx) for lim in self.limits]
-        blocks = [self._embed(r.A, lim.space) for r, lim in zip(rows, self.limits, strict=True)]
-        K = self._coupling(ctx)
         if self._declared is None:
-            declared = [self._embed(lim.pattern(self.chain), lim.space) != 0 for lim in self.limits]
-            for lim, b, d in zip(self.limits, blocks, declared, strict=True):
-                if b.shape != d.shape:
-                    raise ParameterError(
-                        f"limit {lim.name!r} returned {b.shape[0]} rows, its pattern declares {d.shape[0]}"
-                    )
-            T_mask = robot_pattern(np.eye(n, dtype=bool))
-            K_mask = (np.abs(self._coupling(ctx)) > 0) | False
-            K_mask[:n, :n] |= T_mask
-            self._declared = np.vstack([K_mask, *declared])
-        A0 = np.vstack([K, *blocks])
+            self._prepare(ctx, rows)
+        A0 = self._rows(ctx, rows)
         objectives: dict[int, tuple] = {}  # built on first use: skipped levels cost nothing
         solves = [0]
         result = None
@@ -465,19 +505,23 @@ class LexicographicQP:
             Jw, tw, J, t, full = objectives[i]
             # lower levels start from the higher optimum, which sits on active rows up to the solver accuracy: a
             # small widening (growing with the level, as violations may accumulate) keeps that optimum feasible
-            widen = self.widen * i
-            C = np.vstack([A0, F, Jw])
-            lo = np.concatenate([lo0 - widen, y, tw])
-            up = np.concatenate([up0 + widen, y, tw])
-            z, status, it = self._workspace(i, F.shape[0]).solve(C, Jw.shape[0], lo, up, self._declared)
+            widen = self.widen * i * (lo0 < up0)  # equalities (q̇ = T v) stay exact: OSQP treats them apart
+            m0, nF = A0.shape[0], F.shape[0]
+            self._buffer[m0 : m0 + nF] = F  # the frozen rows go below the hard rows: A is a view, never a copy
+            A = self._buffer[: m0 + nF]
+            lo = np.concatenate([lo0 - widen, y])
+            up = np.concatenate([up0 + widen, y])
+            z, status, it = self._workspace(i, nF).solve(A, lo, up, Jw, tw, self._declared)
             solves[0] += 1
             iters += it
-            if self.solver == "osqp" and status not in ("solved", "primal infeasible"):
+            if self.solver == "osqp" and status not in ("verified", "solved", "primal infeasible"):
                 # OSQP stopped without an answer (iteration limit on an ill-conditioned level): an active-set method
                 # settles it exactly
-                z, status, _ = self._fallback.solve(C, Jw.shape[0], lo, up)
+                z, status, _ = self._fallback.solve(A, lo, up, Jw, tw)
                 self.fallbacks += 1
-            if z is None or not self._feasible(A0, lo0, up0, z) or not self._kept(F, y, z):
+            # a KKT-verified solution meets every row to 1e-9 already; a solver's answer is checked here
+            ok = z is not None and (status == "verified" or (self._feasible(A0, lo0, up0, z) and self._kept(F, y, z)))
+            if not ok:
                 if i == start and optimistic:
                     return None
                 if i == 0:
