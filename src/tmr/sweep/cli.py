@@ -1,0 +1,294 @@
+"""Command line: ``python -m tmr.sweep sensitivity|moga|bench …``.
+
+* ``sensitivity`` — Caruso 2021 §5.1 / Fig. 9: f1–f4 over a k_v0 × d_min grid (nominal · [0.5, 2.0]) for each
+  ``--methods``; writes ``sensitivity_<S>.md``, ``sensitivity_<S>_<method>.csv``, ``sensitivity_<S>_<method>.png``
+  (failed cells black) and ``sensitivity_<S>_<method>_raw.png`` (values of the recorded motion, failed cells ×).
+* ``moga`` — NSGA-II over the controller parameters (Caruso 2021 §4.2.2); writes ``moga_<S>_<method>.md`` (Pareto
+  front + chosen set), ``.csv`` (every evaluation) and ``.png`` (pairwise objective plots).
+* ``bench`` — scenarios × methods; writes ``bench.md``, ``bench.csv`` (scores) and ``bench_timing.csv``.
+
+Runs locally on every core by default (``--jobs N``; ``--jobs 1`` = in this process) or on a Dask cluster with
+``--scheduler tcp://host:port``. Same arguments and seed → the same bytes in every file except ``bench_timing.csv``,
+whichever the executor. Inputs are validated first; files are written to a temporary directory and moved into
+``--out`` only when all are complete.
+
+Exit codes: 0 done; 2 bad input or a run error (nothing written).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shlex
+import shutil
+import sys
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from tmr.errors import TmrError
+from tmr.planner import METHODS
+from tmr.sweep.errors import SweepError
+
+__all__ = ["build_parser", "main"]
+
+
+def _param(text: str) -> tuple[str, Any]:
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    val: Any
+    try:
+        val = int(value)
+    except ValueError:
+        try:
+            val = float(value)
+        except ValueError:
+            val = value  # string parameters, e.g. solver=daqp
+    else:
+        if val != val or val in (float("inf"), float("-inf")):
+            raise argparse.ArgumentTypeError(f"expected a finite value, got {text!r}")
+    return key, val
+
+
+def _var(text: str) -> Any:
+    from tmr.sweep.moga import Variable
+
+    key, sep, rng = text.partition("=")
+    lo, sep2, hi = rng.partition(":")
+    try:
+        low, high = float(lo), float(hi)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected NAME=LOW:HIGH, got {text!r}") from exc
+    if not sep or not sep2 or not key:
+        raise argparse.ArgumentTypeError(f"expected NAME=LOW:HIGH, got {text!r}")
+    return Variable(key, low, high)
+
+
+def _positive(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from exc
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"need at least 1, got {v}")
+    return v
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m tmr.sweep", description=__doc__.split("\n\n")[0])
+    sub = p.add_subparsers(dest="command", required=True)
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--seed", type=int, default=0, help="seed of the leader's RRT* (and of NSGA-II); default 0")
+    common.add_argument(
+        "--set", type=_param, action="append", default=[], metavar="NAME=VALUE", help="fixed parameter override"
+    )
+    common.add_argument("--out", default="runs/sweep", help="output directory (default runs/sweep)")
+    common.add_argument("--jobs", type=_positive, help="local worker processes (default: all cores; 1 = serial)")
+    common.add_argument("--scheduler", help="Dask scheduler address tcp://host:port (instead of local processes)")
+    common.add_argument(
+        "--connect-timeout", type=float, default=10.0, help="seconds to wait for the Dask scheduler (default 10)"
+    )
+    common.add_argument("--no-progress", action="store_true", help="no progress bar")
+    common.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+
+    s = sub.add_parser("sensitivity", parents=[common], help="k_v0 × d_min grid (Caruso 2021 §5.1, Fig. 9)")
+    s.add_argument("--scenario", default="D", help="scenario (default D, the paper's plane case study)")
+    s.add_argument(
+        "--methods",
+        nargs="+",
+        default=["pinv", "qp"],
+        choices=list(METHODS),
+        help="pinv sweeps d_min × k_v0; qp and horizon sweep d_safe × approach_rate (default: pinv qp)",
+    )
+    s.add_argument(
+        "--n", type=_positive, nargs="+", default=[13], help="grid points per axis, or two: columns rows (default 13)"
+    )
+    s.add_argument("--low", type=float, default=0.5, help="lowest factor on the nominal values (default 0.5)")
+    s.add_argument("--high", type=float, default=2.0, help="highest factor on the nominal values (default 2.0)")
+
+    m = sub.add_parser("moga", parents=[common], help="NSGA-II tuning of the controller parameters (§4.2.2)")
+    m.add_argument("--scenario", default="D")
+    m.add_argument("--method", default="pinv", choices=["pinv", "qp"])
+    m.add_argument("--pop", type=_positive, default=16, help="population size (default 16)")
+    m.add_argument("--gen", type=_positive, default=6, help="generations (default 6)")
+    m.add_argument(
+        "--var", type=_var, action="append", metavar="NAME=LOW:HIGH", help="decision variable (default: the method's)"
+    )
+
+    b = sub.add_parser("bench", parents=[common], help="scenarios × methods table")
+    b.add_argument("--scenarios", nargs="+", default=["A", "B", "C", "D"])
+    b.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
+    b.add_argument("--repeats", type=_positive, default=1, help="plans per cell for the timing median (default 1)")
+    b.add_argument("--robots", type=_positive, help="number of robots N (default: the scenario's)")
+    return p
+
+
+def canonical_command(args: argparse.Namespace) -> str:
+    """The command line without the executor options (``--jobs``, ``--scheduler``, ``--out``, progress/plots), so
+    reports do not depend on where the sweep ran."""
+    parts = ["python", "-m", "tmr.sweep", args.command]
+    skip = {"command", "jobs", "scheduler", "connect_timeout", "out", "no_progress", "no_plots"}
+    for key, val in vars(args).items():
+        if key in skip or val is None or val == []:
+            continue
+        flag = "--" + key.replace("_", "-")
+        if key == "set":
+            for k, v in val:
+                parts += [flag, f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"]
+        elif key == "var":
+            for v in val:
+                parts += [flag, f"{v.name}={v.low:g}:{v.high:g}"]
+        elif isinstance(val, list):
+            parts += [flag, *map(str, val)]
+        elif isinstance(val, float):
+            parts += [flag, f"{val:g}"]
+        else:
+            parts += [flag, str(val)]
+    return shlex.join(parts)
+
+
+def _safe(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in Path(name).stem)
+
+
+def _sensitivity(args: argparse.Namespace, executor: Any) -> dict[str, Callable[[Path], Any]]:
+    from tmr.sweep.grid import SensitivityResult, sensitivity_grid, sensitivity_specs
+    from tmr.sweep.report import csv_text, heatmap_figure, sensitivity_markdown
+    from tmr.sweep.runs import evaluate_run
+
+    if len(args.n) > 2:
+        raise SweepError(f"--n takes one or two integers, got {args.n}")
+    n = args.n[0] if len(args.n) == 1 else tuple(args.n)
+    grids = {method: sensitivity_grid(n, args.low, args.high, method) for method in args.methods}
+    results = []
+    for method, grid in grids.items():
+        specs = sensitivity_specs(grid, args.scenario, method, args.seed, dict(args.set))
+        res = executor.map(evaluate_run, specs, desc=f"sensitivity {args.scenario} {method}")
+        results.append(SensitivityResult(grid, args.scenario, method, args.seed, tuple(res)))
+    tag = _safe(args.scenario)
+    files: dict[str, Callable[[Path], Any]] = {
+        f"sensitivity_{tag}.md": lambda p: p.write_text(sensitivity_markdown(results, canonical_command(args)))
+    }
+    for r in results:
+        files[f"sensitivity_{tag}_{r.method}.csv"] = lambda p, r=r: p.write_text(csv_text([x.row() for x in r.results]))
+        if not args.no_plots:
+            files[f"sensitivity_{tag}_{r.method}.png"] = lambda p, r=r: _save(heatmap_figure(r), p)
+            files[f"sensitivity_{tag}_{r.method}_raw.png"] = lambda p, r=r: _save(heatmap_figure(r, raw=True), p)
+    return files
+
+
+def _moga(args: argparse.Namespace, executor: Any) -> dict[str, Callable[[Path], Any]]:
+    from tmr.sweep.moga import run_moga
+    from tmr.sweep.report import csv_text, moga_figure, moga_markdown, moga_rows
+
+    res = run_moga(
+        args.scenario,
+        args.method,
+        variables=args.var,
+        pop_size=args.pop,
+        n_gen=args.gen,
+        seed=args.seed,
+        base=dict(args.set),
+        executor=executor,
+    )
+    stem = f"moga_{_safe(args.scenario)}_{args.method}"
+    files: dict[str, Callable[[Path], Any]] = {
+        f"{stem}.md": lambda p: p.write_text(moga_markdown(res, canonical_command(args))),
+        f"{stem}.csv": lambda p: p.write_text(csv_text(moga_rows(res))),
+    }
+    if not args.no_plots:
+        files[f"{stem}.png"] = lambda p: _save(moga_figure(res), p)
+    return files
+
+
+def _bench(args: argparse.Namespace, executor: Any) -> dict[str, Callable[[Path], Any]]:
+    from tmr.sweep.bench import bench_markdown, bench_specs
+    from tmr.sweep.report import csv_text
+    from tmr.sweep.runs import evaluate_run
+
+    specs = bench_specs(args.scenarios, args.methods, args.seed, args.repeats, args.robots, dict(args.set))
+    res = executor.map(evaluate_run, specs, desc="bench")
+    cmd = canonical_command(args)
+    md = f"# Formulations on scenarios {', '.join(args.scenarios)}\n\n`{cmd}`\n\n" + bench_markdown(res, timing=False)
+    return {
+        "bench.md": lambda p: p.write_text(md),
+        "bench.csv": lambda p: p.write_text(csv_text([r.row() for r in res])),
+        "bench_timing.csv": lambda p: p.write_text(
+            csv_text(
+                [
+                    {
+                        "scenario": r.spec.scenario,
+                        "method": r.spec.method,
+                        "plan_time": r.plan_time,
+                        "ms_per_step": r.ms_per_step,
+                    }
+                    for r in res
+                ]
+            )  # fmt: skip
+        ),
+    }
+
+
+def _save(fig: Any, path: Path) -> None:
+    from tmr.plot import save_figure
+
+    save_figure(fig, path)
+
+
+def _validate(args: argparse.Namespace) -> None:
+    from tmr.scenario import load_scenario
+    from tmr.sweep.runs import check_overrides
+
+    for name in getattr(args, "scenarios", None) or [args.scenario]:
+        load_scenario(name)
+    check_overrides(dict(args.set))
+    if getattr(args, "var", None):
+        for v in args.var:
+            check_overrides({v.name: v.low, **dict(args.set)})
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise SweepError(f"--out {out} exists and is not a directory")
+
+
+def write_outputs(out: Path, files: dict[str, Callable[[Path], Any]]) -> list[str]:
+    """Write every file into a temporary sibling directory, then move them into ``out``."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        for name, writer in files.items():
+            writer(tmp / name)
+        out.mkdir(parents=True, exist_ok=True)
+        names = sorted(files)
+        for name in names:
+            os.replace(tmp / name, out / name)
+        return names
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def main(argv: list[str] | None = None, executor: Any = None) -> int:
+    """Entry point; ``executor`` (an object with ``map``) overrides ``--jobs``/``--scheduler`` (for tests)."""
+    from tmr.sweep.executor import make_executor
+
+    args = build_parser().parse_args(argv)
+    own = executor is None
+    try:
+        _validate(args)
+        if own:
+            executor = make_executor(
+                args.jobs, args.scheduler, progress=not args.no_progress, timeout=args.connect_timeout
+            )
+        try:
+            run = {"sensitivity": _sensitivity, "moga": _moga, "bench": _bench}[args.command]
+            files = run(args, executor)
+            names = write_outputs(Path(args.out), files)
+        finally:
+            if own and executor is not None:
+                executor.close()
+    except TmrError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"tmr sweep {args.command}: wrote {', '.join(names)} to {args.out}")
+    return 0
