@@ -14,7 +14,7 @@ from tmr.environment import Environment
 from tmr.errors import InfeasibleStep, ParameterError
 from tmr.formulations.qp import Level, LexicographicQP, orthonormal_rows, solvers
 from tmr.limits import JointBox, Limit, LimitRows, ObstacleClearance, RobotSeparation, RobotSpeed, link_pattern
-from tmr.planner import build_problem, make_qp, solve
+from tmr.planner import build_problem, make_qp, plan, solve
 from tmr.scenario import Scenario
 from tmr.tasks import Damping, LeaderTracking, Smoothness, SpanUniformity, StepContext, TaskRows, TetherRegulation
 
@@ -23,9 +23,9 @@ from .conftest import straight_trajectory
 LIMITS = np.array([[0.5, 5.596], [1.0, 5.596], [1.0, 5.596]])
 
 
-def stack(chain, levels="all", solver="osqp", extra=()):
+def stack(chain, levels="all", solver="osqp", extra=(), second=(), warm_start=True):
     leader, tether = LeaderTracking(5.0), TetherRegulation(chain, LIMITS[: chain.n_robots], max_gain=20.0)
-    lv = [Level([(leader, 1.0)])]
+    lv = [Level([(leader, 1.0)]), *second]
     if levels == "all":
         lv += [
             Level([(tether, 1.0), (SpanUniformity(chain), 1.0), (Smoothness(chain), 100.0)]),
@@ -34,7 +34,7 @@ def stack(chain, levels="all", solver="osqp", extra=()):
     lv += list(extra)
     limits = [ObstacleClearance(chain, 20), RobotSpeed(chain, 2.5), RobotSeparation(chain, 0.5)]
     box = JointBox(chain, LIMITS[: chain.n_robots], 3.0, 3.0, 20.0)
-    return LexicographicQP(chain, lv, limits, box, solver=solver)
+    return LexicographicQP(chain, lv, limits, box, solver=solver, warm_start=warm_start)
 
 
 def context(env, positions, base, ref, refv, qdot_prev=None):
@@ -80,8 +80,11 @@ def test_strict_priority_lower_levels_never_change_the_leader_residual(column_ro
     v1 = np.array([0.5, -0.2]) + 5.0 * (np.array([9.3, 7.0]) - ctx.x_e)
     only = stack(chain, levels="leader")
     x1, _ = only.step(ctx)
-    for extra in ([], [Level([(PullRobot1(), 1.0)])]):
-        full = stack(chain, extra=extra)
+    pull = [Level([(PullRobot1(), 1.0)])]
+    # the pulling task below everything (where the full-rank smoothness of level 2 leaves it nothing), and right
+    # below the leader (where it does move the chain), with the KKT warm start and with OSQP alone
+    for kw in ({}, {"extra": pull}, {"second": pull}, {"second": pull, "warm_start": False}):
+        full = stack(chain, **kw)
         x, diag = full.step(ctx)
         assert np.linalg.norm(J_e @ x - v1) == pytest.approx(np.linalg.norm(J_e @ x1 - v1), abs=1e-6)
         np.testing.assert_allclose(J_e @ x, J_e @ x1, atol=1e-5)
@@ -182,6 +185,18 @@ def test_random_clutter_never_violates_silently(seed):
         assert "hard constraints have no common solution" in plan.failure or "from the goal" in plan.failure
     else:
         assert metrics.final_leader_error < 0.1
+
+
+def test_warm_active_set_and_osqp_give_the_same_plan():
+    problem = build_problem(random_scenario(5), seed=1, path_iterations=300)
+    warm = make_qp(problem)
+    cold = make_qp(problem)
+    cold.warm_start = False
+    a, b = plan(problem, warm), plan(problem, cold)
+    assert a.success == b.success
+    assert np.nansum(a.diagnostics["solver_iterations"]) == 0  # every level settled by one verified KKT solve
+    assert np.nansum(b.diagnostics["solver_iterations"]) > 0  # OSQP iterated
+    np.testing.assert_allclose(a.q, b.q, atol=1e-5)
 
 
 def test_same_problem_same_plan():

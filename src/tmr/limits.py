@@ -47,6 +47,19 @@ def robot_link_pattern(chain: Chain, links: ArrayLike) -> NDArray[np.bool_]:
     return (robot == li[:, None]) | (robot == li[:, None] - 1)
 
 
+_INF: dict[int, Array] = {}
+
+
+def _infinite(m: int) -> Array:
+    """A read-only vector of m infinities (shared: bounds that never bind)."""
+    v = _INF.get(m)
+    if v is None:
+        v = np.full(m, np.inf)
+        v.flags.writeable = False
+        _INF[m] = v
+    return v
+
+
 def _robot_rows(m: int, n_robots: int) -> Array:
     """Zero rows on robot velocities indexed by robot (0 = the fixed anchor): (m, N+1, 2)."""
     return np.zeros((m, n_robots + 1, 2))
@@ -180,7 +193,7 @@ class ObstacleClearance(Limit):
         A[r, links] = (ctx.Ts * s)[:, None] * g
         lower = approach_bound(d, self.d_safe, self.rate, ctx.Ts)
         lower[d > self.activation] = -np.inf
-        return LimitRows(A[:, 1:].reshape(M, -1), lower, np.full(M, np.inf))
+        return LimitRows(A[:, 1:].reshape(M, -1), lower, _infinite(M))
 
 
 class RobotSeparation(Limit):
@@ -254,7 +267,7 @@ class RobotSeparation(Limit):
         A = A.reshape(i.size, -1)
         lower = approach_bound(dij, self.min_distance, self.rate, ctx.Ts)
         lower = np.where(dij > self.activation, -np.inf, lower)
-        return LimitRows(A, lower, np.full(i.size, np.inf))
+        return LimitRows(A, lower, _infinite(i.size))
 
 
 class _RobotVelocityRows(Limit):
@@ -275,11 +288,14 @@ class RobotSpeed(_RobotVelocityRows):
         if not v_max > 0:
             raise ParameterError(f"v_max must be > 0 m/s, got {v_max}")
         self.v_max = float(v_max)
+        self._rows: LimitRows | None = None
 
     def compute(self, ctx: StepContext) -> LimitRows:
         n = 2 * ctx.chain.n_robots
-        v = np.full(n, self.v_max)
-        return LimitRows(np.eye(n), -v, v)
+        if self._rows is None or self._rows.A.shape[0] != n:  # constant rows: built once
+            v = np.full(n, self.v_max)
+            self._rows = LimitRows(np.eye(n), -v, v)
+        return self._rows
 
 
 class RobotAcceleration(_RobotVelocityRows):
@@ -296,11 +312,14 @@ class RobotAcceleration(_RobotVelocityRows):
         if not a_max > 0:
             raise ParameterError(f"a_max must be > 0 m/s², got {a_max}")
         self.a_max = float(a_max)
+        self._eye: Array | None = None
 
     def compute(self, ctx: StepContext) -> LimitRows:
         v_prev = ctx.velocity_map.robot_velocities(ctx.qdot_prev)
         dv = self.a_max * ctx.Ts
-        return LimitRows(np.eye(v_prev.size), v_prev - dv, v_prev + dv)
+        if self._eye is None or self._eye.shape[0] != v_prev.size:
+            self._eye = np.eye(v_prev.size)
+        return LimitRows(self._eye, v_prev - dv, v_prev + dv)
 
 
 class JointBox:

@@ -76,7 +76,10 @@ class StepContext:
         self.k = k
         self.q = q
         self.qdot_prev = qdot_prev
-        self.points = self.chain.points(q)
+        if self.chain.spatial:
+            self.points, self._u = self.chain.points(q), None
+        else:
+            self._u, self.points = self.chain._planar_geometry(np.asarray(q, dtype=float))
         self.x_e = self.points[-1]
         self.x_d = self.reference[k]
         self.xd_d = self.reference_velocity[k]
@@ -107,7 +110,7 @@ class StepContext:
     def velocity_map(self) -> VelocityMap:
         """Maps between joint rates and robot velocities at this step (planar chains; cached for the step)."""
         if self._vmap is None:
-            self._vmap = VelocityMap(self.points, self.spans)
+            self._vmap = VelocityMap(self.points, self.spans, self._u)
         return self._vmap
 
     def rows_in(self, space: str, A: Array, source: str) -> Array:

@@ -36,19 +36,24 @@ class VelocityMap:
     Args:
         points: base and robots, ``(N+1, 2)`` [m].
         spans: signed spans d_j, ``(N,)`` [m] (the prismatic joints; they must be nonzero).
+        directions: the unit link directions u_j ``(N, 2)`` if already known (then ``points`` is not read).
     """
 
-    def __init__(self, points: Array, spans: Array) -> None:
-        P = np.asarray(points, dtype=float)
+    def __init__(self, points: Array, spans: Array, directions: Array | None = None) -> None:
         d = np.asarray(spans, dtype=float)
-        if P.ndim != 2 or P.shape[1] != 2 or d.shape != (P.shape[0] - 1,):
-            raise ParameterError("robot-velocity coordinates need a planar chain: points (N+1, 2) and spans (N,)")
-        if np.any(np.abs(d) < 1e-9):
+        if directions is None:
+            P = np.asarray(points, dtype=float)
+            if P.ndim != 2 or P.shape[1] != 2 or d.shape != (P.shape[0] - 1,):
+                raise ParameterError("robot-velocity coordinates need a planar chain: points (N+1, 2) and spans (N,)")
+            u = np.diff(P, axis=0) / d[:, None]  # (N, 2) link directions (signed spans: P_j − P_{j−1} = d_j u_j)
+        else:
+            u = directions
+        if np.min(np.abs(d), initial=np.inf) < 1e-9:
             raise ParameterError(f"robot-velocity coordinates need nonzero spans, got {d}")
         self.n_robots = d.size
         self.d = d
-        self.u = np.diff(P, axis=0) / d[:, None]  # (N, 2) link directions (signed spans keep P_j − P_{j−1} = d_j u_j)
-        self.nrm = np.column_stack([-self.u[:, 1], self.u[:, 0]])
+        self.u = u
+        self.nrm = u[:, ::-1] * np.array([-1.0, 1.0])  # (−u_y, u_x)
         self._T: Array | None = None
 
     # ------------------------------------------------------------------ vectors

@@ -22,6 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
+from scipy.linalg.lapack import dgesv
 
 Array = NDArray[np.float64]
 
@@ -65,7 +66,9 @@ class WarmActiveSet:
                 K[:n, :n] = P
                 K[:n, n:] = A.T
                 K[n:, :n] = A
-                z = np.linalg.solve(K, rhs)
+                _, _, z, info = dgesv(K, rhs, overwrite_a=True, overwrite_b=True)  # LAPACK, no wrapper overhead
+                if info != 0:
+                    return None
             else:
                 As = sp.csr_matrix(A)
                 K = sp.bmat([[sp.csr_matrix(P), As.T], [As, None]], format="csc")
@@ -85,27 +88,36 @@ class WarmActiveSet:
         """
         s = guess.copy()
         s[lo == up] = 2
+        tol = self.tol
         for r in range(1, self.rounds + 1):
             W = np.flatnonzero(s)
-            b = np.where(s[W] == -1, lo[W], up[W])
+            st = s[W]
+            b = np.where(st == -1, lo[W], up[W])
             sol = self._kkt(P, q, A[W], b)
             if sol is None:
                 return None
             x, yW = sol
-            # residual of the KKT solve itself (ill-conditioned or inconsistent active rows show up here)
             Ax = A @ x
-            if np.max(np.abs(Ax[W] - b), initial=0.0) > self.tol * (1.0 + np.max(np.abs(b), initial=0.0)):
+            # residual of the KKT solve itself (ill-conditioned or inconsistent active rows show up here)
+            if np.max(np.abs(Ax[W] - b), initial=0.0) > tol * (1.0 + np.max(np.abs(b), initial=0.0)):
                 return None
-            below = Ax < lo - self.tol
-            above = Ax > up + self.tol
-            st = s[W]
-            ytol = self.tol * max(1.0, float(np.max(np.abs(yW), initial=0.0)))
-            wrong = ((st == 1) & (yW < -ytol)) | ((st == -1) & (yW > ytol))
-            if not (below.any() or above.any() or wrong.any()):
+            viol = np.maximum(lo - Ax, Ax - up)
+            feasible = not viol.size or viol.max() <= tol
+            ineq = st != 2
+            wrong = None
+            if ineq.any():  # multipliers of the active inequalities must have the sign of their bound
+                ytol = tol * max(1.0, float(np.max(np.abs(yW))))
+                wrong = ((st == 1) & (yW < -ytol)) | ((st == -1) & (yW > ytol))
+                if not wrong.any():
+                    wrong = None
+            if feasible and wrong is None:
                 y = np.zeros(A.shape[0])
                 y[W] = yW
                 return ActiveSetResult(x, y, s, r)
-            s[W[wrong]] = 0
-            s[below & (s != 2)] = -1
-            s[above & (s != 2)] = 1
+            if wrong is not None:
+                s[W[wrong]] = 0
+            if not feasible:
+                free = s != 2
+                s[(Ax < lo - tol) & free] = -1
+                s[(Ax > up + tol) & free] = 1
         return None

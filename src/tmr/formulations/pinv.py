@@ -78,12 +78,12 @@ class PinvController:
         rows: list[Array] = []
         for task in tasks:
             J, v = task.compute(ctx)
-            J = ctx.rows_in("joint", J, task.space)
+            J = ctx.rows_in("joint", J, getattr(task, "space", "joint"))
             qdot += P @ (dls_inverse(J, self.damping) @ v)
             rows.append(J)
             P = null_space_projector(np.vstack(rows))
         J_t, v_t = self.tether.compute(ctx)
-        J_t = ctx.rows_in("joint", J_t, self.tether.space)
+        J_t = ctx.rows_in("joint", J_t, getattr(self.tether, "space", "joint"))
         qdot += P @ (J_t.T @ v_t)  # GPM: q̇_opt = K φ̂ on the prismatic joints (eq. 7, 13)
         diag = {
             "obstacle_active": float(active),

@@ -163,8 +163,6 @@ class _OsqpLevel:
         """Minimise ‖Jw x − tw‖² + ε‖x‖² subject to lo ≤ A x ≤ up (equalities where lo = up)."""
         m = A.shape[0]
         P, q = self._hessian(Jw, tw)
-        lo = np.maximum(lo, -OSQP_INFTY)
-        up = np.minimum(up, OSQP_INFTY)
         if self.warm is not None:  # the previous step's active set, verified by the KKT conditions
             guess = self.guess if self.guess is not None and self.guess.size == m else np.zeros(m, np.int8)
             res = self.warm.solve(P, q, A, lo, up, guess)
@@ -172,6 +170,8 @@ class _OsqpLevel:
                 self.guess = res.active
                 self.warm_hits += 1
                 return res.x, "verified", 0
+        lo = np.maximum(lo, -OSQP_INFTY)
+        up = np.minimum(up, OSQP_INFTY)
         if sp.issparse(P):
             P = P.toarray()
         fits = self.A_pat is not None and self.A_pat.shape == A.shape and self.J_pat.shape == Jw.shape
@@ -353,14 +353,15 @@ class LexicographicQP:
             r = 0
             for (task, w), (Jt, t) in zip(level.tasks, parts, strict=True):
                 k = t.size
-                if task.space == "robot":
+                space = getattr(task, "space", "joint")  # duck-typed tasks write joint rates
+                if space == "robot":
                     J[r : r + k, :n] = Jt
-                elif task.space == "joint":
+                elif space == "joint":
                     J[r : r + k, n:] = Jt
                 else:
-                    raise ParameterError(f"task {task.name!r}: unknown velocity coordinates {task.space!r}")
+                    raise ParameterError(f"task {task.name!r}: unknown velocity coordinates {space!r}")
                 sw[r : r + k] = np.sqrt(w)
-                full = full or (task.full_rank and w > 0)
+                full = full or (getattr(task, "full_rank", False) and w > 0)
                 r += k
             Jw = sw[:, None] * J
             self._rows_cache[id(level)] = ([Jt for Jt, _ in parts], J, Jw, sw, full)
@@ -481,11 +482,15 @@ class LexicographicQP:
         """
         nx = A0.shape[1]
         lb, ub = self.box.compute(ctx, relax=relax)
-        drop = [relax and lim.relaxable for lim in self.limits]
-        pairs = list(zip(rows, drop, strict=True))
         zeros = np.zeros(nx // 2)
-        lo0 = np.concatenate([zeros, lb, *(np.full(r.lower.size, -np.inf) if d else r.lower for r, d in pairs)])
-        up0 = np.concatenate([zeros, ub, *(np.full(r.upper.size, np.inf) if d else r.upper for r, d in pairs)])
+        if relax:  # the relaxable (comfort) limits are dropped: their rows get infinite bounds
+            drop = [lim.relaxable for lim in self.limits]
+            pairs = list(zip(rows, drop, strict=True))
+            lo0 = np.concatenate([zeros, lb, *(np.full(r.lower.size, -np.inf) if d else r.lower for r, d in pairs)])
+            up0 = np.concatenate([zeros, ub, *(np.full(r.upper.size, np.inf) if d else r.upper for r, d in pairs)])
+        else:
+            lo0 = np.concatenate([zeros, lb, *(r.lower for r in rows)])
+            up0 = np.concatenate([zeros, ub, *(r.upper for r in rows)])
         F, y = np.zeros((0, nx)), np.zeros(0)
         start = 0
         if optimistic:

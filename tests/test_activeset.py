@@ -1,0 +1,93 @@
+"""Warm active set: KKT solves from a guessed active set agree with an independent QP solver, or decline."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import qpsolvers
+import scipy.sparse as sp
+
+from tmr.formulations.activeset import WarmActiveSet, active_set
+
+
+def random_qp(seed: int, n: int = 8, m: int = 14, n_eq: int = 2):
+    rng = np.random.default_rng(seed)
+    M = rng.normal(size=(n, n))
+    P = M @ M.T + 0.1 * np.eye(n)
+    q = rng.normal(size=n)
+    A = rng.normal(size=(m, n))
+    x0 = rng.normal(size=n) * 0.1
+    lo = A @ x0 - rng.uniform(0.05, 1.0, m)
+    up = A @ x0 + rng.uniform(0.05, 1.0, m)
+    lo[:n_eq] = up[:n_eq] = A[:n_eq] @ x0  # equalities
+    lo[n_eq : n_eq + 3] = -np.inf  # one-sided rows
+    return P, q, A, lo, up
+
+
+def reference(P, q, A, lo, up):
+    eq = lo == up
+    G = np.vstack([A[~eq & np.isfinite(up)], -A[~eq & np.isfinite(lo)]])
+    h = np.concatenate([up[~eq & np.isfinite(up)], -lo[~eq & np.isfinite(lo)]])
+    return qpsolvers.solve_qp(P, q, G, h, A[eq], lo[eq], solver="daqp")
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_from_the_right_active_set_it_is_the_optimum(seed):
+    P, q, A, lo, up = random_qp(seed)
+    x_ref = reference(P, q, A, lo, up)
+    ws = WarmActiveSet(tol=1e-9, rounds=1)
+    res = ws.solve(P, q, A, lo, up, right_set(A, lo, up, x_ref))  # the right active set, read off the reference
+    assert res is not None and res.rounds == 1
+    np.testing.assert_allclose(res.x, x_ref, atol=1e-7)
+    # KKT: stationarity with the returned multipliers, signs on their bounds
+    np.testing.assert_allclose(P @ res.x + q + A.T @ res.y, 0.0, atol=1e-8)
+    act = active_set(res.y, lo, up)
+    assert np.all(res.y[act == 1] > 0) and np.all(res.y[act == -1] < 0)
+
+
+def right_set(A, lo, up, x):
+    Ax = A @ x
+    s = np.zeros(A.shape[0], np.int8)
+    s[np.isclose(Ax, up, atol=1e-8)] = 1
+    s[np.isclose(Ax, lo, atol=1e-8)] = -1
+    return s
+
+
+def test_from_a_wrong_guess_it_corrects_or_declines_never_returns_a_wrong_answer():
+    corrected = 0
+    for seed in range(12):
+        P, q, A, lo, up = random_qp(seed)
+        x_ref = reference(P, q, A, lo, up)
+        right = right_set(A, lo, up, x_ref)
+        rng = np.random.default_rng(100 + seed)
+        for _ in range(4):  # the previous step's set, off by one row each way
+            guess = right.copy()
+            ineq = np.flatnonzero(lo < up)
+            guess[rng.choice(ineq)] = 0  # forget one (maybe) active row
+            k = rng.choice(ineq)
+            guess[k] = 1 if guess[k] == 0 else guess[k]  # claim one (maybe) inactive row
+            res = WarmActiveSet(rounds=6).solve(P, q, A, lo, up, guess)
+            if res is not None:
+                corrected += 1
+                np.testing.assert_allclose(res.x, x_ref, atol=1e-7)
+    assert corrected >= 24  # most one-row mistakes are repaired within a few KKT solves
+
+
+def test_sparse_and_dense_kkt_agree():
+    P, q, A, lo, up = random_qp(3, n=12, m=20)
+    x_ref = reference(P, q, A, lo, up)
+    guess = np.zeros(A.shape[0], np.int8)
+    dense = WarmActiveSet(dense_below=1000, rounds=8).solve(P, q, A, lo, up, guess)
+    sparse = WarmActiveSet(dense_below=0, rounds=8).solve(sp.csr_matrix(P), q, A, lo, up, guess)
+    assert (dense is None) == (sparse is None)
+    if dense is not None:
+        np.testing.assert_allclose(dense.x, x_ref, atol=1e-7)
+        np.testing.assert_allclose(sparse.x, dense.x, atol=1e-9)
+
+
+def test_dependent_active_rows_are_declined():
+    P = np.eye(2)
+    q = np.array([-1.0, -1.0])
+    A = np.array([[1.0, 0.0], [1.0, 0.0]])  # the same row twice, both as equalities: a singular KKT matrix
+    lo = up = np.array([0.5, 0.5])
+    assert WarmActiveSet().solve(P, q, A, lo, up, np.zeros(2, np.int8)) is None
