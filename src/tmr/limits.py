@@ -157,6 +157,7 @@ class ObstacleClearance(Limit):
         self.d_safe, self.activation = float(d_safe), float(activation)
         self.rate = float(approach_rate)
         self.links = np.repeat(np.arange(1, chain.n_robots + 1), self.per_link)
+        self._r: NDArray[np.intp] | None = None
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
         return robot_link_pattern(chain, self.links)
@@ -187,7 +188,9 @@ class ObstacleClearance(Limit):
             idx, _ = self.select(ctx)
             links, s, d, g = links[idx], s[idx], d[idx], g[idx]
         M = d.size
-        r = np.arange(M)
+        if self._r is None or self._r.size != M:
+            self._r = np.arange(M)
+        r = self._r
         A = _robot_rows(M, ctx.chain.n_robots)
         A[r, links - 1] = (ctx.Ts * (1.0 - s))[:, None] * g
         A[r, links] = (ctx.Ts * s)[:, None] * g
@@ -347,6 +350,8 @@ class JointBox:
         self.vmax = np.where(chain.is_prismatic, v_span_max, omega_max).astype(float)
         self.a_max = float(a_max)
         self.margin = float(span_margin)
+        self._span_lo = self.limits[:, 0] + self.margin
+        self._span_hi = self.limits[:, 1] - self.margin
 
     def compute(self, ctx: StepContext, relax: bool = False) -> tuple[Array, Array]:
         """Bounds (lb, ub) on q̇; ``relax=True`` drops the acceleration bound (speed and span bounds stay)."""
@@ -358,13 +363,13 @@ class JointBox:
             ub = np.minimum(self.vmax, ctx.qdot_prev + self.a_max * Ts)
         pi = self.chain.prismatic_index
         d = ctx.q[pi]
-        band_lo = (np.minimum(self.limits[:, 0] + self.margin, d) - d) / Ts  # ≤ 0: a span outside only must not
-        band_hi = (np.maximum(self.limits[:, 1] - self.margin, d) - d) / Ts  # ≥ 0: get worse
+        band_lo = (np.minimum(self._span_lo, d) - d) / Ts  # ≤ 0: a span outside only must not
+        band_hi = (np.maximum(self._span_hi, d) - d) / Ts  # ≥ 0: get worse
         lo, hi = np.maximum(lb[pi], band_lo), np.minimum(ub[pi], band_hi)
-        # where speed/acceleration and the span band do not meet, the span band (the safety limit) wins
         empty = lo > hi
-        edge = np.where(lb[pi] > band_hi, band_hi, band_lo)
-        lo, hi = np.where(empty, edge, lo), np.where(empty, edge, hi)
+        if empty.any():  # speed/acceleration and the span band do not meet: the span band (the safety limit) wins
+            edge = np.where(lb[pi] > band_hi, band_hi, band_lo)
+            lo, hi = np.where(empty, edge, lo), np.where(empty, edge, hi)
         lb[pi], ub[pi] = lo, hi
         return lb, ub
 
