@@ -130,3 +130,14 @@ def test_relative_links_resolve(readme):
     assert local
     missing = [t for t in local if not (ROOT / t).exists()]
     assert missing == []
+
+
+def test_mopick_example_capacity_matches_the_lp_path(examples):
+    from tmr.mcdpr import capacity_lp
+
+    snapshots, _ = examples
+    ns = next(s for s in snapshots if "cap" in s)
+    mu = ns["cap"].mu
+    assert mu.shape == (2,) and np.all(mu > 0)  # both poses hold the platform with margin
+    lp = capacity_lp(ns["robot"], ns["platform"], np.broadcast_to(ns["bases"], (2, 4, 2)), None, ns["rws"])
+    np.testing.assert_allclose(mu, lp, atol=1e-9)
