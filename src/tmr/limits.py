@@ -60,11 +60,6 @@ def _infinite(m: int) -> Array:
     return v
 
 
-def _robot_rows(m: int, n_robots: int) -> Array:
-    """Zero rows on robot velocities indexed by robot (0 = the fixed anchor): (m, N+1, 2)."""
-    return np.zeros((m, n_robots + 1, 2))
-
-
 def approach_bound(g: Array, g_min: float, rate: float, Ts: float) -> Array:
     """Lower bound on the change ``Ts ġ`` of a distance g ≥ g_min over one step (velocity damper).
 
@@ -157,7 +152,7 @@ class ObstacleClearance(Limit):
         self.d_safe, self.activation = float(d_safe), float(activation)
         self.rate = float(approach_rate)
         self.links = np.repeat(np.arange(1, chain.n_robots + 1), self.per_link)
-        self._r: NDArray[np.intp] | None = None
+        self._scatter: tuple | None = None
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
         return robot_link_pattern(chain, self.links)
@@ -184,19 +179,37 @@ class ObstacleClearance(Limit):
 
     def compute(self, ctx: StepContext) -> LimitRows:
         links, s, d, g = ctx.sample_links, ctx.sample_fractions, ctx.sample_clearance, ctx.sample_gradient
+        idx = None
         if self.per_link != self.samples or d.size != links.size or d.size != self.samples * ctx.chain.n_robots:
             idx, _ = self.select(ctx)
             links, s, d, g = links[idx], s[idx], d[idx], g[idx]
         M = d.size
-        if self._r is None or self._r.size != M:
-            self._r = np.arange(M)
-        r = self._r
-        A = _robot_rows(M, ctx.chain.n_robots)
-        A[r, links - 1] = (ctx.Ts * (1.0 - s))[:, None] * g
-        A[r, links] = (ctx.Ts * s)[:, None] * g
+        n = 2 * ctx.chain.n_robots
+        if idx is None:  # every sample: the scatter of the rows into A is fixed, built once
+            key = (M, n, ctx.Ts)
+            if self._scatter is None or self._scatter[0] != key:
+                self._scatter = (key, *self._scatter_map(links, s, ctx.Ts, n))
+            _, flat, w, pick = self._scatter
+        else:
+            flat, w, pick = self._scatter_map(links, s, ctx.Ts, n)
+        A = np.zeros(M * n)
+        A[flat] = (w[:, None] * g[pick]).ravel()  # Ts (1 − s) ∇d on robot j−1, Ts s ∇d on robot j
         lower = approach_bound(d, self.d_safe, self.rate, ctx.Ts)
         lower[d > self.activation] = -np.inf
-        return LimitRows(A[:, 1:].reshape(M, -1), lower, _infinite(M))
+        return LimitRows(A.reshape(M, n), lower, _infinite(M))
+
+    @staticmethod
+    def _scatter_map(
+        links: NDArray[np.intp], s: Array, Ts: float, n: int
+    ) -> tuple[NDArray[np.intp], Array, NDArray[np.intp]]:
+        """Flat indices into A (M, n) of each row's two robot blocks, their weights and the sample of each."""
+        r = np.arange(links.size)
+        lead = links >= 2  # link 1 starts at the fixed anchor: no robot j−1
+        rows = np.concatenate([r[lead], r])
+        robot = np.concatenate([links[lead] - 2, links - 1])  # 0-based robots j−1 and j
+        weight = Ts * np.concatenate([1.0 - s[lead], s])
+        flat = ((rows * n + 2 * robot)[:, None] + np.arange(2)).ravel()
+        return flat, weight, rows
 
 
 class RobotSeparation(Limit):
@@ -227,7 +240,7 @@ class RobotSeparation(Limit):
         self.k = max(1, min(int(neighbours), chain.n_robots - 1))
         self.activation = float(activation)
         self.rows = chain.n_robots * self.k if chain.n_robots > 1 else 0
-        self._pairs: tuple[NDArray[np.intp], NDArray[np.intp]] | None = None
+        self._D = np.zeros((0, 0))
 
     @staticmethod
     def _all_pairs(N: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
@@ -247,30 +260,33 @@ class RobotSeparation(Limit):
         if self.rows == 0:
             return LimitRows(np.zeros((0, n)), np.zeros(0), np.zeros(0))
         P = ctx.points[1:]
-        N = P.shape[0]
-        if self.k == N - 1:  # every pair: a fixed list, no sorting
-            if self._pairs is None or self._pairs[0].size != N * (N - 1):
-                self._pairs = self._all_pairs(N)
-            i, j = self._pairs
-            diff = P[i] - P[j]
-            dij = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-        else:
-            D = P[:, None, :] - P[None, :, :]
-            dist = np.linalg.norm(D, axis=-1)
-            np.fill_diagonal(dist, np.inf)
-            j = np.argsort(dist, axis=1, kind="stable")[:, : self.k].reshape(-1)  # the k nearest of each robot
-            i = np.repeat(np.arange(N), self.k)
-            dij = dist[i, j]
-            diff = D[i, j]
+        D = self._differences(P)  # (rows, N): row r is robot i minus robot j
+        diff = D @ P
+        dij = np.sqrt(np.einsum("ij,ij->i", diff, diff))
         nij = diff / dij[:, None]
-        r = np.arange(i.size)
-        A = np.zeros((i.size, N, 2))
-        A[r, i] = ctx.Ts * nij
-        A[r, j] = -ctx.Ts * nij
-        A = A.reshape(i.size, -1)
+        A = (D[:, :, None] * (ctx.Ts * nij)[:, None, :]).reshape(D.shape[0], -1)
         lower = approach_bound(dij, self.min_distance, self.rate, ctx.Ts)
-        lower = np.where(dij > self.activation, -np.inf, lower)
-        return LimitRows(A, lower, _infinite(i.size))
+        lower[dij > self.activation] = -np.inf
+        return LimitRows(A, lower, _infinite(dij.size))
+
+    def _differences(self, P: Array) -> Array:
+        """The pair matrix of this step: every pair (fixed, built once) or each robot's k nearest (re-sorted)."""
+        N = P.shape[0]
+        if self.k == N - 1:
+            if self._D.shape != (N * (N - 1), N):
+                i, j = self._all_pairs(N)
+                self._D = np.zeros((i.size, N))
+                self._D[np.arange(i.size), i] = 1.0
+                self._D[np.arange(i.size), j] = -1.0
+            return self._D
+        dist = np.linalg.norm(P[:, None, :] - P[None, :, :], axis=-1)
+        np.fill_diagonal(dist, np.inf)
+        j = np.argsort(dist, axis=1, kind="stable")[:, : self.k].reshape(-1)  # the k nearest of each robot
+        i = np.repeat(np.arange(N), self.k)
+        D = np.zeros((i.size, N))
+        D[np.arange(i.size), i] = 1.0
+        D[np.arange(i.size), j] = -1.0
+        return D
 
 
 class _RobotVelocityRows(Limit):
@@ -357,12 +373,13 @@ class JointBox:
         """Bounds (lb, ub) on q̇; ``relax=True`` drops the acceleration bound (speed and span bounds stay)."""
         Ts = ctx.Ts
         if relax:
-            lb, ub = -self.vmax.copy(), self.vmax.copy()
+            lb, ub = -self.vmax, self.vmax.copy()
         else:
-            lb = np.maximum(-self.vmax, ctx.qdot_prev - self.a_max * Ts)
-            ub = np.minimum(self.vmax, ctx.qdot_prev + self.a_max * Ts)
+            da = self.a_max * Ts
+            lb = np.maximum(-self.vmax, ctx.qdot_prev - da)
+            ub = np.minimum(self.vmax, ctx.qdot_prev + da)
         pi = self.chain.prismatic_index
-        d = ctx.q[pi]
+        d = ctx.spans
         band_lo = (np.minimum(self._span_lo, d) - d) / Ts  # ≤ 0: a span outside only must not
         band_hi = (np.maximum(self._span_hi, d) - d) / Ts  # ≥ 0: get worse
         lo, hi = np.maximum(lb[pi], band_lo), np.minimum(ub[pi], band_hi)

@@ -90,6 +90,7 @@ class StepContext:
         self._J_e: Array | None = None
         self._J_r: Array | None = None
         self._vmap: VelocityMap | None = None
+        self._spans: Array | None = None
 
     @property
     def J_e(self) -> Array:
@@ -138,8 +139,10 @@ class StepContext:
 
     @property
     def spans(self) -> Array:
-        """Tether spans d_i [m] (the prismatic joints)."""
-        return self.q[self.chain.prismatic_index]
+        """Tether spans d_i [m] (the prismatic joints; cached for the step)."""
+        if self._spans is None:
+            self._spans = self.q[self.chain.prismatic_index]
+        return self._spans
 
 
 class Task(ABC):
@@ -237,6 +240,7 @@ class TetherRegulation(Task):
         self.target = np.full(chain.n_robots, lo + target_fraction * (hi - lo))
         coeffs = np.array([joint_limit_gain_coefficients(lo, hi, gain_edge, gain_length) for lo, hi in lim])  # (N, 4)
         self.a1, self.b1, self.a2, self.b2 = coeffs.T
+        self._a, self._b = np.vstack([self.a1, self.a2]), np.vstack([self.b1, self.b2])  # (2, N)
         self.G = float(gain_floor)
         self.max_gain = float(max_gain)
         self.S = np.zeros((chain.n_robots, chain.dof))
@@ -244,8 +248,8 @@ class TetherRegulation(Task):
 
     def gain(self, d: Array) -> Array:
         """K_ii(d) of Caruso 2021 eq. 23 [1/s], capped at ``max_gain``."""
-        # exponents clipped below overflow: beyond a limit the gain is capped anyway
-        k = self.a1 * np.exp(np.minimum(self.b1 * d, 700.0)) + self.a2 * np.exp(np.minimum(self.b2 * d, 700.0))
+        # both exponentials at once, exponents clipped below overflow (beyond a limit the gain is capped anyway)
+        k = np.einsum("ij,ij->j", self._a, np.exp(np.minimum(self._b * d, 700.0)))
         return np.minimum(k + self.G, self.max_gain)
 
     def compute(self, ctx: StepContext) -> TaskRows:

@@ -28,6 +28,7 @@ Array = NDArray[np.float64]
 #: Entries of a converted row below this fraction of the row's largest entry are rounding noise and set to zero,
 #: so that a row that is local in the target coordinates keeps its exact sparsity.
 NOISE = 1e-13
+_PERP = np.array([-1.0, 1.0])
 
 
 class VelocityMap:
@@ -41,6 +42,8 @@ class VelocityMap:
 
     def __init__(self, points: Array, spans: Array, directions: Array | None = None) -> None:
         d = np.asarray(spans, dtype=float)
+        if np.min(np.abs(d), initial=np.inf) < 1e-9:
+            raise ParameterError(f"robot-velocity coordinates need nonzero spans, got {d}")
         if directions is None:
             P = np.asarray(points, dtype=float)
             if P.ndim != 2 or P.shape[1] != 2 or d.shape != (P.shape[0] - 1,):
@@ -48,12 +51,10 @@ class VelocityMap:
             u = np.diff(P, axis=0) / d[:, None]  # (N, 2) link directions (signed spans: P_j − P_{j−1} = d_j u_j)
         else:
             u = directions
-        if np.min(np.abs(d), initial=np.inf) < 1e-9:
-            raise ParameterError(f"robot-velocity coordinates need nonzero spans, got {d}")
         self.n_robots = d.size
         self.d = d
         self.u = u
-        self.nrm = u[:, ::-1] * np.array([-1.0, 1.0])  # (−u_y, u_x)
+        self.nrm = u[:, ::-1] * _PERP  # (−u_y, u_x)
         self._T: Array | None = None
 
     # ------------------------------------------------------------------ vectors
@@ -98,16 +99,13 @@ class VelocityMap:
         """The matrix T of ``q̇ = T v``, (2N, 2N), banded (computed once per map)."""
         if self._T is None:
             N = self.n_robots
-            T = np.zeros((N, 2, N + 1, 2))  # (joint j, θ/d, robot 0..N, xy); robot 0 is the fixed anchor
-            j = np.arange(N)
+            idx = _t_scatter(N)
             a = self.nrm / self.d[:, None]  # φ̇_j = a_jᵀ (ṗ_j − ṗ_{j−1})
-            T[j, 1, j + 1] = self.u  # ḋ_j = u_jᵀ (ṗ_j − ṗ_{j−1})
-            T[j, 1, j] = -self.u
-            T[j, 0, j + 1] = a  # θ̇_j = φ̇_j − φ̇_{j−1}
-            T[j, 0, j] = -a
-            T[j[1:], 0, j[1:]] -= a[:-1]
-            T[j[1:], 0, j[1:] - 1] += a[:-1]
-            self._T = T[:, :, 1:].reshape(2 * N, 2 * N)
+            # ḋ_j = u_jᵀ (ṗ_j − ṗ_{j−1});  θ̇_j = φ̇_j − φ̇_{j−1} = a_jᵀ ṗ_j − (a_j + a_{j−1})ᵀ ṗ_{j−1} + a_{j−1}ᵀ ṗ_{j−2}
+            vals = np.concatenate([self.u, -self.u[1:], a, -a[1:] - a[:-1], a[1:-1]], axis=None)
+            T = np.zeros(4 * N * N)
+            T[idx] = vals
+            self._T = T.reshape(2 * N, 2 * N)
         return self._T
 
     @staticmethod
@@ -115,6 +113,32 @@ class VelocityMap:
         """Rows ``B`` on v, (m, 2N), as rows on q̇: ``B J_R`` with ``J_R`` the stacked robot Jacobians (N, 2, n)."""
         J = np.asarray(robot_jacobians, dtype=float)
         return np.asarray(B, dtype=float) @ J.reshape(-1, J.shape[-1])
+
+
+_T_SCATTER: dict[int, NDArray[np.intp]] = {}
+
+
+def _t_scatter(N: int) -> NDArray[np.intp]:
+    """Flat indices into T (2N, 2N) of the values stacked by :attr:`VelocityMap.T` (cached per N)."""
+    idx = _T_SCATTER.get(N)
+    if idx is None:
+        j = np.arange(N)
+        xy = np.arange(2)
+
+        def block(rows: NDArray[np.intp], robots: NDArray[np.intp]) -> NDArray[np.intp]:
+            return ((rows * 2 * N)[:, None] + 2 * robots[:, None] + xy).ravel()
+
+        idx = np.concatenate(
+            [
+                block(2 * j + 1, j),  # ḋ_j on robot j
+                block(2 * j[1:] + 1, j[1:] - 1),  # ḋ_j on robot j−1
+                block(2 * j, j),  # θ̇_j on robot j
+                block(2 * j[1:], j[1:] - 1),  # θ̇_j on robot j−1
+                block(2 * j[2:], j[2:] - 2),  # θ̇_j on robot j−2
+            ]
+        )
+        _T_SCATTER[N] = idx
+    return idx
 
 
 def _denoise(B: Array) -> Array:

@@ -317,6 +317,7 @@ class LexicographicQP:
         self._fallback = _QpsolversLevel(FALLBACK_SOLVER, self.eps)
         self.fallbacks = 0
         self._buffer = np.zeros((0, 0))
+        self._zeros = np.zeros(0)
         self._rows_cache: dict[int, tuple] = {}
         self._spans: list[tuple[slice, slice]] = []
         self._m0 = 0
@@ -404,6 +405,7 @@ class LexicographicQP:
         self._m0 = start
         # rows: [T, −I] (q̇ = T v), [0, I] (joint box), the limits, then room for the frozen rows of the levels
         self._buffer = np.zeros((start + n, 2 * n))
+        self._zeros = np.zeros(n)
         self._buffer[:n, n:] = -np.eye(n)
         self._buffer[n : 2 * n, n:] = np.eye(n)
         declared = np.zeros((start, 2 * n), dtype=bool)
@@ -482,7 +484,7 @@ class LexicographicQP:
         """
         nx = A0.shape[1]
         lb, ub = self.box.compute(ctx, relax=relax)
-        zeros = np.zeros(nx // 2)
+        zeros = self._zeros  # right-hand side of q̇ − T v = 0
         if relax:  # the relaxable (comfort) limits are dropped: their rows get infinite bounds
             drop = [lim.relaxable for lim in self.limits]
             pairs = list(zip(rows, drop, strict=True))
@@ -491,13 +493,14 @@ class LexicographicQP:
         else:
             lo0 = np.concatenate([zeros, lb, *(r.lower for r in rows)])
             up0 = np.concatenate([zeros, ub, *(r.upper for r in rows)])
-        F, y = np.zeros((0, nx)), np.zeros(0)
-        start = 0
         if optimistic:
             if 0 not in objectives:
                 objectives[0] = self._objective(self.levels[0], ctx)
             F, y = objectives[0][2], objectives[0][3]  # level 1 met exactly: J_1 x = t_1
             start = 1
+        else:
+            F, y = np.zeros((0, nx)), np.zeros(0)
+            start = 0
         x: Array | None = None
         iters = 0
         lag = 0.0
@@ -510,12 +513,14 @@ class LexicographicQP:
             Jw, tw, J, t, full = objectives[i]
             # lower levels start from the higher optimum, which sits on active rows up to the solver accuracy: a
             # small widening (growing with the level, as violations may accumulate) keeps that optimum feasible
-            widen = self.widen * i * (lo0 < up0)  # equalities (q̇ = T v) stay exact: OSQP treats them apart
             m0, nF = A0.shape[0], F.shape[0]
             self._buffer[m0 : m0 + nF] = F  # the frozen rows go below the hard rows: A is a view, never a copy
             A = self._buffer[: m0 + nF]
-            lo = np.concatenate([lo0 - widen, y])
-            up = np.concatenate([up0 + widen, y])
+            if i == start:  # no optimum of an earlier solve to keep feasible
+                lo, up = np.concatenate([lo0, y]), np.concatenate([up0, y])
+            else:
+                widen = self.widen * i * (lo0 < up0)  # equalities (q̇ = T v) stay exact: OSQP treats them apart
+                lo, up = np.concatenate([lo0 - widen, y]), np.concatenate([up0 + widen, y])
             z, status, it = self._workspace(i, nF).solve(A, lo, up, Jw, tw, self._declared)
             solves[0] += 1
             iters += it
