@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from tmr.cli_args import positive_int as _positive_int
 from tmr.errors import TmrError
 
 
@@ -39,16 +40,6 @@ def _points(text: str) -> np.ndarray:
     if not pts:
         raise argparse.ArgumentTypeError("expected robot positions 'x1,y1;x2,y2;...'")
     return np.array(pts)
-
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from exc
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"need at least 1, got {v}")
-    return v
 
 
 def _param(text: str) -> tuple[str, float]:

@@ -27,29 +27,11 @@ from typing import Any
 
 import numpy as np
 
+from tmr.cli_args import positive_float as _positive
+from tmr.cli_args import positive_int as _positive_int
 from tmr.errors import TmrError
 
 PLAN_FORMAT = "tmr-mcdpr-plan/1"
-
-
-def _positive(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from exc
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"expected a positive finite number, got {text!r}")
-    return v
-
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from exc
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"need at least 1, got {v}")
-    return v
 
 
 def _triple(text: str) -> tuple[float, float, float]:

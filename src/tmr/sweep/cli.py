@@ -27,6 +27,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from tmr.cli_args import positive_int as _positive
 from tmr.errors import TmrError
 from tmr.planner import METHODS
 from tmr.sweep.errors import SweepError
@@ -64,16 +65,6 @@ def _var(text: str) -> Any:
     if not sep or not sep2 or not key:
         raise argparse.ArgumentTypeError(f"expected NAME=LOW:HIGH, got {text!r}")
     return Variable(key, low, high)
-
-
-def _positive(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from exc
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"need at least 1, got {v}")
-    return v
 
 
 def build_parser() -> argparse.ArgumentParser:
