@@ -24,11 +24,9 @@ from __future__ import annotations
 import argparse
 import csv
 import datetime
-import importlib.metadata
 import os
 import platform
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -40,6 +38,10 @@ if PINNED:
     os.environ["OPENBLAS_NUM_THREADS"] = os.environ["OMP_NUM_THREADS"] = "1"
 
 import numpy as np  # noqa: E402
+from provenance import source_version, versions  # noqa: E402
+
+#: Distributions whose versions the table records.
+PACKAGES = ("numpy", "scipy", "casadi")
 
 from tmr.ccma.control import reached, track  # noqa: E402
 from tmr.ccma.energy import EnergyModel  # noqa: E402
@@ -70,33 +72,6 @@ COLUMNS = [
     ("max_residual", "max residual E [m²]", "{:.1e}"),
     ("reached", "all reached", "{}"),
 ]
-
-
-def versions() -> str:
-    out = []
-    for name in ("numpy", "scipy", "casadi"):
-        try:
-            out.append(f"{name} {importlib.metadata.version(name)}")
-        except importlib.metadata.PackageNotFoundError:
-            out.append(f"{name} (not installed)")
-    return ", ".join(out)
-
-
-def source_version() -> str:
-    root = Path(__file__).resolve().parent.parent
-    try:
-        head = subprocess.run(
-            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
-        ).stdout.strip()
-        dirty = subprocess.run(
-            ["git", "-C", str(root), "status", "--porcelain", "--", "src/tmr/ccma"],
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout
-    except (OSError, subprocess.CalledProcessError):
-        return "tmr commit unknown"
-    return f"tmr commit {head}" + (" + uncommitted changes in src/tmr/ccma" if dirty.strip() else "")
 
 
 def markdown(rows: list[dict[str, Any]]) -> str:
@@ -205,8 +180,8 @@ def main() -> None:
     load = "/".join(f"{x:.1f}" for x in load_start) + " → " + "/".join(f"{x:.1f}" for x in os.getloadavg())
     note = f"""\
 `{" ".join(["python benchmarks/ccma.py", *sys.argv[1:]])}` — {datetime.date.today().isoformat()}, machine
-`{platform.processor() or platform.machine()}`, nproc {nproc}, Python {platform.python_version()}; {versions()};
-{threads}; {source_version()}. Total run time {total:.0f} s; load average (1/5/15 min) {load}.
+`{platform.processor() or platform.machine()}`, nproc {nproc}, Python {platform.python_version()}; {versions(PACKAGES)};
+{threads}; {source_version("src/tmr/ccma")}. Total run time {total:.0f} s; load average (1/5/15 min) {load}.
 
 Path: `combined`, {args.steps} steps of (+1 mm x, y, z; +0.01 rad yaw and every tilt axis) from the reference
 configuration, {args.repeats} repeats. Formulation: [`formulations/ccma.md`](../../formulations/ccma.md). Columns:

@@ -37,7 +37,7 @@ from tmr.metrics import distance_errors
 from tmr.planner import METHODS, build_problem, solve
 from tmr.plot import plot_chain_poses, save_figure
 from tmr.scenario import load_scenario
-from tmr.sweep.bench import BENCH_COLUMNS
+from tmr.sweep.bench import BENCH_HEADER, bench_cells
 from tmr.sweep.report import csv_text, fmt, markdown_table
 from tmr.sweep.runs import RunResult, RunSpec, score
 
@@ -160,16 +160,10 @@ def main() -> None:
             print(f"{s} {m}: success {res.success}, {res.ms_per_step:.3f} ms/step", file=sys.stderr)
         save_figure(scenario_figure(s, cells), args.out / f"formulations_{s}.png")
 
-    header = ["scenario", "method", "success", *(h for _, h, _ in BENCH_COLUMNS)]
-    header += ["build [s]", "plan [ms/step]", "total [s]"]
+    header = [*BENCH_HEADER, "build [s]", "plan [ms/step]", "total [s]"]
     rows = []
     for r, tim in zip(results, timings, strict=True):
-        cells = [r.spec.scenario, r.spec.method, fmt(r.success)]
-        for key, _, spec in BENCH_COLUMNS:
-            if key in ("f1", "f2", "f3", "f4") and not r.success:
-                cells.append(f"({fmt(r.raw[int(key[1]) - 1], spec)})")
-            else:
-                cells.append(fmt(getattr(r, key), spec))
+        cells = bench_cells(r)
         cells += [fmt(tim["build_s"], ".2f"), fmt(r.ms_per_step, ".3f"), fmt(tim["total_s"], ".2f")]
         rows.append(cells)
     derr = markdown_table(

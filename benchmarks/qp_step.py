@@ -31,13 +31,11 @@ import argparse
 import csv
 import dataclasses
 import datetime
-import importlib.metadata
 import io
 import math
 import os
 import platform
 import statistics
-import subprocess
 import sys
 import time
 import traceback
@@ -53,7 +51,11 @@ if PINNED:
     os.environ["OPENBLAS_NUM_THREADS"] = os.environ["OMP_NUM_THREADS"] = "1"
 
 import numpy as np  # noqa: E402
+from provenance import source_version, versions  # noqa: E402
 from shapely.geometry import Point  # noqa: E402
+
+#: Distributions whose versions the table records.
+PACKAGES = ("numpy", "scipy", "osqp", "qpsolvers", "daqp", "proxsuite", "shapely")
 
 from tmr.environment import Environment  # noqa: E402
 from tmr.formulations.qp import solvers as qp_solvers  # noqa: E402
@@ -265,34 +267,6 @@ def markdown(rows: list[dict[str, Any]]) -> str:
     return out.getvalue()
 
 
-def versions() -> str:
-    names = ("numpy", "scipy", "osqp", "qpsolvers", "daqp", "proxsuite", "shapely")
-    out = []
-    for name in names:
-        try:
-            out.append(f"{name} {importlib.metadata.version(name)}")
-        except importlib.metadata.PackageNotFoundError:
-            out.append(f"{name} (not installed)")
-    return ", ".join(out)
-
-
-def source_version() -> str:
-    """Commit of the library measured, and whether ``src/`` has uncommitted changes (the library is in flux)."""
-    root = Path(__file__).resolve().parent.parent
-    try:
-        head = subprocess.run(
-            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
-        ).stdout.strip()
-        dirty = subprocess.run(
-            ["git", "-C", str(root), "status", "--porcelain", "--", "src"], capture_output=True, text=True, check=True
-        ).stdout
-    except (OSError, subprocess.CalledProcessError):
-        return "tmr commit unknown"
-    changed = [line[3:] for line in dirty.splitlines() if line.strip()]
-    listed = ", ".join(changed[:5]) + (", …" if len(changed) > 5 else "")
-    return f"tmr commit {head}" + (f" + uncommitted changes in {listed}" if changed else "")
-
-
 def targets(rows: list[dict[str, Any]]) -> str:
     """The project issue's targets, checked against the measured rows."""
 
@@ -422,7 +396,7 @@ def main() -> None:
     threads += " (set by the script: one thread per step)" if PINNED else " (from the environment)"
     note = f"""\
 `{" ".join(["python benchmarks/qp_step.py", *sys.argv[1:]])}` — {datetime.date.today().isoformat()}, machine
-`{machine}`, nproc {nproc}, Python {platform.python_version()}; {versions()}; {threads}; {source_version()}.
+`{machine}`, nproc {nproc}, Python {platform.python_version()}; {versions(PACKAGES)}; {threads}; {source_version()}.
 Total run time {total:.0f} s;
 {load} (a load above 1 on an otherwise idle machine means other processes competed for the {nproc} cores).
 

@@ -47,18 +47,29 @@ def bench_specs(
 
 def bench_markdown(results: Sequence[RunResult], timing: bool = True) -> str:
     """Markdown table of a benchmark; f1–f4 of failed plans are the raw values in brackets (the paper scores +∞)."""
-    header = ["scenario", "method", "success", *(h for _, h, _ in BENCH_COLUMNS)]
+    header = list(BENCH_HEADER)
     if timing:
         header += ["plan [ms/step]", "plan [s]"]
     rows = []
     for r in results:
-        cells = [r.spec.scenario, r.spec.method, fmt(r.success)]
-        for key, _, spec in BENCH_COLUMNS:
-            if key in ("f1", "f2", "f3", "f4") and not r.success:
-                cells.append(f"({fmt(r.raw[int(key[1]) - 1], spec)})")
-            else:
-                cells.append(fmt(getattr(r, key), spec))
+        cells = bench_cells(r)
         if timing:
             cells += [fmt(r.ms_per_step, ".3f"), fmt(r.plan_time, ".2f")]
         rows.append(cells)
     return markdown_table(header, rows)
+
+
+#: Header of the score columns of :func:`bench_cells`.
+BENCH_HEADER = ("scenario", "method", "success", *(h for _, h, _ in BENCH_COLUMNS))
+
+
+def bench_cells(r: RunResult) -> list[str]:
+    """Scenario, method, success and the :data:`BENCH_COLUMNS` of one run, formatted; f1–f4 of a failed plan are the
+    raw values of its recorded motion in brackets (the paper scores a failure +∞)."""
+    cells = [r.spec.scenario, r.spec.method, fmt(r.success)]
+    for key, _, spec in BENCH_COLUMNS:
+        if key in ("f1", "f2", "f3", "f4") and not r.success:
+            cells.append(f"({fmt(r.raw[int(key[1]) - 1], spec)})")
+        else:
+            cells.append(fmt(getattr(r, key), spec))
+    return cells
