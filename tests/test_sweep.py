@@ -187,7 +187,7 @@ def test_process_pool_matches_serial_in_task_order(tiny_specs, serial_results):
 def dask_cluster():
     distributed = pytest.importorskip("distributed")
     cluster = distributed.LocalCluster(
-        n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None, silence_logs=50
+        n_workers=1, threads_per_worker=2, processes=False, dashboard_address=":0", silence_logs=50
     )
     yield cluster
     cluster.close()
