@@ -214,3 +214,29 @@ def test_make_qp_with_user_limit_and_params():
     plan, metrics = solve(problem, "qp")
     speeds = np.abs(np.diff(plan.robots, axis=0) / 0.05)
     assert speeds.max() < 1.0 + 0.05  # the per-axis speed bound holds on the recorded motion (linearisation)
+
+
+class _BufferedPull:
+    """Pulls robot 1 along y with rows written into one reused (writable) buffer, as a user task may do."""
+
+    name = "buffered"
+
+    def __init__(self, copy: bool) -> None:
+        self.copy, self.J = copy, None
+
+    def compute(self, ctx):
+        if self.J is None:
+            self.J = np.zeros((1, ctx.chain.dof))
+        self.J[:] = ctx.robot_jacobians[0][1]  # changes every step, written in place
+        return TaskRows(self.J.copy() if self.copy else self.J, np.array([-0.3]))
+
+    def reset(self):
+        self.J = None
+
+
+def test_rows_rewritten_in_place_are_never_taken_from_the_cache():
+    problem = build_problem(random_scenario(5), seed=1, path_iterations=300)
+    plans = [
+        plan(problem, make_qp(problem, extra_levels=(Level([(_BufferedPull(copy), 1.0)]),))) for copy in (False, True)
+    ]
+    np.testing.assert_array_equal(plans[0].q, plans[1].q)

@@ -151,7 +151,9 @@ class Task(ABC):
     ``space`` names the velocity coordinates of ``J``: ``"joint"`` (q̇, the default) or ``"robot"`` (robot
     velocities); every formulation converts the rows to its own coordinates (:meth:`StepContext.rows_in`).
     ``full_rank = True`` declares that the rows always have rank 2N (e.g. all joint rates): a priority level holding
-    such a task has a unique optimum, so the lexicographic QP skips the levels below it.
+    such a task has a unique optimum, so the lexicographic QP skips the levels below it. A task whose ``J`` never
+    changes may return the same read-only array every step (``J.flags.writeable = False``): formulations then reuse
+    what they built from it.
     """
 
     name: str = "task"
@@ -190,6 +192,7 @@ class LeaderTracking(Task):
         if self._S is None or self._S.shape[1] != n:
             self._S = np.zeros((2, n))
             self._S[:, n - 2 :] = np.eye(2)
+            self._S.flags.writeable = False  # constant rows (formulations may reuse what they built from them)
         return TaskRows(self._S, ctx.xd_d + self.gain * (ctx.x_d - ctx.x_e))
 
 
@@ -245,6 +248,7 @@ class TetherRegulation(Task):
         self.max_gain = float(max_gain)
         self.S = np.zeros((chain.n_robots, chain.dof))
         self.S[np.arange(chain.n_robots), chain.prismatic_index] = 1.0
+        self.S.flags.writeable = False  # constant rows
 
     def gain(self, d: Array) -> Array:
         """K_ii(d) of Caruso 2021 eq. 23 [1/s], capped at ``max_gain``."""
@@ -344,6 +348,7 @@ class SpanUniformity(Task):
         rows = np.arange(N - 1)
         self.D[rows, chain.prismatic_index[:-1]] = 1.0
         self.D[rows, chain.prismatic_index[1:]] = -1.0
+        self.D.flags.writeable = False  # constant rows
 
     def compute(self, ctx: StepContext) -> TaskRows:
         return TaskRows(self.D, -self.gain * (self.D @ ctx.q))
@@ -357,6 +362,7 @@ class Damping(Task):
 
     def __init__(self, chain: Chain) -> None:
         self.I = np.eye(chain.dof)
+        self.I.flags.writeable = False  # constant rows
 
     def compute(self, ctx: StepContext) -> TaskRows:
         return TaskRows(self.I, np.zeros(ctx.chain.dof))
@@ -370,6 +376,7 @@ class Smoothness(Task):
 
     def __init__(self, chain: Chain) -> None:
         self.I = np.eye(chain.dof)
+        self.I.flags.writeable = False  # constant rows
 
     def compute(self, ctx: StepContext) -> TaskRows:
         return TaskRows(self.I, ctx.qdot_prev)

@@ -338,12 +338,15 @@ class LexicographicQP:
     def _objective(self, level: Level, ctx: StepContext) -> tuple[Array, Array, Array, Array, bool]:
         """Rows of a level on x = [v, q̇]: weighted (√w J, √w t), plain (J, t), and whether it is full rank.
 
-        Tasks whose rows are constant return the same array every step (selectors, identities); when every task of
-        the level does, the stacked matrices of the previous step are reused and only the targets are rebuilt.
+        Tasks whose rows are constant return the same read-only array every step (selectors, identities); when every
+        task of the level does, the stacked matrices of the previous step are reused and only the targets are rebuilt
+        (a writable array may have been changed in place: it is always restacked).
         """
         parts = [task.compute(ctx) for task, _ in level.tasks]
         cached = self._rows_cache.get(id(level))
-        if cached is not None and all(Jt is c for (Jt, _), c in zip(parts, cached[0], strict=True)):
+        if cached is not None and all(
+            Jt is c and not Jt.flags.writeable for (Jt, _), c in zip(parts, cached[0], strict=True)
+        ):
             _, J, Jw, sw, full = cached
         else:
             n = 2 * self.chain.n_robots
