@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -416,3 +417,26 @@ def test_outputs_land_next_to_existing_files(tmp_path, capsys):
 def test_module_entry_point_help():
     res = subprocess.run([sys.executable, "-m", "tmr.sweep", "sensitivity", "--help"], capture_output=True, text=True)
     assert res.returncode == 0 and "--scheduler" in res.stdout and "d_min" in res.stdout
+
+
+def _fail_first(args: tuple[int, str]) -> int:
+    import time
+
+    i, folder = args
+    if i == 0:
+        raise ValueError("task 0 is broken")
+    time.sleep(0.2)
+    Path(folder, f"ran_{i}").touch()
+    return i
+
+
+def test_a_failing_task_stops_the_pool_without_running_the_rest(tmp_path):
+    from tmr.sweep.executor import LocalExecutor
+
+    ex = LocalExecutor(jobs=2, progress=False)
+    with pytest.raises(ValueError, match="task 0 is broken"):
+        ex.map(_fail_first, [(i, str(tmp_path)) for i in range(40)])
+    ex.close()  # waits for nothing left: the queued tasks were cancelled
+    assert len(list(tmp_path.glob("ran_*"))) < 20  # without the cancel every one of the 39 tasks would have run
+    assert ex.map(abs, [-1, 2]) == [1, 2]  # the executor is usable again (a fresh pool)
+    ex.close()

@@ -18,6 +18,7 @@ import multiprocessing
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Protocol, TypeVar
 
 from tmr.sweep.errors import SweepError
@@ -89,10 +90,18 @@ class LocalExecutor:
             self._pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx)
         futures = {self._pool.submit(fn, item): i for i, item in enumerate(items)}
         out: list[Any] = [None] * len(items)
-        with _bar(len(items), desc, self.progress) as bar:
-            for fut in as_completed(futures):
-                out[futures[fut]] = fut.result()
-                bar.update(1)
+        try:
+            with _bar(len(items), desc, self.progress) as bar:
+                for fut in as_completed(futures):
+                    out[futures[fut]] = fut.result()
+                    bar.update(1)
+        except BaseException as exc:
+            # one task failed (or Ctrl-C): drop the tasks not started yet instead of running them all first
+            pool, self._pool = self._pool, None
+            pool.shutdown(wait=False, cancel_futures=True)
+            if isinstance(exc, BrokenProcessPool):
+                raise SweepError(f"a worker process died ({exc}); out of memory? try fewer --jobs") from exc
+            raise
         return out
 
     def close(self) -> None:
@@ -138,10 +147,16 @@ class DaskExecutor:
         futures = self.client.map(fn, list(items), pure=False)
         index = {f.key: i for i, f in enumerate(futures)}
         out: list[Any] = [None] * len(items)
-        with _bar(len(items), desc, self.progress) as bar:
-            for fut in dask_completed(futures):
-                out[index[fut.key]] = fut.result()
-                bar.update(1)
+        try:
+            with _bar(len(items), desc, self.progress) as bar:
+                for fut in dask_completed(futures):
+                    out[index[fut.key]] = fut.result()
+                    bar.update(1)
+        except BaseException as exc:
+            self.client.cancel(futures)  # the other tasks are not waited for
+            if type(exc).__name__ == "KilledWorker":
+                raise SweepError(f"a Dask worker died running a task ({exc})") from exc
+            raise
         return out
 
     def close(self) -> None:
