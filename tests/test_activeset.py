@@ -91,3 +91,40 @@ def test_dependent_active_rows_are_declined():
     A = np.array([[1.0, 0.0], [1.0, 0.0]])  # the same row twice, both as equalities: a singular KKT matrix
     lo = up = np.array([0.5, 0.5])
     assert WarmActiveSet().solve(P, q, A, lo, up, np.zeros(2, np.int8)) is None
+
+
+def test_near_duplicate_and_badly_scaled_rows_never_give_a_wrong_verified_answer():
+    """Nearly parallel rows guessed active together make the KKT matrix nearly singular: the solve must be declined
+    (stationarity and active-row checks), never returned as the optimum."""
+    rng = np.random.default_rng(1)
+    ws = WarmActiveSet()
+    accepted = 0
+    for _ in range(1000):  # the wrong answers of the unchecked solve show up a few times in a thousand
+        n = 6
+        J = rng.normal(size=(3, n))
+        P = J.T @ J + 1e-9 * np.eye(n)
+        q = -J.T @ rng.normal(size=3)
+        A = rng.normal(size=(5, n))
+        A = np.vstack([A, A[0] + rng.normal(size=n) * 10 ** rng.uniform(-14, -8), 1e6 * A[1]])
+        lo, up = -np.abs(rng.normal(size=7)) * 0.1, np.abs(rng.normal(size=7)) * 0.1
+        lo[6] *= 1e6
+        up[6] *= 1e6
+        x_ref = reference(P, q, A, lo, up)
+        if x_ref is None:
+            continue
+        for _ in range(3):
+            res = ws.solve(P, q, A, lo, up, rng.integers(-1, 2, size=7).astype(np.int8))
+            if res is None:
+                continue
+            accepted += 1
+            f = 0.5 * res.x @ P @ res.x + q @ res.x
+            f_ref = 0.5 * x_ref @ P @ x_ref + q @ x_ref
+            assert f <= f_ref + 1e-6 * (1 + abs(f_ref))  # optimal (the minimiser need not be unique: P is singular)
+    assert accepted > 0
+
+
+def test_more_active_rows_than_unknowns_is_declined():
+    P, q = np.eye(2), np.zeros(2)
+    A = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    lo, up = np.full(3, -1.0), np.array([1.0, 1.0, 2.0])
+    assert WarmActiveSet().solve(P, q, A, lo, up, np.ones(3, np.int8)) is None

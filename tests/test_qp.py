@@ -240,3 +240,32 @@ def test_rows_rewritten_in_place_are_never_taken_from_the_cache():
         plan(problem, make_qp(problem, extra_levels=(Level([(_BufferedPull(copy), 1.0)]),))) for copy in (False, True)
     ]
     np.testing.assert_array_equal(plans[0].q, plans[1].q)
+
+
+class _LeaderTimesN:
+    """Level-1 rows that repeat the leader's x velocity 2N times (more rows than unknowns, rank 1)."""
+
+    name = "dup"
+    space = "robot"
+
+    def compute(self, ctx):
+        n = 2 * ctx.chain.n_robots
+        S = np.zeros((n, n))
+        S[:, n - 2] = 1.0
+        return TaskRows(S, np.full(n, 0.3))
+
+    def reset(self):
+        pass
+
+
+def test_first_level_with_every_degree_of_freedom_or_redundant_rows(column_room):
+    chain, ctx = context(column_room, [[3.0, 7.3], [6.0, 7.4], [9.0, 7.3]], (1.0, 7.3), [[9.3, 7.0]], [[0.5, -0.2]])
+    limits = [ObstacleClearance(chain, 20), RobotSpeed(chain, 2.5), RobotSeparation(chain, 0.5)]
+    box = JointBox(chain, LIMITS, 3.0, 3.0, 20.0)
+    # smoothness first: it fixes every joint rate (at the previous ones, zero), the leader below cannot move
+    qp = LexicographicQP(chain, [Level([(Smoothness(chain), 1.0)]), Level([(LeaderTracking(5.0), 1.0)])], limits, box)
+    np.testing.assert_allclose(qp.step(ctx)[0], 0.0, atol=1e-9)
+    # 2N copies of one row first: the leader's x velocity is 0.3 m/s, the level below (energy) decides the rest
+    qp = LexicographicQP(chain, [Level([(_LeaderTimesN(), 1.0)]), Level([(Damping(chain), 1.0)])], limits, box)
+    qdot, _ = qp.step(ctx)
+    assert (chain.end_effector_jacobian(ctx.q) @ qdot)[0] == pytest.approx(0.3, abs=1e-6)

@@ -5,12 +5,15 @@ the equalities). Given a guess W of the active rows (each at its lower or upper 
 
     min ½ xᵀPx + qᵀx   s.t.  A_W x = b_W
 
-is one linear solve of its KKT system ``[P A_Wᵀ; A_W 0] [x; y_W] = [−q; b_W]`` (numpy for small problems, SuperLU
-through scipy.sparse for large ones). Its solution is the QP's optimum exactly when the KKT conditions hold: every
-row within its bounds (primal feasibility) and every multiplier of the right sign (y ≥ 0 at an upper bound, y ≤ 0 at
-a lower bound; free on equalities). If they do not, the violated rows are added to W and the rows with wrong-sign
-multipliers dropped, for a few rounds (a primal-dual active-set update); if the guess still does not verify, the
-caller falls back to a general solver (OSQP) and takes its active set as the next guess. It is OSQP's own "solution
+is one linear solve of its KKT system ``[P A_Wᵀ; A_W 0] [x; y_W] = [−q; b_W]`` (LAPACK for small problems, SuperLU
+through scipy.sparse for large ones). Its solution is the QP's optimum exactly when the KKT conditions hold, and each
+is checked on the computed point: stationarity ``P x + q + A_Wᵀ y_W = 0`` and the active rows at their bounds (an
+ill-conditioned solve fails here), every row within its bounds (primal feasibility), and every multiplier of the
+right sign (y ≥ 0 at an upper bound, y ≤ 0 at a lower bound; free on equalities), with tolerances scaled by the
+problem data. If they do not hold, the violated rows are added to W and the rows with wrong-sign multipliers
+dropped, for a few rounds (a primal-dual active-set update); a guess with more active rows than unknowns, or a
+singular or inaccurate solve, is declined. Then the caller falls back to a general solver (OSQP) and takes its active
+set as the next guess. It is OSQP's own "solution
 polishing" applied across steps: the guess comes from the previous step instead of from ADMM iterates.
 """
 
@@ -89,23 +92,33 @@ class WarmActiveSet:
         s = guess.copy()
         s[lo == up] = 2
         tol = self.tol
+        n = q.size
+        scale = 1.0 + float(np.max(np.abs(q), initial=0.0))  # problem data, not the (possibly garbage) multipliers
         for r in range(1, self.rounds + 1):
             W = np.flatnonzero(s)
+            if W.size > n:
+                return None  # more active rows than unknowns: degenerate, multipliers not unique
             st = s[W]
-            ineq = st != 2
-            has_ineq = bool(ineq.any())
+            has_ineq = bool((st != 2).any())
             b = np.where(st == 1, up[W], lo[W]) if has_ineq else lo[W]  # equalities: lo = up
-            sol = self._kkt(P, q, A[W], b)
+            AW = A[W]
+            sol = self._kkt(P, q, AW, b)
             if sol is None:
                 return None
             x, yW = sol
             Ax = A @ x
-            # every row within its bounds, the active ones included (an inaccurate solve shows up here)
-            viol = np.maximum(lo - Ax, Ax - up)
+            # the KKT point itself: active rows at their bounds and stationarity P x + q + A_Wᵀ y = 0 (an
+            # ill-conditioned system, e.g. nearly parallel active rows, fails here instead of passing garbage on)
+            if np.max(np.abs(Ax[W] - b), initial=0.0) > tol * (1.0 + np.max(np.abs(b), initial=0.0)):
+                return None
+            Px = P @ x
+            if np.max(np.abs(Px + q + AW.T @ yW), initial=0.0) > 10 * tol * (scale + np.max(np.abs(Px))):
+                return None
+            viol = np.maximum(lo - Ax, Ax - up)  # every row within its bounds
             feasible = not viol.size or viol.max() <= tol
             wrong = None
             if has_ineq:  # multipliers of the active inequalities must have the sign of their bound
-                ytol = tol * max(1.0, float(np.max(np.abs(yW))))
+                ytol = tol * scale
                 wrong = ((st == 1) & (yW < -ytol)) | ((st == -1) & (yW > ytol))
                 if not wrong.any():
                     wrong = None

@@ -424,7 +424,12 @@ class LexicographicQP:
         n = 2 * self.chain.n_robots
         B = self._buffer
         B[:n, :n] = ctx.velocity_map.T
-        for (r, c), lr in zip(self._spans, rows, strict=True):
+        for (r, c), lr, lim in zip(self._spans, rows, self.limits, strict=True):
+            if lr.A.shape != (r.stop - r.start, n) or lr.lower.shape != lr.upper.shape != (r.stop - r.start,):
+                raise ParameterError(
+                    f"limit {lim.name!r} returned rows of shape {lr.A.shape} (bounds {lr.lower.shape}); its pattern "
+                    f"declares {r.stop - r.start} rows of {n} columns"
+                )
             B[r, c] = lr.A
         return B[: self._m0]
 
@@ -496,9 +501,12 @@ class LexicographicQP:
         else:
             lo0 = np.concatenate([zeros, lb, *(r.lower for r in rows)])
             up0 = np.concatenate([zeros, ub, *(r.upper for r in rows)])
+        n = nx // 2
         if optimistic:
             if 0 not in objectives:
                 objectives[0] = self._objective(self.levels[0], ctx)
+            if objectives[0][4] or objectives[0][2].shape[0] >= n:
+                return None  # level 1 alone fixes every degree of freedom: nothing to gain, solve it on its own
             F, y = objectives[0][2], objectives[0][3]  # level 1 met exactly: J_1 x = t_1
             start = 1
         else:
@@ -509,7 +517,7 @@ class LexicographicQP:
         lag = 0.0
         last = len(self.levels) - 1
         for i in range(start, len(self.levels)):
-            if F.shape[0] >= nx // 2:
+            if i > start and F.shape[0] >= n:
                 break  # the higher levels fix every degree of freedom (x has 2N of them: v determines q̇)
             if i not in objectives:
                 objectives[i] = self._objective(self.levels[i], ctx)
@@ -545,13 +553,28 @@ class LexicographicQP:
                 lag = float(np.linalg.norm(J @ x - t))  # > 0 when the limits hold the leader back
             if i == last or full:
                 break  # nothing below, or this level's optimum is unique
+            # the frozen basis lives on v (q̇ = T v): a row [a, b] on x = [v, q̇] acts as a + b T, so rows that are
+            # equivalent through the coupling are recognised as dependent; F's rows are [F_v, 0]
+            T = ctx.velocity_map.T
             if i == start and optimistic:  # replace level 1's raw rows by an orthonormal basis before extending it
-                F = orthonormal_rows(F, np.zeros((0, nx)))
+                F = self._on_x(orthonormal_rows(self._on_v(F, T), np.zeros((0, n))))
                 y = F @ x
-            Fn = orthonormal_rows(J, F)
+            Fn = self._on_x(orthonormal_rows(self._on_v(J, T), F[:, :n]))
             F, y = np.vstack([F, Fn]), np.concatenate([y, Fn @ x])
-        assert x is not None
+        if x is None:  # pragma: no cover - level 1 is always solved or raises above
+            raise InfeasibleStep(f"step {ctx.k}: no level was solved")
         return x, lag, iters
+
+    @staticmethod
+    def _on_v(J: Array, T: Array) -> Array:
+        """Rows on x = [v, q̇] as rows on v, through q̇ = T v."""
+        n = T.shape[0]
+        return J[:, :n] + J[:, n:] @ T
+
+    @staticmethod
+    def _on_x(Fv: Array) -> Array:
+        """Rows on v as rows on x = [v, q̇] (zeros on q̇)."""
+        return np.hstack([Fv, np.zeros_like(Fv)])
 
     def _kept(self, F: Array, y: Array, x: Array) -> bool:
         """Whether x keeps the frozen task values of the higher levels (strict priority) to solver accuracy."""
