@@ -90,3 +90,35 @@ def test_unreachable_path_exits_1_with_outputs(tmp_path, capsys):
 def test_list(capsys):
     assert main(["list"]) == 0
     assert "4dof-reduced     3 agents, 6 controls" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("where", ["file", "file/sub"])
+def test_bad_out_exits_2_before_computing(tmp_path, capsys, monkeypatch, where):
+    """--out an existing file (or below one): exit 2 at once, nothing written, no tracking done."""
+    (tmp_path / "file").write_text("keep")
+    import tmr.ccma.control as control
+
+    def boom(*a, **k):  # the check must come before any computation
+        raise AssertionError("tracked despite a bad --out")
+
+    monkeypatch.setattr(control, "track", boom)
+    code = main(["run", "--out", str(tmp_path / where), "--no-plots", "--steps", "1", "--path", "line"])
+    assert code == 2
+    assert "--out" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"] and (tmp_path / "file").read_text() == "keep"
+
+
+def test_rerun_into_same_out_removes_stale_outputs(tmp_path):
+    out = tmp_path / "out"
+    assert main(["run", "--out", str(out), "--path", "line", "--steps", "1"]) == 0
+    (out / "notes.txt").write_text("mine")  # not a tmr output name: left alone
+    assert main(["run", "--out", str(out), "--path", "line", "--steps", "1", "--no-plots"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "summary.json", "trajectory.csv", "trajectory.json"]
+
+
+def test_non_utf8_description_exits_2(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_bytes(b'name = "\xff\xfe"\n')
+    code, out = _run(tmp_path, "out", "--description", str(bad))
+    assert code == 2 and not out.exists()
+    assert "not a UTF-8 text file" in capsys.readouterr().err

@@ -155,3 +155,25 @@ def test_unreachable_target_is_reported_not_faked(models):
     res = track(m, np.array([p0 + [0, 0, 0.3]]), r0[None])
     assert not reached(res).any()
     assert res.position_error[0] > 1e-3
+
+
+@pytest.mark.parametrize(
+    ("bad", "match"),
+    [
+        ({"position": [np.nan, 0.0, 0.5]}, "target position must be 3 finite numbers"),
+        ({"position": [0.0, 0.5]}, "target position must be 3 finite numbers"),
+        ({"rotation": np.full((3, 3), np.nan)}, "target rotation must be a finite 3×3 matrix"),
+        ({"rotation": 2.0 * np.eye(3)}, "not a rotation matrix"),
+        ({"u0": np.full(6, np.inf)}, "u0 must be 6 finite numbers"),
+        ({"u0": np.zeros(5)}, "u0 must be 6 finite numbers"),
+    ],
+)
+def test_solve_ik_rejects_bad_inputs(models, bad, match):
+    from tmr.ccma.errors import CcmaError
+
+    m = models["4dof-reduced"]
+    st = reference_state(m)
+    p0, r0 = end_effector_pose(m, st)
+    target = Target(bad.get("position", p0), bad.get("rotation", r0))
+    with pytest.raises(CcmaError, match=match):
+        solve_ik(m, st, bad.get("u0", m.system.u0), target)

@@ -8,7 +8,7 @@ import shutil
 import numpy as np
 import pytest
 
-from tmr.ccma.energy import EnergyModel
+from tmr.ccma.energy import EnergyModel, _Evaluator
 from tmr.ccma.system import build_system, load_system
 
 RNG = np.random.default_rng(11)
@@ -113,11 +113,25 @@ def test_compiled_model_matches_interpreted(tmp_path):
     x = ref.system.x0 + 0.05 * RNG.normal(size=ref.system.x0.size)
     u = ref.system.u0 + 0.05
     p = ref.params(ref.system.r_ref0)
-    for a, b in zip(ref.egh(x, u, p), fast.egh(x, u, p), strict=True):
-        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)
-    t = ref.target_vector(np.zeros(3), np.eye(3))
-    for a, b in zip(ref.ik(x, u, p, t), fast.ik(x, u, p, t), strict=True):
-        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)
+    t = ref.target_vector(np.array([0.1, -0.2, 0.9]), np.eye(3))
+    inputs = {
+        "egh": (x, u, p),
+        "energy": (x, u, p),
+        "ik": (x, u, p, t),
+        "gn": (x, u, p, t),
+        "ee": (x, p),
+        "residuals": (x, u, p),
+        "poses": (x, p),
+    }
+    evaluators = {k for k, v in vars(ref).items() if isinstance(v, _Evaluator)}
+    assert set(inputs) == evaluators and len(evaluators) == 7  # every compiled function of EnergyModel
+    for name, args in inputs.items():
+        a_out, b_out = getattr(ref, name)(*args), getattr(fast, name)(*args)
+        a_out = a_out if isinstance(a_out, tuple) else (a_out,)
+        b_out = b_out if isinstance(b_out, tuple) else (b_out,)
+        assert len(a_out) == len(b_out), name
+        for a, b in zip(a_out, b_out, strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15, err_msg=name)
     # the second build loads the cached library
     again = EnergyModel(build_system(desc), compile=True, cache_dir=tmp_path, check=False)
     assert again.energy(x, u, p) == fast.energy(x, u, p)

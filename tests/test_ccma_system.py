@@ -122,3 +122,56 @@ def test_loading_files_and_bad_sources(tmp_path):
         load_description(bad)
     with pytest.raises(DescriptionError, match="neither a shipped example"):
         load_description("7dof-imaginary")
+
+
+def _malformed(edit):
+    d = load_description("4dof-reduced")
+    edit(d)
+    return d
+
+
+@pytest.mark.parametrize(
+    ("edit", "match"),
+    [
+        (lambda d: d["bodies"].__setitem__(0, "ee"), r"\[\[bodies\]\] entry #1 must be a table"),
+        (lambda d: d["joints"].__setitem__(0, 5), r"\[\[joints\]\] entry #1 must be a table"),
+        (lambda d: d["agents"].__setitem__(0, ["agent_a"]), r"\[\[agents\]\] entry #1 must be a table"),
+        (lambda d: d.__setitem__("bodies", "ee"), "'bodies' must be an array of tables"),
+        (lambda d: d.__setitem__("agents", {"name": "a"}), "'agents' must be an array of tables"),
+        (lambda d: d["agents"][0].__setitem__("attach", ["post_a"]), "'attach' must name a passive body"),
+        (lambda d: d["end_effector"].__setitem__("body", ["ee"]), r"\[end_effector\] must name a body"),
+        (lambda d: d["joints"][0].__setitem__("bodies", [["post_a"], "arm_a"]), "must be a body name"),
+        (lambda d: d["joints"][0].__setitem__("type", ["revolute"]), "type .* is not one of"),
+        (lambda d: d["agents"][0].__setitem__("actuation", ["reduced"]), "actuation .* is not one of"),
+        (lambda d: d["end_effector"].__setitem__("tilt_axes", 5), "tilt_axes must be a list of 3-vectors"),
+    ],
+)
+def test_malformed_descriptions_raise_description_error(edit, match):
+    with pytest.raises(DescriptionError, match=match):
+        build_system(_malformed(edit))
+
+
+def test_unreadable_description_files_raise_description_error(tmp_path):
+    bad = tmp_path / "latin1.toml"
+    bad.write_bytes('name = "caf\xe9"\n'.encode("latin-1"))
+    with pytest.raises(DescriptionError, match="not a UTF-8 text file"):
+        load_description(bad)
+
+
+def test_held_yaw_of_reduced_agents_does_not_reach_the_chain():
+    """Reduced actuation holds each agent body's yaw at the description's value (formulations/ccma.md, choice); the
+    passive mount revolute decouples it, so end-effector pose and residual energy do not depend on it."""
+    from tmr.ccma.sim import end_effector_pose, newton, reference_state
+
+    d = load_description("4dof-reduced")
+    turned = copy.deepcopy(d)
+    for a in turned["agents"]:
+        a["yaw"] = a["yaw"] + 0.7
+    ma, mb = EnergyModel(build_system(d)), EnergyModel(build_system(turned))
+    u = (ma.system.u0.reshape(3, 2) * (1.0 + 0.04 / 0.6)).ravel()  # radial expansion: assemblable, every leg bends
+    ra, rb = newton(ma, reference_state(ma), u), newton(mb, reference_state(mb), u)
+    assert ra.converged and rb.converged and ra.energy < 1e-16 and rb.energy < 1e-16
+    (pa, rota), (pb, rotb) = end_effector_pose(ma, ra.state), end_effector_pose(mb, rb.state)
+    assert np.linalg.norm(pa - end_effector_pose(ma, reference_state(ma))[0]) > 0.01  # the platform really moved
+    np.testing.assert_allclose(pb, pa, atol=1e-12)
+    np.testing.assert_allclose(rotb, rota, atol=1e-12)

@@ -4,13 +4,15 @@
 (:mod:`tmr.ccma.control`) and writes into ``--out``: ``trajectory.csv`` and ``trajectory.json`` (targets, reached
 end-effector pose, agent poses and controls, errors, residual energy, iteration counts per step), ``summary.json``
 (tolerance checks and timings) and, unless ``--no-plots``, ``mechanism.png`` (3D + top view) and
-``convergence.png`` (objective against time, Kumar 2019 Fig. 5). ``list`` prints the shipped examples.
+``convergence.png`` (objective against time, Kumar 2019 Fig. 5). Files of these names left in ``--out`` by an earlier
+run that this run does not write (e.g. the figures under ``--no-plots``) are deleted; other files are not touched.
+``list`` prints the shipped examples.
 
 Everything is deterministic except the timings (``summary.json`` "timing" and ``convergence.png``): the same inputs
 give the same trajectory bytes. Nothing in this command is random, so there is no ``--seed``.
 
 Exit codes: 0 every target reached; 1 tracked but some target missed (outputs written, reason printed); 2 bad input
-(nothing written).
+(nothing written), including an ``--out`` that is an existing file or cannot be created or written (checked first).
 """
 
 from __future__ import annotations
@@ -34,6 +36,30 @@ from tmr.cli_args import positive_int as _positive_int
 from tmr.errors import TmrError
 
 TRAJECTORY_FORMAT = "tmr-ccma-trajectory/1"
+#: Every file name ``run`` may write into ``--out``; names a run does not produce are removed from ``--out`` so no
+#: file of an earlier run survives next to the new ones (other files in ``--out`` are left alone).
+OUTPUT_NAMES = ("trajectory.csv", "trajectory.json", "summary.json", "mechanism.png", "convergence.png")
+
+
+def check_out_dir(out: Path) -> None:
+    """Raise :class:`~tmr.ccma.errors.CcmaError` unless ``out`` is, or can be created as, a writable directory.
+
+    Checked before any computation, so a bad ``--out`` exits 2 at once and writes nothing.
+    """
+    from tmr.ccma.errors import CcmaError
+
+    if out.exists() and not out.is_dir():
+        raise CcmaError(f"--out {str(out)!r} exists and is not a directory; give a directory path")
+    probe = out
+    while not probe.exists():  # nearest existing ancestor: the directories below it will be created
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not probe.is_dir():
+        raise CcmaError(f"--out {str(out)!r}: {str(probe)!r} is not a directory, so {str(out)!r} cannot be created")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        what = "is not writable" if probe == out else f"cannot be created ({str(probe)!r} is not writable)"
+        raise CcmaError(f"--out {str(out)!r} {what}; choose another output directory")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -114,6 +140,7 @@ def _trajectory_doc(model: Any, args: argparse.Namespace, path: Any, res: Any) -
 def run(args: argparse.Namespace) -> int:
     from tmr.ccma.control import reached, track
     from tmr.ccma.energy import EnergyModel
+    from tmr.ccma.errors import CcmaError
     from tmr.ccma.paths import make_path
     from tmr.ccma.sim import end_effector_pose, reference_state
     from tmr.ccma.system import build_system, load_description
@@ -121,6 +148,8 @@ def run(args: argparse.Namespace) -> int:
     from tmr.metrics import json_safe
 
     # ---- validate and compute everything before writing
+    out = Path(args.out)
+    check_out_dir(out)
     desc = load_description(args.description or args.example)
     model = EnergyModel(build_system(desc), compile=args.compile)
     st0 = reference_state(model)
@@ -159,9 +188,11 @@ def run(args: argparse.Namespace) -> int:
             "total_s": float(res.step_time.sum()),
         },
     }
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # e.g. removed or made read-only since check_out_dir
+        raise CcmaError(f"--out {str(out)!r}: cannot create the output directory: {exc.strerror or exc}") from exc
+    tmp = Path(tempfile.mkdtemp(prefix=".ccma-run.", dir=out))
     try:
         atomic_write_text(tmp / "trajectory.csv", _csv_text(model, path, res))
         doc = json_safe(_trajectory_doc(model, args, path, res))
@@ -179,10 +210,13 @@ def run(args: argparse.Namespace) -> int:
             curves = {"step 1 (from the reference)": res.histories[0], f"step {mid + 1}": res.histories[mid]}
             curves[f"step {slow + 1} (slowest warm)"] = res.histories[slow]
             save_figure(plot_convergence(curves, f"{model.system.name}: objective vs time"), tmp / "convergence.png")
-        out.mkdir(parents=True, exist_ok=True)
         names = sorted(p.name for p in tmp.iterdir())
         for name in names:
             os.replace(tmp / name, out / name)
+        for name in OUTPUT_NAMES:  # outputs of an earlier run that this run does not produce (e.g. --no-plots)
+            stale = out / name
+            if name not in names and (stale.is_file() or stale.is_symlink()):
+                stale.unlink(missing_ok=True)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     t = summary["timing"]

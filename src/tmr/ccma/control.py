@@ -30,6 +30,7 @@ from scipy.optimize import OptimizeResult, minimize
 
 from tmr.ccma.bodies import rotation_angle
 from tmr.ccma.energy import EnergyModel
+from tmr.ccma.errors import CcmaError, ConvergenceError
 from tmr.ccma.sim import ASSEMBLY_TOL, SimResult, State, agent_poses, end_effector_pose, newton
 
 __all__ = [
@@ -51,6 +52,31 @@ class Target(NamedTuple):
 
     position: np.ndarray
     rotation: np.ndarray
+
+
+def _check_ik_inputs(model: EnergyModel, state: State, u0: np.ndarray, target: Target) -> tuple[np.ndarray, Target]:
+    """``u0`` and ``target`` as float arrays, or :class:`CcmaError` naming the bad input (shape, NaN/inf, not a
+    rotation)."""
+    try:
+        u = np.asarray(u0, dtype=float)
+        pos = np.asarray(target.position, dtype=float)
+        rot = np.asarray(target.rotation, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise CcmaError(f"solve_ik: controls and target must be numeric arrays: {exc}") from exc
+    if u.shape != (model.nu,) or not np.all(np.isfinite(u)):
+        raise CcmaError(
+            f"solve_ik: u0 must be {model.nu} finite numbers ({', '.join(model.system.control_names)}), got {u0!r}"
+        )
+    if pos.shape != (3,) or not np.all(np.isfinite(pos)):
+        raise CcmaError(f"solve_ik: target position must be 3 finite numbers [m], got {target.position!r}")
+    if rot.shape != (3, 3) or not np.all(np.isfinite(rot)):
+        raise CcmaError(f"solve_ik: target rotation must be a finite 3×3 matrix, got shape {rot.shape}")
+    if np.max(np.abs(rot.T @ rot - np.eye(3))) > 1e-6 or np.linalg.det(rot) < 0:
+        raise CcmaError("solve_ik: target rotation is not a rotation matrix (RᵀR ≠ I or det R < 0)")
+    x = np.asarray(state.x)
+    if x.shape != (model.nx,) or not np.all(np.isfinite(x)):
+        raise CcmaError(f"solve_ik: state.x must be {model.nx} finite numbers, got shape {x.shape}")
+    return u, Target(pos, rot)
 
 
 def _solve_h(h: np.ndarray, rhs: np.ndarray) -> np.ndarray:
@@ -119,7 +145,9 @@ class Objective:
     """O(u) and dO/du as a callable for :func:`scipy.optimize.minimize`, with warm starts and bookkeeping.
 
     Every evaluation warm-starts Newton from the state of the best point evaluated so far (the BFGS iterate), so a
-    rejected line-search trial never moves the warm start.
+    rejected line-search trial never moves the warm start. An evaluation whose forward simulation did not converge
+    (``SimResult.converged`` false: iteration limit or stalled line search) is returned to BFGS but never becomes the
+    best point or the warm start, since its sensitivity gradient assumes ∇ₓE = 0; ``unconverged`` counts them.
     """
 
     model: EnergyModel
@@ -128,6 +156,7 @@ class Objective:
     gtol_newton: float = 1e-13
     evaluations: int = 0
     newton_iterations: int = 0
+    unconverged: int = 0
     best: float = float("inf")
     best_sim: SimResult | None = None
     best_f: float = float("nan")
@@ -144,7 +173,9 @@ class Objective:
         self.last = (np.array(u, dtype=float), o, g.copy())
         self.evaluations += 1
         self.newton_iterations += sim.iterations
-        if o < self.best:  # the controls returned are the best evaluated, with their own state
+        if not sim.converged:
+            self.unconverged += 1
+        elif o < self.best:  # the controls returned are the best evaluated, with their own state
             self.best, self.best_sim, self.best_f, self.best_u = o, sim, f, np.array(u, dtype=float)
             self.state = sim.state
         return o, g
@@ -185,13 +216,19 @@ def solve_ik(
 
     ``gtol`` [m] is the BFGS tolerance on ‖dO/du‖∞; ``hess_inv0`` an initial inverse-Hessian estimate (default: the
     inverse of :func:`gauss_newton_hessian` at ``u0``; or pass the previous step's ``hess_inv`` along a path).
+    Raises :class:`CcmaError` if ``u0`` is not ``model.nu`` finite numbers, the target position not 3 finite numbers
+    or the target rotation not a rotation matrix.
     """
+    u0, target = _check_ik_inputs(model, state, u0, target)
     obj = Objective(model, state, target)
-    u0 = np.asarray(u0, dtype=float)
     o0, _ = obj(u0)
     obj.history.append((time.perf_counter() - obj.t0, o0))
+    if obj.best_sim is None:  # Newton did not converge at u0 (or O(u0) is not finite): nothing to start from
+        raise ConvergenceError(
+            f"{model.system.name}: the forward simulation at u0 did not converge (objective {o0:.3g} m²); start "
+            f"from controls close to assemblable ones (e.g. the previous solution) and a state close to them"
+        )
     if hess_inv0 is None:
-        assert obj.best_sim is not None
         b = gauss_newton_hessian(model, obj.best_sim, u0, target)
         hess_inv0 = _positive_definite(np.linalg.inv(_positive_definite(b)))
     else:

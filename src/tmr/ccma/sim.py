@@ -5,8 +5,11 @@ Kumar 2019 §III-A, eq. 2: for given controls u, x*(u) = argminₓ E(x, u), E = 
 from 1e-10·max diag until it succeeds — far from a solution with non-zero residual the Hessian may be indefinite),
 followed by Armijo backtracking on E (a full step that halves the gradient is also accepted when E only changes at
 rounding level, as happens at a non-zero residual). The solve is warm-started from the previous state and starts by
-re-anchoring every body's rotation (:func:`tmr.ccma.bodies.reanchor`). Converged when ‖∇ₓE‖∞ ≤ ``gtol`` [m]
-(or E ≤ 1e-30 m²).
+re-anchoring every body's rotation (:func:`tmr.ccma.bodies.reanchor`). Converged when ‖∇ₓE‖∞ ≤ ``gtol``·s² [m]
+(or E ≤ 1e-30·s² m²), where s = max(1, largest coordinate of the state and controls in metres)
+(:func:`problem_size`), because the rounding floor of ∇ₓE grows with the square of the coordinates; or when no
+descent is possible and the Newton decrement ½∇ₓEᵀ(∇ₓ²E)⁻¹∇ₓE is below the rounding level of E (:func:`e_noise`),
+i.e. E sits at its rounding floor. A mechanism 1000× larger therefore converges as the shipped ones do.
 
 The residual energy E(x*, u) measures how far the commanded agents are from an assemblable configuration;
 :func:`simulate` raises :class:`AssemblyError` (naming the worst constraint) when it exceeds ``tol``.
@@ -68,6 +71,17 @@ def reference_state(model: EnergyModel) -> State:
     return State(model.system.x0.copy(), model.system.r_ref0.copy())
 
 
+def problem_size(x: np.ndarray, u: np.ndarray) -> float:
+    """Size of the coordinates [m] (≥ 1): rounding errors of C, E and ∇ₓE grow with it (1, 2 and 2 powers)."""
+    pos = np.abs(x.reshape(-1, 6)[:, :3])
+    return max(1.0, float(np.max(pos)) if pos.size else 0.0, float(np.max(np.abs(u))) if u.size else 0.0)
+
+
+def e_noise(e: float, size: float) -> float:
+    """Rounding level [m²] of E = ½‖C‖² at coordinates of ``size`` [m] (C is known to ~1e-16·size per row)."""
+    return 1e-10 * e + 1e-14 * size * float(np.sqrt(2.0 * e)) + (1e-15 * size) ** 2
+
+
 def newton(
     model: EnergyModel,
     state: State,
@@ -83,10 +97,12 @@ def newton(
     p = model.params(st.r_ref)
     u = np.asarray(u, dtype=float)
     eye = np.eye(x.size)
+    size = problem_size(x, u)
+    gtol_eff = gtol * size**2
     e, g, h = model.egh(x, u, p)
     for it in range(max_iter + 1):
         gnorm = float(np.max(np.abs(g)))
-        if gnorm <= gtol or e <= 1e-30:
+        if gnorm <= gtol_eff or e <= 1e-30 * size**2:
             return SimResult(st, e, gnorm, it, True, h)
         if it == max_iter:
             break
@@ -106,16 +122,19 @@ def newton(
                 e_new, g_new, h_new = model.egh(x_new, u, p)
                 # at the rounding floor of E (residual > 0) a full step that shrinks the gradient is accepted even if
                 # E rises by a few ulps; Armijo alone would backtrack into noise forever
-                # (rounding of C is ~1e-16 m per row, so E = ½‖C‖² is known to about ‖C‖·1e-14 m²)
-                if e_new <= e + 1e-10 * e + 1e-14 * np.sqrt(2.0 * e) and np.max(np.abs(g_new)) < 0.5 * gnorm:
+                # (rounding of C is ~1e-16 m per row and metre of coordinates, so E = ½‖C‖² is known to about
+                # ‖C‖·size·1e-14 m²)
+                if e_new <= e + e_noise(e, size) and np.max(np.abs(g_new)) < 0.5 * gnorm:
                     break
             else:
                 e_new = model.energy(x_new, u, p)
             if e_new <= e + 1e-4 * t * slope or t < 1e-12:
                 break
             t *= 0.5
-        if t < 1e-12 and e_new >= e:  # no descent along the Newton direction: stalled
-            break
+        if t < 1e-12 and e_new >= e:  # no descent along the Newton direction
+            if 0.0 <= -0.5 * slope <= e_noise(e, size):  # predicted decrease below the rounding of E: at the floor
+                return SimResult(st, e, gnorm, it, True, h)
+            break  # stalled away from a minimum
         x[:] = x_new
         if reanchor(x, st.r_ref, REANCHOR_LIMIT):
             p = model.params(st.r_ref)
@@ -145,9 +164,9 @@ def simulate(
 ) -> SimResult:
     """Forward kinematics x*(u), warm-started from ``state`` (default: the reference configuration).
 
-    Raises :class:`ConvergenceError` if Newton uses up ``max_iter`` iterations, and :class:`AssemblyError` if it
-    converges (or stalls) with a residual energy above ``tol`` [m²]: the agents are commanded to poses the chain
-    cannot reach.
+    Raises :class:`ConvergenceError` if Newton does not converge (uses up ``max_iter`` iterations, or its line search
+    stalls before), and :class:`AssemblyError` if it converges with a residual energy above ``tol`` [m²]: the agents
+    are commanded to poses the chain cannot reach.
     """
     u = np.asarray(u, dtype=float)
     if u.shape != (model.nu,) or not np.all(np.isfinite(u)):
@@ -158,6 +177,12 @@ def simulate(
             f"{model.system.name}: Newton did not converge in {max_iter} iterations (‖∇E‖∞ = {res.grad_norm:.3g} m, "
             f"residual energy {res.energy:.3g} m²); allow more iterations, warm-start closer, or check for a "
             f"singular configuration"
+        )
+    if not res.converged:  # the line search found no descent before the iteration limit
+        raise ConvergenceError(
+            f"{model.system.name}: Newton stalled after {res.iterations} iterations: the line search found no "
+            f"descent (‖∇E‖∞ = {res.grad_norm:.3g} m, residual energy {res.energy:.3g} m²); the state is not a "
+            f"minimiser of the constraint energy. Warm-start closer or check for a singular configuration"
         )
     if res.energy > tol:
         name, size = worst_constraint(model, res.state, u)

@@ -172,6 +172,23 @@ def _positive(value: Any, what: str) -> float:
     return v
 
 
+def _table_list(value: Any, what: str) -> list[Mapping[str, Any]]:
+    """``value`` as a list of tables (TOML ``[[what]]``); anything else is a :class:`DescriptionError`."""
+    if not isinstance(value, (list, tuple)):
+        raise DescriptionError(f"'{what}' must be an array of tables ([[{what}]] entries), got {value!r}")
+    for k, entry in enumerate(value):
+        if not isinstance(entry, Mapping):
+            raise DescriptionError(f"[[{what}]] entry #{k + 1} must be a table, got {entry!r}")
+    return list(value)
+
+
+def _body_ref(value: Any, what: str) -> str:
+    """A body name (string); lists, numbers, tables are a :class:`DescriptionError`."""
+    if not isinstance(value, str):
+        raise DescriptionError(f"{what} must be a body name (a string), got {value!r}")
+    return value
+
+
 def _name(entry: Mapping[str, Any], what: str) -> str:
     name = entry.get("name")
     if not isinstance(name, str) or not name or name == WORLD:
@@ -191,15 +208,9 @@ def build_system(description: Mapping[str, Any]) -> System:
     desc = copy.deepcopy(dict(description))
     name = str(desc.get("name", "ccma"))
     ell = _positive(desc.get("length_scale", 0.1), "length_scale")
-    bodies_in = desc.get("bodies", [])
-    joints_in = desc.get("joints", [])
-    agents_in = desc.get("agents", [])
-    if (
-        not isinstance(bodies_in, Sequence)
-        or not isinstance(joints_in, Sequence)
-        or not isinstance(agents_in, Sequence)
-    ):
-        raise DescriptionError("'bodies', 'joints' and 'agents' must be arrays of tables")
+    bodies_in = _table_list(desc.get("bodies", []), "bodies")
+    joints_in = _table_list(desc.get("joints", []), "joints")
+    agents_in = _table_list(desc.get("agents", []), "agents")
     if not agents_in:
         raise DescriptionError(f"{name}: no [[agents]]; a CCMA needs at least one mobile agent")
 
@@ -217,12 +228,13 @@ def build_system(description: Mapping[str, Any]) -> System:
     raw_joints: list[dict[str, Any]] = []
     for k, j in enumerate(joints_in):
         jt = j.get("type")
-        if jt not in JOINT_TYPES:
+        if not isinstance(jt, str) or jt not in JOINT_TYPES:
             raise DescriptionError(f"joint #{k + 1}: type {jt!r} is not one of {sorted(JOINT_TYPES)}")
         pair = j.get("bodies")
         if not isinstance(pair, Sequence) or isinstance(pair, str) or len(pair) != 2:
             raise DescriptionError(f"joint #{k + 1}: 'bodies' must be two body names, got {pair!r}")
         for b in pair:
+            _body_ref(b, f"joint #{k + 1} ({jt}): every entry of 'bodies'")
             if b != WORLD and b not in index:
                 raise DescriptionError(f"joint #{k + 1} ({jt}): unknown body {b!r}; known: {names + [WORLD]}")
         if pair[0] == pair[1]:
@@ -247,10 +259,10 @@ def build_system(description: Mapping[str, Any]) -> System:
         yaw = float(_vec(a.get("yaw", 0.0), 1, f"agent {an!r} yaw")[0])
         h = float(_vec(a.get("height", 0.1), 1, f"agent {an!r} height")[0])
         act = a.get("actuation", "reduced")
-        if act not in ACTUATIONS:
+        if not isinstance(act, str) or act not in ACTUATIONS:
             raise DescriptionError(f"agent {an!r}: actuation {act!r} is not one of {list(ACTUATIONS)}")
         attach = a.get("attach")
-        if attach not in index or attach in [s["name"] for s in agents_in]:
+        if not isinstance(attach, str) or attach not in index or attach in [s["name"] for s in agents_in]:
             raise DescriptionError(f"agent {an!r}: 'attach' must name a passive body, got {attach!r}")
         point = _vec(a.get("point", [xy[0], xy[1], h]), 3, f"agent {an!r} point")
         agent_specs.append((an, xy, yaw, h, act))
@@ -312,11 +324,14 @@ def build_system(description: Mapping[str, Any]) -> System:
             body_points[joint.b].append(joint.anchor_b)
 
     ee = desc.get("end_effector")
-    if not isinstance(ee, Mapping) or ee.get("body") not in index:
+    if not isinstance(ee, Mapping) or not isinstance(ee.get("body"), str) or ee.get("body") not in index:
         raise DescriptionError(f"{name}: [end_effector] must name a body with 'body = ...', got {ee!r}")
     ee_i = index[ee["body"]]
     ee_point = _vec(ee.get("point", pos[ee_i]), 3, "end_effector point")
-    tilt = np.array([_unit(t, "end_effector tilt axis") for t in ee.get("tilt_axes", [])]).reshape(-1, 3)
+    tilt_in = ee.get("tilt_axes", [])
+    if not isinstance(tilt_in, (list, tuple)):
+        raise DescriptionError(f"end_effector tilt_axes must be a list of 3-vectors, e.g. [[0, 1, 0]], got {tilt_in!r}")
+    tilt = np.array([_unit(t, "end_effector tilt axis") for t in tilt_in]).reshape(-1, 3)
     rscale = _positive(ee.get("rotation_scale", 0.1), "end_effector rotation_scale")
 
     agents: list[Agent] = []
@@ -378,8 +393,13 @@ def load_description(source: str | Path) -> dict[str, Any]:
             raise DescriptionError(
                 f"{source!r} is neither a shipped example ({', '.join(example_names())}) nor a TOML file"
             )
-        text = path.read_text(encoding="utf-8")
         label = str(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError as exc:
+            raise DescriptionError(f"{label}: not a UTF-8 text file ({exc.reason} at byte {exc.start})") from exc
+        except OSError as exc:
+            raise DescriptionError(f"{label}: cannot read the description: {exc.strerror or exc}") from exc
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
