@@ -43,12 +43,39 @@ def test_fast_path_agrees_with_lp_path_to_1e9() -> None:
     assert (fast > 0).any() and (fast < 0).any()
 
 
+def _independent_w_and_bounds(P, B, H) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """W (eq. 1-3) and the tipping-tightened bounds (eq. 5-6) of one MoPICK pose, written out per base and edge."""
+    W = np.empty((3, 4))
+    lo, hi = np.full(4, R.t_min), np.full(4, R.t_max)
+    for j in range(4):
+        A = np.array([B[j][0], B[j][1], 1.2])  # exit point on the base axis
+        u = (A - P) / np.linalg.norm(A - P)
+        W[:, j] = u
+        c, s = np.cos(H[j]), np.sin(H[j])
+        rot = np.array([[c, -s], [s, c]])
+        pts = [np.r_[B[j] + rot @ q, 0.0] for q in R.footprint]
+        G = np.r_[B[j] + rot @ R.cog[:2], R.cog[2]]
+        for o in range(len(pts)):
+            C, C2 = pts[o], pts[(o + 1) % len(pts)]
+            e = (C2 - C) / np.linalg.norm(C2 - C)
+            m0 = e @ np.cross(G - C, [0.0, 0.0, -R.base_mass * R.gravity])  # weight moment (< 0)
+            slope = e @ np.cross(C - P, u)  # moment per newton of cable tension
+            if slope > 0:
+                hi[j] = min(hi[j], -m0 / slope)
+            elif slope < 0:
+                lo[j] = max(lo[j], -m0 / slope)
+    return W, lo, hi
+
+
 def test_fast_path_agrees_with_hull_method() -> None:
     P, B, H = _poses(40, 1)
     cap = capacity(R, P, B, H, RWS)
     for i in range(len(P)):
-        A, b = box_rows(cap.lo[i], cap.hi[i])
-        assert capacity_margin_hull(cap.W[i], A, b, RWS) == pytest.approx(cap.mu[i], abs=1e-9)
+        # W and bounds computed independently of tmr.mcdpr.wrench/tipping, polytope hull independently of capacity
+        W, lo, hi = _independent_w_and_bounds(P[i], B[i], H[i])
+        np.testing.assert_allclose(W, cap.W[i], atol=1e-12)
+        A, b = box_rows(lo, hi)
+        assert capacity_margin_hull(W, A, b, RWS) == pytest.approx(cap.mu[i], abs=1e-9)
         # the hull of the general constraint rows (box + tipping) is the same polytope
         A2, b2 = constraint_rows(R, tipping(R, P[i], B[i], H[i]))
         assert capacity_margin_hull(cap.W[i], A2, b2, RWS) == pytest.approx(cap.mu[i], abs=1e-8)
@@ -109,6 +136,17 @@ def test_mu_is_the_distance_to_the_boundary_for_a_simple_box() -> None:
     A, b = box_rows(lo, hi)
     assert mu == pytest.approx(capacity_margin_hull(W, A, b, f), abs=1e-12)
     assert mu > 0
+
+
+def test_all_columns_parallel_has_no_interior() -> None:
+    # every cable along ±x: the AWS is a segment, so no required wrench is strictly inside (was +inf)
+    W = np.array([[1.0, -1.0, 1.0, -1.0], [0, 0, 0, 0], [0, 0, 0, 0]])
+    mu = capacity_margin(W, np.zeros(4), np.ones(4), np.zeros((1, 3)))
+    assert mu == -np.inf
+    # a flat (rank-2) AWS still gets a finite margin <= 0 from its two facets
+    W2 = np.array([[1.0, 0, -1.0, 0], [0, 1.0, 0, -1.0], [0, 0, 0, 0]])
+    mu2 = capacity_margin(W2, np.zeros(4), np.ones(4), np.zeros((1, 3)))
+    assert np.isfinite(mu2) and mu2 <= 0
 
 
 def test_coupled_robot_rejected_by_fast_path() -> None:

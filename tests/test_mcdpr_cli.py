@@ -34,9 +34,115 @@ def test_outputs(run_dir) -> None:
 
 def test_same_inputs_same_bytes(run_dir, tmp_path) -> None:
     out = tmp_path / "again"
+    out.mkdir()
+    (out / "mu.png").write_bytes(b"stale figure of an older run")
+    (out / "plan.json").write_text("{}")
+    (out / "notes.txt").write_text("the user's own file")
     assert main(["plan", "--out", str(out), "--no-plots"]) == 0
     for name in ("plan.json", "bases.csv", "platform.csv"):
         assert (out / name).read_bytes() == (run_dir / name).read_bytes()
+    # the stale figure of the older run is gone (--no-plots), files that are not ours are kept
+    assert sorted(q.name for q in out.iterdir()) == ["bases.csv", "notes.txt", "plan.json", "platform.csv"]
+
+
+SMALL_SCENE = (
+    "bounds = [0, 0, 6, 6]\ntasks = [[2, 2, 0.8], [2.3, 2.2, 0.8]]\nbases = [[1, 1], [3, 1], [3, 3], [1, 3]]\n"
+)
+
+
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        ('headings = ["a", "b", "c", "d"]\n', "headings must be numeric"),
+        ("headings = [nan, 0, 0, 0]\n", "headings must be finite"),
+        ("headings = [0, 0]\n", "headings must have shape"),
+        ('lateral = "x"\n', "lateral must be a number"),
+        ("lateral = nan\n", "lateral must be finite"),
+        ("lateral = -1.0\n", "lateral"),
+        ("intermediate = true\n", "intermediate"),
+        ("tables = 3\n", "tables must be an array of tables"),
+        ('[[tables]]\ncenter = [4, 4]\nsize = [1, 1]\nangle = "steep"\n', "angle must be a number"),
+        ('[[obstacles]]\ncenter = [4, 4]\nradius = "big"\n', "radius must be a number"),
+        ("[[obstacles]]\ncenter = [4, 4]\n", "radius must be positive"),
+        ("[[obstacles]]\nradius = 0.3\n", "missing key 'center'"),
+    ],
+)
+def test_bad_scene_contents_exit_2(tmp_path, capsys, extra, match) -> None:
+    scene = tmp_path / "scene.toml"
+    scene.write_text(SMALL_SCENE + extra)
+    out = tmp_path / "out"
+    assert main(["plan", "--scene", str(scene), "--out", str(out), "--no-plots"]) == 2
+    err = capsys.readouterr().err
+    assert match in err and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_non_utf8_scene_exit_2(tmp_path, capsys) -> None:
+    scene = tmp_path / "scene.toml"
+    scene.write_bytes(SMALL_SCENE.encode() + b'name = "caf\xe9"\n')
+    out = tmp_path / "out"
+    assert main(["plan", "--scene", str(scene), "--out", str(out)]) == 2
+    assert "UTF-8" in capsys.readouterr().err and not out.exists()
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ('base_mass = "heavy"\n', "base_mass must be a number"),
+        ('cable_base = ["a", "b", "c", "d"]\n', "cable_base entry must be an integer"),
+        ("cable_base = 3\n", "cable_base must be a list"),
+        ("n_bases = 4.5\n", "n_bases must be an integer"),
+        ('exit_points = [["a", 0, 1], [0, 0, 1], [0, 0, 1], [0, 0, 1]]\n', "exit_points"),
+        ("footprint = [[0.2, 0], [0, 0.2], [-0.2, 0], [0, -0.2], [0.2, 0]]\n", "coincide"),
+        ("name = 3\n", "name must be a string"),
+    ],
+)
+def test_bad_robot_contents_exit_2(tmp_path, capsys, text, match) -> None:
+    rob = tmp_path / "r.toml"
+    rob.write_text(text)
+    out = tmp_path / "out"
+    assert main(["plan", "--robot", str(rob), "--out", str(out), "--no-plots"]) == 2
+    err = capsys.readouterr().err
+    assert match in err and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_non_utf8_robot_exit_2(tmp_path, capsys) -> None:
+    rob = tmp_path / "r.toml"
+    rob.write_bytes(b'name = "caf\xe9"\n')
+    assert main(["plan", "--robot", str(rob), "--out", str(tmp_path / "out")]) == 2
+    assert "cannot read robot TOML" in capsys.readouterr().err
+
+
+def test_out_is_a_file_exit_2_before_planning(tmp_path, capsys, monkeypatch) -> None:
+    import tmr.mcdpr.planner as planner
+
+    def no_plan(*a, **k):  # the check must come before the (long) planning
+        raise AssertionError("planned although --out is unusable")
+
+    monkeypatch.setattr(planner, "plan", no_plan)
+    f = tmp_path / "taken"
+    f.write_text("keep me")
+    assert main(["plan", "--out", str(f)]) == 2
+    assert "not a directory" in capsys.readouterr().err and f.read_text() == "keep me"
+    assert main(["plan", "--out", str(f / "sub")]) == 2
+    assert "is a file" in capsys.readouterr().err
+    assert sorted(q.name for q in tmp_path.iterdir()) == ["taken"]
+
+
+def test_write_failure_exit_2_creates_nothing(tmp_path, capsys, monkeypatch) -> None:
+    import tmr.mcdpr.__main__ as cli
+
+    def broken(*a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(cli, "_csv", broken)
+    scene = tmp_path / "scene.toml"
+    scene.write_text(SMALL_SCENE)
+    out = tmp_path / "a" / "b" / "out"
+    assert main(["plan", "--scene", str(scene), "--max-iter", "2", "--out", str(out), "--no-plots"]) == 2
+    assert "cannot write the outputs" in capsys.readouterr().err
+    assert sorted(q.name for q in tmp_path.iterdir()) == ["scene.toml"]  # no parents, no temporary directory
 
 
 @pytest.mark.parametrize(

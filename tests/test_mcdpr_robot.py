@@ -40,6 +40,11 @@ def test_toml_roundtrip(tmp_path) -> None:
         ({"cable_base": (0, 1, 2, 7)}, "cable_base"),
         ({"base_mass": -1.0}, "base_mass"),
         ({"exit_points": [[0, 0, 1.2]]}, "exit_points"),
+        ({"footprint": [[0.2, 0], [0, 0.2], [-0.2, 0], [0, -0.2], [0.2, 0]]}, "coincide"),  # was NaN tipping rows
+        ({"footprint": [[0.2, 0], [0, 0.2], [0, 0.2], [-0.2, 0], [0, -0.2]]}, "coincide"),
+        ({"base_mass": "heavy"}, "base_mass must be a number"),
+        ({"n_bases": 4.0}, "n_bases must be an integer"),
+        ({"cable_base": ("a", "b", "c", "d")}, "cable_base entry"),
     ],
 )
 def test_invalid_robot(changes, match) -> None:

@@ -82,3 +82,17 @@ def test_closed_form_needs_m_equal_n_plus_one() -> None:
         closed_form_batch(np.eye(3), F, np.zeros(3), np.ones(3))
     with pytest.raises(ParameterError, match="objective"):
         TensionProblem(3, 4, 8, "bogus")  # type: ignore[arg-type]
+
+
+def test_closed_form_rejects_rank_deficient_w_where_the_lp_finds_tensions() -> None:
+    # documented limit (tension.md): the closed form needs full rank; the QP/LP handle this pose
+    W = np.array([[1.0, 0, -1.0, 0], [0, 1.0, 0, -1.0], [0, 0, 0, 0]])
+    f = np.array([1.0, 0.0, 0.0])
+    lo, hi = np.zeros(4), np.full(4, 2.0)
+    A, b = box_rows(lo, hi)
+    assert wrench_feasible(W, f, A, b)
+    assert not closed_form_batch(W, f, lo, hi).feasible
+    with pytest.raises(InfeasibleWrench, match="rank-deficient"):
+        closed_form(W, f, lo, hi)
+    t = TensionProblem(3, 4, 8).solve(W, f, A, b)
+    np.testing.assert_allclose(W @ t, f, atol=1e-7)

@@ -3,8 +3,10 @@
 Plans a MoPICK-type MCDPR task with the two-stage planner (Rasheed 2019 sec. 5), checks the result (μ > 0, cable
 tensions within the tipping-tightened bounds, no base collision), and writes ``plan.json``, ``bases.csv``,
 ``platform.csv`` and the figures ``topview.png``, ``mu.png``, ``tensions.png`` into ``--out``. Inputs are validated
-before anything is written; the files go to a temporary directory first and are moved into ``--out`` only when all
-of them are complete. The planner is deterministic (no random choices): same inputs, same bytes.
+before anything is written (``--out`` must be, or become, a directory); the files go to a temporary directory first
+and are moved into ``--out`` (created only then) when all of them are complete; outputs of an older run in ``--out``
+that this run does not produce (e.g. the figures after ``--no-plots``) are deleted. The planner is deterministic
+(no random choices): same inputs, same bytes.
 
 Exit codes: 0 plan succeeded; 1 plan computed but a guarantee fails (outputs written, reason printed);
 2 bad input or planning error (nothing written).
@@ -99,6 +101,8 @@ def plan_dict(robot: Any, scene: Any, params: Any, result: Any, chk: Any) -> dic
                 "nonpositive_samples": list(chk.nonpositive),
                 "tension_ok": chk.tension_ok,
                 "collision_free": chk.collision_free,
+                "waypoints_ok": chk.waypoints_ok,
+                "steps_ok": chk.steps_ok,
                 "max_tension": chk.max_tension,
                 "messages": list(chk.messages),
             },
@@ -135,14 +139,38 @@ def _csv(header: list[str], ints: np.ndarray, floats: np.ndarray) -> str:
     return buf.getvalue()
 
 
+#: Every file name ``plan`` may write; a run deletes those of them it did not produce (stale ones of an older run).
+OUTPUT_NAMES = ("plan.json", "bases.csv", "platform.csv", "topview.png", "mu.png", "tensions.png")
+
+
+def _existing_ancestor(path: Path) -> Path:
+    """The nearest ancestor of ``path`` that exists (the current directory for a relative path without one)."""
+    for q in path.absolute().parents:
+        if q.exists():
+            return q
+    return Path.cwd()  # pragma: no cover - the root always exists
+
+
+def check_out_dir(out: Path) -> None:
+    """Raise TmrError when ``out`` cannot become the output directory (a file, or below a file); writes nothing."""
+    if out.exists() and not out.is_dir():
+        raise TmrError(f"--out {out}: exists and is not a directory; choose another output directory")
+    anc = _existing_ancestor(out) if not out.exists() else out
+    if not anc.is_dir():
+        raise TmrError(f"--out {out}: {anc} is a file, so the directory cannot be created")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        raise TmrError(f"--out {out}: {anc} is not writable")
+
+
 def write_outputs(
     out: Path, robot: Any, scene: Any, env: Any, params: Any, result: Any, chk: Any, plots: bool
 ) -> list[str]:
-    """Write all outputs into a temporary sibling directory, then move them into ``out``."""
+    """Write all outputs into a temporary directory, then move them into ``out`` (created only then, with its
+    parents) and delete the outputs of an older run that this run did not produce (only :data:`OUTPUT_NAMES`)."""
     from tmr.io import atomic_write_text
 
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    check_out_dir(out)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out if out.is_dir() else _existing_ancestor(out)))
     try:
         text = json.dumps(plan_dict(robot, scene, params, result, chk), indent=1, sort_keys=True)
         atomic_write_text(tmp / "plan.json", text + "\n")
@@ -163,10 +191,14 @@ def write_outputs(
             plot.plot_topview(robot, scene, env, result, tmp / "topview.png")
             plot.plot_mu(result, tmp / "mu.png")
             plot.plot_tensions(robot, result, tmp / "tensions.png")
-        out.mkdir(parents=True, exist_ok=True)
         names = sorted(q.name for q in tmp.iterdir())
+        out.mkdir(parents=True, exist_ok=True)
         for name in names:
             os.replace(tmp / name, out / name)
+        for name in OUTPUT_NAMES:
+            stale = out / name
+            if name not in names and stale.is_file():
+                stale.unlink()
         return names
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -181,6 +213,8 @@ def main(argv: list[str] | None = None) -> int:
         from tmr.mcdpr.robot import load_robot, mopick
         from tmr.mcdpr.scene import load_scene
 
+        out = Path(args.out)
+        check_out_dir(out)
         robot = load_robot(args.robot) if args.robot else mopick()
         scene = load_scene(args.scene)
         if args.external is not None:
@@ -199,7 +233,10 @@ def main(argv: list[str] | None = None) -> int:
         result = plan(robot, scene, params, env)
         wall = time.perf_counter() - t0
         chk = check(robot, env, result)
-        names = write_outputs(Path(args.out), robot, scene, env, params, result, chk, not args.no_plots)
+        try:
+            names = write_outputs(out, robot, scene, env, params, result, chk, not args.no_plots)
+        except OSError as exc:
+            raise TmrError(f"cannot write the outputs to {out}: {exc}") from exc
     except TmrError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -210,6 +247,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  mu_min        {chk.mu_min:.6g} N")
     print(f"  max_tension   {chk.max_tension:.6g} N (t_max {robot.t_max:g} N)")
     print(f"  collision     {'none' if chk.collision_free else 'YES'}")
+    print(f"  way-points    {'all reached' if chk.waypoints_ok else 'MISSED'}, steps <= d_MP: {chk.steps_ok}")
     print(
         f"  stage1        {result.times['stage1']:.3f} s, "
         f"{sum(s['combinations'] for s in result.stage1)} combinations scored"

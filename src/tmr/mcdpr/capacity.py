@@ -83,14 +83,16 @@ def capacity_margin(W: ArrayLike, lo: ArrayLike, hi: ArrayLike, rws: ArrayLike) 
     """Capacity margin μ [N] (Rasheed 2019 eq. 8) of the zonotope AWS {W t : lo ≤ t ≤ hi}, batched over poses.
 
     ``rws`` (V, 3) or (..., V, 3) vertices of the required wrench set. μ = min_{d,l} (h_l − N_l f_d): positive iff
-    all vertices are strictly inside, negative when one is outside. An empty tension box (lo > hi) gives −inf.
+    all vertices are strictly inside, negative when one is outside. An empty tension box (lo > hi) gives −inf, and so
+    do poses whose columns are all parallel (no column pair spans a facet: the AWS is a segment, no interior in 3D).
     """
     N, h = aws_hrep(W, lo, hi)
     F = np.asarray(rws, dtype=float)
     s = h[..., :, None] - N @ np.swapaxes(F, -1, -2)
     mu = np.min(s, axis=(-2, -1))
     empty = np.any(np.asarray(lo) > np.asarray(hi), axis=-1)
-    return np.where(empty, -np.inf, mu)
+    flat = ~np.any(np.isfinite(h), axis=-1)
+    return np.where(empty | flat, -np.inf, mu)
 
 
 class Capacity(NamedTuple):

@@ -13,12 +13,16 @@ points), sampled ten times as densely; a smoothed path that would hit an obstacl
 
 Stage 2 (:func:`platform_search`, Algorithm 2): along the smoothed base paths, the platform stays or moves by
 d_MP in one of 8 directions, or straight towards the next way-point, picking the candidate with the largest μ among
-those from which the way-point is still reachable in the remaining steps — so it arrives exactly (the paper notes a
-plain greedy step can miss the way-point). Heights are interpolated linearly between way-points.
+those from which the way-point is still reachable in the remaining steps (the paper notes a plain greedy step can
+miss the way-point). The segment has at least ceil(max(‖Δxy‖, |Δz|)/d_MP) + 1 samples (the smoothed base path is
+resampled more densely when the stage-1 iterates give fewer), so the platform arrives exactly at every way-point
+with steps of at most d_MP; the next segment starts from the pose actually reached. Heights are interpolated
+linearly between way-points.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from itertools import product
@@ -30,9 +34,11 @@ from scipy.interpolate import BSpline
 
 from tmr.environment import Environment
 from tmr.mcdpr.capacity import capacity, required_wrench_set
+from tmr.mcdpr.capacity_hull import box_rows
+from tmr.mcdpr.errors import InfeasibleWrench, ParameterError
 from tmr.mcdpr.robot import Robot
 from tmr.mcdpr.scene import Scene, waypoints
-from tmr.mcdpr.tension import closed_form_batch
+from tmr.mcdpr.tension import TensionProblem, closed_form_batch
 
 __all__ = ["Plan", "PlannerParams", "base_search", "check", "plan", "platform_search", "smooth_paths"]
 
@@ -78,7 +84,9 @@ class Plan:
     waypoints (l, 3) [m]; bases (T, p, 2) [m]; headings (T, p) [rad]; platform (T, 3) [m]; segment (T,) index i of
     the way-point pair; mu (T,) capacity margin [N] (eq. 8); tensions (T, m) minimum 2-norm tensions holding the
     platform weight [N] (NaN if infeasible); lo, hi (T, m) tipping-tightened tension bounds [N]; stage1: per segment
-    the raw iterates (k_i, p, 2) and μ history; times: wall time of the stages [s].
+    the raw iterates (k_i, p, 2) and μ history; times: wall time of the stages [s]; params: the planner settings
+    (:func:`check` uses ``params.d_platform`` to bound the platform steps); external (3,) the external wrench box
+    half-widths of the scene [N] (:func:`check` recomputes μ with it).
     """
 
     waypoints: NDArray[np.float64]
@@ -92,6 +100,8 @@ class Plan:
     hi: NDArray[np.float64]
     stage1: list[dict[str, Any]] = field(default_factory=list)
     times: dict[str, float] = field(default_factory=dict)
+    params: PlannerParams = field(default_factory=PlannerParams)
+    external: NDArray[np.float64] = field(default_factory=lambda: np.ones(3))
 
 
 def _combos(p: int, k: int) -> NDArray[np.intp]:
@@ -179,8 +189,10 @@ def _min_pair_distance(
     xy: NDArray[np.float64], XY: NDArray[np.float64], iu: tuple[NDArray[np.intp], NDArray[np.intp]]
 ) -> NDArray[np.float64]:
     """Smallest distance (n,) [m] between any two bases while all move straight and simultaneously from xy (p, 2)
-    to XY (n, p, 2): per pair, min over s in [0, 1] of |d0 + s (d1 - d0)| (closed form)."""
-    d0 = (xy[iu[0]] - xy[iu[1]])[None]  # (1, P, 2)
+    or (n, p, 2) to XY (n, p, 2): per pair, min over s in [0, 1] of |d0 + s (d1 - d0)| (closed form)."""
+    d0 = xy[..., iu[0], :] - xy[..., iu[1], :]
+    if d0.ndim == 2:
+        d0 = d0[None]  # (1, P, 2)
     d1 = XY[:, iu[0]] - XY[:, iu[1]]  # (n, P, 2)
     v = d1 - d0
     vv = np.einsum("npi,npi->np", v, v)
@@ -212,14 +224,15 @@ def _polyline(ctrl: NDArray[np.float64], n: int) -> NDArray[np.float64]:
 
 
 def smooth_paths(
-    robot: Robot, env: Environment, path: NDArray[np.float64], upsample: int
+    robot: Robot, env: Environment, path: NDArray[np.float64], upsample: int, n_min: int = 1
 ) -> tuple[NDArray[np.float64], bool]:
-    """B-spline smoothing of the stage-1 iterates (k, p, 2) into (upsample·k, p, 2) samples; (samples, smoothed?).
+    """B-spline smoothing of the stage-1 iterates (k, p, 2) into max(upsample·k, n_min) samples (n, p, 2);
+    returns (samples, smoothed?).
 
     Falls back to the piecewise-linear path when the spline leaves the free space or brings two bases closer than
-    2 r_mb.
+    2 r_mb (at a sample or between consecutive samples).
     """
-    n = upsample * len(path)
+    n = max(upsample * len(path), n_min)
     S = _clamped_bspline(path, n)
     if _path_ok(robot, env, S):
         return S, True
@@ -227,11 +240,16 @@ def smooth_paths(
 
 
 def _path_ok(robot: Robot, env: Environment, S: NDArray[np.float64]) -> bool:
+    """Every base sample and sample-to-sample segment of S (n, p, 2) free, and the bases >= 2 r_mb apart at the
+    samples and while they move straight and simultaneously between consecutive samples."""
     p = S.shape[1]
-    iu = np.triu_indices(p, 1)
-    apart = np.linalg.norm(S[:, iu[0]] - S[:, iu[1]], axis=-1).min() >= 2 * robot.base_radius - 1e-9
-    if not apart:
-        return False
+    if p > 1:
+        iu = np.triu_indices(p, 1)
+        gap = 2 * robot.base_radius - 1e-9
+        if np.linalg.norm(S[:, iu[0]] - S[:, iu[1]], axis=-1).min() < gap:
+            return False
+        if len(S) > 1 and _min_pair_distance(S[:-1], S[1:], iu).min() < gap:
+            return False
     if len(S) == 1:
         return bool(env.is_free(S).all())
     return bool((env.segment_clearance(S[:-1], S[1:]) > 0.0).all())
@@ -270,10 +288,17 @@ def platform_search(
     """Stage 2 for one way-point pair (Rasheed 2019 Algorithm 2): platform poses (n, 3) [m] and μ (n,) [N].
 
     At sample r the bases are at S[r] with headings H[r]; candidates are stay, 8 neighbours at d_MP and the step
-    towards ``goal``; only candidates within (n−1−r)·d_MP of the goal are kept, so the last pose is the goal.
+    towards ``goal``; only candidates within (n−1−r)·d_MP of the goal are kept, so the last pose is the goal and
+    every step is at most d_MP. Needs n >= :func:`samples_needed` (else ParameterError: the goal is out of reach).
     """
     n = len(S)
     d = params.d_platform
+    need = samples_needed(start, goal, d)
+    if n < need:
+        raise ParameterError(
+            f"platform_search: {n} samples cannot reach the way-point {np.round(goal, 4).tolist()} from "
+            f"{np.round(start, 4).tolist()} with steps of d_MP = {d} m; at least {need} are needed"
+        )
     out = np.empty((n, 3))
     mus = np.empty(n)
     xy = start[:2].astype(float).copy()
@@ -286,11 +311,12 @@ def platform_search(
         dist = float(np.hypot(*to_goal))
         step = to_goal / dist * min(d, dist) if dist > 0 else np.zeros(2)
         cand = np.vstack([xy + d * _DIRS, xy + step])
-        budget = (n - 1 - r) * d + 1e-12
+        budget = (n - 1 - r) * d + _REACH_TOL * d
         keep = np.hypot(*(cand - g).T) <= budget
-        if r == n - 1 or not keep.any():
-            cand = (xy + step)[None]
-            keep = np.ones(1, bool)
+        if r == n - 1 and dist <= d * (1 + _REACH_TOL):
+            cand, keep = g[None], np.ones(1, bool)  # land exactly on the way-point
+        elif r == n - 1 or not keep.any():  # unreachable (n too small): cannot happen after the check above
+            cand, keep = (xy + step)[None], np.ones(1, bool)
         cand = cand[keep]
         P = np.column_stack([cand, np.full(len(cand), zs[r])])
         mu = capacity(robot, P, S[r], H[r], rws).mu
@@ -301,6 +327,18 @@ def platform_search(
     return out, mus
 
 
+#: Relative slack (of d_MP) in the stage-2 reachability test, absorbing rounding in distance / d_MP.
+_REACH_TOL = 1e-9
+
+
+def samples_needed(start: NDArray[np.float64], goal: NDArray[np.float64], d_platform: float) -> int:
+    """Smallest number of stage-2 samples (start included) that moves the platform from ``start`` to ``goal`` with
+    horizontal steps and (linearly interpolated) height steps of at most d_platform [m]; at least 2."""
+    dxy = float(np.hypot(*(np.asarray(goal[:2], float) - np.asarray(start[:2], float))))
+    dz = abs(float(goal[2]) - float(start[2]))
+    return max(2, math.ceil(max(dxy, dz) / d_platform - _REACH_TOL) + 1)
+
+
 def plan(robot: Robot, scene: Scene, params: PlannerParams | None = None, env: Environment | None = None) -> Plan:
     """Plan the whole task of ``scene``: way-points, stage 1 + smoothing per way-point, stage 2, tensions.
 
@@ -308,19 +346,26 @@ def plan(robot: Robot, scene: Scene, params: PlannerParams | None = None, env: E
     plan is returned and :func:`check` reports the samples.
     """
     params = params or PlannerParams()
+    if not robot.one_cable_per_base:
+        raise ParameterError(
+            f"{robot.name}: the planner needs one cable per base (cable_base a permutation of 0..{robot.n_bases - 1}), "
+            f"got cable_base = {list(robot.cable_base)}"
+        )
     env = scene.validate(robot, env)
     rws = required_wrench_set(robot, scene.external)
     wps = waypoints(scene)
     xy, th = scene.bases.astype(float).copy(), scene.headings.astype(float).copy()
+    start = wps[0].astype(float).copy()
     all_b, all_h, all_p, seg, stage1 = [], [], [], [], []
     t_stage1 = t_stage2 = 0.0
     for i in range(len(wps) - 1):
         t0 = time.perf_counter()
         path, heads, mus, scored = base_search(robot, env, wps[i + 1], xy, th, rws, params)
-        S, smoothed = smooth_paths(robot, env, path, params.upsample)
+        n_min = samples_needed(start, wps[i + 1], params.d_platform)
+        S, smoothed = smooth_paths(robot, env, path, params.upsample, n_min)
         H = path_headings(S, th)
         t1 = time.perf_counter()
-        P, _ = platform_search(robot, wps[i], wps[i + 1], S, H, rws, params)
+        P, _ = platform_search(robot, start, wps[i + 1], S, H, rws, params)
         t2 = time.perf_counter()
         t_stage1 += t1 - t0
         t_stage2 += t2 - t1
@@ -330,14 +375,13 @@ def plan(robot: Robot, scene: Scene, params: PlannerParams | None = None, env: E
         all_h.append(H[sl])
         all_p.append(P[sl])
         seg.append(np.full(len(S[sl]), i))
-        xy, th = path[-1].copy(), H[-1].copy()
+        xy, th, start = path[-1].copy(), H[-1].copy(), P[-1].copy()
     bases = np.concatenate(all_b)
     headings = np.concatenate(all_h)
     platform = np.concatenate(all_p)
     t3 = time.perf_counter()
     cap = capacity(robot, platform, bases, headings, rws)
-    f = np.array([0.0, 0.0, robot.platform_mass * robot.gravity])
-    tens = closed_form_batch(cap.W, f, cap.lo, cap.hi).t if robot.n_cables == 4 else np.full((len(bases), 4), np.nan)
+    tens = tensions(robot, cap.W, cap.lo, cap.hi)
     t4 = time.perf_counter()
     return Plan(
         waypoints=wps,
@@ -351,14 +395,44 @@ def plan(robot: Robot, scene: Scene, params: PlannerParams | None = None, env: E
         hi=cap.hi,
         stage1=stage1,
         times={"stage1": t_stage1, "stage2": t_stage2, "evaluation": t4 - t3, "total": t_stage1 + t_stage2 + t4 - t3},
+        params=params,
+        external=np.asarray(scene.external, dtype=float).copy(),
     )
+
+
+def tensions(
+    robot: Robot, W: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Minimum 2-norm tensions (T, m) [N] holding the platform weight within [lo, hi] (NaN where infeasible).
+
+    ``W`` (T, 3, m). The null-space closed form when m = n + 1 = 4 (fast, needs W of full rank); the cvxpy QP
+    (:class:`~tmr.mcdpr.tension.TensionProblem`) for any other m and for the poses the closed form rejects.
+    """
+    T, n, m = W.shape
+    f = np.array([0.0, 0.0, robot.platform_mass * robot.gravity])
+    t = closed_form_batch(W, f, lo, hi).t if m == n + 1 else np.full((T, m), np.nan)
+    todo = np.flatnonzero(~np.all(np.isfinite(t), axis=1))
+    if len(todo):
+        qp = TensionProblem(n, m, 2 * m, "2norm")
+        for i in todo:
+            if np.any(lo[i] > hi[i]):
+                continue
+            try:
+                t[i] = qp.solve(W[i], f, *box_rows(lo[i], hi[i]))
+            except InfeasibleWrench:
+                t[i] = np.nan
+    return t
 
 
 @dataclass(frozen=True)
 class Check:
-    """Guarantees verified on a plan. ok: all hold. mu_min [N]; nonpositive: sample indices with μ ≤ 0;
-    tension_ok: tensions exist, balance the weight and respect the tightened bounds; collision_free: every base
-    sample and sample-to-sample segment in the free space and the bases 2 r_mb apart; max_tension [N]."""
+    """Guarantees verified on a plan, all recomputed from its poses (the stored μ, bounds and tensions are not
+    trusted). ok: all hold. mu_min [N] (recomputed); nonpositive: sample indices with μ ≤ 0; tension_ok: the stored
+    tensions exist, balance the weight and respect the recomputed tipping-tightened bounds; collision_free: every
+    base sample and sample-to-sample segment in the free space and the bases 2 r_mb apart at the samples and while
+    moving straight between them; waypoints_ok: the platform starts at the first way-point and ends every segment
+    at its way-point (within 1e-6 m); steps_ok: every platform step is at most d_MP horizontally and vertically;
+    max_tension [N]."""
 
     ok: bool
     mu_min: float
@@ -367,39 +441,82 @@ class Check:
     collision_free: bool
     max_tension: float
     messages: tuple[str, ...]
+    waypoints_ok: bool = True
+    steps_ok: bool = True
 
 
-def check(robot: Robot, env: Environment, result: Plan) -> Check:
-    """Check μ > 0, cable tensions within bounds (and W t = f), no base collision along the plan."""
+#: Distance [m] within which the platform counts as arriving at a way-point.
+ARRIVAL_TOL = 1e-6
+
+
+def check(robot: Robot, env: Environment, result: Plan, external: NDArray[np.float64] | None = None) -> Check:
+    """Check μ > 0, cable tensions within bounds (and W t = f), no base collision, way-point arrival and platform
+    steps ≤ d_MP along the plan. μ, W and the tipping bounds are recomputed from the poses with the external wrench
+    box half-widths ``external`` [N] (default: the scene's, stored in ``result.external``)."""
     msgs = []
-    nonpos = tuple(int(i) for i in np.flatnonzero(~(result.mu > 0)))
+    rws = required_wrench_set(robot, result.external if external is None else external)
+    cap = capacity(robot, result.platform, result.bases, result.headings, rws)
+    mu = cap.mu
+    nonpos = tuple(int(i) for i in np.flatnonzero(~(mu > 0)))
     if nonpos:
         msgs.append(
-            f"capacity margin <= 0 at {len(nonpos)} of {len(result.mu)} samples (first {nonpos[0]}, segment "
-            f"{int(result.segment[nonpos[0]])}, min {float(np.min(result.mu)):.4g} N)"
+            f"capacity margin <= 0 at {len(nonpos)} of {len(mu)} samples (first {nonpos[0]}, segment "
+            f"{int(result.segment[nonpos[0]])}, min {float(np.min(mu)):.4g} N)"
         )
-    t = result.tensions
-    finite = np.all(np.isfinite(t), axis=1)
-    from tmr.mcdpr.wrench import wrench_matrix
-
-    W = wrench_matrix(robot, result.platform, result.bases, result.headings)
-    f = np.array([0.0, 0.0, robot.platform_mass * robot.gravity])
-    tf = np.where(finite[:, None], t, 0.0)
-    balance = np.linalg.norm(np.einsum("tij,tj->ti", W, tf) - f, axis=1) <= 1e-6
-    inb = np.all((tf >= result.lo - 1e-9) & (tf <= result.hi + 1e-9) & (tf <= robot.t_max + 1e-9), axis=1)
-    tension_ok = bool(np.all(finite & balance & inb))
-    if not tension_ok:
-        bad = np.flatnonzero(~(finite & balance & inb))
-        msgs.append(f"tensions infeasible or out of bounds at {len(bad)} samples (first {int(bad[0])})")
+    if not np.allclose(mu, result.mu, rtol=1e-9, atol=1e-9, equal_nan=True):
+        bad = np.flatnonzero(~np.isclose(mu, result.mu, rtol=1e-9, atol=1e-9, equal_nan=True))
+        msgs.append(f"stored capacity margin differs from the recomputed one at {len(bad)} samples (first {bad[0]})")
+    t = np.asarray(result.tensions, dtype=float)
+    if t.shape != cap.lo.shape:
+        msgs.append(f"tensions have shape {t.shape}, expected {cap.lo.shape} (samples, cables)")
+        tension_ok = False
+        t = np.full(cap.lo.shape, np.nan)
+    else:
+        finite = np.all(np.isfinite(t), axis=1)
+        f = np.array([0.0, 0.0, robot.platform_mass * robot.gravity])
+        tf = np.where(finite[:, None], t, 0.0)
+        balance = np.linalg.norm(np.einsum("tij,tj->ti", cap.W, tf) - f, axis=1) <= 1e-6
+        inb = np.all((tf >= cap.lo - 1e-9) & (tf <= cap.hi + 1e-9) & (tf <= robot.t_max + 1e-9), axis=1)
+        good = finite & balance & inb
+        tension_ok = bool(np.all(good))
+        if not tension_ok:
+            bad = np.flatnonzero(~good)
+            msgs.append(f"tensions infeasible or out of bounds at {len(bad)} samples (first {int(bad[0])})")
     collision_free = _path_ok(robot, env, result.bases)
     if not collision_free:
         msgs.append("a base path leaves the free space or two bases come closer than 2 r_mb")
+    # way-point arrival: first sample at way-point 0, last sample of segment i at way-point i + 1
+    wps, seg, P = result.waypoints, result.segment, result.platform
+    miss = [(0, float(np.linalg.norm(P[0] - wps[0])))]
+    for i in range(len(wps) - 1):
+        idx = np.flatnonzero(seg == i)
+        miss.append((i + 1, float(np.linalg.norm(P[idx[-1]] - wps[i + 1])) if len(idx) else float("inf")))
+    missed = [(k, e) for k, e in miss if not e <= ARRIVAL_TOL]
+    waypoints_ok = not missed
+    if missed:
+        worst = max(missed, key=lambda x: x[1])
+        msgs.append(
+            f"the platform misses {len(missed)} way-point(s) {[k for k, _ in missed]} (worst: way-point {worst[0]} "
+            f"by {worst[1]:.4g} m)"
+        )
+    d = result.params.d_platform
+    dP = np.diff(P, axis=0)
+    step = np.maximum(np.hypot(dP[:, 0], dP[:, 1]), np.abs(dP[:, 2])) if len(dP) else np.zeros(0)
+    long = np.flatnonzero(~(step <= d + 1e-9))
+    steps_ok = not len(long)
+    if not steps_ok:
+        msgs.append(
+            f"the platform jumps: {len(long)} step(s) longer than d_MP = {d} m (first between samples "
+            f"{int(long[0])} and {int(long[0]) + 1}, longest {float(np.max(step)):.4g} m)"
+        )
     return Check(
         ok=not msgs,
-        mu_min=float(np.min(result.mu)),
+        mu_min=float(np.min(mu)),
         nonpositive=nonpos,
         tension_ok=tension_ok,
         collision_free=collision_free,
         max_tension=float(np.nanmax(t)) if np.isfinite(t).any() else float("nan"),
         messages=tuple(msgs),
+        waypoints_ok=waypoints_ok,
+        steps_ok=steps_ok,
     )

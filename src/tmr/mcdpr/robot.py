@@ -43,6 +43,21 @@ def _arr(value: Any, shape: tuple[int | None, ...], name: str) -> NDArray[np.flo
     return a
 
 
+def _scalar(value: Any, name: str) -> float:
+    if isinstance(value, (bool, np.bool_)):
+        raise ParameterError(f"{name} must be a number, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"{name} must be a number, got {value!r}") from exc
+
+
+def _integer(value: Any, name: str) -> int:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise ParameterError(f"{name} must be an integer, got {value!r}")
+    return int(value)
+
+
 @dataclass(frozen=True, eq=False)
 class Robot:
     """An MCDPR: bases, cables, footprints, masses and tension bounds (SI units).
@@ -77,10 +92,16 @@ class Robot:
     gravity: float = 9.81
 
     def __post_init__(self) -> None:
-        m = len(self.cable_base)
+        if not isinstance(self.name, str):
+            raise ParameterError(f"name must be a string, got {self.name!r}")
+        object.__setattr__(self, "n_bases", _integer(self.n_bases, "n_bases"))
+        try:
+            cb = tuple(_integer(b, "cable_base entry") for b in self.cable_base)
+        except TypeError as exc:
+            raise ParameterError(f"cable_base must be a list of base indices, got {self.cable_base!r}") from exc
+        m = len(cb)
         if self.n_bases < 1 or m < 1:
             raise ParameterError(f"need at least one base and one cable, got p={self.n_bases}, m={m}")
-        cb = tuple(int(b) for b in self.cable_base)
         if any(b < 0 or b >= self.n_bases for b in cb):
             raise ParameterError(f"cable_base entries must be in 0..{self.n_bases - 1}, got {cb}")
         object.__setattr__(self, "cable_base", cb)
@@ -88,6 +109,13 @@ class Robot:
         fp = _arr(self.footprint, (None, 2), "footprint [m]")
         if len(fp) < 3:
             raise ParameterError(f"footprint needs at least 3 contact points, got {len(fp)}")
+        gap = np.linalg.norm(np.roll(fp, -1, axis=0) - fp, axis=1)
+        if np.any(gap <= 1e-9):
+            k = int(np.argmax(gap <= 1e-9))
+            raise ParameterError(
+                f"footprint contact points {k} and {(k + 1) % len(fp)} coincide ({fp[k].tolist()}): list every "
+                "contact point once (do not repeat the first point at the end)"
+            )
         poly = Polygon(fp)
         if not poly.is_valid or poly.area <= 0.0 or not poly.exterior.is_ccw:
             raise ParameterError("footprint must be a simple polygon listed anticlockwise (seen from above)")
@@ -97,12 +125,12 @@ class Robot:
             raise ParameterError(f"the centre of gravity {cog[:2].tolist()} must project inside the footprint")
         object.__setattr__(self, "cog", cog)
         for name in ("base_radius", "base_mass", "gravity"):
-            v = float(getattr(self, name))
+            v = _scalar(getattr(self, name), name)
             if not np.isfinite(v) or v <= 0.0:
                 raise ParameterError(f"{name} must be positive and finite, got {v}")
             object.__setattr__(self, name, v)
         for name in ("platform_mass", "t_min", "t_max"):
-            v = float(getattr(self, name))
+            v = _scalar(getattr(self, name), name)
             if not np.isfinite(v) or v < 0.0:
                 raise ParameterError(f"{name} must be non-negative and finite, got {v}")
             object.__setattr__(self, name, v)
@@ -133,8 +161,8 @@ def load_robot(path: str | Path) -> Robot:
     """Robot from a TOML file with the field names of :class:`Robot`; unknown keys raise ParameterError."""
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text())
-    except (OSError, tomllib.TOMLDecodeError) as exc:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise ParameterError(f"{path}: cannot read robot TOML: {exc}") from exc
     return robot_from_dict(data, str(path))
 
@@ -147,11 +175,15 @@ def robot_from_dict(data: dict[str, Any], where: str = "robot") -> Robot:
         raise ParameterError(f"{where}: unknown robot keys {sorted(unknown)}; known: {sorted(known)}")
     kwargs = dict(data)
     if "cable_base" in kwargs:
+        if not isinstance(kwargs["cable_base"], (list, tuple)):
+            raise ParameterError(f"{where}: cable_base must be a list of base indices, got {kwargs['cable_base']!r}")
         kwargs["cable_base"] = tuple(kwargs["cable_base"])
     try:
         return Robot(**kwargs)
-    except TypeError as exc:
+    except ParameterError as exc:
         raise ParameterError(f"{where}: {exc}") from exc
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"{where}: invalid robot description: {exc}") from exc
 
 
 def mopick() -> Robot:

@@ -106,18 +106,42 @@ class Scene:
         return env
 
 
-def _arr(data: dict[str, Any], key: str, shape: tuple[int | None, ...], where: str) -> NDArray[np.float64]:
+def _arr(data: Any, key: str, shape: tuple[int | None, ...], where: str, default: Any = None) -> NDArray[np.float64]:
+    if not isinstance(data, dict):
+        raise ScenarioError(f"{where}: expected a table with key {key!r}, got {type(data).__name__} {data!r}")
+    if key not in data and default is None:
+        raise ScenarioError(f"{where}: missing key {key!r}")
+    value = data.get(key, default)
     try:
-        a = np.array(data[key], dtype=float)
-    except KeyError as exc:
-        raise ScenarioError(f"{where}: missing key {key!r}") from exc
+        a = np.array(value, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise ScenarioError(f"{where}: {key} must be numeric") from exc
+        raise ScenarioError(f"{where}: {key} must be numeric, got {value!r}") from exc
     if a.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, a.shape, strict=True)):
         raise ScenarioError(f"{where}: {key} must have shape {shape} (None = any), got {a.shape}")
     if not np.all(np.isfinite(a)):
-        raise ScenarioError(f"{where}: {key} must be finite")
+        raise ScenarioError(f"{where}: {key} must be finite, got {value!r}")
     return a
+
+
+def _num(data: dict[str, Any], key: str, default: float, where: str) -> float:
+    """A finite number data[key] (default when absent); ScenarioError otherwise."""
+    value = data.get(key, default)
+    if isinstance(value, bool):
+        raise ScenarioError(f"{where}: {key} must be a number, got {value!r}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError) as exc:
+        raise ScenarioError(f"{where}: {key} must be a number, got {value!r}") from exc
+    if not np.isfinite(v):
+        raise ScenarioError(f"{where}: {key} must be finite, got {value!r}")
+    return v
+
+
+def _tables(data: dict[str, Any], key: str, where: str) -> list[dict[str, Any]]:
+    value = data.get(key, [])
+    if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+        raise ScenarioError(f"{where}: {key} must be an array of tables ([[{key}]] entries), got {value!r}")
+    return value
 
 
 def scene_from_dict(data: dict[str, Any], where: str = "scene") -> Scene:
@@ -129,30 +153,38 @@ def scene_from_dict(data: dict[str, Any], where: str = "scene") -> Scene:
     if bounds[2] <= bounds[0] or bounds[3] <= bounds[1]:
         raise ScenarioError(f"{where}: bounds must be xmin < xmax, ymin < ymax, got {bounds}")
     tables = []
-    for i, t in enumerate(data.get("tables", [])):
-        c = _arr(t, "center", (2,), f"{where} table {i}")
-        s = _arr(t, "size", (2,), f"{where} table {i}")
+    for i, t in enumerate(_tables(data, "tables", where)):
+        w = f"{where} table {i}"
+        c = _arr(t, "center", (2,), w)
+        s = _arr(t, "size", (2,), w)
         if np.any(s <= 0):
-            raise ScenarioError(f"{where} table {i}: size must be positive")
+            raise ScenarioError(f"{w}: size must be positive")
         rect = box(c[0] - s[0] / 2, c[1] - s[1] / 2, c[0] + s[0] / 2, c[1] + s[1] / 2)
-        tables.append(affinity.rotate(rect, float(t.get("angle", 0.0)), origin=(c[0], c[1])))
+        tables.append(affinity.rotate(rect, _num(t, "angle", 0.0, w), origin=(c[0], c[1])))
     obstacles = []
-    for i, o in enumerate(data.get("obstacles", [])):
-        c = _arr(o, "center", (2,), f"{where} obstacle {i}")
-        r = float(o.get("radius", 0.0))
+    for i, o in enumerate(_tables(data, "obstacles", where)):
+        w = f"{where} obstacle {i}"
+        c = _arr(o, "center", (2,), w)
+        r = _num(o, "radius", 0.0, w)
         if not r > 0:
-            raise ScenarioError(f"{where} obstacle {i}: radius must be positive")
+            raise ScenarioError(f"{w}: radius must be positive, got {r}")
         obstacles.append(Point(c).buffer(r, quad_segs=16))
     bases = _arr(data, "bases", (None, 2), where)
-    headings = np.array(data.get("headings", np.zeros(len(bases))), dtype=float)
-    external = np.array(data.get("external", [1.0, 1.0, 1.0]), dtype=float)
-    if external.shape != (3,) or np.any(external < 0) or not np.all(np.isfinite(external)):
-        raise ScenarioError(f"{where}: external must be 3 non-negative numbers [N]")
+    headings = _arr(data, "headings", (len(bases),), where, default=np.zeros(len(bases)))
+    external = _arr(data, "external", (3,), where, default=[1.0, 1.0, 1.0])
+    if np.any(external < 0):
+        raise ScenarioError(f"{where}: external must be 3 non-negative numbers [N], got {external.tolist()}")
     inter = data.get("intermediate", 1)
-    if not isinstance(inter, int) or inter < 0:
+    if isinstance(inter, bool) or not isinstance(inter, int) or inter < 0:
         raise ScenarioError(f"{where}: intermediate must be a non-negative integer, got {inter!r}")
+    lateral = _num(data, "lateral", 1.5, where)
+    if lateral < 0:
+        raise ScenarioError(f"{where}: lateral (max sideways shift of a way-point) must be >= 0 m, got {lateral}")
+    name = data.get("name", Path(where).stem)
+    if not isinstance(name, str):
+        raise ScenarioError(f"{where}: name must be a string, got {name!r}")
     return Scene(
-        name=str(data.get("name", Path(where).stem)),
+        name=name,
         bounds=bounds,  # type: ignore[arg-type]
         tables=tuple(tables),
         obstacles=tuple(obstacles),
@@ -161,7 +193,7 @@ def scene_from_dict(data: dict[str, Any], where: str = "scene") -> Scene:
         headings=headings,
         external=external,
         intermediate=inter,
-        lateral=float(data.get("lateral", 1.5)),
+        lateral=lateral,
     )
 
 
@@ -181,7 +213,10 @@ def load_scene(name_or_path: str | Path) -> Scene:
         path = Path(name_or_path)
         if not path.is_file():
             raise ScenarioError(f"no scene {where!r}: not a built-in ({', '.join(builtin_scenes())}) nor a file")
-        text = path.read_text()
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ScenarioError(f"{where}: cannot read the scene file (a UTF-8 TOML file is expected): {exc}") from exc
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

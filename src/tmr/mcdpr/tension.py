@@ -2,6 +2,7 @@
 
 * :func:`closed_form` — m = n + 1 (MoPICK: 4 cables, 3 dof): t = W⁺f + λ n with n spanning the null space of W; the
   bounds give an interval of λ and the minimum 2-norm solution clamps λ = 0 into it (t_p = W⁺f ⊥ n). Batched numpy.
+  Needs W of full rank (rank-deficient poses are reported infeasible; use :class:`TensionProblem` there).
 * :class:`TensionProblem` — cvxpy, any m and any constraint rows A t ≤ b: minimum 2-norm (QP), minimum max tension
   (LP) or minimum 1-norm (LP). DPP with Parameters: compiled once, re-solved per pose.
 * :func:`wrench_feasible` — the feasibility LP (is f in the AWS of eq. 7?).
@@ -45,8 +46,10 @@ def closed_form_batch(W: ArrayLike, f: ArrayLike, lo: ArrayLike, hi: ArrayLike, 
 
     ``W`` (..., n, n+1), ``f`` (..., n) [N], ``lo``/``hi`` (..., m) [N]. W t = f has the solutions
     t = W⁺f + λ n (n = unit null vector); lo ≤ t ≤ hi gives λ ∈ [λ_lo, λ_hi] and the minimum-norm feasible tension is
-    λ* = clip(0, λ_lo, λ_hi). A pose is infeasible when the interval is empty or W is rank-deficient and f is not in
-    its range (residual > tol·(1 + ‖f‖)).
+    λ* = clip(0, λ_lo, λ_hi). The closed form needs W of full rank n (a one-dimensional null space): a pose is
+    reported infeasible when the interval is empty, when f is not in the range of W (residual > tol·(1 + ‖f‖)) and
+    whenever W is rank-deficient (smallest singular value ≤ 1e-12), even if some tensions would produce f there —
+    fall back to :class:`TensionProblem` or :func:`wrench_feasible` for such poses.
     """
     W = np.asarray(W, dtype=float)
     f = np.asarray(f, dtype=float)
@@ -80,6 +83,12 @@ def closed_form_batch(W: ArrayLike, f: ArrayLike, lo: ArrayLike, hi: ArrayLike, 
 def closed_form(W: ArrayLike, f: ArrayLike, lo: ArrayLike, hi: ArrayLike) -> NDArray[np.float64]:
     """Minimum 2-norm tensions (m,) [N] of one pose by the null-space closed form; raises InfeasibleWrench."""
     res = closed_form_batch(W, f, lo, hi)
+    s = np.linalg.svd(np.asarray(W, dtype=float), compute_uv=False)
+    if s[-1] <= 1e-12:
+        raise InfeasibleWrench(
+            f"W is rank-deficient (rank {int(np.sum(s > 1e-12))} < {len(s)}): the null-space closed form needs full "
+            "rank; use TensionProblem (QP/LP) for this pose"
+        )
     if not bool(res.feasible):
         raise InfeasibleWrench(
             f"wrench f = {np.round(np.asarray(f, float), 6).tolist()} N cannot be produced with tensions in "
