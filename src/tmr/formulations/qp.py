@@ -1,29 +1,32 @@
 """Lexicographic QP per step with hard safety constraints (``--method qp``; math in ``formulations/qp.md``).
 
-Each step solves one QP per priority level in the robot velocities v = [ṗ1, …, ṗN] (2N, planar; the joint rates
-are q̇ = T v, :mod:`tmr.velocity`), where every row on a robot or a tether point is local and the QP is sparse:
+Each step solves a strict priority stack of QPs in x = [v, q̇]: the robot velocities v = [ṗ1, …, ṗN] (2N, planar)
+and the joint rates q̇, tied by q̇ = T v (:mod:`tmr.velocity`, T banded). Rows on robots and tether points are local
+in v, joint-space rows (tether regulation, smoothness, energy, the joint box) are simplest on q̇, and every task and
+limit declares which one it writes (``space``):
 
-    level i:  min_v Σ_t w_t ‖J_t v − v_t‖² + ε‖v‖²
-              s.t.  lb ≤ T v ≤ ub                             (joint speed, acceleration, tether span: JointBox)
-                    lower ≤ A v ≤ upper                       (every Limit: clearance, separation, robot speed, …)
-                    F v = F v*                               (strict priority: the higher levels' optima are frozen)
+    level i:  min_x Σ_t w_t ‖J_t x − t_t‖² + ε‖x‖²
+              s.t.  q̇ − T v = 0,   lb ≤ q̇ ≤ ub              (coupling; joint speed, acceleration, span: JointBox)
+                    lower ≤ A x ≤ upper                       (every Limit: clearance, separation, robot speed, …)
+                    F x = F x*                               (strict priority: the higher levels' optima are frozen)
 
-Tasks and limits written on joint rates are converted (``A T``). The least squares are posed with residual variables
-r = √w (J v − v_t) (OSQP: ``min ½(ε‖v‖² + ‖r‖²)`` subject to ``√w J v − r = √w v_t``), so no JᵀJ is ever formed and
-every matrix keeps the rows' sparsity. F is an orthonormal basis of the higher levels' task rows and y* = F v* their
-optimal values: a level's objective is strictly convex in its task value, so freezing it means no lower level can
-degrade a higher one. A level holding a full-rank task (``Task.full_rank``) has a unique optimum, and the levels
-below it are skipped.
+F is an orthonormal basis, on v, of the higher levels' task rows and F x* their optimal values: a level's objective
+is strictly convex in its task value, so freezing it means no lower level can degrade a higher one. A level holding a
+full-rank task (``Task.full_rank``) has a unique optimum, and the levels below it are skipped. The returned joint
+rates are q̇ = T v* (exact).
 
 **Optimistic first level.** Level 1 (leader tracking) usually reaches zero residual. So each step first solves level
-2 with level 1's rows as equalities at their targets (``J_1 v = v_1``): if that QP is feasible its solution is exactly
+2 with level 1's rows as equalities at their targets (``J_1 x = t_1``): if that QP is feasible its solution is exactly
 the lexicographic one (level 1's optimum is then the zero residual), and one QP replaces two. Only if it is
 infeasible (the limits hold the leader back) is level 1 solved on its own, as an objective: the leader lags instead of
 breaking a hard limit, and the lag is reported. After a lagging step the next one starts with level 1 directly.
 
-Solvers: the default ``"osqp"`` keeps one persistent ``osqp.OSQP`` workspace per level with a fixed sparsity pattern
-and only updates its values each step; any qpsolvers backend (``"daqp"``, ``"proxqp"``, ``"clarabel"``, …, or
-``"qpsolvers-osqp"``) is reached through :func:`qpsolvers.solve_qp` with the same problem (condensed: P = Σ w JᵀJ).
+**Solvers.** With the default ``"osqp"`` each level is first solved from the previous step's active set by one KKT
+solve, accepted only if the KKT conditions verify (:mod:`tmr.formulations.activeset`); otherwise one persistent
+``osqp.OSQP`` workspace per level (fixed sparsity pattern, values updated each step) solves it, and DAQP settles a
+level OSQP leaves at its iteration limit. Any qpsolvers backend (``"daqp"``, ``"proxqp"``, ``"clarabel"``, …, or
+``"qpsolvers-osqp"``) is reached through :func:`qpsolvers.solve_qp` with the same problem. Every backend gets the
+condensed least squares P = Σ w JᵀJ + εI, q = −Σ w Jᵀt.
 """
 
 from __future__ import annotations
