@@ -269,3 +269,31 @@ def test_first_level_with_every_degree_of_freedom_or_redundant_rows(column_room)
     qp = LexicographicQP(chain, [Level([(_LeaderTimesN(), 1.0)]), Level([(Damping(chain), 1.0)])], limits, box)
     qdot, _ = qp.step(ctx)
     assert (chain.end_effector_jacobian(ctx.q) @ qdot)[0] == pytest.approx(0.3, abs=1e-6)
+
+
+class _ShrinkingLimit(Limit):
+    """Declares two rows, returns one from the second step on (a bug a user limit may have)."""
+
+    name = "shrinking"
+    space = "robot"
+
+    def __init__(self):
+        self.calls = 0
+
+    def pattern(self, chain):
+        return np.ones((2, 2 * chain.n_robots), dtype=bool)
+
+    def compute(self, ctx):
+        self.calls += 1
+        m = 2 if self.calls == 1 else 1
+        n = 2 * ctx.chain.n_robots
+        return LimitRows(np.zeros((m, n)), np.full(2, -np.inf), np.full(m, np.inf))
+
+
+def test_a_limit_changing_its_row_count_is_a_clear_error(column_room):
+    chain, ctx = context(column_room, [[3.0, 7.3], [6.0, 7.4], [9.0, 7.3]], (1.0, 7.3), [[9.3, 7.0]], [[0.5, -0.2]])
+    qp = stack(chain)
+    qp.limits.append(_ShrinkingLimit())
+    qp.step(ctx)
+    with pytest.raises(ParameterError, match="shrinking"):
+        qp.step(ctx)

@@ -366,8 +366,10 @@ class JointBox:
         self.vmax = np.where(chain.is_prismatic, v_span_max, omega_max).astype(float)
         self.a_max = float(a_max)
         self.margin = float(span_margin)
-        self._span_lo = self.limits[:, 0] + self.margin
-        self._span_hi = self.limits[:, 1] - self.margin
+        self._q_lo = np.full(chain.dof, -np.inf)  # span band per joint (revolute joints: unbounded)
+        self._q_hi = np.full(chain.dof, np.inf)
+        self._q_lo[chain.prismatic_index] = self.limits[:, 0] + self.margin
+        self._q_hi[chain.prismatic_index] = self.limits[:, 1] - self.margin
 
     def compute(self, ctx: StepContext, relax: bool = False) -> tuple[Array, Array]:
         """Bounds (lb, ub) on q̇; ``relax=True`` drops the acceleration bound (speed and span bounds stay)."""
@@ -378,17 +380,17 @@ class JointBox:
             da = self.a_max * Ts
             lb = np.maximum(-self.vmax, ctx.qdot_prev - da)
             ub = np.minimum(self.vmax, ctx.qdot_prev + da)
-        pi = self.chain.prismatic_index
-        d = ctx.spans
-        band_lo = (np.minimum(self._span_lo, d) - d) / Ts  # ≤ 0: a span outside only must not
-        band_hi = (np.maximum(self._span_hi, d) - d) / Ts  # ≥ 0: get worse
-        lo, hi = np.maximum(lb[pi], band_lo), np.minimum(ub[pi], band_hi)
+        # span band on every joint at once (±inf on the revolute ones): d_lo + m ≤ d + Ts ḋ ≤ d_max − m; a span already
+        # outside only must not get worse
+        q = ctx.q
+        band_lo = (np.minimum(self._q_lo, q) - q) / Ts
+        band_hi = (np.maximum(self._q_hi, q) - q) / Ts
+        lo, hi = np.maximum(lb, band_lo), np.minimum(ub, band_hi)
         empty = lo > hi
         if empty.any():  # speed/acceleration and the span band do not meet: the span band (the safety limit) wins
-            edge = np.where(lb[pi] > band_hi, band_hi, band_lo)
+            edge = np.where(lb > band_hi, band_hi, band_lo)
             lo, hi = np.where(empty, edge, lo), np.where(empty, edge, hi)
-        lb[pi], ub[pi] = lo, hi
-        return lb, ub
+        return lo, hi
 
 
 class KeepInPolygon(Limit):

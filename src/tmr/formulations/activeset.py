@@ -59,7 +59,8 @@ class WarmActiveSet:
     def __init__(self, tol: float = 1e-9, rounds: int = 4, dense_below: int = 80) -> None:
         self.tol, self.rounds, self.dense_below = float(tol), int(rounds), int(dense_below)
 
-    def _kkt(self, P: Array | sp.spmatrix, q: Array, A: Array, b: Array) -> tuple[Array, Array] | None:
+    def _kkt(self, P: Array | sp.spmatrix, q: Array, A: Array, b: Array) -> tuple[Array, Array, float] | None:
+        """Solve ``[P Aᵀ; A 0][x; y] = [−q; b]``; returns x, y and the largest residual of the system at (x, y)."""
         n, k = P.shape[0], A.shape[0]
         rhs = np.concatenate([-q, b])
         try:
@@ -69,7 +70,7 @@ class WarmActiveSet:
                 K[:n, :n] = P
                 K[:n, n:] = A.T
                 K[n:, :n] = A
-                _, _, z, info = dgesv(K, rhs, overwrite_a=True, overwrite_b=True)  # LAPACK, no wrapper overhead
+                _, _, z, info = dgesv(K, rhs)  # LAPACK without the wrapper overhead; K and rhs are kept
                 if info != 0:
                     return None
             else:
@@ -80,7 +81,7 @@ class WarmActiveSet:
             return None  # singular KKT matrix: dependent active rows or no curvature on their null space
         if not np.all(np.isfinite(z)):
             return None
-        return z[:n], z[n:]
+        return z[:n], z[n:], float(np.max(np.abs(K @ z - rhs)))
 
     def solve(
         self, P: Array | sp.spmatrix, q: Array, A: Array, lo: Array, up: Array, guess: NDArray[np.int8]
@@ -101,19 +102,16 @@ class WarmActiveSet:
             st = s[W]
             has_ineq = bool((st != 2).any())
             b = np.where(st == 1, up[W], lo[W]) if has_ineq else lo[W]  # equalities: lo = up
-            AW = A[W]
-            sol = self._kkt(P, q, AW, b)
+            sol = self._kkt(P, q, A[W], b)
             if sol is None:
                 return None
-            x, yW = sol
+            x, yW, residual = sol
+            # the KKT point itself: stationarity P x + q + A_Wᵀ y = 0 and the active rows at their bounds, to a
+            # tolerance from the data [−q; b] (never from y: an ill-conditioned system, e.g. nearly parallel active
+            # rows, gives huge multipliers and fails here instead of passing garbage on)
+            if residual > 10 * tol * max(scale, 1.0 + float(np.max(np.abs(b), initial=0.0))):
+                return None
             Ax = A @ x
-            # the KKT point itself: active rows at their bounds and stationarity P x + q + A_Wᵀ y = 0 (an
-            # ill-conditioned system, e.g. nearly parallel active rows, fails here instead of passing garbage on)
-            if np.max(np.abs(Ax[W] - b), initial=0.0) > tol * (1.0 + np.max(np.abs(b), initial=0.0)):
-                return None
-            Px = P @ x
-            if np.max(np.abs(Px + q + AW.T @ yW), initial=0.0) > 10 * tol * (scale + np.max(np.abs(Px))):
-                return None
             viol = np.maximum(lo - Ax, Ax - up)  # every row within its bounds
             feasible = not viol.size or viol.max() <= tol
             wrong = None

@@ -322,7 +322,7 @@ class LexicographicQP:
         self._buffer = np.zeros((0, 0))
         self._zeros = np.zeros(0)
         self._rows_cache: dict[int, tuple] = {}
-        self._spans: list[tuple[slice, slice]] = []
+        self._spans: list[tuple[slice, slice, tuple[int, int], tuple[int]]] = []
         self._m0 = 0
 
     def reset(self) -> None:
@@ -406,7 +406,7 @@ class LexicographicQP:
         start = 2 * n
         for lim, d in zip(self.limits, patterns, strict=True):
             cols = slice(0, n) if lim.space == "robot" else slice(n, 2 * n)
-            self._spans.append((slice(start, start + d.shape[0]), cols))
+            self._spans.append((slice(start, start + d.shape[0]), cols, (d.shape[0], n), (d.shape[0],)))
             start += d.shape[0]
         self._m0 = start
         # rows: [T, −I] (q̇ = T v), [0, I] (joint box), the limits, then room for the frozen rows of the levels
@@ -418,7 +418,7 @@ class LexicographicQP:
         declared[:n, :n] = robot_pattern(np.eye(n, dtype=bool))
         declared[:n, n:] = np.eye(n, dtype=bool)
         declared[n : 2 * n, n:] = np.eye(n, dtype=bool)
-        for (r, c), d in zip(self._spans, patterns, strict=True):
+        for (r, c, _, _), d in zip(self._spans, patterns, strict=True):
             declared[r, c] = d
         self._declared = declared
 
@@ -427,11 +427,11 @@ class LexicographicQP:
         n = 2 * self.chain.n_robots
         B = self._buffer
         B[:n, :n] = ctx.velocity_map.T
-        for (r, c), lr, lim in zip(self._spans, rows, self.limits, strict=True):
-            if lr.A.shape != (r.stop - r.start, n) or lr.lower.shape != lr.upper.shape != (r.stop - r.start,):
+        for (r, c, shape, bounds), lr, lim in zip(self._spans, rows, self.limits, strict=True):
+            if lr.A.shape != shape or lr.lower.shape != bounds or lr.upper.shape != bounds:
                 raise ParameterError(
-                    f"limit {lim.name!r} returned rows of shape {lr.A.shape} (bounds {lr.lower.shape}); its pattern "
-                    f"declares {r.stop - r.start} rows of {n} columns"
+                    f"limit {lim.name!r} returned rows of shape {lr.A.shape} (bounds {lr.lower.shape}, "
+                    f"{lr.upper.shape}); its pattern declares {shape[0]} rows of {shape[1]} columns"
                 )
             B[r, c] = lr.A
         return B[: self._m0]
