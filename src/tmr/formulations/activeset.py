@@ -31,13 +31,19 @@ Array = NDArray[np.float64]
 
 
 class ActiveSetResult(NamedTuple):
-    """x: primal solution; y: multipliers of every row (0 on inactive rows); active: the verified active set
-    (+1 upper, −1 lower, 2 equality, 0 inactive); rounds: KKT solves used."""
+    """x: primal solution; active: the verified active set (+1 upper, −1 lower, 2 equality, 0 inactive); rounds: KKT
+    solves used; y_active: the multipliers of the active rows (in row order); ``y``: of every row (0 on inactive)."""
 
     x: Array
-    y: Array
     active: NDArray[np.int8]
     rounds: int
+    y_active: Array
+
+    @property
+    def y(self) -> Array:
+        y = np.zeros(self.active.size)
+        y[np.flatnonzero(self.active)] = self.y_active
+        return y
 
 
 def active_set(y: Array, lo: Array, up: Array, tol: float = 1e-9) -> NDArray[np.int8]:
@@ -59,8 +65,9 @@ class WarmActiveSet:
     def __init__(self, tol: float = 1e-9, rounds: int = 4, dense_below: int = 80) -> None:
         self.tol, self.rounds, self.dense_below = float(tol), int(rounds), int(dense_below)
 
-    def _kkt(self, P: Array | sp.spmatrix, q: Array, A: Array, b: Array) -> tuple[Array, Array, float] | None:
-        """Solve ``[P Aᵀ; A 0][x; y] = [−q; b]``; returns x, y and the largest residual of the system at (x, y)."""
+    def _kkt(self, P: Array | sp.spmatrix, q: Array, A: Array, b: Array) -> tuple[Array, Array, float, float] | None:
+        """Solve ``[P Aᵀ; A 0][x; y] = [−q; b]``: x, y, the relative residual of the system at (x, y) (stationarity
+        over 10 (1 + |q|), active rows over 1 + |b|; NaN if the solve produced non-finite values) and max |q|."""
         n, k = P.shape[0], A.shape[0]
         rhs = np.concatenate([-q, b])
         try:
@@ -79,9 +86,12 @@ class WarmActiveSet:
                 z = spla.splu(K).solve(rhs)
         except (np.linalg.LinAlgError, RuntimeError, ValueError):
             return None  # singular KKT matrix: dependent active rows or no curvature on their null space
-        if not np.all(np.isfinite(z)):
-            return None
-        return z[:n], z[n:], float(np.max(np.abs(K @ z - rhs)))
+        r = np.abs(K @ z - rhs)
+        # stationarity residual relative to q, active-row residual relative to b (separately: a badly scaled row's
+        # bound must not loosen the stationarity test); NaN compares false and fails the caller's test
+        stat = float(np.max(r[:n])) / (1.0 + float(np.max(np.abs(q), initial=0.0)))
+        act = float(np.max(r[n:], initial=0.0)) / (1.0 + float(np.max(np.abs(b), initial=0.0)))
+        return z[:n], z[n:], max(stat / 10.0, act), float(np.max(np.abs(q), initial=0.0))
 
     def solve(
         self, P: Array | sp.spmatrix, q: Array, A: Array, lo: Array, up: Array, guess: NDArray[np.int8]
@@ -94,7 +104,6 @@ class WarmActiveSet:
         s[lo == up] = 2
         tol = self.tol
         n = q.size
-        scale = 1.0 + float(np.max(np.abs(q), initial=0.0))  # problem data, not the (possibly garbage) multipliers
         for r in range(1, self.rounds + 1):
             W = np.flatnonzero(s)
             if W.size > n:
@@ -105,25 +114,23 @@ class WarmActiveSet:
             sol = self._kkt(P, q, A[W], b)
             if sol is None:
                 return None
-            x, yW, residual = sol
+            x, yW, residual, scale = sol
             # the KKT point itself: stationarity P x + q + A_Wᵀ y = 0 and the active rows at their bounds, to a
-            # tolerance from the data [−q; b] (never from y: an ill-conditioned system, e.g. nearly parallel active
-            # rows, gives huge multipliers and fails here instead of passing garbage on)
-            if residual > 10 * tol * max(scale, 1.0 + float(np.max(np.abs(b), initial=0.0))):
+            # tolerance from the data [−q; b], never from y (an ill-conditioned system, e.g. nearly parallel active
+            # rows, gives huge multipliers and fails here instead of passing garbage on; NaN fails too)
+            if not residual <= tol:
                 return None
             Ax = A @ x
             viol = np.maximum(lo - Ax, Ax - up)  # every row within its bounds
             feasible = not viol.size or viol.max() <= tol
             wrong = None
             if has_ineq:  # multipliers of the active inequalities must have the sign of their bound
-                ytol = tol * scale
+                ytol = tol * (1.0 + scale)
                 wrong = ((st == 1) & (yW < -ytol)) | ((st == -1) & (yW > ytol))
                 if not wrong.any():
                     wrong = None
             if feasible and wrong is None:
-                y = np.zeros(A.shape[0])
-                y[W] = yW
-                return ActiveSetResult(x, y, s, r)
+                return ActiveSetResult(x, s, r, yW)
             if wrong is not None:
                 s[W[wrong]] = 0
             if not feasible:
