@@ -57,7 +57,8 @@ class WarmActiveSet:
     """KKT solve of a QP from a guessed active set, with a few primal-dual corrections (see the module docstring).
 
     Args:
-        tol: primal feasibility and dual sign tolerance [row units].
+        tol: primal feasibility tolerance [row units], and the relative tolerance of the KKT residuals and of the
+            multipliers' signs.
         rounds: largest number of KKT solves per call.
         dense_below: problems with fewer variables use dense LAPACK, larger ones SuperLU on the sparse KKT matrix.
     """
@@ -91,7 +92,8 @@ class WarmActiveSet:
         # bound must not loosen the stationarity test); NaN compares false and fails the caller's test
         stat = float(np.max(r[:n])) / (1.0 + float(np.max(np.abs(q), initial=0.0)))
         act = float(np.max(r[n:], initial=0.0)) / (1.0 + float(np.max(np.abs(b), initial=0.0)))
-        return z[:n], z[n:], max(stat / 10.0, act), float(np.max(np.abs(q), initial=0.0))
+        residual = max(stat / 10.0, act) if np.isfinite(stat) and np.isfinite(act) else np.nan
+        return z[:n], z[n:], residual, float(np.max(np.abs(q), initial=0.0))
 
     def solve(
         self, P: Array | sp.spmatrix, q: Array, A: Array, lo: Array, up: Array, guess: NDArray[np.int8]
