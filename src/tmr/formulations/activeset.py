@@ -66,9 +66,8 @@ class WarmActiveSet:
     def __init__(self, tol: float = 1e-9, rounds: int = 4, dense_below: int = 80) -> None:
         self.tol, self.rounds, self.dense_below = float(tol), int(rounds), int(dense_below)
 
-    def _kkt(self, P: Array | sp.spmatrix, q: Array, A: Array, b: Array) -> tuple[Array, Array, float, float] | None:
-        """Solve ``[P Aᵀ; A 0][x; y] = [−q; b]``: x, y, the relative residual of the system at (x, y) (stationarity
-        over 10 (1 + |q|), active rows over 1 + |b|; NaN if the solve produced non-finite values) and max |q|."""
+    def _kkt(self, P: Array | sp.spmatrix, q: Array, A: Array, b: Array) -> tuple[Array, Array, Array] | None:
+        """Solve ``[P Aᵀ; A 0][x; y] = [−q; b]``: x, y and the residual ``K z − rhs`` of the system at (x, y)."""
         n, k = P.shape[0], A.shape[0]
         rhs = np.concatenate([-q, b])
         try:
@@ -87,13 +86,7 @@ class WarmActiveSet:
                 z = spla.splu(K).solve(rhs)
         except (np.linalg.LinAlgError, RuntimeError, ValueError):
             return None  # singular KKT matrix: dependent active rows or no curvature on their null space
-        r = np.abs(K @ z - rhs)
-        # stationarity residual relative to q, active-row residual relative to b (separately: a badly scaled row's
-        # bound must not loosen the stationarity test); NaN compares false and fails the caller's test
-        stat = float(np.max(r[:n])) / (1.0 + float(np.max(np.abs(q), initial=0.0)))
-        act = float(np.max(r[n:], initial=0.0)) / (1.0 + float(np.max(np.abs(b), initial=0.0)))
-        residual = max(stat / 10.0, act) if np.isfinite(stat) and np.isfinite(act) else np.nan
-        return z[:n], z[n:], residual, float(np.max(np.abs(q), initial=0.0))
+        return z[:n], z[n:], K @ z - rhs
 
     def solve(
         self, P: Array | sp.spmatrix, q: Array, A: Array, lo: Array, up: Array, guess: NDArray[np.int8]
@@ -106,6 +99,7 @@ class WarmActiveSet:
         s[lo == up] = 2
         tol = self.tol
         n = q.size
+        qscale = 1.0 + float(np.max(np.abs(q), initial=0.0))  # problem data, never the (maybe garbage) multipliers
         for r in range(1, self.rounds + 1):
             W = np.flatnonzero(s)
             if W.size > n:
@@ -116,18 +110,20 @@ class WarmActiveSet:
             sol = self._kkt(P, q, A[W], b)
             if sol is None:
                 return None
-            x, yW, residual, scale = sol
-            # the KKT point itself: stationarity P x + q + A_Wᵀ y = 0 and the active rows at their bounds, to a
-            # tolerance from the data [−q; b], never from y (an ill-conditioned system, e.g. nearly parallel active
-            # rows, gives huge multipliers and fails here instead of passing garbage on; NaN fails too)
-            if not residual <= tol:
+            x, yW, res = sol
+            # the KKT point itself: stationarity P x + q + A_Wᵀ y = 0 relative to q, and the active rows at their
+            # bounds relative to b (never relative to y: an ill-conditioned system, e.g. nearly parallel active rows,
+            # gives huge multipliers and fails here instead of passing garbage on; NaN compares false and fails too)
+            if not np.max(np.abs(res[:n])) <= 10 * tol * qscale:
+                return None
+            if W.size and not np.max(np.abs(res[n:])) <= tol * (1.0 + float(np.max(np.abs(b)))):
                 return None
             Ax = A @ x
             viol = np.maximum(lo - Ax, Ax - up)  # every row within its bounds
             feasible = not viol.size or viol.max() <= tol
             wrong = None
             if has_ineq:  # multipliers of the active inequalities must have the sign of their bound
-                ytol = tol * (1.0 + scale)
+                ytol = tol * qscale
                 wrong = ((st == 1) & (yW < -ytol)) | ((st == -1) & (yW > ytol))
                 if not wrong.any():
                     wrong = None
