@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 from shapely.geometry import Point
@@ -26,3 +28,21 @@ def straight_trajectory(start, goal, T_end: float = 15.0, Ts: float = 0.05):
     """Leader trajectory along a straight line with the B-spline time law (no RRT*)."""
     start, goal = np.asarray(start, float), np.asarray(goal, float)
     return time_law(np.vstack([start, (start + goal) / 2, goal]), T_end=T_end, Ts=Ts)
+
+
+def add_fourth_leg(desc: dict) -> dict:
+    """A CCMA description with a fourth agent and leg on the end-effector (a description edit, no code)."""
+    d = copy.deepcopy(desc)
+    d["bodies"] += [{"name": "post_d"}, {"name": "arm_d"}]
+    d["joints"] += [
+        {
+            "name": "elbow_d",
+            "type": "revolute",
+            "bodies": ["post_d", "arm_d"],
+            "point": [0, -0.6, 0.3],
+            "axis": [1, 0, 0],
+        },
+        {"name": "wrist_d", "type": "revolute", "bodies": ["arm_d", "ee"], "point": [0, -0.2, 0.5], "axis": [1, 0, 0]},
+    ]
+    d["agents"].append({"name": "agent_d", "position": [0.0, -0.6], "height": 0.1, "attach": "post_d"})
+    return d

@@ -15,6 +15,8 @@ from tmr.ccma.paths import make_path
 from tmr.ccma.sim import end_effector_pose, newton, reference_state, simulate
 from tmr.ccma.system import build_system, load_description, load_system
 
+from .conftest import add_fourth_leg
+
 
 @pytest.fixture(scope="module")
 def models() -> dict[str, EnergyModel]:
@@ -123,19 +125,7 @@ def test_actuation_swap_and_extra_agent_need_no_code_change():
     complete = copy.deepcopy(base)
     for a in complete["agents"]:
         a["actuation"] = "complete"
-    four = copy.deepcopy(base)
-    four["bodies"] += [{"name": "post_d"}, {"name": "arm_d"}]
-    four["joints"] += [
-        {
-            "name": "elbow_d",
-            "type": "revolute",
-            "bodies": ["post_d", "arm_d"],
-            "point": [0, -0.6, 0.3],
-            "axis": [1, 0, 0],
-        },
-        {"name": "wrist_d", "type": "revolute", "bodies": ["arm_d", "ee"], "point": [0, -0.2, 0.5], "axis": [1, 0, 0]},
-    ]
-    four["agents"].append({"name": "agent_d", "position": [0.0, -0.6], "height": 0.1, "attach": "post_d"})
+    four = add_fourth_leg(base)
     for desc, nu in ((complete, 9), (four, 8)):
         m = EnergyModel(build_system(desc))
         assert m.nu == nu

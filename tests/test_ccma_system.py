@@ -11,6 +11,8 @@ from tmr.ccma.energy import EnergyModel
 from tmr.ccma.errors import DescriptionError
 from tmr.ccma.system import build_system, example_names, load_description, load_system
 
+from .conftest import add_fourth_leg
+
 
 def test_shipped_examples():
     assert example_names() == ["4dof-complete", "4dof-reduced", "5dof-reduced", "6dof-reduced"]
@@ -48,25 +50,8 @@ def test_swapping_actuation_is_a_description_edit():
     assert s.control_names == load_system("4dof-complete").control_names
 
 
-def _add_fourth_leg(desc: dict) -> dict:
-    d = copy.deepcopy(desc)
-    d["bodies"] += [{"name": "post_d"}, {"name": "arm_d"}]
-    d["joints"] += [
-        {
-            "name": "elbow_d",
-            "type": "revolute",
-            "bodies": ["post_d", "arm_d"],
-            "point": [0, -0.6, 0.3],
-            "axis": [1, 0, 0],
-        },
-        {"name": "wrist_d", "type": "revolute", "bodies": ["arm_d", "ee"], "point": [0, -0.2, 0.5], "axis": [1, 0, 0]},
-    ]
-    d["agents"].append({"name": "agent_d", "position": [0.0, -0.6], "height": 0.1, "attach": "post_d"})
-    return d
-
-
 def test_adding_an_agent_is_a_description_edit():
-    s = build_system(_add_fourth_leg(load_description("4dof-reduced")))
+    s = build_system(add_fourth_leg(load_description("4dof-reduced")))
     assert len(s.agents) == 4 and s.n_controls == 8
     EnergyModel(s)
 

@@ -21,7 +21,6 @@ from numpy.typing import ArrayLike, NDArray
 from tmr.chain import Chain
 from tmr.errors import ParameterError
 from tmr.tasks import StepContext
-from tmr.velocity import robot_pattern
 
 Array = NDArray[np.float64]
 
@@ -88,11 +87,6 @@ class Limit(ABC):
         A QP keeps it as the initial sparsity of its workspace; an entry outside it makes the workspace grow (a new
         factorisation), so a declared pattern saves time but is not a promise the solver relies on.
         """
-
-    def robot_pattern(self, chain: Chain) -> NDArray[np.bool_]:
-        """:meth:`pattern` in robot velocities."""
-        mask = self.pattern(chain)
-        return mask if self.space == "robot" else robot_pattern(mask)
 
     @abstractmethod
     def compute(self, ctx: StepContext) -> LimitRows:

@@ -354,29 +354,29 @@ class SpanUniformity(Task):
         return TaskRows(self.D, -self.gain * (self.D @ ctx.q))
 
 
-class Damping(Task):
-    """Minimum joint velocity (the energy f1 of Caruso 2021 eq. 24): rows ``q̇ ≈ 0``."""
+class _EveryJointRate(Task):
+    """A task on every joint rate: rows ``q̇ ≈ target`` (the identity, full rank, constant)."""
 
-    name = "energy"
     full_rank = True
 
     def __init__(self, chain: Chain) -> None:
         self.I = np.eye(chain.dof)
         self.I.flags.writeable = False  # constant rows
+
+
+class Damping(_EveryJointRate):
+    """Minimum joint velocity (the energy f1 of Caruso 2021 eq. 24): rows ``q̇ ≈ 0``."""
+
+    name = "energy"
 
     def compute(self, ctx: StepContext) -> TaskRows:
         return TaskRows(self.I, np.zeros(ctx.chain.dof))
 
 
-class Smoothness(Task):
+class Smoothness(_EveryJointRate):
     """Small joint acceleration (the jerk-like f4 of Caruso 2021 eq. 27): rows ``q̇_k ≈ q̇_{k−1}``."""
 
     name = "smoothness"
-    full_rank = True
-
-    def __init__(self, chain: Chain) -> None:
-        self.I = np.eye(chain.dof)
-        self.I.flags.writeable = False  # constant rows
 
     def compute(self, ctx: StepContext) -> TaskRows:
         return TaskRows(self.I, ctx.qdot_prev)

@@ -496,14 +496,10 @@ class LexicographicQP:
         nx = A0.shape[1]
         lb, ub = self.box.compute(ctx, relax=relax)
         zeros = self._zeros  # right-hand side of q̇ − T v = 0
-        if relax:  # the relaxable (comfort) limits are dropped: their rows get infinite bounds
-            drop = [lim.relaxable for lim in self.limits]
-            pairs = list(zip(rows, drop, strict=True))
-            lo0 = np.concatenate([zeros, lb, *(np.full(r.lower.size, -np.inf) if d else r.lower for r, d in pairs)])
-            up0 = np.concatenate([zeros, ub, *(np.full(r.upper.size, np.inf) if d else r.upper for r, d in pairs)])
-        else:
-            lo0 = np.concatenate([zeros, lb, *(r.lower for r in rows)])
-            up0 = np.concatenate([zeros, ub, *(r.upper for r in rows)])
+        # with relax, the relaxable (comfort) limits are dropped: their rows get infinite bounds
+        pairs = [(r, relax and lim.relaxable) for r, lim in zip(rows, self.limits, strict=True)]
+        lo0 = np.concatenate([zeros, lb, *(np.full(r.lower.size, -np.inf) if d else r.lower for r, d in pairs)])
+        up0 = np.concatenate([zeros, ub, *(np.full(r.upper.size, np.inf) if d else r.upper for r, d in pairs)])
         n = nx // 2
         if optimistic:
             if 0 not in objectives:
