@@ -1,19 +1,27 @@
-"""Whole-horizon NLP (``tmr.formulations.horizon``): feasibility, optimality, cost vs warm start, clear failures."""
+"""Whole-horizon NLP (``tmr.formulations.horizon``): feasibility, optimality, cost vs warm start, fallbacks (never
+worse than the warm start), time limit, clear failures, no import of the planner."""
 
 from __future__ import annotations
 
+import ast
 import dataclasses
+import io
 import math
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 from shapely.geometry import Point
 
+import tmr.formulations.horizon as horizon_module
 from tmr.chain import Chain
 from tmr.clik import Plan
 from tmr.environment import Environment
 from tmr.errors import InfeasibleStep, ParameterError, TmrError
 from tmr.formulations.horizon import (
+    DEFAULT_TIME_LIMIT,
     GROUPS,
     HorizonInfeasible,
     distance_spline,
@@ -148,8 +156,9 @@ def test_objective_terms_are_the_paper_fitness(solved):
 
 def test_start_outside_span_limit_names_group_and_knot():
     problem = small_problem(limits=[[0.5, 5.596], [1.0, 1.2]])  # the start's second span is 1.26 m
+    warm = solve(problem, "qp")[0]  # any plan: the start is checked first
     with pytest.raises(HorizonInfeasible) as info:
-        plan_horizon(problem, warm_start=None)
+        plan_horizon(problem, warm_start=warm)
     err = info.value
     assert isinstance(err, InfeasibleStep) and isinstance(err, TmrError)
     assert err.groups == ["span"] and err.status == "start_infeasible"
@@ -161,8 +170,10 @@ def test_start_outside_span_limit_names_group_and_knot():
 def test_unreachable_reference_reports_leader_knots():
     """Both tethers limited to 1.5 m: the end of the reference is out of reach; IPOPT proves local infeasibility."""
     problem = small_problem(limits=[[0.5, 1.5], [1.0, 1.5]])
+    warm = solve(problem, "qp")[0]
+    assert not warm.success  # the qp plan fails too: no fallback
     with pytest.raises(HorizonInfeasible) as info:
-        plan_horizon(problem)
+        plan_horizon(problem, warm)
     err = info.value
     assert err.status == "Infeasible_Problem_Detected" and "leader" in err.groups
     reach = 1.5 + 1.5 - 2 * problem.qp_params.span_margin
@@ -177,7 +188,7 @@ def test_reference_through_obstacle_with_equality_leader_fails_clearly():
     inside = problem.env.exact_clearance(problem.trajectory.x) < 0
     assert inside.any()
     with pytest.raises(HorizonInfeasible) as info:
-        plan_horizon(problem)
+        plan_horizon(problem, solve(problem, "qp")[0])
     err = info.value
     assert err.status == "Infeasible_Problem_Detected"
     assert set(err.groups) <= {"leader", "clearance"} and "leader" in err.groups
@@ -185,29 +196,239 @@ def test_reference_through_obstacle_with_equality_leader_fails_clearly():
     assert inside[worst.knot]  # the leader is pulled off its reference where the reference is inside the column
     msg = str(err)
     assert "Infeasible_Problem_Detected" in msg and "leader" in msg and f"knot {worst.knot}" in msg
+    # the qp plan leaves the reference by up to 0.93 m to go round the column: not a fallback of the equality leader
+    assert "the warm start is no fallback" in msg and "off the reference" in msg
     for v in err.violations:
         assert v.group in GROUPS and 0 <= v.knot <= 30 and v.amount > 0 and v.t == pytest.approx(0.05 * v.knot)
 
 
 def test_bounded_leader_error_passes_where_equality_cannot():
     problem = small_problem(GRAZING)
+    warm = solve(problem, "qp")[0]
     with pytest.raises(HorizonInfeasible, match="leader"):
-        plan_horizon(problem)
-    plan = plan_horizon(problem, leader_tolerance=0.1)
+        plan_horizon(problem, warm)
+    plan = plan_horizon(problem, warm, leader_tolerance=0.1)
     metrics = check(plan, problem.env)
     assert plan.success and metrics.n_violation_steps == 0
     assert 0.0 < metrics.max_tracking_error <= 0.1 + 1e-6
+    assert plan.diagnostics["horizon_result"] == "optimal"
 
 
 def test_bad_options_and_warm_start():
     problem = small_problem()
+    warm = solve(problem, "qp")[0]
     with pytest.raises(ParameterError, match="unknown horizon option"):
-        plan_horizon(problem, nonsense=1)
+        plan_horizon(problem, warm, nonsense=1)
     with pytest.raises(ParameterError):
-        plan_horizon(problem, hessian="bfgs")
-    bad = dataclasses.replace(solve(problem, "qp")[0], q=np.zeros((31, 3)))
+        plan_horizon(problem, warm, hessian="bfgs")
+    bad = dataclasses.replace(warm, q=np.zeros((31, 3)))
     with pytest.raises(ParameterError, match="warm start"):
         plan_horizon(problem, bad)
+    # the warm start is required (the planner passes its qp plan), the time limit is a positive number of seconds
+    with pytest.raises(ParameterError, match=r"needs a warm start.*solve\(problem, 'qp'\)"):
+        plan_horizon(problem, None)
+    with pytest.raises(TypeError):
+        plan_horizon(problem)  # type: ignore[call-arg]
+    for limit in (0.0, -1.0, True, "60"):
+        with pytest.raises(ParameterError, match="time_limit"):
+            plan_horizon(problem, warm, time_limit=limit)
+    assert DEFAULT_TIME_LIMIT == 60.0
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# the planner ↔ horizon import circle is gone
+# ----------------------------------------------------------------------------------------------------------------
+def test_module_does_not_import_the_planner():
+    """Neither at import time (fresh process, the ``tmr`` package's own ``__init__`` — which imports the planner for
+    ``tmr.solve`` — bypassed) nor anywhere in the source (a function-level ``from tmr.planner import …`` included)."""
+    code = (
+        "import importlib.util, sys, types\n"
+        "spec = importlib.util.find_spec('tmr')\n"
+        "pkg = types.ModuleType('tmr'); pkg.__path__ = list(spec.submodule_search_locations)\n"
+        "sys.modules['tmr'] = pkg\n"
+        "import tmr.formulations.horizon\n"
+        "print(sorted(m for m in sys.modules if m.startswith('tmr')))\n"
+        "assert 'tmr.planner' not in sys.modules\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "'tmr.formulations.horizon'" in out.stdout and "tmr.planner" not in out.stdout
+    tree = ast.parse(Path(horizon_module.__file__).read_text(encoding="utf-8"))
+    imported = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            imported.add(node.module)
+        elif isinstance(node, ast.Import):
+            imported.update(a.name for a in node.names)
+    assert not any(m == "tmr.planner" or m.startswith("tmr.planner.") for m in imported), imported
+    assert "tmr" not in imported  # no `import tmr` / `from tmr import planner` either
+
+
+def test_plans_with_the_planner_blocked(monkeypatch, feasible_warm):
+    problem, warm, _ = feasible_warm
+    monkeypatch.setitem(sys.modules, "tmr.planner", None)  # any `import tmr.planner` now raises ImportError
+    plan = plan_horizon(problem, warm)
+    assert plan.diagnostics["horizon_result"] == "optimal"
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# never worse than the warm start: fallbacks, time limit
+# ----------------------------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def feasible_warm():
+    """A warm start that satisfies every row of the NLP but is not its optimum: the optimum of other weights (the
+    small problem's qp plan is no such start: its followers are still moving at t_K, against the to-rest rows)."""
+    problem = small_problem()
+    warm = plan_horizon(problem, solve(problem, "qp")[0], w_uniformity=100.0)
+    assert warm.success and warm.diagnostics["horizon_result"] == "optimal"
+    J_warm = objective(warm.q, problem)
+    return problem, warm, J_warm
+
+
+def test_normal_run_is_optimal_and_not_worse(feasible_warm):
+    problem, warm, J_warm = feasible_warm
+    plan = plan_horizon(problem, warm)
+    d = plan.diagnostics
+    assert d["horizon_result"] == "optimal" and d["horizon_stop"] == "converged" and not d["time_limit_hit"]
+    assert d["ipopt_status"] == "Solve_Succeeded"
+    assert d["warm_start_fallback"] == "the warm-start horizon plan"
+    assert d["objective_warm_start"] == pytest.approx(J_warm, rel=1e-6)  # on the reference to 10⁻⁶ m already
+    J = objective(plan.q, problem)
+    assert J == pytest.approx(d["objective"], rel=1e-9)
+    assert J < J_warm - 0.1  # 119.77 vs 120.15
+    assert "IPOPT solved the NLP" in d["horizon_note"] and "returned the optimum" in d["horizon_note"]
+    assert check(plan, problem.env).n_violation_steps == 0 and plan.success
+
+
+@pytest.mark.parametrize(
+    "limit",
+    [{"max_iter": 1}, {"max_iter": 2}, {"max_iter": 3}, {"time_limit": 1e-3}],
+    ids=["max_iter=1", "max_iter=2", "max_iter=3", "time_limit=1ms"],
+)
+def test_stopped_ipopt_returns_a_feasible_plan_not_worse_than_warm_start(feasible_warm, limit):
+    problem, warm, J_warm = feasible_warm
+    plan = plan_horizon(problem, warm, **limit)
+    d = plan.diagnostics
+    assert plan.method == "horizon" and plan.success and plan.failure is None
+    assert d["horizon_result"] in ("warm_start", "best_feasible_iterate")
+    assert d["horizon_stop"] == ("time_limit" if "time_limit" in limit else "ipopt_failed")
+    assert d["time_limit_hit"] == ("time_limit" in limit)
+    assert J_warm >= objective(plan.q, problem) == pytest.approx(d["objective"], rel=1e-9)
+    assert d["constraint_violation"] <= 1e-5  # every row of every group, every clearance sample
+    metrics = check(plan, problem.env)
+    assert plan.success and metrics.n_violation_steps == 0 and metrics.max_tracking_error < 1e-6
+    if d["horizon_result"] == "warm_start":
+        np.testing.assert_array_equal(plan.q, warm.q)
+        assert "returned the warm-start horizon plan" in d["horizon_note"]
+    else:
+        assert "returned its best feasible iterate (round 1" in d["horizon_note"]
+    if "max_iter" in limit:
+        assert "Maximum_Iterations_Exceeded" in d["horizon_note"] and d["ipopt_status"] == "Maximum_Iterations_Exceeded"
+    else:  # spent before the first IPOPT call (the transcription alone takes longer than 1 ms)
+        assert d["horizon_note"].startswith("time limit of 0.001 s reached before IPOPT started")
+        assert d["ipopt_iterations"] == 0 and d["rounds"] == 0
+
+
+def test_iterate_fallback_beats_warm_start(feasible_warm):
+    """Two IPOPT iterations already lower the cost from a feasible start; the iterate is kept, projected on the
+    reference and checked on every row."""
+    problem, warm, J_warm = feasible_warm
+    plan = plan_horizon(problem, warm, max_iter=2)
+    d = plan.diagnostics
+    assert d["horizon_result"] == "best_feasible_iterate"
+    assert objective(plan.q, problem) < J_warm - 0.1  # 119.77 vs 120.15
+    assert d["iterates_kept"] >= 1 and check(plan, problem.env).n_violation_steps == 0
+
+
+def test_warm_start_as_given_with_a_lagging_leader_is_the_last_fallback(feasible_warm, monkeypatch):
+    """A warm start whose leader lags its reference by a few mm (as a CLIK qp plan does) is still a fallback when its
+    projection on the reference is not feasible: as given, if every other row holds and the leader stays within
+    ``warm_start_leader_error`` (1 cm) of the reference."""
+    problem, warm, _ = feasible_warm
+    q = warm.q.copy()
+    s = np.linspace(0.0, 1.0, q.shape[0])
+    q[:, -1] += 0.003 * np.sin(np.pi * s) ** 2  # the leader's tether up to 3 mm longer mid-way, smoothly
+    lagging = dataclasses.replace(warm, q=q, method="lagging")
+    real = horizon_module._project_leader
+
+    def spoiled(su, Q):
+        out = real(su, Q)
+        out[1:, 0] += 0.5  # turn the first tether by 0.5 rad: the leader leaves its reference
+        return out
+
+    monkeypatch.setattr(horizon_module, "_project_leader", spoiled)
+    plan = plan_horizon(problem, lagging, time_limit=1e-3)
+    d = plan.diagnostics
+    assert d["horizon_result"] == "warm_start"
+    assert d["warm_start_fallback"] == "the warm-start lagging plan as given, leader within 3.0 mm of the reference"
+    np.testing.assert_array_equal(plan.q, q)
+    assert check(plan, problem.env).n_violation_steps == 0
+    with pytest.raises(HorizonInfeasible, match=r"warm start is no fallback.*as given: leader up to 0.003 m"):
+        plan_horizon(problem, lagging, time_limit=1e-3, warm_start_leader_error=0.002)
+
+
+def test_warm_start_clearance_within_the_field_error_budget(feasible_warm):
+    """A warm start whose samples read up to ``field_error`` below d_safe in the spline field (its own formulation
+    kept d_safe in another distance field) is a fallback; beyond the budget it is not (nor is it as given: its leader
+    is 9.5 mm off the reference, more than ``warm_start_leader_error``)."""
+    problem, warm, _ = feasible_warm
+    q = warm.q.copy()
+    s = np.linspace(0.0, 1.0, q.shape[0])
+    q[:, 2] += 0.005 * s**3 * (10 - 15 * s + 6 * s**2)  # θ2 turned by up to 5 mrad towards the column, smoothly
+    dipping = dataclasses.replace(warm, q=q, method="dipping")
+    plan = plan_horizon(problem, dipping, time_limit=1e-3)
+    d = plan.diagnostics
+    assert d["horizon_result"] == "warm_start"
+    assert d["warm_start_fallback"].startswith("the warm-start dipping plan, leader projected on the reference; ")
+    assert d["warm_start_fallback"].endswith("mm below d_safe in the spline field")
+    assert 5e-4 < 0.05 - d["min_field_clearance"][1:].min() < 0.015
+    assert check(plan, problem.env).n_violation_steps == 0
+    with pytest.raises(HorizonInfeasible, match="warm start is no fallback: the dipping plan violates clearance"):
+        plan_horizon(
+            problem, dipping, time_limit=1e-3, field_error=5e-4, samples_per_link=15, warm_start_leader_error=0
+        )
+
+
+def test_no_feasible_point_raises_with_the_warm_start_reason():
+    """From the qp plan (infeasible for the NLP: followers still moving at t_K), two iterations find nothing."""
+    problem = small_problem()
+    warm = solve(problem, "qp")[0]
+    with pytest.raises(HorizonInfeasible) as info:
+        plan_horizon(problem, warm, max_iter=2)
+    err = info.value
+    msg = str(err)
+    assert err.status == "Maximum_Iterations_Exceeded"
+    assert "IPOPT found no solution in round 1" in msg and "no iterate satisfies the hard constraints" in msg
+    assert "the warm start is no fallback: the qp plan violates" in msg and "robot_accel" in msg
+    assert err.violations and err.diagnostics["horizon_stop"] == "ipopt_failed"
+
+
+def test_time_limit_not_reached_gives_the_same_plan(feasible_warm):
+    problem, warm, _ = feasible_warm
+    a = plan_horizon(problem, warm)
+    b = plan_horizon(problem, warm, time_limit=DEFAULT_TIME_LIMIT)
+    np.testing.assert_array_equal(a.q, b.q)
+    assert a.params == b.params
+    assert b.diagnostics["time_limit"] == DEFAULT_TIME_LIMIT and not b.diagnostics["time_limit_hit"]
+
+
+def test_progress_bar_only_on_a_terminal(feasible_warm, monkeypatch, capfd):
+    problem, warm, _ = feasible_warm
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    plan_horizon(problem, warm, progress=True)  # pytest's stderr is not a terminal: no bar
+    assert capfd.readouterr().err == ""
+    term = Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    plan = plan_horizon(problem, warm, progress=True)
+    assert "horizon round 1 primary" in term.getvalue() and "it" in term.getvalue()
+    term2 = Terminal()
+    monkeypatch.setattr(sys, "stderr", term2)
+    plan_horizon(problem, warm, progress=False)
+    assert term2.getvalue() == "" and plan.diagnostics["horizon_result"] == "optimal"
 
 
 def test_spline_field_close_to_exact_and_sagitta_bound():

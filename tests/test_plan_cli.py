@@ -26,7 +26,8 @@ def run_cli(args: list[str], capsys) -> tuple[int, str, str]:
 
 def test_scenario_a_writes_every_output(tmp_path, capsys):
     out = tmp_path / "runs" / "A"
-    code, stdout, _ = run_cli(["--scenario", "A", "--method", "pinv", "--out", str(out), *FAST], capsys)
+    args = ["--scenario", "A", "--method", "pinv", "--route", "rrt", "--out", str(out), *FAST]
+    code, stdout, _ = run_cli(args, capsys)
     assert code in (0, 1)  # 1 = planned but a constraint failed (reported, outputs still written)
     names = sorted(p.name for p in out.iterdir())
     assert names == sorted(

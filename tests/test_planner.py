@@ -62,7 +62,7 @@ def test_build_problem_rejects_unknown_parameters_and_bad_start():
 
 def test_plan_verdict_is_taken_from_recorded_states():
     sc = load_scenario("A")
-    problem = build_problem(sc, seed=0, path_iterations=300)
+    problem = build_problem(sc, seed=0, path_iterations=300, route="rrt")  # the paper's RRT* leader over 15 s
     plan, metrics = solve(problem, "pinv")
     assert problem.trajectory.t.size == 301
     np.testing.assert_allclose(plan.robots[0], problem.chain.robots(problem.q0))

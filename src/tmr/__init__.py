@@ -10,9 +10,9 @@ Quick start::
 
 from __future__ import annotations
 
-from tmr.chain import Chain
-from tmr.clik import Plan, run
-from tmr.environment import Environment
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
+
 from tmr.errors import (
     InfeasibleStep,
     MapError,
@@ -21,12 +21,66 @@ from tmr.errors import (
     ScenarioError,
     TmrError,
 )
-from tmr.formulations.qp import Level, LexicographicQP
-from tmr.limits import KeepInPolygon, Limit, LimitRows, link_pattern
-from tmr.metrics import Metrics, evaluate
-from tmr.planner import Problem, build_problem, check, make_pinv, make_qp, solve
-from tmr.scenario import Scenario, builtin_scenarios, load_scenario
-from tmr.tasks import LeaderTracking, ObstacleEvasion, StepContext, Task, TaskRows, TetherRegulation
+
+#: Public names and the module defining each: imported on first use (PEP 562), so ``import tmr`` and the command
+#: lines load only what a run needs (no solver, OMPL or plotting stack for a refused task).
+_LAZY = {
+    "Chain": "tmr.chain",
+    "Plan": "tmr.clik",
+    "run": "tmr.clik",
+    "Environment": "tmr.environment",
+    "Level": "tmr.formulations.qp",
+    "LexicographicQP": "tmr.formulations.qp",
+    "KeepInPolygon": "tmr.limits",
+    "Limit": "tmr.limits",
+    "LimitRows": "tmr.limits",
+    "link_pattern": "tmr.limits",
+    "Metrics": "tmr.metrics",
+    "evaluate": "tmr.metrics",
+    "Problem": "tmr.planner",
+    "build_problem": "tmr.planner",
+    "check": "tmr.planner",
+    "make_pinv": "tmr.planner",
+    "make_qp": "tmr.planner",
+    "solve": "tmr.planner",
+    "Route": "tmr.route",
+    "plan_route": "tmr.route",
+    "Scenario": "tmr.scenario",
+    "builtin_scenarios": "tmr.scenario",
+    "load_scenario": "tmr.scenario",
+    "LeaderTracking": "tmr.tasks",
+    "ObstacleEvasion": "tmr.tasks",
+    "StepContext": "tmr.tasks",
+    "Task": "tmr.tasks",
+    "TaskRows": "tmr.tasks",
+    "TetherRegulation": "tmr.tasks",
+}
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'tmr' has no attribute {name!r}")
+    value = getattr(import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
+
+if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
+    from tmr.chain import Chain
+    from tmr.clik import Plan, run
+    from tmr.environment import Environment
+    from tmr.formulations.qp import Level, LexicographicQP
+    from tmr.limits import KeepInPolygon, Limit, LimitRows, link_pattern
+    from tmr.metrics import Metrics, evaluate
+    from tmr.planner import Problem, build_problem, check, make_pinv, make_qp, solve
+    from tmr.route import Route, plan_route
+    from tmr.scenario import Scenario, builtin_scenarios, load_scenario
+    from tmr.tasks import LeaderTracking, ObstacleEvasion, StepContext, Task, TaskRows, TetherRegulation
 
 __version__ = "0.1.0"
 
@@ -54,7 +108,9 @@ __all__ = [
     "ParameterError",
     "PathError",
     "Plan",
+    "plan_route",
     "Problem",
+    "Route",
     "run",
     "Scenario",
     "ScenarioError",

@@ -27,7 +27,6 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.optimize import brentq
 
 from tmr.errors import ParameterError
 
@@ -395,6 +394,8 @@ def max_span(
         hi *= 2.0
     else:  # pragma: no cover - lowest_height -> -inf as span -> inf, so this cannot happen for finite inputs
         raise ParameterError(f"could not bracket the maximum span for h1={a}, h2={b}")
+    from scipy.optimize import brentq  # imported here: scipy.optimize costs ~0.5 s to import
+
     return float(brentq(f, 0.0, hi, xtol=xtol, rtol=4.0 * np.finfo(float).eps))
 
 

@@ -95,17 +95,30 @@ class PathParams:
         path_clearance_min: smallest margin tried [m].
         path_iterations: RRT* iterations (termination by count, so the path is a function of the seed).
         goal_tolerance: the plan fails if the leader ends farther than this from the goal [m].
+        leader_speed: peak speed of the leader's time law along the route [m/s]; with ``leader_accel`` [m/s²] it
+            sets the duration T_end from the route length unless T_end is given (``tmr.references``).
+        route_gain: gain [1/s] of the followers' tracking of their route references (``RouteFollowers``).
+        route_weight: weight of that task in the QP's tether level.
     """
 
     path_clearance: float = 0.6
     path_clearance_min: float = 0.05
     path_iterations: int = 1000
     goal_tolerance: float = 0.1
+    leader_speed: float = 0.8
+    leader_accel: float = 0.5
+    route_gain: float = 1.0
+    route_weight: float = 1.0
 
     def __post_init__(self) -> None:
         _validate(self)
         if self.path_clearance < 0 or self.path_clearance_min < 0 or self.path_iterations < 1:
             raise ParameterError(f"need path_clearance ≥ 0, path_clearance_min ≥ 0, path_iterations ≥ 1; got {self}")
+        if min(self.leader_speed, self.leader_accel, self.route_gain) <= 0 or self.route_weight < 0:
+            raise ParameterError(
+                "need leader_speed > 0 [m/s], leader_accel > 0 [m/s²], route_gain > 0 [1/s], route_weight ≥ 0; "
+                f"got {self.leader_speed}, {self.leader_accel}, {self.route_gain}, {self.route_weight}"
+            )
 
     @property
     def clearances(self) -> tuple[float, ...]:

@@ -5,8 +5,11 @@ hard constraint on the recorded states, writes trajectories (JSON + CSV), metric
 and prints a metrics summary. Inputs are validated before anything is written; all files are written to a temporary
 directory first and moved into ``--out`` only when every one of them is complete.
 
-Exit codes: 0 plan succeeded; 1 plan computed but failed a constraint (outputs written, reason printed);
-2 bad input or planning error (nothing written).
+Before any motion is planned, the shortest free route from the anchor to the goal tells whether the goal can be
+reached and with how many robots (:mod:`tmr.route`); ``--robots auto`` takes the fewest that plan.
+
+Exit codes: 0 plan succeeded; 1 no plan found or the plan failed a check (the reason printed; outputs of a computed
+plan written); 2 bad input or a task proven impossible up front (one line, nothing written).
 """
 
 from __future__ import annotations
@@ -42,6 +45,16 @@ def _points(text: str) -> np.ndarray:
     return np.array(pts)
 
 
+def _robots(text: str) -> int | str:
+    if text.strip().lower() == "auto":
+        return "auto"
+    return _positive_int(text)
+
+
+#: ``--robots auto`` tries N_min, N_min + 1, ... up to N_min + AUTO_EXTRA robots.
+AUTO_EXTRA = 3
+
+
 def _param(text: str) -> tuple[str, float]:
     key, sep, value = text.partition("=")
     try:
@@ -66,13 +79,30 @@ def build_parser() -> argparse.ArgumentParser:
     src.add_argument("--base", type=_xy, help="tether anchor X,Y [m]")
     src.add_argument("--goal", type=_xy, help="leader goal X,Y [m]")
     src.add_argument("--start", type=_points, help="robot start positions 'x1,y1;x2,y2;...' [m] (default: computed)")
-    src.add_argument("--robots", type=_positive_int, help="number of robots N (default: the scenario's, 3)")
+    src.add_argument(
+        "--robots",
+        type=_robots,
+        help="number of robots N, or 'auto' for the fewest that plan (default: the scenario's, 3)",
+    )
     p.add_argument(
         "--method",
-        default="pinv",
+        default="qp",
         choices=["pinv", "qp", "horizon"],
-        help="pinv: the paper's pseudoinverse CLIK; qp: lexicographic QP with hard constraints; horizon: whole-horizon "
-        "NLP (CasADi/IPOPT) warm-started from qp (default: pinv)",
+        help="qp: lexicographic QP with hard constraints (default); pinv: the paper's pseudoinverse CLIK; horizon: "
+        "whole-horizon NLP (CasADi/IPOPT) warm-started from qp",
+    )
+    p.add_argument(
+        "--route",
+        default="shortest",
+        choices=["shortest", "rrt"],
+        help="shortest: the tether-aware shortest free route, references for every robot, duration from the route "
+        "length (default); rrt: the paper's RRT* leader path over T_end = 15 s (Caruso 2021)",
+    )
+    p.add_argument(
+        "--time-limit",
+        type=float,
+        default=None,
+        help="wall-clock limit of the horizon NLP [s] (default 60); on expiry the best feasible plan is returned",
     )
     p.add_argument(
         "--solver",
@@ -113,7 +143,8 @@ def load_inputs(args: argparse.Namespace) -> Any:
             except ValueError as exc:
                 raise TmrError(f"--bounds must be xmin,ymin,xmax,ymax, got {args.bounds!r}") from exc
             kwargs["bounds"] = b
-        sc = scenario_from_map(args.map, args.base, args.goal, start=args.start, n_robots=args.robots or 3, **kwargs)
+        n = args.robots if isinstance(args.robots, int) else 3
+        sc = scenario_from_map(args.map, args.base, args.goal, start=args.start, n_robots=n, **kwargs)
     else:
         sc = load_scenario(args.scenario or "A")
         changes: dict[str, Any] = {}
@@ -126,7 +157,9 @@ def load_inputs(args: argparse.Namespace) -> Any:
     return sc
 
 
-def write_outputs(out: Path, plan: Any, metrics: Any, env: Any, filtered: np.ndarray, plots: bool) -> list[str]:
+def write_outputs(
+    out: Path, plan: Any, metrics: Any, env: Any, filtered: np.ndarray, plots: bool, extra: dict[str, Any] | None = None
+) -> list[str]:
     """Write every output into a temporary sibling directory, then move the files into ``out``."""
     from tmr import io
 
@@ -135,7 +168,7 @@ def write_outputs(out: Path, plan: Any, metrics: Any, env: Any, filtered: np.nda
     try:
         io.write_trajectories_json(plan, tmp / "trajectories.json", filtered=filtered)
         io.write_trajectories_csv(plan, tmp / "trajectories.csv", filtered=filtered)
-        io.write_metrics_json(metrics.to_dict(), tmp / "metrics.json")
+        io.write_metrics_json(metrics.to_dict() | (extra or {}), tmp / "metrics.json")
         if plots:
             from tmr import plot
 
@@ -189,28 +222,100 @@ def summary(plan: Any, metrics: Any) -> str:
     return "\n".join(lines)
 
 
+def _plan_once(args: argparse.Namespace, scenario: Any, n_robots: int | None) -> tuple[Any, Any, Any]:
+    from tmr.planner import build_problem, solve
+
+    overrides = dict(args.set) | ({"solver": args.solver} if args.solver else {})
+    problem = build_problem(
+        scenario,
+        seed=args.seed,
+        n_robots=n_robots,
+        start=args.start,
+        overrides=overrides,
+        path_iterations=args.iterations,
+        route=args.route,
+    )
+    plan, metrics = solve(problem, args.method, time_limit=args.time_limit)
+    return problem, plan, metrics
+
+
+def _route_summary(problem: Any, auto_note: str | None) -> dict[str, Any]:
+    out: dict[str, Any] = {"n_robots": problem.chain.n_robots, "route": problem.route_mode}
+    if problem.route is not None:
+        out.update(route_length=problem.route.length, n_min=problem.route.n_min, n_lower=problem.route.n_lower)
+    if auto_note:
+        out["robots_auto"] = auto_note
+    return out
+
+
+def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
+    """The route and the robots it needs, before the planner (and its solvers) are even imported.
+
+    Returns the route and the N to plan with (``args.robots``; its N_min for ``auto``). Raises
+    :class:`tmr.route.NoRouteError` / :class:`tmr.route.TooFewRobotsError` (exit 2) for a task proven impossible.
+    """
+    from tmr.params import ChainParams, apply_overrides
+    from tmr.route import TooFewRobotsError, plan_route
+    from tmr.spans import span_limits
+
+    values = dict(scenario.params or {}) | dict(args.set)
+    chain_params, _ = apply_overrides(ChainParams(), values)
+    n = args.robots if isinstance(args.robots, int) else scenario.n_robots
+    rt = plan_route(scenario.environment, scenario.base, scenario.goal, span_limits(max(n, 2), chain_params))
+    if args.robots == "auto":
+        return rt, rt.n_min
+    why = rt.refusal(n)
+    if why is not None:
+        raise TooFewRobotsError(why, rt.n_min, proven=n < rt.n_lower)
+    return rt, args.robots
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        from tmr.metrics import filter_trajectories
-        from tmr.planner import build_problem, solve
+    from tmr.route import TooFewRobotsError
 
+    try:
         scenario = load_inputs(args)
-        problem = build_problem(
-            scenario,
-            seed=args.seed,
-            n_robots=args.robots,
-            start=args.start,
-            overrides=dict(args.set) | ({"solver": args.solver} if args.solver else {}),
-            path_iterations=args.iterations,
-        )
-        plan, metrics = solve(problem, args.method)
+        try:
+            rt, n_first = precheck(args, scenario)
+        except TooFewRobotsError as exc:
+            if exc.proven:
+                raise
+            print(f"no plan found: {exc}", file=sys.stderr)  # a search-resolution verdict, not a proof: exit 1
+            return 1
+
+        from tmr.metrics import filter_trajectories
+
+        auto_note = None
+        if args.robots == "auto":
+            tried = []
+            last = rt.n_min + AUTO_EXTRA
+            for n in range(rt.n_min, last + 1):
+                try:
+                    problem, plan, metrics = _plan_once(args, scenario, n)
+                except TooFewRobotsError:
+                    tried.append(f"{n}: refused")
+                    continue
+                except TmrError as exc:  # no start placement or path with this N: try the next one
+                    tried.append(f"{n}: {exc}")
+                    if n == last:
+                        raise
+                    continue
+                tried.append(f"{n}: {'planned' if plan.success else 'failed'}")
+                if plan.success:
+                    break
+            auto_note = f"--robots auto: N_min = {rt.n_min}, chose N = {problem.chain.n_robots} ({'; '.join(tried)})"
+        else:
+            problem, plan, metrics = _plan_once(args, scenario, n_first)
         filtered = filter_trajectories(plan.robots, problem.time_params.Ts, cutoff_hz=args.filter_cutoff)
-        names = write_outputs(Path(args.out), plan, metrics, problem.env, filtered, not args.no_plots)
+        extra = _route_summary(problem, auto_note)
+        names = write_outputs(Path(args.out), plan, metrics, problem.env, filtered, not args.no_plots, extra)
     except TmrError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    if auto_note:
+        print(auto_note)
     print(summary(plan, metrics))
     print(f"  wrote {', '.join(names)} to {args.out}")
     if not plan.success:

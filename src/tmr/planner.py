@@ -1,4 +1,8 @@
-"""From a scenario to a checked plan: scenario → chain, limits, start → leader path → formulation → plan → metrics.
+"""From a scenario to a checked plan: scenario → route → chain, limits, start → references → formulation → plan →
+checks → metrics.
+
+The route (:mod:`tmr.route`) comes first: a goal with no free route, or a chain with fewer robots than the route
+needs, is refused before any motion is planned (:class:`tmr.route.NoRouteError`, :class:`TooFewRobotsError`).
 
 This is the library entry point behind ``python -m tmr.plan``::
 
@@ -15,7 +19,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tmr import catenary
 from tmr.chain import Chain
 from tmr.clik import Formulation, Plan, run
 from tmr.errors import ParameterError, PathError, ScenarioError
@@ -34,11 +37,15 @@ from tmr.params import (
     as_dict,
 )
 from tmr.path import Trajectory, leader_trajectory, plan_leader_path
+from tmr.references import ChainReference, chain_reference, start_placement
+from tmr.route import Route, TooFewRobotsError, plan_route
 from tmr.scenario import Scenario
+from tmr.spans import span_limits
 from tmr.tasks import (
     Damping,
     LeaderTracking,
     ObstacleEvasion,
+    RouteFollowers,
     Smoothness,
     SpanUniformity,
     Task,
@@ -48,6 +55,9 @@ from tmr.tasks import (
 Array = NDArray[np.float64]
 
 METHODS = ("pinv", "qp", "horizon")
+#: Leader routes: ``shortest`` — the tether-aware shortest route with references for every robot (default);
+#: ``rrt`` — the paper's RRT* leader path with the fixed 15 s time law (Caruso 2021 §4.2), for the faithful comparison.
+ROUTES = ("shortest", "rrt")
 
 
 @dataclass
@@ -66,6 +76,9 @@ class Problem:
     q0: Array
     trajectory: Trajectory
     seed: int
+    route: Route | None = None
+    references: ChainReference | None = None
+    route_mode: str = "rrt"
 
     @property
     def env(self) -> Any:
@@ -76,31 +89,10 @@ class Problem:
             self.chain_params, self.time_params, self.path_params, self.task_params, self.pinv_params, self.qp_params
         )
         out.update(seed=self.seed, n_robots=self.chain.n_robots, d_max=float(self.span_limits[0, 1]))
+        out.update(route=self.route_mode, T_end=float(self.trajectory.t[-1]))
+        if self.route is not None:
+            out.update(route_length=self.route.length, n_min=self.route.n_min, n_lower=self.route.n_lower)
         return out
-
-
-def span_limits(n_robots: int, params: ChainParams) -> Array:
-    """Per-tether [d_lo, d_max] [m]: d_lo from the safety bubbles (r for the anchor link, 2r between robots),
-    d_max the catenary limit of Caruso 2021 §4.2.1 (lowest point of the cable above the floor)."""
-    cat = catenary.CatenaryParams(
-        horizontal_tension=params.horizontal_tension,
-        mass_per_length=params.cable_mass_per_length,
-        end_height=params.exit_height,
-        base_height=params.base_height,
-        ground_clearance=params.ground_clearance,
-    )
-    lim = np.empty((n_robots, 2))
-    lim[:, 0] = 2 * params.safety_radius
-    lim[0, 0] = params.safety_radius
-    lim[0, 1] = catenary.max_span(params.base_height, params.exit_height, cat)
-    if n_robots > 1:
-        lim[1:, 1] = catenary.max_span(params.exit_height, params.exit_height, cat)
-    if np.any(lim[:, 0] >= lim[:, 1]):
-        raise ParameterError(
-            f"the catenary limit d_max = {lim[:, 1].min():.2f} m is below the minimum span {lim[:, 0].max():.2f} m "
-            "from the safety bubbles: increase the tension or the exit height"
-        )
-    return lim
 
 
 def default_start(
@@ -161,8 +153,9 @@ def build_problem(
     start: ArrayLike | None = None,
     overrides: dict[str, Any] | None = None,
     path_iterations: int | None = None,
+    route: str = "shortest",
 ) -> Problem:
-    """Assemble chain, limits, start configuration and leader trajectory for ``scenario``.
+    """Assemble route, chain, limits, start configuration and references for ``scenario``.
 
     Args:
         scenario: loaded scenario; its ``params`` table overrides parameter defaults by field name.
@@ -171,7 +164,16 @@ def build_problem(
         start: (N, 2) robot positions overriding the scenario's.
         overrides: extra parameter overrides (after the scenario's).
         path_iterations: RRT* iterations (overrides ``PathParams.path_iterations``).
+        route: ``"shortest"`` (default): the leader follows the shortest free route, its duration from the route
+            length and ``leader_speed``/``leader_accel`` unless ``T_end`` is set, and every follower gets a route
+            reference; ``"rrt"``: the paper's RRT* leader path over ``T_end`` (15 s).
+
+    Raises:
+        NoRouteError: the goal is not connected to the anchor through free space.
+        TooFewRobotsError: N < the robots the route needs (checked before any motion planning).
     """
+    if route not in ROUTES:
+        raise ParameterError(f"unknown route {route!r}; available: {', '.join(ROUTES)}")
     values = dict(scenario.params or {})
     values.update(overrides or {})
     chain_params, rest = apply_overrides(ChainParams(), values)
@@ -188,10 +190,19 @@ def build_problem(
     chain = Chain(N, base=scenario.base)
     limits = span_limits(N, chain_params)
     env = scenario.environment
+    goal = np.asarray(scenario.goal, float)
+    rt = plan_route(env, scenario.base, goal, limits)
+    why = rt.refusal(N)
+    if why is not None:
+        raise TooFewRobotsError(why, rt.n_min, proven=N < rt.n_lower)
+    parked = 0
     if start is not None:
         P = np.asarray(start, dtype=float)
     elif scenario.start is not None and n_robots in (None, scenario.n_robots):
         P = np.asarray(scenario.start, dtype=float)
+    elif route == "shortest":
+        spacing = limits[:, 0].max() + 0.2
+        P, parked = start_placement(env, rt, N, spacing)
     else:
         P = default_start(
             chain,
@@ -212,6 +223,38 @@ def build_problem(
             f"(clearance {clear[k]:.3f} m)"
         )
     q0 = chain.q_from_positions(P)
+    if route == "shortest":
+        t_end_set = "T_end" in values
+        ref = chain_reference(
+            env,
+            rt,
+            P,
+            limits,
+            parked=parked,
+            T_end=time_params.T_end if t_end_set else None,
+            Ts=time_params.Ts,
+            speed=path_params.leader_speed,
+            accel=path_params.leader_accel,
+            spacing=limits[:, 0].max() + 0.2,
+        )
+        time_params = replace(time_params, T_end=float(ref.trajectory.t[-1]))
+        return Problem(
+            scenario,
+            chain,
+            chain_params,
+            time_params,
+            path_params,
+            task_params,
+            pinv_params,
+            qp_params,
+            limits,
+            q0,
+            ref.trajectory,
+            int(seed),
+            route=rt,
+            references=ref,
+            route_mode="shortest",
+        )
     traj = None
     for clearance in path_params.clearances:
         try:
@@ -243,6 +286,8 @@ def build_problem(
         q0,
         traj,
         int(seed),
+        route=rt,
+        route_mode="rrt",
     )
 
 
@@ -290,13 +335,19 @@ def make_qp(
     """
     p, chain = problem.qp_params, problem.chain
     leader, tether = make_tasks(problem)
+    tether_tasks: list[tuple[Task, float]] = [
+        (tether, 1.0),
+        (SpanUniformity(chain, p.uniformity_gain), 1.0),
+        (Smoothness(chain), p.tether_smoothness),
+    ]
+    ref = problem.references
+    if ref is not None and chain.n_robots > 1 and problem.path_params.route_weight > 0:
+        follow = RouteFollowers(ref.positions, ref.velocities, problem.path_params.route_gain)
+        tether_tasks.append((follow, problem.path_params.route_weight))
     levels = [
         Level([(leader, 1.0)], "leader"),
         *extra_levels,
-        Level(
-            [(tether, 1.0), (SpanUniformity(chain, p.uniformity_gain), 1.0), (Smoothness(chain), p.tether_smoothness)],
-            "tethers",
-        ),
+        Level(tether_tasks, "tethers"),
         Level([(Damping(chain), p.energy_weight), (Smoothness(chain), p.smoothness_weight)], "energy"),
     ]
     limits: list[Limit] = [
@@ -354,7 +405,9 @@ def plan(problem: Problem, method: str | Formulation = "pinv") -> Plan:
     )
 
 
-def solve(problem: Problem, method: str | Formulation = "pinv") -> tuple[Plan, Metrics]:
+def solve(
+    problem: Problem, method: str | Formulation = "qp", *, time_limit: float | None = None, progress: bool = False
+) -> tuple[Plan, Metrics]:
     """Plan with ``method`` and check every hard constraint on the recorded states.
 
     Args:
@@ -362,13 +415,26 @@ def solve(problem: Problem, method: str | Formulation = "pinv") -> tuple[Plan, M
         method: ``"pinv"``, ``"qp"``, ``"horizon"`` (the whole-horizon NLP of ``formulations/horizon.md``, warm
             started from the ``qp`` plan), or any per-step formulation object with ``name``, ``reset()`` and
             ``step(ctx)`` (e.g. ``make_qp(problem, extra_limits=...)`` or your own).
+        time_limit: wall-clock limit of the horizon NLP [s] (None: its default); progress: a progress bar for it.
 
-    Returns the plan (``success`` False with the reason if a constraint is violated anywhere) and its metrics.
+    Returns the plan (``success`` False with the reason if a constraint is violated anywhere) and its metrics. The
+    horizon plan is never worse than its ``qp`` warm start: if IPOPT fails, it is the best feasible iterate or the
+    warm start itself (``diagnostics["horizon_result"]`` says which); if nothing feasible is found, the failed plan
+    names the violated limits.
     """
     if method == "horizon":  # a whole-trajectory NLP, not a per-step formulation
-        from tmr.formulations.horizon import plan_horizon  # casadi is imported only when used
+        from tmr.formulations.horizon import DEFAULT_TIME_LIMIT, HorizonInfeasible, plan_horizon  # casadi: when used
 
-        result = plan_horizon(problem)
+        warm, warm_metrics = solve(problem, "qp")
+        limit = DEFAULT_TIME_LIMIT if time_limit is None else time_limit
+        try:
+            result = plan_horizon(problem, warm, time_limit=limit, progress=progress)
+        except HorizonInfeasible as exc:
+            warm.method = "horizon"
+            warm.success = False
+            reason = f"horizon: {exc}"
+            warm.failure = reason if warm.failure is None else f"{reason}; its qp warm start: {warm.failure}"
+            return warm, evaluate(warm, problem.env)
     else:
         result = plan(problem, method)
     return result, check(result, problem.env, goal_tolerance=problem.path_params.goal_tolerance)

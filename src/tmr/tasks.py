@@ -380,3 +380,38 @@ class Smoothness(_EveryJointRate):
 
     def compute(self, ctx: StepContext) -> TaskRows:
         return TaskRows(self.I, ctx.qdot_prev)
+
+
+class RouteFollowers(Task):
+    """Followers track their route references (``formulations/route.md``): rows select robots 1..N−1.
+
+    ``v_i = ṗ_ref,i + gain (p_ref,i − p_i)`` [m/s] with the references of :class:`tmr.references.ChainReference`
+    (robot i trails the leader along the route and stops at its station). Written on robot velocities.
+
+    Args:
+        positions: (K+1, N, 2) references of every robot [m] (the leader's column is ignored).
+        velocities: (K+1, N, 2) their time derivatives [m/s].
+        gain: tracking gain [1/s].
+    """
+
+    name = "route"
+    space = "robot"
+
+    def __init__(self, positions: ArrayLike, velocities: ArrayLike, gain: float = 1.0) -> None:
+        P = np.asarray(positions, dtype=float)
+        V = np.asarray(velocities, dtype=float)
+        if P.ndim != 3 or P.shape[2] != 2 or V.shape != P.shape or not np.all(np.isfinite(P)):
+            raise ParameterError(f"route references must be finite (K+1, N, 2) arrays, got {P.shape} and {V.shape}")
+        if not np.isfinite(gain) or gain <= 0:
+            raise ParameterError(f"route tracking gain must be a positive finite number [1/s], got {gain!r}")
+        self.P, self.V, self.gain = P, V, float(gain)
+        N = P.shape[1]
+        self.S = np.zeros((2 * (N - 1), 2 * N))
+        self.S[:, : 2 * (N - 1)] = np.eye(2 * (N - 1))
+        self.S.flags.writeable = False  # constant rows
+
+    def compute(self, ctx: StepContext) -> TaskRows:
+        k = min(ctx.k, len(self.P) - 1)
+        ref, vel = self.P[k, :-1], self.V[k, :-1]
+        here = ctx.points[1:-1]
+        return TaskRows(self.S, (vel + self.gain * (ref - here)).ravel())

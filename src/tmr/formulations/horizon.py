@@ -23,13 +23,25 @@ the new solution are added and IPOPT restarts primal–dual warm. The final poin
 that satisfies every row of the full one, hence a KKT point of the full problem (the rows left out are inactive, with
 zero multipliers).
 
-Public API: :func:`plan_horizon` (→ :class:`tmr.clik.Plan`), :class:`HorizonOptions`, :class:`HorizonInfeasible`
-(:class:`Violation`), :func:`distance_spline`, :func:`samples_needed`, :func:`objective_terms`, :func:`objective`.
+**Never worse than the warm start.** The warm start (a plan of the same problem, required: the planner passes its
+``qp`` plan; this module never imports :mod:`tmr.planner`) is IPOPT's initial point and the last fallback. If IPOPT
+stops without a solution (both attempts of a round), the time limit is reached, rows left out stay violated after
+``max_rounds``, or the optimum costs more than the warm start, :func:`plan_horizon` returns the cheapest IPOPT iterate
+that satisfies every row of every group (casadi ``iteration_callback``; the leader projected on its reference) or else
+the warm start itself if it satisfies them; only if none does it raise :class:`HorizonInfeasible`.
+``diagnostics["horizon_result"]`` is ``"optimal"``, ``"best_feasible_iterate"`` or ``"warm_start"`` and
+``diagnostics["horizon_note"]`` says why in one line.
+
+Public API: :func:`plan_horizon` (→ :class:`tmr.clik.Plan`), :data:`DEFAULT_TIME_LIMIT`, :class:`HorizonOptions`,
+:class:`HorizonInfeasible` (:class:`Violation`), :func:`distance_spline`, :func:`samples_needed`,
+:func:`objective_terms`, :func:`objective`.
 """
 
 from __future__ import annotations
 
+import heapq
 import math
+import sys
 import time
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any, NamedTuple
@@ -37,6 +49,7 @@ from typing import Any, NamedTuple
 import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
+from tqdm import tqdm
 
 from tmr.clik import Plan
 from tmr.errors import InfeasibleStep, ParameterError
@@ -44,6 +57,7 @@ from tmr.errors import InfeasibleStep, ParameterError
 Array = NDArray[np.float64]
 
 __all__ = [
+    "DEFAULT_TIME_LIMIT",
     "GROUPS",
     "HorizonInfeasible",
     "HorizonOptions",
@@ -67,8 +81,15 @@ GROUPS: tuple[str, ...] = (
     "robot_accel",
 )
 
+#: Wall-clock limit [s] of a whole :func:`plan_horizon` call used by the command line (``--time-limit``); the library
+#: default is no limit (``time_limit=None``). Successful runs on A–D take 2.5–4.5 s.
+DEFAULT_TIME_LIMIT: float = 60.0
+
 _SUCCESS = ("Solve_Succeeded",)
 _ACCEPTABLE = ("Solved_To_Acceptable_Level",)
+_WALL_TIME = "Maximum_WallTime_Exceeded"
+_POOL_SIZE = 64  # iterates kept for the fallback (the cheapest ones; 64 × 9 k doubles ≈ 4.6 MB on A–D)
+_POOL_SCREEN = 1e-3  # kept only if no transcribed row is violated by more than this (the leader is projected after)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -101,7 +122,10 @@ class HorizonOptions:
             ``acceptable_iter`` iterations, constraint violation below ``constr_viol_tol``); the status is recorded.
         retry: if IPOPT stops without a solution, solve the round once more from the same start with ``retry_ipopt``
             merged into the options and least-squares multipliers of the leader rows (another path to the optimum;
-            the error is raised only if both attempts fail).
+            the fallbacks of :func:`plan_horizon` are used only if both attempts fail).
+        warm_start_leader_error: with the equality leader, the warm start *as given* (not projected on the reference)
+            is still a fallback if its leader stays within this distance [m] of the reference at every knot and every
+            other row holds (a ``qp`` plan lags its reference by ≤ 4.6 mm on A–D: CLIK).
         expand: expand the MX graph to SX (default False: measured 3× slower, the B-spline is one call node per point).
         scale_objective: divide the cost by its warm-start value, so IPOPT sees O(1) (without: 35–80 % more
             iterations on A–D).
@@ -132,12 +156,21 @@ class HorizonOptions:
     accept_acceptable: bool = True
     retry: bool = True
     retry_ipopt: dict[str, Any] = field(default_factory=lambda: {"min_hessian_perturbation": 1e-2})
+    warm_start_leader_error: float = 0.01
     expand: bool = False
     scale_objective: bool = True
     ipopt: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        for name in ("w_energy", "w_uniformity", "w_smoothness", "w_tracking", "leader_tolerance", "field_error"):
+        for name in (
+            "w_energy",
+            "w_uniformity",
+            "w_smoothness",
+            "w_tracking",
+            "leader_tolerance",
+            "field_error",
+            "warm_start_leader_error",
+        ):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ParameterError(f"HorizonOptions.{name} must be a finite number ≥ 0, got {v!r}")
@@ -166,8 +199,10 @@ class HorizonInfeasible(InfeasibleStep):
     """The whole-horizon NLP has no (found) solution that satisfies its hard constraints.
 
     Raised when the fixed start violates a hard constraint, or when IPOPT stops without a solution (infeasible problem
-    detected, iteration limit, restoration failure, …). ``violations`` lists, per constraint group and knot, the worst
-    violated row at the last iterate; ``status`` is IPOPT's return status; ``diagnostics`` its statistics.
+    detected, iteration limit, restoration failure, time limit, …) and neither an iterate nor the warm start satisfies
+    every row. ``violations`` lists, per constraint group and knot, the worst violated row at the last iterate;
+    ``status`` is IPOPT's return status (``"start_infeasible"``, or ``"time_limit"`` if IPOPT never ran);
+    ``diagnostics`` its statistics.
     """
 
     def __init__(
@@ -503,10 +538,14 @@ class _Transcription:
         self.lbx, self.ubx = lbx.ravel(), ubx.ravel()
         self.nlp = {"x": model.x, "f": model.J, "g": self.g}
 
-    def solver(self, obj_scale: float, extra: dict[str, Any]) -> ca.Function:
-        """IPOPT on this transcription, cost divided by ``obj_scale``, with ``extra`` IPOPT options."""
+    def solver(self, obj_scale: float, extra: dict[str, Any], callback: ca.Callback | None = None) -> ca.Function:
+        """IPOPT on this transcription, cost divided by ``obj_scale``, with ``extra`` IPOPT options and an optional
+        casadi ``iteration_callback`` (called with x, f, g, … of every iterate; it must outlive the solver)."""
         nlp = dict(self.nlp, f=self.nlp["f"] / obj_scale)
-        return ca.nlpsol("horizon", "ipopt", nlp, _solver_opts(self.opts, extra))
+        opts = _solver_opts(self.opts, extra)
+        if callback is not None:
+            opts["iteration_callback"] = callback
+        return ca.nlpsol("horizon", "ipopt", nlp, opts)
 
     def carry_multipliers(self, old: _Transcription, lam_g: Array) -> Array:
         """Constraint multipliers of the previous round mapped onto this round's rows (new rows start at 0)."""
@@ -664,61 +703,265 @@ def _leader_jacobians(su: _Setup, Q: Array) -> Array:
     return J
 
 
-def _warm_start(su: _Setup, problem: Any, warm: Plan | None) -> tuple[Array, dict[str, Any]]:
-    """Joints (K+1, n) to start IPOPT from: the ``qp`` plan (computed if not given), leader projected on x_d."""
-    info: dict[str, Any] = {}
-    t0 = time.perf_counter()
-    if warm is None:
-        from tmr.planner import solve  # local import: the planner imports the formulations
+def _project_leader(su: _Setup, Q: Array) -> Array:
+    """A copy of joints Q (K+1, n) with the leader on its reference at every knot k ≥ 1: per knot, up to five
+    Gauss–Newton steps of minimum joint change q ← q + J_eᵀ(J_e J_eᵀ)⁻¹(x_d − x_N(q)) (to 10⁻¹² m)."""
+    Q = np.array(Q, dtype=float)
+    for _ in range(5):
+        e = su.ref[1:] - su.robots(Q[1:])[:, -1]
+        if np.max(np.abs(e)) < 1e-12:
+            break
+        Je = _leader_jacobians(su, Q[1:])
+        JJt = Je @ np.swapaxes(Je, 1, 2) + 1e-12 * np.eye(2)
+        Q[1:] += np.einsum("kji,kj->ki", Je, np.linalg.solve(JJt, e[..., None])[..., 0])
+    return Q
 
-        warm, _ = solve(problem, "qp")
-    info["warm_start_time"] = time.perf_counter() - t0
+
+def _warm_start(su: _Setup, warm: Plan) -> tuple[Array, Array, dict[str, Any]]:
+    """Joints (K+1, n) to start IPOPT from (the warm start's, q_0 = start, leader projected on x_d with the equality
+    leader) and the warm start's joints as given (padded with its last configuration if it stopped early)."""
+    info: dict[str, Any] = {}
     Q = np.asarray(warm.q, dtype=float)
-    if Q.ndim != 2 or Q.shape[1] != su.n:
+    if Q.ndim != 2 or Q.shape[1] != su.n or Q.shape[0] < 1:
         raise ParameterError(f"warm start q must have shape (K+1, {su.n}), got {Q.shape}")
     info["warm_start_method"] = str(warm.method)
     info["warm_start_success"] = bool(warm.success)
     info["warm_start_steps"] = int(Q.shape[0] - 1)
     if Q.shape[0] < su.K + 1:  # a plan that stopped early: hold its last configuration
         Q = np.vstack([Q, np.repeat(Q[-1:], su.K + 1 - Q.shape[0], axis=0)])
-    Q = Q[: su.K + 1].copy()
-    info["objective_warm_start_raw"] = _weighted(objective_terms(Q, su.Ts, su.ref, su.base), su.opts)
+    raw = Q[: su.K + 1].copy()
+    info["objective_warm_start_raw"] = _weighted(objective_terms(raw, su.Ts, su.ref, su.base), su.opts)
+    Q = raw.copy()
     Q[0] = su.q0
-    if su.opts.leader_tolerance == 0:  # Gauss–Newton, minimum-norm joint change: leader exactly on x_d
-        for _ in range(5):
-            e = su.ref[1:] - su.robots(Q[1:])[:, -1]
-            if np.max(np.abs(e)) < 1e-12:
-                break
-            Je = _leader_jacobians(su, Q[1:])
-            JJt = Je @ np.swapaxes(Je, 1, 2) + 1e-12 * np.eye(2)
-            Q[1:] += np.einsum("kji,kj->ki", Je, np.linalg.solve(JJt, e[..., None])[..., 0])
-    return Q, info
+    if su.opts.leader_tolerance == 0:  # leader exactly on x_d, so IPOPT starts on the equality rows
+        Q = _project_leader(su, Q)
+    return Q, raw, info
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# fallbacks: the warm start and the best feasible iterate
+# ----------------------------------------------------------------------------------------------------------------
+class _Candidate(NamedTuple):
+    """A trajectory that satisfies every hard-constraint row: what :func:`plan_horizon` may return."""
+
+    Q: Array  #: (K+1, n) joints
+    J: float  #: weighted objective w1 f1 + w2 f2 + w4 f4 (+ w3 f3)
+    result: str  #: "optimal", "best_feasible_iterate" or "warm_start"
+    detail: str  #: where it comes from, for the note
+
+
+def _cost(su: _Setup, Q: Array) -> float:
+    return _weighted(objective_terms(Q, su.Ts, su.ref, su.base), su.opts)
+
+
+def _warm_candidate(model: _Model, warm: Plan, Qw: Array, raw: Array, tol: float) -> tuple[_Candidate | None, str]:
+    """The warm start as a fallback if it satisfies the hard constraints (else ``None`` and why not).
+
+    Only a successful plan (``warm.success``: for the planner's ``qp`` plan, verified by :func:`tmr.planner.check`
+    with exact clearances of robots and tether segments) is a fallback, and every row must hold at ``tol`` except that
+    a clearance sample may read up to ``field_error`` [m] below ``d_safe`` in the spline field (the warm start kept
+    d_safe in its own formulation's distance field; the two fields differ by up to the spline's error budget). Tried in
+    order: (1) the warm start as given, if it starts at q_0 and every row holds at ``tol`` (the fallback is then the
+    warm start itself, cost included); (2) the warm start with its leader projected on the reference (IPOPT's initial
+    point); (3) with the equality leader, the warm start as given with its leader within ``warm_start_leader_error``
+    [m] of the reference at every knot (a ``qp`` plan lags its reference by a few mm: CLIK).
+    """
+    su = model.su
+    if not warm.success:
+        return None, f"the {warm.method} plan failed ({warm.failure or 'no reason given'})"
+    name = f"the warm-start {warm.method} plan"
+    slack = float(su.opts.field_error)
+
+    def blocking(viol: list[Violation]) -> list[Violation]:
+        return [v for v in viol if not (v.group == "clearance" and v.amount <= slack)]
+
+    def dip(viol: list[Violation]) -> str:
+        a = max((v.amount for v in viol if v.group == "clearance"), default=0.0)
+        return f"; clearance up to {1e3 * a:.2f} mm below d_safe in the spline field" if a > 0 else ""
+
+    at_start = bool(np.allclose(raw[0], su.q0, rtol=0.0, atol=1e-9))
+    viol_raw = _violations(model, model.values(raw.ravel()), raw, tol)
+    if at_start and not viol_raw:
+        return _Candidate(raw, _cost(su, raw), "warm_start", name), ""
+    viol = _violations(model, model.values(Qw.ravel()), Qw, tol)
+    if not blocking(viol):
+        detail = f"{name}, leader projected on the reference" if su.opts.leader_tolerance == 0 else name
+        return _Candidate(Qw, _cost(su, Qw), "warm_start", detail + dip(viol)), ""
+    why = f"the {warm.method} plan violates {_describe(blocking(viol), worst=1)}"
+    if su.opts.leader_tolerance == 0 and at_start:
+        err = float(np.max(np.linalg.norm(su.robots(raw[1:])[:, -1] - su.ref[1:], axis=1)))
+        rest = blocking([v for v in viol_raw if v.group != "leader"])
+        if not rest and err <= su.opts.warm_start_leader_error:
+            detail = f"{name} as given, leader within {1e3 * err:.1f} mm of the reference" + dip(viol_raw)
+            return _Candidate(raw, _cost(su, raw), "warm_start", detail), ""
+        groups = [g for g in GROUPS if any(v.group == g for v in rest)]
+        why += f" (as given: leader up to {err:.3g} m off the reference"
+        why += f", and {', '.join(groups)} violated)" if rest else ")"
+    return None, why
+
+
+class _Pool:
+    """The ``keep`` lowest-cost IPOPT iterates (over every solve) that nearly satisfy the transcribed rows.
+
+    An iterate is kept if its scaled cost is below ``f_limit`` (the feasible warm start's) and no transcribed row or
+    bound is violated by more than ``screen`` (the leader rows are projected afterwards). Only copies are made during
+    the solve; :meth:`best` runs the full check (every row of every group, the clearance of every sample) afterwards,
+    and only when a fallback is needed, so a successful solve pays nothing but the copies.
+    """
+
+    def __init__(self, keep: int, screen: float, f_limit: float) -> None:
+        self.keep, self.screen, self.f_limit = keep, screen, f_limit
+        self._heap: list[tuple[float, int, Array, str]] = []  # (−f, seq, x, where): the costliest kept on top
+        self._seq = 0
+
+    def offer(self, f: float, viol: float, x: Array, where: str) -> None:
+        if not (f < self.f_limit and viol <= self.screen):
+            return
+        if len(self._heap) >= self.keep and -self._heap[0][0] <= f:
+            return
+        item = (-f, self._seq, np.array(x, dtype=float), where)
+        self._seq += 1
+        if len(self._heap) < self.keep:
+            heapq.heappush(self._heap, item)
+        else:
+            heapq.heapreplace(self._heap, item)
+
+    def __len__(self) -> int:
+        return len(self._heap)
+
+    def best(self, model: _Model, tol: float, J_limit: float) -> _Candidate | None:
+        """The lowest-cost kept iterate that satisfies every row at ``tol`` (leader projected on the reference with
+        the equality leader) and costs less than ``J_limit``; ``None`` if there is none."""
+        su = model.su
+        best: _Candidate | None = None
+        for _, _, x, where in sorted(self._heap, key=lambda item: (-item[0], item[1])):
+            Q = x.reshape(su.K + 1, su.n)
+            if su.opts.leader_tolerance == 0:
+                Q = _project_leader(su, Q)
+            if _violations(model, model.values(Q.ravel()), Q, tol):
+                continue
+            J = _cost(su, Q)
+            if J < J_limit and (best is None or J < best.J):
+                best = _Candidate(Q, J, "best_feasible_iterate", f"its best feasible iterate ({where})")
+                break  # ascending cost: the next ones cost more (up to the tiny change of the projection)
+        return best
+
+
+class _IterationCallback(ca.Callback):
+    """IPOPT's per-iteration hook (casadi ``iteration_callback``): advances the progress bar and offers the iterate
+    to the pool. Never stops IPOPT (returns 0)."""
+
+    def __init__(self, tr: _Transcription, pool: _Pool, bar: Any, label: str) -> None:
+        ca.Callback.__init__(self)
+        self.nx, self.ng = int(tr.lbx.size), int(tr.size)
+        self.tr, self.pool, self.bar, self.label = tr, pool, bar, label
+        self.iteration = 0
+        self._names = list(ca.nlpsol_out())
+        self.construct("horizon_iteration", {})
+
+    def get_n_in(self) -> int:
+        return ca.nlpsol_n_out()
+
+    def get_n_out(self) -> int:
+        return 1
+
+    def get_name_in(self, i: int) -> str:
+        return str(ca.nlpsol_out(i))
+
+    def get_name_out(self, i: int) -> str:
+        return "ret"
+
+    def get_sparsity_in(self, i: int) -> ca.Sparsity:
+        name = ca.nlpsol_out(i)
+        if name == "f":
+            return ca.Sparsity.scalar()
+        if name in ("x", "lam_x"):
+            return ca.Sparsity.dense(self.nx)
+        if name in ("g", "lam_g"):
+            return ca.Sparsity.dense(self.ng)
+        return ca.Sparsity(0, 0)
+
+    def eval(self, arg: list[Any]) -> list[Any]:
+        a = dict(zip(self._names, arg, strict=True))
+        x = np.asarray(a["x"], dtype=float).ravel()
+        g = np.asarray(a["g"], dtype=float).ravel()
+        f = float(a["f"])
+        tr = self.tr
+        viol = max(
+            float(np.max(tr.lbg - g, initial=0.0)),
+            float(np.max(g - tr.ubg, initial=0.0)),
+            float(np.max(tr.lbx - x, initial=0.0)),
+            float(np.max(x - tr.ubx, initial=0.0)),
+        )
+        self.pool.offer(f, viol, x, f"{self.label}, iteration {self.iteration}")
+        self.iteration += 1
+        self.bar.update(1)
+        self.bar.set_postfix_str(f"cost/warm {f:.3g}, row violation {viol:.1e}", refresh=False)
+        return [0]
+
+
+def _time_limit(time_limit: float | None) -> float:
+    if time_limit is None:
+        return math.inf
+    if isinstance(time_limit, bool) or not isinstance(time_limit, (int, float)) or not time_limit > 0:
+        raise ParameterError(f"time_limit must be a number of seconds > 0 (or None: no limit), got {time_limit!r}")
+    return float(time_limit)
 
 
 # ----------------------------------------------------------------------------------------------------------------
 # the planner
 # ----------------------------------------------------------------------------------------------------------------
-def plan_horizon(problem: Any, warm_start: Plan | None = None, **options: Any) -> Plan:
+def plan_horizon(
+    problem: Any,
+    warm_start: Plan | None,
+    *,
+    time_limit: float | None = None,
+    progress: bool = False,
+    **options: Any,
+) -> Plan:
     """Plan the whole horizon at once: one NLP over q_0..q_K solved by IPOPT (``formulations/horizon.md``).
 
+    Never worse than its warm start: the plan returned is IPOPT's optimum if it satisfies every hard-constraint row
+    and costs no more than the warm start; otherwise (IPOPT stopped without a solution, the time limit was reached,
+    rows left out stayed violated, or the optimum costs more) the cheapest IPOPT iterate that satisfies every row, or
+    else the warm start itself if it does (see :func:`_warm_candidate`). ``diagnostics["horizon_result"]`` says which.
+
     Args:
-        problem: a :class:`tmr.planner.Problem` (chain, environment, leader trajectory, limits, parameters).
-        warm_start: a plan of the same problem whose joints ``q`` start IPOPT; ``None``: the ``qp`` plan, computed
-            here with :func:`tmr.planner.solve` (its time is part of ``wall_time``).
+        problem: a :class:`tmr.planner.Problem` (chain, environment, leader trajectory, limits, parameters); only its
+            attributes are used (this module does not import the planner).
+        warm_start: a plan of the same problem whose joints ``q`` start IPOPT, required — the planner passes its
+            ``qp`` plan (``tmr.planner.solve(problem, "qp")[0]``); it is also the fallback if it satisfies the hard
+            constraints (``warm_start.success`` and every row).
+        time_limit: wall-clock limit [s] for the whole call (``None``: none; the CLI uses
+            :data:`DEFAULT_TIME_LIMIT` = 60 s): each IPOPT solve gets the remaining budget as ``max_wall_time`` and no
+            round or retry starts once it is spent; the overrun is at most one transcription (0.2–0.3 s on A–D), one
+            IPOPT iteration and the fallback check. A run that does not reach it gives the same plan as without.
+        progress: show a tqdm bar of the IPOPT iterations on stderr (only if stderr is a terminal).
         **options: fields of :class:`HorizonOptions` (weights, leader tolerance, samples, IPOPT options, …).
 
     Returns:
-        A :class:`tmr.clik.Plan`, ``method="horizon"``: ``q`` the optimum, ``qdot[k] = (q[k+1] − q[k])/Ts``,
-        ``qdot[K] = 0``, ``robots`` its forward kinematics, ``success=True``; ``diagnostics`` holds IPOPT's status and
-        iterations, the objective at the warm start and at the solution, f1–f4, the largest row violation, the row
-        counts, the rounds and the time split (warm start, transcription, solve); ``wall_time`` is the total. Run
-        :func:`tmr.planner.check` on it for the exact (shapely) verification.
+        A :class:`tmr.clik.Plan`, ``method="horizon"``: ``q`` the trajectory, ``qdot[k] = (q[k+1] − q[k])/Ts``,
+        ``qdot[K] = 0``, ``robots`` its forward kinematics, ``success=True``; ``diagnostics`` holds
+        ``horizon_result`` ("optimal", "best_feasible_iterate" or "warm_start"), ``horizon_note`` (one line: what
+        IPOPT did and what was returned), ``horizon_stop`` ("converged", "ipopt_failed", "time_limit",
+        "rows_left_out"), IPOPT's status and iterations, the objective returned and at the warm start, f1–f4, the
+        largest row violation, the row counts, the rounds and the time split (warm-start preparation, transcription,
+        solve); ``wall_time`` is the total. Run :func:`tmr.planner.check` on it for the exact (shapely) verification.
 
     Raises:
-        HorizonInfeasible: the start violates a hard constraint, or IPOPT stopped without a solution; the message names
-            the violated constraint groups with knots, times and amounts (also in ``.violations``).
+        ParameterError: no warm start, a warm start of the wrong shape, a bad option or time limit.
+        HorizonInfeasible: the start violates a hard constraint, or neither IPOPT's optimum, nor an iterate, nor the
+            warm start satisfies them; the message names the violated constraint groups with knots, times and
+            amounts (also in ``.violations``).
     """
     start_time = time.perf_counter()
+    if warm_start is None:
+        raise ParameterError(
+            "plan_horizon needs a warm start: a Plan of the same problem, e.g. the qp plan "
+            "tmr.planner.solve(problem, 'qp')[0] (tmr.planner.solve(problem, 'horizon') computes and passes it)"
+        )
+    limit = _time_limit(time_limit)
+    deadline = start_time + limit
     opts = _options(options)
     su = _Setup(problem, opts)
     env = problem.env
@@ -730,89 +973,173 @@ def plan_horizon(problem: Any, warm_start: Plan | None = None, **options: Any) -
             bad,
             status="start_infeasible",
         )
-    Qw, info = _warm_start(su, problem, warm_start)
+    tol = max(10 * opts.constr_viol_tol, 1e-6)  # a row "holds" if violated by at most this (its unit)
+    t0 = time.perf_counter()
+    Qw, Qraw, info = _warm_start(su, warm_start)
+    warm_time = time.perf_counter() - t0
     t0 = time.perf_counter()
     model = _Model(su, distance_spline(env))
     xv = Qw.ravel()
     vals = model.values(xv)
     masks = {name: model.near(name, vals[name]) for name in model.rows}
-    J_warm = _weighted(objective_terms(Qw, su.Ts, su.ref, su.base), opts)
+    J_warm = _cost(su, Qw)
     obj_scale = max(J_warm, 1e-6) if opts.scale_objective else 1.0
     trans_time, solve_time = time.perf_counter() - t0, 0.0
+    t0 = time.perf_counter()
+    warm_c, warm_why = _warm_candidate(model, warm_start, Qw, Qraw, tol)
+    viol = _violations(model, vals, Qw, tol)  # at the current point (the last iterate once IPOPT ran)
+    info["warm_start_time"] = warm_time + time.perf_counter() - t0
+    pool = _Pool(_POOL_SIZE, _POOL_SCREEN, (warm_c.J if warm_c else math.inf) / obj_scale)
     rounds: list[dict[str, Any]] = []
     tr: _Transcription | None = None
     lam: tuple[Array, Array] | None = None
     stats: dict[str, Any] = {}
     status = ""
+    stop = ""  # why the rounds ended: converged, ipopt_failed, time_limit, rows_left_out
     attempts = [("primary", {}, False)]
     if opts.retry:
         attempts.append(("retry", dict(opts.retry_ipopt), opts.leader_tolerance == 0))
-    for rnd in range(1, opts.max_rounds + 1):
-        t1 = time.perf_counter()
-        prev, tr = tr, _Transcription(model, masks)
-        trans_time += time.perf_counter() - t1
-        x_start, lam_start = xv, lam
-        for label, extra, ls_duals in attempts:
-            t2 = time.perf_counter()
-            solver = tr.solver(obj_scale, extra)
-            kwargs: dict[str, Any] = dict(x0=x_start, lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg)
-            if prev is not None and lam_start is not None:  # primal–dual warm start from the previous round
-                kwargs.update(lam_x0=lam_start[0], lam_g0=tr.carry_multipliers(prev, lam_start[1]))
-            elif ls_duals:
-                kwargs.update(lam_g0=_leader_multipliers(model, tr, x_start, obj_scale))
-            t3 = time.perf_counter()
-            sol = solver(**kwargs)
-            t4 = time.perf_counter()
-            trans_time += t3 - t2
-            solve_time += t4 - t3
-            stats = solver.stats()
-            status = str(stats.get("return_status", ""))
-            xv = np.asarray(sol["x"], dtype=float).ravel()
-            lam = (np.asarray(sol["lam_x"], dtype=float).ravel(), np.asarray(sol["lam_g"], dtype=float).ravel())
-            vals = model.values(xv)
-            viol = _violations(model, vals, xv.reshape(su.K + 1, su.n), tol=max(10 * opts.constr_viol_tol, 1e-6))
-            rounds.append(
-                dict(
-                    round=rnd,
-                    attempt=label,
-                    status=status,
-                    iterations=int(stats.get("iter_count", -1)),
-                    rows=int(tr.size),
-                    clearance_rows=int(tr.index["clearance"].size),
-                    violated=len(viol),
-                    transcription_time=(t2 - t1 if label == "primary" else 0.0) + t3 - t2,
-                    solve_time=t4 - t3,
-                    t_wall={k[7:]: round(float(v), 4) for k, v in stats.items() if k.startswith("t_wall_nlp")},
-                )
-            )
-            ok = status in _SUCCESS or (opts.accept_acceptable and status in _ACCEPTABLE)
-            if ok:
+    bar = tqdm(
+        desc="horizon",
+        unit="it",
+        file=sys.stderr,
+        leave=False,
+        disable=not (progress and _is_terminal(sys.stderr)),
+    )
+    try:
+        for rnd in range(1, opts.max_rounds + 1):
+            if time.perf_counter() >= deadline:
+                stop = "time_limit"
                 break
-        if not ok:
-            tried = " and ".join(f"{r['attempt']}: {r['status']!r} after {r['iterations']} iterations"
-                                 for r in rounds if r["round"] == rnd)  # fmt: skip
-            raise HorizonInfeasible(
-                f"horizon NLP: IPOPT found no solution in round {rnd} ({tried}); violated constraints at its last "
-                "iterate: " + (_describe(viol) if viol else "none above tolerance (not converged: raise max_iter)"),
-                viol,
-                status=status,
-                diagnostics=_diagnostics(
-                    model, tr, stats, xv, vals, rounds, info, J_warm, trans_time, solve_time, start_time
-                ),
-            )
-        if not viol:
-            break
-        masks = {name: masks[name] | model.near(name, vals[name]) for name in model.rows}
-    else:
-        raise HorizonInfeasible(
-            f"horizon NLP: rows left out of the NLP are still violated after {opts.max_rounds} rounds of constraint "
-            "generation (raise max_rounds or activation): " + _describe(viol),
-            viol,
-            status=status,
+            t1 = time.perf_counter()
+            prev, tr = tr, _Transcription(model, masks)
+            trans_time += time.perf_counter() - t1
+            x_start, lam_start = xv, lam
+            ok = False
+            for label, extra, ls_duals in attempts:
+                remaining = deadline - time.perf_counter()
+                if remaining <= 0:
+                    stop = "time_limit"
+                    break
+                if math.isfinite(limit):
+                    extra = dict(extra, max_wall_time=float(remaining))
+                bar.set_description(f"horizon round {rnd} {label}")
+                t2 = time.perf_counter()
+                callback = _IterationCallback(tr, pool, bar, f"round {rnd} {label}")
+                solver = tr.solver(obj_scale, extra, callback)
+                kwargs: dict[str, Any] = dict(x0=x_start, lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg)
+                if prev is not None and lam_start is not None:  # primal–dual warm start from the previous round
+                    kwargs.update(lam_x0=lam_start[0], lam_g0=tr.carry_multipliers(prev, lam_start[1]))
+                elif ls_duals:
+                    kwargs.update(lam_g0=_leader_multipliers(model, tr, x_start, obj_scale))
+                t3 = time.perf_counter()
+                sol = solver(**kwargs)
+                t4 = time.perf_counter()
+                trans_time += t3 - t2
+                solve_time += t4 - t3
+                stats = solver.stats()
+                status = str(stats.get("return_status", ""))
+                xv = np.asarray(sol["x"], dtype=float).ravel()
+                lam = (np.asarray(sol["lam_x"], dtype=float).ravel(), np.asarray(sol["lam_g"], dtype=float).ravel())
+                vals = model.values(xv)
+                viol = _violations(model, vals, xv.reshape(su.K + 1, su.n), tol=tol)
+                rounds.append(
+                    dict(
+                        round=rnd,
+                        attempt=label,
+                        status=status,
+                        iterations=int(stats.get("iter_count", -1)),
+                        rows=int(tr.size),
+                        clearance_rows=int(tr.index["clearance"].size),
+                        violated=len(viol),
+                        transcription_time=(t2 - t1 if label == "primary" else 0.0) + t3 - t2,
+                        solve_time=t4 - t3,
+                        t_wall={k[7:]: round(float(v), 4) for k, v in stats.items() if k.startswith("t_wall_nlp")},
+                    )
+                )
+                ok = status in _SUCCESS or (opts.accept_acceptable and status in _ACCEPTABLE)
+                if ok:
+                    break
+                if status == _WALL_TIME:
+                    stop = "time_limit"
+                    break
+            if stop:
+                break
+            if not ok:
+                stop = "ipopt_failed"
+                break
+            if not viol:
+                stop = "converged"
+                break
+            masks = {name: masks[name] | model.near(name, vals[name]) for name in model.rows}
+        else:
+            stop = "rows_left_out"
+    finally:
+        bar.close()
+
+    # what happened, in words; then the choice: optimum, best feasible iterate, warm start
+    last = rounds[-1]["round"] if rounds else 0
+    tried = " and ".join(f"{r['attempt']}: {r['status']!r} after {r['iterations']} iterations"
+                         for r in rounds if r["round"] == last)  # fmt: skip
+    iterations = int(sum(r["iterations"] for r in rounds))
+    if stop == "converged":
+        what = f"IPOPT solved the NLP ({status}, {iterations} iterations in {last} round(s))"
+    elif stop == "ipopt_failed":
+        what = f"IPOPT stopped without a solution in round {last} ({tried})"
+    elif stop == "time_limit":
+        where = (
+            f"in round {last} ({tried})"
+            if rounds and rounds[-1]["status"] == _WALL_TIME
+            else (f"after round {last} ({tried})" if rounds else "before IPOPT started")
         )
-    assert tr is not None
-    Q = xv.reshape(su.K + 1, su.n)
+        what = f"time limit of {limit:g} s reached {where}"
+    else:
+        what = f"rows left out of the NLP were still violated after {opts.max_rounds} rounds of constraint generation"
+    final: _Candidate | None = None
+    if stop == "converged":
+        Q = xv.reshape(su.K + 1, su.n)
+        final = _Candidate(Q, _cost(su, Q), "optimal", "the optimum")
+    if final is not None and (warm_c is None or final.J <= warm_c.J):
+        chosen: _Candidate | None = final
+    else:
+        if final is not None:
+            what = f"IPOPT's optimum ({status}, objective {final.J:.6g}) costs more than the warm start"
+        chosen = pool.best(model, tol, warm_c.J if warm_c else math.inf) or warm_c
+    if chosen is None:
+        warm_note = f"; the warm start is no fallback: {warm_why}"
+        diag = _diagnostics(model, tr, stats, xv, vals, rounds, info, J_warm, trans_time, solve_time, start_time)
+        diag.update(horizon_stop=stop, time_limit=time_limit, time_limit_hit=stop == "time_limit")
+        if stop == "rows_left_out":
+            message = (
+                f"horizon NLP: rows left out of the NLP are still violated after {opts.max_rounds} rounds of "
+                "constraint generation (raise max_rounds or activation): " + _describe(viol)
+            )
+        else:
+            lead = {"ipopt_failed": f"IPOPT found no solution in round {last} ({tried})"}.get(stop, what)
+            at = "no iterate satisfies the hard constraints; violated constraints at its last iterate: "
+            if not rounds:
+                at = "violated constraints at the initial point (the warm start, leader projected): "
+            message = f"horizon NLP: {lead}; {at}" + (
+                _describe(viol) if viol else "none above tolerance (not converged: raise max_iter)"
+            )
+        raise HorizonInfeasible(message + warm_note, viol, status=status or stop, diagnostics=diag)
+
+    Q = chosen.Q
+    xv = Q.ravel()
+    vals = model.values(xv)
     diag = _diagnostics(model, tr, stats, xv, vals, rounds, info, J_warm, trans_time, solve_time, start_time)
+    versus = f"warm start {warm_c.J:.6g}" if warm_c else f"infeasible warm start {J_warm:.6g}"
+    returned = {"optimal": "returned the optimum"}.get(chosen.result, f"returned {chosen.detail}")
+    diag.update(
+        horizon_result=chosen.result,
+        horizon_note=f"{what}; {returned} (objective {chosen.J:.6g} vs {versus})",
+        horizon_stop=stop,
+        time_limit=time_limit,
+        time_limit_hit=stop == "time_limit",
+        objective_warm_start_fallback=warm_c.J if warm_c else math.inf,
+        warm_start_fallback=warm_c.detail if warm_c else f"none: {warm_why}",
+        iterates_kept=len(pool),
+    )
     return Plan(
         method="horizon",
         scenario=problem.scenario.name,
@@ -834,9 +1161,16 @@ def plan_horizon(problem: Any, warm_start: Plan | None = None, **options: Any) -
     )
 
 
+def _is_terminal(stream: Any) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
 def _diagnostics(
     model: _Model,
-    tr: _Transcription,
+    tr: _Transcription | None,
     stats: dict[str, Any],
     xv: Array,
     vals: dict[str, Array],
@@ -868,11 +1202,11 @@ def _diagnostics(
         "f4": f4,
         "constraint_violation": max(worst, 0.0),
         "variables": int(model.x.shape[0]),
-        "rows": int(tr.size),
+        "rows": int(tr.size) if tr is not None else 0,
         "rows_full": int(sum(vals[g].shape[0] * np.count_nonzero(~model.fixed_columns(g)) for g in model.rows)),
-        "clearance_rows": int(tr.index["clearance"].size),
+        "clearance_rows": int(tr.index["clearance"].size) if tr is not None else 0,
         "samples_per_link": int(su.S),
-        "rounds": len(rounds),
+        "rounds": len({r["round"] for r in rounds}),
         "round_log": rounds,
         "warm_start_method": info.get("warm_start_method", ""),
         "warm_start_success": info.get("warm_start_success"),

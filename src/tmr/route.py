@@ -1,0 +1,609 @@
+"""Tether-aware global route: is the goal reachable, with how many robots, and where does the chain lie?
+
+The single source of "is this possible, and how many robots" (``formulations/route.md``):
+
+1. **Free space.** The room minus the obstacles grown by the safety radius r (``env.free``), eroded by a route
+   margin δ (so the route keeps clearance δ > the QP's d_safe) and simplified conservatively (erode by δ + t,
+   then Douglas–Peucker with tolerance t: the simplified region lies inside the region eroded by δ).
+2. **Shortest route** from the anchor to the goal: a visibility graph on the *reflex* vertices of that region only
+   (the convex corners of the obstacles: a shortest path bends only there), keeping only *bitangent* edges (both
+   neighbours of each end vertex on one side of the edge), visibility tested with vectorised shapely ``covers``;
+   Dijkstra (``scipy.sparse.csgraph``). Exact on the polygonal region (Lozano-Pérez and Wesley 1979).
+3. **Fewest robots.** Tethers are straight chords of at most d_max, clear of the grown obstacles, robots at least
+   2r apart. Two numbers come out:
+
+   * ``n_lower`` = ⌈(L − δ Θ) / d_max⌉, a proof: any chain is a free path from the anchor to the goal, at least as
+     long as the shortest one in the free space (L − δ Θ bounds it from below, Θ the route's total turning);
+   * ``n_min``: the robots of the *route chain*: stations on the route, each the farthest route point (step
+     ``STATION_STEP``) whose chord from the previous station is free, no longer than d_max and homotopic to the
+     route (the region between chord and route holds no obstacle). Corners cost robots here, so
+     ``n_min ≥ n_lower``; it is what the route-guided planner can realise, and a plan with N ≥ n_min starts
+     from a placement along the route and ends with the robots at these stations.
+
+A goal in another connected piece of free space raises :class:`NoRouteError`. Nothing here plans motion.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import shapely
+from numpy.typing import ArrayLike, NDArray
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+from shapely.geometry.base import BaseGeometry
+
+from tmr.errors import ParameterError, TmrError
+
+Array = NDArray[np.float64]
+
+__all__ = [
+    "NoRouteError",
+    "Route",
+    "ROUTE_MARGIN",
+    "STATION_STEP",
+    "TooFewRobotsError",
+    "guide_arcs",
+    "plan_route",
+    "point_at",
+    "stations",
+]
+
+#: δ [m]: clearance the route keeps from the obstacles grown by r (above the QP's d_safe = 0.05 m, so the robots'
+#: references are feasible); halved, then 0.02 m, where a passage is too narrow for it.
+ROUTE_MARGIN = 0.15
+#: t [m]: Douglas–Peucker tolerance of the conservative simplification of the free region.
+SIMPLIFY_TOLERANCE = 0.02
+#: Segments per quarter circle of the erosion (its chord error δ (1 − cos(π/8)) ≤ 0.012 m is inside δ).
+QUAD_SEGS = 4
+#: Spacing [m] of the candidate stations along the route.
+STATION_STEP = 0.1
+#: Clearance [m] a chord between stations keeps from the obstacles grown by r.
+CHORD_CLEARANCE = 0.06
+#: Extra distance [m] between two robots beyond 2r in a station placement.
+SPACING_MARGIN = 0.1
+
+
+class NoRouteError(TmrError):
+    """The goal cannot be reached from the anchor through free space (the obstacles grown by r separate them)."""
+
+
+class TooFewRobotsError(TmrError):
+    """The chain has fewer robots than the route needs (``needed``, ``proven`` = ``needed`` is a lower bound)."""
+
+    def __init__(self, message: str, needed: int, proven: bool) -> None:
+        super().__init__(message)
+        self.needed = needed
+        self.proven = proven
+
+
+@dataclass(frozen=True)
+class Route:
+    """The shortest free route of the chain and what it implies (see the module docstring).
+
+    Attributes:
+        points: (M, 2) polyline from the anchor to the goal [m]; every segment keeps clearance ``margin``.
+        length: L [m].
+        margin: δ kept from the obstacles grown by r [m].
+        d_max: longest tether chord [m] (per tether: ``d_max_first`` for the anchor tether).
+        turning: Θ, total turning angle of the route [rad].
+        n_lower: ⌈(L − δ Θ) / d_max⌉, a proven lower bound on the number of robots.
+        n_min: robots of the route chain (stations on the route; corners cost robots).
+        stations: (n_min, 2) station positions, the last one the goal [m].
+        station_arcs: (n_min,) their arc lengths along the route [m].
+        vertices: number of reflex vertices of the visibility graph; edges: its edges.
+        time: seconds spent.
+    """
+
+    points: Array
+    length: float
+    margin: float
+    d_max: float
+    d_max_first: float
+    turning: float
+    n_lower: int
+    n_min: int
+    stations: Array
+    station_arcs: Array
+    vertices: int
+    edges: int
+    time: float
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def arcs(self) -> Array:
+        """Cumulative arc length at each route point [m]."""
+        return guide_arcs(self.points)
+
+    def refusal(self, n_robots: int) -> str | None:
+        """One line saying why ``n_robots`` cannot reach the goal along this route, or None if it can."""
+        if n_robots >= self.n_min:
+            return None
+        if n_robots < self.n_lower:
+            return (
+                f"the goal needs at least {self.n_min} robots: shortest tether route {self.length:.1f} m, each "
+                f"tether ≤ {self.d_max:.2f} m; rerun with --robots {self.n_min}"
+            )
+        return (
+            f"no chain of {n_robots} robots was found along the shortest tether route ({self.length:.1f} m, "
+            f"{len(self.points) - 2} corner(s)): straight tethers of ≤ {self.d_max:.2f} m clear of the obstacles "
+            f"need {self.n_min} robots there (the route length alone needs {self.n_lower}); rerun with --robots "
+            f"{self.n_min}"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (no timing)."""
+        return {
+            "route_length": self.length,
+            "route_margin": self.margin,
+            "route_turning": self.turning,
+            "route_points": self.points.tolist(),
+            "n_lower": self.n_lower,
+            "n_min": self.n_min,
+            "stations": self.stations.tolist(),
+        }
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# polylines
+# ----------------------------------------------------------------------------------------------------------------
+def guide_arcs(points: ArrayLike) -> Array:
+    """Cumulative arc length [m] at each point of a polyline (M, 2)."""
+    p = np.asarray(points, dtype=float)
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+
+
+def point_at(points: Array, arcs: Array, s: ArrayLike) -> Array:
+    """Points of the polyline at arc lengths ``s`` [m] (clipped to [0, L]); shape ``s.shape + (2,)``."""
+    s = np.clip(np.asarray(s, dtype=float), 0.0, arcs[-1])
+    return np.stack([np.interp(s, arcs, points[:, 0]), np.interp(s, arcs, points[:, 1])], axis=-1)
+
+
+def _turning(points: Array) -> float:
+    d = np.diff(points, axis=0)
+    if len(d) < 2:
+        return 0.0
+    a = np.arctan2(d[:, 1], d[:, 0])
+    return float(np.sum(np.abs((np.diff(a) + np.pi) % (2 * np.pi) - np.pi)))
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# visibility graph
+# ----------------------------------------------------------------------------------------------------------------
+def free_region(env: Any, margin: float, tolerance: float = SIMPLIFY_TOLERANCE) -> BaseGeometry:
+    """The free space eroded by ``margin + tolerance`` and simplified with ``tolerance`` (⊂ free eroded by margin)."""
+    region = env.free.buffer(-(margin + tolerance), quad_segs=QUAD_SEGS)
+    if tolerance > 0 and not region.is_empty:
+        region = region.simplify(tolerance, preserve_topology=True)
+    return shapely.make_valid(region) if not region.is_valid else region
+
+
+def _reflex_vertices(region: BaseGeometry) -> tuple[Array, Array, Array]:
+    """Reflex vertices of the region (its boundary turns away from the interior) with their ring neighbours."""
+    pts, prev, nxt = [], [], []
+    for poly in shapely.get_parts(region):
+        if poly.geom_type != "Polygon" or poly.is_empty:
+            continue
+        poly = shapely.geometry.polygon.orient(poly, sign=1.0)  # exterior CCW, holes CW: interior on the left
+        for ring in (poly.exterior, *poly.interiors):
+            c = np.asarray(ring.coords)[:-1]
+            if len(c) < 3:
+                continue
+            a, b = np.roll(c, 1, axis=0), np.roll(c, -1, axis=0)
+            e1, e2 = c - a, b - c
+            cross = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+            keep = cross < -1e-12  # a right turn with the interior on the left: a reflex vertex
+            pts.append(c[keep])
+            prev.append(a[keep])
+            nxt.append(b[keep])
+    if not pts:
+        z = np.zeros((0, 2))
+        return z, z, z
+    return np.vstack(pts), np.vstack(prev), np.vstack(nxt)
+
+
+def _cross(u: Array, v: Array) -> Array:
+    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+
+def _tangent_at(p: Array, q: Array, a: Array, b: Array) -> NDArray[np.bool_]:
+    """Whether the line p→q is tangent to the boundary at p (neighbours a, b of p on one side of it)."""
+    d = q - p
+    sa, sb = _cross(d, a - p), _cross(d, b - p)
+    scale = np.linalg.norm(d, axis=-1) * 1e-9
+    return (sa >= -scale) & (sb >= -scale) | (sa <= scale) & (sb <= scale)
+
+
+def _visible(test: BaseGeometry, a: Array, b: Array) -> NDArray[np.bool_]:
+    if len(a) == 0:
+        return np.zeros(0, dtype=bool)
+    return shapely.covers(test, shapely.linestrings(np.stack([a, b], axis=1)))
+
+
+class _Graph:
+    """Visibility graph of one eroded free region with the anchor and the goal as extra nodes."""
+
+    def __init__(self, env: Any, margin: float) -> None:
+        self.margin = margin
+        self.region = free_region(env, margin)
+        self.test = self.region.buffer(1e-7, quad_segs=1)  # grazing along the boundary counts as free
+        shapely.prepare(self.test)
+        self.env = env
+        self.V, self.Va, self.Vb = _reflex_vertices(self.region)
+        n = len(self.V)
+        i, j = np.triu_indices(n, 1)
+        ok = _tangent_at(self.V[i], self.V[j], self.Va[i], self.Vb[i]) & _tangent_at(
+            self.V[j], self.V[i], self.Va[j], self.Vb[j]
+        )
+        i, j = i[ok], j[ok]
+        vis = _visible(self.test, self.V[i], self.V[j])
+        self.i, self.j = i[vis], j[vis]
+
+    def _endpoint_edges(self, p: Array) -> tuple[Array, NDArray[np.bool_]]:
+        """Vertices visible from the free point p (tangent at the vertex end)."""
+        n = len(self.V)
+        P = np.repeat(p[None], n, axis=0)
+        ok = _tangent_at(self.V, P, self.Va, self.Vb)
+        idx = np.flatnonzero(ok)
+        inside = bool(shapely.covers(self.test, shapely.points(p)))
+        if inside:
+            vis = _visible(self.test, P[idx], self.V[idx])
+        else:  # the point itself is nearer than δ to an obstacle: its own edges need clearance > 0 only
+            vis = np.asarray(self.env.segment_clearance(P[idx], self.V[idx]), float) > 0.0
+        return idx[vis], np.array(inside)
+
+    def shortest(self, base: Array, goal: Array) -> Array | None:
+        """Shortest polyline base → goal in the graph, or None."""
+        n = len(self.V)
+        direct = _visible(self.test, base[None], goal[None])[0] or (
+            float(np.asarray(self.env.segment_clearance(base, goal))) > self.margin
+        )
+        if direct:
+            return np.vstack([base, goal])
+        eb, _ = self._endpoint_edges(base)
+        eg, _ = self._endpoint_edges(goal)
+        nodes = np.vstack([self.V, base, goal])
+        src = np.concatenate([self.i, np.full(len(eb), n), np.full(len(eg), n + 1)])
+        dst = np.concatenate([self.j, eb, eg])
+        w = np.linalg.norm(nodes[src] - nodes[dst], axis=1)
+        g = coo_matrix((w, (src, dst)), shape=(n + 2, n + 2)).tocsr()
+        dist, pred = dijkstra(g, directed=False, indices=n, return_predecessors=True)
+        if not np.isfinite(dist[n + 1]):
+            return None
+        path = [n + 1]
+        while path[-1] != n:
+            path.append(int(pred[path[-1]]))
+        return nodes[path[::-1]]
+
+    @property
+    def edges(self) -> int:
+        return int(len(self.i))
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# stations
+# ----------------------------------------------------------------------------------------------------------------
+def hole_points(env: Any) -> Array:
+    """One point inside each hole of the free space (an obstacle a closed loop of free space can go round)."""
+    pts = []
+    for poly in shapely.get_parts(env.free):
+        for ring in getattr(poly, "interiors", ()):
+            pts.append(np.asarray(shapely.Polygon(ring).representative_point().coords[0]))
+    return np.array(pts).reshape(-1, 2)
+
+
+def _ray_crossings(h: Array, a: Array, b: Array) -> NDArray[np.int_]:
+    """Whether the ray from each point h (H, 2) towards +x crosses each segment a→b (..., 2): shape (..., H)."""
+    a, b = a[..., None, :], b[..., None, :]
+    ay, by = a[..., 1], b[..., 1]
+    straddle = (ay > h[:, 1]) != (by > h[:, 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = a[..., 0] + (h[:, 1] - ay) * (b[..., 0] - a[..., 0]) / (by - ay)
+    return (straddle & (x > h[:, 0])).astype(np.int_)
+
+
+#: Offsets [m] of the candidate stations off a bend of the route, along its outward bisector.
+BEND_OFFSETS = (0.1, 0.25, 0.5, 0.8, 1.2, 1.8)
+#: Cumulative turning [rad] of the route between two bends that get offset candidates.
+BEND_TURN = math.radians(12.0)
+#: Offsets [m] of the candidate stations to either side of the route, every ``LATERAL_EVERY`` [m] along it (a chain
+#: that swings wide of the route can pass a wall's end with fewer robots).
+LATERAL_OFFSETS = (0.5, 1.2, 2.0)
+LATERAL_EVERY = 0.5
+
+
+class _Samples:
+    """Candidate stations: guide points every ``step`` and its vertices (offset 0), and points off the guide's
+    bends along their outward bisector (where a taut tether wraps a round obstacle, the robot sits off the route).
+
+    Each candidate has a *foot*: the guide sample it hangs from (itself on the guide). ``arc`` is the foot's arc
+    length, the order of progress along the guide.
+    """
+
+    def __init__(self, env: Any, guide: Array, step: float, start_arc: float = 0.0) -> None:
+        arcs = guide_arcs(guide)
+        L = float(arcs[-1])
+        n = max(2, math.ceil((L - start_arc) / step) + 1)
+        s = np.union1d(np.linspace(start_arc, L, n), arcs[(arcs > start_arc) & (arcs < L)])
+        R = point_at(guide, arcs, s)
+        self.holes = hole_points(env)
+        H = len(self.holes)
+        # parity of the crossings of the +x ray from every hole with the guide up to each guide sample
+        if H:
+            c = _ray_crossings(self.holes, R[:-1], R[1:])
+            route_par = np.vstack([np.zeros((1, H), np.int_), np.cumsum(c, axis=0)]) % 2
+        else:
+            route_par = np.zeros((len(s), 0), np.int_)
+        # bends: interior guide vertices, one every BEND_TURN of accumulated turning
+        feet, pts = [], []
+        d = np.diff(guide, axis=0)
+        heading = np.arctan2(d[:, 1], d[:, 0])
+        turn = np.abs((np.diff(heading) + np.pi) % (2 * np.pi) - np.pi)
+        acc = 0.0
+        for v in range(1, len(guide) - 1):
+            acc += turn[v - 1]
+            if acc < BEND_TURN and v < len(guide) - 2:
+                continue
+            acc = 0.0
+            if arcs[v] <= start_arc:
+                continue
+            u = (guide[v - 1] - guide[v]) / max(np.linalg.norm(guide[v - 1] - guide[v]), 1e-12) + (
+                guide[v + 1] - guide[v]
+            ) / max(np.linalg.norm(guide[v + 1] - guide[v]), 1e-12)
+            if np.linalg.norm(u) < 1e-9:
+                continue
+            u /= np.linalg.norm(u)
+            probe = np.asarray(env.clearance(np.array([guide[v] + 0.2 * u, guide[v] - 0.2 * u])), float)
+            if probe[1] > probe[0]:
+                u = -u
+            foot = int(np.searchsorted(s, arcs[v]))
+            foot = min(foot, len(s) - 1)
+            for off in BEND_OFFSETS:
+                feet.append(foot)
+                pts.append(guide[v] + off * u)
+        seg = np.clip(np.searchsorted(arcs, s, side="right") - 1, 0, len(guide) - 2)
+        tangent = d[seg] / np.maximum(np.linalg.norm(d[seg], axis=1, keepdims=True), 1e-12)
+        normal = np.column_stack([-tangent[:, 1], tangent[:, 0]])
+        every = max(1, round(LATERAL_EVERY / max(step, 1e-9)))
+        for f in range(every, len(s) - 1, every):
+            for off in LATERAL_OFFSETS:
+                for sign in (1.0, -1.0):
+                    feet.append(f)
+                    pts.append(R[f] + sign * off * normal[f])
+        n_route = len(s)
+        if pts:
+            Q = np.array(pts)
+            F = np.array(feet)
+            ok = np.asarray(env.clearance(Q), float) > CHORD_CLEARANCE
+            ok &= _field_clear(env, R[F], Q, CHORD_CLEARANCE)
+            Q, F = Q[ok], F[ok]
+        else:
+            Q, F = np.zeros((0, 2)), np.zeros(0, np.intp)
+        # candidates: guide samples, then offsets; goal (the last guide sample) moved to the end
+        self.P = np.vstack([R[:-1], Q, R[-1:]])
+        self.foot = np.concatenate([np.arange(n_route - 1), F, [n_route - 1]]).astype(np.intp)
+        self.arc = s[self.foot]
+        off_par = _ray_crossings(self.holes, R[F], Q) if H and len(Q) else np.zeros((len(Q), H), np.int_)
+        self.off_par = np.vstack([np.zeros((n_route - 1, H), np.int_), off_par, np.zeros((1, H), np.int_)])
+        self.route_par = route_par
+        self.s = self.arc
+
+    def homotopic(self, i: int, js: NDArray[np.int_]) -> NDArray[np.bool_]:
+        """Chords i→j that enclose no hole together with the guide between their feet (and the offsets)."""
+        if not len(self.holes):
+            return np.ones(len(js), dtype=bool)
+        chord = _ray_crossings(self.holes, np.repeat(self.P[i : i + 1], len(js), 0), self.P[js])  # (m, H)
+        loop = self.route_par[self.foot[js]] - self.route_par[self.foot[i]] + self.off_par[js] + self.off_par[i] + chord
+        return ~np.any(loop % 2 == 1, axis=1)
+
+
+def _field_clear(env: Any, a: Array, b: Array, clearance: float, step: float = 0.05) -> NDArray[np.bool_]:
+    """Chords a→b (m, 2) that keep clearance > ``clearance`` [m], conservatively from the distance field.
+
+    Points every ≤ ``step`` along each chord read the field at their nearest grid cell; the field is 1-Lipschitz,
+    so ``value − h/√2 − step/2 > clearance`` (h the cell size) bounds the clearance of the whole chord from below.
+    """
+    field = env.distance_field
+    x0, y0 = env.grid_origin
+    h = env.resolution
+    nx, ny = field.shape
+    length = np.linalg.norm(b - a, axis=1)
+    k = int(max(2, math.ceil(float(length.max(initial=0.0)) / step) + 1))
+    f = np.linspace(0.0, 1.0, k)
+    pts = a[:, None, :] + f[None, :, None] * (b - a)[:, None, :]
+    ix = np.clip(np.rint((pts[..., 0] - x0) / h).astype(np.intp), 0, nx - 1)
+    iy = np.clip(np.rint((pts[..., 1] - y0) / h).astype(np.intp), 0, ny - 1)
+    need = clearance + h * math.sqrt(0.5) + 0.5 * float(length.max(initial=0.0)) / (k - 1)
+    return np.all(field[ix, iy] > need, axis=1)
+
+
+def stations(
+    env: Any,
+    guide: Array,
+    span_max: ArrayLike,
+    span_min: ArrayLike | None = None,
+    *,
+    start_arc: float = 0.0,
+    step: float = STATION_STEP,
+    clearance: float = CHORD_CLEARANCE,
+) -> tuple[Array, Array]:
+    """Arc lengths of the fewest stations along ``guide`` (from arc ``start_arc`` to the guide's end, the goal).
+
+    Breadth-first search over candidate stations (every ``step`` [m] and every guide vertex): a tether k joins two
+    candidates if its straight chord is between ``span_min[k]`` and ``span_max[k]`` long (the last value repeats),
+    keeps clearance > ``clearance`` [m] from the obstacles grown by r (distance field, then the exact test on the
+    chosen chords) and is homotopic to the guide (the chord and the guide between its ends enclose no obstacle:
+    parity of the crossings of a ray from every hole). Returns the arcs (n,) of the stations after the start,
+    the last one the goal; the fewest hops at this resolution. Raises :class:`NoRouteError` if none exists.
+    """
+    smax = np.atleast_1d(np.asarray(span_max, float))
+    smin = np.atleast_1d(np.asarray(span_min, float)) if span_min is not None else np.zeros(1)
+    sm = _Samples(env, guide, step, start_arc)
+    P, n = sm.P, len(sm.s)
+    banned: set[tuple[int, int]] = set()
+    for _ in range(20):  # exact re-checks of the chosen chords; a field false positive is banned and searched again
+        parent = np.full(n, -1)
+        seen = np.zeros(n, dtype=bool)
+        seen[0] = True
+        frontier = [0]
+        hop = 0
+        while frontier and not seen[-1]:
+            dmax, dmin = smax[min(hop, len(smax) - 1)], smin[min(hop, len(smin) - 1)]
+            nxt: list[int] = []
+            for i in sorted(frontier, reverse=True):  # farther stations first: they become the parents
+                js = np.flatnonzero(~seen)
+                js = js[sm.arc[js] > sm.arc[i]]
+                if not len(js):
+                    continue
+                d = np.linalg.norm(P[js] - P[i], axis=1)
+                js = js[(d <= dmax) & (d >= dmin)]
+                if not len(js):
+                    continue
+                js = js[_field_clear(env, np.repeat(P[i : i + 1], len(js), 0), P[js], clearance)]
+                js = js[sm.homotopic(i, js)] if len(js) else js
+                js = np.array([j for j in js if (i, int(j)) not in banned], dtype=np.intp)
+                if len(js):
+                    parent[js] = i
+                    seen[js] = True
+                    nxt.extend(js.tolist())
+            frontier = nxt
+            hop += 1
+        if not seen[-1]:
+            far = int(np.flatnonzero(seen).max())
+            where = P[far].round(2).tolist()
+            raise NoRouteError(
+                f"no chain of straight tethers of ≤ {smax.max():.2f} m, clear of the obstacles, follows the route "
+                f"past {where} (arc {sm.s[far]:.1f} m of {sm.s[-1]:.1f} m): a gap or corner the chain cannot pass"
+            )
+        path = [n - 1]
+        while path[-1] != 0:
+            path.append(int(parent[path[-1]]))
+        path = path[::-1]
+        a, b = P[path[:-1]], P[path[1:]]
+        exact = np.asarray(env.segment_clearance(a, b), float)
+        bad = np.flatnonzero(exact <= 0.5 * clearance)
+        if not len(bad):
+            return sm.arc[path[1:]], sm.P[path[1:]]
+        banned.update((path[k], path[k + 1]) for k in bad)
+    raise NoRouteError("the station search did not settle (distance field and exact clearance disagree)")
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# the route
+# ----------------------------------------------------------------------------------------------------------------
+def _xy(p: Array) -> str:
+    return f"({p[0]:.4g}, {p[1]:.4g})"
+
+
+def _check_point(env: Any, p: ArrayLike, name: str) -> Array:
+    try:
+        a = np.asarray(p, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"{name} must be an (x, y) position in metres, got {p!r}") from exc
+    if a.shape != (2,) or not np.all(np.isfinite(a)):
+        raise ParameterError(f"{name} must be a finite (x, y) position in metres, got {p!r}")
+    xmin, ymin, xmax, ymax = env.bounds
+    if not (xmin <= a[0] <= xmax and ymin <= a[1] <= ymax):
+        raise NoRouteError(f"the {name} {_xy(a)} is outside the room {tuple(env.bounds)}")
+    c = float(np.asarray(env.exact_clearance(a)))
+    if c <= 0:
+        raise NoRouteError(
+            f"the {name} {_xy(a)} is inside an obstacle grown by the safety radius "
+            f"{env.safety_radius:g} m (clearance {c:.3f} m)"
+        )
+    return a
+
+
+def _same_component(env: Any, a: Array, b: Array) -> bool:
+    for part in shapely.get_parts(env.free):
+        ina = bool(shapely.contains_xy(part, a[0], a[1]))
+        inb = bool(shapely.contains_xy(part, b[0], b[1]))
+        if ina or inb:
+            return ina and inb
+    return False
+
+
+def plan_route(
+    env: Any,
+    base: ArrayLike,
+    goal: ArrayLike,
+    span_limits: ArrayLike,
+    *,
+    margin: float = ROUTE_MARGIN,
+) -> Route:
+    """Shortest free route from the anchor ``base`` to ``goal`` and the robots it needs (module docstring).
+
+    Args:
+        env: :class:`tmr.environment.Environment` (``free``, ``inflated``, ``bounds``, exact clearance queries).
+        base, goal: (2,) positions [m].
+        span_limits: (N, 2) [d_lo, d_max] per tether [m] (the first row is the anchor tether), or (2,) for all.
+        margin: δ [m] the route keeps from the obstacles grown by r; smaller margins are tried in narrow passages.
+
+    Raises:
+        NoRouteError: base or goal outside the room or in an obstacle, or in different pieces of free space.
+    """
+    t0 = time.perf_counter()
+    base = _check_point(env, base, "anchor")
+    goal = _check_point(env, goal, "goal")
+    lim = np.atleast_2d(np.asarray(span_limits, dtype=float))
+    if lim.shape[1] != 2 or np.any(~np.isfinite(lim)) or np.any(lim[:, 0] >= lim[:, 1]):
+        raise ParameterError(f"span_limits must be rows [d_lo, d_max] with d_lo < d_max, got {lim.tolist()}")
+    if not _same_component(env, base, goal):
+        raise NoRouteError(
+            f"no free route from the anchor {_xy(base)} to the goal {_xy(goal)}: the "
+            f"obstacles grown by the safety radius {env.safety_radius:g} m separate them"
+        )
+    notes: list[str] = []
+    points = None
+    graph = None
+    for m in dict.fromkeys((margin, margin / 2, 0.02)):
+        graph = _Graph(env, m)
+        points = graph.shortest(base, goal)
+        if points is not None:
+            if m < margin:
+                notes.append(f"route margin lowered to {m:.3f} m in a narrow passage")
+            margin = m
+            break
+    assert graph is not None
+    if points is None:
+        raise NoRouteError(
+            f"no free route from the anchor {_xy(base)} to the goal {_xy(goal)} with "
+            f"clearance ≥ 0.02 m from the obstacles grown by {env.safety_radius:g} m (the passage is too narrow)"
+        )
+    points = _dedupe(points)
+    L = float(guide_arcs(points)[-1])
+    turning = _turning(points)
+    d_max = float(lim[:, 1].max())
+    n_lower = max(1, math.ceil(max(L - margin * turning, 0.0) / d_max - 1e-9))
+    spacing_min = np.concatenate([lim[:1, 0], lim[1:, 0]]) + SPACING_MARGIN
+    arcs, st = stations(env, points, lim[:, 1], spacing_min)
+    st = st.copy()
+    st[-1] = goal
+    n_min = max(len(arcs), n_lower)
+    return Route(
+        points=points,
+        length=L,
+        margin=float(margin),
+        d_max=d_max,
+        d_max_first=float(lim[0, 1]),
+        turning=turning,
+        n_lower=int(n_lower),
+        n_min=int(n_min),
+        stations=st,
+        station_arcs=arcs,
+        vertices=len(graph.V),
+        edges=graph.edges,
+        time=time.perf_counter() - t0,
+        notes=tuple(notes),
+    )
+
+
+def _dedupe(points: Array) -> Array:
+    keep = np.r_[True, np.linalg.norm(np.diff(points, axis=0), axis=1) > 1e-9]
+    out = points[keep]
+    out[-1] = points[-1]
+    return out
