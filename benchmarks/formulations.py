@@ -52,7 +52,7 @@ PAPER_DIST_ERR = {"A": None, "B": 0.05, "C": 0.05, "D": 0.008}
 def run_cell(scenario: str, method: str, seed: int, repeats: int) -> tuple[RunResult, dict[str, Any], Any, Any]:
     """Build, plan ``repeats`` times, score; returns (result, timings, last plan, problem)."""
     t0 = time.perf_counter()
-    problem = build_problem(load_scenario(scenario), seed=seed)
+    problem = build_problem(load_scenario(scenario), seed=seed, route="rrt")  # the paper's setting
     build = time.perf_counter() - t0
     walls = []
     total = math.nan

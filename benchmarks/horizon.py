@@ -59,7 +59,7 @@ def child(scenario: str, seed: int) -> dict:
 
     t_import = time.perf_counter() - t0
     t0 = time.perf_counter()
-    problem = build_problem(load_scenario(scenario), seed=seed)
+    problem = build_problem(load_scenario(scenario), seed=seed, route="rrt")  # the paper's setting
     t_build = time.perf_counter() - t0
     t0 = time.perf_counter()
     qp_plan, qp = solve(problem, "qp")

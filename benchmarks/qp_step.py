@@ -344,7 +344,7 @@ def main() -> None:
     for n in args.sizes:
         t0 = time.perf_counter()
         scenario = cluttered_band(n, args.seed)
-        problem = build_problem(scenario, seed=args.seed, n_robots=n)
+        problem = build_problem(scenario, seed=args.seed, n_robots=n, route="rrt")
         problem.env.clearance_and_gradient(np.array([problem.chain.base]))  # build the lazy distance field now
         K_full = problem.trajectory.t.size - 1
         problem = truncated(problem, caps.get(n))

@@ -49,7 +49,7 @@ COLUMNS = [
 
 def run_one(scenario: str, method: str, seed: int, repeats: int) -> dict:
     t0 = time.perf_counter()
-    problem = build_problem(load_scenario(scenario), seed=seed)
+    problem = build_problem(load_scenario(scenario), seed=seed, route="rrt")  # the paper's setting
     build = time.perf_counter() - t0
     walls = []
     for _ in range(repeats):

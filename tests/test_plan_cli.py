@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -130,3 +131,95 @@ def test_hard_constraint_methods_on_scenario_a(tmp_path, capsys, method):
     metrics = json.loads((out / "metrics.json").read_text())
     assert code == 0 and metrics["success"] and metrics["method"] == method
     assert metrics["n_violation_steps"] == 0 and metrics["min_tether_clearance"] > 0
+
+
+def _corridor(tmp_path: Path) -> Path:
+    """A 30 m × 4 m empty corridor (GeoJSON with its own bounds)."""
+    p = tmp_path / "corridor.geojson"
+    p.write_text('{"type": "FeatureCollection", "bounds": [0, 0, 30, 4], "features": []}')
+    return p
+
+
+def _wall(tmp_path: Path) -> Path:
+    """A 16 m wall between the anchor (8, 2) and the goal (12, 2): straight line 4 m, route about 30 m."""
+    p = tmp_path / "wall.geojson"
+    p.write_text(
+        '{"type": "FeatureCollection", "bounds": [0, 0, 20, 20], "features": [{"type": "Feature", "properties": {}, '
+        '"geometry": {"type": "Polygon", "coordinates": [[[9.9, 0], [10.1, 0], [10.1, 16], [9.9, 16], [9.9, 0]]]}}]}'
+    )
+    return p
+
+
+def test_too_few_robots_refused_up_front_with_the_count(tmp_path, capsys):
+    out = tmp_path / "out"
+    args = ["--map", str(_corridor(tmp_path)), "--base", "1,2", "--goal", "25,2", "--robots", "3", "--out", str(out)]
+    code, stdout, err = run_cli(args, capsys)
+    assert code == 2 and not out.exists() and stdout == ""
+    assert err.strip().splitlines() == [
+        "error: the goal needs at least 5 robots: shortest tether route 24.0 m, each tether ≤ 5.60 m; "
+        "rerun with --robots 5"
+    ]
+    # the planner is not even imported for a refusal (whole process, fresh interpreter)
+    probe = (
+        "import sys; from tmr.plan import main; "
+        f"code = main(['--map', {str(_corridor(tmp_path))!r}, '--base', '1,2', '--goal', '25,2', '--robots', '4']); "
+        "print(code, 'tmr.planner' in sys.modules, 'ompl' in sys.modules, 'osqp' in sys.modules)"
+    )
+    res = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
+    assert res.stdout.split() == ["2", "False", "False", "False"], res.stderr
+
+
+def test_goal_without_free_route_refused(tmp_path, capsys):
+    p = tmp_path / "split.geojson"
+    p.write_text(
+        '{"type": "FeatureCollection", "bounds": [0, 0, 20, 20], "features": [{"type": "Feature", "properties": {}, '
+        '"geometry": {"type": "Polygon", "coordinates": [[[9.9, 0], [10.1, 0], [10.1, 20], [9.9, 20], [9.9, 0]]]}}]}'
+    )
+    out = tmp_path / "out"
+    code, _, err = run_cli(["--map", str(p), "--base", "5,10", "--goal", "15,10", "--out", str(out)], capsys)
+    assert code == 2 and "no free route" in err and not out.exists()
+    code, _, err = run_cli(["--map", str(p), "--base", "5,10", "--goal", "1e308,0", "--out", str(out)], capsys)
+    assert code == 2 and "outside the room" in err and not out.exists()
+
+
+def test_robots_auto_picks_the_fewest_that_plan(tmp_path, capsys):
+    out = tmp_path / "auto"
+    args = ["--map", str(_corridor(tmp_path)), "--base", "1,2", "--goal", "25,2", "--robots", "auto", "--no-plots"]
+    code, stdout, _ = run_cli([*args, "--out", str(out)], capsys)
+    assert code == 0
+    assert "--robots auto: N_min = 5, chose N = 5" in stdout
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["n_robots"] == 5 and metrics["n_min"] == 5 and metrics["n_lower"] == 5
+    assert metrics["route_length"] == pytest.approx(24.0) and metrics["success"]
+    traj = json.loads((out / "trajectories.json").read_text())
+    assert len(traj["robots"]) == 5
+    # the leader's time law follows from the route length and the speed and acceleration limits, not a fixed 15 s
+    T = traj["robots"][-1]["t"][-1]
+    lead = 25.0 - traj["robots"][-1]["x"][0]  # the leader's way along the corridor [m]
+    assert lead == pytest.approx(24.0 - 5 * 1.2, abs=0.1)
+    assert T == pytest.approx(math.ceil(15 / 8 * lead / 0.8 / 0.05 - 1e-9) * 0.05, abs=1e-9)
+
+
+def test_route_guided_plan_goes_round_the_wall(tmp_path, capsys):
+    """The straight line is 4 m, the route 30 m: the chain must go round the wall's end, with at least 6 robots."""
+    out = tmp_path / "wall"
+    args = ["--map", str(_wall(tmp_path)), "--base", "8,2", "--goal", "12,2", "--no-plots", "--out", str(out)]
+    code, _, err = run_cli([*args, "--robots", "5"], capsys)
+    assert code == 2 and "at least" in err and not out.exists()
+    code, stdout, err = run_cli([*args, "--robots", "auto"], capsys)
+    assert code == 0, err
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["success"] and metrics["n_violation_steps"] == 0 and metrics["n_robots"] >= 6
+    traj = json.loads((out / "trajectories.json").read_text())
+    leader_y = np.array(traj["robots"][-1]["y"])
+    assert leader_y.max() > 16.0  # over the wall's end, not through it
+
+
+def test_same_seed_same_bytes_route_mode(tmp_path, capsys):
+    outs = [tmp_path / "a", tmp_path / "b"]
+    for out in outs:
+        args = ["--map", str(_wall(tmp_path)), "--base", "8,2", "--goal", "12,2", "--robots", "7", "--no-plots"]
+        code, _, _ = run_cli([*args, "--out", str(out)], capsys)
+        assert code == 0
+    for name in ("trajectories.json", "trajectories.csv"):
+        assert (outs[0] / name).read_bytes() == (outs[1] / name).read_bytes()

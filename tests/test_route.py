@@ -12,7 +12,16 @@ from shapely.geometry import LineString, Point, box
 from tmr.environment import Environment
 from tmr.errors import ParameterError
 from tmr.params import ChainParams
-from tmr.route import NoRouteError, Route, TooFewRobotsError, guide_arcs, plan_route, point_at, stations
+from tmr.route import (
+    BlockedRouteError,
+    NoRouteError,
+    Route,
+    TooFewRobotsError,
+    guide_arcs,
+    plan_route,
+    point_at,
+    stations,
+)
 from tmr.spans import span_limits
 
 LIM = span_limits(3, ChainParams())
@@ -177,5 +186,6 @@ def test_stations_search_refuses_a_chain_that_cannot_pass():
     guide = np.array([[1.0, 2.0], [25.0, 2.0]])
     arcs, pts = stations(env, guide, [D_MAX], [R])
     assert len(arcs) == 5 and arcs[-1] == pytest.approx(24.0)
-    with pytest.raises(NoRouteError):
+    with pytest.raises(BlockedRouteError) as err:
         stations(env, guide, [0.4], [0.5])  # tethers shorter than the robot spacing cannot advance
+    assert not err.value.proven and "past (1, 2)" in str(err.value)

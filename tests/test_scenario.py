@@ -244,7 +244,7 @@ def test_scenario_from_map(tmp_path: Path) -> None:
     (tmp_path / "room.wkt").write_text("POLYGON ((4 0, 4.2 0, 4.2 10, 4 10, 4 0))\n")  # wall splitting the room
     sc = scenario_from_map(tmp_path / "room.wkt", (1, 1), (3, 9), n_robots=1, bounds=(0, 0, 10, 10))
     assert sc.n_robots == 1
-    with pytest.raises(ScenarioError, match="cannot be reached from the base"):
+    with pytest.raises(ScenarioError, match="no free route from the base"):
         scenario_from_map(tmp_path / "room.wkt", (1, 1), (8, 8), bounds=(0, 0, 10, 10))
     with pytest.raises(ParameterError, match="robots must be >= 1"):
         scenario_from_map(SCENARIO_DIR / "A.geojson", (1, 5), (6.7, 5), n_robots=0)

@@ -108,7 +108,7 @@ class PathParams:
     leader_speed: float = 0.8
     leader_accel: float = 0.5
     route_gain: float = 1.0
-    route_weight: float = 1.0
+    route_weight: float = 10.0
 
     def __post_init__(self) -> None:
         _validate(self)

@@ -158,7 +158,14 @@ def load_inputs(args: argparse.Namespace) -> Any:
 
 
 def write_outputs(
-    out: Path, plan: Any, metrics: Any, env: Any, filtered: np.ndarray, plots: bool, extra: dict[str, Any] | None = None
+    out: Path,
+    plan: Any,
+    metrics: Any,
+    env: Any,
+    filtered: np.ndarray,
+    plots: bool,
+    extra: dict[str, Any] | None = None,
+    route: Any = None,
 ) -> list[str]:
     """Write every output into a temporary sibling directory, then move the files into ``out``."""
     from tmr import io
@@ -173,7 +180,7 @@ def write_outputs(
             from tmr import plot
 
             figs = {
-                "chain_poses.png": plot.plot_chain_poses(plan, env),
+                "chain_poses.png": plot.plot_chain_poses(plan, env, route=route),
                 "trajectories.png": plot.plot_trajectories(plan, filtered),
                 "distance_errors.png": plot.plot_distance_errors(plan),
                 "speeds.png": plot.plot_speeds(plan, filtered),
@@ -235,7 +242,7 @@ def _plan_once(args: argparse.Namespace, scenario: Any, n_robots: int | None) ->
         path_iterations=args.iterations,
         route=args.route,
     )
-    plan, metrics = solve(problem, args.method, time_limit=args.time_limit)
+    plan, metrics = solve(problem, args.method, time_limit=args.time_limit, progress=True)  # a bar on a terminal only
     return problem, plan, metrics
 
 
@@ -273,17 +280,11 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    from tmr.route import TooFewRobotsError
+    from tmr.route import RouteVerdict, TooFewRobotsError
 
     try:
         scenario = load_inputs(args)
-        try:
-            rt, n_first = precheck(args, scenario)
-        except TooFewRobotsError as exc:
-            if exc.proven:
-                raise
-            print(f"no plan found: {exc}", file=sys.stderr)  # a search-resolution verdict, not a proof: exit 1
-            return 1
+        rt, n_first = precheck(args, scenario)
 
         from tmr.metrics import filter_trajectories
 
@@ -310,7 +311,15 @@ def main(argv: list[str] | None = None) -> int:
             problem, plan, metrics = _plan_once(args, scenario, n_first)
         filtered = filter_trajectories(plan.robots, problem.time_params.Ts, cutoff_hz=args.filter_cutoff)
         extra = _route_summary(problem, auto_note)
-        names = write_outputs(Path(args.out), plan, metrics, problem.env, filtered, not args.no_plots, extra)
+        names = write_outputs(
+            Path(args.out), plan, metrics, problem.env, filtered, not args.no_plots, extra, route=problem.route
+        )
+    except RouteVerdict as exc:
+        if exc.proven:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        print(f"no plan found: {exc}", file=sys.stderr)
+        return 1
     except TmrError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

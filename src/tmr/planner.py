@@ -202,7 +202,7 @@ def build_problem(
         P = np.asarray(scenario.start, dtype=float)
     elif route == "shortest":
         spacing = limits[:, 0].max() + 0.2
-        P, parked = start_placement(env, rt, N, spacing)
+        P, parked = start_placement(env, rt, N, spacing, span_limits=limits)
     else:
         P = default_start(
             chain,

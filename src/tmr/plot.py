@@ -131,14 +131,17 @@ def _pose_indices(t: np.ndarray, every: float) -> np.ndarray:
     return np.unique(np.append(idx, t.size - 1))
 
 
-def plot_chain_poses(plan: Any, env: Any, every: float = 3.0, goal: np.ndarray | None = None) -> Figure:
+def plot_chain_poses(
+    plan: Any, env: Any, every: float = 3.0, goal: np.ndarray | None = None, route: Any = None
+) -> Figure:
     """Caruso 2021 Fig. 5: poses of the chain (base → robot 1 → … → robot N) every ``every`` seconds over the
     map.
 
     Draws the raw obstacles (filled), the inflated obstacles (dashed outline), the room, the leader reference
     path, the robots' traces (thin), and at each pose time the tether polylines and the robots as circles of
     the safety radius, coloured by time (colour bar in s). Base = black square, goal = star (``goal``, else
-    ``plan.goal``, else the reference's end).
+    ``plan.goal``, else the reference's end). With a :class:`tmr.route.Route`, its shortest route (wide, light)
+    and its stations (diamonds) are drawn under the chain.
     """
     t = np.asarray(plan.t, dtype=float)
     robots = np.asarray(plan.robots, dtype=float)
@@ -154,6 +157,17 @@ def plot_chain_poses(plan: Any, env: Any, every: float = 3.0, goal: np.ndarray |
     ax = fig.add_subplot()
     handles = _draw_environment(ax, env)
 
+    if route is not None:
+        rp = np.asarray(route.points, dtype=float)
+        ax.plot(rp[:, 0], rp[:, 1], color="#2ca02c", lw=5.0, alpha=0.25, solid_capstyle="round", zorder=3)
+        handles.append(
+            Line2D([], [], color="#2ca02c", lw=5.0, alpha=0.25, label=f"shortest route ({route.length:.1f} m)")
+        )
+        st = np.asarray(route.stations, dtype=float)
+        ax.plot(st[:, 0], st[:, 1], "D", ms=5, mfc="none", mec="#2ca02c", mew=1.2, zorder=4)
+        handles.append(
+            Line2D([], [], ls="", marker="D", ms=5, mfc="none", mec="#2ca02c", label=f"N_min = {route.n_min} stations")
+        )
     ax.plot(ref[:, 0], ref[:, 1], color="#e377c2", ls="--", lw=1.3, zorder=4)
     handles.append(Line2D([], [], color="#e377c2", ls="--", lw=1.3, label="leader reference"))
     for i in range(robots.shape[1]):

@@ -25,13 +25,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tmr.errors import ScenarioError
 from tmr.path import Trajectory, time_law
 from tmr.route import (
     CHORD_CLEARANCE,
     SPACING_MARGIN,
-    NoRouteError,
+    BlockedRouteError,
     Route,
+    RouteVerdict,
     guide_arcs,
     plan_route,
     point_at,
@@ -40,7 +40,14 @@ from tmr.route import (
 
 Array = NDArray[np.float64]
 
-__all__ = ["ChainReference", "chain_reference", "leader_duration", "start_placement"]
+__all__ = ["ChainReference", "PlacementError", "chain_reference", "leader_duration", "start_placement"]
+
+
+class PlacementError(RouteVerdict):
+    """No start placement of the robots was found (a verdict of the search, not a proof: the command line exits 1)."""
+
+    proven = False
+
 
 #: Peak speed and acceleration of the quintic law s = L(10τ³ − 15τ⁴ + 6τ⁵): 15 L / (8 T) and 10 L / (√3 T²).
 _PEAK_SPEED = 15.0 / 8.0
@@ -81,74 +88,197 @@ class ChainReference:
     velocities: Array
 
 
+#: Clearance [m] the start's tethers keep (the robots keep ``clear``): the QP lets a tether sample that starts
+#: nearer than its d_safe stay there, but not get nearer.
+CHORD_START_CLEARANCE = 0.02
+
+
 def _free_chain(env: Any, base: Array, P: Array, clear: float) -> bool:
+    """Robots keep clearance > ``clear`` [m], tethers > ``CHORD_START_CLEARANCE`` (the anchor's only > half the
+    anchor's own clearance if that is less: an anchor placed next to a wall)."""
     starts = np.vstack([base, P[:-1]])
+    need = np.full(len(P), min(clear, CHORD_START_CLEARANCE))
+    need[0] = min(need[0], 0.5 * float(np.asarray(env.exact_clearance(base))))
     return bool(
         np.all(np.asarray(env.exact_clearance(P), float) > clear)
-        and np.all(np.asarray(env.segment_clearance(starts, P), float) > clear)
+        and np.all(np.asarray(env.segment_clearance(starts, P), float) > need)
     )
 
 
-def start_placement(env: Any, route: Route, n_robots: int, spacing: float, clear: float = 0.05) -> tuple[Array, int]:
-    """Start positions (N, 2) along the route, spacing ``spacing`` [m], and the number of parked robots.
+def start_placement(
+    env: Any,
+    route: Route,
+    n_robots: int,
+    spacing: float,
+    clear: float = 0.05,
+    span_limits: Array | None = None,
+) -> tuple[Array, int]:
+    """Start positions (N, 2) and the number of parked robots (module docstring).
 
-    The leader needs route ahead of it: robots are placed at arcs i·spacing while the last one stays at least one
-    spacing before the goal. The robots that do not fit are parked on the free straight ray from the anchor whose
-    heading is farthest from the route's first direction (72 headings), the rest follow the route from there.
+    Robots are placed at arcs i·``spacing`` [m] along the route while the leader keeps at least one spacing of route
+    ahead of it. Otherwise the robots that do not fit are *parked*: a self-avoiding walk from the anchor (steps of
+    ``spacing``, 36 headings, depth-first over the best few, free chords, robots 2r apart, away from the goal), and
+    the active robots stand on the shortest route from the last parked robot, provided that route holds them and its
+    stations need no more robots than are active (``span_limits`` (N, 2), default [2r, route.d_max]).
+    Robots and tethers keep clearance > ``clear`` [m]. :class:`PlacementError` if nothing fits.
     """
     N = int(n_robots)
     arcs = guide_arcs(route.points)
     L = float(arcs[-1])
-    fit = max(0, min(N, int(math.floor((L - spacing) / spacing + 1e-9))))
+    r = float(env.safety_radius)
+    lim = np.asarray(span_limits, dtype=float) if span_limits is not None else np.tile([2 * r, route.d_max], (N, 1))
+    fit = max(0, int(math.floor((L - spacing) / spacing + 1e-9)))
     base = route.points[0]
-    if fit == N:
-        P = point_at(route.points, arcs, spacing * np.arange(1, N + 1))
-        if _free_chain(env, base, P, clear):
+    goal = route.points[-1]
+    if fit >= N:
+        P = _along(env, route.points, N, spacing, clear, ahead=spacing)
+        if P is not None and _free_chain(env, base, P, clear):
             return P, 0
-    active = max(fit, 1)
-    while active >= 1:
+    tried = 0
+    ahead = point_at(route.points, arcs, min(spacing, L))
+    heading = math.atan2(ahead[1] - base[1], ahead[0] - base[0])
+    for active in range(min(N - 1, fit + 2), 0, -1):
         parked = N - active
-        Pp = _snake(env, base, parked, spacing, clear)
-        if Pp is not None:
-            tail = Pp[-1] if parked else base
+        for Pp in _rings(env, base, parked, spacing, clear, heading) + _snakes(env, base, parked, spacing, clear, goal):
+            tried += 1
             try:
-                sub = plan_route(env, tail, route.points[-1], np.array([[2 * env.safety_radius, route.d_max]]))
-            except NoRouteError:
-                sub = None
-            if sub is not None:
-                sarcs = guide_arcs(sub.points)
-                step = min(spacing, float(sarcs[-1]) / (active + 1))
-                Pa = point_at(sub.points, sarcs, step * np.arange(1, active + 1))
-                P = np.vstack([Pp, Pa]) if parked else Pa
-                if _free_chain(env, base, P, clear) and _separated(P, 2 * env.safety_radius + 0.02):
-                    return P, parked
-        active -= 1
-    raise ScenarioError(
-        f"no free start placement of {N} robots along the route or parked near the anchor was found; give the "
-        "start positions explicitly (scenario 'start' or --start)"
+                sub = plan_route(env, Pp[-1], goal, lim[parked:])
+            except RouteVerdict:
+                continue
+            if sub.n_min > active:
+                continue
+            Pa = _along(env, sub.points, active, spacing, clear, ahead=0.0)
+            if Pa is None:
+                continue
+            P = np.vstack([Pp, Pa])
+            if _free_chain(env, base, P, clear) and _separated(P, 2 * r + 0.02):
+                return P, parked
+    raise PlacementError(
+        f"no free start placement of {N} robots was found (along the {L:.1f} m route, or {tried} parking walks from "
+        "the anchor); give the start positions explicitly (scenario 'start' or --start)"
     )
 
 
-def _snake(env: Any, base: Array, count: int, spacing: float, clear: float) -> Array | None:
-    """``count`` parked robots, each ``spacing`` [m] from the previous one (the first from the anchor), on free
-    chords, each in the heading (of 36) that keeps it farthest from the robots already placed and the obstacles."""
-    pts = [base]
+def _along(env: Any, guide: Array, n: int, spacing: float, clear: float, ahead: float) -> Array | None:
+    """``n`` robots along the polyline from its start, each at the first point (every 0.05 m) at least ``spacing``
+    [m] from the previous one and keeping clearance > ``clear``, whose chord from it keeps
+    ``CHORD_START_CLEARANCE`` (a chord must not cut a corner of the route), the last one at least ``ahead`` [m] of
+    route before the end; None if they do not fit."""
+    arcs = guide_arcs(guide)
+    L = float(arcs[-1])
+    s = np.arange(0.0, L + 1e-9, 0.05)
+    S = point_at(guide, arcs, s)
+    out: list[Array] = []
+    cur, k = S[0], 0
+    first = min(clear, 0.5 * float(np.asarray(env.exact_clearance(cur))))
+    for j in range(n):
+        far = np.linalg.norm(S[k + 1 :] - cur, axis=1) >= spacing
+        cand = np.flatnonzero(far) + k + 1
+        cand = cand[s[cand] <= L - ahead + 1e-9]
+        if not len(cand):
+            return None
+        cand = cand[:40]  # the first points far enough; the chord to one of them clears the corner
+        need = first if j == 0 else CHORD_START_CLEARANCE
+        ok = np.asarray(env.segment_clearance(np.repeat(cur[None], len(cand), 0), S[cand]), float) > need
+        ok &= np.asarray(env.exact_clearance(S[cand]), float) > clear
+        if not ok.any():
+            return None
+        k = int(cand[np.argmax(ok)])
+        cur = S[k]
+        out.append(cur)
+    return np.array(out)
+
+
+def _rings(env: Any, base: Array, count: int, spacing: float, clear: float, heading: float) -> list[Array]:
+    """Parking on a ring round the anchor: robot k of ``count`` at angle heading ± (count − k + 1) Δ on a circle of
+    radius 1–2 spacings, Δ the angle of a ``spacing`` chord (+5 %), so the last parked robot sits next to the route's
+    first direction and the active robots leave the ring outwards. Free and separated rings only."""
+    out = []
+    r = float(env.safety_radius)
+    for rho in (spacing, 1.5 * spacing, 2.0 * spacing):
+        delta = 2.0 * math.asin(min(1.0, 0.5 * spacing / rho)) * 1.05
+        if (count + 1) * delta > 2 * math.pi:
+            continue
+        for sign in (1.0, -1.0):
+            ang = heading + sign * delta * np.arange(count, 0, -1)
+            P = base + rho * np.column_stack([np.cos(ang), np.sin(ang)])
+            if _free_chain(env, base, P, clear + 0.05) and _separated(np.vstack([base, P]), 2 * r + 0.05):
+                out.append(P)
+    return out
+
+
+#: Parking walks tried per number of parked robots, and the walk's search budget (expanded positions).
+SNAKES = 4
+SNAKE_BUDGET = 400
+
+
+def _snakes(env: Any, base: Array, count: int, spacing: float, clear: float, goal: Array) -> list[Array]:
+    """Up to ``SNAKES`` parking walks of ``count`` robots from the anchor (depth-first, best headings first).
+
+    Each robot is ``spacing`` [m] from the previous one (the first from the anchor) on a free chord, ≥ 2r + 0.05 m
+    from every robot placed and the anchor; headings are ranked by distance to those robots, clearance and distance
+    to the goal (the robots that follow the route from the last parked one need room before the goal).
+    """
     h = spacing * np.stack([np.cos(np.arange(36) * np.pi / 18), np.sin(np.arange(36) * np.pi / 18)], axis=1)
-    for _ in range(count):
+    r = float(env.safety_radius)
+    found: list[Array] = []
+    budget = [SNAKE_BUDGET]
+
+    def grow(pts: list[Array]) -> None:
+        if len(found) >= SNAKES or budget[0] <= 0:
+            return
+        if len(pts) == count + 1:
+            found.append(np.array(pts[1:]))
+            return
+        budget[0] -= 1
         C = pts[-1] + h
         ok = np.asarray(env.exact_clearance(C), float) > clear + 0.1
-        ok &= np.asarray(env.segment_clearance(np.repeat(pts[-1][None], len(C), 0), C), float) > clear + 0.05
         if not ok.any():
-            return None
+            return
         prev = np.array(pts)
         sep = np.min(np.linalg.norm(C[:, None] - prev[None], axis=-1), axis=1)
-        ok &= sep >= 2 * env.safety_radius + 0.05 if len(pts) > 1 else ok
-        if not ok.any():
-            return None
-        score = np.minimum(sep, 3.0) + np.minimum(np.asarray(env.clearance(C), float), 1.0)
-        score[~ok] = -np.inf
-        pts.append(C[int(np.argmax(score))])
-    return np.array(pts[1:]).reshape(-1, 2)
+        if len(pts) > 1:
+            ok &= sep >= 2 * r + 0.05
+        idx = np.flatnonzero(ok)
+        if not len(idx):
+            return
+        free = np.asarray(env.segment_clearance(np.repeat(pts[-1][None], len(idx), 0), C[idx]), float) > clear + 0.05
+        idx = idx[free]
+        score = (
+            np.minimum(sep[idx], 3.0)
+            + np.minimum(np.asarray(env.clearance(C[idx]), float), 1.0)
+            + 0.5 * np.minimum(np.linalg.norm(C[idx] - goal, axis=1), 6.0)
+        )
+        for k in idx[np.argsort(-score, kind="stable")][:3]:
+            grow([*pts, C[k]])
+
+    if count == 0:
+        return [np.zeros((0, 2))]
+    grow([np.asarray(base, float)])
+    return found
+
+
+#: Clearance [m] a follower's tether to the robot ahead keeps, in the visibility rule of the references.
+VISIBLE_CLEARANCE = 0.1
+
+
+def _visible_back(env: Any, guide: Array, arcs: Array, step: float = 0.1) -> tuple[Array, NDArray[np.intp]]:
+    """Guide samples s (every ``step`` [m]) and, for each, the first sample behind it from which every later sample
+    up to it is joined to it by a chord keeping ``VISIBLE_CLEARANCE`` (distance field, conservative)."""
+    from tmr.route import _field_clear
+
+    L = float(arcs[-1])
+    s = np.linspace(0.0, L, max(2, math.ceil(L / step) + 1))
+    S = point_at(guide, arcs, s)
+    back = np.zeros(len(s), dtype=np.intp)
+    window = 80
+    for j in range(1, len(s)):
+        lo = max(0, j - window)
+        idx = np.arange(lo, j)
+        ok = _field_clear(env, S[idx], np.repeat(S[j : j + 1], len(idx), 0), VISIBLE_CLEARANCE)
+        bad = np.flatnonzero(~ok)
+        back[j] = idx[bad[-1]] + 1 if len(bad) else lo
+    return s, back
 
 
 def _distance_to_polyline(points: Array, p: Array) -> float:
@@ -240,10 +370,10 @@ def chain_reference(
     d_lo = lim[parked:, 0] + SPACING_MARGIN
     try:
         f_arcs, f_pts = stations(env, guide, lim[parked:, 1], d_lo, start_arc=s0, clearance=CHORD_CLEARANCE)
-    except NoRouteError as exc:
-        raise NoRouteError(f"from the start placement: {exc}") from exc
+    except RouteVerdict as exc:
+        raise BlockedRouteError(f"from the start placement: {exc}") from exc
     if len(f_arcs) > active:
-        raise NoRouteError(
+        raise BlockedRouteError(
             f"the {active} active robot(s) cannot reach the goal along the route from their start placement: "
             f"{len(f_arcs)} are needed"
         )
@@ -272,19 +402,31 @@ def chain_reference(
     frac = travelled / travelled[-1] if travelled[-1] > 0 else np.ones(K + 1)
     s_lead = start_arcs[-1] + frac * (garcs[-1] - start_arcs[-1])
     pos = np.empty((K + 1, N, 2))
-    for i in range(N - 1):
+    end = float(garcs[-1])
+    vis_s, vis_back = _visible_back(env, guide, garcs)
+    ahead = s_lead.copy()  # arc of the robot ahead (its foot on the guide), from the leader backwards
+    for i in range(N - 2, -1, -1):
         if final_arcs[i] <= start_arcs[i] + 1e-9 and np.linalg.norm(final[i] - P[i]) < 1e-9:
             pos[:, i] = P[i]
+            ahead = np.full(K + 1, start_arcs[i])
             continue
-        target = s_lead - (N - 1 - i) * spacing
-        a = np.clip(target, start_arcs[i], final_arcs[i])
-        on_guide = point_at(guide, garcs, a)
         foot = point_at(guide, garcs, final_arcs[i])
         off = final[i] - foot  # offset of a station off a bend, walked once the foot is reached
-        extra = np.clip(target - final_arcs[i], 0.0, None)
         span = float(np.linalg.norm(off))
-        w = np.clip(extra / span, 0.0, 1.0)[:, None] if span > 1e-9 else np.zeros((K + 1, 1))
-        pos[:, i] = on_guide + w * off
+        # trail the leader by the start's gap, shrinking with the leader's progress to one that reaches the station
+        gap0 = float(s_lead[0] - start_arcs[i])  # the start's own gap: the reference starts at the start
+        gap1 = max(0.0, min(gap0, end - final_arcs[i] - span))
+        target = s_lead - (gap0 + frac * (gap1 - gap0))
+        # never so far behind the robot ahead that their tether would cut a corner of the guide
+        seen = vis_s[vis_back[np.clip(np.searchsorted(vis_s, ahead), 0, len(vis_s) - 1)]]
+        a = np.clip(np.maximum(np.clip(target, start_arcs[i], final_arcs[i]), seen), start_arcs[i], final_arcs[i])
+        a = np.maximum.accumulate(a)  # progress only
+        on_guide = point_at(guide, garcs, a)
+        extra = np.clip(target - final_arcs[i], 0.0, None)
+        w = np.clip(extra / span, 0.0, 1.0) if span > 1e-9 else np.zeros(K + 1)
+        w = np.maximum.accumulate(np.where(a >= final_arcs[i] - 1e-9, w, 0.0))
+        pos[:, i] = on_guide + w[:, None] * off
+        ahead = a
     pos[:, -1] = traj.x
     vel = np.gradient(pos, traj.t, axis=0)
     vel[:, -1] = traj.xd

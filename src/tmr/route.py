@@ -42,8 +42,10 @@ from tmr.errors import ParameterError, TmrError
 Array = NDArray[np.float64]
 
 __all__ = [
+    "BlockedRouteError",
     "NoRouteError",
     "Route",
+    "RouteVerdict",
     "ROUTE_MARGIN",
     "STATION_STEP",
     "TooFewRobotsError",
@@ -68,12 +70,26 @@ CHORD_CLEARANCE = 0.06
 SPACING_MARGIN = 0.1
 
 
-class NoRouteError(TmrError):
+class RouteVerdict(TmrError):
+    """A task refused by the route before any motion is planned. ``proven``: impossible (the command line exits 2),
+    else a verdict of the search at its resolution (no plan found: exit 1)."""
+
+    proven = True
+
+
+class NoRouteError(RouteVerdict):
     """The goal cannot be reached from the anchor through free space (the obstacles grown by r separate them)."""
 
 
-class TooFewRobotsError(TmrError):
-    """The chain has fewer robots than the route needs (``needed``, ``proven`` = ``needed`` is a lower bound)."""
+class BlockedRouteError(RouteVerdict):
+    """The goal is connected, but no chain of straight tethers was found along the route (a passage too narrow for
+    the tethers' clearance, or a corner the chords cannot cut at the search resolution)."""
+
+    proven = False
+
+
+class TooFewRobotsError(RouteVerdict):
+    """The chain has fewer robots than the route needs (``needed``; ``proven``: fewer than the lower bound)."""
 
     def __init__(self, message: str, needed: int, proven: bool) -> None:
         super().__init__(message)
@@ -454,7 +470,7 @@ def stations(
         while frontier and not seen[-1]:
             dmax, dmin = smax[min(hop, len(smax) - 1)], smin[min(hop, len(smin) - 1)]
             nxt: list[int] = []
-            for i in sorted(frontier, reverse=True):  # farther stations first: they become the parents
+            for i in sorted(frontier, key=lambda i: (-sm.arc[i], -i)):  # farther along first: they become parents
                 js = np.flatnonzero(~seen)
                 js = js[sm.arc[js] > sm.arc[i]]
                 if not len(js):
@@ -473,11 +489,12 @@ def stations(
             frontier = nxt
             hop += 1
         if not seen[-1]:
-            far = int(np.flatnonzero(seen).max())
-            where = P[far].round(2).tolist()
-            raise NoRouteError(
-                f"no chain of straight tethers of ≤ {smax.max():.2f} m, clear of the obstacles, follows the route "
-                f"past {where} (arc {sm.s[far]:.1f} m of {sm.s[-1]:.1f} m): a gap or corner the chain cannot pass"
+            far = int(np.argmax(np.where(seen, sm.arc, -np.inf)))
+            where = _xy(point_at(guide, guide_arcs(guide), sm.arc[far]))
+            raise BlockedRouteError(
+                f"no chain of straight tethers of ≤ {smax.max():.2f} m keeping {clearance:.2f} m from the obstacles "
+                f"follows the route past {where} ({sm.arc[far]:.1f} m of {sm.arc[-1]:.1f} m): a passage too "
+                "narrow or a corner too sharp for the tethers"
             )
         path = [n - 1]
         while path[-1] != 0:
@@ -489,7 +506,7 @@ def stations(
         if not len(bad):
             return sm.arc[path[1:]], sm.P[path[1:]]
         banned.update((path[k], path[k + 1]) for k in bad)
-    raise NoRouteError("the station search did not settle (distance field and exact clearance disagree)")
+    raise BlockedRouteError("the station search did not settle (distance field and exact clearance disagree)")
 
 
 # ----------------------------------------------------------------------------------------------------------------

@@ -90,12 +90,15 @@ class Scenario:
             pts += list(self.start)
         P = np.array(pts)
         clear = env.exact_clearance(P)
+        xmin, ymin, xmax, ymax = env.bounds
         for nm, p, c in zip(names, P, clear, strict=True):
+            if not (xmin <= p[0] <= xmax and ymin <= p[1] <= ymax):
+                raise ScenarioError(f"{label}: {nm} ({p[0]:.6g}, {p[1]:.6g}) m is outside the room {env.bounds}")
             if not c > 0.0:
                 raise ScenarioError(
                     f"{label}: {nm} ({p[0]:g}, {p[1]:g}) m is not in free space: clearance {c:.3f} m to the "
                     f"obstacles and walls grown by the safety radius {env.safety_radius:g} m (must be > 0); "
-                    f"move it away from the obstacles or inside the room {env.bounds}"
+                    f"move it away from the obstacles"
                 )
         # every point must lie in the same connected piece of free space as the base
         parts = shapely.get_parts(env.free)
@@ -105,9 +108,9 @@ class Scenario:
         for nm, p, reg in zip(names[1:], P[1:], region[1:], strict=True):
             if reg != region[0]:
                 raise ScenarioError(
-                    f"{label}: {nm} ({p[0]:g}, {p[1]:g}) m cannot be reached from the base: it lies in a "
-                    f"different connected region of free space (the obstacles grown by "
-                    f"{env.safety_radius:g} m separate them)"
+                    f"{label}: no free route from the base to the {nm} ({p[0]:g}, {p[1]:g}) m: they lie in "
+                    f"different connected regions of free space (the obstacles grown by {env.safety_radius:g} m "
+                    "separate them)"
                 )
 
 

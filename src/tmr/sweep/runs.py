@@ -64,6 +64,8 @@ class RunSpec:
         overrides: parameter overrides by field name (``tmr.params``), e.g. ``(("k_v0", 0.05), ("d_min", 0.5))``.
         n_robots: number of robots (``None``: the scenario's).
         repeats: plans run for the timing fields (median); the scores are those of the last (all are identical).
+        route: leader route (``tmr.planner.ROUTES``); sweeps default to ``"rrt"``, the paper's RRT* leader over 15 s,
+            because they reproduce Caruso 2021 (sensitivity, MOGA, the formulation table).
     """
 
     scenario: str
@@ -72,6 +74,7 @@ class RunSpec:
     overrides: tuple[tuple[str, Any], ...] = ()
     n_robots: int | None = None
     repeats: int = 1
+    route: str = "rrt"
 
     def override(self, name: str, default: Any = None) -> Any:
         """Value of override ``name`` or ``default``."""
@@ -154,7 +157,11 @@ _local = threading.local()
 
 
 def cached_problem(
-    scenario: str, seed: int, problem_overrides: tuple[tuple[str, Any], ...], n_robots: int | None
+    scenario: str,
+    seed: int,
+    problem_overrides: tuple[tuple[str, Any], ...],
+    n_robots: int | None,
+    route: str = "rrt",
 ) -> Problem:
     """The problem for (scenario, seed, non-controller overrides, N), built once per worker thread/process.
 
@@ -163,12 +170,12 @@ def cached_problem(
     """
     cache: dict[Any, Problem] = getattr(_local, "cache", None) or {}
     _local.cache = cache
-    key = (scenario, seed, problem_overrides, n_robots)
+    key = (scenario, seed, problem_overrides, n_robots, route)
     if key not in cache:
         if len(cache) > 16:
             cache.clear()
         cache[key] = build_problem(
-            load_scenario(scenario), seed=seed, n_robots=n_robots, overrides=dict(problem_overrides)
+            load_scenario(scenario), seed=seed, n_robots=n_robots, overrides=dict(problem_overrides), route=route
         )
     return cache[key]
 
@@ -177,7 +184,7 @@ def problem_for(spec: RunSpec) -> Problem:
     """The problem of ``spec``: the cached one with the controller overrides applied."""
     ctrl = {k: v for k, v in spec.overrides if k in CONTROLLER_PARAMS}
     other = tuple((k, v) for k, v in spec.overrides if k not in CONTROLLER_PARAMS)
-    base = cached_problem(spec.scenario, spec.seed, other, spec.n_robots)
+    base = cached_problem(spec.scenario, spec.seed, other, spec.n_robots, spec.route)
     if not ctrl:
         return base
     task, rest = apply_overrides(base.task_params, ctrl)

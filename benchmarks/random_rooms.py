@@ -1,0 +1,517 @@
+"""Whole pipeline on seeded random rooms: does `python -m tmr.plan` plan, refuse and keep every hard limit?
+
+    python benchmarks/random_rooms.py [--rooms 216] [--seed 0] [--methods qp[,pinv,horizon]] [--subset K]
+                                      [--robots 2,3,5,8,auto] [--jobs N | --scheduler tcp://host:port]
+                                      [--timeout 600] [--keep-failures DIR] [--quick]
+
+A benchmark, not a test. Rooms come from the project's own generator (:mod:`tmr.sweep.rooms`): 20 m × 20 m,
+densities sparse / medium / dense / walls / narrow / long_walls × goal classes near / mid / corner / far, evenly
+(``room_set``), base and goal with clearance > 0.3 m from the obstacles grown by r = 0.5 m; a quarter of the corner
+rooms wall the goal off (a "no free route" refusal test). Every (room, method, N) runs the whole command line in a
+subprocess (``python -m tmr.plan --map ROOM.geojson --base=X,Y --goal=X,Y --robots N --method M --no-plots``),
+timed from process start to exit, through ``tmr.sweep.executor.make_executor`` (all cores by default, or Dask).
+
+What a run should do, from the shortest tether route of :func:`tmr.route.plan_route` (N_min = fewest robots):
+
+* goal not connected to the base (another piece of free space, checked with shapely): exit 2, "no free route";
+* N < N_min: exit 2 with one line, fast;
+* N ≥ N_min or ``--robots auto``: exit 0 with a plan keeping every hard limit.
+
+Each plan's raw trajectories are checked **independently** of tmr's own metrics (shapely distances to the raw
+obstacles and walls minus r for every robot centre and every straight tether chord anchor → robot 1 → … → robot N,
+spans vs d_max, every robot pair ≥ 2r; :func:`tmr.sweep.rooms.independent_check`, 1 mm tolerance on clearances).
+
+Writes ``benchmarks/results/random_rooms.md``, ``.csv`` (one row per run) and ``.png`` (success per density × N,
+histograms of whole-process times). BLAS runs on one thread per process unless OPENBLAS_NUM_THREADS/OMP_NUM_THREADS
+is set. ``--quick``: the first 16 rooms (every density, every goal class), for smoke runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime
+import io
+import math
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+PINNED = not any(v in os.environ for v in THREAD_VARS)
+if PINNED:
+    os.environ["OPENBLAS_NUM_THREADS"] = os.environ["OMP_NUM_THREADS"] = "1"
+
+import numpy as np  # noqa: E402
+from provenance import source_version, versions  # noqa: E402
+
+from tmr.sweep.executor import make_executor  # noqa: E402
+from tmr.sweep.rooms import (  # noqa: E402
+    DENSITIES,
+    GOAL_CLASSES,
+    Room,
+    RoomRun,
+    default_d_max,
+    room_from_spec,
+    room_set,
+    run_room,
+)
+
+RESULTS = Path(__file__).resolve().parent / "results"
+PACKAGES = ("numpy", "scipy", "shapely", "osqp", "ompl")
+DEFAULT_ROOMS = 216  # 9 per density x goal class
+QUICK_ROOMS = 16
+ROBOTS = ("2", "3", "5", "8", "auto")
+
+#: Targets of the project issue ("tether-aware global planning", item 6).
+TARGET_AUTO_SUCCESS = 0.98  # fraction of connected goals planned with --robots auto (qp)
+TARGET_REFUSE_S = 1.0  # s, whole process, every N < N_min
+TARGET_MEDIAN_PLAN_S = 2.0  # s, whole process, median
+
+# ----------------------------------------------------------------------------------------------------------------
+# classification
+# ----------------------------------------------------------------------------------------------------------------
+EXPECT_PLAN = "plan"  # route found and N >= N_min (or auto)
+EXPECT_REFUSE_NMIN = "refuse: N < N_min"  # N < n_lower (proven) or n_lower <= N < N_min (route chain)
+EXPECT_REFUSE_DISCONNECTED = "refuse: not connected"
+EXPECT_ROUTE_GAP = "route module refuses a connected goal"  # shapely connects base and goal, tmr.route finds no chain
+
+
+def expectation(row: dict[str, Any]) -> str:
+    if not row["connected"]:
+        return EXPECT_REFUSE_DISCONNECTED
+    if row["n_min"] is None:
+        return EXPECT_ROUTE_GAP
+    if row["robots"] == "auto" or int(row["robots"]) >= int(row["n_min"]):
+        return EXPECT_PLAN
+    return EXPECT_REFUSE_NMIN
+
+
+def outcome(row: dict[str, Any]) -> str:
+    code = row["exit_code"]
+    if code is None:
+        return "timeout"
+    if code == 0:
+        return "planned" if row.get("independent_ok") is True else "planned, independent violation"
+    if code == 1:
+        return "failed" if row.get("n_robots") is not None else "no plan found (exit 1, nothing written)"
+    if code == 2:
+        return "refused"
+    return f"crash ({code})"
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# statistics helpers
+# ----------------------------------------------------------------------------------------------------------------
+def _vals(rows: list[dict[str, Any]], key: str) -> list[float]:
+    return [float(r[key]) for r in rows if r.get(key) is not None and not math.isnan(float(r[key]))]
+
+
+def _med(v: list[float]) -> float | None:
+    return statistics.median(v) if v else None
+
+
+def _fmt(v: Any, spec: str = ".2f") -> str:
+    if v is None:
+        return "—"
+    if isinstance(v, float) and math.isinf(v):
+        return "∞"
+    return format(v, spec)
+
+
+def _frac(k: int, n: int) -> str:
+    return f"{k}/{n} ({100 * k / n:.0f} %)" if n else "—"
+
+
+def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Table cells of one (method, N) group."""
+    reach = [r for r in rows if r["expect"] == EXPECT_PLAN]
+    others = [r for r in rows if r["expect"] in (EXPECT_REFUSE_NMIN, EXPECT_REFUSE_DISCONNECTED)]
+    gap = [r for r in rows if r["expect"] == EXPECT_ROUTE_GAP]
+    ok_plans = [r for r in reach if r["exit_code"] == 0]
+    band = [r for r in rows if r["expect"] == EXPECT_REFUSE_NMIN and r["robots"] != "auto"
+            and int(r["robots"]) >= int(r["n_lower"])]  # fmt: skip
+    auto = [r for r in ok_plans if r["robots"] == "auto" and r.get("n_robots") is not None]
+    all_plans = [r for r in rows if r["exit_code"] == 0]
+    refusals = [r for r in others if r["exit_code"] == 2]
+    planned_any = [r for r in rows if r["exit_code"] in (0, 1)]
+    return {
+        "rooms": len(rows),
+        "reachable": len(reach),
+        "success": len(ok_plans),
+        "failed": sum(r["exit_code"] == 1 for r in reach),
+        "wrong_refusals": sum(r["exit_code"] == 2 for r in reach),
+        "timeouts": sum(r["exit_code"] not in (0, 1, 2) for r in rows),
+        "others": len(others),
+        "correct_refusals": len(refusals),
+        "band": len(band),
+        "band_exit1": sum(r["exit_code"] == 1 and r.get("n_robots") is None for r in band),
+        "auto_extra": Counter(int(r["n_robots"]) - int(r["n_min"]) for r in auto),
+        "gap": len(gap),
+        "gap_refused": sum(r["exit_code"] == 2 for r in gap),
+        "gap_planned": sum(r["exit_code"] == 0 for r in gap),
+        "refuse_med": _med(_vals(refusals, "wall_time")),
+        "refuse_max": max(_vals(refusals, "wall_time"), default=None),
+        "slow_refusals": sum(r["wall_time"] >= TARGET_REFUSE_S for r in refusals),
+        "plan_med": _med(_vals(planned_any, "wall_time")),
+        "plan_max": max(_vals(planned_any, "wall_time"), default=None),
+        "ratio_med": _med(_vals(ok_plans, "route_ratio")),
+        "min_robot": min(
+            _vals(all_plans, "ind_robot_clearance") + _vals(all_plans, "ind_wall_clearance"), default=None
+        ),
+        "min_tether": min(_vals(all_plans, "ind_tether_clearance"), default=None),
+        "max_span": max(_vals(all_plans, "ind_max_span_ratio"), default=None),
+        "violations": sum(r.get("independent_ok") is False for r in all_plans),
+        "filtered_violations": sum(r.get("filtered_ok") is False for r in all_plans),
+        "unplanned_success": sum(r["exit_code"] == 0 and r["expect"] != EXPECT_PLAN for r in rows),
+    }
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# report
+# ----------------------------------------------------------------------------------------------------------------
+CSV_COLUMNS = [
+    "room", "room_seed", "density", "goal_class", "n_obstacles", "base_x", "base_y", "goal_x", "goal_y",
+    "connected", "straight", "route_found", "route_length", "n_lower", "n_min", "route_error",
+    "method", "robots", "expect", "outcome", "exit_code", "wall_time", "stderr_last",
+    "success", "failure", "n_robots", "robots_auto", "route_length_cli", "n_lower_cli", "n_min_cli",
+    "plan_wall_time", "d_max",
+    "min_robot_clearance", "min_tether_clearance", "max_span_ratio", "final_leader_error",
+    "leader_length", "leader_route_length", "route_ratio",
+    "ind_robot_clearance", "ind_robot_clearance_step", "ind_wall_clearance", "ind_tether_clearance",
+    "ind_tether_clearance_step", "ind_max_span_ratio", "ind_min_anchor_span", "ind_min_separation",
+    "ind_violations", "independent_ok",
+    "ind_filtered_robot_clearance", "ind_filtered_tether_clearance", "ind_filtered_max_span_ratio", "filtered_ok",
+]  # fmt: skip
+
+
+def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
+    buf = io.StringIO()
+    cw = csv.DictWriter(buf, fieldnames=CSV_COLUMNS, extrasaction="ignore", lineterminator="\n")
+    cw.writeheader()
+    for r in rows:
+        cw.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in CSV_COLUMNS})
+    path.write_text(buf.getvalue())
+
+
+def write_figure(rows: list[dict[str, Any]], method: str, robots: list[str], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    mine = [r for r in rows if r["method"] == method]
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
+    # (a) success among reachable, per density x N
+    grid = np.full((len(DENSITIES), len(robots)), np.nan)
+    text = [["" for _ in robots] for _ in DENSITIES]
+    for i, d in enumerate(DENSITIES):
+        for j, n in enumerate(robots):
+            cell = [r for r in mine if r["density"] == d and r["robots"] == n]
+            reach = [r for r in cell if r["expect"] == EXPECT_PLAN]
+            ok = sum(r["exit_code"] == 0 and r.get("independent_ok") is True for r in reach)
+            refused_ok = sum(
+                r["exit_code"] == 2 for r in cell if r["expect"] in (EXPECT_REFUSE_NMIN, EXPECT_REFUSE_DISCONNECTED)
+            )
+            others = sum(r["expect"] in (EXPECT_REFUSE_NMIN, EXPECT_REFUSE_DISCONNECTED) for r in cell)
+            if reach:
+                grid[i, j] = ok / len(reach)
+            text[i][j] = f"{ok}/{len(reach)}\nref {refused_ok}/{others}"
+    ax = axes[0]
+    im = ax.imshow(grid, vmin=0, vmax=1, cmap="RdYlGn", aspect="auto")
+    for i in range(len(DENSITIES)):
+        for j in range(len(robots)):
+            ax.text(j, i, text[i][j], ha="center", va="center", fontsize=7)
+    ax.set_xticks(range(len(robots)), [f"N={n}" for n in robots])
+    ax.set_yticks(range(len(DENSITIES)), DENSITIES)
+    ax.set_title(f"{method}: planned / reachable (N ≥ N_min)\n'ref': correct refusals / expected refusals", fontsize=9)
+    fig.colorbar(im, ax=ax, fraction=0.046, label="success among reachable")
+    # (b) whole-process times
+    ax = axes[1]
+    planned = _vals([r for r in mine if r["exit_code"] in (0, 1)], "wall_time")
+    refused = _vals([r for r in mine if r["exit_code"] == 2], "wall_time")
+    hi = max(planned + refused + [1.0])
+    bins = np.geomspace(0.1, hi * 1.1, 40)
+    ax.hist(planned, bins=bins, alpha=0.7, label=f"planned (exit 0/1), n={len(planned)}")
+    ax.hist(refused, bins=bins, alpha=0.7, label=f"refused (exit 2), n={len(refused)}")
+    ax.axvline(TARGET_REFUSE_S, color="k", ls=":", lw=1, label=f"refusal target {TARGET_REFUSE_S:g} s")
+    ax.axvline(TARGET_MEDIAN_PLAN_S, color="k", ls="--", lw=1, label=f"median plan target {TARGET_MEDIAN_PLAN_S:g} s")
+    ax.set_xscale("log")
+    ax.set_xlabel("whole `python -m tmr.plan` process [s]")
+    ax.set_ylabel("runs")
+    ax.legend(fontsize=7)
+    ax.set_title(f"{method}: whole-process time", fontsize=9)
+    # (c) leader path length over shortest route
+    ax = axes[2]
+    ratios = _vals([r for r in mine if r["exit_code"] == 0], "route_ratio")
+    if ratios:
+        ax.hist(ratios, bins=30)
+    ax.set_xlabel("leader path length / shortest free route from its start")
+    ax.set_ylabel("plans")
+    ax.set_title(f"{method}: route-length ratio of successful plans", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def import_baseline(repeats: int = 3) -> float:
+    """Median wall time [s] of importing what a refusal needs (tmr.plan, tmr.scenario, tmr.route) in a new
+    process: the floor of every whole-process time."""
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-c", "import tmr.plan, tmr.scenario, tmr.route"], check=True)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rooms", type=int, default=DEFAULT_ROOMS, help=f"number of rooms (default {DEFAULT_ROOMS})")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the room set (default 0)")
+    ap.add_argument("--methods", default="qp", help="comma-separated methods: qp, pinv, horizon (default qp)")
+    ap.add_argument("--subset", type=int, help="methods after the first run on the first K rooms only")
+    ap.add_argument("--robots", default=",".join(ROBOTS), help="comma-separated N values (default 2,3,5,8,auto)")
+    ap.add_argument("--plan-seed", type=int, default=0, help="--seed passed to tmr.plan (default 0)")
+    ap.add_argument("--jobs", type=int, help="worker processes (default: every core; 1 = serial)")
+    ap.add_argument("--scheduler", help="Dask scheduler address tcp://host:port (workers need tmr installed)")
+    ap.add_argument("--timeout", type=float, default=600.0, help="seconds per run before it is killed (default 600)")
+    ap.add_argument("--keep-failures", help="copy the room and outputs of every unexpected run into this directory")
+    ap.add_argument("--quick", action="store_true", help=f"smoke run: the first {QUICK_ROOMS} rooms")
+    ap.add_argument("--out", default=str(RESULTS), help="output directory (default benchmarks/results)")
+    ap.add_argument("--name", default="random_rooms", help="output file stem (default random_rooms)")
+    args = ap.parse_args(argv)
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    robots = [n.strip() for n in args.robots.split(",") if n.strip()]
+    n_rooms = QUICK_ROOMS if args.quick else args.rooms
+    out_dir = Path(args.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+    t_start = time.perf_counter()
+    load0 = os.getloadavg()
+    baseline = import_baseline()
+    executor = make_executor(args.jobs, args.scheduler, progress=True)
+    try:
+        specs = room_set(n_rooms, args.seed)
+        t0 = time.perf_counter()
+        generated = executor.map(room_from_spec, specs, desc="rooms")
+        t_gen = time.perf_counter() - t0
+        rooms_ok: list[Room] = [g for g in generated if isinstance(g, Room)]
+        gen_errors = [g for g in generated if not isinstance(g, Room)]
+        tasks = []
+        for k, method in enumerate(methods):
+            chosen = rooms_ok if k == 0 or args.subset is None else rooms_ok[: args.subset]
+            for room in chosen:
+                for n in robots:
+                    tasks.append(RoomRun(room, method, n, args.plan_seed, args.timeout, args.keep_failures))
+        t0 = time.perf_counter()
+        rows = executor.map(run_room, tasks, desc="plans")
+        t_runs = time.perf_counter() - t0
+    finally:
+        executor.close()
+    for r in rows:
+        r["expect"] = expectation(r)
+        r["outcome"] = outcome(r)
+    total = time.perf_counter() - t_start
+    load1 = os.getloadavg()
+    jobs_desc = (
+        f"Dask scheduler {args.scheduler}" if args.scheduler else
+        ("serial" if args.jobs == 1 else f"{args.jobs or os.cpu_count()} local worker processes")
+    )  # fmt: skip
+
+    # ------------------------------------------------------------------ report
+    stem = out_dir / args.name
+    write_csv(rows, stem.with_suffix(".csv"))
+    write_figure(rows, methods[0], robots, stem.with_suffix(".png"))
+
+    buf = io.StringIO()
+    w = buf.write
+    cmd = " ".join(argv if argv is not None else sys.argv[1:])
+    w("# Random rooms: the whole `python -m tmr.plan` on seeded rooms\n\n")
+    if args.quick:
+        w(f"**Quick smoke run ({n_rooms} rooms)**: not the full benchmark; run without `--quick` for it.\n\n")
+    w(f"`python benchmarks/random_rooms.py {cmd}`".replace(" `", "`") + f" — {datetime.date.today().isoformat()}, ")
+    w(f"`{platform.machine()}`, nproc {os.cpu_count()}, Python {platform.python_version()}; {versions(PACKAGES)}; ")
+    threads = ", ".join(f"{v}={os.environ[v]}" for v in THREAD_VARS if v in os.environ)
+    w(f"{threads}; {source_version()}.\n")
+    w(f"{jobs_desc}; total {total:.0f} s (room generation {t_gen:.0f} s, {len(tasks)} runs {t_runs:.0f} s); ")
+    w(f"load average {load0[0]:.1f} at the start, {load1[0]:.1f} at the end. Whole-process times are measured while ")
+    w("the other workers run, so they include contention on a loaded machine.\n\n")
+
+    w("## Rooms\n\n")
+    w(f"{len(rooms_ok)} rooms (`tmr.sweep.rooms.room_set({n_rooms}, seed={args.seed})`, 20 m × 20 m, r = 0.5 m, ")
+    w(f"d_max = {default_d_max():.3f} m)")
+    w(f"; {len(gen_errors)} could not be generated: {'; '.join(gen_errors)}" if gen_errors else "")
+    w(". Goal classes by the shortest free route of `tmr.route.plan_route`: near 2–6 m, mid 6–12 m, far > 3 d_max; ")
+    w("corner = within 3 m of the corner farthest from the base (a quarter walled off).\n\n")
+    w("| density | " + " | ".join(GOAL_CLASSES) + " | goal not connected | connected, no route (tmr.route) | ")
+    w("N_min median (max) |\n|---|" + "---:|" * (len(GOAL_CLASSES) + 3) + "\n")
+    for d in DENSITIES:
+        rs = [r for r in rooms_ok if r.density == d]
+        counts = Counter(r.goal_class for r in rs)
+        nm = [r.n_min for r in rs if r.n_min is not None]
+        w(f"| {d} | " + " | ".join(str(counts[g]) for g in GOAL_CLASSES))
+        w(f" | {sum(not r.connected for r in rs)} | {sum(r.connected and r.n_min is None for r in rs)} | ")
+        w(f"{_fmt(_med(nm), '.0f')} ({max(nm, default='—')}) |\n")
+    w("| **all** | " + " | ".join(str(sum(r.goal_class == g for r in rooms_ok)) for g in GOAL_CLASSES))
+    w(f" | {sum(not r.connected for r in rooms_ok)} | {sum(r.connected and r.n_min is None for r in rooms_ok)} | |\n\n")
+    w(
+        "*goal not connected*: base and goal lie in different pieces of the free space (shapely, independent of "
+        "tmr.route); every run should refuse. *connected, no route*: shapely connects them but `tmr.route` finds no "
+        "chain of free tether chords (a gap it judges too narrow); these are reported apart from the targets.\n\n"
+    )
+
+    w("## Per method and N\n\n")
+    w(
+        "*reachable*: the goal is connected, `tmr.route` finds a route and N ≥ N_min (every connected goal with a "
+        "route for `auto`). *success*: exit 0 among reachable. *correct refusals*: exit 2 among the others (N < N_min, "
+        "goal not connected; in brackets: runs with N_lower ≤ N < N_min that exit 1 'no plan found' instead, the "
+        "CLI's unproven verdict). *wrong ref.*: exit 2 for a reachable goal; *fail*: exit 1 for a reachable goal; "
+        "*t/o*: timeouts or crashes. Times are whole-process wall times [s] (refusals: the expected ones; plan: every "
+        "run that wrote a plan, exit 0 or 1). *ratio*: median leader path length / shortest free route from the "
+        "leader's start to the goal (successful plans). Independent minima over every successful plan (exit 0): "
+        "robot = min over robots and steps of the distance of the centre to the raw obstacles and walls − r; tether = "
+        "the same for every straight chord; *viol.*: successful plans breaking an independent check (raw "
+        "trajectories; in brackets: the filtered ones). *gap*: runs on connected goals `tmr.route` refuses, as "
+        "refused / planned.\n\n"
+    )
+    w(
+        "| method | N | rooms | reachable | success | fail | wrong ref. | t/o | correct refusals "
+        "| refuse med / max [s] | plan med / max [s] | ratio | min robot clr [m] | min tether clr [m] "
+        "| max span/d_max | viol. | gap |\n"
+    )
+    w("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n")
+    table: list[tuple[str, str, dict[str, Any]]] = []
+    for method in methods:
+        for n in robots:
+            s = summarise([r for r in rows if r["method"] == method and r["robots"] == n])
+            table.append((method, n, s))
+            w(f"| {method} | {n} | {s['rooms']} | {s['reachable']} | {_frac(s['success'], s['reachable'])} | ")
+            w(f"{s['failed']} | {s['wrong_refusals']} | {s['timeouts']} | {_frac(s['correct_refusals'], s['others'])}")
+            w(f" {'(' + str(s['band_exit1']) + ' exit 1)' if s['band_exit1'] else ''} ")
+            w(f"| {_fmt(s['refuse_med'])} / {_fmt(s['refuse_max'])} | {_fmt(s['plan_med'])} / {_fmt(s['plan_max'])} ")
+            w(f"| {_fmt(s['ratio_med'], '.3f')} | {_fmt(s['min_robot'], '.3f')} | {_fmt(s['min_tether'], '.3f')} ")
+            w(f"| {_fmt(s['max_span'], '.3f')} | {s['violations']} ({s['filtered_violations']}) ")
+            w(f"| {s['gap_refused']} / {s['gap_planned']} of {s['gap']} |\n")
+    w(
+        f"\n`python -c 'import tmr.plan, tmr.scenario, tmr.route'` (what a refusal imports) takes {baseline:.2f} s "
+        "here (median of 3, before the runs): the floor under every whole-process time above.\n\n"
+    )
+    for method in methods:
+        s = summarise([r for r in rows if r["method"] == method and r["robots"] == "auto"])
+        if s["auto_extra"]:
+            parts = ", ".join(f"N_min + {k}: {v}" for k, v in sorted(s["auto_extra"].items()))
+            w(f"{method}, `--robots auto`, successful plans by the N chosen: {parts}.\n\n")
+
+    # per density x N for the first method
+    method = methods[0]
+    w(f"## {method}: success among reachable per density × N\n\n")
+    w("| density | " + " | ".join(f"N={n}" for n in robots) + " |\n|---|" + "---:|" * len(robots) + "\n")
+    for d in DENSITIES:
+        cells = []
+        for n in robots:
+            s = summarise([r for r in rows if r["method"] == method and r["robots"] == n and r["density"] == d])
+            cells.append(_frac(s["success"], s["reachable"]))
+        w(f"| {d} | " + " | ".join(cells) + " |\n")
+    w("\n")
+
+    # targets
+    w("## Targets\n\n")
+    autos = [r for r in rows if r["method"] == "qp" and r["robots"] == "auto"]
+    lines = []
+    if autos:
+        conn = [r for r in autos if r["connected"]]
+        ok = [r for r in conn if r["exit_code"] == 0 and r.get("independent_ok") is True]
+        frac = len(ok) / len(conn) if conn else math.nan
+        lines.append(
+            (
+                f"qp, `--robots auto`: plans ≥ {100 * TARGET_AUTO_SUCCESS:.0f} % of the rooms whose goal is "
+                f"connected (shapely), independent checks passed",
+                f"{_frac(len(ok), len(conn))}",
+                frac >= TARGET_AUTO_SUCCESS,
+            )
+        )
+    plans = [r for r in rows if r["exit_code"] == 0]
+    bad = [r for r in plans if r.get("independent_ok") is not True or r.get("success") is not True]
+    lines.append(
+        (
+            "every plan (exit 0) keeps every hard limit (tmr's metrics and the independent check)",
+            f"{len(plans) - len(bad)}/{len(plans)}",
+            not bad,
+        )
+    )
+    low = [r for r in rows if r["expect"] == EXPECT_REFUSE_NMIN]
+    low_ok = [r for r in low if r["exit_code"] == 2 and r["wall_time"] < TARGET_REFUSE_S]
+    low_ref = [r for r in low if r["exit_code"] == 2]
+    low_band = [r for r in low if r["exit_code"] == 1 and r.get("n_robots") is None]
+    lines.append(
+        (
+            f"every N < N_min refused (exit 2) in < {TARGET_REFUSE_S:g} s (whole process)",
+            f"{len(low_ref)}/{len(low)} refused, {len(low_ok)}/{len(low)} in time; median "
+            f"{_fmt(_med(_vals(low_ref, 'wall_time')))} s, max "
+            f"{_fmt(max(_vals(low_ref, 'wall_time'), default=None))}"
+            f" s; {len(low_band)} exit 1 'no plan found' (N_lower ≤ N < N_min) in median "
+            f"{_fmt(_med(_vals(low_band, 'wall_time')))} s",
+            len(low_ok) == len(low),
+        )
+    )
+    disc = [r for r in rows if r["expect"] == EXPECT_REFUSE_DISCONNECTED]
+    disc_ok = [r for r in disc if r["exit_code"] == 2]
+    lines.append(
+        ("every goal not connected refused (exit 2)", _frac(len(disc_ok), len(disc)), len(disc_ok) == len(disc))
+    )
+    high = [r for r in rows if r["expect"] == EXPECT_PLAN and r["robots"] != "auto"]
+    wrong = [r for r in high if r["exit_code"] == 2]
+    lines.append(("no N ≥ N_min refused", f"{len(wrong)} of {len(high)} refused", not wrong))
+    pt = _vals([r for r in rows if r["exit_code"] in (0, 1)], "wall_time")
+    pt0 = _vals(plans, "wall_time")
+    lines.append(
+        (
+            f"median whole `tmr.plan` time < {TARGET_MEDIAN_PLAN_S:g} s (runs that wrote a plan)",
+            f"{_fmt(_med(pt))} s (exit 0 only: {_fmt(_med(pt0))} s; all runs: "
+            f"{_fmt(_med(_vals(rows, 'wall_time')))} s)",
+            (_med(pt) or math.inf) < TARGET_MEDIAN_PLAN_S,
+        )
+    )
+    w("| target | measured | met |\n|---|---|---|\n")
+    for what, measured, met in lines:
+        w(f"| {what} | {measured} | {'yes' if met else '**no**'} |\n")
+    w("\n")
+
+    # what went wrong
+    unexpected = [r for r in rows if not (
+        (r["expect"] == EXPECT_PLAN and r["exit_code"] == 0 and r.get("independent_ok") is True)
+        or (r["expect"] in (EXPECT_REFUSE_NMIN, EXPECT_REFUSE_DISCONNECTED) and r["exit_code"] == 2)
+    )]  # fmt: skip
+    w(f"## Runs that did not do what was expected ({len(unexpected)} of {len(rows)})\n\n")
+    if unexpected:
+        reasons = Counter((r["expect"], r["outcome"]) for r in unexpected)
+        w("| expected | outcome | runs |\n|---|---|---:|\n")
+        for (e, o), c in reasons.most_common():
+            w(f"| {e} | {o} | {c} |\n")
+        w("\nLast stderr line, most frequent first (numbers replaced by #):\n\n")
+        import re
+
+        msgs = Counter(re.sub(r"-?\d+(\.\d+)?", "#", r["stderr_last"] or r.get("ind_violations") or "")[:160]
+                       for r in unexpected)  # fmt: skip
+        w("| runs | message |\n|---:|---|\n")
+        for m, c in msgs.most_common(15):
+            w(f"| {c} | {m.replace('|', '/')} |\n")
+        w("\nEvery run: `" + stem.with_suffix(".csv").name + "` (`expect`, `outcome`, `stderr_last`).\n")
+    else:
+        w("None.\n")
+    w(f"\nFigure: `{stem.with_suffix('.png').name}` (success per density × N, whole-process times, route ratios).\n")
+    stem.with_suffix(".md").write_text(buf.getvalue())
+    print(buf.getvalue())
+    print(f"wrote {stem.with_suffix('.md')}, .csv, .png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,129 @@
+"""tmr.references and tmr.tasks.RouteFollowers: start placement, stations, time law from limits, follower rows."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from shapely.geometry import Point, box
+
+from tmr.chain import Chain
+from tmr.environment import Environment
+from tmr.errors import ParameterError
+from tmr.params import ChainParams
+from tmr.references import chain_reference, leader_duration, start_placement
+from tmr.route import guide_arcs, plan_route
+from tmr.spans import span_limits
+from tmr.tasks import RouteFollowers, StepContext
+
+SPACING = 1.2
+
+
+def test_leader_duration_keeps_the_peak_speed_and_acceleration():
+    for L, v, a in ((10.0, 0.8, 0.5), (0.5, 0.8, 0.5), (30.0, 2.0, 0.1)):
+        T = leader_duration(L, v, a, 0.05)
+        assert abs(T / 0.05 - round(T / 0.05)) < 1e-9 and T >= 2.0
+        t = np.linspace(0.0, T, 20001)
+        tau = t / T
+        s = L * tau**3 * (10 - 15 * tau + 6 * tau**2)
+        sd = np.gradient(s, t)
+        sdd = np.gradient(sd, t)
+        assert sd.max() <= v * (1 + 1e-3) and np.abs(sdd).max() <= a * (1 + 1e-2)
+        # and one of the limits binds (up to the rounding to Ts), unless the 2 s floor does
+        if T > 2.0 + 0.05:
+            assert sd.max() > v * (T - 0.05) / T or np.abs(sdd).max() > a * ((T - 0.05) / T) ** 2 * 0.99
+
+
+def plan_refs(env, base, goal, n, T_end=None):
+    lim = span_limits(n, ChainParams())
+    route = plan_route(env, base, goal, lim)
+    P, parked = start_placement(env, route, n, SPACING)
+    ref = chain_reference(
+        env, route, P, lim, parked=parked, T_end=T_end, Ts=0.05, speed=0.8, accel=0.5, spacing=SPACING
+    )
+    return route, ref, lim
+
+
+def check_chain(env, base, P, lim):
+    starts = np.vstack([base, P[:-1]])
+    spans = np.linalg.norm(P - starts, axis=1)
+    assert np.all(spans <= lim[:, 1] + 1e-9)
+    assert np.all(env.exact_clearance(P) > 0) and np.all(env.segment_clearance(starts, P) > 0)
+    D = np.linalg.norm(P[:, None] - P[None], axis=-1)[np.triu_indices(len(P), 1)]
+    assert np.all(D >= 2 * env.safety_radius - 1e-9)
+
+
+def test_start_along_the_route_and_references_end_at_the_stations():
+    env = Environment.from_geometry([Point(5.0, 5.0).buffer(0.45, 64)], (0.0, 0.0, 10.0, 10.0))
+    route, ref, lim = plan_refs(env, (1.0, 5.0), (6.7, 5.0), 3)
+    assert ref.parked == 0
+    arcs = guide_arcs(route.points)
+    np.testing.assert_allclose(ref.start_arcs, SPACING * np.arange(1, 4), atol=1e-9)
+    check_chain(env, route.points[0], ref.start, lim)
+    check_chain(env, route.points[0], ref.final, lim)
+    # every robot starts at its start and ends at its station, the leader at the goal
+    np.testing.assert_allclose(ref.positions[0], ref.start, atol=1e-9)
+    np.testing.assert_allclose(ref.positions[-1, -1], route.points[-1], atol=1e-9)
+    np.testing.assert_allclose(ref.positions[-1, :-1], ref.final[:-1], atol=1e-6)
+    # the guide is the route: every follower reference stays within its station offset of the route
+    assert ref.guide.shape == route.points.shape and arcs[-1] == pytest.approx(route.length)
+    # velocities are the derivatives of the positions
+    np.testing.assert_allclose(
+        ref.velocities[1:-1, :-1], np.gradient(ref.positions, 0.05, axis=0)[1:-1, :-1], atol=1e-9
+    )
+
+
+def test_followers_trail_the_leader_and_never_go_back():
+    env = Environment.from_geometry([box(9.9, 0.0, 10.1, 16.0)], (0.0, 0.0, 20.0, 20.0))
+    route, ref, lim = plan_refs(env, (8.0, 2.0), (12.0, 2.0), 7)
+    # arc progress of each follower along the guide is monotone
+    from tmr.references import _arc_of
+
+    g = ref.guide
+    ga = guide_arcs(g)
+    K = ref.positions.shape[0]
+    for i in range(6):
+        a = np.array([_arc_of(g, ga, ref.positions[k, i]) for k in range(0, K, 5)])
+        assert np.all(np.diff(a) >= -0.06), i  # (stations off a bend walk their offset at a constant foot)
+    # the duration follows from the leader's route length, not 15 s
+    L_lead = route.length - ref.start_arcs[-1]
+    assert ref.trajectory.t[-1] == pytest.approx(leader_duration(L_lead, 0.8, 0.5, 0.05))
+    check_chain(env, route.points[0], ref.final, lim)
+
+
+def test_user_duration_is_kept():
+    env = Environment.from_geometry(None, (0.0, 0.0, 20.0, 4.0))
+    _, ref, _ = plan_refs(env, (1.0, 2.0), (12.0, 2.0), 2, T_end=15.0)
+    assert ref.trajectory.t[-1] == pytest.approx(15.0) and ref.trajectory.t.size == 301
+
+
+def test_short_route_many_robots_parks_the_extra_ones():
+    env = Environment.from_geometry([Point(5.0, 5.0).buffer(0.45, 64)], (0.0, 0.0, 10.0, 10.0))
+    route, ref, lim = plan_refs(env, (2.0, 5.0), (3.5, 7.0), 5)
+    assert route.n_min == 1 and ref.parked >= 3
+    check_chain(env, route.points[0], ref.start, lim)
+    check_chain(env, route.points[0], ref.final, lim)
+    np.testing.assert_allclose(
+        ref.positions[:, : ref.parked], np.repeat(ref.start[None, : ref.parked], len(ref.positions), 0)
+    )
+
+
+def test_route_followers_rows():
+    K, N = 4, 3
+    P = np.random.default_rng(1).normal(size=(K + 1, N, 2))
+    V = np.random.default_rng(2).normal(size=(K + 1, N, 2))
+    task = RouteFollowers(P, V, gain=2.0)
+    chain = Chain(N, base=np.zeros(2))
+    env = Environment.from_geometry(None, (-10.0, -10.0, 10.0, 10.0))
+    ctx = StepContext(chain, env, np.zeros((K + 1, 2)), np.zeros((K + 1, 2)), 0.05, 2, [[0.5, 5.0]] * N)
+    q = chain.q_from_positions(np.array([[1.0, 0.0], [2.0, 0.5], [3.0, 0.0]]))
+    ctx.update(2, q, np.zeros(chain.dof))
+    rows = task.compute(ctx)
+    assert rows.J.shape == (4, 6) and task.space == "robot"
+    np.testing.assert_array_equal(rows.J[:, :4], np.eye(4))
+    assert not rows.J[:, 4:].any()  # the leader is not a follower
+    expect = V[2, :2] + 2.0 * (P[2, :2] - chain.robots(q)[:2])
+    np.testing.assert_allclose(rows.v, expect.ravel())
+    with pytest.raises(ParameterError):
+        RouteFollowers(P, V[:2], gain=1.0)
+    with pytest.raises(ParameterError):
+        RouteFollowers(P, V, gain=-1.0)
