@@ -38,7 +38,18 @@ def scenarios() -> dict[str, Scenario]:
 
 
 def test_builtin_names() -> None:
-    assert builtin_scenarios() == ["A", "B", "C", "D"]
+    assert builtin_scenarios() == ["A", "B", "C", "D", "E"]
+
+
+def test_scenario_e_needs_more_than_three_robots(scenarios: dict[str, Scenario]) -> None:
+    """E (tmr's): the straight line is 4 m, the route over the wall's end about 30.4 m, so 3 robots are refused."""
+    from tmr.route import plan_route
+
+    sc = scenarios["E"]
+    route = plan_route(sc.environment, sc.base, sc.goal, [[0.5, D_MAX], [1.0, D_MAX]])
+    assert np.linalg.norm(sc.goal - sc.base) == pytest.approx(4.0)
+    assert 30.3 < route.length < 30.5 and route.n_lower == 6
+    assert route.n_min <= sc.n_robots and route.refusal(3) is not None
 
 
 @pytest.mark.parametrize("name", ["A", "B", "C", "D"])
@@ -231,8 +242,8 @@ def test_bad_toml_and_map(tmp_path: Path) -> None:
 
 
 def test_unknown_builtin_lists_available() -> None:
-    with pytest.raises(ScenarioError, match="unknown scenario 'E'.*A, B, C, D"):
-        load_scenario("E")
+    with pytest.raises(ScenarioError, match="unknown scenario 'F'.*A, B, C, D, E"):
+        load_scenario("F")
     with pytest.raises(ScenarioError, match="not found"):
         load_scenario("no/such/file.toml")
 

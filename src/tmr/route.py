@@ -140,9 +140,14 @@ class Route:
         if n_robots >= self.n_min:
             return None
         if n_robots < self.n_lower:
+            corners = (
+                ""
+                if self.n_min == self.n_lower
+                else f" (its corners make it {self.n_min} for a chain along the route)"
+            )
             return (
-                f"the goal needs at least {self.n_min} robots: shortest tether route {self.length:.1f} m, each "
-                f"tether ≤ {self.d_max:.2f} m; rerun with --robots {self.n_min}"
+                f"the goal needs at least {self.n_lower} robots: shortest tether route {self.length:.1f} m, each "
+                f"tether ≤ {self.d_max:.2f} m{corners}; rerun with --robots {self.n_min}"
             )
         return (
             f"no chain of {n_robots} robots was found along the shortest tether route ({self.length:.1f} m, "
