@@ -223,3 +223,13 @@ def test_same_seed_same_bytes_route_mode(tmp_path, capsys):
         assert code == 0
     for name in ("trajectories.json", "trajectories.csv"):
         assert (outs[0] / name).read_bytes() == (outs[1] / name).read_bytes()
+
+
+def test_horizon_time_limit_returns_a_checked_plan_and_says_which(tmp_path, capsys):
+    out = tmp_path / "h"
+    args = ["--scenario", "A", "--method", "horizon", "--time-limit", "0.05", "--no-plots", "--out", str(out)]
+    code, stdout, _ = run_cli(args, capsys)
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert code == 0 and metrics["success"] and metrics["method"] == "horizon"
+    assert metrics["horizon_result"] in ("warm_start", "best_feasible_iterate")
+    assert "time limit" in metrics["horizon_note"] and "horizon: " in stdout

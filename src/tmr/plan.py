@@ -246,12 +246,17 @@ def _plan_once(args: argparse.Namespace, scenario: Any, n_robots: int | None) ->
     return problem, plan, metrics
 
 
-def _route_summary(problem: Any, auto_note: str | None) -> dict[str, Any]:
+def _extras(problem: Any, plan: Any, auto_note: str | None) -> dict[str, Any]:
+    """What ``metrics.json`` records beyond the metrics: the route and its robot counts, the ``--robots auto``
+    choice, and for ``horizon`` which plan it returned (optimum, best feasible iterate, or its warm start)."""
     out: dict[str, Any] = {"n_robots": problem.chain.n_robots, "route": problem.route_mode}
     if problem.route is not None:
         out.update(route_length=problem.route.length, n_min=problem.route.n_min, n_lower=problem.route.n_lower)
     if auto_note:
         out["robots_auto"] = auto_note
+    for key in ("horizon_result", "horizon_note"):
+        if isinstance(plan.diagnostics.get(key), str):
+            out[key] = plan.diagnostics[key]
     return out
 
 
@@ -310,7 +315,7 @@ def main(argv: list[str] | None = None) -> int:
         else:
             problem, plan, metrics = _plan_once(args, scenario, n_first)
         filtered = filter_trajectories(plan.robots, problem.time_params.Ts, cutoff_hz=args.filter_cutoff)
-        extra = _route_summary(problem, auto_note)
+        extra = _extras(problem, plan, auto_note)
         names = write_outputs(
             Path(args.out), plan, metrics, problem.env, filtered, not args.no_plots, extra, route=problem.route
         )
@@ -326,6 +331,8 @@ def main(argv: list[str] | None = None) -> int:
     if auto_note:
         print(auto_note)
     print(summary(plan, metrics))
+    if "horizon_note" in extra:
+        print(f"  horizon: {extra['horizon_result']}: {extra['horizon_note']}")
     print(f"  wrote {', '.join(names)} to {args.out}")
     if not plan.success:
         print(f"plan FAILED: {plan.failure}", file=sys.stderr)

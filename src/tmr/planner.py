@@ -431,6 +431,11 @@ def solve(
             result = plan_horizon(problem, warm, time_limit=limit, progress=progress)
         except HorizonInfeasible as exc:
             warm.method = "horizon"
+            first = str(exc).split(";")[0]
+            if warm.success:  # the NLP's own rows are stricter than the checks: the verified warm start stands
+                warm.diagnostics = dict(warm.diagnostics, horizon_result="warm_start")
+                warm.diagnostics["horizon_note"] = f"{first}; returned its qp warm start, which passes every check"
+                return warm, evaluate(warm, problem.env)
             warm.success = False
             reason = f"horizon: {exc}"
             warm.failure = reason if warm.failure is None else f"{reason}; its qp warm start: {warm.failure}"
