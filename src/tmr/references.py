@@ -258,6 +258,9 @@ def _snakes(env: Any, base: Array, count: int, spacing: float, clear: float, goa
     return found
 
 
+#: Spacing [m] of the leader's waypoints along the guide (its cubic spline would overshoot long straight legs).
+LEAD_STEP = 1.0
+
 #: Clearance [m] a follower's tether to the robot ahead keeps, in the visibility rule of the references.
 VISIBLE_CLEARANCE = 0.1
 
@@ -392,6 +395,10 @@ def chain_reference(
     lead = guide[garcs >= start_arcs[-1] - 1e-9]
     lead = np.vstack([P[-1], lead[np.linalg.norm(lead - P[-1], axis=1) > 1e-9]])
     L_lead = float(guide_arcs(lead)[-1])
+    if L_lead > 0:  # waypoints every ≤ LEAD_STEP: the spline stays close to the route instead of overshooting
+        la = guide_arcs(lead)
+        extra = np.linspace(0.0, L_lead, max(2, math.ceil(L_lead / LEAD_STEP) + 1))
+        lead = point_at(lead, la, np.union1d(la, extra))
     if T_end is None:
         T_end = leader_duration(L_lead, speed, accel, Ts)
     traj = time_law(lead, T_end=T_end, Ts=Ts, env=env, clearance=spline_clearance)

@@ -408,6 +408,7 @@ class _Samples:
         self.P = np.vstack([R[:-1], Q, R[-1:]])
         self.foot = np.concatenate([np.arange(n_route - 1), F, [n_route - 1]]).astype(np.intp)
         self.arc = s[self.foot]
+        self.off = np.linalg.norm(self.P - R[self.foot], axis=1)  # 0 on the guide
         off_par = _ray_crossings(self.holes, R[F], Q) if H and len(Q) else np.zeros((len(Q), H), np.int_)
         self.off_par = np.vstack([np.zeros((n_route - 1, H), np.int_), off_par, np.zeros((1, H), np.int_)])
         self.route_par = route_par
@@ -475,7 +476,9 @@ def stations(
         while frontier and not seen[-1]:
             dmax, dmin = smax[min(hop, len(smax) - 1)], smin[min(hop, len(smin) - 1)]
             nxt: list[int] = []
-            for i in sorted(frontier, key=lambda i: (-sm.arc[i], -i)):  # farther along first: they become parents
+            # on-guide stations first, then farther along: they become the parents (a chain along the route
+            # rather than one zig-zagging between offsets)
+            for i in sorted(frontier, key=lambda i: (sm.off[i] > 1e-9, -sm.arc[i], -i)):
                 js = np.flatnonzero(~seen)
                 js = js[sm.arc[js] > sm.arc[i]]
                 if not len(js):
