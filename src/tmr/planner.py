@@ -223,56 +223,24 @@ def build_problem(
             f"(clearance {clear[k]:.3f} m)"
         )
     q0 = chain.q_from_positions(P)
+    ref: ChainReference | None = None
     if route == "shortest":
-        t_end_set = "T_end" in values
         ref = chain_reference(
             env,
             rt,
             P,
             limits,
             parked=parked,
-            T_end=time_params.T_end if t_end_set else None,
+            T_end=time_params.T_end if "T_end" in values else None,
             Ts=time_params.Ts,
             speed=path_params.leader_speed,
             accel=path_params.leader_accel,
             spacing=limits[:, 0].max() + 0.2,
         )
-        time_params = replace(time_params, T_end=float(ref.trajectory.t[-1]))
-        return Problem(
-            scenario,
-            chain,
-            chain_params,
-            time_params,
-            path_params,
-            task_params,
-            pinv_params,
-            qp_params,
-            limits,
-            q0,
-            ref.trajectory,
-            int(seed),
-            route=rt,
-            references=ref,
-            route_mode="shortest",
-        )
-    traj = None
-    for clearance in path_params.clearances:
-        try:
-            traj = leader_trajectory(
-                env,
-                P[-1],
-                np.asarray(scenario.goal, float),
-                seed=seed,
-                T_end=time_params.T_end,
-                Ts=time_params.Ts,
-                iterations=path_params.path_iterations,
-                clearance=clearance,
-            )
-            break
-        except PathError:
-            if clearance == path_params.clearances[-1]:
-                raise
-    assert traj is not None
+        traj = ref.trajectory
+        time_params = replace(time_params, T_end=float(traj.t[-1]))
+    else:
+        traj = _rrt_trajectory(env, P[-1], np.asarray(scenario.goal, float), seed, time_params, path_params)
     return Problem(
         scenario,
         chain,
@@ -287,8 +255,32 @@ def build_problem(
         traj,
         int(seed),
         route=rt,
-        route_mode="rrt",
+        references=ref,
+        route_mode=route,
     )
+
+
+def _rrt_trajectory(
+    env: Any, start: Array, goal: Array, seed: int, time_params: TimeParams, path_params: PathParams
+) -> Trajectory:
+    """The paper's leader: RRT* path and B-spline time law over T_end (Caruso 2021 §4.2), with the path margins of
+    ``path_params.clearances`` tried in turn."""
+    for clearance in path_params.clearances:
+        try:
+            return leader_trajectory(
+                env,
+                start,
+                goal,
+                seed=seed,
+                T_end=time_params.T_end,
+                Ts=time_params.Ts,
+                iterations=path_params.path_iterations,
+                clearance=clearance,
+            )
+        except PathError:
+            if clearance == path_params.clearances[-1]:
+                raise
+    raise AssertionError("unreachable: the last clearance re-raises")  # pragma: no cover
 
 
 def make_tasks(problem: Problem) -> tuple[LeaderTracking, TetherRegulation]:
