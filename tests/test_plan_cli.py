@@ -187,7 +187,7 @@ def test_robots_auto_picks_the_fewest_that_plan(tmp_path, capsys):
     args = ["--map", str(_corridor(tmp_path)), "--base", "1,2", "--goal", "25,2", "--robots", "auto", "--no-plots"]
     code, stdout, _ = run_cli([*args, "--out", str(out)], capsys)
     assert code == 0
-    assert "--robots auto: N_min = 5, chose N = 5" in stdout
+    assert "--robots auto: N_min = 5; 5: planned; chose N = 5" in stdout
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["n_robots"] == 5 and metrics["n_min"] == 5 and metrics["n_lower"] == 5
     assert metrics["route_length"] == pytest.approx(24.0) and metrics["success"]
@@ -233,3 +233,23 @@ def test_horizon_time_limit_returns_a_checked_plan_and_says_which(tmp_path, caps
     assert code == 0 and metrics["success"] and metrics["method"] == "horizon"
     assert metrics["horizon_result"] in ("warm_start", "best_feasible_iterate")
     assert "time limit" in metrics["horizon_note"] and "horizon: " in stdout
+
+
+def test_robots_auto_rejects_start_and_reports_every_try(tmp_path, capsys):
+    out = tmp_path / "auto"
+    args = ["--map", str(_corridor(tmp_path)), "--base", "1,2", "--goal", "25,2", "--robots", "auto"]
+    code, _, err = run_cli([*args, "--start", "2,2;3.2,2", "--out", str(out)], capsys)
+    assert code == 2 and "--start" in err and not out.exists()
+    # no N from N_min to N_min + 3 can start in a 2 m x 0.4 m slot: one line with every try, exit 1
+    p = tmp_path / "slot.geojson"
+    p.write_text('{"type": "FeatureCollection", "bounds": [0, 0, 2.2, 1.4], "features": []}')
+    code, _, err = run_cli(["--map", str(p), "--base", "0.6,0.7", "--goal", "1.6,0.7", "--robots", "auto"], capsys)
+    assert code == 1 and err.startswith("no plan found: --robots auto: N_min = 1; 1: ") and not out.exists()
+
+
+def test_unknown_parameter_refused_before_planning(tmp_path, capsys):
+    out = tmp_path / "out"
+    code, _, err = run_cli(["--scenario", "A", "--set", "nosuch=1", "--out", str(out)], capsys)
+    assert code == 2 and "nosuch" in err and not out.exists()
+    code, _, err = run_cli(["--scenario", "A", "--time-limit", "-1", "--out", str(out)], capsys)
+    assert code == 2 and "positive" in err

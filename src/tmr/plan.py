@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from tmr.cli_args import positive_float
 from tmr.cli_args import positive_int as _positive_int
 from tmr.errors import TmrError
 
@@ -48,7 +49,10 @@ def _points(text: str) -> np.ndarray:
 def _robots(text: str) -> int | str:
     if text.strip().lower() == "auto":
         return "auto"
-    return _positive_int(text)
+    try:
+        return _positive_int(text)
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"{exc} or 'auto'") from exc
 
 
 #: ``--robots auto`` tries N_min, N_min + 1, ... up to N_min + AUTO_EXTRA robots.
@@ -73,7 +77,9 @@ def build_parser() -> argparse.ArgumentParser:
         "metrics and figures.",
     )
     src = p.add_argument_group("scenario")
-    src.add_argument("--scenario", help="built-in scenario A, B, C, D, or a path to a scenario TOML file")
+    src.add_argument(
+        "--scenario", help="built-in scenario A, B, C, D (Caruso 2021), E (tmr's), or a path to a scenario TOML file"
+    )
     src.add_argument("--map", help="map file: ROS map_server .yaml (+ .pgm), .geojson or .wkt (needs --base, --goal)")
     src.add_argument("--bounds", help="room bounds xmin,ymin,xmax,ymax for a GeoJSON/WKT --map")
     src.add_argument("--base", type=_xy, help="tether anchor X,Y [m]")
@@ -100,7 +106,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--time-limit",
-        type=float,
+        type=positive_float,
         default=None,
         help="wall-clock limit of the horizon NLP [s] (default 60); on expiry the best feasible plan is returned",
     )
@@ -109,7 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="QP solver for --method qp: osqp (persistent workspace, default) or a qpsolvers "
         "backend (daqp, proxqp, clarabel, qpsolvers-osqp, ...)",
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of the leader's RRT* (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the leader's RRT* with --route rrt (default 0)")
     p.add_argument("--iterations", type=_positive_int, help="RRT* iterations (default 1000)")
     p.add_argument(
         "--set",
@@ -143,7 +149,7 @@ def load_inputs(args: argparse.Namespace) -> Any:
             except ValueError as exc:
                 raise TmrError(f"--bounds must be xmin,ymin,xmax,ymax, got {args.bounds!r}") from exc
             kwargs["bounds"] = b
-        n = args.robots if isinstance(args.robots, int) else 3
+        n = args.robots if isinstance(args.robots, int) else (len(args.start) if args.start is not None else 3)
         sc = scenario_from_map(args.map, args.base, args.goal, start=args.start, n_robots=n, **kwargs)
     else:
         sc = load_scenario(args.scenario or "A")
@@ -246,6 +252,12 @@ def _plan_once(args: argparse.Namespace, scenario: Any, n_robots: int | None) ->
     return problem, plan, metrics
 
 
+def _short(reason: Any, width: int = 90) -> str:
+    """The first clause of a failure reason, at most ``width`` characters (for the ``--robots auto`` summary)."""
+    text = str(reason).split(";")[0].strip()
+    return text if len(text) <= width else text[: width - 1] + "…"
+
+
 def _extras(problem: Any, plan: Any, auto_note: str | None) -> dict[str, Any]:
     """What ``metrics.json`` records beyond the metrics: the route and its robot counts, the ``--robots auto``
     choice, and for ``horizon`` which plan it returned (optimum, best feasible iterate, or its warm start)."""
@@ -266,28 +278,45 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
     Returns the route and the N to plan with (``args.robots``; its N_min for ``auto``). Raises
     :class:`tmr.route.NoRouteError` / :class:`tmr.route.TooFewRobotsError` (exit 2) for a task proven impossible.
     """
-    from tmr.params import ChainParams, apply_overrides
+    from tmr.params import ChainParams, PathParams, PinvParams, QPParams, TaskParams, TimeParams, apply_overrides
     from tmr.route import TooFewRobotsError, plan_route
     from tmr.spans import span_limits
 
     values = dict(scenario.params or {}) | dict(args.set)
-    chain_params, _ = apply_overrides(ChainParams(), values)
+    rest = dict(values)
+    for cls in (ChainParams, TimeParams, PathParams, TaskParams, PinvParams, QPParams):  # bad values: exit 2 now
+        params, rest = apply_overrides(cls(), rest)
+        if cls is ChainParams:
+            chain_params = params
+    if rest:
+        raise TmrError(f"unknown parameter(s) {sorted(rest)}; the names are the fields of tmr.params")
     n = args.robots if isinstance(args.robots, int) else scenario.n_robots
-    rt = plan_route(scenario.environment, scenario.base, scenario.goal, span_limits(max(n, 2), chain_params))
+    if args.start is not None and args.robots is None:
+        n = len(args.start)
+    rt = plan_route(
+        scenario.environment,
+        scenario.base,
+        scenario.goal,
+        span_limits(max(n, 2), chain_params),
+        robots=n if args.robots != "auto" else None,
+    )
     if args.robots == "auto":
         return rt, rt.n_min
     why = rt.refusal(n)
-    if why is not None:
+    # a search verdict (N_min at the route's resolution) binds only the route-guided planner from its own start
+    if why is not None and (n < rt.n_lower or (args.route == "shortest" and args.start is None)):
         raise TooFewRobotsError(why, rt.n_min, proven=n < rt.n_lower)
-    return rt, args.robots
+    return rt, n
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    from tmr.route import RouteVerdict, TooFewRobotsError
+    from tmr.route import RouteVerdict
 
     try:
+        if args.robots == "auto" and args.start is not None:
+            raise TmrError("--robots auto chooses the number of robots, so it cannot take --start; give --robots N")
         scenario = load_inputs(args)
         rt, n_first = precheck(args, scenario)
 
@@ -297,21 +326,22 @@ def main(argv: list[str] | None = None) -> int:
         if args.robots == "auto":
             tried = []
             last = rt.n_min + AUTO_EXTRA
+            problem = None
             for n in range(rt.n_min, last + 1):
                 try:
-                    problem, plan, metrics = _plan_once(args, scenario, n)
-                except TooFewRobotsError:
-                    tried.append(f"{n}: refused")
+                    attempt = _plan_once(args, scenario, n)
+                except TmrError as exc:  # refused, no start placement or no path with this N: try the next one
+                    tried.append(f"{n}: {_short(exc)}")
                     continue
-                except TmrError as exc:  # no start placement or path with this N: try the next one
-                    tried.append(f"{n}: {exc}")
-                    if n == last:
-                        raise
-                    continue
-                tried.append(f"{n}: {'planned' if plan.success else 'failed'}")
+                problem, plan, metrics = attempt
+                tried.append(f"{n}: {'planned' if plan.success else _short(plan.failure)}")
                 if plan.success:
                     break
-            auto_note = f"--robots auto: N_min = {rt.n_min}, chose N = {problem.chain.n_robots} ({'; '.join(tried)})"
+            summary_line = f"--robots auto: N_min = {rt.n_min}; " + "; ".join(tried)
+            if problem is None:
+                print(f"no plan found: {summary_line}", file=sys.stderr)
+                return 1
+            auto_note = f"{summary_line}; chose N = {problem.chain.n_robots}"
         else:
             problem, plan, metrics = _plan_once(args, scenario, n_first)
         filtered = filter_trajectories(plan.robots, problem.time_params.Ts, cutoff_hz=args.filter_cutoff)

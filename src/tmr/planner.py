@@ -191,9 +191,10 @@ def build_problem(
     limits = span_limits(N, chain_params)
     env = scenario.environment
     goal = np.asarray(scenario.goal, float)
-    rt = plan_route(env, scenario.base, goal, limits)
+    rt = plan_route(env, scenario.base, goal, limits, robots=N)
     why = rt.refusal(N)
-    if why is not None:
+    # N_min is a verdict of the route-guided search; only the proven bound binds other routes and given starts
+    if why is not None and (N < rt.n_lower or (route == "shortest" and start is None)):
         raise TooFewRobotsError(why, rt.n_min, proven=N < rt.n_lower)
     parked = 0
     if start is not None:

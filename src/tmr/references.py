@@ -160,33 +160,48 @@ def start_placement(
 
 
 def _along(env: Any, guide: Array, n: int, spacing: float, clear: float, ahead: float) -> Array | None:
-    """``n`` robots along the polyline from its start, each at the first point (every 0.05 m) at least ``spacing``
-    [m] from the previous one and keeping clearance > ``clear``, whose chord from it keeps
-    ``CHORD_START_CLEARANCE`` (a chord must not cut a corner of the route), the last one at least ``ahead`` [m] of
-    route before the end; None if they do not fit."""
+    """``n`` robots along the polyline from its start (depth-first with a small budget), each at a point (every
+    0.05 m) at least 2r + 0.05 m — preferably ``spacing`` — from the previous one, keeping clearance > ``clear`` [m],
+    whose chord from it keeps ``CHORD_START_CLEARANCE`` (a chord must not cut a corner of the route: at a hairpin the
+    robot sits at its apex), the last one at least ``ahead`` [m] of route before the end; None if they do not fit."""
     arcs = guide_arcs(guide)
     L = float(arcs[-1])
     s = np.arange(0.0, L + 1e-9, 0.05)
     S = point_at(guide, arcs, s)
-    out: list[Array] = []
-    cur, k = S[0], 0
-    first = min(clear, 0.5 * float(np.asarray(env.exact_clearance(cur))))
-    for j in range(n):
-        far = np.linalg.norm(S[k + 1 :] - cur, axis=1) >= spacing
-        cand = np.flatnonzero(far) + k + 1
-        cand = cand[s[cand] <= L - ahead + 1e-9]
+    first = min(CHORD_START_CLEARANCE, 0.5 * float(np.asarray(env.exact_clearance(S[0]))))
+    near = 2.0 * float(env.safety_radius) + 0.05  # robots at least 2r apart, with a little margin
+    budget = [300]
+
+    def options(k: int, j: int) -> list[int]:
+        cur = S[k]
+        d = np.linalg.norm(S[k + 1 :] - cur, axis=1)
+        cand = np.flatnonzero(d >= near) + k + 1
+        cand = cand[s[cand] <= L - ahead + 1e-9][:400]
         if not len(cand):
-            return None
-        cand = cand[:40]  # the first points far enough; the chord to one of them clears the corner
+            return []
         need = first if j == 0 else CHORD_START_CLEARANCE
         ok = np.asarray(env.segment_clearance(np.repeat(cur[None], len(cand), 0), S[cand]), float) > need
         ok &= np.asarray(env.exact_clearance(S[cand]), float) > clear
-        if not ok.any():
+        wide = ok & (np.linalg.norm(S[cand] - cur, axis=1) >= spacing)
+        # the first free point one spacing away, then the free ones nearer (a hairpin's apex), then farther ones
+        order = [int(c) for c in cand[wide][:1]] + [int(c) for c in cand[ok & ~wide][::-1][:2]]
+        order += [int(c) for c in cand[wide][1:][::8][:2]]
+        return order
+
+    def grow(path: list[int]) -> list[int] | None:
+        if len(path) - 1 == n:
+            return path
+        budget[0] -= 1
+        if budget[0] < 0:
             return None
-        k = int(cand[np.argmax(ok)])
-        cur = S[k]
-        out.append(cur)
-    return np.array(out)
+        for c in options(path[-1], len(path) - 1):
+            done = grow([*path, c])
+            if done is not None:
+                return done
+        return None
+
+    found = grow([0])
+    return None if found is None else S[found[1:]]
 
 
 def _rings(env: Any, base: Array, count: int, spacing: float, clear: float, heading: float) -> list[Array]:

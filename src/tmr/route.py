@@ -12,8 +12,8 @@ The single source of "is this possible, and how many robots" (``formulations/rou
 3. **Fewest robots.** Tethers are straight chords of at most d_max, clear of the grown obstacles, robots at least
    2r apart. Two numbers come out:
 
-   * ``n_lower`` = ⌈(L − δ Θ) / d_max⌉, a proof: any chain is a free path from the anchor to the goal, at least as
-     long as the shortest one in the free space (L − δ Θ bounds it from below, Θ the route's total turning);
+   * ``n_lower`` = ⌈L_lower / d_max⌉, a proof: any chain is a free path from the anchor to the goal, at least as
+     long as the shortest path in a region that contains the free space (grown by t, then simplified by t), L_lower;
    * ``n_min``: the robots of the *route chain*: stations on the route, each the farthest route point (step
      ``STATION_STEP``) whose chord from the previous station is free, no longer than d_max and homotopic to the
      route (the region between chord and route holds no obstacle). Corners cost robots here, so
@@ -64,8 +64,9 @@ SIMPLIFY_TOLERANCE = 0.02
 QUAD_SEGS = 4
 #: Spacing [m] of the candidate stations along the route.
 STATION_STEP = 0.1
-#: Clearance [m] a chord between stations keeps from the obstacles grown by r.
-CHORD_CLEARANCE = 0.06
+#: Clearance [m] a chord between stations keeps from the obstacles grown by r (the QP keeps d_safe = 0.05 m, but a
+#: tether sample that starts nearer may stay there); the distance-field test adds its own Lipschitz slack.
+CHORD_CLEARANCE = 0.03
 #: Extra distance [m] between two robots beyond 2r in a station placement.
 SPACING_MARGIN = 0.1
 
@@ -107,7 +108,8 @@ class Route:
         margin: δ kept from the obstacles grown by r [m].
         d_max: longest tether chord [m] (per tether: ``d_max_first`` for the anchor tether).
         turning: Θ, total turning angle of the route [rad].
-        n_lower: ⌈(L − δ Θ) / d_max⌉, a proven lower bound on the number of robots.
+        n_lower: ⌈L_lower / d_max⌉, a proven lower bound on the number of robots.
+        lower_length: L_lower [m], the shortest path in a region containing the free space (≤ any chain's length).
         n_min: robots of the route chain (stations on the route; corners cost robots).
         stations: (n_min, 2) station positions, the last one the goal [m].
         station_arcs: (n_min,) their arc lengths along the route [m].
@@ -123,6 +125,7 @@ class Route:
     turning: float
     n_lower: int
     n_min: int
+    lower_length: float
     stations: Array
     station_arcs: Array
     vertices: int
@@ -146,8 +149,8 @@ class Route:
                 else f" (its corners make it {self.n_min} for a chain along the route)"
             )
             return (
-                f"the goal needs at least {self.n_lower} robots: shortest tether route {self.length:.1f} m, each "
-                f"tether ≤ {self.d_max:.2f} m{corners}; rerun with --robots {self.n_min}"
+                f"the goal needs at least {self.n_lower} robots: shortest tether route {self.lower_length:.1f} m, "
+                f"each tether ≤ {self.d_max:.2f} m{corners}; rerun with --robots {self.n_min}"
             )
         return (
             f"no chain of {n_robots} robots was found along the shortest tether route ({self.length:.1f} m, "
@@ -164,6 +167,7 @@ class Route:
             "route_turning": self.turning,
             "route_points": self.points.tolist(),
             "n_lower": self.n_lower,
+            "route_lower_length": self.lower_length,
             "n_min": self.n_min,
             "stations": self.stations.tolist(),
         }
@@ -195,8 +199,14 @@ def _turning(points: Array) -> float:
 # ----------------------------------------------------------------------------------------------------------------
 # visibility graph
 # ----------------------------------------------------------------------------------------------------------------
-def free_region(env: Any, margin: float, tolerance: float = SIMPLIFY_TOLERANCE) -> BaseGeometry:
-    """The free space eroded by ``margin + tolerance`` and simplified with ``tolerance`` (⊂ free eroded by margin)."""
+def free_region(
+    env: Any, margin: float, tolerance: float = SIMPLIFY_TOLERANCE, *, outward: bool = False
+) -> BaseGeometry:
+    """The free space eroded by ``margin + tolerance`` and simplified with ``tolerance`` (⊂ free eroded by margin);
+    with ``outward``, grown by ``tolerance`` and simplified instead (⊇ free: its shortest paths bound from below)."""
+    if outward:
+        region = env.free.buffer(tolerance, quad_segs=QUAD_SEGS).simplify(tolerance, preserve_topology=True)
+        return shapely.make_valid(region) if not region.is_valid else region
     region = env.free.buffer(-(margin + tolerance), quad_segs=QUAD_SEGS)
     if tolerance > 0 and not region.is_empty:
         region = region.simplify(tolerance, preserve_topology=True)
@@ -248,9 +258,9 @@ def _visible(test: BaseGeometry, a: Array, b: Array) -> NDArray[np.bool_]:
 class _Graph:
     """Visibility graph of one eroded free region with the anchor and the goal as extra nodes."""
 
-    def __init__(self, env: Any, margin: float) -> None:
+    def __init__(self, env: Any, margin: float, outward: bool = False) -> None:
         self.margin = margin
-        self.region = free_region(env, margin)
+        self.region = free_region(env, margin, outward=outward)
         self.test = self.region.buffer(1e-7, quad_segs=1)  # grazing along the boundary counts as free
         shapely.prepare(self.test)
         self.env = env
@@ -423,11 +433,11 @@ class _Samples:
         return ~np.any(loop % 2 == 1, axis=1)
 
 
-def _field_clear(env: Any, a: Array, b: Array, clearance: float, step: float = 0.05) -> NDArray[np.bool_]:
-    """Chords a→b (m, 2) that keep clearance > ``clearance`` [m], conservatively from the distance field.
+def _field_bounds(env: Any, a: Array, b: Array, step: float = 0.05) -> tuple[Array, Array]:
+    """Lower and upper bounds [m] of the clearance of each chord a→b (m, 2), from the distance field.
 
-    Points every ≤ ``step`` along each chord read the field at their nearest grid cell; the field is 1-Lipschitz,
-    so ``value − h/√2 − step/2 > clearance`` (h the cell size) bounds the clearance of the whole chord from below.
+    Points every ≤ ``step`` along each chord read the field at their nearest grid cell (size h). The field is
+    1-Lipschitz, so the chord's clearance is ≥ min(value) − h/√2 − step/2 and ≤ min(value) + h/√2.
     """
     field = env.distance_field
     x0, y0 = env.grid_origin
@@ -439,8 +449,21 @@ def _field_clear(env: Any, a: Array, b: Array, clearance: float, step: float = 0
     pts = a[:, None, :] + f[None, :, None] * (b - a)[:, None, :]
     ix = np.clip(np.rint((pts[..., 0] - x0) / h).astype(np.intp), 0, nx - 1)
     iy = np.clip(np.rint((pts[..., 1] - y0) / h).astype(np.intp), 0, ny - 1)
-    need = clearance + h * math.sqrt(0.5) + 0.5 * float(length.max(initial=0.0)) / (k - 1)
-    return np.all(field[ix, iy] > need, axis=1)
+    low = field[ix, iy].min(axis=1)
+    return low - h * math.sqrt(0.5) - 0.5 * float(length.max(initial=0.0)) / (k - 1), low + h * math.sqrt(0.5)
+
+
+def _field_clear(env: Any, a: Array, b: Array, clearance: float, step: float = 0.05) -> NDArray[np.bool_]:
+    """Chords a→b (m, 2) that keep clearance > ``clearance`` [m]: the field's lower bound decides; chords it cannot
+    decide (lower bound ≤ clearance < upper bound) get the exact test (``env.segment_clearance``)."""
+    if not len(a):
+        return np.zeros(0, dtype=bool)
+    lo, hi = _field_bounds(env, a, b, step)
+    ok = lo > clearance
+    unsure = ~ok & (hi > clearance)
+    if unsure.any():
+        ok[unsure] = np.asarray(env.segment_clearance(a[unsure], b[unsure]), float) > clearance
+    return ok
 
 
 def stations(
@@ -466,6 +489,7 @@ def stations(
     smin = np.atleast_1d(np.asarray(span_min, float)) if span_min is not None else np.zeros(1)
     sm = _Samples(env, guide, step, start_arc)
     P, n = sm.P, len(sm.s)
+    first = 0.5 * float(np.asarray(env.exact_clearance(P[0]))) - env.resolution  # slack of the field test
     banned: set[tuple[int, int]] = set()
     for _ in range(20):  # exact re-checks of the chosen chords; a field false positive is banned and searched again
         parent = np.full(n, -1)
@@ -487,7 +511,8 @@ def stations(
                 js = js[(d <= dmax) & (d >= dmin)]
                 if not len(js):
                     continue
-                js = js[_field_clear(env, np.repeat(P[i : i + 1], len(js), 0), P[js], clearance)]
+                need = clearance if i else min(clearance, first)  # an anchor next to a wall: its own clearance
+                js = js[_field_clear(env, np.repeat(P[i : i + 1], len(js), 0), P[js], need)]
                 js = js[sm.homotopic(i, js)] if len(js) else js
                 js = np.array([j for j in js if (i, int(j)) not in banned], dtype=np.intp)
                 if len(js):
@@ -510,7 +535,9 @@ def stations(
         path = path[::-1]
         a, b = P[path[:-1]], P[path[1:]]
         exact = np.asarray(env.segment_clearance(a, b), float)
-        bad = np.flatnonzero(exact <= 0.5 * clearance)
+        need = np.full(len(exact), 0.5 * clearance)
+        need[0] = min(need[0], max(0.25 * float(np.asarray(env.exact_clearance(P[0]))), 0.0))
+        bad = np.flatnonzero(exact <= need - 1e-12)
         if not len(bad):
             return sm.arc[path[1:]], sm.P[path[1:]]
         banned.update((path[k], path[k + 1]) for k in bad)
@@ -559,6 +586,7 @@ def plan_route(
     span_limits: ArrayLike,
     *,
     margin: float = ROUTE_MARGIN,
+    robots: int | None = None,
 ) -> Route:
     """Shortest free route from the anchor ``base`` to ``goal`` and the robots it needs (module docstring).
 
@@ -567,6 +595,9 @@ def plan_route(
         base, goal: (2,) positions [m].
         span_limits: (N, 2) [d_lo, d_max] per tether [m] (the first row is the anchor tether), or (2,) for all.
         margin: δ [m] the route keeps from the obstacles grown by r; smaller margins are tried in narrow passages.
+        robots: the chain's N, if known: when the route at ``margin`` needs more robots than that, the routes with
+            the smaller margins (through narrower passages, often shorter) are tried too and the one needing the
+            fewest robots is returned.
 
     Raises:
         NoRouteError: base or goal outside the room or in an obstacle, or in different pieces of free space.
@@ -583,9 +614,13 @@ def plan_route(
             f"obstacles grown by the safety radius {env.safety_radius:g} m separate them"
         )
     notes: list[str] = []
+    # lower bound: the shortest path in a region that contains the free space (grown by t, then simplified)
+    lower = _Graph(env, 0.0, outward=True).shortest(base, goal)
+    L_lower = float(guide_arcs(lower)[-1]) if lower is not None else 0.0
+    margins = tuple(dict.fromkeys((margin, margin / 2, 0.02)))
     points = None
     graph = None
-    for m in dict.fromkeys((margin, margin / 2, 0.02)):
+    for m in margins:
         graph = _Graph(env, m)
         points = graph.shortest(base, goal)
         if points is not None:
@@ -595,20 +630,28 @@ def plan_route(
             break
     assert graph is not None
     if points is None:
-        raise NoRouteError(
-            f"no free route from the anchor {_xy(base)} to the goal {_xy(goal)} with "
-            f"clearance ≥ 0.02 m from the obstacles grown by {env.safety_radius:g} m (the passage is too narrow)"
+        raise BlockedRouteError(
+            f"no route from the anchor {_xy(base)} to the goal {_xy(goal)} keeps 0.02 m from the obstacles grown by "
+            f"{env.safety_radius:g} m: a passage is too narrow for the chain"
         )
     points = _dedupe(points)
     L = float(guide_arcs(points)[-1])
     turning = _turning(points)
     d_max = float(lim[:, 1].max())
-    n_lower = max(1, math.ceil(max(L - margin * turning, 0.0) / d_max - 1e-9))
+    n_lower = max(1, math.ceil(min(L_lower, L) / d_max - 1e-9))
     spacing_min = np.concatenate([lim[:1, 0], lim[1:, 0]]) + SPACING_MARGIN
     arcs, st = stations(env, points, lim[:, 1], spacing_min)
     st = st.copy()
     st[-1] = goal
     n_min = max(len(arcs), n_lower)
+    if robots is not None and n_min > robots and margin > margins[-1]:
+        tighter = [m for m in margins if m < margin]
+        try:
+            other = plan_route(env, base, goal, lim, margin=tighter[0], robots=robots)
+        except RouteVerdict:
+            other = None
+        if other is not None and other.n_min < n_min:
+            return other
     return Route(
         points=points,
         length=L,
@@ -618,6 +661,7 @@ def plan_route(
         turning=turning,
         n_lower=int(n_lower),
         n_min=int(n_min),
+        lower_length=min(L_lower, L),
         stations=st,
         station_arcs=arcs,
         vertices=len(graph.V),
