@@ -322,12 +322,15 @@ def _separated(P: Array, d: float) -> bool:
     return bool(np.all(D[np.triu_indices(len(P), 1)] >= d))
 
 
-def _split_extra(final: Array, arcs: Array, start_pt: Array, extra: int, d_min: float) -> tuple[Array, Array]:
-    """Add ``extra`` stations by splitting the longest tethers at their midpoint (sub-chords of free chords)."""
+def _split_extra(
+    final: Array, arcs: Array, start_pt: Array, extra: int, d_min: float, start_arc: float
+) -> tuple[Array, Array]:
+    """Add ``extra`` stations by splitting the longest tethers at their midpoint (sub-chords of free chords), as
+    long as the halves stay ≥ ``d_min`` [m]; ``start_pt`` at arc ``start_arc`` is where the first tether starts."""
     pts, ar = list(final), list(arcs)
     for _ in range(extra):
         prev = [start_pt, *pts[:-1]]
-        prev_arc = [ar[0] - np.linalg.norm(pts[0] - start_pt), *ar[:-1]]
+        prev_arc = [start_arc, *ar[:-1]]
         lengths = [float(np.linalg.norm(b - a)) for a, b in zip(prev, pts, strict=True)]
         k = int(np.argmax(lengths))
         if lengths[k] / 2 < d_min:
@@ -382,26 +385,28 @@ def chain_reference(
     guide = guide[keep]
     garcs = guide_arcs(guide)
     start_arcs = np.array([_arc_of(guide, garcs, p) for p in P])
-    # final stations of the active robots parked+1..N, from the last parked robot's position
-    s0 = float(start_arcs[parked - 1]) if parked else 0.0
-    active = N - parked
-    d_lo = lim[parked:, 0] + SPACING_MARGIN
-    try:
-        f_arcs, f_pts = stations(env, guide, lim[parked:, 1], d_lo, start_arc=s0, clearance=CHORD_CLEARANCE)
-    except RouteVerdict as exc:
-        raise BlockedRouteError(f"from the start placement: {exc}") from exc
-    if len(f_arcs) > active:
-        raise BlockedRouteError(
-            f"the {active} active robot(s) cannot reach the goal along the route from their start placement: "
-            f"{len(f_arcs)} are needed"
-        )
-    if len(f_arcs) < active:
-        f_pts, f_arcs = _split_extra(f_pts, f_arcs, point_at(guide, garcs, s0), active - len(f_arcs), float(d_lo.max()))
-    if len(f_arcs) < active:  # the remaining robots stay at their start
-        extra = active - len(f_arcs)
-        parked += extra
-        f_pts = np.vstack([P[parked - extra : parked], f_pts])
-        f_arcs = np.concatenate([start_arcs[parked - extra : parked], f_arcs])
+    # final stations of the active robots parked+1..N, from the last parked robot's position; when there are more
+    # robots than stations and no tether is long enough to split, one more robot stays where it starts (parked),
+    # and the stations are searched again from it, so that no two final positions crowd each other
+    while True:
+        s0 = float(start_arcs[parked - 1]) if parked else 0.0
+        active = N - parked
+        d_lo = lim[parked:, 0] + SPACING_MARGIN
+        try:
+            f_arcs, f_pts = stations(env, guide, lim[parked:, 1], d_lo, start_arc=s0, clearance=CHORD_CLEARANCE)
+        except RouteVerdict as exc:
+            raise BlockedRouteError(f"from the start placement: {exc}") from exc
+        if len(f_arcs) > active:
+            raise BlockedRouteError(
+                f"the {active} active robot(s) cannot reach the goal along the route from their start placement: "
+                f"{len(f_arcs)} are needed"
+            )
+        if len(f_arcs) < active:
+            start_pt = point_at(guide, garcs, s0)
+            f_pts, f_arcs = _split_extra(f_pts, f_arcs, start_pt, active - len(f_arcs), float(d_lo.max()), s0)
+        if len(f_arcs) == active or parked >= N - 1:
+            break
+        parked += 1
     final = np.vstack([P[: N - len(f_pts)], f_pts])
     final_arcs = np.concatenate([start_arcs[: N - len(f_arcs)], f_arcs])
     final[-1] = goal
