@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 import qpsolvers
@@ -123,8 +125,50 @@ def test_near_duplicate_and_badly_scaled_rows_never_give_a_wrong_verified_answer
     assert accepted > 0
 
 
-def test_more_active_rows_than_unknowns_is_declined():
-    P, q = np.eye(2), np.zeros(2)
+def test_more_active_rows_than_unknowns_keeps_an_independent_subset():
+    """A degenerate vertex: three rows through the optimum of a 2-variable QP. The KKT system takes two of them; the
+    third is checked as an ordinary row, and the answer is the optimum (an earlier version declined such guesses)."""
+    P, q = np.eye(2), np.array([-2.0, -2.0])  # unconstrained optimum (2, 2)
     A = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
-    lo, up = np.full(3, -1.0), np.array([1.0, 1.0, 2.0])
-    assert WarmActiveSet().solve(P, q, A, lo, up, np.ones(3, np.int8)) is None
+    lo, up = np.full(3, -10.0), np.array([1.0, 1.0, 2.0])  # all three active at (1, 1)
+    res = WarmActiveSet().solve(P, q, A, lo, up, np.ones(3, np.int8))
+    assert res is not None
+    np.testing.assert_allclose(res.x, [1.0, 1.0], atol=1e-12)
+    np.testing.assert_allclose(P @ res.x + q + A.T @ res.y, 0.0, atol=1e-12)
+    assert np.all(res.y >= 0)
+
+
+def test_random_degenerate_vertices_give_the_optimum_or_decline():
+    """More rows active at the optimum than unknowns, built from the KKT conditions (P positive definite: the optimum
+    is unique). The guess holding all of them verifies to the optimum, or is declined (the multipliers of the kept
+    subset may have the wrong sign: then the caller's QP solver settles it) — never a wrong answer."""
+    verified = 0
+    for seed in range(40):
+        rng = np.random.default_rng(seed)
+        n, k, m = 4, 6, 10
+        M = rng.normal(size=(n, n))
+        P = M @ M.T + 0.5 * np.eye(n)
+        x_opt = rng.normal(size=n)
+        A = rng.normal(size=(m, n))
+        up = A @ x_opt + np.r_[np.zeros(k), rng.uniform(0.1, 1.0, m - k)]  # k rows at their upper bound
+        lo = np.full(m, -np.inf)
+        y = np.r_[rng.uniform(0.0, 2.0, k), np.zeros(m - k)]
+        q = -P @ x_opt - A.T @ y  # stationarity with y ≥ 0 on the active upper bounds: x_opt is the optimum
+        guess = np.r_[np.ones(k), np.zeros(m - k)].astype(np.int8)
+        res = WarmActiveSet(rounds=6).solve(P, q, A, lo, up, guess)
+        if res is not None:
+            verified += 1
+            np.testing.assert_allclose(res.x, x_opt, atol=1e-8)
+    assert verified >= 30  # most are settled (all of them were declined before: more rows than unknowns)
+
+
+def test_a_nearly_singular_kkt_system_is_declined_without_a_warning():
+    """A pivot of 1e-300 makes LAPACK return an infinite solution: it is declined before anything is multiplied
+    out (it used to print "invalid value encountered in matmul")."""
+    P = np.diag([1.0, 1e-300])
+    q = np.array([1.0, 1e10])
+    A, lo, up = np.zeros((0, 2)), np.zeros(0), np.zeros(0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert WarmActiveSet().solve(P, q, A, lo, up, np.zeros(0, np.int8)) is None
+        assert WarmActiveSet(dense_below=0).solve(sp.csr_matrix(P), q, A, lo, up, np.zeros(0, np.int8)) is None

@@ -120,12 +120,12 @@ def test_hard_limits_hold_and_the_leader_lags_instead(column_room):
 def test_qp_backends_agree(column_room):
     chain, ctx = context(column_room, [[3.0, 7.3], [6.0, 7.4], [9.0, 7.3]], (1.0, 7.3), [[9.3, 7.0]], [[0.5, -0.2]])
     x_ref, _ = stack(chain).step(ctx)
-    # proxqp 0.8 is left out: it reports these (feasible) problems as primal infeasible (formulations/qp.md)
-    for name in ("daqp", "clarabel", "qpsolvers-osqp"):
+    # every answer is polished to its exact KKT point, or checked against a second backend: the same motion
+    for name in ("daqp", "proxqp", "clarabel", "qpsolvers-osqp"):
         if name not in solvers():
             continue
         x, _ = stack(chain, solver=name).step(ctx)
-        np.testing.assert_allclose(x, x_ref, atol=2e-3)
+        np.testing.assert_allclose(x, x_ref, atol=1e-7)
     with pytest.raises(ParameterError, match="unknown QP solver"):
         stack(chain, solver="nope")
 
@@ -187,16 +187,19 @@ def test_random_clutter_never_violates_silently(seed):
         assert metrics.final_leader_error < 0.1
 
 
-def test_warm_active_set_and_osqp_give_the_same_plan():
-    problem = build_problem(random_scenario(5), seed=1, path_iterations=300)
+@pytest.mark.parametrize("route", ["rrt", "shortest"])
+def test_warm_active_set_and_osqp_give_the_same_plan(route):
+    problem = build_problem(random_scenario(5), seed=1, path_iterations=300, route=route)
     warm = make_qp(problem)
     cold = make_qp(problem)
     cold.warm_start = False
     a, b = plan(problem, warm), plan(problem, cold)
     assert a.success == b.success
-    assert np.nansum(a.diagnostics["solver_iterations"]) == 0  # every level settled by one verified KKT solve
+    if route == "rrt":  # (the route followers of the default route make a few steps change their active set)
+        assert np.nansum(a.diagnostics["solver_iterations"]) == 0  # every level settled by one verified KKT solve
     assert np.nansum(b.diagnostics["solver_iterations"]) > 0  # OSQP iterated
-    np.testing.assert_allclose(a.q, b.q, atol=1e-5)
+    # OSQP's answers are polished to their exact KKT point (or, if that does not verify, checked by DAQP)
+    np.testing.assert_allclose(a.q, b.q, atol=1e-8)
 
 
 def test_same_problem_same_plan():

@@ -83,7 +83,9 @@ def test_goal_class(every_room, density, goal_class) -> None:
     assert lo <= length <= hi
     assert room.straight <= length + 1e-9
     if room.route_source == "route":
-        assert room.n_min >= room.n_lower >= np.ceil(room.route_length / D_MAX - 0.1)
+        # n_lower comes from the shortest path with no margin (through slits the route's margin avoids), so it
+        # may be below route_length / d_max, never above it
+        assert room.n_min >= room.n_lower >= 1 and room.n_lower <= np.ceil(room.route_length / D_MAX - 1e-9)
 
 
 def test_densities_grow() -> None:

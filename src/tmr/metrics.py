@@ -3,7 +3,8 @@
 Everything here reads a plan through the fields of :class:`tmr.clik.Plan` only (duck typing): ``t`` (K+1,)
 [s], ``q``/``qdot`` (K+1, n), ``robots`` (K+1, N, 2) [m], ``base`` (2,) [m], ``reference`` (K+1, 2) [m],
 ``spans`` (K+1, N) [m], ``span_limits`` ((d_lo, d_max) or (N, 2)) [m], ``safety_radius`` [m], ``success``,
-``failure``, ``wall_time`` [s], and optionally ``goal`` (2,) [m].
+``failure``, ``wall_time`` [s], and optionally ``goal`` (2,) [m] and ``diagnostics`` (per-step arrays; the lexicographic
+QP's level status ``qp_level:<name>`` and ``fallback_solves`` are counted).
 The environment is read through ``exact_clearance(points (..., 2))`` and ``segment_clearance(a, b)`` (signed
 distances to the inflated obstacles, metres: > 0 free, < 0 inside), as :class:`tmr.environment.Environment`
 provides.
@@ -24,6 +25,7 @@ from scipy import signal
 from tmr.errors import ParameterError
 
 __all__ = [
+    "QP_LEVEL_STATUS",
     "VIOLATION_KINDS",
     "Clearances",
     "Metrics",
@@ -35,11 +37,18 @@ __all__ = [
     "fitness",
     "json_safe",
     "plan_goal",
+    "qp_level_counts",
     "robot_separations",
     "robot_speeds",
     "sample_time",
     "span_limits",
 ]
+
+#: Status of a level of the lexicographic QP at a step, by code: ``plan.diagnostics["qp_level:<name>"]`` holds the
+#: code per step (the same tuple as :data:`tmr.formulations.qp.LEVEL_STATUS`, not imported here: metrics read plans).
+QP_LEVEL_STATUS: tuple[str, ...] = ("solved", "relaxed", "implied", "failed", "skipped", "empty")
+#: Prefix of those diagnostics keys.
+QP_LEVEL_PREFIX = "qp_level:"
 
 #: Names of the violation kinds reported by :func:`evaluate`, in report order.
 VIOLATION_KINDS: tuple[str, ...] = (
@@ -295,6 +304,10 @@ class Metrics:
     # timing
     wall_time: float = math.nan  #: planner wall time [s]
     ms_per_step: float = math.nan  #: wall_time / K [ms]
+    # lexicographic QP (``--method qp``; empty for the other methods), see :func:`qp_level_counts`
+    #: per level name, the number of steps at which it was solved / relaxed / implied / failed / skipped / empty
+    qp_levels: dict[str, dict[str, int]] = field(default_factory=dict)
+    qp_fallback_solves: int = 0  #: level solves done by a fallback backend (the primary failed or was not verified)
 
     @property
     def fitness(self) -> tuple[float, float, float, float]:
@@ -311,6 +324,26 @@ class Metrics:
         ``"nan"`` (see :func:`json_safe`); ``None`` (e.g. no failure, no violation of a kind) becomes
         ``null``."""
         return json_safe(asdict(self))
+
+
+def qp_level_counts(diagnostics: dict[str, Any]) -> dict[str, dict[str, int]]:
+    """Per QP level, how many steps ended in each status of :data:`QP_LEVEL_STATUS`.
+
+    Reads the per-step codes ``diagnostics["qp_level:<name>"]`` (NaN where no step was done) that
+    :class:`tmr.formulations.qp.LexicographicQP` writes: ``solved`` (its optimum with every higher level kept
+    exactly), ``relaxed`` (solved with a higher level's freeze loosened by the documented slack), ``implied`` (not
+    solved: the higher levels leave it no freedom), ``failed`` (no backend solved it: the step keeps the higher
+    levels' optimum), ``skipped`` (below a failed level), ``empty`` (no task of weight > 0). Levels in stack order.
+    """
+    out: dict[str, dict[str, int]] = {}
+    for key, values in diagnostics.items():
+        if not key.startswith(QP_LEVEL_PREFIX):
+            continue
+        v = np.asarray(values, dtype=float)
+        v = v[np.isfinite(v)]
+        counts = {name: int(np.count_nonzero(v == c)) for c, name in enumerate(QP_LEVEL_STATUS)}
+        out[key[len(QP_LEVEL_PREFIX) :]] = counts
+    return out
 
 
 def _argmin_step(values: np.ndarray) -> tuple[float, int | None]:
@@ -400,6 +433,8 @@ def evaluate(
     any_violation = np.logical_or.reduce([masks[kind] for kind in VIOLATION_KINDS])
 
     wall = float(getattr(plan, "wall_time", math.nan))
+    diagnostics = getattr(plan, "diagnostics", None) or {}
+    fallbacks = np.asarray(diagnostics.get("fallback_solves", []), dtype=float)
     return Metrics(
         scenario=str(plan.scenario),
         method=str(plan.method),
@@ -440,6 +475,8 @@ def evaluate(
         first_violation=first,
         wall_time=wall,
         ms_per_step=1000.0 * wall / n_steps if n_steps > 0 else math.nan,
+        qp_levels=qp_level_counts(diagnostics),
+        qp_fallback_solves=int(np.nansum(fallbacks)) if fallbacks.size else 0,
     )
 
 

@@ -226,6 +226,13 @@ def summary(plan: Any, metrics: Any) -> str:
         "wall_time",
         "ms_per_step",
     ]
+    if d.get("qp_levels"):  # --method qp: what each level of the QP stack did, counted over the steps
+        d["qp_levels"] = "; ".join(
+            f"{name}: " + ", ".join(f"{n} {status}" for status, n in counts.items() if n)
+            for name, counts in d["qp_levels"].items()
+        )
+        at = keys.index("violations") + 1
+        keys[at:at] = ["qp_levels", "qp_fallback_solves"]
     lines = [
         f"tmr plan: scenario {plan.scenario}, method {plan.method}, {plan.n_robots} robots, {plan.t.size - 1} steps"
     ]

@@ -144,9 +144,7 @@ class Route:
             return None
         if n_robots < self.n_lower:
             corners = (
-                ""
-                if self.n_min == self.n_lower
-                else f" (its corners make it {self.n_min} for a chain along the route)"
+                "" if self.n_min == self.n_lower else f" (its corners make it {self.n_min} for a chain along the route)"
             )
             return (
                 f"the goal needs at least {self.n_lower} robots: shortest tether route {self.lower_length:.1f} m, "

@@ -22,6 +22,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
@@ -53,6 +54,19 @@ def active_set(y: Array, lo: Array, up: Array, tol: float = 1e-9) -> NDArray[np.
     return s
 
 
+def _sparse_kkt(P: Array | sp.spmatrix, A: Array, d: float) -> sp.csc_matrix:
+    """``[P, Aᵀ; A, −d I]`` in CSC, assembled from coordinates in one conversion (``sp.bmat`` converts every block)."""
+    n, k = P.shape[0], A.shape[0]
+    Pc = P.tocoo() if sp.issparse(P) else sp.coo_matrix(P)
+    ar, ac = np.nonzero(A)
+    av = A[ar, ac]
+    diag = np.arange(n, n + k)
+    rows = np.concatenate([Pc.row, ac, ar + n, diag])
+    cols = np.concatenate([Pc.col, ar + n, ac, diag])
+    data = np.concatenate([Pc.data, av, av, np.full(k, -d)])
+    return sp.csc_matrix((data, (rows, cols)), shape=(n + k, n + k))
+
+
 class WarmActiveSet:
     """KKT solve of a QP from a guessed active set, with a few primal-dual corrections (see the module docstring).
 
@@ -61,13 +75,37 @@ class WarmActiveSet:
             multipliers' signs.
         rounds: largest number of KKT solves per call.
         dense_below: problems with fewer variables use dense LAPACK, larger ones SuperLU on the sparse KKT matrix.
+        independence_rtol: a row of a degenerate guess within this distance of the span of the kept rows (unit rows,
+            projected off the equalities) is dropped from the KKT system.
+        huge: a KKT solution with an entry beyond this is declined (a nearly singular system).
+        kkt_reg, refinements: regularisation δ and refinement steps of the sparse KKT solve (see ``_kkt``).
     """
 
-    def __init__(self, tol: float = 1e-9, rounds: int = 4, dense_below: int = 80) -> None:
+    def __init__(
+        self,
+        tol: float = 1e-9,
+        rounds: int = 4,
+        dense_below: int = 80,
+        independence_rtol: float = 1e-8,
+        huge: float = 1e100,
+        kkt_reg: float = 1e-10,
+        refinements: int = 3,
+    ) -> None:
         self.tol, self.rounds, self.dense_below = float(tol), int(rounds), int(dense_below)
+        self.independence_rtol, self.huge = float(independence_rtol), float(huge)
+        self.kkt_reg, self.refinements = float(kkt_reg), int(refinements)
 
     def _kkt(self, P: Array | sp.spmatrix, q: Array, A: Array, b: Array) -> tuple[Array, Array, Array] | None:
-        """Solve ``[P Aᵀ; A 0][x; y] = [−q; b]``: x, y and the residual ``K z − rhs`` of the system at (x, y)."""
+        """Solve ``[P Aᵀ; A 0][x; y] = [−q; b]``: x, y and the residual ``K z − rhs`` of the system at (x, y).
+
+        None if the KKT matrix is singular (dependent active rows, or no curvature on their null space), or so
+        nearly singular that the solution has entries beyond ``huge`` (or non-finite ones): such a vector is never
+        multiplied out (it would overflow), and a finite but inaccurate one fails the residual checks of the caller.
+        Large problems factor ``[P, Aᵀ; A, −δI]`` (δ = ``kkt_reg``; quasi-definite, so never singular when P is
+        positive definite, as the QP's P = Σ w JᵀJ + εI is: SuperLU prints BLAS errors on stderr when it meets an
+        exactly singular matrix) and refine the solution against the exact system (up to ``refinements`` steps, as
+        OSQP's polish does); dependent active rows then fail the residual checks, or are consistent and harmless.
+        """
         n, k = P.shape[0], A.shape[0]
         rhs = np.concatenate([-q, b])
         try:
@@ -80,13 +118,53 @@ class WarmActiveSet:
                 _, _, z, info = dgesv(K, rhs)  # LAPACK without the wrapper overhead; K and rhs are kept
                 if info != 0:
                     return None
-            else:
-                As = sp.csr_matrix(A)
-                K = sp.bmat([[sp.csr_matrix(P), As.T], [As, None]], format="csc")
-                z = spla.splu(K).solve(rhs)
+            else:  # quasi-definite regularisation + iterative refinement: SuperLU never sees a singular matrix
+                d = self.kkt_reg
+                Kd = _sparse_kkt(P, A, d)
+                lu = spla.splu(Kd)
+                z = lu.solve(rhs)
+                small = 1e-3 * self.tol * (1.0 + np.abs(rhs).max())
+                for i in range(self.refinements + 1):
+                    if not np.abs(z).max() <= self.huge:
+                        return None
+                    res = Kd @ z - rhs
+                    res[n:] += d * z[n:]  # the residual of the exact system K z = rhs
+                    if i == self.refinements or np.abs(res).max() <= small:
+                        return z[:n], z[n:], res
+                    z -= lu.solve(res)
         except (np.linalg.LinAlgError, RuntimeError, ValueError):
-            return None  # singular KKT matrix: dependent active rows or no curvature on their null space
+            return None  # exactly singular KKT matrix
+        if not np.abs(z).max() <= self.huge:
+            return None  # nearly singular: a tiny pivot gave huge, infinite or NaN values (NaN compares false)
         return z[:n], z[n:], K @ z - rhs
+
+    @staticmethod
+    def _independent(A: Array, st: NDArray[np.int8], rtol: float) -> NDArray[np.bool_]:
+        """Which of the active rows ``A`` (kinds ``st``) to keep: every equality, and among the inequalities a
+        subset that is linearly independent of them and of each other (pivoted QR of the unit rows projected off the
+        equalities; a row within ``rtol`` of the span of the kept ones is dropped).
+
+        At a degenerate vertex (several nearly parallel clearance rows touching at one point, a speed bound on a
+        frozen velocity) more rows are at their bounds than the KKT system can take; the dropped ones are checked
+        as ordinary rows afterwards.
+        """
+        keep = st == 2
+        ineq = np.flatnonzero(~keep)
+        B = A[ineq]
+        norm = np.linalg.norm(B, axis=1)
+        ok = norm > 0
+        ineq, B = ineq[ok], B[ok] / norm[ok, None]
+        if not ineq.size:
+            return keep
+        E = A[keep]
+        if E.shape[0]:
+            Q, _ = np.linalg.qr(E.T)
+            B = B - (B @ Q) @ Q.T
+        _, R, piv = scipy.linalg.qr(B.T, mode="economic", pivoting=True)
+        d = np.abs(R.diagonal())
+        rank = min(int(np.count_nonzero(d > rtol)), A.shape[1] - E.shape[0])
+        keep[ineq[piv[:rank]]] = True
+        return keep
 
     def solve(
         self, P: Array | sp.spmatrix, q: Array, A: Array, lo: Array, up: Array, guess: NDArray[np.int8]
@@ -102,22 +180,19 @@ class WarmActiveSet:
         qscale = 1.0 + float(np.max(np.abs(q), initial=0.0))  # problem data, never the (maybe garbage) multipliers
         for r in range(1, self.rounds + 1):
             W = np.flatnonzero(s)
-            if W.size > n:
-                return None  # more active rows than unknowns: degenerate, multipliers not unique
             st = s[W]
             has_ineq = bool((st != 2).any())
-            b = np.where(st == 1, up[W], lo[W]) if has_ineq else lo[W]  # equalities: lo = up
-            sol = self._kkt(P, q, A[W], b)
+            sol = self._verified_kkt(P, q, A, lo, up, W, st, has_ineq, qscale) if W.size <= n else None
+            if sol is None and has_ineq:  # degenerate guess: keep an independent subset of its rows
+                keep = self._independent(A[W], st, self.independence_rtol)
+                if not keep.all():
+                    s[W[~keep]] = 0  # dropped: checked as ordinary rows below, re-added if violated
+                    W, st = W[keep], st[keep]
+                    has_ineq = bool((st != 2).any())
+                    sol = self._verified_kkt(P, q, A, lo, up, W, st, has_ineq, qscale)
             if sol is None:
                 return None
-            x, yW, res = sol
-            # the KKT point itself: stationarity P x + q + A_Wᵀ y = 0 relative to q, and the active rows at their
-            # bounds relative to b (never relative to y: an ill-conditioned system, e.g. nearly parallel active rows,
-            # gives huge multipliers and fails here instead of passing garbage on; NaN compares false and fails too)
-            if not np.max(np.abs(res[:n])) <= 10 * tol * qscale:
-                return None
-            if W.size and not np.max(np.abs(res[n:])) <= tol * (1.0 + float(np.max(np.abs(b)))):
-                return None
+            x, yW = sol
             Ax = A @ x
             viol = np.maximum(lo - Ax, Ax - up)  # every row within its bounds
             feasible = not viol.size or viol.max() <= tol
@@ -136,3 +211,31 @@ class WarmActiveSet:
                 s[(Ax < lo - tol) & free] = -1
                 s[(Ax > up + tol) & free] = 1
         return None
+
+    def _verified_kkt(
+        self,
+        P: Array | sp.spmatrix,
+        q: Array,
+        A: Array,
+        lo: Array,
+        up: Array,
+        W: NDArray[np.intp],
+        st: NDArray[np.int8],
+        has_ineq: bool,
+        qscale: float,
+    ) -> tuple[Array, Array] | None:
+        """x and the multipliers of the rows W (kinds ``st``) at their bounds, if the KKT solve is accurate."""
+        b = np.where(st == 1, up[W], lo[W]) if has_ineq else lo[W]  # equalities: lo = up
+        sol = self._kkt(P, q, A[W], b)
+        if sol is None:
+            return None
+        x, yW, res = sol
+        # the KKT point itself: stationarity P x + q + A_Wᵀ y = 0 relative to q, and the active rows at their bounds
+        # relative to b (never relative to y: an ill-conditioned system, e.g. nearly parallel active rows, gives huge
+        # multipliers and fails here instead of passing garbage on)
+        n = q.size
+        if not np.abs(res[:n]).max() <= 10 * self.tol * qscale:
+            return None
+        if W.size and not np.abs(res[n:]).max() <= self.tol * (1.0 + np.abs(b).max()):
+            return None
+        return x, yW

@@ -1128,7 +1128,7 @@ def plan_horizon(
     xv = Q.ravel()
     vals = model.values(xv)
     diag = _diagnostics(model, tr, stats, xv, vals, rounds, info, J_warm, trans_time, solve_time, start_time)
-    versus = f"warm start {warm_c.J:.6g}" if warm_c else f"infeasible warm start {J_warm:.6g}"
+    versus = f"warm start {warm_c.J:.6g}" if warm_c else f"warm start {J_warm:.6g}, outside the NLP's own rows"
     returned = {"optimal": "returned the optimum"}.get(chosen.result, f"returned {chosen.detail}")
     diag.update(
         horizon_result=chosen.result,

@@ -10,10 +10,11 @@ limit declares which one it writes (``space``):
                     lower ≤ A x ≤ upper                       (every Limit: clearance, separation, robot speed, …)
                     F x = F x*                               (strict priority: the higher levels' optima are frozen)
 
-F is an orthonormal basis, on v, of the higher levels' task rows and F x* their optimal values: a level's objective
-is strictly convex in its task value, so freezing it means no lower level can degrade a higher one. A level holding a
-full-rank task (``Task.full_rank``) has a unique optimum, and the levels below it are skipped. The returned joint
-rates are q̇ = T v* (exact).
+F is an orthonormal basis, on v, of the higher levels' task rows (tasks of weight > 0 only) and F x* their optimal
+values: a level's objective is strictly convex in its task value, so freezing it means no lower level can degrade a
+higher one. The bounds of a lower level are widened just enough that x* meets them (``min(lower, A x*)``, …): every
+frozen level is feasible by construction. A level holding a full-rank task (``Task.full_rank``) has a unique optimum,
+and the levels below it are ``implied``. The returned joint rates are q̇ = T v* (exact).
 
 **Optimistic first level.** Level 1 (leader tracking) usually reaches zero residual. So each step first solves level
 2 with level 1's rows as equalities at their targets (``J_1 x = t_1``): if that QP is feasible its solution is exactly
@@ -23,17 +24,25 @@ breaking a hard limit, and the lag is reported. After a lagging step the next on
 
 **Solvers.** With the default ``"osqp"`` each level is first solved from the previous step's active set by one KKT
 solve, accepted only if the KKT conditions verify (:mod:`tmr.formulations.activeset`); otherwise one persistent
-``osqp.OSQP`` workspace per level (fixed sparsity pattern, values updated each step) solves it, and DAQP settles a
-level OSQP leaves at its iteration limit. Any qpsolvers backend (``"daqp"``, ``"proxqp"``, ``"clarabel"``, …, or
-``"qpsolvers-osqp"``) is reached through :func:`qpsolvers.solve_qp` with the same problem. Every backend gets the
-condensed least squares P = Σ w JᵀJ + εI, q = −Σ w Jᵀt.
+``osqp.OSQP`` workspace per level (fixed sparsity pattern, values updated each step) solves it and its answer is
+polished the same way. Any qpsolvers backend (``"daqp"``, ``"proxqp"``, ``"clarabel"``, …, or ``"qpsolvers-osqp"``) is
+reached through :func:`qpsolvers.solve_problem` with the same problem, and its answer polished from the rows it has
+at their bounds. Every backend gets the condensed least squares P = Σ w JᵀJ + εI, q = −Σ w Jᵀt.
+
+**Failures.** A level a backend does not solve (or solves outside the tolerances) goes to the next backend of
+:data:`FALLBACK_SOLVERS`; an accepted answer that is not verified optimal gets a second opinion from the next backend
+(the lower objective wins); if every backend fails, the freezes of the higher levels are relaxed by priority (lowest
+first) to ``freeze_slack``; a level still unsolved is ``failed`` and the step keeps the higher levels' optimum. Each
+step's status per level is in ``diagnostics["qp_level:<name>"]`` (:data:`LEVEL_STATUS`), counted in ``metrics.json``.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+import warnings
+from collections.abc import Container, Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import osqp
@@ -54,8 +63,8 @@ Array = NDArray[np.float64]
 #: OSQP settings (polishing is off: osqp 1.1 prints a line on stdout for every polish that finds no active set,
 #: even with verbose=False).
 OSQP_SETTINGS = dict(eps_abs=1e-8, eps_rel=1e-8, polishing=False, max_iter=20000, verbose=False, warm_starting=True)
-#: Backend that settles a level OSQP leaves unsolved (iteration limit): dense active set, exact.
-FALLBACK_SOLVER = "daqp"
+#: Backends that take over a level, in this order, when the primary one fails (no answer, or one that fails the checks).
+FALLBACK_SOLVERS: tuple[str, ...] = ("daqp", "clarabel")
 #: OSQP's infinity: bounds beyond it are clipped.
 OSQP_INFTY = 1e30
 
@@ -67,7 +76,10 @@ def solvers() -> list[str]:
 
 @dataclass
 class Level:
-    """One priority level: weighted tasks whose rows are stacked into a least-squares objective."""
+    """One priority level: weighted tasks whose rows are stacked into a least-squares objective.
+
+    Only tasks of weight > 0 take part (in the level's objective and in the freeze of its optimum below it).
+    """
 
     tasks: Sequence[tuple[Task, float]]
     name: str = ""
@@ -196,9 +208,15 @@ class _OsqpLevel:
             res = self.solver.solve(raise_error=False)
             info, x, y = res.info, res.x, res.y
         x = np.array(x) if x is not None and np.all(np.isfinite(x)) else None
-        if x is not None and y is not None and str(info.status) == "solved":
+        status, iters = str(info.status), int(info.iter)
+        if x is not None and y is not None and status == "solved":
             self.guess = active_set(np.asarray(y), lo, up, tol=1e-7)
-        return x, str(info.status), int(info.iter)
+            if self.warm is not None:  # polish: the exact optimum on OSQP's active set, if it verifies
+                res = self.warm.solve(P, q, A, lo, up, self.guess)
+                if res is not None:
+                    self.guess = res.active
+                    return res.x, "verified", iters
+        return x, status, iters
 
 
 class _QpsolversLevel:
@@ -210,11 +228,21 @@ class _QpsolversLevel:
         "proxqp": {"eps_abs": 1e-9, "eps_rel": 0.0},
     }
 
-    def __init__(self, solver: str, eps: float) -> None:
+    #: rows within this distance (relative to 1 + |bound|) of a bound are the polishing guess of the active set
+    POLISH_ROWS = 1e-7
+    #: backends that never warn on a failed solve (no warnings filter needed: it costs a few µs per call)
+    SILENT = frozenset({"daqp"})
+    #: backends whose own multipliers may prove an answer optimal (:meth:`_certified`): an active-set method stops on
+    #: a vertex with exact multipliers; interior-point (Clarabel), ADMM (OSQP) and augmented-Lagrangian (proxqp)
+    #: answers sit near the bounds with spread multipliers and can pass the test while off by 1e-5: they are polished
+    CERTIFY = frozenset({"daqp"})
+
+    def __init__(self, solver: str, eps: float, polish: bool = True) -> None:
         self.solver = solver
         self.eps = float(eps)
         self.options = self.OPTIONS.get(solver, {})
         self.setups = 0
+        self.polish = WarmActiveSet() if polish else None
 
     def solve(
         self, A: Array, lo: Array, up: Array, Jw: Array, tw: Array, declared: NDArray[np.bool_] | None = None
@@ -233,13 +261,73 @@ class _QpsolversLevel:
         if self.solver in qpsolvers.sparse_solvers and self.solver not in qpsolvers.dense_solvers:
             P, G = sp.csc_matrix(P), sp.csc_matrix(G)
             Aeq = sp.csc_matrix(Aeq) if Aeq is not None else None
+        problem = qpsolvers.Problem(P, q, G if G.shape[0] else None, h if h.size else None, Aeq, beq)
         try:
-            x = qpsolvers.solve_qp(P, q, G, h, Aeq, beq, solver=self.solver, **self.options)
+            if self.solver in self.SILENT:
+                sol = qpsolvers.solve_problem(problem, solver=self.solver, **self.options)
+            else:
+                with warnings.catch_warnings():  # the caller reports the status (Clarabel warns on every failure)
+                    warnings.simplefilter("ignore")
+                    sol = qpsolvers.solve_problem(problem, solver=self.solver, **self.options)
         except Exception as exc:  # a backend error is a failed solve, reported by the caller
             return None, f"{self.solver} error: {exc}", 0
-        if x is None or not np.all(np.isfinite(x)):
-            return None, "infeasible or failed", 0
-        return np.asarray(x, dtype=float), "solved", 0
+        x = sol.x
+        if not sol.found or x is None or not np.all(np.isfinite(x)):
+            extras = getattr(sol, "extras", None) or {}
+            why = extras.get("status", extras.get("info", None))
+            why = getattr(why, "status", why)
+            return None, f"{self.solver}: {why if why is not None else 'infeasible or failed'}", 0
+        x = np.array(x, dtype=float)
+        if self.polish is None:
+            return x, "solved", 0
+        if self.solver in self.CERTIFY and self._certified(P, q, x, sol, G, h, Aeq, beq):
+            return x, "verified", 0
+        # polish: the exact optimum on the rows the answer has at their bounds, if it verifies
+        r = A @ x
+        at_up = r >= up - self.POLISH_ROWS * (1.0 + np.abs(np.where(np.isfinite(up), up, 0.0)))
+        at_lo = r <= lo + self.POLISH_ROWS * (1.0 + np.abs(np.where(np.isfinite(lo), lo, 0.0)))
+        guess = np.where(at_up, 1, np.where(at_lo, -1, 0)).astype(np.int8)
+        res = self.polish.solve(P, q, A, lo, up, guess)
+        if res is not None:
+            return res.x, "verified", 0
+        return x, "solved", 0
+
+    def _certified(
+        self,
+        P: Array | sp.spmatrix,
+        q: Array,
+        x: Array,
+        sol: qpsolvers.Solution,
+        G: Array | sp.spmatrix,
+        h: Array,
+        Aeq: Array | sp.spmatrix | None,
+        beq: Array | None,
+    ) -> bool:
+        """Whether the backend's own multipliers prove x optimal (``G x ≤ h``, ``Aeq x = beq``): stationarity
+        ``P x + q + Gᵀz + Aeqᵀy = 0`` relative to q, every row within its bound, z ≥ 0 and z = 0 off the bound — the
+        KKT conditions :class:`WarmActiveSet` verifies, with its tolerances. No solve: the usual proof for an
+        active-set backend (DAQP) that stopped exactly."""
+        z, y = getattr(sol, "z", None), getattr(sol, "y", None)
+        if (h.size and (z is None or np.size(z) != h.size)) or (
+            beq is not None and (y is None or np.size(y) != beq.size)
+        ):
+            return False
+        tol = self.polish.tol
+        qscale = 1.0 + float(np.abs(q).max(initial=0.0))
+        grad = P @ x + q
+        if h.size:
+            z = np.asarray(z, dtype=float).ravel()
+            slack = h - G @ x  # ≥ 0 inside
+            if not slack.min() >= -tol or not z.min() >= -tol * qscale:
+                return False
+            if not np.abs(z[slack > tol * (1.0 + np.abs(h))]).max(initial=0.0) <= tol * qscale:
+                return False  # a multiplier on a row away from its bound
+            grad = grad + G.T @ z
+        if beq is not None:
+            if not np.abs(Aeq @ x - beq).max() <= tol * (1.0 + np.abs(beq).max()):
+                return False
+            grad = grad + Aeq.T @ np.asarray(y, dtype=float).ravel()
+        return bool(np.abs(grad).max() <= 10 * tol * qscale)
 
 
 def orthonormal_rows(J: Array, F: Array, rtol: float = 1e-9) -> Array:
@@ -260,13 +348,74 @@ def orthonormal_rows(J: Array, F: Array, rtol: float = 1e-9) -> Array:
     return rows
 
 
+#: Per-step status of a level, in ``diagnostics["qp_level:<name>"]`` (the code, a float per step) and counted per
+#: level in ``metrics.json`` (``qp_levels``). Codes are the indices in this tuple.
+LEVEL_STATUS: tuple[str, ...] = ("solved", "relaxed", "implied", "failed", "skipped", "empty")
+SOLVED, RELAXED, IMPLIED, FAILED, SKIPPED, EMPTY = range(len(LEVEL_STATUS))
+
+
+class StepRecord(NamedTuple):
+    """One step's QP as posed and as solved, kept when the step is in ``LexicographicQP.record_steps``.
+
+    Everything is on x = [v, q̇] (robot velocities [m/s], then joint rates [rad/s, m/s]) so that an independent solver
+    can re-solve the textbook lexicographic problem (``tests/test_qp_priority.py``).
+
+    Attributes:
+        k: step index.
+        A: hard rows (m0, 2n): the coupling q̇ − T v = 0, the joint box on q̇, then every limit's rows.
+        lower, upper: their bounds (m0,) with every limit (``relax=False``) [row units, ±inf allowed].
+        lower_relaxed, upper_relaxed: the bounds without the comfort limits (acceleration), as the relaxed step.
+        relaxed: whether this step was solved without the comfort limits.
+        levels: per level, highest first, ``(J, t, w)`` of every task of weight w > 0 (J on x, t its target).
+        x: the step's solution [v, T v] (q̇ = T v exactly, as returned).
+        status: per level, the code of :data:`LEVEL_STATUS`.
+    """
+
+    k: int
+    A: Array
+    lower: Array
+    upper: Array
+    lower_relaxed: Array
+    upper_relaxed: Array
+    relaxed: bool
+    levels: list[list[tuple[Array, Array, float]]]
+    x: Array
+    status: tuple[int, ...]
+
+
+class _Objective(NamedTuple):
+    """A level's least-squares rows on x = [v, q̇]: weighted (√w J, √w t), plain (J, t), full rank."""
+
+    Jw: Array
+    tw: Array
+    J: Array
+    t: Array
+    full: bool
+
+
 class LexicographicQP:
     """Strict-priority stack of QPs solved every step, in robot velocities (see the module docstring).
 
-    Level i keeps the task values of every higher level j < i with equality rows ``F v = F v*_{i−1}``, where F is an
-    orthonormal basis of the span of the higher levels' task rows (redundant rows, e.g. span differences next to the
-    spans, are removed: OSQP converges poorly on inconsistent near-duplicate equalities). The last level freezes
-    nothing, and the levels below one holding a full-rank task are skipped.
+    Level i keeps the task values of every higher level j < i with rows ``F v = F v*``, where F is an orthonormal
+    basis of the span of the higher levels' task rows (redundant rows, e.g. span differences next to the spans, are
+    removed: OSQP converges poorly on inconsistent near-duplicate equalities), and v* the last accepted solution.
+    Only tasks of weight > 0 take part in a level and in its freeze; a level without one is ``"empty"``. The levels
+    below one holding a full-rank task, or below a freeze that fixes every robot velocity, are ``"implied"``.
+
+    **Freezing is feasible by construction.** The inequality bounds of a lower level are those of the hard rows,
+    widened just enough that v* meets them: ``min(lower, A x*) − widening ≤ A x ≤ max(upper, A x*) + widening``
+    (x* = [v*, T v*]; equality rows stay exact). So v* itself is a feasible point of every frozen level, and a solver
+    that calls one infeasible has failed. Each accepted solution is checked against the original bounds (within
+    ``feasibility_tolerance``) and the frozen values (within ``lex_tolerance``).
+
+    **Fallback.** A level is tried on the primary backend (``solver``), then on each of :data:`FALLBACK_SOLVERS`
+    (``diagnostics["fallback_solves"]`` counts these solves); an accepted answer that its KKT polish does not verify
+    optimal gets a second opinion from the next backend, and the lower objective wins. If every backend fails with the
+    exact freeze, the freezes are relaxed by priority — the lowest frozen level first, up to all of them — to
+    ``|F x − F x*| ≤ freeze_slack (1 + |F x*|)`` (status ``"relaxed"``); a level no attempt solves is ``"failed"`` and
+    the step keeps the higher levels' optimum (lower levels ``"skipped"``). Each step's status per level is in
+    ``diagnostics["qp_level:<name>"]`` (the index in :data:`LEVEL_STATUS`); a level 1 that no backend solves, even
+    without the comfort limits, raises :class:`InfeasibleStep`.
 
     Args:
         chain: the chain (planar).
@@ -277,9 +426,20 @@ class LexicographicQP:
         regularization: ε added to every level's Hessian [dimensionless].
         feasibility_tolerance: largest violation of a hard row accepted from a solver [row units].
         lex_tolerance: largest relative change of a frozen higher-level task value accepted from a solver.
+        widening: margin added round a higher optimum's row values in a lower level's bounds [row units].
+        freeze_slack: relative half-width of a relaxed freeze (see above).
         optimistic: try each step first with level 1 met exactly (one QP instead of two; exact when feasible).
         warm_start: with ``"osqp"``, first solve each level from the previous step's active set by one KKT solve,
             verified by the KKT conditions (:mod:`tmr.formulations.activeset`); OSQP runs only when it fails.
+        fallbacks: backends tried in order after the primary one (default :data:`FALLBACK_SOLVERS`, the installed
+            ones other than the primary).
+
+    Attributes:
+        level_keys: the diagnostics key of each level's status, ``"qp_level:<name>"`` (``level<i>`` if unnamed).
+        fallback_solvers: the backends tried after the primary one, in order.
+        record_steps: a set of step indices (or None): those steps are kept as :class:`StepRecord` in ``records``.
+        notes: one line per unusual solve of the plan so far (a backend that failed and why, a second opinion),
+            at most ``max_notes``.
     """
 
     name = "qp"
@@ -295,8 +455,11 @@ class LexicographicQP:
         regularization: float = 1e-9,
         feasibility_tolerance: float = 1e-5,
         lex_tolerance: float = 1e-6,
+        widening: float = 0.0,
+        freeze_slack: float = 1e-6,
         optimistic: bool = True,
         warm_start: bool = True,
+        fallbacks: Sequence[str] | None = None,
     ) -> None:
         if not levels or any(not level.tasks for level in levels):
             raise ParameterError("the QP stack needs at least one level, and every level at least one task")
@@ -304,6 +467,13 @@ class LexicographicQP:
             raise ParameterError(f"unknown QP solver {solver!r}; available: {', '.join(solvers())}")
         if chain.spatial:
             raise ParameterError("the lexicographic QP plans planar chains (robot-velocity coordinates)")
+        for level in levels:
+            for task, w in level.tasks:
+                if not (np.isfinite(w) and w >= 0):
+                    name = getattr(task, "name", task)
+                    raise ParameterError(f"task {name!r}: weight must be finite and ≥ 0, got {w}")
+        if not any(w > 0 for level in levels for _, w in level.tasks):
+            raise ParameterError("every task of the QP stack has weight 0: nothing to optimise")
         self.chain, self.levels, self.limits, self.box = chain, list(levels), list(limits), box
         self.solver = solver
         self.eps, self.feas_tol, self.lex_tol = (
@@ -311,19 +481,30 @@ class LexicographicQP:
             float(feasibility_tolerance),
             float(lex_tolerance),
         )
+        self.widen, self.slack = float(widening), float(freeze_slack)
         self.optimistic = bool(optimistic)
         self.warm_start = bool(warm_start)
-        self.widen = 0.1 * self.feas_tol / max(1, len(self.levels))
-        self._workspaces: dict[tuple[int, int], _OsqpLevel | _QpsolversLevel] = {}
+        primary = solver.removeprefix("qpsolvers-")
+        available = set(qpsolvers.available_solvers)
+        names = FALLBACK_SOLVERS if fallbacks is None else tuple(fallbacks)
+        self.fallback_solvers = tuple(s for s in names if s != primary and s in available)
+        self._fallback = {s: _QpsolversLevel(s, self.eps) for s in self.fallback_solvers}
+        self.level_keys = _level_keys(self.levels)
+        self.record_steps: Container[int] | None = None
+        self.records: dict[int, StepRecord] = {}
+        self.notes: list[str] = []
+        self.max_notes = 1000
+        self._workspaces: dict[tuple[int, int, bool], _OsqpLevel | _QpsolversLevel] = {}
         self._declared: NDArray[np.bool_] | None = None
         self._lagging = False
-        self._fallback = _QpsolversLevel(FALLBACK_SOLVER, self.eps)
         self.fallbacks = 0
         self._buffer = np.zeros((0, 0))
         self._zeros = np.zeros(0)
         self._rows_cache: dict[int, tuple] = {}
         self._spans: list[tuple[slice, slice, tuple[int, int], tuple[int]]] = []
         self._m0 = 0
+        #: per level, its tasks of weight > 0 (set again by reset(): a plan starts with it)
+        self._tasks = [[(task, w) for task, w in level.tasks if w > 0] for level in self.levels]
 
     def reset(self) -> None:
         self._workspaces = {}
@@ -331,6 +512,9 @@ class LexicographicQP:
         self._lagging = False
         self.fallbacks = 0
         self._rows_cache = {}
+        self.records = {}
+        self.notes = []
+        self._tasks = [[(task, w) for task, w in level.tasks if w > 0] for level in self.levels]
         for level in self.levels:
             for task, _ in level.tasks:
                 task.reset()
@@ -338,17 +522,22 @@ class LexicographicQP:
             lim.reset()
 
     # ------------------------------------------------------------------ assembly
-    def _objective(self, level: Level, ctx: StepContext) -> tuple[Array, Array, Array, Array, bool]:
-        """Rows of a level on x = [v, q̇]: weighted (√w J, √w t), plain (J, t), and whether it is full rank.
+    def _objective(self, i: int, ctx: StepContext) -> _Objective | None:
+        """Rows of a level on x = [v, q̇] from its tasks of weight > 0 (None if it has none).
 
         Tasks whose rows are constant return the same read-only array every step (selectors, identities); when every
         task of the level does, the stacked matrices of the previous step are reused and only the targets are rebuilt
         (a writable array may have been changed in place: it is always restacked).
         """
-        parts = [task.compute(ctx) for task, _ in level.tasks]
-        cached = self._rows_cache.get(id(level))
-        if cached is not None and all(
-            Jt is c and not Jt.flags.writeable for (Jt, _), c in zip(parts, cached[0], strict=True)
+        tasks = self._tasks[i]
+        if not tasks:
+            return None
+        parts = [task.compute(ctx) for task, _ in tasks]
+        cached = self._rows_cache.get(i)
+        if (
+            cached is not None
+            and len(cached[0]) == len(parts)
+            and all(Jt is c and not Jt.flags.writeable for (Jt, _), c in zip(parts, cached[0], strict=True))
         ):
             _, J, Jw, sw, full = cached
         else:
@@ -358,7 +547,7 @@ class LexicographicQP:
             sw = np.empty(m)
             full = False
             r = 0
-            for (task, w), (Jt, t) in zip(level.tasks, parts, strict=True):
+            for (task, w), (Jt, t) in zip(tasks, parts, strict=True):
                 k = t.size
                 space = getattr(task, "space", "joint")  # duck-typed tasks write joint rates
                 if space == "robot":
@@ -368,15 +557,22 @@ class LexicographicQP:
                 else:
                     raise ParameterError(f"task {task.name!r}: unknown velocity coordinates {space!r}")
                 sw[r : r + k] = np.sqrt(w)
-                full = full or (getattr(task, "full_rank", False) and w > 0)
+                full = full or getattr(task, "full_rank", False)
                 r += k
             Jw = sw[:, None] * J
-            self._rows_cache[id(level)] = ([Jt for Jt, _ in parts], J, Jw, sw, full)
+            self._rows_cache[i] = ([Jt for Jt, _ in parts], J, Jw, sw, full)
         t = np.concatenate([t for _, t in parts])
-        return Jw, sw * t, J, t, full
+        return _Objective(Jw, sw * t, J, t, full)
 
-    def _workspace(self, i: int, n_frozen: int) -> _OsqpLevel | _QpsolversLevel:
-        key = (i, n_frozen)
+    def _get_objective(self, i: int, ctx: StepContext, objectives: dict) -> _Objective | None:
+        """Level i's rows of this step, built on first use (skipped levels cost nothing)."""
+        obj = objectives.get(i, objectives)
+        if obj is objectives:
+            obj = objectives[i] = self._objective(i, ctx)
+        return obj
+
+    def _workspace(self, i: int, n_frozen: int, relaxed: bool) -> _OsqpLevel | _QpsolversLevel:
+        key = (i, n_frozen, relaxed)
         ws = self._workspaces.get(key)
         if ws is None:
             if self.solver == "osqp":
@@ -442,7 +638,8 @@ class LexicographicQP:
 
         If the limits have no common solution, the step is solved again without the relaxable (comfort) limits —
         the acceleration bounds — and ``diagnostics["relaxed"]`` is 1; if the safety limits alone have no solution,
-        :class:`InfeasibleStep` is raised.
+        :class:`InfeasibleStep` is raised. ``diagnostics["qp_level:<name>"]`` is each level's status code
+        (:data:`LEVEL_STATUS`), ``diagnostics["fallback_solves"]`` the solves by a fallback backend.
         """
         t0 = time.perf_counter()
         n = 2 * self.chain.n_robots
@@ -451,8 +648,8 @@ class LexicographicQP:
         if self._declared is None:
             self._prepare(ctx, rows)
         A0 = self._rows(ctx, rows)
-        objectives: dict[int, tuple] = {}  # built on first use: skipped levels cost nothing
-        solves = [0]
+        objectives: dict[int, _Objective | None] = {}  # built on first use: skipped levels cost nothing
+        solves = [0, 0]  # QP solves, solver iterations
         result = None
         try:
             if self.optimistic and len(self.levels) > 1 and not self._lagging:
@@ -464,19 +661,39 @@ class LexicographicQP:
             result = self._solve_levels(ctx, A0, rows, objectives, relax=True, optimistic=False, solves=solves)
             relaxed = 1.0
         assert result is not None
-        x, lag, iters = result
+        x, lag, status = result
         self._lagging = lag > 1e-6
         diag = {
             "leader_residual": lag,
-            "solver_iterations": float(iters),
+            "solver_iterations": float(solves[1]),
             "qp_solves": float(solves[0]),
             "fallback_solves": float(self.fallbacks - fallbacks),
             "relaxed": relaxed,
-            "step_time": time.perf_counter() - t0,
         }
-        # q̇ = T v exactly (the solver meets the coupling rows q̇ = T v only to its tolerance): the robots move as
-        # the rows on v, which carry the safety limits and the leader, were solved
-        return ctx.velocity_map.joint_rates(x[:n]), diag
+        diag.update(zip(self.level_keys, map(float, status), strict=True))
+        if self.record_steps is not None and ctx.k in self.record_steps:
+            self.records[ctx.k] = self._record(ctx, A0, rows, x, bool(relaxed), status)
+        diag["step_time"] = time.perf_counter() - t0
+        # x = [v, T v] exactly (each accepted level is projected on the coupling q̇ = T v): the robots move as the
+        # rows on v, which carry the safety limits and the leader, were solved
+        return x[n:].copy(), diag
+
+    def _bounds(self, ctx: StepContext, rows: list, relax: bool) -> tuple[Array, Array]:
+        """Bounds of the hard rows (coupling, joint box, limits); ``relax`` drops the comfort limits (±inf)."""
+        lb, ub = self.box.compute(ctx, relax=relax)
+        zeros = self._zeros  # right-hand side of q̇ − T v = 0
+        if not relax:
+            lo0 = np.concatenate([zeros, lb, *[r.lower for r in rows]])
+            return lo0, np.concatenate([zeros, ub, *[r.upper for r in rows]])
+        pairs = [(r, lim.relaxable) for r, lim in zip(rows, self.limits, strict=True)]
+        lo0 = np.concatenate([zeros, lb, *(np.full(r.lower.size, -np.inf) if d else r.lower for r, d in pairs)])
+        up0 = np.concatenate([zeros, ub, *(np.full(r.upper.size, np.inf) if d else r.upper for r, d in pairs)])
+        return lo0, up0
+
+    def _below(self, status: list[int], i: int, code: int) -> None:
+        """Mark the levels from i down with ``code`` (``"empty"`` for a level without a task of weight > 0)."""
+        for j in range(i, len(self.levels)):
+            status[j] = code if self._tasks[j] else EMPTY
 
     def _solve_levels(
         self,
@@ -487,82 +704,193 @@ class LexicographicQP:
         relax: bool,
         optimistic: bool,
         solves: list[int],
-    ) -> tuple[Array, float, int] | None:
+    ) -> tuple[Array, float, list[int]] | None:
         """Solve the levels in order; each freezes an orthonormal basis F of its task rows' span: F x = F x*.
 
         ``optimistic``: start at level 2 with level 1's rows as equalities at their targets; returns None if that
-        QP fails (the caller then solves level 1 on its own).
+        QP fails (the caller then solves level 1 on its own). Returns x = [v*, T v*], the leader residual and the
+        status of every level.
         """
         nx = A0.shape[1]
-        lb, ub = self.box.compute(ctx, relax=relax)
-        zeros = self._zeros  # right-hand side of q̇ − T v = 0
-        # with relax, the relaxable (comfort) limits are dropped: their rows get infinite bounds
-        pairs = [(r, relax and lim.relaxable) for r, lim in zip(rows, self.limits, strict=True)]
-        lo0 = np.concatenate([zeros, lb, *(np.full(r.lower.size, -np.inf) if d else r.lower for r, d in pairs)])
-        up0 = np.concatenate([zeros, ub, *(np.full(r.upper.size, np.inf) if d else r.upper for r, d in pairs)])
         n = nx // 2
+        lo0, up0 = self._bounds(ctx, rows, relax)
+        status = [SKIPPED] * len(self.levels)
         if optimistic:
-            if 0 not in objectives:
-                objectives[0] = self._objective(self.levels[0], ctx)
-            if objectives[0][4] or objectives[0][2].shape[0] >= n:
-                return None  # level 1 alone fixes every degree of freedom: nothing to gain, solve it on its own
-            F, y = objectives[0][2], objectives[0][3]  # level 1 met exactly: J_1 x = t_1
+            first = self._get_objective(0, ctx, objectives)
+            if first is None or first.full or first.J.shape[0] >= n:
+                return None  # nothing to meet, or level 1 alone fixes every degree of freedom: solve it on its own
+            F, y = first.J, first.t  # level 1 met exactly: J_1 x = t_1
+            blocks = [F.shape[0]]
+            status[0] = SOLVED
             start = 1
         else:
             F, y = np.zeros((0, nx)), np.zeros(0)
+            blocks = []
             start = 0
         x: Array | None = None
-        iters = 0
         lag = 0.0
         last = len(self.levels) - 1
         for i in range(start, len(self.levels)):
-            if i > start and F.shape[0] >= n:
-                break  # the higher levels fix every degree of freedom (x has 2N of them: v determines q̇)
-            if i not in objectives:
-                objectives[i] = self._objective(self.levels[i], ctx)
-            Jw, tw, J, t, full = objectives[i]
-            # lower levels start from the higher optimum, which sits on active rows up to the solver accuracy: a
-            # small widening (growing with the level, as violations may accumulate) keeps that optimum feasible
-            m0, nF = A0.shape[0], F.shape[0]
-            self._buffer[m0 : m0 + nF] = F  # the frozen rows go below the hard rows: A is a view, never a copy
-            A = self._buffer[: m0 + nF]
-            if i == start:  # no optimum of an earlier solve to keep feasible
-                lo, up = np.concatenate([lo0, y]), np.concatenate([up0, y])
-            else:
-                widen = self.widen * i * (lo0 < up0)  # equalities (q̇ = T v) stay exact: OSQP treats them apart
-                lo, up = np.concatenate([lo0 - widen, y]), np.concatenate([up0 + widen, y])
-            z, status, it = self._workspace(i, nF).solve(A, lo, up, Jw, tw, self._declared)
-            solves[0] += 1
-            iters += it
-            if self.solver == "osqp" and status not in ("verified", "solved", "primal infeasible"):
-                # OSQP stopped without an answer (iteration limit on an ill-conditioned level): an active-set method
-                # settles it exactly
-                z, status, _ = self._fallback.solve(A, lo, up, Jw, tw)
-                self.fallbacks += 1
-            # a KKT-verified solution meets every row to 1e-9 already; a solver's answer is checked here
-            ok = z is not None and (status == "verified" or (self._feasible(A0, lo0, up0, z) and self._kept(F, y, z)))
-            if not ok:
-                if i == start and optimistic:
+            obj = self._get_objective(i, ctx, objectives)
+            if obj is None:
+                status[i] = EMPTY
+                continue
+            if x is not None and F.shape[0] >= n:
+                self._below(status, i, IMPLIED)  # the higher levels fix every robot velocity (v determines q̇)
+                break
+            if x is None:
+                lo, up = lo0, up0
+            else:  # widened just enough that the higher optimum x* is feasible: the frozen level always has a solution
+                r = A0 @ x
+                ineq = lo0 < up0  # equality rows (q̇ = T v) stay exact: OSQP treats them apart
+                lo = np.where(ineq, np.minimum(lo0, r) - self.widen, lo0)
+                up = np.where(ineq, np.maximum(up0, r) + self.widen, up0)
+            head = optimistic and i == start
+            z, code, why = self._solve_level(i, ctx, A0, lo0, up0, lo, up, F, y, blocks, obj, solves, head)
+            if z is None:
+                if head:
                     return None
-                if i == 0:
-                    raise InfeasibleStep(self._explain(ctx, status, A0, lo0, up0, relax))
-                break  # a lower level failed numerically: keep the higher levels' optimum (strict priority holds)
+                if x is None:
+                    raise InfeasibleStep(self._explain(ctx, why, A0, lo0, up0, relax))
+                self._below(status, i, SKIPPED)
+                status[i] = FAILED  # every backend failed, even relaxed: keep the higher levels' optimum
+                break
             x = z
+            status[i] = code
             if i == 0:
-                lag = float(np.linalg.norm(J @ x - t))  # > 0 when the limits hold the leader back
-            if i == last or full:
-                break  # nothing below, or this level's optimum is unique
+                lag = float(np.linalg.norm(obj.J @ x - obj.t))  # > 0 when the limits hold the leader back
+            if i == last:
+                break
+            if obj.full:
+                self._below(status, i + 1, IMPLIED)  # this level's optimum is unique
+                break
             # the frozen basis lives on v (q̇ = T v): a row [a, b] on x = [v, q̇] acts as a + b T, so rows that are
             # equivalent through the coupling are recognised as dependent; F's rows are [F_v, 0]
             T = ctx.velocity_map.T
-            if i == start and optimistic:  # replace level 1's raw rows by an orthonormal basis before extending it
+            if head:  # replace level 1's raw rows by an orthonormal basis before extending it
                 F = self._on_x(orthonormal_rows(self._on_v(F, T), np.zeros((0, n))))
-                y = F @ x
-            Fn = self._on_x(orthonormal_rows(self._on_v(J, T), F[:, :n]))
-            F, y = np.vstack([F, Fn]), np.concatenate([y, Fn @ x])
+                blocks = [F.shape[0]]
+            Fn = self._on_x(orthonormal_rows(self._on_v(obj.J, T), F[:, :n]))
+            F = np.vstack([F, Fn])
+            blocks.append(Fn.shape[0])
+            y = F @ x  # the values of the accepted point (after a relaxed freeze: its own, within the slack)
         if x is None:  # pragma: no cover - level 1 is always solved or raises above
             raise InfeasibleStep(f"step {ctx.k}: no level was solved")
-        return x, lag, iters
+        return x, lag, status
+
+    def _solve_level(
+        self,
+        i: int,
+        ctx: StepContext,
+        A0: Array,
+        lo0: Array,
+        up0: Array,
+        lo: Array,
+        up: Array,
+        F: Array,
+        y: Array,
+        blocks: list[int],
+        obj: _Objective,
+        solves: list[int],
+        head: bool,
+    ) -> tuple[Array | None, int, str]:
+        """One level (see the class docstring): the primary backend with the exact freeze; on failure the fallback
+        backends, then the same with the freezes relaxed by priority. An accepted answer that its backend's KKT
+        polish could not verify gets a second opinion from the next backend, and the lower objective wins.
+
+        ``head`` (the optimistic first QP): a failure returns at once — solving level 1 on its own is the fallback.
+        Returns the accepted solution, projected on q̇ = T v (or None), ``SOLVED`` or ``RELAXED``, and why the last
+        attempt failed (a solver status).
+        """
+        m0, nF = A0.shape[0], F.shape[0]
+        n = A0.shape[1] // 2
+        self._buffer[m0 : m0 + nF] = F  # the frozen rows go below the hard rows: A is a view, never a copy
+        A = self._buffer[: m0 + nF]
+        # the usual case first, without the machinery below: the exact freeze, verified from the warm active set
+        z, status, it = self._workspace(i, nF, False).solve(
+            A, np.concatenate([lo, y]), np.concatenate([up, y]), obj.Jw, obj.tw, self._declared
+        )
+        solves[0] += 1
+        solves[1] += it
+        if status == "verified":
+            z[n:] = ctx.velocity_map.T @ z[:n]  # onto the coupling q̇ = T v exactly: the motion the robots will make
+            return z, SOLVED, status
+        why = "not solved"
+        best: tuple[Array, float] | None = None  # an accepted answer that is not verified optimal
+        # attempt r relaxes the r lowest-priority frozen blocks (r = 0: the exact freeze)
+        for r in range(1 if head or not nF else len(blocks) + 1):
+            if r:
+                s = np.zeros(nF)
+                k = sum(blocks[len(blocks) - r :])
+                s[nF - k :] = self.slack * (1.0 + np.abs(y[nF - k :]))
+                lo_f, up_f = np.concatenate([lo, y - s]), np.concatenate([up, y + s])
+            else:
+                s = 0.0
+                lo_f, up_f = np.concatenate([lo, y]), np.concatenate([up, y])
+            backends = [(self.solver, self._workspace(i, nF, r > 0))]
+            backends += [(b, self._fallback[b]) for b in self.fallback_solvers]
+            for b, (name, ws) in enumerate(backends):
+                if r or b:  # (the primary's exact attempt was solved above)
+                    if head and b and best is None:
+                        return None, FAILED, why  # optimistic QP: level 1 on its own is the fallback
+                    z, status, it = ws.solve(A, lo_f, up_f, obj.Jw, obj.tw, self._declared)
+                    solves[0] += 1
+                    solves[1] += it
+                    self.fallbacks += b > 0
+                ok = z is not None and (
+                    status == "verified"
+                    or (status == "solved" and self._feasible(A0, lo0, up0, z) and self._kept(F, y, z, s))
+                )
+                if not ok:
+                    why = f"{name}: {status if z is None or status != 'solved' else 'answer failed the checks'}"
+                    if not head:  # (the optimistic QP failing is how a lagging leader shows: nothing unusual)
+                        self._note(ctx, i, why)
+                    continue
+                z[n:] = ctx.velocity_map.T @ z[:n]
+                code = RELAXED if r else SOLVED
+                if status == "verified":
+                    return z, code, status
+                f = self._value(obj, z)
+                if best is not None:  # the second opinion on an unverified answer: the lower objective wins
+                    return (z, code, status) if f < best[1] else (best[0], code, "solved")
+                best = (z, f)
+                self._note(ctx, i, f"{name}: optimum not verified, asking the next backend")
+            if best is not None:
+                return best[0], RELAXED if r else SOLVED, "solved"
+            if head:
+                break
+        return None, FAILED, why
+
+    @staticmethod
+    def _value(obj: _Objective, z: Array) -> float:
+        """The level's objective ‖Jw z − tw‖² at z (without the ε regularisation)."""
+        res = obj.Jw @ z - obj.tw
+        return float(res @ res)
+
+    def _note(self, ctx: StepContext, i: int, text: str) -> None:
+        """Keep a line on an unusual solve (fallback, second opinion, relaxed freeze, failure) in ``notes``."""
+        if len(self.notes) < self.max_notes:
+            self.notes.append(f"step {ctx.k}: level {self.level_keys[i].removeprefix('qp_level:')}: {text}")
+
+    def _record(
+        self, ctx: StepContext, A0: Array, rows: list, x: Array, relaxed: bool, status: list[int]
+    ) -> StepRecord:
+        """This step's problem and solution (see :class:`StepRecord`); every level's rows are rebuilt."""
+        n = 2 * self.chain.n_robots
+        levels = []
+        for level in self.levels:
+            out = []
+            for task, w in level.tasks:
+                if w > 0:
+                    Jt, t = task.compute(ctx)
+                    J = np.zeros((t.size, 2 * n))
+                    cols = slice(0, n) if getattr(task, "space", "joint") == "robot" else slice(n, 2 * n)
+                    J[:, cols] = Jt
+                    out.append((J, np.array(t, dtype=float), float(w)))
+            levels.append(out)
+        lo, up = self._bounds(ctx, rows, False)
+        lo_r, up_r = self._bounds(ctx, rows, True)
+        return StepRecord(ctx.k, A0.copy(), lo, up, lo_r, up_r, relaxed, levels, x.copy(), tuple(status))
 
     @staticmethod
     def _on_v(J: Array, T: Array) -> Array:
@@ -575,9 +903,9 @@ class LexicographicQP:
         """Rows on v as rows on x = [v, q̇] (zeros on q̇)."""
         return np.hstack([Fv, np.zeros_like(Fv)])
 
-    def _kept(self, F: Array, y: Array, x: Array) -> bool:
+    def _kept(self, F: Array, y: Array, x: Array, slack: Array | float = 0.0) -> bool:
         """Whether x keeps the frozen task values of the higher levels (strict priority) to solver accuracy."""
-        return bool(np.all(np.abs(F @ x - y) <= self.lex_tol * (1.0 + np.abs(y))))
+        return bool(np.all(np.abs(F @ x - y) <= self.lex_tol * (1.0 + np.abs(y)) + slack))
 
     def _feasible(self, A: Array, lo: Array, up: Array, x: Array) -> bool:
         r = A @ x
@@ -607,3 +935,12 @@ class LexicographicQP:
             f"(solver status: {status}{', even without the acceleration bounds' if relax else ''}); tightest: {names}. "
             "Relax the speed bounds or the clearance margin, or give the leader a path farther from the obstacles."
         )
+
+
+def _level_keys(levels: Sequence[Level]) -> list[str]:
+    """Diagnostics keys of the levels' status: ``"qp_level:<name>"`` (``level<i>`` if unnamed; unique)."""
+    keys: list[str] = []
+    for i, level in enumerate(levels):
+        key = f"qp_level:{level.name or f'level{i + 1}'}"
+        keys.append(key if key not in keys else f"{key}#{i + 1}")
+    return keys
