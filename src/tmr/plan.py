@@ -242,7 +242,9 @@ def summary(plan: Any, metrics: Any) -> str:
     return "\n".join(lines)
 
 
-def _plan_once(args: argparse.Namespace, scenario: Any, n_robots: int | None) -> tuple[Any, Any, Any]:
+def _plan_once(args: argparse.Namespace, scenario: Any, n_robots: int | None, route: Any) -> tuple[Any, Any, Any]:
+    """Build and solve with ``n_robots``, reusing the precheck's ``route`` (its span limits are those of any N ≥ 2,
+    and for N ≥ its N_min no tighter margin is tried): the route is not computed twice."""
     from tmr.planner import build_problem, solve
 
     overrides = dict(args.set) | ({"solver": args.solver} if args.solver else {})
@@ -254,6 +256,7 @@ def _plan_once(args: argparse.Namespace, scenario: Any, n_robots: int | None) ->
         overrides=overrides,
         path_iterations=args.iterations,
         route=args.route,
+        known_route=route if (n_robots or 0) >= max(2, route.n_min) else None,
     )
     plan, metrics = solve(problem, args.method, time_limit=args.time_limit, progress=True)  # a bar on a terminal only
     return problem, plan, metrics
@@ -336,7 +339,7 @@ def main(argv: list[str] | None = None) -> int:
             problem = None
             for n in range(rt.n_min, last + 1):
                 try:
-                    attempt = _plan_once(args, scenario, n)
+                    attempt = _plan_once(args, scenario, n, rt)
                 except TmrError as exc:  # refused, no start placement or no path with this N: try the next one
                     tried.append(f"{n}: {_short(exc)}")
                     continue
@@ -350,7 +353,7 @@ def main(argv: list[str] | None = None) -> int:
                 return 1
             auto_note = f"{summary_line}; chose N = {problem.chain.n_robots}"
         else:
-            problem, plan, metrics = _plan_once(args, scenario, n_first)
+            problem, plan, metrics = _plan_once(args, scenario, n_first, rt)
         filtered = filter_trajectories(plan.robots, problem.time_params.Ts, cutoff_hz=args.filter_cutoff)
         extra = _extras(problem, plan, auto_note)
         names = write_outputs(

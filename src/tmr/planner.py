@@ -154,6 +154,7 @@ def build_problem(
     overrides: dict[str, Any] | None = None,
     path_iterations: int | None = None,
     route: str = "shortest",
+    known_route: Route | None = None,
 ) -> Problem:
     """Assemble route, chain, limits, start configuration and references for ``scenario``.
 
@@ -167,6 +168,8 @@ def build_problem(
         route: ``"shortest"`` (default): the leader follows the shortest free route, its duration from the route
             length and ``leader_speed``/``leader_accel`` unless ``T_end`` is set, and every follower gets a route
             reference; ``"rrt"``: the paper's RRT* leader path over ``T_end`` (15 s).
+        known_route: the route of this anchor and goal with the same span limits, already computed (the command
+            line computes it before importing the planner); None: computed here.
 
     Raises:
         NoRouteError: the goal is not connected to the anchor through free space.
@@ -191,7 +194,7 @@ def build_problem(
     limits = span_limits(N, chain_params)
     env = scenario.environment
     goal = np.asarray(scenario.goal, float)
-    rt = plan_route(env, scenario.base, goal, limits, robots=N)
+    rt = known_route if known_route is not None else plan_route(env, scenario.base, goal, limits, robots=N)
     why = rt.refusal(N)
     # N_min is a verdict of the route-guided search; only the proven bound binds other routes and given starts
     if why is not None and (N < rt.n_lower or (route == "shortest" and start is None)):

@@ -299,20 +299,24 @@ def _visible_back(env: Any, guide: Array, arcs: Array, step: float = 0.1) -> tup
     return s, back
 
 
-def _distance_to_polyline(points: Array, p: Array) -> float:
+def _project(points: Array, p: Array) -> tuple[int, float, float]:
+    """Nearest point of the polyline to p: its segment k, the fraction t along it, and the distance [m]."""
     a, b = points[:-1], points[1:]
     d = b - a
     t = np.clip(np.einsum("ij,ij->i", p - a, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300), 0.0, 1.0)
-    return float(np.min(np.linalg.norm(a + t[:, None] * d - p, axis=1)))
+    dist = np.linalg.norm(a + t[:, None] * d - p, axis=1)
+    k = int(np.argmin(dist))
+    return k, float(t[k]), float(dist[k])
+
+
+def _distance_to_polyline(points: Array, p: Array) -> float:
+    return _project(points, p)[2]
 
 
 def _arc_of(points: Array, arcs: Array, p: Array) -> float:
     """Arc length [m] of the point of the polyline nearest to p."""
-    a, b = points[:-1], points[1:]
-    d = b - a
-    t = np.clip(np.einsum("ij,ij->i", p - a, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300), 0.0, 1.0)
-    k = int(np.argmin(np.linalg.norm(a + t[:, None] * d - p, axis=1)))
-    return float(arcs[k] + t[k] * (arcs[k + 1] - arcs[k]))
+    k, t, _ = _project(points, p)
+    return float(arcs[k] + t * (arcs[k + 1] - arcs[k]))
 
 
 def _separated(P: Array, d: float) -> bool:
