@@ -84,6 +84,21 @@ def test_segment_clearance(disc_env: Environment) -> None:
     assert np.all(got <= np.minimum(disc_env.exact_clearance(a), disc_env.exact_clearance(b)) + 1e-12)
 
 
+def test_segment_is_free_agrees_with_segment_clearance(builtin_envs: dict[str, Environment]) -> None:
+    """The boolean test equals ``segment_clearance > margin`` on random segments (many of them blocked)."""
+    rng = np.random.default_rng(3)
+    for env in builtin_envs.values():
+        xmin, ymin, xmax, ymax = env.bounds
+        a = rng.uniform((xmin, ymin), (xmax, ymax), size=(400, 2))
+        b = a + rng.normal(scale=3.0, size=(400, 2))
+        b[:5] = a[:5]  # zero-length segments
+        value = env.segment_clearance(a, b)
+        for margin in (0.0, 0.03, 0.3, -0.1):
+            got = env.segment_is_free(a, b, margin)
+            assert got.dtype == bool and got.shape == (400,)
+            np.testing.assert_array_equal(got, value > margin)
+
+
 def test_thin_obstacle_crossing_is_negative() -> None:
     env = Environment.from_geometry(LineString([(5, 0), (5, 6)]), (0, 0, 10, 10), R, 0.05)
     # end points are free, the segment crosses the zero-thickness wall (a band 1 m wide once inflated)

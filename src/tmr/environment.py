@@ -512,6 +512,31 @@ class Environment:
             out[seg] = res
         return out.reshape(shape)
 
+    def segment_is_free(self, a: ArrayLike, b: ArrayLike, margin: float = 0.0) -> NDArray[np.bool_]:
+        """Whether each straight segment a-b keeps a clearance > ``margin`` [m] from the inflated obstacles and
+        walls: ``segment_clearance(a, b) > margin`` without measuring how deep a blocked segment goes when
+        ``margin`` ≥ 0 (exact, and much cheaper for long blocked segments); shape (...)."""
+        margin = float(margin)
+        if not math.isfinite(margin):
+            raise ParameterError(f"margin must be finite, got {margin}")
+        if margin < 0.0:
+            return np.asarray(self.segment_clearance(a, b)) > margin
+        pa, pb = np.broadcast_arrays(_as_points(a, "a"), _as_points(b, "b"))
+        shape = pa.shape[:-1]
+        A, B = pa.reshape(-1, 2), pb.reshape(-1, 2)
+        out = np.zeros(len(A), dtype=bool)
+        degenerate = np.all(A == B, axis=1)
+        if degenerate.any():
+            out[degenerate] = self.exact_clearance(A[degenerate]) > margin
+        seg = np.flatnonzero(~degenerate)
+        if len(seg):
+            lines = shapely.linestrings(np.stack([A[seg], B[seg]], axis=1))
+            covered = shapely.covers(self.free, lines)
+            inside = seg[covered]
+            if len(inside):
+                out[inside] = self._boundary_distance(lines[covered]) > margin
+        return out.reshape(shape)
+
     def _penetration(self, A: NDArray[np.float64], B: NDArray[np.float64]) -> NDArray[np.float64]:
         """min(0, min exact clearance over points spaced <= resolution/2 along each segment A-B)."""
         h = 0.5 * self.resolution

@@ -180,7 +180,7 @@ def _along(env: Any, guide: Array, n: int, spacing: float, clear: float, ahead: 
         if not len(cand):
             return []
         need = first if j == 0 else CHORD_START_CLEARANCE
-        ok = np.asarray(env.segment_clearance(np.repeat(cur[None], len(cand), 0), S[cand]), float) > need
+        ok = env.segment_is_free(np.repeat(cur[None], len(cand), 0), S[cand], need)
         ok &= np.asarray(env.exact_clearance(S[cand]), float) > clear
         wide = ok & (np.linalg.norm(S[cand] - cur, axis=1) >= spacing)
         # the first free point one spacing away, then the free ones nearer (a hairpin's apex), then farther ones

@@ -460,7 +460,7 @@ def _field_clear(env: Any, a: Array, b: Array, clearance: float, step: float = 0
     ok = lo > clearance
     unsure = ~ok & (hi > clearance)
     if unsure.any():
-        ok[unsure] = np.asarray(env.segment_clearance(a[unsure], b[unsure]), float) > clearance
+        ok[unsure] = env.segment_is_free(a[unsure], b[unsure], clearance)
     return ok
 
 
