@@ -163,10 +163,10 @@ def test_too_few_robots_refused_up_front_with_the_count(tmp_path, capsys):
     probe = (
         "import sys; from tmr.plan import main; "
         f"code = main(['--map', {str(_corridor(tmp_path))!r}, '--base', '1,2', '--goal', '25,2', '--robots', '4']); "
-        "print(code, 'tmr.planner' in sys.modules, 'ompl' in sys.modules, 'osqp' in sys.modules)"
+        "print(code, *(m in sys.modules for m in ('tmr.planner', 'ompl', 'osqp', 'scipy.sparse', 'scipy.ndimage')))"
     )
     res = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
-    assert res.stdout.split() == ["2", "False", "False", "False"], res.stderr
+    assert res.stdout.split() == ["2", "False", "False", "False", "False", "False"], res.stderr
 
 
 def test_goal_without_free_route_refused(tmp_path, capsys):

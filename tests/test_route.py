@@ -189,3 +189,32 @@ def test_stations_search_refuses_a_chain_that_cannot_pass():
     with pytest.raises(BlockedRouteError) as err:
         stations(env, guide, [0.4], [0.5])  # tethers shorter than the robot spacing cannot advance
     assert not err.value.proven and "past (1, 2)" in str(err.value)
+
+
+def test_shortest_path_tree_matches_scipy_dijkstra() -> None:
+    """The route's Dijkstra against ``scipy.sparse.csgraph.dijkstra`` on random geometric graphs."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    from tmr.route import shortest_path_tree
+
+    rng = np.random.default_rng(7)
+    for trial in range(30):
+        n = int(rng.integers(2, 120))
+        pts = rng.uniform(0, 10, size=(n, 2))
+        i, j = np.triu_indices(n, 1)
+        keep = rng.random(len(i)) < rng.uniform(0.02, 0.3)
+        i, j = i[keep], j[keep]
+        w = np.linalg.norm(pts[i] - pts[j], axis=1)
+        s, t = 0, n - 1
+        ref = dijkstra(coo_matrix((w, (i, j)), shape=(n, n)).tocsr(), directed=False, indices=s)
+        pred = shortest_path_tree(n, i, j, w, s, t)
+        if not np.isfinite(ref[t]):
+            assert pred is None, trial
+            continue
+        assert pred is not None, trial
+        path = [t]
+        while path[-1] != s:
+            path.append(pred[path[-1]])
+        length = sum(np.linalg.norm(pts[a] - pts[b]) for a, b in zip(path[:-1], path[1:]))
+        assert length == pytest.approx(ref[t], rel=1e-12, abs=1e-12), trial

@@ -38,7 +38,6 @@ import shapely
 import shapely.affinity
 import shapely.errors
 from numpy.typing import ArrayLike, NDArray
-from scipy import ndimage
 from shapely.geometry import box
 from shapely.geometry.base import BaseGeometry
 
@@ -373,6 +372,8 @@ class Environment:
         uu = np.maximum(ux * ux + uy * uy, 1e-300)
         label = np.full(free.shape, -1, dtype=np.intp)
         label[bi, bj] = np.arange(len(bi))
+        from scipy import ndimage  # only when a distance field is built (a refusal never needs one)
+
         near = ndimage.distance_transform_edt(~band, return_distances=False, return_indices=True)
         out = np.empty(free.shape)
         step = max(1, 2_000_000 // (9 * ny))  # rows per slab: bounds the temporaries to a few tens of MB

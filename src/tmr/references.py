@@ -282,9 +282,7 @@ VISIBLE_CLEARANCE = 0.1
 
 def _visible_back(env: Any, guide: Array, arcs: Array, step: float = 0.1) -> tuple[Array, NDArray[np.intp]]:
     """Guide samples s (every ``step`` [m]) and, for each, the first sample behind it from which every later sample
-    up to it is joined to it by a chord keeping ``VISIBLE_CLEARANCE`` (distance field, conservative)."""
-    from tmr.route import _field_clear
-
+    up to it is joined to it by a chord keeping ``VISIBLE_CLEARANCE`` (exact)."""
     L = float(arcs[-1])
     s = np.linspace(0.0, L, max(2, math.ceil(L / step) + 1))
     S = point_at(guide, arcs, s)
@@ -293,7 +291,7 @@ def _visible_back(env: Any, guide: Array, arcs: Array, step: float = 0.1) -> tup
     for j in range(1, len(s)):
         lo = max(0, j - window)
         idx = np.arange(lo, j)
-        ok = _field_clear(env, S[idx], np.repeat(S[j : j + 1], len(idx), 0), VISIBLE_CLEARANCE)
+        ok = env.segment_is_free(S[idx], np.repeat(S[j : j + 1], len(idx), 0), VISIBLE_CLEARANCE)
         bad = np.flatnonzero(~ok)
         back[j] = idx[bad[-1]] + 1 if len(bad) else lo
     return s, back

@@ -8,7 +8,7 @@ The single source of "is this possible, and how many robots" (``formulations/rou
 2. **Shortest route** from the anchor to the goal: a visibility graph on the *reflex* vertices of that region only
    (the convex corners of the obstacles: a shortest path bends only there), keeping only *bitangent* edges (both
    neighbours of each end vertex on one side of the edge), visibility tested with vectorised shapely ``covers``;
-   Dijkstra (``scipy.sparse.csgraph``). Exact on the polygonal region (Lozano-Pérez and Wesley 1979).
+   Dijkstra (:func:`shortest_path_tree`). Exact on the polygonal region (Lozano-Pérez and Wesley 1979).
 3. **Fewest robots.** Tethers are straight chords of at most d_max, clear of the grown obstacles, robots at least
    2r apart. Two numbers come out:
 
@@ -25,6 +25,7 @@ A goal in another connected piece of free space raises :class:`NoRouteError`. No
 
 from __future__ import annotations
 
+import heapq
 import math
 import time
 from dataclasses import dataclass, field
@@ -33,8 +34,6 @@ from typing import Any
 import numpy as np
 import shapely
 from numpy.typing import ArrayLike, NDArray
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import dijkstra
 from shapely.geometry.base import BaseGeometry
 
 from tmr.errors import ParameterError, TmrError
@@ -253,6 +252,42 @@ def _visible(test: BaseGeometry, a: Array, b: Array) -> NDArray[np.bool_]:
     return shapely.covers(test, shapely.linestrings(np.stack([a, b], axis=1)))
 
 
+def shortest_path_tree(
+    n: int, src: NDArray[np.intp], dst: NDArray[np.intp], w: Array, source: int, target: int
+) -> list[int] | None:
+    """Dijkstra (binary heap) on the undirected graph of ``n`` nodes and edges src–dst of lengths ``w`` ≥ 0 [m],
+    stopped when ``target`` is settled: the predecessor of every settled node (−1 for none), or None if
+    ``target`` is unreachable.
+
+    Written here rather than taken from ``scipy.sparse.csgraph``: importing that takes 0.2–0.3 s of the 1 s a
+    refusal may take (``benchmarks/results/random_rooms.md``), for a graph of a few hundred to a few thousand
+    nodes; ``tests/test_route.py`` checks it against ``scipy.sparse.csgraph.dijkstra``.
+    """
+    u = np.concatenate([src, dst])
+    v = np.concatenate([dst, src])
+    length = np.concatenate([w, w])
+    order = np.argsort(u, kind="stable")
+    start = np.searchsorted(u[order], np.arange(n + 1)).tolist()
+    nbr, cost = v[order].tolist(), length[order].tolist()
+    dist = [math.inf] * n
+    pred = [-1] * n
+    dist[source] = 0.0
+    heap = [(0.0, source)]
+    while heap:
+        d, x = heapq.heappop(heap)
+        if d > dist[x]:
+            continue
+        if x == target:
+            return pred
+        for e in range(start[x], start[x + 1]):
+            y, nd = nbr[e], d + cost[e]
+            if nd < dist[y]:
+                dist[y] = nd
+                pred[y] = x
+                heapq.heappush(heap, (nd, y))
+    return None
+
+
 class _Graph:
     """Visibility graph of one eroded free region with the anchor and the goal as extra nodes."""
 
@@ -299,9 +334,8 @@ class _Graph:
         src = np.concatenate([self.i, np.full(len(eb), n), np.full(len(eg), n + 1)])
         dst = np.concatenate([self.j, eb, eg])
         w = np.linalg.norm(nodes[src] - nodes[dst], axis=1)
-        g = coo_matrix((w, (src, dst)), shape=(n + 2, n + 2)).tocsr()
-        dist, pred = dijkstra(g, directed=False, indices=n, return_predecessors=True)
-        if not np.isfinite(dist[n + 1]):
+        pred = shortest_path_tree(n + 2, src, dst, w, n, n + 1)
+        if pred is None:
             return None
         path = [n + 1]
         while path[-1] != n:
@@ -386,7 +420,7 @@ class _Samples:
             if np.linalg.norm(u) < 1e-9:
                 continue
             u /= np.linalg.norm(u)
-            probe = np.asarray(env.clearance(np.array([guide[v] + 0.2 * u, guide[v] - 0.2 * u])), float)
+            probe = np.asarray(env.exact_clearance(np.array([guide[v] + 0.2 * u, guide[v] - 0.2 * u])), float)
             if probe[1] > probe[0]:
                 u = -u
             foot = int(np.searchsorted(s, arcs[v]))
@@ -407,8 +441,8 @@ class _Samples:
         if pts:
             Q = np.array(pts)
             F = np.array(feet)
-            ok = np.asarray(env.clearance(Q), float) > CHORD_CLEARANCE
-            ok &= _field_clear(env, R[F], Q, CHORD_CLEARANCE)
+            ok = np.asarray(env.exact_clearance(Q), float) > CHORD_CLEARANCE
+            ok &= env.segment_is_free(R[F], Q, CHORD_CLEARANCE)
             Q, F = Q[ok], F[ok]
         else:
             Q, F = np.zeros((0, 2)), np.zeros(0, np.intp)
@@ -431,39 +465,6 @@ class _Samples:
         return ~np.any(loop % 2 == 1, axis=1)
 
 
-def _field_bounds(env: Any, a: Array, b: Array, step: float = 0.05) -> tuple[Array, Array]:
-    """Lower and upper bounds [m] of the clearance of each chord a→b (m, 2), from the distance field.
-
-    Points every ≤ ``step`` along each chord read the field at their nearest grid cell (size h). The field is
-    1-Lipschitz, so the chord's clearance is ≥ min(value) − h/√2 − step/2 and ≤ min(value) + h/√2.
-    """
-    field = env.distance_field
-    x0, y0 = env.grid_origin
-    h = env.resolution
-    nx, ny = field.shape
-    length = np.linalg.norm(b - a, axis=1)
-    k = int(max(2, math.ceil(float(length.max(initial=0.0)) / step) + 1))
-    f = np.linspace(0.0, 1.0, k)
-    pts = a[:, None, :] + f[None, :, None] * (b - a)[:, None, :]
-    ix = np.clip(np.rint((pts[..., 0] - x0) / h).astype(np.intp), 0, nx - 1)
-    iy = np.clip(np.rint((pts[..., 1] - y0) / h).astype(np.intp), 0, ny - 1)
-    low = field[ix, iy].min(axis=1)
-    return low - h * math.sqrt(0.5) - 0.5 * float(length.max(initial=0.0)) / (k - 1), low + h * math.sqrt(0.5)
-
-
-def _field_clear(env: Any, a: Array, b: Array, clearance: float, step: float = 0.05) -> NDArray[np.bool_]:
-    """Chords a→b (m, 2) that keep clearance > ``clearance`` [m]: the field's lower bound decides; chords it cannot
-    decide (lower bound ≤ clearance < upper bound) get the exact test (``env.segment_clearance``)."""
-    if not len(a):
-        return np.zeros(0, dtype=bool)
-    lo, hi = _field_bounds(env, a, b, step)
-    ok = lo > clearance
-    unsure = ~ok & (hi > clearance)
-    if unsure.any():
-        ok[unsure] = env.segment_is_free(a[unsure], b[unsure], clearance)
-    return ok
-
-
 def stations(
     env: Any,
     guide: Array,
@@ -478,8 +479,8 @@ def stations(
 
     Breadth-first search over candidate stations (every ``step`` [m] and every guide vertex): a tether k joins two
     candidates if its straight chord is between ``span_min[k]`` and ``span_max[k]`` long (the last value repeats),
-    keeps clearance > ``clearance`` [m] from the obstacles grown by r (distance field, then the exact test on the
-    chosen chords) and is homotopic to the guide (the chord and the guide between its ends enclose no obstacle:
+    keeps clearance > ``clearance`` [m] from the obstacles grown by r (exact: ``env.segment_is_free``; the anchor's
+    own tether: half the anchor's clearance if that is less) and is homotopic to the guide (the chord and the guide between its ends enclose no obstacle:
     parity of the crossings of a ray from every hole). Returns the arcs (n,) of the stations after the start,
     the last one the goal; the fewest hops at this resolution. Raises :class:`NoRouteError` if none exists.
     """
@@ -487,59 +488,47 @@ def stations(
     smin = np.atleast_1d(np.asarray(span_min, float)) if span_min is not None else np.zeros(1)
     sm = _Samples(env, guide, step, start_arc)
     P, n = sm.P, len(sm.s)
-    first = 0.5 * float(np.asarray(env.exact_clearance(P[0]))) - env.resolution  # slack of the field test
-    banned: set[tuple[int, int]] = set()
-    for _ in range(20):  # exact re-checks of the chosen chords; a field false positive is banned and searched again
-        parent = np.full(n, -1)
-        seen = np.zeros(n, dtype=bool)
-        seen[0] = True
-        frontier = [0]
-        hop = 0
-        while frontier and not seen[-1]:
-            dmax, dmin = smax[min(hop, len(smax) - 1)], smin[min(hop, len(smin) - 1)]
-            nxt: list[int] = []
-            # on-guide stations first, then farther along: they become the parents (a chain along the route
-            # rather than one zig-zagging between offsets)
-            for i in sorted(frontier, key=lambda i: (sm.off[i] > 1e-9, -sm.arc[i], -i)):
-                js = np.flatnonzero(~seen)
-                js = js[sm.arc[js] > sm.arc[i]]
-                if not len(js):
-                    continue
-                d = np.linalg.norm(P[js] - P[i], axis=1)
-                js = js[(d <= dmax) & (d >= dmin)]
-                if not len(js):
-                    continue
-                need = clearance if i else min(clearance, first)  # an anchor next to a wall: its own clearance
-                js = js[_field_clear(env, np.repeat(P[i : i + 1], len(js), 0), P[js], need)]
-                js = js[sm.homotopic(i, js)] if len(js) else js
-                js = np.array([j for j in js if (i, int(j)) not in banned], dtype=np.intp)
-                if len(js):
-                    parent[js] = i
-                    seen[js] = True
-                    nxt.extend(js.tolist())
-            frontier = nxt
-            hop += 1
-        if not seen[-1]:
-            far = int(np.argmax(np.where(seen, sm.arc, -np.inf)))
-            where = _xy(point_at(guide, guide_arcs(guide), sm.arc[far]))
-            raise BlockedRouteError(
-                f"no chain of straight tethers of ≤ {smax.max():.2f} m keeping {clearance:.2f} m from the obstacles "
-                f"follows the route past {where} ({sm.arc[far]:.1f} m of {sm.arc[-1]:.1f} m): a passage too "
-                "narrow or a corner too sharp for the tethers"
-            )
-        path = [n - 1]
-        while path[-1] != 0:
-            path.append(int(parent[path[-1]]))
-        path = path[::-1]
-        a, b = P[path[:-1]], P[path[1:]]
-        exact = np.asarray(env.segment_clearance(a, b), float)
-        need = np.full(len(exact), 0.5 * clearance)
-        need[0] = min(need[0], max(0.25 * float(np.asarray(env.exact_clearance(P[0]))), 0.0))
-        bad = np.flatnonzero(exact <= need - 1e-12)
-        if not len(bad):
-            return sm.arc[path[1:]], sm.P[path[1:]]
-        banned.update((path[k], path[k + 1]) for k in bad)
-    raise BlockedRouteError("the station search did not settle (distance field and exact clearance disagree)")
+    first = min(clearance, 0.5 * float(np.asarray(env.exact_clearance(P[0]))))  # an anchor next to a wall
+    parent = np.full(n, -1)
+    seen = np.zeros(n, dtype=bool)
+    seen[0] = True
+    frontier = [0]
+    hop = 0
+    while frontier and not seen[-1]:
+        dmax, dmin = smax[min(hop, len(smax) - 1)], smin[min(hop, len(smin) - 1)]
+        nxt: list[int] = []
+        # on-guide stations first, then farther along: they become the parents (a chain along the route rather
+        # than one zig-zagging between offsets)
+        for i in sorted(frontier, key=lambda i: (sm.off[i] > 1e-9, -sm.arc[i], -i)):
+            js = np.flatnonzero(~seen)
+            js = js[sm.arc[js] > sm.arc[i]]
+            if not len(js):
+                continue
+            d = np.linalg.norm(P[js] - P[i], axis=1)
+            js = js[(d <= dmax) & (d >= dmin)]
+            if not len(js):
+                continue
+            js = js[env.segment_is_free(np.repeat(P[i : i + 1], len(js), 0), P[js], clearance if i else first)]
+            js = js[sm.homotopic(i, js)] if len(js) else js
+            if len(js):
+                parent[js] = i
+                seen[js] = True
+                nxt.extend(js.tolist())
+        frontier = nxt
+        hop += 1
+    if not seen[-1]:
+        far = int(np.argmax(np.where(seen, sm.arc, -np.inf)))
+        where = _xy(point_at(guide, guide_arcs(guide), sm.arc[far]))
+        raise BlockedRouteError(
+            f"no chain of straight tethers of ≤ {smax.max():.2f} m keeping {clearance:.2f} m from the obstacles "
+            f"follows the route past {where} ({sm.arc[far]:.1f} m of {sm.arc[-1]:.1f} m): a passage too "
+            "narrow or a corner too sharp for the tethers"
+        )
+    path = [n - 1]
+    while path[-1] != 0:
+        path.append(int(parent[path[-1]]))
+    path = path[::-1]
+    return sm.arc[path[1:]], sm.P[path[1:]]
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -642,7 +631,8 @@ def plan_route(
     st = st.copy()
     st[-1] = goal
     n_min = max(len(arcs), n_lower)
-    if robots is not None and n_min > robots and margin > margins[-1]:
+    # tighter margins can lower n_min, never below n_lower (which holds for every margin): no retry below it
+    if robots is not None and n_min > robots >= n_lower and margin > margins[-1]:
         tighter = [m for m in margins if m < margin]
         try:
             other = plan_route(env, base, goal, lim, margin=tighter[0], robots=robots)
