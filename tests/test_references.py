@@ -127,3 +127,39 @@ def test_route_followers_rows():
         RouteFollowers(P, V[:2], gain=1.0)
     with pytest.raises(ParameterError):
         RouteFollowers(P, V, gain=-1.0)
+
+
+def test_leader_stops_at_a_hairpin_instead_of_a_spline_cusp() -> None:
+    """A route that turns back round a wall's end: one minimum-jerk piece per leg, the leader at rest at the apex
+    (one interpolating spline through it has a cusp and is refused)."""
+    from tmr.path import time_law
+    from tmr.references import _leader_law, leader_duration
+
+    # a leader's route in a seeded random room (dense-near-533521220) round the tip of an obstacle at (4.0, 4.9)
+    lead = np.array(
+        [
+            [3.668, 6.368],
+            [4.011, 5.605],
+            [4.034, 5.555],
+            [4.097, 5.252],
+            [4.009, 4.939],
+            [4.062, 5.076],
+            [4.364, 5.856],
+            [4.667, 6.636],
+            [4.969, 7.416],
+        ]
+    )
+    with pytest.raises(ParameterError, match="cusp"):
+        time_law(lead, T_end=10.0, Ts=0.05)
+    tr = _leader_law(lead, None, 0.05, 0.8, 0.5, None, 0.05)
+    legs = (float(guide_arcs(lead[:5])[-1]), float(guide_arcs(lead[4:])[-1]))
+    T = sum(leader_duration(L, 0.8, 0.5, 0.05) for L in legs)
+    assert tr.t[-1] == pytest.approx(T, abs=1e-9) and np.allclose(np.diff(tr.t), 0.05)
+    k = int(np.argmin(np.linalg.norm(tr.x - lead[4], axis=1)))
+    assert np.linalg.norm(tr.x[k] - lead[4]) < 1e-9 and np.linalg.norm(tr.xd[k]) < 1e-9
+    assert np.array_equal(tr.x[0], lead[0]) and np.array_equal(tr.x[-1], lead[-1])
+    steps = np.linalg.norm(np.diff(tr.x, axis=0), axis=1)
+    assert steps.max() <= 0.8 * 0.05 + 1e-9  # the peak speed holds on every piece
+    # a given T_end is shared between the pieces in proportion to their lengths
+    tr = _leader_law(lead, 20.0, 0.05, 0.8, 0.5, None, 0.05)
+    assert tr.t[-1] == pytest.approx(20.0, abs=1e-9) and len(tr.t) == 401

@@ -216,5 +216,5 @@ def test_shortest_path_tree_matches_scipy_dijkstra() -> None:
         path = [t]
         while path[-1] != s:
             path.append(pred[path[-1]])
-        length = sum(np.linalg.norm(pts[a] - pts[b]) for a, b in zip(path[:-1], path[1:]))
+        length = sum(np.linalg.norm(pts[a] - pts[b]) for a, b in zip(path[:-1], path[1:], strict=True))
         assert length == pytest.approx(ref[t], rel=1e-12, abs=1e-12), trial

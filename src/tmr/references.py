@@ -342,6 +342,43 @@ def _split_extra(
     return np.array(pts), np.array(ar)
 
 
+#: Turn [rad] of the leader's path at a waypoint beyond which the leader stops there and starts a new minimum-jerk
+#: piece (a hairpin round a wall's end: one interpolating spline through it would have a cusp).
+HAIRPIN_TURN = math.radians(90.0)
+
+
+def _leader_law(
+    lead: Array, T_end: float | None, Ts: float, speed: float, accel: float, env: Any, clearance: float
+) -> Trajectory:
+    """The leader's trajectory along the polyline ``lead``: one minimum-jerk piece (:func:`tmr.path.time_law`)
+    between consecutive hairpins (turns > ``HAIRPIN_TURN``), each stopping at its end; durations from the pieces'
+    lengths and the speed and acceleration limits (:func:`leader_duration`), or ``T_end`` [s] shared in
+    proportion to them."""
+    d = np.diff(lead, axis=0)
+    heading = np.arctan2(d[:, 1], d[:, 0])
+    turn = np.abs((np.diff(heading) + np.pi) % (2 * np.pi) - np.pi)
+    cuts = [0, *(np.flatnonzero(turn > HAIRPIN_TURN) + 1).tolist(), len(lead) - 1]
+    pieces = [lead[a : b + 1] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+    if T_end is None:
+        T = [leader_duration(float(guide_arcs(p)[-1]), speed, accel, Ts) for p in pieces]
+    else:
+        K = max(len(pieces), round(T_end / Ts))
+        lengths = np.array([max(float(guide_arcs(p)[-1]), 1e-9) for p in pieces])
+        steps = np.maximum(1, np.floor(K * lengths / lengths.sum()).astype(int))
+        steps[int(np.argmax(lengths))] += K - int(steps.sum())
+        T = [int(k) * Ts for k in steps]
+    parts = [time_law(p, T_end=t, Ts=Ts, env=env, clearance=clearance) for p, t in zip(pieces, T, strict=True)]
+    if len(parts) == 1:
+        return parts[0]
+    x, xd, xdd = [parts[0].x], [parts[0].xd], [parts[0].xdd]
+    for part in parts[1:]:
+        x.append(part.x[1:])
+        xd.append(part.xd[1:])
+        xdd.append(part.xdd[1:])
+    K = sum(len(p.t) - 1 for p in parts)
+    return Trajectory(Ts * np.arange(K + 1), np.vstack(x), np.vstack(xd), np.vstack(xdd), lead.copy())
+
+
 def chain_reference(
     env: Any,
     route: Route,
@@ -421,9 +458,7 @@ def chain_reference(
         la = guide_arcs(lead)
         extra = np.linspace(0.0, L_lead, max(2, math.ceil(L_lead / LEAD_STEP) + 1))
         lead = point_at(lead, la, np.union1d(la, extra))
-    if T_end is None:
-        T_end = leader_duration(L_lead, speed, accel, Ts)
-    traj = time_law(lead, T_end=T_end, Ts=Ts, env=env, clearance=spline_clearance)
+    traj = _leader_law(lead, T_end, Ts, speed, accel, env, spline_clearance)
     # leader progress along the guide: s_N(t) = start arc + travelled fraction of the guide's remainder
     K = len(traj.t) - 1
     steps = np.linalg.norm(np.diff(traj.x, axis=0), axis=1)

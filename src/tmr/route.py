@@ -480,8 +480,9 @@ def stations(
     Breadth-first search over candidate stations (every ``step`` [m] and every guide vertex): a tether k joins two
     candidates if its straight chord is between ``span_min[k]`` and ``span_max[k]`` long (the last value repeats),
     keeps clearance > ``clearance`` [m] from the obstacles grown by r (exact: ``env.segment_is_free``; the anchor's
-    own tether: half the anchor's clearance if that is less) and is homotopic to the guide (the chord and the guide between its ends enclose no obstacle:
-    parity of the crossings of a ray from every hole). Returns the arcs (n,) of the stations after the start,
+    own tether: half the anchor's clearance if that is less) and is homotopic to the guide (the chord and the
+    guide between its ends enclose no obstacle: parity of the crossings of a ray from every hole).
+    Returns the arcs (n,) of the stations after the start,
     the last one the goal; the fewest hops at this resolution. Raises :class:`NoRouteError` if none exists.
     """
     smax = np.atleast_1d(np.asarray(span_max, float))
