@@ -353,7 +353,8 @@ def _leader_law(
     """The leader's trajectory along the polyline ``lead``: one minimum-jerk piece (:func:`tmr.path.time_law`)
     between consecutive hairpins (turns > ``HAIRPIN_TURN``), each stopping at its end; durations from the pieces'
     lengths and the speed and acceleration limits (:func:`leader_duration`), or ``T_end`` [s] shared in
-    proportion to them."""
+    proportion to them. The spline keeps ``clearance`` [m], or half the polyline's own clearance where that is
+    less (the route keeps 0.02 m in a narrow passage)."""
     d = np.diff(lead, axis=0)
     heading = np.arctan2(d[:, 1], d[:, 0])
     turn = np.abs((np.diff(heading) + np.pi) % (2 * np.pi) - np.pi)
@@ -367,6 +368,9 @@ def _leader_law(
         steps = np.maximum(1, np.floor(K * lengths / lengths.sum()).astype(int))
         steps[int(np.argmax(lengths))] += K - int(steps.sum())
         T = [int(k) * Ts for k in steps]
+    if env is not None and len(lead) > 1:  # a start placement or a route through a narrow door may keep less
+        least = float(np.min(env.segment_clearance(lead[:-1], lead[1:])))
+        clearance = min(clearance, 0.5 * least) if least > 0 else clearance
     parts = [time_law(p, T_end=t, Ts=Ts, env=env, clearance=clearance) for p, t in zip(pieces, T, strict=True)]
     if len(parts) == 1:
         return parts[0]
