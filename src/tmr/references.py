@@ -32,6 +32,7 @@ from tmr.route import (
     BlockedRouteError,
     Route,
     RouteVerdict,
+    bend_offsets,
     guide_arcs,
     plan_route,
     point_at,
@@ -161,20 +162,33 @@ def start_placement(
 
 def _along(env: Any, guide: Array, n: int, spacing: float, clear: float, ahead: float) -> Array | None:
     """``n`` robots along the polyline from its start (depth-first with a small budget), each at a point (every
-    0.05 m) at least 2r + 0.05 m — preferably ``spacing`` — from the previous one, keeping clearance > ``clear`` [m],
+    0.05 m, or off a bend: :func:`tmr.route.bend_offsets`) at least 2r + 0.05 m — preferably ``spacing`` — from the previous one, keeping clearance > ``clear`` [m],
     whose chord from it keeps ``CHORD_START_CLEARANCE`` (a chord must not cut a corner of the route: at a hairpin the
     robot sits at its apex), the last one at least ``ahead`` [m] of route before the end; None if they do not fit."""
     arcs = guide_arcs(guide)
     L = float(arcs[-1])
     s = np.arange(0.0, L + 1e-9, 0.05)
     S = point_at(guide, arcs, s)
+    # and points off its bends (round a wall's end, robots 2r apart cannot both stand on a route that hugs it)
+    vs, off = bend_offsets(env, guide, arcs)
+    if len(off):
+        keep = np.asarray(env.exact_clearance(off), float) > clear
+        s = np.concatenate([s, arcs[vs[keep]] + 1e-6])
+        S = np.vstack([S, off[keep]])
+        order = np.argsort(s, kind="stable")
+        s, S = s[order], S[order]
     first = min(CHORD_START_CLEARANCE, 0.5 * float(np.asarray(env.exact_clearance(S[0]))))
     near = 2.0 * float(env.safety_radius) + 0.05  # robots at least 2r apart, with a little margin
     budget = [300]
 
-    def options(k: int, j: int) -> list[int]:
+    def options(path: list[int]) -> list[int]:
+        k, j = path[-1], len(path) - 1
         cur = S[k]
-        d = np.linalg.norm(S[k + 1 :] - cur, axis=1)
+        # at least 2r + 0.05 m from every robot placed so far (not only the previous one: off-bend points come back
+        # near the route)
+        d = np.min(
+            np.linalg.norm(S[k + 1 :, None] - S[path[1:]][None] if j else S[k + 1 :, None] - cur, axis=2), axis=1
+        )
         cand = np.flatnonzero(d >= near) + k + 1
         cand = cand[s[cand] <= L - ahead + 1e-9][:400]
         if not len(cand):
@@ -194,7 +208,7 @@ def _along(env: Any, guide: Array, n: int, spacing: float, clear: float, ahead: 
         budget[0] -= 1
         if budget[0] < 0:
             return None
-        for c in options(path[-1], len(path) - 1):
+        for c in options(path):
             done = grow([*path, c])
             if done is not None:
                 return done

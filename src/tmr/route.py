@@ -379,6 +379,41 @@ LATERAL_OFFSETS = (0.5, 1.2, 2.0)
 LATERAL_EVERY = 0.5
 
 
+def bend_offsets(
+    env: Any, guide: Array, arcs: Array, start_arc: float = 0.0, offsets: tuple[float, ...] = BEND_OFFSETS
+) -> tuple[NDArray[np.intp], Array]:
+    """Points off the bends of ``guide`` (one bend every ``BEND_TURN`` of accumulated turning, after ``start_arc``
+    [m]) along the outward bisector (towards the larger clearance) at ``offsets`` [m]: where a taut tether wraps an
+    obstacle the robot sits there, and round a wall's end a chain needs them to turn. Returns the bend vertex of
+    each point (k,) and the points (k, 2); the points are not checked for clearance."""
+    d = np.diff(guide, axis=0)
+    heading = np.arctan2(d[:, 1], d[:, 0])
+    turn = np.abs((np.diff(heading) + np.pi) % (2 * np.pi) - np.pi)
+    vs: list[int] = []
+    pts: list[Array] = []
+    acc = 0.0
+    for v in range(1, len(guide) - 1):
+        acc += turn[v - 1]
+        if acc < BEND_TURN and v < len(guide) - 2:
+            continue
+        acc = 0.0
+        if arcs[v] <= start_arc:
+            continue
+        u = (guide[v - 1] - guide[v]) / max(np.linalg.norm(guide[v - 1] - guide[v]), 1e-12) + (
+            guide[v + 1] - guide[v]
+        ) / max(np.linalg.norm(guide[v + 1] - guide[v]), 1e-12)
+        if np.linalg.norm(u) < 1e-9:
+            continue
+        u /= np.linalg.norm(u)
+        probe = np.asarray(env.exact_clearance(np.array([guide[v] + 0.2 * u, guide[v] - 0.2 * u])), float)
+        if probe[1] > probe[0]:
+            u = -u
+        for off in offsets:
+            vs.append(v)
+            pts.append(guide[v] + off * u)
+    return np.array(vs, dtype=np.intp), np.array(pts).reshape(-1, 2)
+
+
 class _Samples:
     """Candidate stations: guide points every ``step`` and its vertices (offset 0), and points off the guide's
     bends along their outward bisector (where a taut tether wraps a round obstacle, the robot sits off the route).
@@ -402,32 +437,10 @@ class _Samples:
         else:
             route_par = np.zeros((len(s), 0), np.int_)
         # bends: interior guide vertices, one every BEND_TURN of accumulated turning
-        feet, pts = [], []
         d = np.diff(guide, axis=0)
-        heading = np.arctan2(d[:, 1], d[:, 0])
-        turn = np.abs((np.diff(heading) + np.pi) % (2 * np.pi) - np.pi)
-        acc = 0.0
-        for v in range(1, len(guide) - 1):
-            acc += turn[v - 1]
-            if acc < BEND_TURN and v < len(guide) - 2:
-                continue
-            acc = 0.0
-            if arcs[v] <= start_arc:
-                continue
-            u = (guide[v - 1] - guide[v]) / max(np.linalg.norm(guide[v - 1] - guide[v]), 1e-12) + (
-                guide[v + 1] - guide[v]
-            ) / max(np.linalg.norm(guide[v + 1] - guide[v]), 1e-12)
-            if np.linalg.norm(u) < 1e-9:
-                continue
-            u /= np.linalg.norm(u)
-            probe = np.asarray(env.exact_clearance(np.array([guide[v] + 0.2 * u, guide[v] - 0.2 * u])), float)
-            if probe[1] > probe[0]:
-                u = -u
-            foot = int(np.searchsorted(s, arcs[v]))
-            foot = min(foot, len(s) - 1)
-            for off in BEND_OFFSETS:
-                feet.append(foot)
-                pts.append(guide[v] + off * u)
+        vs, pts_b = bend_offsets(env, guide, arcs, start_arc)
+        feet = np.minimum(np.searchsorted(s, arcs[vs]), len(s) - 1).tolist()
+        pts = list(pts_b)
         seg = np.clip(np.searchsorted(arcs, s, side="right") - 1, 0, len(guide) - 2)
         tangent = d[seg] / np.maximum(np.linalg.norm(d[seg], axis=1, keepdims=True), 1e-12)
         normal = np.column_stack([-tangent[:, 1], tangent[:, 0]])
