@@ -129,10 +129,11 @@ def start_placement(
     r = float(env.safety_radius)
     lim = np.asarray(span_limits, dtype=float) if span_limits is not None else np.tile([2 * r, route.d_max], (N, 1))
     fit = max(0, int(math.floor((L - spacing) / spacing + 1e-9)))
+    reach = float(lim[:, 1].min()) - SPACING_MARGIN  # no start tether longer than this [m]
     base = route.points[0]
     goal = route.points[-1]
     if fit >= N:
-        P = _along(env, route.points, N, spacing, clear, ahead=spacing)
+        P = _along(env, route.points, N, spacing, clear, ahead=spacing, reach=reach)
         if P is not None and _free_chain(env, base, P, clear):
             return P, 0
     tried = 0
@@ -148,7 +149,7 @@ def start_placement(
                 continue
             if sub.n_min > active:
                 continue
-            Pa = _along(env, sub.points, active, spacing, clear, ahead=0.0)
+            Pa = _along(env, sub.points, active, spacing, clear, ahead=0.0, reach=reach)
             if Pa is None:
                 continue
             P = np.vstack([Pp, Pa])
@@ -160,11 +161,17 @@ def start_placement(
     )
 
 
-def _along(env: Any, guide: Array, n: int, spacing: float, clear: float, ahead: float) -> Array | None:
-    """``n`` robots along the polyline from its start (depth-first with a small budget), each at a point (every
-    0.05 m, or off a bend: :func:`tmr.route.bend_offsets`) at least 2r + 0.05 m — preferably ``spacing`` — from the previous one, keeping clearance > ``clear`` [m],
-    whose chord from it keeps ``CHORD_START_CLEARANCE`` (a chord must not cut a corner of the route: at a hairpin the
-    robot sits at its apex), the last one at least ``ahead`` [m] of route before the end; None if they do not fit."""
+def _along(
+    env: Any, guide: Array, n: int, spacing: float, clear: float, ahead: float, reach: float = math.inf
+) -> Array | None:
+    """``n`` robots along the polyline from its start (depth-first with a small budget).
+
+    Each robot stands at a point of the polyline (every 0.05 m) or off one of its bends
+    (:func:`tmr.route.bend_offsets`), keeping clearance > ``clear`` [m], at least 2r + 0.05 m from every robot
+    placed before it and preferably ``spacing`` [m] from the previous one, no farther than ``reach`` [m] (a
+    tether's d_max), on a chord from the previous one that keeps ``CHORD_START_CLEARANCE`` (a chord must not cut
+    a corner of the route: at a hairpin the robot sits at its apex); the last one at least ``ahead`` [m] of route
+    before the end. None if they do not fit."""
     arcs = guide_arcs(guide)
     L = float(arcs[-1])
     s = np.arange(0.0, L + 1e-9, 0.05)
@@ -190,6 +197,7 @@ def _along(env: Any, guide: Array, n: int, spacing: float, clear: float, ahead: 
             np.linalg.norm(S[k + 1 :, None] - S[path[1:]][None] if j else S[k + 1 :, None] - cur, axis=2), axis=1
         )
         cand = np.flatnonzero(d >= near) + k + 1
+        cand = cand[np.linalg.norm(S[cand] - cur, axis=1) <= reach]
         cand = cand[s[cand] <= L - ahead + 1e-9][:400]
         if not len(cand):
             return []
