@@ -132,29 +132,32 @@ def start_placement(
     reach = float(lim[:, 1].min()) - SPACING_MARGIN  # no start tether longer than this [m]
     base = route.points[0]
     goal = route.points[-1]
-    if fit >= N:
-        P = _along(env, route.points, N, spacing, clear, ahead=spacing, reach=reach)
-        if P is not None and _free_chain(env, base, P, clear):
-            return P, 0
     tried = 0
-    ahead = point_at(route.points, arcs, min(spacing, L))
-    heading = math.atan2(ahead[1] - base[1], ahead[0] - base[0])
-    for active in range(min(N - 1, fit + 2), 0, -1):
-        parked = N - active
-        for Pp in _rings(env, base, parked, spacing, clear, heading) + _snakes(env, base, parked, spacing, clear, goal):
-            tried += 1
-            try:
-                sub = plan_route(env, Pp[-1], goal, lim[parked:])
-            except RouteVerdict:
-                continue
-            if sub.n_min > active:
-                continue
-            Pa = _along(env, sub.points, active, spacing, clear, ahead=0.0, reach=reach)
-            if Pa is None:
-                continue
-            P = np.vstack([Pp, Pa])
-            if _free_chain(env, base, P, clear) and _separated(P, 2 * r + 0.02):
-                return P, parked
+    for bends in (False, True):  # off-bend candidates only where the route's own points give no placement at all
+        if fit >= N:
+            P = _along(env, route.points, N, spacing, clear, ahead=spacing, reach=reach, bends=bends)
+            if P is not None and _free_chain(env, base, P, clear):
+                return P, 0
+        ahead = point_at(route.points, arcs, min(spacing, L))
+        heading = math.atan2(ahead[1] - base[1], ahead[0] - base[0])
+        for active in range(min(N - 1, fit + 2), 0, -1):
+            parked = N - active
+            for Pp in _rings(env, base, parked, spacing, clear, heading) + _snakes(
+                env, base, parked, spacing, clear, goal
+            ):
+                tried += 1
+                try:
+                    sub = plan_route(env, Pp[-1], goal, lim[parked:])
+                except RouteVerdict:
+                    continue
+                if sub.n_min > active:
+                    continue
+                Pa = _along(env, sub.points, active, spacing, clear, ahead=0.0, reach=reach, bends=bends)
+                if Pa is None:
+                    continue
+                P = np.vstack([Pp, Pa])
+                if _free_chain(env, base, P, clear) and _separated(P, 2 * r + 0.02):
+                    return P, parked
     raise PlacementError(
         f"no free start placement of {N} robots was found (along the {L:.1f} m route, or {tried} parking walks from "
         "the anchor); give the start positions explicitly (scenario 'start' or --start)"
@@ -162,22 +165,29 @@ def start_placement(
 
 
 def _along(
-    env: Any, guide: Array, n: int, spacing: float, clear: float, ahead: float, reach: float = math.inf
+    env: Any,
+    guide: Array,
+    n: int,
+    spacing: float,
+    clear: float,
+    ahead: float,
+    reach: float = math.inf,
+    bends: bool = False,
 ) -> Array | None:
     """``n`` robots along the polyline from its start (depth-first with a small budget).
 
-    Each robot stands at a point of the polyline (every 0.05 m) or off one of its bends
-    (:func:`tmr.route.bend_offsets`), keeping clearance > ``clear`` [m], at least 2r + 0.05 m from every robot
-    placed before it and preferably ``spacing`` [m] from the previous one, no farther than ``reach`` [m] (a
-    tether's d_max), on a chord from the previous one that keeps ``CHORD_START_CLEARANCE`` (a chord must not cut
-    a corner of the route: at a hairpin the robot sits at its apex); the last one at least ``ahead`` [m] of route
-    before the end. None if they do not fit."""
+    Each robot stands at a point of the polyline (every 0.05 m), keeping clearance > ``clear`` [m], at least
+    2r + 0.05 m from the previous one and preferably ``spacing`` [m], on a chord from the previous one that keeps
+    ``CHORD_START_CLEARANCE`` (a chord must not cut a corner of the route: at a hairpin the robot sits at its
+    apex); the last one at least ``ahead`` [m] of route before the end. With ``bends``, points off the
+    polyline's bends are candidates too (:func:`tmr.route.bend_offsets`: round a wall's end, robots 2r apart
+    cannot both stand on a route that hugs it), every robot keeps 2r + 0.05 m from all placed before it, and no
+    chord is longer than ``reach`` [m]. None if they do not fit."""
     arcs = guide_arcs(guide)
     L = float(arcs[-1])
     s = np.arange(0.0, L + 1e-9, 0.05)
     S = point_at(guide, arcs, s)
-    # and points off its bends (round a wall's end, robots 2r apart cannot both stand on a route that hugs it)
-    vs, off = bend_offsets(env, guide, arcs)
+    vs, off = bend_offsets(env, guide, arcs) if bends else (np.zeros(0, np.intp), np.zeros((0, 2)))
     if len(off):
         keep = np.asarray(env.exact_clearance(off), float) > clear
         s = np.concatenate([s, arcs[vs[keep]] + 1e-6])
@@ -191,13 +201,13 @@ def _along(
     def options(path: list[int]) -> list[int]:
         k, j = path[-1], len(path) - 1
         cur = S[k]
-        # at least 2r + 0.05 m from every robot placed so far (not only the previous one: off-bend points come back
-        # near the route)
-        d = np.min(
-            np.linalg.norm(S[k + 1 :, None] - S[path[1:]][None] if j else S[k + 1 :, None] - cur, axis=2), axis=1
-        )
+        if bends and j:  # off-bend points come back near the route: 2r + 0.05 m from every robot placed so far
+            d = np.min(np.linalg.norm(S[k + 1 :, None] - S[path[1:]][None], axis=2), axis=1)
+        else:  # along the polyline, from the previous one
+            d = np.linalg.norm(S[k + 1 :] - cur, axis=1)
         cand = np.flatnonzero(d >= near) + k + 1
-        cand = cand[np.linalg.norm(S[cand] - cur, axis=1) <= reach]
+        if bends:
+            cand = cand[np.linalg.norm(S[cand] - cur, axis=1) <= reach]
         cand = cand[s[cand] <= L - ahead + 1e-9][:400]
         if not len(cand):
             return []
