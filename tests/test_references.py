@@ -163,3 +163,26 @@ def test_leader_stops_at_a_hairpin_instead_of_a_spline_cusp() -> None:
     # a given T_end is shared between the pieces in proportion to their lengths
     tr = _leader_law(lead, 20.0, 0.05, 0.8, 0.5, None, 0.05)
     assert tr.t[-1] == pytest.approx(20.0, abs=1e-9) and len(tr.t) == 401
+
+
+def test_start_placement_turns_round_a_wall_end_off_the_route():
+    """A route that hugs a thin wall's end at δ holds no two robots 2r apart on either side whose tether clears
+    the end: robots along it turn there only with points off the bend (``tmr.route.bend_offsets``)."""
+    from tmr.references import _along
+
+    env = Environment.from_geometry(box(4.9, 0.0, 5.1, 5.0), (0, 0, 10, 10), 0.5, 0.05)
+    n = 8
+    lim = span_limits(n, ChainParams())
+    route = plan_route(env, (4.0, 1.0), (6.0, 1.0), lim)
+    assert route.length > 9.0  # up the wall, round its end, down the other side
+    reach = float(lim[:, 1].min()) - 0.1
+    assert _along(env, route.points, n, SPACING, 0.05, ahead=SPACING, reach=reach) is None
+    P = _along(env, route.points, n, SPACING, 0.05, ahead=SPACING, reach=reach, bends=True)
+    assert P is not None and P.shape == (n, 2)
+    assert (P[:, 0] > 5.1).any()  # the chain turns round the end (past the wall's axis, above it)
+    D = np.linalg.norm(P[:, None] - P[None], axis=-1)[np.triu_indices(n, 1)]
+    assert D.min() >= 2 * 0.5 + 0.05 - 1e-9
+    ends = np.vstack([route.points[0], P])
+    assert np.all(env.segment_clearance(ends[:-1], ends[1:]) > 0.0)
+    assert np.all(np.linalg.norm(np.diff(ends, axis=0), axis=1) <= reach + 1e-9)
+    assert np.all(env.exact_clearance(P) > 0.05)
