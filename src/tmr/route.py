@@ -64,7 +64,7 @@ QUAD_SEGS = 4
 #: Spacing [m] of the candidate stations along the route.
 STATION_STEP = 0.1
 #: Clearance [m] a chord between stations keeps from the obstacles grown by r (the QP keeps d_safe = 0.05 m, but a
-#: tether sample that starts nearer may stay there); the distance-field test adds its own Lipschitz slack.
+#: tether sample that starts nearer may stay there).
 CHORD_CLEARANCE = 0.03
 #: Extra distance [m] between two robots beyond 2r in a station placement.
 SPACING_MARGIN = 0.1
@@ -494,9 +494,9 @@ def stations(
     candidates if its straight chord is between ``span_min[k]`` and ``span_max[k]`` long (the last value repeats),
     keeps clearance > ``clearance`` [m] from the obstacles grown by r (exact: ``env.segment_is_free``; the anchor's
     own tether: half the anchor's clearance if that is less) and is homotopic to the guide (the chord and the
-    guide between its ends enclose no obstacle: parity of the crossings of a ray from every hole).
-    Returns the arcs (n,) of the stations after the start,
-    the last one the goal; the fewest hops at this resolution. Raises :class:`NoRouteError` if none exists.
+    guide between its ends enclose no obstacle: parity of the crossings of a ray from every hole). Returns the
+    arcs (n,) and positions (n, 2) of the stations after the start, the last one the goal: the fewest hops at this
+    resolution. Raises :class:`BlockedRouteError` if no chain reaches the goal.
     """
     smax = np.atleast_1d(np.asarray(span_max, float))
     smin = np.atleast_1d(np.asarray(span_min, float)) if span_min is not None else np.zeros(1)
