@@ -253,3 +253,27 @@ def test_unknown_parameter_refused_before_planning(tmp_path, capsys):
     assert code == 2 and "nosuch" in err and not out.exists()
     code, _, err = run_cli(["--scenario", "A", "--time-limit", "-1", "--out", str(out)], capsys)
     assert code == 2 and "positive" in err
+
+
+def test_negative_coordinates_are_values_not_flags(tmp_path, capsys):
+    """`--base -5,0` (a ROS map's origin is often negative) is read as a position, as `--base=-5,0` is."""
+    p = tmp_path / "negative.geojson"
+    p.write_text('{"type": "FeatureCollection", "bounds": [-10, -2, 10, 2], "features": []}')
+    out = tmp_path / "out"
+    args = ["--map", str(p), "--base", "-5,0", "--goal", "-0.5,0", "--robots", "2", "--no-plots", "--out", str(out)]
+    code, _, err = run_cli(args, capsys)
+    assert code == 0, err
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["success"] and metrics["route_length"] == pytest.approx(4.5)
+    code, _, err = run_cli(["--map", str(p), "--base", "-5,0", "--goal", "-20.5,0", "--out", str(out)], capsys)
+    assert code == 2 and "outside the room" in err
+
+
+def test_unusable_out_refused_before_planning(tmp_path, capsys):
+    """An --out that is a file, or lies under one, exits 2 at once with one line; nothing is written."""
+    f = tmp_path / "a_file"
+    f.write_text("keep me")
+    for out, why in ((f, "is a file, not a directory"), (f / "sub", "is a file, not a directory")):
+        code, stdout, err = run_cli(["--scenario", "A", "--no-plots", "--out", str(out)], capsys)
+        assert code == 2 and why in err and len(err.strip().splitlines()) == 1 and stdout == ""
+    assert f.read_text() == "keep me" and sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]

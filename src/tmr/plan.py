@@ -319,14 +319,51 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
     return rt, n
 
 
+#: Options whose values are coordinates: a value such as ``-2.0,0.0`` is not a flag.
+_COORDINATE_OPTIONS = ("--base", "--goal", "--start", "--bounds")
+
+
+def _join_negative(argv: list[str]) -> list[str]:
+    """``--base -2.0,0.0`` → ``--base=-2.0,0.0`` (argparse reads a value that starts with '-' and is not a plain
+    number as a flag)."""
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        tok = argv[i]
+        nxt = argv[i + 1] if i + 1 < len(argv) else ""
+        if tok in _COORDINATE_OPTIONS and len(nxt) > 1 and nxt[0] == "-" and (nxt[1].isdigit() or nxt[1] == "."):
+            out.append(f"{tok}={nxt}")
+            i += 2
+            continue
+        out.append(tok)
+        i += 1
+    return out
+
+
+def check_out(out: Path) -> None:
+    """Refuse, before any planning, an ``--out`` that is a file or lies where nothing can be written."""
+    if out.exists() and not out.is_dir():
+        raise TmrError(f"--out {out} is a file, not a directory")
+    parent = out.absolute()
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise TmrError(f"--out {out}: {parent} is a file, not a directory")
+    try:  # a real write test (permissions alone do not tell, e.g. for root or a read-only file system)
+        os.rmdir(tempfile.mkdtemp(prefix=".tmr-out-check-", dir=parent))
+    except OSError as exc:
+        raise TmrError(f"--out {out}: cannot write in {parent} ({exc.strerror})") from exc
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_join_negative(list(sys.argv[1:] if argv is None else argv)))
     from tmr.route import RouteVerdict
 
     try:
         if args.robots == "auto" and args.start is not None:
             raise TmrError("--robots auto chooses the number of robots, so it cannot take --start; give --robots N")
+        check_out(Path(args.out))
         scenario = load_inputs(args)
         rt, n_first = precheck(args, scenario)
 
