@@ -3,14 +3,14 @@
 * :func:`plan_leader_path` -- collision-free polyline from start to goal with OMPL's RRT* (the planner of
   Caruso 2021 §4.2, ref. [41]), seeded and stopped after a fixed **number of iterations**, so the same seed
   gives the same path, byte for byte. Every state and every straight motion is checked exactly against the
-  inflated obstacles (``env.is_free`` / ``env.segment_clearance``): the polyline is free, not sampled free.
+  inflated obstacles (``env.is_free`` / ``env.segment_is_free``): the polyline is free, not sampled free.
 * :func:`time_law` -- cubic B-spline through the waypoints (chord-length parametrisation), re-parametrised by
   arc length and traversed with the quintic minimum-jerk law ``s(t)`` (zero velocity and acceleration at both
   ends), sampled at ``t = 0, Ts, ..., T_end``; position, velocity and acceleration are analytic.
 * :func:`leader_trajectory` -- both: ``w = [X, Xdot, Xddot] = f(T_end, Ts, z)`` of Caruso 2021 §4.2.
 
 The environment is duck-typed: only ``env.bounds``, ``env.is_free(points, margin)``,
-``env.exact_clearance(points)`` and ``env.segment_clearance(a, b)`` are used (see
+``env.exact_clearance(points)``, ``env.segment_clearance(a, b)`` and ``env.segment_is_free(a, b, margin)`` are used (see
 :class:`tmr.environment.Environment`). Clearances are signed distances [m] to the obstacles inflated by the
 robot safety radius.
 """
@@ -40,8 +40,7 @@ __all__ = ["Trajectory", "leader_trajectory", "path_length", "plan_leader_path",
 
 #: Default number of RRT* iterations of :func:`plan_leader_path`.
 DEFAULT_ITERATIONS = 3000
-#: Spacing [m] of the points tested with ``env.is_free`` before a motion's exact check (a cheap, exact
-#: rejection: one point too close means the segment is too close); also OMPL's state-checking step.
+#: OMPL's state-checking step [m] (motions themselves are checked exactly: ``env.segment_is_free``).
 CHECK_STEP = 0.05
 #: Arc-length spacing [m] of the dense spline samples checked against the obstacles in :func:`time_law`.
 DENSE_STEP = 0.02
@@ -145,27 +144,6 @@ def _segment_clearance(env: Any, a: ArrayLike, b: ArrayLike) -> Array:
     return np.asarray(env.segment_clearance(a, b), dtype=float)
 
 
-def _segments_free(env: Any, a: Array, b: Array, margin: float) -> NDArray[np.bool_]:
-    """Exact test ``segment_clearance(a_i, b_i) > margin`` of (n, 2) segment ends, cheap rejection first.
-
-    Points every <= CHECK_STEP along each segment (ends included) are tested with ``env.is_free(p, margin)``;
-    a segment with a point at clearance <= margin is rejected (exactly: its minimum clearance is <= margin).
-    The survivors get the exact ``env.segment_clearance``, which is slow on segments crossing obstacles.
-    """
-    a = np.atleast_2d(a)
-    b = np.atleast_2d(b)
-    length = np.linalg.norm(b - a, axis=1)
-    n = np.maximum(2, np.ceil(length / CHECK_STEP).astype(np.intp) + 1)
-    starts = np.concatenate([[0], np.cumsum(n)[:-1]])
-    seg = np.repeat(np.arange(len(a)), n)
-    f = (np.arange(n.sum()) - starts[seg]) / (n[seg] - 1)
-    pts = a[seg] + f[:, None] * (b - a)[seg]
-    free = np.logical_and.reduceat(np.asarray(env.is_free(pts, margin=margin), dtype=bool), starts)
-    if free.any():
-        free[free] = _segment_clearance(env, a[free], b[free]) > margin
-    return free
-
-
 class _ExactMotionValidator(ob.MotionValidator):
     """OMPL motion validator: a straight motion is valid iff its exact clearance exceeds ``margin`` [m]."""
 
@@ -175,14 +153,9 @@ class _ExactMotionValidator(ob.MotionValidator):
         self._margin = margin
 
     def checkMotion(self, s1: Any, s2: Any) -> bool:  # OMPL's method name
-        # single-segment version of _segments_free (this is the planner's hot path)
         a = np.array((s1[0], s1[1]))
         b = np.array((s2[0], s2[1]))
-        n = max(2, math.ceil(math.hypot(b[0] - a[0], b[1] - a[1]) / CHECK_STEP) + 1)
-        pts = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
-        if not np.all(self._env.is_free(pts, margin=self._margin)):
-            return False
-        return bool(self._env.segment_clearance(a, b) > self._margin)
+        return bool(self._env.segment_is_free(a, b, self._margin))
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -306,7 +279,7 @@ def _string_pull(env: Any, points: Array, margin: float, step: float = 0.1) -> A
     n = len(dense)
     while i < n - 1:
         cands = np.arange(i + 1, n)
-        ok = cands[_segments_free(env, np.repeat(dense[i : i + 1], len(cands), axis=0), dense[cands], margin)]
+        ok = cands[env.segment_is_free(np.repeat(dense[i : i + 1], len(cands), axis=0), dense[cands], margin)]
         # dense[i] -> dense[i + 1] lies on a free segment of the input path, so it is free too
         i = int(ok.max()) if len(ok) else i + 1
         keep.append(i)
@@ -378,7 +351,7 @@ def plan_leader_path(
 
     if np.linalg.norm(goal - start) <= SAME_POINT:
         return np.vstack([start, goal])
-    if _segments_free(env, start[None], goal[None], margin)[0]:
+    if env.segment_is_free(start, goal, margin):
         return np.vstack([start, goal])  # the straight line is free: it is the shortest path
 
     found = _rrt_star(
