@@ -133,13 +133,13 @@ def start_placement(
     base = route.points[0]
     goal = route.points[-1]
     tried = 0
+    ahead = point_at(route.points, arcs, min(spacing, L))
+    heading = math.atan2(ahead[1] - base[1], ahead[0] - base[0])
     for bends in (False, True):  # off-bend candidates only where the route's own points give no placement at all
         if fit >= N:
             P = _along(env, route.points, N, spacing, clear, ahead=spacing, reach=reach, bends=bends)
             if P is not None and _free_chain(env, base, P, clear):
                 return P, 0
-        ahead = point_at(route.points, arcs, min(spacing, L))
-        heading = math.atan2(ahead[1] - base[1], ahead[0] - base[0])
         for active in range(min(N - 1, fit + 2), 0, -1):
             parked = N - active
             for Pp in _rings(env, base, parked, spacing, clear, heading) + _snakes(
