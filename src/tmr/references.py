@@ -19,6 +19,7 @@ From a :class:`tmr.route.Route` (the shortest free route and its stations) this 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -135,11 +136,12 @@ def start_placement(
     tried = 0
     ahead = point_at(route.points, arcs, min(spacing, L))
     heading = math.atan2(ahead[1] - base[1], ahead[0] - base[0])
-    for bends in (False, True):  # off-bend candidates only where the route's own points give no placement at all
-        if fit >= N:
-            P = _along(env, route.points, N, spacing, clear, ahead=spacing, reach=reach, bends=bends)
-            if P is not None and _free_chain(env, base, P, clear):
-                return P, 0
+    walks: list[tuple[int, Array, Route]] = []  # parking walks the remaining robots can go on from
+
+    def parkings() -> Iterator[tuple[int, Array, Route]]:
+        """Parkings (most active robots first) whose route to the goal the active robots can chain, each
+        recorded in ``walks`` (the second pass reuses them)."""
+        nonlocal tried
         for active in range(min(N - 1, fit + 2), 0, -1):
             parked = N - active
             for Pp in _rings(env, base, parked, spacing, clear, heading) + _snakes(
@@ -150,14 +152,22 @@ def start_placement(
                     sub = plan_route(env, Pp[-1], goal, lim[parked:])
                 except RouteVerdict:
                     continue
-                if sub.n_min > active:
-                    continue
-                Pa = _along(env, sub.points, active, spacing, clear, ahead=0.0, reach=reach, bends=bends)
-                if Pa is None:
-                    continue
-                P = np.vstack([Pp, Pa])
-                if _free_chain(env, base, P, clear) and _separated(P, 2 * r + 0.02):
-                    return P, parked
+                if sub.n_min <= active:
+                    walks.append((parked, Pp, sub))
+                    yield walks[-1]
+
+    for bends in (False, True):  # off-bend candidates only where the route's own points give no placement at all
+        if fit >= N:
+            P = _along(env, route.points, N, spacing, clear, ahead=spacing, reach=reach, bends=bends)
+            if P is not None and _free_chain(env, base, P, clear):
+                return P, 0
+        for parked, Pp, sub in walks if bends else parkings():
+            Pa = _along(env, sub.points, N - parked, spacing, clear, ahead=0.0, reach=reach, bends=bends)
+            if Pa is None:
+                continue
+            P = np.vstack([Pp, Pa])
+            if _free_chain(env, base, P, clear) and _separated(P, 2 * r + 0.02):
+                return P, parked
     raise PlacementError(
         f"no free start placement of {N} robots was found (along the {L:.1f} m route, or {tried} parking walks from "
         "the anchor); give the start positions explicitly (scenario 'start' or --start)"
