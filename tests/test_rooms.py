@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import shapely
 
-from tmr.environment import Environment
+from tmr.maps import load_environment
 from tmr.sweep import rooms
 from tmr.sweep.rooms import (
     DENSITIES,
@@ -53,7 +53,7 @@ def test_same_seed_same_bytes_other_seed_other_bytes(tmp_path) -> None:
 def test_base_and_goal_clear_in_the_loaded_file(every_room, tmp_path, density, goal_class) -> None:
     room = every_room[(density, goal_class)]
     path = write_geojson(room, tmp_path / f"{room.name}.geojson")
-    env = Environment.from_file(path)  # bounds from the file's top-level member
+    env = load_environment(path)  # bounds from the file's top-level member
     assert env.bounds == (0.0, 0.0, 20.0, 20.0)
     # the file describes exactly the generated obstacles
     mine = shapely.union_all(room.obstacles).intersection(shapely.box(*env.bounds))  # tmr clips to the room

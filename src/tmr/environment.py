@@ -1,4 +1,4 @@
-"""Planar environments: obstacles, inflation by the robot safety radius, clearance queries and map loading.
+"""Planar environments: obstacles, inflation by the robot safety radius and clearance queries.
 
 The world is an axis-aligned rectangular room ``bounds = (xmin, ymin, xmax, ymax)`` [m]; everything outside it
 is an obstacle (the walls). Obstacles are shapely geometries. A robot is a disc of radius ``safety_radius`` r
@@ -18,16 +18,14 @@ Two kinds of query:
 * exact queries (shapely/GEOS): :meth:`Environment.exact_clearance`, :meth:`Environment.segment_clearance` and
   :meth:`Environment.is_free`, used for validity checks (path planner, metrics).
 
-Maps load from ROS ``map_server`` files (``.yaml`` + ``.pgm``/``.png``), GeoJSON (``.geojson``/``.json``) and
-WKT (``.wkt``); see :meth:`Environment.from_file`. Occupancy-grid maps are **polygonised** (occupied cells
+Map files (ROS ``map_server``/Nav2, GeoJSON, WKT) are turned into geometry by :mod:`tmr.maps`
+(:func:`tmr.maps.load_environment`); occupancy-grid maps are **polygonised** there (occupied and unknown cells
 become unions of boxes), so every query works the same for every map source.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import re
 from collections.abc import Iterable, Sequence
 from functools import cached_property
 from pathlib import Path
@@ -35,8 +33,6 @@ from typing import Any
 
 import numpy as np
 import shapely
-import shapely.affinity
-import shapely.errors
 from numpy.typing import ArrayLike, NDArray
 from shapely.geometry import box
 from shapely.geometry.base import BaseGeometry
@@ -49,8 +45,8 @@ __all__ = [
     "Bounds",
     "Environment",
     "bilinear_interpolate",
-    "read_pgm",
-    "parse_map_yaml",
+    "check_bounds",
+    "check_geometry",
 ]
 
 Bounds = tuple[float, float, float, float]
@@ -62,8 +58,6 @@ QUAD_SEGS = 16  # segments per quarter circle when buffering (chord error r(1 - 
 _PAD_CELLS = 4
 # refuse grids bigger than this (e.g. 200 m x 200 m at 5 cm); building the field needs ~60 bytes per cell
 _MAX_CELLS = 16_000_000
-
-MAP_SUFFIXES = (".yaml", ".yml", ".geojson", ".json", ".wkt")
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -79,7 +73,7 @@ def _as_points(points: ArrayLike, what: str = "points") -> NDArray[np.float64]:
     return pts
 
 
-def _check_bounds(bounds: Any, where: str) -> Bounds:
+def check_bounds(bounds: Any, where: str) -> Bounds:
     try:
         values = [float(v) for v in bounds]
     except (TypeError, ValueError):
@@ -152,7 +146,8 @@ def bilinear_interpolate(
 class Environment:
     """A rectangular room with obstacles, inflated by the robot safety radius, with clearance queries.
 
-    Build it with :meth:`from_geometry` or :meth:`from_file`. Attributes (read-only by convention):
+    Build it with :meth:`from_geometry`, or from a map file with :func:`tmr.maps.load_environment`. Attributes
+    (read-only by convention):
 
     * ``bounds`` (xmin, ymin, xmax, ymax) [m] -- the room; outside is wall.
     * ``safety_radius`` r [m] -- robot radius; obstacles are grown by r and the walls inward by r.
@@ -163,6 +158,8 @@ class Environment:
     * ``free`` -- the free space (Polygon or MultiPolygon), the complement of ``inflated`` in the room;
       prepared.
     * ``source`` -- the map file it was loaded from, or None.
+    * ``known_free`` -- for an occupancy-grid map, the bounding box (xmin, ymin, xmax, ymax) [m] of its known free
+      cells (figures are framed on it); None otherwise.
 
     The signed distance field is built lazily on the first grid query and cached; the exact queries use a
     prepared polygon and an STR-tree of the free-space boundary segments (also cached).
@@ -179,7 +176,8 @@ class Environment:
     ) -> None:
         where = str(source) if source is not None else "environment"
         self.source: Path | None = Path(source) if source is not None else None
-        self.bounds: Bounds = _check_bounds(bounds, where)
+        self.known_free: Bounds | None = None
+        self.bounds: Bounds = check_bounds(bounds, where)
         self.safety_radius: float = _check_positive(safety_radius, "safety_radius [m]", allow_zero=True)
         self.resolution: float = _check_positive(resolution, "resolution [m]")
         xmin, ymin, xmax, ymax = self.bounds
@@ -230,53 +228,6 @@ class Environment:
         ``resolution`` [m] cell of the distance field. Invalid geometry raises MapError.
         """
         return cls(obstacles, bounds, safety_radius, resolution)
-
-    @classmethod
-    def from_file(
-        cls,
-        path: str | Path,
-        bounds: Sequence[float] | None = None,
-        safety_radius: float = DEFAULT_SAFETY_RADIUS,
-        resolution: float = DEFAULT_RESOLUTION,
-    ) -> Environment:
-        """Load a map file; raises MapError naming the file and the problem.
-
-        * ``.yaml``/``.yml``: ROS ``map_server`` metadata (``image``, ``resolution``, ``origin: [x, y, yaw]``,
-          ``negate``, ``occupied_thresh``, ``free_thresh``, ``mode``) with a PGM (P5 binary or P2 ASCII, 8 or
-          16 bit) or PNG image. Occupied **and unknown** cells are obstacles (conservative). The room is the
-          image footprint unless ``bounds`` is given.
-        * ``.geojson``/``.json``: a FeatureCollection, Feature, GeometryCollection or bare geometry. Polygons
-          and multipolygons are obstacles; a Point (or MultiPoint) with a ``radius`` property [m] is a disc; a
-          LineString with a ``width`` property [m] is a wall of that thickness (flat ends); points/lines
-          without them are zero-thickness obstacles. The room is ``bounds`` or else a top-level ``"bounds":
-          [xmin, ymin, xmax, ymax]`` member of the document.
-        * ``.wkt``: one WKT geometry (e.g. a GEOMETRYCOLLECTION or MULTIPOLYGON), or one per line; ``#``
-          starts a comment line; a comment ``# bounds: xmin ymin xmax ymax`` gives the room when ``bounds`` is
-          None.
-        """
-        p = Path(path)
-        if not p.exists():
-            raise MapError(f"{p}: map file not found")
-        if not p.is_file():
-            raise MapError(f"{p}: not a file")
-        suffix = p.suffix.lower()
-        if suffix in (".yaml", ".yml"):
-            obstacles, file_bounds = _load_ros_map(p)
-        elif suffix in (".geojson", ".json"):
-            obstacles, file_bounds = _load_geojson(p)
-        elif suffix == ".wkt":
-            obstacles, file_bounds = _load_wkt(p)
-        elif suffix in (".pgm", ".png"):
-            raise MapError(f"{p}: give the ROS map_server .yaml file that describes this image (resolution, origin)")
-        else:
-            raise MapError(f"{p}: unknown map format {suffix!r}; supported: {', '.join(MAP_SUFFIXES)}")
-        room = bounds if bounds is not None else file_bounds
-        if room is None:
-            raise MapError(
-                f"{p}: no room bounds: pass bounds=(xmin, ymin, xmax, ymax) or put them in the file "
-                f"(GeoJSON: top-level \"bounds\" member; WKT: a '# bounds: xmin ymin xmax ymax' comment)"
-            )
-        return cls(obstacles, room, safety_radius, resolution, source=p)
 
     # --------------------------------------------------------------------------------------------------------
     # pickling
@@ -513,29 +464,31 @@ class Environment:
             out[seg] = res
         return out.reshape(shape)
 
-    def segment_is_free(self, a: ArrayLike, b: ArrayLike, margin: float = 0.0) -> NDArray[np.bool_]:
+    def segment_is_free(self, a: ArrayLike, b: ArrayLike, margin: ArrayLike = 0.0) -> NDArray[np.bool_]:
         """Whether each straight segment a-b keeps a clearance > ``margin`` [m] from the inflated obstacles and
         walls: ``segment_clearance(a, b) > margin`` without measuring how deep a blocked segment goes when
-        ``margin`` ≥ 0 (exact, and much cheaper for long blocked segments); shape (...)."""
-        margin = float(margin)
-        if not math.isfinite(margin):
-            raise ParameterError(f"margin must be finite, got {margin}")
-        if margin < 0.0:
-            return np.asarray(self.segment_clearance(a, b)) > margin
+        ``margin`` ≥ 0 (exact, and much cheaper for long blocked segments); shape (...). ``margin`` is a scalar
+        or one value per segment (broadcast with the segments' shape)."""
         pa, pb = np.broadcast_arrays(_as_points(a, "a"), _as_points(b, "b"))
         shape = pa.shape[:-1]
+        m = np.asarray(margin, dtype=float)
+        if not np.all(np.isfinite(m)):
+            raise ParameterError(f"margin must be finite, got {margin}")
+        if np.any(m < 0.0):
+            return np.asarray(self.segment_clearance(a, b)) > m
+        M = np.broadcast_to(m, shape).reshape(-1)
         A, B = pa.reshape(-1, 2), pb.reshape(-1, 2)
         out = np.zeros(len(A), dtype=bool)
         degenerate = np.all(A == B, axis=1)
         if degenerate.any():
-            out[degenerate] = self.exact_clearance(A[degenerate]) > margin
+            out[degenerate] = self.exact_clearance(A[degenerate]) > M[degenerate]
         seg = np.flatnonzero(~degenerate)
         if len(seg):
             lines = shapely.linestrings(np.stack([A[seg], B[seg]], axis=1))
             covered = shapely.covers(self.free, lines)
             inside = seg[covered]
             if len(inside):
-                out[inside] = self._boundary_distance(lines[covered]) > margin
+                out[inside] = self._boundary_distance(lines[covered]) > M[inside]
         return out.reshape(shape)
 
     def _penetration(self, A: NDArray[np.float64], B: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -578,13 +531,13 @@ def _union_obstacles(obstacles: BaseGeometry | Iterable[BaseGeometry] | None, wh
     for k, g in enumerate(geoms):
         if not isinstance(g, BaseGeometry):
             raise MapError(f"{where}: obstacle #{k} is not a shapely geometry: {type(g).__name__}")
-        _check_geometry(g, f"{where}: obstacle #{k}")
+        check_geometry(g, f"{where}: obstacle #{k}")
     if not geoms:
         return shapely.GeometryCollection()
     return shapely.union_all(geoms)
 
 
-def _check_geometry(g: BaseGeometry, what: str) -> None:
+def check_geometry(g: BaseGeometry, what: str) -> None:
     if g.is_empty:
         return
     coords = shapely.get_coordinates(g)
@@ -595,392 +548,3 @@ def _check_geometry(g: BaseGeometry, what: str) -> None:
             f"{what}: invalid geometry ({shapely.is_valid_reason(g)}); fix the polygon "
             f"(no self-intersections, closed rings, holes inside the shell), e.g. with shapely.make_valid"
         )
-
-
-# ------------------------------------------------------------------------------------------------------------
-# ROS map_server maps
-# ------------------------------------------------------------------------------------------------------------
-_YAML_KEY = re.compile(r"^([A-Za-z_][A-Za-z0-9_\-]*)\s*:(?:\s+(.*)|\s*)$")
-
-
-def _strip_comment(line: str) -> str:
-    """Remove a ``#`` comment that is not inside quotes."""
-    quote = None
-    for k, ch in enumerate(line):
-        if quote:
-            if ch == quote:
-                quote = None
-        elif ch in "'\"":
-            quote = ch
-        elif ch == "#" and (k == 0 or line[k - 1] in " \t"):
-            return line[:k]
-    return line
-
-
-def _yaml_scalar(text: str) -> Any:
-    text = text.strip()
-    if len(text) >= 2 and text[0] == text[-1] and text[0] in "'\"":
-        return text[1:-1]
-    low = text.lower()
-    if low in ("true", "yes", "on"):
-        return True
-    if low in ("false", "no", "off"):
-        return False
-    if low in ("null", "~", ""):
-        return None
-    try:
-        return int(text)
-    except ValueError:
-        pass
-    try:
-        return float(text)
-    except ValueError:
-        return text
-
-
-def _yaml_flow_list(text: str, where: str) -> list[Any]:
-    inner = text.strip()[1:-1].strip()
-    if not inner:
-        return []
-    if "[" in inner or "{" in inner:
-        raise MapError(f"{where}: nested lists are not supported in a map_server yaml: {text!r}")
-    return [_yaml_scalar(item) for item in inner.split(",")]
-
-
-def parse_map_yaml(text: str, path: str | Path = "<yaml>") -> dict[str, Any]:
-    """Parse the flat ``key: value`` YAML of a ROS map_server map (no PyYAML needed).
-
-    Supports comments, quoted strings, numbers, booleans, flow lists ``[x, y, yaw]`` and block lists
-    (``- item`` lines under an empty ``key:``). Anything else (nested mappings, a line without ``key:``,
-    duplicate keys) raises MapError naming the file and the line.
-    """
-    result: dict[str, Any] = {}
-    pending: str | None = None  # key waiting for block-list items
-    for lineno, raw in enumerate(text.splitlines(), start=1):
-        line = _strip_comment(raw).rstrip()
-        stripped = line.strip()
-        if not stripped or stripped in ("---", "..."):
-            continue
-        where = f"{path}: line {lineno}"
-        if stripped.startswith("- "):
-            if pending is None:
-                raise MapError(f"{where}: list item {stripped!r} does not follow a 'key:' line")
-            if result[pending] is None:
-                result[pending] = []
-            result[pending].append(_yaml_scalar(stripped[2:]))
-            continue
-        if line[0] in " \t":
-            raise MapError(f"{where}: nested mappings are not supported in a map_server yaml: {raw.strip()!r}")
-        m = _YAML_KEY.match(line)
-        if m is None:
-            raise MapError(f"{where}: expected 'key: value', got {raw.strip()[:60]!r}")
-        key, value = m.group(1), (m.group(2) or "").strip()
-        if key in result:
-            raise MapError(f"{where}: duplicate key {key!r}")
-        if value.startswith("["):
-            if not value.endswith("]"):
-                raise MapError(f"{where}: unterminated list {value!r}")
-            result[key] = _yaml_flow_list(value, where)
-            pending = None
-        elif value.startswith("{"):
-            raise MapError(f"{where}: nested mappings are not supported in a map_server yaml: {value!r}")
-        elif value == "":
-            result[key] = None
-            pending = key
-        else:
-            result[key] = _yaml_scalar(value)
-            pending = None
-    return result
-
-
-def read_pgm(path: str | Path) -> tuple[NDArray[np.int64], int]:
-    """Read a PGM image (P5 binary or P2 ASCII, 8 or 16 bit) -> (pixels (height, width), maxval).
-
-    Row 0 is the top of the image. Raises MapError naming the file and what is wrong with the header or data.
-    """
-    p = Path(path)
-    try:
-        data = p.read_bytes()
-    except OSError as exc:
-        raise MapError(f"{p}: cannot read image: {exc.strerror or exc}") from None
-    magic = data[:2]
-    if magic not in (b"P5", b"P2"):
-        kind = {b"P1": "PBM", b"P4": "PBM", b"P3": "PPM (colour)", b"P6": "PPM (colour)"}.get(magic)
-        hint = f" (this is a {kind} image; save it as greyscale PGM)" if kind else ""
-        raise MapError(f"{p}: not a PGM image: magic number {magic!r}, expected b'P5' or b'P2'{hint}")
-    pos = 2
-    fields: list[int] = []
-    n = len(data)
-    while len(fields) < 3:
-        while pos < n and data[pos : pos + 1].isspace():
-            pos += 1
-        if pos < n and data[pos : pos + 1] == b"#":
-            while pos < n and data[pos : pos + 1] not in (b"\n", b"\r"):
-                pos += 1
-            continue
-        start = pos
-        while pos < n and data[pos : pos + 1].isdigit():
-            pos += 1
-        if start == pos:
-            got = data[start : start + 10]
-            name = ("width", "height", "maxval")[len(fields)]
-            raise MapError(f"{p}: bad PGM header: expected the {name} (a positive integer), got {got!r}")
-        fields.append(int(data[start:pos]))
-    width, height, maxval = fields
-    if width <= 0 or height <= 0:
-        raise MapError(f"{p}: bad PGM header: image size {width} x {height}")
-    if not 0 < maxval < 65536:
-        raise MapError(f"{p}: bad PGM header: maxval {maxval} must be in 1..65535")
-    count = width * height
-    if magic == b"P5":
-        if pos >= n or not data[pos : pos + 1].isspace():
-            raise MapError(f"{p}: bad PGM header: no whitespace after maxval")
-        pos += 1
-        dtype = np.dtype(">u2") if maxval > 255 else np.dtype("u1")
-        raster = data[pos:]
-        if len(raster) < count * dtype.itemsize:
-            raise MapError(
-                f"{p}: truncated PGM: {width} x {height} pixels need {count * dtype.itemsize} bytes, "
-                f"found {len(raster)}"
-            )
-        pixels = np.frombuffer(raster, dtype=dtype, count=count).astype(np.int64)
-    else:
-        body = re.sub(rb"#[^\n\r]*", b" ", data[pos:])
-        try:
-            values = np.array(body.split(), dtype=np.int64)
-        except (ValueError, OverflowError):
-            raise MapError(f"{p}: bad P2 PGM data: non-integer pixel values") from None
-        if len(values) < count:
-            raise MapError(f"{p}: truncated PGM: {width} x {height} pixels, found {len(values)} values")
-        pixels = values[:count]
-    if pixels.size and (pixels.max() > maxval or pixels.min() < 0):
-        raise MapError(f"{p}: PGM pixel values outside 0..{maxval}")
-    return pixels.reshape(height, width), maxval
-
-
-def _read_png(path: Path) -> tuple[NDArray[np.float64], int]:
-    import matplotlib.image as mpimg  # matplotlib is a dependency; it reads PNG through Pillow
-
-    try:
-        img = np.asarray(mpimg.imread(path), dtype=float)
-    except Exception as exc:  # any decoder error means a bad map image
-        raise MapError(f"{path}: cannot read PNG image: {exc}") from None
-    if img.ndim == 3:
-        img = img[..., :3].mean(axis=-1)  # map_server averages the colour channels
-    return img * 255.0, 255
-
-
-def _number(meta: dict[str, Any], key: str, where: str, default: float | None = None) -> float:
-    if key not in meta or meta[key] is None:
-        if default is None:
-            raise MapError(f"{where}: missing required key {key!r}")
-        return default
-    v = meta[key]
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        raise MapError(f"{where}: {key} must be a finite number, got {v!r}")
-    return float(v)
-
-
-def _load_ros_map(path: Path) -> tuple[BaseGeometry, Bounds]:
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError:
-        raise MapError(f"{path}: not a text file (map_server yaml expected)") from None
-    meta = parse_map_yaml(text, path)
-    if not meta:
-        raise MapError(f"{path}: empty map yaml (needs image, resolution, origin)")
-    where = str(path)
-    image = meta.get("image")
-    if not isinstance(image, str) or not image.strip():
-        raise MapError(f"{where}: missing required key 'image' (path of the .pgm/.png, relative to the yaml)")
-    res = _number(meta, "resolution", where)
-    if res <= 0:
-        raise MapError(f"{where}: resolution must be a positive number of metres per pixel, got {res}")
-    origin = meta.get("origin")
-    if (
-        not isinstance(origin, list)
-        or len(origin) not in (2, 3)
-        or not all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in origin)
-    ):
-        raise MapError(f"{where}: origin must be a list [x, y, yaw] of finite numbers, got {origin!r}")
-    ox, oy = float(origin[0]), float(origin[1])
-    yaw = float(origin[2]) if len(origin) == 3 else 0.0
-    negate = meta.get("negate", 0)
-    if negate not in (0, 1, True, False):
-        raise MapError(f"{where}: negate must be 0 or 1, got {negate!r}")
-    occ_th = _number(meta, "occupied_thresh", where, 0.65)
-    free_th = _number(meta, "free_thresh", where, 0.196)
-    if not 0.0 <= free_th <= occ_th <= 1.0:
-        raise MapError(f"{where}: need 0 <= free_thresh <= occupied_thresh <= 1, got {free_th} and {occ_th}")
-    mode = str(meta.get("mode", "trinary")).lower()
-    if mode not in ("trinary", "scale", "raw"):
-        raise MapError(f"{where}: mode must be trinary, scale or raw, got {meta.get('mode')!r}")
-
-    img_path = Path(image.strip())
-    if not img_path.is_absolute():
-        img_path = path.parent / img_path
-    if not img_path.is_file():
-        raise MapError(f"{where}: image file {img_path} not found")
-    if img_path.suffix.lower() == ".png":
-        pixels, maxval = _read_png(img_path)
-    elif img_path.suffix.lower() == ".pgm":
-        pixels, maxval = read_pgm(img_path)
-    else:
-        raise MapError(f"{where}: unsupported image format {img_path.suffix!r}; use PGM (P5/P2) or PNG")
-
-    if mode == "raw":
-        # raw: the pixel value is the occupancy in percent (values above 100, e.g. 255, are unknown)
-        p_occ = np.where(pixels > 100, np.nan, pixels / 100.0)
-    else:
-        p_occ = pixels / maxval if negate else (maxval - pixels) / maxval
-    # occupied above occupied_thresh, free below free_thresh; unknown in between (all modes): obstacle
-    free = p_occ < free_th
-    occupied = ~free
-    height, width = occupied.shape
-    geom = _polygonise(occupied, res, ox, oy)
-    footprint = box(ox, oy, ox + width * res, oy + height * res)
-    if yaw != 0.0:
-        geom = shapely.affinity.rotate(geom, yaw, origin=(ox, oy), use_radians=True)
-        footprint = shapely.affinity.rotate(footprint, yaw, origin=(ox, oy), use_radians=True)
-        rect = box(*footprint.bounds)
-        geom = shapely.union(geom, rect.difference(footprint))
-    return geom, tuple(float(v) for v in footprint.bounds)  # type: ignore[return-value]
-
-
-def _polygonise(occupied: NDArray[np.bool_], res: float, ox: float, oy: float) -> BaseGeometry:
-    """Union of boxes covering the occupied cells; image row 0 is the top (largest y)."""
-    height, width = occupied.shape
-    if not occupied.any():
-        return shapely.GeometryCollection()
-    padded = np.zeros((height, width + 2), dtype=np.int8)
-    padded[:, 1:-1] = occupied
-    diff = np.diff(padded, axis=1)
-    rows_s, cols_s = np.nonzero(diff == 1)
-    _, cols_e = np.nonzero(diff == -1)  # same row-major order as the starts
-    # merge identical runs of consecutive rows into one rectangle
-    rects: list[list[int]] = []  # [col_start, col_end, row_top, row_bottom]
-    open_runs: dict[tuple[int, int], list[int]] = {}
-    for r, c0, c1 in zip(rows_s.tolist(), cols_s.tolist(), cols_e.tolist(), strict=True):
-        rect = open_runs.get((c0, c1))
-        if rect is not None and rect[3] == r - 1:
-            rect[3] = r
-        else:
-            rect = [c0, c1, r, r]
-            rects.append(rect)
-            open_runs[(c0, c1)] = rect
-    arr = np.array(rects, dtype=float)
-    x0 = ox + arr[:, 0] * res
-    x1 = ox + arr[:, 1] * res
-    y1 = oy + (height - arr[:, 2]) * res
-    y0 = oy + (height - arr[:, 3] - 1) * res
-    return shapely.union_all(shapely.box(x0, y0, x1, y1))
-
-
-# ------------------------------------------------------------------------------------------------------------
-# GeoJSON and WKT
-# ------------------------------------------------------------------------------------------------------------
-def _positive_property(props: dict[str, Any], key: str, what: str) -> float | None:
-    if key not in props or props[key] is None:
-        return None
-    v = props[key]
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or v <= 0:
-        raise MapError(f"{what}: property {key!r} must be a positive number of metres, got {v!r}")
-    return float(v)
-
-
-def _geojson_geometry(obj: Any, props: dict[str, Any], what: str) -> list[BaseGeometry]:
-    if not isinstance(obj, dict) or "type" not in obj:
-        raise MapError(f"{what}: expected a GeoJSON geometry object with a 'type', got {str(obj)[:60]!r}")
-    kind = obj["type"]
-    if kind == "GeometryCollection":
-        out: list[BaseGeometry] = []
-        for k, g in enumerate(obj.get("geometries") or []):
-            out += _geojson_geometry(g, props, f"{what} geometry #{k}")
-        return out
-    if kind not in ("Point", "MultiPoint", "LineString", "MultiLineString", "Polygon", "MultiPolygon"):
-        raise MapError(f"{what}: unsupported geometry type {kind!r}")
-    try:
-        geom = shapely.geometry.shape(obj)
-    except Exception as exc:  # shapely raises various errors on bad coordinates
-        raise MapError(f"{what}: malformed {kind} coordinates: {exc}") from None
-    _check_geometry(geom, what)
-    if kind in ("Point", "MultiPoint"):
-        radius = _positive_property(props, "radius", what)
-        if radius is not None:
-            geom = geom.buffer(radius, quad_segs=QUAD_SEGS)
-    elif kind in ("LineString", "MultiLineString"):
-        width = _positive_property(props, "width", what)
-        if width is not None:
-            geom = geom.buffer(width / 2.0, quad_segs=QUAD_SEGS, cap_style="flat", join_style="mitre")
-    return [geom]
-
-
-def _load_geojson(path: Path) -> tuple[list[BaseGeometry], Bounds | None]:
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8-sig"))
-    except UnicodeDecodeError:
-        raise MapError(f"{path}: not a text file (GeoJSON expected)") from None
-    except json.JSONDecodeError as exc:
-        raise MapError(f"{path}: not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
-    if not isinstance(doc, dict) or "type" not in doc:
-        raise MapError(f"{path}: not a GeoJSON object (a JSON object with a 'type' member expected)")
-    bounds = None
-    if "bounds" in doc:
-        bounds = _check_bounds(doc["bounds"], f"{path}: top-level 'bounds'")
-    geoms: list[BaseGeometry] = []
-    kind = doc["type"]
-    if kind == "FeatureCollection":
-        features = doc.get("features")
-        if not isinstance(features, list):
-            raise MapError(f"{path}: FeatureCollection without a 'features' list")
-    elif kind == "Feature":
-        features = [doc]
-    else:
-        return _geojson_geometry(doc, {}, str(path)), bounds
-    for k, feat in enumerate(features):
-        what = f"{path}: feature #{k}"
-        if not isinstance(feat, dict) or feat.get("type") != "Feature":
-            raise MapError(f"{what}: not a GeoJSON Feature")
-        props = feat.get("properties") or {}
-        if not isinstance(props, dict):
-            raise MapError(f"{what}: 'properties' must be an object")
-        if props.get("name"):
-            what += f" ({props['name']})"
-        if feat.get("geometry") is None:
-            continue  # GeoJSON allows unlocated features
-        geoms += _geojson_geometry(feat["geometry"], props, what)
-    return geoms, bounds
-
-
-_WKT_BOUNDS = re.compile(r"^#\s*bounds\s*[:=]\s*(.*)$", re.IGNORECASE)
-
-
-def _load_wkt(path: Path) -> tuple[list[BaseGeometry], Bounds | None]:
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError:
-        raise MapError(f"{path}: not a text file (WKT expected)") from None
-    bounds = None
-    body: list[tuple[int, str]] = []
-    for lineno, line in enumerate(text.splitlines(), start=1):
-        s = line.strip()
-        m = _WKT_BOUNDS.match(s)
-        if m:
-            numbers = m.group(1).replace(",", " ").replace("[", " ").replace("]", " ").split()
-            bounds = _check_bounds(numbers, f"{path}: line {lineno}")
-        elif s and not s.startswith("#"):
-            body.append((lineno, s))
-    if not body:
-        return [], bounds
-    try:
-        geoms = [shapely.from_wkt(" ".join(s for _, s in body))]
-    except shapely.errors.GEOSException:
-        geoms = []
-        for lineno, s in body:  # one geometry per line: find the bad one
-            try:
-                geoms.append(shapely.from_wkt(s))
-            except shapely.errors.GEOSException as exc:
-                raise MapError(f"{path}: line {lineno}: not valid WKT ({exc}): {s[:60]!r}") from None
-    for k, g in enumerate(geoms):
-        _check_geometry(g, f"{path}: geometry #{k}")
-    return geoms, bounds

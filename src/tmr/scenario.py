@@ -22,6 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tmr.environment import DEFAULT_RESOLUTION, DEFAULT_SAFETY_RADIUS, Environment
 from tmr.errors import ParameterError, ScenarioError
+from tmr.maps import load_environment
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -211,7 +212,7 @@ def _load_toml(path: Path) -> Scenario:
     map_path = Path(m["file"])
     if not map_path.is_absolute():
         map_path = path.parent / map_path
-    env = Environment.from_file(
+    env = load_environment(
         map_path,
         bounds=m.get("bounds"),
         safety_radius=_number(m.get("safety_radius", DEFAULT_SAFETY_RADIUS), "map.safety_radius", label),
@@ -252,11 +253,11 @@ def scenario_from_map(
 ) -> Scenario:
     """Scenario from a map file plus base and goal [m] (the ``--map --base --goal`` command-line use).
 
-    ``map_path``: any format of :meth:`Environment.from_file`; ``bounds`` is needed for GeoJSON/WKT files that
+    ``map_path``: any format of :func:`tmr.maps.load_map`; ``bounds`` is needed for GeoJSON/WKT files that
     do not carry their own. Validated like a scenario file (ScenarioError / ParameterError / MapError).
     """
     p = Path(map_path)
-    env = Environment.from_file(p, bounds=bounds, safety_radius=safety_radius, resolution=resolution)
+    env = load_environment(p, bounds=bounds, safety_radius=safety_radius, resolution=resolution)
     return Scenario(
         name=name if name is not None else p.stem,
         description=f"map {p.name}",

@@ -207,7 +207,7 @@ def _r(v: float) -> float:
 
 
 def _geometry(spec: tuple[Any, ...]) -> BaseGeometry:
-    """The geometry Environment.from_file builds from the GeoJSON feature of ``spec`` (same buffer settings)."""
+    """The geometry tmr.maps.load_environment builds from the GeoJSON feature of ``spec`` (same buffer settings)."""
     kind = spec[0]
     if kind == "disc":
         _, x, y, radius = spec
@@ -533,7 +533,7 @@ def room_set(n_rooms: int, seed: int = 0) -> list[tuple[int, str, str]]:
 # GeoJSON
 # ------------------------------------------------------------------------------------------------------------
 def room_geojson(room: Room) -> dict[str, Any]:
-    """The room as a GeoJSON FeatureCollection with a top-level ``bounds`` (loadable by Environment.from_file):
+    """The room as a GeoJSON FeatureCollection with a top-level ``bounds`` (loadable by tmr.maps.load_environment):
     discs as Points with a ``radius``, walls as LineStrings with a ``width``, the rest as Polygons. Base, goal
     and the generator inputs go into a top-level ``tmr_room`` member (ignored by the loader)."""
     features = []
