@@ -21,7 +21,7 @@ def run_dir(tmp_path_factory):
 
 
 def test_outputs(run_dir) -> None:
-    assert sorted(p.name for p in run_dir.iterdir()) == ["bases.csv", "plan.json", "platform.csv"]
+    assert sorted(p.name for p in run_dir.iterdir()) == ["bases.csv", "plan.json", "platform.csv", "run.json"]
     d = json.loads((run_dir / "plan.json").read_text())
     assert d["format"] == PLAN_FORMAT and d["check"]["ok"] and d["check"]["mu_min"] > 0
     mu = np.array(d["samples"]["mu"])
@@ -39,10 +39,10 @@ def test_same_inputs_same_bytes(run_dir, tmp_path) -> None:
     (out / "plan.json").write_text("{}")
     (out / "notes.txt").write_text("the user's own file")
     assert main(["plan", "--out", str(out), "--no-plots"]) == 0
-    for name in ("plan.json", "bases.csv", "platform.csv"):
+    for name in ("plan.json", "run.json", "bases.csv", "platform.csv"):
         assert (out / name).read_bytes() == (run_dir / name).read_bytes()
     # the stale figure of the older run is gone (--no-plots), files that are not ours are kept
-    assert sorted(q.name for q in out.iterdir()) == ["bases.csv", "notes.txt", "plan.json", "platform.csv"]
+    assert sorted(q.name for q in out.iterdir()) == ["bases.csv", "notes.txt", "plan.json", "platform.csv", "run.json"]
 
 
 SMALL_SCENE = (

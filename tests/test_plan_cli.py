@@ -36,6 +36,7 @@ def test_scenario_a_writes_every_output(tmp_path, capsys):
             "chain_poses.png",
             "distance_errors.png",
             "metrics.json",
+            "run.json",
             "speeds.png",
             "trajectories.csv",
             "trajectories.json",

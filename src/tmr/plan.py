@@ -182,6 +182,9 @@ def write_outputs(
         io.write_trajectories_json(plan, tmp / "trajectories.json", filtered=filtered)
         io.write_trajectories_csv(plan, tmp / "trajectories.csv", filtered=filtered)
         io.write_metrics_json(metrics.to_dict() | (extra or {}), tmp / "metrics.json")
+        from tmr.rundir import write_chain_run
+
+        write_chain_run(tmp / "run.json", plan, env, extra)  # scenario, map and tether parameters (tmr.replay)
         if plots:
             from tmr import plot
 

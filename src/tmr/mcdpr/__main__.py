@@ -140,7 +140,7 @@ def _csv(header: list[str], ints: np.ndarray, floats: np.ndarray) -> str:
 
 
 #: Every file name ``plan`` may write; a run deletes those of them it did not produce (stale ones of an older run).
-OUTPUT_NAMES = ("plan.json", "bases.csv", "platform.csv", "topview.png", "mu.png", "tensions.png")
+OUTPUT_NAMES = ("plan.json", "run.json", "bases.csv", "platform.csv", "topview.png", "mu.png", "tensions.png")
 
 
 def _existing_ancestor(path: Path) -> Path:
@@ -174,6 +174,9 @@ def write_outputs(
     try:
         text = json.dumps(plan_dict(robot, scene, params, result, chk), indent=1, sort_keys=True)
         atomic_write_text(tmp / "plan.json", text + "\n")
+        from tmr.rundir import write_mcdpr_run
+
+        write_mcdpr_run(tmp / "run.json", robot, scene, params)  # robot and scene geometry (tmr.replay)
         T, p = result.bases.shape[:2]
         ints = np.column_stack([np.arange(T), result.segment])
         brows = np.hstack([result.bases.reshape(T, -1), result.headings])
