@@ -34,17 +34,24 @@ from tmr.ccma.errors import CcmaError, ConvergenceError
 from tmr.ccma.sim import ASSEMBLY_TOL, SimResult, State, agent_poses, end_effector_pose, newton
 
 __all__ = [
+    "CONDITION_LIMIT",
     "IKResult",
     "Objective",
     "Target",
     "gauss_newton_hessian",
     "reached",
     "TrackResult",
+    "conditioning",
     "objective",
     "sensitivity",
     "solve_ik",
     "track",
 ]
+
+
+#: Condition number of the end-effector sensitivity above which a configuration is called near-singular and the next
+#: IK step is damped (see :func:`conditioning`).
+CONDITION_LIMIT = 100.0
 
 
 class Target(NamedTuple):
@@ -107,6 +114,32 @@ def sensitivity(model: EnergyModel, state: State, u: np.ndarray) -> np.ndarray:
     _, _, h = model.egh(state.x, u, p)
     _, _, _, exu = model.ik(state.x, u, p, np.zeros(12))
     return -_solve_h(h, exu)
+
+
+def task_dof(model: EnergyModel) -> int:
+    """Number of end-effector coordinates the system controls: x, y, z, yaw and one per tilt axis (at most 6 and at
+    most the number of controls)."""
+    return min(6, 4 + len(model.system.tilt_axes), model.nu)
+
+
+def conditioning(model: EnergyModel, state: State, hessian: np.ndarray, u: np.ndarray) -> tuple[float, float]:
+    """Smallest task singular value σ_d [m per unit control] and condition number σ_1/σ_d of the end-effector
+    sensitivity J = ∂r/∂x · dx*/du at a converged state (Kumar 2019 eq. 6 for dx*/du).
+
+    r stacks the end-effector point [m] and ℓ_R/√2 · R_EE (a rotation rate ω changes it by ℓ_R |ω|), so J is
+    (12, m) in metres. Its d = :func:`task_dof` largest singular values are the end-effector directions the agents
+    can drive; near a singular configuration (e.g. a leg stretched straight) σ_d → 0 — the end-effector can no longer
+    move that way — and the condition number grows without bound. ``hessian`` is ∇ₓ²E at ``state``.
+    """
+    p = model.params(state.r_ref)
+    u = np.asarray(u, float)
+    t = model.target_vector(np.zeros(3), np.eye(3))
+    _, _, _, exu = model.ik(state.x, u, p, t)
+    jr, _ = model.gn(state.x, u, p, t)
+    sv = np.linalg.svd(jr @ -_solve_h(hessian, exu), compute_uv=False)
+    d = task_dof(model)
+    low = float(sv[d - 1])
+    return low, float(sv[0] / low) if low > 0 else float("inf")
 
 
 def gauss_newton_hessian(model: EnergyModel, sim: SimResult, u: np.ndarray, target: Target) -> np.ndarray:
@@ -200,6 +233,7 @@ class IKResult(NamedTuple):
     history: np.ndarray
     time: float
     message: str
+    hessian: np.ndarray | None = None
 
 
 def solve_ik(
@@ -211,11 +245,15 @@ def solve_ik(
     hess_inv0: np.ndarray | None = None,
     gtol: float = 1e-9,
     max_iter: int = 200,
+    damping: float = 0.0,
 ) -> IKResult:
     """Controls reaching ``target`` from the warm start (``state``, ``u0``) by BFGS on O(u) (Kumar 2019 §III-B/C).
 
     ``gtol`` [m] is the BFGS tolerance on ‖dO/du‖∞; ``hess_inv0`` an initial inverse-Hessian estimate (default: the
     inverse of :func:`gauss_newton_hessian` at ``u0``; or pass the previous step's ``hess_inv`` along a path).
+    ``damping`` λ [m²] ≥ 0 is added to the diagonal of the Gauss–Newton estimate before it is inverted (damped least
+    squares: the first BFGS step shrinks in the directions the end-effector barely moves; :func:`track` sets it near
+    singular configurations). It changes only the start of BFGS, not the minimiser.
     Raises :class:`CcmaError` if ``u0`` is not ``model.nu`` finite numbers, the target position not 3 finite numbers
     or the target rotation not a rotation matrix.
     """
@@ -230,6 +268,8 @@ def solve_ik(
         )
     if hess_inv0 is None:
         b = gauss_newton_hessian(model, obj.best_sim, u0, target)
+        if damping > 0:
+            b = b + damping * np.eye(b.shape[0])
         hess_inv0 = _positive_definite(np.linalg.inv(_positive_definite(b)))
     else:
         hess_inv0 = _positive_definite(hess_inv0)
@@ -257,6 +297,7 @@ def solve_ik(
         history=np.array(obj.history),
         time=elapsed,
         message=str(res.message),
+        hessian=sim.hessian,
     )
 
 
@@ -264,7 +305,10 @@ class TrackResult(NamedTuple):
     """A tracked end-effector path (K targets). Arrays: ``u`` (K, m) controls; ``agents`` (K, n_agents, 3) agent
     x, y [m], yaw [rad]; ``ee_position`` (K, 3) [m], ``ee_rotation`` (K, 3, 3) reached; ``position_error`` [m] and
     ``rotation_error`` [rad] (K,); ``residual`` (K,) [m²]; ``iterations``, ``evaluations``, ``newton_iterations``
-    (K,) per step; ``step_time`` (K,) [s]; ``histories`` per-step BFGS convergence (time [s], O [m²])."""
+    (K,) per step; ``step_time`` (K,) [s]; ``histories`` per-step BFGS convergence (time [s], O [m²]); ``condition``
+    (K,) condition number of the end-effector sensitivity at the reached state and ``sigma_min`` (K,) its smallest
+    task singular value [m] (:func:`conditioning`); ``damped`` (K,) whether the step was solved with damping because
+    the previous state was near-singular (condition > ``condition_limit``)."""
 
     u: np.ndarray
     agents: np.ndarray
@@ -279,6 +323,9 @@ class TrackResult(NamedTuple):
     step_time: np.ndarray
     histories: list[np.ndarray]
     states: list[State]
+    condition: np.ndarray
+    sigma_min: np.ndarray
+    damped: np.ndarray
 
 
 def track(
@@ -291,11 +338,16 @@ def track(
     gtol: float = 1e-9,
     keep_states: bool = False,
     init: str = "gauss-newton",
+    condition_limit: float = CONDITION_LIMIT,
 ) -> TrackResult:
     """Follow the targets (positions (K, 3) [m], rotations (K, 3, 3)) one IK solve per target, warm-starting each
     from the previous solution's controls and state. BFGS starts every step from the Gauss–Newton estimate
     (``init="gauss-newton"``, :func:`gauss_newton_hessian`) or, after the first step, from the previous step's
-    inverse-Hessian estimate (``init="warm"``)."""
+    inverse-Hessian estimate (``init="warm"``).
+
+    After every step the conditioning of the end-effector sensitivity is recorded (:func:`conditioning`); when it
+    exceeds ``condition_limit`` the next step is damped: λ = 2 (σ_1 / ``condition_limit``)² [m²] is added to the
+    Gauss–Newton estimate that starts BFGS (:func:`solve_ik`), which bounds that estimate's condition number."""
     if init not in ("gauss-newton", "warm"):
         raise ValueError(f"init must be 'gauss-newton' or 'warm', got {init!r}")
     from tmr.ccma.sim import reference_state
@@ -313,11 +365,17 @@ def track(
     times = np.zeros(k)
     hist: list[np.ndarray] = []
     states: list[State] = []
+    cond, smin, damped = np.zeros(k), np.zeros(k), np.zeros(k, bool)
     hinv = None
+    lam = 0.0
     for i in range(k):
-        r = solve_ik(model, st, u, Target(positions[i], rotations[i]), hess_inv0=hinv, gtol=gtol)
+        damped[i] = lam > 0
+        r = solve_ik(model, st, u, Target(positions[i], rotations[i]), hess_inv0=hinv, gtol=gtol, damping=lam)
         st, u = r.state, r.u
         hinv = r.hess_inv if init == "warm" else None
+        assert r.hessian is not None
+        smin[i], cond[i] = conditioning(model, st, r.hessian, u)
+        lam = 2.0 * (smin[i] * cond[i] / condition_limit) ** 2 if cond[i] > condition_limit else 0.0
         out_u[i] = u
         agents[i] = agent_poses(model, st)
         pe[i], re[i] = end_effector_pose(model, st)
@@ -333,7 +391,9 @@ def track(
         hist.append(r.history)
         if keep_states:
             states.append(st.copy())
-    return TrackResult(out_u, agents, pe, re, perr, rerr, resid, its, evals, nits, times, hist, states)
+    return TrackResult(
+        out_u, agents, pe, re, perr, rerr, resid, its, evals, nits, times, hist, states, cond, smin, damped
+    )
 
 
 def reached(
