@@ -1,0 +1,311 @@
+"""A :class:`tmr.motion.Motion` as a ROS 2 bag (rosbag2, MCAP storage) written with the ``rosbags`` library.
+
+No ROS installation is needed: messages are serialised to CDR with the ROS 2 Jazzy type definitions shipped in
+``rosbags``. Topics (frame ``map``; every stamp is the plan's time t_k, stored as ``round(t_k · 1e9)`` ns):
+
+========================================  ======================================  ====================================
+topic                                     type                                    messages
+========================================  ======================================  ====================================
+``/tmr/<body>/pose``                      ``geometry_msgs/msg/PoseStamped``       one per sample and body
+``/tmr/<body>/path``                      ``nav_msgs/msg/Path``                   one (at t_0, latched): all samples
+``/tmr/team/trajectory``                  ``trajectory_msgs/msg/                  one (at t_0, latched): every sample,
+                                          MultiDOFJointTrajectory``               one transform per body
+``/tmr/lines``                            ``visualization_msgs/msg/MarkerArray``  one per sample: tethers (catenary,
+                                                                                  sagging), cables, links as
+                                                                                  LINE_STRIPs
+``/tmr/bodies``                           ``visualization_msgs/msg/MarkerArray``  one per sample: robot / base discs
+                                                                                  (CYLINDER), points (SPHERE)
+``/tmr/scene``                            ``visualization_msgs/msg/MarkerArray``  one (at t_0, latched): obstacles,
+                                                                                  inflated outlines, room, anchor,
+                                                                                  goal, task points
+``/tf``                                   ``tf2_msgs/msg/TFMessage``              one per sample: map → every body
+========================================  ======================================  ====================================
+
+Bodies are the motion's tracks: ``robot1..N`` (chain), ``base1..p`` and ``platform`` (MoPICK), the agents and
+``end_effector`` (CCMA). Orientation is the body's yaw when it has one (MoPICK bases, CCMA agents), else identity
+(omnidirectional chain robots carry no heading).
+
+The bag is deterministic: the same motion gives the same bytes (no wall-clock time is written).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tmr.motion import OBSTACLE_HEIGHT, Motion
+
+__all__ = ["FRAME", "TOPIC_TYPES", "stamp_ns", "topics", "write_bag"]
+
+FRAME = "map"
+
+TOPIC_TYPES = {
+    "pose": "geometry_msgs/msg/PoseStamped",
+    "path": "nav_msgs/msg/Path",
+    "trajectory": "trajectory_msgs/msg/MultiDOFJointTrajectory",
+    "markers": "visualization_msgs/msg/MarkerArray",
+    "tf": "tf2_msgs/msg/TFMessage",
+}
+
+_COLORS = {  # r, g, b, a
+    "tether": (0.12, 0.47, 0.71, 1.0),
+    "cable": (0.84, 0.15, 0.16, 1.0),
+    "link": (0.17, 0.63, 0.17, 1.0),
+    "robot": (0.5, 0.5, 0.5, 0.5),
+    "leader": (1.0, 0.5, 0.05, 0.6),
+    "base": (0.3, 0.3, 0.3, 0.7),
+    "platform": (0.84, 0.15, 0.16, 1.0),
+    "agent": (0.58, 0.4, 0.74, 0.8),
+    "end_effector": (0.86, 0.08, 0.24, 1.0),
+    "obstacle": (0.62, 0.62, 0.62, 1.0),
+    "inflated": (0.33, 0.33, 0.33, 1.0),
+    "room": (0.0, 0.0, 0.0, 1.0),
+    "point": (1.0, 0.5, 0.05, 1.0),
+}
+
+
+def stamp_ns(t: float) -> int:
+    """Bag timestamp [ns] of a plan time ``t`` [s]."""
+    return int(round(float(t) * 1e9))
+
+
+def topics(motion: Motion) -> dict[str, str]:
+    """Every topic :func:`write_bag` writes for ``motion`` → its message type."""
+    out: dict[str, str] = {}
+    for tr in motion.tracks:
+        out[f"/tmr/{tr.name}/pose"] = TOPIC_TYPES["pose"]
+        out[f"/tmr/{tr.name}/path"] = TOPIC_TYPES["path"]
+    out["/tmr/team/trajectory"] = TOPIC_TYPES["trajectory"]
+    out["/tmr/lines"] = TOPIC_TYPES["markers"]
+    out["/tmr/bodies"] = TOPIC_TYPES["markers"]
+    out["/tmr/scene"] = TOPIC_TYPES["markers"]
+    out["/tf"] = TOPIC_TYPES["tf"]
+    return out
+
+
+class _Msgs:
+    """Message constructors over a rosbags typestore."""
+
+    def __init__(self, ts: Any) -> None:
+        self.ts = ts
+        self.T = ts.types
+
+    def time(self, ns: int) -> Any:
+        return self.T["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+    def duration(self, ns: int) -> Any:
+        return self.T["builtin_interfaces/msg/Duration"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+    def header(self, ns: int) -> Any:
+        return self.T["std_msgs/msg/Header"](stamp=self.time(ns), frame_id=FRAME)
+
+    def point(self, p: Any) -> Any:
+        return self.T["geometry_msgs/msg/Point"](x=float(p[0]), y=float(p[1]), z=float(p[2]))
+
+    def vector(self, p: Any) -> Any:
+        return self.T["geometry_msgs/msg/Vector3"](x=float(p[0]), y=float(p[1]), z=float(p[2]))
+
+    def quat(self, yaw: float | None) -> Any:
+        q = self.T["geometry_msgs/msg/Quaternion"]
+        if yaw is None:
+            return q(x=0.0, y=0.0, z=0.0, w=1.0)
+        return q(x=0.0, y=0.0, z=math.sin(0.5 * yaw), w=math.cos(0.5 * yaw))
+
+    def pose(self, p: Any, yaw: float | None) -> Any:
+        return self.T["geometry_msgs/msg/Pose"](position=self.point(p), orientation=self.quat(yaw))
+
+    def transform(self, p: Any, yaw: float | None) -> Any:
+        return self.T["geometry_msgs/msg/Transform"](translation=self.vector(p), rotation=self.quat(yaw))
+
+    def color(self, key: str) -> Any:
+        r, g, b, a = _COLORS[key]
+        return self.T["std_msgs/msg/ColorRGBA"](r=r, g=g, b=b, a=a)
+
+    def marker(
+        self,
+        ns_stamp: int,
+        ns: str,
+        mid: int,
+        mtype: str,
+        color: str,
+        scale: tuple[float, float, float],
+        points: Any = (),
+        pose: tuple[Any, float | None] | None = None,
+        text: str = "",
+    ) -> Any:
+        M = self.T["visualization_msgs/msg/Marker"]
+        return M(
+            header=self.header(ns_stamp),
+            ns=ns,
+            id=mid,
+            type=getattr(M, mtype),
+            action=M.ADD,
+            pose=self.pose(*pose) if pose is not None else self.pose((0.0, 0.0, 0.0), None),
+            scale=self.vector(scale),
+            color=self.color(color),
+            lifetime=self.duration(0),
+            frame_locked=False,
+            points=[self.point(p) for p in points],
+            colors=[],
+            texture_resource="",
+            texture=self.T["sensor_msgs/msg/CompressedImage"](
+                header=self.header(0), format="", data=np.zeros(0, np.uint8)
+            ),
+            uv_coordinates=[],
+            text=text,
+            mesh_resource="",
+            mesh_file=self.T["visualization_msgs/msg/MeshFile"](filename="", data=np.zeros(0, np.uint8)),
+            mesh_use_embedded_materials=False,
+        )
+
+
+def _yaw(tr: Any, k: int) -> float | None:
+    return None if tr.yaw is None else float(tr.yaw[k])
+
+
+def _line_width(ln: Any) -> float:
+    return 0.03 if ln.kind == "tether" else 0.015
+
+
+def _scene_markers(m: _Msgs, motion: Motion, ns0: int) -> list[Any]:
+    out: list[Any] = []
+    i = 0
+    for poly in motion.obstacles:
+        for ring in [poly.exterior, *poly.interiors]:
+            xy = np.asarray(ring.coords)[:, :2]
+            for z in (0.0, OBSTACLE_HEIGHT):
+                pts = np.column_stack([xy, np.full(len(xy), z)])
+                out.append(m.marker(ns0, "obstacles", i, "LINE_STRIP", "obstacle", (0.03, 0, 0), pts))
+                i += 1
+            edges = np.repeat(np.column_stack([xy, np.zeros(len(xy))]), 2, axis=0)
+            edges[1::2, 2] = OBSTACLE_HEIGHT
+            out.append(m.marker(ns0, "obstacles", i, "LINE_LIST", "obstacle", (0.02, 0, 0), edges))
+            i += 1
+    for j, poly in enumerate(motion.inflated):
+        for ring in [poly.exterior, *poly.interiors]:
+            xy = np.asarray(ring.coords)[:, :2]
+            pts = np.column_stack([xy, np.zeros(len(xy))])
+            out.append(m.marker(ns0, "inflated", j * 1000 + len(out), "LINE_STRIP", "inflated", (0.01, 0, 0), pts))
+    x0, y0, x1, y1 = motion.bounds
+    room = [(x0, y0, 0.0), (x1, y0, 0.0), (x1, y1, 0.0), (x0, y1, 0.0), (x0, y0, 0.0)]
+    out.append(m.marker(ns0, "room", 0, "LINE_STRIP", "room", (0.05, 0, 0), room))
+    for j, (name, p) in enumerate(motion.points.items()):
+        out.append(m.marker(ns0, "points", j, "SPHERE", "point", (0.15, 0.15, 0.15), pose=(p, None)))
+        top = (float(p[0]), float(p[1]), float(p[2]) + 0.25)
+        out.append(m.marker(ns0, "labels", j, "TEXT_VIEW_FACING", "room", (0, 0, 0.2), pose=(top, None), text=name))
+    return out
+
+
+def write_bag(motion: Motion, path: str | os.PathLike[str], overwrite: bool = True) -> Path:
+    """Write ``motion`` as a rosbag2 directory with MCAP storage at ``path``; return the path.
+
+    The bag is written into a temporary sibling directory and moved to ``path`` only when complete, replacing an
+    older bag there if ``overwrite`` (else :class:`tmr.errors.TmrError` when ``path`` exists).
+    """
+    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    from tmr.errors import TmrError
+
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise TmrError(f"{path} exists; choose another output or allow overwriting")
+    if path.exists() and not path.is_dir():
+        raise TmrError(f"{path} is a file, not a bag directory")
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    m = _Msgs(ts)
+    ser = ts.serialize_cdr
+    t = np.asarray(motion.t, dtype=float)
+    stamps = [stamp_ns(v) for v in t]
+    ns0 = stamps[0]
+    zero = QosTime(sec=0, nsec=0)
+    latched = Qos(
+        QosHistory.KEEP_LAST,
+        1,
+        QosReliability.RELIABLE,
+        QosDurability.TRANSIENT_LOCAL,
+        zero,
+        zero,
+        QosLiveliness.AUTOMATIC,
+        zero,
+        False,
+    )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp_parent = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
+    tmp = tmp_parent / path.name
+    try:
+        with Writer(tmp, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+            conns = {}
+            for topic, msgtype in topics(motion).items():
+                once = topic.endswith("/path") or topic in ("/tmr/team/trajectory", "/tmr/scene")
+                conns[topic] = w.add_connection(
+                    topic, msgtype, typestore=ts, offered_qos_profiles=[latched] if once else []
+                )
+            # once, at t_0: scene, paths, team trajectory
+            scene = ts.types["visualization_msgs/msg/MarkerArray"](markers=_scene_markers(m, motion, ns0))
+            w.write(conns["/tmr/scene"], ns0, ser(scene, TOPIC_TYPES["markers"]))
+            for tr in motion.tracks:
+                poses = [
+                    ts.types["geometry_msgs/msg/PoseStamped"](header=m.header(s), pose=m.pose(tr.xyz[k], _yaw(tr, k)))
+                    for k, s in enumerate(stamps)
+                ]
+                msg = ts.types["nav_msgs/msg/Path"](header=m.header(ns0), poses=poses)
+                w.write(conns[f"/tmr/{tr.name}/path"], ns0, ser(msg, TOPIC_TYPES["path"]))
+            P = ts.types["trajectory_msgs/msg/MultiDOFJointTrajectoryPoint"]
+            points = [
+                P(
+                    transforms=[m.transform(tr.xyz[k], _yaw(tr, k)) for tr in motion.tracks],
+                    velocities=[],
+                    accelerations=[],
+                    time_from_start=m.duration(s - ns0),
+                )
+                for k, s in enumerate(stamps)
+            ]
+            traj = ts.types["trajectory_msgs/msg/MultiDOFJointTrajectory"](
+                header=m.header(ns0), joint_names=[tr.name for tr in motion.tracks], points=points
+            )
+            w.write(conns["/tmr/team/trajectory"], ns0, ser(traj, TOPIC_TYPES["trajectory"]))
+            # per sample
+            TS = ts.types["geometry_msgs/msg/TransformStamped"]
+            MA = ts.types["visualization_msgs/msg/MarkerArray"]
+            for k, s in enumerate(stamps):
+                for tr in motion.tracks:
+                    msg = ts.types["geometry_msgs/msg/PoseStamped"](
+                        header=m.header(s), pose=m.pose(tr.xyz[k], _yaw(tr, k))
+                    )
+                    w.write(conns[f"/tmr/{tr.name}/pose"], s, ser(msg, TOPIC_TYPES["pose"]))
+                lines = [
+                    m.marker(s, ln.kind, i, "LINE_STRIP", ln.kind, (_line_width(ln), 0, 0), ln.points[k])
+                    for i, ln in enumerate(motion.lines)
+                ]
+                w.write(conns["/tmr/lines"], s, ser(MA(markers=lines), TOPIC_TYPES["markers"]))
+                bodies = []
+                for i, tr in enumerate(motion.tracks):
+                    if tr.radius > 0:
+                        d = 2.0 * tr.radius
+                        p = (tr.xyz[k][0], tr.xyz[k][1], 0.5 * tr.xyz[k][2] if tr.xyz[k][2] > 0 else 0.05)
+                        h = max(float(tr.xyz[k][2]), 0.1)
+                        bodies.append(m.marker(s, "bodies", i, "CYLINDER", tr.role, (d, d, h), pose=(p, _yaw(tr, k))))
+                    else:
+                        bodies.append(
+                            m.marker(s, "bodies", i, "SPHERE", tr.role, (0.06, 0.06, 0.06), pose=(tr.xyz[k], None))
+                        )
+                w.write(conns["/tmr/bodies"], s, ser(MA(markers=bodies), TOPIC_TYPES["markers"]))
+                tfs = [
+                    TS(header=m.header(s), child_frame_id=tr.name, transform=m.transform(tr.xyz[k], _yaw(tr, k)))
+                    for tr in motion.tracks
+                ]
+                w.write(conns["/tf"], s, ser(ts.types["tf2_msgs/msg/TFMessage"](transforms=tfs), TOPIC_TYPES["tf"]))
+        if path.exists():
+            shutil.rmtree(path)
+        os.replace(tmp, path)
+        return path
+    finally:
+        shutil.rmtree(tmp_parent, ignore_errors=True)

@@ -1,0 +1,311 @@
+"""One self-contained HTML file to scrub through a :class:`tmr.motion.Motion` (plotly, offline).
+
+A top view like the GIF (:mod:`tmr.animate`): obstacles, obstacles grown by the safety radius, room, anchor / goal /
+task points, and per frame the tethers (hover: sag [m] and lowest height above the floor [m], Caruso 2021 eq. 22),
+cables and links, the bodies as discs of their radius and the leader's trail. A time slider and play / pause
+buttons move through the frames; the whole plotly.js library is embedded (``include_plotlyjs=True``) so the file
+opens without a network. Equal aspect (1 m is as long on x as on y).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tmr.motion import Motion
+
+__all__ = ["build_figure", "write_html"]
+
+_ROLE_COLOR = {
+    "robot": "#1f77b4",
+    "leader": "#ff7f0e",
+    "base": "#7f7f7f",
+    "platform": "#d62728",
+    "agent": "#9467bd",
+    "end_effector": "#dc143c",
+}
+_LINE_COLOR = {"tether": "#5b2c83", "cable": "#d62728", "link": "#2ca02c"}
+_TRAIL = "#17a589"
+
+
+def _ring_xy(poly: Any) -> tuple[list[float | None], list[float | None]]:
+    xs: list[float | None] = []
+    ys: list[float | None] = []
+    for ring in [poly.exterior, *poly.interiors]:
+        c = np.asarray(ring.coords)
+        xs += c[:, 0].tolist() + [None]
+        ys += c[:, 1].tolist() + [None]
+    return xs, ys
+
+
+def _disc(x: float, y: float, r: float, n: int = 32) -> tuple[list[float], list[float]]:
+    a = np.linspace(0.0, 2.0 * np.pi, n + 1)
+    return (x + r * np.cos(a)).tolist(), (y + r * np.sin(a)).tolist()
+
+
+def _moving(motion: Motion, k: int) -> list[dict[str, Any]]:
+    """Data of the moving traces at sample ``k`` (same order as the traces made by :func:`build_figure`)."""
+    out: list[dict[str, Any]] = []
+    for ln in motion.lines:
+        p = ln.points[k]
+        text = None
+        if ln.sag is not None:
+            text = f"{ln.name}: sag {ln.sag[k]:.3f} m, lowest {p[:, 2].min():.3f} m above the floor"
+        else:
+            text = f"{ln.name}"
+        out.append({"x": p[:, 0].tolist(), "y": p[:, 1].tolist(), "text": [text] * len(p)})
+    if motion.trail is not None:
+        tr = motion.track(motion.trail)
+        out.append({"x": tr.xyz[: k + 1, 0].tolist(), "y": tr.xyz[: k + 1, 1].tolist()})
+    for tr in motion.tracks:
+        x, y, z = (float(v) for v in tr.xyz[k])
+        label = f"{tr.name}: ({x:.3f}, {y:.3f}, {z:.3f}) m"
+        if tr.radius > 0:
+            xs, ys = _disc(x, y, tr.radius)
+            out.append({"x": xs, "y": ys, "text": [label] * len(xs)})
+        else:
+            out.append({"x": [x], "y": [y], "text": [label]})
+    return out
+
+
+def _stamp(motion: Motion, k: int) -> str:
+    return f"t = {motion.t[k]:.2f} s" if motion.timed else f"sample {k + 1}"
+
+
+def build_figure(motion: Motion, max_frames: int = 200) -> Any:
+    """The plotly figure (static traces, one frame per shown sample, slider and play buttons)."""
+    import plotly.graph_objects as go
+
+    from tmr.animate import frame_indices
+
+    fig = go.Figure()
+    for i, poly in enumerate(motion.obstacles):
+        xs, ys = _ring_xy(poly)
+        fig.add_trace(
+            go.Scatter(
+                x=xs,
+                y=ys,
+                fill="toself",
+                mode="lines",
+                fillcolor="#9e9e9e",
+                line={"color": "#424242", "width": 1},
+                name="obstacle",
+                legendgroup="obstacle",
+                showlegend=i == 0,
+                hoverinfo="skip",
+            )
+        )
+    for i, poly in enumerate(motion.inflated):
+        xs, ys = _ring_xy(poly)
+        fig.add_trace(
+            go.Scatter(
+                x=xs,
+                y=ys,
+                mode="lines",
+                line={"color": "#555555", "width": 1, "dash": "dash"},
+                name="grown by robot radius",
+                legendgroup="inflated",
+                showlegend=i == 0,
+                hoverinfo="skip",
+            )
+        )
+    if motion.system != "ccma":
+        x0, y0, x1, y1 = motion.bounds
+        fig.add_trace(
+            go.Scatter(
+                x=[x0, x1, x1, x0, x0],
+                y=[y0, y0, y1, y1, y0],
+                mode="lines",
+                line={"color": "black", "width": 2},
+                name="room",
+                hoverinfo="skip",
+            )
+        )
+    for name, p in motion.points.items():
+        symbol = {"anchor": "square", "goal": "star"}.get(name, "x")
+        fig.add_trace(
+            go.Scatter(
+                x=[p[0]],
+                y=[p[1]],
+                mode="markers+text",
+                text=[name],
+                textposition="top right",
+                marker={
+                    "symbol": symbol,
+                    "size": 14 if name == "goal" else 10,
+                    "color": "#ff7f0e" if name == "goal" else "black",
+                },
+                name=name,
+                hovertemplate=f"{name}: (%{{x:.3f}}, %{{y:.3f}}) m<extra></extra>",
+            )
+        )
+    n_static = len(fig.data)
+    first = _moving(motion, 0)
+    j = 0
+    seen: set[str] = set()
+    for ln in motion.lines:
+        d = first[j]
+        j += 1
+        fig.add_trace(
+            go.Scatter(
+                x=d["x"],
+                y=d["y"],
+                text=d["text"],
+                mode="lines",
+                hoverinfo="text",
+                line={"color": _LINE_COLOR.get(ln.kind, "#2ca02c"), "width": 3 if ln.kind == "tether" else 2},
+                name=ln.kind,
+                legendgroup=ln.kind,
+                showlegend=ln.kind not in seen,
+            )
+        )
+        seen.add(ln.kind)
+    if motion.trail is not None:
+        d = first[j]
+        j += 1
+        tr = motion.track(motion.trail)
+        fig.add_trace(
+            go.Scatter(
+                x=d["x"],
+                y=d["y"],
+                mode="lines",
+                line={"color": _TRAIL, "width": 2},
+                name=f"{'leader' if tr.role == 'leader' else tr.name} trail",
+                hoverinfo="skip",
+            )
+        )
+    for tr in motion.tracks:
+        d = first[j]
+        j += 1
+        color = _ROLE_COLOR.get(tr.role, "#1f77b4")
+        r_txt = f" (r = {tr.radius:g} m)" if tr.radius > 0 else ""
+        if tr.radius > 0:
+            trace = go.Scatter(
+                x=d["x"],
+                y=d["y"],
+                text=d["text"],
+                mode="lines",
+                fill="toself",
+                hoverinfo="text",
+                opacity=0.6,
+                line={"color": color, "width": 1.5},
+                name=f"{tr.role}{r_txt}",
+                legendgroup=tr.role,
+                showlegend=tr.role not in seen,
+            )
+        else:
+            trace = go.Scatter(
+                x=d["x"],
+                y=d["y"],
+                text=d["text"],
+                mode="markers",
+                hoverinfo="text",
+                marker={"color": color, "size": 9},
+                name=tr.role,
+                legendgroup=tr.role,
+                showlegend=tr.role not in seen,
+            )
+        seen.add(tr.role)
+        fig.add_trace(trace)
+    moving_ids = list(range(n_static, len(fig.data)))
+    idx = frame_indices(motion, fps=10.0, max_frames=max_frames)
+    frames = []
+    for k in idx:
+        data = [go.Scatter(**d) for d in _moving(motion, int(k))]
+        frames.append(
+            go.Frame(data=data, traces=moving_ids, name=str(int(k)), layout={"title": {"text": _title(motion, int(k))}})
+        )
+    fig.frames = frames
+    step_ms = 100
+    slider = {
+        "active": 0,
+        "currentvalue": {"prefix": "", "visible": True},
+        "pad": {"t": 40},
+        "x": 0.2,
+        "len": 0.8,
+        "font": {"size": 9},
+        "steps": [
+            {
+                "label": f"{motion.t[k]:.2f}" if motion.timed else str(int(k) + 1),
+                "method": "animate",
+                "args": [
+                    [str(int(k))],
+                    {"mode": "immediate", "frame": {"duration": 0, "redraw": True}, "transition": {"duration": 0}},
+                ],
+            }
+            for k in idx
+        ],
+    }
+    slider["currentvalue"]["prefix"] = "t [s] = " if motion.timed else "sample "
+    buttons = [
+        {
+            "label": "▶ play",
+            "method": "animate",
+            "args": [
+                None,
+                {"frame": {"duration": step_ms, "redraw": True}, "fromcurrent": True, "transition": {"duration": 0}},
+            ],
+        },
+        {
+            "label": "❚❚ pause",
+            "method": "animate",
+            "args": [
+                [None],
+                {"mode": "immediate", "frame": {"duration": 0, "redraw": False}, "transition": {"duration": 0}},
+            ],
+        },
+    ]
+    ex0, ey0, ex1, ey1 = motion.extent(pad=0.3)
+    fig.update_layout(
+        title={"text": _title(motion, 0)},
+        xaxis={"title": "x [m]", "range": [ex0, ex1], "constrain": "domain"},
+        yaxis={"title": "y [m]", "range": [ey0, ey1], "scaleanchor": "x", "scaleratio": 1, "constrain": "domain"},
+        template="plotly_white",
+        height=760,
+        legend={"orientation": "h", "y": -0.25},
+        updatemenus=[
+            {
+                "type": "buttons",
+                "direction": "left",
+                "x": 0.0,
+                "y": -0.1,
+                "xanchor": "left",
+                "yanchor": "top",
+                "buttons": buttons,
+            }
+        ],
+        sliders=[slider],
+        hovermode="closest",
+        annotations=[
+            {
+                "text": "; ".join(motion.notes),
+                "showarrow": False,
+                "xref": "paper",
+                "yref": "paper",
+                "x": 0,
+                "y": 1.02,
+                "xanchor": "left",
+                "yanchor": "bottom",
+                "font": {"size": 11, "color": "#555555"},
+            }
+        ]
+        if motion.notes
+        else [],
+    )
+    return fig
+
+
+def _title(motion: Motion, k: int) -> str:
+    return f"{motion.title} — {_stamp(motion, k)}"
+
+
+def write_html(motion: Motion, path: str | os.PathLike[str], max_frames: int = 200) -> Path:
+    """Write the interactive view as one self-contained HTML file (plotly.js embedded; atomic write)."""
+    from tmr.io import atomic_write_text
+
+    fig = build_figure(motion, max_frames=max_frames)
+    html = fig.to_html(include_plotlyjs=True, full_html=True, auto_play=False, div_id="tmr-view")
+    return atomic_write_text(path, html)
