@@ -38,6 +38,7 @@ def test_scenario_a_writes_every_output(tmp_path, capsys):
             "metrics.json",
             "run.json",
             "speeds.png",
+            "timings.json",
             "trajectories.csv",
             "trajectories.json",
             "trajectories.png",
@@ -60,9 +61,13 @@ def test_same_seed_same_bytes(tmp_path, capsys):
     outs = [tmp_path / "a", tmp_path / "b"]
     for out in outs:
         run_cli(["--scenario", "C", "--seed", "4", "--no-plots", "--out", str(out), *FAST], capsys)
-    for name in ("trajectories.json", "trajectories.csv"):
-        assert (outs[0] / name).read_bytes() == (outs[1] / name).read_bytes()
+    for name in ("trajectories.json", "trajectories.csv", "metrics.json", "run.json"):
+        assert (outs[0] / name).read_bytes() == (outs[1] / name).read_bytes(), name
     assert not list(outs[0].glob("*.png"))
+    # the timings are apart: metrics.json has none, timings.json has them
+    assert "wall_time" not in json.loads((outs[0] / "metrics.json").read_text())
+    timings = json.loads((outs[0] / "timings.json").read_text())
+    assert set(timings) == {"wall_time", "ms_per_step"} and timings["wall_time"] > 0
 
 
 def test_robots_override_and_start(tmp_path, capsys):

@@ -114,7 +114,13 @@ def test_scenario_file_example_plans(readme, tmp_path, capsys):
     out = tmp_path / "runs" / "room"
     code = main(["--scenario", str(tmp_path / "room.toml"), "--method", "qp", "--out", str(out), "--no-plots"])
     assert code == 0, capsys.readouterr().err
-    assert sorted(p.name for p in out.iterdir()) == ["metrics.json", "trajectories.csv", "trajectories.json"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "metrics.json",
+        "run.json",
+        "timings.json",
+        "trajectories.csv",
+        "trajectories.json",
+    ]
 
 
 def test_flag_table_matches_the_parser(readme):

@@ -229,6 +229,15 @@ class Environment:
         """
         return cls(obstacles, bounds, safety_radius, resolution)
 
+    def with_safety_radius(self, safety_radius: float) -> Environment:
+        """The same room and obstacles with the obstacles grown by another robot radius ``safety_radius`` [m]
+        (``self`` when it is already that radius)."""
+        if float(safety_radius) == self.safety_radius:
+            return self
+        env = Environment(self.obstacles, self.bounds, safety_radius, self.resolution, source=self.source)
+        env.known_free = self.known_free
+        return env
+
     # --------------------------------------------------------------------------------------------------------
     # pickling
     def __getstate__(self) -> dict[str, Any]:

@@ -8,8 +8,17 @@ directory first and moved into ``--out`` only when every one of them is complete
 Before any motion is planned, the shortest free route from the anchor to the goal tells whether the goal can be
 reached and with how many robots (:mod:`tmr.route`); ``--robots auto`` takes the fewest that plan.
 
+One robot radius r (``--robot-radius R``, or ``--set safety_radius=R``; default the scenario's) is used everywhere:
+the obstacles are grown by it, the robots kept 2r apart, the route and the messages use it.
+
+Messages go through :mod:`logging` (``--quiet``, ``--verbose``; ``--debug`` shows tracebacks, :mod:`tmr.console`).
+``metrics.json`` holds no timing, so two runs with the same inputs write the same bytes; the planner's wall time is
+in ``timings.json``. A re-used ``--out`` keeps no output of an older run (:data:`OUTPUT_NAMES`; other files are left
+alone).
+
 Exit codes: 0 plan succeeded; 1 no plan found or the plan failed a check (the reason printed; outputs of a computed
-plan written); 2 bad input or a task proven impossible up front (one line, nothing written).
+plan written); 2 bad input or a task proven impossible up front (one line, nothing written); 130 interrupted (Ctrl-C,
+nothing written).
 """
 
 from __future__ import annotations
@@ -26,7 +35,25 @@ import numpy as np
 
 from tmr.cli_args import positive_float
 from tmr.cli_args import positive_int as _positive_int
+from tmr.console import LOG, add_manners, check_out_dir, progress_enabled, remove_stale
+from tmr.console import run as run_cli
 from tmr.errors import TmrError
+
+#: Every file ``python -m tmr.plan`` may write into ``--out``; those a run does not write are removed from a re-used
+#: ``--out`` (files of other names are never touched).
+OUTPUT_NAMES = (
+    "trajectories.json",
+    "trajectories.csv",
+    "metrics.json",
+    "timings.json",
+    "run.json",
+    "chain_poses.png",
+    "trajectories.png",
+    "distance_errors.png",
+    "speeds.png",
+)
+#: Keys of the metrics that are timings: written to ``timings.json``, not ``metrics.json``.
+TIMING_KEYS = ("wall_time", "ms_per_step")
 
 
 def _xy(text: str) -> tuple[float, float]:
@@ -59,15 +86,43 @@ def _robots(text: str) -> int | str:
 AUTO_EXTRA = 3
 
 
-def _param(text: str) -> tuple[str, float]:
-    key, sep, value = text.partition("=")
+def _param(text: str) -> tuple[str, float | str]:
+    """``NAME=VALUE``; a value that is not a number is kept as text and judged by :func:`check_set` (which knows
+    the parameter's type)."""
+    key, sep, value = (part.strip() for part in text.partition("="))
+    if not sep or not key or not value:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, e.g. d_min=0.6, got {text!r}")
     try:
         val = float(value)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}") from exc
-    if not sep or not key or not np.isfinite(val):
-        raise argparse.ArgumentTypeError(f"expected NAME=VALUE with a finite value, got {text!r}")
+    except ValueError:
+        return key, value
+    if not np.isfinite(val):
+        raise argparse.ArgumentTypeError(f"{text!r}: the value must be a finite number")
     return key, val
+
+
+def check_set(pairs: list[tuple[str, Any]]) -> None:
+    """Every ``--set NAME=VALUE`` names a field of the parameter classes of :mod:`tmr.params` and gives a value
+    of its type; TmrError (exit 2) naming the flag, the closest names and the expected type otherwise."""
+    import difflib
+    from dataclasses import fields
+
+    from tmr.params import ChainParams, PathParams, PinvParams, QPParams, TaskParams, TimeParams
+
+    classes = (ChainParams, TimeParams, PathParams, TaskParams, PinvParams, QPParams)
+    known = {f.name: cls for cls in classes for f in fields(cls)}
+    for key, val in pairs:
+        cls = known.get(key)
+        if cls is None:
+            close = difflib.get_close_matches(key, list(known), n=3)
+            hint = f"; did you mean {' or '.join(close)}?" if close else ""
+            raise TmrError(
+                f"--set {key}={val}: unknown parameter {key!r}{hint} (the names are the fields of "
+                f"{', '.join(c.__name__ for c in classes)} in tmr.params)"
+            )
+        default = getattr(cls(), key)
+        if isinstance(val, str) and isinstance(default, int | float) and not isinstance(default, bool):
+            raise TmrError(f"--set {key}={val}: {cls.__name__}.{key} takes a number, got {val!r}")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -89,6 +144,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--robots",
         type=_robots,
         help="number of robots N, or 'auto' for the fewest that plan (default: the scenario's, 3)",
+    )
+    src.add_argument(
+        "--robot-radius",
+        type=positive_float,
+        metavar="R",
+        help="robot radius r [m] (default: the scenario's, 0.5): obstacles grown by r, robots kept 2r apart, the "
+        "route and the messages use it; same as --set safety_radius=R",
     )
     p.add_argument(
         "--method",
@@ -115,7 +177,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="QP solver for --method qp: osqp (persistent workspace, default) or a qpsolvers "
         "backend (daqp, proxqp, clarabel, qpsolvers-osqp, ...)",
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of the leader's RRT* with --route rrt (default 0)")
+    p.add_argument(
+        "--seed", type=int, default=0, help="seed of the leader's RRT* and of the start placement (default 0)"
+    )
     p.add_argument("--iterations", type=_positive_int, help="RRT* iterations (default 1000)")
     p.add_argument(
         "--set",
@@ -128,7 +192,37 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--filter-cutoff", type=float, default=1.0, help="cut-off of the trajectory filter [Hz]")
     p.add_argument("--out", default="runs/plan", help="output directory (default runs/plan)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    add_manners(p)
     return p
+
+
+def robot_radius(args: argparse.Namespace, scenario: Any) -> float:
+    """The one robot radius r [m] of the run: ``--robot-radius``, else ``--set safety_radius=``, else the
+    scenario's ``[params]`` ``safety_radius``, else its map's (``[map] safety_radius``, 0.5 m by default)."""
+    given = {float(v) for k, v in args.set if k == "safety_radius"}
+    if getattr(args, "robot_radius", None) is not None:
+        given.add(float(args.robot_radius))
+    if len(given) > 1:
+        raise TmrError(f"two robot radii given: {sorted(given)} m (--robot-radius and --set safety_radius=); give one")
+    if given:
+        return given.pop()
+    if "safety_radius" in (scenario.params or {}):
+        return float(scenario.params["safety_radius"])
+    return float(scenario.environment.safety_radius)
+
+
+def with_robot_radius(scenario: Any, r: float) -> Any:
+    """``scenario`` with its obstacles grown by ``r`` [m] and ``safety_radius = r`` in its parameters, so the
+    environment, the span limits, the separation, the route and the messages share one r (re-validated: base,
+    goal and start must be free for this r)."""
+    from dataclasses import replace
+
+    from tmr.errors import ParameterError
+
+    if not r > 0:
+        raise ParameterError(f"the robot radius must be > 0 m, got {r:g}")
+    params = dict(scenario.params or {}) | {"safety_radius": float(r)}
+    return replace(scenario, environment=scenario.environment.with_safety_radius(r), params=params)
 
 
 def load_inputs(args: argparse.Namespace) -> Any:
@@ -137,6 +231,7 @@ def load_inputs(args: argparse.Namespace) -> Any:
 
     from tmr.scenario import load_scenario, scenario_from_map
 
+    check_set(args.set)
     if args.map:
         if args.scenario:
             raise TmrError("give either --scenario or --map, not both")
@@ -160,7 +255,7 @@ def load_inputs(args: argparse.Namespace) -> Any:
             changes["goal"] = np.array(args.goal)
         if changes:
             sc = replace(sc, **changes)
-    return sc
+    return with_robot_radius(sc, robot_radius(args, sc))
 
 
 def write_outputs(
@@ -181,7 +276,10 @@ def write_outputs(
     try:
         io.write_trajectories_json(plan, tmp / "trajectories.json", filtered=filtered)
         io.write_trajectories_csv(plan, tmp / "trajectories.csv", filtered=filtered)
-        io.write_metrics_json(metrics.to_dict() | (extra or {}), tmp / "metrics.json")
+        values = metrics.to_dict() | (extra or {})
+        timings = {key: values.pop(key) for key in TIMING_KEYS if key in values}
+        io.write_metrics_json(values, tmp / "metrics.json")
+        io.write_metrics_json(timings, tmp / "timings.json")  # kept apart: metrics.json is reproducible
         from tmr.rundir import write_chain_run
 
         write_chain_run(tmp / "run.json", plan, env, extra)  # scenario, map and tether parameters (tmr.replay)
@@ -200,6 +298,7 @@ def write_outputs(
         names = sorted(p.name for p in tmp.iterdir())
         for name in names:
             os.replace(tmp / name, out / name)
+        remove_stale(out, OUTPUT_NAMES, names)
         return names
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -261,7 +360,7 @@ def _plan_once(args: argparse.Namespace, scenario: Any, n_robots: int | None, ro
         route=args.route,
         known_route=route if (n_robots or 0) >= max(2, route.n_min) else None,
     )
-    plan, metrics = solve(problem, args.method, time_limit=args.time_limit, progress=True)  # a bar on a terminal only
+    plan, metrics = solve(problem, args.method, time_limit=args.time_limit, progress=progress_enabled())
     return problem, plan, metrics
 
 
@@ -345,22 +444,17 @@ def _join_negative(argv: list[str]) -> list[str]:
 
 def check_out(out: Path) -> None:
     """Refuse, before any planning, an ``--out`` that is a file or lies where nothing can be written."""
-    if out.exists() and not out.is_dir():
-        raise TmrError(f"--out {out} is a file, not a directory")
-    parent = out.absolute()
-    while not parent.exists():
-        parent = parent.parent
-    if not parent.is_dir():
-        raise TmrError(f"--out {out}: {parent} is a file, not a directory")
-    try:  # a real write test (permissions alone do not tell, e.g. for root or a read-only file system)
-        os.rmdir(tempfile.mkdtemp(prefix=".tmr-out-check-", dir=parent))
-    except OSError as exc:
-        raise TmrError(f"--out {out}: cannot write in {parent} ({exc.strerror})") from exc
+    check_out_dir(out)
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``python -m tmr.plan`` and ``tmr plan``; returns the exit code."""
     parser = build_parser()
     args = parser.parse_args(_join_negative(list(sys.argv[1:] if argv is None else argv)))
+    return run_cli(_main, args)
+
+
+def _main(args: argparse.Namespace) -> int:
     from tmr.route import RouteVerdict
 
     try:
@@ -389,7 +483,7 @@ def main(argv: list[str] | None = None) -> int:
                     break
             summary_line = f"--robots auto: N_min = {rt.n_min}; " + "; ".join(tried)
             if problem is None:
-                print(f"no plan found: {summary_line}", file=sys.stderr)
+                LOG.error("no plan found: %s", summary_line)
                 return 1
             auto_note = f"{summary_line}; chose N = {problem.chain.n_robots}"
         else:
@@ -401,21 +495,17 @@ def main(argv: list[str] | None = None) -> int:
         )
     except RouteVerdict as exc:
         if exc.proven:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
-        print(f"no plan found: {exc}", file=sys.stderr)
+            raise  # a TmrError: one line, exit 2 (tmr.console.run)
+        LOG.error("no plan found: %s", exc)
         return 1
-    except TmrError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
     if auto_note:
-        print(auto_note)
-    print(summary(plan, metrics))
+        LOG.info(auto_note)
+    LOG.info(summary(plan, metrics))
     if "horizon_note" in extra:
-        print(f"  horizon: {extra['horizon_result']}: {extra['horizon_note']}")
-    print(f"  wrote {', '.join(names)} to {args.out}")
+        LOG.info("  horizon: %s: %s", extra["horizon_result"], extra["horizon_note"])
+    LOG.info("  wrote %s to %s", ", ".join(names), args.out)
     if not plan.success:
-        print(f"plan FAILED: {plan.failure}", file=sys.stderr)
+        LOG.error("plan FAILED: %s", plan.failure)
         return 1
     return 0
 

@@ -1,0 +1,158 @@
+"""Manners shared by every tmr command line: logging, errors, Ctrl-C, progress bars and the ``--out`` directory.
+
+Every command (``tmr plan``, ``tmr mcdpr``, ``tmr ccma``, ``tmr sweep``, and their ``python -m`` forms) takes
+
+* ``--quiet`` / ``-q``: only warnings and errors (no summary, no progress bar); ``--verbose`` / ``-v``: also debug
+  details and the warnings of the numeric libraries (numpy's RuntimeWarnings and the like, hidden otherwise);
+* ``--debug``: the traceback of an error instead of the one-line message.
+
+Messages go through :mod:`logging` (logger ``tmr``): information and debug lines to stdout, warnings and errors to
+stderr. :func:`run` calls a command's body and turns what it raises into the exit codes of every tmr command:
+:class:`~tmr.errors.TmrError` (bad input, a task proven impossible) → one line ``error: …`` and 2; Ctrl-C → one
+line ``interrupted`` and 130 (outputs are written to a temporary directory and moved into ``--out`` only when
+complete, so an interrupted run leaves no half-written file); any other exception → one line naming it and
+1, with ``--debug`` the traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+import tempfile
+import warnings
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any
+
+from tmr.errors import TmrError
+
+__all__ = [
+    "LOG",
+    "EXIT_INTERRUPTED",
+    "add_manners",
+    "check_out_dir",
+    "progress_enabled",
+    "remove_stale",
+    "run",
+    "setup_logging",
+]
+
+LOG = logging.getLogger("tmr")
+#: Exit code after Ctrl-C (128 + SIGINT, as a shell reports it).
+EXIT_INTERRUPTED = 130
+
+_state = {"quiet": False}
+
+
+def add_manners(parser: argparse.ArgumentParser) -> None:
+    """Add ``--quiet``/``--verbose`` (exclusive) and ``--debug`` to ``parser``."""
+    g = parser.add_argument_group("messages")
+    x = g.add_mutually_exclusive_group()
+    x.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors: no summary, no progress bar")
+    x.add_argument(
+        "-v", "--verbose", action="store_true", help="also debug details and the numeric libraries' warnings"
+    )
+    g.add_argument("--debug", action="store_true", help="on an error, show the traceback instead of one line")
+
+
+class _StdHandler(logging.Handler):
+    """Info and debug records to stdout, warnings and errors to stderr (the streams looked up at each record, so
+    a caller's redirection, e.g. pytest's capture, is honoured)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            stream = sys.stderr if record.levelno >= logging.WARNING else sys.stdout
+            stream.write(self.format(record) + "\n")
+            stream.flush()
+        except Exception:  # pragma: no cover - logging must never raise
+            self.handleError(record)
+
+
+def setup_logging(quiet: bool = False, verbose: bool = False) -> None:
+    """Configure logger ``tmr`` (and captured Python warnings) for one command-line run."""
+    handler = _StdHandler()
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    for name, level in (
+        ("tmr", logging.WARNING if quiet else logging.DEBUG if verbose else logging.INFO),
+        ("py.warnings", logging.WARNING if verbose else logging.CRITICAL),  # library warnings: --verbose only
+    ):
+        logger = logging.getLogger(name)
+        for h in list(logger.handlers):
+            logger.removeHandler(h)
+        logger.addHandler(handler)
+        logger.setLevel(level)
+        logger.propagate = False
+    _state["quiet"] = bool(quiet)
+
+
+def progress_enabled(stream: Any = None) -> bool:
+    """Whether a progress bar should be drawn: ``stream`` (stderr by default) is a terminal and not ``--quiet``."""
+    stream = sys.stderr if stream is None else stream
+    try:
+        tty = bool(stream.isatty())
+    except (AttributeError, ValueError):
+        tty = False
+    return tty and not _state["quiet"]
+
+
+def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> int:
+    """Call ``body(args)`` with logging set up from ``args``; map what it raises to an exit code (module doc)."""
+    quiet, verbose, debug = (bool(getattr(args, k, False)) for k in ("quiet", "verbose", "debug"))
+    setup_logging(quiet, verbose)
+    logging.captureWarnings(True)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("default")  # each distinct warning once, through logging
+            return body(args)
+    except KeyboardInterrupt:
+        if debug:
+            LOG.exception("interrupted")
+        else:
+            LOG.error("interrupted")
+        return EXIT_INTERRUPTED
+    except TmrError as exc:
+        if debug:
+            LOG.exception("error: %s", exc)
+        else:
+            LOG.error("error: %s", exc)
+        return 2
+    except Exception as exc:  # not a user error: one line unless --debug
+        if debug:
+            LOG.exception("internal error")
+        else:
+            LOG.error("internal error: %s: %s (rerun with --debug for the traceback)", type(exc).__name__, exc)
+        return 1
+    finally:
+        logging.captureWarnings(False)
+        _state["quiet"] = False
+
+
+def check_out_dir(out: Path) -> None:
+    """Refuse, before any work, an ``--out`` that is a file or lies where nothing can be written (TmrError)."""
+    if out.exists() and not out.is_dir():
+        raise TmrError(f"--out {out} is a file, not a directory")
+    parent = out.absolute()
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise TmrError(f"--out {out}: {parent} is a file, not a directory")
+    try:  # a real write test (permissions alone do not tell, e.g. for root or a read-only file system)
+        os.rmdir(tempfile.mkdtemp(prefix=".tmr-out-check-", dir=parent))
+    except OSError as exc:
+        raise TmrError(f"--out {out}: cannot write in {parent} ({exc.strerror})") from exc
+
+
+def remove_stale(out: Path, owned: Iterable[str], written: Iterable[str]) -> list[str]:
+    """Delete from ``out`` the files named in ``owned`` (every output this command can write) that this run did not
+    write (``written``): a re-used ``--out`` then holds no output of an older run. Files of other names are never
+    touched. Returns the names deleted."""
+    keep = set(written)
+    gone = []
+    for name in owned:
+        path = out / name
+        if name not in keep and path.is_file():
+            path.unlink()
+            gone.append(name)
+    return gone
