@@ -86,7 +86,9 @@ class Plan:
     platform weight [N] (NaN if infeasible); lo, hi (T, m) tipping-tightened tension bounds [N]; stage1: per segment
     the raw iterates (k_i, p, 2) and μ history; times: wall time of the stages [s]; params: the planner settings
     (:func:`check` uses ``params.d_platform`` to bound the platform steps); external (3,) the external wrench box
-    half-widths of the scene [N] (:func:`check` recomputes μ with it).
+    half-widths of the scene [N] (:func:`check` recomputes μ with it). planner: ``"greedy"`` (this module) or
+    ``"search"`` (:mod:`tmr.mcdpr.search`); mu_lower (T − 1,): guaranteed lower bound of μ on each piece between
+    consecutive samples [N] (:mod:`tmr.mcdpr.certify`; search plans only); search: statistics of the search.
     """
 
     waypoints: NDArray[np.float64]
@@ -102,6 +104,9 @@ class Plan:
     times: dict[str, float] = field(default_factory=dict)
     params: PlannerParams = field(default_factory=PlannerParams)
     external: NDArray[np.float64] = field(default_factory=lambda: np.ones(3))
+    planner: str = "greedy"
+    mu_lower: NDArray[np.float64] | None = None
+    search: dict[str, Any] = field(default_factory=dict)
 
 
 def _combos(p: int, k: int) -> NDArray[np.intp]:

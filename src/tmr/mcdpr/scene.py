@@ -56,6 +56,8 @@ class Scene:
 
     tables, obstacles: raw shapely polygons (tables are rectangles, obstacles discs). tasks: (k, 3) task points [m].
     bases: (p, 2) initial base positions [m]. headings: (p,) [rad]. external: (3,) external wrench half-widths [N].
+    discs: (k, 3) the obstacles' exact circles (x, y, radius) [m] (the polygons of ``obstacles`` are inscribed in
+    them; the search planner checks the bases against the exact circles).
     """
 
     name: str
@@ -68,6 +70,7 @@ class Scene:
     external: NDArray[np.float64] = field(default_factory=lambda: np.ones(3))
     intermediate: int = 1
     lateral: float = 1.5
+    discs: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
 
     def environment(self, robot: Robot) -> Environment:
         """Room with tables and obstacles inflated by the base radius (bases become points)."""
@@ -161,7 +164,7 @@ def scene_from_dict(data: dict[str, Any], where: str = "scene") -> Scene:
             raise ScenarioError(f"{w}: size must be positive")
         rect = box(c[0] - s[0] / 2, c[1] - s[1] / 2, c[0] + s[0] / 2, c[1] + s[1] / 2)
         tables.append(affinity.rotate(rect, _num(t, "angle", 0.0, w), origin=(c[0], c[1])))
-    obstacles = []
+    obstacles, discs = [], []
     for i, o in enumerate(_tables(data, "obstacles", where)):
         w = f"{where} obstacle {i}"
         c = _arr(o, "center", (2,), w)
@@ -169,6 +172,7 @@ def scene_from_dict(data: dict[str, Any], where: str = "scene") -> Scene:
         if not r > 0:
             raise ScenarioError(f"{w}: radius must be positive, got {r}")
         obstacles.append(Point(c).buffer(r, quad_segs=16))
+        discs.append([c[0], c[1], r])
     bases = _arr(data, "bases", (None, 2), where)
     headings = _arr(data, "headings", (len(bases),), where, default=np.zeros(len(bases)))
     external = _arr(data, "external", (3,), where, default=[1.0, 1.0, 1.0])
@@ -194,6 +198,7 @@ def scene_from_dict(data: dict[str, Any], where: str = "scene") -> Scene:
         external=external,
         intermediate=inter,
         lateral=lateral,
+        discs=np.array(discs, dtype=float).reshape(-1, 3),
     )
 
 

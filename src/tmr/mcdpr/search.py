@@ -1,0 +1,586 @@
+"""Search planner of a MoPICK-type MCDPR: a graph over base placements along the platform path, lazy certification
+of the motions, shortcut smoothing, and verdicts (our planner; Rasheed 2019 eq. 5-8 for the statics).
+
+1. **Up-front refusals** (:class:`~tmr.mcdpr.errors.TaskRefused`, < 0.1 s): the platform weight plus the vertical
+   external wrench is at least m·t_max (no placement can hold it: each cable lifts at most t_max), or the start pose
+   has μ ≤ 0 (which limit: the tension box alone, or the tipping bound of which base, and μ).
+2. **Stations**: the platform flies straight between consecutive task points; stations every ``station_step`` m.
+3. **Placements** per station: a fixed Halton set of formations (base j at angle α + 2πj/p + β_j and distance
+   ρ_j from the platform's ground point, in the cyclic order of the start bases), plus the previous station's
+   placements (so the bases may stay); kept when every base is free against the exact shapes (:mod:`clearance`),
+   the bases are > 2 r_mb apart and μ at the *worst* heading of every base (``headings`` grid) is ≥ ``margin``;
+   the ``keep`` best, spread at least ``spread`` m apart, survive. No placement at a task point →
+   :class:`~tmr.mcdpr.errors.NoPlanFound` (``no-placement``, the best μ found) before any graph is built.
+4. **Graph**: an edge joins placements of consecutive stations (the platform moves) or of the same station (the
+   platform waits) when every base moves ≤ ``max_move``, each drive is collision-free (exact) and the bases stay
+   2 r_mb apart while driving simultaneously (closed form). Cost: total base travel + a small per-edge cost +
+   ``mu_weight``/μ. Dijkstra (scipy.sparse.csgraph) from the start to any placement of the last station; none →
+   ``not-connectable`` with the farthest platform position reached.
+5. **Lazy certification** (Bohlin & Kavraki's lazy PRM): the edges of the shortest path are executed as in-place
+   turns (to the drive direction or its opposite) and straight drives, and certified by
+   :func:`tmr.mcdpr.certify.certify` (μ's lower bound > 0 on every piece, adaptive bisection); failing edges are
+   deleted and the search repeats.
+6. **Shortcuts**: within each task segment, consecutive path nodes are replaced by one straight motion from node i
+   to the farthest node j (≤ ``shortcut`` ahead) whose motion is collision-free and certified.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tmr.mcdpr.capacity import capacity, capacity_margin, required_wrench_set
+from tmr.mcdpr.certify import certify, wrap
+from tmr.mcdpr.clearance import point_clearance, segment_clearance
+from tmr.mcdpr.errors import NoPlanFound, ParameterError, TaskRefused
+from tmr.mcdpr.planner import Plan, PlannerParams, _min_pair_distance, tensions
+from tmr.mcdpr.robot import Robot
+from tmr.mcdpr.scene import Scene
+from tmr.mcdpr.tipping import tension_bounds, tipping
+
+__all__ = ["SearchParams", "placements", "plan_search", "refuse_upfront", "stations", "worst_heading_mu"]
+
+
+@dataclass(frozen=True)
+class SearchParams:
+    """Resolution and limits of the search planner (SI units).
+
+    station_step: platform distance between stations [m]. n_formations: formations tried per station. keep:
+    placements kept per station (fresh ones; the previous station's best ``keep`` are added). radii: (min, max)
+    base distance from the platform's ground point [m]. spread_angle: max angular deviation β of a base from its
+    formation slot [rad]. spread: min distance between kept placements (largest base displacement) [m]. margin: μ
+    required at the worst heading of a kept placement [N]. headings: heading grid for that worst case. max_move:
+    largest base displacement of one edge [m]. mu_weight: cost weight of 1/μ [m·N]. d_platform: platform step of
+    the output samples [m]. max_rounds: lazy re-searches. shortcut: look-ahead of the shortcut smoothing [nodes].
+    expand, expand_samples, seed: local expansion, ``expand_samples`` random placements (every base moved by up
+    to ``max_move``, seeded) around each of the ``expand`` best reachable placements of the previous station.
+    """
+
+    station_step: float = 0.25
+    n_formations: int = 768
+    keep: int = 48
+    radii: tuple[float, float] = (0.55, 2.4)
+    spread_angle: float = math.pi / 5
+    spread: float = 0.12
+    margin: float = 0.3
+    headings: int = 8
+    max_move: float = 0.6
+    mu_weight: float = 0.2
+    d_platform: float = 0.05
+    max_rounds: int = 300
+    shortcut: int = 12
+    expand: int = 16
+    expand_samples: int = 12
+    seed: int = 0
+
+
+def stations(tasks: NDArray[np.float64], step: float) -> tuple[NDArray[np.float64], NDArray[np.int64], list[int]]:
+    """Platform stations (S, 3) [m] along the straight segments between task points, their segment index (S,)
+    and the station index of every task point."""
+    pts, seg, at = [tasks[0]], [0], [0]
+    for i in range(len(tasks) - 1):
+        d = tasks[i + 1] - tasks[i]
+        n = max(1, math.ceil(max(float(np.hypot(d[0], d[1])), abs(float(d[2]))) / step - 1e-9))
+        for k in range(1, n + 1):
+            pts.append(tasks[i] + d * k / n)
+            seg.append(i)
+        at.append(len(pts) - 1)
+    return np.array(pts), np.array(seg), at
+
+
+def worst_heading_mu(
+    robot: Robot, P: NDArray[np.float64], B: NDArray[np.float64], rws: NDArray[np.float64], n_head: int
+) -> NDArray[np.float64]:
+    """μ [N] (Rasheed 2019 eq. 8) of placements B (n, p, 2) for the platform at P (3,) with every base at the worst
+    of ``n_head`` headings in [0, 2π) (a cable's tipping bound depends only on its own base's heading, so the worst
+    case is the per-cable minimum of the bounds)."""
+    hi_min = None
+    for g in range(n_head):
+        tip = tipping(robot, P, B, np.full(B.shape[:-1], 2 * math.pi * g / n_head))
+        lo, hi = tension_bounds(robot, tip)
+        hi_min = hi if hi_min is None else np.minimum(hi_min, hi)
+    return capacity_margin(tip.W, lo, hi_min, rws)
+
+
+def _halton(n: int, d: int) -> NDArray[np.float64]:
+    from scipy.stats import qmc
+
+    return qmc.Halton(d=d, scramble=False).random(n + 1)[1:]
+
+
+def _formations(robot: Robot, params: SearchParams, order: NDArray[np.intp]) -> NDArray[np.float64]:
+    """Base offsets (n, p, 2) [m] from the platform's ground point, bases in the cyclic ``order``."""
+    p = robot.n_bases
+    u = _halton(params.n_formations, 1 + 2 * p)
+    alpha = 2 * math.pi * u[:, :1]
+    r0, r1 = params.radii
+    rho = r0 + (r1 - r0) * u[:, 1 : 1 + p]
+    beta = params.spread_angle * (2 * u[:, 1 + p :] - 1)
+    slot = np.empty(p)
+    slot[order] = 2 * math.pi * np.arange(p) / p
+    ang = alpha + slot + beta
+    return np.stack([rho * np.cos(ang), rho * np.sin(ang)], axis=-1)
+
+
+def _apart(robot: Robot, B: NDArray[np.float64]) -> NDArray[np.bool_]:
+    iu = np.triu_indices(robot.n_bases, 1)
+    return np.all(np.linalg.norm(B[:, iu[0]] - B[:, iu[1]], axis=-1) > 2 * robot.base_radius, axis=-1)
+
+
+def _diverse(B: NDArray[np.float64], score: NDArray[np.float64], k: int, spread: float) -> NDArray[np.intp]:
+    """Up to k indices of B (n, p, 2), best score first, each ≥ ``spread`` m (largest base distance) from the others."""
+    chosen: list[int] = []
+    for i in np.argsort(-score, kind="stable"):
+        if chosen and np.min(np.max(np.linalg.norm(B[chosen] - B[i], axis=-1), axis=-1)) < spread:
+            continue
+        chosen.append(int(i))
+        if len(chosen) >= k:
+            break
+    return np.array(chosen, dtype=np.intp)
+
+
+def placements(
+    robot: Robot,
+    scene: Scene,
+    P: NDArray[np.float64],
+    offsets: NDArray[np.float64],
+    rws: NDArray[np.float64],
+    params: SearchParams,
+    extra: NDArray[np.float64] | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float, NDArray[np.float64] | None]:
+    """Kept placements (k, p, 2) [m] and their worst-heading μ (k,) [N] for the platform at P (3,), plus the best
+    μ among all free, apart formations and its placement (for a refusal message)."""
+    B = P[:2] + offsets
+    if extra is not None and len(extra):
+        B = np.concatenate([B, extra])
+    free = np.all(point_clearance(scene, robot.base_radius, B) > 0, axis=-1) & _apart(robot, B)
+    B = B[free]
+    if not len(B):
+        return B, np.zeros(0), -np.inf, None
+    mu = worst_heading_mu(robot, P, B, rws, params.headings)
+    best = int(np.argmax(mu))
+    ok = mu >= params.margin
+    n_fresh = len(B) - (0 if extra is None else int(np.sum(free[len(offsets) :])))
+    fresh = np.flatnonzero(ok[:n_fresh])
+    half = params.keep // 2
+    idx = fresh[_diverse(B[fresh], mu[fresh], params.keep - half, params.spread)] if len(fresh) else fresh
+    if extra is not None and len(extra) and len(fresh):
+        # the other half: the fresh placements nearest to the previous station's (so the search can progress)
+        near = np.min(np.max(np.linalg.norm(B[fresh][:, None] - extra[None], axis=-1), axis=-1), axis=1)
+        rest = np.setdiff1d(fresh, idx)
+        if len(rest):
+            nr = near[np.searchsorted(fresh, rest)]
+            idx = np.concatenate([idx, rest[_diverse(B[rest], -nr, half, params.spread)]])
+    old = np.flatnonzero(ok[n_fresh:]) + n_fresh
+    old = old[np.argsort(-mu[old], kind="stable")[: params.keep]]
+    idx = np.concatenate([idx, old]).astype(np.intp)
+    return B[idx], mu[idx], float(mu[best]), B[best]
+
+
+def refuse_upfront(robot: Robot, scene: Scene, rws: NDArray[np.float64]) -> float:
+    """Raise TaskRefused when the task is impossible for every placement or the start already violates a limit;
+    return μ of the start pose [N]."""
+    m = robot.n_cables
+    fz = float(np.max(rws[:, 2]))
+    if fz >= m * robot.t_max:
+        raise TaskRefused(
+            f"the platform needs up to {fz:.4g} N of vertical cable force (weight {robot.platform_mass:g} kg × "
+            f"{robot.gravity:g} m/s² + external {float(scene.external[2]):g} N) but {m} cables of at most "
+            f"{robot.t_max:g} N lift at most {m * robot.t_max:g} N: short by {fz - m * robot.t_max:.4g} N for any "
+            "placement of the bases",
+            "tension",
+            m * robot.t_max - fz,
+        )
+    P0, B0, H0 = scene.tasks[0], scene.bases.astype(float), scene.headings.astype(float)
+    cap = capacity(robot, P0, B0, H0, rws)
+    mu = float(cap.mu)
+    if mu > 0:
+        return mu
+    mu_box = float(capacity_margin(cap.W, np.full(m, robot.t_min), np.full(m, robot.t_max), rws))
+    if mu_box <= 0:
+        raise TaskRefused(
+            f"start infeasible: with the bases at their start positions the cables cannot hold the platform at "
+            f"{np.round(P0, 3).tolist()} even without tipping (tension limit {robot.t_max:g} N): capacity margin "
+            f"{mu_box:.4g} N (tipping included {mu:.4g} N)",
+            "tension",
+            mu,
+        )
+    k = int(np.argmin(cap.hi))
+    j = robot.cable_base[k]
+    raise TaskRefused(
+        f"start infeasible: base {j + 1} would tip: its tipping-tightened tension bound is {float(cap.hi[k]):.4g} N "
+        f"(t_max {robot.t_max:g} N) and the capacity margin is {mu:.4g} N (it would be {mu_box:.4g} N without "
+        "tipping); move the bases closer to the platform or lower the payload",
+        "tipping",
+        mu,
+    )
+
+
+def _motion(
+    Bn: NDArray[np.float64], Pn: NDArray[np.float64], th0: NDArray[np.float64], d_platform: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.intp]]:
+    """Samples of the executed motion through the nodes Bn (K, p, 2), Pn (K, 3) starting with headings th0 (p,):
+    per edge an in-place turn of the moving bases to their drive direction (or its opposite, the nearer; ≤ 90°),
+    then a straight simultaneous drive with the platform, in steps of ≤ d_platform. Returns P, B, H and the edge
+    index of each piece (T − 1,)."""
+    P, B, H, edge = [Pn[0]], [Bn[0]], [th0.astype(float)], []
+    th = th0.astype(float).copy()
+    for e in range(len(Bn) - 1):
+        d = Bn[e + 1] - Bn[e]
+        moving = np.linalg.norm(d, axis=-1) > 1e-9
+        ang = np.arctan2(d[:, 1], d[:, 0])
+        fwd = wrap(ang - th)
+        turn = np.where(np.abs(fwd) <= np.pi / 2, fwd, wrap(fwd - np.pi))
+        new = np.where(moving, wrap(th + turn), th)
+        if np.any(np.abs(wrap(new - th)) > 1e-12):
+            P.append(Pn[e])
+            B.append(Bn[e])
+            H.append(new)
+            edge.append(e)
+        th = new
+        dp = Pn[e + 1] - Pn[e]
+        n = max(1, math.ceil(max(float(np.hypot(dp[0], dp[1])), abs(float(dp[2]))) / d_platform - 1e-9))
+        for k in range(1, n + 1):
+            P.append(Pn[e] + dp * k / n)
+            B.append(Bn[e] + d * k / n)
+            H.append(th)
+            edge.append(e)
+    return np.array(P), np.array(B), np.array(H), np.array(edge, dtype=np.intp)
+
+
+def _edges_ok(robot: Robot, scene: Scene, Ba: NDArray[np.float64], Bb: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Straight simultaneous drives Ba → Bb (n, p, 2): collision-free (exact) and bases 2 r_mb apart."""
+    if not len(Ba):
+        return np.zeros(0, bool)
+    free = np.all(segment_clearance(scene, robot.base_radius, Ba, Bb) > 0, axis=-1)
+    if robot.n_bases > 1:
+        iu = np.triu_indices(robot.n_bases, 1)
+        free &= _min_pair_distance(Ba, Bb, iu) > 2 * robot.base_radius
+    return free
+
+
+@dataclass
+class _Graph:
+    B: NDArray[np.float64]  # (N, p, 2)
+    P: NDArray[np.float64]  # (N, 3)
+    st: NDArray[np.intp]  # (N,) station
+    mu: NDArray[np.float64]  # (N,)
+    src: NDArray[np.intp]
+    dst: NDArray[np.intp]
+    w: NDArray[np.float64]
+
+
+def _connect(
+    robot: Robot,
+    scene: Scene,
+    B: NDArray[np.float64],
+    ia: NDArray[np.intp],
+    ib: NDArray[np.intp],
+    clear: NDArray[np.float64],
+    params: SearchParams,
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Candidate edges between node sets ia × ib: every base moves ≤ max_move, drives free, bases apart."""
+    A, C = np.meshgrid(ia, ib, indexing="ij")
+    A, C = A.ravel(), C.ravel()
+    keep = A != C
+    A, C = A[keep], C[keep]
+    dist = np.linalg.norm(B[C] - B[A], axis=-1)  # (n, p)
+    near = np.all(dist <= params.max_move, axis=-1)
+    A, C, dist = A[near], C[near], dist[near]
+    # a drive shorter than an end point's clearance is free (the disc around that end point is free)
+    sure = np.all((dist < clear[A]) | (dist < clear[C]), axis=-1)
+    ok = sure.copy()
+    todo = np.flatnonzero(~sure)
+    if len(todo):
+        ok[todo] = _edges_ok(robot, scene, B[A[todo]], B[C[todo]])
+    if robot.n_bases > 1 and len(A):
+        iu = np.triu_indices(robot.n_bases, 1)
+        ok &= _min_pair_distance(B[A], B[C], iu) > 2 * robot.base_radius
+    return A[ok], C[ok]
+
+
+def plan_search(
+    robot: Robot, scene: Scene, params: SearchParams | None = None, external: NDArray[np.float64] | None = None
+) -> Plan:
+    """Plan the task of ``scene`` with the search planner (see the module docstring); raises TaskRefused (refused
+    up front) or NoPlanFound (nothing found at the search resolution)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    params = params or SearchParams()
+    if not robot.one_cable_per_base:
+        raise ParameterError(f"{robot.name}: the search planner needs one cable per base")
+    t0 = time.perf_counter()
+    scene.validate(robot)
+    ext = np.asarray(scene.external if external is None else external, dtype=float)
+    rws = required_wrench_set(robot, ext)
+    mu_start = refuse_upfront(robot, scene, rws)
+    t_refuse = time.perf_counter() - t0
+
+    S, seg, task_at = stations(scene.tasks, params.station_step)
+    rel = scene.bases - scene.tasks[0, :2]
+    order = np.argsort(np.arctan2(rel[:, 1], rel[:, 0]), kind="stable")
+    offsets = _formations(robot, params, order)
+
+    # task points first: a refusal there costs a fraction of a second
+    for k, s in enumerate(task_at):
+        Bk, _, best, bestB = placements(robot, scene, S[s], offsets, rws, params)
+        if not len(Bk) and not (k == 0):
+            where = tuple(float(v) for v in np.round(S[s], 4))
+            raise NoPlanFound(
+                f"no base placement for task point {k + 1} {list(where)}: none of {len(offsets)} formations (bases "
+                f"{params.radii[0]:g}-{params.radii[1]:g} m from the platform) is free with μ ≥ {params.margin:g} N "
+                f"at every heading; best μ found {best:.4g} N"
+                + (f" with the bases at {np.round(bestB, 2).tolist()}" if bestB is not None else " (no free one)"),
+                "no-placement",
+                where,
+                best,
+            )
+    t_tasks = time.perf_counter() - t0
+
+    # nodes, built forward station by station: fresh formations, the reachable placements of the previous
+    # station (the bases stay) and the same translated with the platform (the formation follows it)
+    nB = [scene.bases.astype(float)[None]]
+    nst = [np.zeros(1, np.intp)]
+    nmu = [np.array([mu_start])]
+    src: list[NDArray[np.intp]] = []
+    dst: list[NDArray[np.intp]] = []
+    rng = np.random.default_rng(params.seed)
+    nclear = [point_clearance(scene, robot.base_radius, nB[0])]
+    reach_prev = np.zeros(1, np.intp)  # global indices of the reachable nodes of the previous station
+    count = 1
+    Ball = nB[0]
+    for s in range(len(S)):
+        Bprev = Ball[reach_prev]
+        muprev = np.concatenate(nmu)[reach_prev]
+        top = np.argsort(-muprev, kind="stable")[: params.keep]
+        shift = S[s, :2] - S[max(s - 1, 0), :2]
+        # local expansion: every base of the best reachable placements moved by up to max_move (seeded)
+        anchors = Bprev[top[: params.expand]]
+        steps = rng.uniform(-1.0, 1.0, (len(anchors), params.expand_samples, robot.n_bases, 2)) * params.max_move
+        local = (anchors[:, None] + shift + steps).reshape(-1, robot.n_bases, 2)
+        extra = np.concatenate([Bprev[top], Bprev[top] + shift, local])
+        Bs, mus, best, bestB = placements(robot, scene, S[s], offsets, rws, params, extra)
+        if not len(Bs) and s > 0:
+            where = tuple(float(v) for v in np.round(S[s], 4))
+            raise NoPlanFound(
+                f"no base placement for the platform at {list(where)} (between task points {int(seg[s]) + 1} and "
+                f"{int(seg[s]) + 2}) with μ ≥ {params.margin:g} N at every heading; best μ found {best:.4g} N",
+                "no-placement",
+                where,
+                best,
+            )
+        ids = np.arange(count, count + len(Bs))
+        count += len(Bs)
+        nB.append(Bs)
+        nst.append(np.full(len(Bs), s, np.intp))
+        nmu.append(mus)
+        Ball = np.concatenate(nB)
+        nclear.append(point_clearance(scene, robot.base_radius, Bs))
+        clear = np.concatenate(nclear)
+        prev_ids = reach_prev if s > 0 else np.zeros(1, np.intp)
+        a1, b1 = _connect(
+            robot, scene, Ball, prev_ids, np.concatenate([ids, prev_ids]) if s == 0 else ids, clear, params
+        )
+        a2, b2 = _connect(robot, scene, Ball, ids, ids, clear, params)
+        src += [a1, a2]
+        dst += [b1, b2]
+        # reachable at this station: from the previous station's reachable nodes, then waits here
+        reached = np.zeros(count, bool)
+        reached[b1] = True
+        if s == 0:
+            reached[0] = True
+        while True:
+            more = b2[reached[a2] & ~reached[b2]]
+            if not len(more):
+                break
+            reached[more] = True
+        reach_prev = np.flatnonzero(reached[ids]) + ids[0] if len(ids) else ids
+        if s == 0:
+            reach_prev = np.concatenate([[0], reach_prev])
+        if not len(reach_prev):
+            where = tuple(float(v) for v in np.round(S[max(s - 1, 0)], 4))
+            raise NoPlanFound(
+                f"placements exist but no collision-free base motion (each base ≤ {params.max_move:g} m per step, "
+                f"bases 2 r_mb apart) follows the platform beyond {list(where)} (station {s} of {len(S)}, between "
+                f"task points {int(seg[s]) + 1} and {min(int(seg[s]) + 2, len(scene.tasks))})",
+                "not-connectable",
+                where,
+                float(np.max(mus, initial=-np.inf)),
+            )
+    B = Ball
+    st = np.concatenate(nst)
+    mu = np.concatenate(nmu)
+    P = S[st]
+    src_a = np.concatenate(src)
+    dst_a = np.concatenate(dst)
+    w = (
+        np.linalg.norm(B[dst_a] - B[src_a], axis=-1).sum(axis=-1)
+        + 0.01
+        + params.mu_weight / np.maximum(mu[dst_a], 1e-3)
+    )
+    t_graph = time.perf_counter() - t0
+
+    N = len(B)
+    alive = np.ones(len(src_a), bool)
+    goal = np.flatnonzero(st == len(S) - 1)
+    th0 = scene.headings.astype(float)
+    rounds = 0
+    removed = 0
+    while True:
+        rounds += 1
+        G = coo_matrix((w[alive], (src_a[alive], dst_a[alive])), shape=(N, N)).tocsr()
+        dist, pred = dijkstra(G, directed=True, indices=0, return_predecessors=True)
+        reach = np.isfinite(dist)
+        if not reach[goal].any():
+            far = int(st[reach].max())
+            where = tuple(float(v) for v in np.round(S[far], 4))
+            raise NoPlanFound(
+                f"placements exist at every platform position but no certified base motion joins them: the bases "
+                f"follow the platform only up to {list(where)} (station {far + 1} of {len(S)}, between task points "
+                f"{int(seg[far]) + 1} and {min(int(seg[far]) + 2, len(scene.tasks))}); {removed} motions failed the "
+                f"μ certification, {len(src_a)} were tried",
+                "not-connectable",
+                where,
+                float(np.max(mu[st == min(far + 1, len(S) - 1)], initial=-np.inf)),
+            )
+        end = int(goal[np.argmin(dist[goal])])
+        path = [end]
+        while path[-1] != 0:
+            path.append(int(pred[path[-1]]))
+        path = path[::-1]
+        Pm, Bm, Hm, edge = _motion(B[path], P[path], th0, params.d_platform)
+        cert = certify(robot, Pm, Bm, Hm, rws)
+        if cert.ok:
+            break
+        bad_pieces = np.flatnonzero(~(cert.lower > 0))
+        bad_edges = np.unique(edge[np.floor(cert.u[bad_pieces]).astype(np.intp)])
+        eid = {(int(a), int(b)): i for i, (a, b) in enumerate(zip(src_a, dst_a, strict=True)) if alive[i]}
+        for e in bad_edges:
+            i = eid[(path[e], path[e + 1])]
+            alive[i] = False
+            removed += 1
+        if rounds >= params.max_rounds:
+            raise NoPlanFound(
+                f"no certified motion after {rounds} searches ({removed} motions removed); last failure near the "
+                f"platform at {np.round(Pm[cert.fail], 3).tolist()}",
+                "not-connectable",
+                tuple(float(v) for v in Pm[cert.fail]),
+            )
+    t_search = time.perf_counter() - t0
+
+    # shortcut smoothing inside each task segment
+    nodes = path
+    out = [nodes[0]]
+    th = th0.copy()
+    i = 0
+    shortcuts = 0
+    while i < len(nodes) - 1:
+        j_best = i + 1
+        for j in range(min(len(nodes) - 1, i + params.shortcut), i + 1, -1):
+            if not _same_line(S, st[nodes[i : j + 1]], seg, task_at):
+                continue
+            pair = np.array([nodes[i], nodes[j]])
+            if not _edges_ok(robot, scene, B[pair[:1]], B[pair[1:]])[0]:
+                continue
+            if np.max(np.linalg.norm(B[nodes[j]] - B[nodes[i]], axis=-1)) > 4 * params.max_move:
+                continue
+            Pm, Bm, Hm, _ = _motion(B[pair], P[pair], th, params.d_platform)
+            if certify(robot, Pm, Bm, Hm, rws).ok:
+                j_best = j
+                shortcuts += 1
+                break
+        pair = np.array([nodes[i], nodes[j_best]])
+        _, _, Hm, _ = _motion(B[pair], P[pair], th, params.d_platform)
+        th = Hm[-1]
+        out.append(nodes[j_best])
+        i = j_best
+    Pm, Bm, Hm, edge = _motion(B[out], P[out], th0, params.d_platform)
+    cert = certify(robot, Pm, Bm, Hm, rws)
+    if not cert.ok:  # cannot happen piecewise; keep the certified unsmoothed path then
+        out = path
+        Pm, Bm, Hm, edge = _motion(B[out], P[out], th0, params.d_platform)
+        cert = certify(robot, Pm, Bm, Hm, rws)
+    t_smooth = time.perf_counter() - t0
+
+    # per original piece: the smallest guaranteed bound over its refined sub-pieces
+    piece = np.floor(cert.u[:-1]).astype(np.intp)
+    lower = np.full(len(Pm) - 1, np.inf)
+    np.minimum.at(lower, piece, cert.lower)
+    labels = _labels(Pm, S, seg, task_at)
+    cap = capacity(robot, Pm, Bm, Hm, rws)
+    tens = tensions(robot, cap.W, cap.lo, cap.hi)
+    t_end = time.perf_counter() - t0
+    info: dict[str, Any] = {
+        "stations": len(S),
+        "nodes": int(N),
+        "edges": int(len(src_a)),
+        "rounds": rounds,
+        "edges_removed": removed,
+        "path_nodes": len(path),
+        "smoothed_nodes": len(out),
+        "shortcuts": shortcuts,
+        "refined_samples": int(len(cert.P)),
+        "mu_lower_min": float(np.min(cert.lower)) if len(cert.lower) else float("nan"),
+    }
+    return Plan(
+        waypoints=np.asarray(scene.tasks, float),
+        bases=Bm,
+        headings=Hm,
+        platform=Pm,
+        segment=labels,
+        mu=cap.mu,
+        tensions=tens,
+        lo=cap.lo,
+        hi=cap.hi,
+        stage1=[],
+        times={
+            "refusal_checks": t_refuse,
+            "task_placements": t_tasks - t_refuse,
+            "graph": t_graph - t_tasks,
+            "search": t_search - t_graph,
+            "smoothing": t_smooth - t_search,
+            "evaluation": t_end - t_smooth,
+            "total": t_end,
+        },
+        params=PlannerParams(d_platform=params.d_platform),
+        external=ext.copy(),
+        planner="search",
+        mu_lower=lower,
+        search=info,
+    )
+
+
+def _same_line(S: NDArray[np.float64], sts: NDArray[np.intp], seg: NDArray[np.int64], task_at: list[int]) -> bool:
+    """True when the stations ``sts`` (in path order) lie on one task segment, monotonically (a straight platform
+    motion from the first to the last passes through all of them and through no task point in between)."""
+    lo, hi = int(sts.min()), int(sts.max())
+    if np.any(np.diff(sts) < 0):
+        return False
+    inner = [t for t in task_at if lo < t < hi]
+    return not inner
+
+
+def _labels(
+    Pm: NDArray[np.float64], S: NDArray[np.float64], seg: NDArray[np.int64], task_at: list[int]
+) -> NDArray[np.int64]:
+    """Segment index of each sample: the task segment the platform last moved along (waits keep the label)."""
+    tasks = S[task_at]
+    out = np.zeros(len(Pm), np.int64)
+    cur = 0
+    for r in range(1, len(Pm)):
+        d = Pm[r] - Pm[r - 1]
+        if np.linalg.norm(d) > 1e-12:
+            mid = 0.5 * (Pm[r] + Pm[r - 1])
+            # the segment whose line contains the midpoint (distance to each segment)
+            a, b = tasks[:-1], tasks[1:]
+            v = b - a
+            s = np.clip(np.einsum("ki,ki->k", mid - a, v) / np.maximum(np.einsum("ki,ki->k", v, v), 1e-300), 0, 1)
+            cur = int(np.argmin(np.linalg.norm(a + s[:, None] * v - mid, axis=-1)))
+        out[r] = cur
+    return out
