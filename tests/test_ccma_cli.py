@@ -79,12 +79,63 @@ def test_under_constrained_description_exits_2(tmp_path, capsys):
     assert "free bodies" in capsys.readouterr().err
 
 
-def test_unreachable_path_exits_1_with_outputs(tmp_path, capsys):
-    code, out = _run(tmp_path, "far", "--path", "combined", "--steps", "2", "--step", "0.15", "--no-plots")
+def test_target_beyond_reach_exits_1_before_control(tmp_path, capsys, monkeypatch):
+    """Step 2 of (+0.15 m in x, y, z) puts the platform at z = 0.8 m; the arms (0.447 m from elbows at z = 0.3 m)
+    reach z = 0.747 m: refused with the reason before any IK step, only summary.json written."""
+    import tmr.ccma.control as control
+
+    def boom(*a, **k):
+        raise AssertionError("tracked a path that leaves the reach")
+
+    monkeypatch.setattr(control, "track", boom)
+    code, out = _run(tmp_path, "far", "--path", "combined", "--steps", "2", "--step", "0.15")
     assert code == 1
+    assert sorted(p.name for p in out.iterdir()) == ["summary.json"]
     summary = json.loads((out / "summary.json").read_text())
-    assert not summary["all_reached"] and summary["missed_steps"] == [2]
-    assert "path FAILED" in capsys.readouterr().err
+    reach = summary["reach"]
+    assert summary["refused"] and not summary["all_reached"] and not reach["ok"]
+    assert reach["step"] == 2 and reach["first_step"] == 2 and reach["steps_beyond"] == 1
+    arm = np.hypot(0.4, 0.2)
+    assert reach["excess_m"] == pytest.approx(0.5 - arm, abs=2e-6)
+    assert reach["ee_height_range_m"][1] == pytest.approx(0.3 + arm, abs=2e-6)
+    err = capsys.readouterr().err
+    assert f"target 2 is {0.5 - arm:.3g} m beyond the reach of the linkage" in err
+
+
+def test_default_demo_bends_the_joints(tmp_path, capsys):
+    """The default path (vertical circle, radius 0.05 m, rising first) lifts the platform to 0.6 m: each arm turns
+    from asin(0.2/L) to asin(0.3/L), L = √(0.4² + 0.2²), and the output reports it."""
+    code, out = _run(tmp_path, "demo", "--no-plots")
+    assert code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    arm = np.hypot(0.4, 0.2)
+    bend = np.arcsin(0.3 / arm) - np.arcsin(0.2 / arm)
+    assert summary["path"] == "vcircle" and summary["all_reached"]
+    assert summary["max_joint_range_rad"] == pytest.approx(bend, abs=1e-5)
+    lo, hi = summary["joint_ranges_rad"]["elbow_a"]
+    assert abs(lo) < 1e-6 and abs(hi) == pytest.approx(bend, abs=1e-5)
+    assert summary["max_condition"] < summary["condition_limit"] and summary["near_singular_steps"] == []
+    assert f"joint range          {bend:.3g} rad" in capsys.readouterr().out
+    rows = list(csv.DictReader((out / "trajectory.csv").open()))
+    assert max(abs(float(r["angle_elbow_b"])) for r in rows) == pytest.approx(bend, abs=1e-5)
+    assert all(float(r["condition"]) > 1 for r in rows)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (("--radius", "1e9"), "more than the cap of 100000"),
+        (("--step", "1e-12"), "more than the cap of 100000"),
+        (("--path", "line", "--steps", "1000000000000"), "more than the cap of 100000"),
+        (("--path", "tilt"), "0 tilt axis"),
+        (("--example", "5dof-reduced", "--path", "roll"), "1 tilt axis"),
+    ],
+)
+def test_path_errors_exit_2_before_anything(tmp_path, capsys, args, message):
+    code, out = _run(tmp_path, "bad", *args)
+    assert code == 2 and not out.exists()
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1 and "Traceback" not in err
 
 
 def test_list(capsys):

@@ -15,7 +15,14 @@ from .conftest import add_fourth_leg
 
 
 def test_shipped_examples():
-    assert example_names() == ["4dof-complete", "4dof-reduced", "5dof-reduced", "6dof-reduced"]
+    assert example_names() == [
+        "4dof-2agents",
+        "4dof-4agents",
+        "4dof-complete",
+        "4dof-reduced",
+        "5dof-reduced",
+        "6dof-reduced",
+    ]
     red, comp = load_system("4dof-reduced"), load_system("4dof-complete")
     assert red.n_controls == 6 and comp.n_controls == 9
     assert red.control_names[:3] == ["agent_a.x", "agent_a.y", "agent_b.x"]

@@ -1,7 +1,9 @@
-"""Command line: ``python -m tmr.ccma run --example 4dof-reduced --path circle --out runs/ccma``.
+"""Command line: ``python -m tmr.ccma run --example 4dof-reduced --path vcircle --out runs/ccma``.
 
-``run`` tracks an end-effector path of small increments (Kumar 2019 §III-D) with the sensitivity-based IK
-(:mod:`tmr.ccma.control`) and writes into ``--out``: ``trajectory.csv`` and ``trajectory.json`` (targets, reached
+``run`` first checks every target of the path against the reach bound of the linkage (:mod:`tmr.ccma.reach`), then
+tracks the end-effector path of small increments (Kumar 2019 §III-D) with the sensitivity-based IK
+(:mod:`tmr.ccma.control`), records the joint angles (:mod:`tmr.ccma.angles`) and the conditioning of every step, and
+writes into ``--out``: ``trajectory.csv`` and ``trajectory.json`` (targets, reached
 end-effector pose, agent poses and controls, errors, residual energy, iteration counts per step), ``summary.json``
 (tolerance checks and timings) and, unless ``--no-plots``, ``mechanism.png`` (3D + top view) and
 ``convergence.png`` (objective against time, Kumar 2019 Fig. 5). Files of these names left in ``--out`` by an earlier
@@ -11,8 +13,10 @@ run that this run does not write (e.g. the figures under ``--no-plots``) are del
 Everything is deterministic except the timings (``summary.json`` "timing" and ``convergence.png``): the same inputs
 give the same trajectory bytes. Nothing in this command is random, so there is no ``--seed``.
 
-Exit codes: 0 every target reached; 1 tracked but some target missed (outputs written, reason printed); 2 bad input
-(nothing written), including an ``--out`` that is an existing file or cannot be created or written (checked first).
+Exit codes: 0 every target reached; 1 a target beyond the reach of the linkage (found before control: only
+``summary.json`` is written, with the reason) or tracked but some target missed (outputs written, reason printed); 2 bad
+input (nothing written), including an ``--out`` that is an existing file or cannot be created or written (checked
+first) and a path of more than :data:`tmr.ccma.paths.MAX_STEPS` targets (checked before anything is allocated).
 """
 
 from __future__ import annotations
@@ -75,8 +79,15 @@ def build_parser() -> argparse.ArgumentParser:
     src = r.add_mutually_exclusive_group()
     src.add_argument("--example", default="4dof-reduced", help="shipped example (see 'list'; default 4dof-reduced)")
     src.add_argument("--description", help="path of a system description TOML file instead of an example")
-    r.add_argument("--path", default="circle", choices=list(PATHS), help="end-effector path (default circle)")
-    r.add_argument("--radius", type=_positive, default=0.05, help="circle radius [m] (default 0.05)")
+    r.add_argument(
+        "--path",
+        default="vcircle",
+        choices=list(PATHS),
+        help="end-effector path (default vcircle); vcircle, figure8, tilt and roll bend the joints, circle and line "
+        "only slide a level mechanism",
+    )
+    r.add_argument("--radius", type=_positive, default=0.05, help="size of circle/vcircle/figure8 [m] (default 0.05)")
+    r.add_argument("--amplitude", type=_positive, default=0.2, help="tilt/roll sweep amplitude [rad] (default 0.2)")
     r.add_argument("--step", type=_positive, default=1e-3, help="translation increment per step [m] (default 0.001)")
     r.add_argument("--rot-step", type=_positive, default=0.01, help="rotation increment per step [rad] (default 0.01)")
     r.add_argument("--steps", type=_positive_int, default=20, help="steps of line/yaw/combined paths (default 20)")
@@ -87,7 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _csv_text(model: Any, path: Any, res: Any) -> str:
+def _csv_text(model: Any, path: Any, res: Any, joint_names: list[str], angles: np.ndarray) -> str:
     sysm = model.system
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
@@ -103,6 +114,7 @@ def _csv_text(model: Any, path: Any, res: Any) -> str:
     for a in sysm.agents:
         head += [f"{a.name}_x", f"{a.name}_y", f"{a.name}_yaw"]
     head += [f"u_{n}" for n in sysm.control_names]
+    head += ["condition", "sigma_min", "damped"] + [f"angle_{n}" for n in joint_names]
     w.writerow(head)
     for k in range(len(path.positions)):
         yaw = math.atan2(res.ee_rotation[k, 1, 0], res.ee_rotation[k, 0, 0])
@@ -110,11 +122,14 @@ def _csv_text(model: Any, path: Any, res: Any) -> str:
         row += [res.position_error[k], res.rotation_error[k], res.residual[k]]
         row += [int(res.iterations[k]), int(res.evaluations[k]), int(res.newton_iterations[k])]
         row += list(res.agents[k].ravel()) + list(res.u[k])
+        row += [res.condition[k], res.sigma_min[k], int(res.damped[k])] + list(angles[k])
         w.writerow([repr(float(v)) if isinstance(v, (float, np.floating)) else v for v in row])
     return buf.getvalue()
 
 
-def _trajectory_doc(model: Any, args: argparse.Namespace, path: Any, res: Any) -> dict[str, Any]:
+def _trajectory_doc(
+    model: Any, args: argparse.Namespace, path: Any, res: Any, joint_names: list[str], angles: np.ndarray
+) -> dict[str, Any]:
     sysm = model.system
     return {
         "format": TRAJECTORY_FORMAT,
@@ -134,17 +149,22 @@ def _trajectory_doc(model: Any, args: argparse.Namespace, path: Any, res: Any) -
         "bfgs_iterations": res.iterations,
         "evaluations": res.evaluations,
         "newton_iterations": res.newton_iterations,
+        "condition": res.condition,
+        "sigma_min": res.sigma_min,
+        "damped": res.damped.astype(int),
+        "joint_names": joint_names,
+        "joint_angles": angles,
     }
 
 
 def run(args: argparse.Namespace) -> int:
-    from tmr.ccma.control import reached, track
+    from tmr.ccma.angles import joint_angles, joint_ranges, rotary_joints
+    from tmr.ccma.control import CONDITION_LIMIT, reached, track
     from tmr.ccma.energy import EnergyModel
-    from tmr.ccma.errors import CcmaError
     from tmr.ccma.paths import make_path
+    from tmr.ccma.reach import check_reach, height_range
     from tmr.ccma.sim import end_effector_pose, reference_state
     from tmr.ccma.system import build_system, load_description
-    from tmr.io import atomic_write_text
     from tmr.metrics import json_safe
 
     # ---- validate and compute everything before writing
@@ -163,10 +183,44 @@ def run(args: argparse.Namespace) -> int:
         rot_step=args.rot_step,
         radius=args.radius,
         steps=args.steps,
+        amplitude=args.amplitude,
     )
+    verdict = check_reach(model.system, path.positions, path.rotations)
+    z_lo, z_hi = height_range(model.system)
+    reach = {
+        "ok": verdict.ok,
+        "legs_bounded": verdict.legs,
+        "ee_height_range_m": [z_lo, z_hi],
+        "min_margin_m": float(verdict.margin.min()),
+        "message": verdict.message(),
+    }
+    if not verdict.ok:
+        reach.update(
+            step=verdict.step,
+            leg=verdict.leg,
+            excess_m=verdict.excess,
+            rise_m=verdict.rise,
+            limit_m=verdict.limit,
+            first_step=verdict.first,
+            steps_beyond=verdict.count,
+        )
+        _write_outputs(
+            out,
+            {
+                "summary.json": json.dumps(json_safe(_refusal(model, args, path, reach)), indent=2, allow_nan=False)
+                + "\n"
+            },
+        )
+        print(f"path REFUSED before control: {verdict.message()}", file=sys.stderr)
+        return 1
     n_snap = 5
     res = track(model, path.positions, path.rotations, state=st0, gtol=args.gtol, keep_states=True)
     ok = reached(res)
+    joint_names = [model.system.joints[k].name for k in rotary_joints(model)]
+    angles = joint_angles(model, res.states)
+    ranges = joint_ranges(model, angles)
+    widest = max(ranges, key=lambda r: r.span, default=None)
+    near = np.flatnonzero(res.condition > CONDITION_LIMIT)
     summary = {
         "system": model.system.name,
         "path": args.path,
@@ -181,6 +235,14 @@ def run(args: argparse.Namespace) -> int:
         "max_residual_energy": float(res.residual.max()),
         "median_bfgs_iterations": float(np.median(res.iterations)),
         "median_newton_iterations_per_step": float(np.median(res.newton_iterations)),
+        "reach": reach,
+        "joint_ranges_rad": {r.name: [r.low, r.high] for r in ranges},
+        "max_joint_range_rad": widest.span if widest else 0.0,
+        "max_condition": float(res.condition.max()),
+        "min_sigma_m": float(res.sigma_min.min()),
+        "condition_limit": CONDITION_LIMIT,
+        "near_singular_steps": [int(k) + 1 for k in near],
+        "damped_steps": [int(k) + 1 for k in np.flatnonzero(res.damped)],
         "timing": {
             "compiled": model.compiled,
             "median_step_ms": 1e3 * float(np.median(res.step_time)),
@@ -188,28 +250,116 @@ def run(args: argparse.Namespace) -> int:
             "total_s": float(res.step_time.sum()),
         },
     }
+    texts = {
+        "trajectory.csv": _csv_text(model, path, res, joint_names, angles),
+        "trajectory.json": json.dumps(
+            json_safe(_trajectory_doc(model, args, path, res, joint_names, angles)), allow_nan=False
+        )
+        + "\n",
+        "summary.json": json.dumps(json_safe(summary), indent=2, allow_nan=False) + "\n",
+    }
+    figures = {}
+    if not args.no_plots:
+        from tmr.ccma.plot import plot_convergence, plot_mechanism
+
+        idx = np.unique(np.linspace(0, len(res.states) - 1, n_snap).round().astype(int))
+        title = f"{model.system.name}: {args.path} path, {len(path.positions)} steps"
+        figures["mechanism.png"] = plot_mechanism(
+            model, res, [st0] + [res.states[i] for i in idx], title, angles=angles, joint_names=joint_names
+        )
+        slow = int(np.argmax(res.step_time[1:])) + 1 if len(res.step_time) > 1 else 0
+        mid = len(res.step_time) // 2
+        curves = {"step 1 (from the reference)": res.histories[0], f"step {mid + 1}": res.histories[mid]}
+        curves[f"step {slow + 1} (slowest warm)"] = res.histories[slow]
+        figures["convergence.png"] = plot_convergence(curves, f"{model.system.name}: objective vs time")
+    names = _write_outputs(out, texts, figures)
+    t = summary["timing"]
+    print(
+        f"tmr ccma: {model.system.name}, path {args.path}, {summary['steps']} steps, {model.nu} controls\n"
+        f"  max position error   {summary['max_position_error']:.3g} m\n"
+        f"  max rotation error   {summary['max_rotation_error']:.3g} rad\n"
+        f"  max residual energy  {summary['max_residual_energy']:.3g} m²\n"
+        f"  median BFGS its      {summary['median_bfgs_iterations']:g}\n"
+        f"  median step time     {t['median_step_ms']:.3g} ms (compiled: {t['compiled']})\n"
+        f"  joint range          {_range_text(widest)}\n"
+        f"  reach                smallest margin {reach['min_margin_m']:.3g} m (end-effector height "
+        f"{z_lo:.3g} … {z_hi:.3g} m at the reference rotation)\n"
+        f"  conditioning         max {summary['max_condition']:.3g} (near-singular above {CONDITION_LIMIT:g}: "
+        f"{len(near)} step(s), {int(res.damped.sum())} damped)\n"
+        f"  wrote {', '.join(names)} to {out}"
+    )
+    if near.size:
+        print(
+            f"warning: {len(near)} step(s) near a singular configuration (sensitivity condition number up to "
+            f"{summary['max_condition']:.3g} at step {int(np.argmax(res.condition)) + 1}; smallest end-effector "
+            f"singular value {summary['min_sigma_m']:.3g} m); the steps after them were damped",
+            file=sys.stderr,
+        )
+    if not ok.all():
+        print(f"path FAILED: {_miss_reason(res, ok)}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _range_text(widest: Any) -> str:
+    if widest is None:
+        return "no rotary joint"
+    return f"{widest.span:.3g} rad ({widest.name}: {widest.low:.3g} … {widest.high:.3g} rad)"
+
+
+def _miss_reason(res: Any, ok: np.ndarray) -> str:
+    """One line: how many targets were missed, the first, and which tolerance it broke by how much."""
+    from tmr.ccma.control import CONDITION_LIMIT
+    from tmr.ccma.sim import ASSEMBLY_TOL
+
+    missed = np.flatnonzero(~ok)
+    k = int(missed[0])
+    why = []
+    if res.position_error[k] > 1e-5:
+        why.append(f"position error {res.position_error[k]:.3g} m > 1e-05 m")
+    if res.rotation_error[k] > 1e-4:
+        why.append(f"rotation error {res.rotation_error[k]:.3g} rad > 0.0001 rad")
+    if res.residual[k] > ASSEMBLY_TOL:
+        why.append(
+            f"residual energy {res.residual[k]:.3g} m² > {ASSEMBLY_TOL:g} m² (the agents' commands do not assemble)"
+        )
+    if res.condition[k] > CONDITION_LIMIT:
+        why.append(f"near-singular (condition number {res.condition[k]:.3g})")
+    return f"{len(missed)} target(s) missed, first at step {k + 1}: {'; '.join(why)}"
+
+
+def _refusal(model: Any, args: argparse.Namespace, path: Any, reach: dict[str, Any]) -> dict[str, Any]:
+    """summary.json of a path refused before control (a target beyond the reach of the linkage)."""
+    return {
+        "system": model.system.name,
+        "path": args.path,
+        "steps": len(path.positions),
+        "controls": model.nu,
+        "all_reached": False,
+        "refused": True,
+        "reach": reach,
+    }
+
+
+def _write_outputs(out: Path, texts: dict[str, str], figures: dict[str, Any] | None = None) -> list[str]:
+    """Write the files into ``out`` through a temporary directory (no partial output), remove outputs of an earlier
+    run this one does not produce, and return the names written."""
+    from tmr.ccma.errors import CcmaError
+    from tmr.io import atomic_write_text
+
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:  # e.g. removed or made read-only since check_out_dir
         raise CcmaError(f"--out {str(out)!r}: cannot create the output directory: {exc.strerror or exc}") from exc
     tmp = Path(tempfile.mkdtemp(prefix=".ccma-run.", dir=out))
     try:
-        atomic_write_text(tmp / "trajectory.csv", _csv_text(model, path, res))
-        doc = json_safe(_trajectory_doc(model, args, path, res))
-        atomic_write_text(tmp / "trajectory.json", json.dumps(doc, allow_nan=False) + "\n")
-        atomic_write_text(tmp / "summary.json", json.dumps(json_safe(summary), indent=2, allow_nan=False) + "\n")
-        if not args.no_plots:
-            from tmr.ccma.plot import plot_convergence, plot_mechanism
+        for name, text in texts.items():
+            atomic_write_text(tmp / name, text)
+        if figures:
             from tmr.plot import save_figure
 
-            idx = np.unique(np.linspace(0, len(res.states) - 1, n_snap).round().astype(int))
-            title = f"{model.system.name}: {args.path} path, {len(path.positions)} steps"
-            save_figure(plot_mechanism(model, res, [st0] + [res.states[i] for i in idx], title), tmp / "mechanism.png")
-            slow = int(np.argmax(res.step_time[1:])) + 1 if len(res.step_time) > 1 else 0
-            mid = len(res.step_time) // 2
-            curves = {"step 1 (from the reference)": res.histories[0], f"step {mid + 1}": res.histories[mid]}
-            curves[f"step {slow + 1} (slowest warm)"] = res.histories[slow]
-            save_figure(plot_convergence(curves, f"{model.system.name}: objective vs time"), tmp / "convergence.png")
+            for name, fig in figures.items():
+                save_figure(fig, tmp / name)
         names = sorted(p.name for p in tmp.iterdir())
         for name in names:
             os.replace(tmp / name, out / name)
@@ -219,23 +369,7 @@ def run(args: argparse.Namespace) -> int:
                 stale.unlink(missing_ok=True)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    t = summary["timing"]
-    print(
-        f"tmr ccma: {model.system.name}, path {args.path}, {summary['steps']} steps, {model.nu} controls\n"
-        f"  max position error   {summary['max_position_error']:.3g} m\n"
-        f"  max rotation error   {summary['max_rotation_error']:.3g} rad\n"
-        f"  max residual energy  {summary['max_residual_energy']:.3g} m²\n"
-        f"  median BFGS its      {summary['median_bfgs_iterations']:g}\n"
-        f"  median step time     {t['median_step_ms']:.3g} ms (compiled: {t['compiled']})\n"
-        f"  wrote {', '.join(names)} to {out}"
-    )
-    if not ok.all():
-        print(
-            f"path FAILED: {len(summary['missed_steps'])} target(s) missed, first at step {summary['missed_steps'][0]}",
-            file=sys.stderr,
-        )
-        return 1
-    return 0
+    return names
 
 
 def main(argv: list[str] | None = None) -> int:

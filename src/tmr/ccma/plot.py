@@ -1,4 +1,5 @@
-"""Figures of a tracked CCMA path: mechanism in 3D and top view, and BFGS convergence (Kumar 2019 Fig. 5, 11)."""
+"""Figures of a tracked CCMA path: mechanism in 3D and top view, joint angles, and BFGS convergence (Kumar 2019
+Fig. 5, 11)."""
 
 from __future__ import annotations
 
@@ -44,11 +45,22 @@ def _draw_agents(ax: Axes, agents: np.ndarray, colour: str, z: float | None) -> 
             ax.plot(pts[:, 0], pts[:, 1], np.full(len(pts), z), color=colour, lw=1.0)
 
 
-def plot_mechanism(model: EnergyModel, result: TrackResult, states: Sequence[State], title: str = "") -> Figure:
-    """3D view (mechanism at the given states, end-effector path) and top view (agent and end-effector paths)."""
-    fig = Figure(figsize=(12, 5.5))
-    ax3 = fig.add_subplot(1, 2, 1, projection="3d")
-    ax2 = fig.add_subplot(1, 2, 2)
+def plot_mechanism(
+    model: EnergyModel,
+    result: TrackResult,
+    states: Sequence[State],
+    title: str = "",
+    *,
+    angles: np.ndarray | None = None,
+    joint_names: Sequence[str] = (),
+) -> Figure:
+    """3D view (mechanism at the given states, end-effector path) and top view (agent and end-effector paths); with
+    ``angles`` (K, J) [rad] of the joints ``joint_names`` (:func:`tmr.ccma.angles.joint_angles`) a third panel plots
+    every joint that turns against the step (joints that stay within 1e-6 rad are listed, not drawn)."""
+    panels = 3 if angles is not None else 2
+    fig = Figure(figsize=(6 * panels, 5.5))
+    ax3 = fig.add_subplot(1, panels, 1, projection="3d")
+    ax2 = fig.add_subplot(1, panels, 2)
     cmap = colormaps["viridis"]
     ee = result.ee_position
     n_ag = result.agents.shape[1]
@@ -81,10 +93,33 @@ def plot_mechanism(model: EnergyModel, result: TrackResult, states: Sequence[Sta
     ax2.set_title("top view: agent and end-effector paths")
     ax2.legend(fontsize=8, loc="best")
     ax2.grid(True, lw=0.3)
+    if angles is not None:
+        _plot_angles(fig.add_subplot(1, panels, 3), np.asarray(angles, float), list(joint_names))
     if title:
         fig.suptitle(title)
     fig.tight_layout()
     return fig
+
+
+def _plot_angles(ax: Axes, angles: np.ndarray, names: list[str]) -> None:
+    steps = np.arange(1, len(angles) + 1)
+    still = []
+    for c, name in enumerate(names):
+        a = angles[:, c]
+        if a.size and np.ptp(a) > 1e-6:
+            ax.plot(steps, np.degrees(a), lw=1.3, label=name)
+        else:
+            still.append(name)
+    ax.set_xlabel("step")
+    ax.set_ylabel("joint angle from the reference [deg]")
+    span = float(np.ptp(angles, axis=0).max()) if angles.size else 0.0
+    ax.set_title(f"joint angles (largest range {np.degrees(span):.1f}°)")
+    if len(names) > len(still):
+        ax.legend(fontsize=7, loc="best", ncol=2)
+    if still:
+        text = "not turning: " + ", ".join(still)
+        ax.text(0.01, 0.01, text if len(text) < 90 else text[:87] + "…", transform=ax.transAxes, fontsize=7)
+    ax.grid(True, lw=0.3)
 
 
 def plot_convergence(curves: Mapping[str, np.ndarray], title: str = "") -> Figure:

@@ -59,10 +59,11 @@ class Leg:
 
 class ReachVerdict(NamedTuple):
     """Reach check of a path. ``ok``: every target inside the bound (within :data:`REACH_TOL`); otherwise ``step``
-    (1-based) is the first target outside, ``leg`` the agent whose leg cannot reach it, ``excess`` [m] by how much,
-    ``rise`` [m] the height the leg would have to span there and ``limit`` [m] the most it can. ``margin`` (K,) [m]
-    is the smallest distance of each target's leg rises to their bounds (negative outside); ``legs`` the number of
-    legs with a bound (0: no analytic bound for this system, nothing checked)."""
+    (1-based) is the target farthest outside, ``leg`` the agent whose leg misses it most, ``excess`` [m] by how much,
+    ``rise`` [m] the height the leg would have to span there and ``limit`` [m] the most it can; ``first`` (1-based)
+    the first target outside and ``count`` how many are. ``margin`` (K,) [m] is the smallest distance of each
+    target's leg rises to their bounds (negative outside); ``legs`` the number of legs with a bound (0: no analytic
+    bound for this system, nothing checked)."""
 
     ok: bool
     step: int
@@ -72,14 +73,17 @@ class ReachVerdict(NamedTuple):
     limit: float
     margin: np.ndarray
     legs: int
+    first: int = 0
+    count: int = 0
 
     def message(self) -> str:
         if self.ok:
             return "every target is within the reach of the linkage"
+        more = f"; {self.count} targets are beyond it, the first is target {self.first}" if self.count > 1 else ""
         return (
-            f"target {self.step} is {self.excess:.3g} m beyond the reach of the linkage: the leg of {self.leg} would "
+            f"target {self.step} is {self.excess:.3g} m beyond the reach of the linkage (the leg of {self.leg} would "
             f"have to span {abs(self.rise):.3g} m in height between its base and the end-effector, at most "
-            f"{self.limit:.3g} m"
+            f"{self.limit:.3g} m){more}"
         )
 
 
@@ -218,10 +222,12 @@ def check_reach(system: System, positions: np.ndarray, rotations: np.ndarray, to
     bad = np.flatnonzero(worst < -tol)
     if not bad.size:
         return ReachVerdict(True, 0, "", 0.0, 0.0, 0.0, worst, len(ls))
-    k = int(bad[0])
+    k = int(bad[np.argmin(worst[bad])])
     c = int(np.argmin(margins[k]))
     leg = ls[c]
     rise = float(_rises(system, leg, positions[k : k + 1], rotations[k : k + 1])[0])
     lo, hi = _leg_bounds(leg, rotations[k : k + 1])
     limit = float(hi[0]) if rise > hi[0] else float(-lo[0])
-    return ReachVerdict(False, k + 1, leg.agent, float(-margins[k, c]), rise, limit, worst, len(ls))
+    return ReachVerdict(
+        False, k + 1, leg.agent, float(-margins[k, c]), rise, limit, worst, len(ls), int(bad[0]) + 1, int(bad.size)
+    )
