@@ -283,3 +283,97 @@ def test_unusable_out_refused_before_planning(tmp_path, capsys):
         code, stdout, err = run_cli(["--scenario", "A", "--no-plots", "--out", str(out)], capsys)
         assert code == 2 and why in err and len(err.strip().splitlines()) == 1 and stdout == ""
     assert f.read_text() == "keep me" and sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]
+
+
+# ----------------------------------------------------------------------------------------------------- a ROS map
+# with one robot radius, and the manners every tmr command shares
+def test_turtlebot3_map_one_robot_radius(tmp_path, capsys):
+    """A map_saver TurtleBot3-world-like map (origin -10, -10; a 5 m arena in a 20 m x 20 m mostly unknown image):
+    --base -2.0,0.0 sits 0.35 m from two pillars, so r = 0.5 m refuses it naming 0.5 m, and r = 0.15 m (either
+    flag) grows the obstacles, spaces the robots and names the radius with 0.15 m."""
+    from tests.test_maps import _turtlebot3_world
+
+    m = str(_turtlebot3_world(tmp_path))
+    base = ["--map", m, "--base", "-2.0,0.0", "--goal", "1.5,2.5", "--no-plots"]
+    code, _, err = run_cli([*base, "--out", str(tmp_path / "r05")], capsys)
+    assert code == 2 and "grown by the safety radius 0.5 m" in err and len(err.strip().splitlines()) == 1
+    outs = {}
+    for name, flag in (("flag", ["--robot-radius", "0.15"]), ("set", ["--set", "safety_radius=0.15"])):
+        outs[name] = tmp_path / name
+        code, _, err = run_cli([*base, *flag, "--out", str(outs[name])], capsys)
+        assert code == 0, err
+    for f in ("trajectories.json", "metrics.json", "run.json"):
+        assert (outs["flag"] / f).read_bytes() == (outs["set"] / f).read_bytes(), f
+    traj = json.loads((outs["flag"] / "trajectories.json").read_text())
+    P = np.stack([np.column_stack([r["x"], r["y"]]) for r in traj["robots"]], axis=1)  # (K+1, N, 2)
+    iu, ju = np.triu_indices(P.shape[1], 1)
+    gaps = np.linalg.norm(P[:, iu] - P[:, ju], axis=-1)
+    assert gaps.min() >= 2 * 0.15 - 1e-9
+    # the pillar next to the base, (-2, 0.5), radius 0.15 (3 px), grown by 0.15: every robot outside 0.3 m of it
+    assert np.linalg.norm(P - [-2.0, 0.5], axis=-1).min() >= 0.3 - 0.03
+    # the two flags must agree
+    code, _, err = run_cli(
+        [*base, "--robot-radius", "0.2", "--set", "safety_radius=0.15", "--out", str(tmp_path / "x")], capsys
+    )
+    assert code == 2 and "two robot radii" in err
+
+
+@pytest.mark.parametrize(
+    ("flag", "match"),
+    [
+        (["--set", "d_mn=0.6"], "unknown parameter 'd_mn'; did you mean d_min?"),
+        (["--set", "foo=1"], "unknown parameter 'foo' (the names are the fields of ChainParams"),
+        (["--set", "d_min=abc"], "--set d_min=abc: PinvParams.d_min takes a number, got 'abc'"),
+        (["--set", "d_min"], "expected NAME=VALUE"),
+        (["--goal", "1e308,0"], "outside the room"),
+    ],
+)
+def test_bad_values_one_clear_line(tmp_path, capsys, flag, match):
+    out = tmp_path / "out"
+    code, stdout, err = run_cli(["--scenario", "A", *flag, "--no-plots", "--out", str(out)], capsys)
+    assert code == 2 and match in err and not out.exists() and stdout == ""
+    assert "Traceback" not in err and (len(err.strip().splitlines()) == 1 or "usage:" in err)
+
+
+def test_reused_out_keeps_no_stale_outputs(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    for name in ("chain_poses.png", "speeds.png", "notes.txt"):  # two outputs of an older run, one file of the user
+        (out / name).write_text("old")
+    code, _, err = run_cli(["--scenario", "A", "--no-plots", "--out", str(out), *FAST], capsys)
+    assert code == 0, err
+    names = sorted(p.name for p in out.iterdir())
+    assert "chain_poses.png" not in names and "speeds.png" not in names and "notes.txt" in names
+    assert (out / "notes.txt").read_text() == "old" and "metrics.json" in names
+
+
+def test_quiet_verbose_debug_and_interrupt(tmp_path, capsys, monkeypatch):
+    import tmr.plan
+
+    out = tmp_path / "q"
+    code, stdout, err = run_cli(["--scenario", "A", "--no-plots", "--quiet", "--out", str(out), *FAST], capsys)
+    assert code == 0 and stdout == "" and err == "" and (out / "metrics.json").is_file()
+    code, stdout, err = run_cli(["--scenario", "nosuch", "--debug", "--out", str(out)], capsys)
+    assert code == 2 and "Traceback" in err and "unknown scenario 'nosuch'" in err
+    code, _, err = run_cli(["--scenario", "A", "--quiet", "--verbose"], capsys)
+    assert code == 2 and "not allowed with argument" in err
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(tmr.plan, "_plan_once", interrupted)
+    out = tmp_path / "ctrl-c"
+    code, stdout, err = run_cli(["--scenario", "A", "--no-plots", "--out", str(out)], capsys)
+    assert (
+        code == 130
+        and err.strip() == "interrupted"
+        and not out.exists()
+        and list(tmp_path.iterdir()) == [tmp_path / "q"]
+    )
+
+    def crash(*args, **kwargs):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(tmr.plan, "_plan_once", crash)
+    code, _, err = run_cli(["--scenario", "A", "--no-plots", "--out", str(out)], capsys)
+    assert code == 1 and err.strip() == "internal error: RuntimeError: boom (rerun with --debug for the traceback)"

@@ -143,3 +143,22 @@ def test_speeds(plan, filtered, tmp_path):
     b = save_figure(fig, tmp_path / "b.png").read_bytes()
     assert a == b and a.startswith(PNG_SIGNATURE)
     assert sorted(os.listdir(tmp_path)) == ["a.png", "b.png"]
+
+
+def test_view_bounds_frames_the_known_area_of_an_occupancy_map(tmp_path):
+    """A map_saver map that is mostly unknown is framed on its known free area and the plan, not the whole image;
+    a geometric room is framed whole."""
+    from tests.test_maps import _turtlebot3_world
+    from tmr.maps import load_environment
+    from tmr.plot import view_bounds
+
+    env = load_environment(_turtlebot3_world(tmp_path), safety_radius=0.15)
+    pts = np.array([[-2.0, 0.0], [1.5, 2.5]])
+    x0, y0, x1, y1 = view_bounds(env, pts)
+    # the arena's known free cells span x in [-2.85, 1.85], y in [-1.85, 2.85]; margin 0.5 m
+    assert (x0, y0, x1, y1) == pytest.approx((-3.35, -2.35, 2.35, 3.35))
+    assert (x1 - x0) * (y1 - y0) < 0.1 * 20 * 20
+    # a point outside the known area widens the frame, within the room
+    assert view_bounds(env, np.array([[-9.9, 9.9]]))[0] == pytest.approx(-10.0)
+    room = make_env([], (0, 0, 10, 8))
+    assert view_bounds(room, pts) == (0.0, 0.0, 10.0, 8.0)

@@ -196,33 +196,15 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def robot_radius(args: argparse.Namespace, scenario: Any) -> float:
-    """The one robot radius r [m] of the run: ``--robot-radius``, else ``--set safety_radius=``, else the
-    scenario's ``[params]`` ``safety_radius``, else its map's (``[map] safety_radius``, 0.5 m by default)."""
+def robot_radius(args: argparse.Namespace) -> float | None:
+    """The robot radius r [m] the command line gives (``--robot-radius``, ``--set safety_radius=``), or None for
+    the scenario's own (its ``[params]``/``[map]`` ``safety_radius``, 0.5 m by default)."""
     given = {float(v) for k, v in args.set if k == "safety_radius"}
     if getattr(args, "robot_radius", None) is not None:
         given.add(float(args.robot_radius))
     if len(given) > 1:
         raise TmrError(f"two robot radii given: {sorted(given)} m (--robot-radius and --set safety_radius=); give one")
-    if given:
-        return given.pop()
-    if "safety_radius" in (scenario.params or {}):
-        return float(scenario.params["safety_radius"])
-    return float(scenario.environment.safety_radius)
-
-
-def with_robot_radius(scenario: Any, r: float) -> Any:
-    """``scenario`` with its obstacles grown by ``r`` [m] and ``safety_radius = r`` in its parameters, so the
-    environment, the span limits, the separation, the route and the messages share one r (re-validated: base,
-    goal and start must be free for this r)."""
-    from dataclasses import replace
-
-    from tmr.errors import ParameterError
-
-    if not r > 0:
-        raise ParameterError(f"the robot radius must be > 0 m, got {r:g}")
-    params = dict(scenario.params or {}) | {"safety_radius": float(r)}
-    return replace(scenario, environment=scenario.environment.with_safety_radius(r), params=params)
+    return given.pop() if given else None
 
 
 def load_inputs(args: argparse.Namespace) -> Any:
@@ -232,6 +214,7 @@ def load_inputs(args: argparse.Namespace) -> Any:
     from tmr.scenario import load_scenario, scenario_from_map
 
     check_set(args.set)
+    r = robot_radius(args)  # one r: the obstacles are grown by it and the chain keeps it (tmr.scenario)
     if args.map:
         if args.scenario:
             raise TmrError("give either --scenario or --map, not both")
@@ -245,9 +228,11 @@ def load_inputs(args: argparse.Namespace) -> Any:
                 raise TmrError(f"--bounds must be xmin,ymin,xmax,ymax, got {args.bounds!r}") from exc
             kwargs["bounds"] = b
         n = args.robots if isinstance(args.robots, int) else (len(args.start) if args.start is not None else 3)
+        if r is not None:
+            kwargs["safety_radius"] = r
         sc = scenario_from_map(args.map, args.base, args.goal, start=args.start, n_robots=n, **kwargs)
     else:
-        sc = load_scenario(args.scenario or "A")
+        sc = load_scenario(args.scenario or "A", safety_radius=r)
         changes: dict[str, Any] = {}
         if args.base is not None:
             changes["base"] = np.array(args.base)
@@ -255,7 +240,7 @@ def load_inputs(args: argparse.Namespace) -> Any:
             changes["goal"] = np.array(args.goal)
         if changes:
             sc = replace(sc, **changes)
-    return with_robot_radius(sc, robot_radius(args, sc))
+    return sc
 
 
 def write_outputs(
@@ -394,7 +379,7 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
     from tmr.route import TooFewRobotsError, plan_route
     from tmr.spans import span_limits
 
-    values = dict(scenario.params or {}) | dict(args.set)
+    values = {"safety_radius": scenario.environment.safety_radius} | dict(scenario.params or {}) | dict(args.set)
     rest = dict(values)
     for cls in (ChainParams, TimeParams, PathParams, TaskParams, PinvParams, QPParams):  # bad values: exit 2 now
         params, rest = apply_overrides(cls(), rest)

@@ -179,6 +179,14 @@ def build_problem(
         raise ParameterError(f"unknown route {route!r}; available: {', '.join(ROUTES)}")
     values = dict(scenario.params or {})
     values.update(overrides or {})
+    r_env = scenario.environment.safety_radius  # one robot radius: the obstacles' growth is the chain's r
+    if "safety_radius" not in values:
+        values["safety_radius"] = r_env
+    elif not float(values["safety_radius"]) == r_env:
+        raise ParameterError(
+            f"safety_radius = {values['safety_radius']} m, but the environment's obstacles are grown by {r_env:g} m; "
+            "use one robot radius (e.g. Environment.with_safety_radius, or load the scenario with it)"
+        )
     chain_params, rest = apply_overrides(ChainParams(), values)
     time_params, rest = apply_overrides(TimeParams(), rest)
     path_params, rest = apply_overrides(PathParams(), rest)

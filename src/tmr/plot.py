@@ -122,6 +122,24 @@ def _draw_environment(ax: Any, env: Any) -> list[Any]:
 # ----------------------------------------------------------------------------------------------------------
 # Fig. 5
 # ----------------------------------------------------------------------------------------------------------
+def view_bounds(env: Any, points: np.ndarray, margin: float = 0.5) -> tuple[float, float, float, float]:
+    """The part of the map a figure frames (xmin, ymin, xmax, ymax) [m].
+
+    The whole room, except for an occupancy-grid map (``env.known_free`` set by :func:`tmr.maps.load_map`), whose
+    image is often mostly unknown (a TurtleBot3 map: a 4 m arena in a 20 m x 20 m image): then the known free area
+    and ``points`` (robots, base, goal; (..., 2) [m]) with ``margin`` [m] round them, within the room.
+    """
+    room = tuple(float(v) for v in env.bounds)
+    known = getattr(env, "known_free", None)
+    if known is None:
+        return room  # type: ignore[return-value]
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    lo = np.minimum(np.array(known[:2], dtype=float), pts.min(axis=0) if pts.size else np.inf) - margin
+    hi = np.maximum(np.array(known[2:], dtype=float), pts.max(axis=0) if pts.size else -np.inf) + margin
+    return (max(lo[0], room[0]), max(lo[1], room[1]), min(hi[0], room[2]), min(hi[1], room[3]))
+
+
 def _pose_indices(t: np.ndarray, every: float) -> np.ndarray:
     """Sample indices closest to t0, t0 + every, ..., plus the last sample."""
     if t.size == 0:
@@ -150,7 +168,7 @@ def plot_chain_poses(
     goal_xy = plan_goal(plan, goal)
     r = float(plan.safety_radius)
 
-    x0, y0, x1, y1 = (float(v) for v in env.bounds)
+    x0, y0, x1, y1 = view_bounds(env, np.vstack([robots.reshape(-1, 2), base[None], np.reshape(goal_xy, (1, 2))]))
     aspect = (y1 - y0) / max(x1 - x0, 1e-9)
     width = 7.5
     fig = _new_figure(width, min(max(width * aspect * 0.92 + 0.9, 3.5), 11.0))

@@ -154,8 +154,11 @@ def builtin_scenarios() -> list[str]:
     return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
 
 
-def load_scenario(name_or_path: str | Path) -> Scenario:
+def load_scenario(name_or_path: str | Path, safety_radius: float | None = None) -> Scenario:
     """Load a built-in scenario by name ("A".."D", case-insensitive) or a scenario TOML file by path.
+
+    ``safety_radius`` [m]: the robot radius r to grow the obstacles by, instead of the file's (``[params]``
+    ``safety_radius``, else ``[map] safety_radius``, else 0.5 m); base, goal and start are checked with it.
 
     Raises ScenarioError for an unknown name, a missing or malformed TOML, missing keys or points not in free
     space; ParameterError for N < 1 robots or NaN/inf numbers; MapError for a bad map file.
@@ -164,7 +167,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         builtins = builtin_scenarios()
         match = [b for b in builtins if b.lower() == name_or_path.strip().lower()]
         if match:
-            return _load_toml(SCENARIO_DIR / f"{match[0]}.toml")
+            return _load_toml(SCENARIO_DIR / f"{match[0]}.toml", safety_radius)
         if not Path(name_or_path).is_file():
             raise ScenarioError(
                 f"unknown scenario {name_or_path!r}: built-in scenarios are {', '.join(builtins)}; "
@@ -175,10 +178,10 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         raise ScenarioError(
             f"{path}: scenario file not found (built-in scenarios are {', '.join(builtin_scenarios())})"
         )
-    return _load_toml(path)
+    return _load_toml(path, safety_radius)
 
 
-def _load_toml(path: Path) -> Scenario:
+def _load_toml(path: Path, safety_radius: float | None = None) -> Scenario:
     try:
         with path.open("rb") as fh:
             doc = tomllib.load(fh)
@@ -212,10 +215,15 @@ def _load_toml(path: Path) -> Scenario:
     map_path = Path(m["file"])
     if not map_path.is_absolute():
         map_path = path.parent / map_path
+    params = doc.get("params", {})
+    if safety_radius is None and isinstance(params, dict) and "safety_radius" in params:
+        safety_radius = _number(params["safety_radius"], "params.safety_radius", label)  # one r: the chain's
+    if safety_radius is None:
+        safety_radius = _number(m.get("safety_radius", DEFAULT_SAFETY_RADIUS), "map.safety_radius", label)
     env = load_environment(
         map_path,
         bounds=m.get("bounds"),
-        safety_radius=_number(m.get("safety_radius", DEFAULT_SAFETY_RADIUS), "map.safety_radius", label),
+        safety_radius=safety_radius,
         resolution=_number(m.get("resolution", DEFAULT_RESOLUTION), "map.resolution", label),
     )
     return Scenario(
@@ -226,7 +234,9 @@ def _load_toml(path: Path) -> Scenario:
         goal=doc["goal"],
         start=doc.get("start"),
         n_robots=robots,
-        params=dict(doc.get("params", {})),
+        params=(dict(params) | ({"safety_radius": env.safety_radius} if "safety_radius" in params else {}))
+        if isinstance(params, dict)
+        else params,
         source=path,
     )
 
