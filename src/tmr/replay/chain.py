@@ -1,0 +1,440 @@
+"""Physics replay of a tethered-chain plan (Caruso 2021) in MuJoCo: model builder and runner.
+
+The model (``formulations/replay.md``): the floor; walls round the room; the plan's raw obstacles extruded into
+convex prisms (:mod:`tmr.replay.world`); the fixed anchor at its height; N robots, each a cylinder of the plan's
+robot radius on two slides (x, y) and a hinge (yaw), driven by force-limited actuators that track the planned
+trajectory (feed-forward of mass × reference acceleration and of the planned tethers' horizontal pull, plus PD
+feedback); N tethers (:mod:`tmr.replay.tether`), tether j leaving robot j's winch at the exit height and held at
+robot j-1's exit point (the anchor for j = 1).
+
+:func:`replay_chain` steps the model over the plan and records, at every plan sample, the robots' positions, each
+tether's lowest point, paid-out length and end tensions next to the static catenary of the same ends
+(:func:`tmr.catenary.solve`), and every contact of the physics steps (tether-obstacle, tether-floor,
+robot-obstacle, robot-robot).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tmr.replay.errors import ReplayError
+from tmr.replay.tether import TetherSpec, TetherState, tether_body_xml, tether_extra_xml
+from tmr.replay.world import OBSTACLE_HEIGHT, ROBOT_BITS, TETHER_BITS, world_xml
+
+Array = NDArray[np.float64]
+
+__all__ = ["ChainReplay", "ReplayConfig", "build_chain_model", "replay_chain"]
+
+
+@dataclass(frozen=True)
+class ReplayConfig:
+    """Choices of the replay (``formulations/replay.md`` gives the reasons). Units: m, kg, N, s.
+
+    Attributes:
+        n_links: links per tether (16: lowest point, length and end tensions of the static catenary within 1e-3
+            relative, ``tests/test_replay_tether.py``).
+        timestep: physics step [s] (implicit-in-velocity integrator ``implicitfast``).
+        robot_mass: mass of a robot [kg] (not in Caruso 2021; a small ground robot).
+        robot_height: height of the robot cylinder [m] (below the tether exit).
+        frequency: closed-loop natural frequency of the robots' position loops [Hz]; kp = m ω², kv = 2 ζ m ω.
+        damping_ratio: ζ of the position loops.
+        force_limit: actuator force bound per axis [N].
+        track: "filtered" (the low-passed trajectories a robot is given, default) or "raw" (the planner's).
+        tolerance: tracking error beyond which the replay fails [m] (0.05 = the plan's clearance margin d_safe).
+        winch: "horizontal" (the winch holds the horizontal tension T0, the planner's assumption) or "torque"
+            (it holds the tension at the winch end at T0).
+        obstacle_height: height of the extruded obstacles [m].
+        settle: extra simulated time after the plan's last sample [s].
+    """
+
+    n_links: int = 16
+    timestep: float = 0.005
+    robot_mass: float = 10.0
+    robot_height: float = 0.35
+    frequency: float = 2.0
+    damping_ratio: float = 1.0
+    force_limit: float = 100.0
+    track: str = "filtered"
+    tolerance: float = 0.05
+    winch: str = "horizontal"
+    obstacle_height: float = OBSTACLE_HEIGHT
+    settle: float = 0.0
+
+    @property
+    def kp(self) -> float:
+        w = 2 * math.pi * self.frequency
+        return self.robot_mass * w * w
+
+    @property
+    def kv(self) -> float:
+        return 2 * self.damping_ratio * self.robot_mass * 2 * math.pi * self.frequency
+
+
+@dataclass
+class ChainModel:
+    """A compiled chain model: MuJoCo model, the tethers' states, and index maps."""
+
+    model: Any
+    xml: str
+    tethers: list[TetherState]
+    robot_q: NDArray[np.int64]  # (N, 3) qpos addresses of x, y, yaw
+    robot_act: NDArray[np.int64]  # (N, 3) actuator ids
+    start: Array  # (N, 2) robot positions at qpos0 [m]
+    geom_kind: NDArray[np.int64]  # 0 floor, 1 obstacle/wall, 2 tether, 3 robot, -1 other
+    geom_owner: NDArray[np.int64]  # tether or robot index (0-based) of a geom
+    geom_names: list[str]
+
+
+@dataclass
+class ChainReplay:
+    """What a replay measured (arrays per plan sample k; tethers j = 0..N-1, robots i = 0..N-1). Units: m, N, s."""
+
+    t: Array
+    reference: Array  # (K, N, 2) tracked reference
+    actual: Array  # (K, N, 2)
+    tracking_error: Array  # (K, N)
+    lowest: Array  # (K, N) lowest node height of each tether
+    lowest_catenary: Array  # (K, N) static catenary's lowest point for the same ends
+    span: Array  # (K, N) horizontal span of each tether
+    length: Array  # (K, N) paid-out length
+    length_catenary: Array
+    tension_winch: Array  # (K, N) tension at the winch end (robot j)
+    tension_far: Array  # (K, N) tension at the far end (robot j-1 / anchor)
+    tension_winch_catenary: Array
+    tension_far_catenary: Array
+    contacts: dict[str, dict[str, Any]]
+    nodes: list[Array]  # per sample, (N, n_links+1, 3) tether nodes (for figures and the GIF)
+    sim_time: float
+    wall_time: float
+    steps: int
+    diverged: str | None = None
+    config: ReplayConfig = field(default_factory=ReplayConfig)
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.sim_time / self.wall_time if self.wall_time > 0 else math.inf
+
+
+#: simulated time at the start pose before the plan's first sample [s] (lets the constraint forces settle).
+WARMUP = 0.25
+
+CONTACT_KINDS = ("robot-obstacle", "robot-robot", "tether-obstacle", "tether-floor")
+
+
+def build_chain_model(run: Any, cfg: ReplayConfig, track: Array | None = None) -> ChainModel:
+    """Compile the MuJoCo model of a :class:`tmr.rundir.ChainRun` (robots start at the tracked trajectory's first
+    sample, yaw 0)."""
+    import mujoco
+
+    rec = run.record
+    teth = rec["tether"]
+    params = run.catenary_params()
+    traj = run.filtered if track is None else track
+    start = np.asarray(traj[0], dtype=float)
+    n = start.shape[0]
+    H, Hb = float(teth["exit_height"]), float(teth["anchor_height"])
+    r = run.robot_radius
+    anchor = [float(run.anchor[0]), float(run.anchor[1]), Hb]
+    sl = start.tolist()
+    assets, world, _ = world_xml(run.obstacles, run.bounds, cfg.obstacle_height)
+    rt, ra = ROBOT_BITS
+    specs = []
+    for j in range(n):
+        root_world = (sl[j][0], sl[j][1], H)
+        far_world = tuple(anchor) if j == 0 else (sl[j - 1][0], sl[j - 1][1], H)
+        specs.append(
+            TetherSpec(
+                name=f"t{j + 1}",
+                n_links=cfg.n_links,
+                root_body=f"r{j + 1}",
+                root_local=(0.0, 0.0, H),
+                root_world=root_world,
+                end_body="world" if j == 0 else f"r{j}",
+                end_world=far_world,  # type: ignore[arg-type]
+                params=params,
+                contype=TETHER_BITS[0],
+                conaffinity=TETHER_BITS[1],
+            )
+        )
+    bodies = []
+    hz = cfg.robot_height / 2
+    izz = 0.5 * cfg.robot_mass * r * r
+    for i in range(n):
+        bodies.append(
+            f'<body name="r{i + 1}" pos="{sl[i][0]!r} {sl[i][1]!r} 0">'
+            f'<joint name="r{i + 1}_x" type="slide" axis="1 0 0"/>'
+            f'<joint name="r{i + 1}_y" type="slide" axis="0 1 0"/>'
+            f'<joint name="r{i + 1}_yaw" type="hinge" axis="0 0 1"/>'
+            f'<inertial pos="0 0 {hz + 0.05!r}" mass="{cfg.robot_mass!r}" diaginertia="{izz!r} {izz!r} {izz!r}"/>'
+            f'<geom name="r{i + 1}_body" type="cylinder" size="{r!r} {hz!r}" pos="0 0 {hz + 0.05!r}" '
+            f'contype="{rt}" conaffinity="{ra}" rgba="0.15 0.35 0.75 0.55" solref="0.01 1" '
+            f'solimp="0.99 0.9999 0.0005 0.5 2"/>'
+            f'<geom type="cylinder" size="0.03 {H / 2!r}" pos="0 0 {H / 2!r}" contype="0" conaffinity="0" '
+            f'rgba="0.2 0.2 0.2 1"/>' + tether_body_xml(specs[i]) + "</body>"
+        )
+    extras = [tether_extra_xml(s) for s in specs]
+    kp, kv, fl = cfg.kp, cfg.kv, cfg.force_limit
+    acts = []
+    for i in range(n):
+        for ax in ("x", "y"):
+            acts.append(
+                f'<general name="r{i + 1}_a{ax}" joint="r{i + 1}_{ax}" gainprm="{kp!r}" biastype="affine" biasprm="0 {-kp!r} {-kv!r}" '
+                f'forcelimited="true" forcerange="{-fl!r} {fl!r}"/>'
+            )
+        kyaw = izz * (2 * math.pi * cfg.frequency) ** 2
+        dyaw = 2 * izz * 2 * math.pi * cfg.frequency
+        acts.append(
+            f'<general name="r{i + 1}_ayaw" joint="r{i + 1}_yaw" gainprm="{kyaw!r}" biastype="affine" biasprm="0 {-kyaw!r} {-dyaw!r}" '
+            f'forcelimited="true" forcerange="{-fl!r} {fl!r}"/>'
+        )
+    g = float(teth["g"])
+    xml = (
+        '<mujoco model="tmr-replay-chain"><compiler angle="radian"/>'
+        f'<option timestep="{cfg.timestep!r}" integrator="implicitfast" gravity="0 0 {-g!r}"/>'
+        '<visual><global offwidth="960" offheight="720"/><quality shadowsize="2048"/></visual>'
+        f"<asset>{assets}</asset><worldbody>"
+        '<light pos="0 0 12" dir="0 0 -1" directional="true" diffuse="0.7 0.7 0.7"/>'
+        f"{world}"
+        f'<site name="anchor" pos="{anchor[0]!r} {anchor[1]!r} {Hb!r}" size="0.05" rgba="0 0 0 1"/>'
+        f'<geom type="box" pos="{anchor[0]!r} {anchor[1]!r} {Hb / 2!r}" size="0.08 0.08 {Hb / 2!r}" contype="0" '
+        f'conaffinity="0" rgba="0.1 0.1 0.1 1"/>' + "".join(bodies) + "</worldbody>"
+        "<equality>" + "".join(e["equality"] for e in extras) + "</equality>"
+        "<tendon>" + "".join(e["tendon"] for e in extras) + "</tendon>"
+        "<actuator>" + "".join(acts) + "".join(e["actuator"] for e in extras) + "</actuator>"
+        "<sensor>" + "".join(e["sensor"] for e in extras) + "</sensor></mujoco>"
+    )
+    try:
+        model = mujoco.MjModel.from_xml_string(xml)
+    except ValueError as exc:
+        raise ReplayError(f"MuJoCo could not compile the replay model: {exc}") from None
+    tethers = [TetherState(model, s, cfg.winch) for s in specs]
+
+    def jq(name: str) -> int:
+        return int(model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)])
+
+    def aid(name: str) -> int:
+        return int(mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, name))
+
+    robot_q = np.array([[jq(f"r{i + 1}_{a}") for a in ("x", "y", "yaw")] for i in range(n)])
+    robot_act = np.array([[aid(f"r{i + 1}_a{a}") for a in ("x", "y", "yaw")] for i in range(n)])
+    kinds = np.full(model.ngeom, -1)
+    owner = np.full(model.ngeom, -1)
+    names = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, k) or "" for k in range(model.ngeom)]
+    for k, nm in enumerate(names):
+        if nm == "floor":
+            kinds[k] = 0
+        elif nm.startswith(("obs", "wall_")):
+            kinds[k] = 1
+        elif nm.startswith("t") and "_g" in nm:
+            kinds[k], owner[k] = 2, int(nm[1:].split("_")[0]) - 1
+        elif nm.startswith("r") and nm.endswith("_body"):
+            kinds[k], owner[k] = 3, int(nm[1:].split("_")[0]) - 1
+    return ChainModel(model, xml, tethers, robot_q, robot_act, start, kinds, owner, names)
+
+
+def _reference(t: Array, traj: Array, times: Array) -> tuple[Array, Array, Array]:
+    """Position, velocity, acceleration of the tracked trajectory at ``times`` (C² cubic spline through the plan's
+    samples, zero end slopes: the plan starts and ends at rest)."""
+    from scipy.interpolate import CubicSpline
+
+    sp = CubicSpline(t, traj, axis=0, bc_type="clamped")
+    tt = np.clip(times, t[0], t[-1])
+    return sp(tt), sp(tt, 1), sp(tt, 2)
+
+
+def _contact_kind(k1: int, k2: int) -> str | None:
+    pair = {k1, k2}
+    if pair == {2, 0}:
+        return "tether-floor"
+    if pair == {2, 1}:
+        return "tether-obstacle"
+    if pair == {3, 1}:
+        return "robot-obstacle"
+    if pair == {3}:
+        return "robot-robot"
+    return None
+
+
+def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None) -> ChainReplay:
+    """Simulate the run's plan in MuJoCo and measure it (see the module docstring).
+
+    Args:
+        run: a :class:`tmr.rundir.ChainRun`.
+        cfg: replay choices.
+        progress: optional callable(fraction) called every plan sample.
+    """
+    import mujoco
+
+    from tmr.catenary import solve
+
+    cfg = cfg or ReplayConfig()
+    if cfg.track not in ("filtered", "raw"):
+        raise ReplayError(f"track must be 'filtered' or 'raw', got {cfg.track!r}")
+    traj = run.filtered if cfg.track == "filtered" else run.robots
+    cm = build_chain_model(run, cfg, traj)
+    m = cm.model
+    d = mujoco.MjData(m)
+    n = traj.shape[1]
+    H = float(run.record["tether"]["exit_height"])
+    Hb = float(run.record["tether"]["anchor_height"])
+    anchor3 = np.array([run.anchor[0], run.anchor[1], Hb])
+    for j, ts in enumerate(cm.tethers):
+        root = np.array([cm.start[j, 0], cm.start[j, 1], H])
+        far = anchor3 if j == 0 else np.array([cm.start[j - 1, 0], cm.start[j - 1, 1], H])
+        ts.set_initial(d, root, far)
+    mujoco.mj_kinematics(m, d)  # node positions for the winch law
+    for ts in cm.tethers:
+        ts.update(m, d)
+    mujoco.mj_forward(m, d)
+
+    t = np.asarray(run.t, dtype=float)
+    Ts = float(run.record["Ts"])
+    sub = max(1, int(round(Ts / cfg.timestep)))
+    if abs(sub * cfg.timestep - Ts) > 1e-9 * Ts:
+        raise ReplayError(f"the physics step {cfg.timestep} s must divide the plan's sample time Ts = {Ts} s")
+    n_settle = int(round(cfg.settle / Ts))
+    K = t.size + n_settle
+    times = t[0] + np.arange((K - 1) * sub + 1) * cfg.timestep
+    p_ref, v_ref, a_ref = _reference(t, traj, times)
+    T0 = float(run.record["tether"]["horizontal_tension"])
+    kp, kv, mass = cfg.kp, cfg.kv, cfg.robot_mass
+
+    contacts: dict[str, dict[str, Any]] = {
+        kind: {"count": 0, "first_time": None, "where": None, "between": None, "max_depth": 0.0}
+        for kind in CONTACT_KINDS
+    }
+    rec_actual = np.zeros((K, n, 2))
+    rec_nodes: list[Array] = []
+    rec_len = np.zeros((K, n))
+    rec_tw = np.zeros((K, n))
+    rec_tf = np.zeros((K, n))
+    ax_ids = cm.robot_act[:, :2]
+    yaw_ids = cm.robot_act[:, 2]
+    rq = cm.robot_q
+    diverged = None
+
+    def record(k: int) -> None:
+        rec_actual[k] = cm.start + d.qpos[rq[:, :2]]
+        rec_nodes.append(np.stack([ts.nodes(d) for ts in cm.tethers]))
+        for j, ts in enumerate(cm.tethers):
+            rec_len[k, j] = ts.length(d)
+            rec_tw[k, j] = ts.root_tension(d)
+            rec_tf[k, j] = ts.end_tension(d)
+
+    def ff_tether(pos: Array) -> Array:
+        """Planned horizontal pull of the tethers on each robot [N]: T0 along each tether's chord."""
+        f = np.zeros((n, 2))
+        prev = np.vstack([run.anchor[None, :], pos[:-1]])
+        for j in range(n):
+            u = prev[j] - pos[j]
+            L = float(np.hypot(*u))
+            if L > 1e-9:
+                f[j] += T0 * u / L  # tether j pulls robot j towards robot j-1 / the anchor
+                if j > 0:
+                    f[j - 1] -= T0 * u / L  # and robot j-1 towards robot j
+        return f
+
+    wall0 = time.perf_counter()
+    # warm-up at the start pose (not recorded): the soft constraints build up the cable's static forces
+    hold = (cm.start - cm.start) + mass * 0.0
+    for _ in range(int(round(WARMUP / cfg.timestep))):
+        d.ctrl[ax_ids] = hold - ff_tether(cm.start) / kp
+        d.ctrl[yaw_ids] = 0.0
+        for ts in cm.tethers:
+            ts.update(m, d)
+        mujoco.mj_step(m, d)
+    d.time = 0.0
+    record(0)
+    step = 0
+    for k in range(1, K):
+        for _ in range(sub):
+            pr, vr, ar = p_ref[step], v_ref[step], a_ref[step]
+            ff = mass * ar - ff_tether(pr)  # cancel the expected tether pull
+            d.ctrl[ax_ids] = (pr - cm.start) + (kv * vr + ff) / kp
+            d.ctrl[yaw_ids] = 0.0
+            for ts in cm.tethers:
+                ts.update(m, d)
+            mujoco.mj_step(m, d)
+            step += 1
+            if d.ncon:
+                _log_contacts(d, cm, contacts, times[step])
+        if not np.all(np.isfinite(d.qpos)) or d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number:
+            diverged = f"the simulation diverged at t = {times[step]:.3f} s (non-finite accelerations)"
+            rec_actual = rec_actual[:k]
+            break
+        record(k)
+        if progress is not None:
+            progress(k / (K - 1))
+    wall = time.perf_counter() - wall0
+    K = rec_actual.shape[0]
+    ref_k = np.asarray(p_ref[:: sub][:K])
+    nodes = rec_nodes[:K]
+    lowest = np.array([[float(tn[:, 2].min()) for tn in nd] for nd in nodes])
+    root = np.array([[tn[0] for tn in nd] for nd in nodes])  # (K, N, 3) winch exits
+    far = np.array([[tn[-1] for tn in nd] for nd in nodes])
+    span = np.hypot(*(far - root)[..., :2].transpose(2, 0, 1))
+    cat = solve(root[..., 2], far[..., 2], np.maximum(span, 1e-6), run.catenary_params())
+    return ChainReplay(
+        t=t[0] + np.arange(K) * Ts,
+        reference=ref_k,
+        actual=rec_actual,
+        tracking_error=np.linalg.norm(rec_actual - ref_k, axis=2),
+        lowest=lowest,
+        lowest_catenary=np.asarray(cat.z_min, dtype=float),
+        span=span,
+        length=rec_len[:K],
+        length_catenary=np.asarray(cat.length, dtype=float),
+        tension_winch=rec_tw[:K],
+        tension_far=rec_tf[:K],
+        tension_winch_catenary=np.asarray(cat.tension_1, dtype=float),
+        tension_far_catenary=np.asarray(cat.tension_2, dtype=float),
+        contacts=contacts,
+        nodes=nodes,
+        sim_time=float(step * cfg.timestep),
+        wall_time=wall,
+        steps=step,
+        diverged=diverged,
+        config=cfg,
+    )
+
+
+def _log_contacts(d: Any, cm: ChainModel, contacts: dict[str, dict[str, Any]], now: float) -> None:
+    seen: set[str] = set()
+    for c in _iter_contacts(d):
+        g1, g2, dist, pos = c
+        kind = _contact_kind(int(cm.geom_kind[g1]), int(cm.geom_kind[g2]))
+        if kind is None or dist > 0:
+            continue
+        entry = contacts[kind]
+        entry["max_depth"] = max(entry["max_depth"], float(-dist))
+        if kind in seen:
+            continue
+        seen.add(kind)
+        entry["count"] += 1
+        if entry["first_time"] is None:
+            entry["first_time"] = float(now)
+            entry["where"] = [float(v) for v in pos]
+            entry["between"] = [_label(cm, g1), _label(cm, g2)]
+
+
+def _iter_contacts(d: Any) -> Any:
+    n = d.ncon
+    con = d.contact
+    g1, g2, dist, pos = con.geom1[:n], con.geom2[:n], con.dist[:n], con.pos[:n]
+    for i in range(n):
+        yield int(g1[i]), int(g2[i]), float(dist[i]), pos[i]
+
+
+def _label(cm: ChainModel, g: int) -> str:
+    kind, owner = int(cm.geom_kind[g]), int(cm.geom_owner[g])
+    if kind == 2:
+        return f"tether {owner + 1}"
+    if kind == 3:
+        return f"robot {owner + 1}"
+    return cm.geom_names[g] or f"geom {g}"
