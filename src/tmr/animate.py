@@ -263,6 +263,7 @@ def write_gif(
     os.close(fd)
     try:  # as matplotlib's PillowWriter saves its frames, with the frames drawn by blitting
         images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:], duration=int(1000 / fps), loop=0)
+        os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):

@@ -26,7 +26,16 @@ from numpy.typing import NDArray
 
 from tmr.errors import ParameterError
 
-__all__ = ["Lines", "Motion", "Track", "ccma_motion", "chain_motion", "mcdpr_motion"]
+__all__ = [
+    "Lines",
+    "Motion",
+    "Track",
+    "catenary_polylines",
+    "ccma_motion",
+    "chain_motion",
+    "mcdpr_motion",
+    "tethered_chain",
+]
 
 Array = NDArray[np.float64]
 
@@ -176,15 +185,17 @@ def catenary_polylines(
 def chain_motion(plan: Any, env: Any, chain_params: Any = None, title: str | None = None) -> Motion:
     """Motion of a tethered-chain plan (:class:`tmr.clik.Plan`) in ``env`` (:class:`tmr.environment.Environment`).
 
-    Robots stand at the tether exit height H (``chain_params.exit_height``, default 0.43 m), the anchor at
-    ``chain_params.base_height``; tether i hangs from robot i−1 (the anchor for i = 1) to robot i as the catenary
-    with T0 = pulley torque / radius and ρ of ``chain_params`` (Caruso 2021 §4.2.1, eq. 22). Robot radius = the
-    plan's safety radius; robot N is the leader.
+    The tether parameters come from ``chain_params`` (:class:`tmr.params.ChainParams`), else from the plan's
+    recorded ``params`` (the fields of ``ChainParams``), else the defaults (Caruso 2021 §4.2.1). See
+    :func:`tethered_chain`.
     """
     from tmr.catenary import CatenaryParams
     from tmr.params import ChainParams
 
-    cp = chain_params if chain_params is not None else ChainParams()
+    if chain_params is None:
+        names = {f for f in ChainParams.__dataclass_fields__}
+        chain_params = ChainParams(**{k: v for k, v in (getattr(plan, "params", None) or {}).items() if k in names})
+    cp = chain_params
     cat = CatenaryParams(
         horizontal_tension=cp.horizontal_tension,
         mass_per_length=cp.cable_mass_per_length,
@@ -192,40 +203,74 @@ def chain_motion(plan: Any, env: Any, chain_params: Any = None, title: str | Non
         base_height=cp.base_height,
         ground_clearance=cp.ground_clearance,
     )
-    t = np.asarray(plan.t, dtype=float)
-    robots = np.asarray(plan.robots, dtype=float)
+    obs, inf, bounds = _room_parts(env)
+    n = int(np.asarray(plan.robots).shape[1])
+    verdict = "" if plan.success else " — FAILED"
+    return tethered_chain(
+        t=plan.t,
+        robots=plan.robots,
+        anchor=plan.base,
+        goal=getattr(plan, "goal", None),
+        radius=float(plan.safety_radius),
+        cat=cat,
+        obstacles=obs,
+        inflated=inf,
+        bounds=bounds,
+        title=title or f"Scenario {plan.scenario}, {plan.method}: {n} tethered robots{verdict}",
+    )
+
+
+def tethered_chain(
+    t: Array,
+    robots: Array,
+    anchor: Array,
+    goal: Array | None,
+    radius: float,
+    cat: Any,
+    obstacles: tuple[Any, ...],
+    inflated: tuple[Any, ...],
+    bounds: tuple[float, float, float, float],
+    title: str,
+) -> Motion:
+    """Motion of a tethered chain: ``robots`` (K, N, 2) [m] at stamps ``t`` (K,) [s], robot N the leader.
+
+    Robots stand at the tether exit height H (``cat.end_height``), the anchor at ``cat.base_height``; tether i hangs
+    from robot i−1 (the anchor for i = 1) to robot i as the catenary of ``cat`` (a
+    :class:`tmr.catenary.CatenaryParams`: T0, ρ, g; Caruso 2021 §4.2.1, eq. 22). Robot disc radius ``radius`` [m].
+    """
+    t = np.asarray(t, dtype=float)
+    robots = np.asarray(robots, dtype=float)
     k, n = robots.shape[:2]
-    base = np.asarray(plan.base, dtype=float)[:2]
-    h = float(cp.exit_height)
-    r = float(plan.safety_radius)
+    base = np.asarray(anchor, dtype=float)[:2]
+    h = float(cat.end_height)
     tracks = []
     for i in range(n):
         xyz = np.column_stack([robots[:, i], np.full(k, h)])
-        tracks.append(Track(f"robot{i + 1}", xyz, "leader" if i == n - 1 else "robot", radius=r))
+        tracks.append(Track(f"robot{i + 1}", xyz, "leader" if i == n - 1 else "robot", radius=radius))
     lines = []
-    prev, h_prev = np.broadcast_to(base, (k, 2)), float(cp.base_height)
+    prev, h_prev = np.broadcast_to(base, (k, 2)), float(cat.base_height)
     for i in range(n):
         pts, sag = catenary_polylines(prev, robots[:, i], h_prev, h, cat)
         lines.append(Lines(f"tether{i + 1}", pts, "tether", sag=sag))
         prev, h_prev = robots[:, i], h
-    obs, inf, bounds = _room_parts(env)
-    points = {"anchor": np.array([base[0], base[1], float(cp.base_height)])}
-    goal = getattr(plan, "goal", None)
+    points = {"anchor": np.array([base[0], base[1], float(cat.base_height)])}
     if goal is not None:
         points["goal"] = np.array([float(goal[0]), float(goal[1]), 0.0])
-    verdict = "" if plan.success else " — FAILED"
     return Motion(
         system="chain",
-        title=title or f"Scenario {plan.scenario}, {plan.method}: {n} tethered robots{verdict}",
+        title=title,
         t=t,
         tracks=tuple(tracks),
         lines=tuple(lines),
-        obstacles=obs,
-        inflated=inf,
+        obstacles=tuple(obstacles),
+        inflated=tuple(inflated),
         bounds=bounds,
         points=points,
         trail=f"robot{n}",
-        notes=(f"robot disc = safety radius {r:g} m; tethers hang as catenaries (T0 = {cat.horizontal_tension:g} N)",),
+        notes=(
+            f"robot disc = safety radius {radius:g} m; tethers hang as catenaries (T0 = {cat.horizontal_tension:g} N, "
+            f"rho = {cat.mass_per_length:g} kg/m)",
+        ),
     )
 
 

@@ -202,8 +202,11 @@ def _scene_markers(m: _Msgs, motion: Motion, ns0: int) -> list[Any]:
     return out
 
 
-def write_bag(motion: Motion, path: str | os.PathLike[str], overwrite: bool = True) -> Path:
-    """Write ``motion`` as a rosbag2 directory with MCAP storage at ``path``; return the path.
+def write_bag(motion: Motion, path: str | os.PathLike[str], overwrite: bool = True, storage: str = "mcap") -> Path:
+    """Write ``motion`` as a rosbag2 directory (rosbag2 metadata version 9) at ``path``; return the path.
+
+    ``storage``: ``"mcap"`` (default; Foxglove opens it directly, ``ros2 bag play`` with the MCAP plugin) or
+    ``"sqlite3"`` (rosbag2's older default).
 
     The bag is written into a temporary sibling directory and moved to ``path`` only when complete, replacing an
     older bag there if ``overwrite`` (else :class:`tmr.errors.TmrError` when ``path`` exists).
@@ -214,6 +217,9 @@ def write_bag(motion: Motion, path: str | os.PathLike[str], overwrite: bool = Tr
 
     from tmr.errors import TmrError
 
+    plugins = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
+    if storage not in plugins:
+        raise TmrError(f"unknown bag storage {storage!r}; choose one of {', '.join(plugins)}")
     path = Path(path)
     if path.exists() and not overwrite:
         raise TmrError(f"{path} exists; choose another output or allow overwriting")
@@ -241,7 +247,7 @@ def write_bag(motion: Motion, path: str | os.PathLike[str], overwrite: bool = Tr
     tmp_parent = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
     tmp = tmp_parent / path.name
     try:
-        with Writer(tmp, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        with Writer(tmp, version=9, storage_plugin=plugins[storage]) as w:
             conns = {}
             for topic, msgtype in topics(motion).items():
                 once = topic.endswith("/path") or topic in ("/tmr/team/trajectory", "/tmr/scene")

@@ -1,0 +1,134 @@
+"""Command line: ``python -m tmr.export RUN_DIR --format mcap`` (``tmr export`` in the ``tmr`` command).
+
+Reads the output directory of ``tmr.plan``, ``tmr.mcdpr plan`` or ``tmr.ccma run`` and writes
+
+* ``--format mcap`` (default) or ``sqlite3``: a ROS 2 bag (rosbag2 directory, written with ``rosbags``, no ROS
+  installation needed) — topics and types in :mod:`tmr.export.rosbag` — default ``RUN_DIR/ros2_bag``;
+* ``--format gif``: the animation (:mod:`tmr.animate`), default ``RUN_DIR/motion.gif``;
+* ``--format html``: the interactive view (:mod:`tmr.htmlview`), default ``RUN_DIR/motion.html``.
+
+Open the bag in Foxglove (File → Open local file → ``ros2_bag/ros2_bag.mcap``) or play it with
+``ros2 bag play RUN_DIR/ros2_bag`` (ROS 2 Jazzy or newer; MCAP storage plugin).
+
+Exit codes: 0 written; 2 bad input (not a run directory, an older run without ``run.json``, an ``--out`` that is
+a file or a non-bag directory; one line on stderr, nothing written).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from tmr.errors import TmrError
+
+FORMATS = ("mcap", "sqlite3", "gif", "html")
+
+
+def _rate(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a rate in Hz, got {text!r}") from None
+    if not (v > 0 and v < float("inf")):
+        raise argparse.ArgumentTypeError(f"the rate must be a finite number > 0 Hz, got {text!r}")
+    return v
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m tmr.export",
+        description="Export a tmr run directory as a ROS 2 bag (MCAP or SQLite 3, via rosbags), an animated GIF or "
+        "an interactive HTML view.",
+    )
+    p.add_argument("run_dir", metavar="RUN_DIR", help="--out directory of tmr.plan, tmr.mcdpr plan or tmr.ccma run")
+    p.add_argument(
+        "--format",
+        default="mcap",
+        choices=FORMATS,
+        help="mcap (default) or sqlite3: a rosbag2 directory; gif: an animation; html: an interactive view",
+    )
+    p.add_argument(
+        "--out", help="where to write (default RUN_DIR/ros2_bag for a bag, RUN_DIR/motion.gif, RUN_DIR/motion.html)"
+    )
+    p.add_argument(
+        "--rate",
+        type=_rate,
+        default=10.0,
+        help="stamp rate of MoPICK / CCMA samples, which carry no time [Hz] (default 10); chain plans keep their "
+        "own times",
+    )
+    p.add_argument(
+        "--trajectory",
+        default="raw",
+        choices=("raw", "filtered"),
+        help="chain runs: the checked plan (raw, default) or the low-passed positions the robots track (filtered)",
+    )
+    p.add_argument("--description", help="CCMA runs: the system description TOML the run was made from")
+    return p
+
+
+def _default_out(run_dir: Path, fmt: str) -> Path:
+    from tmr.views import BAG_DIR, GIF_NAME, HTML_NAME
+
+    return run_dir / {"gif": GIF_NAME, "html": HTML_NAME}.get(fmt, BAG_DIR)
+
+
+def check_out(out: Path, fmt: str) -> None:
+    """Refuse before reading anything an ``--out`` that cannot take the export (TmrError, exit 2)."""
+    if fmt in ("mcap", "sqlite3"):
+        if out.exists() and not out.is_dir():
+            raise TmrError(f"--out {out} is a file; a bag is a directory")
+        if out.is_dir() and any(out.iterdir()) and not (out / "metadata.yaml").is_file():
+            raise TmrError(f"--out {out} is a directory that is not a rosbag2 bag; it is left alone, choose another")
+    elif out.is_dir():
+        raise TmrError(f"--out {out} is a directory; give a file name (e.g. {out / ('motion.' + fmt)})")
+    parent = out.absolute().parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise TmrError(f"--out {out}: cannot write in {parent}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    run_dir = Path(args.run_dir)
+    out = Path(args.out) if args.out else _default_out(run_dir, args.format)
+    try:
+        if not run_dir.is_dir():
+            raise TmrError(f"{run_dir} is not a directory: give the --out directory of a tmr run")
+        check_out(out, args.format)
+        from tmr.export.runs import load_motion
+
+        motion = load_motion(run_dir, rate=args.rate, trajectory=args.trajectory, description=args.description)
+        if args.format in ("mcap", "sqlite3"):
+            from tmr.export.rosbag import topics, write_bag
+
+            write_bag(motion, out, storage=args.format)
+            what = f"ROS 2 bag ({args.format}, {len(topics(motion))} topics, {motion.n_samples} samples)"
+        elif args.format == "gif":
+            from tmr.animate import frame_indices, write_gif
+
+            write_gif(motion, out)
+            what = f"animation ({len(frame_indices(motion))} frames, {out.stat().st_size / 1e6:.2f} MB)"
+        else:
+            from tmr.htmlview import write_html
+
+            write_html(motion, out)
+            what = f"interactive view ({out.stat().st_size / 1e6:.2f} MB)"
+    except TmrError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    print(f"tmr.export: {motion.title}")
+    if not motion.timed:
+        print(f"  note: {motion.notes[0]}")
+    print(f"  wrote {what} to {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
