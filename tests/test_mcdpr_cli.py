@@ -6,6 +6,7 @@ import csv
 import json
 import subprocess
 import sys
+from importlib import resources
 
 import numpy as np
 import pytest
@@ -174,9 +175,14 @@ def test_bad_robot_file(tmp_path, capsys) -> None:
 
 
 def test_failed_guarantee_exit_1_with_outputs(tmp_path, capsys) -> None:
-    # a 6 N external wrench box cannot be held everywhere by 15 N cables: the run reports where μ <= 0
+    # the greedy planner on fig2 with table 2 (and its task point) moved 1 m left and 0.8 m up: stage 2 ends with
+    # μ <= 0 (the search planner solves it, tests/test_mcdpr_search.py); the run reports where μ <= 0
+    text = (resources.files("tmr.mcdpr") / "scenes" / "fig2.toml").read_text()
+    text = text.replace("[5.0, 5.2, 0.8]", "[4.0, 6.0, 0.8]").replace("center = [5.0, 5.2]", "center = [4.0, 6.0]")
+    scene = tmp_path / "moved.toml"
+    scene.write_text(text)
     out = tmp_path / "out"
-    code = main(["plan", "--external", "6,6,6", "--max-iter", "15", "--out", str(out), "--no-plots"])
+    code = main(["plan", "--planner", "greedy", "--scene", str(scene), "--out", str(out), "--no-plots"])
     assert code == 1
     assert "capacity margin <= 0" in capsys.readouterr().err
     d = json.loads((out / "plan.json").read_text())

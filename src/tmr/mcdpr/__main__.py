@@ -52,9 +52,18 @@ def build_parser() -> argparse.ArgumentParser:
         description="Mobile cable-driven parallel robot (MoPICK, Rasheed 2019) tools.",
     )
     sub = p.add_subparsers(dest="command", required=True)
-    pl = sub.add_parser("plan", help="two-stage path planning of the bases and the platform")
+    pl = sub.add_parser("plan", help="path planning of the bases and the platform (search or the paper's greedy)")
     pl.add_argument("--scene", default="fig2", help="built-in scene name (fig2) or a scene TOML file (default fig2)")
     pl.add_argument("--robot", help="robot TOML file (default: the shipped MoPICK description)")
+    pl.add_argument(
+        "--planner",
+        choices=("search", "greedy"),
+        default="search",
+        help="search: placement graph + certified μ between samples (default); greedy: Rasheed 2019 two-stage",
+    )
+    pl.add_argument("--station-step", type=_positive, default=0.25, help="search: platform station spacing [m]")
+    pl.add_argument("--margin", type=_positive, default=0.3, help="search: μ of a placement at any heading [N]")
+    pl.add_argument("--max-move", type=_positive, default=0.6, help="search: base move per graph edge [m] (0.6)")
     pl.add_argument("--d-base", type=_positive, default=0.2, help="base step d_j of the stage-1 grid [m] (0.2)")
     pl.add_argument("--min-step", type=_positive, default=0.05, help="smallest retried base step [m] (0.05)")
     pl.add_argument("--d-platform", type=_positive, default=0.05, help="platform step d_MP of stage 2 [m] (0.05)")
@@ -95,6 +104,8 @@ def plan_dict(robot: Any, scene: Any, params: Any, result: Any, chk: Any) -> dic
             "params": dataclasses.asdict(params),
             "external": scene.external,
             "waypoints": result.waypoints,
+            "planner": result.planner,
+            "search": result.search,
             "check": {
                 "ok": chk.ok,
                 "mu_min": chk.mu_min,
@@ -124,6 +135,7 @@ def plan_dict(robot: Any, scene: Any, params: Any, result: Any, chk: Any) -> dic
                 "mu": result.mu,
                 "tensions": result.tensions,
                 "tension_upper_bounds": result.hi,
+                "mu_lower_between": result.mu_lower,
             },
         }
     )
@@ -212,7 +224,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         import dataclasses
 
+        from tmr.mcdpr.errors import NoPlanFound
         from tmr.mcdpr.planner import PlannerParams, check, plan
+        from tmr.mcdpr.capacity import required_wrench_set
+        from tmr.mcdpr.search import SearchParams, plan_search, refuse_upfront
         from tmr.mcdpr.robot import load_robot, mopick
         from tmr.mcdpr.scene import load_scene
 
@@ -233,7 +248,19 @@ def main(argv: list[str] | None = None) -> int:
         )
         env = scene.validate(robot)
         t0 = time.perf_counter()
-        result = plan(robot, scene, params, env)
+        if args.planner == "search":
+            params = SearchParams(
+                station_step=args.station_step, margin=args.margin, max_move=args.max_move, d_platform=args.d_platform
+            )
+            try:
+                result = plan_search(robot, scene, params)
+            except NoPlanFound as exc:
+                print(f"no plan found ({exc.kind}): {exc}", file=sys.stderr)
+                print(f"  searched for {time.perf_counter() - t0:.3f} s; nothing written", file=sys.stderr)
+                return 1
+        else:
+            refuse_upfront(robot, scene, required_wrench_set(robot, scene.external))
+            result = plan(robot, scene, params, env)
         wall = time.perf_counter() - t0
         chk = check(robot, env, result)
         try:
@@ -251,11 +278,19 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  max_tension   {chk.max_tension:.6g} N (t_max {robot.t_max:g} N)")
     print(f"  collision     {'none' if chk.collision_free else 'YES'}")
     print(f"  way-points    {'all reached' if chk.waypoints_ok else 'MISSED'}, steps <= d_MP: {chk.steps_ok}")
-    print(
-        f"  stage1        {result.times['stage1']:.3f} s, "
-        f"{sum(s['combinations'] for s in result.stage1)} combinations scored"
-    )
-    print(f"  stage2        {result.times['stage2']:.3f} s")
+    if result.planner == "search":
+        info = result.search
+        print(f"  mu_between    >= {info['mu_lower_min']:.6g} N guaranteed between samples")
+        print(
+            f"  search        {info['stations']} stations, {info['nodes']} placements, {info['edges']} motions, "
+            f"{info['rounds']} round(s), {info['smoothed_nodes']} nodes after shortcuts"
+        )
+    else:
+        print(
+            f"  stage1        {result.times['stage1']:.3f} s, "
+            f"{sum(s['combinations'] for s in result.stage1)} combinations scored"
+        )
+        print(f"  stage2        {result.times['stage2']:.3f} s")
     print(f"  wall_time     {wall:.3f} s")
     print(f"  wrote {', '.join(names)} to {args.out}")
     if not chk.ok:

@@ -147,11 +147,13 @@ def certify(
     rws: NDArray[np.float64],
     min_piece: float = 1e-3,
     max_samples: int = 200_000,
+    frac: float = 0.5,
 ) -> Certified:
-    """Bisect the pieces of the motion (P (T, 3), B (T, p, 2), H (T, p)) until μ's lower bound is positive on all.
+    """Bisect the pieces of the motion (P (T, 3), B (T, p, 2), H (T, p)) until μ's lower bound on every piece is at
+    least ``frac`` × the smaller μ of its two end samples (so > 0: certified, and not much below the samples).
 
     ``min_piece`` [m or rad]: pieces whose largest displacement is below it are not split further (they stay
-    uncertified). Stops early at a sample with μ ≤ 0 only once no piece can be refined any more."""
+    uncertified if their bound is ≤ 0). Pieces with an end sample at μ ≤ 0 are not split (a real violation)."""
     P = np.asarray(P, float)
     B = np.asarray(B, float)
     H = np.asarray(H, float)
@@ -164,7 +166,8 @@ def certify(
             np.maximum(np.linalg.norm(np.diff(B, axis=0), axis=-1), np.abs(wrap(np.diff(H, axis=0)))).max(axis=-1),
         )
         ends_ok = (st.mu[:-1] > 0) & (st.mu[1:] > 0)
-        split = np.flatnonzero(~(low > 0) & ends_ok & (size > min_piece))
+        target = frac * np.minimum(st.mu[:-1], st.mu[1:])
+        split = np.flatnonzero(~(low >= target) & ends_ok & (size > min_piece))
         if not len(split) or len(P) + len(split) > max_samples:
             break
         Pm = 0.5 * (P[split] + P[split + 1])
