@@ -224,12 +224,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         import dataclasses
 
+        from tmr.mcdpr.capacity import required_wrench_set
         from tmr.mcdpr.errors import NoPlanFound
         from tmr.mcdpr.planner import PlannerParams, check, plan
-        from tmr.mcdpr.capacity import required_wrench_set
-        from tmr.mcdpr.search import SearchParams, plan_search, refuse_upfront
         from tmr.mcdpr.robot import load_robot, mopick
         from tmr.mcdpr.scene import load_scene
+        from tmr.mcdpr.search import SearchParams, plan_search, refuse_upfront
 
         out = Path(args.out)
         check_out_dir(out)
