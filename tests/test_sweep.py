@@ -3,6 +3,7 @@ failure handling, NSGA-II tuning, reports and the ``python -m tmr.sweep`` CLI (d
 
 from __future__ import annotations
 
+import argparse
 import math
 import subprocess
 import sys
@@ -440,3 +441,28 @@ def test_a_failing_task_stops_the_pool_without_running_the_rest(tmp_path):
     assert len(list(tmp_path.glob("ran_*"))) < 20  # without the cancel every one of the 39 tasks would have run
     assert ex.map(abs, [-1, 2]) == [1, 2]  # the executor is usable again (a fresh pool)
     ex.close()
+
+
+def test_help_is_plain_text_and_every_option_explained():
+    """No RST markup in --help, and every option of every sub-command has a help text."""
+    from tmr.sweep.cli import build_parser
+
+    parser = build_parser()
+    assert "``" not in parser.format_help()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    for name, sp in sub.choices.items():
+        assert "``" not in sp.format_help(), name
+        missing = [a.option_strings for a in sp._actions if a.option_strings and not a.help]
+        assert missing == [], (name, missing)
+
+
+def test_moga_reused_out_keeps_no_stale_figure(tiny, tmp_path, capsys):
+    out = tmp_path / "m"
+    out.mkdir()
+    (out / "moga_tiny_pinv.png").write_text("old figure")
+    (out / "notes.txt").write_text("mine")
+    args = ["moga", "--scenario", tiny, "--pop", "4", "--gen", "1", "--jobs", "1", "--no-plots", "--quiet",
+            *FAST_ARGS, "--out", str(out)]  # fmt: skip
+    code, stdout, err = _cli(args, capsys)
+    assert code == 0 and stdout == "" and err == ""
+    assert sorted(p.name for p in out.iterdir()) == ["moga_tiny_pinv.csv", "moga_tiny_pinv.md", "notes.txt"]

@@ -12,7 +12,12 @@ Runs locally on every core by default (``--jobs N``; ``--jobs 1`` = in this proc
 whichever the executor. Inputs are validated first; files are written to a temporary directory and moved into
 ``--out`` only when all are complete.
 
-Exit codes: 0 done; 2 bad input or a run error (nothing written).
+A re-used ``--out`` keeps no output of an older run of the same command (the files of :func:`owned_names` that this
+run did not write are deleted; other files are left alone). Messages go through :mod:`logging` (``--quiet``,
+``--verbose``, ``--debug``: :mod:`tmr.console`); the progress bar is drawn on a terminal only, not with ``--quiet``
+or ``--no-progress``.
+
+Exit codes: 0 done; 2 bad input or a run error (nothing written); 130 interrupted (Ctrl-C; nothing written).
 """
 
 from __future__ import annotations
@@ -21,14 +26,14 @@ import argparse
 import os
 import shlex
 import shutil
-import sys
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from tmr.cli_args import positive_int as _positive
-from tmr.errors import TmrError
+from tmr.console import LOG, add_manners, check_out_dir, progress_enabled, remove_stale
+from tmr.console import run as run_cli
 from tmr.planner import METHODS
 from tmr.sweep.errors import SweepError
 
@@ -68,7 +73,11 @@ def _var(text: str) -> Any:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m tmr.sweep", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(
+        prog="python -m tmr.sweep",
+        description="Parameter sweeps of the tethered-chain planner (Caruso 2021 §5.1, §4.2.2): a sensitivity grid, "
+        "NSGA-II tuning (moga) and a scenarios x methods table (bench), on every core or a Dask cluster.",
+    )
     sub = p.add_subparsers(dest="command", required=True)
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--seed", type=int, default=0, help="seed of the leader's RRT* (and of NSGA-II); default 0")
@@ -83,6 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     common.add_argument("--no-progress", action="store_true", help="no progress bar")
     common.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    add_manners(common)
 
     s = sub.add_parser("sensitivity", parents=[common], help="k_v0 × d_min grid (Caruso 2021 §5.1, Fig. 9)")
     s.add_argument("--scenario", default="D", help="scenario (default D, the paper's plane case study)")
@@ -100,8 +110,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--high", type=float, default=2.0, help="highest factor on the nominal values (default 2.0)")
 
     m = sub.add_parser("moga", parents=[common], help="NSGA-II tuning of the controller parameters (§4.2.2)")
-    m.add_argument("--scenario", default="D")
-    m.add_argument("--method", default="pinv", choices=["pinv", "qp"])
+    m.add_argument("--scenario", default="D", help="scenario to tune on (default D, the paper's plane case study)")
+    m.add_argument(
+        "--method", default="pinv", choices=["pinv", "qp"], help="formulation whose parameters are tuned (default pinv)"
+    )
     m.add_argument("--pop", type=_positive, default=16, help="population size (default 16)")
     m.add_argument("--gen", type=_positive, default=6, help="generations (default 6)")
     m.add_argument(
@@ -109,8 +121,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
 
     b = sub.add_parser("bench", parents=[common], help="scenarios × methods table")
-    b.add_argument("--scenarios", nargs="+", default=["A", "B", "C", "D"])
-    b.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
+    b.add_argument("--scenarios", nargs="+", default=["A", "B", "C", "D"], help="scenarios (default A B C D)")
+    b.add_argument(
+        "--methods", nargs="+", default=list(METHODS), choices=list(METHODS), help="formulations (default: all)"
+    )
     b.add_argument("--repeats", type=_positive, default=1, help="plans per cell for the timing median (default 1)")
     b.add_argument("--robots", type=_positive, help="number of robots N (default: the scenario's)")
     return p
@@ -121,6 +135,7 @@ def canonical_command(args: argparse.Namespace) -> str:
     reports do not depend on where the sweep ran."""
     parts = ["python", "-m", "tmr.sweep", args.command]
     skip = {"command", "jobs", "scheduler", "connect_timeout", "out", "no_progress", "no_plots"}
+    skip |= {"quiet", "verbose", "debug"}
     for key, val in vars(args).items():
         if key in skip or val is None or val == []:
             continue
@@ -238,9 +253,22 @@ def _validate(args: argparse.Namespace) -> None:
     if getattr(args, "var", None):
         for v in args.var:
             check_overrides({v.name: v.low, **dict(args.set)})
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise SweepError(f"--out {out} exists and is not a directory")
+    check_out_dir(Path(args.out))
+
+
+def owned_names(args: argparse.Namespace) -> list[str]:
+    """Every file the command of ``args`` can write into ``--out`` (for the stale-output cleanup)."""
+    if args.command == "sensitivity":
+        tag = _safe(args.scenario)
+        names = [f"sensitivity_{tag}.md"]
+        for method in METHODS:
+            stem = f"sensitivity_{tag}_{method}"
+            names += [f"{stem}.csv", f"{stem}.png", f"{stem}_raw.png"]
+        return names
+    if args.command == "moga":
+        stem = f"moga_{_safe(args.scenario)}_{args.method}"
+        return [f"{stem}.md", f"{stem}.csv", f"{stem}.png"]
+    return ["bench.md", "bench.csv", "bench_timing.csv"]
 
 
 def write_outputs(out: Path, files: dict[str, Callable[[Path], Any]]) -> list[str]:
@@ -261,25 +289,25 @@ def write_outputs(out: Path, files: dict[str, Callable[[Path], Any]]) -> list[st
 
 def main(argv: list[str] | None = None, executor: Any = None) -> int:
     """Entry point; ``executor`` (an object with ``map``) overrides ``--jobs``/``--scheduler`` (for tests)."""
+    args = build_parser().parse_args(argv)
+    return run_cli(lambda a: _main(a, executor), args)
+
+
+def _main(args: argparse.Namespace, executor: Any = None) -> int:
     from tmr.sweep.executor import make_executor
 
-    args = build_parser().parse_args(argv)
     own = executor is None
+    _validate(args)
+    if own:
+        progress = progress_enabled() and not args.no_progress
+        executor = make_executor(args.jobs, args.scheduler, progress=progress, timeout=args.connect_timeout)
     try:
-        _validate(args)
-        if own:
-            executor = make_executor(
-                args.jobs, args.scheduler, progress=not args.no_progress, timeout=args.connect_timeout
-            )
-        try:
-            run = {"sensitivity": _sensitivity, "moga": _moga, "bench": _bench}[args.command]
-            files = run(args, executor)
-            names = write_outputs(Path(args.out), files)
-        finally:
-            if own and executor is not None:
-                executor.close()
-    except TmrError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    print(f"tmr sweep {args.command}: wrote {', '.join(names)} to {args.out}")
+        run = {"sensitivity": _sensitivity, "moga": _moga, "bench": _bench}[args.command]
+        files = run(args, executor)
+        names = write_outputs(Path(args.out), files)
+        remove_stale(Path(args.out), owned_names(args), names)
+    finally:
+        if own and executor is not None:
+            executor.close()
+    LOG.info("tmr sweep %s: wrote %s to %s", args.command, ", ".join(names), args.out)
     return 0
