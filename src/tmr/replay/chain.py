@@ -115,6 +115,8 @@ class ChainReplay:
     steps: int
     diverged: str | None = None
     config: ReplayConfig = field(default_factory=ReplayConfig)
+    qpos: list[Array] = field(default_factory=list)  # per sample, the full MuJoCo state (for the GIF)
+    built: ChainModel | None = None
 
     @property
     def real_time_factor(self) -> float:
@@ -184,13 +186,15 @@ def build_chain_model(run: Any, cfg: ReplayConfig, track: Array | None = None) -
     for i in range(n):
         for ax in ("x", "y"):
             acts.append(
-                f'<general name="r{i + 1}_a{ax}" joint="r{i + 1}_{ax}" gainprm="{kp!r}" biastype="affine" biasprm="0 {-kp!r} {-kv!r}" '
+                f'<general name="r{i + 1}_a{ax}" joint="r{i + 1}_{ax}" gainprm="{kp!r}" biastype="affine" '
+                f'biasprm="0 {-kp!r} {-kv!r}" '
                 f'forcelimited="true" forcerange="{-fl!r} {fl!r}"/>'
             )
         kyaw = izz * (2 * math.pi * cfg.frequency) ** 2
         dyaw = 2 * izz * 2 * math.pi * cfg.frequency
         acts.append(
-            f'<general name="r{i + 1}_ayaw" joint="r{i + 1}_yaw" gainprm="{kyaw!r}" biastype="affine" biasprm="0 {-kyaw!r} {-dyaw!r}" '
+            f'<general name="r{i + 1}_ayaw" joint="r{i + 1}_yaw" gainprm="{kyaw!r}" biastype="affine" '
+            f'biasprm="0 {-kyaw!r} {-dyaw!r}" '
             f'forcelimited="true" forcerange="{-fl!r} {fl!r}"/>'
         )
     g = float(teth["g"])
@@ -311,6 +315,7 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
     }
     rec_actual = np.zeros((K, n, 2))
     rec_nodes: list[Array] = []
+    rec_qpos: list[Array] = []
     rec_len = np.zeros((K, n))
     rec_tw = np.zeros((K, n))
     rec_tf = np.zeros((K, n))
@@ -322,6 +327,7 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
     def record(k: int) -> None:
         rec_actual[k] = cm.start + d.qpos[rq[:, :2]]
         rec_nodes.append(np.stack([ts.nodes(d) for ts in cm.tethers]))
+        rec_qpos.append(np.array(d.qpos))
         for j, ts in enumerate(cm.tethers):
             rec_len[k, j] = ts.length(d)
             rec_tw[k, j] = ts.root_tension(d)
@@ -342,9 +348,8 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
 
     wall0 = time.perf_counter()
     # warm-up at the start pose (not recorded): the soft constraints build up the cable's static forces
-    hold = (cm.start - cm.start) + mass * 0.0
     for _ in range(int(round(WARMUP / cfg.timestep))):
-        d.ctrl[ax_ids] = hold - ff_tether(cm.start) / kp
+        d.ctrl[ax_ids] = -ff_tether(cm.start) / kp
         d.ctrl[yaw_ids] = 0.0
         for ts in cm.tethers:
             ts.update(m, d)
@@ -373,7 +378,7 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
             progress(k / (K - 1))
     wall = time.perf_counter() - wall0
     K = rec_actual.shape[0]
-    ref_k = np.asarray(p_ref[:: sub][:K])
+    ref_k = np.asarray(p_ref[::sub][:K])
     nodes = rec_nodes[:K]
     lowest = np.array([[float(tn[:, 2].min()) for tn in nd] for nd in nodes])
     root = np.array([[tn[0] for tn in nd] for nd in nodes])  # (K, N, 3) winch exits
@@ -401,6 +406,8 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
         steps=step,
         diverged=diverged,
         config=cfg,
+        qpos=rec_qpos[:K],
+        built=cm,
     )
 
 

@@ -232,9 +232,7 @@ class TetherState:
         self.eq_end = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, f"{name}_end")
         sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, f"{name}_rootforce")
         self.sensor_adr = int(m.sensor_adr[sid])
-        self.end_body = (
-            0 if spec.end_body == "world" else mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, spec.end_body)
-        )
+        self.end_body = 0 if spec.end_body == "world" else mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, spec.end_body)
         self.s0 = spec.s0
         self.rho = spec.params.mass_per_length
         self.t0 = spec.params.horizontal_tension

@@ -81,7 +81,8 @@ def world_xml(
         )
         names.append(name)
     for k, piece in enumerate(convex_pieces(polygons)):
-        verts = np.vstack([np.column_stack([piece, np.zeros(len(piece))]), np.column_stack([piece, np.full(len(piece), height)])])
+        k_ = len(piece)
+        verts = np.vstack([np.column_stack([piece, np.zeros(k_)]), np.column_stack([piece, np.full(k_, height)])])
         assets.append(f'<mesh name="obs{k}" vertex="{_fmt(verts)}"/>')
         body.append(
             f'<geom name="obs{k}" type="mesh" mesh="obs{k}" contype="{ot}" conaffinity="{oa}" '

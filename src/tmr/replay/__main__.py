@@ -1,0 +1,133 @@
+"""Command line: ``python -m tmr.replay RUN_DIR [--gif]``.
+
+Replays the plan of a ``tmr.plan`` (tethered chain) or ``tmr.mcdpr plan`` (MoPICK) output directory in MuJoCo,
+writes ``RUN_DIR/replay/`` (``replay.json``, ``timing.json``, figures, optionally ``replay.gif``) and prints the
+verdict.
+
+Exit codes: 0 the replay confirms the plan (every check passed); 1 it does not (the first reason printed: which
+check, when, where, by how much); 2 bad input (a missing, older or corrupt run directory, a bad option): one line
+on stderr, nothing written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from tmr.cli_args import positive_float, positive_int
+from tmr.errors import TmrError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m tmr.replay",
+        description="Replay a plan in the MuJoCo physics engine and check that it holds up: tethers off the floor "
+        "and the obstacles, robots on their trajectories (tmr.plan), or the MoPICK platform held with its bases "
+        "on the ground (tmr.mcdpr plan).",
+    )
+    p.add_argument("run", help="output directory of tmr.plan or tmr.mcdpr plan")
+    p.add_argument("--out", help="where to write the replay (default RUN/replay)")
+    p.add_argument("--gif", action="store_true", help="also write replay.gif, rendered offscreen from the simulation")
+    p.add_argument("--links", type=positive_int, help="links per tether (chain, default 16)")
+    p.add_argument("--timestep", type=positive_float, help="physics step [s] (default 0.005; must divide Ts)")
+    p.add_argument(
+        "--track",
+        choices=["filtered", "raw"],
+        default="filtered",
+        help="trajectory the robots track: the filtered one a robot is given (default) or the planner's raw one",
+    )
+    p.add_argument("--tolerance", type=positive_float, help="tracking error that fails the replay [m] (0.05)")
+    p.add_argument(
+        "--winch",
+        choices=["horizontal", "torque"],
+        default="horizontal",
+        help="winch law: hold the horizontal tension T0 (the planner's model, default) or the winch-end tension",
+    )
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    return p
+
+
+def _chain(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str], str]:
+    from dataclasses import replace
+
+    from tmr.replay.chain import ReplayConfig, replay_chain
+    from tmr.replay.report import chain_verdict, write_chain_outputs
+
+    cfg = ReplayConfig(track=args.track, winch=args.winch)
+    for name, value in (("n_links", args.links), ("timestep", args.timestep), ("tolerance", args.tolerance)):
+        if value is not None:
+            cfg = replace(cfg, **{name: value})
+    rp = replay_chain(run, cfg)
+    verdict = chain_verdict(rp, run)
+    names = write_chain_outputs(out, rp, run, verdict, plots=not args.no_plots)
+    if args.gif:
+        from tmr.replay.gif import render_gif
+
+        used = render_gif(rp, run, out / "replay.gif")
+        names = sorted([*names, "replay.gif"])
+        print(f"  replay.gif rendered with {used}")
+    lines = [f"tmr replay: {run.label}, {run.n_robots} robots, {rp.sim_time:.2f} s simulated, {rp.steps} steps"]
+    for i in range(rp.actual.shape[1]):
+        e = rp.tracking_error[:, i]
+        rms = 1000 * float((e**2).mean()) ** 0.5
+        lines.append(f"  robot{i + 1}   tracking error max {1000 * e.max():.2f} mm, rms {rms:.2f} mm")
+    for j in range(rp.lowest.shape[1]):
+        k = int(rp.lowest[:, j].argmin())
+        lines.append(
+            f"  tether{j + 1}  lowest point {rp.lowest[k, j]:.4f} m at t = {rp.t[k]:.2f} s (catenary "
+            f"{rp.lowest_catenary[k, j]:.4f} m), winch tension max {rp.tension_winch[:, j].max():.2f} N"
+        )
+    counts = ", ".join(f"{kind} {c['count']}" for kind, c in rp.contacts.items())
+    lines.append(f"  contacts  {counts} (physics steps in contact)")
+    lines.append(f"  real-time factor {rp.real_time_factor:.1f}x ({rp.wall_time:.2f} s wall)")
+    return (0 if verdict.ok else 1), names, "\n".join(lines) + ("" if verdict.ok else f"\nFAILED: {verdict.reason}")
+
+
+def _mcdpr(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str], str]:
+    from tmr.replay.mcdpr import McdprConfig, mcdpr_summary, replay_mcdpr, write_mcdpr_outputs
+
+    cfg = McdprConfig()
+    if args.timestep is not None:
+        from dataclasses import replace
+
+        cfg = replace(cfg, timestep=args.timestep)
+    rp = replay_mcdpr(run, cfg)
+    names = write_mcdpr_outputs(out, rp, run, plots=not args.no_plots, gif=args.gif)
+    text = mcdpr_summary(rp, run)
+    return (0 if rp.verdict.ok else 1), names, text
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        from tmr.rundir import load_run
+
+        run = load_run(args.run)
+        out = Path(args.out) if args.out else Path(args.run) / "replay"
+        if out.exists() and not out.is_dir():
+            raise TmrError(f"--out {out} is a file, not a directory")
+        if args.gif:
+            from tmr.replay.gif import select_backend
+
+            select_backend()
+        try:
+            import mujoco  # noqa: F401
+        except ImportError as exc:
+            raise TmrError(f"the replay needs MuJoCo: pip install 'mujoco>=4.0' ({exc})") from None
+        code, names, text = _chain(args, run, out) if run.kind == "chain" else _mcdpr(args, run, out)
+    except TmrError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(text.split("\nFAILED: ")[0])
+    print(f"  wrote {', '.join(names)} to {out}")
+    if code:
+        print(f"replay FAILED: {text.split(chr(10) + 'FAILED: ')[1]}", file=sys.stderr)
+    else:
+        print("replay OK: the physics confirms the plan")
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,139 @@
+"""Figures of a replay (matplotlib, Agg): tether heights and tensions against the catenary, tracking errors,
+planned and simulated paths over the map. Every figure is written with :func:`tmr.plot.save_figure`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+__all__ = ["chain_figures", "plot_heights", "plot_tensions", "plot_topview", "plot_tracking"]
+
+_COLORS = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive"]
+
+
+def _fig(rows: int = 1, height: float = 3.6) -> tuple[Any, Any]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(rows, 1, figsize=(8.0, height * rows), sharex=True, squeeze=False)
+    return fig, ax[:, 0]
+
+
+def plot_heights(rp: Any, title: str) -> Any:
+    """Lowest point of every tether over time (solid) and the static catenary of the same ends (dashed) [m]."""
+    fig, (ax,) = _fig()
+    for j in range(rp.lowest.shape[1]):
+        c = _COLORS[j % len(_COLORS)]
+        ax.plot(rp.t, rp.lowest[:, j], color=c, lw=1.8, label=f"tether {j + 1}, MuJoCo")
+        ax.plot(rp.t, rp.lowest_catenary[:, j], color=c, lw=1.2, ls="--", label=f"tether {j + 1}, catenary")
+    ax.axhline(0.0, color="k", lw=1.0)
+    ax.fill_between(rp.t, -1.0, 0.0, color="0.85")
+    lo = min(float(rp.lowest.min()), float(rp.lowest_catenary.min()))
+    ax.set_ylim(min(-0.02, lo - 0.02), float(max(rp.lowest.max(), rp.lowest_catenary.max())) + 0.03)
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("lowest point of the tether [m]")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncol=2, loc="lower left")
+    fig.tight_layout()
+    return fig
+
+
+def plot_tensions(rp: Any, title: str) -> Any:
+    """Tension at the winch end and at the far end of every tether (solid) and the catenary's (dashed) [N]."""
+    fig, axes = _fig(2, 3.0)
+    for j in range(rp.tension_winch.shape[1]):
+        c = _COLORS[j % len(_COLORS)]
+        axes[0].plot(rp.t, rp.tension_winch[:, j], color=c, lw=1.5, label=f"tether {j + 1}")
+        axes[0].plot(rp.t, rp.tension_winch_catenary[:, j], color=c, lw=1.0, ls="--")
+        axes[1].plot(rp.t, rp.tension_far[:, j], color=c, lw=1.5, label=f"tether {j + 1}")
+        axes[1].plot(rp.t, rp.tension_far_catenary[:, j], color=c, lw=1.0, ls="--")
+    axes[0].set_ylabel("winch end [N]")
+    axes[1].set_ylabel("far end [N]")
+    axes[1].set_xlabel("t [s]")
+    axes[0].set_title(title + " (dashed: catenary)")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    return fig
+
+
+def plot_tracking(rp: Any, title: str) -> Any:
+    """Distance between each robot and its tracked reference [m], with the tolerance."""
+    fig, (ax,) = _fig()
+    for i in range(rp.tracking_error.shape[1]):
+        ax.plot(rp.t, 1000 * rp.tracking_error[:, i], color=_COLORS[i % len(_COLORS)], label=f"robot {i + 1}")
+    ax.axhline(1000 * rp.config.tolerance, color="r", ls=":", label="tolerance")
+    ax.set_yscale("symlog", linthresh=1.0)
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("tracking error [mm]")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def plot_topview(rp: Any, run: Any, title: str) -> Any:
+    """The map (obstacles filled, grown obstacles dashed), planned paths (thin) and simulated paths (thick), the
+    tethers' horizontal projection every 1 s, and the first contact of each kind (x)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 7.0))
+    for poly in run.obstacles:
+        x, y = poly.exterior.xy
+        ax.fill(x, y, color="0.55", zorder=1)
+    for poly in run.grown:
+        x, y = poly.exterior.xy
+        ax.plot(x, y, color="0.5", ls="--", lw=0.7, zorder=1)
+    xmin, ymin, xmax, ymax = run.bounds
+    ax.plot([xmin, xmax, xmax, xmin, xmin], [ymin, ymin, ymax, ymax, ymin], color="k", lw=1.2)
+    ax.plot(*run.anchor, "ks", ms=8, label="anchor")
+    n = rp.actual.shape[1]
+    for i in range(n):
+        c = _COLORS[i % len(_COLORS)]
+        ax.plot(rp.reference[:, i, 0], rp.reference[:, i, 1], color=c, lw=0.8, ls="--")
+        ax.plot(rp.actual[:, i, 0], rp.actual[:, i, 1], color=c, lw=2.0, alpha=0.8, label=f"robot {i + 1}")
+    Ts = float(rp.t[1] - rp.t[0]) if rp.t.size > 1 else 1.0
+    every = max(1, int(round(1.0 / Ts)))
+    for k in range(0, len(rp.nodes), every):
+        for nd in rp.nodes[k]:
+            ax.plot(nd[:, 0], nd[:, 1], color="tab:orange", lw=0.6, alpha=0.5)
+    for kind, c in rp.contacts.items():
+        if c["count"]:
+            ax.plot(c["where"][0], c["where"][1], "rx", ms=12, mew=2.5)
+            ax.annotate(kind, c["where"][:2], color="r", fontsize=8, xytext=(5, 5), textcoords="offset points")
+    ax.set_aspect("equal")
+    ax.set_xlim(xmin - 0.3, xmax + 0.3)
+    ax.set_ylim(ymin - 0.3, ymax + 0.3)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(title + "\nplanned (dashed) and simulated paths, tethers every 1 s")
+    ax.legend(fontsize=7, loc="upper right")
+    fig.tight_layout()
+    return fig
+
+
+def chain_figures(out: Path, rp: Any, run: Any) -> list[str]:
+    """Write the four PNG figures of a chain replay into ``out``; return their names."""
+    import matplotlib.pyplot as plt
+
+    from tmr.plot import save_figure
+
+    label = f"MuJoCo replay: {run.label}"
+    figs = {
+        "tether_heights.png": plot_heights(rp, label),
+        "tensions.png": plot_tensions(rp, label),
+        "tracking.png": plot_tracking(rp, label),
+        "topview.png": plot_topview(rp, run, label),
+    }
+    for name, fig in figs.items():
+        save_figure(fig, out / name)
+        plt.close(fig)
+    return list(figs)

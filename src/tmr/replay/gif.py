@@ -1,0 +1,109 @@
+"""Animated GIF of a replay, rendered offscreen by MuJoCo from the simulated states (Pillow writes the GIF).
+
+MuJoCo picks its OpenGL backend from ``MUJOCO_GL`` when it is first imported: :func:`select_backend` sets
+``egl`` (GPU or Mesa's EGL, headless) unless the user chose one (``MUJOCO_GL=osmesa`` for software rendering);
+when no OpenGL context can be made, :func:`render_gif` draws the same simulated states with matplotlib instead
+and says so.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+__all__ = ["render_gif", "select_backend"]
+
+#: frames per second of the GIF, and its size [px]
+FPS = 10
+WIDTH, HEIGHT = 640, 480
+#: radius the tethers are drawn with [m] (the simulated cable is 2 mm thick)
+VISUAL_TETHER_RADIUS = 0.02
+
+
+def select_backend() -> None:
+    """Set ``MUJOCO_GL=egl`` before MuJoCo is imported, unless the user set it."""
+    os.environ.setdefault("MUJOCO_GL", "egl")
+
+
+def _frames_mujoco(rp: Any, run: Any, every: int) -> list[Any]:
+    import mujoco
+    from PIL import Image
+
+    cm = rp.built
+    m = cm.model
+    d = mujoco.MjData(m)
+    xmin, ymin, xmax, ymax = run.bounds
+    cam = mujoco.MjvCamera()
+    cam.lookat[:] = [(xmin + xmax) / 2, (ymin + ymax) / 2, 0.0]
+    cam.distance = 1.25 * max(xmax - xmin, ymax - ymin)
+    cam.elevation = -62.0
+    cam.azimuth = 90.0
+    frames = []
+    radius = m.geom_size[:, 0].copy()
+    for ts in cm.tethers:  # drawn thicker than the 2 mm cable so that it shows at this scale
+        m.geom_size[ts.geom, 0] = VISUAL_TETHER_RADIUS
+    with mujoco.Renderer(m, HEIGHT, WIDTH) as renderer:
+        for k in range(0, len(rp.qpos), every):
+            d.qpos[:] = rp.qpos[k]
+            mujoco.mj_kinematics(m, d)
+            for ts in cm.tethers:
+                ts.update(m, d)  # capsule sizes of this sample
+            mujoco.mj_forward(m, d)
+            renderer.update_scene(d, camera=cam)
+            frames.append(Image.fromarray(renderer.render()))
+    m.geom_size[:, 0] = radius
+    return frames
+
+
+def _frames_matplotlib(rp: Any, run: Any, every: int) -> list[Any]:
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from PIL import Image
+
+    frames = []
+    xmin, ymin, xmax, ymax = run.bounds
+    for k in range(0, len(rp.nodes), every):
+        fig, ax = plt.subplots(figsize=(WIDTH / 100, HEIGHT / 100), dpi=100)
+        for poly in run.obstacles:
+            ax.fill(*poly.exterior.xy, color="0.55")
+        for nd in rp.nodes[k]:
+            ax.plot(nd[:, 0], nd[:, 1], color="tab:orange", lw=1.5)
+        for i, p in enumerate(rp.actual[k]):
+            ax.add_patch(plt.Circle(p, run.robot_radius, color="tab:blue", alpha=0.5))
+            ax.annotate(str(i + 1), p, ha="center", va="center", fontsize=8)
+        ax.plot(*run.anchor, "ks")
+        ax.set_xlim(xmin, xmax)
+        ax.set_ylim(ymin, ymax)
+        ax.set_aspect("equal")
+        ax.set_title(f"t = {rp.t[k]:.2f} s (top view of the simulated states)", fontsize=9)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png")
+        plt.close(fig)
+        frames.append(Image.open(io.BytesIO(buf.getvalue())).convert("RGB"))
+    return frames
+
+
+def render_gif(rp: Any, run: Any, path: Path) -> str:
+    """Write ``path`` (GIF, :data:`FPS` frames per second of simulated time); return the renderer used
+    ("mujoco-egl", "mujoco-osmesa" or "matplotlib")."""
+    Ts = float(rp.t[1] - rp.t[0]) if rp.t.size > 1 else 0.1
+    every = max(1, int(round(1.0 / (FPS * Ts))))
+    used = "matplotlib"
+    try:
+        frames = _frames_mujoco(rp, run, every)
+        used = f"mujoco-{os.environ.get('MUJOCO_GL', 'default')}"
+    except Exception:  # noqa: BLE001 - no OpenGL context on this machine: draw the same states with matplotlib
+        frames = _frames_matplotlib(rp, run, every)
+    import io
+
+    from tmr.io import atomic_write_bytes
+
+    buf = io.BytesIO()
+    frames[0].save(buf, format="GIF", save_all=True, append_images=frames[1:], duration=int(1000 / FPS), loop=0)
+    atomic_write_bytes(path, buf.getvalue())
+    return used

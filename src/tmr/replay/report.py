@@ -1,0 +1,200 @@
+"""Verdict and outputs of a chain replay: ``replay.json`` (deterministic), ``timing.json`` and the figures.
+
+The verdict lists every failed check with the time it first failed and takes the earliest as the reason:
+a contact robot-obstacle, robot-robot, tether-obstacle or tether-floor, a tracking error beyond the tolerance,
+or a diverged simulation. ``replay.json`` holds no timings (same run, same bytes); the wall time and real-time
+factor go to ``timing.json``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tmr.replay.chain import CONTACT_KINDS, WARMUP, ChainReplay
+from tmr.replay.tether import TETHER_RADIUS
+
+__all__ = ["REPLAY_FORMAT", "Verdict", "chain_document", "chain_verdict", "write_chain_outputs"]
+
+REPLAY_FORMAT = "tmr-replay/1"
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """ok: the replay confirms the plan; reason: the earliest failed check (None if ok); failures: every failed
+    check as (time [s], kind, message), earliest first."""
+
+    ok: bool
+    reason: str | None
+    failures: tuple[tuple[float, str, str], ...]
+
+
+def _xyz(p: Any) -> str:
+    return "(" + ", ".join(f"{float(v):.2f}" for v in p) + ") m"
+
+
+def chain_verdict(rp: ChainReplay, run: Any) -> Verdict:
+    """Check the replay against the plan's promises (no contact, no floor touch, tracking within tolerance)."""
+    fails: list[tuple[float, str, str]] = []
+    d_max = np.asarray(run.record["tether"]["d_max"], dtype=float)
+    for kind in CONTACT_KINDS:
+        c = rp.contacts[kind]
+        if not c["count"]:
+            continue
+        t0 = float(c["first_time"])
+        a, b = c["between"]
+        who = f"{b} touches {a}" if kind.startswith("tether") or a.startswith(("obs", "wall")) else f"{a} touches {b}"
+        if kind == "tether-floor":
+            j = int(b.split()[-1]) - 1 if b.startswith("tether") else int(a.split()[-1]) - 1
+            k = int(np.argmin(np.abs(rp.t - t0)))
+            extra = f"; span {rp.span[k, j]:.3f} m"
+            if rp.span[k, j] > d_max[j]:
+                extra += f" > d_max {d_max[j]:.3f} m by {rp.span[k, j] - d_max[j]:.3f} m"
+            extra += f", static catenary lowest point {rp.lowest_catenary[k, j]:.3f} m"
+            msg = f"tether {j + 1} touches the floor at t = {t0:.2f} s at {_xyz(c['where'])}{extra}"
+        else:
+            msg = f"{who} at t = {t0:.2f} s at {_xyz(c['where'])} ({c['count']} physics steps in contact, "
+            msg += f"deepest {1000 * c['max_depth']:.1f} mm)"
+        fails.append((t0, kind, msg))
+    tol = rp.config.tolerance
+    over = rp.tracking_error > tol
+    if over.any():
+        k = int(np.argmax(over.any(axis=1)))
+        i = int(np.argmax(rp.tracking_error[k]))
+        e = float(rp.tracking_error.max())
+        msg = (
+            f"robot {i + 1} tracking error {rp.tracking_error[k, i]:.3f} m > tolerance {tol:g} m at "
+            f"t = {rp.t[k]:.2f} s (largest {e:.3f} m)"
+        )
+        fails.append((float(rp.t[k]), "tracking", msg))
+    if rp.diverged:
+        fails.append((float(rp.t[-1]), "diverged", rp.diverged))
+    fails.sort(key=lambda f: f[0])
+    return Verdict(ok=not fails, reason=fails[0][2] if fails else None, failures=tuple(fails))
+
+
+def _f(x: Any) -> Any:
+    if isinstance(x, np.ndarray):
+        return [_f(v) for v in x.tolist()]
+    if isinstance(x, (list, tuple)):
+        return [_f(v) for v in x]
+    if isinstance(x, (float, np.floating)):
+        v = float(x)
+        return v if math.isfinite(v) else None
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    return x
+
+
+def chain_document(rp: ChainReplay, run: Any, verdict: Verdict) -> dict[str, Any]:
+    """The ``replay.json`` document (format :data:`REPLAY_FORMAT`; no timings)."""
+    cfg = rp.config
+    robots = []
+    for i in range(rp.actual.shape[1]):
+        e = rp.tracking_error[:, i]
+        k = int(np.argmax(e))
+        robots.append(
+            {
+                "name": f"robot{i + 1}",
+                "tracking_error_max": float(e.max()),
+                "tracking_error_rms": float(np.sqrt(np.mean(e**2))),
+                "max_at": float(rp.t[k]),
+            }
+        )
+    tethers = []
+    for j in range(rp.lowest.shape[1]):
+        k = int(np.argmin(rp.lowest[:, j]))
+        tethers.append(
+            {
+                "name": f"tether{j + 1}",
+                "winch_on": f"robot{j + 1}",
+                "held_by": "anchor" if j == 0 else f"robot{j}",
+                "lowest_min": float(rp.lowest[k, j]),
+                "lowest_min_at": float(rp.t[k]),
+                "lowest_catenary_then": float(rp.lowest_catenary[k, j]),
+                "lowest_error_max": float(np.abs(rp.lowest[:, j] - rp.lowest_catenary[:, j]).max()),
+                "span_max": float(rp.span[:, j].max()),
+                "d_max": float(run.record["tether"]["d_max"][j]),
+                "length_error_max": float(np.abs(rp.length[:, j] - rp.length_catenary[:, j]).max()),
+                "tension_winch_max": float(rp.tension_winch[:, j].max()),
+                "tension_winch_error_max": float(
+                    np.abs(rp.tension_winch[:, j] - rp.tension_winch_catenary[:, j]).max()
+                ),
+                "tension_far_max": float(rp.tension_far[:, j].max()),
+                "tension_far_error_max": float(np.abs(rp.tension_far[:, j] - rp.tension_far_catenary[:, j]).max()),
+            }
+        )
+    model = asdict(cfg) | {
+        "kp": cfg.kp,
+        "kv": cfg.kv,
+        "tether_radius": TETHER_RADIUS,
+        "warmup": WARMUP,
+        "integrator": "implicitfast",
+    }
+    return {
+        "format": REPLAY_FORMAT,
+        "kind": "chain",
+        "run": {
+            "path": run.path.name,
+            "scenario": run.record["scenario"],
+            "method": run.record["method"],
+            "plan_success": run.record["success"],
+        },
+        "verdict": {
+            "ok": verdict.ok,
+            "reason": verdict.reason,
+            "failures": [{"t": t, "check": k, "message": m} for t, k, m in verdict.failures],
+        },
+        "model": model,
+        "sim_time": rp.sim_time,
+        "steps": rp.steps,
+        "robots": robots,
+        "tethers": tethers,
+        "contacts": rp.contacts,
+        "series": {
+            "t": rp.t,
+            "lowest": rp.lowest,
+            "lowest_catenary": rp.lowest_catenary,
+            "span": rp.span,
+            "length": rp.length,
+            "length_catenary": rp.length_catenary,
+            "tension_winch": rp.tension_winch,
+            "tension_winch_catenary": rp.tension_winch_catenary,
+            "tension_far": rp.tension_far,
+            "tension_far_catenary": rp.tension_far_catenary,
+            "tracking_error": rp.tracking_error,
+            "actual": rp.actual,
+        },
+    }
+
+
+def _dump(doc: dict[str, Any]) -> str:
+    from tmr.io import _dumps_readable
+
+    return _dumps_readable(_f_tree(doc)) + "\n"
+
+
+def _f_tree(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _f_tree(v) for k, v in x.items()}
+    return _f(x) if not isinstance(x, (str, bool, type(None), int)) else x
+
+
+def write_chain_outputs(out: Path, rp: ChainReplay, run: Any, verdict: Verdict, plots: bool = True) -> list[str]:
+    """Write ``replay.json``, ``timing.json`` and the figures into ``out``; return the file names."""
+    from tmr.io import atomic_write_text
+
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "replay.json", _dump(chain_document(rp, run, verdict)))
+    timing = {"wall_time": rp.wall_time, "sim_time": rp.sim_time, "real_time_factor": rp.real_time_factor}
+    atomic_write_text(out / "timing.json", _dump(timing))
+    names = ["replay.json", "timing.json"]
+    if plots:
+        from tmr.replay import figures
+
+        names += figures.chain_figures(out, rp, run)
+    return sorted(names)
