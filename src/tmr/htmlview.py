@@ -98,7 +98,7 @@ def build_figure(motion: Motion, max_frames: int = 200) -> Any:
                 hoverinfo="skip",
             )
         )
-    for i, poly in enumerate(motion.inflated):
+    for i, poly in enumerate(motion.inflated_in_room()):
         xs, ys = _ring_xy(poly)
         fig.add_trace(
             go.Scatter(

@@ -113,6 +113,13 @@ class Motion:
             if len(shp) != 3 or shp[0] != k or shp[2] != 3 or shp[1] < 2 or not np.all(np.isfinite(ln.points)):
                 raise ParameterError(f"line {ln.name}: points must be finite with shape ({k}, M >= 2, 3), got {shp}")
 
+    def inflated_in_room(self) -> tuple[Any, ...]:
+        """The grown obstacles cut to the room (the walls grown by r reach r beyond it), as polygons to draw."""
+        from shapely.geometry import box
+
+        room = box(*self.bounds)
+        return tuple(q for p in self.inflated for q in _polygons(p.intersection(room)))
+
     @property
     def n_samples(self) -> int:
         return int(np.asarray(self.t).size)
@@ -146,15 +153,19 @@ def _polygons(geom: Any) -> tuple[Any, ...]:
 
 
 def _room_parts(env: Any) -> tuple[tuple[Any, ...], tuple[Any, ...], tuple[float, float, float, float]]:
-    from shapely.geometry import box
+    """Raw and grown obstacle polygons of ``env`` in the order ``shapely.get_parts`` gives them (the order
+    :mod:`tmr.rundir` records them in, so a motion rebuilt from a run directory is the same), and the room."""
+    import shapely
 
     bounds = tuple(float(v) for v in env.bounds)
-    room = box(*bounds)
-    obstacles = getattr(env, "obstacles", None)
-    inflated = getattr(env, "inflated", None)
-    obs = _polygons(obstacles.intersection(room)) if obstacles is not None else ()
-    inf = _polygons(inflated.intersection(room)) if inflated is not None else ()
-    return obs, inf, bounds  # type: ignore[return-value]
+    parts = []
+    for geom in (getattr(env, "obstacles", None), getattr(env, "inflated", None)):
+        polys: list[Any] = []
+        if geom is not None and not geom.is_empty:
+            for part in shapely.get_parts(geom):
+                polys.extend(_polygons(part))
+        parts.append(tuple(polys))
+    return parts[0], parts[1], bounds  # type: ignore[return-value]
 
 
 def catenary_polylines(

@@ -38,6 +38,8 @@ from tmr.cli_args import positive_int as _positive_int
 from tmr.console import LOG, add_manners, check_out_dir, progress_enabled, remove_stale
 from tmr.console import run as run_cli
 from tmr.errors import TmrError
+from tmr.motion import chain_motion
+from tmr.views import add_view_args, write_views
 
 #: Every file ``python -m tmr.plan`` may write into ``--out``; those a run does not write are removed from a re-used
 #: ``--out`` (files of other names are never touched).
@@ -192,6 +194,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--filter-cutoff", type=float, default=1.0, help="cut-off of the trajectory filter [Hz]")
     p.add_argument("--out", default="runs/plan", help="output directory (default runs/plan)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    add_view_args(p)  # --gif, --html, --export FORMAT (tmr.views)
     add_manners(p)
     return p
 
@@ -478,6 +481,7 @@ def _main(args: argparse.Namespace) -> int:
         names = write_outputs(
             Path(args.out), plan, metrics, problem.env, filtered, not args.no_plots, extra, route=problem.route
         )
+        names += write_views(args, Path(args.out), lambda: chain_motion(plan, problem.env, problem.chain_params))
     except RouteVerdict as exc:
         if exc.proven:
             raise  # a TmrError: one line, exit 2 (tmr.console.run)

@@ -187,7 +187,7 @@ def _scene_markers(m: _Msgs, motion: Motion, ns0: int) -> list[Any]:
             edges[1::2, 2] = OBSTACLE_HEIGHT
             out.append(m.marker(ns0, "obstacles", i, "LINE_LIST", "obstacle", (0.02, 0, 0), edges))
             i += 1
-    for j, poly in enumerate(motion.inflated):
+    for j, poly in enumerate(motion.inflated_in_room()):
         for ring in [poly.exterior, *poly.interiors]:
             xy = np.asarray(ring.coords)[:, :2]
             pts = np.column_stack([xy, np.zeros(len(xy))])
