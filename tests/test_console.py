@@ -1,0 +1,107 @@
+"""tmr.console: the manners every command line shares (logging streams and levels, exit codes of what a command
+raises, Ctrl-C, library warnings, progress bars, --out checks and the stale-output cleanup)."""
+
+from __future__ import annotations
+
+import argparse
+import io
+import logging
+
+import numpy as np
+import pytest
+
+from tmr import console
+from tmr.errors import TmrError
+
+
+def _args(*flags: str) -> argparse.Namespace:
+    p = argparse.ArgumentParser()
+    console.add_manners(p)
+    return p.parse_args(list(flags))
+
+
+def test_info_to_stdout_warnings_to_stderr_quiet_and_verbose(capsys):
+    def body(_):
+        console.LOG.debug("detail")
+        console.LOG.info("summary")
+        console.LOG.warning("careful")
+        return 0
+
+    assert console.run(body, _args()) == 0
+    assert capsys.readouterr() == ("summary\n", "careful\n")
+    assert console.run(body, _args("--quiet")) == 0
+    assert capsys.readouterr() == ("", "careful\n")
+    assert console.run(body, _args("--verbose")) == 0
+    assert capsys.readouterr() == ("detail\nsummary\n", "careful\n")
+    with pytest.raises(SystemExit):
+        _args("--quiet", "--verbose")
+
+
+@pytest.mark.parametrize(
+    ("exc", "code", "line"),
+    [
+        (TmrError("bad --goal"), 2, "error: bad --goal"),
+        (KeyboardInterrupt(), 130, "interrupted"),
+        (RuntimeError("boom"), 1, "internal error: RuntimeError: boom (rerun with --debug for the traceback)"),
+    ],
+)
+def test_exit_codes_one_line_and_debug_traceback(capsys, exc, code, line):
+    def body(_):
+        raise exc
+
+    assert console.run(body, _args()) == code
+    out, err = capsys.readouterr()
+    assert out == "" and err.strip() == line
+    assert console.run(body, _args("--debug")) == code
+    err = capsys.readouterr().err
+    assert "Traceback (most recent call last)" in err and err.count("\n") > 3
+
+
+def test_library_warnings_only_with_verbose(capsys):
+    def body(_):
+        np.log(np.zeros(1))  # numpy: RuntimeWarning divide by zero
+        return 0
+
+    assert console.run(body, _args()) == 0
+    assert capsys.readouterr() == ("", "")
+    assert console.run(body, _args("-v")) == 0
+    assert "RuntimeWarning" in capsys.readouterr().err
+    assert logging.getLogger("py.warnings").handlers  # captured through logging ...
+    import warnings
+
+    with pytest.warns(RuntimeWarning):  # ... and given back to Python afterwards
+        warnings.warn("after the run", RuntimeWarning, stacklevel=1)
+
+
+class _Tty(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_progress_only_on_a_terminal_and_not_quiet():
+    assert console.progress_enabled(io.StringIO()) is False
+    assert console.progress_enabled(_Tty()) is True
+    seen = {}
+
+    def body(_):
+        seen["bar"] = console.progress_enabled(_Tty())
+        return 0
+
+    console.run(body, _args("--quiet"))
+    assert seen["bar"] is False and console.progress_enabled(_Tty()) is True
+
+
+def test_check_out_dir_and_remove_stale(tmp_path):
+    f = tmp_path / "file"
+    f.write_text("x")
+    for out in (f, f / "below"):
+        with pytest.raises(TmrError, match="is a file, not a directory"):
+            console.check_out_dir(out)
+    console.check_out_dir(tmp_path / "new" / "deeper")  # creatable: fine, nothing created
+    assert not (tmp_path / "new").exists()
+    out = tmp_path / "out"
+    out.mkdir()
+    for name in ("a.png", "b.png", "keep.txt", "c.json"):
+        (out / name).write_text(name)
+    gone = console.remove_stale(out, owned=("a.png", "b.png", "c.json", "never.png"), written=("c.json",))
+    assert gone == ["a.png", "b.png"] and sorted(p.name for p in out.iterdir()) == ["c.json", "keep.txt"]
