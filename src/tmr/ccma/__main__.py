@@ -116,7 +116,7 @@ def _csv_text(model: Any, path: Any, res: Any, joint_names: list[str], angles: n
     for a in sysm.agents:
         head += [f"{a.name}_x", f"{a.name}_y", f"{a.name}_yaw"]
     head += [f"u_{n}" for n in sysm.control_names]
-    head += ["condition", "sigma_min", "damped"] + [f"angle_{n}" for n in joint_names]
+    head += ["condition", "sigma_min", "damped", "substeps"] + [f"angle_{n}" for n in joint_names]
     w.writerow(head)
     for k in range(len(path.positions)):
         yaw = math.atan2(res.ee_rotation[k, 1, 0], res.ee_rotation[k, 0, 0])
@@ -124,7 +124,7 @@ def _csv_text(model: Any, path: Any, res: Any, joint_names: list[str], angles: n
         row += [res.position_error[k], res.rotation_error[k], res.residual[k]]
         row += [int(res.iterations[k]), int(res.evaluations[k]), int(res.newton_iterations[k])]
         row += list(res.agents[k].ravel()) + list(res.u[k])
-        row += [res.condition[k], res.sigma_min[k], int(res.damped[k])] + list(angles[k])
+        row += [res.condition[k], res.sigma_min[k], int(res.damped[k]), int(res.substeps[k])] + list(angles[k])
         w.writerow([repr(float(v)) if isinstance(v, (float, np.floating)) else v for v in row])
     return buf.getvalue()
 
@@ -154,6 +154,7 @@ def _trajectory_doc(
         "condition": res.condition,
         "sigma_min": res.sigma_min,
         "damped": res.damped.astype(int),
+        "substeps": res.substeps,
         "joint_names": joint_names,
         "joint_angles": angles,
     }
@@ -245,6 +246,7 @@ def run(args: argparse.Namespace) -> int:
         "condition_limit": CONDITION_LIMIT,
         "near_singular_steps": [int(k) + 1 for k in near],
         "damped_steps": [int(k) + 1 for k in np.flatnonzero(res.damped)],
+        "subdivided_steps": {str(int(k) + 1): int(res.substeps[k]) for k in np.flatnonzero(res.substeps > 1)},
         "timing": {
             "compiled": model.compiled,
             "median_step_ms": 1e3 * float(np.median(res.step_time)),
@@ -287,14 +289,15 @@ def run(args: argparse.Namespace) -> int:
         f"  reach                smallest margin {reach['min_margin_m']:.3g} m (end-effector height "
         f"{z_lo:.3g} … {z_hi:.3g} m at the reference rotation)\n"
         f"  conditioning         max {summary['max_condition']:.3g} (near-singular above {CONDITION_LIMIT:g}: "
-        f"{len(near)} step(s), {int(res.damped.sum())} damped)\n"
+        f"{len(near)} step(s), {int(res.damped.sum())} damped, {int((res.substeps > 1).sum())} subdivided)\n"
         f"  wrote {', '.join(names)} to {out}"
     )
     if near.size:
         LOG.warning(
             f"warning: {len(near)} step(s) near a singular configuration (sensitivity condition number up to "
             f"{summary['max_condition']:.3g} at step {int(np.argmax(res.condition)) + 1}; smallest end-effector "
-            f"singular value {summary['min_sigma_m']:.3g} m); the steps after them were damped"
+            f"singular value {summary['min_sigma_m']:.3g} m); the steps after them were damped, and missed steps "
+            f"retried in smaller increments"
         )
     if not ok.all():
         LOG.error("path FAILED: %s", _miss_reason(res, ok))

@@ -308,7 +308,8 @@ class TrackResult(NamedTuple):
     (K,) per step; ``step_time`` (K,) [s]; ``histories`` per-step BFGS convergence (time [s], O [m²]); ``condition``
     (K,) condition number of the end-effector sensitivity at the reached state and ``sigma_min`` (K,) its smallest
     task singular value [m] (:func:`conditioning`); ``damped`` (K,) whether the step was solved with damping because
-    the previous state was near-singular (condition > ``condition_limit``)."""
+    the previous state was near-singular (condition > ``condition_limit``); ``substeps`` (K,) how many sub-steps
+    the target was finally solved in (1: directly; see :func:`track`)."""
 
     u: np.ndarray
     agents: np.ndarray
@@ -326,6 +327,7 @@ class TrackResult(NamedTuple):
     condition: np.ndarray
     sigma_min: np.ndarray
     damped: np.ndarray
+    substeps: np.ndarray
 
 
 def track(
@@ -339,6 +341,7 @@ def track(
     keep_states: bool = False,
     init: str = "gauss-newton",
     condition_limit: float = CONDITION_LIMIT,
+    max_substeps: int = 16,
 ) -> TrackResult:
     """Follow the targets (positions (K, 3) [m], rotations (K, 3, 3)) one IK solve per target, warm-starting each
     from the previous solution's controls and state. BFGS starts every step from the Gauss–Newton estimate
@@ -347,7 +350,16 @@ def track(
 
     After every step the conditioning of the end-effector sensitivity is recorded (:func:`conditioning`); when it
     exceeds ``condition_limit`` the next step is damped: λ = 2 (σ_1 / ``condition_limit``)² [m²] is added to the
-    Gauss–Newton estimate that starts BFGS (:func:`solve_ik`), which bounds that estimate's condition number."""
+    Gauss–Newton estimate that starts BFGS (:func:`solve_ik`), which bounds that estimate's condition number.
+
+    A target that is missed (position error > 1e-5 m, rotation error > 1e-4 rad or residual energy > the assembly
+    tolerance) is solved again from the previous solution in 2, 4, … ``max_substeps`` equal sub-steps (positions
+    linear, rotations by spherical interpolation) until one division reaches it; otherwise the direct solve is kept
+    (and the following targets are not subdivided until one is reached again).
+    Near a singular configuration the objective has a cusp (e.g. a leg's link passing the horizontal: the height of
+    the end-effector grows like the square root of an agent's travel), where one BFGS line search can overshoot to the
+    far side; smaller increments stay on the branch (Kumar 2019 §III-D recommends small steps for the same reason).
+    Times, iterations and evaluations of a subdivided target add up all its solves."""
     if init not in ("gauss-newton", "warm"):
         raise ValueError(f"init must be 'gauss-newton' or 'warm', got {init!r}")
     from tmr.ccma.sim import reference_state
@@ -365,12 +377,25 @@ def track(
     times = np.zeros(k)
     hist: list[np.ndarray] = []
     states: list[State] = []
-    cond, smin, damped = np.zeros(k), np.zeros(k), np.zeros(k, bool)
+    cond, smin, damped, subs = np.zeros(k), np.zeros(k), np.zeros(k, bool), np.ones(k, int)
     hinv = None
     lam = 0.0
+    prev = Target(*end_effector_pose(model, st))
+    ok_prev = True
     for i in range(k):
         damped[i] = lam > 0
-        r = solve_ik(model, st, u, Target(positions[i], rotations[i]), hess_inv0=hinv, gtol=gtol, damping=lam)
+        target = Target(positions[i], rotations[i])
+        r = solve_ik(model, st, u, target, hess_inv0=hinv, gtol=gtol, damping=lam)
+        spent = (r.iterations, r.evaluations, r.newton_iterations, r.time)
+        n = 2 if ok_prev else max_substeps + 1
+        while not _step_reached(model, r, target) and n <= max_substeps:
+            sub = _subdivided(model, st, u, prev, target, n, gtol, lam)
+            spent = tuple(a + b for a, b in zip(spent, sub[1], strict=True))  # type: ignore[assignment]
+            if _step_reached(model, sub[0], target):
+                r, subs[i] = sub[0], n
+                break
+            n *= 2
+        prev, ok_prev = target, _step_reached(model, r, target)
         st, u = r.state, r.u
         hinv = r.hess_inv if init == "warm" else None
         assert r.hessian is not None
@@ -381,19 +406,43 @@ def track(
         pe[i], re[i] = end_effector_pose(model, st)
         perr[i] = np.linalg.norm(pe[i] - positions[i])
         rerr[i] = rotation_angle(re[i], rotations[i])
-        resid[i], its[i], evals[i], nits[i], times[i] = (
-            r.residual,
-            r.iterations,
-            r.evaluations,
-            r.newton_iterations,
-            r.time,
-        )
+        resid[i] = r.residual
+        its[i], evals[i], nits[i], times[i] = spent
         hist.append(r.history)
         if keep_states:
             states.append(st.copy())
     return TrackResult(
-        out_u, agents, pe, re, perr, rerr, resid, its, evals, nits, times, hist, states, cond, smin, damped
+        out_u, agents, pe, re, perr, rerr, resid, its, evals, nits, times, hist, states, cond, smin, damped, subs
     )
+
+
+def _step_reached(model: EnergyModel, r: IKResult, target: Target) -> bool:
+    """The tolerances of :func:`reached` for one IK result."""
+    p, rot = end_effector_pose(model, r.state)
+    return bool(
+        np.linalg.norm(p - target.position) <= 1e-5
+        and rotation_angle(rot, target.rotation) <= 1e-4
+        and r.residual <= ASSEMBLY_TOL
+    )
+
+
+def _subdivided(
+    model: EnergyModel, st: State, u: np.ndarray, start: Target, target: Target, n: int, gtol: float, lam: float
+) -> tuple[IKResult, tuple[int, int, int, float]]:
+    """Solve ``target`` from (``st``, ``u``) in ``n`` equal sub-steps from ``start``; the last result and the summed
+    iterations, evaluations, Newton iterations and time [s]."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    slerp = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([start.rotation, target.rotation])))
+    total = (0, 0, 0, 0.0)
+    r = None
+    for s in np.arange(1, n + 1) / n:
+        sub = Target(start.position + s * (target.position - start.position), slerp([s]).as_matrix()[0])
+        r = solve_ik(model, st, u, sub, gtol=gtol, damping=lam)
+        st, u = r.state, r.u
+        total = (total[0] + r.iterations, total[1] + r.evaluations, total[2] + r.newton_iterations, total[3] + r.time)
+    assert r is not None
+    return r, total
 
 
 def reached(

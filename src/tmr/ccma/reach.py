@@ -44,7 +44,9 @@ class Leg:
     leg's point on the end-effector in the end-effector body frame; ``length`` [m]: Σ of the rigid link spans;
     ``bodies``: names from base to end-effector. A one-link leg with a revolute joint at the end-effector end carries
     its axis ``ee_axis`` (end-effector frame) and the link's constant component ``c_ee`` [m] along it; with a revolute
-    joint at the base end, the axis's constant vertical component ``base_axis_z`` and the component ``c_base`` [m]."""
+    joint at the base end, the axis's constant vertical component ``base_axis_z`` and the component ``c_base`` [m].
+    ``rise0`` [m] is a one-link leg's rise z_base − z_w in the reference configuration (0 for longer legs): its sign
+    is the assembly branch the tracking stays on."""
 
     agent: str
     bodies: tuple[str, ...]
@@ -55,13 +57,16 @@ class Leg:
     c_ee: float = 0.0
     base_axis_z: float | None = None
     c_base: float = 0.0
+    rise0: float = 0.0
 
 
 class ReachVerdict(NamedTuple):
     """Reach check of a path. ``ok``: every target inside the bound (within :data:`REACH_TOL`); otherwise ``step``
     (1-based) is the target farthest outside, ``leg`` the agent whose leg misses it most, ``excess`` [m] by how much,
     ``rise`` [m] the height the leg would have to span there and ``limit`` [m] the most it can; ``first`` (1-based)
-    the first target outside and ``count`` how many are. ``margin`` (K,) [m] is the smallest distance of each
+    the first target outside and ``count`` how many are; ``singular`` is true when that target is not beyond the
+    leg's length but on the other side of the singular configuration where the link lies horizontal (see
+    :func:`check_reach`). ``margin`` (K,) [m] is the smallest distance of each
     target's leg rises to their bounds (negative outside); ``legs`` the number of legs with a bound (0: no analytic
     bound for this system, nothing checked)."""
 
@@ -75,11 +80,20 @@ class ReachVerdict(NamedTuple):
     legs: int
     first: int = 0
     count: int = 0
+    singular: bool = False
 
     def message(self) -> str:
         if self.ok:
             return "every target is within the reach of the linkage"
         more = f"; {self.count} targets are beyond it, the first is target {self.first}" if self.count > 1 else ""
+        if self.singular:
+            side = "above" if self.rise > 0 else "below"
+            return (
+                f"target {self.step} is {self.excess:.3g} m past a singular configuration of the linkage: the leg of "
+                f"{self.leg} would have to turn its link through the horizontal (its end-effector point {side} its "
+                f"base point, unlike the reference), where the agents lose control of the end-effector's height; the "
+                f"tracking cannot follow the linkage through it{more}"
+            )
         return (
             f"target {self.step} is {self.excess:.3g} m beyond the reach of the linkage (the leg of {self.leg} would "
             f"have to span {abs(self.rise):.3g} m in height between its base and the end-effector, at most "
@@ -149,6 +163,7 @@ def legs(system: System) -> list[Leg]:
         leg = Leg(ag.name, names, float(pts[0][2]), _anchor(js[-1], ee).copy(), length)
         if len(js) == 2:
             link = pts[0] - pts[1]  # base point − end-effector point, both on the one link
+            leg = replace(leg, rise0=float(link[2]))
             if js[1].type == "revolute":
                 n_ee = _axis(js[1], ee)
                 leg = replace(leg, ee_axis=n_ee.copy(), c_ee=float(link @ (system.r_ref0[ee] @ n_ee)))
@@ -166,8 +181,9 @@ def _interval(c: float, n_z: np.ndarray | float, length: float) -> tuple[np.ndar
     return c * n_z - half, c * n_z + half
 
 
-def _leg_bounds(leg: Leg, rotations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(K,) lower and upper bound [m] of the leg's rise z_base − z_w for end-effector rotations (K, 3, 3)."""
+def _leg_bounds(leg: Leg, rotations: np.ndarray, branch: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """(K,) lower and upper bound [m] of the leg's rise z_base − z_w for end-effector rotations (K, 3, 3); with
+    ``branch`` a one-link leg's rise also keeps the sign it has in the reference configuration."""
     k = len(rotations)
     lo, hi = np.full(k, -leg.length), np.full(k, leg.length)
     if leg.ee_axis is not None:
@@ -176,6 +192,10 @@ def _leg_bounds(leg: Leg, rotations: np.ndarray) -> tuple[np.ndarray, np.ndarray
     if leg.base_axis_z is not None:
         a, b = _interval(leg.c_base, leg.base_axis_z, leg.length)
         lo, hi = np.maximum(lo, a), np.minimum(hi, b)
+    if branch and leg.rise0 < -REACH_TOL:  # the link keeps its side of the horizontal (assembly branch)
+        hi = np.minimum(hi, 0.0)
+    elif branch and leg.rise0 > REACH_TOL:
+        lo = np.maximum(lo, 0.0)
     return lo, hi
 
 
@@ -226,8 +246,20 @@ def check_reach(system: System, positions: np.ndarray, rotations: np.ndarray, to
     c = int(np.argmin(margins[k]))
     leg = ls[c]
     rise = float(_rises(system, leg, positions[k : k + 1], rotations[k : k + 1])[0])
-    lo, hi = _leg_bounds(leg, rotations[k : k + 1])
-    limit = float(hi[0]) if rise > hi[0] else float(-lo[0])
+    lo, hi = _leg_bounds(leg, rotations[k : k + 1], branch=False)
+    lo_b, hi_b = _leg_bounds(leg, rotations[k : k + 1])
+    singular = bool(lo[0] - tol <= rise <= hi[0] + tol)  # within the leg's length: only the branch bound is broken
+    limit = float(hi_b[0]) if rise > hi_b[0] else float(-lo_b[0])
     return ReachVerdict(
-        False, k + 1, leg.agent, float(-margins[k, c]), rise, limit, worst, len(ls), int(bad[0]) + 1, int(bad.size)
+        False,
+        k + 1,
+        leg.agent,
+        float(-margins[k, c]),
+        rise,
+        limit,
+        worst,
+        len(ls),
+        int(bad[0]) + 1,
+        int(bad.size),
+        singular,
     )
