@@ -32,6 +32,7 @@ __all__ = [
     "Track",
     "catenary_polylines",
     "ccma_motion",
+    "ccma_track_motion",
     "chain_motion",
     "mcdpr_motion",
     "tethered_chain",
@@ -376,4 +377,27 @@ def ccma_motion(
         timed=False,
         trail="end_effector",
         notes=(f"steps stamped at {rate:g} Hz (the run has no time law)",),
+    )
+
+
+def ccma_track_motion(model: Any, result: Any, path_name: str = "", rate: float = 10.0) -> Motion:
+    """:func:`ccma_motion` of a tracked path (:func:`tmr.ccma.control.track` with ``keep_states=True``) of the
+    CCMA ``model`` (:class:`tmr.ccma.energy.EnergyModel`): links from every step's state
+    (:func:`tmr.ccma.plot.body_segments`)."""
+    from tmr.ccma.plot import body_segments
+
+    if not result.states:
+        raise ParameterError("the tracked path has no states (track(..., keep_states=True))")
+    frames = [body_segments(model, st) for st in result.states]
+    links = [np.stack([f[i] for f in frames]) for i in range(len(frames[0]))]
+    sysm = model.system
+    return ccma_motion(
+        sysm.name,
+        [a.name for a in sysm.agents],
+        result.agents,
+        min(a.height for a in sysm.agents),
+        result.ee_position,
+        links,
+        rate=rate,
+        title=f"CCMA {sysm.name}: {path_name} path" if path_name else None,
     )

@@ -39,6 +39,8 @@ from tmr.cli_args import positive_float as _positive
 from tmr.cli_args import positive_int as _positive_int
 from tmr.console import LOG, add_manners
 from tmr.console import run as run_cli
+from tmr.motion import ccma_track_motion
+from tmr.views import add_view_args, write_views
 
 TRAJECTORY_FORMAT = "tmr-ccma-trajectory/1"
 #: Every file name ``run`` may write into ``--out``; names a run does not produce are removed from ``--out`` so no
@@ -96,6 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--compile", action="store_true", help="compile the CasADi functions to C (cached; ~30x faster)")
     r.add_argument("--out", default="runs/ccma", help="output directory (default runs/ccma)")
     r.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    add_view_args(r)  # --gif, --html, --export FORMAT (tmr.views)
     add_manners(r)
     return p
 
@@ -277,6 +280,7 @@ def run(args: argparse.Namespace) -> int:
         curves[f"step {slow + 1} (slowest warm)"] = res.histories[slow]
         figures["convergence.png"] = plot_convergence(curves, f"{model.system.name}: objective vs time")
     names = _write_outputs(out, texts, figures)
+    names += write_views(args, out, lambda: ccma_track_motion(model, res, args.path))
     t = summary["timing"]
     LOG.info(
         f"tmr ccma: {model.system.name}, path {args.path}, {summary['steps']} steps, {model.nu} controls\n"

@@ -192,9 +192,10 @@ def _scene_markers(m: _Msgs, motion: Motion, ns0: int) -> list[Any]:
             xy = np.asarray(ring.coords)[:, :2]
             pts = np.column_stack([xy, np.zeros(len(xy))])
             out.append(m.marker(ns0, "inflated", j * 1000 + len(out), "LINE_STRIP", "inflated", (0.01, 0, 0), pts))
-    x0, y0, x1, y1 = motion.bounds
-    room = [(x0, y0, 0.0), (x1, y0, 0.0), (x1, y1, 0.0), (x0, y1, 0.0), (x0, y0, 0.0)]
-    out.append(m.marker(ns0, "room", 0, "LINE_STRIP", "room", (0.05, 0, 0), room))
+    if motion.system != "ccma":  # a CCMA run has no room (its bounds only frame the views)
+        x0, y0, x1, y1 = motion.bounds
+        room = [(x0, y0, 0.0), (x1, y0, 0.0), (x1, y1, 0.0), (x0, y1, 0.0), (x0, y0, 0.0)]
+        out.append(m.marker(ns0, "room", 0, "LINE_STRIP", "room", (0.05, 0, 0), room))
     for j, (name, p) in enumerate(motion.points.items()):
         out.append(m.marker(ns0, "points", j, "SPHERE", "point", (0.15, 0.15, 0.15), pose=(p, None)))
         top = (float(p[0]), float(p[1]), float(p[2]) + 0.25)
