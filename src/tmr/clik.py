@@ -95,6 +95,7 @@ def run(
     scenario: str = "",
     params: dict[str, Any] | None = None,
     goal: Array | None = None,
+    progress: bool = False,
 ) -> Plan:
     """Integrate the formulation along the leader trajectory (Caruso 2021 eq. 21, Euler with step Ts).
 
@@ -103,6 +104,8 @@ def run(
         env: environment (distance field queries); trajectory: :class:`tmr.path.Trajectory` (t, x, xd).
         formulation: object with ``reset()`` and ``step(ctx)``.
         span_limits: (N, 2) [d_lo, d_max]; safety_radius [m]; samples_per_link: clearance samples per tether.
+        progress: a tqdm bar of the steps on stderr, shown only once the run has taken 2 s (the caller decides
+            whether a bar is wanted at all, e.g. :func:`tmr.console.progress_enabled`).
 
     The run stops early only if the formulation raises :class:`InfeasibleStep` (no motion satisfies its hard
     constraints) or returns non-finite velocities (numerical divergence); the plan is then marked failed, with the
@@ -122,10 +125,17 @@ def run(
     failure: str | None = None
     formulation.reset()
     qdot_prev = np.zeros(chain.dof)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=K, desc=f"{formulation.name} steps", unit="step", leave=False, delay=2.0, mininterval=0.5)
     start = time.perf_counter()
     k_done = K
     for k in range(K + 1):
         Q[k] = q
+        if bar is not None:
+            bar.update(1 if k else 0)
         if k == K:
             break
         ctx.update(k, q, qdot_prev)
@@ -145,6 +155,8 @@ def run(
         q = q + Ts * qdot
         qdot_prev = qdot
     wall = time.perf_counter() - start
+    if bar is not None:
+        bar.close()
     n = k_done + 1
     Q, Qd = Q[:n], Qd[:n]
     robots = np.stack([chain.robots(qk) for qk in Q])

@@ -392,8 +392,9 @@ def formulation(problem: Problem, method: str | Formulation) -> Formulation:
     return method
 
 
-def plan(problem: Problem, method: str | Formulation = "pinv") -> Plan:
-    """Run ``method`` along the problem's leader trajectory (:func:`tmr.clik.run`); the plan is not checked yet."""
+def plan(problem: Problem, method: str | Formulation = "pinv", *, progress: bool = False) -> Plan:
+    """Run ``method`` along the problem's leader trajectory (:func:`tmr.clik.run`); the plan is not checked yet.
+    ``progress``: a bar of the steps on stderr once the run takes 2 s."""
     return run(
         problem.chain,
         problem.env,
@@ -406,6 +407,7 @@ def plan(problem: Problem, method: str | Formulation = "pinv") -> Plan:
         scenario=problem.scenario.name,
         params=problem.params_dict(),
         goal=np.asarray(problem.scenario.goal, float),
+        progress=progress,
     )
 
 
@@ -419,7 +421,8 @@ def solve(
         method: ``"pinv"``, ``"qp"``, ``"horizon"`` (the whole-horizon NLP of ``formulations/horizon.md``, warm
             started from the ``qp`` plan), or any per-step formulation object with ``name``, ``reset()`` and
             ``step(ctx)`` (e.g. ``make_qp(problem, extra_limits=...)`` or your own).
-        time_limit: wall-clock limit of the horizon NLP [s] (None: its default); progress: a progress bar for it.
+        time_limit: wall-clock limit of the horizon NLP [s] (None: its default); progress: progress bars (the
+            steps, once they take 2 s; the horizon NLP's iterations).
 
     Returns the plan (``success`` False with the reason if a constraint is violated anywhere) and its metrics. The
     horizon plan is never worse than its ``qp`` warm start: if IPOPT fails, it is the best feasible iterate or the
@@ -429,7 +432,7 @@ def solve(
     if method == "horizon":  # a whole-trajectory NLP, not a per-step formulation
         from tmr.formulations.horizon import DEFAULT_TIME_LIMIT, HorizonInfeasible, plan_horizon  # casadi: when used
 
-        warm, warm_metrics = solve(problem, "qp")
+        warm, warm_metrics = solve(problem, "qp", progress=progress)
         limit = DEFAULT_TIME_LIMIT if time_limit is None else time_limit
         try:
             result = plan_horizon(problem, warm, time_limit=limit, progress=progress)
@@ -445,7 +448,7 @@ def solve(
             warm.failure = reason if warm.failure is None else f"{reason}; its qp warm start: {warm.failure}"
             return warm, evaluate(warm, problem.env)
     else:
-        result = plan(problem, method)
+        result = plan(problem, method, progress=progress)
     return result, check(result, problem.env, goal_tolerance=problem.path_params.goal_tolerance)
 
 
