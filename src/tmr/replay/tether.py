@@ -303,3 +303,63 @@ class TetherState:
             np.asarray(data.efc_id) == self.eq_end  # type: ignore[attr-defined]
         )
         return float(np.linalg.norm(np.asarray(data.efc_force)[rows]))  # type: ignore[attr-defined]
+
+
+@dataclass(frozen=True)
+class HangResult:
+    """A tether hung between two fixed points and let settle (units: m, N).
+
+    lowest: lowest node height; length: paid-out length N s; tension_winch / tension_far: end tensions;
+    end_gap: distance between the last node and the far end (constraint error); speed: largest joint speed at the
+    end (how still it is).
+    """
+
+    lowest: float
+    length: float
+    tension_winch: float
+    tension_far: float
+    end_gap: float
+    speed: float
+
+
+def hang(
+    p1: tuple[float, float, float],
+    p2: tuple[float, float, float],
+    params: CatenaryParams,
+    n_links: int = 16,
+    timestep: float = 0.005,
+    duration: float = 2.0,
+    winch: str = "horizontal",
+    floor: bool = False,
+) -> HangResult:
+    """Hang one winched tether between a fixed winch at ``p1`` and a fixed point ``p2`` (world [m]), start it on
+    its static catenary, simulate ``duration`` seconds and measure it (the static check of ``replay.md``)."""
+    import mujoco
+
+    spec = TetherSpec("t1", n_links, "winch", (0.0, 0.0, 0.0), p1, "world", p2, params)
+    ex = tether_extra_xml(spec)
+    ground = '<geom type="plane" size="50 50 0.1" contype="1" conaffinity="0"/>' if floor else ""
+    xml = (
+        f'<mujoco><option timestep="{timestep!r}" integrator="implicitfast" gravity="0 0 {-params.g!r}"/>'
+        f'<worldbody>{ground}<body name="winch" pos="{_v(np.asarray(p1))}">{tether_body_xml(spec)}</body>'
+        f"</worldbody><equality>{ex['equality']}</equality><tendon>{ex['tendon']}</tendon>"
+        f"<actuator>{ex['actuator']}</actuator><sensor>{ex['sensor']}</sensor></mujoco>"
+    )
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    ts = TetherState(model, spec, winch)
+    ts.set_initial(data, np.asarray(p1, float), np.asarray(p2, float))
+    mujoco.mj_kinematics(model, data)
+    for _ in range(int(round(duration / timestep))):
+        ts.update(model, data)
+        mujoco.mj_step(model, data)
+    mujoco.mj_forward(model, data)
+    nodes = ts.nodes(data)
+    return HangResult(
+        lowest=float(nodes[:, 2].min()),
+        length=ts.length(data),
+        tension_winch=ts.root_tension(data),
+        tension_far=ts.end_tension(data),
+        end_gap=float(np.linalg.norm(nodes[-1] - np.asarray(p2))),
+        speed=float(np.abs(data.qvel).max()),
+    )
