@@ -31,6 +31,8 @@ import numpy as np
 
 from tmr.cli_args import positive_float as _positive
 from tmr.cli_args import positive_int as _positive_int
+from tmr.console import LOG, add_manners
+from tmr.console import run as run_cli
 from tmr.errors import TmrError
 
 PLAN_FORMAT = "tmr-mcdpr-plan/1"
@@ -72,6 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--external", type=_triple, help="external wrench box half-widths FX,FY,FZ [N] (scene's)")
     pl.add_argument("--out", default="runs/mcdpr", help="output directory (default runs/mcdpr)")
     pl.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    add_manners(pl)
     return p
 
 
@@ -220,7 +223,12 @@ def write_outputs(
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``python -m tmr.mcdpr`` and ``tmr mcdpr``; returns the exit code (module doc)."""
     args = build_parser().parse_args(argv)
+    return run_cli(_main, args)  # --quiet/--verbose/--debug, one-line errors (exit 2), Ctrl-C (130)
+
+
+def _main(args: argparse.Namespace) -> int:
     try:
         import dataclasses
 
@@ -255,8 +263,8 @@ def main(argv: list[str] | None = None) -> int:
             try:
                 result = plan_search(robot, scene, params)
             except NoPlanFound as exc:
-                print(f"no plan found ({exc.kind}): {exc}", file=sys.stderr)
-                print(f"  searched for {time.perf_counter() - t0:.3f} s; nothing written", file=sys.stderr)
+                LOG.error(f"no plan found ({exc.kind}): {exc}")
+                LOG.error(f"  searched for {time.perf_counter() - t0:.3f} s; nothing written")
                 return 1
         else:
             refuse_upfront(robot, scene, required_wrench_set(robot, scene.external))
@@ -268,33 +276,33 @@ def main(argv: list[str] | None = None) -> int:
         except OSError as exc:
             raise TmrError(f"cannot write the outputs to {out}: {exc}") from exc
     except TmrError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        LOG.error(f"error: {exc}")
         return 2
-    print(
+    LOG.info(
         f"tmr.mcdpr plan: robot {robot.name}, scene {scene.name}, {len(result.waypoints)} way-points, "
         f"{len(result.mu)} samples"
     )
-    print(f"  mu_min        {chk.mu_min:.6g} N")
-    print(f"  max_tension   {chk.max_tension:.6g} N (t_max {robot.t_max:g} N)")
-    print(f"  collision     {'none' if chk.collision_free else 'YES'}")
-    print(f"  way-points    {'all reached' if chk.waypoints_ok else 'MISSED'}, steps <= d_MP: {chk.steps_ok}")
+    LOG.info(f"  mu_min        {chk.mu_min:.6g} N")
+    LOG.info(f"  max_tension   {chk.max_tension:.6g} N (t_max {robot.t_max:g} N)")
+    LOG.info(f"  collision     {'none' if chk.collision_free else 'YES'}")
+    LOG.info(f"  way-points    {'all reached' if chk.waypoints_ok else 'MISSED'}, steps <= d_MP: {chk.steps_ok}")
     if result.planner == "search":
         info = result.search
-        print(f"  mu_between    >= {info['mu_lower_min']:.6g} N guaranteed between samples")
-        print(
+        LOG.info(f"  mu_between    >= {info['mu_lower_min']:.6g} N guaranteed between samples")
+        LOG.info(
             f"  search        {info['stations']} stations, {info['nodes']} placements, {info['edges']} motions, "
             f"{info['rounds']} round(s), {info['smoothed_nodes']} nodes after shortcuts"
         )
     else:
-        print(
+        LOG.info(
             f"  stage1        {result.times['stage1']:.3f} s, "
             f"{sum(s['combinations'] for s in result.stage1)} combinations scored"
         )
-        print(f"  stage2        {result.times['stage2']:.3f} s")
-    print(f"  wall_time     {wall:.3f} s")
-    print(f"  wrote {', '.join(names)} to {args.out}")
+        LOG.info(f"  stage2        {result.times['stage2']:.3f} s")
+    LOG.info(f"  wall_time     {wall:.3f} s")
+    LOG.info(f"  wrote {', '.join(names)} to {args.out}")
     if not chk.ok:
-        print("plan FAILED: " + "; ".join(chk.messages), file=sys.stderr)
+        LOG.error("plan FAILED: " + "; ".join(chk.messages))
         return 1
     return 0
 
