@@ -80,6 +80,43 @@ def test_plan_verdict_is_taken_from_recorded_states():
     assert 150 in m.violation_steps["robot_clearance"] and np.isinf(m.f4)
 
 
+def test_rrt_route_plans_one_rrt_star_path_for_start_and_leader(monkeypatch):
+    """--route rrt: the anchor→goal RRT* path places the robots and its tail is the leader's path (issue 14)."""
+    import tmr.path
+    import tmr.planner
+
+    calls = []
+    real = tmr.planner.plan_leader_path
+
+    def counting(*args, **kwargs):
+        calls.append(args[1:3])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(tmr.planner, "plan_leader_path", counting)
+    monkeypatch.setattr(tmr.path, "plan_leader_path", counting)  # what tmr.path.leader_trajectory calls
+    sc = load_scenario("A")
+    problem = build_problem(sc, seed=0, path_iterations=300, route="rrt")
+    assert len(calls) == 1  # one RRT*, from the anchor
+    np.testing.assert_array_equal(calls[0][0], sc.base)
+    W = real(sc.environment, sc.base, sc.goal, seed=0, iterations=300, clearance=PathParams().path_clearance)
+    leader0 = problem.chain.robots(problem.q0)[-1]
+    wp = problem.trajectory.waypoints
+    np.testing.assert_allclose(wp[0], leader0, atol=1e-9)  # the leader starts where it was placed ...
+    np.testing.assert_array_equal(wp[-1], sc.goal)  # ... and ends at the goal ...
+    # ... along the anchor's path: every waypoint after the first is one of its vertices, in order
+    idx = [int(np.flatnonzero(np.all(W == p, axis=1))[0]) for p in wp[1:]]
+    assert idx == list(range(len(W) - len(idx), len(W)))
+    # the leader's position lies on the anchor path's segment that precedes those vertices
+    a, b = W[idx[0] - 1], W[idx[0]]
+    cross = (b - a)[0] * (leader0 - a)[1] - (b - a)[1] * (leader0 - a)[0]
+    assert abs(cross) < 1e-9 * np.linalg.norm(b - a) and np.dot(leader0 - a, b - a) > 0
+    # a given start cannot reuse the anchor's path: the leader plans its own (a second RRT* call from its position)
+    calls.clear()
+    start = problem.chain.robots(problem.q0) + [0.0, 0.3]
+    build_problem(sc, seed=0, path_iterations=300, route="rrt", start=start)
+    assert len(calls) == 1 and np.array_equal(calls[0][0], start[-1])
+
+
 @pytest.mark.parametrize(
     ("cls", "field"),
     [(ChainParams, "safety_radius"), (QPParams, "robot_accel_max"), (QPParams, "accel_max"), (PinvParams, "k_v0")],

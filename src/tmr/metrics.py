@@ -20,7 +20,6 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, NamedTuple
 
 import numpy as np
-from scipy import signal
 
 from tmr.errors import ParameterError
 
@@ -515,6 +514,8 @@ def filter_trajectories(robots: np.ndarray, Ts: float, cutoff_hz: float = 1.0, o
         raise ParameterError(f"filter order must be >= 1, got {order!r}")
     if x.shape[0] < 3:
         return x
+    from scipy import signal  # imported here: scipy.signal costs ~0.5 s to import and only the filter needs it
+
     b, a = signal.butter(int(order), cutoff_hz, btype="low", fs=1.0 / Ts)
     # pad over ~4 periods of the cut-off so the start-up transient dies out inside the padding
     padlen = min(max(3 * max(len(a), len(b)), math.ceil(4.0 / (cutoff_hz * Ts))), x.shape[0] - 1)

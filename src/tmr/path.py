@@ -27,10 +27,6 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from ompl import base as ob
-from ompl import geometric as og
-from ompl import util as ou
-from scipy.interpolate import CubicHermiteSpline, make_interp_spline
 
 from tmr.errors import ParameterError, PathError
 
@@ -144,18 +140,25 @@ def _segment_clearance(env: Any, a: ArrayLike, b: ArrayLike) -> Array:
     return np.asarray(env.segment_clearance(a, b), dtype=float)
 
 
-class _ExactMotionValidator(ob.MotionValidator):
-    """OMPL motion validator: a straight motion is valid iff its exact clearance exceeds ``margin`` [m]."""
+@functools.cache
+def _motion_validator_class() -> type:
+    """The OMPL motion validator class, defined on first use (OMPL is imported only when RRT* runs)."""
+    from ompl import base as ob
 
-    def __init__(self, si: Any, env: Any, margin: float) -> None:
-        super().__init__(si)
-        self._env = env
-        self._margin = margin
+    class _ExactMotionValidator(ob.MotionValidator):
+        """OMPL motion validator: a straight motion is valid iff its exact clearance exceeds ``margin`` [m]."""
 
-    def checkMotion(self, s1: Any, s2: Any) -> bool:  # OMPL's method name
-        a = np.array((s1[0], s1[1]))
-        b = np.array((s2[0], s2[1]))
-        return bool(self._env.segment_is_free(a, b, self._margin))
+        def __init__(self, si: Any, env: Any, margin: float) -> None:
+            super().__init__(si)
+            self._env = env
+            self._margin = margin
+
+        def checkMotion(self, s1: Any, s2: Any) -> bool:  # OMPL's method name
+            a = np.array((s1[0], s1[1]))
+            b = np.array((s2[0], s2[1]))
+            return bool(self._env.segment_is_free(a, b, self._margin))
+
+    return _ExactMotionValidator
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -165,6 +168,8 @@ class _ExactMotionValidator(ob.MotionValidator):
 @contextlib.contextmanager
 def _ompl_log_level(level: Any) -> Iterator[None]:
     """Set OMPL's (process-global) log level for the duration of the block, then restore the caller's."""
+    from ompl import util as ou
+
     previous = ou.getLogLevel()
     ou.setLogLevel(level)
     try:
@@ -189,6 +194,10 @@ def _rrt_star(
     simplify: bool,
 ) -> tuple[Array, Array] | None:
     """RRT*, then optionally OMPL's simplifier: (raw path, simplified path), or None if no exact solution."""
+    from ompl import base as ob  # imported here: only the --route rrt planner needs OMPL
+    from ompl import geometric as og
+    from ompl import util as ou
+
     xmin, ymin, xmax, ymax = _env_bounds(env)
 
     def state_valid(s: Any) -> bool:
@@ -204,7 +213,7 @@ def _rrt_star(
         space.setBounds(bounds)
         si = ob.SpaceInformation(space)
         si.setStateValidityChecker(state_valid)
-        si.setMotionValidator(_ExactMotionValidator(si, env, margin))
+        si.setMotionValidator(_motion_validator_class()(si, env, margin))
         # State-checking step <= CHECK_STEP [m] (OMPL takes it as a fraction of the space's extent); only
         # used by OMPL helpers that interpolate states, motions are validated exactly.
         si.setStateValidityCheckingResolution(min(0.5, CHECK_STEP / si.getMaximumExtent()))
@@ -391,6 +400,8 @@ class _ArcLengthSpline:
     s(u) (Gauss-Legendre) and the inverse u(s) (Hermite interpolation of a table, then Newton steps)."""
 
     def __init__(self, points: Array) -> None:
+        from scipy.interpolate import CubicHermiteSpline, make_interp_spline  # imported on use (~0.3 s)
+
         chords = np.linalg.norm(np.diff(points, axis=0), axis=1)
         self.u_knots = np.concatenate([[0.0], np.cumsum(chords)])
         self.p = make_interp_spline(self.u_knots, points, k=3)  # not-a-knot cubic B-spline

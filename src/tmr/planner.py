@@ -14,7 +14,7 @@ This is the library entry point behind ``python -m tmr.plan``::
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -22,8 +22,6 @@ from numpy.typing import ArrayLike, NDArray
 from tmr.chain import Chain
 from tmr.clik import Formulation, Plan, run
 from tmr.errors import ParameterError, PathError, ScenarioError
-from tmr.formulations.pinv import PinvController
-from tmr.formulations.qp import Level, LexicographicQP
 from tmr.limits import JointBox, Limit, ObstacleClearance, RobotAcceleration, RobotSeparation, RobotSpeed
 from tmr.metrics import Metrics, evaluate
 from tmr.params import (
@@ -36,7 +34,7 @@ from tmr.params import (
     apply_overrides,
     as_dict,
 )
-from tmr.path import Trajectory, leader_trajectory, plan_leader_path
+from tmr.path import Trajectory, leader_trajectory, path_length, plan_leader_path, time_law
 from tmr.references import ChainReference, chain_reference, start_placement
 from tmr.route import Route, TooFewRobotsError, plan_route
 from tmr.scenario import Scenario
@@ -51,6 +49,10 @@ from tmr.tasks import (
     Task,
     TetherRegulation,
 )
+
+if TYPE_CHECKING:  # the formulations import their solvers (osqp, qpsolvers): loaded by the method that runs
+    from tmr.formulations.pinv import PinvController
+    from tmr.formulations.qp import Level, LexicographicQP
 
 Array = NDArray[np.float64]
 
@@ -115,6 +117,26 @@ def default_start(
     along the free straight ray from the anchor whose heading is closest to the goal direction (72 headings tried).
     Robots and tethers must be free by ``clear`` [m]. ``ScenarioError`` if no placement is found.
     """
+    W = _anchor_path(env, chain.base, goal, seed=seed, iterations=iterations, clearance=path_clearance)
+    return _start_from_path(chain, env, goal, limits, W, margin, clear)[0]
+
+
+def _anchor_path(env: Any, base: Array, goal: Array, *, seed: int, iterations: int, clearance: float) -> Array | None:
+    """The RRT* path from the anchor to the goal (:func:`tmr.path.plan_leader_path`), or None if it finds none."""
+    try:
+        return plan_leader_path(env, base, goal, seed=seed, iterations=iterations, clearance=clearance)
+    except PathError:
+        return None
+
+
+def _start_from_path(
+    chain: Chain, env: Any, goal: Array, limits: Array, W: Array | None, margin: float = 0.2, clear: float = 0.05
+) -> tuple[Array, float | None]:
+    """:func:`default_start` on an anchor→goal path ``W`` already planned (None: there is none).
+
+    Returns the placement and the arc length [m] of the leader's position along ``W`` (None if the robots were
+    placed on a straight ray instead, off the path).
+    """
     spacing = limits[:, 0].max() + margin
     offsets = np.arange(1, chain.n_robots + 1) * spacing
 
@@ -122,27 +144,31 @@ def default_start(
         starts = np.vstack([chain.base, P[:-1]])
         return bool(np.all(env.exact_clearance(P) > clear) and np.all(env.segment_clearance(starts, P) > clear))
 
-    try:
-        W = plan_leader_path(env, chain.base, goal, seed=seed, iterations=iterations, clearance=path_clearance)
-    except PathError:
-        W = None
     if W is not None:
         arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(W, axis=0), axis=1))]
         if arc[-1] > offsets[-1] + spacing:  # leave the leader some path to follow
             P = np.column_stack([np.interp(offsets, arc, W[:, 0]), np.interp(offsets, arc, W[:, 1])])
             if free(P):
-                return P
+                return P, float(offsets[-1])
     to_goal = np.arctan2(goal[1] - chain.base[1], goal[0] - chain.base[0])
     steps = np.arange(72) * (2 * np.pi / 72)
     headings = to_goal + np.where(np.arange(72) % 2 == 0, 1, -1) * steps[(np.arange(72) + 1) // 2]
     for h in headings:
         P = chain.base + offsets[:, None] * np.array([np.cos(h), np.sin(h)])
         if free(P):
-            return P
+            return P, None
     raise ScenarioError(
         "no free placement of the robots near the base was found; give the start positions explicitly "
         "(scenario 'start' or --start)"
     )
+
+
+def _path_tail(W: Array, at: float) -> Array:
+    """The part of the polyline ``W`` (M, 2) [m] beyond arc length ``at`` [m], starting at the point at ``at``."""
+    arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(W, axis=0), axis=1))]
+    first = np.array([np.interp(at, arc, W[:, 0]), np.interp(at, arc, W[:, 1])])
+    rest = W[arc > at + 1e-9]
+    return np.vstack([first, rest])
 
 
 def build_problem(
@@ -208,6 +234,8 @@ def build_problem(
     if why is not None and (N < rt.n_lower or (route == "shortest" and start is None)):
         raise TooFewRobotsError(why, rt.n_min, proven=N < rt.n_lower)
     parked = 0
+    anchor_path: Array | None = None
+    leader_at: float | None = None
     if start is not None:
         P = np.asarray(start, dtype=float)
     elif scenario.start is not None and n_robots in (None, scenario.n_robots):
@@ -215,16 +243,16 @@ def build_problem(
     elif route == "shortest":
         spacing = limits[:, 0].max() + 0.2
         P, parked = start_placement(env, rt, N, spacing, span_limits=limits)
-    else:
-        P = default_start(
-            chain,
+    else:  # the paper's RRT*, planned once: the start placement and the leader's path share it (issue 14)
+        anchor_path = _anchor_path(
             env,
-            np.asarray(scenario.goal, float),
-            limits,
+            chain.base,
+            goal,
             seed=seed,
             iterations=path_params.path_iterations,
-            path_clearance=path_params.path_clearance,
+            clearance=path_params.path_clearance,
         )
+        P, leader_at = _start_from_path(chain, env, goal, limits, anchor_path)
     if P.shape != (N, 2) or not np.all(np.isfinite(P)):
         raise ScenarioError(f"start must be {N} finite (x, y) positions, got shape {P.shape}")
     clear = env.exact_clearance(P)
@@ -252,7 +280,11 @@ def build_problem(
         traj = ref.trajectory
         time_params = replace(time_params, T_end=float(traj.t[-1]))
     else:
-        traj = _rrt_trajectory(env, P[-1], np.asarray(scenario.goal, float), seed, time_params, path_params)
+        traj = None
+        if anchor_path is not None and leader_at is not None:  # the leader is on the anchor's path: follow its tail
+            traj = _trajectory_along(env, _path_tail(anchor_path, leader_at), time_params, path_params)
+        if traj is None:
+            traj = _rrt_trajectory(env, P[-1], goal, seed, time_params, path_params)
     return Problem(
         scenario,
         chain,
@@ -270,6 +302,22 @@ def build_problem(
         references=ref,
         route_mode=route,
     )
+
+
+def _trajectory_along(
+    env: Any, waypoints: Array, time_params: TimeParams, path_params: PathParams
+) -> Trajectory | None:
+    """The leader's B-spline time law over T_end (Caruso 2021 §4.2) along ``waypoints`` already planned, with the
+    spline clearance :func:`tmr.path.leader_trajectory` uses; None if the path is too short or no spline through it
+    keeps that clearance (the caller then plans the leader's own RRT* path)."""
+    if len(waypoints) < 2 or path_length(waypoints) <= 1e-9:
+        return None
+    kept = float(np.min(env.segment_clearance(waypoints[:-1], waypoints[1:])))
+    spline_clearance = max(0.0, 0.5 * min(float(path_params.path_clearance), kept))
+    try:
+        return time_law(waypoints, T_end=time_params.T_end, Ts=time_params.Ts, env=env, clearance=spline_clearance)
+    except (PathError, ParameterError):
+        return None
 
 
 def _rrt_trajectory(
@@ -316,6 +364,8 @@ def make_pinv(problem: Problem, extra_tasks: tuple[Task, ...] = ()) -> PinvContr
 
     ``extra_tasks`` are appended to the priority stack after the obstacle task (eq. 5), highest first.
     """
+    from tmr.formulations.pinv import PinvController
+
     p = problem.pinv_params
     leader, tether = make_tasks(problem)
     return PinvController(
@@ -337,6 +387,8 @@ def make_qp(
     ``extra_limits`` are added to the hard limits of every level; ``extra_levels`` are inserted after the leader
     level (so they outrank tether regulation and energy), highest first.
     """
+    from tmr.formulations.qp import Level, LexicographicQP
+
     p, chain = problem.qp_params, problem.chain
     leader, tether = make_tasks(problem)
     tether_tasks: list[tuple[Task, float]] = [
