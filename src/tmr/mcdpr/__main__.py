@@ -112,6 +112,7 @@ def plan_dict(robot: Any, scene: Any, params: Any, result: Any, chk: Any) -> dic
             "check": {
                 "ok": chk.ok,
                 "mu_min": chk.mu_min,
+                "mu_between": chk.mu_between,
                 "nonpositive_samples": list(chk.nonpositive),
                 "tension_ok": chk.tension_ok,
                 "collision_free": chk.collision_free,

@@ -437,7 +437,9 @@ class Check:
     base sample and sample-to-sample segment in the free space and the bases 2 r_mb apart at the samples and while
     moving straight between them; waypoints_ok: the platform starts at the first way-point and ends every segment
     at its way-point (within 1e-6 m); steps_ok: every platform step is at most d_MP horizontally and vertically;
-    max_tension [N]."""
+    max_tension [N]; mu_between: for plans that claim a bound between samples (``mu_lower``, search planner), the
+    guaranteed lower bound of μ over the whole motion [N], recomputed by :func:`tmr.mcdpr.certify.certify` (the
+    claim fails the check when it is not > 0 or exceeds the recomputed one); NaN otherwise."""
 
     ok: bool
     mu_min: float
@@ -448,6 +450,7 @@ class Check:
     messages: tuple[str, ...]
     waypoints_ok: bool = True
     steps_ok: bool = True
+    mu_between: float = float("nan")
 
 
 #: Distance [m] within which the platform counts as arriving at a way-point.
@@ -514,8 +517,25 @@ def check(robot: Robot, env: Environment, result: Plan, external: NDArray[np.flo
             f"the platform jumps: {len(long)} step(s) longer than d_MP = {d} m (first between samples "
             f"{int(long[0])} and {int(long[0]) + 1}, longest {float(np.max(step)):.4g} m)"
         )
+    mu_between = float("nan")
+    if result.mu_lower is not None:
+        from tmr.mcdpr.certify import certify
+
+        cert = certify(robot, result.platform, result.bases, result.headings, rws)
+        mu_between = float(np.min(cert.lower)) if len(cert.lower) else float(np.min(mu))
+        if not cert.ok:
+            msgs.append(
+                f"μ is not certified > 0 between samples: lower bound {mu_between:.4g} N on a piece starting near "
+                f"the platform at {np.round(cert.P[max(cert.fail, 0)], 3).tolist()}"
+            )
+        elif float(np.min(result.mu_lower)) > mu_between + 1e-9:
+            msgs.append(
+                f"the plan claims μ >= {float(np.min(result.mu_lower)):.4g} N between samples, the recomputed bound "
+                f"is {mu_between:.4g} N"
+            )
     return Check(
         ok=not msgs,
+        mu_between=mu_between,
         mu_min=float(np.min(mu)),
         nonpositive=nonpos,
         tension_ok=tension_ok,
