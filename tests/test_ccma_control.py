@@ -170,3 +170,70 @@ def test_solve_ik_rejects_bad_inputs(models, bad, match):
     target = Target(bad.get("position", p0), bad.get("rotation", r0))
     with pytest.raises(CcmaError, match=match):
         solve_ik(m, st, bad.get("u0", m.system.u0), target)
+
+
+def _fd_task_jacobian(model, state, u, directions, h=1e-5):
+    """(12, k) central differences of r = (p_EE, ℓ_R/√2 · R_EE) along control directions (m, k), through independent
+    forward simulations."""
+
+    def r(v):
+        st = simulate(model, v, state, tol=1e-10).state
+        p, rot = end_effector_pose(model, st)
+        return np.concatenate([p, model.system.rotation_scale / np.sqrt(2.0) * rot.ravel()])
+
+    return np.column_stack([(r(u + h * e) - r(u - h * e)) / (2 * h) for e in directions.T])
+
+
+def _fd_assemblable_directions(model, state, u, d, h=1e-4):
+    """The d directions of least curvature of the residual energy E(x*(u), u), from central second differences of
+    independent forward simulations (no CasADi second derivatives)."""
+
+    def e(v):
+        return simulate(model, v, state, tol=1.0).energy
+
+    m = u.size
+    hess = np.zeros((m, m))
+    eye = np.eye(m)
+    for i in range(m):
+        for j in range(m):
+            a, b = h * eye[i], h * eye[j]
+            hess[i, j] = (e(u + a + b) - e(u + a - b) - e(u - a + b) + e(u - a - b)) / (4 * h * h)
+    return np.linalg.eigh(0.5 * (hess + hess.T))[1][:, :d]
+
+
+@pytest.mark.parametrize(("name", "dz"), [("4dof-reduced", 0.0), ("6dof-reduced", 0.0), ("4dof-reduced", -0.18)])
+def test_conditioning_matches_finite_differences_of_the_forward_kinematics(models, name, dz):
+    from tmr.ccma.control import conditioning, task_dof
+
+    m = models[name]
+    st = reference_state(m)
+    u = m.system.u0.copy()
+    if dz:
+        p0, r0 = end_effector_pose(m, st)
+        res = track(m, p0 + np.outer(np.linspace(0, dz, 10)[1:], [0, 0, 1]), np.tile(r0, (9, 1, 1)), keep_states=True)
+        st, u = res.states[-1], res.u[-1]
+    sim = newton(m, st, u)
+    low, cond = conditioning(m, sim.state, sim.hessian, u)
+    d = task_dof(m)
+    assert d == (4 if name.startswith("4dof") else 6)
+    t = _fd_assemblable_directions(m, sim.state, u, d)
+    sv = np.linalg.svd(_fd_task_jacobian(m, sim.state, u, t), compute_uv=False)
+    assert low == pytest.approx(sv[d - 1], rel=1e-4)
+    assert cond == pytest.approx(sv[0] / sv[d - 1], rel=1e-4)
+
+
+def test_missed_step_near_a_fold_is_solved_in_sub_steps(models):
+    """Platform lowered towards the elbow height (arms horizontal, 0.3 m): at 5 mm above it one 3 mm step overshoots
+    the cusp of O(u) when solved directly (max_substeps=1: missed), and is reached in two sub-steps."""
+    m = models["4dof-reduced"]
+    p0, r0 = end_effector_pose(m, reference_state(m))
+    zs = np.concatenate([np.linspace(0.5, 0.32, 25), [0.31, 0.305]])
+    pos = np.column_stack([np.zeros_like(zs), np.zeros_like(zs), zs])
+    rots = np.tile(r0, (len(zs), 1, 1))
+    lead = track(m, pos, rots, keep_states=True)
+    assert reached(lead).all() and lead.condition[-1] > 100  # near-singular: the next step is damped
+    last = (np.array([[0.0, 0.0, 0.302]]), r0[None])
+    direct = track(m, *last, state=lead.states[-1], u0=lead.u[-1], max_substeps=1)
+    assert not reached(direct).any() and direct.substeps[0] == 1
+    sub = track(m, *last, state=lead.states[-1], u0=lead.u[-1])
+    assert reached(sub).all() and sub.substeps[0] == 2

@@ -123,21 +123,29 @@ def task_dof(model: EnergyModel) -> int:
 
 
 def conditioning(model: EnergyModel, state: State, hessian: np.ndarray, u: np.ndarray) -> tuple[float, float]:
-    """Smallest task singular value σ_d [m per unit control] and condition number σ_1/σ_d of the end-effector
-    sensitivity J = ∂r/∂x · dx*/du at a converged state (Kumar 2019 eq. 6 for dx*/du).
+    """Smallest singular value σ_d [m per unit control] and condition number σ_1/σ_d of the end-effector sensitivity
+    restricted to the assemblable control directions, at a converged state (Kumar 2019 eq. 6 for dx*/du).
 
-    r stacks the end-effector point [m] and ℓ_R/√2 · R_EE (a rotation rate ω changes it by ℓ_R |ω|), so J is
-    (12, m) in metres. Its d = :func:`task_dof` largest singular values are the end-effector directions the agents
-    can drive; near a singular configuration (e.g. a leg stretched straight) σ_d → 0 — the end-effector can no longer
-    move that way — and the condition number grows without bound. ``hessian`` is ∇ₓ²E at ``state``.
+    J = ∂r/∂x · dx*/du, where r stacks the end-effector point [m] and ℓ_R/√2 · R_EE (a rotation rate ω changes it by
+    ℓ_R |ω|), is (12, m) in metres. An over-constrained system (more controls than end-effector dof) also has control
+    directions that squeeze the chain — the residual energy rises along them and the end-effector only moves through
+    the compromise. So J is restricted to the d = :func:`task_dof` directions T of least curvature of the residual
+    energy, d²E(x*(u), u)/du² = ∂²E/∂u² − (∂²E/∂x∂u)ᵀ (∇ₓ²E)⁻¹ ∂²E/∂x∂u (zero along the assemblable set), and the
+    singular values of J T are the rates at which the agents drive the end-effector. Near a singular configuration
+    the condition number grows without bound: at a fold (a leg's link passing the horizontal) σ_1 → ∞, the
+    end-effector's height moves without the agents moving; at a stretched leg σ_d → 0. ``hessian`` is ∇ₓ²E at
+    ``state``.
     """
     p = model.params(state.r_ref)
     u = np.asarray(u, float)
     t = model.target_vector(np.zeros(3), np.eye(3))
     _, _, _, exu = model.ik(state.x, u, p, t)
-    jr, _ = model.gn(state.x, u, p, t)
-    sv = np.linalg.svd(jr @ -_solve_h(hessian, exu), compute_uv=False)
+    jr, euu = model.gn(state.x, u, p, t)
+    dxdu = -_solve_h(hessian, exu)
     d = task_dof(model)
+    curvature = euu + exu.T @ dxdu
+    _, vec = np.linalg.eigh(0.5 * (curvature + curvature.T))
+    sv = np.linalg.svd(jr @ dxdu @ vec[:, :d], compute_uv=False)
     low = float(sv[d - 1])
     return low, float(sv[0] / low) if low > 0 else float("inf")
 

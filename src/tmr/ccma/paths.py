@@ -14,6 +14,7 @@ is checked against :data:`MAX_STEPS` before any array is allocated.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -67,6 +68,7 @@ def _hcircle_unit(s: np.ndarray) -> np.ndarray:
 _CURVES = {"circle": _hcircle_unit, "vcircle": _vcircle_unit, "figure8": _figure8_unit}
 
 
+@functools.cache
 def _unit_length(kind: str) -> float:
     """Length [m] of the closed curve of unit radius."""
     if kind in ("circle", "vcircle"):
