@@ -1,0 +1,62 @@
+"""tmr.views: --gif / --html / --export on the planners' command lines; stale views are removed."""
+
+from __future__ import annotations
+
+import argparse
+
+import pytest
+from PIL import Image
+from rosbags.rosbag2 import Reader
+
+from tests.motion_data import mopick_plan
+from tmr.motion import mcdpr_motion
+from tmr.views import BAG_DIR, GIF_NAME, HTML_NAME, add_view_args, write_views
+
+
+def _args(*argv: str) -> argparse.Namespace:
+    p = argparse.ArgumentParser()
+    add_view_args(p)
+    return p.parse_args(list(argv))
+
+
+def test_flags():
+    a = _args("--gif", "--export", "sqlite3")
+    assert a.gif and not a.html and a.export == "sqlite3"
+    with pytest.raises(SystemExit):
+        _args("--export", "bag")
+
+
+def test_write_views_builds_the_motion_only_when_asked_and_clears_stale_views(tmp_path):
+    calls = []
+
+    def motion():
+        calls.append(1)
+        robot, scene, res = mopick_plan(n=4)
+        return mcdpr_motion(robot, scene, res)
+
+    assert write_views(_args(), tmp_path, motion) == [] and calls == []
+    names = write_views(_args("--gif", "--html", "--export", "mcap"), tmp_path, motion)
+    assert names == [BAG_DIR, HTML_NAME, GIF_NAME] and calls == [1]
+    assert Image.open(tmp_path / GIF_NAME).n_frames == 4 and (tmp_path / HTML_NAME).stat().st_size > 3_000_000
+    (tmp_path / "notes.txt").write_text("mine")
+    assert write_views(_args("--html"), tmp_path, motion) == [HTML_NAME]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [HTML_NAME, "notes.txt"]  # the old gif and bag are gone
+
+
+def test_plan_cli_writes_html_and_bag(tmp_path, capsys):
+    from tmr.plan import main
+
+    out = tmp_path / "A"
+    assert main(["--scenario", "A", "--out", str(out), "--no-plots", "--html", "--export", "mcap"]) == 0
+    assert "ros2_bag, motion.html" in capsys.readouterr().out
+    with Reader(out / BAG_DIR) as r:
+        assert "/tmr/robot3/pose" in r.topics and "/tmr/team/trajectory" in r.topics
+    assert "Scenario A, qp: 3 tethered robots" in (out / HTML_NAME).read_text(encoding="utf-8")
+
+
+def test_ccma_cli_writes_gif(tmp_path):
+    from tmr.ccma.__main__ import main
+
+    out = tmp_path / "cc"
+    assert main(["run", "--path", "line", "--steps", "3", "--out", str(out), "--no-plots", "--gif", "--quiet"]) == 0
+    assert Image.open(out / GIF_NAME).n_frames == 3
