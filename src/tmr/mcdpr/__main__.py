@@ -34,6 +34,8 @@ from tmr.cli_args import positive_int as _positive_int
 from tmr.console import LOG, add_manners
 from tmr.console import run as run_cli
 from tmr.errors import TmrError
+from tmr.motion import mcdpr_motion
+from tmr.views import add_view_args, write_views
 
 PLAN_FORMAT = "tmr-mcdpr-plan/1"
 
@@ -74,6 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--external", type=_triple, help="external wrench box half-widths FX,FY,FZ [N] (scene's)")
     pl.add_argument("--out", default="runs/mcdpr", help="output directory (default runs/mcdpr)")
     pl.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    add_view_args(pl)  # --gif, --html, --export FORMAT (tmr.views)
     add_manners(pl)
     return p
 
@@ -274,6 +277,7 @@ def _main(args: argparse.Namespace) -> int:
         chk = check(robot, env, result)
         try:
             names = write_outputs(out, robot, scene, env, params, result, chk, not args.no_plots)
+            names += write_views(args, out, lambda: mcdpr_motion(robot, scene, result))
         except OSError as exc:
             raise TmrError(f"cannot write the outputs to {out}: {exc}") from exc
     except TmrError as exc:
