@@ -54,3 +54,23 @@ def test_convergence_figure_plots_milliseconds_on_log_axis(tracked):
     ax = fig.axes[0]
     assert ax.get_yscale() == "log"
     np.testing.assert_allclose(ax.get_lines()[0].get_xdata(), 1e3 * res.histories[0][:, 0])
+
+
+def test_joint_angle_panel_draws_turning_joints_and_lists_the_others():
+    from tmr.ccma.angles import joint_angles, rotary_joints
+
+    m = EnergyModel(load_system("4dof-reduced"))
+    st = reference_state(m)
+    p0, r0 = end_effector_pose(m, st)
+    path = make_path("vcircle", p0, r0, radius=0.05, step=0.01)
+    res = track(m, path.positions, path.rotations, keep_states=True)
+    names = [m.system.joints[k].name for k in rotary_joints(m)]
+    a = joint_angles(m, res.states)
+    fig = plot_mechanism(m, res, [st, res.states[-1]], "t", angles=a, joint_names=names)
+    assert len(fig.axes) == 3
+    ax = fig.axes[2]
+    drawn = {ln.get_label(): ln for ln in ax.get_lines()}
+    assert set(drawn) == {f"{j}_{leg}" for leg in "abc" for j in ("elbow", "wrist")}  # the mounts do not turn
+    np.testing.assert_allclose(drawn["elbow_a"].get_ydata(), np.degrees(a[:, 0]))
+    assert "agent_a.mount" in ax.texts[0].get_text()
+    assert "largest range 15.6°" in ax.get_title()  # asin(0.3/L) − asin(0.2/L), L = √(0.4² + 0.2²)
