@@ -105,3 +105,35 @@ def test_check_out_dir_and_remove_stale(tmp_path):
         (out / name).write_text(name)
     gone = console.remove_stale(out, owned=("a.png", "b.png", "c.json", "never.png"), written=("c.json",))
     assert gone == ["a.png", "b.png"] and sorted(p.name for p in out.iterdir()) == ["c.json", "keep.txt"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["tmr.sweep", "sensitivity", "--scenario", "A", "--n", "4", "--methods", "qp", "--jobs", "2"],
+        ["tmr.plan", "--scenario", "E", "--method", "horizon"],
+    ],
+)
+def test_ctrl_c_whole_process_group_one_line_130(tmp_path, command):
+    """Ctrl-C at a terminal signals the whole process group (the command and its worker processes): one line,
+    exit 130, nothing written."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "out"
+    p = subprocess.Popen(
+        [sys.executable, "-m", *command, "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    time.sleep(3.0)
+    os.killpg(p.pid, signal.SIGINT)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 130 and err.strip() == "interrupted"
+    assert list(tmp_path.iterdir()) == []

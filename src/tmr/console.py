@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import signal
 import sys
 import tempfile
 import warnings
@@ -43,7 +44,7 @@ LOG = logging.getLogger("tmr")
 #: Exit code after Ctrl-C (128 + SIGINT, as a shell reports it).
 EXIT_INTERRUPTED = 130
 
-_state = {"quiet": False}
+_state: dict[str, Any] = {"quiet": False}
 
 
 def add_manners(parser: argparse.ArgumentParser) -> None:
@@ -107,6 +108,7 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
             warnings.simplefilter("default")  # each distinct warning once, through logging
             return body(args)
     except KeyboardInterrupt:
+        _ignore_further_interrupts()  # a second Ctrl-C (or one sent to the whole process group) while reporting
         if debug:
             LOG.exception("interrupted")
         else:
@@ -127,6 +129,15 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
     finally:
         logging.captureWarnings(False)
         _state["quiet"] = False
+        if _state.get("sigint") is not None:  # give the caller (e.g. a test session) its handler back
+            signal.signal(signal.SIGINT, _state.pop("sigint"))
+
+
+def _ignore_further_interrupts() -> None:
+    try:
+        _state["sigint"] = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread: signals cannot be set there
+        pass
 
 
 def check_out_dir(out: Path) -> None:

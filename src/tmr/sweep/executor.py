@@ -64,6 +64,13 @@ class SerialExecutor:
         return "SerialExecutor()"
 
 
+def _ignore_sigint() -> None:
+    """Worker initialiser: Ctrl-C is the parent's to handle (one line, exit 130), not every worker's traceback."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 class LocalExecutor:
     """A process pool of ``jobs`` workers (default: every core, ``os.cpu_count()``), reused across ``map`` calls.
 
@@ -87,7 +94,7 @@ class LocalExecutor:
             # which plain fork can deadlock on
             methods = multiprocessing.get_all_start_methods()
             ctx = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
-            self._pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx)
+            self._pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=_ignore_sigint)
         futures = {self._pool.submit(fn, item): i for i, item in enumerate(items)}
         out: list[Any] = [None] * len(items)
         try:
@@ -99,6 +106,9 @@ class LocalExecutor:
             # one task failed (or Ctrl-C): drop the tasks not started yet instead of running them all first
             pool, self._pool = self._pool, None
             pool.shutdown(wait=False, cancel_futures=True)
+            if isinstance(exc, KeyboardInterrupt):  # Ctrl-C: stop the running tasks too, do not wait for them
+                for proc in list((getattr(pool, "_processes", None) or {}).values()):
+                    proc.terminate()
             if isinstance(exc, BrokenProcessPool):
                 raise SweepError(f"a worker process died ({exc}); out of memory? try fewer --jobs") from exc
             raise
