@@ -427,7 +427,8 @@ def _log_contacts(d: Any, cm: ChainModel, contacts: dict[str, dict[str, Any]], n
         if entry["first_time"] is None:
             entry["first_time"] = float(now)
             entry["where"] = [float(v) for v in pos]
-            entry["between"] = [_label(cm, g1), _label(cm, g2)]
+            first, second = (g1, g2) if cm.geom_kind[g1] >= cm.geom_kind[g2] else (g2, g1)  # the mover first
+            entry["between"] = [_label(cm, first), _label(cm, second)]
 
 
 def _iter_contacts(d: Any) -> Any:

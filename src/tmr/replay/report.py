@@ -47,14 +47,18 @@ def chain_verdict(rp: ChainReplay, run: Any) -> Verdict:
             continue
         t0 = float(c["first_time"])
         a, b = c["between"]
-        who = f"{b} touches {a}" if kind.startswith("tether") or a.startswith(("obs", "wall")) else f"{a} touches {b}"
+        who = f"{a} touches {b}"  # the tether or robot first
         if kind == "tether-floor":
-            j = int(b.split()[-1]) - 1 if b.startswith("tether") else int(a.split()[-1]) - 1
+            j = int(a.split()[-1]) - 1
             k = int(np.argmin(np.abs(rp.t - t0)))
-            extra = f"; span {rp.span[k, j]:.3f} m"
-            if rp.span[k, j] > d_max[j]:
-                extra += f" > d_max {d_max[j]:.3f} m by {rp.span[k, j] - d_max[j]:.3f} m"
-            extra += f", static catenary lowest point {rp.lowest_catenary[k, j]:.3f} m"
+            extra = f"; span {rp.span[k, j]:.3f} m, static catenary lowest point {rp.lowest_catenary[k, j]:.3f} m"
+            planned = _planned_spans(rp, run)[:, j]
+            kp = int(np.argmax(planned))
+            if planned[kp] > d_max[j]:
+                extra += (
+                    f"; the plan's span reaches {planned[kp]:.3f} m > d_max {d_max[j]:.3f} m (by "
+                    f"{planned[kp] - d_max[j]:.3f} m) at t = {rp.t[kp]:.2f} s"
+                )
             msg = f"tether {j + 1} touches the floor at t = {t0:.2f} s at {_xyz(c['where'])}{extra}"
         else:
             msg = f"{who} at t = {t0:.2f} s at {_xyz(c['where'])} ({c['count']} physics steps in contact, "
@@ -75,6 +79,13 @@ def chain_verdict(rp: ChainReplay, run: Any) -> Verdict:
         fails.append((float(rp.t[-1]), "diverged", rp.diverged))
     fails.sort(key=lambda f: f[0])
     return Verdict(ok=not fails, reason=fails[0][2] if fails else None, failures=tuple(fails))
+
+
+def _planned_spans(rp: ChainReplay, run: Any) -> np.ndarray:
+    """(K, N) horizontal spans of the tracked plan [m] (tether j from robot j-1, or the anchor, to robot j)."""
+    ref = rp.reference
+    prev = np.concatenate([np.broadcast_to(run.anchor, (ref.shape[0], 1, 2)), ref[:, :-1]], axis=1)
+    return np.linalg.norm(ref - prev, axis=2)
 
 
 def _f(x: Any) -> Any:
