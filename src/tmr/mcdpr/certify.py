@@ -26,6 +26,7 @@ is ≤ 0 is bisected (the midpoint is a real pose of the motion) until the bound
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import numpy as np
@@ -75,6 +76,7 @@ def sample_stats(
     return SampleStats(cap.mu, cap.lo, cap.hi, np.linalg.norm(v, axis=-1), np.sqrt(np.sum(r**2, axis=0)))
 
 
+@functools.lru_cache(maxsize=32)
 def _weight_moments(robot: Robot) -> NDArray[np.float64]:
     """|a_o| (c,) [N·m]: moment of the base weight about each footprint edge (pose-independent, Rasheed 2019 eq. 5)."""
     tip = tipping(robot, np.array([0.0, 0.0, 1.0]), np.zeros((robot.n_bases, 2)) + [[10.0, 0.0]], None)

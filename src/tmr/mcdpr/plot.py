@@ -38,8 +38,12 @@ def plot_topview(robot: Robot, scene: Scene, env: Environment, result: Plan, pat
     _polys(ax, grown, facecolor="0.9", edgecolor="0.7", lw=0.8, ls="--")
     for t in scene.tables:
         _polys(ax, t, facecolor="tan", edgecolor="saddlebrown", lw=1.0)
-    for o in scene.obstacles:
-        _polys(ax, o, facecolor="dimgray", edgecolor="black", lw=1.0)
+    if len(scene.discs) == len(scene.obstacles):
+        for cx, cy, r in scene.discs:  # the exact circles
+            ax.add_patch(Circle((cx, cy), r, facecolor="dimgray", edgecolor="black", lw=1.0))
+    else:
+        for o in scene.obstacles:
+            _polys(ax, o, facecolor="dimgray", edgecolor="black", lw=1.0)
     ax.plot([x0, x1, x1, x0, x0], [y0, y0, y1, y1, y0], "k-", lw=1.5)
     for j in range(robot.n_bases):
         c = _COLORS[j % len(_COLORS)]
@@ -48,7 +52,13 @@ def plot_topview(robot: Robot, scene: Scene, env: Environment, result: Plan, pat
             ax.plot(st["iterates"][:, j, 0], st["iterates"][:, j, 1], ".", color=c, ms=3, alpha=0.6)
         ax.add_patch(Circle(result.bases[0, j], robot.base_radius, fill=False, color=c, lw=1.0, ls=":"))
         ax.add_patch(Circle(result.bases[-1, j], robot.base_radius, fill=False, color=c, lw=1.5))
+        ax.plot(*result.bases[0, j], "o", mfc="white", mec=c, ms=6)
+        ax.plot(*result.bases[-1, j], "s", color=c, ms=6)
     ax.plot(result.platform[:, 0], result.platform[:, 1], "k-", lw=1.4, label="platform")
+    ax.plot([], [], "o", mfc="white", mec="k", ms=6, label="start (dotted: base footprint)")
+    ax.plot([], [], "s", color="k", ms=6, label="end (solid: base footprint)")
+    if result.stage1:
+        ax.plot([], [], ".", color="0.4", ms=4, label="stage-1 iterates")
     ends = np.flatnonzero(np.diff(np.r_[result.segment, -1]) != 0)
     for r in np.r_[0, ends]:
         for j, k in enumerate(robot.cable_base):
@@ -60,8 +70,9 @@ def plot_topview(robot: Robot, scene: Scene, env: Environment, result: Plan, pat
                 lw=0.6,
                 alpha=0.7,
             )
+    ax.plot([], [], "-", color="0.5", lw=0.6, label="cables at the way-points")
     w = result.waypoints
-    ax.plot(w[:, 0], w[:, 1], "k*", ms=11, label="way-points")
+    ax.plot(w[:, 0], w[:, 1], "k*", ms=11, label="way-points" if result.stage1 else "task points")
     for i, p in enumerate(w):
         ax.annotate(f"P{i + 1}", p[:2], textcoords="offset points", xytext=(6, 6), fontsize=10)
     bad = result.mu <= 0
@@ -72,8 +83,11 @@ def plot_topview(robot: Robot, scene: Scene, env: Environment, result: Plan, pat
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.set_title(f"{robot.name} plan, scene {scene.name}: min μ = {np.min(result.mu):.3f} N")
-    ax.legend(loc="upper left", fontsize=8, ncol=2)
+    title = f"{robot.name} plan ({result.planner}), scene {scene.name}: min μ = {np.min(result.mu):.3f} N"
+    if result.mu_lower is not None and len(result.mu_lower):
+        title += f", ≥ {np.min(result.mu_lower):.3f} N guaranteed between samples"
+    ax.set_title(title, fontsize=10)
+    ax.legend(loc="upper left", fontsize=7, ncol=3, framealpha=0.85)
     fig.tight_layout()
     path = Path(path)
     fig.savefig(path, dpi=110)
@@ -83,14 +97,31 @@ def plot_topview(robot: Robot, scene: Scene, env: Environment, result: Plan, pat
 
 def plot_mu(result: Plan, path: str | Path) -> Path:
     """Capacity margin μ [N] along the plan (Rasheed 2019 eq. 8) and its stage-1 histories (cf. Fig. 3e)."""
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
-    a1.plot(result.mu, "k-", lw=1.2)
+    if not result.stage1:
+        fig, a1 = plt.subplots(figsize=(11, 4))
+        a2 = None
+    else:
+        fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
+    x = np.arange(len(result.mu))
+    a1.plot(x, result.mu, "k.-", lw=1.0, ms=3, label="μ at the samples")
+    if result.mu_lower is not None and len(result.mu_lower):
+        low = result.mu_lower
+        xs = np.repeat(x, 2)[1:-1]
+        a1.plot(xs, np.repeat(low, 2), "-", color="tab:green", lw=1.0, label="guaranteed lower bound between samples")
+        a1.fill_between(xs, np.repeat(low, 2), 0.0, color="tab:green", alpha=0.15, lw=0)
     a1.axhline(0.0, color="r", lw=0.8, ls="--")
     for s in np.flatnonzero(np.diff(result.segment)):
         a1.axvline(s + 0.5, color="0.7", lw=0.8)
-    a1.set_xlabel("sample along the plan")
+    a1.set_xlabel("sample along the plan (in-place turns and straight drives)")
     a1.set_ylabel("capacity margin μ [N]")
-    a1.set_title("μ along the plan (stage 2)")
+    a1.set_title("μ along the plan" + (" (stage 2)" if result.stage1 else ""))
+    a1.legend(fontsize=8, loc="lower right")
+    if a2 is None:
+        fig.tight_layout()
+        path = Path(path)
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        return path
     for i, st in enumerate(result.stage1):
         a2.plot(st["mu"], "o-", ms=3, label=f"P{i + 1}→P{i + 2}")
     a2.axhline(0.0, color="r", lw=0.8, ls="--")

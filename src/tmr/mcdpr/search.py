@@ -73,7 +73,7 @@ class SearchParams:
     mu_weight: float = 0.2
     d_platform: float = 0.05
     max_rounds: int = 300
-    shortcut: int = 12
+    shortcut: int = 40
     expand: int = 16
     expand_samples: int = 12
     seed: int = 0
@@ -474,37 +474,17 @@ def plan_search(
             )
     t_search = time.perf_counter() - t0
 
-    # shortcut smoothing inside each task segment
-    nodes = path
-    out = [nodes[0]]
-    th = th0.copy()
-    i = 0
-    shortcuts = 0
-    while i < len(nodes) - 1:
-        j_best = i + 1
-        for j in range(min(len(nodes) - 1, i + params.shortcut), i + 1, -1):
-            if not _same_line(S, st[nodes[i : j + 1]], seg, task_at):
-                continue
-            pair = np.array([nodes[i], nodes[j]])
-            if not _edges_ok(robot, scene, B[pair[:1]], B[pair[1:]])[0]:
-                continue
-            if np.max(np.linalg.norm(B[nodes[j]] - B[nodes[i]], axis=-1)) > 4 * params.max_move:
-                continue
-            Pm, Bm, Hm, _ = _motion(B[pair], P[pair], th, params.d_platform)
-            if certify(robot, Pm, Bm, Hm, rws).ok:
-                j_best = j
-                shortcuts += 1
-                break
-        pair = np.array([nodes[i], nodes[j_best]])
-        _, _, Hm, _ = _motion(B[pair], P[pair], th, params.d_platform)
-        th = Hm[-1]
-        out.append(nodes[j_best])
-        i = j_best
-    Pm, Bm, Hm, edge = _motion(B[out], P[out], th0, params.d_platform)
+    # smoothing: relax the nodes towards their neighbours' midpoints, then shortcut inside each task segment;
+    # every change is checked (exact collision, spacing, certified μ) and the whole result certified again
+    Bn, Pn, sn = B[path].copy(), P[path].copy(), st[path].copy()
+    Bn = _relax(robot, scene, Bn, Pn, th0, rws, params)
+    idx, shortcuts = _shortcut(robot, scene, Bn, Pn, sn, th0, rws, params, task_at)
+    Pm, Bm, Hm, edge = _motion(Bn[idx], Pn[idx], th0, params.d_platform)
     cert = certify(robot, Pm, Bm, Hm, rws)
-    if not cert.ok:  # cannot happen piecewise; keep the certified unsmoothed path then
+    out = idx
+    if not cert.ok:  # the local checks do not see a changed turn further on: keep the certified search path
         out = path
-        Pm, Bm, Hm, edge = _motion(B[out], P[out], th0, params.d_platform)
+        Pm, Bm, Hm, edge = _motion(B[path], P[path], th0, params.d_platform)
         cert = certify(robot, Pm, Bm, Hm, rws)
     t_smooth = time.perf_counter() - t0
 
@@ -556,7 +536,105 @@ def plan_search(
     )
 
 
-def _same_line(S: NDArray[np.float64], sts: NDArray[np.intp], seg: NDArray[np.int64], task_at: list[int]) -> bool:
+def _arrival_headings(Bn: NDArray[np.float64], th0: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Headings (K, p) [rad] on arrival at each node of the path (before its turn), as :func:`_motion` drives."""
+    out = np.empty((len(Bn), len(th0)))
+    th = th0.astype(float).copy()
+    out[0] = th
+    for e in range(len(Bn) - 1):
+        d = Bn[e + 1] - Bn[e]
+        moving = np.linalg.norm(d, axis=-1) > 1e-9
+        fwd = wrap(np.arctan2(d[:, 1], d[:, 0]) - th)
+        turn = np.where(np.abs(fwd) <= np.pi / 2, fwd, wrap(fwd - np.pi))
+        th = np.where(moving, wrap(th + turn), th)
+        out[e + 1] = th
+    return out
+
+
+def _local_ok(
+    robot: Robot,
+    scene: Scene,
+    Bn: NDArray[np.float64],
+    Pn: NDArray[np.float64],
+    th: NDArray[np.float64],
+    rws: NDArray[np.float64],
+    d_platform: float,
+) -> bool:
+    """The motion through the nodes Bn, Pn (starting with headings th) is collision-free, spaced and certified."""
+    if not np.all(_edges_ok(robot, scene, Bn[:-1], Bn[1:])):
+        return False
+    Pm, Bm, Hm, _ = _motion(Bn, Pn, th, d_platform)
+    return certify(robot, Pm, Bm, Hm, rws).ok
+
+
+def _relax(
+    robot: Robot,
+    scene: Scene,
+    Bn: NDArray[np.float64],
+    Pn: NDArray[np.float64],
+    th0: NDArray[np.float64],
+    rws: NDArray[np.float64],
+    params: SearchParams,
+    sweeps: int = 4,
+) -> NDArray[np.float64]:
+    """Move every inner node's bases half-way towards the midpoint of their neighbours when the motion from the
+    node before to the node two after stays collision-free, spaced and certified (removes zig-zags and spurs)."""
+    Bn = Bn.copy()
+    for _ in range(sweeps):
+        moved = False
+        for k in range(1, len(Bn) - 1):
+            new = Bn[k] + 0.5 * (0.5 * (Bn[k - 1] + Bn[k + 1]) - Bn[k])
+            if np.max(np.linalg.norm(new - Bn[k], axis=-1)) < 0.01:
+                continue
+            th = _arrival_headings(Bn[:k], th0)[-1]
+            hi = min(k + 3, len(Bn))
+            trial = Bn[k - 1 : hi].copy()
+            trial[1] = new
+            if point_clearance(scene, robot.base_radius, new).min() > 0 and _local_ok(
+                robot, scene, trial, Pn[k - 1 : hi], th, rws, params.d_platform
+            ):
+                Bn[k] = new
+                moved = True
+        if not moved:
+            break
+    return Bn
+
+
+def _shortcut(
+    robot: Robot,
+    scene: Scene,
+    Bn: NDArray[np.float64],
+    Pn: NDArray[np.float64],
+    sn: NDArray[np.intp],
+    th0: NDArray[np.float64],
+    rws: NDArray[np.float64],
+    params: SearchParams,
+    task_at: list[int],
+) -> tuple[list[int], int]:
+    """Indices of the nodes kept: from node i, a straight motion to the farthest node j of the same task segment
+    whose motion is collision-free, spaced and certified (the nodes in between are dropped)."""
+    out = [0]
+    th = th0.astype(float).copy()
+    i = 0
+    shortcuts = 0
+    while i < len(Bn) - 1:
+        j_best = i + 1
+        last = i + 1
+        while last + 1 < len(Bn) and _same_line(sn[i : last + 2], task_at):
+            last += 1
+        for j in range(min(last, i + params.shortcut), i + 1, -1):
+            pair = np.array([i, j])
+            if _local_ok(robot, scene, Bn[pair], Pn[pair], th, rws, params.d_platform):
+                j_best = j
+                shortcuts += 1
+                break
+        th = _arrival_headings(Bn[[i, j_best]], th)[-1]
+        out.append(j_best)
+        i = j_best
+    return out, shortcuts
+
+
+def _same_line(sts: NDArray[np.intp], task_at: list[int]) -> bool:
     """True when the stations ``sts`` (in path order) lie on one task segment, monotonically (a straight platform
     motion from the first to the last passes through all of them and through no task point in between)."""
     lo, hi = int(sts.min()), int(sts.max())
