@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import shutil
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -56,7 +55,9 @@ def wanted(args: argparse.Namespace) -> bool:
 def _progress(total: int, what: str) -> Any:
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=what, unit="view", leave=False, disable=not sys.stderr.isatty())
+    from tmr.console import progress_enabled  # a terminal, and not --quiet
+
+    return tqdm(total=total, desc=what, unit="view", leave=False, disable=not progress_enabled())
 
 
 def write_views(args: argparse.Namespace, out: Path, motion: Callable[[], Any]) -> list[str]:
