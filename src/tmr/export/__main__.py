@@ -21,6 +21,8 @@ import os
 import sys
 from pathlib import Path
 
+from tmr.console import LOG, add_manners
+from tmr.console import run as run_cli
 from tmr.errors import TmrError
 
 FORMATS = ("mcap", "sqlite3", "gif", "html")
@@ -66,6 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="chain runs: the checked plan (raw, default) or the low-passed positions the robots track (filtered)",
     )
     p.add_argument("--description", help="CCMA runs: the system description TOML the run was made from")
+    add_manners(p)  # --quiet/--verbose/--debug (tmr.console)
     return p
 
 
@@ -92,41 +95,39 @@ def check_out(out: Path, fmt: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``python -m tmr.export`` and ``tmr export``; returns the exit code (module doc)."""
     args = build_parser().parse_args(argv)
+    return run_cli(_main, args)  # one-line errors (exit 2), Ctrl-C (130), --debug tracebacks
+
+
+def _main(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     out = Path(args.out) if args.out else _default_out(run_dir, args.format)
-    try:
-        if not run_dir.is_dir():
-            raise TmrError(f"{run_dir} is not a directory: give the --out directory of a tmr run")
-        check_out(out, args.format)
-        from tmr.export.runs import load_motion
+    if not run_dir.is_dir():
+        raise TmrError(f"{run_dir} is not a directory: give the --out directory of a tmr run")
+    check_out(out, args.format)
+    from tmr.export.runs import load_motion
 
-        motion = load_motion(run_dir, rate=args.rate, trajectory=args.trajectory, description=args.description)
-        if args.format in ("mcap", "sqlite3"):
-            from tmr.export.rosbag import topics, write_bag
+    motion = load_motion(run_dir, rate=args.rate, trajectory=args.trajectory, description=args.description)
+    if args.format in ("mcap", "sqlite3"):
+        from tmr.export.rosbag import topics, write_bag
 
-            write_bag(motion, out, storage=args.format)
-            what = f"ROS 2 bag ({args.format}, {len(topics(motion))} topics, {motion.n_samples} samples)"
-        elif args.format == "gif":
-            from tmr.animate import frame_indices, write_gif
+        write_bag(motion, out, storage=args.format)
+        what = f"ROS 2 bag ({args.format}, {len(topics(motion))} topics, {motion.n_samples} samples)"
+    elif args.format == "gif":
+        from tmr.animate import frame_indices, write_gif
 
-            write_gif(motion, out)
-            what = f"animation ({len(frame_indices(motion))} frames, {out.stat().st_size / 1e6:.2f} MB)"
-        else:
-            from tmr.htmlview import write_html
+        write_gif(motion, out)
+        what = f"animation ({len(frame_indices(motion))} frames, {out.stat().st_size / 1e6:.2f} MB)"
+    else:
+        from tmr.htmlview import write_html
 
-            write_html(motion, out)
-            what = f"interactive view ({out.stat().st_size / 1e6:.2f} MB)"
-    except TmrError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
-    print(f"tmr.export: {motion.title}")
+        write_html(motion, out)
+        what = f"interactive view ({out.stat().st_size / 1e6:.2f} MB)"
+    LOG.info(f"tmr.export: {motion.title}")
     if not motion.timed:
-        print(f"  note: {motion.notes[0]}")
-    print(f"  wrote {what} to {out}")
+        LOG.info(f"  note: {motion.notes[0]}")
+    LOG.info(f"  wrote {what} to {out}")
     return 0
 
 
