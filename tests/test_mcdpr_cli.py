@@ -194,3 +194,14 @@ def test_module_entry_point(tmp_path) -> None:
         [sys.executable, "-m", "tmr.mcdpr", "plan", "--scene", "missing"], capture_output=True, text=True
     )
     assert r.returncode == 2 and "error: no scene" in r.stderr
+
+
+def test_tension_lp_lowers_the_largest_tension(run_dir, tmp_path) -> None:
+    out = tmp_path / "lp"
+    assert main(["plan", "--tension", "lp", "--out", str(out), "--no-plots"]) == 0
+    d = json.loads((out / "plan.json").read_text())
+    ref = json.loads((run_dir / "plan.json").read_text())
+    assert d["tension_method"] == "lp" and ref["tension_method"] == "closed-form" and d["check"]["ok"]
+    assert d["samples"]["platform"] == ref["samples"]["platform"]  # same motion, other tensions
+    t, t0 = np.array(d["samples"]["tensions"]), np.array(ref["samples"]["tensions"])
+    assert np.all(t.max(axis=1) <= t0.max(axis=1) + 1e-7)

@@ -96,3 +96,56 @@ def test_closed_form_rejects_rank_deficient_w_where_the_lp_finds_tensions() -> N
         closed_form(W, f, lo, hi)
     t = TensionProblem(3, 4, 8).solve(W, f, A, b)
     np.testing.assert_allclose(W @ t, f, atol=1e-7)
+
+
+# --- tension-distribution methods: DAQP min-norm QP, HiGHS min-max LP, distribute() -------------------------------
+def test_daqp_qp_equals_the_closed_form() -> None:
+    from tmr.mcdpr.tension import min_norm_qp
+
+    cap = _feasible_poses(10, 3)
+    ref = closed_form_batch(cap.W, F, cap.lo, cap.hi)
+    for i in np.flatnonzero(ref.feasible):
+        np.testing.assert_allclose(min_norm_qp(cap.W[i], F, cap.lo[i], cap.hi[i]), ref.t[i], atol=1e-6)
+
+
+def test_min_max_lp_reaches_the_cvxpy_optimum_and_is_feasible() -> None:
+    from tmr.mcdpr.tension import min_max_lp
+
+    cap = _feasible_poses(10, 4)
+    ref = TensionProblem(3, 4, 8, "maxnorm")
+    for i in range(10):
+        if not np.all(cap.lo[i] <= cap.hi[i]):
+            continue
+        try:
+            best = float(np.max(ref.solve(cap.W[i], F, *box_rows(cap.lo[i], cap.hi[i]))))
+        except InfeasibleWrench:
+            with pytest.raises(InfeasibleWrench):
+                min_max_lp(cap.W[i], F, cap.lo[i], cap.hi[i])
+            continue
+        t = min_max_lp(cap.W[i], F, cap.lo[i], cap.hi[i])
+        assert float(np.max(t)) == pytest.approx(best, abs=1e-6)
+        np.testing.assert_allclose(cap.W[i] @ t, F, atol=1e-7)
+        assert np.all(t >= cap.lo[i] - 1e-9) and np.all(t <= cap.hi[i] + 1e-9)
+
+
+def test_lp_max_is_at_most_the_min_norm_max() -> None:
+    from tmr.mcdpr.tension import distribute
+
+    cap = _feasible_poses(8, 5)
+    qp = distribute("qp", cap.W, F, cap.lo, cap.hi)
+    lp = distribute("lp", cap.W, F, cap.lo, cap.hi)
+    ok = np.all(np.isfinite(qp), axis=1)
+    assert ok.any()
+    assert np.all(lp[ok].max(axis=1) <= qp[ok].max(axis=1) + 1e-7)
+    assert np.all(np.sum(qp[ok] ** 2, axis=1) <= np.sum(lp[ok] ** 2, axis=1) + 1e-7)
+
+
+def test_distribute_infeasible_rows_and_bad_method() -> None:
+    from tmr.mcdpr.tension import distribute
+
+    cap = _feasible_poses(2, 6)
+    heavy = np.array([0.0, 0.0, 100.0])  # more than 4 x 15 N can lift
+    for method in ("closed-form", "qp", "lp"):
+        assert np.all(np.isnan(distribute(method, cap.W, heavy, cap.lo, cap.hi)))
+    with pytest.raises(ParameterError, match="tension method"):
+        distribute("pinv", cap.W, F, cap.lo, cap.hi)

@@ -65,6 +65,12 @@ def build_parser() -> argparse.ArgumentParser:
         default="search",
         help="search: placement graph + certified μ between samples (default); greedy: Rasheed 2019 two-stage",
     )
+    pl.add_argument(
+        "--tension",
+        choices=("closed-form", "qp", "lp"),
+        default="closed-form",
+        help="tension distribution: null-space closed form (min 2-norm), qp (min 2-norm, DAQP), lp (min-max, HiGHS)",
+    )
     pl.add_argument("--station-step", type=_positive, default=0.25, help="search: platform station spacing [m]")
     pl.add_argument("--margin", type=_positive, default=0.3, help="search: μ of a placement at any heading [N]")
     pl.add_argument("--max-move", type=_positive, default=0.6, help="search: base move per graph edge [m] (0.6)")
@@ -111,6 +117,7 @@ def plan_dict(robot: Any, scene: Any, params: Any, result: Any, chk: Any) -> dic
             "external": scene.external,
             "waypoints": result.waypoints,
             "planner": result.planner,
+            "tension_method": result.tension_method,
             "search": result.search,
             "check": {
                 "ok": chk.ok,
@@ -236,7 +243,7 @@ def _main(args: argparse.Namespace) -> int:
     try:
         import dataclasses
 
-        from tmr.mcdpr.capacity import required_wrench_set
+        from tmr.mcdpr.capacity import capacity, required_wrench_set
         from tmr.mcdpr.errors import NoPlanFound
         from tmr.mcdpr.planner import PlannerParams, check, plan
         from tmr.mcdpr.robot import load_robot, mopick
@@ -274,6 +281,15 @@ def _main(args: argparse.Namespace) -> int:
             refuse_upfront(robot, scene, required_wrench_set(robot, scene.external))
             result = plan(robot, scene, params, env)
         wall = time.perf_counter() - t0
+        if args.tension != "closed-form":
+            from tmr.mcdpr.tension import distribute
+
+            cap = capacity(
+                robot, result.platform, result.bases, result.headings, required_wrench_set(robot, scene.external)
+            )
+            weight = np.array([0.0, 0.0, robot.platform_mass * robot.gravity])
+            result.tensions = distribute(args.tension, cap.W, weight, cap.lo, cap.hi)
+            result.tension_method = args.tension
         chk = check(robot, env, result)
         try:
             names = write_outputs(out, robot, scene, env, params, result, chk, not args.no_plots)

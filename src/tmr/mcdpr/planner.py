@@ -88,7 +88,8 @@ class Plan:
     (:func:`check` uses ``params.d_platform`` to bound the platform steps); external (3,) the external wrench box
     half-widths of the scene [N] (:func:`check` recomputes μ with it). planner: ``"greedy"`` (this module) or
     ``"search"`` (:mod:`tmr.mcdpr.search`); mu_lower (T − 1,): guaranteed lower bound of μ on each piece between
-    consecutive samples [N] (:mod:`tmr.mcdpr.certify`; search plans only); search: statistics of the search.
+    consecutive samples [N] (:mod:`tmr.mcdpr.certify`; search plans only); search: statistics of the search;
+    tension_method: how ``tensions`` were distributed (:data:`tmr.mcdpr.tension.METHODS`).
     """
 
     waypoints: NDArray[np.float64]
@@ -107,6 +108,7 @@ class Plan:
     planner: str = "greedy"
     mu_lower: NDArray[np.float64] | None = None
     search: dict[str, Any] = field(default_factory=dict)
+    tension_method: str = "closed-form"
 
 
 def _combos(p: int, k: int) -> NDArray[np.intp]:

@@ -6,6 +6,10 @@
 * :class:`TensionProblem` — cvxpy, any m and any constraint rows A t ≤ b: minimum 2-norm (QP), minimum max tension
   (LP) or minimum 1-norm (LP). DPP with Parameters: compiled once, re-solved per pose.
 * :func:`wrench_feasible` — the feasibility LP (is f in the AWS of eq. 7?).
+* :func:`min_norm_qp` — minimum 2-norm tensions, a dense active-set QP through qpsolvers (DAQP): any m.
+* :func:`min_max_lp` — minimum largest tension, min s s.t. t_k ≤ s, W t = f, lo ≤ t ≤ hi (scipy linprog, HiGHS).
+* :func:`distribute` — one of these (``"closed-form"``, ``"qp"``, ``"lp"``) over a batch of poses, NaN where
+  infeasible; the choice CASPR users know (closed form, quadratic programming, linear programming).
 
 Infeasible wrenches raise :class:`~tmr.mcdpr.errors.InfeasibleWrench`. See ``formulations/tension.md``.
 """
@@ -20,7 +24,17 @@ from numpy.typing import ArrayLike, NDArray
 
 from tmr.mcdpr.errors import InfeasibleWrench, McdprError, ParameterError
 
-__all__ = ["ClosedForm", "TensionProblem", "closed_form", "closed_form_batch", "wrench_feasible"]
+__all__ = [
+    "METHODS",
+    "ClosedForm",
+    "TensionProblem",
+    "closed_form",
+    "closed_form_batch",
+    "distribute",
+    "min_max_lp",
+    "min_norm_qp",
+    "wrench_feasible",
+]
 
 Objective = Literal["2norm", "maxnorm", "1norm"]
 
@@ -165,3 +179,73 @@ def wrench_feasible(W: ArrayLike, f: ArrayLike, A: ArrayLike, b: ArrayLike) -> b
 
 
 _FEAS: dict[tuple[int, int, int], TensionProblem] = {}
+
+
+#: Tension-distribution methods of :func:`distribute`.
+METHODS = ("closed-form", "qp", "lp")
+
+
+def min_norm_qp(W: ArrayLike, f: ArrayLike, lo: ArrayLike, hi: ArrayLike) -> NDArray[np.float64]:
+    """Minimum 2-norm tensions (m,) [N]: min ½‖t‖² s.t. W t = f, lo ≤ t ≤ hi (Rasheed 2019 eq. 2, 4, 6), solved by
+    qpsolvers with the dense active-set solver DAQP; raises InfeasibleWrench when no tension fits."""
+    import qpsolvers
+
+    W = np.asarray(W, dtype=float)
+    m = W.shape[1]
+    lo = np.asarray(lo, dtype=float)
+    hi = np.asarray(hi, dtype=float)
+    if np.any(lo > hi):
+        raise InfeasibleWrench(f"empty tension box: lo {np.round(lo, 4).tolist()} > hi {np.round(hi, 4).tolist()} N")
+    t = qpsolvers.solve_qp(np.eye(m), np.zeros(m), A=W, b=np.asarray(f, dtype=float), lb=lo, ub=hi, solver="daqp")
+    if t is None:
+        raise InfeasibleWrench(
+            f"wrench f = {np.round(np.asarray(f, float), 6).tolist()} N cannot be produced with tensions in "
+            f"[{np.round(lo, 4).tolist()}, {np.round(hi, 4).tolist()}] N (QP infeasible, DAQP)"
+        )
+    return np.clip(np.asarray(t, dtype=float), lo, hi)
+
+
+def min_max_lp(W: ArrayLike, f: ArrayLike, lo: ArrayLike, hi: ArrayLike) -> NDArray[np.float64]:
+    """Tensions (m,) [N] minimising the largest tension: min s s.t. t_k − s ≤ 0, W t = f, lo ≤ t ≤ hi (scipy
+    ``linprog``, HiGHS); among the minimisers HiGHS returns a vertex. Raises InfeasibleWrench when infeasible."""
+    from scipy.optimize import linprog
+
+    W = np.asarray(W, dtype=float)
+    n, m = W.shape
+    lo = np.asarray(lo, dtype=float)
+    hi = np.asarray(hi, dtype=float)
+    if np.any(lo > hi):
+        raise InfeasibleWrench(f"empty tension box: lo {np.round(lo, 4).tolist()} > hi {np.round(hi, 4).tolist()} N")
+    c = np.r_[np.zeros(m), 1.0]
+    A_ub = np.hstack([np.eye(m), -np.ones((m, 1))])
+    A_eq = np.hstack([W, np.zeros((n, 1))])
+    bounds = [(float(a), float(b)) for a, b in zip(lo, hi, strict=True)] + [(None, None)]
+    res = linprog(c, A_ub=A_ub, b_ub=np.zeros(m), A_eq=A_eq, b_eq=np.asarray(f, float), bounds=bounds, method="highs")
+    if res.status != 0:
+        raise InfeasibleWrench(
+            f"wrench f = {np.round(np.asarray(f, float), 6).tolist()} N cannot be produced with tensions in "
+            f"[{np.round(lo, 4).tolist()}, {np.round(hi, 4).tolist()}] N (min-max LP: {res.message})"
+        )
+    return np.clip(res.x[:m], lo, hi)
+
+
+def distribute(method: str, W: ArrayLike, f: ArrayLike, lo: ArrayLike, hi: ArrayLike) -> NDArray[np.float64]:
+    """Tensions (T, m) [N] for a batch of poses W (T, n, m), bounds lo/hi (T, m) and one wrench f (n,) by
+    ``method`` (:data:`METHODS`): ``"closed-form"`` (null space, m = n + 1, minimum 2-norm; poses it rejects fall
+    back to the QP), ``"qp"`` (:func:`min_norm_qp`) or ``"lp"`` (:func:`min_max_lp`). NaN rows where infeasible."""
+    if method not in METHODS:
+        raise ParameterError(f"tension method must be one of {', '.join(METHODS)}, got {method!r}")
+    W = np.asarray(W, dtype=float)
+    lo = np.asarray(lo, dtype=float)
+    hi = np.asarray(hi, dtype=float)
+    T, n, m = W.shape
+    t = np.full((T, m), np.nan)
+    if method == "closed-form" and m == n + 1:
+        t = closed_form_batch(W, f, lo, hi).t
+    solve = min_max_lp if method == "lp" else min_norm_qp
+    for i in np.flatnonzero(~np.all(np.isfinite(t), axis=1)):
+        try:
+            t[i] = solve(W[i], f, lo[i], hi[i])
+        except InfeasibleWrench:
+            t[i] = np.nan
+    return t
