@@ -136,16 +136,34 @@ def conditioning(model: EnergyModel, state: State, hessian: np.ndarray, u: np.nd
     end-effector's height moves without the agents moving; at a stretched leg σ_d → 0. ``hessian`` is ∇ₓ²E at
     ``state``.
     """
+    return _condition(_sensitivity_parts(model, state, hessian, u), task_dof(model))
+
+
+class _Parts(NamedTuple):
+    """At a converged state: ju = ∂r/∂x · dx*/du (12, m) [m], the residual-energy curvature d²E/du² (m, m) [m²]."""
+
+    ju: np.ndarray
+    curvature: np.ndarray
+
+
+def _sensitivity_parts(model: EnergyModel, state: State, hessian: np.ndarray, u: np.ndarray) -> _Parts:
+    """ju and d²E(x*(u), u)/du² = ∂²E/∂u² − (∂²E/∂x∂u)ᵀ (∇ₓ²E)⁻¹ ∂²E/∂x∂u; neither depends on the target (∂r/∂x
+    does not), so one evaluation serves the conditioning of a reached state and the Gauss–Newton start of the next
+    step."""
     p = model.params(state.r_ref)
     u = np.asarray(u, float)
     t = model.target_vector(np.zeros(3), np.eye(3))
     _, _, _, exu = model.ik(state.x, u, p, t)
     jr, euu = model.gn(state.x, u, p, t)
     dxdu = -_solve_h(hessian, exu)
-    d = task_dof(model)
     curvature = euu + exu.T @ dxdu
-    _, vec = np.linalg.eigh(0.5 * (curvature + curvature.T))
-    sv = np.linalg.svd(jr @ dxdu @ vec[:, :d], compute_uv=False)
+    return _Parts(jr @ dxdu, 0.5 * (curvature + curvature.T))
+
+
+def _condition(parts: _Parts, d: int) -> tuple[float, float]:
+    """(σ_d, σ_1/σ_d) of ju on the d least-curvature control directions (see :func:`conditioning`)."""
+    _, vec = np.linalg.eigh(parts.curvature)
+    sv = np.linalg.svd(parts.ju @ vec[:, :d], compute_uv=False)
     low = float(sv[d - 1])
     return low, float(sv[0] / low) if low > 0 else float("inf")
 
@@ -157,13 +175,11 @@ def gauss_newton_hessian(model: EnergyModel, sim: SimResult, u: np.ndarray, targ
     (∇ₓ²E)⁻¹ ∂²E/∂x∂u. Tracking part, Gauss–Newton: 2 (∂r/∂x · dx*/du)ᵀ (∂r/∂x · dx*/du) with f = ‖r‖² (the term
     with d²x*/du², which needs third derivatives of E, is dropped; it vanishes with f at the solution).
     """
-    p = model.params(sim.state.r_ref)
-    t = model.target_vector(target.position, target.rotation)
-    _, _, _, exu = model.ik(sim.state.x, u, p, t)
-    jr, euu = model.gn(sim.state.x, u, p, t)
-    dxdu = -_solve_h(sim.hessian, exu)
-    ju = jr @ dxdu
-    b = 2.0 * ju.T @ ju + euu + exu.T @ dxdu
+    return _gn_from(_sensitivity_parts(model, sim.state, sim.hessian, u))
+
+
+def _gn_from(parts: _Parts) -> np.ndarray:
+    b = 2.0 * parts.ju.T @ parts.ju + parts.curvature
     return 0.5 * (b + b.T)
 
 
@@ -242,6 +258,8 @@ class IKResult(NamedTuple):
     time: float
     message: str
     hessian: np.ndarray | None = None
+    start_condition: tuple[float, float] | None = None
+    damped: bool = False
 
 
 def solve_ik(
@@ -254,6 +272,7 @@ def solve_ik(
     gtol: float = 1e-9,
     max_iter: int = 200,
     damping: float = 0.0,
+    condition_limit: float | None = None,
 ) -> IKResult:
     """Controls reaching ``target`` from the warm start (``state``, ``u0``) by BFGS on O(u) (Kumar 2019 §III-B/C).
 
@@ -261,7 +280,9 @@ def solve_ik(
     inverse of :func:`gauss_newton_hessian` at ``u0``; or pass the previous step's ``hess_inv`` along a path).
     ``damping`` λ [m²] ≥ 0 is added to the diagonal of the Gauss–Newton estimate before it is inverted (damped least
     squares: the first BFGS step shrinks in the directions the end-effector barely moves; :func:`track` sets it near
-    singular configurations). It changes only the start of BFGS, not the minimiser.
+    singular configurations). It changes only the start of BFGS, not the minimiser. With ``condition_limit`` and the
+    Gauss–Newton start, the conditioning of the start configuration (:func:`conditioning`, returned as
+    ``start_condition``) decides the damping: above the limit, λ = 2 (σ_1 / ``condition_limit``)² (``damped``).
     Raises :class:`CcmaError` if ``u0`` is not ``model.nu`` finite numbers, the target position not 3 finite numbers
     or the target rotation not a rotation matrix.
     """
@@ -274,8 +295,14 @@ def solve_ik(
             f"{model.system.name}: the forward simulation at u0 did not converge (objective {o0:.3g} m²); start "
             f"from controls close to assemblable ones (e.g. the previous solution) and a state close to them"
         )
+    start = None
     if hess_inv0 is None:
-        b = gauss_newton_hessian(model, obj.best_sim, u0, target)
+        parts = _sensitivity_parts(model, obj.best_sim.state, obj.best_sim.hessian, u0)
+        b = _gn_from(parts)
+        if condition_limit is not None:
+            start = _condition(parts, task_dof(model))
+            if start[1] > condition_limit:
+                damping = max(damping, 2.0 * (start[0] * start[1] / condition_limit) ** 2)
         if damping > 0:
             b = b + damping * np.eye(b.shape[0])
         hess_inv0 = _positive_definite(np.linalg.inv(_positive_definite(b)))
@@ -306,6 +333,8 @@ def solve_ik(
         time=elapsed,
         message=str(res.message),
         hessian=sim.hessian,
+        start_condition=start,
+        damped=damping > 0,
     )
 
 
@@ -356,9 +385,10 @@ def track(
     (``init="gauss-newton"``, :func:`gauss_newton_hessian`) or, after the first step, from the previous step's
     inverse-Hessian estimate (``init="warm"``).
 
-    After every step the conditioning of the end-effector sensitivity is recorded (:func:`conditioning`); when it
-    exceeds ``condition_limit`` the next step is damped: λ = 2 (σ_1 / ``condition_limit``)² [m²] is added to the
-    Gauss–Newton estimate that starts BFGS (:func:`solve_ik`), which bounds that estimate's condition number.
+    After every step the conditioning of the end-effector sensitivity is recorded (:func:`conditioning`, computed
+    by the next step's Gauss–Newton start, which needs the same quantities); when it exceeds ``condition_limit`` the
+    next step is damped: λ = 2 (σ_1 / ``condition_limit``)² [m²] is added to the Gauss–Newton estimate that starts
+    BFGS (:func:`solve_ik`), which bounds that estimate's condition number (``init="warm"``: recorded, no damping).
 
     A target that is missed (position error > 1e-5 m, rotation error > 1e-4 rad or residual energy > the assembly
     tolerance) is solved again from the previous solution in 2, 4, … ``max_substeps`` equal sub-steps (positions
@@ -367,7 +397,8 @@ def track(
     Near a singular configuration the objective has a cusp (e.g. a leg's link passing the horizontal: the height of
     the end-effector grows like the square root of an agent's travel), where one BFGS line search can overshoot to the
     far side; smaller increments stay on the branch (Kumar 2019 §III-D recommends small steps for the same reason).
-    Times, iterations and evaluations of a subdivided target add up all its solves."""
+    Iterations and evaluations of a subdivided target add up all its solves; ``step_time`` is the wall time of the
+    whole step (every solve and the conditioning)."""
     if init not in ("gauss-newton", "warm"):
         raise ValueError(f"init must be 'gauss-newton' or 'warm', got {init!r}")
     from tmr.ccma.sim import reference_state
@@ -387,35 +418,42 @@ def track(
     states: list[State] = []
     cond, smin, damped, subs = np.zeros(k), np.zeros(k), np.zeros(k, bool), np.ones(k, int)
     hinv = None
-    lam = 0.0
+    lim = condition_limit if init == "gauss-newton" else None
     prev = Target(*end_effector_pose(model, st))
     ok_prev = True
+    last: IKResult | None = None
     for i in range(k):
-        damped[i] = lam > 0
         target = Target(positions[i], rotations[i])
-        r = solve_ik(model, st, u, target, hess_inv0=hinv, gtol=gtol, damping=lam)
-        spent = (r.iterations, r.evaluations, r.newton_iterations, r.time)
+        t_step = time.perf_counter()
+        r = solve_ik(model, st, u, target, hess_inv0=hinv, gtol=gtol, condition_limit=lim)
+        damped[i] = r.damped
+        if i > 0:  # the conditioning of the previous step's state, found by this step's Gauss–Newton start
+            assert last is not None and last.hessian is not None
+            start = r.start_condition or conditioning(model, last.state, last.hessian, last.u)
+            smin[i - 1], cond[i - 1] = start
+        spent = (r.iterations, r.evaluations, r.newton_iterations)
         n = 2 if ok_prev else max_substeps + 1
         while not _step_reached(model, r, target) and n <= max_substeps:
-            sub = _subdivided(model, st, u, prev, target, n, gtol, lam)
-            spent = tuple(a + b for a, b in zip(spent, sub[1], strict=True))  # type: ignore[assignment]
+            sub = _subdivided(model, st, u, prev, target, n, gtol, lim)
+            spent = tuple(a + b for a, b in zip(spent, sub[1][:3], strict=True))  # type: ignore[assignment]
             if _step_reached(model, sub[0], target):
                 r, subs[i] = sub[0], n
                 break
             n *= 2
-        prev, ok_prev = target, _step_reached(model, r, target)
+        prev, ok_prev, last = target, _step_reached(model, r, target), r
         st, u = r.state, r.u
         hinv = r.hess_inv if init == "warm" else None
-        assert r.hessian is not None
-        smin[i], cond[i] = conditioning(model, st, r.hessian, u)
-        lam = 2.0 * (smin[i] * cond[i] / condition_limit) ** 2 if cond[i] > condition_limit else 0.0
+        if i == k - 1:
+            assert r.hessian is not None
+            smin[i], cond[i] = conditioning(model, st, r.hessian, u)
         out_u[i] = u
         agents[i] = agent_poses(model, st)
         pe[i], re[i] = end_effector_pose(model, st)
         perr[i] = np.linalg.norm(pe[i] - positions[i])
         rerr[i] = rotation_angle(re[i], rotations[i])
         resid[i] = r.residual
-        its[i], evals[i], nits[i], times[i] = spent
+        its[i], evals[i], nits[i] = spent
+        times[i] = time.perf_counter() - t_step  # IK solve(s) + the conditioning: the whole cost of the step
         hist.append(r.history)
         if keep_states:
             states.append(st.copy())
@@ -435,7 +473,7 @@ def _step_reached(model: EnergyModel, r: IKResult, target: Target) -> bool:
 
 
 def _subdivided(
-    model: EnergyModel, st: State, u: np.ndarray, start: Target, target: Target, n: int, gtol: float, lam: float
+    model: EnergyModel, st: State, u: np.ndarray, start: Target, target: Target, n: int, gtol: float, lim: float | None
 ) -> tuple[IKResult, tuple[int, int, int, float]]:
     """Solve ``target`` from (``st``, ``u``) in ``n`` equal sub-steps from ``start``; the last result and the summed
     iterations, evaluations, Newton iterations and time [s]."""
@@ -446,7 +484,7 @@ def _subdivided(
     r = None
     for s in np.arange(1, n + 1) / n:
         sub = Target(start.position + s * (target.position - start.position), slerp([s]).as_matrix()[0])
-        r = solve_ik(model, st, u, sub, gtol=gtol, damping=lam)
+        r = solve_ik(model, st, u, sub, gtol=gtol, condition_limit=lim)
         st, u = r.state, r.u
         total = (total[0] + r.iterations, total[1] + r.evaluations, total[2] + r.newton_iterations, total[3] + r.time)
     assert r is not None
