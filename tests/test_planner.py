@@ -124,3 +124,13 @@ def test_rrt_route_plans_one_rrt_star_path_for_start_and_leader(monkeypatch):
 def test_bounds_of_every_parameter_set(cls, field):
     with pytest.raises(ParameterError, match=field):
         cls(**{field: -1.0})
+
+
+def test_build_problem_takes_the_environments_robot_radius():
+    """One robot radius: the chain's r is the one the obstacles are grown by, a different one is refused."""
+    sc = load_scenario("A", safety_radius=0.3)
+    problem = build_problem(sc)
+    assert problem.chain_params.safety_radius == 0.3
+    assert problem.span_limits[0, 0] == pytest.approx(0.3) and problem.span_limits[1, 0] == pytest.approx(0.6)
+    with pytest.raises(ParameterError, match="grown by 0.3 m"):
+        build_problem(sc, overrides={"safety_radius": 0.5})

@@ -271,3 +271,21 @@ def test_direct_construction_validates() -> None:
     assert sc.n_robots == 2 and isinstance(sc.n_robots, int)
     with pytest.raises(ParameterError, match="robots must be >= 1"):
         Scenario("x", "", env, np.array([1.0, 1.0]), np.array([9.0, 9.0]), None, -1)
+
+
+def test_one_robot_radius_from_the_caller_or_the_file(tmp_path):
+    """load_scenario grows the obstacles by the caller's r (base and goal checked with it); a file's [params]
+    safety_radius is the chain's and the map's r at once."""
+    sc = load_scenario("A", safety_radius=0.3)
+    assert sc.environment.safety_radius == 0.3
+    assert sc.environment.obstacles.equals(load_scenario("A").environment.obstacles)
+    assert sc.environment.free.area > load_scenario("A").environment.free.area  # less grown, more free space
+    (tmp_path / "room.geojson").write_text('{"type": "FeatureCollection", "bounds": [0, 0, 8, 6], "features": []}')
+    (tmp_path / "room.toml").write_text(
+        'base = [1, 3]\ngoal = [7, 3]\n[map]\nfile = "room.geojson"\nsafety_radius = 0.5\n'
+        "[params]\nsafety_radius = 0.2\n"
+    )
+    sc = load_scenario(tmp_path / "room.toml")
+    assert sc.environment.safety_radius == 0.2 and sc.params["safety_radius"] == 0.2
+    sc = load_scenario(tmp_path / "room.toml", safety_radius=0.25)
+    assert sc.environment.safety_radius == 0.25 and sc.params["safety_radius"] == 0.25
