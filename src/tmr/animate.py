@@ -249,16 +249,26 @@ def render_frame(motion: Motion, k: int, path: str | os.PathLike[str], dpi: int 
 
 
 def write_gif(
-    motion: Motion, path: str | os.PathLike[str], fps: float = 10.0, dpi: int = 80, max_frames: int = 200
+    motion: Motion,
+    path: str | os.PathLike[str],
+    fps: float = 10.0,
+    dpi: int = 80,
+    max_frames: int = 200,
+    progress: bool = False,
 ) -> Path:
     """Write the animation of ``motion`` as a GIF at ``path`` (atomic: a temporary file, then renamed); return
-    the path. ``fps`` frames per second; ``dpi`` sets the size (6.4 in wide → 512 px at 80 dpi)."""
+    the path. ``fps`` frames per second; ``dpi`` sets the size (6.4 in wide → 512 px at 80 dpi); ``progress``: a
+    tqdm bar over the frames on stderr."""
     import tempfile
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     sc = _Scene(motion, dpi=dpi)
-    images = [im.convert("RGB") for im in sc.frames(frame_indices(motion, fps, max_frames))]
+    from tqdm import tqdm
+
+    idx = frame_indices(motion, fps, max_frames)
+    frames = tqdm(sc.frames(idx), total=len(idx), desc="gif frames", unit="frame", leave=False, disable=not progress)
+    images = [im.convert("RGB") for im in frames]
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".gif")
     os.close(fd)
     try:  # as matplotlib's PillowWriter saves its frames, with the frames drawn by blitting

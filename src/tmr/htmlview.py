@@ -46,8 +46,10 @@ def _disc(x: float, y: float, r: float, n: int = 32) -> tuple[list[float], list[
     return (x + r * np.cos(a)).tolist(), (y + r * np.sin(a)).tolist()
 
 
-def _moving(motion: Motion, k: int) -> list[dict[str, Any]]:
-    """Data of the moving traces at sample ``k`` (same order as the traces made by :func:`build_figure`)."""
+def _moving(motion: Motion, k: int, shown: np.ndarray | None = None) -> list[dict[str, Any]]:
+    """Data of the moving traces at sample ``k`` (same order as the traces made by :func:`build_figure`); the trail
+    goes through the ``shown`` samples up to ``k`` (every sample if None), so the file grows with the frames, not
+    with the samples squared."""
     out: list[dict[str, Any]] = []
     for ln in motion.lines:
         p = ln.points[k]
@@ -59,7 +61,8 @@ def _moving(motion: Motion, k: int) -> list[dict[str, Any]]:
         out.append({"x": p[:, 0].tolist(), "y": p[:, 1].tolist(), "text": [text] * len(p)})
     if motion.trail is not None:
         tr = motion.track(motion.trail)
-        out.append({"x": tr.xyz[: k + 1, 0].tolist(), "y": tr.xyz[: k + 1, 1].tolist()})
+        upto = np.arange(k + 1) if shown is None else np.append(shown[shown < k], k)
+        out.append({"x": tr.xyz[upto, 0].tolist(), "y": tr.xyz[upto, 1].tolist()})
     for tr in motion.tracks:
         x, y, z = (float(v) for v in tr.xyz[k])
         label = f"{tr.name}: ({x:.3f}, {y:.3f}, {z:.3f}) m"
@@ -214,7 +217,7 @@ def build_figure(motion: Motion, max_frames: int = 200) -> Any:
     idx = frame_indices(motion, fps=10.0, max_frames=max_frames)
     frames = []
     for k in idx:
-        data = [go.Scatter(**d) for d in _moving(motion, int(k))]
+        data = [go.Scatter(**d) for d in _moving(motion, int(k), idx)]
         frames.append(
             go.Frame(data=data, traces=moving_ids, name=str(int(k)), layout={"title": {"text": _title(motion, int(k))}})
         )

@@ -79,25 +79,24 @@ def write_views(args: argparse.Namespace, out: Path, motion: Callable[[], Any]) 
         shutil.rmtree(out / BAG_DIR)
     if not (gif or html or fmt):
         return []
+    from tmr.console import progress_enabled
+
+    bar = progress_enabled()  # on a terminal, not with --quiet
     m = motion()
     written: list[str] = []
-    with _progress(int(gif) + int(html) + int(bool(fmt)), "views") as bar:
-        if fmt:
-            from tmr.export.rosbag import write_bag
+    if fmt:
+        from tmr.export.rosbag import write_bag
 
-            write_bag(m, out / BAG_DIR, storage=fmt)
-            written.append(BAG_DIR)
-            bar.update()
-        if html:
-            from tmr.htmlview import write_html
+        write_bag(m, out / BAG_DIR, storage=fmt, progress=bar)
+        written.append(BAG_DIR)
+    if html:
+        from tmr.htmlview import write_html
 
-            write_html(m, out / HTML_NAME)
-            written.append(HTML_NAME)
-            bar.update()
-        if gif:
-            from tmr.animate import write_gif
+        write_html(m, out / HTML_NAME)
+        written.append(HTML_NAME)
+    if gif:
+        from tmr.animate import write_gif
 
-            write_gif(m, out / GIF_NAME)
-            written.append(GIF_NAME)
-            bar.update()
+        write_gif(m, out / GIF_NAME, progress=bar)
+        written.append(GIF_NAME)
     return written

@@ -11,7 +11,8 @@ Open the bag in Foxglove (File → Open local file → ``ros2_bag/ros2_bag.mcap`
 ``ros2 bag play RUN_DIR/ros2_bag`` (ROS 2 Jazzy or newer; MCAP storage plugin).
 
 Exit codes: 0 written; 2 bad input (not a run directory, an older run without ``run.json``, an ``--out`` that is
-a file or a non-bag directory; one line on stderr, nothing written).
+a file or a non-bag directory; one line on stderr, nothing written); 130 interrupted (Ctrl-C: every output goes
+to a temporary name and is renamed when complete, so nothing half-written is left). A progress bar on a terminal.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import os
 import sys
 from pathlib import Path
 
-from tmr.console import LOG, add_manners
+from tmr.console import LOG, add_manners, progress_enabled
 from tmr.console import run as run_cli
 from tmr.errors import TmrError
 
@@ -112,12 +113,12 @@ def _main(args: argparse.Namespace) -> int:
     if args.format in ("mcap", "sqlite3"):
         from tmr.export.rosbag import topics, write_bag
 
-        write_bag(motion, out, storage=args.format)
+        write_bag(motion, out, storage=args.format, progress=progress_enabled())
         what = f"ROS 2 bag ({args.format}, {len(topics(motion))} topics, {motion.n_samples} samples)"
     elif args.format == "gif":
         from tmr.animate import frame_indices, write_gif
 
-        write_gif(motion, out)
+        write_gif(motion, out, progress=progress_enabled())
         what = f"animation ({len(frame_indices(motion))} frames, {out.stat().st_size / 1e6:.2f} MB)"
     else:
         from tmr.htmlview import write_html

@@ -203,11 +203,13 @@ def _scene_markers(m: _Msgs, motion: Motion, ns0: int) -> list[Any]:
     return out
 
 
-def write_bag(motion: Motion, path: str | os.PathLike[str], overwrite: bool = True, storage: str = "mcap") -> Path:
+def write_bag(
+    motion: Motion, path: str | os.PathLike[str], overwrite: bool = True, storage: str = "mcap", progress: bool = False
+) -> Path:
     """Write ``motion`` as a rosbag2 directory (rosbag2 metadata version 9) at ``path``; return the path.
 
     ``storage``: ``"mcap"`` (default; Foxglove opens it directly, ``ros2 bag play`` with the MCAP plugin) or
-    ``"sqlite3"`` (rosbag2's older default).
+    ``"sqlite3"`` (rosbag2's older default). ``progress``: a tqdm bar over the samples on stderr.
 
     The bag is written into a temporary sibling directory and moved to ``path`` only when complete, replacing an
     older bag there if ``overwrite`` (else :class:`tmr.errors.TmrError` when ``path`` exists).
@@ -282,7 +284,9 @@ def write_bag(motion: Motion, path: str | os.PathLike[str], overwrite: bool = Tr
             # per sample
             TS = ts.types["geometry_msgs/msg/TransformStamped"]
             MA = ts.types["visualization_msgs/msg/MarkerArray"]
-            for k, s in enumerate(stamps):
+            from tqdm import tqdm
+
+            for k, s in enumerate(tqdm(stamps, desc="bag samples", unit="sample", leave=False, disable=not progress)):
                 for tr in motion.tracks:
                     msg = ts.types["geometry_msgs/msg/PoseStamped"](
                         header=m.header(s), pose=m.pose(tr.xyz[k], _yaw(tr, k))
