@@ -12,7 +12,7 @@ from tmr.chain import Chain
 from tmr.clik import run
 from tmr.environment import Environment
 from tmr.errors import InfeasibleStep, ParameterError
-from tmr.formulations.qp import Level, LexicographicQP, orthonormal_rows, solvers
+from tmr.formulations.qp import OSQP_COARSE, Level, LexicographicQP, orthonormal_rows, solvers
 from tmr.limits import JointBox, Limit, LimitRows, ObstacleClearance, RobotSeparation, RobotSpeed, link_pattern
 from tmr.planner import build_problem, make_qp, plan, solve
 from tmr.scenario import Scenario
@@ -195,8 +195,12 @@ def test_warm_active_set_and_osqp_give_the_same_plan(route):
     cold.warm_start = False
     a, b = plan(problem, warm), plan(problem, cold)
     assert a.success == b.success
-    if route == "rrt":  # (the route followers of the default route make a few steps change their active set)
-        assert np.nansum(a.diagnostics["solver_iterations"]) == 0  # every level settled by one verified KKT solve
+    # nearly every step is settled by one verified KKT solve from the previous active set; OSQP runs on the few steps
+    # where the active set changes (one step on each route here), its coarse pass finding the new one
+    osqp_steps = np.count_nonzero(np.nan_to_num(a.diagnostics["solver_iterations"]) > 0)
+    assert osqp_steps <= 3, osqp_steps
+    assert np.nanmax(a.diagnostics["solver_iterations"]) <= OSQP_COARSE["max_iter"]  # no tight 1e-8 run was needed
+    assert np.nansum(a.diagnostics["solver_iterations"]) < 0.05 * np.nansum(b.diagnostics["solver_iterations"])
     assert np.nansum(b.diagnostics["solver_iterations"]) > 0  # OSQP iterated
     # OSQP's answers are polished to their exact KKT point (or, if that does not verify, checked by DAQP)
     np.testing.assert_allclose(a.q, b.q, atol=1e-8)
