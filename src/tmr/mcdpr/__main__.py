@@ -84,7 +84,100 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     add_view_args(pl)  # --gif, --html, --export FORMAT (tmr.views)
     add_manners(pl)
+    ws = sub.add_parser("workspace", help="map of μ over platform positions with the bases parked (wrench-feasible)")
+    ws.add_argument("--scene", default="fig2", help="built-in scene name or scene TOML file (default fig2)")
+    ws.add_argument("--robot", help="robot TOML file (default: the shipped MoPICK description)")
+    ws.add_argument("--bases", type=_points, help="parked bases X1,Y1;X2,Y2;... [m] (default: the scene's start)")
+    ws.add_argument("--z", type=_positive, help="platform height [m] (default: the first task point's)")
+    ws.add_argument("--cell", type=_positive, default=0.05, help="grid cell [m] (0.05)")
+    ws.add_argument("--external", type=_triple, help="external wrench box half-widths FX,FY,FZ [N] (scene's)")
+    ws.add_argument("--out", default="runs/mcdpr_workspace", help="output directory (default runs/mcdpr_workspace)")
+    add_manners(ws)
     return p
+
+
+def _points(text: str) -> list[tuple[float, float]]:
+    try:
+        pts = [tuple(float(v) for v in item.split(",")) for item in text.split(";") if item.strip()]
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected X1,Y1;X2,Y2;... in metres, got {text!r}") from exc
+    if not pts or any(len(q) != 2 or not all(math.isfinite(v) for v in q) for q in pts):
+        raise argparse.ArgumentTypeError(f"expected X1,Y1;X2,Y2;... (finite numbers), got {text!r}")
+    return pts  # type: ignore[return-value]
+
+
+#: Files written by ``workspace``.
+WORKSPACE_NAMES = ("workspace.json", "workspace.csv", "workspace.png")
+
+
+def workspace_main(args: argparse.Namespace) -> int:
+    """``python -m tmr.mcdpr workspace``: μ map (CSV), summary (JSON) and figure; exit 2 on bad input (nothing
+    written)."""
+    import dataclasses
+
+    from tmr.io import atomic_write_text
+    from tmr.mcdpr.capacity import required_wrench_set
+    from tmr.mcdpr.plot import plot_workspace
+    from tmr.mcdpr.robot import load_robot, mopick
+    from tmr.mcdpr.scene import load_scene
+    from tmr.mcdpr.workspace import workspace
+
+    try:
+        out = Path(args.out)
+        check_out_dir(out)
+        robot = load_robot(args.robot) if args.robot else mopick()
+        scene = load_scene(args.scene)
+        if args.external is not None:
+            scene = dataclasses.replace(scene, external=np.array(args.external))
+        if args.bases is not None:
+            if len(args.bases) != robot.n_bases:
+                raise TmrError(f"--bases: {robot.n_bases} base positions needed, got {len(args.bases)}")
+            scene = dataclasses.replace(scene, bases=np.array(args.bases, dtype=float))
+        scene.validate(robot)
+        z = float(scene.tasks[0, 2]) if args.z is None else args.z
+        t0 = time.perf_counter()
+        rws = required_wrench_set(robot, scene.external)
+        ws = workspace(robot, scene.bases, scene.headings, rws, scene.bounds, z, args.cell)
+        wall = time.perf_counter() - t0
+        k = int(np.argmax(ws.mu))
+        summary = {
+            "format": "tmr-mcdpr-workspace/1",
+            "robot": robot.name,
+            "scene": scene.name,
+            "bases": scene.bases,
+            "headings": scene.headings,
+            "external": scene.external,
+            "z": ws.z,
+            "cell": ws.cell,
+            "nx": len(ws.x),
+            "ny": len(ws.y),
+            "area_feasible_m2": ws.area,
+            "mu_max": float(ws.mu.flat[k]),
+            "mu_max_at": [float(ws.x[k % len(ws.x)]), float(ws.y[k // len(ws.x)])],
+        }
+        X, Y = np.meshgrid(ws.x, ws.y)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out if out.is_dir() else _existing_ancestor(out)))
+        try:
+            atomic_write_text(tmp / "workspace.json", json.dumps(_jsonable(summary), indent=1, sort_keys=True) + "\n")
+            floats = np.column_stack([X.ravel(), Y.ravel(), ws.mu.ravel()])
+            atomic_write_text(tmp / "workspace.csv", _csv(["x", "y", "mu"], np.zeros((X.size, 0), int), floats))
+            plot_workspace(robot, scene, ws, scene.bases, tmp / "workspace.png")
+            out.mkdir(parents=True, exist_ok=True)
+            for name in WORKSPACE_NAMES:
+                os.replace(tmp / name, out / name)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+    except TmrError as exc:
+        LOG.error(f"error: {exc}")
+        return 2
+    except OSError as exc:
+        LOG.error(f"error: cannot write the outputs to {args.out}: {exc}")
+        return 2
+    LOG.info(f"tmr.mcdpr workspace: robot {robot.name}, scene {scene.name}, z = {ws.z:g} m, {ws.mu.size} positions")
+    LOG.info(f"  feasible area {ws.area:.4g} m² (μ > 0), max μ {summary['mu_max']:.4g} N at {summary['mu_max_at']}")
+    LOG.info(f"  wall_time     {wall:.3f} s")
+    LOG.info(f"  wrote {', '.join(WORKSPACE_NAMES)} to {args.out}")
+    return 0
 
 
 def _jsonable(x: Any) -> Any:
@@ -240,6 +333,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(args: argparse.Namespace) -> int:
+    if args.command == "workspace":
+        return workspace_main(args)
     try:
         import dataclasses
 

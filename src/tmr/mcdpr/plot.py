@@ -18,7 +18,7 @@ from tmr.mcdpr.planner import Plan  # noqa: E402
 from tmr.mcdpr.robot import Robot  # noqa: E402
 from tmr.mcdpr.scene import Scene  # noqa: E402
 
-__all__ = ["plot_mu", "plot_tensions", "plot_topview"]
+__all__ = ["plot_mu", "plot_tensions", "plot_topview", "plot_workspace"]
 
 _COLORS = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive"]
 
@@ -148,6 +148,58 @@ def plot_tensions(robot: Robot, result: Plan, path: str | Path) -> Path:
     ax.set_ylabel("tension [N]")
     ax.set_title("tensions holding the platform weight (solid) and tipping-tightened bounds (dashed)")
     ax.legend(fontsize=8, ncol=5)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_workspace(robot: Robot, scene: Scene, ws: object, bases: np.ndarray, path: str | Path) -> Path:
+    """Map of the capacity margin μ [N] over platform positions at one height with the bases parked, the
+    wrench-feasible workspace (μ > 0) outlined, tables/obstacles and the bases (Rasheed 2019 eq. 8)."""
+    from matplotlib.colors import TwoSlopeNorm
+
+    fig, ax = plt.subplots(figsize=(10, 7.5))
+    mu = np.where(np.isfinite(ws.mu), ws.mu, np.nan)
+    lo = float(np.nanmin(mu)) if np.isfinite(np.nanmin(mu)) else -1.0
+    hi = float(np.nanmax(mu))
+    span = max(hi, 1.0)  # negative margins are clipped at −max μ (far outside the workspace they dive)
+    norm = TwoSlopeNorm(vcenter=0.0, vmin=max(min(lo, -1e-3), -span), vmax=max(hi, 1e-3))
+    x0, y0, x1, y1 = scene.bounds
+    im = ax.imshow(
+        mu,
+        origin="lower",
+        extent=(ws.x[0] - ws.cell / 2, ws.x[-1] + ws.cell / 2, ws.y[0] - ws.cell / 2, ws.y[-1] + ws.cell / 2),
+        cmap="RdYlGn",
+        norm=norm,
+        interpolation="nearest",
+    )
+    fig.colorbar(im, ax=ax, label="capacity margin μ [N]", shrink=0.8, extend="min" if lo < -span else "neither")
+    if np.nanmax(mu) > 0 > np.nanmin(mu):
+        ax.contour(ws.x, ws.y, mu, levels=[0.0], colors="k", linewidths=1.5)
+    for t in scene.tables:
+        _polys(ax, t, facecolor="none", edgecolor="saddlebrown", lw=1.2, hatch="//")
+    for cx, cy, r in scene.discs:
+        ax.add_patch(Circle((cx, cy), r, facecolor="none", edgecolor="black", lw=1.0, hatch="xx"))
+    for j in range(robot.n_bases):
+        c = _COLORS[j % len(_COLORS)]
+        ax.add_patch(Circle(bases[j], robot.base_radius, facecolor="white", edgecolor=c, lw=2.0))
+        ax.annotate(f"{j + 1}", bases[j], ha="center", va="center", fontsize=9, color=c)
+    ax.plot([x0, x1, x1, x0, x0], [y0, y0, y1, y1, y0], "k-", lw=1.5)
+    ax.plot([], [], "k-", lw=1.5, label="μ = 0: border of the wrench-feasible workspace")
+    ax.plot([], [], "o", mfc="white", mec="k", ms=9, label="parked bases")
+    ax.set_xlim(x0 - 0.2, x1 + 0.2)
+    ax.set_ylim(y0 - 0.2, y1 + 0.2)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(
+        f"{robot.name}, scene {scene.name}: wrench-feasible workspace at z = {ws.z:g} m "
+        f"(area {ws.area:.2f} m², max μ {hi:.2f} N)",
+        fontsize=10,
+    )
+    ax.legend(loc="upper left", fontsize=8, framealpha=0.85)
     fig.tight_layout()
     path = Path(path)
     fig.savefig(path, dpi=110)
