@@ -451,6 +451,17 @@ def _main(args: argparse.Namespace) -> int:
         check_out(Path(args.out))
         scenario = load_inputs(args)
         rt, n_first = precheck(args, scenario)
+        env = scenario.environment
+        LOG.debug(
+            "map %s: room %s m, robot radius r = %g m (obstacles grown by r, robots >= %g m apart)",
+            env.source or scenario.name,
+            env.bounds,
+            env.safety_radius,
+            2 * env.safety_radius,
+        )
+        LOG.debug(
+            "route %.3f m, N_lower = %d, N_min = %d; planning with N = %s", rt.length, rt.n_lower, rt.n_min, n_first
+        )
 
         from tmr.metrics import filter_trajectories
 
