@@ -72,12 +72,25 @@ class _Scene:
         self.m = motion
         x0, y0, x1, y1 = motion.extent(pad=0.3)
         aspect = (y1 - y0) / max(x1 - x0, 1e-9)
-        self.fig = Figure(
-            figsize=(width, min(max(0.8 * width * aspect + 1.3, 3.5), 9.0)), dpi=dpi, layout="constrained"
-        )
+        # MoPICK and CCMA move in height too: a side view (x–z, same x scale) under the top view
+        self.side = motion.system in ("mcdpr", "ccma")
+        z0, z1 = 0.0, 1.0
+        if self.side:
+            zs = [np.asarray(tr.xyz)[:, 2] for tr in motion.tracks] + [
+                np.asarray(ln.points)[..., 2].ravel() for ln in motion.lines
+            ]
+            zall = np.concatenate(zs)
+            z0, z1 = min(0.0, float(zall.min())) - 0.1, float(zall.max()) + 0.15
+        zaspect = (z1 - z0) / max(x1 - x0, 1e-9) if self.side else 0.0
+        height = 0.8 * width * (aspect + zaspect) + 1.3 + (0.5 if self.side else 0.0)
+        self.fig = Figure(figsize=(width, min(max(height, 3.5), 9.5)), dpi=dpi, layout="constrained")
         FigureCanvasAgg(self.fig)
-        ax = self.fig.add_subplot()
+        if self.side:
+            ax, axz = self.fig.subplots(2, 1, sharex=True, height_ratios=[y1 - y0, max(z1 - z0, 0.25 * (y1 - y0))])
+        else:
+            ax, axz = self.fig.add_subplot(), None
         self.ax = ax
+        self.axz = axz
         handles: list[Any] = []
         if motion.obstacles:
             path = MplPath.make_compound_path(*[_polygon_path(p) for p in motion.obstacles])
@@ -181,14 +194,46 @@ class _Scene:
         ax.set_ylabel("y [m]")
         ax.grid(True, lw=0.3, alpha=0.5)
         ax.set_title(motion.title, fontsize=10)
+        if axz is not None:
+            self._side_view(axz, x0, x1, z0, z1)
+            ax.set_xlabel("")
         self.fig.legend(handles=handles, loc="outside lower center", ncols=4, fontsize=7, frameon=False)
         self.update(0)
         self.fig.canvas.draw()  # lay out once (constrained), then keep that layout for every frame (fast, steady)
         self.fig.set_layout_engine("none")
 
+    def _side_view(self, axz: Any, x0: float, x1: float, z0: float, z1: float) -> None:
+        """Side view: the floor, fixed points, and per frame the lines, bodies and trail projected on x–z."""
+        from matplotlib.collections import LineCollection
+
+        m = self.m
+        axz.axhline(0.0, color="black", lw=1.2, zorder=1)
+        for p in m.points.values():
+            axz.plot(p[0], p[2], "X", ms=7, color="#2ca02c", mec="black", mew=0.5, zorder=8)
+        self.side_lc = LineCollection(
+            [], colors=[_LINE_COLOR.get(ln.kind, "#5b2c83") for ln in m.lines], linewidths=1.6, zorder=5
+        )
+        axz.add_collection(self.side_lc)
+        self.side_dots = [
+            axz.plot(
+                [], [], "o", ms=6, color=_ROLE_STYLE.get(tr.role, ("#1f77b4", ""))[0], mec="black", mew=0.4, zorder=7
+            )[0]
+            for tr in m.tracks
+        ]
+        (self.side_trail,) = axz.plot([], [], color=_TRAIL, lw=1.6, zorder=4.5)
+        axz.set_xlim(x0, x1)
+        axz.set_ylim(z0, z1)
+        axz.set_aspect("equal")
+        axz.set_xlabel("x [m]")
+        axz.set_ylabel("z [m]")
+        axz.grid(True, lw=0.3, alpha=0.5)
+        axz.set_title("side view (x–z)", fontsize=8)
+
     def animated(self) -> list[Any]:
         """The artists that change from frame to frame."""
         out: list[Any] = [self.plain_lc, self.clock]
+        if self.axz is not None:
+            out += [self.side_lc, self.side_trail, *self.side_dots]
         if self.tethers:
             out.append(self.tether_lc)
         if self.trail is not None:
@@ -218,6 +263,12 @@ class _Scene:
                 label.set_position((x, y + 1.05 * tr.radius))
                 label.set_text(tr.name.replace("robot", "R").replace("base", "B"))
         self.clock.set_text(_stamp(m, k))
+        if self.axz is not None:
+            self.side_lc.set_segments([ln.points[k][:, [0, 2]] for ln in m.lines])
+            for tr, dot in zip(m.tracks, self.side_dots, strict=True):
+                dot.set_data([tr.xyz[k, 0]], [tr.xyz[k, 2]])
+            if self.trail is not None:
+                self.side_trail.set_data(self.trail.xyz[: k + 1, 0], self.trail.xyz[: k + 1, 2])
 
     def frames(self, indices: np.ndarray) -> Any:
         """RGBA images of the given samples: the static layer is drawn once, then only the moving artists are
@@ -234,7 +285,7 @@ class _Scene:
             canvas.restore_region(background)
             self.update(int(k))
             for a in moving:
-                self.ax.draw_artist(a)
+                a.axes.draw_artist(a)
             buf = canvas.buffer_rgba()
             yield Image.frombuffer("RGBA", (buf.shape[1], buf.shape[0]), bytes(buf), "raw", "RGBA", 0, 1)
 
