@@ -141,7 +141,9 @@ def test_path_errors_exit_2_before_anything(tmp_path, capsys, args, message):
 
 def test_list(capsys):
     assert main(["list"]) == 0
-    assert "4dof-reduced     3 agents, 6 controls" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "4dof-reduced     3 agents, 6 controls" in out and "reduced actuation; Kumar 2019 Fig. 3(a)" in out
+    assert "4dof-2agents     2 agents" in out and "4dof-4agents     4 agents" in out
 
 
 @pytest.mark.parametrize("where", ["file", "file/sub"])

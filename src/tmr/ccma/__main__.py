@@ -395,7 +395,7 @@ def _main(args: argparse.Namespace) -> int:
             acts = sorted({a.actuation for a in s.agents})
             print(
                 f"{name:16s} {len(s.agents)} agents, {s.n_controls} controls, {s.n_bodies} bodies, "
-                f"{'/'.join(acts)} actuation"
+                f"{'/'.join(acts)} actuation; {s.description.get('figure', 'no figure')}"
             )  # the listing is the product of 'list': on stdout even with --quiet
         return 0
     return run(args)
