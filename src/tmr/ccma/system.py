@@ -6,6 +6,7 @@ end-effector body. Changing the number of agents, the chain morphology or the ac
 description only — no code changes (the point of Kumar 2019). Schema (lengths in m, angles in rad)::
 
     name = "4dof-reduced"
+    figure = "Kumar 2019 Fig. 3(a)"  # what the description follows (optional; shown by 'list')
     length_scale = 0.1              # ℓ: weight of orientation rows of C [m] (optional)
 
     [[bodies]]                      # passive links and the end-effector
