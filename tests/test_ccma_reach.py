@@ -128,3 +128,15 @@ def test_no_leg_no_bound():
     assert height_range(s) == (pytest.approx(0.1), pytest.approx(0.1))
     v = check_reach(s, np.array([[0.5, 0, 0.1], [0, 0, 0.2]]), np.tile(np.eye(3), (2, 1, 1)))
     assert not v.ok and v.step == 2 and v.excess == pytest.approx(0.1)
+
+
+def test_a_prismatic_leg_gets_no_bound():
+    """A sliding elbow separates the joint points: the rigid-span bound would refuse reachable targets, so the leg
+    is left out (the other legs still bound the end-effector)."""
+    desc = load_description("4dof-reduced")
+    for j in desc["joints"]:
+        if j["name"] == "elbow_a":
+            j["type"] = "prismatic"
+            j["axis"] = [0.0, 0.0, 1.0]
+    s = build_system(desc)
+    assert [leg.agent for leg in legs(s)] == ["agent_b", "agent_c"]

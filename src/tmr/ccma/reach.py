@@ -14,7 +14,9 @@ link's vector d = P(j_1) − P(j_2) keeps its component c = d·n along a revolut
 its vertical component lies in c n_z ± √(L² − c²)·√(1 − n_z²). At the end-effector end n = R_t n_EE depends on the
 target; at the base end n_z is constant (the base only yaws). For the shipped legs (revolute or universal elbow,
 revolute wrist) these intervals are the reach of the leg: the agent can put the elbow anywhere on the floor, and the
-legs are independent once the end-effector pose is fixed. The bound ignores collisions between links.
+legs are independent once the end-effector pose is fixed. The bound ignores collisions between links. A leg with a
+prismatic joint has no rigid span and gets no bound; neither does an agent whose base reaches the end-effector only
+through other agents.
 
 :func:`check_reach` returns a :class:`ReachVerdict` for all targets of a path: the first target outside the bound,
 the leg and by how much (the CLI turns it into exit 1 before any IK step), and the smallest margin of every target.
@@ -142,7 +144,8 @@ def _path_to(system: System, base: int) -> tuple[list[int], list[int]] | None:
 
 
 def legs(system: System) -> list[Leg]:
-    """The leg of every agent whose base is connected to the end-effector through passive joints."""
+    """The leg of every agent whose base is connected to the end-effector through passive joints (none through a
+    prismatic joint)."""
     ee = system.ee_body
     out = []
     for ag in system.agents:
@@ -153,6 +156,8 @@ def legs(system: System) -> list[Leg]:
             continue
         chain, jidx = found
         js = [system.joints[k] for k in jidx]
+        if any(j.type == "prismatic" for j in js):  # a slide separates the joint points: no rigid span, no bound
+            continue
         names = tuple(system.body_names[b] for b in chain)
         if not js:  # the agent carries the end-effector itself: the mount point keeps its height
             anchor = _anchor(mount, ee)
