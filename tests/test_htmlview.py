@@ -54,6 +54,20 @@ def test_frame_data_is_the_plan(chain):
         assert list(trail.x) == plan.robots[shown, n - 1, 0].tolist()  # through the shown samples, ends at k
 
 
+def test_mopick_side_view_shows_heights():
+    """MoPICK and CCMA get a side view (x–z, equal scale): the platform's height is its z, cables end on it."""
+    robot, scene, res = mopick_plan(n=5)
+    m = mcdpr_motion(robot, scene, res)
+    fig = build_figure(m)
+    assert fig.layout.yaxis2.scaleanchor == "x2" and fig.layout.xaxis2.matches == "x"
+    fr = fig.frames[-1]
+    side = [d for d, i in zip(fr.data, fr.traces, strict=True) if fig.data[i].yaxis == "y2"]
+    assert len(side) == 4 + 1 + 5  # cables, trail, bodies
+    assert list(side[-1].x) == [res.platform[-1, 0]] and list(side[-1].y) == [res.platform[-1, 2]]
+    assert list(side[0].y) == [1.2, res.platform[-1, 2]]  # cable 1: exit 1.2 m up, to the platform
+    assert "yaxis2" not in build_figure(chain_motion(*scenario_a())).layout.to_plotly_json()  # chain: top view only
+
+
 def test_offline_file_same_bytes(tmp_path):
     robot, scene, res = mopick_plan(n=5)
     m = mcdpr_motion(robot, scene, res)

@@ -71,7 +71,22 @@ def _moving(motion: Motion, k: int, shown: np.ndarray | None = None) -> list[dic
             out.append({"x": xs, "y": ys, "text": [label] * len(xs)})
         else:
             out.append({"x": [x], "y": [y], "text": [label]})
+    if _has_side(motion):  # the side view (x–z): lines, trail, bodies
+        for ln in motion.lines:
+            p = ln.points[k]
+            out.append({"x": p[:, 0].tolist(), "y": p[:, 2].tolist()})
+        if motion.trail is not None:
+            tr = motion.track(motion.trail)
+            upto = np.arange(k + 1) if shown is None else np.append(shown[shown < k], k)
+            out.append({"x": tr.xyz[upto, 0].tolist(), "y": tr.xyz[upto, 2].tolist()})
+        for tr in motion.tracks:
+            out.append({"x": [float(tr.xyz[k, 0])], "y": [float(tr.xyz[k, 2])]})
     return out
+
+
+def _has_side(motion: Motion) -> bool:
+    """MoPICK and CCMA move in height too: they get a side view (x–z) under the top view."""
+    return motion.system in ("mcdpr", "ccma")
 
 
 def _stamp(motion: Motion, k: int) -> str:
@@ -213,6 +228,25 @@ def build_figure(motion: Motion, max_frames: int = 200) -> Any:
             )
         seen.add(tr.role)
         fig.add_trace(trace)
+    if _has_side(motion):
+        side = {"xaxis": "x2", "yaxis": "y2", "showlegend": False, "hoverinfo": "skip"}
+        for ln in motion.lines:
+            d = first[j]
+            j += 1
+            fig.add_trace(
+                go.Scatter(
+                    x=d["x"], y=d["y"], mode="lines", line={"color": _LINE_COLOR.get(ln.kind, "#2ca02c")}, **side
+                )
+            )
+        if motion.trail is not None:
+            d = first[j]
+            j += 1
+            fig.add_trace(go.Scatter(x=d["x"], y=d["y"], mode="lines", line={"color": _TRAIL, "width": 2}, **side))
+        for tr in motion.tracks:
+            d = first[j]
+            j += 1
+            color = _ROLE_COLOR.get(tr.role, "#1f77b4")
+            fig.add_trace(go.Scatter(x=d["x"], y=d["y"], mode="markers", marker={"color": color, "size": 8}, **side))
     moving_ids = list(range(n_static, len(fig.data)))
     idx = frame_indices(motion, fps=10.0, max_frames=max_frames)
     frames = []
@@ -262,10 +296,34 @@ def build_figure(motion: Motion, max_frames: int = 200) -> Any:
         },
     ]
     ex0, ey0, ex1, ey1 = motion.extent(pad=0.3)
+    if _has_side(motion):
+        zall = np.concatenate(
+            [np.asarray(tr.xyz)[:, 2] for tr in motion.tracks]
+            + [np.asarray(ln.points)[..., 2].ravel() for ln in motion.lines]
+        )
+        fig.update_layout(
+            xaxis2={"title": "x [m]", "range": [ex0, ex1], "matches": "x", "anchor": "y2", "constrain": "domain"},
+            yaxis2={
+                "title": "z [m] (side view)",
+                "range": [min(0.0, float(zall.min())) - 0.1, float(zall.max()) + 0.15],
+                "domain": [0.0, 0.22],
+                "anchor": "x2",
+                "scaleanchor": "x2",
+                "scaleratio": 1,
+                "constrain": "domain",
+            },
+        )
     fig.update_layout(
         title={"text": _title(motion, 0)},
         xaxis={"title": "x [m]", "range": [ex0, ex1], "constrain": "domain"},
-        yaxis={"title": "y [m]", "range": [ey0, ey1], "scaleanchor": "x", "scaleratio": 1, "constrain": "domain"},
+        yaxis={
+            "title": "y [m]",
+            "range": [ey0, ey1],
+            "scaleanchor": "x",
+            "scaleratio": 1,
+            "constrain": "domain",
+            "domain": [0.3, 1.0] if _has_side(motion) else [0.0, 1.0],
+        },
         template="plotly_white",
         height=760,
         legend={"orientation": "h", "y": -0.25},
