@@ -26,6 +26,7 @@ of the motions, shortcut smoothing, and verdicts (our planner; Rasheed 2019 eq. 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -77,6 +78,8 @@ class SearchParams:
     expand: int = 16
     expand_samples: int = 12
     seed: int = 0
+    best_heading: bool = False
+    stall_rounds: int = 8
 
 
 def stations(tasks: NDArray[np.float64], step: float) -> tuple[NDArray[np.float64], NDArray[np.int64], list[int]]:
@@ -94,7 +97,12 @@ def stations(tasks: NDArray[np.float64], step: float) -> tuple[NDArray[np.float6
 
 
 def worst_heading_mu(
-    robot: Robot, P: NDArray[np.float64], B: NDArray[np.float64], rws: NDArray[np.float64], n_head: int
+    robot: Robot,
+    P: NDArray[np.float64],
+    B: NDArray[np.float64],
+    rws: NDArray[np.float64],
+    n_head: int,
+    best: bool = False,
 ) -> NDArray[np.float64]:
     """μ [N] (Rasheed 2019 eq. 8) of placements B (n, p, 2) for the platform at P (3,) with every base at the worst
     of ``n_head`` headings in [0, 2π) (a cable's tipping bound depends only on its own base's heading, so the worst
@@ -103,7 +111,7 @@ def worst_heading_mu(
     for g in range(n_head):
         tip = tipping(robot, P, B, np.full(B.shape[:-1], 2 * math.pi * g / n_head))
         lo, hi = tension_bounds(robot, tip)
-        hi_min = hi if hi_min is None else np.minimum(hi_min, hi)
+        hi_min = hi if hi_min is None else (np.maximum if best else np.minimum)(hi_min, hi)
     return capacity_margin(tip.W, lo, hi_min, rws)
 
 
@@ -162,7 +170,7 @@ def placements(
     B = B[free]
     if not len(B):
         return B, np.zeros(0), -np.inf, None
-    mu = worst_heading_mu(robot, P, B, rws, params.headings)
+    mu = worst_heading_mu(robot, P, B, rws, params.headings, params.best_heading)
     best = int(np.argmax(mu))
     ok = mu >= params.margin
     n_fresh = len(B) - (0 if extra is None else int(np.sum(free[len(offsets) :])))
@@ -264,6 +272,67 @@ def _edges_ok(robot: Robot, scene: Scene, Ba: NDArray[np.float64], Bb: NDArray[n
     return free
 
 
+class _GraphBuilder:
+    """Nodes (placements per station) and candidate edges of the search graph, append-only."""
+
+    def __init__(
+        self, robot: Robot, scene: Scene, rws: NDArray[np.float64], params: SearchParams, mu_start: float
+    ) -> None:
+        self.robot, self.scene, self.rws, self.params = robot, scene, rws, params
+        self.B = scene.bases.astype(float)[None]
+        self.st = np.zeros(1, np.intp)
+        self.mu = np.array([mu_start])
+        self.clear = point_clearance(scene, robot.base_radius, self.B)
+        self.src: list[NDArray[np.intp]] = []
+        self.dst: list[NDArray[np.intp]] = []
+        self.rng = np.random.default_rng(params.seed)
+
+    def add(self, Bs: NDArray[np.float64], mus: NDArray[np.float64], s: int) -> NDArray[np.intp]:
+        ids = np.arange(len(self.B), len(self.B) + len(Bs))
+        self.B = np.concatenate([self.B, Bs])
+        self.st = np.concatenate([self.st, np.full(len(Bs), s, np.intp)])
+        self.mu = np.concatenate([self.mu, mus])
+        self.clear = np.concatenate([self.clear, point_clearance(self.scene, self.robot.base_radius, Bs)])
+        return ids
+
+    def reach(self, sources: NDArray[np.intp], targets: NDArray[np.intp], here: NDArray[np.intp]) -> NDArray[np.intp]:
+        """Connect sources → targets and here ↔ here; return the nodes of ``here`` reachable from the sources."""
+        a1, b1 = _connect(self.robot, self.scene, self.B, sources, targets, self.clear, self.params)
+        a2, b2 = _connect(self.robot, self.scene, self.B, here, here, self.clear, self.params)
+        self.src += [a1, a2]
+        self.dst += [b1, b2]
+        reached = np.zeros(len(self.B), bool)
+        reached[b1] = True
+        while True:
+            more = b2[reached[a2] & ~reached[b2]]
+            if not len(more):
+                break
+            reached[more] = True
+        return here[reached[here]]
+
+    def expand(self, P: NDArray[np.float64], s: int, reach: NDArray[np.intp]) -> NDArray[np.intp]:
+        """One round of repositioning at station s (the platform waits at P): random placements around diverse
+        reachable ones (every base moved by up to max_move), kept when valid, connected; returns the enlarged
+        reachable set of station s."""
+        p = self.params
+        pick = reach[_diverse(self.B[reach], self.rng.uniform(size=len(reach)), p.expand, p.spread)]
+        steps = self.rng.uniform(-1.0, 1.0, (len(pick), 2 * p.expand_samples, self.robot.n_bases, 2))
+        cand = (self.B[pick][:, None] + steps * p.max_move).reshape(-1, self.robot.n_bases, 2)
+        free = np.all(point_clearance(self.scene, self.robot.base_radius, cand) > 0, axis=-1)
+        cand = cand[free & _apart(self.robot, cand)]
+        if not len(cand):
+            return reach
+        mu = worst_heading_mu(self.robot, P, cand, self.rws, p.headings, p.best_heading)
+        ok = mu >= p.margin
+        ids = self.add(cand[ok], mu[ok], s)
+        if not len(ids):
+            return reach
+        back_a, back_b = _connect(self.robot, self.scene, self.B, ids, reach, self.clear, p)  # and back again
+        self.src.append(back_a)
+        self.dst.append(back_b)
+        return np.union1d(reach, self.reach(reach, ids, ids))
+
+
 @dataclass
 class _Graph:
     B: NDArray[np.float64]  # (N, p, 2)
@@ -308,11 +377,31 @@ def plan_search(
     robot: Robot, scene: Scene, params: SearchParams | None = None, external: NDArray[np.float64] | None = None
 ) -> Plan:
     """Plan the task of ``scene`` with the search planner (see the module docstring); raises TaskRefused (refused
-    up front) or NoPlanFound (nothing found at the search resolution)."""
+    up front) or NoPlanFound (nothing found at the search resolution).
+
+    Placements are first required to keep μ ≥ margin at *every* heading of their bases (robust to the in-place
+    turns); when that finds nothing, the search is repeated with μ ≥ margin at the *best* heading of every base
+    (``best_heading``: more placements, the motions' turns are then certified one by one). The verdict is the
+    second search's."""
+    params = params or SearchParams()
+    if params.best_heading:
+        return _plan_search(robot, scene, params, external)
+    t0 = time.perf_counter()
+    try:
+        return _plan_search(robot, scene, params, external)
+    except NoPlanFound as first:
+        t_first = time.perf_counter() - t0
+        res = _plan_search(robot, scene, dataclasses.replace(params, best_heading=True), external)
+        res.search["first_attempt"] = f"every heading: {first.kind}: {first}"
+        res.times["first_attempt"] = t_first
+        res.times["total"] += t_first
+        return res
+
+
+def _plan_search(robot: Robot, scene: Scene, params: SearchParams, external: NDArray[np.float64] | None = None) -> Plan:
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import dijkstra
 
-    params = params or SearchParams()
     if not robot.one_cable_per_base:
         raise ParameterError(f"{robot.name}: the search planner needs one cable per base")
     t0 = time.perf_counter()
@@ -335,7 +424,7 @@ def plan_search(
             raise NoPlanFound(
                 f"no base placement for task point {k + 1} {list(where)}: none of {len(offsets)} formations (bases "
                 f"{params.radii[0]:g}-{params.radii[1]:g} m from the platform) is free with μ ≥ {params.margin:g} N "
-                f"at every heading; best μ found {best:.4g} N"
+                f"at {'the best' if params.best_heading else 'every'} heading of its bases; best μ found {best:.4g} N"
                 + (f" with the bases at {np.round(bestB, 2).tolist()}" if bestB is not None else " (no free one)"),
                 "no-placement",
                 where,
@@ -345,74 +434,53 @@ def plan_search(
 
     # nodes, built forward station by station: fresh formations, the reachable placements of the previous
     # station (the bases stay) and the same translated with the platform (the formation follows it)
-    nB = [scene.bases.astype(float)[None]]
-    nst = [np.zeros(1, np.intp)]
-    nmu = [np.array([mu_start])]
-    src: list[NDArray[np.intp]] = []
-    dst: list[NDArray[np.intp]] = []
-    rng = np.random.default_rng(params.seed)
-    nclear = [point_clearance(scene, robot.base_radius, nB[0])]
+    g = _GraphBuilder(robot, scene, rws, params, mu_start)
     reach_prev = np.zeros(1, np.intp)  # global indices of the reachable nodes of the previous station
-    count = 1
-    Ball = nB[0]
     for s in range(len(S)):
-        Bprev = Ball[reach_prev]
-        muprev = np.concatenate(nmu)[reach_prev]
-        top = np.argsort(-muprev, kind="stable")[: params.keep]
-        shift = S[s, :2] - S[max(s - 1, 0), :2]
-        # local expansion: every base of the best reachable placements moved by up to max_move (seeded)
-        anchors = Bprev[top[: params.expand]]
-        steps = rng.uniform(-1.0, 1.0, (len(anchors), params.expand_samples, robot.n_bases, 2)) * params.max_move
-        local = (anchors[:, None] + shift + steps).reshape(-1, robot.n_bases, 2)
-        extra = np.concatenate([Bprev[top], Bprev[top] + shift, local])
-        Bs, mus, best, bestB = placements(robot, scene, S[s], offsets, rws, params, extra)
-        if not len(Bs) and s > 0:
-            where = tuple(float(v) for v in np.round(S[s], 4))
-            raise NoPlanFound(
-                f"no base placement for the platform at {list(where)} (between task points {int(seg[s]) + 1} and "
-                f"{int(seg[s]) + 2}) with μ ≥ {params.margin:g} N at every heading; best μ found {best:.4g} N",
-                "no-placement",
-                where,
-                best,
-            )
-        ids = np.arange(count, count + len(Bs))
-        count += len(Bs)
-        nB.append(Bs)
-        nst.append(np.full(len(Bs), s, np.intp))
-        nmu.append(mus)
-        Ball = np.concatenate(nB)
-        nclear.append(point_clearance(scene, robot.base_radius, Bs))
-        clear = np.concatenate(nclear)
-        prev_ids = reach_prev if s > 0 else np.zeros(1, np.intp)
-        a1, b1 = _connect(
-            robot, scene, Ball, prev_ids, np.concatenate([ids, prev_ids]) if s == 0 else ids, clear, params
-        )
-        a2, b2 = _connect(robot, scene, Ball, ids, ids, clear, params)
-        src += [a1, a2]
-        dst += [b1, b2]
-        # reachable at this station: from the previous station's reachable nodes, then waits here
-        reached = np.zeros(count, bool)
-        reached[b1] = True
-        if s == 0:
-            reached[0] = True
-        while True:
-            more = b2[reached[a2] & ~reached[b2]]
-            if not len(more):
+        reach = np.zeros(0, np.intp)
+        for attempt in range(params.stall_rounds + 1):
+            if attempt:  # stalled: the bases reposition while the platform waits at the previous station
+                reach_prev = g.expand(S[s - 1], s - 1, reach_prev)
+            Bprev = g.B[reach_prev]
+            top = np.argsort(-g.mu[reach_prev], kind="stable")[: params.keep]
+            shift = S[s, :2] - S[max(s - 1, 0), :2]
+            # local expansion: every base of the best reachable placements moved by up to max_move (seeded)
+            anchors = Bprev[top[: params.expand]]
+            steps = g.rng.uniform(-1.0, 1.0, (len(anchors), params.expand_samples, robot.n_bases, 2))
+            local = (anchors[:, None] + shift + steps * params.max_move).reshape(-1, robot.n_bases, 2)
+            extra = np.concatenate([Bprev[top], Bprev[top] + shift, local])
+            Bs, mus, best, bestB = placements(robot, scene, S[s], offsets, rws, params, extra)
+            if not len(Bs) and s > 0:
+                where = tuple(float(v) for v in np.round(S[s], 4))
+                raise NoPlanFound(
+                    f"no base placement for the platform at {list(where)} (between task points {int(seg[s]) + 1} "
+                    f"and {int(seg[s]) + 2}) with μ ≥ {params.margin:g} N; best μ found {best:.4g} N",
+                    "no-placement",
+                    where,
+                    best,
+                )
+            ids = g.add(Bs, mus, s)
+            prev_ids = reach_prev if s > 0 else np.zeros(1, np.intp)
+            targets = np.concatenate([ids, prev_ids]) if s == 0 else ids
+            reach = g.reach(prev_ids, targets, ids)
+            if s == 0:
+                reach = np.union1d([0], reach)
+            if len(reach):
                 break
-            reached[more] = True
-        reach_prev = np.flatnonzero(reached[ids]) + ids[0] if len(ids) else ids
-        if s == 0:
-            reach_prev = np.concatenate([[0], reach_prev])
-        if not len(reach_prev):
+        if not len(reach):
             where = tuple(float(v) for v in np.round(S[max(s - 1, 0)], 4))
             raise NoPlanFound(
                 f"placements exist but no collision-free base motion (each base ≤ {params.max_move:g} m per step, "
                 f"bases 2 r_mb apart) follows the platform beyond {list(where)} (station {s} of {len(S)}, between "
-                f"task points {int(seg[s]) + 1} and {min(int(seg[s]) + 2, len(scene.tasks))})",
+                f"task points {int(seg[s]) + 1} and {min(int(seg[s]) + 2, len(scene.tasks))}), after "
+                f"{params.stall_rounds} rounds of repositioning the bases there",
                 "not-connectable",
                 where,
-                float(np.max(mus, initial=-np.inf)),
+                float(np.max(g.mu[reach_prev], initial=-np.inf)),
             )
+        reach_prev = reach
+    Ball, nst, nmu = g.B, [g.st], [g.mu]
+    src, dst = g.src, g.dst
     B = Ball
     st = np.concatenate(nst)
     mu = np.concatenate(nmu)
@@ -507,6 +575,7 @@ def plan_search(
         "shortcuts": shortcuts,
         "refined_samples": int(len(cert.P)),
         "mu_lower_min": float(np.min(cert.lower)) if len(cert.lower) else float("nan"),
+        "placement_headings": "best" if params.best_heading else "every",
     }
     return Plan(
         waypoints=np.asarray(scene.tasks, float),
