@@ -73,3 +73,15 @@ def test_mopick_gif_same_bytes_and_a_frame(tmp_path):
     assert write_gif(m, tmp_path / "again.gif").read_bytes() == (tmp_path / "m.gif").read_bytes()
     png = render_frame(m, 3, tmp_path / "f.png")
     assert Image.open(png).size[0] == 512
+
+
+def test_mopick_and_ccma_get_a_side_view():
+    robot, scene, res = mopick_plan(n=4)
+    sc = _Scene(mcdpr_motion(robot, scene, res))
+    sc.update(3)
+    assert sc.axz is not None and sc.axz.get_ylabel() == "z [m]"
+    assert sc.axz.get_aspect() == 1.0  # equal scale
+    assert list(sc.side_dots[-1].get_xdata()) == [res.platform[3, 0]]  # the platform, last track
+    assert list(sc.side_dots[-1].get_ydata()) == [res.platform[3, 2]]
+    plan, env, cp = scenario_a()
+    assert _Scene(chain_motion(plan, env, cp)).axz is None  # the chain moves on the floor: top view only

@@ -3,7 +3,9 @@
 Drawn on a matplotlib Agg canvas (no ``pyplot``) and encoded with matplotlib's ``PillowWriter``: raw obstacles
 (filled), obstacles grown by the safety radius (dashed), the room, the anchor / goal / task points, the tethers,
 cables and links (tethers shaded by their catenary sag, Caruso 2021 eq. 22, with a colour bar), robots and bases
-as discs of their radius, the leader's (platform's, end-effector's) trail so far, and the time stamp.
+as discs of their radius, the leader's (platform's, end-effector's) trail so far, and the time stamp. MoPICK and
+CCMA plans move in height too: under the top view, a side view (x–z, same scale) shows the cables, links, bodies
+and the trail by height.
 
 Frames are taken every ``stride`` samples so that the GIF plays at ``fps`` frames per second in real time when
 the plan has a time law (one frame per ``1 / fps`` s of plan time); the last sample is always the last frame.
