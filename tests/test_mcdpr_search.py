@@ -163,6 +163,7 @@ def test_same_inputs_same_plan(easy) -> None:
         np.testing.assert_array_equal(getattr(again, name), getattr(res, name))
 
 
+@pytest.mark.slow
 def test_moved_table_that_defeats_the_greedy_planner() -> None:
     # fig2 with table 2 and its task point 1 m left and 0.8 m up: the greedy planner ends with μ < 0
     # (tests/test_mcdpr_cli.py), the search plans it with μ certified between samples
@@ -174,3 +175,28 @@ def test_moved_table_that_defeats_the_greedy_planner() -> None:
     chk = check(R, scene.validate(R), res)
     assert chk.ok, chk.messages
     assert chk.mu_between > 0
+
+
+@pytest.mark.slow
+def test_ring_needs_the_bases_round_the_outside() -> None:
+    # the platform flies into a ring of 12 discs the bases cannot cross: the bases go round its outside
+    ring = [
+        {
+            "center": [6.5 + 1.5 * math.cos(2 * math.pi * k / 12), 4.0 + 1.5 * math.sin(2 * math.pi * k / 12)],
+            "radius": 0.2,
+        }
+        for k in range(12)
+    ]
+    scene = scene_from_dict(
+        {
+            "bounds": [0, 0, 11, 8],
+            "tasks": [[2.5, 4, 0.8], [6.5, 4, 0.8]],
+            "bases": [[1.5, 3], [3.5, 3], [3.5, 5], [1.5, 5]],
+            "obstacles": ring,
+        }
+    )
+    res = plan_search(R, scene)
+    chk = check(R, scene.validate(R), res)
+    assert chk.ok and chk.mu_between > 0, chk.messages
+    end = res.bases[-1]
+    assert np.all(np.hypot(end[:, 0] - 6.5, end[:, 1] - 4.0) > 1.5)  # outside the ring of disc centres
