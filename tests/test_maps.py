@@ -18,7 +18,14 @@ from shapely.geometry import Point, box
 
 from tmr.environment import Environment
 from tmr.errors import MapError
-from tmr.maps import load_environment, load_map, occupancy, read_map_image, read_map_yaml
+from tmr.maps import (
+    load_environment,
+    load_map,
+    occupancy,
+    read_map_image,
+    read_map_yaml,
+    saver_grey_reads_free,
+)
 
 R = 0.5  # safety radius [m]
 
@@ -357,7 +364,7 @@ def test_modes_against_the_definition(tmp_path: Path, negate: bool) -> None:
             "occupied_thresh: 0.7\nfree_thresh: 0.3\n"
         )
         meta = read_map_yaml(tmp_path / "m.yaml")
-        got = occupancy(meta, *read_map_image(meta.image))
+        got = occupancy(meta, *read_map_image(meta.image), keep_saver_unknown=False)
         np.testing.assert_array_equal(got, _map_server_reference(values, 255, negate, 0.7, 0.3, mode), err_msg=mode)
 
 
@@ -391,3 +398,22 @@ def test_environment_has_no_file_loader() -> None:
     source = Path(tmr.environment.__file__).read_text()
     assert "yaml" not in source.lower().replace("map_server", "") or "import yaml" not in source
     assert "PGM" not in source and "def read_pgm" not in source
+
+
+def test_nav2_legacy_free_thresh_keeps_the_saver_grey_unknown(tmp_path, capsys, caplog):
+    """Nav2's map_saver wrote trinary maps with free_thresh 0.25 (until navigation2 #5278): by the thresholds its
+    unknown grey 205 (occupancy 0.196) would be free and the 20 m x 20 m unknown area plannable; it stays unknown."""
+    path = _turtlebot3_world(tmp_path)
+    path.write_text(path.read_text().replace("free_thresh: 0.196", "free_thresh: 0.25"))
+    meta = read_map_yaml(path)
+    assert meta.free_thresh == 0.25 and saver_grey_reads_free(meta)
+    values = np.array([[205, 210, 254, 0, 180]], dtype=np.uint8)  # 210: occupancy 0.176 < 0.25, free by definition
+    shade = values / 255.0
+    np.testing.assert_array_equal(occupancy(meta, shade, None), [[-1, 0, 0, 100, -1]])
+    np.testing.assert_array_equal(occupancy(meta, shade, None, keep_saver_unknown=False), [[0, 0, 0, 100, -1]])
+    geo = load_map(path)
+    assert geo.known_free == pytest.approx((-2.85, -1.85, 1.85, 2.85))  # the arena, as with free_thresh 0.196
+    # through the tmr logger: on stderr once a command set it up, else in pytest's log capture
+    assert "kept unknown" in capsys.readouterr().err + caplog.text
+    (tmp_path / "ok").mkdir()
+    assert not saver_grey_reads_free(read_map_yaml(_turtlebot3_world(tmp_path / "ok")))  # free_thresh 0.196

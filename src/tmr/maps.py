@@ -13,13 +13,16 @@ never the reverse. :func:`load_environment` does both steps.
   p < ``free_thresh``, unknown in between (``scale`` also marks transparent pixels unknown); ``mode: raw``: the pixel
   value v ∈ 0..255 is the occupancy in percent, v > 100 unknown. tmr plans only in **known free** cells: occupied
   and unknown cells are obstacles (conservative). ``origin: [x, y, yaw]`` is the pose of the image's lower-left
-  pixel [m, m, rad]; a yaw rotates the map about that corner.
+  pixel [m, m, rad]; a yaw rotates the map about that corner. One exception to the thresholds: a trinary map whose
+  ``free_thresh`` exceeds 0.196 (Nav2's map_saver wrote 0.25 until 2025) would read map_saver's unknown grey 205 as
+  free; those pixels are kept unknown, with a warning (:func:`saver_grey_reads_free`).
 * GeoJSON / WKT: see :func:`load_map`.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import math
 import re
 from dataclasses import dataclass
@@ -46,6 +49,8 @@ from tmr.environment import (
 from tmr.errors import MapError
 
 __all__ = [
+    "SAVER_UNKNOWN",
+    "saver_grey_reads_free",
     "MAP_SUFFIXES",
     "IMAGE_SUFFIXES",
     "MapGeometry",
@@ -275,9 +280,29 @@ def read_map_image(path: str | Path) -> tuple[NDArray[np.float64], NDArray[np.fl
     return shade, alpha
 
 
-def occupancy(meta: RosMapMeta, shade: NDArray[np.float64], alpha: NDArray[np.float64] | None) -> NDArray[np.int8]:
+#: The grey map_saver writes for an unknown cell in trinary mode (occupancy 1 - 205/255 = 0.196).
+SAVER_UNKNOWN = 205
+
+
+def saver_grey_reads_free(meta: RosMapMeta) -> bool:
+    """Whether map_saver's unknown grey would load as *free* under this YAML: a trinary map with ``free_thresh`` above
+    0.196, as Nav2's map_saver wrote them (its default 0.25) before it fixed the trinary thresholds (navigation2
+    PR #5278, 2025). Unknown space read as free would let a plan run through unmapped space."""
+    return meta.mode == "trinary" and not meta.negate and 1.0 - SAVER_UNKNOWN / 255.0 < meta.free_thresh
+
+
+def occupancy(
+    meta: RosMapMeta,
+    shade: NDArray[np.float64],
+    alpha: NDArray[np.float64] | None,
+    *,
+    keep_saver_unknown: bool = True,
+) -> NDArray[np.int8]:
     """Cell states as map_server gives them in the OccupancyGrid: 100 occupied, 0 free, -1 unknown; ``scale`` mode
-    gives the values between as 1..99 and ``raw`` the pixel value itself (percent)."""
+    gives the values between as 1..99 and ``raw`` the pixel value itself (percent).
+
+    ``keep_saver_unknown``: when :func:`saver_grey_reads_free`, pixels of exactly map_saver's unknown grey (205)
+    stay unknown (-1) instead of free; every other pixel follows the thresholds."""
     occ = shade if meta.negate else 1.0 - shade
     out = np.full(shade.shape, -1, dtype=np.int16)
     if meta.mode == "raw":
@@ -286,6 +311,8 @@ def occupancy(meta: RosMapMeta, shade: NDArray[np.float64], alpha: NDArray[np.fl
         return out.astype(np.int8)
     out[occ > meta.occupied_thresh] = 100
     out[occ < meta.free_thresh] = 0
+    if keep_saver_unknown and saver_grey_reads_free(meta):
+        out[np.abs(shade * 255.0 - SAVER_UNKNOWN) < 1e-6] = -1
     if meta.mode == "scale":
         between = (occ >= meta.free_thresh) & (occ <= meta.occupied_thresh)
         span = meta.occupied_thresh - meta.free_thresh
@@ -303,6 +330,14 @@ def _load_ros_map(path: Path) -> MapGeometry:
         raise MapError(f"{where}: image file {meta.image} not found")
     shade, alpha = read_map_image(meta.image)
     grid = occupancy(meta, shade, alpha)
+    if saver_grey_reads_free(meta) and np.any(np.abs(shade * 255.0 - SAVER_UNKNOWN) < 1e-6):
+        logging.getLogger("tmr").warning(
+            "%s: free_thresh %g would read map_saver's unknown grey (%d) as free (a Nav2 map_saver default before "
+            "navigation2 #5278); those cells are kept unknown, so they are obstacles",
+            path,
+            meta.free_thresh,
+            SAVER_UNKNOWN,
+        )
     res = meta.resolution
     ox, oy, yaw = meta.origin
     # only known free cells are planned in: occupied and unknown are obstacles (tmr's conservative reading); in raw
