@@ -37,7 +37,7 @@ import numpy as np
 
 from tmr.cli_args import positive_float as _positive
 from tmr.cli_args import positive_int as _positive_int
-from tmr.console import LOG, add_manners
+from tmr.console import LOG, add_manners, progress_enabled
 from tmr.console import run as run_cli
 from tmr.motion import ccma_track_motion
 from tmr.views import add_view_args, write_views
@@ -220,7 +220,9 @@ def run(args: argparse.Namespace) -> int:
         LOG.error("path REFUSED before control: %s", verdict.message())
         return 1
     n_snap = 5
-    res = track(model, path.positions, path.rotations, state=st0, gtol=args.gtol, keep_states=True)
+    res = track(
+        model, path.positions, path.rotations, state=st0, gtol=args.gtol, keep_states=True, progress=progress_enabled()
+    )
     ok = reached(res)
     joint_names = [model.system.joints[k].name for k in rotary_joints(model)]
     angles = joint_angles(model, res.states)

@@ -379,6 +379,7 @@ def track(
     init: str = "gauss-newton",
     condition_limit: float = CONDITION_LIMIT,
     max_substeps: int = 16,
+    progress: bool = False,
 ) -> TrackResult:
     """Follow the targets (positions (K, 3) [m], rotations (K, 3, 3)) one IK solve per target, warm-starting each
     from the previous solution's controls and state. BFGS starts every step from the Gauss–Newton estimate
@@ -398,7 +399,8 @@ def track(
     the end-effector grows like the square root of an agent's travel), where one BFGS line search can overshoot to the
     far side; smaller increments stay on the branch (Kumar 2019 §III-D recommends small steps for the same reason).
     Iterations and evaluations of a subdivided target add up all its solves; ``step_time`` is the wall time of the
-    whole step (every solve and the conditioning)."""
+    whole step (every solve and the conditioning). ``progress``: a tqdm bar of the steps on stderr, shown once the
+    run has taken 2 s."""
     if init not in ("gauss-newton", "warm"):
         raise ValueError(f"init must be 'gauss-newton' or 'warm', got {init!r}")
     from tmr.ccma.sim import reference_state
@@ -422,6 +424,9 @@ def track(
     prev = Target(*end_effector_pose(model, st))
     ok_prev = True
     last: IKResult | None = None
+    from tqdm import tqdm
+
+    bar = tqdm(total=k, desc="ccma steps", unit="step", leave=False, delay=2.0, disable=not progress)
     for i in range(k):
         target = Target(positions[i], rotations[i])
         t_step = time.perf_counter()
@@ -457,6 +462,8 @@ def track(
         hist.append(r.history)
         if keep_states:
             states.append(st.copy())
+        bar.update()
+    bar.close()
     return TrackResult(
         out_u, agents, pe, re, perr, rerr, resid, its, evals, nits, times, hist, states, cond, smin, damped, subs
     )
