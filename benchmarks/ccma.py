@@ -194,35 +194,6 @@ def main() -> None:
         )
     total = time.perf_counter() - t_start
 
-    if not args.no_figures:
-        # ---- convergence figure (Kumar 2019 Fig. 5 analogue) and the README figure
-        from matplotlib.figure import Figure
-
-        from tmr.plot import save_figure
-
-        fig = Figure(figsize=(10, 4.2))
-        axes = [fig.add_subplot(1, 2, k + 1) for k in range(2)]
-        mode = "compiled" if "compiled" in args.modes else args.modes[0]
-        for name in args.examples:
-            if (name, "combined", mode) not in runs:
-                continue
-            r = runs[name, "combined", mode][-1]
-            k = 1 + int(np.argsort(r.step_time[1:])[len(r.step_time[1:]) // 2])
-            for ax, h in zip(axes, (r.histories[0], r.histories[k]), strict=True):
-                ax.semilogy(1e3 * h[:, 0], np.maximum(h[:, 1], 1e-30), marker=".", ms=4, label=name)
-        axes[0].set_title("step 1 (from the reference configuration)")
-        axes[1].set_title("median warm step")
-        for ax in axes:
-            ax.set_xlabel("time [ms]")
-            ax.set_ylabel("objective O(u) [m²]")
-            ax.grid(True, which="both", lw=0.3)
-            ax.legend(fontsize=8)
-        fig.suptitle(f"CCMA IK convergence, combined 1 mm / 0.01 rad step ({mode})")
-        fig.tight_layout()
-        args.out.mkdir(parents=True, exist_ok=True)
-        save_figure(fig, args.out / "ccma_convergence.png")
-        readme_figure(args.out)
-
     def verdict(mode: str) -> str:
         rs = [r for r in rows if r["mode"] == mode]
         worst_med = max(rs, key=lambda r: r["warm_ms"])
@@ -275,6 +246,34 @@ example on 2 cores. {"; ".join(verdict(mode) for mode in args.modes)}.
         for r in rows:
             w.writerow({k: r[k] for k in fields})
     print(markdown(rows))
+    if not args.no_figures:
+        # ---- convergence figure (Kumar 2019 Fig. 5 analogue) and the README figure
+        from matplotlib.figure import Figure
+
+        from tmr.plot import save_figure
+
+        fig = Figure(figsize=(10, 4.2))
+        axes = [fig.add_subplot(1, 2, k + 1) for k in range(2)]
+        mode = "compiled" if "compiled" in args.modes else args.modes[0]
+        for name in args.examples:
+            if (name, "combined", mode) not in runs:
+                continue
+            r = runs[name, "combined", mode][-1]
+            k = 1 + int(np.argsort(r.step_time[1:])[len(r.step_time[1:]) // 2])
+            for ax, h in zip(axes, (r.histories[0], r.histories[k]), strict=True):
+                ax.semilogy(1e3 * h[:, 0], np.maximum(h[:, 1], 1e-30), marker=".", ms=4, label=name)
+        axes[0].set_title("step 1 (from the reference configuration)")
+        axes[1].set_title("median warm step")
+        for ax in axes:
+            ax.set_xlabel("time [ms]")
+            ax.set_ylabel("objective O(u) [m²]")
+            ax.grid(True, which="both", lw=0.3)
+            ax.legend(fontsize=8)
+        fig.suptitle(f"CCMA IK convergence, combined 1 mm / 0.01 rad step ({mode})")
+        fig.tight_layout()
+        args.out.mkdir(parents=True, exist_ok=True)
+        save_figure(fig, args.out / "ccma_convergence.png")
+        readme_figure(args.out)
 
 
 if __name__ == "__main__":
