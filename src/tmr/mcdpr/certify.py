@@ -150,19 +150,23 @@ def certify(
     min_piece: float = 1e-3,
     max_samples: int = 200_000,
     frac: float = 0.5,
+    skip: NDArray[np.bool_] | None = None,
 ) -> Certified:
     """Bisect the pieces of the motion (P (T, 3), B (T, p, 2), H (T, p)) until μ's lower bound on every piece is at
     least ``frac`` × the smaller μ of its two end samples (so > 0: certified, and not much below the samples).
 
     ``min_piece`` [m or rad]: pieces whose largest displacement is below it are not split further (they stay
-    uncertified if their bound is ≤ 0). Pieces with an end sample at μ ≤ 0 are not split (a real violation)."""
+    uncertified if their bound is ≤ 0). Pieces with an end sample at μ ≤ 0 are not split (a real violation).
+    ``skip`` (T − 1,) marks pieces that are not motions (the junctions of several motions certified in one batch):
+    their bound is +inf and they are never split."""
     P = np.asarray(P, float)
     B = np.asarray(B, float)
     H = np.asarray(H, float)
     u = np.arange(len(P), dtype=float)
     st = sample_stats(robot, P, B, H, rws)
+    skip = np.zeros(max(len(P) - 1, 0), bool) if skip is None else np.asarray(skip, bool).copy()
     while True:
-        low = interval_bounds(robot, st, P, B, H)
+        low = np.where(skip, np.inf, interval_bounds(robot, st, P, B, H))
         size = np.maximum(
             np.linalg.norm(np.diff(P, axis=0), axis=-1),
             np.maximum(np.linalg.norm(np.diff(B, axis=0), axis=-1), np.abs(wrap(np.diff(H, axis=0)))).max(axis=-1),
@@ -181,6 +185,7 @@ def certify(
         B = np.insert(B, at, Bm, axis=0)
         H = np.insert(H, at, Hm, axis=0)
         u = np.insert(u, at, 0.5 * (u[split] + u[split + 1]))
+        skip = np.insert(skip, at, False)
         st = SampleStats(*(np.insert(a, at, b, axis=0) for a, b in zip(st, stm, strict=True)))
     bad = np.flatnonzero(~(low > 0))
     return Certified(

@@ -647,23 +647,52 @@ def _relax(
     sweeps: int = 4,
 ) -> NDArray[np.float64]:
     """Move every inner node's bases half-way towards the midpoint of their neighbours when the motion from the
-    node before to the node two after stays collision-free, spaced and certified (removes zig-zags and spurs)."""
+    node before to the node two after stays collision-free, spaced and certified (removes zig-zags and spurs).
+
+    Nodes k ≡ r (mod 3) are tried together (their windows k−1…k+2 share no moved node), all windows certified in
+    one batched :func:`certify` call; the whole smoothed path is certified again by the caller."""
     Bn = Bn.copy()
     for _ in range(sweeps):
         moved = False
-        for k in range(1, len(Bn) - 1):
-            new = Bn[k] + 0.5 * (0.5 * (Bn[k - 1] + Bn[k + 1]) - Bn[k])
-            if np.max(np.linalg.norm(new - Bn[k], axis=-1)) < 0.01:
+        for r in range(1, 4):
+            ks = [k for k in range(r, len(Bn) - 1, 3)]
+            new = {}
+            for k in ks:
+                cand = Bn[k] + 0.5 * (0.5 * (Bn[k - 1] + Bn[k + 1]) - Bn[k])
+                if np.max(np.linalg.norm(cand - Bn[k], axis=-1)) >= 0.01:
+                    new[k] = cand
+            if not new:
                 continue
-            th = _arrival_headings(Bn[:k], th0)[-1]
-            hi = min(k + 3, len(Bn))
-            trial = Bn[k - 1 : hi].copy()
-            trial[1] = new
-            if point_clearance(scene, robot.base_radius, new).min() > 0 and _local_ok(
-                robot, scene, trial, Pn[k - 1 : hi], th, rws, params.d_platform
-            ):
-                Bn[k] = new
-                moved = True
+            ks = list(new)
+            pts = np.array([new[k] for k in ks])
+            free = np.all(point_clearance(scene, robot.base_radius, pts) > 0, axis=-1)
+            arrive = _arrival_headings(Bn, th0)
+            parts, owner, windows = [], [], []
+            for k, ok in zip(ks, free, strict=True):
+                if not ok:
+                    continue
+                hi = min(k + 3, len(Bn))
+                trial = Bn[k - 1 : hi].copy()
+                trial[1] = new[k]
+                if not np.all(_edges_ok(robot, scene, trial[:-1], trial[1:])):
+                    continue
+                Pm, Bm, Hm, _ = _motion(trial, Pn[k - 1 : hi], arrive[k - 1], params.d_platform)
+                parts.append((Pm, Bm, Hm))
+                owner += [len(windows)] * (len(Pm) - 1) + [-1]
+                windows.append(k)
+            if not windows:
+                continue
+            P = np.concatenate([q[0] for q in parts])
+            B = np.concatenate([q[1] for q in parts])
+            H = np.concatenate([q[2] for q in parts])
+            own = np.array(owner[:-1])
+            cert = certify(robot, P, B, H, rws, skip=own < 0)
+            piece_owner = own[np.floor(cert.u[:-1]).astype(np.intp)]
+            bad = set(piece_owner[~(cert.lower > 0)].tolist())
+            for w, k in enumerate(windows):
+                if w not in bad:
+                    Bn[k] = new[k]
+                    moved = True
         if not moved:
             break
     return Bn
