@@ -194,3 +194,34 @@ def test_refusals(tmp_path):
     with pytest.raises(TmrError, match="exists"):
         write_bag(m, tmp_path / "bag", overwrite=False)
     assert not (tmp_path / "x").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["bag", "file"]
+
+
+def test_ccma_agents_links_end_effector(tmp_path):
+    """CCMA: agents with their yaw, the end-effector, one LINE_STRIP per link; no room (a CCMA run has none)."""
+    from tmr.motion import ccma_motion
+
+    k = 4
+    s = np.linspace(0.0, 1.0, k)
+    agents = np.stack([np.column_stack([s + j, -s, 0.2 * s + j]) for j in range(3)], axis=1)  # (k, 3, 3)
+    ee = np.column_stack([s, s, 0.5 + 0.1 * s])
+    link = np.stack([np.column_stack([s + d, s - d, np.full(k, 0.3)]) for d in (0.0, 0.1, 0.2)], axis=1)  # (k, 3, 3)
+    m = ccma_motion("toy", ["a", "b", "c"], agents, 0.1, ee, [link], rate=5.0)
+    msgs, types = read_bag(write_bag(m, tmp_path / "bag"))
+    assert {t for t in types if t.endswith("/pose")} == {
+        "/tmr/a/pose",
+        "/tmr/b/pose",
+        "/tmr/c/pose",
+        "/tmr/end_effector/pose",
+    }
+    for j, name in enumerate("abc"):
+        for i, (stamp, msg) in enumerate(msgs[f"/tmr/{name}/pose"]):
+            assert stamp == int(round(i / 5.0 * 1e9))
+            assert np.max(np.abs(xyz(msg.pose.position) - [agents[i, j, 0], agents[i, j, 1], 0.1])) <= 1e-9
+            assert abs(yaw_of(msg.pose.orientation) - agents[i, j, 2]) <= 1e-12
+    for i, (_, msg) in enumerate(msgs["/tmr/end_effector/pose"]):
+        assert np.max(np.abs(xyz(msg.pose.position) - ee[i])) <= 1e-9
+    for i, (_, arr) in enumerate(msgs["/tmr/lines"]):
+        (mk,) = arr.markers
+        assert mk.ns == "link" and np.max(np.abs(np.array([xyz(p) for p in mk.points]) - link[i])) <= 1e-9
+    ((_, scene),) = msgs["/tmr/scene"]
+    assert not any(mk.ns == "room" for mk in scene.markers)

@@ -60,3 +60,10 @@ def test_ccma_cli_writes_gif(tmp_path):
     out = tmp_path / "cc"
     assert main(["run", "--path", "line", "--steps", "3", "--out", str(out), "--no-plots", "--gif", "--quiet"]) == 0
     assert Image.open(out / GIF_NAME).n_frames == 3
+
+
+def test_mcdpr_cli_has_the_flags():
+    from tmr.mcdpr.__main__ import build_parser
+
+    a = build_parser().parse_args(["plan", "--gif", "--html", "--export", "mcap"])
+    assert a.gif and a.html and a.export == "mcap"
