@@ -292,8 +292,7 @@ def run(args: argparse.Namespace) -> int:
         f"  median BFGS its      {summary['median_bfgs_iterations']:g}\n"
         f"  median step time     {t['median_step_ms']:.3g} ms (compiled: {t['compiled']})\n"
         f"  joint range          {_range_text(widest)}\n"
-        f"  reach                smallest margin {reach['min_margin_m']:.3g} m (end-effector height "
-        f"{z_lo:.3g} … {z_hi:.3g} m at the reference rotation)\n"
+        f"  reach                {_reach_text(reach)}\n"
         f"  conditioning         max {summary['max_condition']:.3g} (near-singular above {CONDITION_LIMIT:g}: "
         f"{len(near)} step(s), {int(res.damped.sum())} damped, {int((res.substeps > 1).sum())} subdivided)\n"
         f"  wrote {', '.join(names)} to {out}"
@@ -309,6 +308,16 @@ def run(args: argparse.Namespace) -> int:
         LOG.error("path FAILED: %s", _miss_reason(res, ok))
         return 1
     return 0
+
+
+def _reach_text(reach: dict[str, Any]) -> str:
+    if not reach["legs_bounded"]:
+        return "not checked: no leg of rigid links joins an agent to the end-effector (no analytic bound)"
+    z_lo, z_hi = reach["ee_height_range_m"]
+    return (
+        f"smallest margin {reach['min_margin_m']:.3g} m (end-effector height {z_lo:.3g} … {z_hi:.3g} m at the "
+        f"reference rotation; {reach['legs_bounded']} legs bounded)"
+    )
 
 
 def _range_text(widest: Any) -> str:
