@@ -333,17 +333,6 @@ class _GraphBuilder:
         return np.union1d(reach, self.reach(reach, ids, ids))
 
 
-@dataclass
-class _Graph:
-    B: NDArray[np.float64]  # (N, p, 2)
-    P: NDArray[np.float64]  # (N, 3)
-    st: NDArray[np.intp]  # (N,) station
-    mu: NDArray[np.float64]  # (N,)
-    src: NDArray[np.intp]
-    dst: NDArray[np.intp]
-    w: NDArray[np.float64]
-
-
 def _connect(
     robot: Robot,
     scene: Scene,
@@ -479,14 +468,10 @@ def _plan_search(robot: Robot, scene: Scene, params: SearchParams, external: NDA
                 float(np.max(g.mu[reach_prev], initial=-np.inf)),
             )
         reach_prev = reach
-    Ball, nst, nmu = g.B, [g.st], [g.mu]
-    src, dst = g.src, g.dst
-    B = Ball
-    st = np.concatenate(nst)
-    mu = np.concatenate(nmu)
+    B, st, mu = g.B, g.st, g.mu
     P = S[st]
-    src_a = np.concatenate(src)
-    dst_a = np.concatenate(dst)
+    src_a = np.concatenate(g.src)
+    dst_a = np.concatenate(g.dst)
     w = (
         np.linalg.norm(B[dst_a] - B[src_a], axis=-1).sum(axis=-1)
         + 0.01
