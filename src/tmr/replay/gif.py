@@ -26,34 +26,58 @@ def select_backend() -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")
 
 
-def _frames_mujoco(rp: Any, run: Any, every: int) -> list[Any]:
+def frames_mujoco(model: Any, states: list[Any], bounds: Any, every: int, prepare: Any = None) -> list[Any]:
+    """Offscreen MuJoCo frames of every ``every``-th state (qpos) over a room ``bounds`` (x0, y0, x1, y1) [m];
+    ``prepare(model, data)`` runs before each frame (e.g. to resize the tether capsules)."""
     import mujoco
     from PIL import Image
 
-    cm = rp.built
-    m = cm.model
-    d = mujoco.MjData(m)
-    xmin, ymin, xmax, ymax = run.bounds
+    d = mujoco.MjData(model)
+    xmin, ymin, xmax, ymax = bounds
     cam = mujoco.MjvCamera()
     cam.lookat[:] = [(xmin + xmax) / 2, (ymin + ymax) / 2, 0.0]
     cam.distance = 1.25 * max(xmax - xmin, ymax - ymin)
     cam.elevation = -62.0
     cam.azimuth = 90.0
     frames = []
+    with mujoco.Renderer(model, HEIGHT, WIDTH) as renderer:
+        for k in range(0, len(states), every):
+            d.qpos[:] = states[k]
+            mujoco.mj_kinematics(model, d)
+            if prepare is not None:
+                prepare(model, d)
+            mujoco.mj_forward(model, d)
+            renderer.update_scene(d, camera=cam)
+            frames.append(Image.fromarray(renderer.render()))
+    return frames
+
+
+def _frames_mujoco(rp: Any, run: Any, every: int) -> list[Any]:
+    cm = rp.built
+    m = cm.model
     radius = m.geom_size[:, 0].copy()
     for ts in cm.tethers:  # drawn thicker than the 2 mm cable so that it shows at this scale
         m.geom_size[ts.geom, 0] = VISUAL_TETHER_RADIUS
-    with mujoco.Renderer(m, HEIGHT, WIDTH) as renderer:
-        for k in range(0, len(rp.qpos), every):
-            d.qpos[:] = rp.qpos[k]
-            mujoco.mj_kinematics(m, d)
-            for ts in cm.tethers:
-                ts.update(m, d)  # capsule sizes of this sample
-            mujoco.mj_forward(m, d)
-            renderer.update_scene(d, camera=cam)
-            frames.append(Image.fromarray(renderer.render()))
-    m.geom_size[:, 0] = radius
-    return frames
+
+    def prepare(model: Any, data: Any) -> None:
+        for ts in cm.tethers:
+            ts.update(model, data)  # capsule sizes of this sample
+
+    try:
+        return frames_mujoco(m, rp.qpos, run.bounds, every, prepare)
+    finally:
+        m.geom_size[:, 0] = radius
+
+
+def write_gif(frames: list[Any], path: Path) -> None:
+    """Frames (PIL images) to an animated GIF at :data:`FPS`, written atomically."""
+    import io
+
+    from tmr.io import atomic_write_bytes
+
+    buf = io.BytesIO()
+    frames[0].save(buf, format="GIF", save_all=True, append_images=frames[1:], duration=int(1000 / FPS), loop=0)
+    atomic_write_bytes(path, buf.getvalue())
 
 
 def _frames_matplotlib(rp: Any, run: Any, every: int) -> list[Any]:
@@ -99,11 +123,5 @@ def render_gif(rp: Any, run: Any, path: Path) -> str:
         used = f"mujoco-{os.environ.get('MUJOCO_GL', 'default')}"
     except Exception:  # noqa: BLE001 - no OpenGL context on this machine: draw the same states with matplotlib
         frames = _frames_matplotlib(rp, run, every)
-    import io
-
-    from tmr.io import atomic_write_bytes
-
-    buf = io.BytesIO()
-    frames[0].save(buf, format="GIF", save_all=True, append_images=frames[1:], duration=int(1000 / FPS), loop=0)
-    atomic_write_bytes(path, buf.getvalue())
+    write_gif(frames, path)
     return used

@@ -52,10 +52,15 @@ def _fmt(values: np.ndarray) -> str:
 
 
 def world_xml(
-    polygons: list[Any], bounds: tuple[float, float, float, float], height: float = OBSTACLE_HEIGHT
+    polygons: list[Any],
+    bounds: tuple[float, float, float, float],
+    height: float = OBSTACLE_HEIGHT,
+    *,
+    prefix: str = "obs",
+    floor_and_walls: bool = True,
 ) -> tuple[str, str, list[str]]:
-    """(asset XML, worldbody XML, obstacle geom names) of the floor, the four walls round ``bounds`` and the
-    extruded obstacles."""
+    """(asset XML, worldbody XML, obstacle geom names) of the floor, the four walls round ``bounds`` (unless
+    ``floor_and_walls`` is False) and the obstacles extruded to ``height`` [m], named ``{prefix}{k}``."""
     xmin, ymin, xmax, ymax = bounds
     cx, cy = 0.5 * (xmin + xmax), 0.5 * (ymin + ymax)
     hx, hy = 0.5 * (xmax - xmin), 0.5 * (ymax - ymin)
@@ -74,6 +79,8 @@ def world_xml(
         ("wall_w", xmin - w / 2, cy, w / 2, hy + w),
         ("wall_e", xmax + w / 2, cy, w / 2, hy + w),
     ]
+    if not floor_and_walls:
+        body, walls = [], []
     for name, x, y, sx, sy in walls:
         body.append(
             f'<geom name="{name}" type="box" pos="{x!r} {y!r} {height / 2!r}" size="{sx!r} {sy!r} {height / 2!r}" '
@@ -83,10 +90,10 @@ def world_xml(
     for k, piece in enumerate(convex_pieces(polygons)):
         k_ = len(piece)
         verts = np.vstack([np.column_stack([piece, np.zeros(k_)]), np.column_stack([piece, np.full(k_, height)])])
-        assets.append(f'<mesh name="obs{k}" vertex="{_fmt(verts)}"/>')
+        assets.append(f'<mesh name="{prefix}{k}" vertex="{_fmt(verts)}"/>')
         body.append(
-            f'<geom name="obs{k}" type="mesh" mesh="obs{k}" contype="{ot}" conaffinity="{oa}" '
+            f'<geom name="{prefix}{k}" type="mesh" mesh="{prefix}{k}" contype="{ot}" conaffinity="{oa}" '
             f'rgba="0.45 0.47 0.5 1" solref="0.01 1" solimp="0.99 0.9999 0.0005 0.5 2"/>'
         )
-        names.append(f"obs{k}")
+        names.append(f"{prefix}{k}")
     return "".join(assets), "".join(body), names
