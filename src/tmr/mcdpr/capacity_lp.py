@@ -14,7 +14,6 @@ from __future__ import annotations
 
 from itertools import combinations
 
-import cvxpy as cp
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -67,6 +66,8 @@ class SupportLP:
     """
 
     def __init__(self, m: int, r: int, solver: str = "HIGHS") -> None:
+        import cvxpy as cp  # lazily: a 1-5 s import most runs do not need
+
         self.t = cp.Variable(m)
         self.g = cp.Parameter(m)
         self.A = cp.Parameter((r, m))
@@ -78,6 +79,8 @@ class SupportLP:
 
     def support(self, g: ArrayLike, A: ArrayLike, b: ArrayLike) -> tuple[float, NDArray[np.float64] | None]:
         """(max gᵀ t, argmax t) [N]; (−inf, None) if the constraints are infeasible."""
+        import cvxpy as cp  # lazily: a 1-5 s import most runs do not need
+
         self.g.value = np.asarray(g, dtype=float)
         self.A.value = np.asarray(A, dtype=float)
         self.b.value = np.asarray(b, dtype=float)

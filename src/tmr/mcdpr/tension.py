@@ -18,7 +18,6 @@ from __future__ import annotations
 
 from typing import Literal, NamedTuple
 
-import cvxpy as cp
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -120,6 +119,8 @@ class TensionProblem:
     """
 
     def __init__(self, n: int, m: int, r: int, objective: Objective = "2norm", solver: str | None = None) -> None:
+        import cvxpy as cp  # lazily: a 1-5 s import most runs do not need
+
         self.t = cp.Variable(m)
         self.W = cp.Parameter((n, m))
         self.f = cp.Parameter(n)
@@ -145,6 +146,8 @@ class TensionProblem:
 
     def solve(self, W: ArrayLike, f: ArrayLike, A: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
         """Tensions (m,) [N]; raises InfeasibleWrench when no tension satisfies W t = f and A t ≤ b."""
+        import cvxpy as cp  # lazily: a 1-5 s import most runs do not need
+
         self.W.value = np.asarray(W, dtype=float)
         self.f.value = np.asarray(f, dtype=float)
         self.A.value = np.asarray(A, dtype=float)
