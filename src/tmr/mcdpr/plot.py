@@ -70,7 +70,9 @@ def plot_topview(robot: Robot, scene: Scene, env: Environment, result: Plan, pat
                 lw=0.6,
                 alpha=0.7,
             )
-    ax.plot([], [], "-", color="0.5", lw=0.6, label="cables at the way-points")
+    ax.plot(
+        [], [], "-", color="0.5", lw=0.6, label="cables at the " + ("way-points" if result.stage1 else "task points")
+    )
     w = result.waypoints
     ax.plot(w[:, 0], w[:, 1], "k*", ms=11, label="way-points" if result.stage1 else "task points")
     for i, p in enumerate(w):
