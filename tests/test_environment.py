@@ -95,6 +95,8 @@ def test_segment_is_free_agrees_with_segment_clearance(builtin_envs: dict[str, E
             got = env.segment_is_free(a, b, margin)
             assert got.dtype == bool and got.shape == (400,)
             np.testing.assert_array_equal(got, value > margin)
+        per_segment = rng.uniform(0.0, 0.5, size=400)  # one margin per segment
+        np.testing.assert_array_equal(env.segment_is_free(a, b, per_segment), value > per_segment)
 
 
 def test_thin_obstacle_crossing_is_negative() -> None:

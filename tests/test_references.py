@@ -186,3 +186,55 @@ def test_start_placement_turns_round_a_wall_end_off_the_route():
     assert np.all(env.segment_clearance(ends[:-1], ends[1:]) > 0.0)
     assert np.all(np.linalg.norm(np.diff(ends, axis=0), axis=1) <= reach + 1e-9)
     assert np.all(env.exact_clearance(P) > 0.05)
+
+
+def test_followers_see_the_robot_ahead_through_a_narrow_door() -> None:
+    """In a door whose free gap is narrower than 2 x 0.1 m, a guide point is still visible from the samples just
+    behind it: the visibility margin drops to the guide's own clearance there (less 0.01 m), instead of hiding every
+    sample in the door (the references then jumped)."""
+    from tmr.references import VISIBLE_CLEARANCE, _visible_back
+
+    # wall at x = 5 with a door whose grown gap is 0.16 m wide around y = 5
+    wall = [box(4.9, 0.0, 5.1, 4.42), box(4.9, 5.58, 5.1, 10.0)]
+    env = Environment.from_geometry(wall, (0, 0, 10, 10), 0.5, 0.05)
+    guide = np.array([[1.0, 5.0], [9.0, 5.0]])
+    arcs = guide_arcs(guide)
+    s, back = _visible_back(env, guide, arcs)
+    inside = np.flatnonzero(np.abs(s + 1.0 - 5.0) < 0.1)  # samples in the door
+    assert len(inside)
+    clear = env.exact_clearance(np.column_stack([1.0 + s[inside], np.full(len(inside), 5.0)]))
+    assert clear.max() < VISIBLE_CLEARANCE  # a fixed 0.1 m margin would see nothing here
+    assert np.all(s[inside] - s[back[inside]] >= 0.3)  # each sees at least 0.3 m back along the guide
+    # and what it sees is really free at the margin the rule states
+    for j in inside:
+        a = np.column_stack([1.0 + s[back[j] : j], np.full(j - back[j], 5.0)])
+        assert np.all(env.segment_clearance(a, np.repeat([[1.0 + s[j], 5.0]], len(a), 0)) > 0)
+
+
+def test_walk_in_view_keeps_the_tether_off_the_corner_an_s_door_would_press_it_on() -> None:
+    """Robot 0 rests at its station; robot 1's guide path turns round a block that the chord from robot 0's station
+    cuts. After ``_walk_in_view`` robot 1 stays in view of robot 0 (every chord free) and still ends at its
+    station at the same step; without it some chord is blocked."""
+    from tmr.references import _walk_in_view
+
+    env = Environment.from_geometry([box(4.0, 3.0, 5.0, 4.0)], (0, 0, 10, 10), 0.5, 0.05)
+    s0 = np.array([2.0, 2.0])
+    s1 = np.array([8.0, 2.3])
+    assert env.segment_is_free(s0, s1, 0.1)  # the stations' chord passes under the block (grown: y >= 2.5)
+    # robot 1 goes from (3, 2) up and over the block, then down to its station
+    path = np.array([[3.0, 2.0], [3.0, 5.0], [6.0, 5.0], [8.0, 2.3]])
+    k = np.linspace(0.0, 1.0, 200)
+    seg = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))]
+    p1 = np.column_stack([np.interp(k * seg[-1], seg, path[:, 0]), np.interp(k * seg[-1], seg, path[:, 1])])
+    pos = np.zeros((200, 2, 2))
+    pos[:, 0] = s0
+    pos[:, 1] = p1
+    final = np.array([s0, s1])
+    before = env.segment_is_free(np.broadcast_to(s0, p1.shape), p1, 0.0)
+    assert not before.all()  # the guide path hides behind the block
+    _walk_in_view(env, pos, final, 0)
+    after = env.segment_is_free(np.broadcast_to(s0, p1.shape), pos[:, 1], 0.0)
+    assert after.all()
+    np.testing.assert_allclose(pos[-1, 1], s1)
+    np.testing.assert_allclose(pos[0, 1], p1[0])  # it leaves the guide only after P
+    assert np.all(env.exact_clearance(pos[:, 1]) > 0)

@@ -324,16 +324,20 @@ VISIBLE_CLEARANCE = 0.1
 
 def _visible_back(env: Any, guide: Array, arcs: Array, step: float = 0.1) -> tuple[Array, NDArray[np.intp]]:
     """Guide samples s (every ``step`` [m]) and, for each, the first sample behind it from which every later sample
-    up to it is joined to it by a chord keeping ``VISIBLE_CLEARANCE`` (exact)."""
+    up to it is joined to it by a chord keeping ``VISIBLE_CLEARANCE``, or half the guide's own clearance between
+    the two samples less 0.01 m where that is less (a narrow door, where the route keeps 0.06 m) (exact)."""
     L = float(arcs[-1])
     s = np.linspace(0.0, L, max(2, math.ceil(L / step) + 1))
     S = point_at(guide, arcs, s)
+    own = np.asarray(env.segment_clearance(S[:-1], S[1:]), dtype=float)  # guide's clearance per sample interval
     back = np.zeros(len(s), dtype=np.intp)
     window = 80
     for j in range(1, len(s)):
         lo = max(0, j - window)
         idx = np.arange(lo, j)
-        ok = env.segment_is_free(S[idx], np.repeat(S[j : j + 1], len(idx), 0), VISIBLE_CLEARANCE)
+        least = np.minimum.accumulate(own[lo:j][::-1])[::-1]  # guide's clearance from sample idx to sample j
+        margin = np.clip(least - 0.01, 0.0, VISIBLE_CLEARANCE)
+        ok = env.segment_is_free(S[idx], np.repeat(S[j : j + 1], len(idx), 0), margin)
         bad = np.flatnonzero(~ok)
         back[j] = idx[bad[-1]] + 1 if len(bad) else lo
     return s, back
@@ -396,7 +400,7 @@ def _leader_law(
     between consecutive hairpins (turns > ``HAIRPIN_TURN``), each stopping at its end; durations from the pieces'
     lengths and the speed and acceleration limits (:func:`leader_duration`), or ``T_end`` [s] shared in
     proportion to them. The spline keeps ``clearance`` [m], or half the polyline's own clearance where that is
-    less (the route keeps 0.02 m in a narrow passage)."""
+    less (the route keeps 0.06 m in a narrow passage)."""
     d = np.diff(lead, axis=0)
     heading = np.arctan2(d[:, 1], d[:, 0])
     turn = np.abs((np.diff(heading) + np.pi) % (2 * np.pi) - np.pi)
@@ -423,6 +427,43 @@ def _leader_law(
         xdd.append(part.xdd[1:])
     K = sum(len(p.t) - 1 for p in parts)
     return Trajectory(Ts * np.arange(K + 1), np.vstack(x), np.vstack(xd), np.vstack(xdd), lead.copy())
+
+
+def _walk_in_view(env: Any, pos: Array, final: Array, i: int, step: float = 0.05) -> None:
+    """Keep follower ``i+1`` in view of robot ``i`` once ``i`` rests at its final station (in place on ``pos``).
+
+    The stations' chords are free, but the guide from where robot i+1 is when robot i arrives to robot i+1's own
+    station may turn round a corner that the chord from robot i's station cuts (an S-shaped door): the tether
+    between them would be pressed on it. Then robot i+1 leaves the guide at the latest point P of its reference
+    from which the triangle (station i, P, station i+1) is free (the segment P → station i+1 and every chord from
+    station i to it keep the margin), and walks straight from P to its station over the same time."""
+    rest = np.flatnonzero(np.linalg.norm(pos[:, i] - final[i], axis=1) < 1e-9)
+    arrive = np.flatnonzero(np.linalg.norm(pos[:, i + 1] - final[i + 1], axis=1) < 1e-9)
+    if not len(rest) or not len(arrive) or arrive[0] <= rest[0]:
+        return
+    k0, k1 = int(rest[0]), int(arrive[0])
+    if np.linalg.norm(final[i + 1] - final[i]) < 1e-9:
+        return
+    chord = float(env.segment_clearance(final[i], final[i + 1]))
+    margin = min(VISIBLE_CLEARANCE, 0.5 * chord) if chord > 0 else 0.0
+    seg = pos[k0 : k1 + 1, i + 1]
+    seen = env.segment_is_free(np.broadcast_to(final[i], seg.shape), seg, margin)
+    if seen.all():
+        return
+    F = final[i + 1]
+    for kp in range(k0 + int(np.argmin(seen)) - 1, k0 - 1, -1):
+        P = pos[kp, i + 1].copy()
+        m = max(2, math.ceil(float(np.linalg.norm(F - P)) / step) + 1)
+        line = P + np.linspace(0.0, 1.0, m)[:, None] * (F - P)
+        fan = env.segment_is_free(np.broadcast_to(final[i], line.shape), line, margin)
+        if env.segment_is_free(P, F, margin) and fan.all():
+            break
+    else:
+        return
+    path = pos[kp : k1 + 1, i + 1]
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+    u = arc / arc[-1] if arc[-1] > 0 else np.linspace(0.0, 1.0, len(arc))
+    pos[kp : k1 + 1, i + 1] = P + u[:, None] * (F - P)
 
 
 def chain_reference(
@@ -538,6 +579,8 @@ def chain_reference(
         pos[:, i] = on_guide + w[:, None] * off
         ahead = a
     pos[:, -1] = traj.x
+    for i in range(N - 2):
+        _walk_in_view(env, pos, final, i)
     vel = np.gradient(pos, traj.t, axis=0)
     vel[:, -1] = traj.xd
     return ChainReference(

@@ -55,17 +55,19 @@ __all__ = [
 ]
 
 #: δ [m]: clearance the route keeps from the obstacles grown by r (above the QP's d_safe = 0.05 m, so the robots'
-#: references are feasible); halved, then 0.02 m, where a passage is too narrow for it.
+#: references are feasible); halved, then ``NARROW_MARGIN``, where a passage is too narrow for it.
 ROUTE_MARGIN = 0.15
 #: t [m]: Douglas–Peucker tolerance of the conservative simplification of the free region.
 SIMPLIFY_TOLERANCE = 0.02
 #: Segments per quarter circle of the erosion (its chord error δ (1 − cos(π/8)) ≤ 0.012 m is inside δ).
 QUAD_SEGS = 4
+#: Smallest δ [m], tried in a narrow passage: above the QP's d_safe = 0.05 m, which every robot keeps.
+NARROW_MARGIN = 0.06
 #: Spacing [m] of the candidate stations along the route.
 STATION_STEP = 0.1
 #: Clearance [m] a chord between stations keeps from the obstacles grown by r (the QP keeps d_safe = 0.05 m, but a
 #: tether sample that starts nearer may stay there).
-CHORD_CLEARANCE = 0.03
+CHORD_CLEARANCE = 0.06
 #: Extra distance [m] between two robots beyond 2r in a station placement.
 SPACING_MARGIN = 0.1
 
@@ -618,7 +620,7 @@ def plan_route(
     # lower bound: the shortest path in a region that contains the free space (grown by t, then simplified)
     lower = _Graph(env, 0.0, outward=True).shortest(base, goal)
     L_lower = float(guide_arcs(lower)[-1]) if lower is not None else 0.0
-    margins = tuple(dict.fromkeys((margin, margin / 2, 0.02)))
+    margins = tuple(dict.fromkeys((margin, margin / 2, NARROW_MARGIN)))
     points = None
     graph = None
     for m in margins:
@@ -632,8 +634,8 @@ def plan_route(
     assert graph is not None
     if points is None:
         raise BlockedRouteError(
-            f"no route from the anchor {_xy(base)} to the goal {_xy(goal)} keeps 0.02 m from the obstacles grown by "
-            f"{env.safety_radius:g} m: a passage is too narrow for the chain"
+            f"no route from the anchor {_xy(base)} to the goal {_xy(goal)} keeps {NARROW_MARGIN:g} m from the "
+            f"obstacles grown by {env.safety_radius:g} m: a passage is too narrow for the chain"
         )
     points = _dedupe(points)
     L = float(guide_arcs(points)[-1])
