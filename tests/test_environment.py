@@ -277,3 +277,15 @@ def test_bad_parameters_raise() -> None:
         Environment.from_geometry(None, (0, 0, 10, 10), safety_radius=-0.1)
     with pytest.raises(ParameterError, match="coarser resolution"):
         Environment.from_geometry(None, (0, 0, 1000, 1000), resolution=0.01)
+
+
+def test_free_region_numbers_the_connected_pieces() -> None:
+    """A wall across the room splits the free space in two: points on either side get different indices, points
+    on the same side the same one, points in an obstacle or outside the room −1."""
+    env = Environment.from_geometry(box(4.9, 0.0, 5.1, 10.0), (0, 0, 10, 10), R, 0.05)
+    pts = np.array([[2.0, 2.0], [2.0, 8.0], [8.0, 2.0], [8.0, 8.0], [5.0, 5.0], [12.0, 5.0]])
+    region = env.free_region(pts)
+    assert region.shape == (6,)
+    assert region[0] == region[1] >= 0 and region[2] == region[3] >= 0 and region[0] != region[2]
+    assert region[4] == -1 and region[5] == -1
+    assert env.free_region(pts.reshape(2, 3, 2)).shape == (2, 3)

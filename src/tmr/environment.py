@@ -512,6 +512,17 @@ class Environment:
         d = self.exact_clearance(pts)
         return np.minimum(np.minimum.reduceat(d, starts), 0.0)
 
+    def free_region(self, points: ArrayLike) -> NDArray[np.intp]:
+        """Index of the connected piece of the free space each point lies in (the order of
+        ``shapely.get_parts(free)``), −1 outside it; shape (...). Two points are joined by a free path iff they get
+        the same index ≥ 0."""
+        pts = _as_points(points)
+        flat = pts.reshape(-1, 2)
+        region = np.full(len(flat), -1, dtype=np.intp)
+        for k, part in enumerate(shapely.get_parts(self.free)):
+            region[shapely.contains_xy(part, flat[:, 0], flat[:, 1])] = k
+        return region.reshape(pts.shape[:-1])
+
     def is_free(self, points: ArrayLike, margin: float = 0.0) -> NDArray[np.bool_]:
         """True where ``exact_clearance(points) > margin`` [m]; shape (...). Fast path for margin >= 0."""
         pts = _as_points(points)

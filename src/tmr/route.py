@@ -574,12 +574,8 @@ def _check_point(env: Any, p: ArrayLike, name: str) -> Array:
 
 
 def _same_component(env: Any, a: Array, b: Array) -> bool:
-    for part in shapely.get_parts(env.free):
-        ina = bool(shapely.contains_xy(part, a[0], a[1]))
-        inb = bool(shapely.contains_xy(part, b[0], b[1]))
-        if ina or inb:
-            return ina and inb
-    return False
+    ra, rb = env.free_region(np.array([a, b]))
+    return bool(ra >= 0 and ra == rb)
 
 
 def plan_route(

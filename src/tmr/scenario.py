@@ -17,7 +17,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import shapely
 from numpy.typing import ArrayLike, NDArray
 
 from tmr.environment import DEFAULT_RESOLUTION, DEFAULT_SAFETY_RADIUS, Environment
@@ -102,10 +101,7 @@ class Scenario:
                     f"move it away from the obstacles"
                 )
         # every point must lie in the same connected piece of free space as the base
-        parts = shapely.get_parts(env.free)
-        region = np.full(len(P), -1)
-        for k, part in enumerate(parts):
-            region[shapely.contains_xy(part, P[:, 0], P[:, 1])] = k
+        region = env.free_region(P)
         for nm, p, reg in zip(names[1:], P[1:], region[1:], strict=True):
             if reg != region[0]:
                 raise ScenarioError(
