@@ -81,7 +81,10 @@ def _chain(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str
         )
     counts = ", ".join(f"{kind} {c['count']}" for kind, c in rp.contacts.items())
     lines.append(f"  contacts  {counts} (physics steps in contact)")
-    lines.append(f"  real-time factor {rp.real_time_factor:.1f}x ({rp.wall_time:.2f} s wall)")
+    lines.append(
+        f"  real-time factor {rp.real_time_factor:.1f}x ({rp.wall_time:.2f} s wall; "
+        f"{rp.cpu_real_time_factor:.1f}x of this process's CPU time)"
+    )
     return (0 if verdict.ok else 1), names, "\n".join(lines) + ("" if verdict.ok else f"\nFAILED: {verdict.reason}")
 
 

@@ -112,6 +112,7 @@ class ChainReplay:
     nodes: list[Array]  # per sample, (N, n_links+1, 3) tether nodes (for figures and the GIF)
     sim_time: float
     wall_time: float
+    cpu_time: float
     steps: int
     diverged: str | None = None
     config: ReplayConfig = field(default_factory=ReplayConfig)
@@ -120,7 +121,13 @@ class ChainReplay:
 
     @property
     def real_time_factor(self) -> float:
+        """Simulated time / wall time of the simulation loop."""
         return self.sim_time / self.wall_time if self.wall_time > 0 else math.inf
+
+    @property
+    def cpu_real_time_factor(self) -> float:
+        """Simulated time / CPU time of this process in the loop (what the machine's load does not change)."""
+        return self.sim_time / self.cpu_time if self.cpu_time > 0 else math.inf
 
 
 #: simulated time at the start pose before the plan's first sample [s] (lets the constraint forces settle).
@@ -333,35 +340,29 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
             rec_tw[k, j] = ts.root_tension(d)
             rec_tf[k, j] = ts.end_tension(d)
 
-    def ff_tether(pos: Array) -> Array:
-        """Planned horizontal pull of the tethers on each robot [N]: T0 along each tether's chord."""
-        f = np.zeros((n, 2))
-        prev = np.vstack([run.anchor[None, :], pos[:-1]])
-        for j in range(n):
-            u = prev[j] - pos[j]
-            L = float(np.hypot(*u))
-            if L > 1e-9:
-                f[j] += T0 * u / L  # tether j pulls robot j towards robot j-1 / the anchor
-                if j > 0:
-                    f[j - 1] -= T0 * u / L  # and robot j-1 towards robot j
-        return f
-
-    wall0 = time.perf_counter()
+    # actuator commands of every physics step: reference + feed-forward (mass × acceleration, minus the planned pull
+    # of the tethers: T0 along each tether's chord)
+    prev = np.concatenate([np.broadcast_to(run.anchor, (len(times), 1, 2)), p_ref[:, :-1]], axis=1)
+    chord = prev - p_ref  # tether j pulls robot j towards robot j-1 (or the anchor) ...
+    unit = chord / np.maximum(np.linalg.norm(chord, axis=2, keepdims=True), 1e-9)
+    pull = T0 * unit
+    pull[:, :-1] -= T0 * unit[:, 1:]  # ... and robot j-1 towards robot j
+    u_ref = (p_ref - cm.start) + (kv * v_ref + mass * a_ref - pull) / kp
+    u_hold = (p_ref[0] - cm.start) - pull[0] / kp  # at rest at the start pose
     # warm-up at the start pose (not recorded): the soft constraints build up the cable's static forces
     for _ in range(int(round(WARMUP / cfg.timestep))):
-        d.ctrl[ax_ids] = -ff_tether(cm.start) / kp
+        d.ctrl[ax_ids] = u_hold
         d.ctrl[yaw_ids] = 0.0
         for ts in cm.tethers:
             ts.update(m, d)
         mujoco.mj_step(m, d)
     d.time = 0.0
+    wall0, cpu0 = time.perf_counter(), time.process_time()
     record(0)
     step = 0
     for k in range(1, K):
         for _ in range(sub):
-            pr, vr, ar = p_ref[step], v_ref[step], a_ref[step]
-            ff = mass * ar - ff_tether(pr)  # cancel the expected tether pull
-            d.ctrl[ax_ids] = (pr - cm.start) + (kv * vr + ff) / kp
+            d.ctrl[ax_ids] = u_ref[step]
             d.ctrl[yaw_ids] = 0.0
             for ts in cm.tethers:
                 ts.update(m, d)
@@ -376,7 +377,7 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
         record(k)
         if progress is not None:
             progress(k / (K - 1))
-    wall = time.perf_counter() - wall0
+    wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     K = rec_actual.shape[0]
     ref_k = np.asarray(p_ref[::sub][:K])
     nodes = rec_nodes[:K]
@@ -403,6 +404,7 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
         nodes=nodes,
         sim_time=float(step * cfg.timestep),
         wall_time=wall,
+        cpu_time=cpu,
         steps=step,
         diverged=diverged,
         config=cfg,

@@ -201,7 +201,13 @@ def write_chain_outputs(out: Path, rp: ChainReplay, run: Any, verdict: Verdict, 
 
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "replay.json", _dump(chain_document(rp, run, verdict)))
-    timing = {"wall_time": rp.wall_time, "sim_time": rp.sim_time, "real_time_factor": rp.real_time_factor}
+    timing = {
+        "wall_time": rp.wall_time,
+        "cpu_time": rp.cpu_time,
+        "sim_time": rp.sim_time,
+        "real_time_factor": rp.real_time_factor,
+        "cpu_real_time_factor": rp.cpu_real_time_factor,
+    }
     atomic_write_text(out / "timing.json", _dump(timing))
     names = ["replay.json", "timing.json"]
     if plots:
