@@ -316,6 +316,12 @@ def test_turtlebot3_map_one_robot_radius(tmp_path, capsys):
         [*base, "--robot-radius", "0.2", "--set", "safety_radius=0.15", "--out", str(tmp_path / "x")], capsys
     )
     assert code == 2 and "two robot radii" in err
+    # a goal in the unknown part of the image: named as such, not as a clearance
+    code, _, err = run_cli(
+        ["--map", m, "--base", "-2.0,0.0", "--goal", "5,5", "--robot-radius", "0.15", "--out", str(tmp_path / "x")],
+        capsys,
+    )
+    assert code == 2 and "outside the map's known free area (x -2.85 .. 1.85 m, y -1.85 .. 2.85 m" in err
 
 
 @pytest.mark.parametrize(

@@ -94,6 +94,16 @@ class Scenario:
         for nm, p, c in zip(names, P, clear, strict=True):
             if not (xmin <= p[0] <= xmax and ymin <= p[1] <= ymax):
                 raise ScenarioError(f"{label}: {nm} ({p[0]:.6g}, {p[1]:.6g}) m is outside the room {env.bounds}")
+            known = getattr(env, "known_free", None)
+            if (
+                not c > 0.0
+                and known is not None
+                and not (known[0] <= p[0] <= known[2] and known[1] <= p[1] <= known[3])
+            ):
+                raise ScenarioError(
+                    f"{label}: {nm} ({p[0]:g}, {p[1]:g}) m is outside the map's known free area (x {known[0]:.6g} .. "
+                    f"{known[2]:.6g} m, y {known[1]:.6g} .. {known[3]:.6g} m; unknown and occupied cells are obstacles)"
+                )
             if not c > 0.0:
                 raise ScenarioError(
                     f"{label}: {nm} ({p[0]:g}, {p[1]:g}) m is not in free space: clearance {c:.3f} m to the "
