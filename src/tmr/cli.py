@@ -60,7 +60,10 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``tmr`` console script; returns the exit code."""
     args = list(sys.argv[1:] if argv is None else argv)
     if not args or args[0] in ("-h", "--help"):
-        print(_usage(), file=sys.stdout if args else sys.stderr)
+        try:
+            print(_usage(), file=sys.stdout if args else sys.stderr)
+        except BrokenPipeError:  # e.g. tmr --help | head -3
+            pass
         return 0 if args else 2
     if args[0] == "--version":
         from importlib.metadata import PackageNotFoundError, version
