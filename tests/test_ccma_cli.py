@@ -176,3 +176,21 @@ def test_non_utf8_description_exits_2(tmp_path, capsys):
     code, out = _run(tmp_path, "out", "--description", str(bad))
     assert code == 2 and not out.exists()
     assert "not a UTF-8 text file" in capsys.readouterr().err
+
+
+def test_a_singular_configuration_is_reported_with_the_reason(tmp_path, capsys):
+    """The 6-dof platform rolled by ±0.8 rad stays inside the per-leg reach bound but meets a singular configuration
+    of the whole linkage once the roll passes about -0.62 rad: the conditioning rises past the limit (warning, damped
+    steps) and the targets
+    after it are missed (exit 1) with the reason."""
+    args = ("--example", "6dof-reduced", "--path", "roll", "--amplitude", "0.8", "--rot-step", "0.04", "--no-plots")
+    code, out = _run(tmp_path, "roll", *args)
+    assert code == 1
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["reach"]["ok"] and summary["max_condition"] > 100
+    first_near = summary["near_singular_steps"][0]
+    assert summary["damped_steps"][0] == first_near + 1
+    assert summary["missed_steps"][0] == summary["near_singular_steps"][1] + 1
+    err = capsys.readouterr().err
+    assert "warning: " in err and "near a singular configuration" in err
+    assert "path FAILED" in err and "right after a near-singular configuration" in err

@@ -344,6 +344,13 @@ def _miss_reason(res: Any, ok: np.ndarray) -> str:
         )
     if res.condition[k] > CONDITION_LIMIT:
         why.append(f"near-singular (condition number {res.condition[k]:.3g})")
+    near = np.flatnonzero(res.condition[:k] > CONDITION_LIMIT)
+    if near.size and near[-1] >= k - 3:
+        j = int(near[-1])
+        why.append(
+            f"right after a near-singular configuration (condition number {res.condition[j]:.3g} at step {j + 1}): "
+            f"the linkage cannot be followed through it"
+        )
     return f"{len(missed)} target(s) missed, first at step {k + 1}: {'; '.join(why)}"
 
 
