@@ -181,8 +181,7 @@ def test_non_utf8_description_exits_2(tmp_path, capsys):
 def test_a_singular_configuration_is_reported_with_the_reason(tmp_path, capsys):
     """The 6-dof platform rolled by ±0.8 rad stays inside the per-leg reach bound but meets a singular configuration
     of the whole linkage once the roll passes about -0.62 rad: the conditioning rises past the limit (warning, damped
-    steps) and the targets
-    after it are missed (exit 1) with the reason."""
+    steps) and the targets after it are missed (exit 1) with the reason."""
     args = ("--example", "6dof-reduced", "--path", "roll", "--amplitude", "0.8", "--rot-step", "0.04", "--no-plots")
     code, out = _run(tmp_path, "roll", *args)
     assert code == 1
