@@ -128,6 +128,15 @@ def test_out_is_a_file_exit_2_before_planning(tmp_path, capsys, monkeypatch) -> 
     assert "not a directory" in capsys.readouterr().err and f.read_text() == "keep me"
     assert main(["plan", "--out", str(f / "sub")]) == 2
     assert "is a file" in capsys.readouterr().err
+    import os
+    import tempfile
+
+    if os.path.isdir("/proc"):  # a place where even root cannot write, found by a real write test
+        try:
+            os.rmdir(tempfile.mkdtemp(dir="/proc"))
+        except OSError:
+            assert main(["plan", "--planner", "greedy", "--out", "/proc/tmr-out"]) == 2
+            assert "cannot write in /proc" in capsys.readouterr().err
     assert sorted(q.name for q in tmp_path.iterdir()) == ["taken"]
 
 

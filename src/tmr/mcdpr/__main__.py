@@ -279,6 +279,10 @@ def check_out_dir(out: Path) -> None:
         raise TmrError(f"--out {out}: {anc} is a file, so the directory cannot be created")
     if not os.access(anc, os.W_OK | os.X_OK):
         raise TmrError(f"--out {out}: {anc} is not writable")
+    try:  # a real write test: permissions alone do not tell (root, a read-only or virtual file system)
+        os.rmdir(tempfile.mkdtemp(prefix=".tmr-out-check-", dir=anc))
+    except OSError as exc:
+        raise TmrError(f"--out {out}: cannot write in {anc} ({exc.strerror})") from exc
 
 
 def write_outputs(
