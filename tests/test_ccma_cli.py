@@ -193,3 +193,26 @@ def test_a_singular_configuration_is_reported_with_the_reason(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "warning: " in err and "near a singular configuration" in err
     assert "path FAILED" in err and "right after a near-singular configuration" in err
+
+
+def test_out_where_nothing_can_be_written_exit_2_before_tracking(capsys, monkeypatch):
+    """A place where even root cannot write (found by a real write test) is refused before the (long) tracking."""
+    import os
+    import tempfile
+
+    import tmr.ccma.control as control
+
+    if not os.path.isdir("/proc"):
+        pytest.skip("no /proc")
+    try:
+        os.rmdir(tempfile.mkdtemp(dir="/proc"))
+        pytest.skip("/proc is writable here")
+    except OSError:
+        pass
+
+    def no_track(*a, **k):
+        raise AssertionError("tracked although --out is unusable")
+
+    monkeypatch.setattr(control, "track", no_track)
+    assert main(["run", "--no-plots", "--out", "/proc/tmr-out"]) == 2
+    assert "cannot write in '/proc'" in capsys.readouterr().err

@@ -67,6 +67,10 @@ def check_out_dir(out: Path) -> None:
     if not os.access(probe, os.W_OK | os.X_OK):
         what = "is not writable" if probe == out else f"cannot be created ({str(probe)!r} is not writable)"
         raise CcmaError(f"--out {str(out)!r} {what}; choose another output directory")
+    try:  # a real write test: permissions alone do not tell (root, a read-only or virtual file system)
+        os.rmdir(tempfile.mkdtemp(prefix=".tmr-out-check-", dir=probe))
+    except OSError as exc:
+        raise CcmaError(f"--out {str(out)!r}: cannot write in {str(probe)!r} ({exc.strerror})") from exc
 
 
 def build_parser() -> argparse.ArgumentParser:
