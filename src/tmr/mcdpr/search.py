@@ -60,6 +60,9 @@ class SearchParams:
     the output samples [m]. max_rounds: lazy re-searches. shortcut: look-ahead of the shortcut smoothing [nodes].
     expand, expand_samples, seed: local expansion, ``expand_samples`` random placements (every base moved by up
     to ``max_move``, seeded) around each of the ``expand`` best reachable placements of the previous station.
+    best_heading: placements need μ ≥ margin at the best heading of every base instead of at every heading.
+    stall_rounds: repositioning rounds at a station before ``not-connectable``. escalate: retry a failed search at
+    the best heading, then with more formations (see :func:`plan_search`).
     """
 
     station_step: float = 0.25
@@ -80,6 +83,7 @@ class SearchParams:
     seed: int = 0
     best_heading: bool = False
     stall_rounds: int = 8
+    escalate: bool = True
 
 
 def stations(tasks: NDArray[np.float64], step: float) -> tuple[NDArray[np.float64], NDArray[np.int64], list[int]]:
@@ -369,22 +373,40 @@ def plan_search(
     up front) or NoPlanFound (nothing found at the search resolution).
 
     Placements are first required to keep μ ≥ margin at *every* heading of their bases (robust to the in-place
-    turns); when that finds nothing, the search is repeated with μ ≥ margin at the *best* heading of every base
-    (``best_heading``: more placements, the motions' turns are then certified one by one). The verdict is the
-    second search's."""
+    turns); when that finds nothing (``escalate``), the search is repeated with μ ≥ margin at the *best* heading of
+    every base (``best_heading``: more placements, the motions' turns are then certified one by one), then at every
+    heading with 8/3 × the formations and twice the placements kept per station. The verdict is the last search's
+    (its message lists the resolutions tried)."""
     params = params or SearchParams()
-    if params.best_heading:
-        return _plan_search(robot, scene, params, external)
+    attempts = [params]
+    if params.escalate:
+        if not params.best_heading:
+            attempts.append(dataclasses.replace(params, best_heading=True))
+        finer = dataclasses.replace(params, n_formations=params.n_formations * 8 // 3, keep=params.keep * 2)
+        attempts.append(finer)
     t0 = time.perf_counter()
-    try:
-        return _plan_search(robot, scene, params, external)
-    except NoPlanFound as first:
-        t_first = time.perf_counter() - t0
-        res = _plan_search(robot, scene, dataclasses.replace(params, best_heading=True), external)
-        res.search["first_attempt"] = f"every heading: {first.kind}: {first}"
-        res.times["first_attempt"] = t_first
-        res.times["total"] += t_first
+    failed: list[str] = []
+    for k, attempt in enumerate(attempts):
+        try:
+            res = _plan_search(robot, scene, attempt, external)
+        except NoPlanFound as exc:
+            failed.append(f"{_describe(attempt)}: {exc.kind}: {exc}")
+            if k == len(attempts) - 1:
+                if len(attempts) > 1:
+                    exc.args = (f"{exc} [tried: {'; '.join(_describe(a) for a in attempts)}]",)
+                raise
+            continue
+        res.search["failed_attempts"] = failed
+        res.search["attempt"] = _describe(attempt)
+        res.times["total"] = time.perf_counter() - t0
         return res
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def _describe(p: SearchParams) -> str:
+    """Short label of a search resolution, for messages."""
+    where = "the best" if p.best_heading else "every"
+    return f"{p.n_formations} formations, keep {p.keep}, μ ≥ {p.margin:g} N at {where} heading"
 
 
 def _plan_search(robot: Robot, scene: Scene, params: SearchParams, external: NDArray[np.float64] | None = None) -> Plan:
