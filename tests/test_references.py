@@ -99,7 +99,9 @@ def test_user_duration_is_kept():
 def test_short_route_many_robots_parks_the_extra_ones():
     env = Environment.from_geometry([Point(5.0, 5.0).buffer(0.45, 64)], (0.0, 0.0, 10.0, 10.0))
     route, ref, lim = plan_refs(env, (2.0, 5.0), (3.5, 7.0), 5)
-    assert route.n_min == 1 and ref.parked >= 3
+    # one robot fits on the 2.5 m route; the others park on a walk away from the goal, and those that stand on the
+    # (longer) route back from the walk's end keep 2r from the parked ones
+    assert route.n_min == 1 and ref.parked >= 2
     check_chain(env, route.points[0], ref.start, lim)
     check_chain(env, route.points[0], ref.final, lim)
     np.testing.assert_allclose(
@@ -238,3 +240,25 @@ def test_walk_in_view_keeps_the_tether_off_the_corner_an_s_door_would_press_it_o
     np.testing.assert_allclose(pos[-1, 1], s1)
     np.testing.assert_allclose(pos[0, 1], p1[0])  # it leaves the guide only after P
     assert np.all(env.exact_clearance(pos[:, 1]) > 0)
+
+
+@pytest.mark.parametrize(("seed", "density"), [(1903356524, "medium"), (2264831904, "medium"), (419794541, "dense")])
+def test_eight_robots_park_near_the_anchor_of_a_short_route(seed: int, density: str) -> None:
+    """Random rooms (tmr.sweep.rooms) whose goal is 2-5 m from the anchor: 8 robots do not fit on the route, so some
+    park on a walk from the anchor and the rest stand on the route from the last parked one. That route may pass
+    the parked robots: the active ones keep 2r apart from them (before, every such placement was rejected), and no
+    start tether is longer than its span limit."""
+    from tmr.sweep.rooms import generate_room
+
+    room = generate_room(seed, density, "near")
+    env = room.environment()
+    lim = span_limits(8, ChainParams())
+    route = plan_route(env, room.base, room.goal, lim, robots=8)
+    P, parked = start_placement(env, route, 8, lim[:, 0].max() + 0.2, span_limits=lim)
+    assert P.shape == (8, 2) and parked >= 1
+    D = np.linalg.norm(P[:, None] - P[None], axis=-1)
+    assert D[np.triu_indices(8, 1)].min() >= 2 * 0.5 + 0.02
+    spans = np.linalg.norm(np.diff(np.vstack([room.base, P]), axis=0), axis=1)
+    assert np.all(spans <= lim[:, 1]) and np.all(spans >= lim[:, 0])
+    assert np.all(env.exact_clearance(P) > 0.05)
+    assert np.all(env.segment_clearance(np.vstack([room.base, P[:-1]]), P) > 0)

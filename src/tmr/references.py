@@ -162,7 +162,7 @@ def start_placement(
             if P is not None and _free_chain(env, base, P, clear):
                 return P, 0
         for parked, Pp, sub in walks if bends else parkings():
-            Pa = _along(env, sub.points, N - parked, spacing, clear, ahead=0.0, reach=reach, bends=bends)
+            Pa = _along(env, sub.points, N - parked, spacing, clear, ahead=0.0, reach=reach, bends=bends, avoid=Pp)
             if Pa is None:
                 continue
             P = np.vstack([Pp, Pa])
@@ -183,6 +183,7 @@ def _along(
     ahead: float,
     reach: float = math.inf,
     bends: bool = False,
+    avoid: Array | None = None,
 ) -> Array | None:
     """``n`` robots along the polyline from its start (depth-first with a small budget).
 
@@ -191,8 +192,9 @@ def _along(
     ``CHORD_START_CLEARANCE`` (a chord must not cut a corner of the route: at a hairpin the robot sits at its
     apex); the last one at least ``ahead`` [m] of route before the end. With ``bends``, points off the
     polyline's bends are candidates too (:func:`tmr.route.bend_offsets`: round a wall's end, robots 2r apart
-    cannot both stand on a route that hugs it), every robot keeps 2r + 0.05 m from all placed before it, and no
-    chord is longer than ``reach`` [m]. None if they do not fit."""
+    cannot both stand on a route that hugs it) and every robot keeps 2r + 0.05 m from all placed before it. No
+    chord is longer than ``reach`` [m]. Every robot keeps 2r + 0.05 m from the points ``avoid`` (k, 2) too (robots
+    parked before the polyline starts). None if they do not fit."""
     arcs = guide_arcs(guide)
     L = float(arcs[-1])
     s = np.arange(0.0, L + 1e-9, 0.05)
@@ -206,6 +208,10 @@ def _along(
         s, S = s[order], S[order]
     first = min(CHORD_START_CLEARANCE, 0.5 * float(np.asarray(env.exact_clearance(S[0]))))
     near = 2.0 * float(env.safety_radius) + 0.05  # robots at least 2r apart, with a little margin
+    if avoid is not None and len(avoid):  # candidates too near a parked robot are dropped
+        far = np.min(np.linalg.norm(S[:, None] - np.asarray(avoid, float)[None], axis=2), axis=1) >= near
+        far[0] = True  # the polyline's start (the last parked robot itself) is where the walk begins
+        s, S = s[far], S[far]
     budget = [300]
 
     def options(path: list[int]) -> list[int]:
@@ -216,8 +222,7 @@ def _along(
         else:  # along the polyline, from the previous one
             d = np.linalg.norm(S[k + 1 :] - cur, axis=1)
         cand = np.flatnonzero(d >= near) + k + 1
-        if bends:
-            cand = cand[np.linalg.norm(S[cand] - cur, axis=1) <= reach]
+        cand = cand[np.linalg.norm(S[cand] - cur, axis=1) <= reach]  # no start tether beyond its span limit
         cand = cand[s[cand] <= L - ahead + 1e-9][:400]
         if not len(cand):
             return []
