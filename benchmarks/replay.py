@@ -2,7 +2,8 @@
 
     python benchmarks/replay.py [--repeats 3] [--skip-mcdpr]
 
-Writes ``benchmarks/results/replay.md`` and ``replay.csv`` and the README figure ``replay_A_qp_heights.png``.
+Writes ``benchmarks/results/replay.md`` and ``replay.csv`` and the tether-height figure of scenario A (qp),
+``replay_A_qp_heights.png``.
 Plans are made with the command line (``python -m tmr.plan ... --no-plots``, ``python -m tmr.mcdpr plan``) into a
 temporary directory and replayed through :mod:`tmr.replay`. The real-time factor is simulated time / wall time of
 the simulation loop (model building and figures excluded), the median over ``--repeats`` replays of the same run.
