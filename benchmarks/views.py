@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import csv
 import datetime
+import os
 import platform
 import shutil
 import statistics
@@ -50,6 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     from tmr.planner import build_problem, solve
     from tmr.scenario import load_scenario
 
+    measured = source_version()  # before measuring: the code the timings belong to
     rows = []
     work = Path(tempfile.mkdtemp(prefix="tmr-views-"))
     try:
@@ -65,15 +67,17 @@ def main(argv: list[str] | None = None) -> int:
                 "sqlite3": lambda m, p: write_bag(m, p / "bag_sqlite3", storage="sqlite3"),
             }
             times: dict[str, list[float]] = {k: [] for k in writers}
+            cpu: dict[str, list[float]] = {k: [] for k in writers}
             out: dict[str, Path] = {}
             for _ in range(args.repeats):
                 for kind, fn in writers.items():
                     d = work / name / kind
                     shutil.rmtree(d, ignore_errors=True)
                     d.mkdir(parents=True)
-                    t0 = time.perf_counter()
+                    t0, c0 = time.perf_counter(), time.process_time()
                     out[kind] = fn(motion, d)
                     times[kind].append(time.perf_counter() - t0)
+                    cpu[kind].append(time.process_time() - c0)
             if name == "A":
                 shutil.copyfile(out["gif"], RESULTS / "A_qp_motion.gif")
             for kind, path in out.items():
@@ -93,6 +97,7 @@ def main(argv: list[str] | None = None) -> int:
                         "plan_s": round(float(plan.t[-1]), 2),
                         "output": kind,
                         "median_s": round(statistics.median(times[kind]), 3),
+                        "median_cpu_s": round(statistics.median(cpu[kind]), 3),
                         "size_MB": round(_size(path) / 1e6, 2),
                         "detail": detail,
                     }
@@ -106,14 +111,16 @@ def main(argv: list[str] | None = None) -> int:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]), lineterminator="\n")
         w.writeheader()
         w.writerows(rows)
-    head = ["scenario", "robots", "samples", "plan [s]", "output", "median write [s]", "size [MB]", "detail"]
+    head = ["scenario", "robots", "samples", "plan [s]", "output", "median write [s]", "median CPU [s]", "size [MB]"]
+    head.append("detail")
     lines = [
         "# Views and exports of a plan",
         "",
         f"`python benchmarks/views.py --scenarios {' '.join(args.scenarios)} --repeats {args.repeats}`; "
         f"{datetime.date.today().isoformat()}, {platform.machine()} ({platform.python_version()}), "
-        f"{versions(PACKAGES)}, {source_version()}. Median of {args.repeats} interleaved repeats; the plan and the "
-        "motion are built once and not timed.",
+        f"{versions(PACKAGES)}, {measured}, load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores. "
+        f"Median of {args.repeats} interleaved repeats of wall time and of the process's CPU time (less sensitive to "
+        "other load); the plan and the motion are built once and not timed.",
         "",
         "| " + " | ".join(head) + " |",
         "|" + "---|" * len(head),
