@@ -14,7 +14,11 @@ link's vector d = P(j_1) − P(j_2) keeps its component c = d·n along a revolut
 its vertical component lies in c n_z ± √(L² − c²)·√(1 − n_z²). At the end-effector end n = R_t n_EE depends on the
 target; at the base end n_z is constant (the base only yaws). For the shipped legs (revolute or universal elbow,
 revolute wrist) these intervals are the reach of the leg: the agent can put the elbow anywhere on the floor, and the
-legs are independent once the end-effector pose is fixed. The bound ignores collisions between links. A leg with a
+legs are independent once the end-effector pose is fixed. A one-link leg also keeps the side of the horizontal its
+link starts on (the reference assembly branch): at rise 0 the link lies flat, the agent's travel stops and reverses
+while the end-effector's height keeps moving (a fold: ∇ₓ²E singular), and the tracking cannot follow the linkage
+through it — a target past it is reported as a singular configuration (``ReachVerdict.singular``), not as out of
+reach. The bound ignores collisions between links. A leg with a
 prismatic joint has no rigid span and gets no bound; neither does an agent whose base reaches the end-effector only
 through other agents.
 
