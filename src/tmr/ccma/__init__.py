@@ -12,15 +12,18 @@ kinematic control of omnidirectional mobile agents joined by a passive kinematic
 Modules: :mod:`~tmr.ccma.bodies` (pose parameterisation), :mod:`~tmr.ccma.joints` (constraint rows),
 :mod:`~tmr.ccma.system` (declarative description), :mod:`~tmr.ccma.energy` (E = ½‖C‖² and its derivatives),
 :mod:`~tmr.ccma.sim` (Newton forward kinematics), :mod:`~tmr.ccma.control` (sensitivity IK with BFGS),
-:mod:`~tmr.ccma.paths`, :mod:`~tmr.ccma.plot`; CLI ``python -m tmr.ccma``. Math: ``formulations/ccma.md``.
+:mod:`~tmr.ccma.paths`, :mod:`~tmr.ccma.angles` (joint angles), :mod:`~tmr.ccma.reach` (reach bound checked before
+control), :mod:`~tmr.ccma.plot`; CLI ``python -m tmr.ccma``. Math: ``formulations/ccma.md``.
 """
 
 from __future__ import annotations
 
-from tmr.ccma.control import IKResult, Target, TrackResult, objective, sensitivity, solve_ik, track
+from tmr.ccma.angles import joint_angles
+from tmr.ccma.control import IKResult, Target, TrackResult, conditioning, objective, sensitivity, solve_ik, track
 from tmr.ccma.energy import EnergyModel
 from tmr.ccma.errors import AssemblyError, CcmaError, ConvergenceError, DescriptionError
 from tmr.ccma.paths import make_path
+from tmr.ccma.reach import ReachVerdict, check_reach
 from tmr.ccma.sim import SimResult, State, agent_poses, end_effector_pose, reference_state, simulate
 from tmr.ccma.system import System, build_system, example_names, load_description, load_system
 
@@ -31,6 +34,7 @@ __all__ = [
     "DescriptionError",
     "EnergyModel",
     "IKResult",
+    "ReachVerdict",
     "SimResult",
     "State",
     "System",
@@ -38,8 +42,11 @@ __all__ = [
     "TrackResult",
     "agent_poses",
     "build_system",
+    "check_reach",
+    "conditioning",
     "end_effector_pose",
     "example_names",
+    "joint_angles",
     "load_description",
     "load_system",
     "make_path",
