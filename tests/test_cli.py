@@ -38,7 +38,16 @@ def test_tmr_plan_is_python_m_tmr_plan(tmp_path, capsys):
     assert "unknown scenario 'nosuch'" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("command", [["sweep", "bench", "--help"], ["mcdpr", "plan", "--help"], ["ccma", "--help"]])
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["sweep", "bench", "--help"],
+        ["mcdpr", "plan", "--help"],
+        ["ccma", "--help"],
+        ["export", "--help"],
+        ["replay", "--help"],
+    ],
+)
 def test_subcommand_help_exits_0(command, capsys):
     assert cli.main(command) == 0
     assert "usage:" in capsys.readouterr().out
