@@ -67,3 +67,18 @@ def test_mcdpr_cli_has_the_flags():
 
     a = build_parser().parse_args(["plan", "--gif", "--html", "--export", "mcap"])
     assert a.gif and a.html and a.export == "mcap"
+
+
+def test_remove_views_leaves_other_files(tmp_path):
+    from tmr.views import remove_views
+
+    (tmp_path / GIF_NAME).write_bytes(b"GIF89a")
+    (tmp_path / HTML_NAME).write_text("<html>")
+    (tmp_path / BAG_DIR).mkdir()
+    (tmp_path / BAG_DIR / "metadata.yaml").write_text("rosbag2_bagfile_information: {}")
+    (tmp_path / "notes.txt").write_text("mine")
+    assert sorted(remove_views(tmp_path)) == sorted([GIF_NAME, HTML_NAME, BAG_DIR])
+    assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]
+    (tmp_path / BAG_DIR).mkdir()
+    (tmp_path / BAG_DIR / "mine.txt").write_text("not a bag")
+    assert remove_views(tmp_path) == [] and (tmp_path / BAG_DIR / "mine.txt").is_file()

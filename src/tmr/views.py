@@ -20,7 +20,16 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["BAG_DIR", "EXPORT_FORMATS", "GIF_NAME", "HTML_NAME", "VIEW_NAMES", "add_view_args", "write_views"]
+__all__ = [
+    "BAG_DIR",
+    "EXPORT_FORMATS",
+    "GIF_NAME",
+    "HTML_NAME",
+    "VIEW_NAMES",
+    "add_view_args",
+    "remove_views",
+    "write_views",
+]
 
 GIF_NAME = "motion.gif"
 HTML_NAME = "motion.html"
@@ -60,6 +69,25 @@ def _progress(total: int, what: str) -> Any:
     return tqdm(total=total, desc=what, unit="view", leave=False, disable=not progress_enabled())
 
 
+def remove_views(out: Path) -> list[str]:
+    """Remove every view of :data:`VIEW_NAMES` from ``out`` (a run that writes no plan keeps none of an older one);
+    return the names removed. A ``ros2_bag`` directory is removed only if it is a bag (has ``metadata.yaml``)."""
+    return _clear(Path(out), gif=False, html=False, fmt=None)
+
+
+def _clear(out: Path, gif: bool, html: bool, fmt: str | None) -> list[str]:
+    gone = []
+    for name, on in ((GIF_NAME, gif), (HTML_NAME, html)):
+        stale = out / name
+        if not on and (stale.is_file() or stale.is_symlink()):
+            stale.unlink()
+            gone.append(name)
+    if not fmt and (out / BAG_DIR).is_dir() and (out / BAG_DIR / "metadata.yaml").is_file():
+        shutil.rmtree(out / BAG_DIR)
+        gone.append(BAG_DIR)
+    return gone
+
+
 def write_views(args: argparse.Namespace, out: Path, motion: Callable[[], Any]) -> list[str]:
     """Write the views ``args`` ask for into ``out``; remove those it does not ask for; return the names written.
 
@@ -71,12 +99,7 @@ def write_views(args: argparse.Namespace, out: Path, motion: Callable[[], Any]) 
         bool(getattr(args, "html", False)),
         getattr(args, "export", None),
     )
-    for name, on in ((GIF_NAME, gif), (HTML_NAME, html)):
-        stale = out / name
-        if not on and (stale.is_file() or stale.is_symlink()):
-            stale.unlink()
-    if not fmt and (out / BAG_DIR).is_dir() and (out / BAG_DIR / "metadata.yaml").is_file():
-        shutil.rmtree(out / BAG_DIR)
+    _clear(out, gif, html, fmt)
     if not (gif or html or fmt):
         return []
     from tmr.console import progress_enabled

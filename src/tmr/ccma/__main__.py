@@ -40,7 +40,7 @@ from tmr.cli_args import positive_int as _positive_int
 from tmr.console import LOG, add_manners, progress_enabled
 from tmr.console import run as run_cli
 from tmr.motion import ccma_track_motion
-from tmr.views import add_view_args, write_views
+from tmr.views import add_view_args, remove_views, write_views
 
 TRAJECTORY_FORMAT = "tmr-ccma-trajectory/1"
 #: Every file name ``run`` may write into ``--out``; names a run does not produce are removed from ``--out`` so no
@@ -221,6 +221,7 @@ def run(args: argparse.Namespace) -> int:
                 + "\n"
             },
         )
+        remove_views(out)  # no view of an older run beside the refusal
         LOG.error("path REFUSED before control: %s", verdict.message())
         return 1
     n_snap = 5
