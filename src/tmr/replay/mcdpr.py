@@ -92,6 +92,7 @@ class McdprReplay:
     config: McdprConfig = field(default_factory=McdprConfig)
     qpos: list[Array] = field(default_factory=list)
     model: Any = None
+    diverged: str | None = None
 
     @property
     def real_time_factor(self) -> float:
@@ -452,6 +453,7 @@ def replay_mcdpr(run: Any, cfg: McdprConfig | None = None, robot: Any = None) ->
                 entry["where"] = [float(v) for v in con.pos[i]]
                 entry["between"] = [names[int(g1[i])], names[int(g2[i])]]
 
+    diverged = None
     wall0, cpu0 = time.perf_counter(), time.process_time()
     now = 0.0
     ok = control(now, cfg.timestep)
@@ -466,11 +468,15 @@ def replay_mcdpr(run: Any, cfg: McdprConfig | None = None, robot: Any = None) ->
             now = step * cfg.timestep
             if d.ncon:
                 log_contacts(now)
-        if not np.all(np.isfinite(d.qpos)):
-            raise ReplayError(f"the MoPICK simulation diverged at t = {now:.2f} s")
+        if not np.all(np.isfinite(d.qpos)) or d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number:
+            diverged = f"the simulation diverged at t = {now:.2f} s (non-finite accelerations)"
+            K = k
+            break
         record(k, now, ok)
         ok = True
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+    rec = {key: val[:K] for key, val in rec.items()}
+    qpos = qpos[:K]
     t = np.arange(K) * cfg.sample
     refs = [ref(float(x)) for x in t]
     P_ref = np.array([r[4] for r in refs])
@@ -498,6 +504,7 @@ def replay_mcdpr(run: Any, cfg: McdprConfig | None = None, robot: Any = None) ->
         config=cfg,
         qpos=qpos,
         model=model,
+        diverged=diverged,
     )
     rp.verdict = mcdpr_verdict(rp, robot)
     return rp
@@ -574,6 +581,8 @@ def mcdpr_verdict(rp: McdprReplay, robot: Any) -> Any:
         if c["count"]:
             a, b = c["between"]
             fails.append((float(c["first_time"]), kind, f"{kind} contact ({a}, {b}) at t = {c['first_time']:.2f} s"))
+    if rp.diverged:
+        fails.append((float(rp.t[-1]) if len(rp.t) else 0.0, "diverged", rp.diverged))
     fails.sort(key=lambda f: f[0])
     return Verdict(ok=not fails, reason=fails[0][2] if fails else None, failures=tuple(fails))
 
