@@ -118,17 +118,24 @@ def test_tether_across_an_obstacle_is_caught(tmp_path: Path, capsys: pytest.Capt
 def test_span_beyond_d_max_touches_the_floor(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = min_jerk(np.array([3.0, 5.0]), np.array([7.4, 5.0]), 3.0)  # span 6.4 m > d_max 5.596 m
     run = write_run(tmp_path / "far", [], (1.0, 5.0), path)
-    assert replay_main([str(run), "--no-plots", "--gif"]) == 1
+    assert replay_main([str(run), "--no-plots"]) == 1
     err = capsys.readouterr().err
     assert "tether 1 touches the floor" in err and "> d_max 5.596 m" in err
     doc = json.loads((run / "replay" / "replay.json").read_text())
     assert doc["verdict"]["failures"][0]["check"] == "tether-floor"
     k = int(np.argmin(np.abs(np.array(doc["series"]["t"]) - doc["contacts"]["tether-floor"]["first_time"])))
     assert doc["series"]["span"][k][0] == pytest.approx(5.596, abs=0.05)  # it lands where the catenary says
+
+
+def test_gif_is_rendered_from_the_simulation(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from PIL import Image
 
+    run = write_run(tmp_path / "short", [], (1.0, 5.0), min_jerk(np.array([2.0, 5.0]), np.array([3.0, 5.5]), 0.8))
+    assert replay_main([str(run), "--no-plots", "--gif"]) == 0
+    assert "replay.gif rendered with" in capsys.readouterr().out
     with Image.open(run / "replay" / "replay.gif") as gif:
-        assert gif.n_frames > 10
+        assert gif.n_frames == 14  # 10 frames per simulated second, 1.3 s
+        assert gif.size == (640, 480)
 
 
 def test_bad_input_exits_2_and_writes_nothing(run_a: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo's first import: offscreen rendering for --gif
 pytest.importorskip("mujoco")
 
 from tmr.mcdpr.capacity import capacity, required_wrench_set  # noqa: E402

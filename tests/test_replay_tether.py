@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import pytest
 
+os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo's first import: offscreen rendering for --gif
 pytest.importorskip("mujoco")
 
 from tmr.catenary import CatenaryParams, max_span  # noqa: E402

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
 import shapely
 from shapely.geometry import Point, Polygon
@@ -30,6 +32,7 @@ def test_concave_polygon_and_holes_are_covered_by_convex_pieces() -> None:
 
 
 def test_world_compiles_in_mujoco() -> None:
+    os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo's first import (offscreen rendering, test_replay_chain)
     mujoco = pytest.importorskip("mujoco")
     ell = Polygon([(2, 2), (6, 2), (6, 3), (3, 3), (3, 5), (2, 5)])
     assets, body, names = world_xml([ell], (0.0, 0.0, 10.0, 8.0))
