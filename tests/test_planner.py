@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
 from tmr import catenary
 from tmr.chain import Chain
 from tmr.errors import ParameterError, ScenarioError
+from tmr.metrics import evaluate
 from tmr.params import ChainParams, PathParams, PinvParams, QPParams, TimeParams, apply_overrides
 from tmr.planner import build_problem, check, default_start, solve, span_limits
 from tmr.scenario import load_scenario
@@ -78,6 +81,9 @@ def test_plan_verdict_is_taken_from_recorded_states():
     m = check(plan, problem.env)
     assert not plan.success and "robot_clearance" in plan.failure
     assert 150 in m.violation_steps["robot_clearance"] and np.isinf(m.f4)
+    # the failed plan's metrics are exactly those a fresh evaluation of the failed plan gives (check evaluates once)
+    fresh = evaluate(plan, problem.env)
+    assert json.dumps(m.to_dict(), default=str) == json.dumps(fresh.to_dict(), default=str)
 
 
 def test_rrt_route_plans_one_rrt_star_path_for_start_and_leader(monkeypatch):
