@@ -2,7 +2,8 @@
 
 A top view like the GIF (:mod:`tmr.animate`): obstacles, obstacles grown by the safety radius, room, anchor / goal /
 task points, and per frame the tethers (hover: sag [m] and lowest height above the floor [m], Caruso 2021 eq. 22),
-cables and links, the bodies as discs of their radius and the leader's trail. A time slider and play / pause
+cables and links, the bodies as discs of their radius and the leader's trail; tethers are shaded by their sag (colour
+bar, the GIF's colours). A time slider and play / pause
 buttons move through the frames; the whole plotly.js library is embedded (``include_plotlyjs=True``) so the file
 opens without a network. Equal aspect (1 m is as long on x as on y).
 """
@@ -58,7 +59,10 @@ def _moving(motion: Motion, k: int, shown: np.ndarray | None = None) -> list[dic
             text = f"{ln.name}: sag {ln.sag[k]:.3f} m, lowest {p[:, 2].min():.3f} m above the floor"
         else:
             text = f"{ln.name}"
-        out.append({"x": p[:, 0].tolist(), "y": p[:, 1].tolist(), "text": [text] * len(p)})
+        d = {"x": p[:, 0].tolist(), "y": p[:, 1].tolist(), "text": [text] * len(p)}
+        if ln.sag is not None:  # shaded by sag, as in the GIF (colour bar: _sag_scale)
+            d["line"] = {"color": _sag_color(float(ln.sag[k]), _sag_max(motion)), "width": 3}
+        out.append(d)
     if motion.trail is not None:
         tr = motion.track(motion.trail)
         upto = np.arange(k + 1) if shown is None else np.append(shown[shown < k], k)
@@ -82,6 +86,20 @@ def _moving(motion: Motion, k: int, shown: np.ndarray | None = None) -> list[dic
         for tr in motion.tracks:
             out.append({"x": [float(tr.xyz[k, 0])], "y": [float(tr.xyz[k, 2])]})
     return out
+
+
+#: Colour scale of the tether sag: matplotlib's plasma_r from 25 % on (the GIF's), light = slack.
+_SAG_SCALE = "Plasma_r"
+
+
+def _sag_max(motion: Motion) -> float:
+    return max([float(np.max(ln.sag)) for ln in motion.lines if ln.sag is not None] + [1e-3])
+
+
+def _sag_color(sag: float, smax: float) -> str:
+    from plotly.colors import sample_colorscale
+
+    return str(sample_colorscale(_SAG_SCALE, [0.25 + 0.75 * min(max(sag / smax, 0.0), 1.0)])[0])
 
 
 def _has_side(motion: Motion) -> bool:
@@ -160,6 +178,25 @@ def build_figure(motion: Motion, max_frames: int = 200) -> Any:
                 hovertemplate=f"{name}: (%{{x:.3f}}, %{{y:.3f}}) m<extra></extra>",
             )
         )
+    if any(ln.sag is not None for ln in motion.lines):  # colour bar of the tether sag (an empty marker trace)
+        smax = _sag_max(motion)
+        fig.add_trace(
+            go.Scatter(
+                x=[None],
+                y=[None],
+                mode="markers",
+                showlegend=False,
+                hoverinfo="skip",
+                marker={
+                    "colorscale": [[v, _sag_color(v * smax, smax)] for v in np.linspace(0.0, 1.0, 11)],
+                    "cmin": 0.0,
+                    "cmax": smax,
+                    "color": [0.0],
+                    "showscale": True,
+                    "colorbar": {"title": {"text": "tether sag [m]"}, "thickness": 14, "len": 0.6},
+                },
+            )
+        )
     n_static = len(fig.data)
     first = _moving(motion, 0)
     j = 0
@@ -174,7 +211,7 @@ def build_figure(motion: Motion, max_frames: int = 200) -> Any:
                 text=d["text"],
                 mode="lines",
                 hoverinfo="text",
-                line={"color": _LINE_COLOR.get(ln.kind, "#2ca02c"), "width": 3 if ln.kind == "tether" else 2},
+                line=d.get("line", {"color": _LINE_COLOR.get(ln.kind, "#2ca02c"), "width": 2}),
                 name=ln.kind,
                 legendgroup=ln.kind,
                 showlegend=ln.kind not in seen,
