@@ -237,6 +237,7 @@ def test_evaluate_speeds_errors_timing(disc_env):
     m = evaluate(plan, disc_env)
     assert m.peak_speed_per_robot == pytest.approx([1.0, 2.0])
     assert m.peak_speed == pytest.approx(2.0)
+    assert m.final_speed == pytest.approx(2.0)  # the leader still moves at 2 m/s over the last step
     assert m.peak_acceleration_per_robot == pytest.approx([20.0, 0.0], abs=1e-9)
     assert m.max_abs_distance_error == pytest.approx(1.5)
     assert m.max_abs_distance_error_per_tether == pytest.approx([1.5, 1.5])

@@ -102,6 +102,11 @@ def _garbage_yaml(tmp_path: Path) -> Path:
         (["--scenario", "Z"], "A"),
         (["--scenario", "A", "--goal", "5.0,5.0"], "goal"),
         (["--map", "/nonexistent/room.geojson"], "--base"),
+        (["--scenario", "A", "--base", "6.7,5", "--goal", "6.7,5"], "within the robot radius"),
+        (["--scenario", "A", "--goal", "1.05,5"], "0.05 m from the base"),
+        (["--scenario", "A", "--start", "2,5;3,5;3.5,5"], "spans 0.500 m, outside its limits"),
+        (["--scenario", "A", "--start", "2,5;3,5;9,9"], "spans 7.211 m"),
+        (["--scenario", "A", "--start", "2,5;3,5;2.2,5.8"], "nearer than 2r"),
     ],
 )
 def test_bad_input_clear_error_no_output(tmp_path, capsys, args, message):
@@ -199,11 +204,13 @@ def test_robots_auto_picks_the_fewest_that_plan(tmp_path, capsys):
     assert metrics["route_length"] == pytest.approx(24.0) and metrics["success"]
     traj = json.loads((out / "trajectories.json").read_text())
     assert len(traj["robots"]) == 5
-    # the leader's time law follows from the route length and the speed and acceleration limits, not a fixed 15 s
+    # the leader's time law follows from the route length and the speed and acceleration limits, not a fixed 15 s,
+    # then every reference holds still for route_settle = 2 s while the followers come to rest
     T = traj["robots"][-1]["t"][-1]
     lead = 25.0 - traj["robots"][-1]["x"][0]  # the leader's way along the corridor [m]
     assert lead == pytest.approx(24.0 - 5 * 1.2, abs=0.1)
-    assert T == pytest.approx(math.ceil(15 / 8 * lead / 0.8 / 0.05 - 1e-9) * 0.05, abs=1e-9)
+    assert T == pytest.approx(math.ceil(15 / 8 * lead / 0.8 / 0.05 - 1e-9) * 0.05 + 2.0, abs=1e-9)
+    assert metrics["final_speed"] < 0.02
 
 
 def test_route_guided_plan_goes_round_the_wall(tmp_path, capsys):

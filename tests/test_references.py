@@ -262,3 +262,21 @@ def test_eight_robots_park_near_the_anchor_of_a_short_route(seed: int, density: 
     assert np.all(spans <= lim[:, 1]) and np.all(spans >= lim[:, 0])
     assert np.all(env.exact_clearance(P) > 0.05)
     assert np.all(env.segment_clearance(np.vstack([room.base, P[:-1]]), P) > 0)
+
+
+def test_references_hold_still_at_the_end_for_the_settle_time() -> None:
+    """With ``settle`` the leader's trajectory and every reference are extended by settle / Ts steps that hold the
+    final positions with zero velocity (the followers, which lag, come to rest before the plan ends)."""
+    env = Environment.from_geometry([Point(5.0, 5.0).buffer(0.45, 64)], (0.0, 0.0, 10.0, 10.0))
+    lim = span_limits(3, ChainParams())
+    route = plan_route(env, (1.0, 5.0), (9.0, 5.5), lim)
+    P, parked = start_placement(env, route, 3, SPACING)
+    kw = dict(parked=parked, T_end=None, Ts=0.05, speed=0.8, accel=0.5, spacing=SPACING)
+    a = chain_reference(env, route, P, lim, **kw)
+    b = chain_reference(env, route, P, lim, settle=1.5, **kw)
+    K = len(a.trajectory.t)
+    assert len(b.trajectory.t) == K + 30 and b.positions.shape == (K + 30, 3, 2)
+    np.testing.assert_array_equal(b.positions[:K], a.positions)
+    np.testing.assert_array_equal(b.positions[K:], np.repeat(a.positions[-1:], 30, 0))
+    assert np.all(b.velocities[K:] == 0) and np.all(b.trajectory.xd[K:] == 0)
+    np.testing.assert_allclose(np.diff(b.trajectory.t), 0.05)

@@ -288,6 +288,7 @@ class Metrics:
     peak_speed_per_robot: list[float]
     peak_acceleration: float  #: [m/s²]
     peak_acceleration_per_robot: list[float]
+    final_speed: float  #: max over robots of the speed over the last step [m/s] (≈ 0: the plan ends at rest)
     # distance errors of Fig. 7 (span_i − mean span) [m]
     max_abs_distance_error: float
     max_abs_distance_error_per_tether: list[float]
@@ -460,6 +461,7 @@ def evaluate(
         min_separation=min_sep,
         separation_limit=2.0 * r,
         peak_speed=float(peak_speed_i.max()),
+        final_speed=float(speed[-1].max()) if speed.shape[0] else 0.0,
         peak_speed_per_robot=[float(v) for v in peak_speed_i],
         peak_acceleration=float(peak_acc_i.max()),
         peak_acceleration_per_robot=[float(v) for v in peak_acc_i],

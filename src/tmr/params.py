@@ -99,6 +99,8 @@ class PathParams:
             sets the duration T_end from the route length unless T_end is given (``tmr.references``).
         route_gain: gain [1/s] of the followers' tracking of their route references (``RouteFollowers``).
         route_weight: weight of that task in the QP's tether level.
+        route_settle: time [s] the route references hold still at their end, the leader on the goal, so that the
+            followers come to rest on their stations before the plan ends (not added to a ``T_end`` the user set).
     """
 
     path_clearance: float = 0.6
@@ -109,11 +111,14 @@ class PathParams:
     leader_accel: float = 0.5
     route_gain: float = 1.0
     route_weight: float = 10.0
+    route_settle: float = 2.0
 
     def __post_init__(self) -> None:
         _validate(self)
         if self.path_clearance < 0 or self.path_clearance_min < 0 or self.path_iterations < 1:
             raise ParameterError(f"need path_clearance ≥ 0, path_clearance_min ≥ 0, path_iterations ≥ 1; got {self}")
+        if not 0.0 <= self.route_settle <= 60.0:
+            raise ParameterError(f"need 0 ≤ route_settle ≤ 60 [s], got {self.route_settle}")
         if min(self.leader_speed, self.leader_accel, self.route_gain) <= 0 or self.route_weight < 0:
             raise ParameterError(
                 "need leader_speed > 0 [m/s], leader_accel > 0 [m/s²], route_gain > 0 [1/s], route_weight ≥ 0; "

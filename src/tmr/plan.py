@@ -310,6 +310,7 @@ def summary(plan: Any, metrics: Any) -> str:
         "min_separation",
         "peak_speed",
         "peak_acceleration",
+        "final_speed",
         "max_abs_distance_error",
         "final_leader_error",
         "violations",

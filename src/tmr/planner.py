@@ -236,6 +236,7 @@ def build_problem(
     parked = 0
     anchor_path: Array | None = None
     leader_at: float | None = None
+    given = start is not None or (scenario.start is not None and n_robots in (None, scenario.n_robots))
     if start is not None:
         P = np.asarray(start, dtype=float)
     elif scenario.start is not None and n_robots in (None, scenario.n_robots):
@@ -262,6 +263,8 @@ def build_problem(
             f"start position of robot {k + 1} {P[k].tolist()} is inside an (inflated) obstacle "
             f"(clearance {clear[k]:.3f} m)"
         )
+    if given:
+        _check_given_start(P, np.asarray(scenario.base, float), limits, float(env.safety_radius))
     q0 = chain.q_from_positions(P)
     ref: ChainReference | None = None
     if route == "shortest":
@@ -276,6 +279,7 @@ def build_problem(
             speed=path_params.leader_speed,
             accel=path_params.leader_accel,
             spacing=limits[:, 0].max() + 0.2,
+            settle=0.0 if "T_end" in values else path_params.route_settle,
         )
         traj = ref.trajectory
         time_params = replace(time_params, T_end=float(traj.t[-1]))
@@ -341,6 +345,26 @@ def _rrt_trajectory(
             if clearance == path_params.clearances[-1]:
                 raise
     raise AssertionError("unreachable: the last clearance re-raises")  # pragma: no cover
+
+
+def _check_given_start(P: Array, base: Array, limits: Array, r: float) -> None:
+    """A start given by the user breaks no span or separation limit at t = 0 (else nothing could be planned from
+    it): every tether in [d_lo, d_max], robots at least 2r apart. ScenarioError naming the first one that does."""
+    spans = np.linalg.norm(np.diff(np.vstack([base, P]), axis=0), axis=1)
+    for k, (d, (lo, hi)) in enumerate(zip(spans, limits, strict=True)):
+        if not lo - 1e-9 <= d <= hi + 1e-9:
+            ends = "the base" if k == 0 else f"robot {k}"
+            raise ScenarioError(
+                f"start: the tether from {ends} to robot {k + 1} spans {d:.3f} m, outside its limits "
+                f"[{lo:.3f}, {hi:.3f}] m (d_lo, d_max)"
+            )
+    D = np.linalg.norm(P[:, None] - P[None], axis=-1)
+    i, j = np.triu_indices(len(P), 1)
+    if len(i) and float(D[i, j].min()) < 2 * r - 1e-9:
+        m = int(np.argmin(D[i, j]))
+        raise ScenarioError(
+            f"start: robots {i[m] + 1} and {j[m] + 1} are {D[i[m], j[m]]:.3f} m apart, nearer than 2r = {2 * r:g} m"
+        )
 
 
 def make_tasks(problem: Problem) -> tuple[LeaderTracking, TetherRegulation]:

@@ -484,6 +484,7 @@ def chain_reference(
     accel: float,
     spacing: float,
     spline_clearance: float = 0.05,
+    settle: float = 0.0,
 ) -> ChainReference:
     """References of every robot from ``start`` (N, 2) along the route to the final stations.
 
@@ -496,6 +497,8 @@ def chain_reference(
             ``accel`` [m/s²] (:func:`leader_duration`).
         Ts: sampling period [s]; spacing: trailing distance between consecutive robots along the guide [m].
         spline_clearance: clearance [m] the leader's spline keeps from the obstacles grown by r.
+        settle: time [s] every reference holds still at its end (the leader on the goal, the followers on their
+            stations), so that the followers, which lag their references, come to rest before the plan ends.
     """
     P = np.asarray(start, dtype=float)
     N = len(P)
@@ -588,6 +591,17 @@ def chain_reference(
         _walk_in_view(env, pos, final, i)
     vel = np.gradient(pos, traj.t, axis=0)
     vel[:, -1] = traj.xd
+    if settle > 0:  # everyone holds still at the end while the followers come to rest on their stations
+        extra = int(round(settle / Ts))
+        traj = Trajectory(
+            Ts * np.arange(len(traj.t) + extra),
+            np.vstack([traj.x, np.repeat(traj.x[-1:], extra, 0)]),
+            np.vstack([traj.xd, np.zeros((extra, 2))]),
+            np.vstack([traj.xdd, np.zeros((extra, 2))]),
+            traj.waypoints,
+        )
+        pos = np.concatenate([pos, np.repeat(pos[-1:], extra, 0)])
+        vel = np.concatenate([vel, np.zeros((extra, N, 2))])
     return ChainReference(
         guide=guide,
         start=P.copy(),

@@ -607,6 +607,8 @@ def plan_route(
     lim = np.atleast_2d(np.asarray(span_limits, dtype=float))
     if lim.shape[1] != 2 or np.any(~np.isfinite(lim)) or np.any(lim[:, 0] >= lim[:, 1]):
         raise ParameterError(f"span_limits must be rows [d_lo, d_max] with d_lo < d_max, got {lim.tolist()}")
+    if float(np.linalg.norm(goal - base)) < 1e-9:
+        raise ParameterError(f"the anchor and the goal coincide at {_xy(base)}: there is no route to plan")
     if not _same_component(env, base, goal):
         raise NoRouteError(
             f"no free route from the anchor {_xy(base)} to the goal {_xy(goal)}: the "

@@ -111,6 +111,13 @@ class Scenario:
                     f"move it away from the obstacles"
                 )
         # every point must lie in the same connected piece of free space as the base
+        r = float(env.safety_radius)
+        gap = float(np.linalg.norm(P[1] - P[0]))
+        if gap < r:  # the leader's disc would cover the anchor: no robot can stand at the goal
+            raise ScenarioError(
+                f"{label}: the goal ({P[1][0]:g}, {P[1][1]:g}) m is {gap:.3g} m from the base (the tether anchor), "
+                f"within the robot radius {r:g} m: no robot can stand there; move the goal away from the anchor"
+            )
         region = env.free_region(P)
         for nm, p, reg in zip(names[1:], P[1:], region[1:], strict=True):
             if reg != region[0]:
