@@ -353,11 +353,15 @@ def test_reused_out_keeps_no_stale_outputs(tmp_path, capsys):
     out.mkdir()
     for name in ("chain_poses.png", "speeds.png", "notes.txt"):  # two outputs of an older run, one file of the user
         (out / name).write_text("old")
+    (out / "replay").mkdir()  # tmr.replay's check of the older plan
+    (out / "replay" / "replay.json").write_text("{}")
+    (out / "mine").mkdir()  # a directory of the user
     code, _, err = run_cli(["--scenario", "A", "--no-plots", "--out", str(out), *FAST], capsys)
     assert code == 0, err
     names = sorted(p.name for p in out.iterdir())
     assert "chain_poses.png" not in names and "speeds.png" not in names and "notes.txt" in names
     assert (out / "notes.txt").read_text() == "old" and "metrics.json" in names
+    assert "replay" not in names and "mine" in names
 
 
 def test_quiet_verbose_debug_and_interrupt(tmp_path, capsys, monkeypatch):

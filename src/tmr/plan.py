@@ -287,6 +287,10 @@ def write_outputs(
         for name in names:
             os.replace(tmp / name, out / name)
         remove_stale(out, OUTPUT_NAMES, names)
+        stale_replay = out / "replay"
+        if (stale_replay / "replay.json").is_file():  # tmr.replay's check of an older plan in this --out
+            shutil.rmtree(stale_replay)
+            LOG.info("removed %s: the physics replay of an older plan", stale_replay)
         return names
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
