@@ -95,7 +95,7 @@ def _garbage_yaml(tmp_path: Path) -> Path:
         (["--map", "/nonexistent/room.yaml", "--base", "1,1", "--goal", "3,3"], "room.yaml"),
         (["--map", "GARBAGE", "--base", "1,1", "--goal", "3,3"], "map.yaml"),
         (["--scenario", "A", "--start", "5.0,5.0;6.0,5.0;7.0,5.0"], "obstacle"),
-        (["--scenario", "A", "--robots", "0"], "at least 1"),
+        (["--scenario", "A", "--robots", "0"], "number of robots ≥ 1 or 'auto', got '0'"),
         (["--scenario", "A", "--set", "k_v0=nan"], "finite"),
         (["--scenario", "A", "--base", "nan,1"], "finite"),
         (["--scenario", "A", "--set", "no_such_parameter=1"], "no_such_parameter"),

@@ -81,7 +81,7 @@ def _robots(text: str) -> int | str:
     try:
         return _positive_int(text)
     except argparse.ArgumentTypeError as exc:
-        raise argparse.ArgumentTypeError(f"{exc} or 'auto'") from exc
+        raise argparse.ArgumentTypeError(f"expected a number of robots ≥ 1 or 'auto', got {text!r}") from exc
 
 
 #: ``--robots auto`` tries N_min, N_min + 1, ... up to N_min + AUTO_EXTRA robots.
