@@ -454,3 +454,23 @@ def test_spline_field_close_to_exact_and_sagitta_bound():
     # one more sample per tether is not needed, one fewer breaks the bound
     d2 = 5.596 / (S - 1)
     assert (r + c) ** 2 - d2**2 / 4 < r**2 <= h**2
+
+
+def test_ctrl_c_during_the_nlp_stops_ipopt_and_is_raised_after_it() -> None:
+    """casadi swallows a KeyboardInterrupt raised inside IPOPT's callback (the first Ctrl-C of a horizon run was
+    lost): inside the guard SIGINT only sets the flag the iteration callback turns into a stop request, and the
+    KeyboardInterrupt comes once the solver has returned; the previous handler is restored."""
+    import os
+    import signal
+
+    from tmr.formulations import horizon as hz
+
+    before = signal.getsignal(signal.SIGINT)
+    with pytest.raises(KeyboardInterrupt):
+        with hz._ctrl_c_stops_ipopt():
+            os.kill(os.getpid(), signal.SIGINT)  # delivered here, inside the guard: no exception yet
+            assert hz._INTERRUPT.is_set()
+    assert signal.getsignal(signal.SIGINT) is before
+    with hz._ctrl_c_stops_ipopt():  # no Ctrl-C: nothing raised, the flag cleared
+        pass
+    assert not hz._INTERRUPT.is_set()

@@ -39,10 +39,14 @@ Public API: :func:`plan_horizon` (→ :class:`tmr.clik.Plan`), :data:`DEFAULT_TI
 
 from __future__ import annotations
 
+import contextlib
 import heapq
 import math
+import signal
 import sys
+import threading
 import time
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any, NamedTuple
 
@@ -847,9 +851,31 @@ class _Pool:
         return best
 
 
+#: Set while an NLP runs when Ctrl-C arrives: IPOPT stops at its next iteration, then KeyboardInterrupt is raised.
+_INTERRUPT = threading.Event()
+
+
+@contextlib.contextmanager
+def _ctrl_c_stops_ipopt() -> Iterator[None]:
+    """Ctrl-C during IPOPT: casadi catches the KeyboardInterrupt raised inside the iteration callback and IPOPT goes
+    on (or its caller retries), so the first Ctrl-C was lost. Here SIGINT only sets :data:`_INTERRUPT`; the callback
+    then asks IPOPT to stop, and KeyboardInterrupt is raised once the solver has returned."""
+    _INTERRUPT.clear()
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: _INTERRUPT.set())
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if _INTERRUPT.is_set():
+        raise KeyboardInterrupt
+
+
 class _IterationCallback(ca.Callback):
     """IPOPT's per-iteration hook (casadi ``iteration_callback``): advances the progress bar and offers the iterate
-    to the pool. Never stops IPOPT (returns 0)."""
+    to the pool. Stops IPOPT (returns 1) only after Ctrl-C (:func:`_ctrl_c_stops_ipopt`)."""
 
     def __init__(self, tr: _Transcription, pool: _Pool, bar: Any, label: str) -> None:
         ca.Callback.__init__(self)
@@ -897,7 +923,7 @@ class _IterationCallback(ca.Callback):
         self.iteration += 1
         self.bar.update(1)
         self.bar.set_postfix_str(f"cost/warm {f:.3g}, row violation {viol:.1e}", refresh=False)
-        return [0]
+        return [1 if _INTERRUPT.is_set() else 0]
 
 
 def _time_limit(time_limit: float | None) -> float:
@@ -1033,7 +1059,8 @@ def plan_horizon(
                 elif ls_duals:
                     kwargs.update(lam_g0=_leader_multipliers(model, tr, x_start, obj_scale))
                 t3 = time.perf_counter()
-                sol = solver(**kwargs)
+                with _ctrl_c_stops_ipopt():
+                    sol = solver(**kwargs)
                 t4 = time.perf_counter()
                 trans_time += t3 - t2
                 solve_time += t4 - t3
