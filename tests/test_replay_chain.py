@@ -148,3 +148,9 @@ def test_bad_input_exits_2_and_writes_nothing(run_a: Path, tmp_path: Path, capsy
     err = capsys.readouterr().err
     assert "has no run.json: it was written by an older tmr; re-run tmr.plan" in err and err.count("\n") == 1
     assert not (old / "replay").exists()
+    ccma = tmp_path / "ccma"  # a tmr.ccma run directory: said so, not "not a tmr run"
+    ccma.mkdir()
+    (ccma / "trajectory.json").write_text("{}")
+    assert replay_main([str(ccma), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "is a tmr.ccma run" in err and err.count("\n") == 1 and not (ccma / "replay").exists()

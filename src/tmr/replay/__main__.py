@@ -17,6 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from tmr.cli_args import positive_float, positive_int
+from tmr.console import LOG, add_manners
+from tmr.console import run as run_command
 from tmr.errors import TmrError
 
 
@@ -46,6 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="winch law: hold the horizontal tension T0 (the planner's model, default) or the winch-end tension",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    add_manners(p)  # --quiet/--verbose/--debug (tmr.console)
     return p
 
 
@@ -67,8 +70,10 @@ def _chain(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str
 
         used = render_gif(rp, run, out / "replay.gif")
         names = sorted([*names, "replay.gif"])
-        print(f"  replay.gif rendered with {used}")
+        gif_note = f"  replay.gif rendered with {used}"
     lines = [f"tmr replay: {run.label}, {run.n_robots} robots, {rp.sim_time:.2f} s simulated, {rp.steps} steps"]
+    if args.gif:
+        lines.append(gif_note)
     for i in range(rp.actual.shape[1]):
         e = rp.tracking_error[:, i]
         rms = 1000 * float((e**2).mean()) ** 0.5
@@ -103,32 +108,41 @@ def _mcdpr(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    """Exit code (module docstring); messages through logging (``tmr.console``: --quiet, --verbose, --debug, one
+    line per error, Ctrl-C exits 130)."""
+    return run_command(_main, build_parser().parse_args(argv))
+
+
+def _main(args: argparse.Namespace) -> int:
+    from tmr.rundir import RunDirError, load_run
+
     try:
-        from tmr.rundir import load_run
-
         run = load_run(args.run)
-        out = Path(args.out) if args.out else Path(args.run) / "replay"
-        if out.exists() and not out.is_dir():
-            raise TmrError(f"--out {out} is a file, not a directory")
-        if args.gif:
-            from tmr.replay.gif import select_backend
+    except RunDirError as exc:
+        ccma = Path(args.run) / "trajectory.json"
+        if ccma.is_file():
+            raise TmrError(
+                f"{args.run} is a tmr.ccma run: the physics replay covers tmr.plan and tmr.mcdpr runs"
+            ) from exc
+        raise
+    out = Path(args.out) if args.out else Path(args.run) / "replay"
+    if out.exists() and not out.is_dir():
+        raise TmrError(f"--out {out} is a file, not a directory")
+    if args.gif:
+        from tmr.replay.gif import select_backend
 
-            select_backend()
-        try:
-            import mujoco  # noqa: F401
-        except ImportError as exc:
-            raise TmrError(f"the replay needs MuJoCo: pip install 'mujoco>=4.0' ({exc})") from None
-        code, names, text = _chain(args, run, out) if run.kind == "chain" else _mcdpr(args, run, out)
-    except TmrError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    print(text.split("\nFAILED: ")[0])
-    print(f"  wrote {', '.join(names)} to {out}")
+        select_backend()
+    try:
+        import mujoco  # noqa: F401
+    except ImportError as exc:
+        raise TmrError(f"the replay needs MuJoCo: pip install 'mujoco>=4.0' ({exc})") from None
+    code, names, text = _chain(args, run, out) if run.kind == "chain" else _mcdpr(args, run, out)
+    LOG.info(text.split("\nFAILED: ")[0])
+    LOG.info(f"  wrote {', '.join(names)} to {out}")
     if code:
-        print(f"replay FAILED: {text.split(chr(10) + 'FAILED: ')[1]}", file=sys.stderr)
+        LOG.error(f"replay FAILED: {text.split(chr(10) + 'FAILED: ')[1]}")
     else:
-        print("replay OK: the physics confirms the plan")
+        LOG.info("replay OK: the physics confirms the plan")
     return code
 
 
