@@ -95,3 +95,22 @@ def test_motion_refuses_inconsistent_samples():
         sample_stamps(3, 0.0)
     m = Motion("chain", "x", t, (ok,), (), (), (), (0, 0, 1, 1), points={"goal": np.array([5.0, -2.0, 0.0])})
     assert m.extent(pad=0.0) == (0.0, -2.0, 5.0, 1.0)
+
+
+def test_views_frame_an_occupancy_maps_known_area_not_the_whole_image():
+    """A ROS map is often a small arena in a large unknown image: with ``env.known_free`` set (tmr.maps) the views
+    frame the known area and the plan, not the 20 m room; other maps frame the room as before."""
+    plan, env, cp = scenario_a()
+    whole = chain_motion(plan, env, cp)
+    assert whole.view is None and whole.extent(pad=0.0) == tuple(float(v) for v in env.bounds)
+    env.known_free = (2.0, 3.0, 6.0, 7.0)  # as tmr.maps sets it for an occupancy map
+    try:
+        framed = chain_motion(plan, env, cp)
+    finally:
+        env.known_free = None
+    lo = np.minimum(plan.robots.reshape(-1, 2).min(0), [2.0, 3.0])
+    hi = np.maximum(plan.robots.reshape(-1, 2).max(0), [6.0, 7.0])
+    x0, y0, x1, y1 = framed.extent(pad=0.0)
+    assert framed.view == (2.0, 3.0, 6.0, 7.0)
+    assert x0 <= lo[0] and y0 <= lo[1] and x1 >= hi[0] and y1 >= hi[1]  # the plan and the known area are in view
+    assert (x1 - x0) * (y1 - y0) < 0.9 * (env.bounds[2] - env.bounds[0]) * (env.bounds[3] - env.bounds[1])

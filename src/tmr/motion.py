@@ -82,6 +82,9 @@ class Motion:
         obstacles: raw obstacle polygons (shapely) in the room.
         inflated: obstacles grown by the safety radius (shapely polygons), drawn as outlines; may be empty.
         bounds: room (xmin, ymin, xmax, ymax) [m].
+        view: the part of the room the views frame (xmin, ymin, xmax, ymax) [m], or None for the whole room: the
+            known free area of an occupancy map, often a small arena in a large unknown image (the plan and the
+            fixed points are framed too).
         points: fixed named points (anchor, goal, task points), each (3,) [m].
         timed: False when ``t`` only counts samples (no time law in the plan).
         trail: name of the track whose trail the views draw (the leader), or None.
@@ -97,6 +100,7 @@ class Motion:
     inflated: tuple[Any, ...]
     bounds: tuple[float, float, float, float]
     points: dict[str, Array] = field(default_factory=dict)
+    view: tuple[float, float, float, float] | None = None
     timed: bool = True
     trail: str | None = None
     notes: tuple[str, ...] = ()
@@ -137,9 +141,12 @@ class Motion:
             np.asarray(ln.points)[..., :2].reshape(-1, 2) for ln in self.lines
         ]
         pts += [np.asarray(p)[None, :2] for p in self.points.values()]
-        x0, y0, x1, y1 = self.bounds
+        x0, y0, x1, y1 = self.bounds if self.view is None else self.view
         allp = np.vstack(pts + [np.array([[x0, y0], [x1, y1]])])
         lo, hi = allp.min(axis=0) - pad, allp.max(axis=0) + pad
+        if self.view is not None:  # a map's known area: never beyond the room
+            b = self.bounds
+            lo, hi = np.maximum(lo, [b[0] - pad, b[1] - pad]), np.minimum(hi, [b[2] + pad, b[3] + pad])
         return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
 
 
@@ -229,7 +236,14 @@ def chain_motion(plan: Any, env: Any, chain_params: Any = None, title: str | Non
         inflated=inf,
         bounds=bounds,
         title=title or f"Scenario {plan.scenario}, {plan.method}: {n} tethered robots{verdict}",
+        view=_known_view(env),
     )
+
+
+def _known_view(env: Any) -> tuple[float, float, float, float] | None:
+    """The known free area of an occupancy map (``env.known_free``, :mod:`tmr.maps`), else None."""
+    known = getattr(env, "known_free", None)
+    return None if known is None else (float(known[0]), float(known[1]), float(known[2]), float(known[3]))
 
 
 def tethered_chain(
@@ -243,6 +257,7 @@ def tethered_chain(
     inflated: tuple[Any, ...],
     bounds: tuple[float, float, float, float],
     title: str,
+    view: tuple[float, float, float, float] | None = None,
 ) -> Motion:
     """Motion of a tethered chain: ``robots`` (K, N, 2) [m] at stamps ``t`` (K,) [s], robot N the leader.
 
@@ -278,6 +293,7 @@ def tethered_chain(
         inflated=tuple(inflated),
         bounds=bounds,
         points=points,
+        view=view,
         trail=f"robot{n}",
         notes=(
             f"robot disc = safety radius {radius:g} m; tethers hang as catenaries (T0 = {cat.horizontal_tension:g} N, "

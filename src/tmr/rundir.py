@@ -60,6 +60,12 @@ def _ring(coords: Any) -> list[list[float]]:
     return [[float(x), float(y)] for x, y, *_ in coords]
 
 
+def _known_free(env: Any) -> dict[str, list[float]]:
+    """``{"known_free": [xmin, ymin, xmax, ymax]}`` for an occupancy map, else {} (other runs' bytes unchanged)."""
+    known = getattr(env, "known_free", None)
+    return {} if known is None else {"known_free": [float(v) for v in known]}
+
+
 def polygons_to_json(geom: Any) -> list[dict[str, Any]]:
     """Polygons of a shapely geometry as ``[{"exterior": [[x, y], ...], "holes": [[[x, y], ...], ...]}, ...]``.
 
@@ -186,6 +192,7 @@ def chain_run_dict(plan: Any, env: Any, extra: dict[str, Any] | None = None) -> 
             "source": None if env.source is None else Path(env.source).name,
             "obstacles": polygons_to_json(env.obstacles),
             "grown": polygons_to_json(env.inflated),
+            **_known_free(env),
         },
         "tether": tether,
         "route": {k: ex[k] for k in sorted(ex) if k in ("route", "route_length", "n_min", "n_lower", "robots_auto")},
@@ -273,6 +280,12 @@ class ChainRun:
     def bounds(self) -> tuple[float, float, float, float]:
         b = self.record["map"]["bounds"]
         return (float(b[0]), float(b[1]), float(b[2]), float(b[3]))
+
+    @property
+    def known_free(self) -> tuple[float, float, float, float] | None:
+        """Bounding box of an occupancy map's known free cells [m] (``tmr.maps``), or None for other maps."""
+        b = self.record["map"].get("known_free")
+        return None if b is None else (float(b[0]), float(b[1]), float(b[2]), float(b[3]))
 
     @property
     def robot_radius(self) -> float:

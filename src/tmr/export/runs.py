@@ -50,6 +50,7 @@ def _chain(run: Any, trajectory: str) -> Motion:
         inflated=tuple(run.grown),
         bounds=run.bounds,
         title=f"Scenario {rec['scenario']}, {rec['method']}: {what}{verdict}",
+        view=run.known_free,
     )
 
 
