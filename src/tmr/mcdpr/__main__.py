@@ -31,7 +31,7 @@ import numpy as np
 
 from tmr.cli_args import positive_float as _positive
 from tmr.cli_args import positive_int as _positive_int
-from tmr.console import LOG, add_manners
+from tmr.console import LOG, add_manners, progress_enabled
 from tmr.console import run as run_cli
 from tmr.errors import TmrError
 from tmr.motion import mcdpr_motion
@@ -371,7 +371,7 @@ def _main(args: argparse.Namespace) -> int:
                 station_step=args.station_step, margin=args.margin, max_move=args.max_move, d_platform=args.d_platform
             )
             try:
-                result = plan_search(robot, scene, params)
+                result = plan_search(robot, scene, params, progress=progress_enabled())
             except NoPlanFound as exc:
                 LOG.error(f"no plan found ({exc.kind}): {exc}")
                 LOG.error(f"  searched for {time.perf_counter() - t0:.3f} s; nothing written")

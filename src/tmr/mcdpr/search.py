@@ -367,7 +367,11 @@ def _connect(
 
 
 def plan_search(
-    robot: Robot, scene: Scene, params: SearchParams | None = None, external: NDArray[np.float64] | None = None
+    robot: Robot,
+    scene: Scene,
+    params: SearchParams | None = None,
+    external: NDArray[np.float64] | None = None,
+    progress: bool = False,
 ) -> Plan:
     """Plan the task of ``scene`` with the search planner (see the module docstring); raises TaskRefused (refused
     up front) or NoPlanFound (nothing found at the search resolution).
@@ -376,7 +380,8 @@ def plan_search(
     turns); when that finds nothing (``escalate``), the search is repeated with μ ≥ margin at the *best* heading of
     every base (``best_heading``: more placements, the motions' turns are then certified one by one), then at every
     heading with 8/3 × the formations and twice the placements kept per station. The verdict is the last search's
-    (its message lists the resolutions tried)."""
+    (its message lists the resolutions tried). ``progress``: a tqdm bar of the stations on stderr, shown once a
+    search has taken 0.5 s."""
     params = params or SearchParams()
     attempts = [params]
     if params.escalate:
@@ -388,7 +393,7 @@ def plan_search(
     failed: list[str] = []
     for k, attempt in enumerate(attempts):
         try:
-            res = _plan_search(robot, scene, attempt, external)
+            res = _plan_search(robot, scene, attempt, external, progress, f"search {k + 1}/{len(attempts)}")
         except NoPlanFound as exc:
             failed.append(f"{_describe(attempt)}: {exc.kind}: {exc}")
             if k == len(attempts) - 1:
@@ -409,7 +414,14 @@ def _describe(p: SearchParams) -> str:
     return f"{p.n_formations} formations, keep {p.keep}, μ ≥ {p.margin:g} N at {where} heading"
 
 
-def _plan_search(robot: Robot, scene: Scene, params: SearchParams, external: NDArray[np.float64] | None = None) -> Plan:
+def _plan_search(
+    robot: Robot,
+    scene: Scene,
+    params: SearchParams,
+    external: NDArray[np.float64] | None = None,
+    progress: bool = False,
+    label: str = "search",
+) -> Plan:
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import dijkstra
 
@@ -447,7 +459,14 @@ def _plan_search(robot: Robot, scene: Scene, params: SearchParams, external: NDA
     # station (the bases stay) and the same translated with the platform (the formation follows it)
     g = _GraphBuilder(robot, scene, rws, params, mu_start)
     reach_prev = np.zeros(1, np.intp)  # global indices of the reachable nodes of the previous station
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(S), desc=f"MoPICK {label}: stations", unit="station", leave=False, delay=0.5)
     for s in range(len(S)):
+        if bar is not None:
+            bar.update(1)
         reach = np.zeros(0, np.intp)
         for attempt in range(params.stall_rounds + 1):
             if attempt:  # stalled: the bases reposition while the platform waits at the previous station
@@ -492,6 +511,8 @@ def _plan_search(robot: Robot, scene: Scene, params: SearchParams, external: NDA
         reach_prev = reach
     B, st, mu = g.B, g.st, g.mu
     P = S[st]
+    if bar is not None:
+        bar.close()
     src_a = np.concatenate(g.src)
     dst_a = np.concatenate(g.dst)
     w = (
