@@ -474,3 +474,9 @@ def test_ctrl_c_during_the_nlp_stops_ipopt_and_is_raised_after_it() -> None:
     with hz._ctrl_c_stops_ipopt():  # no Ctrl-C: nothing raised, the flag cleared
         pass
     assert not hz._INTERRUPT.is_set()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a sweep worker ignores Ctrl-C: the guard leaves it so
+    try:
+        with hz._ctrl_c_stops_ipopt():
+            assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, before)

@@ -861,8 +861,8 @@ def _ctrl_c_stops_ipopt() -> Iterator[None]:
     on (or its caller retries), so the first Ctrl-C was lost. Here SIGINT only sets :data:`_INTERRUPT`; the callback
     then asks IPOPT to stop, and KeyboardInterrupt is raised once the solver has returned."""
     _INTERRUPT.clear()
-    if threading.current_thread() is not threading.main_thread():
-        yield
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        yield  # a worker that ignores Ctrl-C (tmr.sweep: the parent stops it) keeps ignoring it
         return
     previous = signal.signal(signal.SIGINT, lambda signum, frame: _INTERRUPT.set())
     try:
