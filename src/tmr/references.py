@@ -329,8 +329,8 @@ VISIBLE_CLEARANCE = 0.1
 
 def _visible_back(env: Any, guide: Array, arcs: Array, step: float = 0.1) -> tuple[Array, NDArray[np.intp]]:
     """Guide samples s (every ``step`` [m]) and, for each, the first sample behind it from which every later sample
-    up to it is joined to it by a chord keeping ``VISIBLE_CLEARANCE``, or half the guide's own clearance between
-    the two samples less 0.01 m where that is less (a narrow door, where the route keeps 0.06 m) (exact)."""
+    up to it is joined to it by a chord keeping ``VISIBLE_CLEARANCE``, or the guide's own clearance between the
+    two samples less 0.01 m where that is less (a narrow door, where the route keeps 0.06 m) (exact)."""
     L = float(arcs[-1])
     s = np.linspace(0.0, L, max(2, math.ceil(L / step) + 1))
     S = point_at(guide, arcs, s)
