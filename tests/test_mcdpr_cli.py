@@ -33,6 +33,15 @@ def test_outputs(run_dir) -> None:
     assert len(list(csv.DictReader((run_dir / "bases.csv").open()))) == len(mu)
 
 
+def test_seed_of_the_search_is_an_option_and_recorded(run_dir) -> None:
+    """The search's random base moves take --seed (default 0), recorded with the other parameters."""
+    d = json.loads((run_dir / "plan.json").read_text())
+    assert d["planner"] == "search" and d["params"]["seed"] == 0
+    from tmr.mcdpr.__main__ import build_parser
+
+    assert build_parser().parse_args(["plan", "--seed", "7"]).seed == 7
+
+
 def test_same_inputs_same_bytes(run_dir, tmp_path) -> None:
     out = tmp_path / "again"
     out.mkdir()

@@ -74,6 +74,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--station-step", type=_positive, default=0.25, help="search: platform station spacing [m]")
     pl.add_argument("--margin", type=_positive, default=0.3, help="search: μ of a placement at any heading [N]")
     pl.add_argument("--max-move", type=_positive, default=0.6, help="search: base move per graph edge [m] (0.6)")
+    pl.add_argument(
+        "--seed", type=int, default=0, help="search: seed of the random base moves round the best placements (0)"
+    )
     pl.add_argument("--d-base", type=_positive, default=0.2, help="base step d_j of the stage-1 grid [m] (0.2)")
     pl.add_argument("--min-step", type=_positive, default=0.05, help="smallest retried base step [m] (0.05)")
     pl.add_argument("--d-platform", type=_positive, default=0.05, help="platform step d_MP of stage 2 [m] (0.05)")
@@ -368,7 +371,11 @@ def _main(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         if args.planner == "search":
             params = SearchParams(
-                station_step=args.station_step, margin=args.margin, max_move=args.max_move, d_platform=args.d_platform
+                station_step=args.station_step,
+                margin=args.margin,
+                max_move=args.max_move,
+                d_platform=args.d_platform,
+                seed=args.seed,
             )
             try:
                 result = plan_search(robot, scene, params, progress=progress_enabled())
