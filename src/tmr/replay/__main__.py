@@ -12,12 +12,14 @@ on stderr, nothing written.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 from tmr.cli_args import positive_float, positive_int
-from tmr.console import LOG, add_manners
+from tmr.console import LOG, add_manners, progress_enabled
 from tmr.console import run as run_command
 from tmr.errors import TmrError
 
@@ -52,6 +54,25 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+@contextlib.contextmanager
+def _bar(desc: str) -> Iterator[Callable[[float], None] | None]:
+    """A tqdm bar of the simulated fraction on stderr (terminal only, not with --quiet; shown after 2 s)."""
+    if not progress_enabled():
+        yield None
+        return
+    from tqdm import tqdm
+
+    bar = tqdm(total=1000, desc=desc, unit="‰", leave=False, delay=2.0, mininterval=0.5)
+
+    def update(fraction: float) -> None:
+        bar.update(int(1000 * fraction) - bar.n)
+
+    try:
+        yield update
+    finally:
+        bar.close()
+
+
 def _chain(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str], str]:
     from dataclasses import replace
 
@@ -62,7 +83,8 @@ def _chain(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str
     for name, value in (("n_links", args.links), ("timestep", args.timestep), ("tolerance", args.tolerance)):
         if value is not None:
             cfg = replace(cfg, **{name: value})
-    rp = replay_chain(run, cfg)
+    with _bar("replay") as progress:
+        rp = replay_chain(run, cfg, progress=progress)
     verdict = chain_verdict(rp, run)
     names = write_chain_outputs(out, rp, run, verdict, plots=not args.no_plots)
     if args.gif:
@@ -101,7 +123,8 @@ def _mcdpr(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str
         from dataclasses import replace
 
         cfg = replace(cfg, timestep=args.timestep)
-    rp = replay_mcdpr(run, cfg)
+    with _bar("replay") as progress:
+        rp = replay_mcdpr(run, cfg, progress=progress)
     names = write_mcdpr_outputs(out, rp, run, plots=not args.no_plots, gif=args.gif)
     text = mcdpr_summary(rp, run)
     return (0 if rp.verdict.ok else 1), names, text

@@ -262,8 +262,9 @@ def _tilt(quat: Array) -> float:
     return math.acos(max(-1.0, min(1.0, 1 - 2 * (x * x + y * y))))
 
 
-def replay_mcdpr(run: Any, cfg: McdprConfig | None = None, robot: Any = None) -> McdprReplay:
-    """Simulate a :class:`tmr.rundir.McdprRun` (``robot`` overrides the run's robot, e.g. a heavier platform)."""
+def replay_mcdpr(run: Any, cfg: McdprConfig | None = None, robot: Any = None, progress: Any = None) -> McdprReplay:
+    """Simulate a :class:`tmr.rundir.McdprRun` (``robot`` overrides the run's robot, e.g. a heavier platform);
+    ``progress``: optional callable(fraction) called every plan sample."""
     import mujoco
     from scipy.optimize import lsq_linear
 
@@ -463,6 +464,8 @@ def replay_mcdpr(run: Any, cfg: McdprConfig | None = None, robot: Any = None) ->
     record(0, now, ok)
     step = 0
     for k in range(1, K):
+        if progress is not None:
+            progress(k / (K - 1))
         for _ in range(sub):
             if step % ctrl_every == 0:
                 ok = control(now, ctrl_every * cfg.timestep) and ok
