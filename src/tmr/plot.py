@@ -179,7 +179,14 @@ def plot_chain_poses(
         rp = np.asarray(route.points, dtype=float)
         ax.plot(rp[:, 0], rp[:, 1], color="#2ca02c", lw=5.0, alpha=0.25, solid_capstyle="round", zorder=3)
         handles.append(
-            Line2D([], [], color="#2ca02c", lw=5.0, alpha=0.25, label=f"route ({route.length:.1f} m, {route.margin:.2f} m clear)")
+            Line2D(
+                [],
+                [],
+                color="#2ca02c",
+                lw=5.0,
+                alpha=0.25,
+                label=f"route ({route.length:.1f} m, {route.margin:.2f} m clear)",
+            )
         )
         st = np.asarray(route.stations, dtype=float)
         ax.plot(st[:, 0], st[:, 1], "D", ms=5, mfc="none", mec="#2ca02c", mew=1.2, zorder=4)
