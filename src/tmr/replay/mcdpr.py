@@ -685,18 +685,11 @@ def mcdpr_figures(out: Path, rp: McdprReplay, run: Any) -> list[str]:
 
 def write_mcdpr_outputs(out: Path, rp: McdprReplay, run: Any, plots: bool = True, gif: bool = False) -> list[str]:
     from tmr.io import atomic_write_text
-    from tmr.replay.report import _dump
+    from tmr.replay.report import _dump, write_timing
 
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "replay.json", _dump(mcdpr_document(rp, run)))
-    timing = {
-        "wall_time": rp.wall_time,
-        "cpu_time": rp.cpu_time,
-        "sim_time": rp.sim_time,
-        "real_time_factor": rp.real_time_factor,
-        "cpu_real_time_factor": rp.cpu_real_time_factor,
-    }
-    atomic_write_text(out / "timing.json", _dump(timing))
+    write_timing(out, rp)
     names = ["replay.json", "timing.json"]
     if plots:
         names += mcdpr_figures(out, rp, run)

@@ -195,12 +195,11 @@ def _f_tree(x: Any) -> Any:
     return _f(x) if not isinstance(x, (str, bool, type(None), int)) else x
 
 
-def write_chain_outputs(out: Path, rp: ChainReplay, run: Any, verdict: Verdict, plots: bool = True) -> list[str]:
-    """Write ``replay.json``, ``timing.json`` and the figures into ``out``; return the file names."""
+def write_timing(out: Path, rp: Any) -> None:
+    """``timing.json``: wall, CPU and simulated time [s] of a chain or MoPICK replay and its real-time factors (kept
+    apart from ``replay.json``, which is the same bytes for the same plan)."""
     from tmr.io import atomic_write_text
 
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "replay.json", _dump(chain_document(rp, run, verdict)))
     timing = {
         "wall_time": rp.wall_time,
         "cpu_time": rp.cpu_time,
@@ -209,6 +208,15 @@ def write_chain_outputs(out: Path, rp: ChainReplay, run: Any, verdict: Verdict, 
         "cpu_real_time_factor": rp.cpu_real_time_factor,
     }
     atomic_write_text(out / "timing.json", _dump(timing))
+
+
+def write_chain_outputs(out: Path, rp: ChainReplay, run: Any, verdict: Verdict, plots: bool = True) -> list[str]:
+    """Write ``replay.json``, ``timing.json`` and the figures into ``out``; return the file names."""
+    from tmr.io import atomic_write_text
+
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "replay.json", _dump(chain_document(rp, run, verdict)))
+    write_timing(out, rp)
     names = ["replay.json", "timing.json"]
     if plots:
         from tmr.replay import figures
