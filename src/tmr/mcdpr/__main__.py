@@ -113,6 +113,23 @@ def _points(text: str) -> list[tuple[float, float]]:
 WORKSPACE_NAMES = ("workspace.json", "workspace.csv", "workspace.png")
 
 
+def _inputs(args: argparse.Namespace) -> tuple[Path, Any, Any]:
+    """The checked ``--out``, the robot (``--robot`` or the shipped MoPICK) and the scene (with ``--external``)
+    of a ``plan`` or ``workspace`` run; TmrError (exit 2) on bad input."""
+    import dataclasses
+
+    from tmr.mcdpr.robot import load_robot, mopick
+    from tmr.mcdpr.scene import load_scene
+
+    out = Path(args.out)
+    check_out_dir(out)
+    robot = load_robot(args.robot) if args.robot else mopick()
+    scene = load_scene(args.scene)
+    if args.external is not None:
+        scene = dataclasses.replace(scene, external=np.array(args.external))
+    return out, robot, scene
+
+
 def workspace_main(args: argparse.Namespace) -> int:
     """``python -m tmr.mcdpr workspace``: μ map (CSV), summary (JSON) and figure; exit 2 on bad input (nothing
     written)."""
@@ -121,17 +138,10 @@ def workspace_main(args: argparse.Namespace) -> int:
     from tmr.io import atomic_write_text
     from tmr.mcdpr.capacity import required_wrench_set
     from tmr.mcdpr.plot import plot_workspace
-    from tmr.mcdpr.robot import load_robot, mopick
-    from tmr.mcdpr.scene import load_scene
     from tmr.mcdpr.workspace import workspace
 
     try:
-        out = Path(args.out)
-        check_out_dir(out)
-        robot = load_robot(args.robot) if args.robot else mopick()
-        scene = load_scene(args.scene)
-        if args.external is not None:
-            scene = dataclasses.replace(scene, external=np.array(args.external))
+        out, robot, scene = _inputs(args)
         if args.bases is not None:
             if len(args.bases) != robot.n_bases:
                 raise TmrError(f"--bases: {robot.n_bases} base positions needed, got {len(args.bases)}")
@@ -343,21 +353,12 @@ def _main(args: argparse.Namespace) -> int:
     if args.command == "workspace":
         return workspace_main(args)
     try:
-        import dataclasses
-
         from tmr.mcdpr.capacity import capacity, required_wrench_set
         from tmr.mcdpr.errors import NoPlanFound
         from tmr.mcdpr.planner import PlannerParams, check, plan
-        from tmr.mcdpr.robot import load_robot, mopick
-        from tmr.mcdpr.scene import load_scene
         from tmr.mcdpr.search import SearchParams, plan_search, refuse_upfront
 
-        out = Path(args.out)
-        check_out_dir(out)
-        robot = load_robot(args.robot) if args.robot else mopick()
-        scene = load_scene(args.scene)
-        if args.external is not None:
-            scene = dataclasses.replace(scene, external=np.array(args.external))
+        out, robot, scene = _inputs(args)
         if args.min_step > args.d_base:
             raise TmrError(f"--min-step ({args.min_step} m) must not exceed --d-base ({args.d_base} m)")
         params = PlannerParams(
