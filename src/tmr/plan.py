@@ -371,7 +371,9 @@ def _extras(problem: Any, plan: Any, auto_note: str | None) -> dict[str, Any]:
         out.update(route_length=problem.route.length, n_min=problem.route.n_min, n_lower=problem.route.n_lower)
     if auto_note:
         out["robots_auto"] = auto_note
-    for key in ("horizon_result", "horizon_note"):
+    if problem.references is not None:
+        out["references"] = plan.diagnostics.get("references", problem.references.mode)
+    for key in ("references_note", "horizon_result", "horizon_note"):
         if isinstance(plan.diagnostics.get(key), str):
             out[key] = plan.diagnostics[key]
     return out
@@ -506,6 +508,8 @@ def _main(args: argparse.Namespace) -> int:
     if auto_note:
         LOG.info(auto_note)
     LOG.info(summary(plan, metrics))
+    if "references_note" in extra:
+        LOG.info("  references: %s", extra["references_note"])
     if "horizon_note" in extra:
         LOG.info("  horizon: %s: %s", extra["horizon_result"], extra["horizon_note"])
     LOG.info("  wrote %s to %s", ", ".join(names), args.out)

@@ -81,6 +81,7 @@ class Problem:
     route: Route | None = None
     references: ChainReference | None = None
     route_mode: str = "rrt"
+    fixed_duration: bool = False  # T_end was set by the user (the train references cannot keep it)
 
     @property
     def env(self) -> Any:
@@ -305,6 +306,7 @@ def build_problem(
         route=rt,
         references=ref,
         route_mode=route,
+        fixed_duration="T_end" in values,
     )
 
 
@@ -409,7 +411,8 @@ def make_qp(
     """The lexicographic QP with hard clearance, span, separation and speed limits (``formulations/qp.md``).
 
     ``extra_limits`` are added to the hard limits of every level; ``extra_levels`` are inserted after the leader
-    level (so they outrank tether regulation and energy), highest first.
+    level (so they outrank tether regulation and energy), highest first. Train references (:mod:`tmr.train`, every
+    state checked) are tracked in a level of their own after those; trailing ones are a task of the tether level.
     """
     from tmr.formulations.qp import Level, LexicographicQP
 
@@ -421,12 +424,17 @@ def make_qp(
         (Smoothness(chain), p.tether_smoothness),
     ]
     ref = problem.references
-    if ref is not None and chain.n_robots > 1 and problem.path_params.route_weight > 0:
+    route_levels: list[Level] = []
+    if ref is not None and chain.n_robots > 1 and ref.mode == "train":  # checked references: tracked first
+        follow = RouteFollowers(ref.positions, ref.velocities, problem.path_params.route_gain)
+        route_levels.append(Level([(follow, 1.0)], "route"))
+    elif ref is not None and chain.n_robots > 1 and problem.path_params.route_weight > 0:
         follow = RouteFollowers(ref.positions, ref.velocities, problem.path_params.route_gain)
         tether_tasks.append((follow, problem.path_params.route_weight))
     levels = [
         Level([(leader, 1.0)], "leader"),
         *extra_levels,
+        *route_levels,
         Level(tether_tasks, "tethers"),
         Level([(Damping(chain), p.energy_weight), (Smoothness(chain), p.smoothness_weight)], "energy"),
     ]
@@ -508,7 +516,7 @@ def solve(
     if method == "horizon":  # a whole-trajectory NLP, not a per-step formulation
         from tmr.formulations.horizon import DEFAULT_TIME_LIMIT, HorizonInfeasible, plan_horizon  # casadi: when used
 
-        warm, warm_metrics = solve(problem, "qp", progress=progress)
+        problem, warm, warm_metrics = _solve_qp(problem, progress)
         limit = DEFAULT_TIME_LIMIT if time_limit is None else time_limit
         try:
             result = plan_horizon(problem, warm, time_limit=limit, progress=progress)
@@ -523,9 +531,79 @@ def solve(
             reason = f"horizon: {exc}"
             warm.failure = reason if warm.failure is None else f"{reason}; its qp warm start: {warm.failure}"
             return warm, evaluate(warm, problem.env)
+    elif method == "qp":
+        return _solve_qp(problem, progress)[1:]
     else:
         result = plan(problem, method, progress=progress)
     return result, check(result, problem.env, goal_tolerance=problem.path_params.goal_tolerance)
+
+
+def train_problem(problem: Problem) -> Problem:
+    """``problem`` with train references (:mod:`tmr.train`: one robot at a time, every state checked) in place of
+    its trailing ones: same route, start and stations; the leader's trajectory and the duration come from the
+    train. The train keeps the QP's own limits plus a little (clearance d_safe + 5 mm, separation 2r + margin +
+    5 mm, spans ≥ d_lo + span margin). Raises :class:`tmr.train.TrainError` if the train stalls."""
+    from tmr.train import TRAIN_CLEARANCE, TrainLimits, train_reference
+
+    if problem.references is None:
+        raise ParameterError("train references need a route-guided problem (route='shortest')")
+    qp, path = problem.qp_params, problem.path_params
+    spans = problem.span_limits.copy()
+    spans[:, 0] += qp.span_margin
+    limits = TrainLimits(
+        spans,
+        2 * problem.chain_params.safety_radius + qp.separation_margin + TRAIN_MARGIN,
+        max(TRAIN_CLEARANCE, qp.d_safe + TRAIN_MARGIN),
+    )
+    ref = train_reference(
+        problem.env,
+        problem.references,
+        np.asarray(problem.scenario.base, float),
+        limits,
+        Ts=problem.time_params.Ts,
+        speed=path.leader_speed,
+        accel=path.leader_accel,
+        settle=path.route_settle,
+    )
+    T_end = float(ref.trajectory.t[-1])
+    return replace(
+        problem, references=ref, trajectory=ref.trajectory, time_params=replace(problem.time_params, T_end=T_end)
+    )
+
+
+#: What the train references keep beyond the QP's own clearance and separation [m].
+TRAIN_MARGIN = 0.005
+
+
+def _solve_qp(problem: Problem, progress: bool) -> tuple[Problem, Plan, Metrics]:
+    """The QP along the problem's references; if the plan fails with trailing route references (and T_end is not
+    fixed by the user), again along train references (:func:`train_problem`), whose plan is returned if it passes
+    every check (``diagnostics["references"]`` says which were used, ``["references_note"]`` why)."""
+    result = plan(problem, "qp", progress=progress)
+    metrics = check(result, problem.env, goal_tolerance=problem.path_params.goal_tolerance)
+    ref = problem.references
+    if ref is None or result.success or ref.mode != "trail" or problem.fixed_duration or problem.chain.n_robots < 2:
+        return problem, result, metrics
+    from tmr.train import TrainError
+
+    first = str(result.failure).split(";")[0]
+    try:
+        trained = train_problem(problem)
+    except TrainError as exc:
+        result.diagnostics["references_note"] = f"trailing references failed ({first}); train references: {exc}"
+        return problem, result, metrics
+    retry = plan(trained, "qp", progress=progress)
+    retry_metrics = check(retry, trained.env, goal_tolerance=trained.path_params.goal_tolerance)
+    if not retry.success:
+        result.diagnostics["references_note"] = (
+            f"trailing references failed ({first}); along train references too ({retry.failure})"
+        )
+        return problem, result, metrics
+    retry.diagnostics["references"] = "train"
+    retry.diagnostics["references_note"] = (
+        f"the trailing references failed ({first}); planned along train references (one robot at a time)"
+    )
+    return trained, retry, retry_metrics
 
 
 def check(plan: Plan, env: Any, goal_tolerance: float = 0.1) -> Metrics:

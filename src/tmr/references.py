@@ -77,6 +77,8 @@ class ChainReference:
         trajectory: the leader's trajectory (t, x, xd, xdd, waypoints).
         positions: (K+1, N, 2) reference of every robot [m] (the last column is the leader's x).
         velocities: (K+1, N, 2) their derivatives [m/s].
+        mode: ``"trail"`` (every robot at once, trailing the leader: this module) or ``"train"`` (one robot at a
+            time, every state checked: :mod:`tmr.train`).
     """
 
     guide: Array
@@ -88,6 +90,7 @@ class ChainReference:
     trajectory: Trajectory
     positions: Array
     velocities: Array
+    mode: str = "trail"
 
 
 #: Clearance [m] the start's tethers keep (the robots keep ``clear``): the QP lets a tether sample that starts
@@ -434,6 +437,14 @@ def _leader_law(
     return Trajectory(Ts * np.arange(K + 1), np.vstack(x), np.vstack(xd), np.vstack(xdd), lead.copy())
 
 
+def _anticipate(seen: Array, step: float) -> Array:
+    """The least arc profile a(k) ≥ ``seen`` (K+1,) [m] that never rises faster than ``step`` [m] per step:
+    a(k) = max over k' ≥ k of seen(k') − step·(k' − k). Where the robot ahead rounds a corner, the arc from which it
+    stays in view jumps forward; the follower starts earlier instead of jumping."""
+    ramp = step * np.arange(len(seen))
+    return np.maximum.accumulate((seen - ramp)[::-1])[::-1] + ramp
+
+
 def _walk_in_view(env: Any, pos: Array, final: Array, i: int, step: float = 0.05) -> None:
     """Keep follower ``i+1`` in view of robot ``i`` once ``i`` rests at its final station (in place on ``pos``).
 
@@ -485,6 +496,7 @@ def chain_reference(
     spacing: float,
     spline_clearance: float = 0.05,
     settle: float = 0.0,
+    catch_up: float = 1.2,
 ) -> ChainReference:
     """References of every robot from ``start`` (N, 2) along the route to the final stations.
 
@@ -578,6 +590,7 @@ def chain_reference(
         target = s_lead - (gap0 + frac * (gap1 - gap0))
         # never so far behind the robot ahead that their tether would cut a corner of the guide
         seen = vis_s[vis_back[np.clip(np.searchsorted(vis_s, ahead), 0, len(vis_s) - 1)]]
+        seen = _anticipate(seen, catch_up * Ts)
         a = np.clip(np.maximum(np.clip(target, start_arcs[i], final_arcs[i]), seen), start_arcs[i], final_arcs[i])
         a = np.maximum.accumulate(a)  # progress only
         on_guide = point_at(guide, garcs, a)

@@ -1,0 +1,601 @@
+"""Sequential ("train") references: the chain advances along the route one robot at a time, every state checked.
+
+The trailing references of :func:`tmr.references.chain_reference` move every robot at once and leave the hard limits
+to the QP; in a narrow door or round a wrapped corner that can deadlock (a follower overtaken by the one behind it, a
+tether pressed on a jamb). This module builds references that keep every hard limit by construction, at the cost of a
+longer plan (``formulations/route.md``, "Train references"):
+
+* robot i has its own **path**: the guide from its start to its station's foot, then the short offset to the station
+  (the :class:`tmr.references.ChainReference` it refines: same guide, same start, same stations);
+* **sweeps**, leader first: robot i advances along its path as far as every limit lets it while the others stand
+  still — its clearance, the clearance and length of both its tethers, its distance to every other robot — tested
+  at every ``step`` [m] of the advance (vectorised). A limit the start already breaks (a start tether nearer than the
+  margin) may not get worse, the QP's own rule;
+* until every robot is at its station. A sweep in which no robot advances is a deadlock: :class:`TrainError` names
+  the robot, where it stopped and the limit that stopped it;
+* **timing**: every advance follows the minimum-jerk law within the leader's speed and acceleration limits, stopping
+  at each turn of its path sharper than :data:`TURN_STOP`; the advances of one sweep run together when every sampled
+  state of the joint motion keeps the same limits, else one after the other.
+
+The result is a :class:`tmr.references.ChainReference` (the leader's trajectory and every robot's reference), so the
+QP tracks it exactly as it tracks the trailing references.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+import shapely
+from numpy.typing import NDArray
+
+from tmr.path import Trajectory
+from tmr.references import ChainReference, leader_duration
+from tmr.route import RouteVerdict, guide_arcs, point_at
+
+Array = NDArray[np.float64]
+
+__all__ = ["TRAIN_CLEARANCE", "TrainError", "TrainLimits", "train_reference"]
+
+#: Clearance [m] every robot and tether keeps in the train's states: more than the QP's d_safe (0.05 m), less than
+#: the route's chords in a narrow door (0.06 m), so the stations themselves are valid states.
+TRAIN_CLEARANCE = 0.055
+#: Arc step [m] at which an advance is tested.
+TRAIN_STEP = 0.05
+#: Turn [rad] of a robot's path beyond which its advance stops at the vertex (the reference's velocity keeps a
+#: direction: no acceleration spike at a corner of the polyline).
+TURN_STOP = math.radians(10.0)
+#: Shortest duration [s] of one timed piece of an advance.
+MIN_PIECE = 0.3
+
+
+class TrainError(RouteVerdict):
+    """The train found no sequence of advances to the stations (a search verdict, not a proof: exit 1)."""
+
+    proven = False
+
+
+@dataclass(frozen=True)
+class TrainLimits:
+    """Limits every state of the train keeps.
+
+    Attributes:
+        spans: (N, 2) [d_lo, d_max] of each tether [m] (tether i joins robot i − 1, or the anchor, to robot i).
+        separation: least distance between two robots' centres [m] (2r + margin).
+        clearance: least clearance of every robot and tether from the obstacles grown by r [m].
+    """
+
+    spans: Array
+    separation: float
+    clearance: float = TRAIN_CLEARANCE
+
+
+def _sub(P: Array, arcs: Array, u0: float, u1: float) -> Array:
+    """The part of polyline P (arcs) between arc lengths u0 ≤ u1 [m], as a polyline."""
+    inner = P[(arcs > u0 + 1e-9) & (arcs < u1 - 1e-9)]
+    return np.vstack([point_at(P, arcs, u0), inner, point_at(P, arcs, u1)])
+
+
+def _dedupe(P: Array) -> Array:
+    return P[np.r_[True, np.linalg.norm(np.diff(P, axis=0), axis=1) > 1e-9]]
+
+
+class _Paths:
+    """Every robot's path (polyline, arcs, length [m]) and how far along it the robot is; the guide it follows."""
+
+    def __init__(self, ref: ChainReference) -> None:
+        self.guide, self.garcs = ref.guide, guide_arcs(ref.guide)
+        self.foot = np.asarray(ref.final_arcs, dtype=float)
+        self.station = np.asarray(ref.final, dtype=float)
+        self.garc = np.asarray(ref.start_arcs, dtype=float).copy()  # each robot's progress along the guide [m]
+        N = len(ref.start)
+        self.points: list[Array] = [np.zeros((1, 2))] * N
+        self.arcs: list[Array] = [np.zeros(1)] * N
+        self.u = np.zeros(N)
+        for i in range(N):
+            self.rebase(i, np.asarray(ref.start[i], dtype=float), float(self.garc[i]))
+
+    @property
+    def length(self) -> Array:
+        return np.array([float(a[-1]) for a in self.arcs])
+
+    def rebase(self, i: int, here: Array, garc: float) -> None:
+        """Robot i's path from ``here``: straight to the guide at arc ``garc``, along it to its station's foot,
+        then to the station."""
+        garc = min(max(garc, float(self.garc[i])), float(self.foot[i]))
+        self.garc[i] = garc
+        pts = [here[None]]
+        if self.foot[i] > garc + 1e-9:
+            pts.append(_sub(self.guide, self.garcs, garc, float(self.foot[i])))
+        pts.append(self.station[i][None])
+        P = _dedupe(np.vstack(pts))
+        self.points[i], self.arcs[i], self.u[i] = P, guide_arcs(P), 0.0
+
+    def at(self, i: int, u: Array | float) -> Array:
+        return point_at(self.points[i], self.arcs[i], u)
+
+    def advance(self, i: int, u1: float) -> Array:
+        """Move robot i to arc u1 of its path; returns the polyline it travelled."""
+        part = _sub(self.points[i], self.arcs[i], float(self.u[i]), u1)
+        self.u[i] = u1
+        here = self.at(i, u1)
+        lo = float(self.garc[i])
+        hi = min(float(self.foot[i]), lo + float(self.arcs[i][-1]) + 1.0)
+        if hi > lo:  # progress along the guide: the nearest guide point in [lo, hi]
+            s = np.linspace(lo, hi, max(2, int((hi - lo) / 0.02) + 1))
+            k = int(np.argmin(np.linalg.norm(point_at(self.guide, self.garcs, s) - here, axis=1)))
+            self.garc[i] = s[k]
+        return part
+
+
+class _Fast:
+    """The environment's exact tests, with a fast exact pre-filter for segments at the train's clearance c: a
+    segment covered by the free region eroded by c + 2 mm is free, one not covered by it eroded by c − 2 mm is
+    not (shapely ``covers`` on prepared polygons); only the others get the exact distance."""
+
+    SLACK = 0.002
+
+    def __init__(self, env: Any, clearance: float) -> None:
+        self.env, self.c = env, float(clearance)
+        self.inner = env.free.buffer(-(self.c + self.SLACK), quad_segs=16)
+        self.outer = env.free.buffer(-max(0.0, self.c - self.SLACK), quad_segs=16)
+        shapely.prepare(self.inner)
+        shapely.prepare(self.outer)
+
+    def exact_clearance(self, points: Any) -> Any:
+        return self.env.exact_clearance(points)
+
+    def segment_clearance(self, a: Any, b: Any) -> Any:
+        return self.env.segment_clearance(a, b)
+
+    def segment_is_free(self, a: Any, b: Any, margin: float = 0.0) -> NDArray[np.bool_]:
+        if abs(float(margin) - self.c) > 1e-6:
+            return self.env.segment_is_free(a, b, margin)
+        A, B = np.broadcast_arrays(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
+        shape = A.shape[:-1]
+        A, B = A.reshape(-1, 2), B.reshape(-1, 2)
+        lines = shapely.linestrings(np.stack([A, B], axis=1))
+        out = shapely.covers(self.inner, lines)
+        unsure = np.flatnonzero(~out & shapely.covers(self.outer, lines))
+        if len(unsure):
+            out[unsure] = self.env.segment_is_free(A[unsure], B[unsure], margin)
+        return out.reshape(shape)
+
+
+class _State:
+    """The train's current positions and the tests of a move of one robot."""
+
+    def __init__(self, env: Any, base: Array, X: Array, limits: TrainLimits, paths: _Paths | None = None) -> None:
+        self.env, self.base, self.X, self.lim, self.paths = env, base, X, limits, paths
+        self.compact = True  # the SLACK rule (advances along the paths; repairs may stretch a tether)
+
+    def _tethers(self, i: int) -> list[tuple[Array, int, str]]:
+        """(other end, span-limit row, name) of robot i's tethers."""
+        out = [(self.base if i == 0 else self.X[i - 1], i, "the anchor" if i == 0 else f"robot {i}")]
+        if i < len(self.X) - 1:
+            out.append((self.X[i + 1], i + 1, f"robot {i + 2}"))
+        return out
+
+    def tests(self, i: int, pts: Array) -> list[tuple[str, NDArray[np.bool_]]]:
+        """(name, passes) of every limit for robot i at each of ``pts`` (m, 2), the others where they are."""
+        env, c, here = self.env, self.lim.clearance, self.X[i]
+        out = []
+        now = float(env.exact_clearance(here))
+        out.append(("clearance", np.asarray(env.exact_clearance(pts), float) > min(c, now) - 1e-9))
+        for end, row, name in self._tethers(i):
+            now = float(env.segment_clearance(end, here))
+            margin = c if now > c else max(0.0, now - 1e-9)
+            out.append((f"clearance of the tether to {name}", env.segment_is_free(end, pts, margin)))
+            length = np.linalg.norm(pts - end, axis=1)
+            lo, hi = self.lim.spans[row]
+            d = float(np.linalg.norm(here - end))
+            ok = (length >= min(lo, d) - 1e-9) & (length <= max(hi, d) + 1e-9)
+            out.append((f"length of the tether to {name}", ok))
+        if self.compact and i > 0 and self.paths is not None and self.paths.u[i - 1] < self.paths.length[i - 1] - 1e-9:
+            # compact: a robot does not run farther than SLACK ahead of a follower short of its station
+            slack = max(SLACK, float(np.linalg.norm(here - self.X[i - 1])))
+            out.append((f"slack of the tether to robot {i}", np.linalg.norm(pts - self.X[i - 1], axis=1) <= slack))
+        others = np.delete(np.arange(len(self.X)), i)
+        if len(others):
+            D = np.linalg.norm(pts[:, None] - self.X[others][None], axis=2)
+            need = np.minimum(self.lim.separation, np.linalg.norm(self.X[others] - here, axis=1)) - 1e-9
+            ok = D >= need
+            for col, j in enumerate(others):
+                out.append((f"distance to robot {j + 1}", ok[:, col]))
+        return out
+
+    def valid(self, i: int, pts: Array) -> NDArray[np.bool_]:
+        """All of :meth:`tests` at once, the cheap ones first: the exact geometry only where those pass."""
+        env, c, here, X = self.env, self.lim.clearance, self.X[i], self.X
+        pts = np.asarray(pts, dtype=float).reshape(-1, 2)
+        ok = np.ones(len(pts), dtype=bool)
+        others = np.delete(np.arange(len(X)), i)
+        if len(others):
+            need = np.minimum(self.lim.separation, np.linalg.norm(X[others] - here, axis=1)) - 1e-9
+            ok &= np.all(np.linalg.norm(pts[:, None] - X[others][None], axis=2) >= need, axis=1)
+        tethers = self._tethers(i)
+        for end, row, _ in tethers:
+            lo, hi = self.lim.spans[row]
+            d = float(np.linalg.norm(here - end))
+            length = np.linalg.norm(pts - end, axis=1)
+            ok &= (length >= min(lo, d) - 1e-9) & (length <= max(hi, d) + 1e-9)
+        if self.compact and i > 0 and self.paths is not None and self.paths.u[i - 1] < self.paths.length[i - 1] - 1e-9:
+            ok &= np.linalg.norm(pts - X[i - 1], axis=1) <= max(SLACK, float(np.linalg.norm(here - X[i - 1])))
+        idx = np.flatnonzero(ok)
+        if len(idx):
+            now = float(env.exact_clearance(here))
+            ok[idx] = np.asarray(env.exact_clearance(pts[idx]), float) > min(c, now) - 1e-9
+        for end, _, _ in tethers:
+            idx = np.flatnonzero(ok)
+            if not len(idx):
+                break
+            now = float(env.segment_clearance(end, here))
+            ok[idx] = env.segment_is_free(end, pts[idx], c if now > c else max(0.0, now - 1e-9))
+        return ok
+
+
+#: Radius [m] and grid step [m] of the positions a follower may step to, off its path, so that the robot ahead can
+#: go on (:func:`_repair`); how far ahead [m] that robot's progress is scored.
+REPAIR_RADIUS = 1.0
+REPAIR_GRID = 0.03
+REPAIR_LOOKAHEAD = 2.0
+#: Longest tether [m] between a robot and a follower that has not reached its station, in a normal advance: the
+#: chain stays compact, so that no robot runs so far ahead that the one behind cannot follow it round a corner.
+SLACK = 2.0
+#: Most moves of the search before it gives up (a guard against a cycle of repairs).
+MAX_MOVES = 5000
+#: Most repairs in a row, per robot, that bring no progress along the guide before the search gives up.
+MAX_STUCK_PER_ROBOT = 6
+
+
+def _repair(state: _State, paths: _Paths, mover: int, other: int, step: float) -> Array | None:
+    """A free position Q within ``REPAIR_RADIUS`` of robot ``mover``, reachable by a straight move keeping every
+    limit, that lets robot ``other`` advance farthest along its path — far enough from it and, for a neighbour,
+    joined to it by a free tether of allowed length (ties: the nearest Q); None if no Q lets ``other`` advance."""
+    env, lim, X = state.env, state.lim, state.X
+    r = np.arange(-REPAIR_RADIUS, REPAIR_RADIUS + 1e-9, REPAIR_GRID)
+    G = X[mover] + np.stack(np.meshgrid(r, r, indexing="ij"), axis=-1).reshape(-1, 2)
+    G = G[np.linalg.norm(G - X[mover], axis=1) <= REPAIR_RADIUS]
+    u = np.arange(paths.u[other] + step, min(paths.length[other], paths.u[other] + REPAIR_LOOKAHEAD) + 1e-9, step)
+    if not len(u):
+        return None
+    ahead = paths.at(other, u)
+    if abs(mover - other) == 1:  # ``other``'s first step at least
+        G = G[env.segment_is_free(G, ahead[0], lim.clearance)]
+    G = G[state.valid(mover, G)] if len(G) else G
+    if not len(G):
+        return None
+    length = np.linalg.norm(G[:, None] - ahead[None], axis=2)
+    ok = length >= lim.separation
+    neighbours = abs(mover - other) == 1
+    if neighbours:  # their tether too
+        lo, hi = lim.spans[max(mover, other)]
+        ok &= (length >= lo) & (length <= hi)
+    gain = np.zeros(len(G), dtype=int)
+    alive = np.arange(len(G))
+    for col in range(len(u)):  # the prefix of ``other``'s steps each Q allows, column by column
+        alive = alive[ok[alive, col]]
+        if neighbours and len(alive):
+            alive = alive[env.segment_is_free(G[alive], ahead[col], lim.clearance)]
+        if not len(alive):
+            break
+        gain[alive] += 1
+    order = np.lexsort((np.linalg.norm(G - X[mover], axis=1), -gain))
+    for k in order[:50]:
+        if gain[k] == 0:
+            return None
+        m = max(2, math.ceil(float(np.linalg.norm(G[k] - X[mover])) / step) + 1)
+        line = X[mover] + np.linspace(0.0, 1.0, m)[:, None] * (G[k] - X[mover])
+        if state.valid(mover, line).all():
+            return G[k]
+    return None
+
+
+def _search(env: Any, base: Array, paths: _Paths, limits: TrainLimits, step: float) -> list[list[tuple[int, Array]]]:
+    """Moves (robot, polyline travelled), grouped by sweep (module docstring)."""
+    N = len(paths.length)
+    X = np.array([paths.at(i, 0.0) for i in range(N)])
+    state = _State(_Fast(env, limits.clearance), base, X, limits, paths)
+    sweeps: list[list[tuple[int, Array]]] = []
+    count = 0
+    stuck, best = 0, float(paths.garc.sum() + np.sum(paths.u >= paths.length - 1e-9))
+    while np.any(paths.u < paths.length - 1e-9):
+        moves = []
+        for i in range(N - 1, -1, -1):
+            L = float(paths.length[i])
+            if paths.u[i] >= L - 1e-9:
+                continue
+            cand = np.append(np.arange(paths.u[i] + step, L - 1e-9, step), L)
+            ok = state.valid(i, paths.at(i, cand))
+            k = int(np.argmin(ok)) if not ok.all() else len(cand)
+            if k == 0:
+                continue
+            moves.append((i, paths.advance(i, float(cand[k - 1]))))
+            X[i] = paths.at(i, paths.u[i])
+        if not moves:
+            moves = _unblock(state, paths, step)
+            stuck += 1
+        progress = float(paths.garc.sum() + np.sum(paths.u >= paths.length - 1e-9))
+        if progress > best + step:
+            stuck, best = 0, progress
+        count += len(moves)
+        if not moves or count > MAX_MOVES or stuck > MAX_STUCK_PER_ROBOT * N:
+            raise TrainError(_deadlock(state, paths, step))
+        sweeps.append(moves)
+    return sweeps
+
+
+def _unblock(state: _State, paths: _Paths, step: float) -> list[tuple[int, Array]]:
+    """One repair move when no robot can advance along its path (tried in this order, leader-most robot first):
+    a straight cut to a point farther along its own path (:func:`_shortcut`); for a robot j whose next step a
+    neighbour's tether or another robot's distance blocks: its follower reels in along their tether
+    (:func:`_along_tether`), the blocking robot steps aside so that j can go on (:func:`_repair`), j steps aside so
+    that its follower can close up, or j pays out along their tether; [] if nothing helps."""
+    todo = [int(j) for j in np.flatnonzero(paths.u < paths.length - 1e-9)[::-1]]
+    state.compact = False  # repairs may stretch a tether beyond SLACK
+    try:
+        for j in todo:
+            move = _shortcut(state, paths, j, step)
+            if move is not None:
+                return [move]
+        return _repairs(state, paths, todo, step)
+    finally:
+        state.compact = True
+
+
+def _repairs(state: _State, paths: _Paths, todo: list[int], step: float) -> list[tuple[int, Array]]:
+    """The repairs of :func:`_unblock` after the straight cuts."""
+    for j in todo:
+        nxt = paths.at(j, np.array([min(paths.u[j] + step, paths.length[j])]))
+        broken = [name for name, passes in state.tests(j, nxt) if not passes[0]]
+        blockers = sorted({int(m.group(1)) - 1 for name in broken for m in [_ROBOT.search(name)] if m}, reverse=True)
+        follower = any(name.endswith(f"tether to robot {j}") for name in broken) and j > 0
+        if follower:
+            Q = _along_tether(state, j - 1, j - 1, 1.0, step)  # the follower reels in along the tether
+            if Q is not None:
+                return [_step_to(state, paths, j - 1, Q)]
+        for k in blockers:
+            Q = _repair(state, paths, k, j, step)
+            if Q is not None:
+                return [_step_to(state, paths, k, Q)]
+        if follower:
+            Q = _repair(state, paths, j, j - 1, step)
+            if Q is not None:
+                return [_step_to(state, paths, j, Q)]
+            Q = _along_tether(state, j - 1, j, -1.0, step)  # j pays out along it, if that is forward
+            if Q is not None and _forward(paths, j, Q - state.X[j]):
+                return [_step_to(state, paths, j, Q)]
+    return []
+
+
+_ROBOT = re.compile(r"robot (\d+)")
+
+
+def _forward(paths: _Paths, i: int, d: Array) -> bool:
+    """Whether direction d points within 60° of the guide's direction at robot i's progress."""
+    a = float(paths.garc[i])
+    t = point_at(paths.guide, paths.garcs, min(a + 0.2, float(paths.garcs[-1]))) - point_at(paths.guide, paths.garcs, a)
+    n = float(np.linalg.norm(t) * np.linalg.norm(d))
+    return n > 0 and float(np.dot(t, d)) > 0.5 * n
+
+
+#: How far ahead along its path [m] a blocked robot looks for a straight cut.
+SHORTCUT_AHEAD = 4.0
+
+
+def _shortcut(state: _State, paths: _Paths, i: int, step: float) -> tuple[int, Array] | None:
+    """Robot i moves straight to the farthest point of its path within :data:`SHORTCUT_AHEAD` that it can reach
+    so, keeping every limit at each ``step``; None if there is none beyond its next step."""
+    u0, L = float(paths.u[i]), float(paths.length[i])
+    end = min(L, u0 + SHORTCUT_AHEAD)
+    targets = np.append(np.arange(u0 + 2 * step, end - 1e-9, 2 * step), end)
+    here = state.X[i].copy()
+    Q = paths.at(i, targets)
+    counts = np.maximum(1, np.ceil(np.linalg.norm(Q - here, axis=1) / step).astype(int))
+    owner = np.repeat(np.arange(len(targets)), counts)
+    frac = (np.arange(len(owner)) - np.repeat(np.cumsum(counts) - counts, counts) + 1) / counts[owner]
+    lines = here + frac[:, None] * (Q[owner] - here)  # every line's samples after ``here``, its end included
+    bad = np.bincount(owner[~state.valid(i, lines)], minlength=len(targets))
+    good = np.flatnonzero(bad == 0)
+    if not len(good):
+        return None
+    k = int(good[-1])
+    paths.advance(i, float(targets[k]))
+    state.X[i] = Q[k]
+    return i, np.vstack([here, Q[k]])
+
+
+def _step_to(state: _State, paths: _Paths, i: int, Q: Array) -> tuple[int, Array]:
+    """Move robot i straight to Q (already checked) and re-base its path there."""
+    part = np.vstack([state.X[i], Q])
+    state.X[i] = Q
+    paths.rebase(i, Q, _rejoin_arc(state.env, paths, i, Q, state.lim.clearance))
+    return i, part
+
+
+#: Longest pay-out [m] of the robot ahead along its tether in one repair.
+PAY_OUT = 1.0
+
+
+def _along_tether(state: _State, i: int, mover: int, toward: float, step: float) -> Array | None:
+    """The farthest position of ``mover`` (robot i or i + 1) along the line of their tether — robot i toward robot
+    i + 1 (``toward`` = 1: reel in), or robot i + 1 away from robot i (−1: pay out, at most :data:`PAY_OUT`) —
+    reachable keeping every limit at each ``step``; None if it cannot move one step."""
+    X = state.X
+    d = X[i + 1] - X[i]
+    n = float(np.linalg.norm(d))
+    if n < 1e-9:
+        return None
+    e = d / n
+    reach = n - state.lim.separation if toward > 0 else PAY_OUT
+    if reach < step:
+        return None
+    t = np.append(np.arange(step, reach, step), reach)
+    pts = X[mover] + (e if toward > 0 else e)[None] * t[:, None]
+    ok = state.valid(mover, pts)
+    k = int(np.argmin(ok)) if not ok.all() else len(t)
+    return pts[k - 1] if k > 0 and t[k - 1] >= step - 1e-9 else None
+
+
+#: How far ahead [m] of the guide point nearest a robot that stepped off it the robot may rejoin the guide.
+REJOIN_AHEAD = 2.0
+
+
+def _rejoin_arc(env: Any, paths: _Paths, i: int, Q: Array, clearance: float) -> float:
+    """Where robot i, off its path at Q, rejoins the guide: the farthest arc within :data:`REJOIN_AHEAD` of the
+    guide point nearest Q (in [its progress, its station's foot]) joined to Q by a free segment."""
+    lo, hi = float(paths.garc[i]), float(paths.foot[i])
+    if hi <= lo:
+        return lo
+    s = np.linspace(lo, hi, max(2, int((hi - lo) / 0.02) + 1))
+    near = float(s[int(np.argmin(np.linalg.norm(point_at(paths.guide, paths.garcs, s) - Q, axis=1)))])
+    ahead = s[(s >= near) & (s <= near + REJOIN_AHEAD)]
+    free = env.segment_is_free(Q, point_at(paths.guide, paths.garcs, ahead), clearance)
+    return float(ahead[np.flatnonzero(free)[-1]]) if free.any() else near
+
+
+def _deadlock(state: _State, paths: _Paths, step: float) -> str:
+    """Why no robot can advance: each robot short of its station and the limits its next step breaks."""
+    parts = []
+    for i in np.flatnonzero(paths.u < paths.length - 1e-9)[::-1]:
+        nxt = paths.at(int(i), np.array([min(paths.u[i] + step, paths.length[i])]))
+        broken = [name for name, passes in state.tests(int(i), nxt) if not passes[0]]
+        x, y = state.X[i]
+        parts.append(
+            f"robot {i + 1} at ({x:.2f}, {y:.2f}), {paths.length[i] - paths.u[i]:.2f} m before its station "
+            f"({', '.join(broken)})"
+        )
+    return "the chain's sequential advance stalls: " + "; ".join(parts)
+
+
+def _piece_law(length: float, T: float, Ts: float) -> tuple[Array, Array, Array]:
+    """Minimum-jerk arc s(t), ṡ, s̈ over ``length`` [m] in ``T`` [s], sampled at Ts, 2Ts, ..., T."""
+    t = Ts * np.arange(1, round(T / Ts) + 1)
+    tau = t / T
+    s = length * (10 * tau**3 - 15 * tau**4 + 6 * tau**5)
+    sd = length * (30 * tau**2 - 60 * tau**3 + 30 * tau**4) / T
+    sdd = length * (60 * tau - 180 * tau**2 + 120 * tau**3) / T**2
+    return s, sd, sdd
+
+
+def _timed(P: Array, speed: float, accel: float, Ts: float) -> tuple[Array, Array]:
+    """Samples (k, 2) of a walk along polyline P and their velocities: minimum-jerk pieces between its turns
+    sharper than :data:`TURN_STOP`, each within ``speed`` [m/s] and ``accel`` [m/s²] (:func:`leader_duration`)."""
+    arcs = guide_arcs(P)
+    d = np.diff(P, axis=0)
+    seg = np.linalg.norm(d, axis=1)
+    tang = d / np.maximum(seg, 1e-300)[:, None]
+    heading = np.arctan2(d[:, 1], d[:, 0])
+    turn = np.abs((np.diff(heading) + np.pi) % (2 * np.pi) - np.pi)
+    cuts = [0.0, *arcs[1:-1][turn > TURN_STOP].tolist(), float(arcs[-1])]
+    xs, vs = [], []
+    for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+        T = leader_duration(b - a, speed, accel, Ts, minimum=MIN_PIECE)
+        s, sd, _ = _piece_law(b - a, T, Ts)
+        uu = a + s
+        k = np.clip(np.searchsorted(arcs, uu - 1e-9, side="right") - 1, 0, len(seg) - 1)  # the segment u is on
+        xs.append(point_at(P, arcs, uu))
+        vs.append(sd[:, None] * tang[k])
+    return np.vstack(xs), np.vstack(vs)
+
+
+def _timed_sweep(
+    env: Any,
+    base: Array,
+    X0: Array,
+    limits: TrainLimits,
+    moves: list[tuple[int, Array]],
+    speed: float,
+    accel: float,
+    Ts: float,
+) -> list[tuple[Array, Array]]:
+    """Sampled (positions (k, N, 2), velocities) of one sweep from positions X0: its moves together if every
+    sampled state keeps the limits (the robots that finish early wait), else one after the other."""
+    N = len(X0)
+    walks = [(i, *_timed(P, speed, accel, Ts)) for i, P in moves]
+    if len(moves) > 1 and len({i for i, _ in moves}) == len(moves):
+        K = max(len(x) for _, x, _ in walks)
+        X = np.repeat(X0[None], K, axis=0)
+        V = np.zeros((K, N, 2))
+        for i, x, v in walks:
+            X[: len(x), i], X[len(x) :, i], V[: len(x), i] = x, x[-1], v
+        if _states_valid(env, base, X, limits):
+            return [(X, V)]
+    out = []
+    now = X0.copy()
+    for i, x, v in walks:
+        X = np.repeat(now[None], len(x), axis=0)
+        X[:, i] = x
+        V = np.zeros((len(x), N, 2))
+        V[:, i] = v
+        out.append((X, V))
+        now[i] = x[-1]
+    return out
+
+
+def _states_valid(env: Any, base: Array, X: Array, limits: TrainLimits) -> bool:
+    """Every state (k, N, 2) keeps the train's limits (clearances ≥ ``limits.clearance``, spans, separation)."""
+    k, N, _ = X.shape
+    c = limits.clearance
+    if np.any(np.asarray(env.exact_clearance(X), float) <= c):
+        return False
+    starts = np.concatenate([np.broadcast_to(base, (k, 1, 2)), X[:, :-1]], axis=1)
+    if not np.all(env.segment_is_free(starts, X, c)):
+        return False
+    length = np.linalg.norm(X - starts, axis=2)
+    if np.any(length < limits.spans[:, 0] - 1e-9) or np.any(length > limits.spans[:, 1] + 1e-9):
+        return False
+    iu = np.triu_indices(N, 1)
+    D = np.linalg.norm(X[:, :, None] - X[:, None, :], axis=3)[:, iu[0], iu[1]]
+    return bool(np.all(D >= limits.separation - 1e-9))
+
+
+def train_reference(
+    env: Any,
+    ref: ChainReference,
+    base: Array,
+    limits: TrainLimits,
+    *,
+    Ts: float,
+    speed: float,
+    accel: float,
+    settle: float = 0.0,
+    step: float = TRAIN_STEP,
+) -> ChainReference:
+    """Train references along ``ref``'s guide, from its start to its stations (module docstring).
+
+    Args:
+        env: environment; ref: the trailing references (guide, start, stations) this refines.
+        base: the anchor (x, y) [m]; limits: what every state keeps.
+        Ts: sampling period [s]; speed, accel: peak speed [m/s] and acceleration [m/s²] of every advance.
+        settle: time [s] every robot holds still at its station at the end.
+        step: arc step [m] at which advances are tested.
+
+    Raises:
+        TrainError: no robot can advance and some are short of their stations.
+    """
+    base = np.asarray(base, dtype=float)
+    paths = _Paths(ref)
+    N = len(paths.length)
+    X0 = np.array([paths.at(i, 0.0) for i in range(N)])
+    sweeps = _search(env, base, paths, limits, step)
+    now = X0.copy()
+    blocks_x, blocks_v = [X0[None]], [np.zeros((1, N, 2))]
+    for moves in sweeps:
+        for X, V in _timed_sweep(env, base, now, limits, moves, speed, accel, Ts):
+            blocks_x.append(X)
+            blocks_v.append(V)
+        now = blocks_x[-1][-1].copy()
+    hold = int(round(settle / Ts))
+    if hold:
+        blocks_x.append(np.repeat(blocks_x[-1][-1:], hold, axis=0))
+        blocks_v.append(np.zeros((hold, N, 2)))
+    pos = np.concatenate(blocks_x)
+    vel = np.concatenate(blocks_v)
+    t = Ts * np.arange(len(pos))
+    acc = np.gradient(vel[:, -1], t, axis=0) if len(t) > 1 else np.zeros((1, 2))
+    traj = Trajectory(t, pos[:, -1].copy(), vel[:, -1].copy(), acc, ref.guide.copy())
+    return replace(ref, trajectory=traj, positions=pos, velocities=vel, mode="train")

@@ -1,0 +1,124 @@
+"""Train references (tmr.train): every state keeps the limits, checked here with shapely directly; the QP falls back
+to them when the trailing references fail; a stall is a TrainError naming the robot and the limit."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import shapely
+
+from tmr.planner import build_problem, solve, train_problem
+from tmr.references import _anticipate
+from tmr.scenario import load_scenario, scenario_from_map
+from tmr.sweep.rooms import generate_room, write_geojson
+from tmr.train import TrainError, TrainLimits, train_reference
+
+#: A narrow door the shortest route crosses at a slant: the trailing references leave the leader 0.6 m short.
+DOOR_ROOM = (960306805, "narrow", "mid")
+
+
+@pytest.fixture(scope="module")
+def door_problem(tmp_path_factory: pytest.TempPathFactory):
+    room = generate_room(*DOOR_ROOM)
+    path = write_geojson(room, tmp_path_factory.mktemp("door") / "room.geojson")
+    sc = scenario_from_map(path, room.base, room.goal, n_robots=3)
+    return build_problem(sc, n_robots=3)
+
+
+def _independent_violations(problem, positions: np.ndarray, clearance: float, separation: float) -> list[str]:
+    """Every limit at every sample, with shapely on the free region (not tmr's own clearance code)."""
+    free = problem.env.free
+    boundary = free.boundary
+    base = np.asarray(problem.scenario.base, float)
+    K, N, _ = positions.shape
+    pts = positions.reshape(-1, 2)
+    out = []
+    inside = shapely.contains_xy(free, pts[:, 0], pts[:, 1])
+    dist = shapely.distance(shapely.points(pts), boundary)
+    if not np.all(inside & (dist >= clearance - 1e-6)):
+        out.append(f"robot clearance {dist[inside].min() if inside.any() else -1:.4f}")
+    starts = np.concatenate([np.broadcast_to(base, (K, 1, 2)), positions[:, :-1]], axis=1).reshape(-1, 2)
+    lines = shapely.linestrings(np.stack([starts, pts], axis=1))
+    covered = shapely.covers(free, lines)
+    ldist = shapely.distance(lines, boundary)
+    if not np.all(covered & (ldist >= clearance - 1e-6)):
+        out.append(f"tether clearance {ldist.min():.4f}")
+    spans = np.linalg.norm(pts - starts, axis=1).reshape(K, N)
+    if np.any(spans > problem.span_limits[:, 1] + 1e-6):
+        out.append(f"span {spans.max():.3f} > d_max")
+    iu = np.triu_indices(N, 1)
+    D = np.linalg.norm(positions[:, :, None] - positions[:, None], axis=3)[:, iu[0], iu[1]]
+    if D.size and D.min() < separation - 1e-6:
+        out.append(f"separation {D.min():.3f}")
+    return out
+
+
+def test_train_references_keep_every_limit_through_a_narrow_door(door_problem) -> None:
+    trained = train_problem(door_problem)
+    ref = trained.references
+    assert ref.mode == "train"
+    r = door_problem.chain_params.safety_radius
+    assert _independent_violations(door_problem, ref.positions, 0.05, 2 * r) == []
+    # the stations are reached and the references start where the robots stand
+    assert np.allclose(ref.positions[-1], door_problem.references.final, atol=1e-6)
+    assert np.allclose(ref.positions[0], door_problem.references.start, atol=1e-9)
+    assert np.allclose(trained.trajectory.x, ref.positions[:, -1])
+    # speeds within the leader's limit (one robot's advance at a time, minimum-jerk pieces)
+    v = np.linalg.norm(np.diff(ref.positions, axis=0), axis=2) / trained.time_params.Ts
+    assert v.max() <= door_problem.path_params.leader_speed + 1e-6
+
+
+def test_qp_falls_back_to_train_references_when_the_trailing_ones_fail(door_problem) -> None:
+    plan, metrics = solve(door_problem, "qp")
+    assert plan.success, plan.failure
+    assert plan.diagnostics["references"] == "train"
+    assert "trailing references failed" in plan.diagnostics["references_note"]
+    assert metrics.final_leader_error <= door_problem.path_params.goal_tolerance
+    r = door_problem.chain_params.safety_radius
+    assert _independent_violations(door_problem, plan.robots, 0.0, 2 * r) == []
+
+
+def test_no_fallback_when_the_user_fixes_the_duration(door_problem) -> None:
+    fixed = replace(door_problem, fixed_duration=True)
+    plan, _ = solve(fixed, "qp")
+    assert not plan.success
+    assert "references" not in plan.diagnostics
+
+
+def test_train_is_deterministic(door_problem) -> None:
+    a = train_problem(door_problem).references
+    b = train_problem(door_problem).references
+    assert a.positions.tobytes() == b.positions.tobytes()
+    assert a.velocities.tobytes() == b.velocities.tobytes()
+
+
+def test_a_stall_names_the_robot_and_the_limit() -> None:
+    problem = build_problem(load_scenario("A"))
+    spans = problem.span_limits.copy()
+    spans[:, 1] = spans[:, 0] + 0.3  # tethers too short for the stations
+    limits = TrainLimits(spans, 2 * problem.chain_params.safety_radius + 0.02)
+    with pytest.raises(TrainError, match=r"stalls: robot \d+ at .* \(.*tether"):
+        train_reference(
+            problem.env,
+            problem.references,
+            np.asarray(problem.scenario.base, float),
+            limits,
+            Ts=0.05,
+            speed=0.8,
+            accel=0.5,
+        )
+
+
+def test_anticipate_is_the_least_rate_limited_envelope() -> None:
+    rng = np.random.default_rng(3)
+    seen = np.maximum.accumulate(rng.uniform(0, 1, 200).cumsum() * (rng.uniform(0, 1, 200) < 0.1))
+    step = 0.05
+    a = _anticipate(seen, step)
+    assert np.all(a >= seen - 1e-12)
+    assert np.all(np.diff(a) <= step + 1e-12)
+    # least: lowering any sample breaks one of the two properties
+    for k in range(len(a)):
+        lower = a[k] - 1e-6
+        assert lower < seen[k] or (k + 1 < len(a) and a[k + 1] - lower > step)
