@@ -122,3 +122,22 @@ def test_anticipate_is_the_least_rate_limited_envelope() -> None:
     for k in range(len(a)):
         lower = a[k] - 1e-6
         assert lower < seen[k] or (k + 1 < len(a) and a[k + 1] - lower > step)
+
+
+def test_command_line_says_when_it_planned_along_train_references(tmp_path, capsys) -> None:
+    import json
+
+    from tmr.plan import main
+
+    room = generate_room(*DOOR_ROOM)
+    path = write_geojson(room, tmp_path / "room.geojson")
+    out = tmp_path / "run"
+    base, goal = (f"{float(p[0])!r},{float(p[1])!r}" for p in (room.base, room.goal))
+    args = ["--map", str(path), f"--base={base}", f"--goal={goal}"]
+    code = main([*args, "--robots", "3", "--method", "qp", "--no-plots", "--out", str(out)])
+    stdout, stderr = capsys.readouterr()
+    assert code == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["references"] == "train"
+    assert metrics["references_note"].startswith("the trailing references failed (leader ends")
+    assert "references: the trailing references failed" in stdout + stderr
