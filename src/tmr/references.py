@@ -511,6 +511,8 @@ def chain_reference(
         spline_clearance: clearance [m] the leader's spline keeps from the obstacles grown by r.
         settle: time [s] every reference holds still at its end (the leader on the goal, the followers on their
             stations), so that the followers, which lag their references, come to rest before the plan ends.
+        catch_up: fastest rise [m/s] of a follower's "in view of the robot ahead" bound (:func:`_anticipate`):
+            where that bound jumps forward at a corner, the follower starts earlier instead of jumping.
     """
     P = np.asarray(start, dtype=float)
     N = len(P)
