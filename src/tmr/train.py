@@ -43,6 +43,8 @@ __all__ = ["TRAIN_CLEARANCE", "TrainError", "TrainLimits", "train_reference"]
 #: Clearance [m] every robot and tether keeps in the train's states: more than the QP's d_safe (0.05 m), less than
 #: the route's chords in a narrow door (0.06 m), so the stations themselves are valid states.
 TRAIN_CLEARANCE = 0.055
+#: Clearance [m] of the straight cuts that pull each robot's path taut (the route's own margin).
+TAUT_CLEARANCE = 0.15
 #: Arc step [m] at which an advance is tested.
 TRAIN_STEP = 0.05
 #: Turn [rad] of a robot's path beyond which its advance stops at the vertex (the reference's velocity keeps a
@@ -86,7 +88,8 @@ def _dedupe(P: Array) -> Array:
 class _Paths:
     """Every robot's path (polyline, arcs, length [m]) and how far along it the robot is; the guide it follows."""
 
-    def __init__(self, ref: ChainReference) -> None:
+    def __init__(self, ref: ChainReference, env: Any = None, taut: float | None = None) -> None:
+        self.env, self.taut = env, taut
         self.guide, self.garcs = ref.guide, guide_arcs(ref.guide)
         self.foot = np.asarray(ref.final_arcs, dtype=float)
         self.station = np.asarray(ref.final, dtype=float)
@@ -112,6 +115,8 @@ class _Paths:
             pts.append(_sub(self.guide, self.garcs, garc, float(self.foot[i])))
         pts.append(self.station[i][None])
         P = _dedupe(np.vstack(pts))
+        if self.env is not None and self.taut is not None and len(P) > 2:
+            P = _pulled(self.env, P, self.taut)
         self.points[i], self.arcs[i], self.u[i] = P, guide_arcs(P), 0.0
 
     def at(self, i: int, u: Array | float) -> Array:
@@ -129,6 +134,21 @@ class _Paths:
             k = int(np.argmin(np.linalg.norm(point_at(self.guide, self.garcs, s) - here, axis=1)))
             self.garc[i] = s[k]
         return part
+
+
+def _pulled(env: Any, P: Array, clearance: float, step: float = 0.1, reach: int = 150) -> Array:
+    """Polyline P pulled taut: from each kept point straight to the farthest later point (samples every ``step``
+    [m], at most ``reach`` samples on) joined to it by a segment keeping ``clearance`` [m]; where none is, the next
+    sample (the path itself). A start placement's hairpin (the guide running on past a robot and back) is cut."""
+    arcs = guide_arcs(P)
+    S = point_at(P, arcs, np.union1d(np.arange(0.0, arcs[-1], step), arcs))
+    out, i = [S[0]], 0
+    while i < len(S) - 1:
+        js = np.arange(i + 1, min(len(S), i + 1 + reach))
+        free = np.flatnonzero(env.segment_is_free(S[i], S[js], clearance))
+        i = int(js[free[-1]]) if len(free) else i + 1
+        out.append(S[i])
+    return _dedupe(np.asarray(out))
 
 
 class _Fast:
@@ -578,10 +598,17 @@ def train_reference(
         TrainError: no robot can advance and some are short of their stations.
     """
     base = np.asarray(base, dtype=float)
-    paths = _Paths(ref)
+    try:  # each robot along the guide; if that stalls, along the guide pulled taut (no start hairpin)
+        paths = _Paths(ref)
+        sweeps = _search(env, base, paths, limits, step)
+    except TrainError as exc:
+        try:
+            paths = _Paths(ref, env, TAUT_CLEARANCE)
+            sweeps = _search(env, base, paths, limits, step)
+        except TrainError:
+            raise exc from None
     N = len(paths.length)
-    X0 = np.array([paths.at(i, 0.0) for i in range(N)])
-    sweeps = _search(env, base, paths, limits, step)
+    X0 = np.asarray(ref.start, dtype=float).copy()  # every path starts where its robot stands
     now = X0.copy()
     blocks_x, blocks_v = [X0[None]], [np.zeros((1, N, 2))]
     for moves in sweeps:
