@@ -11,8 +11,11 @@ longer plan (``formulations/route.md``, "Train references"):
   still — its clearance, the clearance and length of both its tethers, its distance to every other robot — tested
   at every ``step`` [m] of the advance (vectorised). A limit the start already breaks (a start tether nearer than the
   margin) may not get worse, the QP's own rule;
-* until every robot is at its station. A sweep in which no robot advances is a deadlock: :class:`TrainError` names
-  the robot, where it stopped and the limit that stopped it;
+* until every robot is at its station. When no robot can advance, local **repairs** (:func:`_unblock`): a straight
+  cut along a robot's own path, a follower reeling in along its tether, a blocking robot stepping aside, a robot
+  paying out along its tether; after ``MAX_STUCK_PER_ROBOT`` × N repairs without progress, :class:`TrainError` names
+  every robot short of its station, where it stopped and the limits its next step breaks. A stalled search runs once
+  more with every path pulled taut (:func:`_pulled`);
 * **timing**: every advance follows the minimum-jerk law within the leader's speed and acceleration limits, stopping
   at each turn of its path sharper than :data:`TURN_STOP`; the advances of one sweep run together when every sampled
   state of the joint motion keeps the same limits, else one after the other.
@@ -156,12 +159,12 @@ class _Fast:
     segment covered by the free region eroded by c + 2 mm is free, one not covered by it eroded by c − 2 mm is
     not (shapely ``covers`` on prepared polygons); only the others get the exact distance."""
 
-    SLACK = 0.002
+    BAND = 0.002  # [m]
 
     def __init__(self, env: Any, clearance: float) -> None:
         self.env, self.c = env, float(clearance)
-        self.inner = env.free.buffer(-(self.c + self.SLACK), quad_segs=16)
-        self.outer = env.free.buffer(-max(0.0, self.c - self.SLACK), quad_segs=16)
+        self.inner = env.free.buffer(-(self.c + self.BAND), quad_segs=16)
+        self.outer = env.free.buffer(-max(0.0, self.c - self.BAND), quad_segs=16)
         shapely.prepare(self.inner)
         shapely.prepare(self.outer)
 
