@@ -425,12 +425,12 @@ def make_qp(
     ]
     ref = problem.references
     route_levels: list[Level] = []
-    if ref is not None and chain.n_robots > 1 and ref.mode == "train":  # checked references: tracked first
+    if ref is not None and chain.n_robots > 1:
         follow = RouteFollowers(ref.positions, ref.velocities, problem.path_params.route_gain)
-        route_levels.append(Level([(follow, 1.0)], "route"))
-    elif ref is not None and chain.n_robots > 1 and problem.path_params.route_weight > 0:
-        follow = RouteFollowers(ref.positions, ref.velocities, problem.path_params.route_gain)
-        tether_tasks.append((follow, problem.path_params.route_weight))
+        if ref.mode == "train":  # checked references: tracked first
+            route_levels.append(Level([(follow, 1.0)], "route"))
+        elif problem.path_params.route_weight > 0:
+            tether_tasks.append((follow, problem.path_params.route_weight))
     levels = [
         Level([(leader, 1.0)], "leader"),
         *extra_levels,

@@ -28,7 +28,9 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -133,10 +135,13 @@ class _Paths:
         lo = float(self.garc[i])
         hi = min(float(self.foot[i]), lo + float(self.arcs[i][-1]) + 1.0)
         if hi > lo:  # progress along the guide: the nearest guide point in [lo, hi]
-            s = np.linspace(lo, hi, max(2, int((hi - lo) / 0.02) + 1))
-            k = int(np.argmin(np.linalg.norm(point_at(self.guide, self.garcs, s) - here, axis=1)))
-            self.garc[i] = s[k]
+            self.garc[i] = self.nearest(here, lo, hi)[1]
         return part
+
+    def nearest(self, Q: Array, lo: float, hi: float) -> tuple[Array, float]:
+        """Guide arcs sampled every 0.02 m over [lo, hi] (lo < hi) [m] and the one nearest the point Q."""
+        s = np.linspace(lo, hi, max(2, int((hi - lo) / 0.02) + 1))
+        return s, float(s[int(np.argmin(np.linalg.norm(point_at(self.guide, self.garcs, s) - Q, axis=1)))])
 
 
 def _pulled(env: Any, P: Array, clearance: float, step: float = 0.1, reach: int = 150) -> Array:
@@ -188,6 +193,20 @@ class _Fast:
         return out.reshape(shape)
 
 
+def _clear(env: Any, least: float, pts: Array) -> NDArray[np.bool_]:
+    return np.asarray(env.exact_clearance(pts), float) > least
+
+
+def _tether_clear(env: Any, end: Array, margin: float, pts: Array) -> NDArray[np.bool_]:
+    return np.asarray(env.segment_is_free(end, pts, margin))
+
+
+def _within(centre: Array, lo: float, hi: float, pts: Array) -> NDArray[np.bool_]:
+    """lo ≤ |pts − centre| ≤ hi."""
+    n = np.linalg.norm(pts - centre, axis=1)
+    return (n >= lo) & (n <= hi)
+
+
 class _State:
     """The train's current positions and the tests of a move of one robot."""
 
@@ -202,61 +221,44 @@ class _State:
             out.append((self.X[i + 1], i + 1, f"robot {i + 2}"))
         return out
 
-    def tests(self, i: int, pts: Array) -> list[tuple[str, NDArray[np.bool_]]]:
-        """(name, passes) of every limit for robot i at each of ``pts`` (m, 2), the others where they are."""
-        env, c, here = self.env, self.lim.clearance, self.X[i]
-        out = []
+    def _checks(self, i: int) -> list[tuple[str, int, Callable[[Array], NDArray[np.bool_]]]]:
+        """(name, cost, test) of every limit for robot i moved to points (m, 2), the others where they are; cost 0:
+        arithmetic, 1: point clearance, 2: segment clearance. A limit robot i already breaks may not get worse."""
+        env, c, X, here = self.env, self.lim.clearance, self.X, self.X[i]
         now = float(env.exact_clearance(here))
-        out.append(("clearance", np.asarray(env.exact_clearance(pts), float) > min(c, now) - 1e-9))
+        out = [("clearance", 1, partial(_clear, env, min(c, now) - 1e-9))]
         for end, row, name in self._tethers(i):
             now = float(env.segment_clearance(end, here))
             margin = c if now > c else max(0.0, now - 1e-9)
-            out.append((f"clearance of the tether to {name}", env.segment_is_free(end, pts, margin)))
-            length = np.linalg.norm(pts - end, axis=1)
-            lo, hi = self.lim.spans[row]
+            out.append((f"clearance of the tether to {name}", 2, partial(_tether_clear, env, end, margin)))
             d = float(np.linalg.norm(here - end))
-            ok = (length >= min(lo, d) - 1e-9) & (length <= max(hi, d) + 1e-9)
-            out.append((f"length of the tether to {name}", ok))
+            lo, hi = self.lim.spans[row]
+            out.append(
+                (f"length of the tether to {name}", 0, partial(_within, end, min(lo, d) - 1e-9, max(hi, d) + 1e-9))
+            )
         if self.compact and i > 0 and self.paths is not None and self.paths.u[i - 1] < self.paths.length[i - 1] - 1e-9:
             # compact: a robot does not run farther than SLACK ahead of a follower short of its station
-            slack = max(SLACK, float(np.linalg.norm(here - self.X[i - 1])))
-            out.append((f"slack of the tether to robot {i}", np.linalg.norm(pts - self.X[i - 1], axis=1) <= slack))
-        others = np.delete(np.arange(len(self.X)), i)
-        if len(others):
-            D = np.linalg.norm(pts[:, None] - self.X[others][None], axis=2)
-            need = np.minimum(self.lim.separation, np.linalg.norm(self.X[others] - here, axis=1)) - 1e-9
-            ok = D >= need
-            for col, j in enumerate(others):
-                out.append((f"distance to robot {j + 1}", ok[:, col]))
+            slack = max(SLACK, float(np.linalg.norm(here - X[i - 1])))
+            out.append((f"slack of the tether to robot {i}", 0, partial(_within, X[i - 1], -np.inf, slack)))
+        for j in range(len(X)):
+            if j != i:
+                need = min(self.lim.separation, float(np.linalg.norm(X[j] - here))) - 1e-9
+                out.append((f"distance to robot {j + 1}", 0, partial(_within, X[j], need, np.inf)))
         return out
+
+    def tests(self, i: int, pts: Array) -> list[tuple[str, NDArray[np.bool_]]]:
+        """(name, passes) of every limit for robot i at each of ``pts`` (m, 2), the others where they are."""
+        return [(name, test(pts)) for name, _, test in self._checks(i)]
 
     def valid(self, i: int, pts: Array) -> NDArray[np.bool_]:
         """All of :meth:`tests` at once, the cheap ones first: the exact geometry only where those pass."""
-        env, c, here, X = self.env, self.lim.clearance, self.X[i], self.X
         pts = np.asarray(pts, dtype=float).reshape(-1, 2)
         ok = np.ones(len(pts), dtype=bool)
-        others = np.delete(np.arange(len(X)), i)
-        if len(others):
-            need = np.minimum(self.lim.separation, np.linalg.norm(X[others] - here, axis=1)) - 1e-9
-            ok &= np.all(np.linalg.norm(pts[:, None] - X[others][None], axis=2) >= need, axis=1)
-        tethers = self._tethers(i)
-        for end, row, _ in tethers:
-            lo, hi = self.lim.spans[row]
-            d = float(np.linalg.norm(here - end))
-            length = np.linalg.norm(pts - end, axis=1)
-            ok &= (length >= min(lo, d) - 1e-9) & (length <= max(hi, d) + 1e-9)
-        if self.compact and i > 0 and self.paths is not None and self.paths.u[i - 1] < self.paths.length[i - 1] - 1e-9:
-            ok &= np.linalg.norm(pts - X[i - 1], axis=1) <= max(SLACK, float(np.linalg.norm(here - X[i - 1])))
-        idx = np.flatnonzero(ok)
-        if len(idx):
-            now = float(env.exact_clearance(here))
-            ok[idx] = np.asarray(env.exact_clearance(pts[idx]), float) > min(c, now) - 1e-9
-        for end, _, _ in tethers:
+        for _, _, test in sorted(self._checks(i), key=lambda check: check[1]):
             idx = np.flatnonzero(ok)
             if not len(idx):
                 break
-            now = float(env.segment_clearance(end, here))
-            ok[idx] = env.segment_is_free(end, pts[idx], c if now > c else max(0.0, now - 1e-9))
+            ok[idx] = test(pts[idx])
         return ok
 
 
@@ -286,14 +288,14 @@ def _repair(state: _State, paths: _Paths, mover: int, other: int, step: float) -
     if not len(u):
         return None
     ahead = paths.at(other, u)
-    if abs(mover - other) == 1:  # ``other``'s first step at least
+    neighbours = abs(mover - other) == 1
+    if neighbours:  # ``other``'s first step at least
         G = G[env.segment_is_free(G, ahead[0], lim.clearance)]
     G = G[state.valid(mover, G)] if len(G) else G
     if not len(G):
         return None
     length = np.linalg.norm(G[:, None] - ahead[None], axis=2)
     ok = length >= lim.separation
-    neighbours = abs(mover - other) == 1
     if neighbours:  # their tether too
         lo, hi = lim.spans[max(mover, other)]
         ok &= (length >= lo) & (length <= hi)
@@ -372,12 +374,11 @@ def _unblock(state: _State, paths: _Paths, step: float) -> list[tuple[int, Array
 def _repairs(state: _State, paths: _Paths, todo: list[int], step: float) -> list[tuple[int, Array]]:
     """The repairs of :func:`_unblock` after the straight cuts."""
     for j in todo:
-        nxt = paths.at(j, np.array([min(paths.u[j] + step, paths.length[j])]))
-        broken = [name for name, passes in state.tests(j, nxt) if not passes[0]]
+        broken = _broken(state, paths, j, step)
         blockers = sorted({int(m.group(1)) - 1 for name in broken for m in [_ROBOT.search(name)] if m}, reverse=True)
         follower = any(name.endswith(f"tether to robot {j}") for name in broken) and j > 0
         if follower:
-            Q = _along_tether(state, j - 1, j - 1, 1.0, step)  # the follower reels in along the tether
+            Q = _along_tether(state, j - 1, True, step)  # the follower reels in along the tether
             if Q is not None:
                 return [_step_to(state, paths, j - 1, Q)]
         for k in blockers:
@@ -388,13 +389,19 @@ def _repairs(state: _State, paths: _Paths, todo: list[int], step: float) -> list
             Q = _repair(state, paths, j, j - 1, step)
             if Q is not None:
                 return [_step_to(state, paths, j, Q)]
-            Q = _along_tether(state, j - 1, j, -1.0, step)  # j pays out along it, if that is forward
+            Q = _along_tether(state, j - 1, False, step)  # j pays out along it, if that is forward
             if Q is not None and _forward(paths, j, Q - state.X[j]):
                 return [_step_to(state, paths, j, Q)]
     return []
 
 
 _ROBOT = re.compile(r"robot (\d+)")
+
+
+def _broken(state: _State, paths: _Paths, i: int, step: float) -> list[str]:
+    """Names of the limits robot i's next step along its path breaks."""
+    nxt = paths.at(i, np.array([min(paths.u[i] + step, paths.length[i])]))
+    return [name for name, passes in state.tests(i, nxt) if not passes[0]]
 
 
 def _forward(paths: _Paths, i: int, d: Array) -> bool:
@@ -443,21 +450,22 @@ def _step_to(state: _State, paths: _Paths, i: int, Q: Array) -> tuple[int, Array
 PAY_OUT = 1.0
 
 
-def _along_tether(state: _State, i: int, mover: int, toward: float, step: float) -> Array | None:
-    """The farthest position of ``mover`` (robot i or i + 1) along the line of their tether — robot i toward robot
-    i + 1 (``toward`` = 1: reel in), or robot i + 1 away from robot i (−1: pay out, at most :data:`PAY_OUT`) —
-    reachable keeping every limit at each ``step``; None if it cannot move one step."""
+def _along_tether(state: _State, i: int, reel_in: bool, step: float) -> Array | None:
+    """The farthest position, along the line of the tether between robots i and i + 1 and in the direction from i
+    to i + 1, of robot i (``reel_in``: toward robot i + 1, until their separation) or robot i + 1 (pay out, away
+    from robot i, at most :data:`PAY_OUT`) reachable keeping every limit at each ``step``; None if it cannot move
+    one step."""
     X = state.X
+    mover = i if reel_in else i + 1
     d = X[i + 1] - X[i]
     n = float(np.linalg.norm(d))
     if n < 1e-9:
         return None
-    e = d / n
-    reach = n - state.lim.separation if toward > 0 else PAY_OUT
+    reach = n - state.lim.separation if reel_in else PAY_OUT
     if reach < step:
         return None
     t = np.append(np.arange(step, reach, step), reach)
-    pts = X[mover] + (e if toward > 0 else e)[None] * t[:, None]
+    pts = X[mover] + (d / n)[None] * t[:, None]
     ok = state.valid(mover, pts)
     k = int(np.argmin(ok)) if not ok.all() else len(t)
     return pts[k - 1] if k > 0 and t[k - 1] >= step - 1e-9 else None
@@ -473,8 +481,7 @@ def _rejoin_arc(env: Any, paths: _Paths, i: int, Q: Array, clearance: float) -> 
     lo, hi = float(paths.garc[i]), float(paths.foot[i])
     if hi <= lo:
         return lo
-    s = np.linspace(lo, hi, max(2, int((hi - lo) / 0.02) + 1))
-    near = float(s[int(np.argmin(np.linalg.norm(point_at(paths.guide, paths.garcs, s) - Q, axis=1)))])
+    s, near = paths.nearest(Q, lo, hi)
     ahead = s[(s >= near) & (s <= near + REJOIN_AHEAD)]
     free = env.segment_is_free(Q, point_at(paths.guide, paths.garcs, ahead), clearance)
     return float(ahead[np.flatnonzero(free)[-1]]) if free.any() else near
@@ -484,8 +491,7 @@ def _deadlock(state: _State, paths: _Paths, step: float) -> str:
     """Why no robot can advance: each robot short of its station and the limits its next step breaks."""
     parts = []
     for i in np.flatnonzero(paths.u < paths.length - 1e-9)[::-1]:
-        nxt = paths.at(int(i), np.array([min(paths.u[i] + step, paths.length[i])]))
-        broken = [name for name, passes in state.tests(int(i), nxt) if not passes[0]]
+        broken = _broken(state, paths, int(i), step)
         x, y = state.X[i]
         parts.append(
             f"robot {i + 1} at ({x:.2f}, {y:.2f}), {paths.length[i] - paths.u[i]:.2f} m before its station "
@@ -539,7 +545,7 @@ def _timed_sweep(
     sampled state keeps the limits (the robots that finish early wait), else one after the other."""
     N = len(X0)
     walks = [(i, *_timed(P, speed, accel, Ts)) for i, P in moves]
-    if len(moves) > 1 and len({i for i, _ in moves}) == len(moves):
+    if len(moves) > 1:  # a sweep moves each robot at most once
         K = max(len(x) for _, x, _ in walks)
         X = np.repeat(X0[None], K, axis=0)
         V = np.zeros((K, N, 2))
