@@ -15,6 +15,9 @@ import pytest
 
 #: Heavy stacks no ``tmr.plan --method qp --no-plots`` run needs (issue 14), and the plotting/solver extras.
 NEVER_FOR_QP = ("cvxpy", "casadi", "dask", "pymoo", "matplotlib", "plotly", "PIL", "mujoco", "rosbags")
+#: scipy packages that cost 0.3-0.7 s each to import (they pull in one another) and that a qp run does without: the
+#: time law's splines and the trajectory filter are tmr.splines and tmr.lowpass.
+SCIPY_NEVER_FOR_QP = ("scipy.interpolate", "scipy.signal", "scipy.stats", "scipy.optimize")
 
 _PROBE = """
 import json, runpy, sys
@@ -24,12 +27,14 @@ try:
     runpy.run_module("tmr.plan", run_name="__main__")
 except SystemExit as exc:
     code = exc.code
-print(json.dumps({"code": code, "modules": sorted(m for m in sys.modules if "." not in m)}))
+top = sorted(m for m in sys.modules if "." not in m or (m.startswith("scipy.") and m.count(".") == 1))
+print(json.dumps({"code": code, "modules": top}))
 """
 
 
 def _run_plan(args: list[str]) -> tuple[int, set[str]]:
-    """Exit code of ``python -m tmr.plan ARGS`` and the top-level packages it had imported when it ended."""
+    """Exit code of ``python -m tmr.plan ARGS`` and the top-level packages (and scipy's subpackages) it had
+    imported when it ended."""
     out = subprocess.run(
         [sys.executable, "-c", _PROBE, json.dumps([*args, "--quiet"])],
         capture_output=True,
@@ -65,6 +70,7 @@ def test_qp_run_without_plots_imports_no_heavy_stack(tmp_path: Path):
     assert code == 0
     assert (tmp_path / "A" / "trajectories.json").is_file()
     assert mods.isdisjoint(NEVER_FOR_QP), sorted(mods & set(NEVER_FOR_QP))
+    assert mods.isdisjoint(SCIPY_NEVER_FOR_QP), sorted(mods & set(SCIPY_NEVER_FOR_QP))
     assert "ompl" not in mods  # the shortest route needs no RRT*
     assert "osqp" in mods  # the probe sees what the run imported
 

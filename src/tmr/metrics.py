@@ -22,6 +22,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from tmr.errors import ParameterError
+from tmr.lowpass import butter_lowpass, filtfilt
 
 __all__ = [
     "QP_LEVEL_STATUS",
@@ -487,11 +488,11 @@ def evaluate(
 def filter_trajectories(robots: np.ndarray, Ts: float, cutoff_hz: float = 1.0, order: int = 2) -> np.ndarray:
     """Zero-phase low-pass filter of the robot trajectories, removing the spikes that task switching produces.
 
-    Butterworth low-pass (``scipy.signal.butter``) applied forward and backward (``scipy.signal.filtfilt``)
-    along time, so there is no phase lag. The series is extended by odd reflection about each end point (which
-    continues a straight line exactly) over about four cut-off periods, so the start-up transient dies out in
-    the padding: a straight line comes back unchanged (< 1e-6 m) and the end points of a smooth trajectory
-    stay put. The pad length is capped at K samples for short series (guard for filtfilt); series with fewer
+    Butterworth low-pass (:func:`tmr.lowpass.butter_lowpass`, the numbers of ``scipy.signal.butter``) applied
+    forward and backward (:func:`tmr.lowpass.filtfilt`, as ``scipy.signal.filtfilt``) along time, so there is
+    no phase lag. The series is extended by odd reflection about each end point (which continues a straight
+    line exactly) over about four cut-off periods, so the start-up transient dies out in the padding: a straight
+    line comes back unchanged (< 1e-6 m) and the end points of a smooth trajectory stay put. The pad length is capped at K samples for short series (guard for filtfilt); series with fewer
     than 3 samples are returned unchanged.
 
     Args:
@@ -516,9 +517,7 @@ def filter_trajectories(robots: np.ndarray, Ts: float, cutoff_hz: float = 1.0, o
         raise ParameterError(f"filter order must be >= 1, got {order!r}")
     if x.shape[0] < 3:
         return x
-    from scipy import signal  # imported here: scipy.signal costs ~0.5 s to import and only the filter needs it
-
-    b, a = signal.butter(int(order), cutoff_hz, btype="low", fs=1.0 / Ts)
+    b, a = butter_lowpass(int(order), cutoff_hz, fs=1.0 / Ts)
     # pad over ~4 periods of the cut-off so the start-up transient dies out inside the padding
     padlen = min(max(3 * max(len(a), len(b)), math.ceil(4.0 / (cutoff_hz * Ts))), x.shape[0] - 1)
-    return signal.filtfilt(b, a, x, axis=0, padtype="odd", padlen=padlen)
+    return filtfilt(b, a, x, padlen=padlen)

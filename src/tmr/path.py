@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tmr.errors import ParameterError, PathError
+from tmr.splines import HermiteSpline, NotAKnotSpline
 
 Array = NDArray[np.float64]
 
@@ -396,39 +397,36 @@ _GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
 
 
 class _ArcLengthSpline:
-    """Cubic interpolating B-spline p(u) through the points (u = cumulative chord length [m]), its arc length
-    s(u) (Gauss-Legendre) and the inverse u(s) (Hermite interpolation of a table, then Newton steps)."""
+    """Cubic interpolating spline p(u) (not-a-knot, :class:`tmr.splines.NotAKnotSpline`) through the points
+    (u = cumulative chord length [m]), its arc length s(u) (Gauss-Legendre) and the inverse u(s) (Hermite
+    interpolation of a table, :class:`tmr.splines.HermiteSpline`, then Newton steps)."""
 
     def __init__(self, points: Array) -> None:
-        from scipy.interpolate import CubicHermiteSpline, make_interp_spline  # imported on use (~0.3 s)
-
         chords = np.linalg.norm(np.diff(points, axis=0), axis=1)
         self.u_knots = np.concatenate([[0.0], np.cumsum(chords)])
-        self.p = make_interp_spline(self.u_knots, points, k=3)  # not-a-knot cubic B-spline
-        self.dp = self.p.derivative(1)
-        self.ddp = self.p.derivative(2)
+        self._p = NotAKnotSpline(self.u_knots, points)
         grid = [
             np.linspace(a, b, max(8, math.ceil((b - a) / 0.02)) + 1)[:-1]
             for a, b in zip(self.u_knots[:-1], self.u_knots[1:], strict=True)
         ]
         self.u_grid = np.concatenate([*grid, self.u_knots[-1:]])
-        d1 = self.dp(self.u_grid)
+        d1 = self._p(self.u_grid, 1)
         speed = np.linalg.norm(d1, axis=1)
         turn = np.sum(d1[:-1] * d1[1:], axis=1)  # <= 0: the tangent turns >= 90 deg within 0.02 m: a cusp
         if np.min(speed) < 1e-9 or np.any(turn <= 0.0):
             i = int(np.argmin(turn))
             raise ParameterError(
-                f"the waypoints turn back on themselves near {self.p(self.u_grid[i]).tolist()} (a cusp "
+                f"the waypoints turn back on themselves near {self._p(self.u_grid[i]).tolist()} (a cusp "
                 "of the B-spline); remove the reversal from the waypoints"
             )
         ds = self._integrate(self.u_grid[:-1], self.u_grid[1:])
         self.s_grid = np.concatenate([[0.0], np.cumsum(ds)])
         self.length = float(self.s_grid[-1])
-        self._u_of_s = CubicHermiteSpline(self.s_grid, self.u_grid, 1.0 / speed)
+        self._u_of_s = HermiteSpline(self.s_grid, self.u_grid, 1.0 / speed)
 
     def speed(self, u: Array) -> Array:
         """|dp/du| (dimensionless, about 1 for the chord-length parametrisation)."""
-        return np.linalg.norm(self.dp(u), axis=-1)
+        return np.linalg.norm(self._p(u, 1), axis=-1)
 
     def _integrate(self, a: Array, b: Array) -> Array:
         """Arc length [m] from parameter a to b (8-point Gauss-Legendre on spans <= 0.02)."""
@@ -450,9 +448,9 @@ class _ArcLengthSpline:
     def geometry(self, s: Array) -> tuple[Array, Array, Array, Array]:
         """At arc lengths s [m]: position x, unit tangent dx/ds, curvature vector d2x/ds2 [1/m], and u."""
         u = self.u_of_s(s)
-        x = self.p(u)
-        d1 = self.dp(u)
-        d2 = self.ddp(u)
+        x = self._p(u)
+        d1 = self._p(u, 1)
+        d2 = self._p(u, 2)
         sp2 = np.sum(d1 * d1, axis=-1, keepdims=True)
         tangent = d1 / np.sqrt(sp2)
         x_ss = (d2 - tangent * np.sum(tangent * d2, axis=-1, keepdims=True)) / sp2
@@ -507,7 +505,7 @@ def time_law(
 ) -> Trajectory:
     """Leader trajectory through ``waypoints`` (Caruso 2021 §4.2, "Trajectory Generator").
 
-    Cubic interpolating B-spline p(u) (scipy ``make_interp_spline``, not-a-knot) on the cumulative chord
+    Cubic interpolating spline p(u) (not-a-knot, :class:`tmr.splines.NotAKnotSpline`) on the cumulative chord
     length u, re-parametrised by its arc length s (Gauss-Legendre quadrature, Newton inverse), traversed with
     the quintic minimum-jerk law s(t) = L (10 tau^3 - 15 tau^4 + 6 tau^5), tau = t / T_end: the leader starts
     and stops with zero velocity and acceleration. Derivatives are analytic (chain rule):
