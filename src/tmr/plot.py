@@ -8,6 +8,7 @@ environments are read through their fields only (see :mod:`tmr.metrics`).
 from __future__ import annotations
 
 import io as _io
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -41,9 +42,43 @@ TIME_CMAP = "viridis"
 
 
 def _new_figure(width: float, height: float) -> Figure:
-    fig = Figure(figsize=(width, height), layout="constrained")
+    """A figure on an Agg canvas, laid out by hand (:func:`_grid`): matplotlib's constrained layout measured
+    every tick label twice and took 60 % of the rendering time (1.1 s of the four figures' 1.8 s)."""
+    fig = Figure(figsize=(width, height))
     FigureCanvasAgg(fig)
     return fig
+
+
+def _grid(
+    fig: Figure,
+    rows: int,
+    cols: int,
+    *,
+    left: float = 0.8,
+    right: float = 0.2,
+    top: float = 0.65,
+    bottom: float = 0.55,
+    hgap: float = 0.5,
+    wgap: float = 0.85,
+    sharex: bool = True,
+) -> np.ndarray:
+    """(rows, cols) axes with fixed margins and gaps in inches (room for tick labels, axis labels and titles)."""
+    w, h = fig.get_size_inches()
+    ax_w = (w - left - right - (cols - 1) * wgap) / cols
+    ax_h = (h - top - bottom - (rows - 1) * hgap) / rows
+    gridspec = {
+        "left": left / w,
+        "right": 1.0 - right / w,
+        "top": 1.0 - top / h,
+        "bottom": bottom / h,
+        "wspace": wgap / ax_w,
+        "hspace": hgap / ax_h,
+    }
+    return fig.subplots(rows, cols, sharex=sharex, squeeze=False, gridspec_kw=gridspec)
+
+
+def _suptitle(fig: Figure, text: str) -> None:
+    fig.suptitle(text, y=1.0 - 0.1 / fig.get_size_inches()[1], va="top")
 
 
 def _title(plan: Any, what: str) -> str:
@@ -172,7 +207,7 @@ def plot_chain_poses(
     aspect = (y1 - y0) / max(x1 - x0, 1e-9)
     width = 7.5
     fig = _new_figure(width, min(max(width * aspect * 0.92 + 0.9, 3.5), 11.0))
-    ax = fig.add_subplot()
+    ax = fig.add_subplot()  # placed at the end, when the legend's height is known
     handles = _draw_environment(ax, env)
 
     if route is not None:
@@ -244,23 +279,28 @@ def plot_chain_poses(
     handles.append(Line2D([], [], marker="s", ms=8, color="black", ls="none", label="base (tether anchor)"))
     handles.append(Line2D([], [], marker="*", ms=12, color="#ff7f0e", mec="black", ls="none", label="goal"))
 
-    pad = 0.03 * max(x1 - x0, y1 - y0)
-    ax.set_xlim(x0 - pad, x1 + pad)
-    ax.set_ylim(y0 - pad, y1 + pad)
-    ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.set_title(_title(plan, f"chain poses every {every:g} s"))
+    ax.set_title(_title(plan, f"chain poses every {every:g} s"), y=1.0)  # y given: no tick-box search
     ax.grid(True, lw=0.3, alpha=0.5)
-    cbar = fig.colorbar(
-        _scalar_mappable(cmap, norm),
-        ax=ax,
-        shrink=0.85,
-        pad=0.02,
-        ticks=np.round(t[idx], 2) if idx.size < 12 else None,
-    )
+    # fixed layout [in]: legend rows at the bottom, then the x label; colour bar and its label on the right
+    w, h = fig.get_size_inches()
+    legend_h = 0.2 * math.ceil(len(handles) / 4) + 0.15
+    left, right, top, bottom = 0.7, 1.15, 0.45, legend_h + 0.55
+    box_w, box_h = w - left - right, h - top - bottom
+    ax.set_position((left / w, bottom / h, box_w / w, box_h / h))
+    # equal scales filling the box: the shorter side of the view widens about its centre
+    pad = 0.03 * max(x1 - x0, y1 - y0)
+    half_x, half_y = 0.5 * (x1 - x0) + pad, 0.5 * (y1 - y0) + pad
+    half_x, half_y = max(half_x, half_y * box_w / box_h), max(half_y, half_x * box_h / box_w)
+    cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+    ax.set_xlim(cx - half_x, cx + half_x)
+    ax.set_ylim(cy - half_y, cy + half_y)
+    ax.set_aspect("equal")
+    cax = fig.add_axes(((w - right + 0.15) / w, bottom / h, 0.2 / w, (h - top - bottom) / h))
+    cbar = fig.colorbar(_scalar_mappable(cmap, norm), cax=cax, ticks=np.round(t[idx], 2) if idx.size < 12 else None)
     cbar.set_label("time [s]")
-    fig.legend(handles=handles, loc="outside lower center", ncols=4, fontsize=8, frameon=False)
+    fig.legend(handles=handles, loc="lower center", bbox_to_anchor=(0.5, 0.05 / h), ncols=4, fontsize=8, frameon=False)
     return fig
 
 
@@ -282,7 +322,7 @@ def plot_trajectories(plan: Any, filtered: np.ndarray | None = None) -> Figure:
     robots = np.asarray(plan.robots, dtype=float)
     n = robots.shape[1]
     fig = _new_figure(9.0, 1.9 * n + 0.9)
-    axes = fig.subplots(n, 2, sharex=True, squeeze=False)
+    axes = _grid(fig, n, 2)
     for i in range(n):
         name = f"robot {i + 1}" + (" (leader)" if i == n - 1 else "")
         for c, coord in enumerate("xy"):
@@ -291,12 +331,12 @@ def plot_trajectories(plan: Any, filtered: np.ndarray | None = None) -> Figure:
             if filtered is not None:
                 ax.plot(t, np.asarray(filtered)[:, i, c], color=FILTERED_COLOR, lw=1.0, label="filtered")
             ax.set_ylabel(f"{coord} [m]")
-            ax.set_title(f"{name}: {coord}(t)", fontsize=10)
+            ax.set_title(f"{name}: {coord}(t)", fontsize=10, y=1.0)
             ax.grid(True, lw=0.3, alpha=0.5)
     for c in range(2):
         axes[-1, c].set_xlabel("time [s]")
     axes[0, 1].legend(loc="best", fontsize=8)
-    fig.suptitle(_title(plan, "robot trajectories"))
+    _suptitle(fig, _title(plan, "robot trajectories"))
     return fig
 
 
@@ -332,7 +372,7 @@ def plot_distance_errors(plan: Any) -> Figure:
     colors = [colormaps["tab10"](i % 10) for i in range(n)]
 
     fig = _new_figure(9.5, 6.0)
-    ax_e, ax_s = fig.subplots(2, 1, sharex=True)
+    ax_e, ax_s = _grid(fig, 2, 1, right=1.75)[:, 0]  # legends outside, on the right
     for i in range(n):
         ax_e.plot(t, err[:, i], color=colors[i], lw=1.2, label=f"tether {i + 1}")
         ax_s.plot(t, spans[:, i], color=colors[i], lw=1.2, label=f"tether {i + 1}")
@@ -340,7 +380,7 @@ def plot_distance_errors(plan: Any) -> Figure:
     _shade_obstacle_active(ax_s, plan, t)
     ax_e.axhline(0.0, color="black", lw=0.6, zorder=0)
     ax_e.set_ylabel("span − mean span [m]")
-    ax_e.set_title(f"distance errors (max |e| = {np.abs(err).max():.3g} m)", fontsize=10)
+    ax_e.set_title(f"distance errors (max |e| = {np.abs(err).max():.3g} m)", fontsize=10, y=1.0)
     handles, _ = ax_e.get_legend_handles_labels()
     if shaded:
         handles.append(Rectangle((0, 0), 1, 1, color="#ffbb78", alpha=0.35, label="obstacle avoidance active"))
@@ -355,11 +395,11 @@ def plot_distance_errors(plan: Any) -> Figure:
             ax_s.axhline(d_lo[i], color=colors[i], ls=":", lw=1.0, label=f"$d_{{lo}}$ tether {i + 1}")
     ax_s.set_ylabel("horizontal span [m]")
     ax_s.set_xlabel("time [s]")
-    ax_s.set_title("tether spans and limits", fontsize=10)
+    ax_s.set_title("tether spans and limits", fontsize=10, y=1.0)
     ax_s.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     for ax in (ax_e, ax_s):
         ax.grid(True, lw=0.3, alpha=0.5)
-    fig.suptitle(_title(plan, "tether distance errors"))
+    _suptitle(fig, _title(plan, "tether distance errors"))
     return fig
 
 
@@ -391,17 +431,17 @@ def plot_speeds(plan: Any, filtered: np.ndarray | None = None) -> Figure:
     filt = _speeds(np.asarray(filtered, dtype=float), Ts) / v_n if filtered is not None else None
 
     fig = _new_figure(8.5, 1.9 * n + 1.0)
-    axes = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
+    axes = _grid(fig, n, 1)[:, 0]
     for i, ax in enumerate(axes):
         ax.plot(t, raw[:, i], color=RAW_COLOR, lw=1.1, label="planner output")
         if filt is not None:
             ax.plot(t, filt[:, i], color=FILTERED_COLOR, lw=1.3, label="filtered")
         ax.set_ylabel(r"$v / v_n$ [-]")
-        ax.set_title(f"robot {i + 1}" + (" (leader)" if i == n - 1 else ""), fontsize=10)
+        ax.set_title(f"robot {i + 1}" + (" (leader)" if i == n - 1 else ""), fontsize=10, y=1.0)
         ax.grid(True, lw=0.3, alpha=0.5)
     axes[0].legend(loc="best", fontsize=8)
     axes[-1].set_xlabel("time [s]")
-    fig.suptitle(_title(plan, f"normalised robot speeds ($v_n$ = {v_n:.3g} m/s)"))
+    _suptitle(fig, _title(plan, f"normalised robot speeds ($v_n$ = {v_n:.3g} m/s)"))
     return fig
 
 
@@ -417,5 +457,7 @@ def save_figure(fig: Figure, path: str | os.PathLike[str], dpi: int = 120) -> Pa
     path = Path(path)
     fmt = path.suffix.lstrip(".").lower() or "png"
     buf = _io.BytesIO()
-    fig.savefig(buf, format=fmt, dpi=dpi, metadata=_DETERMINISTIC_METADATA.get(fmt))
+    # PNG: zlib level 1 encodes 4-5× faster than matplotlib's default 6 for files ~13 % larger
+    extra = {"pil_kwargs": {"compress_level": 1}} if fmt == "png" else {}
+    fig.savefig(buf, format=fmt, dpi=dpi, metadata=_DETERMINISTIC_METADATA.get(fmt), **extra)
     return atomic_write_bytes(path, buf.getvalue())
