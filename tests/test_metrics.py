@@ -18,7 +18,9 @@ from tmr.metrics import (
     distance_errors,
     evaluate,
     filter_trajectories,
+    filter_within_limits,
     fitness,
+    limit_breaks,
     robot_separations,
 )
 
@@ -315,3 +317,36 @@ def test_plan_stopped_at_first_sample(disc_env):
     assert m.n_steps == 0 and math.isnan(m.Ts) and math.isnan(m.ms_per_step)
     assert m.f1 == math.inf and m.peak_speed == 0.0 and m.peak_acceleration == 0.0
     assert m.to_dict()["Ts"] == "nan"
+
+
+def _radial_stop(d_max: float):
+    """One robot driving straight away from the anchor at 1 m/s and stopping 1 cm short of d_max: the filter's
+    overshoot at the stop carries it past d_max."""
+    Ts = 0.05
+    t = np.arange(0.0, 10.0 + Ts / 2, Ts)
+    x = np.clip(3.0 + (t - 1.0), 3.0, 6.59)
+    robots = np.stack([x, np.full_like(x, 5.0)], axis=-1)[:, None, :]
+    plan = make_plan(robots, (1.0, 5.0), span_limits=(0.5, d_max))
+    return plan, make_env([Point(8.5, 1.5).buffer(0.3)], BOUNDS), Ts
+
+
+def test_filter_within_limits_keeps_the_raw_plan_where_the_filter_breaks_a_limit():
+    plan, env, Ts = _radial_stop(5.6)
+    plain = filter_trajectories(plan.robots, Ts)
+    assert not limit_breaks(plan, plan.robots, env).any()
+    broken = limit_breaks(plan, plain, env)
+    assert broken.any() and np.linalg.norm(plain[broken, 0] - plan.base, axis=-1).max() > 5.6 + 1e-4
+    out, note = filter_within_limits(plan, env, Ts)
+    assert not limit_breaks(plan, out, env).any()
+    assert "broke a hard limit" in note and "t = " in note
+    np.testing.assert_array_equal(out[broken], plan.robots[broken])  # held: the raw plan there
+    first = int(np.argmax(broken))
+    far = np.arange(len(out)) < first - 1.0 / Ts - 1  # beyond the blend (1 / cut-off = 1 s): the filter's output
+    np.testing.assert_array_equal(out[far], plain[far])
+
+
+def test_filter_within_limits_leaves_a_clean_filter_alone():
+    plan, env, Ts = _radial_stop(7.0)
+    out, note = filter_within_limits(plan, env, Ts)
+    assert note is None
+    np.testing.assert_array_equal(out, filter_trajectories(plan.robots, Ts))

@@ -34,6 +34,8 @@ __all__ = [
     "distance_errors",
     "evaluate",
     "filter_trajectories",
+    "filter_within_limits",
+    "limit_breaks",
     "fitness",
     "json_safe",
     "plan_goal",
@@ -492,8 +494,9 @@ def filter_trajectories(robots: np.ndarray, Ts: float, cutoff_hz: float = 1.0, o
     forward and backward (:func:`tmr.lowpass.filtfilt`, as ``scipy.signal.filtfilt``) along time, so there is
     no phase lag. The series is extended by odd reflection about each end point (which continues a straight
     line exactly) over about four cut-off periods, so the start-up transient dies out in the padding: a straight
-    line comes back unchanged (< 1e-6 m) and the end points of a smooth trajectory stay put. The pad length is capped at K samples for short series (guard for filtfilt); series with fewer
-    than 3 samples are returned unchanged.
+    line comes back unchanged (< 1e-6 m) and the end points of a smooth trajectory stay put. The pad length is
+    capped at K samples for short series (guard for filtfilt); series with fewer than 3 samples are returned
+    unchanged. The filter does not know the hard limits: :func:`filter_within_limits` restores them.
 
     Args:
         robots: (K+1, N, 2) positions [m] (any array with time on axis 0 works).
@@ -521,3 +524,74 @@ def filter_trajectories(robots: np.ndarray, Ts: float, cutoff_hz: float = 1.0, o
     # pad over ~4 periods of the cut-off so the start-up transient dies out inside the padding
     padlen = min(max(3 * max(len(a), len(b)), math.ceil(4.0 / (cutoff_hz * Ts))), x.shape[0] - 1)
     return filtfilt(b, a, x, padlen=padlen)
+
+
+def limit_breaks(plan: Any, robots: np.ndarray, env: Any, tolerance: float = 1e-6) -> np.ndarray:
+    """Samples (K+1,) bool at which positions ``robots`` (K+1, N, 2) [m] of ``plan``'s chain break a hard limit:
+    a robot or tether inside the inflated obstacles, a span outside [d_lo, d_max], two robots closer than 2 r —
+    the violation kinds of :func:`evaluate`, with its ``tolerance`` [m]."""
+    robots = np.asarray(robots, dtype=float)
+    base = np.broadcast_to(np.asarray(plan.base, dtype=float)[:2], (robots.shape[0], 1, 2))
+    pts = np.concatenate([base, robots], axis=1)
+    k = pts.shape[0]
+    robot_c = np.asarray(env.exact_clearance(pts[:, 1:, :]), dtype=float).reshape(k, -1)
+    tether_c = np.asarray(env.segment_clearance(pts[:, :-1, :], pts[:, 1:, :]), dtype=float).reshape(k, -1)
+    spans = np.linalg.norm(np.diff(pts, axis=1), axis=-1)
+    d_lo, d_max = span_limits(plan)
+    bad = (robot_c < -tolerance).any(axis=1) | (tether_c < -tolerance).any(axis=1)
+    bad |= (spans > d_max + tolerance).any(axis=1) | (spans < d_lo - tolerance).any(axis=1)
+    sep = robot_separations(robots)
+    if sep.size:
+        bad |= (sep < 2.0 * float(plan.safety_radius) - tolerance).any(axis=1)
+    return bad
+
+
+#: Hold times [s] round the samples where the filtered trajectories break a limit, tried in turn by
+#: :func:`filter_within_limits` (the raw plan is kept for ± hold, then blends into the filtered one over 1 / cut-off).
+FILTER_HOLDS = (0.0, 0.5, 1.0, 2.0, 4.0)
+
+
+def filter_within_limits(
+    plan: Any, env: Any, Ts: float, cutoff_hz: float = 1.0, order: int = 2
+) -> tuple[np.ndarray, str | None]:
+    """:func:`filter_trajectories`, then the raw plan restored wherever the filtered trajectories break a hard limit.
+
+    Robot nodes track the filtered trajectories (Caruso 2021 §5.2), so they must keep the limits the plan keeps; the
+    low-pass can pull a robot that turns close round an obstacle a few centimetres into it. Around every sample that
+    breaks a limit (:func:`limit_breaks`) the output is the raw plan for ± hold, blending back into the filtered
+    trajectories over 1 / ``cutoff_hz`` seconds with a raised-cosine weight; holds of :data:`FILTER_HOLDS` are tried
+    in turn, then the raw plan itself (which the checker passed).
+
+    Returns:
+        (filtered positions (K+1, N, 2) [m], a note saying where and how the filter was held, or None if untouched).
+    """
+    raw = np.asarray(plan.robots, dtype=float)
+    filtered = filter_trajectories(raw, Ts, cutoff_hz=cutoff_hz, order=order)
+    bad = limit_breaks(plan, filtered, env)
+    if not bad.any() or limit_breaks(plan, raw, env).any():  # nothing to do, or a failed plan: no better option
+        return filtered, None
+    t = np.asarray(plan.t, dtype=float)
+    first = float(t[np.argmax(bad)])
+    ramp = max(1.0, 1.0 / (cutoff_hz * Ts))  # samples
+    k = np.arange(raw.shape[0])
+    marked = bad.copy()
+    for hold in FILTER_HOLDS:
+        idx = np.flatnonzero(marked)
+        # distance [samples] of every sample to the nearest marked one
+        pos = np.searchsorted(idx, k)
+        right, left = idx[np.minimum(pos, len(idx) - 1)], idx[np.maximum(pos - 1, 0)]
+        dist = np.minimum(np.abs(k - right), np.abs(k - left))
+        beyond = np.clip((dist - hold / Ts) / ramp, 0.0, 1.0)
+        w = 0.5 * (1.0 + np.cos(np.pi * beyond))  # 1 held (raw), 0 filtered
+        out = w[:, None, None] * raw + (1.0 - w[:, None, None]) * filtered
+        still = limit_breaks(plan, out, env)
+        if not still.any():
+            return out, (
+                f"the filtered trajectories broke a hard limit at {int(bad.sum())} sample(s) from t = {first:.2f} s; "
+                f"there the raw plan is kept (± {hold:g} s, blending over {ramp * Ts:.2g} s)"
+            )
+        marked |= still
+    return raw.copy(), (
+        f"the filtered trajectories broke a hard limit at {int(bad.sum())} sample(s) from t = {first:.2f} s and no "
+        "local hold removed it: the 'filtered' trajectories are the raw plan"
+    )

@@ -470,7 +470,7 @@ def _main(args: argparse.Namespace) -> int:
             "route %.3f m, N_lower = %d, N_min = %d; planning with N = %s", rt.length, rt.n_lower, rt.n_min, n_first
         )
 
-        from tmr.metrics import filter_trajectories
+        from tmr.metrics import filter_within_limits
 
         auto_note = None
         if args.robots == "auto":
@@ -494,8 +494,10 @@ def _main(args: argparse.Namespace) -> int:
             auto_note = f"{summary_line}; chose N = {problem.chain.n_robots}"
         else:
             problem, plan, metrics = _plan_once(args, scenario, n_first, rt)
-        filtered = filter_trajectories(plan.robots, problem.time_params.Ts, cutoff_hz=args.filter_cutoff)
-        extra = _extras(problem, plan, auto_note)
+        filtered, filter_note = filter_within_limits(
+            plan, problem.env, problem.time_params.Ts, cutoff_hz=args.filter_cutoff
+        )
+        extra = _extras(problem, plan, auto_note) | ({"filter_note": filter_note} if filter_note else {})
         names = write_outputs(
             Path(args.out), plan, metrics, problem.env, filtered, not args.no_plots, extra, route=problem.route
         )
@@ -508,6 +510,8 @@ def _main(args: argparse.Namespace) -> int:
     if auto_note:
         LOG.info(auto_note)
     LOG.info(summary(plan, metrics))
+    if "filter_note" in extra:
+        LOG.info("  filter: %s", extra["filter_note"])
     if "references_note" in extra:
         LOG.info("  references: %s", extra["references_note"])
     if "horizon_note" in extra:
