@@ -140,3 +140,31 @@ def test_build_problem_takes_the_environments_robot_radius():
     assert problem.span_limits[0, 0] == pytest.approx(0.3) and problem.span_limits[1, 0] == pytest.approx(0.6)
     with pytest.raises(ParameterError, match="grown by 0.3 m"):
         build_problem(sc, overrides={"safety_radius": 0.5})
+
+
+def test_horizon_warm_start_puts_the_followers_on_the_tether_tasks(monkeypatch):
+    """The horizon NLP starts from the qp plan without the route references (closer to the paper's fitness, which it
+    minimises: f2, span uniformity, much lower); if that plan fails a check, from the usual qp plan."""
+    from tmr import planner
+    from tmr.metrics import fitness
+
+    problem = build_problem(load_scenario("A"))
+    assert problem.references is not None and problem.path_params.route_weight > 0
+    _, warm, _ = planner._horizon_warm_start(problem, progress=False)
+    _, routed, _ = planner._solve_qp(problem, progress=False)
+    assert warm.success and routed.success
+    assert warm.diagnostics["references_note"].startswith("horizon warm start")
+    assert fitness(warm)[1] < 0.5 * fitness(routed)[1]
+
+    real = planner.plan
+
+    def plain_fails(prob, method, progress=False):
+        result = real(prob, method, progress=progress)
+        if prob.path_params.route_weight == 0:
+            result.success, result.failure = False, "made to fail by the test"
+        return result
+
+    monkeypatch.setattr(planner, "plan", plain_fails)
+    _, fallback, _ = planner._horizon_warm_start(problem, progress=False)
+    assert fallback.success and "references_note" not in fallback.diagnostics
+    np.testing.assert_array_equal(fallback.robots, routed.robots)
