@@ -560,15 +560,18 @@ def filter_within_limits(
     low-pass can pull a robot that turns close round an obstacle a few centimetres into it. Around every sample that
     breaks a limit (:func:`limit_breaks`) the output is the raw plan for ± hold, blending back into the filtered
     trajectories over 1 / ``cutoff_hz`` seconds with a raised-cosine weight; holds of :data:`FILTER_HOLDS` are tried
-    in turn, then the raw plan itself (which the checker passed).
+    in turn, then the raw plan itself (which the checker passed). A failed plan (``plan.success`` False) is only
+    filtered.
 
     Returns:
         (filtered positions (K+1, N, 2) [m], a note saying where and how the filter was held, or None if untouched).
     """
     raw = np.asarray(plan.robots, dtype=float)
     filtered = filter_trajectories(raw, Ts, cutoff_hz=cutoff_hz, order=order)
+    if not plan.success:  # the raw plan breaks a limit itself (the checker said so): nothing safer to fall back on
+        return filtered, None
     bad = limit_breaks(plan, filtered, env)
-    if not bad.any() or limit_breaks(plan, raw, env).any():  # nothing to do, or a failed plan: no better option
+    if not bad.any():
         return filtered, None
     t = np.asarray(plan.t, dtype=float)
     first = float(t[np.argmax(bad)])
