@@ -159,6 +159,102 @@ def _pulled(env: Any, P: Array, clearance: float, step: float = 0.1, reach: int 
     return _dedupe(np.asarray(out))
 
 
+#: Clearance [m] below which a guide point is in a narrow passage; how far [m] across the passage its other side is
+#: looked for; the half-lengths [m] of the straight crossing tried, longest first (:func:`_axial`).
+DOOR_CLEARANCE = 0.3
+DOOR_ACROSS = 0.4
+DOOR_HALF = (1.6, 1.3, 1.0)
+#: How far [m] beyond the ends of a straight crossing, along its axis, the guide is rejoined.
+DOOR_BEYOND = 0.3
+
+
+def _axial(env: Any, ref: ChainReference, clearance: float) -> ChainReference | None:
+    """``ref`` with its guide crossing each narrow door straight along the door's axis: the guide is cut before the
+    door, runs to a point ``h`` (:data:`DOOR_HALF`) before the door's narrowest point on the line through it
+    perpendicular to its jambs, through it, to the point ``h`` after, and rejoins the guide beyond; a robot in the
+    door then has both neighbours on its axis, not round a jamb. Start and station arcs are mapped onto the new
+    guide. None if the guide crosses no door so."""
+    G, arcs = ref.guide, guide_arcs(ref.guide)
+    L = float(arcs[-1])
+    s = np.arange(0.0, L, 0.02)
+    P = point_at(G, arcs, s)
+    clr = np.asarray(env.exact_clearance(P), float)
+    narrow = np.flatnonzero(clr < DOOR_CLEARANCE)
+    if not len(narrow):
+        return None
+    runs = np.split(narrow, np.flatnonzero(np.diff(narrow) > 1) + 1)
+    boundary = shapely.boundary(env.free)
+    old, new, pieces, last = [0.0], [0.0], [], 0.0
+    for run in runs:
+        Q = P[run]
+        B = shapely.get_coordinates(shapely.shortest_line(boundary, shapely.points(Q)))[0::2]
+        n = (B - Q) / np.maximum(np.linalg.norm(B - Q, axis=1), 1e-12)[:, None]
+        rays = shapely.linestrings(np.stack([Q, Q - DOOR_ACROSS * n], axis=1))
+        across = shapely.distance(shapely.points(Q), shapely.intersection(rays, boundary))
+        width = clr[run] + np.where(np.isfinite(across), across, np.inf)
+        j = int(np.argmin(width))
+        if not np.isfinite(width[j]) or float(s[run[j]]) < last + 1e-9:
+            continue  # open on the other side: a corner, not a door
+        sc = float(s[run[j]])
+        c = 0.5 * (B[j] + Q[j] - float(across[j]) * n[j])  # the middle of the door
+        b = shapely.get_coordinates(shapely.shortest_line(boundary, shapely.points(c)))[0]
+        if np.linalg.norm(b - c) < 1e-9:
+            continue
+        n = (b - c) / np.linalg.norm(b - c)
+        t = np.array([-n[1], n[0]])
+        ahead = point_at(G, arcs, min(sc + 0.3, L)) - point_at(G, arcs, max(sc - 0.3, 0.0))
+        if float(np.dot(t, ahead)) < 0:
+            t = -t
+        print("DOOR", c, t, sc, last) if __import__("os").environ.get("DBG") else None
+        for h in DOOR_HALF:
+            a, z = c - h * t, c + h * t
+            if not bool(env.segment_is_free(a, z, clearance)):
+                continue
+            back = np.arange(max(last, sc - 3 * h - 1.0), sc, 0.05)[::-1]
+            fwd = np.arange(sc, min(L, sc + 3 * h + 1.0), 0.05)
+            Pb, Pf = point_at(G, arcs, back), point_at(G, arcs, fwd)
+            beyond_b = (a - Pb) @ t > DOOR_BEYOND  # the guide rejoined behind a and ahead of z, along the axis
+            beyond_f = (Pf - z) @ t > DOOR_BEYOND
+            fb = np.flatnonzero(beyond_b & env.segment_is_free(Pb, a, clearance))
+            ff = np.flatnonzero(beyond_f & env.segment_is_free(z, Pf, clearance))
+            print("  h", h, len(fb), len(ff)) if __import__("os").environ.get("DBG") else None
+            if not len(ff):
+                continue
+            s_out = float(fwd[ff[0]])
+            if len(fb):
+                pieces.append((float(back[fb[0]]), s_out, np.vstack([a, c, z])))
+            elif pieces and (a - pieces[-1][2][-1]) @ t > DOOR_BEYOND and env.segment_is_free(pieces[-1][2][-1], a, clearance):
+                pieces[-1] = (pieces[-1][0], s_out, np.vstack([pieces[-1][2], a, c, z]))  # straight from the last door
+            else:
+                continue
+            last = s_out
+            break
+    if not pieces:
+        return None
+    parts, pos = [], 0.0
+    for s_in, s_out, mid in pieces:
+        head = _sub(G, arcs, pos, s_in)
+        parts.append(head)
+        before = new[-1] + (s_in - pos)
+        seg = np.vstack([head[-1:], mid, point_at(G, arcs, s_out)[None]])
+        old += [s_in, s_out]
+        new += [before, before + float(guide_arcs(seg)[-1])]
+        parts.append(mid)
+        pos = s_out
+    parts.append(_sub(G, arcs, pos, L))
+    old.append(L)
+    new.append(new[-1] + (L - pos))
+    guide = _dedupe(np.vstack(parts))
+    scale = float(guide_arcs(guide)[-1]) / new[-1]
+    remap = partial(np.interp, xp=np.asarray(old), fp=np.asarray(new) * scale)
+    return replace(
+        ref,
+        guide=guide,
+        start_arcs=remap(np.asarray(ref.start_arcs, float)),
+        final_arcs=remap(np.asarray(ref.final_arcs, float)),
+    )
+
+
 class _Fast:
     """The environment's exact tests, with a fast exact pre-filter for segments at the train's clearance c: a
     segment covered by the free region eroded by c + 2 mm is free, one not covered by it eroded by c − 2 mm is
@@ -615,7 +711,14 @@ def train_reference(
             paths = _Paths(ref, env, TAUT_CLEARANCE)
             sweeps = _search(env, base, paths, limits, step)
         except TrainError:
-            raise exc from None
+            axial = _axial(env, ref, limits.clearance)
+            if axial is None:
+                raise exc from None
+            try:
+                paths = _Paths(axial)
+                sweeps = _search(env, base, paths, limits, step)
+            except TrainError:
+                raise exc from None
     N = len(paths.length)
     X0 = np.asarray(ref.start, dtype=float).copy()  # every path starts where its robot stands
     now = X0.copy()
