@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any
@@ -205,7 +205,6 @@ def _axial(env: Any, ref: ChainReference, clearance: float) -> ChainReference | 
         ahead = point_at(G, arcs, min(sc + 0.3, L)) - point_at(G, arcs, max(sc - 0.3, 0.0))
         if float(np.dot(t, ahead)) < 0:
             t = -t
-        print("DOOR", c, t, sc, last) if __import__("os").environ.get("DBG") else None
         for h in DOOR_HALF:
             a, z = c - h * t, c + h * t
             if not bool(env.segment_is_free(a, z, clearance)):
@@ -217,14 +216,13 @@ def _axial(env: Any, ref: ChainReference, clearance: float) -> ChainReference | 
             beyond_f = (Pf - z) @ t > DOOR_BEYOND
             fb = np.flatnonzero(beyond_b & env.segment_is_free(Pb, a, clearance))
             ff = np.flatnonzero(beyond_f & env.segment_is_free(z, Pf, clearance))
-            print("  h", h, len(fb), len(ff)) if __import__("os").environ.get("DBG") else None
             if not len(ff):
                 continue
             s_out = float(fwd[ff[0]])
             if len(fb):
                 pieces.append((float(back[fb[0]]), s_out, np.vstack([a, c, z])))
-            elif pieces and (a - pieces[-1][2][-1]) @ t > DOOR_BEYOND and env.segment_is_free(pieces[-1][2][-1], a, clearance):
-                pieces[-1] = (pieces[-1][0], s_out, np.vstack([pieces[-1][2], a, c, z]))  # straight from the last door
+            elif pieces and _joins(env, pieces[-1][2][-1], a, t, clearance):  # straight on from the last door
+                pieces[-1] = (pieces[-1][0], s_out, np.vstack([pieces[-1][2], a, c, z]))
             else:
                 continue
             last = s_out
@@ -253,6 +251,11 @@ def _axial(env: Any, ref: ChainReference, clearance: float) -> ChainReference | 
         start_arcs=remap(np.asarray(ref.start_arcs, float)),
         final_arcs=remap(np.asarray(ref.final_arcs, float)),
     )
+
+
+def _joins(env: Any, p: Array, a: Array, t: Array, clearance: float) -> bool:
+    """Whether point a lies beyond p along axis t (by :data:`DOOR_BEYOND`) and is joined to it by a free segment."""
+    return float((a - p) @ t) > DOOR_BEYOND and bool(env.segment_is_free(p, a, clearance))
 
 
 class _Fast:
@@ -678,6 +681,17 @@ def _states_valid(env: Any, base: Array, X: Array, limits: TrainLimits) -> bool:
     return bool(np.all(D >= limits.separation - 1e-9))
 
 
+def _attempts(env: Any, ref: ChainReference, clearance: float) -> Iterator[_Paths]:
+    """The paths the search tries, in turn until one succeeds: along the guide; pulled taut (no start hairpin);
+    along the guide crossing each door straight (:func:`_axial`), then that pulled taut."""
+    yield _Paths(ref)
+    yield _Paths(ref, env, TAUT_CLEARANCE)
+    axial = _axial(env, ref, clearance)
+    if axial is not None:
+        yield _Paths(axial)
+        yield _Paths(axial, env, TAUT_CLEARANCE)
+
+
 def train_reference(
     env: Any,
     ref: ChainReference,
@@ -703,22 +717,16 @@ def train_reference(
         TrainError: no robot can advance and some are short of their stations.
     """
     base = np.asarray(base, dtype=float)
-    try:  # each robot along the guide; if that stalls, along the guide pulled taut (no start hairpin)
-        paths = _Paths(ref)
-        sweeps = _search(env, base, paths, limits, step)
-    except TrainError as exc:
+    first: TrainError | None = None
+    for paths in _attempts(env, ref, limits.clearance):
         try:
-            paths = _Paths(ref, env, TAUT_CLEARANCE)
             sweeps = _search(env, base, paths, limits, step)
-        except TrainError:
-            axial = _axial(env, ref, limits.clearance)
-            if axial is None:
-                raise exc from None
-            try:
-                paths = _Paths(axial)
-                sweeps = _search(env, base, paths, limits, step)
-            except TrainError:
-                raise exc from None
+            break
+        except TrainError as exc:
+            first = first or exc
+    else:
+        assert first is not None
+        raise first
     N = len(paths.length)
     X0 = np.asarray(ref.start, dtype=float).copy()  # every path starts where its robot stands
     now = X0.copy()
