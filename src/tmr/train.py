@@ -93,8 +93,8 @@ def _dedupe(P: Array) -> Array:
 class _Paths:
     """Every robot's path (polyline, arcs, length [m]) and how far along it the robot is; the guide it follows."""
 
-    def __init__(self, ref: ChainReference, env: Any = None, taut: float | None = None) -> None:
-        self.env, self.taut = env, taut
+    def __init__(self, ref: ChainReference, env: Any = None, taut: float | None = None, order: bool = False) -> None:
+        self.env, self.taut, self.order = env, taut, order
         self.guide, self.garcs = ref.guide, guide_arcs(ref.guide)
         self.foot = np.asarray(ref.final_arcs, dtype=float)
         self.station = np.asarray(ref.final, dtype=float)
@@ -306,6 +306,23 @@ def _within(centre: Array, lo: float, hi: float, pts: Array) -> NDArray[np.bool_
     return (n >= lo) & (n <= hi)
 
 
+def _behind(paths: _Paths, i: int, pts: Array) -> NDArray[np.bool_]:
+    """Whether the guide point nearest each of pts (within robot i's reach along the guide) is not beyond the
+    progress of robot i + 1 (nor of robot i, if robot i already passed it)."""
+    lo = float(paths.garc[i])
+    hi = min(float(paths.foot[i]), lo + float(paths.arcs[i][-1]) + 1.0)
+    bound = max(float(paths.garc[i + 1]), lo) + 1e-9
+    if hi <= bound:
+        return np.ones(len(pts), dtype=bool)
+    s = np.linspace(lo, hi, max(2, int((hi - lo) / 0.02) + 1))
+    G = point_at(paths.guide, paths.garcs, s)
+    out = np.empty(len(pts), dtype=bool)
+    for k in range(0, len(pts), 256):
+        D = np.linalg.norm(pts[k : k + 256, None] - G[None], axis=2)
+        out[k : k + 256] = s[np.argmin(D, axis=1)] <= bound
+    return out
+
+
 class _State:
     """The train's current positions and the tests of a move of one robot."""
 
@@ -339,6 +356,10 @@ class _State:
             # compact: a robot does not run farther than SLACK ahead of a follower short of its station
             slack = max(SLACK, float(np.linalg.norm(here - X[i - 1])))
             out.append((f"slack of the tether to robot {i}", 0, partial(_within, X[i - 1], -np.inf, slack)))
+        paths = self.paths
+        if paths is not None and paths.order and i < len(X) - 1 and paths.u[i + 1] < paths.length[i + 1] - 1e-9:
+            # ordered: a robot does not pass, along the guide, the robot ahead of it short of its station
+            out.append(("order behind the next robot", 1, partial(_behind, paths, i)))
         for j in range(len(X)):
             if j != i:
                 need = min(self.lim.separation, float(np.linalg.norm(X[j] - here))) - 1e-9
@@ -683,13 +704,14 @@ def _states_valid(env: Any, base: Array, X: Array, limits: TrainLimits) -> bool:
 
 def _attempts(env: Any, ref: ChainReference, clearance: float) -> Iterator[_Paths]:
     """The paths the search tries, in turn until one succeeds: along the guide; pulled taut (no start hairpin);
-    along the guide crossing each door straight (:func:`_axial`), then that pulled taut."""
+    along the guide crossing each door straight (:func:`_axial`); that pulled taut, each robot kept behind the next
+    along the guide."""
     yield _Paths(ref)
     yield _Paths(ref, env, TAUT_CLEARANCE)
     axial = _axial(env, ref, clearance)
     if axial is not None:
         yield _Paths(axial)
-        yield _Paths(axial, env, TAUT_CLEARANCE)
+        yield _Paths(axial, env, TAUT_CLEARANCE, order=True)
 
 
 def train_reference(
