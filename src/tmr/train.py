@@ -99,6 +99,7 @@ class _Paths:
         self.foot = np.asarray(ref.final_arcs, dtype=float)
         self.station = np.asarray(ref.final, dtype=float)
         self.garc = np.asarray(ref.start_arcs, dtype=float).copy()  # each robot's progress along the guide [m]
+        self.near = self.garc.copy()  # the guide arc nearest each robot (the progress less a rejoin's look-ahead) [m]
         N = len(ref.start)
         self.points: list[Array] = [np.zeros((1, 2))] * N
         self.arcs: list[Array] = [np.zeros(1)] * N
@@ -114,6 +115,8 @@ class _Paths:
         """Robot i's path from ``here``: straight to the guide at arc ``garc``, along it to its station's foot,
         then to the station."""
         garc = min(max(garc, float(self.garc[i])), float(self.foot[i]))
+        if garc > self.garc[i] + 1e-9:
+            self.near[i] = self.nearest(here, float(self.garc[i]), garc)[1]
         self.garc[i] = garc
         pts = [here[None]]
         if self.foot[i] > garc + 1e-9:
@@ -135,7 +138,7 @@ class _Paths:
         lo = float(self.garc[i])
         hi = min(float(self.foot[i]), lo + float(self.arcs[i][-1]) + 1.0)
         if hi > lo:  # progress along the guide: the nearest guide point in [lo, hi]
-            self.garc[i] = self.nearest(here, lo, hi)[1]
+            self.garc[i] = self.near[i] = self.nearest(here, lo, hi)[1]
         return part
 
     def nearest(self, Q: Array, lo: float, hi: float) -> tuple[Array, float]:
@@ -307,11 +310,11 @@ def _within(centre: Array, lo: float, hi: float, pts: Array) -> NDArray[np.bool_
 
 
 def _behind(paths: _Paths, i: int, pts: Array) -> NDArray[np.bool_]:
-    """Whether the guide point nearest each of pts (within robot i's reach along the guide) is not beyond the
-    progress of robot i + 1 (nor of robot i, if robot i already passed it)."""
-    lo = float(paths.garc[i])
-    hi = min(float(paths.foot[i]), lo + float(paths.arcs[i][-1]) + 1.0)
-    bound = max(float(paths.garc[i + 1]), lo) + 1e-9
+    """Whether the guide point nearest each of pts (within robot i's reach along the guide) is not beyond the one
+    nearest robot i + 1 (nor robot i's own, if robot i is already beyond it)."""
+    lo = float(paths.near[i])
+    hi = min(float(paths.foot[i]), float(paths.garc[i]) + float(paths.arcs[i][-1]) + 1.0)
+    bound = max(float(paths.near[i + 1]), lo) + 1e-9
     if hi <= bound:
         return np.ones(len(pts), dtype=bool)
     s = np.linspace(lo, hi, max(2, int((hi - lo) / 0.02) + 1))
