@@ -14,8 +14,10 @@ longer plan (``formulations/route.md``, "Train references"):
 * until every robot is at its station. When no robot can advance, local **repairs** (:func:`_unblock`): a straight
   cut along a robot's own path, a follower reeling in along its tether, a blocking robot stepping aside, a robot
   paying out along its tether; after ``MAX_STUCK_PER_ROBOT`` × N repairs without progress, :class:`TrainError` names
-  every robot short of its station, where it stopped and the limits its next step breaks. A stalled search runs once
-  more with every path pulled taut (:func:`_pulled`);
+  every robot short of its station, where it stopped and the limits its next step breaks. A stalled search runs
+  again with every path pulled taut (:func:`_pulled`); then along a guide that crosses each narrow door straight
+  along the door's axis (:func:`_axial`: a robot in a door has its neighbours on the axis, not round a jamb); then
+  along that guide pulled taut, no robot passing, along the guide, the robot ahead of it (:func:`_attempts`);
 * **timing**: every advance follows the minimum-jerk law within the leader's speed and acceleration limits, stopping
   at each turn of its path sharper than :data:`TURN_STOP`; the advances of one sweep run together when every sampled
   state of the joint motion keeps the same limits, else one after the other.
