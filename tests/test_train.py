@@ -94,6 +94,22 @@ def test_train_is_deterministic(door_problem) -> None:
     assert a.velocities.tobytes() == b.velocities.tobytes()
 
 
+#: Three narrow doors the guide meets at a slant, 6 robots: the train stalls along the guide and along it pulled
+#: taut (a robot in a door, its neighbour round a jamb), and passes along the axial guide (tmr.train._axial).
+SLANT_ROOM = (3896625273, "narrow", "far")
+
+
+def test_train_crosses_narrow_doors_along_their_axis(tmp_path) -> None:
+    room = generate_room(*SLANT_ROOM)
+    path = write_geojson(room, tmp_path / "room.geojson")
+    problem = build_problem(scenario_from_map(path, room.base, room.goal, n_robots=6), n_robots=6)
+    ref = train_problem(problem).references
+    r = problem.chain_params.safety_radius
+    assert _independent_violations(problem, ref.positions, 0.05, 2 * r) == []
+    assert np.allclose(ref.positions[-1], problem.references.final, atol=1e-6)
+    assert np.allclose(ref.positions[0], problem.references.start, atol=1e-9)
+
+
 def test_a_stall_names_the_robot_and_the_limit() -> None:
     problem = build_problem(load_scenario("A"))
     spans = problem.span_limits.copy()

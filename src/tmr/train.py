@@ -14,8 +14,10 @@ longer plan (``formulations/route.md``, "Train references"):
 * until every robot is at its station. When no robot can advance, local **repairs** (:func:`_unblock`): a straight
   cut along a robot's own path, a follower reeling in along its tether, a blocking robot stepping aside, a robot
   paying out along its tether; after ``MAX_STUCK_PER_ROBOT`` × N repairs without progress, :class:`TrainError` names
-  every robot short of its station, where it stopped and the limits its next step breaks. A stalled search runs once
-  more with every path pulled taut (:func:`_pulled`);
+  every robot short of its station, where it stopped and the limits its next step breaks. A stalled search runs
+  again with every path pulled taut (:func:`_pulled`); then along a guide that crosses each narrow door straight
+  along the door's axis (:func:`_axial`: a robot in a door has its neighbours on the axis, not round a jamb); then
+  along that guide pulled taut, no robot passing, along the guide, the robot ahead of it (:func:`_attempts`);
 * **timing**: every advance follows the minimum-jerk law within the leader's speed and acceleration limits, stopping
   at each turn of its path sharper than :data:`TURN_STOP`; the advances of one sweep run together when every sampled
   state of the joint motion keeps the same limits, else one after the other.
@@ -28,7 +30,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any
@@ -93,12 +95,13 @@ def _dedupe(P: Array) -> Array:
 class _Paths:
     """Every robot's path (polyline, arcs, length [m]) and how far along it the robot is; the guide it follows."""
 
-    def __init__(self, ref: ChainReference, env: Any = None, taut: float | None = None) -> None:
-        self.env, self.taut = env, taut
+    def __init__(self, ref: ChainReference, env: Any = None, taut: float | None = None, order: bool = False) -> None:
+        self.env, self.taut, self.order = env, taut, order
         self.guide, self.garcs = ref.guide, guide_arcs(ref.guide)
         self.foot = np.asarray(ref.final_arcs, dtype=float)
         self.station = np.asarray(ref.final, dtype=float)
         self.garc = np.asarray(ref.start_arcs, dtype=float).copy()  # each robot's progress along the guide [m]
+        self.near = self.garc.copy()  # the guide arc nearest each robot (the progress less a rejoin's look-ahead) [m]
         N = len(ref.start)
         self.points: list[Array] = [np.zeros((1, 2))] * N
         self.arcs: list[Array] = [np.zeros(1)] * N
@@ -114,6 +117,8 @@ class _Paths:
         """Robot i's path from ``here``: straight to the guide at arc ``garc``, along it to its station's foot,
         then to the station."""
         garc = min(max(garc, float(self.garc[i])), float(self.foot[i]))
+        if garc > self.garc[i] + 1e-9:
+            self.near[i] = self.nearest(here, float(self.garc[i]), garc)[1]
         self.garc[i] = garc
         pts = [here[None]]
         if self.foot[i] > garc + 1e-9:
@@ -135,7 +140,7 @@ class _Paths:
         lo = float(self.garc[i])
         hi = min(float(self.foot[i]), lo + float(self.arcs[i][-1]) + 1.0)
         if hi > lo:  # progress along the guide: the nearest guide point in [lo, hi]
-            self.garc[i] = self.nearest(here, lo, hi)[1]
+            self.garc[i] = self.near[i] = self.nearest(here, lo, hi)[1]
         return part
 
     def nearest(self, Q: Array, lo: float, hi: float) -> tuple[Array, float]:
@@ -157,6 +162,105 @@ def _pulled(env: Any, P: Array, clearance: float, step: float = 0.1, reach: int 
         i = int(js[free[-1]]) if len(free) else i + 1
         out.append(S[i])
     return _dedupe(np.asarray(out))
+
+
+#: Clearance [m] below which a guide point is in a narrow passage; how far [m] across the passage its other side is
+#: looked for; the half-lengths [m] of the straight crossing tried, longest first (:func:`_axial`).
+DOOR_CLEARANCE = 0.3
+DOOR_ACROSS = 0.4
+DOOR_HALF = (1.6, 1.3, 1.0)
+#: How far [m] beyond the ends of a straight crossing, along its axis, the guide is rejoined.
+DOOR_BEYOND = 0.3
+
+
+def _axial(env: Any, ref: ChainReference, clearance: float) -> ChainReference | None:
+    """``ref`` with its guide crossing each narrow door straight along the door's axis: the guide is cut before the
+    door, runs to a point ``h`` (:data:`DOOR_HALF`) before the door's narrowest point on the line through it
+    perpendicular to its jambs, through it, to the point ``h`` after, and rejoins the guide beyond; a robot in the
+    door then has both neighbours on its axis, not round a jamb. Start and station arcs are mapped onto the new
+    guide. None if the guide crosses no door so."""
+    G, arcs = ref.guide, guide_arcs(ref.guide)
+    L = float(arcs[-1])
+    s = np.arange(0.0, L, 0.02)
+    P = point_at(G, arcs, s)
+    clr = np.asarray(env.exact_clearance(P), float)
+    narrow = np.flatnonzero(clr < DOOR_CLEARANCE)
+    if not len(narrow):
+        return None
+    runs = np.split(narrow, np.flatnonzero(np.diff(narrow) > 1) + 1)
+    boundary = shapely.boundary(env.free)
+    old, new, pieces, last = [0.0], [0.0], [], 0.0
+    for run in runs:
+        Q = P[run]
+        B = shapely.get_coordinates(shapely.shortest_line(boundary, shapely.points(Q)))[0::2]
+        n = (B - Q) / np.maximum(np.linalg.norm(B - Q, axis=1), 1e-12)[:, None]
+        rays = shapely.linestrings(np.stack([Q, Q - DOOR_ACROSS * n], axis=1))
+        across = shapely.distance(shapely.points(Q), shapely.intersection(rays, boundary))
+        width = clr[run] + np.where(np.isfinite(across), across, np.inf)
+        j = int(np.argmin(width))
+        if not np.isfinite(width[j]) or float(s[run[j]]) < last + 1e-9:
+            continue  # open on the other side: a corner, not a door
+        sc = float(s[run[j]])
+        c = 0.5 * (B[j] + Q[j] - float(across[j]) * n[j])  # the middle of the door
+        b = shapely.get_coordinates(shapely.shortest_line(boundary, shapely.points(c)))[0]
+        if np.linalg.norm(b - c) < 1e-9:
+            continue
+        n = (b - c) / np.linalg.norm(b - c)
+        t = np.array([-n[1], n[0]])
+        ahead = point_at(G, arcs, min(sc + 0.3, L)) - point_at(G, arcs, max(sc - 0.3, 0.0))
+        if float(np.dot(t, ahead)) < 0:
+            t = -t
+        for h in DOOR_HALF:
+            a, z = c - h * t, c + h * t
+            if not bool(env.segment_is_free(a, z, clearance)):
+                continue
+            back = np.arange(max(last, sc - 3 * h - 1.0), sc, 0.05)[::-1]
+            fwd = np.arange(sc, min(L, sc + 3 * h + 1.0), 0.05)
+            Pb, Pf = point_at(G, arcs, back), point_at(G, arcs, fwd)
+            beyond_b = (a - Pb) @ t > DOOR_BEYOND  # the guide rejoined behind a and ahead of z, along the axis
+            beyond_f = (Pf - z) @ t > DOOR_BEYOND
+            fb = np.flatnonzero(beyond_b & env.segment_is_free(Pb, a, clearance))
+            ff = np.flatnonzero(beyond_f & env.segment_is_free(z, Pf, clearance))
+            if not len(ff):
+                continue
+            s_out = float(fwd[ff[0]])
+            if len(fb):
+                pieces.append((float(back[fb[0]]), s_out, np.vstack([a, c, z])))
+            elif pieces and _joins(env, pieces[-1][2][-1], a, t, clearance):  # straight on from the last door
+                pieces[-1] = (pieces[-1][0], s_out, np.vstack([pieces[-1][2], a, c, z]))
+            else:
+                continue
+            last = s_out
+            break
+    if not pieces:
+        return None
+    parts, pos = [], 0.0
+    for s_in, s_out, mid in pieces:
+        head = _sub(G, arcs, pos, s_in)
+        parts.append(head)
+        before = new[-1] + (s_in - pos)
+        seg = np.vstack([head[-1:], mid, point_at(G, arcs, s_out)[None]])
+        old += [s_in, s_out]
+        new += [before, before + float(guide_arcs(seg)[-1])]
+        parts.append(mid)
+        pos = s_out
+    parts.append(_sub(G, arcs, pos, L))
+    old.append(L)
+    new.append(new[-1] + (L - pos))
+    guide = _dedupe(np.vstack(parts))
+    scale = float(guide_arcs(guide)[-1]) / new[-1]
+    remap = partial(np.interp, xp=np.asarray(old), fp=np.asarray(new) * scale)
+    return replace(
+        ref,
+        guide=guide,
+        start_arcs=remap(np.asarray(ref.start_arcs, float)),
+        final_arcs=remap(np.asarray(ref.final_arcs, float)),
+    )
+
+
+def _joins(env: Any, p: Array, a: Array, t: Array, clearance: float) -> bool:
+    """Whether point a lies beyond p along axis t (by :data:`DOOR_BEYOND`) and is joined to it by a free segment."""
+    return float((a - p) @ t) > DOOR_BEYOND and bool(env.segment_is_free(p, a, clearance))
 
 
 class _Fast:
@@ -207,6 +311,23 @@ def _within(centre: Array, lo: float, hi: float, pts: Array) -> NDArray[np.bool_
     return (n >= lo) & (n <= hi)
 
 
+def _behind(paths: _Paths, i: int, pts: Array) -> NDArray[np.bool_]:
+    """Whether the guide point nearest each of pts (within robot i's reach along the guide) is not beyond the one
+    nearest robot i + 1 (nor robot i's own, if robot i is already beyond it)."""
+    lo = float(paths.near[i])
+    hi = min(float(paths.foot[i]), float(paths.garc[i]) + float(paths.arcs[i][-1]) + 1.0)
+    bound = max(float(paths.near[i + 1]), lo) + 1e-9
+    if hi <= bound:
+        return np.ones(len(pts), dtype=bool)
+    s = np.linspace(lo, hi, max(2, int((hi - lo) / 0.02) + 1))
+    G = point_at(paths.guide, paths.garcs, s)
+    out = np.empty(len(pts), dtype=bool)
+    for k in range(0, len(pts), 256):
+        D = np.linalg.norm(pts[k : k + 256, None] - G[None], axis=2)
+        out[k : k + 256] = s[np.argmin(D, axis=1)] <= bound
+    return out
+
+
 class _State:
     """The train's current positions and the tests of a move of one robot."""
 
@@ -240,6 +361,10 @@ class _State:
             # compact: a robot does not run farther than SLACK ahead of a follower short of its station
             slack = max(SLACK, float(np.linalg.norm(here - X[i - 1])))
             out.append((f"slack of the tether to robot {i}", 0, partial(_within, X[i - 1], -np.inf, slack)))
+        paths = self.paths
+        if paths is not None and paths.order and i < len(X) - 1 and paths.u[i + 1] < paths.length[i + 1] - 1e-9:
+            # ordered: a robot does not pass, along the guide, the robot ahead of it short of its station
+            out.append(("order behind the next robot", 1, partial(_behind, paths, i)))
         for j in range(len(X)):
             if j != i:
                 need = min(self.lim.separation, float(np.linalg.norm(X[j] - here))) - 1e-9
@@ -582,6 +707,18 @@ def _states_valid(env: Any, base: Array, X: Array, limits: TrainLimits) -> bool:
     return bool(np.all(D >= limits.separation - 1e-9))
 
 
+def _attempts(env: Any, ref: ChainReference, clearance: float) -> Iterator[_Paths]:
+    """The paths the search tries, in turn until one succeeds: along the guide; pulled taut (no start hairpin);
+    along the guide crossing each door straight (:func:`_axial`); that pulled taut, each robot kept behind the next
+    along the guide."""
+    yield _Paths(ref)
+    yield _Paths(ref, env, TAUT_CLEARANCE)
+    axial = _axial(env, ref, clearance)
+    if axial is not None:
+        yield _Paths(axial)
+        yield _Paths(axial, env, TAUT_CLEARANCE, order=True)
+
+
 def train_reference(
     env: Any,
     ref: ChainReference,
@@ -607,15 +744,16 @@ def train_reference(
         TrainError: no robot can advance and some are short of their stations.
     """
     base = np.asarray(base, dtype=float)
-    try:  # each robot along the guide; if that stalls, along the guide pulled taut (no start hairpin)
-        paths = _Paths(ref)
-        sweeps = _search(env, base, paths, limits, step)
-    except TrainError as exc:
+    first: TrainError | None = None
+    for paths in _attempts(env, ref, limits.clearance):
         try:
-            paths = _Paths(ref, env, TAUT_CLEARANCE)
             sweeps = _search(env, base, paths, limits, step)
-        except TrainError:
-            raise exc from None
+            break
+        except TrainError as exc:
+            first = first or exc
+    else:
+        assert first is not None
+        raise first
     N = len(paths.length)
     X0 = np.asarray(ref.start, dtype=float).copy()  # every path starts where its robot stands
     now = X0.copy()
