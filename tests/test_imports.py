@@ -72,6 +72,7 @@ def test_qp_run_without_plots_imports_no_heavy_stack(tmp_path: Path):
     assert mods.isdisjoint(NEVER_FOR_QP), sorted(mods & set(NEVER_FOR_QP))
     assert mods.isdisjoint(SCIPY_NEVER_FOR_QP), sorted(mods & set(SCIPY_NEVER_FOR_QP))
     assert "ompl" not in mods  # the shortest route needs no RRT*
+    assert "qpsolvers" not in mods  # its backends are loaded only when a QP level falls back to one
     assert "osqp" in mods  # the probe sees what the run imported
 
 

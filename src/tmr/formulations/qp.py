@@ -38,15 +38,15 @@ step's status per level is in ``diagnostics["qp_level:<name>"]`` (:data:`LEVEL_S
 
 from __future__ import annotations
 
+import importlib.util
 import time
 import warnings
 from collections.abc import Container, Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 import osqp
-import qpsolvers
 import scipy.linalg
 import scipy.sparse as sp
 from numpy.typing import NDArray
@@ -57,6 +57,9 @@ from tmr.formulations.activeset import WarmActiveSet, active_set
 from tmr.limits import JointBox, Limit
 from tmr.tasks import StepContext, Task
 from tmr.velocity import robot_pattern
+
+if TYPE_CHECKING:
+    import qpsolvers
 
 Array = NDArray[np.float64]
 
@@ -74,8 +77,24 @@ FALLBACK_SOLVERS: tuple[str, ...] = ("daqp", "clarabel")
 OSQP_INFTY = 1e30
 
 
+#: Python module of each default fallback backend: whether it is installed is asked without importing qpsolvers
+#: (which imports every backend it finds: 50-60 ms of a run that, as nearly every run, never falls back).
+_BACKEND_MODULES = {"daqp": "daqp", "clarabel": "clarabel"}
+
+
+def _installed(names: Sequence[str]) -> set[str]:
+    """Which of the qpsolvers backends ``names`` are installed."""
+    if all(n in _BACKEND_MODULES for n in names):
+        return {n for n in names if importlib.util.find_spec(_BACKEND_MODULES[n]) is not None}
+    import qpsolvers
+
+    return set(qpsolvers.available_solvers)
+
+
 def solvers() -> list[str]:
     """Names accepted by ``solver=``: ``"osqp"`` (persistent workspace) and every installed qpsolvers backend."""
+    import qpsolvers
+
     return ["osqp", *(f"qpsolvers-{s}" if s == "osqp" else s for s in qpsolvers.available_solvers)]
 
 
@@ -265,6 +284,8 @@ class _QpsolversLevel:
     def solve(
         self, A: Array, lo: Array, up: Array, Jw: Array, tw: Array, declared: NDArray[np.bool_] | None = None
     ) -> tuple[Array | None, str, int]:
+        import qpsolvers  # only when a level falls back (or a qpsolvers backend was chosen)
+
         n = A.shape[1]
         P = Jw.T @ Jw + self.eps * np.eye(n)
         q = -Jw.T @ tw
@@ -481,7 +502,7 @@ class LexicographicQP:
     ) -> None:
         if not levels or any(not level.tasks for level in levels):
             raise ParameterError("the QP stack needs at least one level, and every level at least one task")
-        if solver not in solvers():
+        if solver != "osqp" and solver not in solvers():  # "osqp" is always there: no qpsolvers import
             raise ParameterError(f"unknown QP solver {solver!r}; available: {', '.join(solvers())}")
         if chain.spatial:
             raise ParameterError("the lexicographic QP plans planar chains (robot-velocity coordinates)")
@@ -503,8 +524,8 @@ class LexicographicQP:
         self.optimistic = bool(optimistic)
         self.warm_start = bool(warm_start)
         primary = solver.removeprefix("qpsolvers-")
-        available = set(qpsolvers.available_solvers)
         names = FALLBACK_SOLVERS if fallbacks is None else tuple(fallbacks)
+        available = _installed(names)
         self.fallback_solvers = tuple(s for s in names if s != primary and s in available)
         self._fallback = {s: _QpsolversLevel(s, self.eps) for s in self.fallback_solvers}
         self.level_keys = _level_keys(self.levels)
