@@ -64,4 +64,6 @@ def test_bad_input() -> None:
     with pytest.raises(ParameterError, match="order"):
         butter_lowpass(0, 1.0, 20.0)
     with pytest.raises(ParameterError, match="padlen"):
-        filtfilt([1.0], [1.0], np.zeros(5), padlen=5)
+        filtfilt([1.0, 1.0], [1.0, 0.5], np.zeros(5), padlen=5)
+    with pytest.raises(ParameterError, match="order >= 1"):
+        filtfilt([1.0], [1.0], np.zeros(5), padlen=2)

@@ -350,3 +350,11 @@ def test_filter_within_limits_leaves_a_clean_filter_alone():
     out, note = filter_within_limits(plan, env, Ts)
     assert note is None
     np.testing.assert_array_equal(out, filter_trajectories(plan.robots, Ts))
+
+
+def test_filter_within_limits_says_when_it_did_not_check():
+    plan, env, Ts = _radial_stop(5.6)
+    plan.success, plan.failure = False, "leader ends 1 m from the goal"
+    out, note = filter_within_limits(plan, env, Ts)
+    np.testing.assert_array_equal(out, filter_trajectories(plan.robots, Ts))
+    assert "not checked" in note

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -162,3 +163,22 @@ def test_view_bounds_frames_the_known_area_of_an_occupancy_map(tmp_path):
     assert view_bounds(env, np.array([[-9.9, 9.9]]))[0] == pytest.approx(-10.0)
     room = make_env([], (0, 0, 10, 8))
     assert view_bounds(room, pts) == (0.0, 0.0, 10.0, 8.0)
+
+
+@pytest.mark.parametrize("n", [3, 6, 12])
+def test_distance_error_legends_fit_in_the_figure(n):
+    """Every legend entry is drawn inside the figure, whatever the number of tethers (per-tether limits)."""
+    t = np.linspace(0.0, 5.0, 51)
+    spans = 1.0 + 0.1 * np.arange(n)[None, :] + 0.2 * np.sin(t)[:, None]
+    limits = np.stack([np.full(n, 0.5), 5.0 + 0.1 * np.arange(n)], axis=1)  # d_max differs per tether
+    robots = np.stack([np.cumsum(spans, axis=1), np.zeros_like(spans)], axis=-1)  # along x from the base
+    plan = SimpleNamespace(
+        t=t, spans=spans, span_limits=limits, robots=robots, base=np.zeros(2), safety_radius=0.5, diagnostics={}
+    )
+    plan.__dict__.update(scenario="S", method="qp", success=True, failure=None)
+    fig = plot_distance_errors(plan)
+    fig.canvas.draw()
+    width, height = fig.bbox.width, fig.bbox.height
+    for ax in fig.axes:
+        box = ax.get_legend().get_window_extent()
+        assert box.x0 >= 0 and box.y0 >= 0 and box.x1 <= width + 1 and box.y1 <= height + 1, (n, box)

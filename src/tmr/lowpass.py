@@ -54,7 +54,7 @@ def lfilter(b: Array, a: Array, x: Array, zi: Array) -> Array:
     """Filter ``x`` along axis 0 with y[k] = b[0] x[k] + z_0, z_j ← b[j+1] x[k] + z_{j+1} − a[j+1] y[k].
 
     Args:
-        b, a: coefficients, ``len(b) == len(a)``, ``a[0] == 1``.
+        b, a: coefficients, ``len(b) == len(a) >= 2`` (order ≥ 1), ``a[0] == 1``.
         x: (K, ...) signal.
         zi: (len(a) − 1, ...) initial state.
     """
@@ -94,6 +94,8 @@ def filtfilt(b: ArrayLike, a: ArrayLike, x: ArrayLike, padlen: int) -> Array:
     b_arr = np.asarray(b, dtype=float)
     a_arr = np.asarray(a, dtype=float)
     b_arr, a_arr = b_arr / a_arr[0], a_arr / a_arr[0]
+    if max(len(a_arr), len(b_arr)) < 2:
+        raise ParameterError("filtfilt needs a filter of order >= 1 (at least two coefficients)")
     x_arr = np.asarray(x, dtype=float)
     if not (0 <= padlen < x_arr.shape[0]):
         raise ParameterError(f"padlen must be in [0, {x_arr.shape[0]}[, got {padlen}")

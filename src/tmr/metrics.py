@@ -35,9 +35,9 @@ __all__ = [
     "evaluate",
     "filter_trajectories",
     "filter_within_limits",
-    "limit_breaks",
     "fitness",
     "json_safe",
+    "limit_breaks",
     "plan_goal",
     "qp_level_counts",
     "robot_separations",
@@ -216,10 +216,29 @@ def clearances(plan: Any, env: Any) -> Clearances:
     Returns:
         :class:`Clearances` with ``robots`` and ``tethers`` arrays of shape (K+1, N) [m].
     """
-    pts = chain_points(plan)
+    return _chain_clearances(chain_points(plan), env)
+
+
+def _chain_clearances(pts: np.ndarray, env: Any) -> Clearances:
+    """:class:`Clearances` of chain polylines ``pts`` (K+1, N+1, 2) [m] (base first)."""
     robot_c = np.asarray(env.exact_clearance(pts[:, 1:, :]), dtype=float).reshape(pts.shape[0], -1)
     tether_c = np.asarray(env.segment_clearance(pts[:, :-1, :], pts[:, 1:, :]), dtype=float).reshape(pts.shape[0], -1)
     return Clearances(robots=robot_c, tethers=tether_c)
+
+
+def _violation_masks(
+    clr: Clearances, spans: np.ndarray, sep: np.ndarray, limits: tuple[np.ndarray, np.ndarray], r: float, tol: float
+) -> dict[str, np.ndarray]:
+    """Per sample (K+1,) bool, for each of :data:`VIOLATION_KINDS`: whether that hard limit is broken beyond ``tol``
+    [m] (clearances < −tol, spans outside [d_lo − tol, d_max + tol], separations < 2 r − tol)."""
+    d_lo, d_max = limits
+    return {
+        "robot_clearance": (clr.robots < -tol).any(axis=1),
+        "tether_clearance": (clr.tethers < -tol).any(axis=1),
+        "span_max": (spans > d_max + tol).any(axis=1),
+        "span_min": (spans < d_lo - tol).any(axis=1),
+        "separation": (sep < 2.0 * r - tol).any(axis=1) if sep.size else np.zeros(spans.shape[0], dtype=bool),
+    }
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -424,13 +443,7 @@ def evaluate(
     final_err = float(np.linalg.norm(robots[-1, -1, :] - goal_xy))
 
     # violations, per sample
-    masks = {
-        "robot_clearance": (clr.robots < -tol).any(axis=1),
-        "tether_clearance": (clr.tethers < -tol).any(axis=1),
-        "span_max": (spans > d_max + tol).any(axis=1),
-        "span_min": (spans < d_lo - tol).any(axis=1),
-        "separation": (sep < 2.0 * r - tol).any(axis=1) if sep.size else np.zeros(n_samples, dtype=bool),
-    }
+    masks = _violation_masks(clr, spans, sep, (d_lo, d_max), r, tol)
     steps = {kind: np.flatnonzero(masks[kind]).tolist() for kind in VIOLATION_KINDS}
     first = {kind: (steps[kind][0] if steps[kind] else None) for kind in VIOLATION_KINDS}
     any_violation = np.logical_or.reduce([masks[kind] for kind in VIOLATION_KINDS])
@@ -533,17 +546,16 @@ def limit_breaks(plan: Any, robots: np.ndarray, env: Any, tolerance: float = 1e-
     robots = np.asarray(robots, dtype=float)
     base = np.broadcast_to(np.asarray(plan.base, dtype=float)[:2], (robots.shape[0], 1, 2))
     pts = np.concatenate([base, robots], axis=1)
-    k = pts.shape[0]
-    robot_c = np.asarray(env.exact_clearance(pts[:, 1:, :]), dtype=float).reshape(k, -1)
-    tether_c = np.asarray(env.segment_clearance(pts[:, :-1, :], pts[:, 1:, :]), dtype=float).reshape(k, -1)
     spans = np.linalg.norm(np.diff(pts, axis=1), axis=-1)
-    d_lo, d_max = span_limits(plan)
-    bad = (robot_c < -tolerance).any(axis=1) | (tether_c < -tolerance).any(axis=1)
-    bad |= (spans > d_max + tolerance).any(axis=1) | (spans < d_lo - tolerance).any(axis=1)
-    sep = robot_separations(robots)
-    if sep.size:
-        bad |= (sep < 2.0 * float(plan.safety_radius) - tolerance).any(axis=1)
-    return bad
+    masks = _violation_masks(
+        _chain_clearances(pts, env),
+        spans,
+        robot_separations(robots),
+        span_limits(plan),
+        float(plan.safety_radius),
+        tolerance,
+    )
+    return np.logical_or.reduce(list(masks.values()))
 
 
 #: Hold times [s] round the samples where the filtered trajectories break a limit, tried in turn by
@@ -561,15 +573,15 @@ def filter_within_limits(
     breaks a limit (:func:`limit_breaks`) the output is the raw plan for ± hold, blending back into the filtered
     trajectories over 1 / ``cutoff_hz`` seconds with a raised-cosine weight; holds of :data:`FILTER_HOLDS` are tried
     in turn, then the raw plan itself (which the checker passed). A failed plan (``plan.success`` False) is only
-    filtered.
+    filtered, and the note says so.
 
     Returns:
         (filtered positions (K+1, N, 2) [m], a note saying where and how the filter was held, or None if untouched).
     """
     raw = np.asarray(plan.robots, dtype=float)
     filtered = filter_trajectories(raw, Ts, cutoff_hz=cutoff_hz, order=order)
-    if not plan.success:  # the raw plan breaks a limit itself (the checker said so): nothing safer to fall back on
-        return filtered, None
+    if not plan.success:  # a limit broken, the goal missed or the run stopped: no checked plan to fall back on
+        return filtered, "not checked against the hard limits: the plan itself failed"
     bad = limit_breaks(plan, filtered, env)
     if not bad.any():
         return filtered, None

@@ -4,7 +4,7 @@
   Caruso 2021 §4.2, ref. [41]), seeded and stopped after a fixed **number of iterations**, so the same seed
   gives the same path, byte for byte. Every state and every straight motion is checked exactly against the
   inflated obstacles (``env.is_free`` / ``env.segment_is_free``): the polyline is free, not sampled free.
-* :func:`time_law` -- cubic B-spline through the waypoints (chord-length parametrisation), re-parametrised by
+* :func:`time_law` -- not-a-knot cubic spline through the waypoints (chord-length parametrisation), re-parametrised by
   arc length and traversed with the quintic minimum-jerk law ``s(t)`` (zero velocity and acceleration at both
   ends), sampled at ``t = 0, Ts, ..., T_end``; position, velocity and acceleration are analytic.
 * :func:`leader_trajectory` -- both: ``w = [X, Xdot, Xddot] = f(T_end, Ts, z)`` of Caruso 2021 §4.2.
@@ -391,7 +391,7 @@ def plan_leader_path(
 
 
 # ------------------------------------------------------------------------------------------------------------
-# trajectory generator: B-spline, arc length, minimum-jerk time law
+# trajectory generator: cubic spline, arc length, minimum-jerk time law
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
 
@@ -417,7 +417,7 @@ class _ArcLengthSpline:
             i = int(np.argmin(turn))
             raise ParameterError(
                 f"the waypoints turn back on themselves near {self._p(self.u_grid[i]).tolist()} (a cusp "
-                "of the B-spline); remove the reversal from the waypoints"
+                "of the spline); remove the reversal from the waypoints"
             )
         ds = self._integrate(self.u_grid[:-1], self.u_grid[1:])
         self.s_grid = np.concatenate([[0.0], np.cumsum(ds)])
@@ -582,7 +582,7 @@ def time_law(
         pts = _refine(pts, spline.u_knots, u_bad)
     else:
         raise PathError(
-            f"the B-spline through the waypoints cuts a corner (clearance {cmin:.3f} m < {clearance} m) even "
+            f"the cubic spline through the waypoints cuts a corner (clearance {cmin:.3f} m < {clearance} m) even "
             f"after {MAX_REFINEMENTS} refinements; pass a smaller clearance or waypoints with more clearance"
         )
 

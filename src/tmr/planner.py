@@ -593,6 +593,12 @@ def _horizon_warm_start(problem: Problem, progress: bool) -> tuple[Problem, Plan
                 "horizon warm start: the qp plan with the followers on the tether tasks (route references off)"
             )
             return problem, result, metrics
+        problem, warm, warm_metrics = _solve_qp(problem, progress)
+        why = str(result.failure).split(";")[0]
+        note = f"horizon warm start: the qp plan with route references (without them it failed: {why})"
+        earlier = warm.diagnostics.get("references_note")
+        warm.diagnostics["references_note"] = f"{note}; {earlier}" if earlier else note
+        return problem, warm, warm_metrics
     return _solve_qp(problem, progress)
 
 

@@ -39,6 +39,8 @@ FILTERED_COLOR = "#d62728"  # red: filtered (as in Caruso 2021 Figs. 6 and 8)
 OBSTACLE_FACE = "#9e9e9e"
 INFLATED_EDGE = "#555555"
 TIME_CMAP = "viridis"
+#: Height [in] of one legend row at font size 8.
+LEGEND_ROW = 0.19
 
 
 def _new_figure(width: float, height: float) -> Figure:
@@ -363,7 +365,8 @@ def plot_distance_errors(plan: Any) -> Figure:
     """Caruso 2021 Fig. 7: distance errors span_i(t) − mean_j span_j(t) per tether (top) and the spans against
     d_max and d_lo (bottom). Intervals where the obstacle-avoidance task is active
     (``plan.diagnostics["obstacle_active"]``, if present) are shaded. Top axis: N lines; bottom axis: N span
-    lines + 2 limit lines for a shared limit (2 N for per-tether limits)."""
+    lines + 2 limit lines for a shared limit (2 N for per-tether limits, in the tethers' colours, with two legend
+    entries for all of them). The figure grows with N so that each legend fits beside its axis."""
     t = np.asarray(plan.t, dtype=float)
     spans = np.asarray(plan.spans, dtype=float)
     err = distance_errors(plan)
@@ -371,8 +374,9 @@ def plot_distance_errors(plan: Any) -> Figure:
     d_lo, d_max = span_limits(plan)
     colors = [colormaps["tab10"](i % 10) for i in range(n)]
 
-    fig = _new_figure(9.5, 6.0)
-    ax_e, ax_s = _grid(fig, 2, 1, right=1.75)[:, 0]  # legends outside, on the right
+    # legends outside, on the right: each axis tall enough for its legend (N tether entries + 2 or 3)
+    fig = _new_figure(9.5, max(6.0, 2.0 * (LEGEND_ROW * (n + 3) + 0.2) + 1.7))
+    ax_e, ax_s = _grid(fig, 2, 1, right=1.95)[:, 0]
     for i in range(n):
         ax_e.plot(t, err[:, i], color=colors[i], lw=1.2, label=f"tether {i + 1}")
         ax_s.plot(t, spans[:, i], color=colors[i], lw=1.2, label=f"tether {i + 1}")
@@ -389,14 +393,18 @@ def plot_distance_errors(plan: Any) -> Figure:
     if np.allclose(d_max, d_max[0]) and np.allclose(d_lo, d_lo[0]):
         ax_s.axhline(d_max[0], color="#d62728", ls="--", lw=1.2, label=f"$d_{{max}}$ = {d_max[0]:.3g} m")
         ax_s.axhline(d_lo[0], color="#2ca02c", ls="--", lw=1.2, label=f"$d_{{lo}}$ = {d_lo[0]:.3g} m")
-    else:
+    else:  # per-tether limits in the tether's colour; two legend entries for all of them
         for i in range(n):
-            ax_s.axhline(d_max[i], color=colors[i], ls="--", lw=1.0, label=f"$d_{{max}}$ tether {i + 1}")
-            ax_s.axhline(d_lo[i], color=colors[i], ls=":", lw=1.0, label=f"$d_{{lo}}$ tether {i + 1}")
+            ax_s.axhline(d_max[i], color=colors[i], ls="--", lw=1.0)
+            ax_s.axhline(d_lo[i], color=colors[i], ls=":", lw=1.0)
+    handles, _ = ax_s.get_legend_handles_labels()
+    if not np.allclose(d_max, d_max[0]) or not np.allclose(d_lo, d_lo[0]):
+        handles.append(Line2D([], [], color="0.35", ls="--", lw=1.0, label="$d_{max}$ (tether colours)"))
+        handles.append(Line2D([], [], color="0.35", ls=":", lw=1.0, label="$d_{lo}$ (tether colours)"))
     ax_s.set_ylabel("horizontal span [m]")
     ax_s.set_xlabel("time [s]")
     ax_s.set_title("tether spans and limits", fontsize=10, y=1.0)
-    ax_s.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    ax_s.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     for ax in (ax_e, ax_s):
         ax.grid(True, lw=0.3, alpha=0.5)
     _suptitle(fig, _title(plan, "tether distance errors"))

@@ -205,8 +205,8 @@ def _axial(env: Any, ref: ChainReference, clearance: float) -> ChainReference | 
         b = shapely.get_coordinates(shapely.shortest_line(boundary, shapely.points(c)))[0]
         if np.linalg.norm(b - c) < 1e-9:
             continue
-        n = (b - c) / np.linalg.norm(b - c)
-        t = np.array([-n[1], n[0]])
+        normal = (b - c) / np.linalg.norm(b - c)  # towards the nearer jamb
+        t = np.array([-normal[1], normal[0]])  # the door's axis
         ahead = point_at(G, arcs, min(sc + 0.3, L)) - point_at(G, arcs, max(sc - 0.3, 0.0))
         if float(np.dot(t, ahead)) < 0:
             t = -t
@@ -752,7 +752,8 @@ def train_reference(
         except TrainError as exc:
             first = first or exc
     else:
-        assert first is not None
+        if first is None:  # pragma: no cover - _attempts always yields the guide first
+            raise RuntimeError("train_reference: no paths to try")
         raise first
     N = len(paths.length)
     X0 = np.asarray(ref.start, dtype=float).copy()  # every path starts where its robot stands

@@ -83,7 +83,9 @@ _BACKEND_MODULES = {"daqp": "daqp", "clarabel": "clarabel"}
 
 
 def _installed(names: Sequence[str]) -> set[str]:
-    """Which of the qpsolvers backends ``names`` are installed."""
+    """Which of the qpsolvers backends ``names`` are installed. For the default fallbacks this asks only whether
+    their module can be found (qpsolvers itself tries to import it): a broken install of one shows up as that
+    backend's error when a level falls back to it."""
     if all(n in _BACKEND_MODULES for n in names):
         return {n for n in names if importlib.util.find_spec(_BACKEND_MODULES[n]) is not None}
     import qpsolvers
