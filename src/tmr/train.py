@@ -283,22 +283,42 @@ class _Fast:
     def segment_clearance(self, a: Any, b: Any) -> Any:
         return self.env.segment_clearance(a, b)
 
+    def clear_above(self, pts: Array, least: float) -> NDArray[np.bool_]:
+        """Whether each point's exact clearance is > ``least`` [m]: inside the inner region it is ≥ c + 2 mm,
+        outside the outer one < c − 2 mm; only the points between get the exact distance."""
+        out = np.zeros(len(pts), dtype=bool)
+        unsure = np.ones(len(pts), dtype=bool)
+        if least < self.c + self.BAND:
+            sure = shapely.contains_xy(self.inner, pts[:, 0], pts[:, 1])
+            out[sure], unsure[sure] = True, False
+        if least >= self.c - self.BAND:
+            unsure &= shapely.contains_xy(self.outer, pts[:, 0], pts[:, 1])
+        idx = np.flatnonzero(unsure)
+        if len(idx):
+            out[idx] = np.asarray(self.env.exact_clearance(pts[idx]), float) > least
+        return out
+
     def segment_is_free(self, a: Any, b: Any, margin: float = 0.0) -> NDArray[np.bool_]:
         if abs(float(margin) - self.c) > 1e-6:
             return self.env.segment_is_free(a, b, margin)
         A, B = np.broadcast_arrays(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
         shape = A.shape[:-1]
         A, B = A.reshape(-1, 2), B.reshape(-1, 2)
-        lines = shapely.linestrings(np.stack([A, B], axis=1))
-        out = shapely.covers(self.inner, lines)
-        unsure = np.flatnonzero(~out & shapely.covers(self.outer, lines))
+        out = np.zeros(len(A), dtype=bool)
+        # an end outside the outer region: not free (a point test, far cheaper than ``covers`` on a segment)
+        ends = shapely.contains_xy(self.outer, A[:, 0], A[:, 1]) & shapely.contains_xy(self.outer, B[:, 0], B[:, 1])
+        idx = np.flatnonzero(ends)
+        lines = shapely.linestrings(np.stack([A[idx], B[idx]], axis=1))
+        inside = shapely.covers(self.inner, lines)
+        out[idx[inside]] = True
+        unsure = idx[~inside][shapely.covers(self.outer, lines[~inside])]
         if len(unsure):
             out[unsure] = self.env.segment_is_free(A[unsure], B[unsure], margin)
         return out.reshape(shape)
 
 
-def _clear(env: Any, least: float, pts: Array) -> NDArray[np.bool_]:
-    return np.asarray(env.exact_clearance(pts), float) > least
+def _clear(env: _Fast, least: float, pts: Array) -> NDArray[np.bool_]:
+    return env.clear_above(np.asarray(pts, dtype=float).reshape(-1, 2), least)
 
 
 def _tether_clear(env: Any, end: Array, margin: float, pts: Array) -> NDArray[np.bool_]:
