@@ -33,7 +33,7 @@ from tmr.splines import HermiteSpline, NotAKnotSpline
 
 Array = NDArray[np.float64]
 
-__all__ = ["Trajectory", "leader_trajectory", "path_length", "plan_leader_path", "time_law"]
+__all__ = ["Trajectory", "leader_trajectory", "min_jerk", "path_length", "plan_leader_path", "time_law"]
 
 #: Default number of RRT* iterations of :func:`plan_leader_path`.
 DEFAULT_ITERATIONS = 3000
@@ -457,7 +457,7 @@ class _ArcLengthSpline:
         return x, tangent, x_ss, u
 
 
-def _min_jerk(t: Array, T_end: float, L: float) -> tuple[Array, Array, Array]:
+def min_jerk(t: Array, T_end: float, L: float) -> tuple[Array, Array, Array]:
     """Quintic minimum-jerk law s = L (10 tau^3 - 15 tau^4 + 6 tau^5), tau = t / T_end [m], with s_dot [m/s]
     and s_ddot [m/s^2]; zero velocity and acceleration at t = 0 and t = T_end."""
     tau = np.clip(t / T_end, 0.0, 1.0)
@@ -586,7 +586,7 @@ def time_law(
             f"after {MAX_REFINEMENTS} refinements; pass a smaller clearance or waypoints with more clearance"
         )
 
-    s, sd, sdd = _min_jerk(t, T_end, spline.length)
+    s, sd, sdd = min_jerk(t, T_end, spline.length)
     x, tangent, x_ss, _ = spline.geometry(s)
     xd = tangent * sd[:, None]
     xdd = x_ss * (sd**2)[:, None] + tangent * sdd[:, None]

@@ -39,7 +39,7 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
-from tmr.path import Trajectory
+from tmr.path import Trajectory, min_jerk
 from tmr.references import ChainReference, leader_duration
 from tmr.route import RouteVerdict, guide_arcs, point_at
 
@@ -645,16 +645,6 @@ def _deadlock(state: _State, paths: _Paths, step: float) -> str:
     return "the chain's sequential advance stalls: " + "; ".join(parts)
 
 
-def _piece_law(length: float, T: float, Ts: float) -> tuple[Array, Array, Array]:
-    """Minimum-jerk arc s(t), ṡ, s̈ over ``length`` [m] in ``T`` [s], sampled at Ts, 2Ts, ..., T."""
-    t = Ts * np.arange(1, round(T / Ts) + 1)
-    tau = t / T
-    s = length * (10 * tau**3 - 15 * tau**4 + 6 * tau**5)
-    sd = length * (30 * tau**2 - 60 * tau**3 + 30 * tau**4) / T
-    sdd = length * (60 * tau - 180 * tau**2 + 120 * tau**3) / T**2
-    return s, sd, sdd
-
-
 def _timed(P: Array, speed: float, accel: float, Ts: float) -> tuple[Array, Array]:
     """Samples (k, 2) of a walk along polyline P and their velocities: minimum-jerk pieces between its turns
     sharper than :data:`TURN_STOP`, each within ``speed`` [m/s] and ``accel`` [m/s²] (:func:`leader_duration`)."""
@@ -668,7 +658,7 @@ def _timed(P: Array, speed: float, accel: float, Ts: float) -> tuple[Array, Arra
     xs, vs = [], []
     for a, b in zip(cuts[:-1], cuts[1:], strict=True):
         T = leader_duration(b - a, speed, accel, Ts, minimum=MIN_PIECE)
-        s, sd, _ = _piece_law(b - a, T, Ts)
+        s, sd, _ = min_jerk(Ts * np.arange(1, round(T / Ts) + 1), T, b - a)  # at Ts, 2Ts, ..., T
         uu = a + s
         k = np.clip(np.searchsorted(arcs, uu - 1e-9, side="right") - 1, 0, len(seg) - 1)  # the segment u is on
         xs.append(point_at(P, arcs, uu))
