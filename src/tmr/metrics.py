@@ -113,9 +113,10 @@ def plan_goal(plan: Any, goal: Any = None) -> np.ndarray:
     return np.asarray(goal, dtype=float)[:2].copy()
 
 
-def chain_points(plan: Any) -> np.ndarray:
-    """Polyline of the chain at every sample: base then robots 1..N, shape (K+1, N+1, 2) [m]."""
-    robots = np.asarray(plan.robots, dtype=float)
+def chain_points(plan: Any, robots: np.ndarray | None = None) -> np.ndarray:
+    """Polyline of the chain at every sample: base then robots 1..N, shape (K+1, N+1, 2) [m]; the robots at
+    ``robots`` (K+1, N, 2) [m] if given (e.g. filtered positions), else at ``plan.robots``."""
+    robots = np.asarray(plan.robots if robots is None else robots, dtype=float)
     base = np.broadcast_to(np.asarray(plan.base, dtype=float)[:2], (robots.shape[0], 1, 2))
     return np.concatenate([base, robots], axis=1)
 
@@ -543,14 +544,12 @@ def limit_breaks(plan: Any, robots: np.ndarray, env: Any, tolerance: float = 1e-
     """Samples (K+1,) bool at which positions ``robots`` (K+1, N, 2) [m] of ``plan``'s chain break a hard limit:
     a robot or tether inside the inflated obstacles, a span outside [d_lo, d_max], two robots closer than 2 r —
     the violation kinds of :func:`evaluate`, with its ``tolerance`` [m]."""
-    robots = np.asarray(robots, dtype=float)
-    base = np.broadcast_to(np.asarray(plan.base, dtype=float)[:2], (robots.shape[0], 1, 2))
-    pts = np.concatenate([base, robots], axis=1)
+    pts = chain_points(plan, robots)
     spans = np.linalg.norm(np.diff(pts, axis=1), axis=-1)
     masks = _violation_masks(
         _chain_clearances(pts, env),
         spans,
-        robot_separations(robots),
+        robot_separations(pts[:, 1:]),
         span_limits(plan),
         float(plan.safety_radius),
         tolerance,
@@ -590,6 +589,7 @@ def filter_within_limits(
     ramp = max(1.0, 1.0 / (cutoff_hz * Ts))  # samples
     k = np.arange(raw.shape[0])
     marked = bad.copy()
+    broke = f"the filtered trajectories broke a hard limit at {int(bad.sum())} sample(s) from t = {first:.2f} s"
     for hold in FILTER_HOLDS:
         idx = np.flatnonzero(marked)
         # distance [samples] of every sample to the nearest marked one
@@ -601,12 +601,6 @@ def filter_within_limits(
         out = w[:, None, None] * raw + (1.0 - w[:, None, None]) * filtered
         still = limit_breaks(plan, out, env)
         if not still.any():
-            return out, (
-                f"the filtered trajectories broke a hard limit at {int(bad.sum())} sample(s) from t = {first:.2f} s; "
-                f"there the raw plan is kept (± {hold:g} s, blending over {ramp * Ts:.2g} s)"
-            )
+            return out, f"{broke}; there the raw plan is kept (± {hold:g} s, blending over {ramp * Ts:.2g} s)"
         marked |= still
-    return raw.copy(), (
-        f"the filtered trajectories broke a hard limit at {int(bad.sum())} sample(s) from t = {first:.2f} s and no "
-        "local hold removed it: the 'filtered' trajectories are the raw plan"
-    )
+    return raw.copy(), f"{broke} and no local hold removed it: the 'filtered' trajectories are the raw plan"

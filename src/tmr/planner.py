@@ -513,28 +513,34 @@ def solve(
     warm start itself (``diagnostics["horizon_result"]`` says which); if nothing feasible is found, the failed plan
     names the violated limits.
     """
-    if method == "horizon":  # a whole-trajectory NLP, not a per-step formulation
-        from tmr.formulations.horizon import DEFAULT_TIME_LIMIT, HorizonInfeasible, plan_horizon  # casadi: when used
-
-        problem, warm, warm_metrics = _horizon_warm_start(problem, progress)
-        limit = DEFAULT_TIME_LIMIT if time_limit is None else time_limit
-        try:
-            result = plan_horizon(problem, warm, time_limit=limit, progress=progress)
-        except HorizonInfeasible as exc:
-            warm.method = "horizon"
-            first = str(exc).split(";")[0]
-            if warm.success:  # the NLP's own rows are stricter than the checks: the verified warm start stands
-                warm.diagnostics = dict(warm.diagnostics, horizon_result="warm_start")
-                warm.diagnostics["horizon_note"] = f"{first}; returned its qp warm start, which passes every check"
-                return warm, evaluate(warm, problem.env)
-            warm.success = False
-            reason = f"horizon: {exc}"
-            warm.failure = reason if warm.failure is None else f"{reason}; its qp warm start: {warm.failure}"
-            return warm, evaluate(warm, problem.env)
-    elif method == "qp":
+    if method == "qp":
         return _solve_qp(problem, progress)[1:]
-    else:
-        result = plan(problem, method, progress=progress)
+    if method != "horizon":
+        return _checked(problem, method, progress)
+    # a whole-trajectory NLP, not a per-step formulation
+    from tmr.formulations.horizon import DEFAULT_TIME_LIMIT, HorizonInfeasible, plan_horizon  # casadi: when used
+
+    problem, warm, warm_metrics = _horizon_warm_start(problem, progress)
+    limit = DEFAULT_TIME_LIMIT if time_limit is None else time_limit
+    try:
+        result = plan_horizon(problem, warm, time_limit=limit, progress=progress)
+    except HorizonInfeasible as exc:
+        warm.method = "horizon"
+        first = str(exc).split(";")[0]
+        if warm.success:  # the NLP's own rows are stricter than the checks: the verified warm start stands
+            warm.diagnostics = dict(warm.diagnostics, horizon_result="warm_start")
+            warm.diagnostics["horizon_note"] = f"{first}; returned its qp warm start, which passes every check"
+            return warm, evaluate(warm, problem.env)
+        warm.success = False
+        reason = f"horizon: {exc}"
+        warm.failure = reason if warm.failure is None else f"{reason}; its qp warm start: {warm.failure}"
+        return warm, evaluate(warm, problem.env)
+    return result, check(result, problem.env, goal_tolerance=problem.path_params.goal_tolerance)
+
+
+def _checked(problem: Problem, method: str | Formulation, progress: bool) -> tuple[Plan, Metrics]:
+    """:func:`plan` with ``method``, then :func:`check` with the problem's goal tolerance."""
+    result = plan(problem, method, progress=progress)
     return result, check(result, problem.env, goal_tolerance=problem.path_params.goal_tolerance)
 
 
@@ -586,8 +592,7 @@ def _horizon_warm_start(problem: Problem, progress: bool) -> tuple[Problem, Plan
     ref = problem.references
     if ref is not None and ref.mode == "trail" and problem.path_params.route_weight > 0 and problem.chain.n_robots > 1:
         plain = replace(problem, path_params=replace(problem.path_params, route_weight=0.0))
-        result = plan(plain, "qp", progress=progress)
-        metrics = check(result, plain.env, goal_tolerance=plain.path_params.goal_tolerance)
+        result, metrics = _checked(plain, "qp", progress)
         if result.success:
             result.diagnostics["references_note"] = (
                 "horizon warm start: the qp plan with the followers on the tether tasks (route references off)"
@@ -606,8 +611,7 @@ def _solve_qp(problem: Problem, progress: bool) -> tuple[Problem, Plan, Metrics]
     """The QP along the problem's references; if the plan fails with trailing route references (and T_end is not
     fixed by the user), again along train references (:func:`train_problem`), whose plan is returned if it passes
     every check (``diagnostics["references"]`` says which were used, ``["references_note"]`` why)."""
-    result = plan(problem, "qp", progress=progress)
-    metrics = check(result, problem.env, goal_tolerance=problem.path_params.goal_tolerance)
+    result, metrics = _checked(problem, "qp", progress)
     ref = problem.references
     if ref is None or result.success or ref.mode != "trail" or problem.fixed_duration or problem.chain.n_robots < 2:
         return problem, result, metrics
@@ -619,8 +623,7 @@ def _solve_qp(problem: Problem, progress: bool) -> tuple[Problem, Plan, Metrics]
     except TrainError as exc:
         result.diagnostics["references_note"] = f"trailing references failed ({first}); train references: {exc}"
         return problem, result, metrics
-    retry = plan(trained, "qp", progress=progress)
-    retry_metrics = check(retry, trained.env, goal_tolerance=trained.path_params.goal_tolerance)
+    retry, retry_metrics = _checked(trained, "qp", progress)
     if not retry.success:
         result.diagnostics["references_note"] = (
             f"trailing references failed ({first}); along train references too ({retry.failure})"

@@ -299,7 +299,7 @@ def plot_chain_poses(
     ax.set_xlim(cx - half_x, cx + half_x)
     ax.set_ylim(cy - half_y, cy + half_y)
     ax.set_aspect("equal")
-    cax = fig.add_axes(((w - right + 0.15) / w, bottom / h, 0.2 / w, (h - top - bottom) / h))
+    cax = fig.add_axes(((w - right + 0.15) / w, bottom / h, 0.2 / w, box_h / h))
     cbar = fig.colorbar(_scalar_mappable(cmap, norm), cax=cax, ticks=np.round(t[idx], 2) if idx.size < 12 else None)
     cbar.set_label("time [s]")
     fig.legend(handles=handles, loc="lower center", bbox_to_anchor=(0.5, 0.05 / h), ncols=4, fontsize=8, frameon=False)
@@ -390,7 +390,8 @@ def plot_distance_errors(plan: Any) -> Figure:
         handles.append(Rectangle((0, 0), 1, 1, color="#ffbb78", alpha=0.35, label="obstacle avoidance active"))
     ax_e.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
 
-    if np.allclose(d_max, d_max[0]) and np.allclose(d_lo, d_lo[0]):
+    shared = np.allclose(d_max, d_max[0]) and np.allclose(d_lo, d_lo[0])
+    if shared:
         ax_s.axhline(d_max[0], color="#d62728", ls="--", lw=1.2, label=f"$d_{{max}}$ = {d_max[0]:.3g} m")
         ax_s.axhline(d_lo[0], color="#2ca02c", ls="--", lw=1.2, label=f"$d_{{lo}}$ = {d_lo[0]:.3g} m")
     else:  # per-tether limits in the tether's colour; two legend entries for all of them
@@ -398,7 +399,7 @@ def plot_distance_errors(plan: Any) -> Figure:
             ax_s.axhline(d_max[i], color=colors[i], ls="--", lw=1.0)
             ax_s.axhline(d_lo[i], color=colors[i], ls=":", lw=1.0)
     handles, _ = ax_s.get_legend_handles_labels()
-    if not np.allclose(d_max, d_max[0]) or not np.allclose(d_lo, d_lo[0]):
+    if not shared:
         handles.append(Line2D([], [], color="0.35", ls="--", lw=1.0, label="$d_{max}$ (tether colours)"))
         handles.append(Line2D([], [], color="0.35", ls=":", lw=1.0, label="$d_{lo}$ (tether colours)"))
     ax_s.set_ylabel("horizontal span [m]")
