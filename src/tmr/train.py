@@ -145,8 +145,18 @@ class _Paths:
 
     def nearest(self, Q: Array, lo: float, hi: float) -> tuple[Array, float]:
         """Guide arcs sampled every 0.02 m over [lo, hi] (lo < hi) [m] and the one nearest the point Q."""
+        s, arcs = self.nearest_arcs(np.asarray(Q, dtype=float).reshape(1, 2), lo, hi)
+        return s, float(arcs[0])
+
+    def nearest_arcs(self, pts: Array, lo: float, hi: float) -> tuple[Array, Array]:
+        """Guide arcs sampled every 0.02 m over [lo, hi] (lo < hi) [m] and, for each of ``pts`` (m, 2), the one
+        nearest it (256 points at a time)."""
         s = np.linspace(lo, hi, max(2, int((hi - lo) / 0.02) + 1))
-        return s, float(s[int(np.argmin(np.linalg.norm(point_at(self.guide, self.garcs, s) - Q, axis=1)))])
+        G = point_at(self.guide, self.garcs, s)
+        out = np.empty(len(pts))
+        for k in range(0, len(pts), 256):
+            out[k : k + 256] = s[np.argmin(np.linalg.norm(pts[k : k + 256, None] - G[None], axis=2), axis=1)]
+        return s, out
 
 
 def _pulled(env: Any, P: Array, clearance: float, step: float = 0.1, reach: int = 150) -> Array:
@@ -339,13 +349,7 @@ def _behind(paths: _Paths, i: int, pts: Array) -> NDArray[np.bool_]:
     bound = max(float(paths.near[i + 1]), lo) + 1e-9
     if hi <= bound:
         return np.ones(len(pts), dtype=bool)
-    s = np.linspace(lo, hi, max(2, int((hi - lo) / 0.02) + 1))
-    G = point_at(paths.guide, paths.garcs, s)
-    out = np.empty(len(pts), dtype=bool)
-    for k in range(0, len(pts), 256):
-        D = np.linalg.norm(pts[k : k + 256, None] - G[None], axis=2)
-        out[k : k + 256] = s[np.argmin(D, axis=1)] <= bound
-    return out
+    return paths.nearest_arcs(pts, lo, hi)[1] <= bound
 
 
 class _State:
