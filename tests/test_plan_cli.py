@@ -180,6 +180,22 @@ def test_too_few_robots_refused_up_front_with_the_count(tmp_path, capsys):
     assert res.stdout.split() == ["2", "False", "False", "False", "False", "False"], res.stderr
 
 
+def test_corner_proof_refuses_with_exit_2(tmp_path, capsys):
+    """A 5 m wall between anchor and goal 2 m apart: the 10 m route's length allows 2 robots, its corners need 3
+    (worked by hand in tests/test_reach.py); 2 is refused up front, proven, nothing written."""
+    p = tmp_path / "short_wall.geojson"
+    p.write_text(
+        '{"type": "FeatureCollection", "bounds": [0, 0, 20, 20], "features": [{"type": "Feature", "properties": {}, '
+        '"geometry": {"type": "Polygon", "coordinates": [[[9.9, 0], [10.1, 0], [10.1, 5], [9.9, 5], [9.9, 0]]]}}]}'
+    )
+    out = tmp_path / "out"
+    args = ["--map", str(p), "--base", "9,1", "--goal", "11,1", "--robots", "2", "--out", str(out)]
+    code, stdout, err = run_cli(args, capsys)
+    assert code == 2 and not out.exists() and stdout == ""
+    assert len(err.strip().splitlines()) == 1
+    assert err.startswith("error: the goal needs at least 3 robots: no chain of 2 straight tethers") and "--robots 3" in err
+
+
 def test_goal_without_free_route_refused(tmp_path, capsys):
     p = tmp_path / "split.geojson"
     p.write_text(

@@ -368,7 +368,8 @@ def _extras(problem: Any, plan: Any, auto_note: str | None) -> dict[str, Any]:
     choice, and for ``horizon`` which plan it returned (optimum, best feasible iterate, or its warm start)."""
     out: dict[str, Any] = {"n_robots": problem.chain.n_robots, "route": problem.route_mode}
     if problem.route is not None:
-        out.update(route_length=problem.route.length, n_min=problem.route.n_min, n_lower=problem.route.n_lower)
+        rt = problem.route
+        out.update(route_length=rt.length, n_min=rt.n_min, n_lower=rt.n_lower, n_lower_by=rt.lower_by)
     if auto_note:
         out["robots_auto"] = auto_note
     if problem.references is not None:

@@ -12,8 +12,10 @@ The single source of "is this possible, and how many robots" (``formulations/rou
 3. **Fewest robots.** Tethers are straight chords of at most d_max, clear of the grown obstacles, robots at least
    2r apart. Two numbers come out:
 
-   * ``n_lower`` = ⌈L_lower / d_max⌉, a proof: any chain is a free path from the anchor to the goal, at least as
-     long as the shortest path in a region that contains the free space (grown by t, then simplified by t), L_lower;
+   * ``n_lower``, a proof: ⌈L_lower / d_max⌉ (any chain is a free path from the anchor to the goal, at least as
+     long as the shortest path in a region that contains the free space (grown by t, then simplified by t),
+     L_lower), raised where corners make a chain of that many robots impossible (:mod:`tmr.reach`, conservative
+     reachable sets on a grid);
    * ``n_min``: the robots of the *route chain*: stations on the route, each the farthest route point (step
      ``STATION_STEP``) whose chord from the previous station is free, no longer than d_max and homotopic to the
      route (the region between chord and route holds no obstacle). Corners cost robots here, so
@@ -109,7 +111,9 @@ class Route:
         margin: δ kept from the obstacles grown by r [m].
         d_max: longest tether chord [m] (per tether: ``d_max_first`` for the anchor tether).
         turning: Θ, total turning angle of the route [rad].
-        n_lower: ⌈L_lower / d_max⌉, a proven lower bound on the number of robots.
+        n_lower: a proven lower bound on the number of robots: ⌈L_lower / d_max⌉ (``lower_by`` "length"), or one
+            more than a chain proven impossible round the corners by :func:`tmr.reach.chain_is_impossible`
+            ("corners").
         lower_length: L_lower [m], the shortest path in a region containing the free space (≤ any chain's length).
         n_min: robots of the route chain (stations on the route; corners cost robots).
         stations: (n_min, 2) station positions, the last one the goal [m].
@@ -133,6 +137,7 @@ class Route:
     edges: int
     time: float
     notes: tuple[str, ...] = field(default_factory=tuple)
+    lower_by: str = "length"
 
     @property
     def arcs(self) -> Array:
@@ -143,6 +148,12 @@ class Route:
         """One line saying why ``n_robots`` cannot reach the goal along this route, or None if it can."""
         if n_robots >= self.n_min:
             return None
+        if n_robots < self.n_lower and self.lower_by == "corners":
+            return (
+                f"the goal needs at least {self.n_lower} robots: no chain of {n_robots} straight tethers of ≤ "
+                f"{self.d_max:.2f} m clear of the obstacles wraps the corners of the shortest tether route "
+                f"({self.lower_length:.1f} m); rerun with --robots {self.n_min}"
+            )
         if n_robots < self.n_lower:
             corners = (
                 "" if self.n_min == self.n_lower else f" (its corners make it {self.n_min} for a chain along the route)"
@@ -166,6 +177,7 @@ class Route:
             "route_turning": self.turning,
             "route_points": self.points.tolist(),
             "n_lower": self.n_lower,
+            "n_lower_by": self.lower_by,
             "route_lower_length": self.lower_length,
             "n_min": self.n_min,
             "stations": self.stations.tolist(),
@@ -595,8 +607,10 @@ def plan_route(
         span_limits: (N, 2) [d_lo, d_max] per tether [m] (the first row is the anchor tether), or (2,) for all.
         margin: δ [m] the route keeps from the obstacles grown by r; smaller margins are tried in narrow passages.
         robots: the chain's N, if known: when the route at ``margin`` needs more robots than that, the routes with
-            the smaller margins (through narrower passages, often shorter) are tried too and the one needing the
-            fewest robots is returned.
+            the smaller margins (δ/2, then ``NARROW_MARGIN``: through narrower passages, often shorter) are tried
+            too and the one needing the fewest robots is returned, unless N is first proven too few round the
+            corners (:mod:`tmr.reach`). Without it, ``n_lower`` is raised to ``n_min`` when N_min − 1 robots are
+            proven too few.
 
     Raises:
         NoRouteError: base or goal outside the room or in an obstacle, or in different pieces of free space.
@@ -614,63 +628,99 @@ def plan_route(
             f"no free route from the anchor {_xy(base)} to the goal {_xy(goal)}: the "
             f"obstacles grown by the safety radius {env.safety_radius:g} m separate them"
         )
-    notes: list[str] = []
     # lower bound: the shortest path in a region that contains the free space (grown by t, then simplified)
     lower = _Graph(env, 0.0, outward=True).shortest(base, goal)
     L_lower = float(guide_arcs(lower)[-1]) if lower is not None else 0.0
-    margins = tuple(dict.fromkeys((margin, margin / 2, NARROW_MARGIN)))
-    points = None
-    graph = None
-    for m in margins:
-        graph = _Graph(env, m)
-        points = graph.shortest(base, goal)
-        if points is not None:
-            if m < margin:
-                notes.append(f"route margin lowered to {m:.3f} m in a narrow passage")
-            margin = m
+    d_max = float(lim[:, 1].max())
+    ladder = [m for m in dict.fromkeys((margin, margin / 2, NARROW_MARGIN)) if m >= min(margin, NARROW_MARGIN)]
+    best: _Along | None = None
+    n_lower, lower_by = 0, "length"
+    for m in ladder:
+        if best is not None and not (robots is not None and best.n_min > robots >= n_lower):
             break
-    assert graph is not None
-    if points is None:
+        try:
+            found = _along(env, base, goal, lim, m, L_lower)
+        except RouteVerdict:
+            if best is None:
+                raise
+            continue
+        if found is None:
+            continue
+        if best is None:
+            n_lower = _length_bound(L_lower, found.length, d_max)
+            # corners: a proof that the chain given cannot reach the goal saves retrying narrower routes
+            if robots is not None and n_lower <= robots < found.n_min and _impossible(env, base, goal, lim, robots):
+                n_lower, lower_by = robots + 1, "corners"
+        if best is None or found.n_min < best.n_min:
+            best = found
+    if best is None:
         raise BlockedRouteError(
             f"no route from the anchor {_xy(base)} to the goal {_xy(goal)} keeps {NARROW_MARGIN:g} m from the "
             f"obstacles grown by {env.safety_radius:g} m: a passage is too narrow for the chain"
         )
+    n_min = max(best.n_min, n_lower)
+    if robots is None and n_lower < n_min and _impossible(env, base, goal, lim, n_min - 1):
+        n_lower, lower_by = n_min, "corners"
+    notes = [f"route margin lowered to {best.margin:.3f} m in a narrow passage"] if best.margin < margin else []
+    return Route(
+        points=best.points,
+        length=best.length,
+        margin=float(best.margin),
+        d_max=d_max,
+        d_max_first=float(lim[0, 1]),
+        turning=_turning(best.points),
+        n_lower=int(n_lower),
+        n_min=int(n_min),
+        lower_length=min(L_lower, best.length),
+        lower_by=lower_by,
+        stations=best.stations,
+        station_arcs=best.arcs,
+        vertices=best.vertices,
+        edges=best.edges,
+        time=time.perf_counter() - t0,
+        notes=tuple(notes),
+    )
+
+
+def _length_bound(L_lower: float, L: float, d_max: float) -> int:
+    """⌈L_lower / d_max⌉ (L_lower ≤ L, the route's length, up to rounding)."""
+    return max(1, math.ceil(min(L_lower, L) / d_max - 1e-9))
+
+
+def _impossible(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> bool:
+    from tmr.reach import chain_is_impossible
+
+    return robots >= 1 and chain_is_impossible(env, base, goal, lim[:, 1], robots)
+
+
+@dataclass(frozen=True)
+class _Along:
+    """The route at one margin and its stations."""
+
+    points: Array
+    length: float
+    margin: float
+    n_min: int
+    stations: Array
+    arcs: Array
+    vertices: int
+    edges: int
+
+
+def _along(env: Any, base: Array, goal: Array, lim: Array, margin: float, L_lower: float) -> _Along | None:
+    """The shortest route keeping ``margin`` [m] and its station chain; None if no route keeps it."""
+    graph = _Graph(env, margin)
+    points = graph.shortest(base, goal)
+    if points is None:
+        return None
     points = _dedupe(points)
     L = float(guide_arcs(points)[-1])
-    turning = _turning(points)
-    d_max = float(lim[:, 1].max())
-    n_lower = max(1, math.ceil(min(L_lower, L) / d_max - 1e-9))
     spacing_min = np.concatenate([lim[:1, 0], lim[1:, 0]]) + SPACING_MARGIN
     arcs, st = stations(env, points, lim[:, 1], spacing_min)
     st = st.copy()
     st[-1] = goal
-    n_min = max(len(arcs), n_lower)
-    # tighter margins can lower n_min, never below n_lower (which holds for every margin): no retry below it
-    if robots is not None and n_min > robots >= n_lower and margin > margins[-1]:
-        tighter = [m for m in margins if m < margin]
-        try:
-            other = plan_route(env, base, goal, lim, margin=tighter[0], robots=robots)
-        except RouteVerdict:
-            other = None
-        if other is not None and other.n_min < n_min:
-            return other
-    return Route(
-        points=points,
-        length=L,
-        margin=float(margin),
-        d_max=d_max,
-        d_max_first=float(lim[0, 1]),
-        turning=turning,
-        n_lower=int(n_lower),
-        n_min=int(n_min),
-        lower_length=min(L_lower, L),
-        stations=st,
-        station_arcs=arcs,
-        vertices=len(graph.V),
-        edges=graph.edges,
-        time=time.perf_counter() - t0,
-        notes=tuple(notes),
-    )
+    n_min = max(len(arcs), _length_bound(L_lower, L, float(lim[:, 1].max())))
+    return _Along(points, L, float(margin), n_min, st, arcs, len(graph.V), graph.edges)
 
 
 def _dedupe(points: Array) -> Array:

@@ -1,0 +1,170 @@
+"""A proof that N robots cannot reach the goal, counting corners: conservative reachable sets on a grid.
+
+The length bound of :mod:`tmr.route` (``n_lower`` = ⌈L_lower / d_max⌉) ignores corners: round a wall's end a chain of
+two 5.6 m tethers may be long enough and still unable to wrap it, because no point sees both the anchor and the goal
+within 5.6 m. This module proves such cases (``formulations/route.md`` §2).
+
+A chain of N robots is the polyline p_0 = anchor, p_1, …, p_N = goal with every chord p_{k-1} p_k in the free space F
+(the room minus the obstacles grown by r) and no longer than d_k. Let R_k be the set of points that can be p_k. On a
+grid of square cells of side h (half-diagonal e = h/√2), :func:`chain_is_impossible` builds cell sets R̂_k ⊇ R_k:
+
+* R̂_0: the cells holding the anchor.
+* A cell is *allowed* if it may hold a point of F (its centre within e of F), *blocked* if none of its points is
+  within e of F after a ray's deviation is added (centre farther than e + σ h from F, σ below).
+* R̂_k = R̂_{k-1} ∪ {allowed cells t within d_k + 2e of a source cell s, every cell of the ray s → t unblocked},
+  the sources being the *boundary* cells of R̂_{k-1} (an 8-neighbour allowed and outside R̂_{k-1}). Why boundary
+  cells suffice: if p_{k-1} ∈ R̂_{k-1} and p_k ∉ R̂_{k-1}, the chord leaves R̂_{k-1} at a last point p' on a boundary
+  cell, and p' p_k is itself a free chord no longer than d_k.
+* Why the ray test never rejects a real chord: if p ∈ s and q ∈ t with pq ⊂ F, the centres' segment lies within e
+  of pq; each cell of the ray table's chain from s to t has its centre within σ h of the centres' segment, hence
+  within e + σ h of F, so it is not blocked. The ray table (:func:`ray_table`) is a tree: each offset's predecessor
+  is the 8-neighbour one ring nearer whose chain stays closest to the straight segment, so one gather per ring tests
+  every ray from every source at once; σ is the table's largest deviation (1.7 cells at 5.7 m / 0.1 m).
+* Pruning: p_k is within Σ_{j>k} d_j of the goal (the rest of the chain is a path to it), so cells farther than that
+  (+ e) are dropped from R̂_k, and sources farther than Σ_{j≥k} d_j (+ e) are not expanded.
+
+If no cell holding the goal is in R̂_N, no chain of N or fewer robots exists: a proof, whatever the resolution. The
+relaxation (obstacles effectively shrunk by e + σ h ≈ 0.24 m, chords 2e ≈ 0.14 m longer at h = 0.1 m) can only make
+it prove less, never wrongly. Robot spacing and the tethers' lower limits are ignored (a relaxation too).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from typing import Any
+
+import numpy as np
+import shapely
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["REACH_CELL", "chain_is_impossible", "ray_table"]
+
+#: h [m]: cell side of the reachable-set grid (0.1 m: 0.02–0.16 s per proof on the 20 m random rooms).
+REACH_CELL = 0.1
+#: Segments per quarter circle of shapely's buffers; their radii are divided by cos(π / (4 QUAD_SEGS)) so the buffer
+#: polygon contains the true offset (its vertices lie on the circle, its edges inside it).
+_QUAD_SEGS = 4
+_NEIGHBOURS = ((-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, -1), (-1, 1), (1, 1))
+
+
+@functools.lru_cache(maxsize=4)
+def ray_table(radius: int) -> tuple[NDArray[np.int_], NDArray[np.int_], NDArray[np.int_], NDArray[np.float64]]:
+    """Offsets of a square of ``radius`` cells, each with the predecessor of its ray from the origin.
+
+    Returns ``(off, ring, pred, dev)``: ``off`` (M, 2) integer offsets (x, y), ``ring`` their Chebyshev distance,
+    ``pred`` the index of the 8-neighbour one ring nearer the origin whose chain of predecessors keeps closest to
+    the straight segment origin → offset (-1 for the origin), ``dev`` that chain's largest distance from the segment
+    [cells]. Built ring by ring, vectorised; cached.
+    """
+    n = 2 * radius + 1
+    ys, xs = np.mgrid[-radius : radius + 1, -radius : radius + 1]
+    xs, ys = xs.ravel(), ys.ravel()
+    ring = np.maximum(np.abs(xs), np.abs(ys))
+    pred = np.full(n * n, -1)
+    dev = np.zeros(n * n)
+    chain = np.zeros((n * n, radius + 1), dtype=np.int64)  # chain[i, m]: the chain's cell on ring m
+    chain[:, 0] = radius * n + radius
+    for m in range(1, radius + 1):
+        t = np.flatnonzero(ring == m)
+        tx, ty = xs[t], ys[t]
+        length = np.hypot(tx, ty)
+        ux, uy = tx / length, ty / length
+        best = np.full(len(t), np.inf)
+        best_p = np.full(len(t), -1)
+        for dx, dy in ((0, 0), *_NEIGHBOURS):
+            px, py = tx + dx, ty + dy
+            valid = np.maximum(np.abs(px), np.abs(py)) == m - 1
+            p = np.where(valid, (np.clip(py, -radius, radius) + radius) * n + np.clip(px, -radius, radius) + radius, 0)
+            cells = chain[p, :m]
+            cx, cy = xs[cells], ys[cells]
+            s = np.clip(cx * ux[:, None] + cy * uy[:, None], 0.0, length[:, None])
+            d = np.where(valid, np.hypot(cx - s * ux[:, None], cy - s * uy[:, None]).max(axis=1), np.inf)
+            better = d < best - 1e-12
+            best, best_p = np.where(better, d, best), np.where(better, p, best_p)
+        pred[t] = best_p
+        chain[t, :m] = chain[best_p, :m]
+        chain[t, m] = t
+        dev[t] = best
+    return np.stack([xs, ys], axis=1), ring, pred, dev
+
+
+def _offset_buffer(geom: Any, distance: float) -> Any:
+    """A polygon containing every point within ``distance`` [m] of ``geom``."""
+    return geom.buffer(distance / math.cos(math.pi / (4 * _QUAD_SEGS)) + 1e-9, quad_segs=_QUAD_SEGS)
+
+
+def chain_is_impossible(
+    env: Any, anchor: ArrayLike, goal: ArrayLike, d_max: ArrayLike, robots: int, cell: float = REACH_CELL
+) -> bool:
+    """True if it is proven that no chain of ``robots`` or fewer robots reaches ``goal`` (module docstring).
+
+    Args:
+        env: :class:`tmr.environment.Environment` (``free``: the free space F, ``bounds``).
+        anchor, goal: (2,) positions [m].
+        d_max: longest chord per tether [m], the anchor's first (the last value repeats), or one value for all.
+        robots: N ≥ 1.
+        cell: h [m], the grid's cell side.
+
+    False means "not proven": a chain may or may not exist.
+    """
+    a, g = np.asarray(anchor, float), np.asarray(goal, float)
+    dk = np.atleast_1d(np.asarray(d_max, float))
+    links = np.array([dk[min(k, len(dk) - 1)] for k in range(robots)])
+    rest = np.concatenate([np.cumsum(links[::-1])[::-1], [0.0]])  # rest[k]: Σ_{j>k} d_j (links k+1..N; 0-based k)
+    e = cell / math.sqrt(2.0)
+    radius = int(math.ceil((links.max() + 2 * e) / cell))
+    off, ring, pred, dev = ray_table(radius)
+    disk = np.hypot(off[:, 0], off[:, 1]) * cell <= links.max() + 2 * e
+    sigma = float(dev[disk].max()) * cell
+
+    xmin, ymin, xmax, ymax = env.bounds
+    pad = radius + 1
+    W = int(math.ceil((xmax - xmin) / cell)) + 2 * pad
+    H = int(math.ceil((ymax - ymin) / cell)) + 2 * pad
+    cx = xmin + (np.arange(W) - pad + 0.5) * cell
+    cy = ymin + (np.arange(H) - pad + 0.5) * cell
+    X, Y = np.meshgrid(cx, cy)
+    allowed = shapely.contains_xy(_offset_buffer(env.free, e), X, Y).ravel()
+    blocked = ~shapely.contains_xy(_offset_buffer(env.free, e + sigma), X, Y).ravel()
+    to_goal = np.hypot(X - g[0], Y - g[1]).ravel()
+
+    def cells_holding(p: NDArray[np.float64]) -> NDArray[np.int_]:
+        """Every cell whose closed square holds p (one, or up to four on a grid line)."""
+        fx, fy = (p[0] - xmin) / cell + pad, (p[1] - ymin) / cell + pad
+        ix = {int(math.floor(fx)), int(math.ceil(fx)) - 1} if abs(fx - round(fx)) < 1e-9 else {int(fx)}
+        iy = {int(math.floor(fy)), int(math.ceil(fy)) - 1} if abs(fy - round(fy)) < 1e-9 else {int(fy)}
+        return np.array([j * W + i for i in ix for j in iy])
+
+    # the rays: offsets inside the disk and every cell of their chains, ring by ring
+    keep = disk.copy()
+    for m in range(radius, 0, -1):  # close under predecessors (a chain may step outside the disk)
+        inner = pred[keep & (ring == m)]
+        keep[inner[inner >= 0]] = True
+    flat = off[:, 1] * W + off[:, 0]
+    rings = [np.flatnonzero(keep & (ring == m)) for m in range(1, radius + 1)]
+    origin = int(np.flatnonzero(ring == 0)[0])
+    length = np.hypot(off[:, 0], off[:, 1]) * cell
+    neighbours = np.array([dy * W + dx for dx, dy in _NEIGHBOURS])
+
+    R = np.zeros(W * H, dtype=bool)
+    R[cells_holding(a)] = True
+    goal_cells = cells_holding(g)
+    for k in range(robots):  # link k + 1: from p_k to p_{k+1}
+        inside = np.flatnonzero(R)
+        nbr = inside[:, None] + neighbours[None, :]
+        src = inside[np.any(allowed[nbr] & ~R[nbr], axis=1)] if k else inside
+        src = src[to_goal[src] <= rest[k] + e + 1e-9]
+        if not len(src):
+            break
+        vis = np.zeros((len(src), len(off)), dtype=bool)
+        vis[:, origin] = True
+        for t in rings:
+            vis[:, t] = vis[:, pred[t]] & ~blocked[src[:, None] + flat[None, t]]
+        vis &= (disk & (length <= links[k] + 2 * e + 1e-9))[None, :]
+        new = np.zeros(W * H, dtype=bool)
+        new[(src[:, None] + flat[None, :])[vis]] = True
+        R |= new & allowed & (to_goal <= rest[k + 1] + e + 1e-9)
+        if R[goal_cells].any():
+            return False
+    return not bool(R[goal_cells].any())

@@ -1,0 +1,120 @@
+"""The corner proof (tmr.reach): cases worked by hand, the ray table's geometry, and real chains never refuted."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from shapely.geometry import LineString, box
+
+from tmr.environment import Environment
+from tmr.reach import chain_is_impossible, ray_table
+from tmr.route import TooFewRobotsError, plan_route
+
+D_MAX = 5.596
+LIM = np.array([[0.5, D_MAX], [1.0, D_MAX]])
+A, G = (9.0, 1.0), (11.0, 1.0)
+
+
+def _short_wall() -> Environment:
+    """A 5 m wall (x 9.9–10.1) between the anchor (9, 1) and the goal (11, 1), in a 20 m room with r = 0.5 m."""
+    return Environment.from_geometry([box(9.9, 0.0, 10.1, 5.0)], (0.0, 0.0, 20.0, 20.0))
+
+
+def test_short_hairpin_needs_three_robots_not_two():
+    """By hand: robot 1 of a 2-robot chain must see both the anchor and the goal. The points that do lie above the two
+    tangents from the anchor and the goal to the grown wall's top corners (circles of radius r at (9.9, 5) and
+    (10.1, 5)), a wedge whose apex (10, 11.06) is its point nearest both: 10.1 m away, beyond d_max = 5.6 m. The route
+    (about 10 m) alone needs only 2."""
+    env = _short_wall()
+    c, rho = np.array([9.9, 5.0]), 0.5
+    ac = c - np.array(A)
+    slope = math.tan(math.atan2(ac[1], ac[0]) + math.asin(rho / np.linalg.norm(ac)))
+    apex = np.array([10.0, A[1] + slope * (10.0 - A[0])])
+    assert np.linalg.norm(apex - A) > 10.0 > 2 * D_MAX - 1.2  # far beyond d_max = 5.6 m
+    route = plan_route(env, A, G, LIM, robots=2)
+    assert math.ceil(route.lower_length / D_MAX) == 2  # the length bound cannot see it
+    assert route.n_lower == 3 and route.lower_by == "corners" and route.n_min == 3
+    assert chain_is_impossible(env, A, G, D_MAX, 1) and chain_is_impossible(env, A, G, D_MAX, 2)
+    assert not chain_is_impossible(env, A, G, D_MAX, 3)  # the route's own 3-robot chain exists
+    with pytest.raises(TooFewRobotsError) as err:
+        raise TooFewRobotsError(route.refusal(2), route.n_min, proven=2 < route.n_lower)
+    assert err.value.proven and str(err.value) == (
+        "the goal needs at least 3 robots: no chain of 2 straight tethers of ≤ 5.60 m clear of the obstacles wraps "
+        f"the corners of the shortest tether route ({route.lower_length:.1f} m); rerun with --robots 3"
+    )
+    # without N, the proof runs for N_min − 1 and n_lower is exact
+    assert plan_route(env, A, G, LIM).n_lower == 3
+
+
+def test_straight_corridor_is_never_refuted_at_its_length_bound():
+    """An empty 30 m × 4 m corridor: N = ⌈L / d_max⌉ robots can reach (24 m: 5); 4 cannot (the length alone)."""
+    env = Environment.from_geometry([], (0.0, 0.0, 30.0, 4.0))
+    assert not chain_is_impossible(env, (1.0, 2.0), (25.0, 2.0), D_MAX, 5)
+    assert chain_is_impossible(env, (1.0, 2.0), (25.0, 2.0), D_MAX, 4)
+    # one tether exactly d_max long along a grid line (the goal on cell edges): reachable
+    assert not chain_is_impossible(env, (1.0, 2.0), (1.0 + D_MAX, 2.0), D_MAX, 1)
+
+
+def test_per_tether_limits_apply_in_order():
+    """Anchor tether 2 m, then 5.6 m: 7 m along a free corridor takes 2 robots, not 1; 3 m anchor-first takes 1."""
+    env = Environment.from_geometry([], (0.0, 0.0, 30.0, 4.0))
+    assert chain_is_impossible(env, (1.0, 2.0), (8.0, 2.0), [2.0, D_MAX], 1)
+    assert not chain_is_impossible(env, (1.0, 2.0), (8.0, 2.0), [2.0, D_MAX], 2)
+    assert chain_is_impossible(env, (1.0, 2.0), (8.0, 2.0), [2.0, 2.0], 3)  # 3 × 2 m < 7 m
+
+
+def test_u_shaped_wall_chain_of_the_route_is_never_refuted():
+    """Every prefix of the route's station chain (a real chain: free chords ≤ d_max) is reachable in the proof."""
+    walls = [LineString([(8, 6), (8, 14)]), LineString([(8, 14), (15, 14)]), LineString([(8, 6), (15, 6)])]
+    env = Environment.from_geometry([w.buffer(0.1, cap_style="flat") for w in walls], (0.0, 0.0, 20.0, 20.0))
+    route = plan_route(env, (2.0, 10.0), (11.0, 10.0), LIM)
+    assert route.n_min >= 4
+    for k, station in enumerate(route.stations, start=1):
+        assert not chain_is_impossible(env, (2.0, 10.0), station, LIM[:, 1], k), k
+
+
+def test_random_rooms_station_chains_are_never_refuted():
+    """On seeded random rooms, no prefix of a real chain (the route's stations) is ever proven impossible."""
+    from tmr.route import RouteVerdict
+    from tmr.sweep.rooms import room_from_spec, room_set, span_rows
+
+    lim = span_rows()
+    checked = 0
+    for spec in room_set(24, seed=3):
+        room = room_from_spec(spec)
+        if isinstance(room, str):
+            continue
+        env = room.environment()
+        try:
+            route = plan_route(env, room.base, room.goal, lim)
+        except RouteVerdict:
+            continue
+        for k, station in enumerate(route.stations, start=1):
+            assert not chain_is_impossible(env, room.base, station, lim[:, 1], k), (spec, k)
+            checked += 1
+    assert checked >= 40
+
+
+def test_ray_table_chains_stay_near_their_segments():
+    """Each offset's chain of predecessors steps one ring at a time to the origin, and stays within ``dev`` of the
+    straight segment (recomputed here point by point), at most 1.7 cells at the default radius."""
+    off, ring, pred, dev = ray_table(12)
+    origin = int(np.flatnonzero(ring == 0)[0])
+    for i in range(len(off)):
+        if i == origin:
+            continue
+        t = off[i].astype(float)
+        u = t / np.linalg.norm(t)
+        j, worst = i, 0.0
+        while j != origin:
+            p = pred[j]
+            assert ring[p] == ring[j] - 1 and np.abs(off[p] - off[j]).max() == 1
+            c = off[j].astype(float)
+            s = float(np.clip(c @ u, 0.0, np.linalg.norm(t)))
+            worst = max(worst, float(np.linalg.norm(c - s * u)))
+            j = p
+        assert worst == pytest.approx(dev[i], abs=1e-9)
+    off, ring, pred, dev = ray_table(58)
+    assert dev[np.hypot(off[:, 0], off[:, 1]) <= 58].max() < 1.7
