@@ -193,7 +193,10 @@ def test_corner_proof_refuses_with_exit_2(tmp_path, capsys):
     code, stdout, err = run_cli(args, capsys)
     assert code == 2 and not out.exists() and stdout == ""
     assert len(err.strip().splitlines()) == 1
-    assert err.startswith("error: the goal needs at least 3 robots: no chain of 2 straight tethers") and "--robots 3" in err
+    assert (
+        err.startswith("error: the goal needs at least 3 robots: no chain of 2 straight tethers")
+        and "--robots 3" in err
+    )
 
 
 def test_goal_without_free_route_refused(tmp_path, capsys):

@@ -195,7 +195,11 @@ def chain_run_dict(plan: Any, env: Any, extra: dict[str, Any] | None = None) -> 
             **_known_free(env),
         },
         "tether": tether,
-        "route": {k: ex[k] for k in sorted(ex) if k in ("route", "route_length", "n_min", "n_lower", "n_lower_by", "robots_auto")},
+        "route": {
+            k: ex[k]
+            for k in sorted(ex)
+            if k in ("route", "route_length", "n_min", "n_lower", "n_lower_by", "robots_auto")
+        },
         "params": {k: p[k] for k in sorted(p)},
         "files": {"trajectories": "trajectories.json", "metrics": "metrics.json"},
     }
