@@ -504,6 +504,33 @@ class Environment:
                 out[inside] = self._boundary_distance(lines[covered]) > M[inside]
         return out.reshape(shape)
 
+    def visible_region(self, point: ArrayLike, radius: float) -> BaseGeometry:
+        """The points q of the free space within ``radius`` [m] of ``point`` whose segment point–q lies in the free
+        space (``point``'s visibility polygon cut to a disc), as a shapely geometry. It contains every such point;
+        the disc is a circumscribed 64-gon, so points up to 0.12 % beyond the radius may be in it too.
+
+        The disc (a 64-gon circumscribing the circle) ∩ the free space, minus the shadow of every free-space boundary
+        segment near the point: the quadrilateral behind the segment as seen from the point, closed at twice the
+        radius (through the bisector too, so it covers the disc). A segment from the point crosses the boundary iff
+        its far end is in a shadow. ``point`` must be in the free space.
+        """
+        p = _as_points(point, "point").reshape(2)
+        r = _check_positive(radius, "radius [m]")
+        disc = shapely.Point(p).buffer(r / math.cos(math.pi / 64), quad_segs=16)
+        tree, segments = self._tree
+        c = shapely.get_coordinates(segments[tree.query(disc)]).reshape(-1, 2, 2)
+        du, dv = c[:, 0] - p, c[:, 1] - p
+        nu, nv = np.linalg.norm(du, axis=1), np.linalg.norm(dv, axis=1)
+        cross = du[:, 0] * dv[:, 1] - du[:, 1] * dv[:, 0]
+        keep = np.abs(cross) > 1e-9 * nu * nv  # a segment in line with the point casts no shadow
+        c, du, dv = c[keep], du[keep] / nu[keep, None], dv[keep] / nv[keep, None]
+        mid = du + dv
+        mid /= np.linalg.norm(mid, axis=1, keepdims=True)
+        far = 2.0 * r
+        rings = np.stack([c[:, 0], c[:, 1], p + far * dv, p + far * mid, p + far * du, c[:, 0]], axis=1)
+        shadows = shapely.union_all(shapely.make_valid(shapely.polygons(rings)))
+        return shapely.difference(shapely.intersection(self.free, disc), shadows)
+
     def _penetration(self, A: NDArray[np.float64], B: NDArray[np.float64]) -> NDArray[np.float64]:
         """min(0, min exact clearance over points spaced <= resolution/2 along each segment A-B)."""
         h = 0.5 * self.resolution

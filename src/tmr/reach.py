@@ -8,9 +8,9 @@ A chain of N robots is the polyline p_0 = anchor, p_1, …, p_N = goal with ever
 (the room minus the obstacles grown by r) and no longer than d_k. Let R_k be the set of points that can be p_k. On a
 grid of square cells of side h (half-diagonal e = h/√2), :func:`chain_is_impossible` builds cell sets R̂_k ⊇ R_k:
 
-* R̂_0: the cells holding the anchor.
 * A cell is *allowed* if it may hold a point of F (its centre within e of F), *blocked* if none of its points is
   within e of F after a ray's deviation is added (centre farther than e + σ h from F, σ below).
+* R̂_1: the cells of the anchor's exact visible region within d_1 (:meth:`Environment.visible_region`).
 * R̂_k = R̂_{k-1} ∪ {allowed cells t within d_k + 2e of a source cell s, every cell of the ray s → t unblocked},
   the sources being the *boundary* cells of R̂_{k-1} (an 8-neighbour allowed and outside R̂_{k-1}). Why boundary
   cells suffice: if p_{k-1} ∈ R̂_{k-1} and p_k ∉ R̂_{k-1}, the chord leaves R̂_{k-1} at a last point p' on a boundary
@@ -20,12 +20,14 @@ grid of square cells of side h (half-diagonal e = h/√2), :func:`chain_is_impos
   within e + σ h of F, so it is not blocked. The ray table (:func:`ray_table`) is a tree: each offset's predecessor
   is the 8-neighbour one ring nearer whose chain stays closest to the straight segment, so one gather per ring tests
   every ray from every source at once; σ is the table's largest deviation (1.7 cells at 5.7 m / 0.1 m).
+* The last tether exactly too: p_{N-1} is in the goal's visible region within d_N, so R̂_{N-1} must meet its cells.
 * Pruning: p_k is within Σ_{j>k} d_j of the goal (the rest of the chain is a path to it), so cells farther than that
   (+ e) are dropped from R̂_k, and sources farther than Σ_{j≥k} d_j (+ e) are not expanded.
 
-If no cell holding the goal is in R̂_N, no chain of N or fewer robots exists: a proof, whatever the resolution. The
-relaxation (obstacles effectively shrunk by e + σ h ≈ 0.24 m, chords 2e ≈ 0.14 m longer at h = 0.1 m) can only make
-it prove less, never wrongly. Robot spacing and the tethers' lower limits are ignored (a relaxation too).
+If R̂_{N-1} meets none of the cells the goal sees, no chain of N or fewer robots exists: a proof, whatever the
+resolution. The relaxation of the middle tethers (obstacles effectively shrunk by e + σ h ≈ 0.24 m, chords 2e ≈
+0.14 m longer at h = 0.1 m) can only make it prove less, never wrongly. Robot spacing and the tethers' lower limits
+are ignored (a relaxation too).
 """
 
 from __future__ import annotations
@@ -129,13 +131,6 @@ def chain_is_impossible(
     blocked = ~shapely.contains_xy(_offset_buffer(env.free, e + sigma), X, Y).ravel()
     to_goal = np.hypot(X - g[0], Y - g[1]).ravel()
 
-    def cells_holding(p: NDArray[np.float64]) -> NDArray[np.int_]:
-        """Every cell whose closed square holds p (one, or up to four on a grid line)."""
-        fx, fy = (p[0] - xmin) / cell + pad, (p[1] - ymin) / cell + pad
-        ix = {int(math.floor(fx)), int(math.ceil(fx)) - 1} if abs(fx - round(fx)) < 1e-9 else {int(fx)}
-        iy = {int(math.floor(fy)), int(math.ceil(fy)) - 1} if abs(fy - round(fy)) < 1e-9 else {int(fy)}
-        return np.array([j * W + i for i in ix for j in iy])
-
     # the rays: offsets inside the disk and every cell of their chains, ring by ring
     keep = disk.copy()
     for m in range(radius, 0, -1):  # close under predecessors (a chain may step outside the disk)
@@ -147,13 +142,29 @@ def chain_is_impossible(
     length = np.hypot(off[:, 0], off[:, 1]) * cell
     neighbours = np.array([dy * W + dx for dx, dy in _NEIGHBOURS])
 
-    R = np.zeros(W * H, dtype=bool)
-    R[cells_holding(a)] = True
-    goal_cells = cells_holding(g)
-    for k in range(robots):  # link k + 1: from p_k to p_{k+1}
+    def near(region: Any) -> NDArray[np.bool_]:
+        """Cells with a point in ``region`` (their centre within e of it)."""
+        out = np.zeros(W * H, dtype=bool)
+        if region.is_empty:
+            return out
+        x0, y0, x1, y1 = region.bounds
+        i = slice(max(0, int((x0 - xmin) / cell) + pad - 1), min(W, int((x1 - xmin) / cell) + pad + 2))
+        j = slice(max(0, int((y0 - ymin) / cell) + pad - 1), min(H, int((y1 - ymin) / cell) + pad + 2))
+        sub = np.zeros((H, W), dtype=bool)
+        sub[j, i] = shapely.contains_xy(_offset_buffer(region, e), X[j, i], Y[j, i])
+        return sub.ravel()
+
+    # the first and the last tether exactly: robot 1 sees the anchor, robot N − 1 sees the goal
+    if robots == 1:
+        return not (np.linalg.norm(g - a) <= links[0] and bool(env.segment_is_free(a[None], g[None])[0]))
+    R = near(env.visible_region(a, links[0])) & allowed & (to_goal <= rest[1] + e + 1e-9)
+    last = near(env.visible_region(g, links[-1])) & allowed
+    for k in range(1, robots - 1):  # link k + 1: from p_k to p_{k+1}
+        if (R & last).any():
+            return False
         inside = np.flatnonzero(R)
         nbr = inside[:, None] + neighbours[None, :]
-        src = inside[np.any(allowed[nbr] & ~R[nbr], axis=1)] if k else inside
+        src = inside[np.any(allowed[nbr] & ~R[nbr], axis=1)]
         src = src[to_goal[src] <= rest[k] + e + 1e-9]
         if not len(src):
             break
@@ -165,6 +176,4 @@ def chain_is_impossible(
         new = np.zeros(W * H, dtype=bool)
         new[(src[:, None] + flat[None, :])[vis]] = True
         R |= new & allowed & (to_goal <= rest[k + 1] + e + 1e-9)
-        if R[goal_cells].any():
-            return False
-    return not bool(R[goal_cells].any())
+    return not bool((R & last).any())
