@@ -199,6 +199,22 @@ def test_corner_proof_refuses_with_exit_2(tmp_path, capsys):
     )
 
 
+def test_chain_off_the_route_plans_with_fewer_robots(tmp_path, capsys):
+    """medium-far-3985118755: 6 robots along the shortest route, 4 off it (the proven minimum): 4 plan."""
+    from tmr.sweep.rooms import generate_room, write_geojson
+
+    room = generate_room(3985118755, "medium", "far")
+    path = write_geojson(room, tmp_path / "room.geojson")
+    out = tmp_path / "out"
+    base, goal = ",".join(map(str, room.base)), ",".join(map(str, room.goal))
+    args = ["--map", str(path), f"--base={base}", f"--goal={goal}", "--robots", "4", "--no-plots", "--out", str(out)]
+    code, _, err = run_cli(args, capsys)
+    assert code == 0, err
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["success"] and metrics["n_violation_steps"] == 0
+    assert (metrics["n_robots"], metrics["n_min"], metrics["n_lower"], metrics["n_route"]) == (4, 4, 4, 6)
+
+
 def test_goal_without_free_route_refused(tmp_path, capsys):
     p = tmp_path / "split.geojson"
     p.write_text(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -118,3 +119,51 @@ def test_ray_table_chains_stay_near_their_segments():
         assert worst == pytest.approx(dev[i], abs=1e-9)
     off, ring, pred, dev = ray_table(58)
     assert dev[np.hypot(off[:, 0], off[:, 1]) <= 58].max() < 1.7
+
+
+def _check_chain(env, chain, anchor, goal, spans, clearance, first):
+    """A witness by the definition: anchor → … → goal, chords in [d_lo, d_max] clear by more than ``clearance``."""
+    assert np.allclose(chain[0], anchor) and np.allclose(chain[-1], goal)
+    for k, (p, q) in enumerate(zip(chain[:-1], chain[1:], strict=True)):
+        lo, hi = spans[min(k, len(spans) - 1)]
+        assert lo <= np.linalg.norm(q - p) <= hi
+        assert env.segment_clearance(p, q) > (first if k == 0 else clearance)
+    robots = chain[1:]
+    gaps = np.linalg.norm(robots[:, None] - robots[None, :], axis=-1)[np.triu_indices(len(robots), 1)]
+    assert len(gaps) == 0 or gaps.min() >= 2 * spans[min(1, len(spans) - 1)][0]
+
+
+def test_find_chain_round_the_short_wall():
+    """The fewest-robot witness round the 5 m wall has 3 robots (2 are proven impossible above)."""
+    from tmr.reach import find_chain
+
+    env = _short_wall()
+    spans = np.array([[0.6, D_MAX], [1.1, D_MAX]])
+    chain = find_chain(env, A, G, spans, 5, 0.06, 0.06)
+    assert chain is not None and len(chain) - 1 == 3
+    _check_chain(env, chain, A, G, spans, 0.06, 0.06)
+    assert find_chain(env, A, G, spans, 2, 0.06, 0.06) is None
+
+
+def test_chain_off_the_route_needs_fewer_robots():
+    """medium-far-3985118755: the chain along the shortest route needs 6 robots; one off it needs 4, which the
+    length proves are needed (n_lower = 4), so N_min = 4 is exact; with N = 4 the guide is that chain."""
+    from tmr.route import CHORD_CLEARANCE
+    from tmr.sweep.rooms import generate_room, span_rows
+
+    room = generate_room(3985118755, "medium", "far")
+    env, lim = room.environment(), span_rows()
+    route = plan_route(env, room.base, room.goal, lim)
+    assert (route.n_lower, route.n_min, route.n_route) == (4, 4, 6)
+    assert route.refusal(3).endswith("rerun with --robots 4") and route.refusal(4) is None
+    unproven = dataclasses.replace(route, n_lower=3).refusal(3)  # the search verdict's wording
+    assert "6 robots along the shortest tether route" in unproven and "4 off it (proven: at least 3)" in unproven
+    four = plan_route(env, room.base, room.goal, lim, robots=4)
+    assert four.n_min == 4 and len(four.stations) == 4 and any("found off it" in n for n in four.notes)
+    chain = np.vstack([room.base, four.stations])
+    assert np.allclose(four.points, chain)
+    spans = np.column_stack([lim[:, 0] + 0.1, lim[:, 1]])
+    first = min(CHORD_CLEARANCE, 0.5 * float(env.exact_clearance(np.asarray(room.base))))
+    _check_chain(env, chain, room.base, room.goal, spans, CHORD_CLEARANCE, first)
+    # N ≥ the route chain's count keeps the shortest route as the guide
+    assert len(plan_route(env, room.base, room.goal, lim, robots=6).points) > 5

@@ -84,7 +84,7 @@ def _robots(text: str) -> int | str:
         raise argparse.ArgumentTypeError(f"expected a number of robots ≥ 1 or 'auto', got {text!r}") from exc
 
 
-#: ``--robots auto`` tries N_min, N_min + 1, ... up to N_min + AUTO_EXTRA robots.
+#: ``--robots auto`` tries N_min, N_min + 1, ... up to AUTO_EXTRA robots more than the route chain needs.
 AUTO_EXTRA = 3
 
 
@@ -351,7 +351,7 @@ def _plan_once(args: argparse.Namespace, scenario: Any, n_robots: int | None, ro
         overrides=overrides,
         path_iterations=args.iterations,
         route=args.route,
-        known_route=route if (n_robots or 0) >= max(2, route.n_min) else None,
+        known_route=route if (n_robots or 0) >= max(2, route.n_min, route.n_route) else None,
     )
     plan, metrics = solve(problem, args.method, time_limit=args.time_limit, progress=progress_enabled())
     return problem, plan, metrics
@@ -370,6 +370,7 @@ def _extras(problem: Any, plan: Any, auto_note: str | None) -> dict[str, Any]:
     if problem.route is not None:
         rt = problem.route
         out.update(route_length=rt.length, n_min=rt.n_min, n_lower=rt.n_lower, n_lower_by=rt.lower_by)
+        out.update(n_route=rt.n_route)
     if auto_note:
         out["robots_auto"] = auto_note
     if problem.references is not None:
@@ -476,7 +477,7 @@ def _main(args: argparse.Namespace) -> int:
         auto_note = None
         if args.robots == "auto":
             tried = []
-            last = rt.n_min + AUTO_EXTRA
+            last = max(rt.n_min, rt.n_route) + AUTO_EXTRA
             problem = None
             for n in range(rt.n_min, last + 1):
                 try:

@@ -177,3 +177,77 @@ def chain_is_impossible(
         new[(src[:, None] + flat[None, :])[vis]] = True
         R |= new & allowed & (to_goal <= rest[k + 1] + e + 1e-9)
     return not bool((R & last).any())
+
+
+#: Spacing [m] of the candidate robot positions of :func:`find_chain`, and of the cells that thin each level's
+#: frontier to one source.
+WITNESS_STEP = 0.25
+WITNESS_THIN = 0.5
+
+
+def find_chain(
+    env: Any,
+    anchor: ArrayLike,
+    goal: ArrayLike,
+    span_limits: ArrayLike,
+    robots: int,
+    clearance: float,
+    first_clearance: float | None = None,
+) -> NDArray[np.float64] | None:
+    """A chain of at most ``robots`` robots from ``anchor`` to ``goal`` anywhere in the free space, or None.
+
+    Breadth-first search over candidate positions (a grid every :data:`WITNESS_STEP` [m] keeping ``clearance`` from
+    the obstacles grown by r, and the goal): tether k joins two candidates if its chord is in [d_lo, d_max] of row k
+    of ``span_limits`` (N, 2) (the last row repeats) and keeps clearance > ``clearance`` [m] (the anchor's tether:
+    ``first_clearance``), exact (``Environment.segment_is_free``). Each level expands one source per
+    :data:`WITNESS_THIN` cell of the positions it reached (the first in grid order), and only candidates from which
+    the rest of the chain can still reach the goal in a straight line. Returns the fewest-hop chain found, (n + 1, 2)
+    from the anchor to the goal with n ≤ ``robots``, whose robots are also 2 d_lo[1] apart pairwise; a witness, not
+    a proof: None says nothing.
+    """
+    a, g = np.asarray(anchor, float), np.asarray(goal, float)
+    lim = np.atleast_2d(np.asarray(span_limits, float))
+    rows = np.array([lim[min(k, len(lim) - 1)] for k in range(robots)])
+    rest = np.concatenate([np.cumsum(rows[::-1, 1])[::-1], [0.0]])
+    xmin, ymin, xmax, ymax = env.bounds
+    xs, ys = np.meshgrid(np.arange(xmin + WITNESS_STEP / 2, xmax, WITNESS_STEP),
+                         np.arange(ymin + WITNESS_STEP / 2, ymax, WITNESS_STEP))  # fmt: skip
+    P = np.stack([xs.ravel(), ys.ravel()], axis=1)
+    P = P[np.linalg.norm(P - g, axis=1) <= rest[1] + 1e-9]
+    P = np.vstack([P[env.is_free(P, clearance)], g, a])
+    goal_i, anchor_i = len(P) - 2, len(P) - 1
+    to_goal = np.linalg.norm(P - g, axis=1)
+    parent = np.full(len(P), -1)
+    level = np.full(len(P), -1)
+    level[anchor_i] = 0
+    frontier = np.array([anchor_i])
+    for k in range(robots):
+        d_lo, d_hi = rows[k]
+        margin = clearance if k or first_clearance is None else first_clearance
+        reached: list[int] = []
+        for s in frontier:
+            cand = np.flatnonzero((level < 0) & (to_goal <= rest[k + 1] + 1e-9))
+            d = np.linalg.norm(P[cand] - P[s], axis=1)
+            cand = cand[(d <= d_hi) & (d >= d_lo)]
+            if not len(cand):
+                continue
+            ok = cand[env.segment_is_free(np.broadcast_to(P[s], (len(cand), 2)), P[cand], margin)]
+            level[ok], parent[ok] = k + 1, s
+            reached.extend(ok.tolist())
+        if level[goal_i] >= 0:
+            chain = [goal_i]
+            while chain[-1] != anchor_i:
+                chain.append(int(parent[chain[-1]]))
+            out = P[chain[::-1]]
+            robots_xy = out[1:]
+            gaps = np.linalg.norm(robots_xy[:, None] - robots_xy[None, :], axis=-1)
+            spacing = 2.0 * float(rows[min(1, len(rows) - 1), 0])
+            if len(robots_xy) > 1 and gaps[np.triu_indices(len(robots_xy), 1)].min() < spacing:
+                return None
+            return out
+        if not reached:
+            return None
+        new = np.array(reached)
+        _, first = np.unique(np.floor(P[new] / WITNESS_THIN).astype(np.int64), axis=0, return_index=True)
+        frontier = new[np.sort(first)]
+    return None

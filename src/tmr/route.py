@@ -20,7 +20,9 @@ The single source of "is this possible, and how many robots" (``formulations/rou
      ``STATION_STEP``) whose chord from the previous station is free, no longer than d_max and homotopic to the
      route (the region between chord and route holds no obstacle). Corners cost robots here, so
      ``n_min ≥ n_lower``; it is what the route-guided planner can realise, and a plan with N ≥ n_min starts
-     from a placement along the route and ends with the robots at these stations.
+     from a placement along the route and ends with the robots at these stations. Where
+     :func:`tmr.reach.find_chain` finds a chain of fewer robots off the route, ``n_min`` is its count
+     (``n_route`` keeps the route chain's) and, for N below ``n_route``, that chain's polyline is the guide.
 
 A goal in another connected piece of free space raises :class:`NoRouteError`. Nothing here plans motion.
 """
@@ -115,7 +117,10 @@ class Route:
             more than a chain proven impossible round the corners by :func:`tmr.reach.chain_is_impossible`
             ("corners").
         lower_length: L_lower [m], the shortest path in a region containing the free space (≤ any chain's length).
-        n_min: robots of the route chain (stations on the route; corners cost robots).
+        n_min: the fewest robots of a chain found: the route chain (stations on the route; corners cost robots), or
+            fewer where :func:`tmr.reach.find_chain` finds a chain off the route.
+        n_route: robots of the route chain; for N < n_route, ``plan_route(..., robots=N)`` returns a route whose
+            guide is the chain found off the route (``points``: its polyline, ``stations``: its robots).
         stations: (n_min, 2) station positions, the last one the goal [m].
         station_arcs: (n_min,) their arc lengths along the route [m].
         vertices: number of reflex vertices of the visibility graph; edges: its edges.
@@ -138,6 +143,7 @@ class Route:
     time: float
     notes: tuple[str, ...] = field(default_factory=tuple)
     lower_by: str = "length"
+    n_route: int = 0
 
     @property
     def arcs(self) -> Array:
@@ -162,11 +168,15 @@ class Route:
                 f"the goal needs at least {self.n_lower} robots: shortest tether route {self.lower_length:.1f} m, "
                 f"each tether ≤ {self.d_max:.2f} m{corners}; rerun with --robots {self.n_min}"
             )
+        where = f"the shortest tether route ({self.length:.1f} m, {len(self.points) - 2} corner(s))"
+        need = (
+            f"{self.n_min} robots along {where}"
+            if self.n_min >= self.n_route
+            else f"{self.n_route} robots along {where}, {self.n_min} off it"
+        )
         return (
-            f"no chain of {n_robots} robots was found along the shortest tether route ({self.length:.1f} m, "
-            f"{len(self.points) - 2} corner(s)): straight tethers of ≤ {self.d_max:.2f} m clear of the obstacles "
-            f"need {self.n_min} robots there (the route length alone needs {self.n_lower}); rerun with --robots "
-            f"{self.n_min}"
+            f"no chain of {n_robots} robots was found: straight tethers of ≤ {self.d_max:.2f} m clear of the "
+            f"obstacles need {need} (proven: at least {self.n_lower}); rerun with --robots {self.n_min}"
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -178,6 +188,7 @@ class Route:
             "route_points": self.points.tolist(),
             "n_lower": self.n_lower,
             "n_lower_by": self.lower_by,
+            "n_route": self.n_route,
             "route_lower_length": self.lower_length,
             "n_min": self.n_min,
             "stations": self.stations.tolist(),
@@ -662,6 +673,18 @@ def plan_route(
     if robots is None and n_lower < n_min and _impossible(env, base, goal, lim, n_min - 1):
         n_lower, lower_by = n_min, "corners"
     notes = [f"route margin lowered to {best.margin:.3f} m in a narrow passage"] if best.margin < margin else []
+    n_route = n_min
+    if n_lower < n_min and (robots is None or robots < n_min):
+        # fewer robots than the route chain needs: a chain anywhere in the free space (the same search whatever N)
+        witness = _witness(env, base, goal, lim, n_min - 1)
+        if witness is not None:
+            n_min = len(witness) - 1
+            if robots is not None and robots >= n_min:  # plan along it: its polyline is the guide
+                best = _witness_along(witness, best)
+                notes.append(
+                    f"no chain of {robots} robots along the shortest route ({n_route} needed there): the guide is a "
+                    f"chain of {n_min} found off it"
+                )
     return Route(
         points=best.points,
         length=best.length,
@@ -673,6 +696,7 @@ def plan_route(
         n_min=int(n_min),
         lower_length=min(L_lower, best.length),
         lower_by=lower_by,
+        n_route=int(n_route),
         stations=best.stations,
         station_arcs=best.arcs,
         vertices=best.vertices,
@@ -691,6 +715,21 @@ def _impossible(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> 
     from tmr.reach import chain_is_impossible
 
     return robots >= 1 and chain_is_impossible(env, base, goal, lim[:, 1], robots)
+
+
+def _witness(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> Array | None:
+    from tmr.reach import find_chain
+
+    first = min(CHORD_CLEARANCE, 0.5 * float(np.asarray(env.exact_clearance(base))))  # an anchor next to a wall
+    spans = np.column_stack([lim[:, 0] + SPACING_MARGIN, lim[:, 1]])
+    return find_chain(env, base, goal, spans, robots, CHORD_CLEARANCE, first)
+
+
+def _witness_along(chain: Array, route: _Along) -> _Along:
+    """The witness chain as the guide: its polyline, stations at its robots."""
+    arcs = guide_arcs(chain)
+    return _Along(chain, float(arcs[-1]), CHORD_CLEARANCE, len(chain) - 1, chain[1:].copy(), arcs[1:], route.vertices,
+                  route.edges)  # fmt: skip
 
 
 @dataclass(frozen=True)
