@@ -255,8 +255,10 @@ def write_outputs(
     plots: bool,
     extra: dict[str, Any] | None = None,
     route: Any = None,
+    pool: Any = None,
 ) -> list[str]:
-    """Write every output into a temporary sibling directory, then move the files into ``out``."""
+    """Write every output into a temporary sibling directory, then move the files into ``out``; the figures are
+    rendered by ``pool`` (a :class:`tmr.plotpool.FigurePool`) if given, else here."""
     from tmr import io
 
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -272,16 +274,20 @@ def write_outputs(
 
         write_chain_run(tmp / "run.json", plan, env, extra)  # scenario, map and tether parameters (tmr.replay)
         if plots:
-            from tmr import plot
-
-            figs = {
-                "chain_poses.png": plot.plot_chain_poses(plan, env, route=route),
-                "trajectories.png": plot.plot_trajectories(plan, filtered),
-                "distance_errors.png": plot.plot_distance_errors(plan),
-                "speeds.png": plot.plot_speeds(plan, filtered),
+            figures = {
+                "chain_poses.png": ("plot_chain_poses", (plan, env), {"route": route}),
+                "trajectories.png": ("plot_trajectories", (plan, filtered), {}),
+                "distance_errors.png": ("plot_distance_errors", (plan,), {}),
+                "speeds.png": ("plot_speeds", (plan, filtered), {}),
             }
-            for name, fig in figs.items():
-                plot.save_figure(fig, tmp / name)
+            if pool is not None:
+                for name, data in pool.render(figures).items():
+                    io.atomic_write_bytes(tmp / name, data)
+            else:
+                from tmr import plot
+
+                for name, (function, args, kwargs) in figures.items():
+                    plot.save_figure(getattr(plot, function)(*args, **kwargs), tmp / name)
         out.mkdir(parents=True, exist_ok=True)
         names = sorted(p.name for p in tmp.iterdir())
         for name in names:
@@ -451,6 +457,16 @@ def main(argv: list[str] | None = None) -> int:
     return run_cli(_main, args)
 
 
+def _figure_pool(args: argparse.Namespace) -> Any:
+    """Workers that import matplotlib while the plan is computed (:mod:`tmr.plotpool`), when figures are wanted and
+    there is a core to spare; else None (figures rendered in this process)."""
+    if args.no_plots or (os.cpu_count() or 1) < 2:
+        return None
+    from tmr.plotpool import FigurePool
+
+    return FigurePool()
+
+
 def _main(args: argparse.Namespace) -> int:
     from tmr.route import RouteVerdict
 
@@ -472,38 +488,51 @@ def _main(args: argparse.Namespace) -> int:
             "route %.3f m, N_lower = %d, N_min = %d; planning with N = %s", rt.length, rt.n_lower, rt.n_min, n_first
         )
 
-        from tmr.metrics import filter_within_limits
+        pool = _figure_pool(args)
+        try:
+            from tmr.metrics import filter_within_limits
 
-        auto_note = None
-        if args.robots == "auto":
-            tried = []
-            last = max(rt.n_min, rt.n_route) + AUTO_EXTRA
-            problem = None
-            for n in range(rt.n_min, last + 1):
-                try:
-                    attempt = _plan_once(args, scenario, n, rt)
-                except TmrError as exc:  # refused, no start placement or no path with this N: try the next one
-                    tried.append(f"{n}: {_short(exc)}")
-                    continue
-                problem, plan, metrics = attempt
-                tried.append(f"{n}: {'planned' if plan.success else _short(plan.failure)}")
-                if plan.success:
-                    break
-            summary_line = f"--robots auto: N_min = {rt.n_min}; " + "; ".join(tried)
-            if problem is None:
-                LOG.error("no plan found: %s", summary_line)
-                return 1
-            auto_note = f"{summary_line}; chose N = {problem.chain.n_robots}"
-        else:
-            problem, plan, metrics = _plan_once(args, scenario, n_first, rt)
-        filtered, filter_note = filter_within_limits(
-            plan, problem.env, problem.time_params.Ts, cutoff_hz=args.filter_cutoff
-        )
-        extra = _extras(problem, plan, auto_note) | ({"filter_note": filter_note} if filter_note else {})
-        names = write_outputs(
-            Path(args.out), plan, metrics, problem.env, filtered, not args.no_plots, extra, route=problem.route
-        )
-        names += write_views(args, Path(args.out), lambda: chain_motion(plan, problem.env, problem.chain_params))
+            auto_note = None
+            if args.robots == "auto":
+                tried = []
+                last = max(rt.n_min, rt.n_route) + AUTO_EXTRA
+                problem = None
+                for n in range(rt.n_min, last + 1):
+                    try:
+                        attempt = _plan_once(args, scenario, n, rt)
+                    except TmrError as exc:  # refused, no start placement or no path with this N: try the next one
+                        tried.append(f"{n}: {_short(exc)}")
+                        continue
+                    problem, plan, metrics = attempt
+                    tried.append(f"{n}: {'planned' if plan.success else _short(plan.failure)}")
+                    if plan.success:
+                        break
+                summary_line = f"--robots auto: N_min = {rt.n_min}; " + "; ".join(tried)
+                if problem is None:
+                    LOG.error("no plan found: %s", summary_line)
+                    return 1
+                auto_note = f"{summary_line}; chose N = {problem.chain.n_robots}"
+            else:
+                problem, plan, metrics = _plan_once(args, scenario, n_first, rt)
+            filtered, filter_note = filter_within_limits(
+                plan, problem.env, problem.time_params.Ts, cutoff_hz=args.filter_cutoff
+            )
+            extra = _extras(problem, plan, auto_note) | ({"filter_note": filter_note} if filter_note else {})
+            names = write_outputs(
+                Path(args.out),
+                plan,
+                metrics,
+                problem.env,
+                filtered,
+                not args.no_plots,
+                extra,
+                route=problem.route,
+                pool=pool,
+            )
+            names += write_views(args, Path(args.out), lambda: chain_motion(plan, problem.env, problem.chain_params))
+        finally:
+            if pool is not None:
+                pool.close()
     except RouteVerdict as exc:
         if exc.proven:
             raise  # a TmrError: one line, exit 2 (tmr.console.run)

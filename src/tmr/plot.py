@@ -27,6 +27,7 @@ from tmr.io import atomic_write_bytes
 from tmr.metrics import distance_errors, plan_goal, sample_time, span_limits
 
 __all__ = [
+    "figure_bytes",
     "plot_chain_poses",
     "plot_distance_errors",
     "plot_speeds",
@@ -460,13 +461,18 @@ def plot_speeds(plan: Any, filtered: np.ndarray | None = None) -> Figure:
 _DETERMINISTIC_METADATA = {"pdf": {"CreationDate": None, "ModDate": None}, "svg": {"Date": None}}
 
 
-def save_figure(fig: Figure, path: str | os.PathLike[str], dpi: int = 120) -> Path:
-    """Render ``fig`` to memory and write it atomically to ``path`` (format from the suffix: png, pdf, svg,
-    ...; default png). Dates are left out of PDF/SVG metadata so the same figure gives the same bytes."""
-    path = Path(path)
-    fmt = path.suffix.lstrip(".").lower() or "png"
+def figure_bytes(fig: Figure, fmt: str = "png", dpi: int = 120) -> bytes:
+    """``fig`` rendered in format ``fmt`` (png, pdf, svg, ...). Dates are left out of PDF/SVG metadata so the same
+    figure gives the same bytes."""
+    fmt = fmt.lower()
     buf = _io.BytesIO()
     # PNG: zlib level 1 encodes 4-5× faster than matplotlib's default 6 for files ~13 % larger
     extra = {"pil_kwargs": {"compress_level": 1}} if fmt == "png" else {}
     fig.savefig(buf, format=fmt, dpi=dpi, metadata=_DETERMINISTIC_METADATA.get(fmt), **extra)
-    return atomic_write_bytes(path, buf.getvalue())
+    return buf.getvalue()
+
+
+def save_figure(fig: Figure, path: str | os.PathLike[str], dpi: int = 120) -> Path:
+    """Render ``fig`` (:func:`figure_bytes`, format from the suffix; default png) and write it atomically."""
+    path = Path(path)
+    return atomic_write_bytes(path, figure_bytes(fig, path.suffix.lstrip(".") or "png", dpi))
