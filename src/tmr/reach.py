@@ -21,6 +21,7 @@ grid of square cells of side h (half-diagonal e = h/√2), :func:`chain_is_impos
   is the 8-neighbour one ring nearer whose chain stays closest to the straight segment, so one gather per ring tests
   every ray from every source at once; σ is the table's largest deviation (1.7 cells at 5.7 m / 0.1 m).
 * The last tether exactly too: p_{N-1} is in the goal's visible region within d_N, so R̂_{N-1} must meet its cells.
+  With N = 2 no grid is needed: robot 1 is in both visible regions, so their intersection must not be empty.
 * Pruning: p_k is within Σ_{j>k} d_j of the goal (the rest of the chain is a path to it), so cells farther than that
   (+ e) are dropped from R̂_k, and sources farther than Σ_{j≥k} d_j (+ e) are not expanded.
 
@@ -157,8 +158,11 @@ def chain_is_impossible(
     # the first and the last tether exactly: robot 1 sees the anchor, robot N − 1 sees the goal
     if robots == 1:
         return not (np.linalg.norm(g - a) <= links[0] and bool(env.segment_is_free(a[None], g[None])[0]))
-    R = near(env.visible_region(a, links[0])) & allowed & (to_goal <= rest[1] + e + 1e-9)
-    last = near(env.visible_region(g, links[-1])) & allowed
+    seen_a, seen_g = env.visible_region(a, links[0]), env.visible_region(g, links[-1])
+    if robots == 2:  # robot 1 sees both: exact, no grid
+        return bool(shapely.intersection(seen_a, seen_g).is_empty)
+    R = near(seen_a) & allowed & (to_goal <= rest[1] + e + 1e-9)
+    last = near(seen_g) & allowed
     for k in range(1, robots - 1):  # link k + 1: from p_k to p_{k+1}
         if (R & last).any():
             return False
