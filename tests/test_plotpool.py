@@ -33,3 +33,27 @@ def test_pool_renders_the_same_bytes_as_the_caller():
 def test_pool_raises_the_plotting_error():
     with FigurePool(1) as pool, pytest.raises(TypeError):
         pool.render({"x.png": ("plot_speeds", (), {})})  # a missing argument, raised in the worker
+
+
+def test_dead_workers_fall_back_to_rendering_here():
+    """If the workers die (killed, out of memory), the command line renders the figures itself."""
+    import os
+    import signal
+    import time
+
+    from tmr.plan import _pooled
+
+    pool = FigurePool(1)
+    try:
+        for _ in range(100):  # the worker exists once started
+            procs = list(pool._pool._processes.values())
+            if procs:
+                break
+            time.sleep(0.01)
+        for p in procs:
+            os.kill(p.pid, signal.SIGKILL)
+        plan = synthetic_plan()
+        assert _pooled(pool, {"s.png": ("plot_speeds", (plan,), {})}) is None
+    finally:
+        pool.close()
+    assert _pooled(None, {}) is None

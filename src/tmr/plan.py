@@ -280,8 +280,9 @@ def write_outputs(
                 "distance_errors.png": ("plot_distance_errors", (plan,), {}),
                 "speeds.png": ("plot_speeds", (plan, filtered), {}),
             }
-            if pool is not None:
-                for name, data in pool.render(figures).items():
+            rendered = _pooled(pool, figures)
+            if rendered is not None:
+                for name, data in rendered.items():
                     io.atomic_write_bytes(tmp / name, data)
             else:
                 from tmr import plot
@@ -464,7 +465,24 @@ def _figure_pool(args: argparse.Namespace) -> Any:
         return None
     from tmr.plotpool import FigurePool
 
-    return FigurePool()
+    try:
+        return FigurePool()
+    except OSError as exc:  # no processes to spare (a resource limit): render here
+        LOG.debug("figures rendered in this process: %s", exc)
+        return None
+
+
+def _pooled(pool: Any, figures: dict[str, Any]) -> dict[str, bytes] | None:
+    """The figures rendered by ``pool``; None without a pool or if its workers died (then render them here)."""
+    if pool is None:
+        return None
+    from concurrent.futures.process import BrokenProcessPool
+
+    try:
+        return pool.render(figures)
+    except BrokenProcessPool as exc:
+        LOG.debug("figure workers stopped (%s): rendering here", exc)
+        return None
 
 
 def _main(args: argparse.Namespace) -> int:
