@@ -167,3 +167,16 @@ def test_chain_off_the_route_needs_fewer_robots():
     _check_chain(env, chain, room.base, room.goal, spans, CHORD_CLEARANCE, first)
     # N ≥ the route chain's count keeps the shortest route as the guide
     assert len(plan_route(env, room.base, room.goal, lim, robots=6).points) > 5
+
+
+def test_chords_exactly_d_max_are_never_refuted():
+    """Two chords exactly d_max long, in a direction where the disc polygons touch: reachable (one of 16 such
+    directions; found in review, where the exact 2-robot test had no tolerance)."""
+    env = Environment.from_geometry([], (0.0, 0.0, 20.0, 20.0))
+    for i in range(16):
+        th = (2 * i + 1) * math.pi / 64
+        u = np.array([math.cos(th), math.sin(th)])
+        a = np.array([10.0, 10.0]) - 2.5 * u
+        p1, g = a + 3.0 * u, a + 5.0 * u
+        assert not chain_is_impossible(env, a, g, [np.linalg.norm(p1 - a), np.linalg.norm(g - p1)], 2), i
+        assert not chain_is_impossible(env, a, p1, np.linalg.norm(p1 - a), 1), i

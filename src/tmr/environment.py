@@ -516,7 +516,7 @@ class Environment:
         """
         p = _as_points(point, "point").reshape(2)
         r = _check_positive(radius, "radius [m]")
-        disc = shapely.Point(p).buffer(r / math.cos(math.pi / 64), quad_segs=16)
+        disc = shapely.Point(p).buffer(r / math.cos(math.pi / 64) * (1 + 1e-12), quad_segs=16)
         tree, segments = self._tree
         c = shapely.get_coordinates(segments[tree.query(disc)]).reshape(-1, 2, 2)
         du, dv = c[:, 0] - p, c[:, 1] - p

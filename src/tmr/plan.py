@@ -358,10 +358,17 @@ def _plan_once(args: argparse.Namespace, scenario: Any, n_robots: int | None, ro
         overrides=overrides,
         path_iterations=args.iterations,
         route=args.route,
-        known_route=route if (n_robots or 0) >= max(2, route.n_min, route.n_route) else None,
+        known_route=route if _route_fits(args, route, n_robots or 0) else None,
     )
     plan, metrics = solve(problem, args.method, time_limit=args.time_limit, progress=progress_enabled())
     return problem, plan, metrics
+
+
+def _route_fits(args: argparse.Namespace, route: Any, n: int) -> bool:
+    """Whether the precheck's route serves N = ``n`` robots: N ≥ its N_min, and either it was computed for that N
+    (not ``auto``: its guide is already the chain off the route if that is what N needs) or N is at least what
+    the route chain needs."""
+    return n >= max(2, route.n_min) and (args.robots != "auto" or n >= route.n_route)
 
 
 def _short(reason: Any, width: int = 90) -> str:
@@ -461,7 +468,8 @@ def main(argv: list[str] | None = None) -> int:
 def _figure_pool(args: argparse.Namespace) -> Any:
     """Workers that import matplotlib while the plan is computed (:mod:`tmr.plotpool`), when figures are wanted and
     there is a core to spare; else None (figures rendered in this process)."""
-    if args.no_plots or (os.cpu_count() or 1) < 2:
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if args.no_plots or cores < 2:
         return None
     from tmr.plotpool import FigurePool
 
@@ -476,11 +484,12 @@ def _pooled(pool: Any, figures: dict[str, Any]) -> dict[str, bytes] | None:
     """The figures rendered by ``pool``; None without a pool or if its workers died (then render them here)."""
     if pool is None:
         return None
+    import pickle
     from concurrent.futures.process import BrokenProcessPool
 
     try:
         return pool.render(figures)
-    except BrokenProcessPool as exc:
+    except (BrokenProcessPool, pickle.PicklingError) as exc:
         LOG.debug("figure workers stopped (%s): rendering here", exc)
         return None
 

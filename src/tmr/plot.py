@@ -229,7 +229,7 @@ def plot_chain_poses(
         st = np.asarray(route.stations, dtype=float)
         ax.plot(st[:, 0], st[:, 1], "D", ms=5, mfc="none", mec="#2ca02c", mew=1.2, zorder=4)
         handles.append(
-            Line2D([], [], ls="", marker="D", ms=5, mfc="none", mec="#2ca02c", label=f"N_min = {route.n_min} stations")
+            Line2D([], [], ls="", marker="D", ms=5, mfc="none", mec="#2ca02c", label=f"{len(route.stations)} stations")
         )
     ax.plot(ref[:, 0], ref[:, 1], color="#e377c2", ls="--", lw=1.3, zorder=4)
     handles.append(Line2D([], [], color="#e377c2", ls="--", lw=1.3, label="leader reference"))

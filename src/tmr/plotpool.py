@@ -11,6 +11,7 @@ bytes are those :func:`tmr.plot.save_figure` writes in the calling process: the 
 from __future__ import annotations
 
 import multiprocessing
+import signal
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import PurePath
@@ -20,6 +21,7 @@ __all__ = ["FigurePool"]
 
 
 def _warm() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle (it stops the workers)
     import tmr.plot  # noqa: F401  (matplotlib, once per worker, while the plan is computed)
 
 
@@ -37,7 +39,7 @@ class FigurePool:
     """
 
     def __init__(self, workers: int = 2) -> None:
-        method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+        method = "fork" if sys.platform.startswith("linux") else "spawn"  # fork is unsafe on macOS
         sys.stdout.flush()  # a forked worker must not write the parent's buffered output a second time
         sys.stderr.flush()
         self._pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context(method), initializer=_warm)

@@ -45,9 +45,11 @@ __all__ = ["REACH_CELL", "chain_is_impossible", "ray_table"]
 
 #: h [m]: cell side of the reachable-set grid (0.1 m: 0.02–0.16 s per proof on the 20 m random rooms).
 REACH_CELL = 0.1
-#: Segments per quarter circle of shapely's buffers; their radii are divided by cos(π / (4 QUAD_SEGS)) so the buffer
-#: polygon contains the true offset (its vertices lie on the circle, its edges inside it).
+#: Segments per quarter circle of shapely's buffers. GEOS rounds a join's segment count, so one segment may span up to
+#: 3π / (8 QUAD_SEGS): radii are divided by the cosine of half that, so the buffer polygon contains the true offset.
 _QUAD_SEGS = 4
+#: Source cells per vectorised ray sweep (memory: _CHUNK × ray-table size bytes and int64 indices).
+_CHUNK = 256
 _NEIGHBOURS = ((-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, -1), (-1, 1), (1, 1))
 
 
@@ -94,7 +96,7 @@ def ray_table(radius: int) -> tuple[NDArray[np.int_], NDArray[np.int_], NDArray[
 
 def _offset_buffer(geom: Any, distance: float) -> Any:
     """A polygon containing every point within ``distance`` [m] of ``geom``."""
-    return geom.buffer(distance / math.cos(math.pi / (4 * _QUAD_SEGS)) + 1e-9, quad_segs=_QUAD_SEGS)
+    return geom.buffer(distance / math.cos(3 * math.pi / (8 * _QUAD_SEGS)) + 1e-9, quad_segs=_QUAD_SEGS)
 
 
 def chain_is_impossible(
@@ -157,10 +159,10 @@ def chain_is_impossible(
 
     # the first and the last tether exactly: robot 1 sees the anchor, robot N − 1 sees the goal
     if robots == 1:
-        return not (np.linalg.norm(g - a) <= links[0] and bool(env.segment_is_free(a[None], g[None])[0]))
+        return not (np.linalg.norm(g - a) <= links[0] + 1e-9 and bool(env.segment_is_free(a[None], g[None])[0]))
     seen_a, seen_g = env.visible_region(a, links[0]), env.visible_region(g, links[-1])
     if robots == 2:  # robot 1 sees both: exact, no grid
-        return bool(shapely.intersection(seen_a, seen_g).is_empty)
+        return not shapely.dwithin(seen_a, seen_g, 1e-9)
     R = near(seen_a) & allowed & (to_goal <= rest[1] + e + 1e-9)
     last = near(seen_g) & allowed
     for k in range(1, robots - 1):  # link k + 1: from p_k to p_{k+1}
@@ -172,13 +174,15 @@ def chain_is_impossible(
         src = src[to_goal[src] <= rest[k] + e + 1e-9]
         if not len(src):
             break
-        vis = np.zeros((len(src), len(off)), dtype=bool)
-        vis[:, origin] = True
-        for t in rings:
-            vis[:, t] = vis[:, pred[t]] & ~blocked[src[:, None] + flat[None, t]]
-        vis &= (disk & (length <= links[k] + 2 * e + 1e-9))[None, :]
+        reach = disk & (length <= links[k] + 2 * e + 1e-9)
         new = np.zeros(W * H, dtype=bool)
-        new[(src[:, None] + flat[None, :])[vis]] = True
+        for chunk in np.array_split(src, max(1, len(src) // _CHUNK)):  # bounded memory on large maps
+            vis = np.zeros((len(chunk), len(off)), dtype=bool)
+            vis[:, origin] = True
+            for t in rings:
+                vis[:, t] = vis[:, pred[t]] & ~blocked[chunk[:, None] + flat[None, t]]
+            vis &= reach[None, :]
+            new[(chunk[:, None] + flat[None, :])[vis]] = True
         R |= new & allowed & (to_goal <= rest[k + 1] + e + 1e-9)
     return not bool((R & last).any())
 
@@ -197,6 +201,7 @@ def find_chain(
     robots: int,
     clearance: float,
     first_clearance: float | None = None,
+    spacing: float = 0.0,
 ) -> NDArray[np.float64] | None:
     """A chain of at most ``robots`` robots from ``anchor`` to ``goal`` anywhere in the free space, or None.
 
@@ -204,10 +209,10 @@ def find_chain(
     the obstacles grown by r, and the goal): tether k joins two candidates if its chord is in [d_lo, d_max] of row k
     of ``span_limits`` (N, 2) (the last row repeats) and keeps clearance > ``clearance`` [m] (the anchor's tether:
     ``first_clearance``), exact (``Environment.segment_is_free``). Each level expands one source per
-    :data:`WITNESS_THIN` cell of the positions it reached (the first in grid order), and only candidates from which
+    :data:`WITNESS_THIN` cell of the positions it reached (the first reached), and only candidates from which
     the rest of the chain can still reach the goal in a straight line. Returns the fewest-hop chain found, (n + 1, 2)
-    from the anchor to the goal with n ≤ ``robots``, whose robots are also 2 d_lo[1] apart pairwise; a witness, not
-    a proof: None says nothing.
+    from the anchor to the goal with n ≤ ``robots``, if its robots are also ``spacing`` [m] apart pairwise; a witness,
+    not a proof: None says nothing.
     """
     a, g = np.asarray(anchor, float), np.asarray(goal, float)
     lim = np.atleast_2d(np.asarray(span_limits, float))
@@ -245,7 +250,6 @@ def find_chain(
             out = P[chain[::-1]]
             robots_xy = out[1:]
             gaps = np.linalg.norm(robots_xy[:, None] - robots_xy[None, :], axis=-1)
-            spacing = 2.0 * float(rows[min(1, len(rows) - 1), 0])
             if len(robots_xy) > 1 and gaps[np.triu_indices(len(robots_xy), 1)].min() < spacing:
                 return None
             return out

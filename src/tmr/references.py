@@ -155,7 +155,7 @@ def start_placement(
                     sub = plan_route(env, Pp[-1], goal, lim[parked:])
                 except RouteVerdict:
                     continue
-                if sub.n_min <= active:
+                if max(sub.n_min, sub.n_route) <= active:
                     walks.append((parked, Pp, sub))
                     yield walks[-1]
 

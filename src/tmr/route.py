@@ -67,6 +67,9 @@ SIMPLIFY_TOLERANCE = 0.02
 QUAD_SEGS = 4
 #: Smallest δ [m], tried in a narrow passage: above the QP's d_safe = 0.05 m, which every robot keeps.
 NARROW_MARGIN = 0.06
+#: δ [m] of the last rung, tried only when the chain has too few robots for the routes keeping ``NARROW_MARGIN``: a
+#: route nearer the obstacles than the QP's d_safe, whose plan the QP and the checks keep within every limit or fail.
+RETRY_MARGIN = 0.03
 #: Spacing [m] of the candidate stations along the route.
 STATION_STEP = 0.1
 #: Clearance [m] a chord between stations keeps from the obstacles grown by r (the QP keeps d_safe = 0.05 m, but a
@@ -121,7 +124,8 @@ class Route:
             fewer where :func:`tmr.reach.find_chain` finds a chain off the route.
         n_route: robots of the route chain; for N < n_route, ``plan_route(..., robots=N)`` returns a route whose
             guide is the chain found off the route (``points``: its polyline, ``stations``: its robots).
-        stations: (n_min, 2) station positions, the last one the goal [m].
+        stations: (n_route, 2) stations of the route chain, the last one the goal [m] (of the chain off the route
+            when that is the guide).
         station_arcs: (n_min,) their arc lengths along the route [m].
         vertices: number of reflex vertices of the visibility graph; edges: its edges.
         time: seconds spent.
@@ -162,7 +166,10 @@ class Route:
             )
         if n_robots < self.n_lower:
             corners = (
-                "" if self.n_min == self.n_lower else f" (its corners make it {self.n_min} for a chain along the route)"
+                ""
+                if self.n_min == self.n_lower == self.n_route
+                else f" (its corners make it {self.n_route} for a chain along the route"
+                + (f", {self.n_min} off it)" if self.n_min < self.n_route else ")")
             )
             return (
                 f"the goal needs at least {self.n_lower} robots: shortest tether route {self.lower_length:.1f} m, "
@@ -644,10 +651,13 @@ def plan_route(
     L_lower = float(guide_arcs(lower)[-1]) if lower is not None else 0.0
     d_max = float(lim[:, 1].max())
     ladder = [m for m in dict.fromkeys((margin, margin / 2, NARROW_MARGIN)) if m >= min(margin, NARROW_MARGIN)]
+    ladder += [RETRY_MARGIN] if RETRY_MARGIN < ladder[-1] else []
     best: _Along | None = None
     n_lower, lower_by = 0, "length"
     for m in ladder:
         if best is not None and not (robots is not None and best.n_min > robots >= n_lower):
+            break
+        if best is None and m == RETRY_MARGIN:  # a retry only: no route keeps NARROW_MARGIN
             break
         try:
             found = _along(env, base, goal, lim, m, L_lower)
@@ -674,12 +684,12 @@ def plan_route(
         n_lower, lower_by = n_min, "corners"
     notes = [f"route margin lowered to {best.margin:.3f} m in a narrow passage"] if best.margin < margin else []
     n_route = n_min
-    if n_lower < n_min and (robots is None or robots < n_min):
+    if n_lower < n_min:
         # fewer robots than the route chain needs: a chain anywhere in the free space (the same search whatever N)
         witness = _witness(env, base, goal, lim, n_min - 1)
         if witness is not None:
             n_min = len(witness) - 1
-            if robots is not None and robots >= n_min:  # plan along it: its polyline is the guide
+            if robots is not None and n_min <= robots < n_route:  # plan along it: its polyline is the guide
                 best = _witness_along(witness, best)
                 notes.append(
                     f"no chain of {robots} robots along the shortest route ({n_route} needed there): the guide is a "
@@ -722,7 +732,8 @@ def _witness(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> Arr
 
     first = min(CHORD_CLEARANCE, 0.5 * float(np.asarray(env.exact_clearance(base))))  # an anchor next to a wall
     spans = np.column_stack([lim[:, 0] + SPACING_MARGIN, lim[:, 1]])
-    return find_chain(env, base, goal, spans, robots, CHORD_CLEARANCE, first)
+    spacing = 2 * env.safety_radius + SPACING_MARGIN
+    return find_chain(env, base, goal, spans, robots, CHORD_CLEARANCE, first, spacing=spacing)
 
 
 def _witness_along(chain: Array, route: _Along) -> _Along:

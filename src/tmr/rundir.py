@@ -198,7 +198,7 @@ def chain_run_dict(plan: Any, env: Any, extra: dict[str, Any] | None = None) -> 
         "route": {
             k: ex[k]
             for k in sorted(ex)
-            if k in ("route", "route_length", "n_min", "n_lower", "n_lower_by", "robots_auto")
+            if k in ("route", "route_length", "n_min", "n_lower", "n_lower_by", "n_route", "robots_auto")
         },
         "params": {k: p[k] for k in sorted(p)},
         "files": {"trajectories": "trajectories.json", "metrics": "metrics.json"},
