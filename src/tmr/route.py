@@ -688,7 +688,7 @@ def plan_route(
         # fewer robots than the route chain needs: a chain anywhere in the free space (the same search whatever N)
         witness = _witness(env, base, goal, lim, n_min - 1)
         if witness is not None:
-            n_min = len(witness) - 1
+            n_min = max(len(witness) - 1, n_lower)  # a real chain: never below a sound proof
             if robots is not None and n_min <= robots < n_route:  # plan along it: its polyline is the guide
                 best = _witness_along(witness, best)
                 notes.append(
