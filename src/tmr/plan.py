@@ -522,7 +522,7 @@ def _main(args: argparse.Namespace) -> int:
             auto_note = None
             if args.robots == "auto":
                 tried = []
-                last = max(rt.n_min, rt.n_route) + AUTO_EXTRA
+                last = rt.n_route + AUTO_EXTRA  # n_route ≥ n_min
                 problem = None
                 for n in range(rt.n_min, last + 1):
                     try:

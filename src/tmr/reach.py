@@ -117,6 +117,13 @@ def chain_is_impossible(
     dk = np.atleast_1d(np.asarray(d_max, float))
     links = np.array([dk[min(k, len(dk) - 1)] for k in range(robots)])
     rest = np.concatenate([np.cumsum(links[::-1])[::-1], [0.0]])  # rest[k]: Σ_{j>k} d_j (links k+1..N; 0-based k)
+    # the first and the last tether exactly: robot 1 sees the anchor, robot N − 1 sees the goal (1 or 2 robots: no
+    # grid at all)
+    if robots == 1:
+        return not (np.linalg.norm(g - a) <= links[0] + 1e-9 and bool(env.segment_is_free(a[None], g[None])[0]))
+    seen_a, seen_g = env.visible_region(a, links[0]), env.visible_region(g, links[-1])
+    if robots == 2:  # robot 1 sees both: exact, no grid
+        return not shapely.dwithin(seen_a, seen_g, 1e-9)
     e = cell / math.sqrt(2.0)
     radius = int(math.ceil((links.max() + 2 * e) / cell))
     off, ring, pred, dev = ray_table(radius)
@@ -157,12 +164,6 @@ def chain_is_impossible(
         sub[j, i] = shapely.contains_xy(_offset_buffer(region, e), X[j, i], Y[j, i])
         return sub.ravel()
 
-    # the first and the last tether exactly: robot 1 sees the anchor, robot N − 1 sees the goal
-    if robots == 1:
-        return not (np.linalg.norm(g - a) <= links[0] + 1e-9 and bool(env.segment_is_free(a[None], g[None])[0]))
-    seen_a, seen_g = env.visible_region(a, links[0]), env.visible_region(g, links[-1])
-    if robots == 2:  # robot 1 sees both: exact, no grid
-        return not shapely.dwithin(seen_a, seen_g, 1e-9)
     R = near(seen_a) & allowed & (to_goal <= rest[1] + e + 1e-9)
     last = near(seen_g) & allowed
     for k in range(1, robots - 1):  # link k + 1: from p_k to p_{k+1}
@@ -234,8 +235,9 @@ def find_chain(
         d_lo, d_hi = rows[k]
         margin = clearance if k or first_clearance is None else first_clearance
         reached: list[int] = []
+        within = to_goal <= rest[k + 1] + 1e-9  # the rest of the chain can still reach the goal
         for s in frontier:
-            cand = np.flatnonzero((level < 0) & (to_goal <= rest[k + 1] + 1e-9))
+            cand = np.flatnonzero((level < 0) & within)
             d = np.linalg.norm(P[cand] - P[s], axis=1)
             cand = cand[(d <= d_hi) & (d >= d_lo)]
             if not len(cand):

@@ -33,6 +33,7 @@ from tmr.route import (
     BlockedRouteError,
     Route,
     RouteVerdict,
+    anchor_tether_clearance,
     bend_offsets,
     guide_arcs,
     plan_route,
@@ -155,7 +156,7 @@ def start_placement(
                     sub = plan_route(env, Pp[-1], goal, lim[parked:])
                 except RouteVerdict:
                     continue
-                if max(sub.n_min, sub.n_route) <= active:
+                if sub.n_route <= active:  # the active robots start along sub.points, the route chain's guide
                     walks.append((parked, Pp, sub))
                     yield walks[-1]
 
@@ -209,7 +210,7 @@ def _along(
         S = np.vstack([S, off[keep]])
         order = np.argsort(s, kind="stable")
         s, S = s[order], S[order]
-    first = min(CHORD_START_CLEARANCE, 0.5 * float(np.asarray(env.exact_clearance(S[0]))))
+    first = anchor_tether_clearance(env, S[0], CHORD_START_CLEARANCE)
     near = 2.0 * float(env.safety_radius) + 0.05  # robots at least 2r apart, with a little margin
     if avoid is not None and len(avoid):  # candidates too near a parked robot are dropped
         far = np.min(np.linalg.norm(S[:, None] - np.asarray(avoid, float)[None], axis=2), axis=1) >= near

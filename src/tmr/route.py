@@ -126,7 +126,7 @@ class Route:
             guide is the chain found off the route (``points``: its polyline, ``stations``: its robots).
         stations: (n_route, 2) stations of the route chain, the last one the goal [m] (of the chain off the route
             when that is the guide).
-        station_arcs: (n_min,) their arc lengths along the route [m].
+        station_arcs: their arc lengths along the guide [m], one per station.
         vertices: number of reflex vertices of the visibility graph; edges: its edges.
         time: seconds spent.
     """
@@ -510,6 +510,12 @@ class _Samples:
         return ~np.any(loop % 2 == 1, axis=1)
 
 
+def anchor_tether_clearance(env: Any, anchor: Array, clearance: float) -> float:
+    """Clearance [m] the anchor's own tether must keep: ``clearance``, or half the anchor's own clearance if that is
+    less (an anchor next to a wall)."""
+    return min(clearance, 0.5 * float(np.asarray(env.exact_clearance(anchor))))
+
+
 def stations(
     env: Any,
     guide: Array,
@@ -534,7 +540,7 @@ def stations(
     smin = np.atleast_1d(np.asarray(span_min, float)) if span_min is not None else np.zeros(1)
     sm = _Samples(env, guide, step, start_arc)
     P, n = sm.P, len(sm.s)
-    first = min(clearance, 0.5 * float(np.asarray(env.exact_clearance(P[0]))))  # an anchor next to a wall
+    first = anchor_tether_clearance(env, P[0], clearance)
     parent = np.full(n, -1)
     seen = np.zeros(n, dtype=bool)
     seen[0] = True
@@ -625,7 +631,8 @@ def plan_route(
         span_limits: (N, 2) [d_lo, d_max] per tether [m] (the first row is the anchor tether), or (2,) for all.
         margin: δ [m] the route keeps from the obstacles grown by r; smaller margins are tried in narrow passages.
         robots: the chain's N, if known: when the route at ``margin`` needs more robots than that, the routes with
-            the smaller margins (δ/2, then ``NARROW_MARGIN``: through narrower passages, often shorter) are tried
+            the smaller margins (δ/2, ``NARROW_MARGIN``, then ``RETRY_MARGIN``: through narrower passages, often
+            shorter) are tried
             too and the one needing the fewest robots is returned, unless N is first proven too few round the
             corners (:mod:`tmr.reach`). Without it, ``n_lower`` is raised to ``n_min`` when N_min − 1 robots are
             proven too few.
@@ -730,7 +737,7 @@ def _impossible(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> 
 def _witness(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> Array | None:
     from tmr.reach import find_chain
 
-    first = min(CHORD_CLEARANCE, 0.5 * float(np.asarray(env.exact_clearance(base))))  # an anchor next to a wall
+    first = anchor_tether_clearance(env, base, CHORD_CLEARANCE)
     spans = np.column_stack([lim[:, 0] + SPACING_MARGIN, lim[:, 1]])
     spacing = 2 * env.safety_radius + SPACING_MARGIN
     return find_chain(env, base, goal, spans, robots, CHORD_CLEARANCE, first, spacing=spacing)
