@@ -465,6 +465,8 @@ def test_ctrl_c_during_the_nlp_stops_ipopt_and_is_raised_after_it() -> None:
 
     from tmr.formulations import horizon as hz
 
+    outer = signal.getsignal(signal.SIGINT)  # a shell's background job starts with SIGINT ignored: test as a user's
+    signal.signal(signal.SIGINT, signal.default_int_handler)  # foreground run, whatever launched pytest
     before = signal.getsignal(signal.SIGINT)
     with pytest.raises(KeyboardInterrupt):
         with hz._ctrl_c_stops_ipopt():
@@ -479,4 +481,4 @@ def test_ctrl_c_during_the_nlp_stops_ipopt_and_is_raised_after_it() -> None:
         with hz._ctrl_c_stops_ipopt():
             assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
     finally:
-        signal.signal(signal.SIGINT, before)
+        signal.signal(signal.SIGINT, outer)
