@@ -144,7 +144,7 @@ class HorizonOptions:
     samples_per_link: int | None = None
     field_error: float = 0.015
     d_safe: float | None = None
-    activation: float = 0.5
+    activation: float = 0.3
     max_rounds: int = 4
     max_iter: int = 200
     tol: float = 1e-6
