@@ -10,7 +10,7 @@ import pytest
 from shapely.geometry import LineString, box
 
 from tmr.environment import Environment
-from tmr.reach import chain_is_impossible, ray_table
+from tmr.reach import REACH_CELL, REFINE_WORK, chain_is_impossible, ray_table
 from tmr.route import TooFewRobotsError, plan_route
 
 D_MAX = 5.596
@@ -82,7 +82,7 @@ def test_random_rooms_station_chains_are_never_refuted():
     from tmr.sweep.rooms import room_from_spec, room_set, span_rows
 
     lim = span_rows()
-    checked = 0
+    checked = fine = 0
     for spec in room_set(24, seed=3):
         room = room_from_spec(spec)
         if isinstance(room, str):
@@ -95,7 +95,31 @@ def test_random_rooms_station_chains_are_never_refuted():
         for k, station in enumerate(route.stations, start=1):
             assert not chain_is_impossible(env, room.base, station, lim[:, 1], k), (spec, k)
             checked += 1
-    assert checked >= 40
+            if k >= 3 and fine < 12:  # the grid's half-size cells of the refinement rung: sound too
+                assert not chain_is_impossible(env, room.base, station, lim[:, 1], k, cell=REACH_CELL / 2), (spec, k)
+                fine += 1
+    assert checked >= 40 and fine == 12
+
+
+def test_the_half_size_cells_prove_what_the_first_grid_cannot():
+    """medium-corner-732277931 (a generated room) with 3 robots: not proven with h = 0.1 m cells (obstacles shrunk by
+    0.24 m in the relaxation), proven with h = 0.05 m (0.12 m); the refinement rung runs it because 8× the first
+    attempt's ray tests fit REFINE_WORK, never with ``refine_work=0``. The route then refuses 3 robots as proven."""
+    from tmr.sweep.rooms import generate_room, span_rows
+
+    room = generate_room(732277931, "medium", "corner")
+    env, lim = room.environment(), span_rows()
+    args = (env, room.base, room.goal, lim[:, 1], 3)
+    assert not chain_is_impossible(*args)
+    assert not chain_is_impossible(*args, refine_work=0)
+    assert chain_is_impossible(*args, cell=REACH_CELL / 2)
+    assert chain_is_impossible(*args, refine_work=REFINE_WORK)
+    route = plan_route(env, room.base, room.goal, lim, robots=3)
+    assert (
+        route.n_lower == 4
+        and route.lower_by == "corners"
+        and route.refusal(3).startswith("the goal needs at least 4 robots: no chain of 3 straight tethers")
+    )
 
 
 def test_ray_table_chains_stay_near_their_segments():

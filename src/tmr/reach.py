@@ -41,10 +41,14 @@ import numpy as np
 import shapely
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["REACH_CELL", "chain_is_impossible", "ray_table"]
+__all__ = ["REACH_CELL", "REFINE_WORK", "chain_is_impossible", "ray_table"]
 
 #: h [m]: cell side of the reachable-set grid (0.1 m: 0.02–0.16 s per proof on the 20 m random rooms).
 REACH_CELL = 0.1
+#: Ray tests [count] the second attempt at h/2 may make (:func:`chain_is_impossible`'s ``refine_work`` as tmr.route
+#: uses it): 5·10⁷ take 0.1–0.5 s on the 20 m random rooms (the ray table at h = 0.05 m, built once per process,
+#: 0.17 s of it).
+REFINE_WORK = 50_000_000
 #: Segments per quarter circle of shapely's buffers. GEOS rounds a join's segment count, so one segment may span up to
 #: 3π / (8 QUAD_SEGS): radii are divided by the cosine of half that, so the buffer polygon contains the true offset.
 _QUAD_SEGS = 4
@@ -68,7 +72,7 @@ def ray_table(radius: int) -> tuple[NDArray[np.int_], NDArray[np.int_], NDArray[
     ring = np.maximum(np.abs(xs), np.abs(ys))
     pred = np.full(n * n, -1)
     dev = np.zeros(n * n)
-    chain = np.zeros((n * n, radius + 1), dtype=np.int64)  # chain[i, m]: the chain's cell on ring m
+    chain = np.zeros((n * n, radius + 1), dtype=np.int32)  # chain[i, m]: the chain's cell on ring m
     chain[:, 0] = radius * n + radius
     for m in range(1, radius + 1):
         t = np.flatnonzero(ring == m)
@@ -77,16 +81,16 @@ def ray_table(radius: int) -> tuple[NDArray[np.int_], NDArray[np.int_], NDArray[
         ux, uy = tx / length, ty / length
         best = np.full(len(t), np.inf)
         best_p = np.full(len(t), -1)
-        for dx, dy in ((0, 0), *_NEIGHBOURS):
+        for dx, dy in _NEIGHBOURS:  # at most 3 of them are one ring nearer: only those targets are evaluated
             px, py = tx + dx, ty + dy
-            valid = np.maximum(np.abs(px), np.abs(py)) == m - 1
-            p = np.where(valid, (np.clip(py, -radius, radius) + radius) * n + np.clip(px, -radius, radius) + radius, 0)
-            cells = chain[p, :m]
-            cx, cy = xs[cells], ys[cells]
-            s = np.clip(cx * ux[:, None] + cy * uy[:, None], 0.0, length[:, None])
-            d = np.where(valid, np.hypot(cx - s * ux[:, None], cy - s * uy[:, None]).max(axis=1), np.inf)
-            better = d < best - 1e-12
-            best, best_p = np.where(better, d, best), np.where(better, p, best_p)
+            v = np.flatnonzero(np.maximum(np.abs(px), np.abs(py)) == m - 1)
+            p = (py[v] + radius) * n + px[v] + radius
+            cx, cy = xs[chain[p, :m]], ys[chain[p, :m]]
+            ux_, uy_ = ux[v, None], uy[v, None]
+            s = np.clip(cx * ux_ + cy * uy_, 0.0, length[v, None])
+            d = np.hypot(cx - s * ux_, cy - s * uy_).max(axis=1)
+            better = d < best[v] - 1e-12
+            best[v[better]], best_p[v[better]] = d[better], p[better]
         pred[t] = best_p
         chain[t, :m] = chain[best_p, :m]
         chain[t, m] = t
@@ -100,7 +104,13 @@ def _offset_buffer(geom: Any, distance: float) -> Any:
 
 
 def chain_is_impossible(
-    env: Any, anchor: ArrayLike, goal: ArrayLike, d_max: ArrayLike, robots: int, cell: float = REACH_CELL
+    env: Any,
+    anchor: ArrayLike,
+    goal: ArrayLike,
+    d_max: ArrayLike,
+    robots: int,
+    cell: float = REACH_CELL,
+    refine_work: int = 0,
 ) -> bool:
     """True if it is proven that no chain of ``robots`` or fewer robots reaches ``goal`` (module docstring).
 
@@ -110,9 +120,22 @@ def chain_is_impossible(
         d_max: longest chord per tether [m], the anchor's first (the last value repeats), or one value for all.
         robots: N ≥ 1.
         cell: h [m], the grid's cell side.
+        refine_work: if the proof at ``cell`` fails, it is tried once more at ``cell / 2`` (half the relaxation,
+            about 8× the work: twice the source cells, four times the rays) when 8× the ray tests of the first
+            attempt are at most this many (0: never). A count, not a clock, so the verdict is the same on any machine.
 
     False means "not proven": a chain may or may not exist.
     """
+    proven, work = _prove(env, anchor, goal, d_max, robots, cell)
+    if not proven and work and 8 * work <= refine_work:
+        proven = _prove(env, anchor, goal, d_max, robots, cell / 2)[0]
+    return proven
+
+
+def _prove(
+    env: Any, anchor: ArrayLike, goal: ArrayLike, d_max: ArrayLike, robots: int, cell: float
+) -> tuple[bool, int]:
+    """:func:`chain_is_impossible` at one cell size: (proven, ray tests made = Σ sources × rays of each level)."""
     a, g = np.asarray(anchor, float), np.asarray(goal, float)
     dk = np.atleast_1d(np.asarray(d_max, float))
     links = np.array([dk[min(k, len(dk) - 1)] for k in range(robots)])
@@ -120,10 +143,10 @@ def chain_is_impossible(
     # the first and the last tether exactly: robot 1 sees the anchor, robot N − 1 sees the goal (1 or 2 robots: no
     # grid at all)
     if robots == 1:
-        return not (np.linalg.norm(g - a) <= links[0] + 1e-9 and bool(env.segment_is_free(a[None], g[None])[0]))
+        return not (np.linalg.norm(g - a) <= links[0] + 1e-9 and bool(env.segment_is_free(a[None], g[None])[0])), 0
     seen_a, seen_g = env.visible_region(a, links[0]), env.visible_region(g, links[-1])
     if robots == 2:  # robot 1 sees both: exact, no grid
-        return not shapely.dwithin(seen_a, seen_g, 1e-9)
+        return not shapely.dwithin(seen_a, seen_g, 1e-9), 0
     e = cell / math.sqrt(2.0)
     radius = int(math.ceil((links.max() + 2 * e) / cell))
     off, ring, pred, dev = ray_table(radius)
@@ -166,9 +189,10 @@ def chain_is_impossible(
 
     R = near(seen_a) & allowed & (to_goal <= rest[1] + e + 1e-9)
     last = near(seen_g) & allowed
+    work = 0
     for k in range(1, robots - 1):  # link k + 1: from p_k to p_{k+1}
         if (R & last).any():
-            return False
+            return False, work
         inside = np.flatnonzero(R)
         nbr = inside[:, None] + neighbours[None, :]
         src = inside[np.any(allowed[nbr] & ~R[nbr], axis=1)]
@@ -176,16 +200,17 @@ def chain_is_impossible(
         if not len(src):
             break
         reach = disk & (length <= links[k] + 2 * e + 1e-9)
+        work += len(src) * len(off)
         new = np.zeros(W * H, dtype=bool)
         for chunk in np.array_split(src, max(1, len(src) // _CHUNK)):  # bounded memory on large maps
-            vis = np.zeros((len(chunk), len(off)), dtype=bool)
-            vis[:, origin] = True
+            vis = np.zeros((len(off), len(chunk)), dtype=bool)  # vis[ray, source]: rows gathered ring by ring
+            vis[origin] = True
             for t in rings:
-                vis[:, t] = vis[:, pred[t]] & ~blocked[chunk[:, None] + flat[None, t]]
-            vis &= reach[None, :]
-            new[(chunk[:, None] + flat[None, :])[vis]] = True
+                vis[t] = vis[pred[t]] & ~blocked[flat[t, None] + chunk[None, :]]
+            ray, source = np.nonzero(vis & reach[:, None])
+            new[flat[ray] + chunk[source]] = True
         R |= new & allowed & (to_goal <= rest[k + 1] + e + 1e-9)
-    return not bool((R & last).any())
+    return not bool((R & last).any()), work
 
 
 #: Spacing [m] of the candidate robot positions of :func:`find_chain`, and of the cells that thin each level's

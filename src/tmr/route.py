@@ -729,9 +729,9 @@ def _length_bound(L_lower: float, L: float, d_max: float) -> int:
 
 
 def _impossible(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> bool:
-    from tmr.reach import chain_is_impossible
+    from tmr.reach import REFINE_WORK, chain_is_impossible
 
-    return robots >= 1 and chain_is_impossible(env, base, goal, lim[:, 1], robots)
+    return robots >= 1 and chain_is_impossible(env, base, goal, lim[:, 1], robots, refine_work=REFINE_WORK)
 
 
 def _witness(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> Array | None:
