@@ -215,6 +215,44 @@ def test_chain_off_the_route_plans_with_fewer_robots(tmp_path, capsys):
     assert (metrics["n_robots"], metrics["n_min"], metrics["n_lower"], metrics["n_route"]) == (4, 4, 4, 6)
 
 
+def test_two_robots_found_by_the_exact_pair_search_plan(tmp_path, capsys):
+    """narrow-mid-541096168: robot 1 of a 2-robot chain can only be in a thin sliver (0.1 m², every point 5.2–5.6 m
+    from both ends) that the 0.25 m candidate grid of find_chain misses; the exact search over the intersection of the
+    two visible regions finds it, keeping 0.06 m, and 2 robots plan (they were refused 'no plan found' before)."""
+    from tmr.sweep.rooms import generate_room, write_geojson
+
+    room = generate_room(541096168, "narrow", "mid")
+    path = write_geojson(room, tmp_path / "room.geojson")
+    out = tmp_path / "out"
+    base, goal = ",".join(map(str, room.base)), ",".join(map(str, room.goal))
+    args = ["--map", str(path), f"--base={base}", f"--goal={goal}", "--robots", "2", "--no-plots", "--out", str(out)]
+    code, _, err = run_cli(args, capsys)
+    assert code == 0, err
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["success"] and metrics["n_violation_steps"] == 0 and metrics["min_tether_clearance"] > 0
+    assert (metrics["n_robots"], metrics["n_min"], metrics["n_route"]) == (2, 2, 3)
+
+
+def test_too_few_robots_for_the_clearance_exit_1_with_it(tmp_path, capsys):
+    """dense-mid-671599181 with 2 robots: a 2-robot chain exists (so 2 is not proven too few), but its best tethers
+    pass 0.0599 m from the obstacles, below the 0.06 m the plans need: exit 1, naming the clearance (floored, so it
+    never reads as enough) and the count that keeps it, nothing written."""
+    from tmr.sweep.rooms import generate_room, write_geojson
+
+    room = generate_room(671599181, "dense", "mid")
+    path = write_geojson(room, tmp_path / "room.geojson")
+    out = tmp_path / "out"
+    base, goal = ",".join(map(str, room.base)), ",".join(map(str, room.goal))
+    args = ["--map", str(path), f"--base={base}", f"--goal={goal}", "--robots", "2", "--out", str(out)]
+    code, stdout, err = run_cli(args, capsys)
+    assert code == 1 and not out.exists()
+    text = (stdout + err).strip()
+    assert (
+        "no chain of 2 robots keeps the 0.06 m from the obstacles the plans need: the best found passes 0.059 m" in text
+    )
+    assert text.endswith("rerun with --robots 3")
+
+
 def test_goal_without_free_route_refused(tmp_path, capsys):
     p = tmp_path / "split.geojson"
     p.write_text(

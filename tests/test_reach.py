@@ -181,7 +181,8 @@ def test_chain_off_the_route_needs_fewer_robots():
     assert (route.n_lower, route.n_min, route.n_route) == (4, 4, 6)
     assert route.refusal(3).endswith("rerun with --robots 4") and route.refusal(4) is None
     unproven = dataclasses.replace(route, n_lower=3).refusal(3)  # the search verdict's wording
-    assert "6 robots along the shortest tether route" in unproven and "4 off it (proven: at least 3)" in unproven
+    assert "keeping 0.06 m from the obstacles need 6 robots along the shortest tether route" in unproven
+    assert "4 off it, and fewer are neither found nor proven too few (proven: at least 3)" in unproven
     four = plan_route(env, room.base, room.goal, lim, robots=4)
     assert four.n_min == 4 and len(four.stations) == 4 and any("found off it" in n for n in four.notes)
     chain = np.vstack([room.base, four.stations])

@@ -115,6 +115,31 @@ def test_gap_narrower_than_2r_has_no_free_route():
     assert route.length == pytest.approx(10.0, abs=0.05) and route.n_min == 2
 
 
+def test_gap_wider_than_2r_but_nearer_than_the_chord_clearance():
+    """A 1.05 m gap in a wall: grown by r = 0.5 m on both sides it leaves 0.05 m, so a chord through its middle keeps
+    0.025 m, less than the 0.06 m (CHORD_CLEARANCE) the plans need. By length one robot could reach the goal 4 m
+    away through it (n_lower = 1); keeping 0.06 m takes the way round the wall's end, 4 robots. With 2 or 3 robots
+    nothing is proven, and the route says what stops them: the clearance, the best chain found passing ≤ 0.025 m."""
+    from tmr.route import CHORD_CLEARANCE
+
+    w = 1.05
+    env = Environment.from_geometry(
+        [box(9.9, 0.0, 10.1, 10 - w / 2), box(9.9, 10 + w / 2, 10.1, 17.0)], (0.0, 0.0, 20.0, 20.0)
+    )
+    a, g = (8.0, 10.0), (12.0, 10.0)
+    assert plan_route(env, a, g, LIM).tight_chain is None  # only asked for a given N in the unproven band
+    for n in (2, 3):
+        route = plan_route(env, a, g, LIM, robots=n)
+        assert (route.n_lower, route.n_min) == (1, 4)
+        count, c = route.tight_chain
+        assert count <= n and 0.015 < c <= 0.025 + 1e-9 < CHORD_CLEARANCE
+        assert route.refusal(n).startswith(
+            f"no chain of {n} robots keeps the 0.06 m from the obstacles the plans need: the best found passes 0.0"
+        )
+        assert route.refusal(n).endswith("rerun with --robots 4")
+    assert plan_route(env, a, g, LIM, robots=4).refusal(4) is None
+
+
 def test_goal_outside_the_room_or_in_an_obstacle():
     env = Environment.from_geometry([Point(5, 5).buffer(1.0)], (0.0, 0.0, 10.0, 10.0))
     with pytest.raises(NoRouteError, match="outside the room"):

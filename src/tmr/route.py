@@ -124,6 +124,9 @@ class Route:
             fewer where :func:`tmr.reach.find_chain` finds a chain off the route.
         n_route: robots of the route chain; for N < n_route, ``plan_route(..., robots=N)`` returns a route whose
             guide is the chain found off the route (``points``: its polyline, ``stations``: its robots).
+        tight_chain: for ``robots=N`` with n_lower ≤ N < n_min (not proven too few): a chain of at most N robots
+            found with tethers merely clear of the grown obstacles, as (its robots, its smallest chord clearance
+            [m] < ``CHORD_CLEARANCE``), see :func:`tight_chain`; None if none was found.
         stations: (n_route, 2) stations of the route chain, the last one the goal [m] (of the chain off the route
             when that is the guide).
         station_arcs: their arc lengths along the guide [m], one per station.
@@ -148,6 +151,7 @@ class Route:
     notes: tuple[str, ...] = field(default_factory=tuple)
     lower_by: str = "length"
     n_route: int = 0
+    tight_chain: tuple[int, float] | None = None
 
     @property
     def arcs(self) -> Array:
@@ -181,9 +185,17 @@ class Route:
             if self.n_min >= self.n_route
             else f"{self.n_route} robots along {where}, {self.n_min} off it"
         )
+        if self.tight_chain is not None:  # the clearance stops it, not the count: floor, so never shown as enough
+            passes = math.floor(self.tight_chain[1] * 1000) / 1000
+            return (
+                f"no chain of {n_robots} robots keeps the {CHORD_CLEARANCE:g} m from the obstacles the plans need: the "
+                f"best found passes {passes:.3f} m from them (tethers ≤ {self.d_max:.2f} m); keeping "
+                f"{CHORD_CLEARANCE:g} m takes {need}; rerun with --robots {self.n_min}"
+            )
         return (
-            f"no chain of {n_robots} robots was found: straight tethers of ≤ {self.d_max:.2f} m clear of the "
-            f"obstacles need {need} (proven: at least {self.n_lower}); rerun with --robots {self.n_min}"
+            f"no chain of {n_robots} robots was found: straight tethers of ≤ {self.d_max:.2f} m keeping "
+            f"{CHORD_CLEARANCE:g} m from the obstacles need {need}, and fewer are neither found nor proven too few "
+            f"(proven: at least {self.n_lower}); rerun with --robots {self.n_min}"
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -693,7 +705,7 @@ def plan_route(
     n_route = n_min
     if n_lower < n_min:
         # fewer robots than the route chain needs: a chain anywhere in the free space (the same search whatever N)
-        witness = _witness(env, base, goal, lim, n_min - 1)
+        witness = _witness(env, base, goal, lim, n_min - 1, n_lower)
         if witness is not None:
             n_min = max(len(witness) - 1, n_lower)  # a real chain: never below a sound proof
             if robots is not None and n_min <= robots < n_route:  # plan along it: its polyline is the guide
@@ -702,6 +714,9 @@ def plan_route(
                     f"no chain of {robots} robots along the shortest route ({n_route} needed there): the guide is a "
                     f"chain of {n_min} found off it"
                 )
+    tight = None
+    if robots is not None and n_lower <= robots < n_min:  # not proven too few: is the clearance what stops it?
+        tight = tight_chain(env, base, goal, lim, robots)
     return Route(
         points=best.points,
         length=best.length,
@@ -720,6 +735,7 @@ def plan_route(
         edges=best.edges,
         time=time.perf_counter() - t0,
         notes=tuple(notes),
+        tight_chain=tight,
     )
 
 
@@ -734,13 +750,73 @@ def _impossible(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> 
     return robots >= 1 and chain_is_impossible(env, base, goal, lim[:, 1], robots, refine_work=REFINE_WORK)
 
 
-def _witness(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> Array | None:
+def _witness(env: Any, base: Array, goal: Array, lim: Array, robots: int, n_lower: int) -> Array | None:
+    """A chain of at most ``robots`` robots keeping the stations' clearance and spacing: 2 robots by the exact
+    search of :func:`best_pair` when no proof rules them out, else :func:`tmr.reach.find_chain`."""
     from tmr.reach import find_chain
 
     first = anchor_tether_clearance(env, base, CHORD_CLEARANCE)
     spans = np.column_stack([lim[:, 0] + SPACING_MARGIN, lim[:, 1]])
     spacing = 2 * env.safety_radius + SPACING_MARGIN
+    if robots >= 2 and n_lower <= 2:
+        pair = best_pair(env, base, goal, spans, spacing, (first, CHORD_CLEARANCE))
+        if pair is not None and pair[1] > 0:
+            return np.array([base, pair[0], goal])
     return find_chain(env, base, goal, spans, robots, CHORD_CLEARANCE, first, spacing=spacing)
+
+
+#: Spacing [m] of the sample points of robot 1 in :func:`best_pair`.
+PAIR_STEP = 0.02
+
+
+def best_pair(
+    env: Any, base: Array, goal: Array, spans: Array, spacing: float, keep: tuple[float, float] = (0.0, 0.0)
+) -> tuple[Array, float] | None:
+    """Robot 1 of a 2-robot chain, searched where it can be: the intersection of the anchor's and the goal's visible
+    regions (:meth:`Environment.visible_region`, radii the span limits), sampled every :data:`PAIR_STEP` [m] and
+    kept within ``spans`` (rows [d_lo, d_max] of the anchor's tether and the next) and ``spacing`` [m] from the goal.
+
+    Returns the sample p whose chords do best against the clearances ``keep`` (anchor chord, goal chord) [m] and
+    its score min(clearance(anchor, p) − keep[0], clearance(p, goal) − keep[1]) [m] (> 0: both chords keep them),
+    or None if no sample qualifies.
+    """
+    lo, hi = spans[0], spans[min(1, len(spans) - 1)]
+    both = env.visible_region(base, lo[1]).intersection(env.visible_region(goal, hi[1]))
+    if both.is_empty:
+        return None
+    x0, y0, x1, y1 = both.bounds
+    xs, ys = np.meshgrid(np.arange(x0, x1 + PAIR_STEP, PAIR_STEP), np.arange(y0, y1 + PAIR_STEP, PAIR_STEP))
+    P = np.stack([xs.ravel(), ys.ravel()], axis=1)
+    P = P[shapely.contains_xy(both, P[:, 0], P[:, 1])]
+    da, dg = np.linalg.norm(P - base, axis=1), np.linalg.norm(P - goal, axis=1)
+    P = P[(da >= lo[0]) & (da <= lo[1]) & (dg >= max(hi[0], spacing)) & (dg <= hi[1])]
+    if not len(P):
+        return None
+    score = np.minimum(env.segment_clearance(base, P) - keep[0], env.segment_clearance(P, goal) - keep[1])
+    i = int(np.argmax(score))
+    return P[i], float(score[i])
+
+
+def tight_chain(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> tuple[int, float] | None:
+    """A chain of at most ``robots`` robots whose tethers are merely clear of the grown obstacles (not
+    ``CHORD_CLEARANCE`` from them), within the span limits ``lim`` (N, 2) and with the robots 2r apart: (its robots,
+    its smallest chord clearance [m]), or None if none was found or the one found keeps ``CHORD_CLEARANCE``.
+
+    2 robots: :func:`best_pair` (the chain whose worse chord is farthest from the obstacles); more:
+    :func:`tmr.reach.find_chain` at zero clearance. Such a chain shows that the count is not what stops the plan:
+    N is at least the fewest robots of the problem's definition (chords clear of the grown obstacles), and only the
+    clearance the plans keep takes more.
+    """
+    from tmr.reach import find_chain
+
+    spacing = 2 * env.safety_radius
+    if robots == 2:
+        pair = best_pair(env, base, goal, lim, spacing)
+        best = (2, pair[1]) if pair is not None and pair[1] > 0 else None
+    else:
+        chain = find_chain(env, base, goal, lim, robots, 0.0, 0.0, spacing=spacing)
+        best = None if chain is None else (len(chain) - 1, float(np.min(env.segment_clearance(chain[:-1], chain[1:]))))
+    return best if best is not None and best[1] < CHORD_CLEARANCE else None
 
 
 def _witness_along(chain: Array, route: _Along) -> _Along:
