@@ -242,12 +242,23 @@ def test_walk_in_view_keeps_the_tether_off_the_corner_an_s_door_would_press_it_o
     assert np.all(env.exact_clearance(pos[:, 1]) > 0)
 
 
-@pytest.mark.parametrize(("seed", "density"), [(1903356524, "medium"), (2264831904, "medium"), (419794541, "dense")])
+@pytest.mark.parametrize(
+    ("seed", "density"),
+    [
+        (1903356524, "medium"),
+        (2264831904, "medium"),
+        (419794541, "dense"),
+        (3098419812, "sparse"),
+        (4097576486, "narrow"),
+    ],
+)
 def test_eight_robots_park_near_the_anchor_of_a_short_route(seed: int, density: str) -> None:
     """Random rooms (tmr.sweep.rooms) whose goal is 2-5 m from the anchor: 8 robots do not fit on the route, so some
     park on a walk from the anchor and the rest stand on the route from the last parked one. That route may pass
     the parked robots: the active ones keep 2r apart from them (before, every such placement was rejected), and no
-    start tether is longer than its span limit."""
+    start tether is longer than its span limit. In the last two rooms the anchor is 0.6-0.8 m from a wall (no ring
+    fits) and the walks away from the goal end too far from it for the active robots: only a walk coiled round the
+    anchor (``compact``) parks them (before, "no free start placement of 8 robots was found")."""
     from tmr.sweep.rooms import generate_room
 
     room = generate_room(seed, density, "near")

@@ -140,32 +140,38 @@ def start_placement(
     tried = 0
     ahead = point_at(route.points, arcs, min(spacing, L))
     heading = math.atan2(ahead[1] - base[1], ahead[0] - base[0])
-    walks: list[tuple[int, Array, Route]] = []  # parking walks the remaining robots can go on from
+    walks: dict[bool, list[tuple[int, Array, Route]]] = {False: [], True: []}  # parkings to reuse with bends
 
-    def parkings() -> Iterator[tuple[int, Array, Route]]:
+    def parkings(compact: bool) -> Iterator[tuple[int, Array, Route]]:
         """Parkings (most active robots first) whose route to the goal the active robots can chain, each
-        recorded in ``walks`` (the second pass reuses them)."""
+        recorded in ``walks[compact]`` (the pass with bends reuses them): rings and walks away from the goal, or
+        with ``compact`` walks coiled round the anchor."""
         nonlocal tried
         for active in range(min(N - 1, fit + 2), 0, -1):
             parked = N - active
-            for Pp in _rings(env, base, parked, spacing, clear, heading) + _snakes(
-                env, base, parked, spacing, clear, goal
-            ):
+            if compact:
+                candidates = _snakes(env, base, parked, spacing, clear, goal, compact=True)
+            else:
+                candidates = _rings(env, base, parked, spacing, clear, heading)
+                candidates += _snakes(env, base, parked, spacing, clear, goal)
+            for Pp in candidates:
                 tried += 1
                 try:
                     sub = plan_route(env, Pp[-1], goal, lim[parked:])
                 except RouteVerdict:
                     continue
                 if sub.n_route <= active:  # the active robots start along sub.points, the route chain's guide
-                    walks.append((parked, Pp, sub))
-                    yield walks[-1]
+                    walks[compact].append((parked, Pp, sub))
+                    yield walks[compact][-1]
 
-    for bends in (False, True):  # off-bend candidates only where the route's own points give no placement at all
-        if fit >= N:
+    # off-bend candidates only where the route's own points give no placement at all; compact parkings last, only
+    # where nothing else fits (a placement found before they existed is found unchanged)
+    for compact, bends in ((False, False), (False, True), (True, False), (True, True)):
+        if fit >= N and not compact:
             P = _along(env, route.points, N, spacing, clear, ahead=spacing, reach=reach, bends=bends)
             if P is not None and _free_chain(env, base, P, clear):
                 return P, 0
-        for parked, Pp, sub in walks if bends else parkings():
+        for parked, Pp, sub in walks[compact] if bends else parkings(compact):
             Pa = _along(env, sub.points, N - parked, spacing, clear, ahead=0.0, reach=reach, bends=bends, avoid=Pp)
             if Pa is None:
                 continue
@@ -278,12 +284,17 @@ SNAKES = 4
 SNAKE_BUDGET = 400
 
 
-def _snakes(env: Any, base: Array, count: int, spacing: float, clear: float, goal: Array) -> list[Array]:
+def _snakes(
+    env: Any, base: Array, count: int, spacing: float, clear: float, goal: Array, compact: bool = False
+) -> list[Array]:
     """Up to ``SNAKES`` parking walks of ``count`` robots from the anchor (depth-first, best headings first).
 
     Each robot is ``spacing`` [m] from the previous one (the first from the anchor) on a free chord, ≥ 2r + 0.05 m
     from every robot placed and the anchor; headings are ranked by distance to those robots, clearance and distance
-    to the goal (the robots that follow the route from the last parked one need room before the goal).
+    to the goal (the robots that follow the route from the last parked one need room before the goal), or with
+    ``compact`` by nearness to the anchor instead of the goal distance: a walk that coils round the anchor, so that
+    the route from its end is not much longer than the anchor's own (a near goal, many robots, and an anchor by a
+    wall where no ring fits and the walks away from the goal end too far from it).
     """
     h = spacing * np.stack([np.cos(np.arange(36) * np.pi / 18), np.sin(np.arange(36) * np.pi / 18)], axis=1)
     r = float(env.safety_radius)
@@ -310,11 +321,12 @@ def _snakes(env: Any, base: Array, count: int, spacing: float, clear: float, goa
             return
         free = np.asarray(env.segment_clearance(np.repeat(pts[-1][None], len(idx), 0), C[idx]), float) > clear + 0.05
         idx = idx[free]
-        score = (
-            np.minimum(sep[idx], 3.0)
-            + np.minimum(np.asarray(env.clearance(C[idx]), float), 1.0)
-            + 0.5 * np.minimum(np.linalg.norm(C[idx] - goal, axis=1), 6.0)
+        far = (
+            -np.linalg.norm(C[idx] - pts[0], axis=1)
+            if compact
+            else np.minimum(np.linalg.norm(C[idx] - goal, axis=1), 6.0)
         )
+        score = np.minimum(sep[idx], 3.0) + np.minimum(np.asarray(env.clearance(C[idx]), float), 1.0) + 0.5 * far
         for k in idx[np.argsort(-score, kind="stable")][:3]:
             grow([*pts, C[k]])
 
