@@ -51,6 +51,7 @@ if PINNED:
 import numpy as np  # noqa: E402
 from provenance import source_version, versions  # noqa: E402
 
+from tmr.route import CHORD_CLEARANCE  # noqa: E402
 from tmr.sweep.executor import make_executor  # noqa: E402
 from tmr.sweep.rooms import (  # noqa: E402
     DENSITIES,
@@ -72,9 +73,9 @@ ROBOTS = ("2", "3", "5", "8", "auto")
 #: Targets of the project issue ("tether-aware global planning", item 6).
 TARGET_AUTO_SUCCESS = 0.98  # fraction of connected goals planned with --robots auto (qp)
 TARGET_REFUSE_S = 1.0  # s, whole process, every N < N_min
-#: How tmr.plan's exit-1 verdict starts when a chain of N exists whose tethers keep less than the plans' clearance
-#: (tmr.route.Route.refusal with ``tight_chain``).
-TIGHT_VERDICT = "keeps the 0.06 m from the obstacles the plans need"
+#: Part of tmr.plan's exit-1 verdict when a chain of N was found that only a tether's clearance keeps from being
+#: planned (tmr.route.Route.refusal with ``tight_chain``).
+TIGHT_VERDICT = f"keeping {CHORD_CLEARANCE:g} m from the obstacles was found, only closer ones"
 TARGET_MEDIAN_PLAN_S = 2.0  # s, whole process, median
 
 # ----------------------------------------------------------------------------------------------------------------

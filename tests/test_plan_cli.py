@@ -215,10 +215,11 @@ def test_chain_off_the_route_plans_with_fewer_robots(tmp_path, capsys):
     assert (metrics["n_robots"], metrics["n_min"], metrics["n_lower"], metrics["n_route"]) == (4, 4, 4, 6)
 
 
-def test_two_robots_found_by_the_exact_pair_search_plan(tmp_path, capsys):
+def test_two_robots_found_by_the_pair_search_plan(tmp_path, capsys):
     """narrow-mid-541096168: robot 1 of a 2-robot chain can only be in a thin sliver (0.1 m², every point 5.2–5.6 m
-    from both ends) that the 0.25 m candidate grid of find_chain misses; the exact search over the intersection of the
-    two visible regions finds it, keeping 0.06 m, and 2 robots plan (they were refused 'no plan found' before)."""
+    from both ends) that the 0.25 m candidate grid of find_chain misses; the 2-robot search, a 0.02 m grid over the
+    intersection of the two visible regions, finds it keeping 0.06 m, and 2 robots plan (they were refused 'no plan
+    found' before)."""
     from tmr.sweep.rooms import generate_room, write_geojson
 
     room = generate_room(541096168, "narrow", "mid")
@@ -234,9 +235,10 @@ def test_two_robots_found_by_the_exact_pair_search_plan(tmp_path, capsys):
 
 
 def test_too_few_robots_for_the_clearance_exit_1_with_it(tmp_path, capsys):
-    """dense-mid-671599181 with 2 robots: a 2-robot chain exists (so 2 is not proven too few), but its best tethers
-    pass 0.0599 m from the obstacles, below the 0.06 m the plans need: exit 1, naming the clearance (floored, so it
-    never reads as enough) and the count that keeps it, nothing written."""
+    """dense-mid-671599181 with 2 robots: a 2-robot chain exists (so 2 is not proven too few), but the best one on the
+    search's grid has a tether 0.0599 m from the obstacles, below the 0.06 m the plans need (on a 0.002 m grid too:
+    0.05992 m): exit 1, naming the clearance (floored, so it never reads as enough) and the count that keeps it,
+    nothing written."""
     from tmr.sweep.rooms import generate_room, write_geojson
 
     room = generate_room(671599181, "dense", "mid")
@@ -248,7 +250,8 @@ def test_too_few_robots_for_the_clearance_exit_1_with_it(tmp_path, capsys):
     assert code == 1 and not out.exists()
     text = (stdout + err).strip()
     assert (
-        "no chain of 2 robots keeps the 0.06 m from the obstacles the plans need: the best found passes 0.059 m" in text
+        "no chain of 2 robots keeping 0.06 m from the obstacles was found, only closer ones: in the best on a 0.02 m "
+        "grid, a tether passes 0.059 m from them where 0.06 m is needed" in text
     )
     assert text.endswith("rerun with --robots 3")
 

@@ -103,17 +103,21 @@ def test_random_rooms_station_chains_are_never_refuted():
 
 def test_the_half_size_cells_prove_what_the_first_grid_cannot():
     """medium-corner-732277931 (a generated room) with 3 robots: not proven with h = 0.1 m cells (obstacles shrunk by
-    0.24 m in the relaxation), proven with h = 0.05 m (0.12 m); the refinement rung runs it because 8× the first
-    attempt's ray tests fit REFINE_WORK, never with ``refine_work=0``. The route then refuses 3 robots as proven."""
+    0.22 m in the relaxation), proven with h = 0.05 m (0.13 m). The refinement rung runs exactly when 8× the first
+    attempt's ray tests fit ``refine_work`` (a count: the same verdict on any machine), and the route then refuses
+    3 robots as proven."""
+    from tmr.reach import _prove
     from tmr.sweep.rooms import generate_room, span_rows
 
     room = generate_room(732277931, "medium", "corner")
     env, lim = room.environment(), span_rows()
     args = (env, room.base, room.goal, lim[:, 1], 3)
-    assert not chain_is_impossible(*args)
-    assert not chain_is_impossible(*args, refine_work=0)
+    proven, work = _prove(*args, REACH_CELL)
+    assert not proven and 0 < 8 * work <= REFINE_WORK
     assert chain_is_impossible(*args, cell=REACH_CELL / 2)
-    assert chain_is_impossible(*args, refine_work=REFINE_WORK)
+    assert not chain_is_impossible(*args)  # refine_work = 0: never refined
+    assert not chain_is_impossible(*args, refine_work=8 * work - 1)  # one ray test over the budget
+    assert chain_is_impossible(*args, refine_work=8 * work)
     route = plan_route(env, room.base, room.goal, lim, robots=3)
     assert (
         route.n_lower == 4
@@ -124,7 +128,7 @@ def test_the_half_size_cells_prove_what_the_first_grid_cannot():
 
 def test_ray_table_chains_stay_near_their_segments():
     """Each offset's chain of predecessors steps one ring at a time to the origin, and stays within ``dev`` of the
-    straight segment (recomputed here point by point), at most 1.7 cells at the default radius."""
+    straight segment (recomputed here point by point), under 1.7 cells at the default radius (1.48 within its disc)."""
     off, ring, pred, dev = ray_table(12)
     origin = int(np.flatnonzero(ring == 0)[0])
     for i in range(len(off)):
@@ -182,7 +186,8 @@ def test_chain_off_the_route_needs_fewer_robots():
     assert route.refusal(3).endswith("rerun with --robots 4") and route.refusal(4) is None
     unproven = dataclasses.replace(route, n_lower=3).refusal(3)  # the search verdict's wording
     assert "keeping 0.06 m from the obstacles need 6 robots along the shortest tether route" in unproven
-    assert "4 off it, and fewer are neither found nor proven too few (proven: at least 3)" in unproven
+    assert "4 off it, and no chain of 3 keeping it was found off the route, nor proven impossible" in unproven
+    assert "(proven: at least 3); rerun with --robots 4" in unproven
     four = plan_route(env, room.base, room.goal, lim, robots=4)
     assert four.n_min == 4 and len(four.stations) == 4 and any("found off it" in n for n in four.notes)
     chain = np.vstack([room.base, four.stations])

@@ -252,7 +252,7 @@ def test_walk_in_view_keeps_the_tether_off_the_corner_an_s_door_would_press_it_o
         (4097576486, "narrow"),
     ],
 )
-def test_eight_robots_park_near_the_anchor_of_a_short_route(seed: int, density: str) -> None:
+def test_eight_robots_park_near_the_anchor_of_a_short_route(seed: int, density: str, monkeypatch) -> None:
     """Random rooms (tmr.sweep.rooms) whose goal is 2-5 m from the anchor: 8 robots do not fit on the route, so some
     park on a walk from the anchor and the rest stand on the route from the last parked one. That route may pass
     the parked robots: the active ones keep 2r apart from them (before, every such placement was rejected), and no
@@ -267,6 +267,19 @@ def test_eight_robots_park_near_the_anchor_of_a_short_route(seed: int, density: 
     route = plan_route(env, room.base, room.goal, lim, robots=8)
     P, parked = start_placement(env, route, 8, lim[:, 0].max() + 0.2, span_limits=lim)
     assert P.shape == (8, 2) and parked >= 1
+    # without the compact walks: the same placement in the first three rooms, none in the last two
+    import tmr.references as references
+
+    snakes = references._snakes
+    monkeypatch.setattr(
+        references, "_snakes", lambda *a, compact=False, **k: [] if compact else snakes(*a, compact=False, **k)
+    )
+    if seed in (3098419812, 4097576486):
+        with pytest.raises(references.PlacementError):
+            start_placement(env, route, 8, lim[:, 0].max() + 0.2, span_limits=lim)
+    else:
+        P0, parked0 = start_placement(env, route, 8, lim[:, 0].max() + 0.2, span_limits=lim)
+        assert parked0 == parked and np.array_equal(P0, P)
     D = np.linalg.norm(P[:, None] - P[None], axis=-1)
     assert D[np.triu_indices(8, 1)].min() >= 2 * 0.5 + 0.02
     spans = np.linalg.norm(np.diff(np.vstack([room.base, P]), axis=0), axis=1)

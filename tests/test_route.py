@@ -119,25 +119,35 @@ def test_gap_wider_than_2r_but_nearer_than_the_chord_clearance():
     """A 1.05 m gap in a wall: grown by r = 0.5 m on both sides it leaves 0.05 m, so a chord through its middle keeps
     0.025 m, less than the 0.06 m (CHORD_CLEARANCE) the plans need. By length one robot could reach the goal 4 m
     away through it (n_lower = 1); keeping 0.06 m takes the way round the wall's end, 4 robots. With 2 or 3 robots
-    nothing is proven, and the route says what stops them: the clearance, the best chain found passing ≤ 0.025 m."""
-    from tmr.route import CHORD_CLEARANCE
+    nothing is proven, and the route says what stops them: the clearance, a chain through the gap passing ≤ 0.025 m
+    (the 2-robot search: the best on its grid, just off the gap's middle line)."""
+    from tmr.route import CHORD_CLEARANCE, tight_chain
 
     w = 1.05
     env = Environment.from_geometry(
         [box(9.9, 0.0, 10.1, 10 - w / 2), box(9.9, 10 + w / 2, 10.1, 17.0)], (0.0, 0.0, 20.0, 20.0)
     )
     a, g = (8.0, 10.0), (12.0, 10.0)
-    assert plan_route(env, a, g, LIM).tight_chain is None  # only asked for a given N in the unproven band
+    free = plan_route(env, a, g, LIM)
+    assert (free.n_lower, free.n_min) == (1, 4)
     for n in (2, 3):
         route = plan_route(env, a, g, LIM, robots=n)
         assert (route.n_lower, route.n_min) == (1, 4)
-        count, c = route.tight_chain
-        assert count <= n and 0.015 < c <= 0.025 + 1e-9 < CHORD_CLEARANCE
+        t = route.tight_chain
+        assert t is not None and t.robots <= n and t.needed == CHORD_CLEARANCE
+        assert 0.015 < t.clearance <= 0.025 + 1e-9
+        assert t.searched == ("the best on a 0.02 m grid" if n == 2 else "the one found")
         assert route.refusal(n).startswith(
-            f"no chain of {n} robots keeps the 0.06 m from the obstacles the plans need: the best found passes 0.0"
+            f"no chain of {n} robots keeping 0.06 m from the obstacles was found, only closer ones: in "
+            f"{t.searched}, a tether passes 0.0"
         )
         assert route.refusal(n).endswith("rerun with --robots 4")
     assert plan_route(env, a, g, LIM, robots=4).refusal(4) is None
+    # a wider gap (0.2 m of free width, 0.1 m at its middle) is no shortfall: no explanation of that kind
+    wide = Environment.from_geometry(
+        [box(9.9, 0.0, 10.1, 10 - 0.6), box(9.9, 10 + 0.6, 10.1, 17.0)], (0.0, 0.0, 20.0, 20.0)
+    )
+    assert tight_chain(wide, np.array(a), np.array(g), LIM, 2) is None
 
 
 def test_goal_outside_the_room_or_in_an_obstacle():

@@ -19,14 +19,15 @@ grid of square cells of side h (half-diagonal e = h/√2), :func:`chain_is_impos
   of pq; each cell of the ray table's chain from s to t has its centre within σ h of the centres' segment, hence
   within e + σ h of F, so it is not blocked. The ray table (:func:`ray_table`) is a tree: each offset's predecessor
   is the 8-neighbour one ring nearer whose chain stays closest to the straight segment, so one gather per ring tests
-  every ray from every source at once; σ is the table's largest deviation (1.7 cells at 5.7 m / 0.1 m).
+  every ray from every source at once; σ is the table's largest deviation within the disc (1.48 cells at
+  5.7 m / 0.1 m, 1.88 at 5.7 m / 0.05 m).
 * The last tether exactly too: p_{N-1} is in the goal's visible region within d_N, so R̂_{N-1} must meet its cells.
   With N = 2 no grid is needed: robot 1 is in both visible regions, so their intersection must not be empty.
 * Pruning: p_k is within Σ_{j>k} d_j of the goal (the rest of the chain is a path to it), so cells farther than that
   (+ e) are dropped from R̂_k, and sources farther than Σ_{j≥k} d_j (+ e) are not expanded.
 
 If R̂_{N-1} meets none of the cells the goal sees, no chain of N or fewer robots exists: a proof, whatever the
-resolution. The relaxation of the middle tethers (obstacles effectively shrunk by e + σ h ≈ 0.24 m, chords 2e ≈
+resolution. The relaxation of the middle tethers (obstacles effectively shrunk by e + σ h ≈ 0.22 m, chords 2e ≈
 0.14 m longer at h = 0.1 m) can only make it prove less, never wrongly. Robot spacing and the tethers' lower limits
 are ignored (a relaxation too).
 """
@@ -120,9 +121,12 @@ def chain_is_impossible(
         d_max: longest chord per tether [m], the anchor's first (the last value repeats), or one value for all.
         robots: N ≥ 1.
         cell: h [m], the grid's cell side.
-        refine_work: if the proof at ``cell`` fails, it is tried once more at ``cell / 2`` (half the relaxation,
-            about 8× the work: twice the source cells, four times the rays) when 8× the ray tests of the first
-            attempt are at most this many (0: never). A count, not a clock, so the verdict is the same on any machine.
+        refine_work: if the proof at ``cell`` fails, it is tried once more at ``cell / 2`` (a smaller relaxation:
+            obstacles shrunk by 0.13 m instead of 0.22 m at 5.6 m tethers; about 8× the work: twice the source
+            cells, four times the rays) when 8× the ray tests of the first attempt are at most this many (0: never).
+            A count, not a clock, so the verdict is the same on any machine. A first attempt that ends before any
+            ray test (robot 1's cells already meet the cells the goal sees) is not refined: the finer grid would
+            almost surely end there too.
 
     False means "not proven": a chain may or may not exist.
     """

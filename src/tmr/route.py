@@ -33,7 +33,7 @@ import heapq
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import shapely
@@ -125,8 +125,8 @@ class Route:
         n_route: robots of the route chain; for N < n_route, ``plan_route(..., robots=N)`` returns a route whose
             guide is the chain found off the route (``points``: its polyline, ``stations``: its robots).
         tight_chain: for ``robots=N`` with n_lower ≤ N < n_min (not proven too few): a chain of at most N robots
-            found with tethers merely clear of the grown obstacles, as (its robots, its smallest chord clearance
-            [m] < ``CHORD_CLEARANCE``), see :func:`tight_chain`; None if none was found.
+            that only the clearance of a tether keeps from being a witness (:func:`tight_chain`); None if none was
+            found.
         stations: (n_route, 2) stations of the route chain, the last one the goal [m] (of the chain off the route
             when that is the guide).
         station_arcs: their arc lengths along the guide [m], one per station.
@@ -151,7 +151,7 @@ class Route:
     notes: tuple[str, ...] = field(default_factory=tuple)
     lower_by: str = "length"
     n_route: int = 0
-    tight_chain: tuple[int, float] | None = None
+    tight_chain: TightChain | None = None
 
     @property
     def arcs(self) -> Array:
@@ -185,17 +185,19 @@ class Route:
             if self.n_min >= self.n_route
             else f"{self.n_route} robots along {where}, {self.n_min} off it"
         )
-        if self.tight_chain is not None:  # the clearance stops it, not the count: floor, so never shown as enough
-            passes = math.floor(self.tight_chain[1] * 1000) / 1000
+        robots = f"{n_robots} robot{'s' if n_robots != 1 else ''}"
+        if self.tight_chain is not None:  # the clearance stops it, not the count: floored, never shown as enough
+            t = self.tight_chain
+            passes = math.floor(t.clearance * 1000) / 1000
             return (
-                f"no chain of {n_robots} robots keeps the {CHORD_CLEARANCE:g} m from the obstacles the plans need: the "
-                f"best found passes {passes:.3f} m from them (tethers ≤ {self.d_max:.2f} m); keeping "
-                f"{CHORD_CLEARANCE:g} m takes {need}; rerun with --robots {self.n_min}"
+                f"no chain of {robots} keeping {CHORD_CLEARANCE:g} m from the obstacles was found, only closer ones: "
+                f"in {t.searched}, a tether passes {passes:.3f} m from them where {t.needed:.3g} m is needed "
+                f"(tethers ≤ {self.d_max:.2f} m); keeping it takes {need}; rerun with --robots {self.n_min}"
             )
         return (
-            f"no chain of {n_robots} robots was found: straight tethers of ≤ {self.d_max:.2f} m keeping "
-            f"{CHORD_CLEARANCE:g} m from the obstacles need {need}, and fewer are neither found nor proven too few "
-            f"(proven: at least {self.n_lower}); rerun with --robots {self.n_min}"
+            f"no chain of {robots} was found: straight tethers of ≤ {self.d_max:.2f} m keeping "
+            f"{CHORD_CLEARANCE:g} m from the obstacles need {need}, and no chain of {n_robots} keeping it was found "
+            f"off the route, nor proven impossible (proven: at least {self.n_lower}); rerun with --robots {self.n_min}"
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -765,27 +767,32 @@ def _witness(env: Any, base: Array, goal: Array, lim: Array, robots: int, n_lowe
     return find_chain(env, base, goal, spans, robots, CHORD_CLEARANCE, first, spacing=spacing)
 
 
-#: Spacing [m] of the sample points of robot 1 in :func:`best_pair`.
+#: Spacing [m] of the sample points of robot 1 in :func:`best_pair`, and the most samples it takes (a larger region
+#: is sampled more coarsely: a wide one needs no fine search).
 PAIR_STEP = 0.02
+PAIR_SAMPLES = 20_000
 
 
 def best_pair(
     env: Any, base: Array, goal: Array, spans: Array, spacing: float, keep: tuple[float, float] = (0.0, 0.0)
-) -> tuple[Array, float] | None:
+) -> tuple[Array, float, float] | None:
     """Robot 1 of a 2-robot chain, searched where it can be: the intersection of the anchor's and the goal's visible
-    regions (:meth:`Environment.visible_region`, radii the span limits), sampled every :data:`PAIR_STEP` [m] and
-    kept within ``spans`` (rows [d_lo, d_max] of the anchor's tether and the next) and ``spacing`` [m] from the goal.
+    regions (:meth:`Environment.visible_region`, radii the span limits), sampled on a grid of :data:`PAIR_STEP` [m]
+    (coarser if that would exceed :data:`PAIR_SAMPLES` points over its bounding box) and kept within ``spans``
+    (rows [d_lo, d_max] of the anchor's tether and the next) and ``spacing`` [m] from the goal.
 
-    Returns the sample p whose chords do best against the clearances ``keep`` (anchor chord, goal chord) [m] and
-    its score min(clearance(anchor, p) − keep[0], clearance(p, goal) − keep[1]) [m] (> 0: both chords keep them),
-    or None if no sample qualifies.
+    Returns the sample p whose chords do best against the clearances ``keep`` (anchor chord, goal chord) [m], its
+    score min(clearance(anchor, p) − keep[0], clearance(p, goal) − keep[1]) [m] (> 0: both chords keep them) and the
+    grid step [m]; None if no sample qualifies. A search on a grid, not a proof: a point between samples may do
+    better.
     """
     lo, hi = spans[0], spans[min(1, len(spans) - 1)]
     both = env.visible_region(base, lo[1]).intersection(env.visible_region(goal, hi[1]))
     if both.is_empty:
         return None
     x0, y0, x1, y1 = both.bounds
-    xs, ys = np.meshgrid(np.arange(x0, x1 + PAIR_STEP, PAIR_STEP), np.arange(y0, y1 + PAIR_STEP, PAIR_STEP))
+    step = max(PAIR_STEP, math.sqrt((x1 - x0 + PAIR_STEP) * (y1 - y0 + PAIR_STEP) / PAIR_SAMPLES))
+    xs, ys = np.meshgrid(np.arange(x0, x1 + step, step), np.arange(y0, y1 + step, step))
     P = np.stack([xs.ravel(), ys.ravel()], axis=1)
     P = P[shapely.contains_xy(both, P[:, 0], P[:, 1])]
     da, dg = np.linalg.norm(P - base, axis=1), np.linalg.norm(P - goal, axis=1)
@@ -794,29 +801,51 @@ def best_pair(
         return None
     score = np.minimum(env.segment_clearance(base, P) - keep[0], env.segment_clearance(P, goal) - keep[1])
     i = int(np.argmax(score))
-    return P[i], float(score[i])
+    return P[i], float(score[i]), step
 
 
-def tight_chain(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> tuple[int, float] | None:
-    """A chain of at most ``robots`` robots whose tethers are merely clear of the grown obstacles (not
-    ``CHORD_CLEARANCE`` from them), within the span limits ``lim`` (N, 2) and with the robots 2r apart: (its robots,
-    its smallest chord clearance [m]), or None if none was found or the one found keeps ``CHORD_CLEARANCE``.
+class TightChain(NamedTuple):
+    """A chain that meets every requirement of the stations but the clearance of one tether (:func:`tight_chain`)."""
 
-    2 robots: :func:`best_pair` (the chain whose worse chord is farthest from the obstacles); more:
-    :func:`tmr.reach.find_chain` at zero clearance. Such a chain shows that the count is not what stops the plan:
-    N is at least the fewest robots of the problem's definition (chords clear of the grown obstacles), and only the
-    clearance the plans keep takes more.
+    robots: int  #: its robots (≤ the N asked)
+    clearance: float  #: clearance [m] of its tether with the largest shortfall
+    needed: float  #: what the stations need of that tether [m]: ``CHORD_CLEARANCE``, or less for the anchor's
+    searched: str  #: how it was found, for the verdict: "the best on a 0.02 m grid" (2 robots), "the one found"
+
+
+def tight_chain(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> TightChain | None:
+    """A chain of at most ``robots`` robots that meets every requirement of the stations and of :func:`_witness`
+    (spans in [d_lo + ``SPACING_MARGIN``, d_max] of ``lim`` (N, 2), robots 2r + ``SPACING_MARGIN`` apart) except the
+    clearance of its tethers, which are merely clear of the grown obstacles; None if none was found, or if the one
+    found keeps the clearances too (then it is no explanation: the verdict stays the search's).
+
+    2 robots: :func:`best_pair` (on its grid, the chain whose worse tether does best against what it needs); more:
+    :func:`tmr.reach.find_chain` at zero clearance (the first chain found, not the best). Such a chain shows that the
+    count is not what stops the plan: N is at least the fewest robots of the problem's definition (chords clear of
+    the grown obstacles), and only the clearance the plans keep takes more.
     """
     from tmr.reach import find_chain
 
-    spacing = 2 * env.safety_radius
+    first = anchor_tether_clearance(env, base, CHORD_CLEARANCE)
+    spans = np.column_stack([lim[:, 0] + SPACING_MARGIN, lim[:, 1]])
+    spacing = 2 * env.safety_radius + SPACING_MARGIN
     if robots == 2:
-        pair = best_pair(env, base, goal, lim, spacing)
-        best = (2, pair[1]) if pair is not None and pair[1] > 0 else None
+        pair = best_pair(env, base, goal, spans, spacing, (first, CHORD_CLEARANCE))
+        if pair is None:
+            return None
+        chain, searched = np.array([base, pair[0], goal]), f"the best on a {pair[2]:.2g} m grid"
     else:
-        chain = find_chain(env, base, goal, lim, robots, 0.0, 0.0, spacing=spacing)
-        best = None if chain is None else (len(chain) - 1, float(np.min(env.segment_clearance(chain[:-1], chain[1:]))))
-    return best if best is not None and best[1] < CHORD_CLEARANCE else None
+        chain = find_chain(env, base, goal, spans, robots, 0.0, 0.0, spacing=spacing)
+        if chain is None:
+            return None
+        searched = "the one found"
+    c = np.asarray(env.segment_clearance(chain[:-1], chain[1:]), float)
+    need = np.full(len(c), CHORD_CLEARANCE)
+    need[0] = first
+    k = int(np.argmin(c - need))
+    if c[k] <= 0 or c[k] > need[k]:  # not clear of the obstacles at all, or no shortfall: no explanation
+        return None
+    return TightChain(len(chain) - 1, float(c[k]), float(need[k]), searched)
 
 
 def _witness_along(chain: Array, route: _Along) -> _Along:
