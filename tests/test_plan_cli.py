@@ -234,6 +234,27 @@ def test_two_robots_found_by_the_pair_search_plan(tmp_path, capsys):
     assert (metrics["n_robots"], metrics["n_min"], metrics["n_route"]) == (2, 2, 3)
 
 
+@pytest.mark.parametrize(("seed", "density", "n"), [(4097576486, "narrow", 5), (202045748, "medium", 8)])
+def test_extra_robots_near_a_near_goal_stay_where_they_start(tmp_path, capsys, seed, density, n):
+    """A goal 3–6 m from the anchor and 5 or 8 robots: the references park one more robot at a time until the
+    stations match the active robots; parking the next one could move the chain's start to where the stations need
+    more robots than remain (narrow-near-4097576486: a robot 1.07 m from the goal, closer than a tether's d_lo +
+    0.1 m, took 2 stations for 1 robot), and the run stopped with "the 1 active robot(s) cannot reach the goal".
+    Now the previous stations are kept, the robots before them staying where they start (their last tether to the
+    first station checked), and the plan passes every check."""
+    from tmr.sweep.rooms import generate_room, write_geojson
+
+    room = generate_room(seed, density, "near")
+    path = write_geojson(room, tmp_path / "room.geojson")
+    out = tmp_path / "out"
+    base, goal = ",".join(map(str, room.base)), ",".join(map(str, room.goal))
+    args = ["--map", str(path), f"--base={base}", f"--goal={goal}", "--robots", str(n), "--no-plots", "--out", str(out)]
+    code, _, err = run_cli(args, capsys)
+    assert code == 0, err
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["success"] and metrics["n_violation_steps"] == 0 and metrics["n_robots"] == n
+
+
 def test_too_few_robots_for_the_clearance_exit_1_with_it(tmp_path, capsys):
     """dense-mid-671599181 with 2 robots: a 2-robot chain exists (so 2 is not proven too few), but the best one on the
     search's grid has a tether 0.0599 m from the obstacles, below the 0.06 m the plans need (on a 0.002 m grid too:

@@ -495,6 +495,18 @@ def _walk_in_view(env: Any, pos: Array, final: Array, i: int, step: float = 0.05
     pos[kp : k1 + 1, i + 1] = P + u[:, None] * (F - P)
 
 
+def _stays_joined(env: Any, P: Array, f_arcs: Array, f_pts: Array, lim: Array) -> bool:
+    """Whether the last robot that stays at its start (robot N − len(f_pts), 1-based) reaches the first final
+    station ``f_pts[0]`` on a free chord (clearance > ``CHORD_START_CLEARANCE``) within the span limits of its
+    tether, ``lim`` (N, 2)."""
+    k = len(P) - len(f_pts)  # 0-based index of the first robot that moves; robot k − 1 stays
+    if k < 1:
+        return False
+    lo, hi = lim[k]
+    d = float(np.linalg.norm(f_pts[0] - P[k - 1]))
+    return bool(lo <= d <= hi and env.segment_is_free(P[k - 1], f_pts[0], CHORD_START_CLEARANCE))
+
+
 def chain_reference(
     env: Any,
     route: Route,
@@ -549,6 +561,7 @@ def chain_reference(
     # final stations of the active robots parked+1..N, from the last parked robot's position; when there are more
     # robots than stations and no tether is long enough to split, one more robot stays where it starts (parked),
     # and the stations are searched again from it, so that no two final positions crowd each other
+    fewer: tuple[Array, Array] | None = None  # the last stations that were fewer than the active robots
     while True:
         s0 = float(start_arcs[parked - 1]) if parked else 0.0
         active = N - parked
@@ -558,6 +571,12 @@ def chain_reference(
         except RouteVerdict as exc:
             raise BlockedRouteError(f"from the start placement: {exc}") from exc
         if len(f_arcs) > active:
+            # parking one more robot moved the chain's start past where the stations fit (a near goal): keep the
+            # previous stations, the robots before them staying where they start, if the last of those reaches the
+            # first station within its span limits on a free chord
+            if fewer is not None and _stays_joined(env, P, *fewer, lim):
+                f_arcs, f_pts = fewer
+                break
             raise BlockedRouteError(
                 f"the {active} active robot(s) cannot reach the goal along the route from their start placement: "
                 f"{len(f_arcs)} are needed"
@@ -567,6 +586,7 @@ def chain_reference(
             f_pts, f_arcs = _split_extra(f_pts, f_arcs, start_pt, active - len(f_arcs), float(d_lo.max()), s0)
         if len(f_arcs) == active or parked >= N - 1:
             break
+        fewer = (f_arcs, f_pts)
         parked += 1
     final = np.vstack([P[: N - len(f_pts)], f_pts])
     final_arcs = np.concatenate([start_arcs[: N - len(f_arcs)], f_arcs])
