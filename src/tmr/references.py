@@ -656,7 +656,7 @@ def chain_reference(
         start_arcs=start_arcs,
         final=final,
         final_arcs=final_arcs,
-        parked=int(parked),
+        parked=int(N - len(f_pts)),  # every robot before the stations stays where it starts
         trajectory=traj,
         positions=pos,
         velocities=vel,

@@ -753,7 +753,7 @@ def _impossible(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> 
 
 
 def _witness(env: Any, base: Array, goal: Array, lim: Array, robots: int, n_lower: int) -> Array | None:
-    """A chain of at most ``robots`` robots keeping the stations' clearance and spacing: 2 robots by the exact
+    """A chain of at most ``robots`` robots keeping the stations' clearance and spacing: 2 robots by the grid
     search of :func:`best_pair` when no proof rules them out, else :func:`tmr.reach.find_chain`."""
     from tmr.reach import find_chain
 
