@@ -304,3 +304,31 @@ def test_references_hold_still_at_the_end_for_the_settle_time() -> None:
     np.testing.assert_array_equal(b.positions[K:], np.repeat(a.positions[-1:], 30, 0))
     assert np.all(b.velocities[K:] == 0) and np.all(b.trajectory.xd[K:] == 0)
     np.testing.assert_allclose(np.diff(b.trajectory.t), 0.05)
+
+
+def test_robots_before_the_stations_stay_when_parking_one_more_overshoots(monkeypatch) -> None:
+    """narrow-near-4097576486, 5 robots, goal 3.3 m from the anchor: parking robot 4 as well would start the
+    stations 1.07 m from the goal, nearer than d_lo + 0.1 m, so they need 2 robots where 1 remains. The previous
+    stations (the goal alone) are kept: robots 1-4 stay where they start (``parked`` = 4, their references never
+    move), robot 5 goes to the goal, 2r + 0.02 m from every staying robot. Without the fallback it is the old
+    BlockedRouteError."""
+    import tmr.references as references
+    from tmr.route import BlockedRouteError
+    from tmr.sweep.rooms import generate_room
+
+    room = generate_room(4097576486, "narrow", "near")
+    env, N = room.environment(), 5
+    lim = span_limits(N, ChainParams())
+    route = plan_route(env, room.base, room.goal, lim, robots=N)
+    P, parked = start_placement(env, route, N, lim[:, 0].max() + 0.2, span_limits=lim)
+    kw = dict(parked=parked, T_end=None, Ts=0.05, speed=0.8, accel=0.5, spacing=lim[:, 0].max() + 0.2)
+    ref = chain_reference(env, route, P, lim, **kw)
+    assert parked < ref.parked == N - 1
+    np.testing.assert_array_equal(
+        ref.positions[:, : ref.parked], np.broadcast_to(P[: ref.parked], ref.positions[:, : ref.parked].shape)
+    )
+    np.testing.assert_allclose(ref.final[-1], room.goal)
+    assert np.linalg.norm(P[: ref.parked] - ref.final[-1], axis=1).min() >= 2 * 0.5 + 0.02
+    monkeypatch.setattr(references, "_stays_joined", lambda *a: False)
+    with pytest.raises(BlockedRouteError, match="the 1 active robot"):
+        chain_reference(env, route, P, lim, **kw)

@@ -495,16 +495,22 @@ def _walk_in_view(env: Any, pos: Array, final: Array, i: int, step: float = 0.05
     pos[kp : k1 + 1, i + 1] = P + u[:, None] * (F - P)
 
 
-def _stays_joined(env: Any, P: Array, f_arcs: Array, f_pts: Array, lim: Array) -> bool:
-    """Whether the last robot that stays at its start (robot N − len(f_pts), 1-based) reaches the first final
-    station ``f_pts[0]`` on a free chord (clearance > ``CHORD_START_CLEARANCE``) within the span limits of its
-    tether, ``lim`` (N, 2)."""
-    k = len(P) - len(f_pts)  # 0-based index of the first robot that moves; robot k − 1 stays
-    if k < 1:
+def _stays_joined(env: Any, P: Array, start_arcs: Array, f_arcs: Array, f_pts: Array, lim: Array) -> bool:
+    """Whether the robots before the final stations ``f_pts`` (arcs ``f_arcs``) can stay where they start: the last
+    of them (robot N − len(f_pts), 1-based) reaches the first station, which is not behind it on the guide, within
+    its tether's span limits (``lim`` (N, 2), at least d_lo + 0.02 m) on a chord keeping ``CHORD_CLEARANCE``, and
+    every staying robot is 2r + 0.02 m from every station."""
+    k = len(P) - len(f_pts)  # 0-based index of the first robot that moves; robots 0..k − 1 stay
+    if k < 1 or f_arcs[0] < start_arcs[k - 1]:
         return False
     lo, hi = lim[k]
     d = float(np.linalg.norm(f_pts[0] - P[k - 1]))
-    return bool(lo <= d <= hi and env.segment_is_free(P[k - 1], f_pts[0], CHORD_START_CLEARANCE))
+    gaps = np.linalg.norm(P[:k, None] - f_pts[None], axis=-1)
+    return bool(
+        lo + 0.02 <= d <= hi
+        and gaps.min() >= 2 * float(env.safety_radius) + 0.02
+        and env.segment_is_free(P[k - 1], f_pts[0], CHORD_CLEARANCE)
+    )
 
 
 def chain_reference(
@@ -560,7 +566,8 @@ def chain_reference(
     start_arcs = np.array([_arc_of(guide, garcs, p) for p in P])
     # final stations of the active robots parked+1..N, from the last parked robot's position; when there are more
     # robots than stations and no tether is long enough to split, one more robot stays where it starts (parked),
-    # and the stations are searched again from it, so that no two final positions crowd each other
+    # and the stations are searched again from it, so that no two final positions crowd each other; if that leaves
+    # more stations than robots, the previous stations are kept when the robots before them can stay (_stays_joined)
     fewer: tuple[Array, Array] | None = None  # the last stations that were fewer than the active robots
     while True:
         s0 = float(start_arcs[parked - 1]) if parked else 0.0
@@ -574,7 +581,7 @@ def chain_reference(
             # parking one more robot moved the chain's start past where the stations fit (a near goal): keep the
             # previous stations, the robots before them staying where they start, if the last of those reaches the
             # first station within its span limits on a free chord
-            if fewer is not None and _stays_joined(env, P, *fewer, lim):
+            if fewer is not None and _stays_joined(env, P, start_arcs, *fewer, lim):
                 f_arcs, f_pts = fewer
                 break
             raise BlockedRouteError(
