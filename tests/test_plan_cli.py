@@ -199,15 +199,22 @@ def test_corner_proof_refuses_with_exit_2(tmp_path, capsys):
     )
 
 
-def test_chain_off_the_route_plans_with_fewer_robots(tmp_path, capsys):
-    """medium-far-3985118755: 6 robots along the shortest route, 4 off it (the proven minimum): 4 plan."""
+def _room_args(tmp_path: Path, seed: int, density: str, goal_class: str, robots: object, *extra: str):
+    """``tmr.plan`` arguments for a generated room (tmr.sweep.rooms, written as GeoJSON under ``tmp_path``) with
+    ``robots`` and ``extra`` flags, and the output directory they name."""
     from tmr.sweep.rooms import generate_room, write_geojson
 
-    room = generate_room(3985118755, "medium", "far")
+    room = generate_room(seed, density, goal_class)
     path = write_geojson(room, tmp_path / "room.geojson")
     out = tmp_path / "out"
     base, goal = ",".join(map(str, room.base)), ",".join(map(str, room.goal))
-    args = ["--map", str(path), f"--base={base}", f"--goal={goal}", "--robots", "4", "--no-plots", "--out", str(out)]
+    args = ["--map", str(path), f"--base={base}", f"--goal={goal}", "--robots", str(robots), *extra, "--out", str(out)]
+    return args, out
+
+
+def test_chain_off_the_route_plans_with_fewer_robots(tmp_path, capsys):
+    """medium-far-3985118755: 6 robots along the shortest route, 4 off it (the proven minimum): 4 plan."""
+    args, out = _room_args(tmp_path, 3985118755, "medium", "far", "4", "--no-plots")
     code, _, err = run_cli(args, capsys)
     assert code == 0, err
     metrics = json.loads((out / "metrics.json").read_text())
@@ -220,13 +227,7 @@ def test_two_robots_found_by_the_pair_search_plan(tmp_path, capsys):
     from both ends) that the 0.25 m candidate grid of find_chain misses; the 2-robot search, a 0.02 m grid over the
     intersection of the two visible regions, finds it keeping 0.06 m, and 2 robots plan (they were refused 'no plan
     found' before)."""
-    from tmr.sweep.rooms import generate_room, write_geojson
-
-    room = generate_room(541096168, "narrow", "mid")
-    path = write_geojson(room, tmp_path / "room.geojson")
-    out = tmp_path / "out"
-    base, goal = ",".join(map(str, room.base)), ",".join(map(str, room.goal))
-    args = ["--map", str(path), f"--base={base}", f"--goal={goal}", "--robots", "2", "--no-plots", "--out", str(out)]
+    args, out = _room_args(tmp_path, 541096168, "narrow", "mid", "2", "--no-plots")
     code, _, err = run_cli(args, capsys)
     assert code == 0, err
     metrics = json.loads((out / "metrics.json").read_text())
@@ -242,13 +243,7 @@ def test_extra_robots_near_a_near_goal_stay_where_they_start(tmp_path, capsys, s
     0.1 m, took 2 stations for 1 robot), and the run stopped with "the 1 active robot(s) cannot reach the goal".
     Now the previous stations are kept, the robots before them staying where they start (their last tether to the
     first station checked), and the plan passes every check."""
-    from tmr.sweep.rooms import generate_room, write_geojson
-
-    room = generate_room(seed, density, "near")
-    path = write_geojson(room, tmp_path / "room.geojson")
-    out = tmp_path / "out"
-    base, goal = ",".join(map(str, room.base)), ",".join(map(str, room.goal))
-    args = ["--map", str(path), f"--base={base}", f"--goal={goal}", "--robots", str(n), "--no-plots", "--out", str(out)]
+    args, out = _room_args(tmp_path, seed, density, "near", str(n), "--no-plots")
     code, _, err = run_cli(args, capsys)
     assert code == 0, err
     metrics = json.loads((out / "metrics.json").read_text())
@@ -260,13 +255,7 @@ def test_too_few_robots_for_the_clearance_exit_1_with_it(tmp_path, capsys):
     search's grid has a tether 0.0599 m from the obstacles, below the 0.06 m the plans need (on a 0.002 m grid too:
     0.05992 m): exit 1, naming the clearance (floored, so it never reads as enough) and the count that keeps it,
     nothing written."""
-    from tmr.sweep.rooms import generate_room, write_geojson
-
-    room = generate_room(671599181, "dense", "mid")
-    path = write_geojson(room, tmp_path / "room.geojson")
-    out = tmp_path / "out"
-    base, goal = ",".join(map(str, room.base)), ",".join(map(str, room.goal))
-    args = ["--map", str(path), f"--base={base}", f"--goal={goal}", "--robots", "2", "--out", str(out)]
+    args, out = _room_args(tmp_path, 671599181, "dense", "mid", "2")
     code, stdout, err = run_cli(args, capsys)
     assert code == 1 and not out.exists()
     text = (stdout + err).strip()

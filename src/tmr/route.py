@@ -752,14 +752,20 @@ def _impossible(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> 
     return robots >= 1 and chain_is_impossible(env, base, goal, lim[:, 1], robots, refine_work=REFINE_WORK)
 
 
+def _witness_requirements(env: Any, base: Array, lim: Array) -> tuple[float, Array, float]:
+    """What a chain off the route must keep, as the stations do: the anchor tether's clearance [m], the span rows
+    [d_lo + ``SPACING_MARGIN``, d_max] of ``lim`` (N, 2), and the robots' spacing 2r + ``SPACING_MARGIN`` [m]."""
+    first = anchor_tether_clearance(env, base, CHORD_CLEARANCE)
+    spans = np.column_stack([lim[:, 0] + SPACING_MARGIN, lim[:, 1]])
+    return first, spans, 2 * env.safety_radius + SPACING_MARGIN
+
+
 def _witness(env: Any, base: Array, goal: Array, lim: Array, robots: int, n_lower: int) -> Array | None:
     """A chain of at most ``robots`` robots keeping the stations' clearance and spacing: 2 robots by the grid
     search of :func:`best_pair` when no proof rules them out, else :func:`tmr.reach.find_chain`."""
     from tmr.reach import find_chain
 
-    first = anchor_tether_clearance(env, base, CHORD_CLEARANCE)
-    spans = np.column_stack([lim[:, 0] + SPACING_MARGIN, lim[:, 1]])
-    spacing = 2 * env.safety_radius + SPACING_MARGIN
+    first, spans, spacing = _witness_requirements(env, base, lim)
     if robots >= 2 and n_lower <= 2:
         pair = best_pair(env, base, goal, spans, spacing, (first, CHORD_CLEARANCE))
         if pair is not None and pair[1] > 0:
@@ -826,9 +832,7 @@ def tight_chain(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> 
     """
     from tmr.reach import find_chain
 
-    first = anchor_tether_clearance(env, base, CHORD_CLEARANCE)
-    spans = np.column_stack([lim[:, 0] + SPACING_MARGIN, lim[:, 1]])
-    spacing = 2 * env.safety_radius + SPACING_MARGIN
+    first, spans, spacing = _witness_requirements(env, base, lim)
     if robots == 2:
         pair = best_pair(env, base, goal, spans, spacing, (first, CHORD_CLEARANCE))
         if pair is None:
