@@ -235,6 +235,17 @@ def test_two_robots_found_by_the_pair_search_plan(tmp_path, capsys):
     assert (metrics["n_robots"], metrics["n_min"], metrics["n_route"]) == (2, 2, 3)
 
 
+def test_chain_found_by_the_fine_search_plans(tmp_path, capsys):
+    """walls-mid-3947533108: the route chain needs 4 robots and the coarse search finds no chain of 3 (exit 1 'no chain
+    of 3 robots was found' before); the geodesic beam of find_chain finds one, and 3 robots plan along it."""
+    args, out = _room_args(tmp_path, 3947533108, "walls", "mid", "3", "--no-plots")
+    code, _, err = run_cli(args, capsys)
+    assert code == 0, err
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["success"] and metrics["n_violation_steps"] == 0 and metrics["min_tether_clearance"] > 0
+    assert (metrics["n_robots"], metrics["n_min"], metrics["n_route"]) == (3, 3, 4)
+
+
 @pytest.mark.parametrize(("seed", "density", "n"), [(4097576486, "narrow", 5), (202045748, "medium", 8)])
 def test_extra_robots_near_a_near_goal_stay_where_they_start(tmp_path, capsys, seed, density, n):
     """A goal 3–6 m from the anchor and 5 or 8 robots: the references park one more robot at a time until the

@@ -173,6 +173,45 @@ def test_find_chain_round_the_short_wall():
     assert find_chain(env, A, G, spans, 2, 0.06, 0.06) is None
 
 
+def test_fine_search_finds_the_chain_the_coarse_one_misses():
+    """walls-mid-3947533108 with 3 robots: the route chain needs 4, and no 3-robot chain is on the 0.25 m grid of the
+    coarse search; the geodesic beam on its 0.1 m grid finds one, checked here by the definition (chords in the span
+    limits and clearer than 0.06 m, robots 2r + 0.1 m apart)."""
+    from tmr import reach
+    from tmr.route import CHORD_CLEARANCE
+    from tmr.sweep.rooms import generate_room, span_rows
+
+    room = generate_room(3947533108, "walls", "mid")
+    env, lim = room.environment(), span_rows()
+    spans = np.column_stack([lim[:, 0] + 0.1, lim[:, 1]])[:3]
+    a, g = np.asarray(room.base, float), np.asarray(room.goal, float)
+    first = min(CHORD_CLEARANCE, 0.5 * float(env.exact_clearance(a)))
+    rows = np.array([spans[min(k, len(spans) - 1)] for k in range(3)])
+    coarse = reach._search(env, a, g, rows, CHORD_CLEARANCE, first, 1.1, 3, reach.WITNESS_STEP, None)
+    assert coarse is None
+    chain = reach.find_chain(env, a, g, spans, 3, CHORD_CLEARANCE, first, spacing=1.1)
+    assert chain is not None and len(chain) - 1 == 3
+    _check_chain(env, chain, a, g, spans, CHORD_CLEARANCE, first)
+
+
+def test_geodesic_distance_bounds_the_shortest_path():
+    """The fine search's heuristic, against the exact shortest path of the visibility graph (tmr.route) round the 5 m
+    wall: an 8-neighbour wavefront is never shorter than the true distance by more than a cell's diagonal, and at most
+    8.3 % (the octile metric's worst case, 1 / cos 22.5° − 1) plus two cells longer."""
+    from tmr.reach import _GEODESIC_CELL, _geodesic
+
+    env = _short_wall()
+    geo = _geodesic(env, np.array(G))
+    h = _GEODESIC_CELL
+    for p in ([2.0, 2.0], [9.0, 1.0], [9.0, 12.0], [15.0, 3.0], [4.0, 18.0]):
+        exact = plan_route(env, p, G, [[0.6, D_MAX]]).lower_length
+        got = float(geo(np.array([p]))[0])
+        assert exact - h * math.sqrt(2) <= got <= exact * (1 / math.cos(math.pi / 8)) + 2 * h, (p, got, exact)
+    split = Environment.from_geometry([box(9.9, 0.0, 10.1, 20.0)], (0.0, 0.0, 20.0, 20.0))  # a wall across the room
+    far = _geodesic(split, np.array(G))(np.array([[9.0, 1.0], [12.0, 1.0]]))
+    assert np.isinf(far[0]) and far[1] == pytest.approx(1.0, abs=2 * h)
+
+
 def test_chain_off_the_route_needs_fewer_robots():
     """medium-far-3985118755: the chain along the shortest route needs 6 robots; one off it needs 4, which the
     length proves are needed (n_lower = 4), so N_min = 4 is exact; with N = 4 the guide is that chain."""

@@ -42,7 +42,7 @@ import numpy as np
 import shapely
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["REACH_CELL", "REFINE_WORK", "chain_is_impossible", "ray_table"]
+__all__ = ["REACH_CELL", "REFINE_WORK", "chain_is_impossible", "find_chain", "ray_table"]
 
 #: h [m]: cell side of the reachable-set grid (0.1 m: 0.02–0.16 s per proof on the 20 m random rooms).
 REACH_CELL = 0.1
@@ -217,10 +217,17 @@ def _prove(
     return not bool((R & last).any()), work
 
 
-#: Spacing [m] of the candidate robot positions of :func:`find_chain`, and of the cells that thin each level's
-#: frontier to one source.
+#: Spacing [m] of the candidate robot positions of the coarse search of :func:`find_chain`, and of the cells that
+#: thin each level's frontier to one source.
 WITNESS_STEP = 0.25
 WITNESS_THIN = 0.5
+#: The fine search of :func:`find_chain`: candidate spacing [m], sources kept per level (the nearest the goal by the
+#: geodesic distance), chords tested per batch, and the cell side [m] of the geodesic distance field.
+BEAM_STEP = 0.1
+BEAM_WIDTH = 40
+_BEAM_BATCH = 256
+_GEODESIC_CELL = 0.25
+_STEPS8 = ((0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1))
 
 
 def find_chain(
@@ -235,26 +242,95 @@ def find_chain(
 ) -> NDArray[np.float64] | None:
     """A chain of at most ``robots`` robots from ``anchor`` to ``goal`` anywhere in the free space, or None.
 
-    Breadth-first search over candidate positions (a grid every :data:`WITNESS_STEP` [m] keeping ``clearance`` from
-    the obstacles grown by r, and the goal): tether k joins two candidates if its chord is in [d_lo, d_max] of row k
-    of ``span_limits`` (N, 2) (the last row repeats) and keeps clearance > ``clearance`` [m] (the anchor's tether:
-    ``first_clearance``), exact (``Environment.segment_is_free``). Each level expands one source per
-    :data:`WITNESS_THIN` cell of the positions it reached (the first reached), and only candidates from which
-    the rest of the chain can still reach the goal in a straight line. Returns the fewest-hop chain found, (n + 1, 2)
-    from the anchor to the goal with n ≤ ``robots``, if its robots are also ``spacing`` [m] apart pairwise; a witness,
-    not a proof: None says nothing.
+    Tether k joins two candidate positions if its chord is in [d_lo, d_max] of row k of ``span_limits`` (N, 2) (the
+    last row repeats) and keeps clearance > ``clearance`` [m] from the obstacles grown by r (the anchor's tether:
+    ``first_clearance``), exact (``Environment.segment_is_free``); the candidates keep ``clearance`` too. Two
+    searches, level by level (level k: the candidates tether k reaches):
+
+    * coarse: breadth-first over a grid every :data:`WITNESS_STEP` [m], each level expanding one source per
+      :data:`WITNESS_THIN` cell of the positions it reached (the first reached): fast, and wide;
+    * fine, for fewer robots than the coarse one found: a beam over a grid every :data:`BEAM_STEP` [m], each level
+      expanding the :data:`BEAM_WIDTH` positions it reached nearest the goal by the geodesic distance (a
+      wavefront on :data:`_GEODESIC_CELL` cells), each source testing its candidates nearest the goal first until it
+      has reached that many. A chain that must wrap a corner closely (robots within 0.1 m of where they must be)
+      is found here.
+
+    Both only keep candidates from which the rest of the chain can still reach the goal in a straight line. Returns
+    the chain with the fewer robots, (n + 1, 2) from the anchor to the goal with n ≤ ``robots``, if its robots are
+    also ``spacing`` [m] apart pairwise; a witness, not a proof: None says nothing.
     """
     a, g = np.asarray(anchor, float), np.asarray(goal, float)
     lim = np.atleast_2d(np.asarray(span_limits, float))
     rows = np.array([lim[min(k, len(lim) - 1)] for k in range(robots)])
+    args = (env, a, g, rows, clearance, first_clearance, spacing)
+    coarse = _search(*args, robots, WITNESS_STEP, None)
+    fewer = robots if coarse is None else len(coarse) - 2
+    fine = _search(*args, fewer, BEAM_STEP, _geodesic(env, g)) if fewer >= 1 else None
+    return fine if fine is not None else coarse
+
+
+def _geodesic(env: Any, goal: NDArray[np.float64]) -> Any:
+    """The geodesic distance to ``goal`` [m] as a function of points (K, 2): an 8-neighbour wavefront over the
+    cells of side :data:`_GEODESIC_CELL` whose centre is within a half-diagonal of the free space (so every
+    passage stays connected), plus the straight distance to the nearest cell's centre. A heuristic only (it orders
+    the fine search): infinite off the goal's piece."""
+    h = _GEODESIC_CELL
+    xmin, ymin, xmax, ymax = env.bounds
+    gx, gy = np.arange(xmin + h / 2, xmax, h), np.arange(ymin + h / 2, ymax, h)
+    X, Y = np.meshgrid(gx, gy)
+    H, W = X.shape
+    ok = (np.asarray(env.exact_clearance(np.stack([X.ravel(), Y.ravel()], axis=1))) > -h / math.sqrt(2)).reshape(H, W)
+    D = np.full((H + 2, W + 2), np.inf)
+    start = np.hypot(X - goal[0], Y - goal[1]) + np.where(ok, 0.0, np.inf)
+    seed = start <= max(float(start.min()), h / math.sqrt(2)) + 1e-9  # the cells round the goal, or the nearest
+    D[1:-1, 1:-1][seed] = start[seed]
+    steps = [(dy, dx, h * math.hypot(dx, dy)) for dy, dx in _STEPS8]
+    while True:
+        inner = D[1:-1, 1:-1]
+        new = inner.copy()
+        for dy, dx, w in steps:
+            np.minimum(new, D[1 + dy : H + 1 + dy, 1 + dx : W + 1 + dx] + w, out=new)
+        new[~ok] = np.inf
+        if np.array_equal(new, inner):
+            break
+        D[1:-1, 1:-1] = new
+    D = D[1:-1, 1:-1]
+
+    def geodesic(Q: NDArray[np.float64]) -> NDArray[np.float64]:
+        i = np.clip(np.round((Q[:, 0] - gx[0]) / h).astype(np.int64), 0, W - 1)
+        j = np.clip(np.round((Q[:, 1] - gy[0]) / h).astype(np.int64), 0, H - 1)
+        return D[j, i] + np.hypot(Q[:, 0] - gx[i], Q[:, 1] - gy[j])
+
+    return geodesic
+
+
+def _search(
+    env: Any,
+    a: NDArray[np.float64],
+    g: NDArray[np.float64],
+    rows: NDArray[np.float64],
+    clearance: float,
+    first_clearance: float | None,
+    spacing: float,
+    robots: int,
+    step: float,
+    geodesic: Any,
+) -> NDArray[np.float64] | None:
+    """One search of :func:`find_chain`: coarse (``geodesic`` None) or fine, on candidates every ``step`` [m]."""
+    rows = rows[:robots]
     rest = np.concatenate([np.cumsum(rows[::-1, 1])[::-1], [0.0]])
     xmin, ymin, xmax, ymax = env.bounds
-    xs, ys = np.meshgrid(np.arange(xmin + WITNESS_STEP / 2, xmax, WITNESS_STEP),
-                         np.arange(ymin + WITNESS_STEP / 2, ymax, WITNESS_STEP))  # fmt: skip
+    xs, ys = np.meshgrid(np.arange(xmin + step / 2, xmax, step), np.arange(ymin + step / 2, ymax, step))
     P = np.stack([xs.ravel(), ys.ravel()], axis=1)
     P = P[np.linalg.norm(P - g, axis=1) <= rest[1] + 1e-9]
     P = np.vstack([P[env.is_free(P, clearance)], g, a])
     goal_i, anchor_i = len(P) - 2, len(P) - 1
+    if geodesic is not None:  # candidates in order of the geodesic distance: index order is search order
+        geo = geodesic(P)
+        geo[goal_i] = -1.0
+        order = np.argsort(geo, kind="stable")
+        P = P[order]
+        goal_i, anchor_i = int(np.flatnonzero(order == goal_i)[0]), int(np.flatnonzero(order == anchor_i)[0])
     to_goal = np.linalg.norm(P - g, axis=1)
     parent = np.full(len(P), -1)
     level = np.full(len(P), -1)
@@ -269,11 +345,22 @@ def find_chain(
             cand = np.flatnonzero((level < 0) & within)
             d = np.linalg.norm(P[cand] - P[s], axis=1)
             cand = cand[(d <= d_hi) & (d >= d_lo)]
-            if not len(cand):
-                continue
-            ok = cand[env.segment_is_free(np.broadcast_to(P[s], (len(cand), 2)), P[cand], margin)]
-            level[ok], parent[ok] = k + 1, s
-            reached.extend(ok.tolist())
+            if geodesic is None:
+                batches = [cand]
+            else:  # only candidates nearer the goal than the level's BEAM_WIDTH-th so far, nearest first
+                if len(reached) >= BEAM_WIDTH:
+                    cand = cand[cand < np.partition(np.asarray(reached), BEAM_WIDTH - 1)[BEAM_WIDTH - 1]]
+                batches = [cand[i : i + _BEAM_BATCH] for i in range(0, len(cand), _BEAM_BATCH)]
+            got = 0
+            for c in batches:
+                if not len(c):
+                    continue
+                ok = c[env.segment_is_free(np.broadcast_to(P[s], (len(c), 2)), P[c], margin)]
+                level[ok], parent[ok] = k + 1, s
+                reached.extend(ok.tolist())
+                got += len(ok)
+                if got >= BEAM_WIDTH:
+                    break
         if level[goal_i] >= 0:
             chain = [goal_i]
             while chain[-1] != anchor_i:
@@ -287,6 +374,9 @@ def find_chain(
         if not reached:
             return None
         new = np.array(reached)
-        _, first = np.unique(np.floor(P[new] / WITNESS_THIN).astype(np.int64), axis=0, return_index=True)
-        frontier = new[np.sort(first)]
+        if geodesic is None:
+            _, first = np.unique(np.floor(P[new] / WITNESS_THIN).astype(np.int64), axis=0, return_index=True)
+            frontier = new[np.sort(first)]
+        else:
+            frontier = np.sort(new)[:BEAM_WIDTH]
     return None

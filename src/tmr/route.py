@@ -705,8 +705,9 @@ def plan_route(
         n_lower, lower_by = n_min, "corners"
     notes = [f"route margin lowered to {best.margin:.3f} m in a narrow passage"] if best.margin < margin else []
     n_route = n_min
-    if n_lower < n_min:
-        # fewer robots than the route chain needs: a chain anywhere in the free space (the same search whatever N)
+    if n_lower < n_min and (robots is None or robots >= n_lower):
+        # fewer robots than the route chain needs: a chain anywhere in the free space (the same search whatever N;
+        # none for an N already proven too few: its refusal stands, and names the route's count)
         witness = _witness(env, base, goal, lim, n_min - 1, n_lower)
         if witness is not None:
             n_min = max(len(witness) - 1, n_lower)  # a real chain: never below a sound proof
