@@ -95,8 +95,9 @@ def test_random_rooms_station_chains_are_never_refuted():
         for k, station in enumerate(route.stations, start=1):
             assert not chain_is_impossible(env, room.base, station, lim[:, 1], k), (spec, k)
             checked += 1
-            if k >= 3 and fine < 12:  # the grid's half-size cells of the refinement rung: sound too
-                assert not chain_is_impossible(env, room.base, station, lim[:, 1], k, cell=REACH_CELL / 2), (spec, k)
+            if k >= 3 and fine < 12:  # the half- and quarter-size cells of the refinement: sound too
+                for cell in (REACH_CELL / 2, REACH_CELL / 4) if fine % 3 == 0 else (REACH_CELL / 2,):
+                    assert not chain_is_impossible(env, room.base, station, lim[:, 1], k, cell=cell), (spec, k, cell)
                 fine += 1
     assert checked >= 40 and fine == 12
 
@@ -149,6 +150,37 @@ def test_ray_table_chains_stay_near_their_segments():
     assert dev[np.hypot(off[:, 0], off[:, 1]) <= 58].max() < 1.7
 
 
+def test_ray_table_cache_on_disk(tmp_path, monkeypatch):
+    """The table is written to ``$TMR_CACHE_DIR/reach`` and read back unchanged; a damaged file or one holding another
+    table is rebuilt (and replaced); a cache directory that cannot be written costs nothing but the build."""
+    from tmr import reach
+
+    monkeypatch.setenv("TMR_CACHE_DIR", str(tmp_path))
+    built = reach.build_ray_table(9)
+    reach.ray_table.cache_clear()
+    first = reach.ray_table(9)
+    files = list((tmp_path / "reach").glob("ray_table_*_r9.npz"))
+    assert len(files) == 1 and all(np.array_equal(a, b) for a, b in zip(first, built, strict=True))
+    reach.ray_table.cache_clear()
+    assert all(np.array_equal(a, b) for a, b in zip(reach.ray_table(9), built, strict=True))  # from the file
+    for damage in (b"not a table", None):
+        if damage is None:  # a well-formed file with another radius's table under this name
+            other = reach.build_ray_table(8)
+            np.savez(files[0], off=other[0], ring=other[1], pred=other[2], dev=other[3])
+        else:
+            files[0].write_bytes(damage)
+        reach.ray_table.cache_clear()
+        assert all(np.array_equal(a, b) for a, b in zip(reach.ray_table(9), built, strict=True))
+        with np.load(files[0]) as z:
+            assert np.array_equal(z["pred"], built[2])  # replaced by the good table
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    monkeypatch.setenv("TMR_CACHE_DIR", str(blocker))  # reach/ cannot be created under a file
+    reach.ray_table.cache_clear()
+    assert all(np.array_equal(a, b) for a, b in zip(reach.ray_table(9), built, strict=True))
+    reach.ray_table.cache_clear()
+
+
 def _check_chain(env, chain, anchor, goal, spans, clearance, first):
     """A witness by the definition: anchor → … → goal, chords in [d_lo, d_max] clear by more than ``clearance``."""
     assert np.allclose(chain[0], anchor) and np.allclose(chain[-1], goal)
@@ -171,6 +203,26 @@ def test_find_chain_round_the_short_wall():
     assert chain is not None and len(chain) - 1 == 3
     _check_chain(env, chain, A, G, spans, 0.06, 0.06)
     assert find_chain(env, A, G, spans, 2, 0.06, 0.06) is None
+
+
+def test_the_quarter_size_cells_prove_what_the_half_size_ones_cannot():
+    """dense-far-2845717476 with 3 robots: proven neither with h = 0.1 m nor 0.05 m cells (obstacles shrunk by 0.22
+    and 0.13 m), but with 0.025 m (0.065 m). The second refinement runs exactly when 8× the second attempt's ray
+    tests fit ``refine_work``; then the route refuses 3 robots as proven."""
+    from tmr.reach import REFINE_LEVELS, _prove
+    from tmr.sweep.rooms import generate_room, span_rows
+
+    room = generate_room(2845717476, "dense", "far")
+    env, lim = room.environment(), span_rows()
+    args = (env, room.base, room.goal, lim[:, 1], 3)
+    (p0, w0), (p1, w1) = _prove(*args, REACH_CELL), _prove(*args, REACH_CELL / 2)
+    assert not p0 and not p1 and REFINE_LEVELS == 2
+    assert chain_is_impossible(*args, cell=REACH_CELL / 4)
+    budget = 8 * max(w0, w1)
+    assert budget <= REFINE_WORK and chain_is_impossible(*args, refine_work=budget)
+    assert not chain_is_impossible(*args, refine_work=budget - 1)  # one ray test over the budget
+    route = plan_route(env, room.base, room.goal, lim, robots=3)
+    assert route.n_lower == 4 and route.lower_by == "corners" and route.refusal(3).startswith("the goal needs at least")
 
 
 def test_fine_search_finds_the_chain_the_coarse_one_misses():

@@ -36,20 +36,33 @@ from __future__ import annotations
 
 import functools
 import math
+import os
+import tempfile
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import shapely
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["REACH_CELL", "REFINE_WORK", "chain_is_impossible", "find_chain", "ray_table"]
+__all__ = [
+    "REACH_CELL",
+    "REFINE_LEVELS",
+    "REFINE_WORK",
+    "build_ray_table",
+    "chain_is_impossible",
+    "find_chain",
+    "ray_table",
+    "ray_table_cache_dir",
+]
 
 #: h [m]: cell side of the reachable-set grid (0.1 m: 0.02–0.16 s per proof on the 20 m random rooms).
 REACH_CELL = 0.1
-#: Ray tests [count] the second attempt at h/2 may make (:func:`chain_is_impossible`'s ``refine_work`` as tmr.route
-#: uses it): 5·10⁷ take 0.1–0.5 s on the 20 m random rooms (the ray table at h = 0.05 m, built once per process,
-#: 0.17 s of it).
-REFINE_WORK = 50_000_000
+#: Ray tests [count] each finer attempt may make (:func:`chain_is_impossible`'s ``refine_work`` as tmr.route uses
+#: it): 1.2·10⁸ take at most about 0.25 s (2 ns per test on the 20 m random rooms).
+REFINE_WORK = 120_000_000
+#: Finer attempts at most: h/2, then h/4 (0.05 m, then 0.025 m).
+REFINE_LEVELS = 2
 #: Segments per quarter circle of shapely's buffers. GEOS rounds a join's segment count, so one segment may span up to
 #: 3π / (8 QUAD_SEGS): radii are divided by the cosine of half that, so the buffer polygon contains the true offset.
 _QUAD_SEGS = 4
@@ -58,15 +71,70 @@ _CHUNK = 256
 _NEIGHBOURS = ((-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, -1), (-1, 1), (1, 1))
 
 
+#: Version of the ray tables' file format and construction (a change makes old cache files unused).
+_RAY_TABLE_VERSION = 1
+RayTable = tuple[NDArray[np.int_], NDArray[np.int_], NDArray[np.int_], NDArray[np.float64]]
+
+
+def ray_table_cache_dir() -> Path:
+    """Directory of the cached ray tables: ``$TMR_CACHE_DIR/reach`` or ``~/.cache/tmr/reach``."""
+    root = os.environ.get("TMR_CACHE_DIR")
+    return Path(root) / "reach" if root else Path.home() / ".cache" / "tmr" / "reach"
+
+
 @functools.lru_cache(maxsize=4)
-def ray_table(radius: int) -> tuple[NDArray[np.int_], NDArray[np.int_], NDArray[np.int_], NDArray[np.float64]]:
+def ray_table(radius: int) -> RayTable:
     """Offsets of a square of ``radius`` cells, each with the predecessor of its ray from the origin.
 
     Returns ``(off, ring, pred, dev)``: ``off`` (M, 2) integer offsets (x, y), ``ring`` their Chebyshev distance,
     ``pred`` the index of the 8-neighbour one ring nearer the origin whose chain of predecessors keeps closest to
     the straight segment origin → offset (-1 for the origin), ``dev`` that chain's largest distance from the segment
-    [cells]. Built ring by ring, vectorised; cached.
+    [cells]. Built ring by ring, vectorised (:func:`build_ray_table`), and kept in this process and on disk
+    (:func:`ray_table_cache_dir`, 2 MB at radius 114): building it takes 0.2 s and allocates about 0.5 GB of
+    temporaries, which on a loaded machine can cost a refusal a second of page faults. A file that is missing,
+    unreadable or not the table of this radius is rebuilt; one that cannot be written is skipped.
     """
+    path = ray_table_cache_dir() / f"ray_table_v{_RAY_TABLE_VERSION}_r{radius}.npz"
+    try:
+        with np.load(path) as z:
+            table = (z["off"], z["ring"], z["pred"], z["dev"])
+        if _is_ray_table(table, radius):
+            return table
+    except (OSError, KeyError, ValueError):
+        pass
+    table = build_ray_table(radius)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, staged = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        with os.fdopen(fd, "wb") as f:
+            np.savez(f, off=table[0], ring=table[1], pred=table[2], dev=table[3])
+        os.replace(staged, path)  # atomic: a concurrent reader never sees a partial file
+    except OSError:
+        pass
+    return table
+
+
+def _is_ray_table(table: RayTable, radius: int) -> bool:
+    """Whether a loaded table has this radius's offsets, rings and predecessors one ring nearer (the deviations are
+    trusted: they only set the relaxation's width)."""
+    off, ring, pred, dev = table
+    n = 2 * radius + 1
+    if off.shape != (n * n, 2) or not ring.shape == pred.shape == dev.shape == (n * n,):
+        return False
+    ys, xs = np.mgrid[-radius : radius + 1, -radius : radius + 1]
+    if not (np.array_equal(off[:, 0], xs.ravel()) and np.array_equal(off[:, 1], ys.ravel())):
+        return False
+    if not np.array_equal(ring, np.maximum(np.abs(xs), np.abs(ys)).ravel()):
+        return False
+    inner = ring > 0
+    p = pred[inner]
+    if p.min() < 0 or p.max() >= n * n or not np.array_equal(ring[p], ring[inner] - 1):
+        return False
+    return bool(np.all(np.abs(off[p] - off[inner]) <= 1) and np.all(np.isfinite(dev)) and dev.min() >= 0)
+
+
+def build_ray_table(radius: int) -> RayTable:
+    """:func:`ray_table`, built (no cache)."""
     n = 2 * radius + 1
     ys, xs = np.mgrid[-radius : radius + 1, -radius : radius + 1]
     xs, ys = xs.ravel(), ys.ravel()
@@ -121,18 +189,21 @@ def chain_is_impossible(
         d_max: longest chord per tether [m], the anchor's first (the last value repeats), or one value for all.
         robots: N ≥ 1.
         cell: h [m], the grid's cell side.
-        refine_work: if the proof at ``cell`` fails, it is tried once more at ``cell / 2`` (a smaller relaxation:
-            obstacles shrunk by 0.13 m instead of 0.22 m at 5.6 m tethers; about 8× the work: twice the source
-            cells, four times the rays) when 8× the ray tests of the first attempt are at most this many (0: never).
-            A count, not a clock, so the verdict is the same on any machine. A first attempt that ends before any
-            ray test (robot 1's cells already meet the cells the goal sees) is not refined: the finer grid would
-            almost surely end there too.
+        refine_work: while the proof fails, it is tried again with half the cell (a smaller relaxation: obstacles
+            shrunk by 0.13 m, then 0.065 m, instead of 0.22 m at 5.6 m tethers; about 8× the work each time: twice
+            the source cells, four times the rays), at most :data:`REFINE_LEVELS` times, when 8× the ray tests of
+            the previous attempt are at most this many (0: never). A count, not a clock, so the verdict is the same
+            on any machine. An attempt that ends before any ray test (robot 1's cells already meet the cells the goal
+            sees) is not refined: the finer grid would almost surely end there too.
 
     False means "not proven": a chain may or may not exist.
     """
     proven, work = _prove(env, anchor, goal, d_max, robots, cell)
-    if not proven and work and 8 * work <= refine_work:
-        proven = _prove(env, anchor, goal, d_max, robots, cell / 2)[0]
+    for _ in range(REFINE_LEVELS):
+        if proven or not work or 8 * work > refine_work:
+            break
+        cell /= 2
+        proven, work = _prove(env, anchor, goal, d_max, robots, cell)
     return proven
 
 
@@ -163,21 +234,64 @@ def _prove(
     H = int(math.ceil((ymax - ymin) / cell)) + 2 * pad
     cx = xmin + (np.arange(W) - pad + 0.5) * cell
     cy = ymin + (np.arange(H) - pad + 0.5) * cell
-    X, Y = np.meshgrid(cx, cy)
-    allowed = shapely.contains_xy(_offset_buffer(env.free, e), X, Y).ravel()
-    blocked = ~shapely.contains_xy(_offset_buffer(env.free, e + sigma), X, Y).ravel()
-    to_goal = np.hypot(X - g[0], Y - g[1]).ravel()
+    to_goal = np.hypot(cx[None, :] - g[0], cy[:, None] - g[1]).ravel()
+    # the cells any ray of a real chord can pass: within e + σh of the room and of the disc every robot is in
+    slack = e + sigma + cell
+    inside_x = (cx >= xmin - slack) & (cx <= xmax + slack)
+    inside_y = (cy >= ymin - slack) & (cy <= ymax + slack)
+    roi = np.flatnonzero((inside_y[:, None] & inside_x[None, :]).ravel() & (to_goal <= rest[1] + slack))
+    px, py = cx[roi % W], cy[roi // W]
+    allowed = np.zeros(W * H, dtype=bool)
+    allowed[roi] = shapely.contains_xy(_offset_buffer(env.free, e), px, py)
+    blocked = np.ones(W * H, dtype=bool)
+    blocked[roi] = ~shapely.contains_xy(_offset_buffer(env.free, e + sigma), px, py)
 
-    # the rays: offsets inside the disk and every cell of their chains, ring by ring
+    # the rays: offsets inside the disk and every cell of their chains, sorted by ring (a ring is a slice)
     keep = disk.copy()
     for m in range(radius, 0, -1):  # close under predecessors (a chain may step outside the disk)
         inner = pred[keep & (ring == m)]
         keep[inner[inner >= 0]] = True
-    flat = off[:, 1] * W + off[:, 0]
-    rings = [np.flatnonzero(keep & (ring == m)) for m in range(1, radius + 1)]
-    origin = int(np.flatnonzero(ring == 0)[0])
-    length = np.hypot(off[:, 0], off[:, 1]) * cell
+    order = np.flatnonzero(keep)
+    order = order[np.argsort(ring[order], kind="stable")]  # the origin first
+    where = np.full(len(off), -1)
+    where[order] = np.arange(len(order))
+    k_pred = where[pred[order]]
+    k_flat = off[order, 1] * W + off[order, 0]
+    k_length = np.hypot(off[order, 0], off[order, 1]) * cell
+    k_disk = disk[order]
+    bounds = np.searchsorted(ring[order], np.arange(radius + 2))  # ring m: rows bounds[m]:bounds[m + 1]
+    clear = ~blocked
     neighbours = np.array([dy * W + dx for dx, dy in _NEIGHBOURS])
+    widest = max(int(np.diff(bounds[1:]).max()), 1)
+    # buffers reused by every sweep: fresh arrays of this size per chunk cost page faults (system time)
+    vis_buf = np.empty(len(order) * 2 * _CHUNK, dtype=bool)
+    idx_buf = np.empty(widest * 2 * _CHUNK, dtype=np.intp)
+    gat_buf = np.empty(widest * 2 * _CHUNK, dtype=bool)
+    prev_buf = np.empty(widest * 2 * _CHUNK, dtype=bool)
+
+    def sweep(chunk: NDArray[np.intp], reach: NDArray[np.bool_], open_: NDArray[np.bool_]) -> None:
+        """Closes (in ``open_``, cells still to be reached) every cell that a ray in ``reach`` whose every cell is
+        unblocked reaches from a source in ``chunk``. Only the rays' new cells are ever listed: listing every
+        visible (ray, source) pair would allocate hundreds of MB on an open map."""
+        c = len(chunk)
+        vis = vis_buf[: len(order) * c].reshape(len(order), c)  # vis[ray, source], ring by ring
+        vis[0] = True
+        for m in range(1, radius + 1):
+            a, b = int(bounds[m]), int(bounds[m + 1])
+            if a == b:
+                continue
+            n = (b - a) * c
+            idx = idx_buf[:n].reshape(b - a, c)
+            np.add(k_flat[a:b, None], chunk[None, :], out=idx)
+            gat = gat_buf[:n].reshape(b - a, c)
+            np.take(clear, idx, out=gat)
+            prev = prev_buf[:n].reshape(b - a, c)
+            np.take(vis, k_pred[a:b], axis=0, out=prev)
+            np.logical_and(prev, gat, out=vis[a:b])
+            np.take(open_, idx, out=gat)  # the ray's cell is new
+            np.logical_and(gat, vis[a:b], out=gat)
+            np.logical_and(gat, reach[a:b, None], out=gat)
+            open_[idx[gat]] = False
 
     def near(region: Any) -> NDArray[np.bool_]:
         """Cells with a point in ``region`` (their centre within e of it)."""
@@ -188,7 +302,7 @@ def _prove(
         i = slice(max(0, int((x0 - xmin) / cell) + pad - 1), min(W, int((x1 - xmin) / cell) + pad + 2))
         j = slice(max(0, int((y0 - ymin) / cell) + pad - 1), min(H, int((y1 - ymin) / cell) + pad + 2))
         sub = np.zeros((H, W), dtype=bool)
-        sub[j, i] = shapely.contains_xy(_offset_buffer(region, e), X[j, i], Y[j, i])
+        sub[j, i] = shapely.contains_xy(_offset_buffer(region, e), *np.meshgrid(cx[i], cy[j]))
         return sub.ravel()
 
     R = near(seen_a) & allowed & (to_goal <= rest[1] + e + 1e-9)
@@ -203,17 +317,13 @@ def _prove(
         src = src[to_goal[src] <= rest[k] + e + 1e-9]
         if not len(src):
             break
-        reach = disk & (length <= links[k] + 2 * e + 1e-9)
+        reach = k_disk & (k_length <= links[k] + 2 * e + 1e-9)
         work += len(src) * len(off)
-        new = np.zeros(W * H, dtype=bool)
+        open_ = allowed & (to_goal <= rest[k + 1] + e + 1e-9) & ~R  # the cells this level may add
+        before = open_.copy()
         for chunk in np.array_split(src, max(1, len(src) // _CHUNK)):  # bounded memory on large maps
-            vis = np.zeros((len(off), len(chunk)), dtype=bool)  # vis[ray, source]: rows gathered ring by ring
-            vis[origin] = True
-            for t in rings:
-                vis[t] = vis[pred[t]] & ~blocked[flat[t, None] + chunk[None, :]]
-            ray, source = np.nonzero(vis & reach[:, None])
-            new[flat[ray] + chunk[source]] = True
-        R |= new & allowed & (to_goal <= rest[k + 1] + e + 1e-9)
+            sweep(chunk, reach, open_)
+        R |= before & ~open_
     return not bool((R & last).any()), work
 
 
