@@ -151,34 +151,62 @@ def test_ray_table_chains_stay_near_their_segments():
 
 
 def test_ray_table_cache_on_disk(tmp_path, monkeypatch):
-    """The table is written to ``$TMR_CACHE_DIR/reach`` and read back unchanged; a damaged file or one holding another
-    table is rebuilt (and replaced); a cache directory that cannot be written costs nothing but the build."""
+    """The table is written to ``$TMR_CACHE_DIR/reach`` and read back unchanged. A damaged file, one whose arrays do
+    not match its SHA-256 (deviations lowered: they set the proof's relaxation, so a lower one would prove too much),
+    or one holding another radius's table is rebuilt and replaced; a cache directory that cannot be written costs
+    nothing but the build."""
     from tmr import reach
+
+    def same(a, b):
+        return all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
 
     monkeypatch.setenv("TMR_CACHE_DIR", str(tmp_path))
     built = reach.build_ray_table(9)
     reach.ray_table.cache_clear()
-    first = reach.ray_table(9)
+    assert same(reach.ray_table(9), built)
     files = list((tmp_path / "reach").glob("ray_table_*_r9.npz"))
-    assert len(files) == 1 and all(np.array_equal(a, b) for a, b in zip(first, built, strict=True))
+    assert len(files) == 1
     reach.ray_table.cache_clear()
-    assert all(np.array_equal(a, b) for a, b in zip(reach.ray_table(9), built, strict=True))  # from the file
-    for damage in (b"not a table", None):
-        if damage is None:  # a well-formed file with another radius's table under this name
-            other = reach.build_ray_table(8)
-            np.savez(files[0], off=other[0], ring=other[1], pred=other[2], dev=other[3])
-        else:
-            files[0].write_bytes(damage)
+    assert same(reach.ray_table(9), built)  # from the file
+    other = reach.build_ray_table(8)
+    damages = {
+        "bytes": lambda f: f.write_bytes(b"not a table"),
+        "truncated": lambda f: f.write_bytes(f.read_bytes()[:500]),
+        "lowered deviations": lambda f: np.savez(f, pred=built[2], dev=built[3] * 0, sha256=np.array("0" * 64)),
+        "another radius": lambda f: np.savez(
+            f, pred=other[2], dev=other[3], sha256=np.array(reach._digest(other[2], other[3]))
+        ),
+    }
+    for name, damage in damages.items():
+        damage(files[0])
         reach.ray_table.cache_clear()
-        assert all(np.array_equal(a, b) for a, b in zip(reach.ray_table(9), built, strict=True))
+        assert same(reach.ray_table(9), built), name
         with np.load(files[0]) as z:
-            assert np.array_equal(z["pred"], built[2])  # replaced by the good table
+            assert np.array_equal(z["pred"], built[2]) and np.array_equal(z["dev"], built[3]), name  # replaced
+    assert not list((tmp_path / "reach").glob("*.tmp"))
     blocker = tmp_path / "file"
     blocker.write_text("")
     monkeypatch.setenv("TMR_CACHE_DIR", str(blocker))  # reach/ cannot be created under a file
     reach.ray_table.cache_clear()
-    assert all(np.array_equal(a, b) for a, b in zip(reach.ray_table(9), built, strict=True))
+    assert same(reach.ray_table(9), built)
     reach.ray_table.cache_clear()
+
+
+def test_chain_deviations_by_hand():
+    """A chain bent along the x axis, (3, 1) → (2, 0) → (1, 0) → origin, is 2/√10 = 0.632 cells off the segment
+    origin → (3, 1) at (2, 0) (by hand); the table's deviations are the function's."""
+    from tmr.reach import chain_deviations
+
+    radius = 3
+    off, ring, pred, dev = ray_table(radius)
+    n = 2 * radius + 1
+    at = {tuple(o): i for i, o in enumerate(off.tolist())}
+    bent = pred.copy()
+    bent[at[(3, 1)]] = at[(2, 0)]
+    bent[at[(2, 0)]] = at[(1, 0)]
+    d = chain_deviations(off, ring, bent)
+    assert d[at[(3, 1)]] == pytest.approx(2 / math.sqrt(10)) and len(d) == n * n
+    assert np.array_equal(chain_deviations(off, ring, pred), dev)
 
 
 def _check_chain(env, chain, anchor, goal, spans, clearance, first):
@@ -205,9 +233,30 @@ def test_find_chain_round_the_short_wall():
     assert find_chain(env, A, G, spans, 2, 0.06, 0.06) is None
 
 
+@pytest.mark.parametrize(
+    ("seed", "density", "goal_class", "robots", "cell", "expected"),
+    [
+        (732277931, "medium", "corner", 3, 0.1, (False, 3093714)),
+        (732277931, "medium", "corner", 3, 0.05, (True, 23650891)),
+        (3870655597, "dense", "corner", 5, 0.1, (False, 8897850)),
+        (3870655597, "dense", "corner", 5, 0.05, (True, 65393927)),
+        (4253401181, "narrow", "far", 8, 0.1, (False, 9513855)),
+    ],
+)
+def test_proof_verdict_and_work_pinned(seed, density, goal_class, robots, cell, expected):
+    """(proven, ray tests) of the plain sweep of commit b35f277, which listed every visible (ray, source) pair and
+    tested every cell against the obstacles: the faster sweep must reach the same cells from the same sources, so
+    the same verdict and count (a region of interest too small, or a cell closed too early, changes the count)."""
+    from tmr.reach import _prove
+    from tmr.sweep.rooms import generate_room, span_rows
+
+    room = generate_room(seed, density, goal_class)
+    assert _prove(room.environment(), room.base, room.goal, span_rows()[:, 1], robots, cell) == expected
+
+
 def test_the_quarter_size_cells_prove_what_the_half_size_ones_cannot():
     """dense-far-2845717476 with 3 robots: proven neither with h = 0.1 m nor 0.05 m cells (obstacles shrunk by 0.22
-    and 0.13 m), but with 0.025 m (0.065 m). The second refinement runs exactly when 8× the second attempt's ray
+    and 0.13 m), but with 0.025 m (0.074 m). The second refinement runs exactly when 8× the second attempt's ray
     tests fit ``refine_work``; then the route refuses 3 robots as proven."""
     from tmr.reach import REFINE_LEVELS, _prove
     from tmr.sweep.rooms import generate_room, span_rows
@@ -286,6 +335,10 @@ def test_chain_off_the_route_needs_fewer_robots():
     spans = np.column_stack([lim[:, 0] + 0.1, lim[:, 1]])
     first = min(CHORD_CLEARANCE, 0.5 * float(env.exact_clearance(np.asarray(room.base))))
     _check_chain(env, chain, room.base, room.goal, spans, CHORD_CLEARANCE, first)
+    # without the search for the fewest (start placements: many routes, only followed), the route chain alone
+    plain = plan_route(env, room.base, room.goal, lim, fewest=False)
+    assert (plain.n_lower, plain.n_min, plain.n_route, plain.lower_by) == (4, 6, 6, "length")
+    assert np.array_equal(plain.points, route.points) and np.array_equal(plain.stations, route.stations)
     # N ≥ the route chain's count keeps the shortest route as the guide
     assert len(plan_route(env, room.base, room.goal, lim, robots=6).points) > 5
 

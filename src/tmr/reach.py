@@ -20,11 +20,13 @@ grid of square cells of side h (half-diagonal e = h/√2), :func:`chain_is_impos
   within e + σ h of F, so it is not blocked. The ray table (:func:`ray_table`) is a tree: each offset's predecessor
   is the 8-neighbour one ring nearer whose chain stays closest to the straight segment, so one gather per ring tests
   every ray from every source at once; σ is the table's largest deviation within the disc (1.48 cells at
-  5.7 m / 0.1 m, 1.88 at 5.7 m / 0.05 m).
+  5.7 m / 0.1 m, 1.88 at 5.7 m / 0.05 m, 2.26 at 5.7 m / 0.025 m).
 * The last tether exactly too: p_{N-1} is in the goal's visible region within d_N, so R̂_{N-1} must meet its cells.
   With N = 2 no grid is needed: robot 1 is in both visible regions, so their intersection must not be empty.
 * Pruning: p_k is within Σ_{j>k} d_j of the goal (the rest of the chain is a path to it), so cells farther than that
-  (+ e) are dropped from R̂_k, and sources farther than Σ_{j≥k} d_j (+ e) are not expanded.
+  (+ e) are dropped from R̂_k, and sources farther than Σ_{j≥k} d_j (+ e) are not expanded. So every ray of a real
+  chord stays within Σ_{j>1} d_j + e + σ h of the goal, and within e + σ h of the room: the cells are tested against
+  the obstacles only there (elsewhere they are blocked and not allowed).
 
 If R̂_{N-1} meets none of the cells the goal sees, no chain of N or fewer robots exists: a proof, whatever the
 resolution. The relaxation of the middle tethers (obstacles effectively shrunk by e + σ h ≈ 0.22 m, chords 2e ≈
@@ -35,6 +37,8 @@ are ignored (a relaxation too).
 from __future__ import annotations
 
 import functools
+import hashlib
+import inspect
 import math
 import os
 import tempfile
@@ -50,6 +54,7 @@ __all__ = [
     "REFINE_LEVELS",
     "REFINE_WORK",
     "build_ray_table",
+    "chain_deviations",
     "chain_is_impossible",
     "find_chain",
     "ray_table",
@@ -71,8 +76,6 @@ _CHUNK = 256
 _NEIGHBOURS = ((-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, -1), (-1, 1), (1, 1))
 
 
-#: Version of the ray tables' file format and construction (a change makes old cache files unused).
-_RAY_TABLE_VERSION = 1
 RayTable = tuple[NDArray[np.int_], NDArray[np.int_], NDArray[np.int_], NDArray[np.float64]]
 
 
@@ -89,48 +92,95 @@ def ray_table(radius: int) -> RayTable:
     Returns ``(off, ring, pred, dev)``: ``off`` (M, 2) integer offsets (x, y), ``ring`` their Chebyshev distance,
     ``pred`` the index of the 8-neighbour one ring nearer the origin whose chain of predecessors keeps closest to
     the straight segment origin → offset (-1 for the origin), ``dev`` that chain's largest distance from the segment
-    [cells]. Built ring by ring, vectorised (:func:`build_ray_table`), and kept in this process and on disk
-    (:func:`ray_table_cache_dir`, 2 MB at radius 114): building it takes 0.2 s and allocates about 0.5 GB of
-    temporaries, which on a loaded machine can cost a refusal a second of page faults. A file that is missing,
-    unreadable or not the table of this radius is rebuilt; one that cannot be written is skipped.
+    [cells]. Built ring by ring, vectorised (:func:`build_ray_table`: 0.07 / 0.36 / 3.6 s at radius 58 / 114 / 226,
+    allocating up to 1 GB of temporaries, which on a loaded machine can cost a refusal a second of page faults), and
+    kept in this process and on disk (:func:`ray_table_cache_dir`; 0.2 / 0.8 / 3.3 MB).
+
+    The file is named after a hash of the code that builds the table (a changed construction never reads an old
+    file) and holds a SHA-256 of its arrays; it is used only if that matches and every offset's predecessor is an
+    8-neighbour one ring nearer. Else it is rebuilt and replaced; a directory that cannot be written is skipped.
+    The proof's soundness rests on ``dev``, so the cache is trusted as the compiled CCMA models are
+    (:mod:`tmr.ccma.energy`): it guards against damage and stale code, not against someone who rewrites it.
     """
-    path = ray_table_cache_dir() / f"ray_table_v{_RAY_TABLE_VERSION}_r{radius}.npz"
+    n = 2 * radius + 1
+    ys, xs = np.mgrid[-radius : radius + 1, -radius : radius + 1]
+    off = np.stack([xs.ravel(), ys.ravel()], axis=1)
+    ring = np.maximum(np.abs(off[:, 0]), np.abs(off[:, 1]))
     try:
-        with np.load(path) as z:
-            table = (z["off"], z["ring"], z["pred"], z["dev"])
-        if _is_ray_table(table, radius):
-            return table
-    except (OSError, KeyError, ValueError):
+        path = ray_table_cache_dir() / f"ray_table_{_code_key()}_r{radius}.npz"
+    except (OSError, TypeError, RuntimeError):  # no source to hash (a frozen install), or no home: no cache
+        return build_ray_table(radius)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            pred, dev, digest = np.asarray(z["pred"]), np.asarray(z["dev"]), str(z["sha256"])
+        if (
+            pred.shape == dev.shape == (n * n,)
+            and pred.dtype == np.int64
+            and dev.dtype == np.float64
+            and digest == _digest(pred, dev)
+            and _steps_one_ring(off, ring, pred)
+        ):
+            return off, ring, pred, dev
+    except Exception:  # noqa: BLE001 - any unreadable file (missing, truncated, bad zip, wrong arrays): rebuild
         pass
     table = build_ray_table(radius)
+    staged = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, staged = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
         with os.fdopen(fd, "wb") as f:
-            np.savez(f, off=table[0], ring=table[1], pred=table[2], dev=table[3])
+            np.savez(f, pred=table[2], dev=table[3], sha256=np.array(_digest(table[2], table[3])))
         os.replace(staged, path)  # atomic: a concurrent reader never sees a partial file
+        staged = None
     except OSError:
         pass
+    finally:
+        if staged is not None:
+            Path(staged).unlink(missing_ok=True)
     return table
 
 
-def _is_ray_table(table: RayTable, radius: int) -> bool:
-    """Whether a loaded table has this radius's offsets, rings and predecessors one ring nearer (the deviations are
-    trusted: they only set the relaxation's width)."""
-    off, ring, pred, dev = table
-    n = 2 * radius + 1
-    if off.shape != (n * n, 2) or not ring.shape == pred.shape == dev.shape == (n * n,):
-        return False
-    ys, xs = np.mgrid[-radius : radius + 1, -radius : radius + 1]
-    if not (np.array_equal(off[:, 0], xs.ravel()) and np.array_equal(off[:, 1], ys.ravel())):
-        return False
-    if not np.array_equal(ring, np.maximum(np.abs(xs), np.abs(ys)).ravel()):
-        return False
+@functools.cache
+def _code_key() -> str:
+    """12 hex digits of a hash of the source of the table's construction (the cache file's name)."""
+    source = "".join(inspect.getsource(f) for f in (build_ray_table, chain_deviations, _steps_one_ring))
+    return hashlib.sha256(source.encode()).hexdigest()[:12]
+
+
+def _digest(pred: NDArray[np.int_], dev: NDArray[np.float64]) -> str:
+    return hashlib.sha256(np.ascontiguousarray(pred).tobytes() + np.ascontiguousarray(dev).tobytes()).hexdigest()
+
+
+def _steps_one_ring(off: NDArray[np.int_], ring: NDArray[np.int_], pred: NDArray[np.int_]) -> bool:
+    """Whether every offset but the origin has as predecessor an 8-neighbour one ring nearer (so every chain
+    reaches the origin), and the origin none."""
     inner = ring > 0
     p = pred[inner]
-    if p.min() < 0 or p.max() >= n * n or not np.array_equal(ring[p], ring[inner] - 1):
+    if pred[~inner][0] != -1 or p.min() < 0 or p.max() >= len(off):
         return False
-    return bool(np.all(np.abs(off[p] - off[inner]) <= 1) and np.all(np.isfinite(dev)) and dev.min() >= 0)
+    return bool(np.array_equal(ring[p], ring[inner] - 1) and np.all(np.abs(off[p] - off[inner]) <= 1))
+
+
+def chain_deviations(off: NDArray[np.int_], ring: NDArray[np.int_], pred: NDArray[np.int_]) -> NDArray[np.float64]:
+    """Each offset's chain (its predecessors down to the origin): the largest distance [cells] of the chain's cells
+    from the straight segment origin → offset. Vectorised, one step along every unfinished chain at a time."""
+    length = np.hypot(off[:, 0], off[:, 1]).astype(float)
+    dev = np.zeros(len(off))
+    idx = np.flatnonzero(ring > 0)
+    idx = idx[np.argsort(-ring[idx], kind="stable")]  # longest chains first: the unfinished ones are a prefix
+    L = length[idx]
+    ux, uy = off[idx, 0] / L, off[idx, 1] / L
+    cur = idx.copy()
+    worst = np.zeros(len(idx))
+    steps = ring[idx]
+    for k in range(int(steps[0]) if len(idx) else 0):
+        n = int(np.searchsorted(-steps, -k, side="left"))  # the chains with a k-th cell: steps > k
+        cx, cy = off[cur[:n], 0], off[cur[:n], 1]
+        s = np.clip(cx * ux[:n] + cy * uy[:n], 0.0, L[:n])
+        np.maximum(worst[:n], np.hypot(cx - s * ux[:n], cy - s * uy[:n]), out=worst[:n])
+        cur[:n] = pred[cur[:n]]
+    dev[idx] = worst
+    return dev
 
 
 def build_ray_table(radius: int) -> RayTable:
@@ -164,7 +214,8 @@ def build_ray_table(radius: int) -> RayTable:
         chain[t, :m] = chain[best_p, :m]
         chain[t, m] = t
         dev[t] = best
-    return np.stack([xs, ys], axis=1), ring, pred, dev
+    off = np.stack([xs, ys], axis=1)
+    return off, ring, pred, chain_deviations(off, ring, pred)  # the same floats as a table read back
 
 
 def _offset_buffer(geom: Any, distance: float) -> Any:
@@ -190,7 +241,7 @@ def chain_is_impossible(
         robots: N ≥ 1.
         cell: h [m], the grid's cell side.
         refine_work: while the proof fails, it is tried again with half the cell (a smaller relaxation: obstacles
-            shrunk by 0.13 m, then 0.065 m, instead of 0.22 m at 5.6 m tethers; about 8× the work each time: twice
+            shrunk by 0.13 m, then 0.074 m, instead of 0.22 m at 5.6 m tethers; about 8× the work each time: twice
             the source cells, four times the rays), at most :data:`REFINE_LEVELS` times, when 8× the ray tests of
             the previous attempt are at most this many (0: never). A count, not a clock, so the verdict is the same
             on any machine. An attempt that ends before any ray test (robot 1's cells already meet the cells the goal
@@ -349,6 +400,7 @@ def find_chain(
     clearance: float,
     first_clearance: float | None = None,
     spacing: float = 0.0,
+    at_least: int = 1,
 ) -> NDArray[np.float64] | None:
     """A chain of at most ``robots`` robots from ``anchor`` to ``goal`` anywhere in the free space, or None.
 
@@ -367,7 +419,8 @@ def find_chain(
 
     Both only keep candidates from which the rest of the chain can still reach the goal in a straight line. Returns
     the chain with the fewer robots, (n + 1, 2) from the anchor to the goal with n ≤ ``robots``, if its robots are
-    also ``spacing`` [m] apart pairwise; a witness, not a proof: None says nothing.
+    also ``spacing`` [m] apart pairwise; a witness, not a proof: None says nothing. ``at_least``: a proven lower
+    bound on the robots (the fine search is not run for fewer).
     """
     a, g = np.asarray(anchor, float), np.asarray(goal, float)
     lim = np.atleast_2d(np.asarray(span_limits, float))
@@ -375,7 +428,7 @@ def find_chain(
     args = (env, a, g, rows, clearance, first_clearance, spacing)
     coarse = _search(*args, robots, WITNESS_STEP, None)
     fewer = robots if coarse is None else len(coarse) - 2
-    fine = _search(*args, fewer, BEAM_STEP, _geodesic(env, g)) if fewer >= 1 else None
+    fine = _search(*args, fewer, BEAM_STEP, _geodesic(env, g)) if fewer >= max(1, at_least) else None
     return fine if fine is not None else coarse
 
 

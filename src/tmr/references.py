@@ -157,7 +157,7 @@ def start_placement(
             for Pp in candidates:
                 tried += 1
                 try:
-                    sub = plan_route(env, Pp[-1], goal, lim[parked:])
+                    sub = plan_route(env, Pp[-1], goal, lim[parked:], fewest=False)
                 except RouteVerdict:
                     continue
                 if sub.n_route <= active:  # the active robots start along sub.points, the route chain's guide
@@ -553,12 +553,14 @@ def chain_reference(
     # guide: anchor → parked robots → the route they start on (when the active robots lie on it), else
     # anchor → every start position → shortest route from the leader to the goal
     tail_start = P[parked - 1] if parked else base
-    sub = route if not parked else plan_route(env, tail_start, goal, np.array([[lim[-1, 0], route.d_max]]))
+    sub = (
+        route if not parked else plan_route(env, tail_start, goal, np.array([[lim[-1, 0], route.d_max]]), fewest=False)
+    )
     on_sub = all(_distance_to_polyline(sub.points, p) < 1e-6 for p in P[parked:])
     if on_sub:
         guide = np.vstack([base, P[:parked], sub.points[1:]]) if parked else sub.points.copy()
     else:
-        tail = plan_route(env, P[-1], goal, np.array([[lim[-1, 0], route.d_max]]))
+        tail = plan_route(env, P[-1], goal, np.array([[lim[-1, 0], route.d_max]]), fewest=False)
         guide = np.vstack([base, P, tail.points[1:]])
     keep = np.r_[True, np.linalg.norm(np.diff(guide, axis=0), axis=1) > 1e-9]
     guide = guide[keep]

@@ -636,6 +636,7 @@ def plan_route(
     *,
     margin: float = ROUTE_MARGIN,
     robots: int | None = None,
+    fewest: bool = True,
 ) -> Route:
     """Shortest free route from the anchor ``base`` to ``goal`` and the robots it needs (module docstring).
 
@@ -650,6 +651,9 @@ def plan_route(
             too and the one needing the fewest robots is returned, unless N is first proven too few round the
             corners (:mod:`tmr.reach`). Without it, ``n_lower`` is raised to ``n_min`` when N_min − 1 robots are
             proven too few.
+        fewest: search for the fewest robots (the corner proof, the chain off the route, :func:`tight_chain`);
+            False: the route and its station chain only (``n_lower`` by length, ``n_min`` = ``n_route``), for callers
+            that only follow the route (start placements try many).
 
     Raises:
         NoRouteError: base or goal outside the room or in an obstacle, or in different pieces of free space.
@@ -691,7 +695,12 @@ def plan_route(
         if best is None:
             n_lower = _length_bound(L_lower, found.length, d_max)
             # corners: a proof that the chain given cannot reach the goal saves retrying narrower routes
-            if robots is not None and n_lower <= robots < found.n_min and _impossible(env, base, goal, lim, robots):
+            if (
+                fewest
+                and robots is not None
+                and n_lower <= robots < found.n_min
+                and _impossible(env, base, goal, lim, robots)
+            ):
                 n_lower, lower_by = robots + 1, "corners"
         if best is None or found.n_min < best.n_min:
             best = found
@@ -701,11 +710,11 @@ def plan_route(
             f"obstacles grown by {env.safety_radius:g} m: a passage is too narrow for the chain"
         )
     n_min = max(best.n_min, n_lower)
-    if robots is None and n_lower < n_min and _impossible(env, base, goal, lim, n_min - 1):
+    if fewest and robots is None and n_lower < n_min and _impossible(env, base, goal, lim, n_min - 1):
         n_lower, lower_by = n_min, "corners"
     notes = [f"route margin lowered to {best.margin:.3f} m in a narrow passage"] if best.margin < margin else []
     n_route = n_min
-    if n_lower < n_min and (robots is None or robots >= n_lower):
+    if fewest and n_lower < n_min and (robots is None or robots >= n_lower):
         # fewer robots than the route chain needs: a chain anywhere in the free space (the same search whatever N;
         # none for an N already proven too few: its refusal stands, and names the route's count)
         witness = _witness(env, base, goal, lim, n_min - 1, n_lower)
@@ -718,8 +727,8 @@ def plan_route(
                     f"chain of {n_min} found off it"
                 )
     tight = None
-    if robots is not None and n_lower <= robots < n_min:  # not proven too few: is the clearance what stops it?
-        tight = tight_chain(env, base, goal, lim, robots)
+    if fewest and robots is not None and n_lower <= robots < n_min:
+        tight = tight_chain(env, base, goal, lim, robots)  # not proven too few: is the clearance what stops it?
     return Route(
         points=best.points,
         length=best.length,
@@ -771,7 +780,7 @@ def _witness(env: Any, base: Array, goal: Array, lim: Array, robots: int, n_lowe
         pair = best_pair(env, base, goal, spans, spacing, (first, CHORD_CLEARANCE))
         if pair is not None and pair[1] > 0:
             return np.array([base, pair[0], goal])
-    return find_chain(env, base, goal, spans, robots, CHORD_CLEARANCE, first, spacing=spacing)
+    return find_chain(env, base, goal, spans, robots, CHORD_CLEARANCE, first, spacing=spacing, at_least=n_lower)
 
 
 #: Spacing [m] of the sample points of robot 1 in :func:`best_pair`, and the most samples it takes (a larger region

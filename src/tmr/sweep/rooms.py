@@ -712,7 +712,9 @@ def _leader_route_length(room: Room, start: NDArray[np.float64]) -> float | None
     if route_mod is None:
         return None
     try:
-        return float(route_mod.plan_route(room.environment(), start, room.goal, span_rows(room.d_max)).length)
+        return float(
+            route_mod.plan_route(room.environment(), start, room.goal, span_rows(room.d_max), fewest=False).length
+        )
     except Exception:  # noqa: BLE001 - a start the route module refuses: no ratio
         return None
 
