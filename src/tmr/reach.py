@@ -61,7 +61,7 @@ __all__ = [
     "ray_table_cache_dir",
 ]
 
-#: h [m]: cell side of the reachable-set grid (0.1 m: 0.02–0.16 s per proof on the 20 m random rooms).
+#: h [m]: cell side of the reachable-set grid (0.1 m: 0.01–0.06 s per proof on the 20 m random rooms).
 REACH_CELL = 0.1
 #: Ray tests [count] each finer attempt may make (:func:`chain_is_impossible`'s ``refine_work`` as tmr.route uses
 #: it): 1.2·10⁸ take at most about 0.25 s (2 ns per test on the 20 m random rooms).
@@ -93,8 +93,9 @@ def ray_table(radius: int) -> RayTable:
     ``pred`` the index of the 8-neighbour one ring nearer the origin whose chain of predecessors keeps closest to
     the straight segment origin → offset (-1 for the origin), ``dev`` that chain's largest distance from the segment
     [cells]. Built ring by ring, vectorised (:func:`build_ray_table`: 0.07 / 0.36 / 3.6 s at radius 58 / 114 / 226,
-    allocating up to 1 GB of temporaries, which on a loaded machine can cost a refusal a second of page faults), and
-    kept in this process and on disk (:func:`ray_table_cache_dir`; 0.2 / 0.8 / 3.3 MB).
+    240 MB at its peak at 226, and many short-lived temporaries, whose page faults can cost a refusal a second of
+    system time on a loaded machine), and kept in this process and on disk (:func:`ray_table_cache_dir`; 0.2 / 0.8
+    / 3.3 MB).
 
     The file is named after a hash of the code that builds the table (a changed construction never reads an old
     file) and holds a SHA-256 of its arrays; it is used only if that matches and every offset's predecessor is an
