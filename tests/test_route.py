@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -143,6 +144,10 @@ def test_gap_wider_than_2r_but_nearer_than_the_chord_clearance():
         )
         assert route.refusal(n).endswith("rerun with --robots 4")
     assert plan_route(env, a, g, LIM, robots=4).refusal(4) is None
+    # floored, to the mm, or to two significant digits below 1 mm (never "0.000 m", never rounded up to enough)
+    for clearance, shown in ((0.0599, "0.059"), (0.0189, "0.018"), (0.00074, "0.00074"), (0.000749, "0.00074")):
+        tight = dataclasses.replace(route, tight_chain=route.tight_chain._replace(clearance=clearance))
+        assert f"a tether passes {shown} m from them where 0.06 m is needed" in tight.refusal(3), clearance
     # a wider gap (0.2 m of free width, 0.1 m at its middle) is no shortfall: no explanation of that kind
     wide = Environment.from_geometry(
         [box(9.9, 0.0, 10.1, 10 - 0.6), box(9.9, 10 + 0.6, 10.1, 17.0)], (0.0, 0.0, 20.0, 20.0)

@@ -402,6 +402,7 @@ def find_chain(
     first_clearance: float | None = None,
     spacing: float = 0.0,
     at_least: int = 1,
+    beam: int = BEAM_WIDTH,
 ) -> NDArray[np.float64] | None:
     """A chain of at most ``robots`` robots from ``anchor`` to ``goal`` anywhere in the free space, or None.
 
@@ -421,15 +422,16 @@ def find_chain(
     Both only keep candidates from which the rest of the chain can still reach the goal in a straight line. Returns
     the chain with the fewer robots, (n + 1, 2) from the anchor to the goal with n ≤ ``robots``, if its robots are
     also ``spacing`` [m] apart pairwise; a witness, not a proof: None says nothing. ``at_least``: a proven lower
-    bound on the robots (the fine search is not run for fewer).
+    bound on the robots (the fine search is not run for fewer); ``beam``: the fine search's width (wider: slower,
+    and finds more).
     """
     a, g = np.asarray(anchor, float), np.asarray(goal, float)
     lim = np.atleast_2d(np.asarray(span_limits, float))
     rows = np.array([lim[min(k, len(lim) - 1)] for k in range(robots)])
     args = (env, a, g, rows, clearance, first_clearance, spacing)
-    coarse = _search(*args, robots, WITNESS_STEP, None)
+    coarse = _search(*args, robots, WITNESS_STEP, None, beam)
     fewer = robots if coarse is None else len(coarse) - 2
-    fine = _search(*args, fewer, BEAM_STEP, _geodesic(env, g)) if fewer >= max(1, at_least) else None
+    fine = _search(*args, fewer, BEAM_STEP, _geodesic(env, g), beam) if fewer >= max(1, at_least) else None
     return fine if fine is not None else coarse
 
 
@@ -479,8 +481,10 @@ def _search(
     robots: int,
     step: float,
     geodesic: Any,
+    beam: int = BEAM_WIDTH,
 ) -> NDArray[np.float64] | None:
-    """One search of :func:`find_chain`: coarse (``geodesic`` None) or fine, on candidates every ``step`` [m]."""
+    """One search of :func:`find_chain`: coarse (``geodesic`` None) or fine (``beam`` sources per level), on
+    candidates every ``step`` [m]."""
     rows = rows[:robots]
     rest = np.concatenate([np.cumsum(rows[::-1, 1])[::-1], [0.0]])
     xmin, ymin, xmax, ymax = env.bounds
@@ -511,9 +515,9 @@ def _search(
             cand = cand[(d <= d_hi) & (d >= d_lo)]
             if geodesic is None:
                 batches = [cand]
-            else:  # only candidates nearer the goal than the level's BEAM_WIDTH-th so far, nearest first
-                if len(reached) >= BEAM_WIDTH:
-                    cand = cand[cand < np.partition(np.asarray(reached), BEAM_WIDTH - 1)[BEAM_WIDTH - 1]]
+            else:  # only candidates nearer the goal than the level's beam-th so far, nearest first
+                if len(reached) >= beam:
+                    cand = cand[cand < np.partition(np.asarray(reached), beam - 1)[beam - 1]]
                 batches = [cand[i : i + _BEAM_BATCH] for i in range(0, len(cand), _BEAM_BATCH)]
             got = 0
             for c in batches:
@@ -523,7 +527,7 @@ def _search(
                 level[ok], parent[ok] = k + 1, s
                 reached.extend(ok.tolist())
                 got += len(ok)
-                if got >= BEAM_WIDTH:
+                if got >= beam:
                     break
         if level[goal_i] >= 0:
             chain = [goal_i]
@@ -542,5 +546,5 @@ def _search(
             _, first = np.unique(np.floor(P[new] / WITNESS_THIN).astype(np.int64), axis=0, return_index=True)
             frontier = new[np.sort(first)]
         else:
-            frontier = np.sort(new)[:BEAM_WIDTH]
+            frontier = np.sort(new)[:beam]
     return None

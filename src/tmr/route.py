@@ -188,10 +188,11 @@ class Route:
         robots = f"{n_robots} robot{'s' if n_robots != 1 else ''}"
         if self.tight_chain is not None:  # the clearance stops it, not the count: floored, never shown as enough
             t = self.tight_chain
-            passes = math.floor(t.clearance * 1000) / 1000
+            decimals = max(3, 1 - math.floor(math.log10(t.clearance)))  # two significant digits below 1 mm
+            passes = math.floor(t.clearance * 10**decimals) / 10**decimals
             return (
                 f"no chain of {robots} keeping {CHORD_CLEARANCE:g} m from the obstacles was found, only closer ones: "
-                f"in {t.searched}, a tether passes {passes:.3f} m from them where {t.needed:.3g} m is needed "
+                f"in {t.searched}, a tether passes {passes:.{decimals}f} m from them where {t.needed:.3g} m is needed "
                 f"(tethers ≤ {self.d_max:.2f} m); keeping it takes {need}; rerun with --robots {self.n_min}"
             )
         return (
@@ -820,6 +821,11 @@ def best_pair(
     return P[i], float(score[i]), step
 
 
+#: Width of the fine search of :func:`tight_chain` (twice the witness search's: it runs only for a verdict in the
+#: band, where a closer chain found names the clearance instead of leaving the count undecided).
+TIGHT_BEAM = 80
+
+
 class TightChain(NamedTuple):
     """A chain that meets every requirement of the stations but the clearance of one tether (:func:`tight_chain`)."""
 
@@ -849,7 +855,7 @@ def tight_chain(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> 
             return None
         chain, searched = np.array([base, pair[0], goal]), f"the best on a {pair[2]:.2g} m grid"
     else:
-        chain = find_chain(env, base, goal, spans, robots, 0.0, 0.0, spacing=spacing)
+        chain = find_chain(env, base, goal, spans, robots, 0.0, 0.0, spacing=spacing, beam=TIGHT_BEAM)
         if chain is None:
             return None
         searched = "the one found"
