@@ -104,9 +104,7 @@ def ray_table(radius: int) -> RayTable:
     (:mod:`tmr.ccma.energy`): it guards against damage and stale code, not against someone who rewrites it.
     """
     n = 2 * radius + 1
-    ys, xs = np.mgrid[-radius : radius + 1, -radius : radius + 1]
-    off = np.stack([xs.ravel(), ys.ravel()], axis=1)
-    ring = np.maximum(np.abs(off[:, 0]), np.abs(off[:, 1]))
+    off, ring = _offsets(radius)
     try:
         path = ray_table_cache_dir() / f"ray_table_{_code_key()}_r{radius}.npz"
     except (OSError, TypeError, RuntimeError):  # no source to hash (a frozen install), or no home: no cache
@@ -144,7 +142,7 @@ def ray_table(radius: int) -> RayTable:
 @functools.cache
 def _code_key() -> str:
     """12 hex digits of a hash of the source of the table's construction (the cache file's name)."""
-    source = "".join(inspect.getsource(f) for f in (build_ray_table, chain_deviations, _steps_one_ring))
+    source = "".join(inspect.getsource(f) for f in (_offsets, build_ray_table, chain_deviations, _steps_one_ring))
     return hashlib.sha256(source.encode()).hexdigest()[:12]
 
 
@@ -184,14 +182,19 @@ def chain_deviations(off: NDArray[np.int_], ring: NDArray[np.int_], pred: NDArra
     return dev
 
 
+def _offsets(radius: int) -> tuple[NDArray[np.int_], NDArray[np.int_]]:
+    """The offsets (M, 2) of the square of ``radius`` cells, row by row from (-radius, -radius), and their rings."""
+    ys, xs = np.mgrid[-radius : radius + 1, -radius : radius + 1]
+    off = np.stack([xs.ravel(), ys.ravel()], axis=1)
+    return off, np.maximum(np.abs(off[:, 0]), np.abs(off[:, 1]))
+
+
 def build_ray_table(radius: int) -> RayTable:
     """:func:`ray_table`, built (no cache)."""
     n = 2 * radius + 1
-    ys, xs = np.mgrid[-radius : radius + 1, -radius : radius + 1]
-    xs, ys = xs.ravel(), ys.ravel()
-    ring = np.maximum(np.abs(xs), np.abs(ys))
+    off, ring = _offsets(radius)
+    xs, ys = off[:, 0], off[:, 1]
     pred = np.full(n * n, -1)
-    dev = np.zeros(n * n)
     chain = np.zeros((n * n, radius + 1), dtype=np.int32)  # chain[i, m]: the chain's cell on ring m
     chain[:, 0] = radius * n + radius
     for m in range(1, radius + 1):
@@ -214,8 +217,6 @@ def build_ray_table(radius: int) -> RayTable:
         pred[t] = best_p
         chain[t, :m] = chain[best_p, :m]
         chain[t, m] = t
-        dev[t] = best
-    off = np.stack([xs, ys], axis=1)
     return off, ring, pred, chain_deviations(off, ring, pred)  # the same floats as a table read back
 
 
@@ -429,7 +430,7 @@ def find_chain(
     lim = np.atleast_2d(np.asarray(span_limits, float))
     rows = np.array([lim[min(k, len(lim) - 1)] for k in range(robots)])
     args = (env, a, g, rows, clearance, first_clearance, spacing)
-    coarse = _search(*args, robots, WITNESS_STEP, None, beam)
+    coarse = _search(*args, robots, WITNESS_STEP, None)
     fewer = robots if coarse is None else len(coarse) - 2
     fine = _search(*args, fewer, BEAM_STEP, _geodesic(env, g), beam) if fewer >= max(1, at_least) else None
     return fine if fine is not None else coarse
