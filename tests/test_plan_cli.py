@@ -280,16 +280,18 @@ def test_too_few_robots_for_the_clearance_exit_1_with_it(tmp_path, capsys):
 def test_clearance_verdict_from_the_wider_tight_search(tmp_path, capsys):
     """narrow-corner-1142507027 with 5 robots: no chain of 5 keeping 0.06 m is found and none is proven impossible;
     the fine search for a closer chain, twice as wide as the witness search (tmr.route.TIGHT_BEAM), finds one whose
-    tether passes 0.00074 m from the obstacles (the witness search's width finds none): exit 1 naming the clearance,
-    to two significant digits, nothing written."""
+    tether passes 0.00074 m from the obstacles (the witness search's width finds none), and widening it
+    (tmr.chain_clearance) moves that tether to 0.035 m, still short of 0.06 m: exit 1 naming the clearance, nothing
+    written."""
     args, out = _room_args(tmp_path, 1142507027, "narrow", "corner", "5")
     code, stdout, err = run_cli(args, capsys)
     assert code == 1 and not out.exists()
     text = (stdout + err).strip()
     assert (
-        "no chain of 5 robots keeping 0.06 m from the obstacles was found, only closer ones: in the one found" in text
+        "no chain of 5 robots keeping 0.06 m from the obstacles was found, only closer ones: in the widest found"
+        in text
     )
-    assert "a tether passes 0.00074 m from them where 0.06 m is needed" in text and text.endswith("--robots 6")
+    assert "a tether passes 0.035 m from them where 0.06 m is needed" in text and text.endswith("--robots 6")
 
 
 def test_goal_without_free_route_refused(tmp_path, capsys):

@@ -246,12 +246,16 @@ def test_find_chain_round_the_short_wall():
 def test_proof_verdict_and_work_pinned(seed, density, goal_class, robots, cell, expected):
     """(proven, ray tests) of the plain sweep of commit b35f277, which listed every visible (ray, source) pair and
     tested every cell against the obstacles: the faster sweep must reach the same cells from the same sources, so
-    the same verdict and count (a region of interest too small, or a cell closed too early, changes the count)."""
+    the same verdict and count (a region of interest too small, or a cell closed too early, changes the count).
+    Pruned by the goal's visible region too (the default): the same verdicts here, never more ray tests."""
     from tmr.reach import _prove
     from tmr.sweep.rooms import generate_room, span_rows
 
     room = generate_room(seed, density, goal_class)
-    assert _prove(room.environment(), room.base, room.goal, span_rows()[:, 1], robots, cell) == expected
+    args = (room.environment(), room.base, room.goal, span_rows()[:, 1], robots, cell)
+    assert _prove(*args, prune=False) == expected
+    proven, work = _prove(*args)  # the sources pruned by the goal's visible region: the same verdict, less work
+    assert proven == expected[0] and work <= expected[1]
 
 
 def test_the_quarter_size_cells_prove_what_the_half_size_ones_cannot():
@@ -267,6 +271,8 @@ def test_the_quarter_size_cells_prove_what_the_half_size_ones_cannot():
     (p0, w0), (p1, w1) = _prove(*args, REACH_CELL), _prove(*args, REACH_CELL / 2)
     assert not p0 and not p1 and REFINE_LEVELS == 2
     assert chain_is_impossible(*args, cell=REACH_CELL / 4)
+    unpruned = _prove(*args, REACH_CELL / 4, prune=False)
+    assert unpruned[0] and _prove(*args, REACH_CELL / 4)[1] < 0.7 * unpruned[1]  # 40 % fewer sources by G
     budget = 8 * max(w0, w1)
     assert budget <= REFINE_WORK and chain_is_impossible(*args, refine_work=budget)
     assert not chain_is_impossible(*args, refine_work=budget - 1)  # one ray test over the budget

@@ -14,6 +14,8 @@ from tmr.environment import Environment
 from tmr.errors import ParameterError
 from tmr.params import ChainParams
 from tmr.route import (
+    CHORD_CLEARANCE,
+    SPACING_MARGIN,
     BlockedRouteError,
     NoRouteError,
     Route,
@@ -137,7 +139,7 @@ def test_gap_wider_than_2r_but_nearer_than_the_chord_clearance():
         t = route.tight_chain
         assert t is not None and t.robots <= n and t.needed == CHORD_CLEARANCE
         assert 0.015 < t.clearance <= 0.025 + 1e-9
-        assert t.searched == ("the best on a 0.02 m grid" if n == 2 else "the one found")
+        assert t.searched == ("the best on a 0.02 m grid" if n == 2 else "the widest found")
         assert route.refusal(n).startswith(
             f"no chain of {n} robots keeping 0.06 m from the obstacles was found, only closer ones: in "
             f"{t.searched}, a tether passes 0.0"
@@ -258,3 +260,28 @@ def test_shortest_path_tree_matches_scipy_dijkstra() -> None:
             path.append(pred[path[-1]])
         length = sum(np.linalg.norm(pts[a] - pts[b]) for a, b in zip(path[:-1], path[1:], strict=True))
         assert length == pytest.approx(ref[t], rel=1e-12, abs=1e-12), trial
+
+
+def test_a_widened_chain_is_the_witness(monkeypatch):
+    """dense-far-2639215061 with 3 robots: the route chain needs 4, and neither search finds a chain of 3 keeping
+    0.06 m; one found with the obstacles grown by 0.1 m less, widened (tmr.chain_clearance), keeps it. Checked by
+    the definition (spans, clearances, spacing); without the widening the count stays 4."""
+    import tmr.route as route_module
+    from tmr.sweep.rooms import generate_room, span_rows
+
+    room = generate_room(2639215061, "dense", "far")
+    env, lim = room.environment(), span_rows()
+    route = plan_route(env, room.base, room.goal, lim, robots=3)
+    assert (route.n_lower, route.n_min, route.n_route) == (3, 3, 4) and route.refusal(3) is None
+    chain = route.points  # the witness is the guide
+    assert len(chain) == 4 and np.allclose(chain[0], room.base) and np.allclose(chain[-1], room.goal)
+    L = np.linalg.norm(np.diff(chain, axis=0), axis=1)
+    rows = lim[np.minimum(np.arange(3), len(lim) - 1)]  # the last row repeats
+    assert np.all(L <= rows[:, 1]) and np.all(L >= rows[:, 0] + SPACING_MARGIN)
+    c = np.asarray(env.segment_clearance(chain[:-1], chain[1:]))
+    first = min(CHORD_CLEARANCE, 0.5 * float(env.exact_clearance(room.base)))
+    assert c[0] > first and np.all(c[1:] > CHORD_CLEARANCE)
+    R = chain[1:]
+    assert min(np.linalg.norm(R[i] - R[j]) for i in range(3) for j in range(i + 1, 3)) >= 2 * 0.5 + SPACING_MARGIN
+    monkeypatch.setattr(route_module, "_widened", lambda *args, **kwargs: None)
+    assert plan_route(env, room.base, room.goal, lim, robots=3).n_min == 4

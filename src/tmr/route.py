@@ -773,7 +773,9 @@ def _witness_requirements(env: Any, base: Array, lim: Array) -> tuple[float, Arr
 
 def _witness(env: Any, base: Array, goal: Array, lim: Array, robots: int, n_lower: int) -> Array | None:
     """A chain of at most ``robots`` robots keeping the stations' clearance and spacing: 2 robots by the grid
-    search of :func:`best_pair` when no proof rules them out, else :func:`tmr.reach.find_chain`."""
+    search of :func:`best_pair` when no proof rules them out, else :func:`tmr.reach.find_chain`; then, for one robot
+    fewer than it found (or ``robots`` if it found none), a chain searched with the obstacles grown by
+    :data:`WIDEN_RELAX` less and widened to the clearances (:func:`_widened`)."""
     from tmr.reach import find_chain
 
     first, spans, spacing = _witness_requirements(env, base, lim)
@@ -781,7 +783,48 @@ def _witness(env: Any, base: Array, goal: Array, lim: Array, robots: int, n_lowe
         pair = best_pair(env, base, goal, spans, spacing, (first, CHORD_CLEARANCE))
         if pair is not None and pair[1] > 0:
             return np.array([base, pair[0], goal])
-    return find_chain(env, base, goal, spans, robots, CHORD_CLEARANCE, first, spacing=spacing, at_least=n_lower)
+    chain = find_chain(env, base, goal, spans, robots, CHORD_CLEARANCE, first, spacing=spacing, at_least=n_lower)
+    fewer = robots if chain is None else len(chain) - 2
+    if fewer >= max(n_lower, 3):
+        wide = _widened(env, base, goal, spans, spacing, _needs(first, fewer), fewer, n_lower)
+        if wide is not None and wide.margin > 0:
+            return wide.chain
+    return chain
+
+
+#: [m] the obstacles are grown by r − WIDEN_RELAX for the search that seeds :func:`tmr.chain_clearance.widen_chain`:
+#: its chords may pass up to this much into the grown obstacles, and the widening moves them out.
+WIDEN_RELAX = 0.1
+
+
+def _needs(first: float, robots: int, clearance: float = CHORD_CLEARANCE) -> Array:
+    """The clearance [m] each tether of a chain of ``robots`` must keep: ``first`` for the anchor's."""
+    need = np.full(robots, clearance)
+    need[0] = min(first, clearance)
+    return need
+
+
+def _widened(
+    env: Any, base: Array, goal: Array, spans: Array, spacing: float, need: Array, robots: int, at_least: int
+) -> Any:
+    """A chain of ``robots`` robots widened to ``need`` (:func:`tmr.chain_clearance.widen_chain`), from a chain of
+    at most that many found with the obstacles grown by r − :data:`WIDEN_RELAX` (its own count first, then padded
+    to ``robots``); the widest tried, or None if the relaxed search finds none."""
+    from tmr.chain_clearance import pad_chain, widen_chain
+    from tmr.reach import find_chain
+
+    relaxed = env.with_safety_radius(max(env.safety_radius - WIDEN_RELAX, 0.0))
+    seed = find_chain(relaxed, base, goal, spans, robots, 0.0, 0.0, spacing=spacing, at_least=at_least)
+    if seed is None:
+        return None
+    best = None
+    for n in dict.fromkeys((len(seed) - 1, robots)):
+        wide = widen_chain(env, pad_chain(seed, n), spans, spacing, need[:n])
+        if wide is not None and (best is None or wide.margin > best.margin):
+            best = wide
+        if best is not None and best.margin > 0:
+            break
+    return best
 
 
 #: Spacing [m] of the sample points of robot 1 in :func:`best_pair`, and the most samples it takes (a larger region
@@ -832,7 +875,7 @@ class TightChain(NamedTuple):
     robots: int  #: its robots (≤ the N asked)
     clearance: float  #: clearance [m] of its tether with the largest shortfall
     needed: float  #: what the stations need of that tether [m]: ``CHORD_CLEARANCE``, or less for the anchor's
-    searched: str  #: how it was found, for the verdict: "the best on a 0.02 m grid" (2 robots), "the one found"
+    searched: str  #: how it was found, for the verdict: "the best on a 0.02 m grid" (2 robots), "the widest found"
 
 
 def tight_chain(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> TightChain | None:
@@ -842,10 +885,13 @@ def tight_chain(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> 
     found keeps the clearances too (then it is no explanation: the verdict stays the search's).
 
     2 robots: :func:`best_pair` (on its grid, the chain whose worse tether does best against what it needs); more:
-    :func:`tmr.reach.find_chain` at zero clearance (the first chain found, not the best). Such a chain shows that the
+    :func:`tmr.reach.find_chain` at zero clearance, or if it finds none, a chain found with the obstacles grown by
+    r − :data:`WIDEN_RELAX` and widened until clear (:func:`_widened`); then widened towards the clearances the
+    plans keep (:func:`tmr.chain_clearance.widen_chain`: a local optimum, not the best). Such a chain shows that the
     count is not what stops the plan: N is at least the fewest robots of the problem's definition (chords clear of
     the grown obstacles), and only the clearance the plans keep takes more.
     """
+    from tmr.chain_clearance import widen_chain
     from tmr.reach import find_chain
 
     first, spans, spacing = _witness_requirements(env, base, lim)
@@ -856,12 +902,18 @@ def tight_chain(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> 
         chain, searched = np.array([base, pair[0], goal]), f"the best on a {pair[2]:.2g} m grid"
     else:
         chain = find_chain(env, base, goal, spans, robots, 0.0, 0.0, spacing=spacing, beam=TIGHT_BEAM)
+        if chain is None:  # one nearer still, widened until clear of the obstacles
+            wide = _widened(env, base, goal, spans, spacing, np.zeros(robots), robots, 1)
+            chain = wide.chain if wide is not None and wide.margin > 0 else None
         if chain is None:
             return None
-        searched = "the one found"
+        # as near the clearances the plans keep as it can be moved (only if every tether stays clear)
+        wide = widen_chain(env, chain, spans, spacing, _needs(first, len(chain) - 1))
+        if wide is not None and bool(np.all(np.asarray(env.segment_clearance(wide.chain[:-1], wide.chain[1:])) > 0)):
+            chain = wide.chain
+        searched = "the widest found"
     c = np.asarray(env.segment_clearance(chain[:-1], chain[1:]), float)
-    need = np.full(len(c), CHORD_CLEARANCE)
-    need[0] = first
+    need = _needs(first, len(c))
     k = int(np.argmin(c - need))
     if c[k] <= 0 or c[k] > need[k]:  # not clear of the obstacles at all, or no shortfall: no explanation
         return None
