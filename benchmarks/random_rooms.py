@@ -58,6 +58,7 @@ from tmr.sweep.rooms import (  # noqa: E402
     GOAL_CLASSES,
     Room,
     RoomRun,
+    decide_count,
     default_d_max,
     room_from_spec,
     room_set,
@@ -82,7 +83,12 @@ TARGET_MEDIAN_PLAN_S = 2.0  # s, whole process, median
 # classification
 # ----------------------------------------------------------------------------------------------------------------
 EXPECT_PLAN = "plan"  # route found and N >= N_min (or auto)
-EXPECT_REFUSE_NMIN = "refuse: N < N_min"  # N < n_lower (proven) or n_lower <= N < N_min (route chain)
+EXPECT_REFUSE_NMIN = "refuse: N < N_min"  # N < n_proven: proven too few (tmr.reach, tmr.sweep.rooms.decide_count)
+#: n_clear ≤ N < n_min: a chain of N merely clear of the grown obstacles exists (found, checked independently), so N
+#: is not below the problem's N_min; the plans keep 0.06 m, which takes n_min: exit 1 naming the clearance, or a plan
+EXPECT_CLOSER = "plan, or name the clearance: only a chain nearer the obstacles than plans keep is known"
+#: n_proven ≤ N < n_clear (or n_min when no clear chain is known): neither proven too few nor a chain found
+EXPECT_UNDECIDED = "undecided: N_min unknown (no proof, no chain)"
 EXPECT_REFUSE_DISCONNECTED = "refuse: not connected"
 EXPECT_ROUTE_GAP = "route module refuses a connected goal"  # shapely connects base and goal, tmr.route finds no chain
 
@@ -94,7 +100,29 @@ def expectation(row: dict[str, Any]) -> str:
         return EXPECT_ROUTE_GAP
     if row["robots"] == "auto" or int(row["robots"]) >= int(row["n_min"]):
         return EXPECT_PLAN
-    return EXPECT_REFUSE_NMIN
+    n = int(row["robots"])
+    if n < int(row.get("n_proven") or row["n_lower"]):
+        return EXPECT_REFUSE_NMIN
+    if row.get("n_clear") is not None and n >= int(row["n_clear"]):
+        return EXPECT_CLOSER
+    return EXPECT_UNDECIDED
+
+
+def as_expected(row: dict[str, Any]) -> bool:
+    """The run did what its expectation asks (an undecided run: anything but a crash, a timeout or a refusal,
+    which only a proof, absent here, could give)."""
+    code = row["exit_code"]
+    if row["expect"] == EXPECT_PLAN:
+        return code == 0 and row.get("independent_ok") is True
+    if row["expect"] in (EXPECT_REFUSE_NMIN, EXPECT_REFUSE_DISCONNECTED):
+        return code == 2
+    if row["expect"] == EXPECT_CLOSER:
+        return (code == 0 and row.get("independent_ok") is True) or (
+            code == 1 and TIGHT_VERDICT in str(row.get("stderr_last", ""))
+        )
+    if row["expect"] == EXPECT_UNDECIDED:
+        return code in (0, 1) and (code == 1 or row.get("independent_ok") is True)
+    return False
 
 
 def outcome(row: dict[str, Any]) -> str:
@@ -139,8 +167,8 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     others = [r for r in rows if r["expect"] in (EXPECT_REFUSE_NMIN, EXPECT_REFUSE_DISCONNECTED)]
     gap = [r for r in rows if r["expect"] == EXPECT_ROUTE_GAP]
     ok_plans = [r for r in reach if r["exit_code"] == 0]
-    band = [r for r in rows if r["expect"] == EXPECT_REFUSE_NMIN and r["robots"] != "auto"
-            and int(r["robots"]) >= int(r["n_lower"])]  # fmt: skip
+    closer = [r for r in rows if r["expect"] == EXPECT_CLOSER]
+    undecided = [r for r in rows if r["expect"] == EXPECT_UNDECIDED]
     auto = [r for r in ok_plans if r["robots"] == "auto" and r.get("n_robots") is not None]
     all_plans = [r for r in rows if r["exit_code"] == 0]
     refusals = [r for r in others if r["exit_code"] == 2]
@@ -154,8 +182,9 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "timeouts": sum(r["exit_code"] not in (0, 1, 2) for r in rows),
         "others": len(others),
         "correct_refusals": len(refusals),
-        "band": len(band),
-        "band_exit1": sum(r["exit_code"] == 1 and r.get("n_robots") is None for r in band),
+        "closer": len(closer),
+        "closer_ok": sum(as_expected(r) for r in closer),
+        "undecided": len(undecided),
         "auto_extra": Counter(int(r["n_robots"]) - int(r["n_min"]) for r in auto),
         "gap": len(gap),
         "gap_refused": sum(r["exit_code"] == 2 for r in gap),
@@ -182,7 +211,8 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
 # ----------------------------------------------------------------------------------------------------------------
 CSV_COLUMNS = [
     "room", "room_seed", "density", "goal_class", "n_obstacles", "base_x", "base_y", "goal_x", "goal_y",
-    "connected", "straight", "route_found", "route_length", "n_lower", "n_min", "route_error",
+    "connected", "straight", "route_found", "route_length", "n_lower", "n_min", "n_proven", "n_clear",
+    "clear_margin", "route_error",
     "method", "robots", "expect", "outcome", "exit_code", "wall_time", "stderr_last",
     "success", "failure", "n_robots", "robots_auto", "route_length_cli", "n_lower_cli", "n_min_cli",
     "plan_wall_time", "d_max",
@@ -308,6 +338,11 @@ def main(argv: list[str] | None = None) -> int:
         t_gen = time.perf_counter() - t0
         rooms_ok: list[Room] = [g for g in generated if isinstance(g, Room)]
         gen_errors = [g for g in generated if not isinstance(g, Room)]
+        # where N_min lies when the proven bound is below the plans' count (a proof for each N, a clear chain)
+        gap_rooms = [r for r in rooms_ok if r.n_min is not None and r.n_lower is not None and r.n_lower < r.n_min]
+        t0 = time.perf_counter()
+        decided = {d["room"]: d for d in executor.map(decide_count, gap_rooms, desc="N_min")}
+        t_decide = time.perf_counter() - t0
         tasks = []
         for k, method in enumerate(methods):
             chosen = rooms_ok if k == 0 or args.subset is None else rooms_ok[: args.subset]
@@ -320,6 +355,9 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         executor.close()
     for r in rows:
+        d = decided.get(r["room"], {})
+        r["n_proven"] = d.get("n_proven", r["n_lower"])
+        r["n_clear"], r["clear_margin"] = d.get("n_clear"), d.get("clear_margin")
         r["expect"] = expectation(r)
         r["outcome"] = outcome(r)
     total = time.perf_counter() - t_start
@@ -344,7 +382,8 @@ def main(argv: list[str] | None = None) -> int:
     w(f"`{platform.machine()}`, nproc {os.cpu_count()}, Python {platform.python_version()}; {versions(PACKAGES)}; ")
     threads = ", ".join(f"{v}={os.environ[v]}" for v in THREAD_VARS if v in os.environ)
     w(f"{threads}; {source_version()}.\n")
-    w(f"{jobs_desc}; total {total:.0f} s (room generation {t_gen:.0f} s, {len(tasks)} runs {t_runs:.0f} s); ")
+    w(f"{jobs_desc}; total {total:.0f} s (room generation {t_gen:.0f} s, N_min bounds {t_decide:.0f} s, ")
+    w(f"{len(tasks)} runs {t_runs:.0f} s); ")
     w(f"load average {load0[0]:.1f} at the start, {load1[0]:.1f} at the end. Whole-process times are measured while ")
     w("the other workers run, so they include contention on a loaded machine.\n\n")
 
@@ -370,13 +409,23 @@ def main(argv: list[str] | None = None) -> int:
         "tmr.route); every run should refuse. *connected, no route*: shapely connects them but `tmr.route` finds no "
         "chain of free tether chords (a gap it judges too narrow); these are reported apart from the targets.\n\n"
     )
+    exact = sum(d["n_clear"] is not None and d["n_clear"] == d["n_proven"] for d in decided.values())
+    w(
+        f"In {len(gap_rooms)} rooms `tmr.route`'s proven bound N_lower is below N_min, the plans' count (tethers "
+        "keeping 0.06 m). There `tmr.sweep.rooms.decide_count` tries the proof for every N below N_min and searches "
+        "a chain merely clear of the grown obstacles (the problem's definition of N_min), checked independently: "
+        f"the problem's N_min is decided in {exact} of them ({t_decide:.0f} s).\n\n"
+    )
 
     w("## Per method and N\n\n")
     w(
         "*reachable*: the goal is connected, `tmr.route` finds a route and N ≥ N_min (every connected goal with a "
-        "route for `auto`). *success*: exit 0 among reachable. *correct refusals*: exit 2 among the others (N < N_min, "
-        "goal not connected; in brackets: runs with N_lower ≤ N < N_min that exit 1 'no plan found' instead, the "
-        "CLI's unproven verdict). *wrong ref.*: exit 2 for a reachable goal; *fail*: exit 1 for a reachable goal; "
+        "route for `auto`). *success*: exit 0 among reachable. *correct refusals*: exit 2 among the others (N proven "
+        "below N_min, goal not connected). *closer*: runs with N below the plans' count whose N is not below the "
+        "N_min of chords merely clear of the grown obstacles (a chain of N found and checked independently), as "
+        "runs that plan or exit 1 naming the clearance / runs. *undecided*: runs with N neither proven too few nor "
+        "matched by a chain found (N_min unknown). *wrong ref.*: exit 2 for a reachable goal; *fail*: exit 1 for a "
+        "reachable goal; "
         "*t/o*: timeouts or crashes. Times are whole-process wall times [s] (refusals: the expected ones; plan: every "
         "run that wrote a plan, exit 0 or 1). *ratio*: median leader path length / shortest free route from the "
         "leader's start to the goal (successful plans). Independent minima over every successful plan (exit 0): "
@@ -386,11 +435,11 @@ def main(argv: list[str] | None = None) -> int:
         "refused / planned.\n\n"
     )
     w(
-        "| method | N | rooms | reachable | success | fail | wrong ref. | t/o | correct refusals "
+        "| method | N | rooms | reachable | success | fail | wrong ref. | t/o | correct refusals | closer | undecided "
         "| refuse med / max [s] | plan med / max [s] | ratio | min robot clr [m] | min tether clr [m] "
         "| max span/d_max | viol. | gap |\n"
     )
-    w("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n")
+    w("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n")
     table: list[tuple[str, str, dict[str, Any]]] = []
     for method in methods:
         for n in robots:
@@ -398,7 +447,7 @@ def main(argv: list[str] | None = None) -> int:
             table.append((method, n, s))
             w(f"| {method} | {n} | {s['rooms']} | {s['reachable']} | {_frac(s['success'], s['reachable'])} | ")
             w(f"{s['failed']} | {s['wrong_refusals']} | {s['timeouts']} | {_frac(s['correct_refusals'], s['others'])}")
-            w(f" {'(' + str(s['band_exit1']) + ' exit 1)' if s['band_exit1'] else ''} ")
+            w(f" | {s['closer_ok']}/{s['closer']} | {s['undecided']} ")
             w(f"| {_fmt(s['refuse_med'])} / {_fmt(s['refuse_max'])} | {_fmt(s['plan_med'])} / {_fmt(s['plan_max'])} ")
             w(f"| {_fmt(s['ratio_med'], '.3f')} | {_fmt(s['min_robot'], '.3f')} | {_fmt(s['min_tether'], '.3f')} ")
             w(f"| {_fmt(s['max_span'], '.3f')} | {s['violations']} ({s['filtered_violations']}) ")
@@ -453,19 +502,28 @@ def main(argv: list[str] | None = None) -> int:
     low = [r for r in rows if r["expect"] == EXPECT_REFUSE_NMIN]
     low_ok = [r for r in low if r["exit_code"] == 2 and r["wall_time"] < TARGET_REFUSE_S]
     low_ref = [r for r in low if r["exit_code"] == 2]
-    low_band = [r for r in low if r["exit_code"] == 1 and r.get("n_robots") is None]
-    low_tight = [r for r in low_band if TIGHT_VERDICT in str(r.get("stderr_last", ""))]
+    undecided = [r for r in rows if r["expect"] == EXPECT_UNDECIDED]
     lines.append(
         (
             f"every N < N_min refused (exit 2) in < {TARGET_REFUSE_S:g} s (whole process)",
-            f"{len(low_ref)}/{len(low)} refused, {len(low_ok)}/{len(low)} in time; median "
-            f"{_fmt(_med(_vals(low_ref, 'wall_time')))} s, max "
-            f"{_fmt(max(_vals(low_ref, 'wall_time'), default=None))}"
-            f" s; {len(low_band)} exit 1 'no plan found' (N_lower ≤ N < N_min) in median "
-            f"{_fmt(_med(_vals(low_band, 'wall_time')))} s, {len(low_tight)} of them naming the clearance (a chain "
-            "of N robots exists, nearer the obstacles than the 0.06 m the plans keep: N is not below the N_min of "
-            "chords merely clear of them)",
-            len(low_ok) == len(low),
+            f"N proven below N_min: {len(low_ref)}/{len(low)} refused, {len(low_ok)}/{len(low)} in time; median "
+            f"{_fmt(_med(_vals(low_ref, 'wall_time')))} s, max {_fmt(max(_vals(low_ref, 'wall_time'), default=None))}"
+            f" s. N_min unknown (neither proven nor matched by a chain found): {len(undecided)} runs"
+            + (f" ({', '.join(sorted(r['room'] + ' N=' + r['robots'] for r in undecided))})" if undecided else ""),
+            len(low_ok) == len(low) and not undecided,
+        )
+    )
+    closer = [r for r in rows if r["expect"] == EXPECT_CLOSER]
+    closer_ok = [r for r in closer if as_expected(r)]
+    margins = _vals(closer, "clear_margin")
+    lines.append(
+        (
+            "N below the plans' count (tethers keeping 0.06 m) but not below N_min (a chain of N whose tethers are "
+            "merely clear of the grown obstacles, found by `tmr.route.clear_chain` and checked independently): "
+            "exit 1 naming the clearance, or a plan",
+            f"{len(closer_ok)}/{len(closer)}"
+            + (f" (those chains' least tether clearance {min(margins):.3f}–{max(margins):.3f} m)" if margins else ""),
+            len(closer_ok) == len(closer),
         )
     )
     disc = [r for r in rows if r["expect"] == EXPECT_REFUSE_DISCONNECTED]
@@ -492,10 +550,7 @@ def main(argv: list[str] | None = None) -> int:
     w("\n")
 
     # what went wrong
-    unexpected = [r for r in rows if not (
-        (r["expect"] == EXPECT_PLAN and r["exit_code"] == 0 and r.get("independent_ok") is True)
-        or (r["expect"] in (EXPECT_REFUSE_NMIN, EXPECT_REFUSE_DISCONNECTED) and r["exit_code"] == 2)
-    )]  # fmt: skip
+    unexpected = [r for r in rows if not as_expected(r)]
     w(f"## Runs that did not do what was expected ({len(unexpected)} of {len(rows)})\n\n")
     if unexpected:
         reasons = Counter((r["expect"], r["outcome"]) for r in unexpected)

@@ -230,3 +230,21 @@ def test_run_room_runs_the_command_line_and_checks_it() -> None:
     if out["exit_code"] == 0:
         assert out["independent_ok"], out["ind_violations"]
         assert out["final_leader_error"] <= 0.1
+
+
+def test_decide_count_bounds_the_fewest_robots() -> None:
+    """Where tmr.route's proven bound is below the plans' count: dense-mid-671599181 (N_lower 2, N_min 3): a chain
+    of 2 whose tethers are merely clear (0.0599 m, short of the 0.06 m the plans keep) is found and passes the
+    independent check, so the problem's N_min is 2, decided. narrow-corner-2929554679 (N_lower 4, N_min 6): 4 is
+    proven too few by the corner proof, so N_min ≥ 5; no clear chain of 5 is found (undecided)."""
+    from tmr.sweep.rooms import decide_count, generate_room
+
+    room = generate_room(671599181, "dense", "mid")
+    assert (room.n_lower, room.n_min) == (2, 3)
+    d = decide_count(room)
+    assert (d["n_proven"], d["n_clear"]) == (2, 2) and 0.059 < d["clear_margin"] < 0.06
+    room = generate_room(2929554679, "narrow", "corner")
+    assert (room.n_lower, room.n_min) == (4, 6)
+    d = decide_count(room)
+    assert (d["n_proven"], d["n_clear"], d["clear_margin"]) == (5, None, None)
+    assert decide_count(generate_room(*rooms.room_set(6)[0]))["n_clear"] is None  # no gap: nothing to decide

@@ -774,8 +774,8 @@ def _witness_requirements(env: Any, base: Array, lim: Array) -> tuple[float, Arr
 def _witness(env: Any, base: Array, goal: Array, lim: Array, robots: int, n_lower: int) -> Array | None:
     """A chain of at most ``robots`` robots keeping the stations' clearance and spacing: 2 robots by the grid
     search of :func:`best_pair` when no proof rules them out, else :func:`tmr.reach.find_chain`; then, for one robot
-    fewer than it found (or ``robots`` if it found none), a chain searched with the obstacles grown by
-    :data:`WIDEN_RELAX` less and widened to the clearances (:func:`_widened`)."""
+    fewer than it found (or ``robots`` if it found none), a chain searched with the obstacles grown less
+    (:data:`WIDEN_RELAX`) and widened to the clearances (:func:`_widened`)."""
     from tmr.reach import find_chain
 
     first, spans, spacing = _witness_requirements(env, base, lim)
@@ -792,9 +792,10 @@ def _witness(env: Any, base: Array, goal: Array, lim: Array, robots: int, n_lowe
     return chain
 
 
-#: [m] the obstacles are grown by r − WIDEN_RELAX for the search that seeds :func:`tmr.chain_clearance.widen_chain`:
-#: its chords may pass up to this much into the grown obstacles, and the widening moves them out.
-WIDEN_RELAX = 0.1
+#: [m] the obstacles are grown by r − δ, δ in turn each of these, for the search that seeds
+#: :func:`tmr.chain_clearance.widen_chain`: its chords may pass up to δ into the grown obstacles, and the widening
+#: moves them out (a larger δ finds chains in other homotopies, which may or may not widen).
+WIDEN_RELAX = (0.1, 0.15, 0.2)
 
 
 def _needs(first: float, robots: int, clearance: float = CHORD_CLEARANCE) -> Array:
@@ -808,22 +809,24 @@ def _widened(
     env: Any, base: Array, goal: Array, spans: Array, spacing: float, need: Array, robots: int, at_least: int
 ) -> Any:
     """A chain of ``robots`` robots widened to ``need`` (:func:`tmr.chain_clearance.widen_chain`), from a chain of
-    at most that many found with the obstacles grown by r − :data:`WIDEN_RELAX` (its own count first, then padded
-    to ``robots``); the widest tried, or None if the relaxed search finds none."""
+    at most that many found with the obstacles grown by r − δ (δ in :data:`WIDEN_RELAX` until one keeps ``need``;
+    the chain with its own count first, then padded to ``robots``); the widest tried, or None if the relaxed searches
+    find none."""
     from tmr.chain_clearance import pad_chain, widen_chain
     from tmr.reach import find_chain
 
-    relaxed = env.with_safety_radius(max(env.safety_radius - WIDEN_RELAX, 0.0))
-    seed = find_chain(relaxed, base, goal, spans, robots, 0.0, 0.0, spacing=spacing, at_least=at_least)
-    if seed is None:
-        return None
     best = None
-    for n in dict.fromkeys((len(seed) - 1, robots)):
-        wide = widen_chain(env, pad_chain(seed, n), spans, spacing, need[:n])
-        if wide is not None and (best is None or wide.margin > best.margin):
-            best = wide
-        if best is not None and best.margin > 0:
-            break
+    for delta in WIDEN_RELAX:
+        relaxed = env.with_safety_radius(max(env.safety_radius - delta, 0.0))
+        seed = find_chain(relaxed, base, goal, spans, robots, 0.0, 0.0, spacing=spacing, at_least=at_least)
+        if seed is None:
+            continue
+        for n in dict.fromkeys((len(seed) - 1, robots)):
+            wide = widen_chain(env, pad_chain(seed, n), spans, spacing, need[:n])
+            if wide is not None and (best is None or wide.margin > best.margin):
+                best = wide
+            if best is not None and best.margin > 0:
+                return best
     return best
 
 
@@ -880,16 +883,35 @@ class TightChain(NamedTuple):
 
 def tight_chain(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> TightChain | None:
     """A chain of at most ``robots`` robots that meets every requirement of the stations and of :func:`_witness`
-    (spans in [d_lo + ``SPACING_MARGIN``, d_max] of ``lim`` (N, 2), robots 2r + ``SPACING_MARGIN`` apart) except the
-    clearance of its tethers, which are merely clear of the grown obstacles; None if none was found, or if the one
-    found keeps the clearances too (then it is no explanation: the verdict stays the search's).
+    except the clearance of its tethers, which are merely clear of the grown obstacles (:func:`clear_chain`); None
+    if none was found, or if the one found keeps the clearances too (then it is no explanation: the verdict stays
+    the search's). Such a chain shows that the count is not what stops the plan: N is at least the fewest robots of
+    the problem's definition (chords clear of the grown obstacles), and only the clearance the plans keep takes
+    more."""
+    found = clear_chain(env, base, goal, lim, robots)
+    if found is None:
+        return None
+    chain, searched = found
+    first = _witness_requirements(env, base, lim)[0]
+    c = np.asarray(env.segment_clearance(chain[:-1], chain[1:]), float)
+    need = _needs(first, len(c))
+    k = int(np.argmin(c - need))
+    if c[k] > need[k]:  # no shortfall: no explanation
+        return None
+    return TightChain(len(chain) - 1, float(c[k]), float(need[k]), searched)
+
+
+def clear_chain(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> tuple[Array, str] | None:
+    """A chain (n + 1, 2) of n ≤ ``robots`` robots from ``base`` to ``goal`` with the stations' spans (in
+    [d_lo + ``SPACING_MARGIN``, d_max] of ``lim`` (N, 2)) and spacing (2r + ``SPACING_MARGIN``) whose every tether is
+    clear of the grown obstacles (exact clearance > 0), and how it was found (for the verdict); None if none is
+    found. A search, not a proof.
 
     2 robots: :func:`best_pair` (on its grid, the chain whose worse tether does best against what it needs); more:
-    :func:`tmr.reach.find_chain` at zero clearance, or if it finds none, a chain found with the obstacles grown by
-    r − :data:`WIDEN_RELAX` and widened until clear (:func:`_widened`); then widened towards the clearances the
-    plans keep (:func:`tmr.chain_clearance.widen_chain`: a local optimum, not the best). Such a chain shows that the
-    count is not what stops the plan: N is at least the fewest robots of the problem's definition (chords clear of
-    the grown obstacles), and only the clearance the plans keep takes more.
+    :func:`tmr.reach.find_chain` at zero clearance, or if it finds none, a chain found with the obstacles grown less
+    (:data:`WIDEN_RELAX`) and widened until clear (:func:`_widened`); then widened towards the clearances the
+    plans keep (:func:`tmr.chain_clearance.widen_chain`: a local optimum, not the best; kept only if every tether
+    stays clear).
     """
     from tmr.chain_clearance import widen_chain
     from tmr.reach import find_chain
@@ -907,17 +929,13 @@ def tight_chain(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> 
             chain = wide.chain if wide is not None and wide.margin > 0 else None
         if chain is None:
             return None
-        # as near the clearances the plans keep as it can be moved (only if every tether stays clear)
         wide = widen_chain(env, chain, spans, spacing, _needs(first, len(chain) - 1))
         if wide is not None and bool(np.all(np.asarray(env.segment_clearance(wide.chain[:-1], wide.chain[1:])) > 0)):
             chain = wide.chain
         searched = "the widest found"
-    c = np.asarray(env.segment_clearance(chain[:-1], chain[1:]), float)
-    need = _needs(first, len(c))
-    k = int(np.argmin(c - need))
-    if c[k] <= 0 or c[k] > need[k]:  # not clear of the obstacles at all, or no shortfall: no explanation
+    if not bool(np.all(np.asarray(env.segment_clearance(chain[:-1], chain[1:])) > 0)):
         return None
-    return TightChain(len(chain) - 1, float(c[k]), float(need[k]), searched)
+    return chain, searched
 
 
 def _witness_along(chain: Array, route: _Along) -> _Along:

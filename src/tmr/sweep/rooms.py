@@ -66,6 +66,7 @@ __all__ = [
     "Room",
     "RoomError",
     "RoomRun",
+    "decide_count",
     "default_d_max",
     "generate_room",
     "independent_check",
@@ -666,6 +667,44 @@ def independent_check(
         "ind_violations": ",".join(k for k, ok in checks.items() if not ok),
         "independent_ok": all(checks.values()),
     }
+
+
+def decide_count(room: Room) -> dict[str, Any]:
+    """Where the fewest robots lies for a room whose proven bound ``n_lower`` is below the plans' count ``n_min``
+    (chords keeping 0.06 m): the problem's N_min (chords merely clear of the grown obstacles) is at least
+    ``n_proven`` and at most ``n_clear``.
+
+    * ``n_proven``: one more than the largest N < ``n_min`` that :func:`tmr.reach.chain_is_impossible` proves too
+      few (with tmr.route's refinement budget, as the command line runs it), else ``n_lower``;
+    * ``n_clear``: the robots of the first chain :func:`tmr.route.clear_chain` finds for N = ``n_proven``,
+      ``n_proven`` + 1, … < ``n_min`` that also passes :func:`independent_check` (shapely alone: chords clear of the
+      raw obstacles grown by r, to 1 mm, spans ≤ d_max, robots 2r apart); None if none is found.
+
+    N_min is decided when ``n_clear == n_proven``. Returns ``{"room", "n_proven", "n_clear", "clear_margin"}``
+    (``clear_margin``: that chain's least tether clearance by the independent check [m]). A picklable task for the
+    sweep executors; seconds per room.
+    """
+    from tmr.reach import REFINE_WORK, chain_is_impossible
+    from tmr.route import clear_chain
+
+    out: dict[str, Any] = {"room": room.name, "n_proven": room.n_lower, "n_clear": None, "clear_margin": None}
+    if room.n_min is None or room.n_lower is None or room.n_lower >= room.n_min:
+        return out
+    env, lim = room.environment(), span_rows(room.d_max)
+    for n in range(room.n_min - 1, room.n_lower - 1, -1):
+        if chain_is_impossible(env, room.base, room.goal, lim[:, 1], n, refine_work=REFINE_WORK):
+            out["n_proven"] = n + 1
+            break
+    for n in range(out["n_proven"], room.n_min):
+        found = clear_chain(env, room.base, room.goal, lim, n)
+        if found is None:
+            continue
+        chain = found[0]
+        check = independent_check(chain[None, 1:], room.base, room.obstacles, room.bounds, room.d_max, SAFETY_RADIUS)
+        if check["independent_ok"]:
+            out["n_clear"], out["clear_margin"] = len(chain) - 1, check["ind_tether_clearance"]
+            break
+    return out
 
 
 def trajectory_positions(doc: dict[str, Any], key: str = "robots") -> NDArray[np.float64]:
