@@ -247,7 +247,8 @@ def test_proof_verdict_and_work_pinned(seed, density, goal_class, robots, cell, 
     """(proven, ray tests) of the plain sweep of commit b35f277, which listed every visible (ray, source) pair and
     tested every cell against the obstacles: the faster sweep must reach the same cells from the same sources, so
     the same verdict and count (a region of interest too small, or a cell closed too early, changes the count).
-    Pruned by the goal's visible region too (the default): the same verdicts here, never more ray tests."""
+    Pruned by the goal's visible region too (the default): the same verdicts here, and no more ray tests in these
+    cases (fewer sources per level; not a bound in general: a level's smaller set may have a longer boundary)."""
     from tmr.reach import _prove
     from tmr.sweep.rooms import generate_room, span_rows
 

@@ -247,4 +247,6 @@ def test_decide_count_bounds_the_fewest_robots() -> None:
     assert (room.n_lower, room.n_min) == (4, 6)
     d = decide_count(room)
     assert (d["n_proven"], d["n_clear"], d["clear_margin"]) == (5, None, None)
-    assert decide_count(generate_room(*rooms.room_set(6)[0]))["n_clear"] is None  # no gap: nothing to decide
+    room = generate_room(*rooms.room_set(6)[0])
+    assert room.n_min is not None and room.n_lower == room.n_min  # no gap: nothing to decide
+    assert decide_count(room) == {"room": room.name, "n_proven": room.n_lower, "n_clear": None, "clear_margin": None}

@@ -266,7 +266,7 @@ def test_a_widened_chain_is_the_witness(monkeypatch):
     """dense-far-2639215061 with 3 robots: the route chain needs 4, and neither search finds a chain of 3 keeping
     0.06 m; one found with the obstacles grown by 0.1 m less, widened (tmr.chain_clearance), keeps it. Checked by
     the definition (spans, clearances, spacing); without the widening the count stays 4."""
-    import tmr.route as route_module
+    from tmr import chain_clearance
     from tmr.sweep.rooms import generate_room, span_rows
 
     room = generate_room(2639215061, "dense", "far")
@@ -283,5 +283,5 @@ def test_a_widened_chain_is_the_witness(monkeypatch):
     assert c[0] > first and np.all(c[1:] > CHORD_CLEARANCE)
     R = chain[1:]
     assert min(np.linalg.norm(R[i] - R[j]) for i in range(3) for j in range(i + 1, 3)) >= 2 * 0.5 + SPACING_MARGIN
-    monkeypatch.setattr(route_module, "_widened", lambda *args, **kwargs: None)
+    monkeypatch.setattr(chain_clearance, "widen_chain", lambda *args, **kwargs: None)
     assert plan_route(env, room.base, room.goal, lim, robots=3).n_min == 4

@@ -44,8 +44,9 @@ NEAR = 1.0
 ROUNDS = 3
 #: SLSQP iterations per solve.
 ITERATIONS = 100
-#: [m] kept inside the span limits and the spacing in the solve, so the exact check after it never fails by rounding.
-_INSET = 1e-6
+#: [m] kept inside the span limits and the spacing in the solve, so the exact check after it does not fail by SLSQP's
+#: constraint tolerance.
+_INSET = 1e-5
 
 
 class WideChain(NamedTuple):
@@ -86,8 +87,9 @@ def pad_chain(chain: ArrayLike, robots: int) -> Array:
 def widen_chain(
     env: Any, chain: ArrayLike, spans: ArrayLike, spacing: float, need: ArrayLike, cap: float = 0.01
 ) -> WideChain | None:
-    """The chain moved to maximise its tethers' clearance over ``need`` (module docstring), or None when the solve
-    ends outside the span limits or the spacing (the exact check of :func:`chain_margin`).
+    """The chain moved to maximise its tethers' clearance over ``need`` (module docstring): the better of the start
+    and the solves' results by :func:`chain_margin`, or None when neither passes its exact check of the span limits
+    and the spacing.
 
     Args:
         env: :class:`tmr.environment.Environment` (``obstacles``, ``bounds``, ``safety_radius``, exact clearances).
@@ -96,8 +98,6 @@ def widen_chain(
         spacing: s [m] between the robots 1 … n.
         need: (n,) clearance c_k [m] each tether should keep from the obstacles grown by r.
         cap: t stops there [m]: a margin enough for the caller, not the widest chain.
-
-    Returns the better of the start and the solve's result by :func:`chain_margin` (the start if no solve helps).
     """
     P0 = np.asarray(chain, float)
     n = len(P0) - 1

@@ -254,7 +254,7 @@ def chain_is_impossible(
 
     False means "not proven": a chain may or may not exist.
     """
-    seen: dict[str, Any] = {}  # the visible regions, computed once for every cell size
+    seen: dict[tuple[float, ...], Any] = {}  # the visible regions, computed once for every cell size
     proven, work = _prove(env, anchor, goal, d_max, robots, cell, seen=seen)
     for _ in range(REFINE_LEVELS):
         if proven or not work or 8 * work > refine_work:
@@ -273,7 +273,7 @@ def _prove(
     cell: float,
     *,
     prune: bool = True,
-    seen: dict[str, Any] | None = None,
+    seen: dict[tuple[float, ...], Any] | None = None,
 ) -> tuple[bool, int]:
     """:func:`chain_is_impossible` at one cell size: (proven, ray tests made = Σ sources × rays of each level).
 
@@ -288,10 +288,11 @@ def _prove(
     # grid at all)
     if robots == 1:
         return not (np.linalg.norm(g - a) <= links[0] + 1e-9 and bool(env.segment_is_free(a[None], g[None])[0])), 0
+    key = (*a, *g, float(links[0]), float(links[-1]))
     seen = {} if seen is None else seen
-    if "a" not in seen:
-        seen["a"], seen["g"] = env.visible_region(a, links[0]), env.visible_region(g, links[-1])
-    seen_a, seen_g = seen["a"], seen["g"]
+    if key not in seen:
+        seen[key] = env.visible_region(a, links[0]), env.visible_region(g, links[-1])
+    seen_a, seen_g = seen[key]
     if robots == 2:  # robot 1 sees both: exact, no grid
         return not shapely.dwithin(seen_a, seen_g, 1e-9), 0
     e = cell / math.sqrt(2.0)
@@ -394,10 +395,13 @@ def _prove(
             break
         reach = k_disk & (k_length <= links[k] + 2 * e + 1e-9)
         work += len(src) * len(off)
-        open_ = allowed & (to_goal <= rest[k + 1] + e + 1e-9) & ~R  # the cells this level may add
+        final = k == robots - 2  # the last level only asks whether a cell the goal sees is reached
+        open_ = allowed & ((last & ~R) if final else ((to_goal <= rest[k + 1] + e + 1e-9) & ~R))
         before = open_.copy()
         for chunk in np.array_split(src, max(1, len(src) // _CHUNK)):  # bounded memory on large maps
             sweep(chunk, reach, open_)
+            if final and not np.array_equal(open_, before):
+                return False, work  # (the work counted is the level's whole sweep: the same on any order)
         R |= before & ~open_
     return not bool((R & last).any()), work
 

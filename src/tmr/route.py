@@ -729,7 +729,17 @@ def plan_route(
                 )
     tight = None
     if fewest and robots is not None and n_lower <= robots < n_min:
-        tight = tight_chain(env, base, goal, lim, robots)  # not proven too few: is the clearance what stops it?
+        # not proven too few: the wider search for a chain merely clear of the obstacles, which names the clearance
+        # as what stops the plan, or, widened, may keep the clearances after all (then it is the witness)
+        found = clear_chain(env, base, goal, lim, robots)
+        tight = None if found is None else _shortfall(env, base, lim, *found)
+        if found is not None and tight is None:
+            n_min = max(len(found[0]) - 1, n_lower)
+            best = _witness_along(found[0], best)
+            notes.append(
+                f"no chain of {robots} robots along the shortest route ({n_route} needed there): the guide is a "
+                f"chain of {n_min} found off it"
+            )
     return Route(
         points=best.points,
         length=best.length,
@@ -884,19 +894,21 @@ class TightChain(NamedTuple):
 def tight_chain(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> TightChain | None:
     """A chain of at most ``robots`` robots that meets every requirement of the stations and of :func:`_witness`
     except the clearance of its tethers, which are merely clear of the grown obstacles (:func:`clear_chain`); None
-    if none was found, or if the one found keeps the clearances too (then it is no explanation: the verdict stays
-    the search's). Such a chain shows that the count is not what stops the plan: N is at least the fewest robots of
-    the problem's definition (chords clear of the grown obstacles), and only the clearance the plans keep takes
-    more."""
+    if none was found, or if the one found keeps the clearances too (then it is a witness, which
+    :func:`plan_route` plans along). Such a chain shows that the count is not what stops the plan: N is at least the
+    fewest robots of the problem's definition (chords clear of the grown obstacles), and only the clearance the
+    plans keep takes more."""
     found = clear_chain(env, base, goal, lim, robots)
-    if found is None:
-        return None
-    chain, searched = found
+    return None if found is None else _shortfall(env, base, lim, *found)
+
+
+def _shortfall(env: Any, base: Array, lim: Array, chain: Array, searched: str) -> TightChain | None:
+    """The tether of ``chain`` that falls shortest of what the stations need of it, or None if none falls short."""
     first = _witness_requirements(env, base, lim)[0]
     c = np.asarray(env.segment_clearance(chain[:-1], chain[1:]), float)
     need = _needs(first, len(c))
     k = int(np.argmin(c - need))
-    if c[k] > need[k]:  # no shortfall: no explanation
+    if c[k] > need[k]:  # no shortfall: a witness, no explanation
         return None
     return TightChain(len(chain) - 1, float(c[k]), float(need[k]), searched)
 

@@ -680,7 +680,8 @@ def decide_count(room: Room) -> dict[str, Any]:
       ``n_proven`` + 1, … < ``n_min`` that also passes :func:`independent_check` (shapely alone: chords clear of the
       raw obstacles grown by r, to 1 mm, spans ≤ d_max, robots 2r apart); None if none is found.
 
-    N_min is decided when ``n_clear == n_proven``. Returns ``{"room", "n_proven", "n_clear", "clear_margin"}``
+    N_min is decided when ``n_clear == n_proven``; a clear chain with fewer robots than a proof allows would show the
+    proof wrong, and raises :class:`RoomError`. Returns ``{"room", "n_proven", "n_clear", "clear_margin"}``
     (``clear_margin``: that chain's least tether clearance by the independent check [m]). A picklable task for the
     sweep executors; seconds per room.
     """
@@ -704,6 +705,11 @@ def decide_count(room: Room) -> dict[str, Any]:
         if check["independent_ok"]:
             out["n_clear"], out["clear_margin"] = len(chain) - 1, check["ind_tether_clearance"]
             break
+    if out["n_clear"] is not None and out["n_clear"] < out["n_proven"]:  # a clear chain below a proof: a wrong proof
+        raise RoomError(
+            f"{room.name}: a chain of {out['n_clear']} robots clear of the grown obstacles passes the independent "
+            f"check, but {out['n_proven'] - 1} robots are proven too few"
+        )
     return out
 
 
