@@ -279,7 +279,7 @@ def _prove(
 
     ``prune``: sources are also dropped when farther than the rest of the chain from the goal's visible region, not
     only from the goal (False: the sweep of commit b35f277, whose counts the tests pin). ``seen``: a cache of the
-    anchor's and the goal's visible regions, filled on first use (the same for every cell size)."""
+    anchor's and the goal's visible regions, keyed by anchor, goal and radii (the same for every cell size)."""
     a, g = np.asarray(anchor, float), np.asarray(goal, float)
     dk = np.atleast_1d(np.asarray(d_max, float))
     links = np.array([dk[min(k, len(dk) - 1)] for k in range(robots)])
