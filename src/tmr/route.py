@@ -715,18 +715,13 @@ def plan_route(
         n_lower, lower_by = n_min, "corners"
     notes = [f"route margin lowered to {best.margin:.3f} m in a narrow passage"] if best.margin < margin else []
     n_route = n_min
+    witness = None
     if fewest and n_lower < n_min and (robots is None or robots >= n_lower):
         # fewer robots than the route chain needs: a chain anywhere in the free space (the same search whatever N;
         # none for an N already proven too few: its refusal stands, and names the route's count)
         witness = _witness(env, base, goal, lim, n_min - 1, n_lower)
         if witness is not None:
             n_min = max(len(witness) - 1, n_lower)  # a real chain: never below a sound proof
-            if robots is not None and n_min <= robots < n_route:  # plan along it: its polyline is the guide
-                best = _witness_along(witness, best)
-                notes.append(
-                    f"no chain of {robots} robots along the shortest route ({n_route} needed there): the guide is a "
-                    f"chain of {n_min} found off it"
-                )
     tight = None
     if fewest and robots is not None and n_lower <= robots < n_min:
         # not proven too few: the wider search for a chain merely clear of the obstacles, which names the clearance
@@ -734,12 +729,14 @@ def plan_route(
         found = clear_chain(env, base, goal, lim, robots)
         tight = None if found is None else _shortfall(env, base, lim, *found)
         if found is not None and tight is None:
-            n_min = max(len(found[0]) - 1, n_lower)
-            best = _witness_along(found[0], best)
-            notes.append(
-                f"no chain of {robots} robots along the shortest route ({n_route} needed there): the guide is a "
-                f"chain of {n_min} found off it"
-            )
+            witness = found[0]
+            n_min = max(len(witness) - 1, n_lower)
+    if witness is not None and robots is not None and n_min <= robots < n_route:  # plan along it: the guide
+        best = _witness_along(witness, best)
+        notes.append(
+            f"no chain of {robots} robots along the shortest route ({n_route} needed there): the guide is a "
+            f"chain of {n_min} found off it"
+        )
     return Route(
         points=best.points,
         length=best.length,
@@ -933,21 +930,24 @@ def clear_chain(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> 
         pair = best_pair(env, base, goal, spans, spacing, (first, CHORD_CLEARANCE))
         if pair is None:
             return None
-        chain, searched = np.array([base, pair[0], goal]), f"the best on a {pair[2]:.2g} m grid"
-    else:
-        chain = find_chain(env, base, goal, spans, robots, 0.0, 0.0, spacing=spacing, beam=TIGHT_BEAM)
-        if chain is None:  # one nearer still, widened until clear of the obstacles
-            wide = _widened(env, base, goal, spans, spacing, np.zeros(robots), robots, 1)
-            chain = wide.chain if wide is not None and wide.margin > 0 else None
-        if chain is None:
-            return None
-        wide = widen_chain(env, chain, spans, spacing, _needs(first, len(chain) - 1))
-        if wide is not None and bool(np.all(np.asarray(env.segment_clearance(wide.chain[:-1], wide.chain[1:])) > 0)):
-            chain = wide.chain
-        searched = "the widest found"
-    if not bool(np.all(np.asarray(env.segment_clearance(chain[:-1], chain[1:])) > 0)):
+        chain = np.array([base, pair[0], goal])
+        return (chain, f"the best on a {pair[2]:.2g} m grid") if _all_clear(env, chain) else None
+    # clear by construction: find_chain's chords keep > 0, the widened one's margin over zero is > 0
+    chain = find_chain(env, base, goal, spans, robots, 0.0, 0.0, spacing=spacing, beam=TIGHT_BEAM)
+    if chain is None:  # one nearer still, widened until clear of the obstacles
+        wide = _widened(env, base, goal, spans, spacing, np.zeros(robots), robots, 1)
+        chain = wide.chain if wide is not None and wide.margin > 0 else None
+    if chain is None:
         return None
-    return chain, searched
+    wide = widen_chain(env, chain, spans, spacing, _needs(first, len(chain) - 1))
+    if wide is not None and _all_clear(env, wide.chain):
+        chain = wide.chain
+    return chain, "the widest found"
+
+
+def _all_clear(env: Any, chain: Array) -> bool:
+    """Whether every tether of ``chain`` (n + 1, 2) is clear of the grown obstacles (exact clearance > 0)."""
+    return bool(np.all(np.asarray(env.segment_clearance(chain[:-1], chain[1:])) > 0))
 
 
 def _witness_along(chain: Array, route: _Along) -> _Along:
