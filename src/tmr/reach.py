@@ -71,6 +71,12 @@ REACH_CELL = 0.1
 REFINE_WORK = 120_000_000
 #: Finer attempts at most: h/2, then h/4 (0.05 m, then 0.025 m).
 REFINE_LEVELS = 2
+#: Tether tests [count] the narrowing (:func:`chain_is_impossible`'s ``narrow_work`` as tmr.route uses it) may make
+#: when the grid fails: 5·10⁴ segment tests take about 0.2 s (4 µs each). The proofs it adds on the random rooms take
+#: 2·10³–1.1·10⁴.
+NARROW_WORK = 50_000
+#: Halvings of the cell the narrowing refines to: h/2, h/4, h/8 (0.05, 0.025, 0.0125 m).
+NARROW_LEVELS = 3
 #: Segments per quarter circle of shapely's buffers. GEOS rounds a join's segment count, so one segment may span up to
 #: 3π / (8 QUAD_SEGS): radii are divided by the cosine of half that, so the buffer polygon contains the true offset.
 _QUAD_SEGS = 4
@@ -236,6 +242,7 @@ def chain_is_impossible(
     robots: int,
     cell: float = REACH_CELL,
     refine_work: int = 0,
+    narrow_work: int = 0,
 ) -> bool:
     """True if it is proven that no chain of ``robots`` or fewer robots reaches ``goal`` (module docstring).
 
@@ -251,16 +258,24 @@ def chain_is_impossible(
             the previous attempt are at most this many (0: never). A count, not a clock, so the verdict is the same
             on any machine. An attempt that ends before any ray test (robot 1's cells already meet the cells the goal
             sees) is not refined: the finer grid would almost surely end there too.
+        narrow_work: if the grid fails (after any ray test, N ≥ 3), the narrowing (:func:`_narrow`: the cells a
+            chain may use, refined with exact tether tests) may make this many segment tests (0: never).
 
     False means "not proven": a chain may or may not exist.
     """
     seen: dict[tuple[float, ...], Any] = {}  # the visible regions, computed once for every cell size
+    coarse = cell
     proven, work = _prove(env, anchor, goal, d_max, robots, cell, seen=seen)
     for _ in range(REFINE_LEVELS):
         if proven or not work or 8 * work > refine_work:
             break
         cell /= 2
         proven, work = _prove(env, anchor, goal, d_max, robots, cell, seen=seen)
+    if not proven and work and narrow_work > 0 and robots >= 3:
+        a, g = np.asarray(anchor, float), np.asarray(goal, float)
+        dk = np.atleast_1d(np.asarray(d_max, float))
+        links = np.array([dk[min(k, len(dk) - 1)] for k in range(robots)])
+        proven = bool(_narrow(env, a, g, links, coarse, seen, narrow_work)[0])
     return proven
 
 
@@ -274,12 +289,16 @@ def _prove(
     *,
     prune: bool = True,
     seen: dict[tuple[float, ...], Any] | None = None,
+    collect: list[NDArray[np.int_]] | None = None,
 ) -> tuple[bool, int]:
     """:func:`chain_is_impossible` at one cell size: (proven, ray tests made = Σ sources × rays of each level).
 
     ``prune``: sources are also dropped when farther than the rest of the chain from the goal's visible region, not
     only from the goal (False: the sweep of commit b35f277, whose counts the tests pin). ``seen``: a cache of the
-    anchor's and the goal's visible regions, keyed by anchor, goal and radii (the same for every cell size)."""
+    anchor's and the goal's visible regions, keyed by anchor, goal and radii (the same for every cell size).
+    ``collect``: if a list, the sweep does not stop when the goal's cells are reached and appends the cells of
+    R̂_1 … R̂_{N−1} (N ≥ 3), each as (K, 2) integer cell indices (column, row) from the room's lower left corner
+    (centre: corner + (index + ½) h), for :func:`_narrow`."""
     a, g = np.asarray(anchor, float), np.asarray(goal, float)
     dk = np.atleast_1d(np.asarray(d_max, float))
     links = np.array([dk[min(k, len(dk) - 1)] for k in range(robots)])
@@ -381,8 +400,15 @@ def _prove(
     R = near(seen_a) & allowed & (to_goal <= rest[1] + e + 1e-9)
     last = near(seen_g) & allowed
     work = 0
+
+    def record(R: NDArray[np.bool_]) -> None:
+        if collect is not None:
+            idx = np.flatnonzero(R)
+            collect.append(np.column_stack([idx % W - pad, idx // W - pad]))
+
+    record(R)
     for k in range(1, robots - 1):  # link k + 1: from p_k to p_{k+1}
-        if (R & last).any():
+        if collect is None and (R & last).any():
             return False, work
         inside = np.flatnonzero(R)
         nbr = inside[:, None] + neighbours[None, :]
@@ -400,10 +426,162 @@ def _prove(
         before = open_.copy()
         for chunk in np.array_split(src, max(1, len(src) // _CHUNK)):  # bounded memory on large maps
             sweep(chunk, reach, open_)
-            if final and not np.array_equal(open_, before):
+            if final and collect is None and not np.array_equal(open_, before):
                 return False, work  # (the work counted is the level's whole sweep: the same on any order)
         R |= before & ~open_
+        record(R)
+    while collect is not None and len(collect) < robots - 1:  # no sources left: R̂ grows no more
+        collect.append(collect[-1])
     return not bool((R & last).any()), work
+
+
+def _narrow(
+    env: Any,
+    anchor: NDArray[np.float64],
+    goal: NDArray[np.float64],
+    links: NDArray[np.float64],
+    cell: float,
+    seen: dict[tuple[float, ...], Any],
+    budget: int,
+) -> tuple[bool | None, int]:
+    """The narrowing of :func:`chain_is_impossible` (``formulations/route.md`` §2): (proven, tether tests made);
+    proven is None when the budget stopped it.
+
+    Robot k of any chain is in C_k = R̂_k ∩ B̂_{N−k}: the grid's reachable cells from the anchor (R̂, k tethers) and
+    from the goal (B̂, N − k tethers, the same sweep backwards), both at ``cell``. Then, :data:`NARROW_LEVELS` times,
+    each cell is split into four (side h, half-diagonal e) and a cell of C_k is kept only if
+
+    * it may hold a point of F (centre within e of F); C_1: of the anchor's visible region, C_{N−1}: of the goal's;
+    * it may hold a point of a tether to C_{k−1} and one to C_{k+1}: a cell s of the other set with centres at most
+      d + 2e apart whose segment lies within e of F (exact: ``shapely.covered_by`` a polygon containing F grown by
+      e). If p ∈ s and q ∈ t with pq ⊂ F and |pq| ≤ d, the centres' segment is within e of pq.
+
+    Forward and backward passes repeat until nothing changes. An empty C_k is a proof. Unlike the ray table's
+    chains, the tether test relaxes the obstacles by e only (not e + σh), and only the cells a chain may still use
+    are refined: walls-corner-2032780706 with 5 robots (24 cm of tether to spare on a 26.9 m route) is proven at
+    h = 0.025 m after 5·10⁴ pair tests, where the ray-table grid fails even at 0.0125 m. ``budget``: pair tests
+    (a count, so the verdict is the same on any machine); when the next pass may exceed it, not proven.
+    """
+    n = len(links)
+    fw: list[NDArray[np.int_]] = []
+    bw: list[NDArray[np.int_]] = []
+    key = (*anchor, *goal, float(links[0]), float(links[-1]))
+    if key not in seen:
+        seen[key] = env.visible_region(anchor, links[0]), env.visible_region(goal, links[-1])
+    seen_a, seen_g = seen[key]
+    seen[(*goal, *anchor, float(links[-1]), float(links[0]))] = seen_g, seen_a
+    _prove(env, anchor, goal, links, n, cell, seen=seen, collect=fw)
+    _prove(env, goal, anchor, links[::-1], n, cell, seen=seen, collect=bw)
+    C = [_common(fw[k - 1], bw[n - k - 1]) for k in range(1, n)]
+    origin = np.asarray(env.bounds[:2], float)
+    reach_a = np.cumsum(links)[:-1]  # robot k is within Σ_{j≤k} d_j of the anchor, Σ_{j>k} d_j of the goal
+    reach_g = np.cumsum(links[::-1])[::-1][1:]
+    children = np.array([[0, 0], [1, 0], [0, 1], [1, 1]])
+    work, h = 0, cell
+    for level in range(NARROW_LEVELS + 1):  # level 0: the grid's own cells, tested exactly
+        h /= 2 if level else 1
+        e = h / math.sqrt(2.0)
+        F_e, A_e, G_e = (_offset_buffer(region, e) for region in (env.free, seen_a, seen_g))
+        for region in (A_e, G_e):
+            shapely.prepare(region)
+        shapely.prepare(F_e)
+        edges = _edge_tree(F_e)
+        if level:
+            C = [(2 * c[:, None] + children[None]).reshape(-1, 2) for c in C]
+        for k, c in enumerate(C):
+            P = origin + (c + 0.5) * h
+            ok = shapely.contains_xy(F_e, P[:, 0], P[:, 1])
+            ok &= (np.linalg.norm(P - anchor, axis=1) <= reach_a[k] + e) & (
+                np.linalg.norm(P - goal, axis=1) <= reach_g[k] + e
+            )
+            if k == 0:
+                ok &= shapely.contains_xy(A_e, P[:, 0], P[:, 1])
+            if k == n - 2:
+                ok &= shapely.contains_xy(G_e, P[:, 0], P[:, 1])
+            C[k] = c[ok]
+        steps = [(k, k - 1, links[k]) for k in range(1, n - 1)] + [
+            (k, k + 1, links[k + 1]) for k in range(n - 3, -1, -1)
+        ]
+        changed = True
+        while changed:
+            changed = False
+            for k, j, d in steps:
+                if not len(C[k]) or not len(C[j]):
+                    return True, work
+                keep, tests = _tethered(C[k], C[j], origin, h, d + 2 * e, edges, budget - work)
+                if keep is None:
+                    return None, work
+                work += tests
+                if not keep.all():
+                    C[k], changed = C[k][keep], True
+            if any(not len(c) for c in C):
+                return True, work
+    return False, work
+
+
+def _edge_tree(region: Any) -> Any:
+    """An STR-tree of the boundary segments of ``region`` (polygons)."""
+    rings = shapely.get_rings(shapely.get_parts(region))
+    xy, ring = shapely.get_coordinates(rings, return_index=True)
+    same = ring[1:] == ring[:-1]
+    return shapely.STRtree(shapely.linestrings(np.stack([xy[:-1][same], xy[1:][same]], axis=1)))
+
+
+def _common(a: NDArray[np.int_], b: NDArray[np.int_]) -> NDArray[np.int_]:
+    """The cells (K, 2) in both ``a`` and ``b`` (integer cell indices)."""
+    if not len(a) or not len(b):
+        return np.zeros((0, 2), dtype=np.int64)
+    lo = np.minimum(a.min(axis=0), b.min(axis=0))
+    span = int(max(a[:, 1].max(), b[:, 1].max()) - lo[1] + 1)
+    key_a = (a[:, 0] - lo[0]) * span + (a[:, 1] - lo[1])
+    key_b = (b[:, 0] - lo[0]) * span + (b[:, 1] - lo[1])
+    return a[np.isin(key_a, key_b)]
+
+
+def _tethered(
+    cells: NDArray[np.int_],
+    others: NDArray[np.int_],
+    origin: NDArray[np.float64],
+    h: float,
+    reach: float,
+    edges: Any,
+    budget: int,
+) -> tuple[NDArray[np.bool_] | None, int]:
+    """Which ``cells`` have a cell of ``others`` with centres within ``reach`` [m] whose segment crosses none of
+    ``edges`` (an STR-tree of a region's boundary segments, both centres inside it: the segment is in the region),
+    and the segments tested. Nearest first, each cell until one passes; None when the pairs listed
+    exceed 8 × ``budget`` or the tests ``budget`` (a count: the same order on any machine)."""
+    from scipy.spatial import cKDTree
+
+    P, Q = origin + (cells + 0.5) * h, origin + (others + 0.5) * h
+    tp, tq = cKDTree(P), cKDTree(Q)
+    if tp.count_neighbors(tq, reach) > 8 * max(budget, 0):
+        return None, 0
+    pairs = tp.sparse_distance_matrix(tq, reach, output_type="ndarray")
+    i, j, v = pairs["i"], pairs["j"], pairs["v"]
+    order = np.lexsort((j, v, i))  # by cell, nearest first
+    i, j = i[order], j[order]
+    counts = np.bincount(i, minlength=len(P))
+    rank = np.arange(len(i)) - np.repeat(np.cumsum(counts) - counts, counts)
+    order = np.argsort(rank, kind="stable")  # every cell's nearest first, then every cell's second, …
+    i, j = i[order], j[order]
+    keep = np.zeros(len(P), dtype=bool)
+    keep[i[np.all(P[i] == Q[j], axis=1)]] = True  # the same cell: a tether of length 0
+    tests, start, size = 0, 0, 256
+    while start < len(i):
+        a, b = i[start : start + size], j[start : start + size]
+        start, size = start + size, min(2 * size, 65536)
+        todo = ~keep[a]
+        a, b = a[todo], b[todo]
+        if not len(a):
+            continue
+        if tests + len(a) > budget:
+            return None, tests
+        tests += len(a)
+        crossed = np.zeros(len(a), dtype=bool)
+        crossed[edges.query(shapely.linestrings(np.stack([P[a], Q[b]], axis=1)), predicate="intersects")[0]] = True
+        keep[a[~crossed]] = True
+    return keep, tests
 
 
 #: Spacing [m] of the candidate robot positions of the coarse search of :func:`find_chain`, and of the cells that

@@ -765,9 +765,11 @@ def _length_bound(L_lower: float, L: float, d_max: float) -> int:
 
 
 def _impossible(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> bool:
-    from tmr.reach import REFINE_WORK, chain_is_impossible
+    from tmr.reach import NARROW_WORK, REFINE_WORK, chain_is_impossible
 
-    return robots >= 1 and chain_is_impossible(env, base, goal, lim[:, 1], robots, refine_work=REFINE_WORK)
+    return robots >= 1 and chain_is_impossible(
+        env, base, goal, lim[:, 1], robots, refine_work=REFINE_WORK, narrow_work=NARROW_WORK
+    )
 
 
 def _witness_requirements(env: Any, base: Array, lim: Array) -> tuple[float, Array, float]:
@@ -877,6 +879,10 @@ def best_pair(
 #: Width of the fine search of :func:`tight_chain` (twice the witness search's: it runs only for a verdict in the
 #: band, where a closer chain found names the clearance instead of leaving the count undecided).
 TIGHT_BEAM = 80
+#: Width of its last resort, when neither that search nor the widening of a nearer chain finds one: 5× wider, about
+#: 2 s (narrow-corner-2929554679 with 5 robots: a chain through two gaps 4 mm wide once grown, which the narrower
+#: beams, ordered by the distance along the route's side, miss).
+WIDE_BEAM = 400
 
 
 class TightChain(NamedTuple):
@@ -918,9 +924,9 @@ def clear_chain(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> 
 
     2 robots: :func:`best_pair` (on its grid, the chain whose worse tether does best against what it needs); more:
     :func:`tmr.reach.find_chain` at zero clearance, or if it finds none, a chain found with the obstacles grown less
-    (:data:`WIDEN_RELAX`) and widened until clear (:func:`_widened`); then widened towards the clearances the
-    plans keep (:func:`tmr.chain_clearance.widen_chain`: a local optimum, not the best; kept only if every tether
-    stays clear).
+    (:data:`WIDEN_RELAX`) and widened until clear (:func:`_widened`), or last the fine search alone with the wider
+    beam :data:`WIDE_BEAM`; then widened towards the clearances the plans keep
+    (:func:`tmr.chain_clearance.widen_chain`: a local optimum, not the best; kept only if every tether stays clear).
     """
     from tmr.chain_clearance import widen_chain
     from tmr.reach import find_chain
@@ -937,6 +943,8 @@ def clear_chain(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> 
     if chain is None:  # one nearer still, widened until clear of the obstacles
         wide = _widened(env, base, goal, spans, spacing, np.zeros(robots), robots, 1)
         chain = wide.chain if wide is not None and wide.margin > 0 else None
+    if chain is None:
+        chain = find_chain(env, base, goal, spans, robots, 0.0, 0.0, spacing=spacing, at_least=robots, beam=WIDE_BEAM)
     if chain is None:
         return None
     wide = widen_chain(env, chain, spans, spacing, _needs(first, len(chain) - 1))

@@ -675,7 +675,7 @@ def decide_count(room: Room) -> dict[str, Any]:
     ``n_proven`` and at most ``n_clear``.
 
     * ``n_proven``: one more than the largest N < ``n_min`` that :func:`tmr.reach.chain_is_impossible` proves too
-      few (with tmr.route's refinement budget, as the command line runs it), else ``n_lower``;
+      few (with tmr.route's refinement and narrowing budgets, as the command line runs it), else ``n_lower``;
     * ``n_clear``: the robots of the first chain :func:`tmr.route.clear_chain` finds for N = ``n_proven``,
       ``n_proven`` + 1, … < ``n_min`` that also passes :func:`independent_check` (shapely alone: chords clear of the
       raw obstacles grown by r, to 1 mm, spans ≤ d_max, robots 2r apart); None if none is found.
@@ -685,7 +685,7 @@ def decide_count(room: Room) -> dict[str, Any]:
     (``clear_margin``: that chain's least tether clearance by the independent check [m]). A picklable task for the
     sweep executors; seconds per room.
     """
-    from tmr.reach import REFINE_WORK, chain_is_impossible
+    from tmr.reach import NARROW_WORK, REFINE_WORK, chain_is_impossible
     from tmr.route import clear_chain
 
     out: dict[str, Any] = {"room": room.name, "n_proven": room.n_lower, "n_clear": None, "clear_margin": None}
@@ -693,7 +693,9 @@ def decide_count(room: Room) -> dict[str, Any]:
         return out
     env, lim = room.environment(), span_rows(room.d_max)
     for n in range(room.n_min - 1, room.n_lower - 1, -1):
-        if chain_is_impossible(env, room.base, room.goal, lim[:, 1], n, refine_work=REFINE_WORK):
+        if chain_is_impossible(
+            env, room.base, room.goal, lim[:, 1], n, refine_work=REFINE_WORK, narrow_work=NARROW_WORK
+        ):
             out["n_proven"] = n + 1
             break
     for n in range(out["n_proven"], room.n_min):
