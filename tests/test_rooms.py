@@ -236,9 +236,9 @@ def test_decide_count_bounds_the_fewest_robots() -> None:
     """Where tmr.route's proven bound is below the plans' count: dense-mid-671599181 (N_lower 2, N_min 3): a chain
     of 2 whose tethers are merely clear (0.0599 m, short of the 0.06 m the plans keep) is found and passes the
     independent check, so the problem's N_min is 2, decided. narrow-corner-2929554679 (N_lower 4, N_min 6): 4 is
-    proven too few by the corner proof, so N_min ≥ 5, and the widest beam finds a chain of 5 through two gaps, clear
-    by 0.036 m once widened: N_min = 5, decided. walls-corner-2032780706: 5 is proven too few (the narrowing), so no
-    gap is left."""
+    proven too few by the corner proof, so N_min ≥ 5, and the widest beam finds a chain of 5 round the other side of
+    two walls, clear by 0.036 m once widened: N_min = 5, decided. walls-corner-2032780706: 5 is proven too few (the
+    narrowing), so no gap is left."""
     from tmr.sweep.rooms import decide_count, generate_room
 
     room = generate_room(671599181, "dense", "mid")

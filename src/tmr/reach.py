@@ -34,7 +34,9 @@ grid of square cells of side h (half-diagonal e = h/√2), :func:`chain_is_impos
 If R̂_{N-1} meets none of the cells the goal sees, no chain of N or fewer robots exists: a proof, whatever the
 resolution. The relaxation of the middle tethers (obstacles effectively shrunk by e + σ h ≈ 0.22 m, chords 2e ≈
 0.14 m longer at h = 0.1 m) can only make it prove less, never wrongly. Robot spacing and the tethers' lower limits
-are ignored (a relaxation too).
+are ignored (a relaxation too). When it fails, the *narrowing* (:func:`_narrow`) intersects these sets with the same
+sweep run from the goal, and refines only the cells left, testing each tether between cell centres exactly
+(relaxed by h/√2 only).
 """
 
 from __future__ import annotations
@@ -53,6 +55,8 @@ import shapely
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "NARROW_LEVELS",
+    "NARROW_WORK",
     "REACH_CELL",
     "REFINE_LEVELS",
     "REFINE_WORK",
@@ -78,7 +82,7 @@ NARROW_WORK = 50_000
 #: Halvings of the cell the narrowing refines to: h/2, h/4, h/8 (0.05, 0.025, 0.0125 m).
 NARROW_LEVELS = 3
 #: Segments per quarter circle of shapely's buffers. GEOS rounds a join's segment count, so one segment may span up to
-#: 3π / (8 QUAD_SEGS): radii are divided by the cosine of half that, so the buffer polygon contains the true offset.
+#: 3π / (4 QUAD_SEGS): radii are divided by the cosine of half that, so the buffer polygon contains the true offset.
 _QUAD_SEGS = 4
 #: Source cells per vectorised ray sweep (memory: _CHUNK × ray-table size bytes and int64 indices).
 _CHUNK = 256
@@ -453,13 +457,15 @@ def _narrow(
 
     * it may hold a point of F (centre within e of F); C_1: of the anchor's visible region, C_{N−1}: of the goal's;
     * it may hold a point of a tether to C_{k−1} and one to C_{k+1}: a cell s of the other set with centres at most
-      d + 2e apart whose segment lies within e of F (exact: ``shapely.covered_by`` a polygon containing F grown by
-      e). If p ∈ s and q ∈ t with pq ⊂ F and |pq| ≤ d, the centres' segment is within e of pq.
+      d + 2e apart whose segment lies within e of F (exact: it crosses no edge of a polygon containing F grown by e,
+      :func:`_edge_tree`, both centres inside it). If p ∈ s and q ∈ t with pq ⊂ F and |pq| ≤ d, the centres' segment
+      is within e of pq, and strictly inside that polygon.
 
     Forward and backward passes repeat until nothing changes. An empty C_k is a proof. Unlike the ray table's
     chains, the tether test relaxes the obstacles by e only (not e + σh), and only the cells a chain may still use
-    are refined: walls-corner-2032780706 with 5 robots (24 cm of tether to spare on a 26.9 m route) is proven at
-    h = 0.025 m after 5·10⁴ pair tests, where the ray-table grid fails even at 0.0125 m. ``budget``: pair tests
+    are refined: walls-corner-2032780706 with 5 robots (1.1 m of tether to spare on a 26.9 m route) is proven at
+    h = 0.025 m after 1.1·10⁴ tether tests, where the ray-table grid fails even at 0.0125 m. Sound because R̂_k and
+    B̂_{N−k} each hold *every* cell a point of R_k lies in (one on a cell's edge lies in several). ``budget``: pair tests
     (a count, so the verdict is the same on any machine); when the next pass may exceed it, not proven.
     """
     n = len(links)
@@ -491,8 +497,8 @@ def _narrow(
         for k, c in enumerate(C):
             P = origin + (c + 0.5) * h
             ok = shapely.contains_xy(F_e, P[:, 0], P[:, 1])
-            ok &= (np.linalg.norm(P - anchor, axis=1) <= reach_a[k] + e) & (
-                np.linalg.norm(P - goal, axis=1) <= reach_g[k] + e
+            ok &= (np.linalg.norm(P - anchor, axis=1) <= reach_a[k] + e + 1e-9) & (
+                np.linalg.norm(P - goal, axis=1) <= reach_g[k] + e + 1e-9
             )
             if k == 0:
                 ok &= shapely.contains_xy(A_e, P[:, 0], P[:, 1])
@@ -508,7 +514,7 @@ def _narrow(
             for k, j, d in steps:
                 if not len(C[k]) or not len(C[j]):
                     return True, work
-                keep, tests = _tethered(C[k], C[j], origin, h, d + 2 * e, edges, budget - work)
+                keep, tests = _tethered(C[k], C[j], origin, h, d + 2 * e + 1e-9, edges, budget - work)
                 if keep is None:
                     return None, work
                 work += tests
@@ -551,14 +557,18 @@ def _tethered(
     ``edges`` (an STR-tree of a region's boundary segments, both centres inside it: the segment is in the region),
     and the segments tested. Nearest first, each cell until one passes; None when the pairs listed
     exceed 8 × ``budget`` or the tests ``budget`` (a count: the same order on any machine)."""
-    from scipy.spatial import cKDTree
-
     P, Q = origin + (cells + 0.5) * h, origin + (others + 0.5) * h
-    tp, tq = cKDTree(P), cKDTree(Q)
-    if tp.count_neighbors(tq, reach) > 8 * max(budget, 0):
-        return None, 0
-    pairs = tp.sparse_distance_matrix(tq, reach, output_type="ndarray")
-    i, j, v = pairs["i"], pairs["j"], pairs["v"]
+    tree, points = shapely.STRtree(shapely.points(Q)), shapely.points(P)
+    found_i, found_j, listed = [], [], 0
+    for start in range(0, len(P), 1024):  # listed in blocks, so a loose case stops before it fills the memory
+        bi, bj = tree.query(points[start : start + 1024], predicate="dwithin", distance=reach)
+        listed += len(bi)
+        if listed > 8 * max(budget, 0):
+            return None, 0
+        found_i.append(bi + start)
+        found_j.append(bj)
+    i, j = np.concatenate(found_i), np.concatenate(found_j)
+    v = np.hypot(*(P[i] - Q[j]).T)
     order = np.lexsort((j, v, i))  # by cell, nearest first
     i, j = i[order], j[order]
     counts = np.bincount(i, minlength=len(P))

@@ -880,8 +880,9 @@ def best_pair(
 #: band, where a closer chain found names the clearance instead of leaving the count undecided).
 TIGHT_BEAM = 80
 #: Width of its last resort, when neither that search nor the widening of a nearer chain finds one: 5× wider, about
-#: 2 s (narrow-corner-2929554679 with 5 robots: a chain through two gaps 4 mm wide once grown, which the narrower
-#: beams, ordered by the distance along the route's side, miss).
+#: 2 s. narrow-corner-2929554679 with 5 robots: a chain round the other side of two walls from the route, through
+#: two doors its widening leaves 0.036 m clear, which the narrower beams (ordered by the distance to the goal through
+#: the route's doors) miss.
 WIDE_BEAM = 400
 
 
