@@ -452,8 +452,9 @@ def _narrow(
     proven is None when the budget stopped it.
 
     Robot k of any chain is in C_k = R̂_k ∩ B̂_{N−k}: the grid's reachable cells from the anchor (R̂, k tethers) and
-    from the goal (B̂, N − k tethers, the same sweep backwards), both at ``cell``. Then, :data:`NARROW_LEVELS` times,
-    each cell is split into four (side h, half-diagonal e) and a cell of C_k is kept only if
+    from the goal (B̂, N − k tethers, the same sweep backwards), both at ``cell``. Then at ``cell`` itself and
+    :data:`NARROW_LEVELS` times more, each cell split into four (side h, half-diagonal e), a cell of C_k is kept
+    only if
 
     * it may hold a point of F (centre within e of F); C_1: of the anchor's visible region, C_{N−1}: of the goal's;
     * it may hold a point of a tether to C_{k−1} and one to C_{k+1}: a cell s of the other set with centres at most
@@ -465,8 +466,8 @@ def _narrow(
     chains, the tether test relaxes the obstacles by e only (not e + σh), and only the cells a chain may still use
     are refined: walls-corner-2032780706 with 5 robots (1.1 m of tether to spare on a 26.9 m route) is proven at
     h = 0.025 m after 1.1·10⁴ tether tests, where the ray-table grid fails even at 0.0125 m. Sound because R̂_k and
-    B̂_{N−k} each hold *every* cell a point of R_k lies in (one on a cell's edge lies in several). ``budget``: pair tests
-    (a count, so the verdict is the same on any machine); when the next pass may exceed it, not proven.
+    B̂_{N−k} each hold *every* cell a point of R_k lies in (one on a cell's edge lies in several). ``budget``: tether
+    tests (a count, so the verdict is the same on any machine); when the next batch may exceed it, not proven.
     """
     n = len(links)
     fw: list[NDArray[np.int_]] = []
