@@ -428,6 +428,9 @@ def test_narrowing_proves_what_the_finest_grid_cannot():
     assert proven is True and work <= NARROW_WORK
     assert chain_is_impossible(*args, refine_work=REFINE_WORK, narrow_work=work)
     assert not chain_is_impossible(*args, refine_work=REFINE_WORK, narrow_work=work - 1)  # one test over the budget
+    from tmr.route import proven_too_few
+
+    assert proven_too_few(env, room.base, room.goal, lim, 5) and not proven_too_few(env, room.base, room.goal, lim, 6)
     route = plan_route(env, room.base, room.goal, lim, robots=5)
     assert (
         route.n_lower == 6 and route.lower_by == "corners" and route.refusal(5).startswith("the goal needs at least 6")

@@ -277,10 +277,29 @@ def chain_is_impossible(
         proven, work = _prove(env, anchor, goal, d_max, robots, cell, seen=seen)
     if not proven and work and narrow_work > 0 and robots >= 3:
         a, g = np.asarray(anchor, float), np.asarray(goal, float)
-        dk = np.atleast_1d(np.asarray(d_max, float))
-        links = np.array([dk[min(k, len(dk) - 1)] for k in range(robots)])
-        proven = bool(_narrow(env, a, g, links, coarse, seen, narrow_work)[0])
+        proven = bool(_narrow(env, a, g, _links(d_max, robots), coarse, seen, narrow_work)[0])
     return proven
+
+
+def _links(d_max: ArrayLike, robots: int) -> NDArray[np.float64]:
+    """d_k [m] of tethers 1 … ``robots``: ``d_max``'s, the anchor's first, the last value repeating."""
+    dk = np.atleast_1d(np.asarray(d_max, float))
+    return np.array([dk[min(k, len(dk) - 1)] for k in range(robots)])
+
+
+def _visible_regions(
+    env: Any,
+    a: NDArray[np.float64],
+    g: NDArray[np.float64],
+    links: NDArray[np.float64],
+    seen: dict[tuple[float, ...], Any],
+) -> tuple[Any, Any]:
+    """The anchor's visible region within d_1 and the goal's within d_N, from the cache ``seen`` (keyed by anchor,
+    goal and radii) or computed into it."""
+    key = (*a, *g, float(links[0]), float(links[-1]))
+    if key not in seen:
+        seen[key] = env.visible_region(a, links[0]), env.visible_region(g, links[-1])
+    return seen[key]
 
 
 def _prove(
@@ -304,18 +323,13 @@ def _prove(
     R̂_1 … R̂_{N−1} (N ≥ 3), each as (K, 2) integer cell indices (column, row) from the room's lower left corner
     (centre: corner + (index + ½) h), for :func:`_narrow`."""
     a, g = np.asarray(anchor, float), np.asarray(goal, float)
-    dk = np.atleast_1d(np.asarray(d_max, float))
-    links = np.array([dk[min(k, len(dk) - 1)] for k in range(robots)])
+    links = _links(d_max, robots)
     rest = np.concatenate([np.cumsum(links[::-1])[::-1], [0.0]])  # rest[k]: Σ_{j>k} d_j (links k+1..N; 0-based k)
     # the first and the last tether exactly: robot 1 sees the anchor, robot N − 1 sees the goal (1 or 2 robots: no
     # grid at all)
     if robots == 1:
         return not (np.linalg.norm(g - a) <= links[0] + 1e-9 and bool(env.segment_is_free(a[None], g[None])[0])), 0
-    key = (*a, *g, float(links[0]), float(links[-1]))
-    seen = {} if seen is None else seen
-    if key not in seen:
-        seen[key] = env.visible_region(a, links[0]), env.visible_region(g, links[-1])
-    seen_a, seen_g = seen[key]
+    seen_a, seen_g = _visible_regions(env, a, g, links, {} if seen is None else seen)
     if robots == 2:  # robot 1 sees both: exact, no grid
         return not shapely.dwithin(seen_a, seen_g, 1e-9), 0
     e = cell / math.sqrt(2.0)
@@ -472,10 +486,7 @@ def _narrow(
     n = len(links)
     fw: list[NDArray[np.int_]] = []
     bw: list[NDArray[np.int_]] = []
-    key = (*anchor, *goal, float(links[0]), float(links[-1]))
-    if key not in seen:
-        seen[key] = env.visible_region(anchor, links[0]), env.visible_region(goal, links[-1])
-    seen_a, seen_g = seen[key]
+    seen_a, seen_g = _visible_regions(env, anchor, goal, links, seen)
     seen[(*goal, *anchor, float(links[-1]), float(links[0]))] = seen_g, seen_a
     _prove(env, anchor, goal, links, n, cell, seen=seen, collect=fw)
     _prove(env, goal, anchor, links[::-1], n, cell, seen=seen, collect=bw)

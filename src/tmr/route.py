@@ -55,6 +55,7 @@ __all__ = [
     "guide_arcs",
     "plan_route",
     "point_at",
+    "proven_too_few",
     "stations",
 ]
 
@@ -700,7 +701,7 @@ def plan_route(
                 fewest
                 and robots is not None
                 and n_lower <= robots < found.n_min
-                and _impossible(env, base, goal, lim, robots)
+                and proven_too_few(env, base, goal, lim, robots)
             ):
                 n_lower, lower_by = robots + 1, "corners"
         if best is None or found.n_min < best.n_min:
@@ -711,7 +712,7 @@ def plan_route(
             f"obstacles grown by {env.safety_radius:g} m: a passage is too narrow for the chain"
         )
     n_min = max(best.n_min, n_lower)
-    if fewest and robots is None and n_lower < n_min and _impossible(env, base, goal, lim, n_min - 1):
+    if fewest and robots is None and n_lower < n_min and proven_too_few(env, base, goal, lim, n_min - 1):
         n_lower, lower_by = n_min, "corners"
     notes = [f"route margin lowered to {best.margin:.3f} m in a narrow passage"] if best.margin < margin else []
     n_route = n_min
@@ -764,11 +765,14 @@ def _length_bound(L_lower: float, L: float, d_max: float) -> int:
     return max(1, math.ceil(min(L_lower, L) / d_max - 1e-9))
 
 
-def _impossible(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> bool:
+def proven_too_few(env: Any, base: ArrayLike, goal: ArrayLike, lim: ArrayLike, robots: int) -> bool:
+    """Whether ``robots`` robots are proven too few to chain from ``base`` to ``goal`` with the tethers' upper limits
+    of ``lim`` (N, 2) [m]: :func:`tmr.reach.chain_is_impossible` with the refinement and narrowing budgets the route
+    uses (``REFINE_WORK``, ``NARROW_WORK``)."""
     from tmr.reach import NARROW_WORK, REFINE_WORK, chain_is_impossible
 
     return robots >= 1 and chain_is_impossible(
-        env, base, goal, lim[:, 1], robots, refine_work=REFINE_WORK, narrow_work=NARROW_WORK
+        env, base, goal, np.asarray(lim, float)[:, 1], robots, refine_work=REFINE_WORK, narrow_work=NARROW_WORK
     )
 
 

@@ -674,8 +674,8 @@ def decide_count(room: Room) -> dict[str, Any]:
     (chords keeping 0.06 m): the problem's N_min (chords merely clear of the grown obstacles) is at least
     ``n_proven`` and at most ``n_clear``.
 
-    * ``n_proven``: one more than the largest N < ``n_min`` that :func:`tmr.reach.chain_is_impossible` proves too
-      few (with tmr.route's refinement and narrowing budgets, as the command line runs it), else ``n_lower``;
+    * ``n_proven``: one more than the largest N < ``n_min`` proven too few by :func:`tmr.route.proven_too_few` (the
+      proof as the command line runs it), else ``n_lower``;
     * ``n_clear``: the robots of the first chain :func:`tmr.route.clear_chain` finds for N = ``n_proven``,
       ``n_proven`` + 1, … < ``n_min`` that also passes :func:`independent_check` (shapely alone: chords clear of the
       raw obstacles grown by r, to 1 mm, spans ≤ d_max, robots 2r apart); None if none is found.
@@ -685,17 +685,14 @@ def decide_count(room: Room) -> dict[str, Any]:
     (``clear_margin``: that chain's least tether clearance by the independent check [m]). A picklable task for the
     sweep executors; seconds per room.
     """
-    from tmr.reach import NARROW_WORK, REFINE_WORK, chain_is_impossible
-    from tmr.route import clear_chain
+    from tmr.route import clear_chain, proven_too_few
 
     out: dict[str, Any] = {"room": room.name, "n_proven": room.n_lower, "n_clear": None, "clear_margin": None}
     if room.n_min is None or room.n_lower is None or room.n_lower >= room.n_min:
         return out
     env, lim = room.environment(), span_rows(room.d_max)
     for n in range(room.n_min - 1, room.n_lower - 1, -1):
-        if chain_is_impossible(
-            env, room.base, room.goal, lim[:, 1], n, refine_work=REFINE_WORK, narrow_work=NARROW_WORK
-        ):
+        if proven_too_few(env, room.base, room.goal, lim, n):
             out["n_proven"] = n + 1
             break
     for n in range(out["n_proven"], room.n_min):
