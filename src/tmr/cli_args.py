@@ -26,3 +26,14 @@ def positive_float(text: str) -> float:
     if not (math.isfinite(v) and v > 0):
         raise argparse.ArgumentTypeError(f"expected a positive finite number, got {text!r}")
     return v
+
+
+def out_path(text: str) -> str:
+    """An ``--out`` path: not empty, not blank, no NUL byte (an empty ``--out`` would write into the current
+    directory). Only the text is judged here; whether the place can take the outputs is judged by
+    :func:`tmr.outdir.check_out_dir` before any work."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("must name a directory, got an empty path")
+    if "\0" in text:
+        raise argparse.ArgumentTypeError("must not contain a NUL byte")
+    return text

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from tmr.cli_args import positive_float
+from tmr.cli_args import out_path, positive_float
 from tmr.cli_args import positive_int as _positive_int
 from tmr.console import LOG, add_manners, check_out_dir, progress_enabled, remove_stale
 from tmr.console import run as run_cli
@@ -192,7 +192,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="override a parameter, e.g. --set d_min=0.6 (repeatable)",
     )
     p.add_argument("--filter-cutoff", type=float, default=1.0, help="cut-off of the trajectory filter [Hz]")
-    p.add_argument("--out", default="runs/plan", help="output directory (default runs/plan)")
+    p.add_argument("--out", type=out_path, default="runs/plan", help="output directory (default runs/plan)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     add_view_args(p)  # --gif, --html, --export FORMAT (tmr.views)
     add_manners(p)

@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from tmr.cli_args import out_path
 from tmr.cli_args import positive_float as _positive
 from tmr.cli_args import positive_int as _positive_int
 from tmr.console import LOG, add_manners, progress_enabled
@@ -100,7 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--steps", type=_positive_int, default=20, help="steps of line/yaw/combined paths (default 20)")
     r.add_argument("--gtol", type=_positive, default=1e-9, help="BFGS tolerance on |dO/du| [m] (default 1e-9)")
     r.add_argument("--compile", action="store_true", help="compile the CasADi functions to C (cached; ~30x faster)")
-    r.add_argument("--out", default="runs/ccma", help="output directory (default runs/ccma)")
+    r.add_argument("--out", type=out_path, default="runs/ccma", help="output directory (default runs/ccma)")
     r.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     add_view_args(r)  # --gif, --html, --export FORMAT (tmr.views)
     add_manners(r)

@@ -22,6 +22,7 @@ import os
 import sys
 from pathlib import Path
 
+from tmr.cli_args import out_path
 from tmr.console import LOG, add_manners, progress_enabled
 from tmr.console import run as run_cli
 from tmr.errors import TmrError
@@ -53,7 +54,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="mcap (default) or sqlite3: a rosbag2 directory; gif: an animation; html: an interactive view",
     )
     p.add_argument(
-        "--out", help="where to write (default RUN_DIR/ros2_bag for a bag, RUN_DIR/motion.gif, RUN_DIR/motion.html)"
+        "--out",
+        type=out_path,
+        help="where to write (default RUN_DIR/ros2_bag for a bag, RUN_DIR/motion.gif, RUN_DIR/motion.html)",
     )
     p.add_argument(
         "--rate",

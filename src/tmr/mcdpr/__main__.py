@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from tmr.cli_args import out_path
 from tmr.cli_args import positive_float as _positive
 from tmr.cli_args import positive_int as _positive_int
 from tmr.console import LOG, add_manners, progress_enabled
@@ -83,7 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--max-iter", type=_positive_int, default=200, help="stage-1 iterations per way-point (200)")
     pl.add_argument("--upsample", type=_positive_int, default=10, help="B-spline samples per iterate (10)")
     pl.add_argument("--external", type=_triple, help="external wrench box half-widths FX,FY,FZ [N] (scene's)")
-    pl.add_argument("--out", default="runs/mcdpr", help="output directory (default runs/mcdpr)")
+    pl.add_argument("--out", type=out_path, default="runs/mcdpr", help="output directory (default runs/mcdpr)")
     pl.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     add_view_args(pl)  # --gif, --html, --export FORMAT (tmr.views)
     add_manners(pl)
@@ -94,7 +95,9 @@ def build_parser() -> argparse.ArgumentParser:
     ws.add_argument("--z", type=_positive, help="platform height [m] (default: the first task point's)")
     ws.add_argument("--cell", type=_positive, default=0.05, help="grid cell [m] (0.05)")
     ws.add_argument("--external", type=_triple, help="external wrench box half-widths FX,FY,FZ [N] (scene's)")
-    ws.add_argument("--out", default="runs/mcdpr_workspace", help="output directory (default runs/mcdpr_workspace)")
+    ws.add_argument(
+        "--out", type=out_path, default="runs/mcdpr_workspace", help="output directory (default runs/mcdpr_workspace)"
+    )
     add_manners(ws)
     return p
 

@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from tmr.cli_args import positive_float, positive_int
+from tmr.cli_args import out_path, positive_float, positive_int
 from tmr.console import LOG, add_manners, progress_enabled
 from tmr.console import run as run_command
 from tmr.errors import TmrError
@@ -32,7 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
         "on the ground (tmr.mcdpr plan).",
     )
     p.add_argument("run", help="output directory of tmr.plan or tmr.mcdpr plan")
-    p.add_argument("--out", help="where to write the replay (default RUN/replay)")
+    p.add_argument("--out", type=out_path, help="where to write the replay (default RUN/replay)")
     p.add_argument("--gif", action="store_true", help="also write replay.gif, rendered offscreen from the simulation")
     p.add_argument("--links", type=positive_int, help="links per tether (chain, default 16)")
     p.add_argument("--timestep", type=positive_float, help="physics step [s] (default 0.005; must divide Ts)")

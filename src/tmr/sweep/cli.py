@@ -31,6 +31,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from tmr.cli_args import out_path
 from tmr.cli_args import positive_int as _positive
 from tmr.console import LOG, add_manners, check_out_dir, progress_enabled, remove_stale
 from tmr.console import run as run_cli
@@ -84,7 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
     common.add_argument(
         "--set", type=_param, action="append", default=[], metavar="NAME=VALUE", help="fixed parameter override"
     )
-    common.add_argument("--out", default="runs/sweep", help="output directory (default runs/sweep)")
+    common.add_argument("--out", type=out_path, default="runs/sweep", help="output directory (default runs/sweep)")
     common.add_argument("--jobs", type=_positive, help="local worker processes (default: all cores; 1 = serial)")
     common.add_argument("--scheduler", help="Dask scheduler address tcp://host:port (instead of local processes)")
     common.add_argument(
