@@ -21,6 +21,7 @@ def test_run_writes_trajectories_summary_and_figures(tmp_path, capsys):
     code, out = _run(tmp_path, "a", "--example", "4dof-complete", "--path", "combined", "--steps", "3")
     assert code == 0
     assert sorted(p.name for p in out.iterdir()) == [
+        ".tmr-outputs.json",
         "convergence.png",
         "mechanism.png",
         "summary.json",
@@ -90,7 +91,7 @@ def test_target_beyond_reach_exits_1_before_control(tmp_path, capsys, monkeypatc
     monkeypatch.setattr(control, "track", boom)
     code, out = _run(tmp_path, "far", "--path", "combined", "--steps", "2", "--step", "0.15")
     assert code == 1
-    assert sorted(p.name for p in out.iterdir()) == ["summary.json"]
+    assert sorted(p.name for p in out.iterdir()) == [".tmr-outputs.json", "summary.json"]
     summary = json.loads((out / "summary.json").read_text())
     reach = summary["reach"]
     assert summary["refused"] and not summary["all_reached"] and not reach["ok"]
@@ -167,7 +168,8 @@ def test_rerun_into_same_out_removes_stale_outputs(tmp_path):
     assert main(["run", "--out", str(out), "--path", "line", "--steps", "1"]) == 0
     (out / "notes.txt").write_text("mine")  # not a tmr output name: left alone
     assert main(["run", "--out", str(out), "--path", "line", "--steps", "1", "--no-plots"]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "summary.json", "trajectory.csv", "trajectory.json"]
+    names = sorted(p.name for p in out.iterdir())
+    assert names == [".tmr-outputs.json", "notes.txt", "summary.json", "trajectory.csv", "trajectory.json"]
 
 
 def test_non_utf8_description_exits_2(tmp_path, capsys):
@@ -215,4 +217,4 @@ def test_out_where_nothing_can_be_written_exit_2_before_tracking(capsys, monkeyp
 
     monkeypatch.setattr(control, "track", no_track)
     assert main(["run", "--no-plots", "--out", "/proc/tmr-out"]) == 2
-    assert "cannot write in '/proc'" in capsys.readouterr().err
+    assert "cannot write in /proc" in capsys.readouterr().err

@@ -91,22 +91,6 @@ def test_progress_only_on_a_terminal_and_not_quiet():
     assert seen["bar"] is False and console.progress_enabled(_Tty()) is True
 
 
-def test_check_out_dir_and_remove_stale(tmp_path):
-    f = tmp_path / "file"
-    f.write_text("x")
-    for out in (f, f / "below"):
-        with pytest.raises(TmrError, match="is a file, not a directory"):
-            console.check_out_dir(out)
-    console.check_out_dir(tmp_path / "new" / "deeper")  # creatable: fine, nothing created
-    assert not (tmp_path / "new").exists()
-    out = tmp_path / "out"
-    out.mkdir()
-    for name in ("a.png", "b.png", "keep.txt", "c.json"):
-        (out / name).write_text(name)
-    gone = console.remove_stale(out, owned=("a.png", "b.png", "c.json", "never.png"), written=("c.json",))
-    assert gone == ["a.png", "b.png"] and sorted(p.name for p in out.iterdir()) == ["c.json", "keep.txt"]
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize(
     "command",

@@ -22,7 +22,8 @@ def run_dir(tmp_path_factory):
 
 
 def test_outputs(run_dir) -> None:
-    assert sorted(p.name for p in run_dir.iterdir()) == ["bases.csv", "plan.json", "platform.csv", "run.json"]
+    names = sorted(p.name for p in run_dir.iterdir())
+    assert names == [".tmr-outputs.json", "bases.csv", "plan.json", "platform.csv", "run.json"]
     d = json.loads((run_dir / "plan.json").read_text())
     assert d["format"] == PLAN_FORMAT and d["check"]["ok"] and d["check"]["mu_min"] > 0
     mu = np.array(d["samples"]["mu"])
@@ -43,16 +44,20 @@ def test_seed_of_the_search_is_an_option_and_recorded(run_dir) -> None:
 
 
 def test_same_inputs_same_bytes(run_dir, tmp_path) -> None:
+    import shutil
+
     out = tmp_path / "again"
-    out.mkdir()
-    (out / "mu.png").write_bytes(b"stale figure of an older run")
-    (out / "plan.json").write_text("{}")
-    (out / "notes.txt").write_text("the user's own file")
+    shutil.copytree(run_dir, out)  # an older run of tmr (its figures and manifest) ...
+    (out / "notes.txt").write_text("the user's own file")  # ... and a file of the user
     assert main(["plan", "--out", str(out), "--no-plots"]) == 0
     for name in ("plan.json", "run.json", "bases.csv", "platform.csv"):
         assert (out / name).read_bytes() == (run_dir / name).read_bytes()
-    # the stale figure of the older run is gone (--no-plots), files that are not ours are kept
-    assert sorted(q.name for q in out.iterdir()) == ["bases.csv", "notes.txt", "plan.json", "platform.csv", "run.json"]
+    # the figures of the older run are gone (--no-plots), files that are not tmr's are kept
+    names = sorted(q.name for q in out.iterdir())
+    assert names == [".tmr-outputs.json", "bases.csv", "notes.txt", "plan.json", "platform.csv", "run.json"]
+    (out / "mu.png").write_bytes(b"a figure of the user's, under an output's name")
+    assert main(["plan", "--out", str(out)]) == 2  # refused: never replaced
+    assert (out / "mu.png").read_bytes().startswith(b"a figure of the user's")
 
 
 SMALL_SCENE = (

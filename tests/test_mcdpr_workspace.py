@@ -54,7 +54,8 @@ def test_bad_height_and_cell() -> None:
 def test_cli_writes_the_map_and_refuses_bad_bases(tmp_path, capsys) -> None:
     out = tmp_path / "ws"
     assert main(["workspace", "--cell", "0.1", "--out", str(out)]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["workspace.csv", "workspace.json", "workspace.png"]
+    names = sorted(p.name for p in out.iterdir())
+    assert names == [".tmr-outputs.json", "workspace.csv", "workspace.json", "workspace.png"]
     d = json.loads((out / "workspace.json").read_text())
     rows = (out / "workspace.csv").read_text().splitlines()
     assert len(rows) == 1 + d["nx"] * d["ny"] and d["area_feasible_m2"] > 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import subprocess
@@ -33,6 +34,7 @@ def test_scenario_a_writes_every_output(tmp_path, capsys):
     names = sorted(p.name for p in out.iterdir())
     assert names == sorted(
         [
+            ".tmr-outputs.json",  # what tmr wrote here (tmr.outdir)
             "chain_poses.png",
             "distance_errors.png",
             "metrics.json",
@@ -463,19 +465,64 @@ def test_bad_values_one_clear_line(tmp_path, capsys, flag, match):
 
 
 def test_reused_out_keeps_no_stale_outputs(tmp_path, capsys):
+    from tmr.outdir import MANIFEST
+
     out = tmp_path / "out"
-    out.mkdir()
-    for name in ("chain_poses.png", "speeds.png", "notes.txt"):  # two outputs of an older run, one file of the user
-        (out / name).write_text("old")
-    (out / "replay").mkdir()  # tmr.replay's check of the older plan
+    code, _, err = run_cli(["--scenario", "A", "--out", str(out), "--gif", *FAST], capsys)  # an older run
+    assert code == 0, err and (out / "chain_poses.png").is_file() and (out / "motion.gif").is_file()
+    (out / "replay").mkdir()  # tmr.replay's check of the older plan, with its own manifest
     (out / "replay" / "replay.json").write_text("{}")
-    (out / "mine").mkdir()  # a directory of the user
+    (out / "replay" / MANIFEST).write_text(
+        json.dumps({"format": "tmr-outputs/1", "files": {"replay.json": hashlib.sha256(b"{}").hexdigest()}})
+    )
+    (out / "notes.txt").write_text("mine")  # a file and a directory of the user
+    (out / "mine").mkdir()
     code, _, err = run_cli(["--scenario", "A", "--no-plots", "--out", str(out), *FAST], capsys)
     assert code == 0, err
     names = sorted(p.name for p in out.iterdir())
-    assert "chain_poses.png" not in names and "speeds.png" not in names and "notes.txt" in names
-    assert (out / "notes.txt").read_text() == "old" and "metrics.json" in names
+    assert "chain_poses.png" not in names and "motion.gif" not in names and "notes.txt" in names
+    assert (out / "notes.txt").read_text() == "mine" and "metrics.json" in names
     assert "replay" not in names and "mine" in names
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]  # no staging directory left beside it
+
+
+@pytest.mark.parametrize("name", ["chain_poses.png", "metrics.json", "motion.gif", "replay"])
+def test_a_file_tmr_did_not_write_is_never_replaced_or_removed(tmp_path, capsys, name):
+    """A user's file (or directory) under an output's name: refused before any work (exit 2, one line), the file
+    untouched, nothing written; the same after tmr wrote the directory, if the user changed the file since."""
+    out = tmp_path / "out"
+    out.mkdir()
+    target = out / name
+    if name == "replay":
+        target.mkdir()
+        (target / "notes.txt").write_text("mine")
+    else:
+        target.write_text("mine")
+    code, stdout, err = run_cli(["--scenario", "A", "--no-plots", "--out", str(out), *FAST], capsys)
+    assert code == 2 and stdout == "" and len(err.strip().splitlines()) == 1
+    assert f"{name} was not written by tmr" in err
+    assert sorted(p.name for p in out.iterdir()) == [name] and [p.name for p in tmp_path.iterdir()] == ["out"]
+    assert (target / "notes.txt" if name == "replay" else target).read_text() == "mine"
+
+
+def test_an_output_changed_by_the_user_is_left_alone(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert run_cli(["--scenario", "A", "--no-plots", "--out", str(out), *FAST], capsys)[0] == 0
+    (out / "metrics.json").write_text("my notes on this plan")
+    code, _, err = run_cli(["--scenario", "A", "--no-plots", "--out", str(out), *FAST], capsys)
+    assert code == 2 and "metrics.json was not written by tmr (or changed since)" in err
+    assert (out / "metrics.json").read_text() == "my notes on this plan"
+
+
+def test_empty_out_is_bad_input_and_touches_nothing(tmp_path, capsys, monkeypatch):
+    """An empty --out wrote into the current directory and deleted a user's chain_poses.png (issue: data loss)."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "chain_poses.png").write_text("mine")
+    for value in ("", "  "):
+        code, stdout, err = run_cli(["--scenario", "A", "--out", value], capsys)
+        assert code == 2 and stdout == "" and "--out: must name a directory" in err
+    assert [p.name for p in tmp_path.iterdir()] == ["chain_poses.png"]
+    assert (tmp_path / "chain_poses.png").read_text() == "mine"
 
 
 def test_quiet_verbose_debug_and_interrupt(tmp_path, capsys, monkeypatch):

@@ -115,6 +115,7 @@ def test_scenario_file_example_plans(readme, tmp_path, capsys):
     code = main(["--scenario", str(tmp_path / "room.toml"), "--method", "qp", "--out", str(out), "--no-plots"])
     assert code == 0, capsys.readouterr().err
     assert sorted(p.name for p in out.iterdir()) == [
+        ".tmr-outputs.json",
         "metrics.json",
         "run.json",
         "timings.json",

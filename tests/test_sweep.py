@@ -213,6 +213,7 @@ def test_cli_on_dask_writes_the_same_bytes_as_local(dask_cluster, tiny, tmp_path
     local = sorted(p.name for p in (tmp_path / "local").iterdir())
     assert local == sorted(p.name for p in (tmp_path / "dask").iterdir())
     assert local == [
+        ".tmr-outputs.json",
         "sensitivity_tiny.md",
         "sensitivity_tiny_pinv.csv",
         "sensitivity_tiny_pinv.png",
@@ -343,7 +344,7 @@ def test_same_seed_same_bytes_moga(tiny, tmp_path, capsys):
     for d in ("a", "b"):
         assert _cli([*args, "--out", str(tmp_path / d)], capsys)[0] == 0
     names = sorted(p.name for p in (tmp_path / "a").iterdir())
-    assert names == ["moga_tiny_pinv.csv", "moga_tiny_pinv.md", "moga_tiny_pinv.png"]
+    assert names == [".tmr-outputs.json", "moga_tiny_pinv.csv", "moga_tiny_pinv.md", "moga_tiny_pinv.png"]
     for n in names:
         assert (tmp_path / "a" / n).read_bytes() == (tmp_path / "b" / n).read_bytes(), n
     md = (tmp_path / "a" / "moga_tiny_pinv.md").read_text()
@@ -355,7 +356,7 @@ def test_bench_cli_writes_scores_and_timings(tmp_path, capsys):
     code, stdout, _ = _cli(["bench", "--scenarios", "C", "--methods", "pinv", "--jobs", "1", "--out", str(out),
                             *FAST_ARGS], capsys)  # fmt: skip
     assert code == 0 and "bench.md" in stdout
-    assert sorted(p.name for p in out.iterdir()) == ["bench.csv", "bench.md", "bench_timing.csv"]
+    assert sorted(p.name for p in out.iterdir()) == [".tmr-outputs.json", "bench.csv", "bench.md", "bench_timing.csv"]
     assert "plan_time" not in (out / "bench.csv").read_text()
     assert float((out / "bench_timing.csv").read_text().splitlines()[1].split(",")[2]) > 0
 
@@ -458,11 +459,11 @@ def test_help_is_plain_text_and_every_option_explained():
 
 def test_moga_reused_out_keeps_no_stale_figure(tiny, tmp_path, capsys):
     out = tmp_path / "m"
-    out.mkdir()
-    (out / "moga_tiny_pinv.png").write_text("old figure")
-    (out / "notes.txt").write_text("mine")
-    args = ["moga", "--scenario", tiny, "--pop", "4", "--gen", "1", "--jobs", "1", "--no-plots", "--quiet",
+    args = ["moga", "--scenario", tiny, "--pop", "4", "--gen", "1", "--jobs", "1", "--quiet",
             *FAST_ARGS, "--out", str(out)]  # fmt: skip
-    code, stdout, err = _cli(args, capsys)
+    assert _cli(args, capsys)[0] == 0 and (out / "moga_tiny_pinv.png").is_file()  # an older sweep, with its figure
+    (out / "notes.txt").write_text("mine")
+    code, stdout, err = _cli([*args, "--no-plots"], capsys)
     assert code == 0 and stdout == "" and err == ""
-    assert sorted(p.name for p in out.iterdir()) == ["moga_tiny_pinv.csv", "moga_tiny_pinv.md", "notes.txt"]
+    names = sorted(p.name for p in out.iterdir())
+    assert names == [".tmr-outputs.json", "moga_tiny_pinv.csv", "moga_tiny_pinv.md", "notes.txt"]

@@ -26,7 +26,7 @@ def test_flags():
         _args("--export", "bag")
 
 
-def test_write_views_builds_the_motion_only_when_asked_and_clears_stale_views(tmp_path):
+def test_write_views_builds_the_motion_only_when_asked(tmp_path):
     calls = []
 
     def motion():
@@ -38,9 +38,6 @@ def test_write_views_builds_the_motion_only_when_asked_and_clears_stale_views(tm
     names = write_views(_args("--gif", "--html", "--export", "mcap"), tmp_path, motion)
     assert names == [BAG_DIR, HTML_NAME, GIF_NAME] and calls == [1]
     assert Image.open(tmp_path / GIF_NAME).n_frames == 4 and (tmp_path / HTML_NAME).stat().st_size > 3_000_000
-    (tmp_path / "notes.txt").write_text("mine")
-    assert write_views(_args("--html"), tmp_path, motion) == [HTML_NAME]
-    assert sorted(p.name for p in tmp_path.iterdir()) == [HTML_NAME, "notes.txt"]  # the old gif and bag are gone
 
 
 def test_plan_cli_writes_html_and_bag(tmp_path, capsys):
@@ -48,7 +45,7 @@ def test_plan_cli_writes_html_and_bag(tmp_path, capsys):
 
     out = tmp_path / "A"
     assert main(["--scenario", "A", "--out", str(out), "--no-plots", "--html", "--export", "mcap"]) == 0
-    assert "ros2_bag, motion.html" in capsys.readouterr().out
+    assert "motion.html, ros2_bag, run.json" in capsys.readouterr().out
     with Reader(out / BAG_DIR) as r:
         assert "/tmr/robot3/pose" in r.topics and "/tmr/team/trajectory" in r.topics
     assert "Scenario A, qp: 3 tethered robots" in (out / HTML_NAME).read_text(encoding="utf-8")
@@ -69,16 +66,16 @@ def test_mcdpr_cli_has_the_flags():
     assert a.gif and a.html and a.export == "mcap"
 
 
-def test_remove_views_leaves_other_files(tmp_path):
-    from tmr.views import remove_views
+def test_a_rerun_without_views_removes_the_views_tmr_wrote_only(tmp_path, capsys):
+    from tmr.plan import main
 
-    (tmp_path / GIF_NAME).write_bytes(b"GIF89a")
-    (tmp_path / HTML_NAME).write_text("<html>")
-    (tmp_path / BAG_DIR).mkdir()
-    (tmp_path / BAG_DIR / "metadata.yaml").write_text("rosbag2_bagfile_information: {}")
-    (tmp_path / "notes.txt").write_text("mine")
-    assert sorted(remove_views(tmp_path)) == sorted([GIF_NAME, HTML_NAME, BAG_DIR])
-    assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]
-    (tmp_path / BAG_DIR).mkdir()
-    (tmp_path / BAG_DIR / "mine.txt").write_text("not a bag")
-    assert remove_views(tmp_path) == [] and (tmp_path / BAG_DIR / "mine.txt").is_file()
+    out = tmp_path / "A"
+    assert main(["--scenario", "A", "--out", str(out), "--no-plots", "--gif", "--html", "--export", "mcap"]) == 0
+    (out / "notes.txt").write_text("mine")
+    assert main(["--scenario", "A", "--out", str(out), "--no-plots", "--html"]) == 0
+    names = sorted(p.name for p in out.iterdir())
+    assert HTML_NAME in names and GIF_NAME not in names and BAG_DIR not in names and "notes.txt" in names
+    (out / BAG_DIR).mkdir()  # a bag of the user's (not listed in tmr's manifest): the next run refuses the --out
+    (out / BAG_DIR / "metadata.yaml").write_text("rosbag2_bagfile_information: {}")
+    assert main(["--scenario", "A", "--out", str(out), "--no-plots"]) == 2
+    assert (out / BAG_DIR / "metadata.yaml").is_file() and (out / HTML_NAME).is_file()

@@ -9,8 +9,8 @@ Every command (``tmr plan``, ``tmr mcdpr``, ``tmr ccma``, ``tmr sweep``, and the
 Messages go through :mod:`logging` (logger ``tmr``): information and debug lines to stdout, warnings and errors to
 stderr. :func:`run` calls a command's body and turns what it raises into the exit codes of every tmr command:
 :class:`~tmr.errors.TmrError` (bad input, a task proven impossible) → one line ``error: …`` and 2; Ctrl-C → one
-line ``interrupted`` and 130 (outputs are written to a temporary directory and moved into ``--out`` only when
-complete, so an interrupted run leaves no half-written file); any other exception → one line naming it and
+line ``interrupted`` and 130 (outputs are staged and published into ``--out`` in one step, :mod:`tmr.outdir`, so
+an interrupted run leaves no half-written file); any other exception → one line naming it and
 1, with ``--debug`` the traceback.
 """
 
@@ -18,13 +18,10 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
 import signal
 import sys
-import tempfile
 import warnings
-from collections.abc import Callable, Iterable
-from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 from tmr.errors import TmrError
@@ -33,9 +30,7 @@ __all__ = [
     "LOG",
     "EXIT_INTERRUPTED",
     "add_manners",
-    "check_out_dir",
     "progress_enabled",
-    "remove_stale",
     "run",
     "setup_logging",
 ]
@@ -138,32 +133,3 @@ def _ignore_further_interrupts() -> None:
         _state["sigint"] = signal.signal(signal.SIGINT, signal.SIG_IGN)
     except ValueError:  # not the main thread: signals cannot be set there
         pass
-
-
-def check_out_dir(out: Path) -> None:
-    """Refuse, before any work, an ``--out`` that is a file or lies where nothing can be written (TmrError)."""
-    if out.exists() and not out.is_dir():
-        raise TmrError(f"--out {out} is a file, not a directory")
-    parent = out.absolute()
-    while not parent.exists():
-        parent = parent.parent
-    if not parent.is_dir():
-        raise TmrError(f"--out {out}: {parent} is a file, not a directory")
-    try:  # a real write test (permissions alone do not tell, e.g. for root or a read-only file system)
-        os.rmdir(tempfile.mkdtemp(prefix=".tmr-out-check-", dir=parent))
-    except OSError as exc:
-        raise TmrError(f"--out {out}: cannot write in {parent} ({exc.strerror})") from exc
-
-
-def remove_stale(out: Path, owned: Iterable[str], written: Iterable[str]) -> list[str]:
-    """Delete from ``out`` the files named in ``owned`` (every output this command can write) that this run did not
-    write (``written``): a re-used ``--out`` then holds no output of an older run. Files of other names are never
-    touched. Returns the names deleted."""
-    keep = set(written)
-    gone = []
-    for name in owned:
-        path = out / name
-        if name not in keep and path.is_file():
-            path.unlink()
-            gone.append(name)
-    return gone

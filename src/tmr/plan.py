@@ -13,8 +13,9 @@ the obstacles are grown by it, the robots kept 2r apart, the route and the messa
 
 Messages go through :mod:`logging` (``--quiet``, ``--verbose``; ``--debug`` shows tracebacks, :mod:`tmr.console`).
 ``metrics.json`` holds no timing, so two runs with the same inputs write the same bytes; the planner's wall time is
-in ``timings.json``. A re-used ``--out`` keeps no output of an older run (:data:`OUTPUT_NAMES`; other files are left
-alone).
+in ``timings.json``. Outputs are staged and published into ``--out`` in one step (:mod:`tmr.outdir`): a re-used
+``--out`` keeps no output of an older run (:data:`OWNED_NAMES`), and a file tmr did not write is never replaced or
+removed (such a file under an output's name is refused up front, exit 2).
 
 Exit codes: 0 plan succeeded; 1 no plan found or the plan failed a check (the reason printed; outputs of a computed
 plan written); 2 bad input or a task proven impossible up front (one line, nothing written); 130 interrupted (Ctrl-C,
@@ -25,9 +26,7 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -35,14 +34,13 @@ import numpy as np
 
 from tmr.cli_args import out_path, positive_float
 from tmr.cli_args import positive_int as _positive_int
-from tmr.console import LOG, add_manners, check_out_dir, progress_enabled, remove_stale
+from tmr.console import LOG, add_manners, progress_enabled
 from tmr.console import run as run_cli
 from tmr.errors import TmrError
 from tmr.motion import chain_motion
-from tmr.views import add_view_args, write_views
+from tmr.views import VIEW_NAMES, add_view_args, write_views
 
-#: Every file ``python -m tmr.plan`` may write into ``--out``; those a run does not write are removed from a re-used
-#: ``--out`` (files of other names are never touched).
+#: Every file ``python -m tmr.plan`` writes into ``--out`` besides the views (:data:`tmr.views.VIEW_NAMES`).
 OUTPUT_NAMES = (
     "trajectories.json",
     "trajectories.csv",
@@ -56,6 +54,12 @@ OUTPUT_NAMES = (
 )
 #: Keys of the metrics that are timings: written to ``timings.json``, not ``metrics.json``.
 TIMING_KEYS = ("wall_time", "ms_per_step")
+#: Every entry of ``--out`` a plan owns: its files, its views, and the physics replay of the plan (``tmr replay``
+#: writes ``replay/``). Those tmr wrote before and a new run does not write are removed when it publishes; an entry
+#: of one of these names that tmr did not write makes the run refuse its ``--out`` (:mod:`tmr.outdir`).
+OWNED_NAMES = OUTPUT_NAMES + VIEW_NAMES + ("replay",)
+#: Outputs whose bytes change from run to run (listed in the manifest without a hash).
+VOLATILE_NAMES = ("timings.json",)
 
 
 def _xy(text: str) -> tuple[float, float]:
@@ -257,50 +261,40 @@ def write_outputs(
     route: Any = None,
     pool: Any = None,
 ) -> list[str]:
-    """Write every output into a temporary sibling directory, then move the files into ``out``; the figures are
-    rendered by ``pool`` (a :class:`tmr.plotpool.FigurePool`) if given, else here."""
+    """Write every output of a plan into the directory ``out`` (a :class:`tmr.outdir.Stage`'s directory when run
+    from the command line) and return the names written; the figures are rendered by ``pool`` (a
+    :class:`tmr.plotpool.FigurePool`) if given, else here."""
     from tmr import io
 
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
-        io.write_trajectories_json(plan, tmp / "trajectories.json", filtered=filtered)
-        io.write_trajectories_csv(plan, tmp / "trajectories.csv", filtered=filtered)
-        values = metrics.to_dict() | (extra or {})
-        timings = {key: values.pop(key) for key in TIMING_KEYS if key in values}
-        io.write_metrics_json(values, tmp / "metrics.json")
-        io.write_metrics_json(timings, tmp / "timings.json")  # kept apart: metrics.json is reproducible
-        from tmr.rundir import write_chain_run
+    out.mkdir(parents=True, exist_ok=True)
+    io.write_trajectories_json(plan, out / "trajectories.json", filtered=filtered)
+    io.write_trajectories_csv(plan, out / "trajectories.csv", filtered=filtered)
+    values = metrics.to_dict() | (extra or {})
+    timings = {key: values.pop(key) for key in TIMING_KEYS if key in values}
+    io.write_metrics_json(values, out / "metrics.json")
+    io.write_metrics_json(timings, out / "timings.json")  # kept apart: metrics.json is reproducible
+    from tmr.rundir import write_chain_run
 
-        write_chain_run(tmp / "run.json", plan, env, extra)  # scenario, map and tether parameters (tmr.replay)
-        if plots:
-            figures = {
-                "chain_poses.png": ("plot_chain_poses", (plan, env), {"route": route}),
-                "trajectories.png": ("plot_trajectories", (plan, filtered), {}),
-                "distance_errors.png": ("plot_distance_errors", (plan,), {}),
-                "speeds.png": ("plot_speeds", (plan, filtered), {}),
-            }
-            rendered = _pooled(pool, figures)
-            if rendered is not None:
-                for name, data in rendered.items():
-                    io.atomic_write_bytes(tmp / name, data)
-            else:
-                from tmr import plot
+    write_chain_run(out / "run.json", plan, env, extra)  # scenario, map and tether parameters (tmr.replay)
+    names = ["trajectories.json", "trajectories.csv", "metrics.json", "timings.json", "run.json"]
+    if plots:
+        figures = {
+            "chain_poses.png": ("plot_chain_poses", (plan, env), {"route": route}),
+            "trajectories.png": ("plot_trajectories", (plan, filtered), {}),
+            "distance_errors.png": ("plot_distance_errors", (plan,), {}),
+            "speeds.png": ("plot_speeds", (plan, filtered), {}),
+        }
+        rendered = _pooled(pool, figures)
+        if rendered is not None:
+            for name, data in rendered.items():
+                io.atomic_write_bytes(out / name, data)
+        else:
+            from tmr import plot
 
-                for name, (function, args, kwargs) in figures.items():
-                    plot.save_figure(getattr(plot, function)(*args, **kwargs), tmp / name)
-        out.mkdir(parents=True, exist_ok=True)
-        names = sorted(p.name for p in tmp.iterdir())
-        for name in names:
-            os.replace(tmp / name, out / name)
-        remove_stale(out, OUTPUT_NAMES, names)
-        stale_replay = out / "replay"
-        if (stale_replay / "replay.json").is_file():  # tmr.replay's check of an older plan in this --out
-            shutil.rmtree(stale_replay)
-            LOG.info("removed %s: the physics replay of an older plan", stale_replay)
-        return names
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+            for name, (function, args, kwargs) in figures.items():
+                plot.save_figure(getattr(plot, function)(*args, **kwargs), out / name)
+        names += list(figures)
+    return sorted(names)
 
 
 def summary(plan: Any, metrics: Any) -> str:
@@ -454,8 +448,10 @@ def _join_negative(argv: list[str]) -> list[str]:
 
 
 def check_out(out: Path) -> None:
-    """Refuse, before any planning, an ``--out`` that is a file or lies where nothing can be written."""
-    check_out_dir(out)
+    """Refuse, before any planning, an ``--out`` that cannot take a plan (:func:`tmr.outdir.check_out`)."""
+    from tmr.outdir import check_out as check
+
+    check(out, OWNED_NAMES)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -545,18 +541,22 @@ def _main(args: argparse.Namespace) -> int:
                 plan, problem.env, problem.time_params.Ts, cutoff_hz=args.filter_cutoff
             )
             extra = _extras(problem, plan, auto_note) | ({"filter_note": filter_note} if filter_note else {})
-            names = write_outputs(
-                Path(args.out),
-                plan,
-                metrics,
-                problem.env,
-                filtered,
-                not args.no_plots,
-                extra,
-                route=problem.route,
-                pool=pool,
-            )
-            names += write_views(args, Path(args.out), lambda: chain_motion(plan, problem.env, problem.chain_params))
+            from tmr.outdir import Stage
+
+            with Stage(args.out, OWNED_NAMES, VOLATILE_NAMES) as stage:  # everything staged, then one publication
+                write_outputs(
+                    stage.path,
+                    plan,
+                    metrics,
+                    problem.env,
+                    filtered,
+                    not args.no_plots,
+                    extra,
+                    route=problem.route,
+                    pool=pool,
+                )
+                write_views(args, stage.path, lambda: chain_motion(plan, problem.env, problem.chain_params))
+                names = stage.publish()
         finally:
             if pool is not None:
                 pool.close()

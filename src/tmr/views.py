@@ -8,14 +8,14 @@ plan's :class:`tmr.motion.Motion` (called only when a view is asked for). The fi
 * ``motion.html`` — the interactive, self-contained view with a time slider (:mod:`tmr.htmlview`);
 * ``ros2_bag/`` — the plan as a ROS 2 bag, MCAP (or SQLite 3) storage (:mod:`tmr.export.rosbag`).
 
-A view not asked for in this run is removed from a re-used ``--out`` (these names only), so no view of an older
-plan is left beside the new data. Each file is written atomically (temporary file, then renamed).
+The views are written into the command's staging directory with its other outputs and published with them
+(:mod:`tmr.outdir`): a view not asked for in this run is removed from a re-used ``--out`` if tmr wrote it there,
+so no view of an older plan is left beside the new data.
 """
 
 from __future__ import annotations
 
 import argparse
-import shutil
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -27,7 +27,6 @@ __all__ = [
     "HTML_NAME",
     "VIEW_NAMES",
     "add_view_args",
-    "remove_views",
     "write_views",
 ]
 
@@ -69,27 +68,8 @@ def _progress(total: int, what: str) -> Any:
     return tqdm(total=total, desc=what, unit="view", leave=False, disable=not progress_enabled())
 
 
-def remove_views(out: Path) -> list[str]:
-    """Remove every view of :data:`VIEW_NAMES` from ``out`` (a run that writes no plan keeps none of an older one);
-    return the names removed. A ``ros2_bag`` directory is removed only if it is a bag (has ``metadata.yaml``)."""
-    return _clear(Path(out), gif=False, html=False, fmt=None)
-
-
-def _clear(out: Path, gif: bool, html: bool, fmt: str | None) -> list[str]:
-    gone = []
-    for name, on in ((GIF_NAME, gif), (HTML_NAME, html)):
-        stale = out / name
-        if not on and (stale.is_file() or stale.is_symlink()):
-            stale.unlink()
-            gone.append(name)
-    if not fmt and (out / BAG_DIR).is_dir() and (out / BAG_DIR / "metadata.yaml").is_file():
-        shutil.rmtree(out / BAG_DIR)
-        gone.append(BAG_DIR)
-    return gone
-
-
 def write_views(args: argparse.Namespace, out: Path, motion: Callable[[], Any]) -> list[str]:
-    """Write the views ``args`` ask for into ``out``; remove those it does not ask for; return the names written.
+    """Write the views ``args`` ask for into the directory ``out``; return the names written.
 
     ``motion`` builds the plan's :class:`tmr.motion.Motion` (called at most once, only if a view is asked for).
     """
@@ -99,7 +79,6 @@ def write_views(args: argparse.Namespace, out: Path, motion: Callable[[], Any]) 
         bool(getattr(args, "html", False)),
         getattr(args, "export", None),
     )
-    _clear(out, gif, html, fmt)
     if not (gif or html or fmt):
         return []
     from tmr.console import progress_enabled

@@ -26,10 +26,7 @@ import csv
 import io
 import json
 import math
-import os
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -41,37 +38,16 @@ from tmr.cli_args import positive_int as _positive_int
 from tmr.console import LOG, add_manners, progress_enabled
 from tmr.console import run as run_cli
 from tmr.motion import ccma_track_motion
-from tmr.views import add_view_args, remove_views, write_views
+from tmr.views import VIEW_NAMES, add_view_args, write_views
 
 TRAJECTORY_FORMAT = "tmr-ccma-trajectory/1"
-#: Every file name ``run`` may write into ``--out``; names a run does not produce are removed from ``--out`` so no
-#: file of an earlier run survives next to the new ones (other files in ``--out`` are left alone).
+#: Every file name ``run`` may write into ``--out``.
 OUTPUT_NAMES = ("trajectory.csv", "trajectory.json", "summary.json", "mechanism.png", "convergence.png")
-
-
-def check_out_dir(out: Path) -> None:
-    """Raise :class:`~tmr.ccma.errors.CcmaError` unless ``out`` is, or can be created as, a writable directory.
-
-    Checked before any computation, so a bad ``--out`` exits 2 at once and writes nothing.
-    """
-    from tmr.ccma.errors import CcmaError
-
-    if out.exists() and not out.is_dir():
-        raise CcmaError(f"--out {str(out)!r} exists and is not a directory; give a directory path")
-    probe = out
-    while not probe.exists():  # nearest existing ancestor: the directories below it will be created
-        if probe.parent == probe:
-            break
-        probe = probe.parent
-    if not probe.is_dir():
-        raise CcmaError(f"--out {str(out)!r}: {str(probe)!r} is not a directory, so {str(out)!r} cannot be created")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        what = "is not writable" if probe == out else f"cannot be created ({str(probe)!r} is not writable)"
-        raise CcmaError(f"--out {str(out)!r} {what}; choose another output directory")
-    try:  # a real write test: permissions alone do not tell (root, a read-only or virtual file system)
-        os.rmdir(tempfile.mkdtemp(prefix=".tmr-out-check-", dir=probe))
-    except OSError as exc:
-        raise CcmaError(f"--out {str(out)!r}: cannot write in {str(probe)!r} ({exc.strerror})") from exc
+#: Every entry of ``--out`` a run owns (its files and views): those tmr wrote before and a run does not produce are
+#: removed when it publishes, so no file of an earlier run survives next to the new ones; other files are never
+#: touched, and a file tmr did not write under one of these names makes the run refuse its ``--out``
+#: (:mod:`tmr.outdir`).
+OWNED_NAMES = OUTPUT_NAMES + VIEW_NAMES
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -179,8 +155,9 @@ def run(args: argparse.Namespace) -> int:
     from tmr.metrics import json_safe
 
     # ---- validate and compute everything before writing
-    out = Path(args.out)
-    check_out_dir(out)
+    from tmr.outdir import check_out
+
+    out = check_out(Path(args.out), OWNED_NAMES)
     desc = load_description(args.description or args.example)
     model = EnergyModel(build_system(desc), compile=args.compile)
     st0 = reference_state(model)
@@ -222,7 +199,6 @@ def run(args: argparse.Namespace) -> int:
                 + "\n"
             },
         )
-        remove_views(out)  # no view of an older run beside the refusal
         LOG.error("path REFUSED before control: %s", verdict.message())
         return 1
     n_snap = 5
@@ -287,8 +263,9 @@ def run(args: argparse.Namespace) -> int:
         curves = {"step 1 (from the reference)": res.histories[0], f"step {mid + 1}": res.histories[mid]}
         curves[f"step {slow + 1} (slowest warm)"] = res.histories[slow]
         figures["convergence.png"] = plot_convergence(curves, f"{model.system.name}: objective vs time")
-    names = _write_outputs(out, texts, figures)
-    names += write_views(args, out, lambda: ccma_track_motion(model, res, args.path))
+    names = _write_outputs(
+        out, texts, figures, lambda where: write_views(args, where, lambda: ccma_track_motion(model, res, args.path))
+    )
     t = summary["timing"]
     LOG.info(
         f"tmr ccma: {model.system.name}, path {args.path}, {summary['steps']} steps, {model.nu} controls\n"
@@ -373,35 +350,30 @@ def _refusal(model: Any, args: argparse.Namespace, path: Any, reach: dict[str, A
     }
 
 
-def _write_outputs(out: Path, texts: dict[str, str], figures: dict[str, Any] | None = None) -> list[str]:
-    """Write the files into ``out`` through a temporary directory (no partial output), remove outputs of an earlier
-    run this one does not produce, and return the names written."""
+def _write_outputs(
+    out: Path, texts: dict[str, str], figures: dict[str, Any] | None = None, views: Any = None
+) -> list[str]:
+    """Stage the files (``views(directory)`` writes the views asked for) and publish them into ``out`` in one step
+    (:mod:`tmr.outdir`: outputs of an earlier run this one does not produce are removed, other files left alone);
+    return the names written."""
     from tmr.ccma.errors import CcmaError
     from tmr.io import atomic_write_text
+    from tmr.outdir import Stage
 
     try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:  # e.g. removed or made read-only since check_out_dir
-        raise CcmaError(f"--out {str(out)!r}: cannot create the output directory: {exc.strerror or exc}") from exc
-    tmp = Path(tempfile.mkdtemp(prefix=".ccma-run.", dir=out))
-    try:
-        for name, text in texts.items():
-            atomic_write_text(tmp / name, text)
-        if figures:
-            from tmr.plot import save_figure
+        with Stage(out, OWNED_NAMES) as stage:
+            for name, text in texts.items():
+                atomic_write_text(stage.path / name, text)
+            if figures:
+                from tmr.plot import save_figure
 
-            for name, fig in figures.items():
-                save_figure(fig, tmp / name)
-        names = sorted(p.name for p in tmp.iterdir())
-        for name in names:
-            os.replace(tmp / name, out / name)
-        for name in OUTPUT_NAMES:  # outputs of an earlier run that this run does not produce (e.g. --no-plots)
-            stale = out / name
-            if name not in names and (stale.is_file() or stale.is_symlink()):
-                stale.unlink(missing_ok=True)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    return names
+                for name, fig in figures.items():
+                    save_figure(fig, stage.path / name)
+            if views is not None:
+                views(stage.path)
+            return stage.publish()
+    except OSError as exc:  # e.g. removed, made read-only or full since the check
+        raise CcmaError(f"--out {str(out)!r}: cannot write the outputs: {exc.strerror or exc}") from exc
 
 
 def main(argv: list[str] | None = None) -> int:

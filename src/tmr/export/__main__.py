@@ -11,14 +11,15 @@ Open the bag in Foxglove (File → Open local file → ``ros2_bag/ros2_bag.mcap`
 ``ros2 bag play RUN_DIR/ros2_bag`` (ROS 2 Jazzy or newer; MCAP storage plugin).
 
 Exit codes: 0 written; 2 bad input (not a run directory, an older run without ``run.json``, an ``--out`` that is
-a file or a non-bag directory; one line on stderr, nothing written); 130 interrupted (Ctrl-C: every output goes
-to a temporary name and is renamed when complete, so nothing half-written is left). A progress bar on a terminal.
+a file or a non-bag directory, or an existing ``--out`` tmr did not write; one line on stderr, nothing written);
+130 interrupted (Ctrl-C). The export is staged beside ``--out`` and published in one rename (:mod:`tmr.outdir`), so
+nothing half-written is ever left, and it replaces only an earlier export that tmr wrote. A progress bar on a
+terminal.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
@@ -83,7 +84,11 @@ def _default_out(run_dir: Path, fmt: str) -> Path:
 
 
 def check_out(out: Path, fmt: str) -> None:
-    """Refuse before reading anything an ``--out`` that cannot take the export (TmrError, exit 2)."""
+    """Refuse before reading anything an ``--out`` that cannot take the export (TmrError, exit 2): a bag is a
+    directory, a GIF or HTML view a file, and an existing ``--out`` is replaced only if tmr wrote it
+    (:func:`tmr.outdir.check_out`)."""
+    from tmr.outdir import check_out as check
+
     if fmt in ("mcap", "sqlite3"):
         if out.exists() and not out.is_dir():
             raise TmrError(f"--out {out} is a file; a bag is a directory")
@@ -91,11 +96,7 @@ def check_out(out: Path, fmt: str) -> None:
             raise TmrError(f"--out {out} is a directory that is not a rosbag2 bag; it is left alone, choose another")
     elif out.is_dir():
         raise TmrError(f"--out {out} is a directory; give a file name (e.g. {out / ('motion.' + fmt)})")
-    parent = out.absolute().parent
-    while not parent.exists():
-        parent = parent.parent
-    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
-        raise TmrError(f"--out {out}: cannot write in {parent}")
+    check(out, file=True)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -113,21 +114,26 @@ def _main(args: argparse.Namespace) -> int:
     from tmr.export.runs import load_motion
 
     motion = load_motion(run_dir, rate=args.rate, trajectory=args.trajectory, description=args.description)
-    if args.format in ("mcap", "sqlite3"):
-        from tmr.export.rosbag import topics, write_bag
+    from tmr.outdir import Stage
 
-        write_bag(motion, out, storage=args.format, progress=progress_enabled())
-        what = f"ROS 2 bag ({args.format}, {len(topics(motion))} topics, {motion.n_samples} samples)"
-    elif args.format == "gif":
-        from tmr.animate import frame_indices, write_gif
+    with Stage(out, file=True) as stage:  # staged beside --out, then one rename (tmr.outdir)
+        staged = stage.path / out.name
+        if args.format in ("mcap", "sqlite3"):
+            from tmr.export.rosbag import topics, write_bag
 
-        write_gif(motion, out, progress=progress_enabled())
-        what = f"animation ({len(frame_indices(motion))} frames, {out.stat().st_size / 1e6:.2f} MB)"
-    else:
-        from tmr.htmlview import write_html
+            write_bag(motion, staged, storage=args.format, progress=progress_enabled())
+            what = f"ROS 2 bag ({args.format}, {len(topics(motion))} topics, {motion.n_samples} samples)"
+        elif args.format == "gif":
+            from tmr.animate import frame_indices, write_gif
 
-        write_html(motion, out)
-        what = f"interactive view ({out.stat().st_size / 1e6:.2f} MB)"
+            write_gif(motion, staged, progress=progress_enabled())
+            what = f"animation ({len(frame_indices(motion))} frames, {staged.stat().st_size / 1e6:.2f} MB)"
+        else:
+            from tmr.htmlview import write_html
+
+            write_html(motion, staged)
+            what = f"interactive view ({staged.stat().st_size / 1e6:.2f} MB)"
+        stage.publish()
     LOG.info(f"tmr.export: {motion.title}")
     if not motion.timed:
         LOG.info(f"  note: {motion.notes[0]}")

@@ -3,10 +3,10 @@
 Plans a MoPICK-type MCDPR task with the two-stage planner (Rasheed 2019 sec. 5), checks the result (μ > 0, cable
 tensions within the tipping-tightened bounds, no base collision), and writes ``plan.json``, ``bases.csv``,
 ``platform.csv`` and the figures ``topview.png``, ``mu.png``, ``tensions.png`` into ``--out``. Inputs are validated
-before anything is written (``--out`` must be, or become, a directory); the files go to a temporary directory first
-and are moved into ``--out`` (created only then) when all of them are complete; outputs of an older run in ``--out``
-that this run does not produce (e.g. the figures after ``--no-plots``) are deleted. The planner is deterministic
-(no random choices): same inputs, same bytes.
+before anything is written (``--out`` must be, or become, a directory, and hold no file tmr did not write under an
+output's name); the files are staged and published into ``--out`` in one step (:mod:`tmr.outdir`): outputs an older
+run wrote in ``--out`` that this run does not produce (e.g. the figures after ``--no-plots``) are removed, other
+files are never touched. The planner is deterministic (no random choices): same inputs, same bytes.
 
 Exit codes: 0 plan succeeded; 1 plan computed but a guarantee fails (outputs written, reason printed);
 2 bad input or planning error (nothing written).
@@ -19,10 +19,7 @@ import csv
 import io
 import json
 import math
-import os
-import shutil
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -36,7 +33,7 @@ from tmr.console import LOG, add_manners, progress_enabled
 from tmr.console import run as run_cli
 from tmr.errors import TmrError
 from tmr.motion import mcdpr_motion
-from tmr.views import add_view_args, write_views
+from tmr.views import VIEW_NAMES, add_view_args, write_views
 
 PLAN_FORMAT = "tmr-mcdpr-plan/1"
 
@@ -123,9 +120,10 @@ def _inputs(args: argparse.Namespace) -> tuple[Path, Any, Any]:
 
     from tmr.mcdpr.robot import load_robot, mopick
     from tmr.mcdpr.scene import load_scene
+    from tmr.outdir import check_out
 
     out = Path(args.out)
-    check_out_dir(out)
+    check_out(out, OWNED_NAMES if args.command == "plan" else WORKSPACE_NAMES)
     robot = load_robot(args.robot) if args.robot else mopick()
     scene = load_scene(args.scene)
     if args.external is not None:
@@ -172,17 +170,15 @@ def workspace_main(args: argparse.Namespace) -> int:
             "mu_max_at": [float(ws.x[k % len(ws.x)]), float(ws.y[k // len(ws.x)])],
         }
         X, Y = np.meshgrid(ws.x, ws.y)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out if out.is_dir() else _existing_ancestor(out)))
-        try:
+        from tmr.outdir import Stage
+
+        with Stage(out, WORKSPACE_NAMES) as stage:  # staged, then published in one step (tmr.outdir)
+            tmp = stage.path
             atomic_write_text(tmp / "workspace.json", json.dumps(_jsonable(summary), indent=1, sort_keys=True) + "\n")
             floats = np.column_stack([X.ravel(), Y.ravel(), ws.mu.ravel()])
             atomic_write_text(tmp / "workspace.csv", _csv(["x", "y", "mu"], np.zeros((X.size, 0), int), floats))
             plot_workspace(robot, scene, ws, scene.bases, tmp / "workspace.png")
-            out.mkdir(parents=True, exist_ok=True)
-            for name in WORKSPACE_NAMES:
-                os.replace(tmp / name, out / name)
-        finally:
-            shutil.rmtree(tmp, ignore_errors=True)
+            stage.publish()
     except TmrError as exc:
         LOG.error(f"error: {exc}")
         return 2
@@ -276,74 +272,42 @@ def _csv(header: list[str], ints: np.ndarray, floats: np.ndarray) -> str:
 
 #: Every file name ``plan`` may write; a run deletes those of them it did not produce (stale ones of an older run).
 OUTPUT_NAMES = ("plan.json", "run.json", "bases.csv", "platform.csv", "topview.png", "mu.png", "tensions.png")
-
-
-def _existing_ancestor(path: Path) -> Path:
-    """The nearest ancestor of ``path`` that exists (the current directory for a relative path without one)."""
-    for q in path.absolute().parents:
-        if q.exists():
-            return q
-    return Path.cwd()  # pragma: no cover - the root always exists
-
-
-def check_out_dir(out: Path) -> None:
-    """Raise TmrError when ``out`` cannot become the output directory (a file, or below a file); writes nothing."""
-    if out.exists() and not out.is_dir():
-        raise TmrError(f"--out {out}: exists and is not a directory; choose another output directory")
-    anc = _existing_ancestor(out) if not out.exists() else out
-    if not anc.is_dir():
-        raise TmrError(f"--out {out}: {anc} is a file, so the directory cannot be created")
-    if not os.access(anc, os.W_OK | os.X_OK):
-        raise TmrError(f"--out {out}: {anc} is not writable")
-    try:  # a real write test: permissions alone do not tell (root, a read-only or virtual file system)
-        os.rmdir(tempfile.mkdtemp(prefix=".tmr-out-check-", dir=anc))
-    except OSError as exc:
-        raise TmrError(f"--out {out}: cannot write in {anc} ({exc.strerror})") from exc
+#: Every entry of ``--out`` a plan owns: its files, its views and the physics replay of the plan (``replay/``).
+OWNED_NAMES = OUTPUT_NAMES + VIEW_NAMES + ("replay",)
 
 
 def write_outputs(
     out: Path, robot: Any, scene: Any, env: Any, params: Any, result: Any, chk: Any, plots: bool
 ) -> list[str]:
-    """Write all outputs into a temporary directory, then move them into ``out`` (created only then, with its
-    parents) and delete the outputs of an older run that this run did not produce (only :data:`OUTPUT_NAMES`)."""
+    """Write every output of a plan into the directory ``out`` (the staging directory of a
+    :class:`tmr.outdir.Stage` from the command line); return the names written."""
     from tmr.io import atomic_write_text
 
-    check_out_dir(out)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out if out.is_dir() else _existing_ancestor(out)))
-    try:
-        text = json.dumps(plan_dict(robot, scene, params, result, chk), indent=1, sort_keys=True)
-        atomic_write_text(tmp / "plan.json", text + "\n")
-        from tmr.rundir import write_mcdpr_run
+    tmp = Path(out)
+    tmp.mkdir(parents=True, exist_ok=True)
+    text = json.dumps(plan_dict(robot, scene, params, result, chk), indent=1, sort_keys=True)
+    atomic_write_text(tmp / "plan.json", text + "\n")
+    from tmr.rundir import write_mcdpr_run
 
-        write_mcdpr_run(tmp / "run.json", robot, scene, params)  # robot and scene geometry (tmr.replay)
-        T, p = result.bases.shape[:2]
-        ints = np.column_stack([np.arange(T), result.segment])
-        brows = np.hstack([result.bases.reshape(T, -1), result.headings])
-        bhead = ["sample", "segment"] + [f"{c}{j + 1}" for j in range(p) for c in ("x", "y")]
-        bhead += [f"heading{j + 1}" for j in range(p)]
-        atomic_write_text(tmp / "bases.csv", _csv(bhead, ints, brows))
-        m = result.tensions.shape[1]
-        prows = np.hstack([result.platform, result.mu[:, None], result.tensions, result.hi])
-        phead = ["sample", "segment", "x", "y", "z", "mu"] + [f"t{k + 1}" for k in range(m)]
-        phead += [f"t{k + 1}_max" for k in range(m)]
-        atomic_write_text(tmp / "platform.csv", _csv(phead, ints, prows))
-        if plots:
-            from tmr.mcdpr import plot
+    write_mcdpr_run(tmp / "run.json", robot, scene, params)  # robot and scene geometry (tmr.replay)
+    T, p = result.bases.shape[:2]
+    ints = np.column_stack([np.arange(T), result.segment])
+    brows = np.hstack([result.bases.reshape(T, -1), result.headings])
+    bhead = ["sample", "segment"] + [f"{c}{j + 1}" for j in range(p) for c in ("x", "y")]
+    bhead += [f"heading{j + 1}" for j in range(p)]
+    atomic_write_text(tmp / "bases.csv", _csv(bhead, ints, brows))
+    m = result.tensions.shape[1]
+    prows = np.hstack([result.platform, result.mu[:, None], result.tensions, result.hi])
+    phead = ["sample", "segment", "x", "y", "z", "mu"] + [f"t{k + 1}" for k in range(m)]
+    phead += [f"t{k + 1}_max" for k in range(m)]
+    atomic_write_text(tmp / "platform.csv", _csv(phead, ints, prows))
+    if plots:
+        from tmr.mcdpr import plot
 
-            plot.plot_topview(robot, scene, env, result, tmp / "topview.png")
-            plot.plot_mu(result, tmp / "mu.png")
-            plot.plot_tensions(robot, result, tmp / "tensions.png")
-        names = sorted(q.name for q in tmp.iterdir())
-        out.mkdir(parents=True, exist_ok=True)
-        for name in names:
-            os.replace(tmp / name, out / name)
-        for name in OUTPUT_NAMES:
-            stale = out / name
-            if name not in names and stale.is_file():
-                stale.unlink()
-        return names
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        plot.plot_topview(robot, scene, env, result, tmp / "topview.png")
+        plot.plot_mu(result, tmp / "mu.png")
+        plot.plot_tensions(robot, result, tmp / "tensions.png")
+    return sorted(q.name for q in tmp.iterdir())
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -401,11 +365,15 @@ def _main(args: argparse.Namespace) -> int:
             result.tensions = distribute(args.tension, cap.W, weight, cap.lo, cap.hi)
             result.tension_method = args.tension
         chk = check(robot, env, result)
+        from tmr.outdir import Stage
+
         try:
-            names = write_outputs(out, robot, scene, env, params, result, chk, not args.no_plots)
-            names += write_views(args, out, lambda: mcdpr_motion(robot, scene, result))
+            with Stage(out, OWNED_NAMES) as stage:  # staged, then published in one step (tmr.outdir)
+                write_outputs(stage.path, robot, scene, env, params, result, chk, not args.no_plots)
+                write_views(args, stage.path, lambda: mcdpr_motion(robot, scene, result))
+                names = stage.publish()
         except OSError as exc:
-            raise TmrError(f"cannot write the outputs to {out}: {exc}") from exc
+            raise TmrError(f"cannot write the outputs to {out}: {exc.strerror or exc}") from exc
     except TmrError as exc:
         LOG.error(f"error: {exc}")
         return 2

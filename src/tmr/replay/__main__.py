@@ -5,8 +5,9 @@ writes ``RUN_DIR/replay/`` (``replay.json``, ``timing.json``, figures, optionall
 verdict.
 
 Exit codes: 0 the replay confirms the plan (every check passed); 1 it does not (the first reason printed: which
-check, when, where, by how much); 2 bad input (a missing, older or corrupt run directory, a bad option): one line
-on stderr, nothing written.
+check, when, where, by how much); 2 bad input (a missing, older or corrupt run directory, a bad option, an
+``--out`` that cannot take the replay): one line on stderr, nothing written. The outputs are staged and published
+into ``--out`` in one step (:mod:`tmr.outdir`).
 """
 
 from __future__ import annotations
@@ -22,6 +23,20 @@ from tmr.cli_args import out_path, positive_float, positive_int
 from tmr.console import LOG, add_manners, progress_enabled
 from tmr.console import run as run_command
 from tmr.errors import TmrError
+
+#: Every file ``tmr replay`` may write into its ``--out`` (chain and MoPICK replays).
+OWNED_NAMES = (
+    "replay.json",
+    "timing.json",
+    "tether_heights.png",
+    "tensions.png",
+    "tracking.png",
+    "topview.png",
+    "mcdpr_replay.png",
+    "replay.gif",
+)
+#: Outputs whose bytes change from run to run.
+VOLATILE_NAMES = ("timing.json",)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -148,9 +163,9 @@ def _main(args: argparse.Namespace) -> int:
                 f"{args.run} is a tmr.ccma run: the physics replay covers tmr.plan and tmr.mcdpr runs"
             ) from exc
         raise
-    out = Path(args.out) if args.out else Path(args.run) / "replay"
-    if out.exists() and not out.is_dir():
-        raise TmrError(f"--out {out} is a file, not a directory")
+    from tmr.outdir import Stage, check_out
+
+    out = check_out(Path(args.out) if args.out else Path(args.run) / "replay", OWNED_NAMES)
     if args.gif:
         from tmr.replay.gif import select_backend
 
@@ -159,7 +174,9 @@ def _main(args: argparse.Namespace) -> int:
         import mujoco  # noqa: F401
     except ImportError as exc:
         raise TmrError(f"the replay needs MuJoCo: pip install 'mujoco>=4.0' ({exc})") from None
-    code, names, text = _chain(args, run, out) if run.kind == "chain" else _mcdpr(args, run, out)
+    with Stage(out, OWNED_NAMES, VOLATILE_NAMES) as stage:  # staged, then published in one step
+        code, names, text = (_chain if run.kind == "chain" else _mcdpr)(args, run, stage.path)
+        names = stage.publish()
     LOG.info(text.split("\nFAILED: ")[0])
     LOG.info(f"  wrote {', '.join(names)} to {out}")
     if code:

@@ -23,17 +23,14 @@ Exit codes: 0 done; 2 bad input or a run error (nothing written); 130 interrupte
 from __future__ import annotations
 
 import argparse
-import os
 import shlex
-import shutil
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from tmr.cli_args import out_path
 from tmr.cli_args import positive_int as _positive
-from tmr.console import LOG, add_manners, check_out_dir, progress_enabled, remove_stale
+from tmr.console import LOG, add_manners, progress_enabled
 from tmr.console import run as run_cli
 from tmr.planner import METHODS
 from tmr.sweep.errors import SweepError
@@ -254,7 +251,9 @@ def _validate(args: argparse.Namespace) -> None:
     if getattr(args, "var", None):
         for v in args.var:
             check_overrides({v.name: v.low, **dict(args.set)})
-    check_out_dir(Path(args.out))
+    from tmr.outdir import check_out
+
+    check_out(Path(args.out), owned_names(args))
 
 
 def owned_names(args: argparse.Namespace) -> list[str]:
@@ -272,20 +271,16 @@ def owned_names(args: argparse.Namespace) -> list[str]:
     return ["bench.md", "bench.csv", "bench_timing.csv"]
 
 
-def write_outputs(out: Path, files: dict[str, Callable[[Path], Any]]) -> list[str]:
-    """Write every file into a temporary sibling directory, then move them into ``out``."""
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
+def write_outputs(out: Path, files: dict[str, Callable[[Path], Any]], owned: Any = None) -> list[str]:
+    """Write every file (``files``: name → writer of that path) into a staging directory, then publish them into
+    ``out`` in one step (:mod:`tmr.outdir`); files of ``owned`` names an older sweep wrote there and this one did
+    not are removed."""
+    from tmr.outdir import Stage
+
+    with Stage(out, sorted(set(owned or ()) | set(files)), volatile=[n for n in files if "timing" in n]) as stage:
         for name, writer in files.items():
-            writer(tmp / name)
-        out.mkdir(parents=True, exist_ok=True)
-        names = sorted(files)
-        for name in names:
-            os.replace(tmp / name, out / name)
-        return names
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+            writer(stage.path / name)
+        return stage.publish()
 
 
 def main(argv: list[str] | None = None, executor: Any = None) -> int:
@@ -305,8 +300,7 @@ def _main(args: argparse.Namespace, executor: Any = None) -> int:
     try:
         run = {"sensitivity": _sensitivity, "moga": _moga, "bench": _bench}[args.command]
         files = run(args, executor)
-        names = write_outputs(Path(args.out), files)
-        remove_stale(Path(args.out), owned_names(args), names)
+        names = write_outputs(Path(args.out), files, owned_names(args))
     finally:
         if own and executor is not None:
             executor.close()
