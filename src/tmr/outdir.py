@@ -41,6 +41,7 @@ import signal
 import stat
 import tempfile
 import threading
+import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
@@ -62,6 +63,15 @@ MANIFEST = ".tmr-outputs.json"
 #: Value of the manifest's ``format`` key.
 MANIFEST_FORMAT = "tmr-outputs/1"
 _STAGE_TAG = ".tmr-stage-"
+#: A staging directory is created under this tag, locked, then renamed to its :data:`_STAGE_TAG` name, so every
+#: directory under the stage tag is locked while its process lives (the cleanup never sees one between its creation
+#: and its lock). One left under this tag (its process killed in those microseconds) is removed once it is unlocked
+#: and a minute old.
+_INIT_TAG = ".tmr-init-"
+_INIT_MAX_AGE = 60.0
+#: Errors of a write that the user can act on (a full disk, a quota, a file-size limit, a file system made
+#: read-only, a directory removed or made unwritable during the run): one line, exit 2, not an internal error.
+_WRITE_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES, errno.EPERM, errno.ENOENT}
 
 
 class OutDirError(TmrError):
@@ -79,9 +89,14 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def read_manifest(directory: Path) -> dict[str, str | None]:
-    """The entries of ``directory``'s manifest: relative POSIX path → SHA-256 hex (None: content not tracked).
-    An absent, unreadable or malformed manifest gives {} (then nothing in the directory counts as tmr's)."""
+#: A manifest entry: the SHA-256 hex of the file's bytes, None for a file whose bytes are not tracked (timings), or
+#: during a publication entry by entry (the journal) the digests of both the old and the new file.
+Digest = str | None | tuple[str, ...]
+
+
+def read_manifest(directory: Path) -> dict[str, Digest]:
+    """The entries of ``directory``'s manifest: relative POSIX path → :data:`Digest`. An absent, unreadable or
+    malformed manifest gives {} (then nothing in the directory counts as tmr's)."""
     try:
         doc = json.loads((Path(directory) / MANIFEST).read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError):
@@ -89,15 +104,44 @@ def read_manifest(directory: Path) -> dict[str, str | None]:
     files = doc.get("files") if isinstance(doc, dict) and doc.get("format") == MANIFEST_FORMAT else None
     if not isinstance(files, dict):
         return {}
-    return {str(k): (v if isinstance(v, str) else None) for k, v in files.items()}
+    out: dict[str, Digest] = {}
+    for k, v in files.items():
+        if isinstance(v, list):
+            out[str(k)] = tuple(str(x) for x in v)
+        else:
+            out[str(k)] = v if isinstance(v, str) else None
+    return out
 
 
-def _manifest_bytes(files: dict[str, str | None]) -> bytes:
-    doc = {"format": MANIFEST_FORMAT, "files": {k: files[k] for k in sorted(files)}}
+def _matches(path: Path, digest: Digest) -> bool:
+    """Whether the file's bytes are those the manifest recorded."""
+    if digest is None:
+        return True
+    return _sha256(path) in ((digest,) if isinstance(digest, str) else digest)
+
+
+def _journal(old: dict[str, Digest], new: dict[str, Digest]) -> dict[str, Digest]:
+    """Entries under which both the old and the new version of every file count as tmr's."""
+    out = dict(old)
+    for k, v in new.items():
+        before = out.get(k, ())
+        if k in out and (before is None or v is None):
+            out[k] = None
+            continue
+        both = ((before,) if isinstance(before, str) else before) + ((v,) if isinstance(v, str) else v)
+        out[k] = tuple(dict.fromkeys(both)) if len(set(both)) > 1 else both[0]
+    return out
+
+
+def _manifest_bytes(files: dict[str, Digest]) -> bytes:
+    doc = {
+        "format": MANIFEST_FORMAT,
+        "files": {k: (list(v) if isinstance(v, tuple) else v) for k, v in sorted(files.items())},
+    }
     return (json.dumps(doc, indent=1) + "\n").encode()
 
 
-def _write_manifest(directory: Path, files: dict[str, str | None]) -> None:
+def _write_manifest(directory: Path, files: dict[str, Digest]) -> None:
     from tmr.io import atomic_write_bytes
 
     atomic_write_bytes(directory / MANIFEST, _manifest_bytes(files))
@@ -113,7 +157,7 @@ def _walk_files(root: Path) -> Iterator[Path]:
                 yield Path(dirpath) / name
 
 
-def _entries_of(root: Path, top: str, volatile: Iterable[str]) -> dict[str, str | None]:
+def _entries_of(root: Path, top: str, volatile: Iterable[str]) -> dict[str, Digest]:
     """Manifest entries for ``root/top`` (a file or a directory of files)."""
     vol = set(volatile)
     path = root / top
@@ -122,7 +166,7 @@ def _entries_of(root: Path, top: str, volatile: Iterable[str]) -> dict[str, str 
     return {top: None if top in vol else _sha256(path)}
 
 
-def is_tmr_output(directory: Path, name: str, files: dict[str, str | None] | None = None) -> bool:
+def is_tmr_output(directory: Path, name: str, files: dict[str, Digest] | None = None) -> bool:
     """Whether ``directory/name`` is an output tmr wrote and nobody changed since (module doc).
 
     A regular file: listed in the manifest with the same SHA-256 (or as untracked). A directory: every file in it
@@ -139,8 +183,7 @@ def is_tmr_output(directory: Path, name: str, files: dict[str, str | None] | Non
     if stat.S_ISREG(st.st_mode):
         if name not in files:
             return False
-        want = files[name]
-        return want is None or _sha256(path) == want
+        return _matches(path, files[name])
     if not stat.S_ISDIR(st.st_mode):
         return False
     inner = read_manifest(path)
@@ -153,8 +196,7 @@ def is_tmr_output(directory: Path, name: str, files: dict[str, str | None] | Non
         rel = p.relative_to(directory).as_posix()
         if p.is_symlink() or not p.is_file() or rel not in files:
             return False
-        want = files[rel]
-        if want is not None and _sha256(p) != want:
+        if not _matches(p, files[rel]):
             return False
     return True
 
@@ -244,9 +286,15 @@ def _stale_stages(places: Iterable[tuple[Path, str]]) -> list[Path]:
         except OSError:
             continue
         for name in names:
-            if not name.startswith(prefix + _STAGE_TAG) or len(name) != len(prefix + _STAGE_TAG) + 8:
-                continue
             path = directory / name
+            if name.startswith(prefix + _INIT_TAG) and len(name) == len(prefix + _INIT_TAG) + 8:
+                try:
+                    if time.time() - path.lstat().st_mtime <= _INIT_MAX_AGE:
+                        continue  # maybe a live process between its mkdtemp and its lock
+                except OSError:
+                    continue
+            elif not name.startswith(prefix + _STAGE_TAG) or len(name) != len(prefix + _STAGE_TAG) + 8:
+                continue
             try:
                 fd = os.open(path, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
             except OSError:
@@ -332,6 +380,7 @@ class Stage:
         self._fd: int | None = None
         self._path: Path | None = None
         self.published: list[str] | None = None
+        self._started = False
 
     # -- lifetime ----------------------------------------------------------------------------------------
     def _stage_home(self) -> tuple[Path, str]:
@@ -355,14 +404,25 @@ class Stage:
         if not self.file:
             for stale in stale_temporaries(self.directory, self.owned):
                 _remove(stale)
-        self._path = Path(tempfile.mkdtemp(prefix=prefix + _STAGE_TAG, suffix="", dir=home))
-        # mkdtemp's names are prefix + 8 characters; the directory gets the mode a plain mkdir would give
-        os.chmod(self._path, _umask_mode())
-        self._fd = os.open(self._path, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
-        _lock(self._fd)
+        # created under the init tag, locked, then renamed (the lock follows the directory): never unlocked under
+        # the stage tag while this process lives. mkdtemp's names are prefix + 8 characters.
+        init = Path(tempfile.mkdtemp(prefix=prefix + _INIT_TAG, dir=home))
+        try:
+            os.chmod(init, _umask_mode())  # the mode a plain mkdir would give, not mkdtemp's 0700
+            self._fd = os.open(init, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+            _lock(self._fd)
+            path = init.with_name(prefix + _STAGE_TAG + init.name[len(prefix + _INIT_TAG) :])
+            os.rename(init, path)
+        except BaseException:
+            shutil.rmtree(init, ignore_errors=True)
+            if self._fd is not None:
+                os.close(self._fd)
+                self._fd = None
+            raise
+        self._path = path
         return self
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, kind: Any, exc: Any, tb: Any) -> None:
         try:  # the staging path holds our staging directory, or after a swap the old outputs: removed either way
             if self._path is not None and os.path.lexists(self._path):
                 shutil.rmtree(self._path, ignore_errors=True)
@@ -370,6 +430,13 @@ class Stage:
             if self._fd is not None:
                 os.close(self._fd)
                 self._fd = None
+        if isinstance(exc, OSError) and exc.errno in _WRITE_ERRORS:
+            what = (
+                "publishing stopped part-way, every file in it is whole (old or new)"
+                if self._started
+                else "nothing in it changed"
+            )
+            raise OutDirError(f"--out {self.out}: cannot write the outputs ({exc.strerror or exc}); {what}") from None
 
     @property
     def path(self) -> Path:
@@ -385,9 +452,10 @@ class Stage:
         :attr:`owned` that tmr wrote before and this run did not; return the names published, sorted."""
         stage = self.path
         names = sorted(n for n in os.listdir(stage) if n != MANIFEST)
-        entries: dict[str, str | None] = {}
+        entries: dict[str, Digest] = {}
         for name in names:
             entries |= _entries_of(stage, name, self.volatile)
+        self._started = True
         with _sigint_deferred():
             if self.file:
                 self._publish_entries(names, entries)
@@ -396,7 +464,7 @@ class Stage:
         self.published = names
         return names
 
-    def _publish_dir(self, names: list[str], entries: dict[str, str | None]) -> None:
+    def _publish_dir(self, names: list[str], entries: dict[str, Digest]) -> None:
         out, stage = self.directory, self.path
         _write_manifest(stage, entries)
         if not os.path.lexists(out):
@@ -435,7 +503,7 @@ class Stage:
                 return False
         return True
 
-    def _publish_entries(self, names: list[str], entries: dict[str, str | None]) -> None:
+    def _publish_entries(self, names: list[str], entries: dict[str, Digest]) -> None:
         """Entry by entry, under a journal: the manifest lists old and new entries until the last rename."""
         out, stage = self.directory, self.path
         out.mkdir(parents=True, exist_ok=True)
@@ -449,7 +517,7 @@ class Stage:
                         f"--out {self.out}: {out / name} appeared during the run and is not an output tmr wrote; "
                         "it is left alone, and so is everything else: choose another --out"
                     )
-            _write_manifest(out, old | entries)  # the journal: old and new both count as tmr's
+            _write_manifest(out, _journal(old, entries))  # the journal: old and new both count as tmr's
             for name in names:
                 src, dst = stage / name, out / name
                 if os.path.lexists(dst) and (src.is_dir() or (dst.is_dir() and not dst.is_symlink())):
@@ -470,10 +538,11 @@ class Stage:
 
 
 def stale_temporaries(out: Path, owned: Iterable[str]) -> list[Path]:
-    """Temporaries an older tmr left beside or in ``out`` when killed (``.OUT.xxxxxxxx/`` directories holding
-    only outputs of ``owned`` names, ``.NAME.xxxxxxxx.tmp`` files of an atomic write), for removal."""
+    """Temporaries a killed tmr left beside or in ``out``, for removal: ``.OUT.xxxxxxxx/`` directories (an older
+    tmr's staging) holding only outputs of ``owned`` names, and ``.NAME.xxxxxxxx.tmp`` files of an atomic write of
+    an ``owned`` name or of the manifest (killed between the write and its rename)."""
     out = Path(out).absolute()
-    own = set(owned)
+    own = set(owned) | {MANIFEST}
     found = []
     pat_dir = re.compile(rf"^\.{re.escape(out.name)}\.[a-z0-9_]{{8}}$")
     with contextlib.suppress(OSError):

@@ -152,8 +152,10 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(args: argparse.Namespace) -> int:
+    from tmr.outdir import Stage, check_out
     from tmr.rundir import RunDirError, load_run
 
+    out = check_out(Path(args.out) if args.out else Path(args.run) / "replay", OWNED_NAMES)  # first: exit 2 at once
     try:
         run = load_run(args.run)
     except RunDirError as exc:
@@ -163,9 +165,6 @@ def _main(args: argparse.Namespace) -> int:
                 f"{args.run} is a tmr.ccma run: the physics replay covers tmr.plan and tmr.mcdpr runs"
             ) from exc
         raise
-    from tmr.outdir import Stage, check_out
-
-    out = check_out(Path(args.out) if args.out else Path(args.run) / "replay", OWNED_NAMES)
     if args.gif:
         from tmr.replay.gif import select_backend
 
