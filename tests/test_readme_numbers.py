@@ -204,7 +204,6 @@ class Quote(NamedTuple):
     cmp: str = "="  # "=": the README shows the source rounded; "<=" / ">=": README value <= / >= source
 
 
-A_QP = "scenario A, qp, route shortest"
 D_QP = "scenario D, qp, route shortest"
 RR = "random_rooms.md"
 
@@ -242,7 +241,7 @@ QUOTES = [
         lambda: (1000 * replay(D_QP, "min_tether_m"), 1000 * replay(D_QP, "catenary_then_m")),
     ),
     Quote(r"The replay passes \(no contact, tracking within (\S+) mm\)", lambda: replay(D_QP, "track_max_mm")),
-    Quote(r"matches `tmr.catenary` to (1e-3) or better", lambda: static_tether_error("16"), ">="),
+    Quote(r"matches `tmr.catenary` to (\S+) or better", lambda: static_tether_error("16"), ">="),
     Quote(
         r"replays with the platform within (\S+) mm of its path",
         lambda: float(mopick_replay()["platform error max / rms [mm]"].split(" / ")[0]),
