@@ -2,8 +2,8 @@
 
     python benchmarks/replay.py [--repeats 3] [--skip-mcdpr]
 
-Writes ``benchmarks/results/replay.md`` and ``replay.csv`` and the tether-height figure of scenario A (qp),
-``replay_A_qp_heights.png``.
+Writes ``benchmarks/results/replay.md`` and ``replay.csv`` and the tether-height figures of scenarios A and D (qp),
+``replay_A_qp_heights.png`` and ``replay_D_qp_heights.png`` (the README shows D's and quotes its numbers).
 Plans are made with the command line (``python -m tmr.plan ... --no-plots``, ``python -m tmr.mcdpr plan``) into a
 temporary directory and replayed through :mod:`tmr.replay`. The real-time factor is simulated time / wall time of
 the simulation loop (model building and figures excluded), the median over ``--repeats`` replays of the same run.
@@ -90,6 +90,7 @@ def chain_row(run_dir: Path, repeats: int, figure: Path | None = None) -> dict:
         "track_max_mm": 1000 * float(rp.tracking_error.max()),
         "track_rms_mm": 1000 * float(np.sqrt(np.mean(rp.tracking_error**2))),
         "min_tether_m": float(rp.lowest.min()),
+        "min_tether_t_s": float(rp.t[k_low[0]]),
         "catenary_then_m": float(rp.lowest_catenary[k_low]),
         "low_err_mm": 1000 * float(np.abs(rp.lowest - rp.lowest_catenary).max()),
         "t_err_n": float(
@@ -171,7 +172,7 @@ def main() -> None:
             if not (run_dir / "run.json").is_file():
                 rows.append({"run": f"scenario {s}, {m}, {route}", "verdict": f"no plan (exit {code})"})
                 continue
-            fig = RESULTS / "replay_A_qp_heights.png" if (s, m, route) == ("A", "qp", "shortest") else None
+            fig = RESULTS / f"replay_{s}_qp_heights.png" if (m, route) == ("qp", "shortest") and s in "AD" else None
             row = chain_row(run_dir, args.repeats, fig)
             row["run"] += f", route {route}"
             rows.append(row)
@@ -185,7 +186,7 @@ def main() -> None:
         " of any tether over the run, next to the static catenary of the same ends at that moment; |Δ| columns: the"
         " largest gap to the catenary over the run (lowest point, end tensions).",
         "",
-        "| run | N | plan [s] | plan ok | replay | tracking max / rms [mm] | lowest tether [m] (catenary) | "
+        "| run | N | plan [s] | plan ok | replay | tracking max / rms [mm] | lowest tether [m] at t (catenary) | "
         "max abs lowest-point error [mm] | max abs tension error [N] | contacts (physics steps) | RTF wall / CPU | "
         "first reason |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
@@ -197,7 +198,7 @@ def main() -> None:
         lines.append(
             f"| {r['run']} | {r['robots']} | {r['plan_s']:.1f} | {r['plan_ok']} | {r['verdict']} | "
             f"{r['track_max_mm']:.2f} / {r['track_rms_mm']:.2f} | "
-            f"{r['min_tether_m']:.3f} ({r['catenary_then_m']:.3f}) | "
+            f"{r['min_tether_m']:.3f} at {r['min_tether_t_s']:.1f} s ({r['catenary_then_m']:.3f}) | "
             f"{r['low_err_mm']:.2f} | {r['t_err_n']:.2f} | {r['contacts']} | {r['rtf']:.1f}× / {r['rtf_cpu']:.1f}× | "
             f"{r['reason']} |"
         )
