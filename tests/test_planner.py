@@ -168,3 +168,19 @@ def test_horizon_warm_start_puts_the_followers_on_the_tether_tasks(monkeypatch):
     _, fallback, _ = planner._horizon_warm_start(problem, progress=False)
     assert fallback.success and "without them it failed: made to fail" in fallback.diagnostics["references_note"]
     np.testing.assert_array_equal(fallback.robots, routed.robots)
+
+
+def test_a_start_of_another_count_is_refused_before_the_route(monkeypatch):
+    """build_problem(start=2 positions) on a 3-robot scenario: the start never changes N by itself; refused naming
+    both counts, before any route is searched."""
+    import tmr.planner
+
+    def boom(*a, **k):
+        raise AssertionError("searched a route for a start of the wrong count")
+
+    monkeypatch.setattr(tmr.planner, "plan_route", boom)
+    sc = load_scenario("A")
+    with pytest.raises(ScenarioError, match=r"start lists 2 positions for 3 robots: give one \(x, y\) per robot"):
+        build_problem(sc, start=[[2.0, 4.0], [3.2, 4.0]])
+    with pytest.raises(ScenarioError, match="start lists 3 positions for 4 robots"):
+        build_problem(sc, n_robots=4, start=[[2.0, 4.0], [3.2, 4.0], [4.4, 4.0]])
