@@ -59,8 +59,10 @@ def test_build_problem_rejects_unknown_parameters_and_bad_start():
         build_problem(sc, overrides={"kv0": 1.0}, path_iterations=200)
     with pytest.raises(ScenarioError, match="inside an"):
         build_problem(sc, start=[[5.0, 5.0], [6.0, 6.0], [7.0, 7.0]], path_iterations=200)
-    with pytest.raises(ScenarioError, match="3 finite"):
+    with pytest.raises(ScenarioError, match="start lists 1 position for 3 robots"):
         build_problem(sc, start=[[2.0, 5.0]], path_iterations=200)
+    with pytest.raises(ScenarioError, match=r"start must be 3 \(x, y\) positions \[m\], got shape \(3, 3\)"):
+        build_problem(sc, start=np.ones((3, 3)), path_iterations=200)
 
 
 def test_plan_verdict_is_taken_from_recorded_states():

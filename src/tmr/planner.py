@@ -226,11 +226,19 @@ def build_problem(
     if path_iterations is not None:
         path_params = replace(path_params, path_iterations=int(path_iterations))
     N = int(n_robots if n_robots is not None else scenario.n_robots)
-    if start is not None and np.shape(start) != (N, 2):  # before the route: a start never changes N by itself
-        raise ScenarioError(
-            f"start lists {len(np.atleast_2d(start))} positions for {N} robots: give one (x, y) per robot, or "
-            f"n_robots={len(np.atleast_2d(start))}"
-        )
+    if start is not None:  # before the route: a start never changes N by itself
+        try:
+            start = np.asarray(start, dtype=float)
+        except (TypeError, ValueError):
+            raise ScenarioError(f"start must be {N} (x, y) positions [m], got {start!r}") from None
+        k = len(np.atleast_2d(start))
+        if start.shape != (N, 2):
+            raise ScenarioError(
+                f"start lists {k} position{'s' if k != 1 else ''} for {N} robots: give one (x, y) per robot, or "
+                f"n_robots={k}"
+                if start.ndim == 2 and start.shape[1] == 2
+                else f"start must be {N} (x, y) positions [m], got shape {start.shape}"
+            )
     chain = Chain(N, base=scenario.base)
     limits = span_limits(N, chain_params)
     env = scenario.environment
