@@ -80,9 +80,10 @@ def test_under_constrained_description_exits_2(tmp_path, capsys):
     assert "free bodies" in capsys.readouterr().err
 
 
-def test_target_beyond_reach_exits_1_before_control(tmp_path, capsys, monkeypatch):
+def test_target_beyond_reach_exits_2_before_control_writing_nothing(tmp_path, capsys, monkeypatch):
     """Step 2 of (+0.15 m in x, y, z) puts the platform at z = 0.8 m; the arms (0.447 m from elbows at z = 0.3 m)
-    reach z = 0.747 m: refused with the reason before any IK step, only summary.json written."""
+    reach z = 0.747 m: proven impossible before any IK step, so refused like bad input: exit 2, one line with the
+    reason, nothing written (no summary.json) and an older run's files in --out left as they were."""
     import tmr.ccma.control as control
 
     def boom(*a, **k):
@@ -90,17 +91,17 @@ def test_target_beyond_reach_exits_1_before_control(tmp_path, capsys, monkeypatc
 
     monkeypatch.setattr(control, "track", boom)
     code, out = _run(tmp_path, "far", "--path", "combined", "--steps", "2", "--step", "0.15")
-    assert code == 1
-    assert sorted(p.name for p in out.iterdir()) == [".tmr-outputs.json", "summary.json"]
-    summary = json.loads((out / "summary.json").read_text())
-    reach = summary["reach"]
-    assert summary["refused"] and not summary["all_reached"] and not reach["ok"]
-    assert reach["step"] == 2 and reach["first_step"] == 2 and reach["steps_beyond"] == 1
-    arm = np.hypot(0.4, 0.2)
-    assert reach["excess_m"] == pytest.approx(0.5 - arm, abs=2e-6)
-    assert reach["ee_height_range_m"][1] == pytest.approx(0.3 + arm, abs=2e-6)
+    assert code == 2 and not out.exists()
     err = capsys.readouterr().err
+    arm = np.hypot(0.4, 0.2)
+    assert err.count("\n") == 1 and err.startswith("error: path refused before control: ")
     assert f"target 2 is {0.5 - arm:.3g} m beyond the reach of the linkage" in err
+    old = tmp_path / "old"
+    monkeypatch.undo()
+    assert _run(tmp_path, "old", "--path", "line", "--steps", "1", "--no-plots")[0] == 0  # an older run of tmr
+    before = {p.name: p.read_bytes() for p in old.iterdir()}
+    code, _ = _run(tmp_path, "old", "--path", "combined", "--steps", "2", "--step", "0.15")
+    assert code == 2 and {p.name: p.read_bytes() for p in old.iterdir()} == before  # refused: nothing touched
 
 
 def test_default_demo_bends_the_joints(tmp_path, capsys):

@@ -109,6 +109,16 @@ def _garbage_yaml(tmp_path: Path) -> Path:
         (["--scenario", "A", "--start", "2,5;3,5;3.5,5"], "spans 0.500 m, outside its limits"),
         (["--scenario", "A", "--start", "2,5;3,5;9,9"], "spans 7.211 m"),
         (["--scenario", "A", "--start", "2,5;3,5;2.2,5.8"], "nearer than 2r"),
+        (
+            ["--scenario", "A", "--start", "2,4;3.2,4"],
+            "error: --start lists 2 positions but scenario A has 3 robots: give 3 positions, or add --robots 2 to "
+            "plan with 2\n",
+        ),
+        (
+            ["--scenario", "A", "--start", "2,4;3.2,4", "--robots", "3"],
+            "error: --start lists 2 positions but --robots is 3: give one position per robot (3), or --robots 2\n",
+        ),
+        (["--scenario", "A", "--start", "2,4;3.2,4;4.4,4", "--robots", "2"], "lists 3 positions but --robots is 2"),
     ],
 )
 def test_bad_input_clear_error_no_output(tmp_path, capsys, args, message):
@@ -373,7 +383,9 @@ def test_robots_auto_rejects_start_and_reports_every_try(tmp_path, capsys):
     p = tmp_path / "slot.geojson"
     p.write_text('{"type": "FeatureCollection", "bounds": [0, 0, 2.2, 1.4], "features": []}')
     code, _, err = run_cli(["--map", str(p), "--base", "0.6,0.7", "--goal", "1.6,0.7", "--robots", "auto"], capsys)
-    assert code == 1 and err.startswith("no plan found: --robots auto: N_min = 1; 1: ") and not out.exists()
+    # at most 3 robots of 0.5 m fit in the 1.2 m x 0.4 m of free centres (tmr.route.packing_bound): N = 4 is not tried
+    assert err.startswith("no plan found: --robots auto: N_min = 1 (at most 3 robots fit in the free area); 1: ")
+    assert code == 1 and "; 3: " in err and "; 4: " not in err and not out.exists()
 
 
 def test_unknown_parameter_refused_before_planning(tmp_path, capsys):
@@ -555,3 +567,43 @@ def test_quiet_verbose_debug_and_interrupt(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(tmr.plan, "_plan_once", crash)
     code, _, err = run_cli(["--scenario", "A", "--no-plots", "--out", str(out)], capsys)
     assert code == 1 and err.strip() == "internal error: RuntimeError: boom (rerun with --debug for the traceback)"
+
+
+@pytest.mark.parametrize("where", ["scenario", "map"])
+def test_more_robots_than_fit_refused_before_the_route_search(tmp_path, capsys, monkeypatch, where):
+    """--robots 1000: at most 112 robots of 0.5 m fit in scenario A (Oler's bound on its free space), 133 in a
+    30 m x 4 m corridor; refused with that number before any route is searched (exit 2, one line, nothing written)."""
+    import tmr.route
+
+    def boom(*a, **k):
+        raise AssertionError("searched a route for more robots than fit")
+
+    monkeypatch.setattr(tmr.route, "_along", boom)
+    args = ["--scenario", "A"] if where == "scenario" else ["--map", str(_corridor(tmp_path)), "--base", "1,2"]
+    args += ["--goal", "25,2"] if where == "map" else []
+    out = tmp_path / "out"
+    code, _, err = run_cli([*args, "--robots", "1000", "--out", str(out)], capsys)
+    fit, area = (112, 96.7) if where == "scenario" else (133, 119.9)
+    assert code == 2 and not out.exists()
+    assert err == (
+        f"error: 1000 robots do not fit: at most {fit} robots of radius 0.5 m fit in the free area ({area} m² "
+        f"reachable from the anchor; robots 1 m apart pack at best hexagonally); rerun with --robots {fit} or fewer\n"
+    )
+
+
+def test_start_count_rule_on_a_map_and_in_the_route_hint(tmp_path, capsys):
+    """A --map run plans 3 robots unless --robots says otherwise, so a 2-position --start is refused naming both
+    numbers; a refusal for too few robots with a --start asks for that many positions too (its --robots alone
+    would be refused by the start-count rule)."""
+    out = tmp_path / "out"
+    args = ["--map", str(_corridor(tmp_path)), "--base", "1,2", "--goal", "25,2", "--start", "2,2;3.2,2"]
+    code, _, err = run_cli([*args, "--out", str(out)], capsys)
+    assert code == 2 and not out.exists()
+    assert err == (
+        "error: --start lists 2 positions but a --map run without --robots plans 3 robots: give 3 positions, or add "
+        "--robots 2 to plan with 2\n"
+    )
+    code, _, err = run_cli([*args, "--robots", "2", "--out", str(out)], capsys)
+    assert code == 2 and not out.exists()
+    assert err.startswith("error: the goal needs at least 5 robots: ")
+    assert err.endswith("; rerun with --robots 5 and 5 --start positions (or none: computed)\n")

@@ -59,8 +59,10 @@ def test_build_problem_rejects_unknown_parameters_and_bad_start():
         build_problem(sc, overrides={"kv0": 1.0}, path_iterations=200)
     with pytest.raises(ScenarioError, match="inside an"):
         build_problem(sc, start=[[5.0, 5.0], [6.0, 6.0], [7.0, 7.0]], path_iterations=200)
-    with pytest.raises(ScenarioError, match="3 finite"):
+    with pytest.raises(ScenarioError, match="start lists 1 position for 3 robots"):
         build_problem(sc, start=[[2.0, 5.0]], path_iterations=200)
+    with pytest.raises(ScenarioError, match=r"start must be 3 \(x, y\) positions \[m\], got shape \(3, 3\)"):
+        build_problem(sc, start=np.ones((3, 3)), path_iterations=200)
 
 
 def test_plan_verdict_is_taken_from_recorded_states():
@@ -168,3 +170,19 @@ def test_horizon_warm_start_puts_the_followers_on_the_tether_tasks(monkeypatch):
     _, fallback, _ = planner._horizon_warm_start(problem, progress=False)
     assert fallback.success and "without them it failed: made to fail" in fallback.diagnostics["references_note"]
     np.testing.assert_array_equal(fallback.robots, routed.robots)
+
+
+def test_a_start_of_another_count_is_refused_before_the_route(monkeypatch):
+    """build_problem(start=2 positions) on a 3-robot scenario: the start never changes N by itself; refused naming
+    both counts, before any route is searched."""
+    import tmr.planner
+
+    def boom(*a, **k):
+        raise AssertionError("searched a route for a start of the wrong count")
+
+    monkeypatch.setattr(tmr.planner, "plan_route", boom)
+    sc = load_scenario("A")
+    with pytest.raises(ScenarioError, match=r"start lists 2 positions for 3 robots: give one \(x, y\) per robot"):
+        build_problem(sc, start=[[2.0, 4.0], [3.2, 4.0]])
+    with pytest.raises(ScenarioError, match="start lists 3 positions for 4 robots"):
+        build_problem(sc, n_robots=4, start=[[2.0, 4.0], [3.2, 4.0], [4.4, 4.0]])

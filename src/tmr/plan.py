@@ -145,7 +145,12 @@ def build_parser() -> argparse.ArgumentParser:
     src.add_argument("--bounds", help="room bounds xmin,ymin,xmax,ymax for a GeoJSON/WKT --map")
     src.add_argument("--base", type=_xy, help="tether anchor X,Y [m]")
     src.add_argument("--goal", type=_xy, help="leader goal X,Y [m]")
-    src.add_argument("--start", type=_points, help="robot start positions 'x1,y1;x2,y2;...' [m] (default: computed)")
+    src.add_argument(
+        "--start",
+        type=_points,
+        help="robot start positions 'x1,y1;x2,y2;...' [m], one per robot (N: --robots, else the scenario's; "
+        "default: computed)",
+    )
     src.add_argument(
         "--robots",
         type=_robots,
@@ -214,6 +219,30 @@ def robot_radius(args: argparse.Namespace) -> float | None:
     return given.pop() if given else None
 
 
+#: Robots of a ``--map`` run without ``--robots`` (a scenario file says its own, 3 by default).
+MAP_ROBOTS = 3
+
+
+def check_start_count(args: argparse.Namespace, scenario_robots: int, owner: str) -> None:
+    """``--start`` lists one position per robot: N from ``--robots N``, else the scenario's own count
+    (``scenario_robots``; ``owner`` says whose, e.g. "scenario A has"). TmrError (exit 2) naming both numbers and the
+    fix otherwise: a shorter or longer list never changes N by itself."""
+    if args.start is None or args.robots == "auto":  # auto with --start is refused on its own
+        return
+    k = len(args.start)
+    if isinstance(args.robots, int):
+        if k != args.robots:
+            raise TmrError(
+                f"--start lists {k} position{'s' if k != 1 else ''} but --robots is {args.robots}: give one "
+                f"position per robot ({args.robots}), or --robots {k}"
+            )
+    elif k != scenario_robots:
+        raise TmrError(
+            f"--start lists {k} position{'s' if k != 1 else ''} but {owner} {scenario_robots} robots: give "
+            f"{scenario_robots} positions, or add --robots {k} to plan with {k}"
+        )
+
+
 def load_inputs(args: argparse.Namespace) -> Any:
     """Scenario object from the arguments (built-in, TOML, or map + base + goal)."""
     from dataclasses import replace
@@ -234,12 +263,14 @@ def load_inputs(args: argparse.Namespace) -> Any:
             except ValueError as exc:
                 raise TmrError(f"--bounds must be xmin,ymin,xmax,ymax, got {args.bounds!r}") from exc
             kwargs["bounds"] = b
-        n = args.robots if isinstance(args.robots, int) else (len(args.start) if args.start is not None else 3)
+        n = args.robots if isinstance(args.robots, int) else MAP_ROBOTS
+        check_start_count(args, n, "a --map run without --robots plans")
         if r is not None:
             kwargs["safety_radius"] = r
         sc = scenario_from_map(args.map, args.base, args.goal, start=args.start, n_robots=n, **kwargs)
     else:
         sc = load_scenario(args.scenario or "A", safety_radius=r)
+        check_start_count(args, sc.n_robots, f"scenario {sc.name} has")
         changes: dict[str, Any] = {}
         if args.base is not None:
             changes["base"] = np.array(args.base)
@@ -393,7 +424,9 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
     """The route and the robots it needs, before the planner (and its solvers) are even imported.
 
     Returns the route and the N to plan with (``args.robots``; its N_min for ``auto``). Raises
-    :class:`tmr.route.NoRouteError` / :class:`tmr.route.TooFewRobotsError` (exit 2) for a task proven impossible.
+    :class:`tmr.route.NoRouteError` / :class:`tmr.route.TooFewRobotsError` / :class:`tmr.route.TooManyRobotsError`
+    (exit 2) for a task proven impossible: no free route, fewer robots than the route needs, or more than fit in
+    the free space at once (before the route search).
     """
     from tmr.params import ChainParams, PathParams, PinvParams, QPParams, TaskParams, TimeParams, apply_overrides
     from tmr.route import TooFewRobotsError, plan_route
@@ -407,9 +440,7 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
             chain_params = params
     if rest:
         raise TmrError(f"unknown parameter(s) {sorted(rest)}; the names are the fields of tmr.params")
-    n = args.robots if isinstance(args.robots, int) else scenario.n_robots
-    if args.start is not None and args.robots is None:
-        n = len(args.start)
+    n = args.robots if isinstance(args.robots, int) else scenario.n_robots  # --start has n positions (load_inputs)
     rt = plan_route(
         scenario.environment,
         scenario.base,
@@ -422,6 +453,8 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
     why = rt.refusal(n)
     # a search verdict (N_min at the route's resolution) binds only the route-guided planner from its own start
     if why is not None and (n < rt.n_lower or (args.route == "shortest" and args.start is None)):
+        if args.start is not None:  # --robots N takes N start positions (check_start_count)
+            why += f" and {rt.n_min} --start positions (or none: computed)"
         raise TooFewRobotsError(why, rt.n_min, proven=n < rt.n_lower)
     return rt, n
 
@@ -517,8 +550,12 @@ def _main(args: argparse.Namespace) -> int:
 
             auto_note = None
             if args.robots == "auto":
+                from tmr.route import packing_bound
+
                 tried = []
-                last = rt.n_route + AUTO_EXTRA  # n_route ≥ n_min
+                fit = packing_bound(env, scenario.base).n_max  # no more robots than fit in the free space at once
+                last = min(rt.n_route + AUTO_EXTRA, fit)  # n_route ≥ n_min
+                capped = f" (at most {fit} robots fit in the free area)" if last < rt.n_route + AUTO_EXTRA else ""
                 problem = None
                 for n in range(rt.n_min, last + 1):
                     try:
@@ -530,7 +567,7 @@ def _main(args: argparse.Namespace) -> int:
                     tried.append(f"{n}: {'planned' if plan.success else _short(plan.failure)}")
                     if plan.success:
                         break
-                summary_line = f"--robots auto: N_min = {rt.n_min}; " + "; ".join(tried)
+                summary_line = f"--robots auto: N_min = {rt.n_min}{capped}; " + "; ".join(tried)
                 if problem is None:
                     LOG.error("no plan found: %s", summary_line)
                     return 1

@@ -36,7 +36,7 @@ from tmr.params import (
 )
 from tmr.path import Trajectory, leader_trajectory, path_length, plan_leader_path, time_law
 from tmr.references import ChainReference, chain_reference, start_placement
-from tmr.route import Route, TooFewRobotsError, plan_route
+from tmr.route import Route, TooFewRobotsError, check_fit, plan_route
 from tmr.scenario import Scenario
 from tmr.spans import span_limits
 from tmr.tasks import (
@@ -201,6 +201,7 @@ def build_problem(
     Raises:
         NoRouteError: the goal is not connected to the anchor through free space.
         TooFewRobotsError: N < the robots the route needs (checked before any motion planning).
+        TooManyRobotsError: N robots do not fit in the free space at once (:func:`tmr.route.check_fit`).
     """
     if route not in ROUTES:
         raise ParameterError(f"unknown route {route!r}; available: {', '.join(ROUTES)}")
@@ -225,10 +226,25 @@ def build_problem(
     if path_iterations is not None:
         path_params = replace(path_params, path_iterations=int(path_iterations))
     N = int(n_robots if n_robots is not None else scenario.n_robots)
+    if start is not None:  # before the route: a start never changes N by itself
+        try:
+            start = np.asarray(start, dtype=float)
+        except (TypeError, ValueError):
+            raise ScenarioError(f"start must be {N} (x, y) positions [m], got {start!r}") from None
+        k = len(np.atleast_2d(start))
+        if start.shape != (N, 2):
+            raise ScenarioError(
+                f"start lists {k} position{'s' if k != 1 else ''} for {N} robots: give one (x, y) per robot, or "
+                f"n_robots={k}"
+                if start.ndim == 2 and start.shape[1] == 2
+                else f"start must be {N} (x, y) positions [m], got shape {start.shape}"
+            )
     chain = Chain(N, base=scenario.base)
     limits = span_limits(N, chain_params)
     env = scenario.environment
     goal = np.asarray(scenario.goal, float)
+    if known_route is not None:  # plan_route(robots=N) checks it first
+        check_fit(env, scenario.base, N)
     rt = known_route if known_route is not None else plan_route(env, scenario.base, goal, limits, robots=N)
     why = rt.refusal(N)
     # N_min is a verdict of the route-guided search; only the proven bound binds other routes and given starts

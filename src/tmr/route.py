@@ -52,7 +52,11 @@ __all__ = [
     "ROUTE_MARGIN",
     "STATION_STEP",
     "TooFewRobotsError",
+    "TooManyRobotsError",
+    "Packing",
+    "check_fit",
     "guide_arcs",
+    "packing_bound",
     "plan_route",
     "point_at",
     "proven_too_few",
@@ -105,6 +109,15 @@ class TooFewRobotsError(RouteVerdict):
         super().__init__(message)
         self.needed = needed
         self.proven = proven
+
+
+class TooManyRobotsError(RouteVerdict):
+    """More robots than can stand in the free space at once (:func:`packing_bound`): proven, exit 2. ``fit``: the
+    most that may fit."""
+
+    def __init__(self, message: str, fit: int) -> None:
+        super().__init__(message)
+        self.fit = fit
 
 
 @dataclass(frozen=True)
@@ -630,6 +643,73 @@ def _same_component(env: Any, a: Array, b: Array) -> bool:
     return bool(ra >= 0 and ra == rb)
 
 
+#: Slack s [m] of :func:`packing_bound`: a plan that passes the checks keeps its robots within s of the free space and
+#: at least 2r − s apart (the checks' tolerance, :func:`tmr.metrics.evaluate`, is 1e-6 m; s also absorbs rounding).
+PACKING_SLACK = 1e-3
+
+
+class Packing(NamedTuple):
+    """An upper bound on how many robots fit in the free space at once (:func:`packing_bound`).
+
+    Attributes:
+        n_max: no more than this many robots fit.
+        area: the area [m²] the robots' discs can cover: the free space reachable from the anchor grown back by r
+            (the room's floor minus the obstacles, less the gaps too narrow for a robot).
+        by: ``"area"`` (disjoint discs) or ``"hexagonal"`` (Oler's bound on the convex hull), whichever is lower.
+    """
+
+    n_max: int
+    area: float
+    by: str
+
+
+def packing_bound(env: Any, base: ArrayLike) -> Packing:
+    """How many robots of radius r can stand at once in the free space the anchor ``base`` reaches: a proof, not a
+    search (a few milliseconds).
+
+    Every robot of a plan that passes the checks stands in the free space F (the room eroded by r minus the
+    obstacles grown by r, ``env.free``) and keeps 2r from every other robot, both up to the slack s
+    (``PACKING_SLACK``); its tether chain joins it to the anchor inside F, so it lies in the connected piece F_a
+    of F ⊕ s that holds the anchor. With ρ = r − s/2 and d = 2r − s, the minimum of two bounds:
+
+    * area: the open discs of radius ρ round the robots are disjoint and lie in F_a ⊕ (r + s/2), so
+      N π ρ² ≤ area(F_a ⊕ (r + s/2)); the buffer is taken with radius (r + s/2) / cos(π/64) so that its polygon
+      (16 segments per quarter circle, vertices on the circle) contains the round one;
+    * hexagonal (Oler 1961, "An inequality in the geometry of numbers", Acta Math. 105): points pairwise ≥ d apart
+      in a compact convex set K number at most 2/√3 · A(K)/d² + P(K)/(2d) + 1; K = the convex hull of F_a.
+    """
+    r = float(env.safety_radius)
+    s = PACKING_SLACK
+    p = shapely.Point(np.asarray(base, dtype=float))
+    parts = [g for g in shapely.get_parts(env.free.buffer(s, quad_segs=QUAD_SEGS)) if g.covers(p)]
+    piece = parts[0] if parts else env.free.buffer(s, quad_segs=QUAD_SEGS)  # the anchor is in F (checked before)
+    rho, d = r - s / 2, 2 * r - s
+    area = float(piece.buffer((r + s / 2) / math.cos(math.pi / 64), quad_segs=16).area)
+    by_area = math.floor(area / (math.pi * rho * rho) + 1e-9)
+    hull = piece.convex_hull
+    by_hex = math.floor(2 / math.sqrt(3) * hull.area / (d * d) + hull.length / (2 * d) + 1 + 1e-9)
+    return Packing(min(by_area, by_hex), area, "area" if by_area <= by_hex else "hexagonal")
+
+
+def check_fit(env: Any, base: ArrayLike, robots: int) -> None:
+    """:class:`TooManyRobotsError` if ``robots`` robots cannot stand in the free space at once
+    (:func:`packing_bound`), naming how many may."""
+    fit = packing_bound(env, base)
+    if robots <= fit.n_max:
+        return
+    r = float(env.safety_radius)
+    how = (
+        f"each robot covers πr² = {math.pi * r * r:.3f} m²"
+        if fit.by == "area"
+        else f"robots {2 * r:g} m apart pack at best hexagonally"
+    )
+    bound = f"at most {fit.n_max} robots of radius {r:g} m fit in the free area ({fit.area:.1f} m² reachable from "
+    bound += f"the anchor; {how})"
+    raise TooManyRobotsError(
+        f"{robots} robots do not fit: {bound}; rerun with --robots {fit.n_max} or fewer", fit.n_max
+    )
+
+
 def plan_route(
     env: Any,
     base: ArrayLike,
@@ -647,11 +727,11 @@ def plan_route(
         base, goal: (2,) positions [m].
         span_limits: (N, 2) [d_lo, d_max] per tether [m] (the first row is the anchor tether), or (2,) for all.
         margin: δ [m] the route keeps from the obstacles grown by r; smaller margins are tried in narrow passages.
-        robots: the chain's N, if known: when the route at ``margin`` needs more robots than that, the routes with
-            the smaller margins (δ/2, ``NARROW_MARGIN``, then ``RETRY_MARGIN``: through narrower passages, often
-            shorter) are tried
-            too and the one needing the fewest robots is returned, unless N is first proven too few round the
-            corners (:mod:`tmr.reach`). Without it, ``n_lower`` is raised to ``n_min`` when N_min − 1 robots are
+        robots: the chain's N, if known: refused first if more than fit in the free space (:func:`check_fit`); when
+            the route at ``margin`` needs more robots than that, the routes with the smaller margins (δ/2,
+            ``NARROW_MARGIN``, then ``RETRY_MARGIN``: through narrower passages, often shorter) are tried too and the
+            one needing the fewest robots is returned, unless N is first proven too few round the corners
+            (:mod:`tmr.reach`). Without it, ``n_lower`` is raised to ``n_min`` when N_min − 1 robots are
             proven too few.
         fewest: search for the fewest robots (the corner proof, the chain off the route, :func:`tight_chain`);
             False: the route and its station chain only (``n_lower`` by length, ``n_min`` = ``n_route``), for callers
@@ -659,6 +739,8 @@ def plan_route(
 
     Raises:
         NoRouteError: base or goal outside the room or in an obstacle, or in different pieces of free space.
+        TooManyRobotsError: ``robots`` more than fit in the free space at once (:func:`check_fit`), before any
+            search.
     """
     t0 = time.perf_counter()
     base = _check_point(env, base, "anchor")
@@ -673,6 +755,8 @@ def plan_route(
             f"no free route from the anchor {_xy(base)} to the goal {_xy(goal)}: the "
             f"obstacles grown by the safety radius {env.safety_radius:g} m separate them"
         )
+    if robots is not None:  # before any search: more robots than fit in the room at once (a proof, milliseconds)
+        check_fit(env, base, robots)
     # lower bound: the shortest path in a region that contains the free space (grown by t, then simplified)
     lower = _Graph(env, 0.0, outward=True).shortest(base, goal)
     L_lower = float(guide_arcs(lower)[-1]) if lower is not None else 0.0

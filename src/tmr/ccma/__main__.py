@@ -13,10 +13,11 @@ run that this run does not write (e.g. the figures under ``--no-plots``) are del
 Everything is deterministic except the timings (``summary.json`` "timing" and ``convergence.png``): the same inputs
 give the same trajectory bytes. Nothing in this command is random, so there is no ``--seed``.
 
-Exit codes: 0 every target reached; 1 a target beyond the reach of the linkage (found before control: only
-``summary.json`` is written, with the reason) or tracked but some target missed (outputs written, reason printed); 2 bad
-input (nothing written), including an ``--out`` that is an existing file or cannot be created or written (checked
-first) and a path of more than :data:`tmr.ccma.paths.MAX_STEPS` targets (checked before anything is allocated).
+Exit codes: 0 every target reached; 1 tracked but some target missed (outputs written, reason printed); 2 bad input
+or a path proven impossible before control (one line, nothing written): an ``--out`` that is an existing file or
+cannot be created or written (checked first), a path of more than :data:`tmr.ccma.paths.MAX_STEPS` targets (checked
+before anything is allocated), or a target beyond the reach of the linkage or past a singular configuration of a leg
+(:mod:`tmr.ccma.reach`, checked before any IK step: :class:`tmr.ccma.errors.ReachError`).
 """
 
 from __future__ import annotations
@@ -148,6 +149,7 @@ def run(args: argparse.Namespace) -> int:
     from tmr.ccma.angles import joint_angles, joint_ranges, rotary_joints
     from tmr.ccma.control import CONDITION_LIMIT, reached, track
     from tmr.ccma.energy import EnergyModel
+    from tmr.ccma.errors import ReachError
     from tmr.ccma.paths import make_path
     from tmr.ccma.reach import check_reach, height_range
     from tmr.ccma.sim import end_effector_pose, reference_state
@@ -174,6 +176,8 @@ def run(args: argparse.Namespace) -> int:
         amplitude=args.amplitude,
     )
     verdict = check_reach(model.system, path.positions, path.rotations)
+    if not verdict.ok:  # proven before any IK step: one line, nothing written (like any task proven impossible)
+        raise ReachError(f"path refused before control: {verdict.message()}", verdict)
     z_lo, z_hi = height_range(model.system)
     reach = {
         "ok": verdict.ok,
@@ -182,25 +186,6 @@ def run(args: argparse.Namespace) -> int:
         "min_margin_m": float(verdict.margin.min()),
         "message": verdict.message(),
     }
-    if not verdict.ok:
-        reach.update(
-            step=verdict.step,
-            leg=verdict.leg,
-            excess_m=verdict.excess,
-            rise_m=verdict.rise,
-            limit_m=verdict.limit,
-            first_step=verdict.first,
-            steps_beyond=verdict.count,
-        )
-        _write_outputs(
-            out,
-            {
-                "summary.json": json.dumps(json_safe(_refusal(model, args, path, reach)), indent=2, allow_nan=False)
-                + "\n"
-            },
-        )
-        LOG.error("path REFUSED before control: %s", verdict.message())
-        return 1
     n_snap = 5
     res = track(
         model, path.positions, path.rotations, state=st0, gtol=args.gtol, keep_states=True, progress=progress_enabled()
@@ -335,19 +320,6 @@ def _miss_reason(res: Any, ok: np.ndarray) -> str:
             f"the linkage cannot be followed through it"
         )
     return f"{len(missed)} target(s) missed, first at step {k + 1}: {'; '.join(why)}"
-
-
-def _refusal(model: Any, args: argparse.Namespace, path: Any, reach: dict[str, Any]) -> dict[str, Any]:
-    """summary.json of a path refused before control (a target beyond the reach of the linkage)."""
-    return {
-        "system": model.system.name,
-        "path": args.path,
-        "steps": len(path.positions),
-        "controls": model.nu,
-        "all_reached": False,
-        "refused": True,
-        "reach": reach,
-    }
 
 
 def _write_outputs(

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from tmr.errors import TmrError
 
-__all__ = ["AssemblyError", "CcmaError", "ConvergenceError", "DescriptionError"]
+__all__ = ["AssemblyError", "CcmaError", "ConvergenceError", "DescriptionError", "ReachError"]
 
 
 class CcmaError(TmrError):
@@ -30,3 +32,13 @@ class AssemblyError(CcmaError):
 
 class ConvergenceError(CcmaError):
     """Newton's method on the constraint energy did not converge (the chain may be at a singular configuration)."""
+
+
+class ReachError(CcmaError):
+    """A target of the path is proven out of the linkage's reach before any IK step (:func:`tmr.ccma.reach.check_reach`:
+    beyond a leg's span, or past the singular configuration its tracking cannot cross); the command line exits 2 and
+    writes nothing. ``verdict``: the :class:`tmr.ccma.reach.ReachVerdict` (which target, leg, by how much)."""
+
+    def __init__(self, message: str, verdict: Any = None) -> None:
+        super().__init__(message)
+        self.verdict = verdict

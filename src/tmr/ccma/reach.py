@@ -23,7 +23,8 @@ prismatic joint has no rigid span and gets no bound; neither does an agent whose
 through other agents.
 
 :func:`check_reach` returns a :class:`ReachVerdict` for all targets of a path: the first target outside the bound,
-the leg and by how much (the CLI turns it into exit 1 before any IK step), and the smallest margin of every target.
+the leg and by how much (the CLI refuses the path with exit 2 before any IK step, writing nothing), and the smallest
+margin of every target.
 """
 
 from __future__ import annotations
