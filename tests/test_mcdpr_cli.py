@@ -121,7 +121,7 @@ def test_non_utf8_robot_exit_2(tmp_path, capsys) -> None:
     rob = tmp_path / "r.toml"
     rob.write_bytes(b'name = "caf\xe9"\n')
     assert main(["plan", "--robot", str(rob), "--out", str(tmp_path / "out")]) == 2
-    assert "cannot read robot TOML" in capsys.readouterr().err
+    assert "not a UTF-8 text file" in capsys.readouterr().err
 
 
 def test_out_is_a_file_exit_2_before_planning(tmp_path, capsys, monkeypatch) -> None:
@@ -168,7 +168,7 @@ def test_write_failure_exit_2_creates_nothing(tmp_path, capsys, monkeypatch) -> 
     "args, match",
     [
         (["--scene", "nope"], "no scene"),
-        (["--d-base", "-1"], "positive"),
+        (["--d-base", "-1"], "--d-base: must be a finite number > 0"),
         (["--external", "1,2"], "FX,FY,FZ"),
         (["--d-base", "0.1", "--min-step", "0.2"], "min-step"),
     ],
