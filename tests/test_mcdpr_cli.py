@@ -223,3 +223,31 @@ def test_tension_lp_lowers_the_largest_tension(run_dir, tmp_path) -> None:
     assert d["samples"]["platform"] == ref["samples"]["platform"]  # same motion, other tensions
     t, t0 = np.array(d["samples"]["tensions"]), np.array(ref["samples"]["tensions"])
     assert np.all(t.max(axis=1) <= t0.max(axis=1) + 1e-7)
+
+
+@pytest.mark.parametrize("flag", ["--robot", "--scene"])
+def test_directory_or_random_bytes_as_robot_or_scene(tmp_path, capsys, flag) -> None:
+    junk = tmp_path / "junk.toml"
+    junk.write_bytes(bytes(range(256)) * 3)
+    for path, words in ((tmp_path, "is a directory"), (junk, "not a UTF-8 text file")):
+        assert main(["plan", flag, str(path), "--out", str(tmp_path / "out")]) == 2
+        err = capsys.readouterr().err
+        assert words in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_empty_robot_file_is_refused_not_the_default_robot(tmp_path, capsys) -> None:
+    rob = tmp_path / "r.toml"
+    rob.write_text("# nothing yet\n")
+    assert main(["plan", "--robot", str(rob), "--out", str(tmp_path / "out")]) == 2
+    assert "the robot file is empty" in capsys.readouterr().err and not (tmp_path / "out").exists()
+
+
+def test_workspace_no_plots(tmp_path, capsys) -> None:
+    out = tmp_path / "ws"
+    out.mkdir()
+    (out / "workspace.png").write_bytes(b"older run")
+    assert main(["workspace", "--cell", "0.2", "--no-plots", "--out", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["workspace.csv", "workspace.json"]
+    stdout = capsys.readouterr().out
+    assert "wrote workspace.json, workspace.csv" in stdout and "N at (" in stdout  # max μ at (x, y), mm
