@@ -219,3 +219,20 @@ def test_out_where_nothing_can_be_written_exit_2_before_tracking(capsys, monkeyp
     monkeypatch.setattr(control, "track", no_track)
     assert main(["run", "--no-plots", "--out", "/proc/tmr-out"]) == 2
     assert "cannot write in /proc" in capsys.readouterr().err
+
+
+def test_description_directory_or_random_bytes_exit_2(tmp_path, capsys):
+    junk = tmp_path / "junk.toml"
+    junk.write_bytes(bytes(range(256)) * 3)
+    for path, words in ((tmp_path, "is a directory"), (junk, "not a UTF-8 text file")):
+        code, out = _run(tmp_path, "out", "--description", str(path))
+        err = capsys.readouterr().err
+        assert code == 2 and words in err and len(err.strip().splitlines()) == 1 and not out.exists(), err
+
+
+def test_no_seed_ccma_is_deterministic(tmp_path, capsys):
+    """ccma run has nothing random: no --seed (tmr --help says which commands take it)."""
+    with pytest.raises(SystemExit) as exc:
+        main(["run", "--seed", "1"], prog="tmr ccma")
+    assert exc.value.code == 2
+    assert capsys.readouterr().err.strip() == "tmr ccma: error: unrecognized arguments: --seed 1 (see tmr ccma --help)"

@@ -69,7 +69,7 @@ def test_not_a_run_dir(tmp_path, capsys):
 def test_bad_rate_is_a_usage_error(run_dir, capsys):
     with pytest.raises(SystemExit) as exc:
         main([str(run_dir), "--rate", "0"])
-    assert exc.value.code == 2 and "rate must be a finite number > 0 Hz" in capsys.readouterr().err
+    assert exc.value.code == 2 and "--rate: must be a finite number > 0, got '0'" in capsys.readouterr().err
 
 
 def test_module_entry_point_help():

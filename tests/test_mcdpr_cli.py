@@ -126,7 +126,7 @@ def test_non_utf8_robot_exit_2(tmp_path, capsys) -> None:
     rob = tmp_path / "r.toml"
     rob.write_bytes(b'name = "caf\xe9"\n')
     assert main(["plan", "--robot", str(rob), "--out", str(tmp_path / "out")]) == 2
-    assert "cannot read robot TOML" in capsys.readouterr().err
+    assert "not a UTF-8 text file" in capsys.readouterr().err
 
 
 def test_out_is_a_file_exit_2_before_planning(tmp_path, capsys, monkeypatch) -> None:
@@ -173,7 +173,7 @@ def test_write_failure_exit_2_creates_nothing(tmp_path, capsys, monkeypatch) -> 
     "args, match",
     [
         (["--scene", "nope"], "no scene"),
-        (["--d-base", "-1"], "positive"),
+        (["--d-base", "-1"], "--d-base: must be a finite number > 0"),
         (["--external", "1,2"], "FX,FY,FZ"),
         (["--d-base", "0.1", "--min-step", "0.2"], "min-step"),
     ],
@@ -228,3 +228,31 @@ def test_tension_lp_lowers_the_largest_tension(run_dir, tmp_path) -> None:
     assert d["samples"]["platform"] == ref["samples"]["platform"]  # same motion, other tensions
     t, t0 = np.array(d["samples"]["tensions"]), np.array(ref["samples"]["tensions"])
     assert np.all(t.max(axis=1) <= t0.max(axis=1) + 1e-7)
+
+
+@pytest.mark.parametrize("flag", ["--robot", "--scene"])
+def test_directory_or_random_bytes_as_robot_or_scene(tmp_path, capsys, flag) -> None:
+    junk = tmp_path / "junk.toml"
+    junk.write_bytes(bytes(range(256)) * 3)
+    for path, words in ((tmp_path, "is a directory"), (junk, "not a UTF-8 text file")):
+        assert main(["plan", flag, str(path), "--out", str(tmp_path / "out")]) == 2
+        err = capsys.readouterr().err
+        assert words in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_empty_robot_file_is_refused_not_the_default_robot(tmp_path, capsys) -> None:
+    rob = tmp_path / "r.toml"
+    rob.write_text("# nothing yet\n")
+    assert main(["plan", "--robot", str(rob), "--out", str(tmp_path / "out")]) == 2
+    assert "the robot file is empty" in capsys.readouterr().err and not (tmp_path / "out").exists()
+
+
+def test_workspace_no_plots(tmp_path, capsys) -> None:
+    out = tmp_path / "ws"
+    out.mkdir()
+    (out / "workspace.png").write_bytes(b"older run")
+    assert main(["workspace", "--cell", "0.2", "--no-plots", "--out", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["workspace.csv", "workspace.json"]
+    stdout = capsys.readouterr().out
+    assert "wrote workspace.json, workspace.csv" in stdout and "N at (" in stdout  # max μ at (x, y), mm

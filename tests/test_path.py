@@ -96,7 +96,7 @@ def test_clearance_margin_lowered_near_a_close_start(square_env):
 
 
 def test_start_inside_obstacle_raises(square_env):
-    with pytest.raises(PathError, match=r"start \[5\.0, 5\.0\] is inside .*clearance -2\.500 m"):
+    with pytest.raises(PathError, match=r"start \(5, 5\) is inside .*clearance -2\.500 m"):
         plan_leader_path(square_env, (5.0, 5.0), (9.0, 9.0))
     with pytest.raises(PathError, match=r"goal .* inside"):
         plan_leader_path(square_env, (1.0, 1.0), (2.7, 5.0))

@@ -372,7 +372,11 @@ def test_bench_cli_writes_scores_and_timings(tmp_path, capsys):
         (["moga", "--scenario", "C", "--var", "k_v0=0.2:0.1"], "low < high"),
         (["moga", "--scenario", "C", "--var", "k_v0=a:b"], "NAME=LOW:HIGH"),
         (["bench", "--methods", "simplex"], "invalid choice"),
-        (["sensitivity", "--jobs", "0"], "at least 1"),
+        (["sensitivity", "--jobs", "0"], "--jobs: must be ≥ 1, got 0"),
+        (["moga", "--scenario", "C", "--var", "samples_per_link=5:20"], "samples_per_link is not a real number"),
+        (["bench", "--set", "path_iterations=2.5"], "takes a whole number"),
+        (["bench", "--seed", "-1"], "--seed: must be in 0"),
+        (["bench", "--connect-timeout", "nan"], "--connect-timeout: must be a finite number > 0"),
     ],
 )
 def test_bad_input_exit_2_and_no_files(tmp_path, capsys, args, message):

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 from tmr.errors import (
     InfeasibleStep,
     MapError,
+    NoPathFound,
     ParameterError,
     PathError,
     ScenarioError,
@@ -104,6 +105,7 @@ __all__ = [
     "make_qp",
     "MapError",
     "Metrics",
+    "NoPathFound",
     "ObstacleEvasion",
     "ParameterError",
     "PathError",

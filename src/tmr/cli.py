@@ -3,8 +3,9 @@
 ``tmr plan`` (= ``python -m tmr.plan``), ``tmr mcdpr plan`` (= ``python -m tmr.mcdpr plan``), ``tmr ccma run``
 (= ``python -m tmr.ccma run``), ``tmr sweep`` (= ``python -m tmr.sweep``), ``tmr export`` (= ``python -m
 tmr.export``) and ``tmr replay`` (= ``python -m tmr.replay``): the arguments after the command go to that tool
-unchanged, and its exit code is returned (0 success, 1 plan failed or check failed, 2 bad input, 130 interrupted).
-A tool's module is imported only when its command runs, so ``tmr --help`` is fast.
+unchanged (with ``prog="tmr <command>"``, the name its messages use), and its exit code is returned (0 success,
+1 plan failed or check failed, 2 bad input, 130 interrupted). A tool's module is imported only when its command
+runs, so ``tmr --help`` is fast.
 """
 
 from __future__ import annotations
@@ -39,13 +40,15 @@ def _usage() -> str:
     lines += [f"  {name:{width}s}  {what}" for name, (_, what) in COMMANDS.items()]
     lines += [
         "",
-        "Every command takes --out, --quiet/--verbose and --debug (tracebacks); the planning commands --seed and",
-        "--no-plots. Exit codes: 0 success, 1 no plan / a check failed, 2 bad input, 130 interrupted.",
+        "Every command takes --out, --quiet/--verbose, --debug (tracebacks) and --version; those that draw figures",
+        "--no-plots, those that draw a progress bar --no-progress, those with random choices (plan, mcdpr plan,",
+        "sweep) --seed, those whose output is a motion (plan, mcdpr plan, ccma run) --gif, --html and --export.",
+        "Exit codes: 0 success, 1 no plan / a check failed, 2 bad input, 130 interrupted.",
     ]
     return "\n".join(lines)
 
 
-def _load(name: str) -> Callable[[list[str]], int] | None:
+def _load(name: str) -> Callable[..., int] | None:
     module_name = COMMANDS[name][0]
     try:
         module = importlib.import_module(module_name)
@@ -84,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"tmr: error: 'tmr {name}' is not available in this version of tmr", file=sys.stderr)
         return 2
     try:
-        return int(entry(args[1:]))
+        return int(entry(args[1:], prog=f"tmr {name}"))  # the tool's messages name it as it was called
     except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
     except KeyboardInterrupt:  # a tool without tmr.console.run

@@ -4,7 +4,8 @@ Every command (``tmr plan``, ``tmr mcdpr``, ``tmr ccma``, ``tmr sweep``, and the
 
 * ``--quiet`` / ``-q``: only warnings and errors (no summary, no progress bar); ``--verbose`` / ``-v``: also debug
   details and the warnings of the numeric libraries (numpy's RuntimeWarnings and the like, hidden otherwise);
-* ``--debug``: the traceback of an error instead of the one-line message.
+* ``--debug``: the traceback of an error instead of the one-line message;
+* ``--no-progress`` where a command draws a progress bar (:func:`set_progress`).
 
 Messages go through :mod:`logging` (logger ``tmr``): information and debug lines to stdout, warnings and errors to
 stderr. :func:`run` calls a command's body and turns what it raises into the exit codes of every tmr command:
@@ -32,6 +33,7 @@ __all__ = [
     "add_manners",
     "progress_enabled",
     "run",
+    "set_progress",
     "setup_logging",
 ]
 
@@ -39,7 +41,7 @@ LOG = logging.getLogger("tmr")
 #: Exit code after Ctrl-C (128 + SIGINT, as a shell reports it).
 EXIT_INTERRUPTED = 130
 
-_state: dict[str, Any] = {"quiet": False}
+_state: dict[str, Any] = {"quiet": False, "progress": True}
 
 
 def add_manners(parser: argparse.ArgumentParser) -> None:
@@ -83,14 +85,21 @@ def setup_logging(quiet: bool = False, verbose: bool = False) -> None:
     _state["quiet"] = bool(quiet)
 
 
+def set_progress(enabled: bool) -> None:
+    """Allow (True) or forbid (False, ``--no-progress``) progress bars; set by every tmr parser
+    (:class:`tmr.cli_args.ArgumentParser`) from the arguments it parsed."""
+    _state["progress"] = bool(enabled)
+
+
 def progress_enabled(stream: Any = None) -> bool:
-    """Whether a progress bar should be drawn: ``stream`` (stderr by default) is a terminal and not ``--quiet``."""
+    """Whether a progress bar should be drawn: ``stream`` (stderr by default) is a terminal, not ``--quiet`` and not
+    ``--no-progress``."""
     stream = sys.stderr if stream is None else stream
     try:
         tty = bool(stream.isatty())
     except (AttributeError, ValueError):
         tty = False
-    return tty and not _state["quiet"]
+    return tty and not _state["quiet"] and _state["progress"]
 
 
 def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> int:

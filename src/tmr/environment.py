@@ -195,9 +195,10 @@ class Environment:
         self.obstacles: BaseGeometry = raw.intersection(self.room) if not raw.is_empty else raw
 
         if xmax - xmin <= 2 * r or ymax - ymin <= 2 * r:
+            width = f"{2 * r:g} m" if math.isfinite(2 * r) else f"2 × {r:g} m"  # 2r overflows for r ≥ 9e307
             raise MapError(
                 f"{where}: empty room: the room {xmax - xmin:g} m x {ymax - ymin:g} m leaves no free space "
-                f"for a robot of safety radius {r:g} m (needs more than {2 * r:g} m each way)"
+                f"for a robot of safety radius {r:g} m (needs more than {width} each way)"
             )
         inner = box(xmin + r, ymin + r, xmax - r, ymax - r)
         grown = self.obstacles.buffer(r, quad_segs=QUAD_SEGS) if not self.obstacles.is_empty else self.obstacles

@@ -2,6 +2,18 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
+
+def fmt_point(p: Iterable[float]) -> str:
+    """A position for a message, rounded to the millimetre: ``(3.675, 1.725)`` (never raw floats such as
+    ``3.6750000000000003``); any number of coordinates [m]."""
+    parts = []
+    for v in p:
+        text = f"{float(v):.3f}".rstrip("0").rstrip(".")
+        parts.append("0" if text in ("-0", "") else text)
+    return f"({', '.join(parts)})"
+
 
 class TmrError(Exception):
     """Base class of every error tmr raises on purpose."""
@@ -21,6 +33,11 @@ class ScenarioError(TmrError):
 
 class PathError(TmrError):
     """The leader's path cannot be planned (goal unreachable, start or goal in collision)."""
+
+
+class NoPathFound(PathError):
+    """A search (RRT*) used its whole budget without finding a path: a verdict of the search at that budget, not bad
+    input (the command line exits 1: no plan found)."""
 
 
 class InfeasibleStep(TmrError):

@@ -105,8 +105,9 @@ def load_environment(
     room = bounds if bounds is not None else geo.bounds
     if room is None:
         raise MapError(
-            f"{p}: no room bounds: pass bounds=(xmin, ymin, xmax, ymax) or put them in the file "
-            f"(GeoJSON: top-level \"bounds\" member; WKT: a '# bounds: xmin ymin xmax ymax' comment)"
+            f"{p}: no room bounds: give them (the command line's --bounds XMIN,YMIN,XMAX,YMAX, a scenario's [map] "
+            f"bounds = [xmin, ymin, xmax, ymax], Python's bounds=) or put them in the file (GeoJSON: top-level "
+            f"\"bounds\" member; WKT: a '# bounds: xmin ymin xmax ymax' comment)"
         )
     env = Environment(geo.obstacles, room, safety_radius, resolution, source=p)
     env.known_free = geo.known_free
@@ -131,7 +132,7 @@ def load_map(path: str | Path) -> MapGeometry:
     if not p.exists():
         raise MapError(f"{p}: map file not found")
     if not p.is_file():
-        raise MapError(f"{p}: not a file")
+        raise MapError(f"{p}: is a directory, not a map file" if p.is_dir() else f"{p}: not a regular file")
     suffix = p.suffix.lower()
     if suffix in (".yaml", ".yml"):
         return _load_ros_map(p)

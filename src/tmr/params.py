@@ -255,21 +255,53 @@ class QPParams:
             raise ParameterError("need clearance_rows_per_link ≥ 0 and separation_neighbours ≥ 1")
 
 
+#: Every parameter class, in the order the planner applies overrides (a name belongs to one of them).
+PARAM_CLASSES: tuple[type, ...] = (ChainParams, TimeParams, PathParams, TaskParams, PinvParams, QPParams)
+
+
+def convert_field(cls: type, name: str, value: Any) -> Any:
+    """``value`` (a number, or its text from a command line or a file) as the type of field ``name`` of ``cls``:
+    an int field takes only whole numbers (``2.5`` is refused, not truncated), a float field only finite numbers, a
+    str field text. ParameterError naming the field otherwise."""
+    default = getattr(cls(), name)
+    kind = type(default)
+    label = f"{cls.__name__}.{name}"
+    if kind is str:
+        if not isinstance(value, str):
+            raise ParameterError(f"{label} takes text, got {value!r}")
+        return value
+    if isinstance(value, bool):
+        raise ParameterError(f"{label} takes a number, got {value!r}")
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{label} takes a number, got {value!r}") from None
+    if not math.isfinite(number):
+        raise ParameterError(f"{label} must be finite, got {value!r}")
+    if kind is int:
+        if isinstance(value, str):
+            try:
+                return int(value.strip())
+            except ValueError:
+                pass
+        if not number.is_integer():
+            raise ParameterError(f"{label} takes a whole number, got {value!r}")
+        return int(value) if isinstance(value, int) else int(number)
+    return number
+
+
 def apply_overrides(obj: T, overrides: dict[str, Any], *, strict: bool = False) -> tuple[T, dict[str, Any]]:
     """Return ``obj`` with the fields named in ``overrides`` replaced, and the overrides it did not use.
 
-    With ``strict=True`` an unknown name raises ``ParameterError``. Types follow the field's default type.
+    With ``strict=True`` an unknown name raises ``ParameterError``. Types follow the field's default type
+    (:func:`convert_field`: an int field refuses 2.5).
     """
     names = {f.name: f for f in fields(obj)}  # type: ignore[arg-type]
     used: dict[str, Any] = {}
     rest: dict[str, Any] = {}
     for key, value in overrides.items():
         if key in names:
-            default = getattr(obj, key)
-            try:
-                used[key] = type(default)(value)
-            except (TypeError, ValueError) as exc:
-                raise ParameterError(f"parameter {key}={value!r} is not a valid {type(default).__name__}") from exc
+            used[key] = convert_field(type(obj), key, value)
         else:
             rest[key] = value
     if strict and rest:

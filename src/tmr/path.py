@@ -28,7 +28,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tmr.errors import ParameterError, PathError
+from tmr.errors import NoPathFound, ParameterError, PathError, fmt_point
 from tmr.splines import HermiteSpline, NotAKnotSpline
 
 Array = NDArray[np.float64]
@@ -336,8 +336,8 @@ def plan_leader_path(
 
     Raises:
         ParameterError: malformed arguments.
-        PathError: start or goal outside the room or in collision (with its clearance), or RRT* found no
-            exact solution within ``iterations``.
+        PathError: start or goal outside the room or in collision (with its clearance).
+        NoPathFound: (a PathError) RRT* found no exact solution within ``iterations`` (a verdict of the search).
     """
     start = _as_point(start, "start")
     goal = _as_point(goal, "goal")
@@ -354,7 +354,7 @@ def plan_leader_path(
         if not inside or c <= 0.0:
             where = "outside the room" if not inside else "inside an (inflated) obstacle"
             raise PathError(
-                f"{name} {p.tolist()} is {where}: clearance {c:.3f} m to the obstacles grown by the safety "
+                f"{name} {fmt_point(p)} is {where}: clearance {c:.3f} m to the obstacles grown by the safety "
                 f"radius (must be > 0); move the {name} into free space"
             )
         margin = min(margin, 0.5 * c)
@@ -368,8 +368,8 @@ def plan_leader_path(
         env, start, goal, seed=seed, iterations=iterations, margin=margin, range_=range_, simplify=simplify
     )
     if found is None:
-        raise PathError(
-            f"RRT* found no collision-free path from start {start.tolist()} to goal {goal.tolist()} in "
+        raise NoPathFound(
+            f"RRT* found no collision-free path from start {fmt_point(start)} to goal {fmt_point(goal)} in "
             f"{iterations} iterations (seed {seed}, clearance margin {margin:.3f} m): the goal may be "
             "unreachable (enclosed by obstacles, or behind a gap too narrow for the robot). Try more "
             "iterations, a smaller clearance, or a different goal"
@@ -385,7 +385,7 @@ def plan_leader_path(
         if np.all(_segment_clearance(env, path[:-1], path[1:]) > margin):
             return np.ascontiguousarray(path)
     raise PathError(  # pragma: no cover - the motion validator is exact: an inconsistent env gets here
-        f"the RRT* path from {start.tolist()} to {goal.tolist()} failed the final exact segment check; "
+        f"the RRT* path from {fmt_point(start)} to {fmt_point(goal)} failed the final exact segment check; "
         "env.is_free and env.segment_clearance disagree"
     )
 
@@ -416,7 +416,7 @@ class _ArcLengthSpline:
         if np.min(speed) < 1e-9 or np.any(turn <= 0.0):
             i = int(np.argmin(turn))
             raise ParameterError(
-                f"the waypoints turn back on themselves near {self._p(self.u_grid[i]).tolist()} (a cusp "
+                f"the waypoints turn back on themselves near {fmt_point(self._p(self.u_grid[i]))} (a cusp "
                 "of the spline); remove the reversal from the waypoints"
             )
         ds = self._integrate(self.u_grid[:-1], self.u_grid[1:])
@@ -557,7 +557,7 @@ def time_law(
         if env is not None:
             c = float(np.asarray(env.exact_clearance(pts[0]), dtype=float))
             if c < clearance:
-                raise PathError(f"the waypoint {pts[0].tolist()} has clearance {c:.3f} m < {clearance} m")
+                raise PathError(f"the waypoint {fmt_point(pts[0])} has clearance {c:.3f} m < {clearance} m")
         x = np.repeat(wp[:1], K + 1, axis=0)
         return Trajectory(t, x, np.zeros_like(x), np.zeros_like(x), wp)
 
@@ -566,7 +566,7 @@ def time_law(
         if np.any(poly < clearance):
             i = int(np.argmin(poly))
             raise PathError(
-                f"waypoint segment {i} {pts[i].tolist()} -> {pts[i + 1].tolist()} has clearance "
+                f"waypoint segment {i} {fmt_point(pts[i])} -> {fmt_point(pts[i + 1])} has clearance "
                 f"{poly[i]:.3f} m < the required {clearance} m, so no spline through the waypoints can keep "
                 "it; plan the path with a larger clearance or pass a smaller one"
             )

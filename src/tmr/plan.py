@@ -32,13 +32,12 @@ from typing import Any
 
 import numpy as np
 
-from tmr.cli_args import out_path, positive_float
-from tmr.cli_args import positive_int as _positive_int
-from tmr.console import LOG, add_manners, progress_enabled
+from tmr.cli_args import ArgumentParser, add_common, bounds, count, param, point, points, positive_float
+from tmr.console import LOG, progress_enabled
 from tmr.console import run as run_cli
-from tmr.errors import TmrError
+from tmr.errors import NoPathFound, TmrError
 from tmr.motion import chain_motion
-from tmr.views import VIEW_NAMES, add_view_args, write_views
+from tmr.views import VIEW_NAMES, write_views
 
 #: Every file ``python -m tmr.plan`` writes into ``--out`` besides the views (:data:`tmr.views.VIEW_NAMES`).
 OUTPUT_NAMES = (
@@ -62,78 +61,27 @@ OWNED_NAMES = OUTPUT_NAMES + VIEW_NAMES + ("replay",)
 VOLATILE_NAMES = ("timings.json",)
 
 
-def _xy(text: str) -> tuple[float, float]:
-    try:
-        parts = [float(v) for v in text.replace(" ", "").split(",")]
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"expected X,Y in metres, got {text!r}") from exc
-    if len(parts) != 2 or not all(np.isfinite(parts)):
-        raise argparse.ArgumentTypeError(f"expected two finite numbers X,Y, got {text!r}")
-    return parts[0], parts[1]
-
-
-def _points(text: str) -> np.ndarray:
-    pts = [_xy(p) for p in text.split(";") if p.strip()]
-    if not pts:
-        raise argparse.ArgumentTypeError("expected robot positions 'x1,y1;x2,y2;...'")
-    return np.array(pts)
-
-
 def _robots(text: str) -> int | str:
     if text.strip().lower() == "auto":
         return "auto"
     try:
-        return _positive_int(text)
+        return count(text)
     except argparse.ArgumentTypeError as exc:
-        raise argparse.ArgumentTypeError(f"expected a number of robots ≥ 1 or 'auto', got {text!r}") from exc
+        raise argparse.ArgumentTypeError(f"must be a whole number ≥ 1 or 'auto', got {text!r}") from exc
 
 
 #: ``--robots auto`` tries N_min, N_min + 1, ... up to AUTO_EXTRA robots more than the route chain needs.
 AUTO_EXTRA = 3
 
 
-def _param(text: str) -> tuple[str, float | str]:
-    """``NAME=VALUE``; a value that is not a number is kept as text and judged by :func:`check_set` (which knows
-    the parameter's type)."""
-    key, sep, value = (part.strip() for part in text.partition("="))
-    if not sep or not key or not value:
-        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, e.g. d_min=0.6, got {text!r}")
-    try:
-        val = float(value)
-    except ValueError:
-        return key, value
-    if not np.isfinite(val):
-        raise argparse.ArgumentTypeError(f"{text!r}: the value must be a finite number")
-    return key, val
+#: Default cut-off of the trajectory filter [Hz] (``--filter-cutoff``).
+FILTER_CUTOFF = 1.0
 
 
-def check_set(pairs: list[tuple[str, Any]]) -> None:
-    """Every ``--set NAME=VALUE`` names a field of the parameter classes of :mod:`tmr.params` and gives a value
-    of its type; TmrError (exit 2) naming the flag, the closest names and the expected type otherwise."""
-    import difflib
-    from dataclasses import fields
-
-    from tmr.params import ChainParams, PathParams, PinvParams, QPParams, TaskParams, TimeParams
-
-    classes = (ChainParams, TimeParams, PathParams, TaskParams, PinvParams, QPParams)
-    known = {f.name: cls for cls in classes for f in fields(cls)}
-    for key, val in pairs:
-        cls = known.get(key)
-        if cls is None:
-            close = difflib.get_close_matches(key, list(known), n=3)
-            hint = f"; did you mean {' or '.join(close)}?" if close else ""
-            raise TmrError(
-                f"--set {key}={val}: unknown parameter {key!r}{hint} (the names are the fields of "
-                f"{', '.join(c.__name__ for c in classes)} in tmr.params)"
-            )
-        default = getattr(cls(), key)
-        if isinstance(val, str) and isinstance(default, int | float) and not isinstance(default, bool):
-            raise TmrError(f"--set {key}={val}: {cls.__name__}.{key} takes a number, got {val!r}")
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="python -m tmr.plan",
+def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
+    """The parser of ``python -m tmr.plan``; ``prog``: the name it shows (``tmr plan`` through the dispatcher)."""
+    p = ArgumentParser(
+        prog=prog or "python -m tmr.plan",
         description="Plan the motion of a chain of tethered mobile robots (Caruso 2021) and write trajectories, "
         "metrics and figures.",
     )
@@ -142,12 +90,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--scenario", help="built-in scenario A, B, C, D (Caruso 2021), E (tmr's), or a path to a scenario TOML file"
     )
     src.add_argument("--map", help="map file: ROS map_server .yaml (+ .pgm), .geojson or .wkt (needs --base, --goal)")
-    src.add_argument("--bounds", help="room bounds xmin,ymin,xmax,ymax for a GeoJSON/WKT --map")
-    src.add_argument("--base", type=_xy, help="tether anchor X,Y [m]")
-    src.add_argument("--goal", type=_xy, help="leader goal X,Y [m]")
+    src.add_argument("--bounds", type=bounds, help="room bounds xmin,ymin,xmax,ymax [m] for a GeoJSON/WKT --map")
+    src.add_argument("--base", type=point, help="tether anchor X,Y [m]")
+    src.add_argument("--goal", type=point, help="leader goal X,Y [m]")
     src.add_argument(
         "--start",
-        type=_points,
+        type=points,
         help="robot start positions 'x1,y1;x2,y2;...' [m], one per robot (N: --robots, else the scenario's; "
         "default: computed)",
     )
@@ -188,23 +136,23 @@ def build_parser() -> argparse.ArgumentParser:
         help="QP solver for --method qp: osqp (persistent workspace, default) or a qpsolvers "
         "backend (daqp, proxqp, clarabel, qpsolvers-osqp, ...)",
     )
-    p.add_argument(
-        "--seed", type=int, default=0, help="seed of the leader's RRT* and of the start placement (default 0)"
-    )
-    p.add_argument("--iterations", type=_positive_int, help="RRT* iterations (default 1000)")
+    p.add_argument("--iterations", type=count, help="RRT* iterations (default 1000)")
     p.add_argument(
         "--set",
-        type=_param,
+        type=param,
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="override a parameter, e.g. --set d_min=0.6 (repeatable)",
+        help="override a parameter of tmr.params by its field name, e.g. --set d_min=0.6 (repeatable)",
     )
-    p.add_argument("--filter-cutoff", type=float, default=1.0, help="cut-off of the trajectory filter [Hz]")
-    p.add_argument("--out", type=out_path, default="runs/plan", help="output directory (default runs/plan)")
-    p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
-    add_view_args(p)  # --gif, --html, --export FORMAT (tmr.views)
-    add_manners(p)
+    p.add_argument(
+        "--filter-cutoff",
+        type=positive_float,
+        default=FILTER_CUTOFF,
+        metavar="HZ",
+        help=f"cut-off of the trajectory filter [Hz], below the Nyquist frequency 1/(2 Ts) (default {FILTER_CUTOFF:g})",
+    )
+    add_common(p, out="runs/plan", seed_help="seed of the leader's RRT* (--route rrt)")
     return p
 
 
@@ -249,7 +197,6 @@ def load_inputs(args: argparse.Namespace) -> Any:
 
     from tmr.scenario import load_scenario, scenario_from_map
 
-    check_set(args.set)
     r = robot_radius(args)  # one r: the obstacles are grown by it and the chain keeps it (tmr.scenario)
     if args.map:
         if args.scenario:
@@ -258,11 +205,7 @@ def load_inputs(args: argparse.Namespace) -> Any:
             raise TmrError("--map needs --base X,Y and --goal X,Y")
         kwargs: dict[str, Any] = {}
         if args.bounds:
-            try:
-                b = tuple(float(v) for v in args.bounds.split(","))
-            except ValueError as exc:
-                raise TmrError(f"--bounds must be xmin,ymin,xmax,ymax, got {args.bounds!r}") from exc
-            kwargs["bounds"] = b
+            kwargs["bounds"] = args.bounds
         n = args.robots if isinstance(args.robots, int) else MAP_ROBOTS
         check_start_count(args, n, "a --map run without --robots plans")
         if r is not None:
@@ -434,12 +377,18 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
 
     values = {"safety_radius": scenario.environment.safety_radius} | dict(scenario.params or {}) | dict(args.set)
     rest = dict(values)
+    made = {}
     for cls in (ChainParams, TimeParams, PathParams, TaskParams, PinvParams, QPParams):  # bad values: exit 2 now
-        params, rest = apply_overrides(cls(), rest)
-        if cls is ChainParams:
-            chain_params = params
+        made[cls], rest = apply_overrides(cls(), rest)
+    chain_params = made[ChainParams]
     if rest:
         raise TmrError(f"unknown parameter(s) {sorted(rest)}; the names are the fields of tmr.params")
+    nyquist = 0.5 / made[TimeParams].Ts
+    if not args.filter_cutoff < nyquist:  # refused before the route and the plan, not after them
+        raise TmrError(
+            f"--filter-cutoff {args.filter_cutoff:g} Hz must be below the Nyquist frequency {nyquist:g} Hz "
+            f"(Ts = {made[TimeParams].Ts:g} s)"
+        )
     n = args.robots if isinstance(args.robots, int) else scenario.n_robots  # --start has n positions (load_inputs)
     rt = plan_route(
         scenario.environment,
@@ -487,9 +436,10 @@ def check_out(out: Path) -> None:
     check(out, OWNED_NAMES)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``python -m tmr.plan`` and ``tmr plan``; returns the exit code."""
-    parser = build_parser()
+def main(argv: list[str] | None = None, prog: str | None = None) -> int:
+    """Entry point of ``python -m tmr.plan`` and ``tmr plan`` (``prog``: the name messages use); returns the exit
+    code."""
+    parser = build_parser(prog)
     args = parser.parse_args(_join_negative(list(sys.argv[1:] if argv is None else argv)))
     return run_cli(_main, args)
 
@@ -597,8 +547,8 @@ def _main(args: argparse.Namespace) -> int:
         finally:
             if pool is not None:
                 pool.close()
-    except RouteVerdict as exc:
-        if exc.proven:
+    except (RouteVerdict, NoPathFound) as exc:  # a verdict of a search (not proven impossible): exit 1
+        if getattr(exc, "proven", False):
             raise  # a TmrError: one line, exit 2 (tmr.console.run)
         LOG.error("no plan found: %s", exc)
         return 1

@@ -21,7 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tmr.chain import Chain
 from tmr.clik import Formulation, Plan, run
-from tmr.errors import ParameterError, PathError, ScenarioError
+from tmr.errors import ParameterError, PathError, ScenarioError, fmt_point
 from tmr.limits import JointBox, Limit, ObstacleClearance, RobotAcceleration, RobotSeparation, RobotSpeed
 from tmr.metrics import Metrics, evaluate, fitness
 from tmr.params import (
@@ -277,7 +277,7 @@ def build_problem(
     if np.any(clear <= 0):
         k = int(np.argmin(clear))
         raise ScenarioError(
-            f"start position of robot {k + 1} {P[k].tolist()} is inside an (inflated) obstacle "
+            f"start position of robot {k + 1} {fmt_point(P[k])} is inside an (inflated) obstacle "
             f"(clearance {clear[k]:.3f} m)"
         )
     if given:

@@ -181,13 +181,13 @@ def load_scenario(name_or_path: str | Path, safety_radius: float | None = None) 
         match = [b for b in builtins if b.lower() == name_or_path.strip().lower()]
         if match:
             return _load_toml(SCENARIO_DIR / f"{match[0]}.toml", safety_radius)
-        if not Path(name_or_path).is_file():
+        if not Path(name_or_path).exists():
             raise ScenarioError(
                 f"unknown scenario {name_or_path!r}: built-in scenarios are {', '.join(builtins)}; "
                 f"or give the path of a scenario .toml file"
             )
     path = Path(name_or_path)
-    if not path.is_file():
+    if not path.exists():
         raise ScenarioError(
             f"{path}: scenario file not found (built-in scenarios are {', '.join(builtin_scenarios())})"
         )
@@ -195,13 +195,13 @@ def load_scenario(name_or_path: str | Path, safety_radius: float | None = None) 
 
 
 def _load_toml(path: Path, safety_radius: float | None = None) -> Scenario:
+    from tmr.files import read_text
+
+    text = read_text(path, "scenario TOML", ScenarioError)  # a directory, random bytes: one line, exit 2
     try:
-        with path.open("rb") as fh:
-            doc = tomllib.load(fh)
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
-    except OSError as exc:
-        raise ScenarioError(f"{path}: cannot read scenario file: {exc.strerror or exc}") from None
     label = f"scenario file {path}"
     unknown = set(doc) - _TOP_KEYS
     if unknown:

@@ -33,13 +33,12 @@ from typing import Any
 
 import numpy as np
 
-from tmr.cli_args import out_path
+from tmr.cli_args import ArgumentParser, add_common, count
 from tmr.cli_args import positive_float as _positive
-from tmr.cli_args import positive_int as _positive_int
 from tmr.console import LOG, add_manners, progress_enabled
 from tmr.console import run as run_cli
 from tmr.motion import ccma_track_motion
-from tmr.views import VIEW_NAMES, add_view_args, write_views
+from tmr.views import VIEW_NAMES, write_views
 
 TRAJECTORY_FORMAT = "tmr-ccma-trajectory/1"
 #: Every file name ``run`` may write into ``--out``.
@@ -51,15 +50,16 @@ OUTPUT_NAMES = ("trajectory.csv", "trajectory.json", "summary.json", "mechanism.
 OWNED_NAMES = OUTPUT_NAMES + VIEW_NAMES
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
+    """The parser of ``python -m tmr.ccma``; ``prog``: the name it shows (``tmr ccma`` through the dispatcher)."""
     from tmr.ccma.paths import PATHS
 
-    p = argparse.ArgumentParser(
-        prog="python -m tmr.ccma",
+    p = ArgumentParser(
+        prog=prog or "python -m tmr.ccma",
         description="Simulate and control constrained collaborative mobile agents (Kumar 2019).",
     )
     sub = p.add_subparsers(dest="command", required=True)
-    sub.add_parser("list", help="list the shipped example systems")
+    add_manners(sub.add_parser("list", help="list the shipped example systems"))
     r = sub.add_parser("run", help="track an end-effector path and write trajectories and figures")
     src = r.add_mutually_exclusive_group()
     src.add_argument("--example", default="4dof-reduced", help="shipped example (see 'list'; default 4dof-reduced)")
@@ -75,13 +75,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--amplitude", type=_positive, default=0.2, help="tilt/roll sweep amplitude [rad] (default 0.2)")
     r.add_argument("--step", type=_positive, default=1e-3, help="translation increment per step [m] (default 0.001)")
     r.add_argument("--rot-step", type=_positive, default=0.01, help="rotation increment per step [rad] (default 0.01)")
-    r.add_argument("--steps", type=_positive_int, default=20, help="steps of line/yaw/combined paths (default 20)")
+    r.add_argument("--steps", type=count, default=20, help="steps of line/yaw/combined paths (default 20)")
     r.add_argument("--gtol", type=_positive, default=1e-9, help="BFGS tolerance on |dO/du| [m] (default 1e-9)")
     r.add_argument("--compile", action="store_true", help="compile the CasADi functions to C (cached; ~30x faster)")
-    r.add_argument("--out", type=out_path, default="runs/ccma", help="output directory (default runs/ccma)")
-    r.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
-    add_view_args(r)  # --gif, --html, --export FORMAT (tmr.views)
-    add_manners(r)
+    add_common(r, out="runs/ccma")  # no --seed: nothing in a run is random (module doc)
     return p
 
 
@@ -348,9 +345,10 @@ def _write_outputs(
         raise CcmaError(f"--out {str(out)!r}: cannot write the outputs: {exc.strerror or exc}") from exc
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``python -m tmr.ccma`` and ``tmr ccma``; returns the exit code (module doc)."""
-    args = build_parser().parse_args(argv)
+def main(argv: list[str] | None = None, prog: str | None = None) -> int:
+    """Entry point of ``python -m tmr.ccma`` and ``tmr ccma`` (``prog``: the name messages use); returns the exit
+    code (module doc)."""
+    args = build_parser(prog).parse_args(argv)
     return run_cli(_main, args)  # --quiet/--verbose/--debug, one-line errors (exit 2), Ctrl-C (130)
 
 

@@ -390,17 +390,14 @@ def load_description(source: str | Path) -> dict[str, Any]:
         label = f"example {source!r}"
     else:
         path = Path(source)
-        if not path.is_file():
+        if not path.exists():
             raise DescriptionError(
                 f"{source!r} is neither a shipped example ({', '.join(example_names())}) nor a TOML file"
             )
         label = str(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except UnicodeDecodeError as exc:
-            raise DescriptionError(f"{label}: not a UTF-8 text file ({exc.reason} at byte {exc.start})") from exc
-        except OSError as exc:
-            raise DescriptionError(f"{label}: cannot read the description: {exc.strerror or exc}") from exc
+        from tmr.files import read_text
+
+        text = read_text(path, "system description TOML", DescriptionError)
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -23,27 +23,18 @@ import argparse
 import sys
 from pathlib import Path
 
-from tmr.cli_args import out_path
-from tmr.console import LOG, add_manners, progress_enabled
+from tmr.cli_args import ArgumentParser, add_common, positive_float
+from tmr.console import LOG, progress_enabled
 from tmr.console import run as run_cli
 from tmr.errors import TmrError
 
 FORMATS = ("mcap", "sqlite3", "gif", "html")
 
 
-def _rate(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a rate in Hz, got {text!r}") from None
-    if not (v > 0 and v < float("inf")):
-        raise argparse.ArgumentTypeError(f"the rate must be a finite number > 0 Hz, got {text!r}")
-    return v
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="python -m tmr.export",
+def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
+    """The parser of ``python -m tmr.export``; ``prog``: the name it shows (``tmr export`` through the dispatcher)."""
+    p = ArgumentParser(
+        prog=prog or "python -m tmr.export",
         description="Export a tmr run directory as a ROS 2 bag (MCAP or SQLite 3, via rosbags), an animated GIF or "
         "an interactive HTML view.",
     )
@@ -55,13 +46,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="mcap (default) or sqlite3: a rosbag2 directory; gif: an animation; html: an interactive view",
     )
     p.add_argument(
-        "--out",
-        type=out_path,
-        help="where to write (default RUN_DIR/ros2_bag for a bag, RUN_DIR/motion.gif, RUN_DIR/motion.html)",
-    )
-    p.add_argument(
         "--rate",
-        type=_rate,
+        type=positive_float,
         default=10.0,
         help="stamp rate of MoPICK / CCMA samples, which carry no time [Hz] (default 10); chain plans keep their "
         "own times",
@@ -73,7 +59,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="chain runs: the checked plan (raw, default) or the low-passed positions the robots track (filtered)",
     )
     p.add_argument("--description", help="CCMA runs: the system description TOML the run was made from")
-    add_manners(p)  # --quiet/--verbose/--debug (tmr.console)
+    add_common(  # no figures, no seed (nothing random), no views: the format is --format
+        p,
+        out=None,
+        out_help="where to write (default RUN_DIR/ros2_bag for a bag, RUN_DIR/motion.gif, RUN_DIR/motion.html)",
+        plots=False,
+        views=False,
+    )
     return p
 
 
@@ -99,9 +91,10 @@ def check_out(out: Path, fmt: str) -> None:
     check(out, file=True)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``python -m tmr.export`` and ``tmr export``; returns the exit code (module doc)."""
-    args = build_parser().parse_args(argv)
+def main(argv: list[str] | None = None, prog: str | None = None) -> int:
+    """Entry point of ``python -m tmr.export`` and ``tmr export`` (``prog``: the name messages use); returns the exit
+    code (module doc)."""
+    args = build_parser(prog).parse_args(argv)
     return run_cli(_main, args)  # one-line errors (exit 2), Ctrl-C (130), --debug tracebacks
 
 

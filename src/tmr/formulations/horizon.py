@@ -1025,9 +1025,10 @@ def plan_horizon(
     attempts = [("primary", {}, False)]
     if opts.retry:
         attempts.append(("retry", dict(opts.retry_ipopt), opts.leader_tolerance == 0))
-    bar = tqdm(
-        desc="horizon",
-        unit="it",
+    bar = tqdm(  # no total: IPOPT's iterations are counted, its rounds named ("horizon NLP, round 1 (primary solve)")
+        desc="horizon NLP",
+        unit="IPOPT iteration",
+        bar_format="{desc}: {n_fmt} IPOPT iterations [{elapsed}{postfix}]",
         file=sys.stderr,
         leave=False,
         disable=not (progress and _is_terminal(sys.stderr)),
@@ -1049,7 +1050,7 @@ def plan_horizon(
                     break
                 if math.isfinite(limit):
                     extra = dict(extra, max_wall_time=float(remaining))
-                bar.set_description(f"horizon round {rnd} {label}")
+                bar.set_description_str(f"horizon NLP, round {rnd} ({label} solve)")
                 t2 = time.perf_counter()
                 callback = _IterationCallback(tr, pool, bar, f"round {rnd} {label}")
                 solver = tr.solver(obj_scale, extra, callback)

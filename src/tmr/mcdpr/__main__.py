@@ -26,14 +26,13 @@ from typing import Any
 
 import numpy as np
 
-from tmr.cli_args import out_path
+from tmr.cli_args import ArgumentParser, add_common, count, points
 from tmr.cli_args import positive_float as _positive
-from tmr.cli_args import positive_int as _positive_int
-from tmr.console import LOG, add_manners, progress_enabled
+from tmr.console import LOG, progress_enabled
 from tmr.console import run as run_cli
-from tmr.errors import TmrError
+from tmr.errors import TmrError, fmt_point
 from tmr.motion import mcdpr_motion
-from tmr.views import VIEW_NAMES, add_view_args, write_views
+from tmr.views import VIEW_NAMES, write_views
 
 PLAN_FORMAT = "tmr-mcdpr-plan/1"
 
@@ -48,9 +47,10 @@ def _triple(text: str) -> tuple[float, float, float]:
     return parts[0], parts[1], parts[2]
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="python -m tmr.mcdpr",
+def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
+    """The parser of ``python -m tmr.mcdpr``; ``prog``: the name it shows (``tmr mcdpr`` through the dispatcher)."""
+    p = ArgumentParser(
+        prog=prog or "python -m tmr.mcdpr",
         description="Mobile cable-driven parallel robot (MoPICK, Rasheed 2019) tools.",
     )
     sub = p.add_subparsers(dest="command", required=True)
@@ -72,41 +72,22 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--station-step", type=_positive, default=0.25, help="search: platform station spacing [m]")
     pl.add_argument("--margin", type=_positive, default=0.3, help="search: μ of a placement at any heading [N]")
     pl.add_argument("--max-move", type=_positive, default=0.6, help="search: base move per graph edge [m] (0.6)")
-    pl.add_argument(
-        "--seed", type=int, default=0, help="search: seed of the random base moves round the best placements (0)"
-    )
     pl.add_argument("--d-base", type=_positive, default=0.2, help="base step d_j of the stage-1 grid [m] (0.2)")
     pl.add_argument("--min-step", type=_positive, default=0.05, help="smallest retried base step [m] (0.05)")
     pl.add_argument("--d-platform", type=_positive, default=0.05, help="platform step d_MP of stage 2 [m] (0.05)")
-    pl.add_argument("--max-iter", type=_positive_int, default=200, help="stage-1 iterations per way-point (200)")
-    pl.add_argument("--upsample", type=_positive_int, default=10, help="B-spline samples per iterate (10)")
+    pl.add_argument("--max-iter", type=count, default=200, help="stage-1 iterations per way-point (200)")
+    pl.add_argument("--upsample", type=count, default=10, help="B-spline samples per iterate (10)")
     pl.add_argument("--external", type=_triple, help="external wrench box half-widths FX,FY,FZ [N] (scene's)")
-    pl.add_argument("--out", type=out_path, default="runs/mcdpr", help="output directory (default runs/mcdpr)")
-    pl.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
-    add_view_args(pl)  # --gif, --html, --export FORMAT (tmr.views)
-    add_manners(pl)
+    add_common(pl, out="runs/mcdpr", seed_help="search: seed of the random base moves round the best placements")
     ws = sub.add_parser("workspace", help="map of μ over platform positions with the bases parked (wrench-feasible)")
     ws.add_argument("--scene", default="fig2", help="built-in scene name or scene TOML file (default fig2)")
     ws.add_argument("--robot", help="robot TOML file (default: the shipped MoPICK description)")
-    ws.add_argument("--bases", type=_points, help="parked bases X1,Y1;X2,Y2;... [m] (default: the scene's start)")
+    ws.add_argument("--bases", type=points, help="parked bases X1,Y1;X2,Y2;... [m] (default: the scene's start)")
     ws.add_argument("--z", type=_positive, help="platform height [m] (default: the first task point's)")
     ws.add_argument("--cell", type=_positive, default=0.05, help="grid cell [m] (0.05)")
     ws.add_argument("--external", type=_triple, help="external wrench box half-widths FX,FY,FZ [N] (scene's)")
-    ws.add_argument(
-        "--out", type=out_path, default="runs/mcdpr_workspace", help="output directory (default runs/mcdpr_workspace)"
-    )
-    add_manners(ws)
+    add_common(ws, out="runs/mcdpr_workspace", progress=False, views=False)  # deterministic, no bar, no motion
     return p
-
-
-def _points(text: str) -> list[tuple[float, float]]:
-    try:
-        pts = [tuple(float(v) for v in item.split(",")) for item in text.split(";") if item.strip()]
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"expected X1,Y1;X2,Y2;... in metres, got {text!r}") from exc
-    if not pts or any(len(q) != 2 or not all(math.isfinite(v) for v in q) for q in pts):
-        raise argparse.ArgumentTypeError(f"expected X1,Y1;X2,Y2;... (finite numbers), got {text!r}")
-    return pts  # type: ignore[return-value]
 
 
 #: Files written by ``workspace``.
@@ -177,8 +158,9 @@ def workspace_main(args: argparse.Namespace) -> int:
             atomic_write_text(tmp / "workspace.json", json.dumps(_jsonable(summary), indent=1, sort_keys=True) + "\n")
             floats = np.column_stack([X.ravel(), Y.ravel(), ws.mu.ravel()])
             atomic_write_text(tmp / "workspace.csv", _csv(["x", "y", "mu"], np.zeros((X.size, 0), int), floats))
-            plot_workspace(robot, scene, ws, scene.bases, tmp / "workspace.png")
-            stage.publish()
+            if not args.no_plots:
+                plot_workspace(robot, scene, ws, scene.bases, tmp / "workspace.png")
+            names = stage.publish()
     except TmrError as exc:
         LOG.error(f"error: {exc}")
         return 2
@@ -186,9 +168,10 @@ def workspace_main(args: argparse.Namespace) -> int:
         LOG.error(f"error: cannot write the outputs to {args.out}: {exc}")
         return 2
     LOG.info(f"tmr.mcdpr workspace: robot {robot.name}, scene {scene.name}, z = {ws.z:g} m, {ws.mu.size} positions")
-    LOG.info(f"  feasible area {ws.area:.4g} m² (μ > 0), max μ {summary['mu_max']:.4g} N at {summary['mu_max_at']}")
+    at = fmt_point(summary["mu_max_at"])
+    LOG.info(f"  feasible area {ws.area:.4g} m² (μ > 0), max μ {summary['mu_max']:.4g} N at {at}")
     LOG.info(f"  wall_time     {wall:.3f} s")
-    LOG.info(f"  wrote {', '.join(WORKSPACE_NAMES)} to {args.out}")
+    LOG.info(f"  wrote {', '.join(names)} to {args.out}")
     return 0
 
 
@@ -310,9 +293,10 @@ def write_outputs(
     return sorted(q.name for q in tmp.iterdir())
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``python -m tmr.mcdpr`` and ``tmr mcdpr``; returns the exit code (module doc)."""
-    args = build_parser().parse_args(argv)
+def main(argv: list[str] | None = None, prog: str | None = None) -> int:
+    """Entry point of ``python -m tmr.mcdpr`` and ``tmr mcdpr`` (``prog``: the name messages use); returns the exit
+    code (module doc)."""
+    args = build_parser(prog).parse_args(argv)
     return run_cli(_main, args)  # --quiet/--verbose/--debug, one-line errors (exit 2), Ctrl-C (130)
 
 

@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 from scipy.interpolate import BSpline
 
 from tmr.environment import Environment
+from tmr.errors import fmt_point
 from tmr.mcdpr.capacity import capacity, required_wrench_set
 from tmr.mcdpr.capacity_hull import box_rows
 from tmr.mcdpr.errors import InfeasibleWrench, ParameterError
@@ -303,8 +304,8 @@ def platform_search(
     need = samples_needed(start, goal, d)
     if n < need:
         raise ParameterError(
-            f"platform_search: {n} samples cannot reach the way-point {np.round(goal, 4).tolist()} from "
-            f"{np.round(start, 4).tolist()} with steps of d_MP = {d} m; at least {need} are needed"
+            f"platform_search: {n} samples cannot reach the way-point {fmt_point(goal)} from "
+            f"{fmt_point(start)} with steps of d_MP = {d} m; at least {need} are needed"
         )
     out = np.empty((n, 3))
     mus = np.empty(n)
@@ -528,7 +529,7 @@ def check(robot: Robot, env: Environment, result: Plan, external: NDArray[np.flo
         if not cert.ok:
             msgs.append(
                 f"μ is not certified > 0 between samples: lower bound {mu_between:.4g} N on a piece starting near "
-                f"the platform at {np.round(cert.P[max(cert.fail, 0)], 3).tolist()}"
+                f"the platform at {fmt_point(cert.P[max(cert.fail, 0)])}"
             )
         elif float(np.min(result.mu_lower)) > mu_between + 1e-9:
             msgs.append(

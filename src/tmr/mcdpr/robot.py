@@ -158,12 +158,21 @@ class Robot:
 
 
 def load_robot(path: str | Path) -> Robot:
-    """Robot from a TOML file with the field names of :class:`Robot`; unknown keys raise ParameterError."""
+    """Robot from a TOML file with the field names of :class:`Robot` (those left out keep their defaults); unknown
+    keys, an empty file, a directory or a file that is not UTF-8 text raise ParameterError."""
+    from tmr.files import read_text
+
     path = Path(path)
+    text = read_text(path, "robot TOML", ParameterError)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
         raise ParameterError(f"{path}: cannot read robot TOML: {exc}") from exc
+    if not data:  # else every field at its default: the shipped robot planned as if it were this file's
+        raise ParameterError(
+            f"{path}: the robot file is empty; give the fields of tmr.mcdpr.Robot (the shipped mopick.toml is an "
+            "example), or leave out --robot for the shipped MoPICK"
+        )
     return robot_from_dict(data, str(path))
 
 

@@ -216,12 +216,11 @@ def load_scene(name_or_path: str | Path) -> Scene:
         text = resources.files("tmr.mcdpr").joinpath("scenes").joinpath(f"{name_or_path}.toml").read_text()
     else:
         path = Path(name_or_path)
-        if not path.is_file():
+        if not path.exists():
             raise ScenarioError(f"no scene {where!r}: not a built-in ({', '.join(builtin_scenes())}) nor a file")
-        try:
-            text = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ScenarioError(f"{where}: cannot read the scene file (a UTF-8 TOML file is expected): {exc}") from exc
+        from tmr.files import read_text
+
+        text = read_text(path, "scene TOML", ScenarioError)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from tmr.errors import fmt_point
 from tmr.mcdpr.capacity import capacity, capacity_margin, required_wrench_set
 from tmr.mcdpr.certify import certify, wrap
 from tmr.mcdpr.clearance import point_clearance, segment_clearance
@@ -217,7 +218,7 @@ def refuse_upfront(robot: Robot, scene: Scene, rws: NDArray[np.float64]) -> floa
     if mu_box <= 0:
         raise TaskRefused(
             f"start infeasible: with the bases at their start positions the cables cannot hold the platform at "
-            f"{np.round(P0, 3).tolist()} even without tipping (tension limit {robot.t_max:g} N): capacity margin "
+            f"{fmt_point(P0)} even without tipping (tension limit {robot.t_max:g} N): capacity margin "
             f"{mu_box:.4g} N (tipping included {mu:.4g} N)",
             "tension",
             mu,
@@ -444,11 +445,12 @@ def _plan_search(
         Bk, _, best, bestB = placements(robot, scene, S[s], offsets, rws, params)
         if not len(Bk) and not (k == 0):
             where = tuple(float(v) for v in np.round(S[s], 4))
+            at = fmt_point(where)
             raise NoPlanFound(
-                f"no base placement for task point {k + 1} {list(where)}: none of {len(offsets)} formations (bases "
+                f"no base placement for task point {k + 1} {at}: none of {len(offsets)} formations (bases "
                 f"{params.radii[0]:g}-{params.radii[1]:g} m from the platform) is free with μ ≥ {params.margin:g} N "
                 f"at {'the best' if params.best_heading else 'every'} heading of its bases; best μ found {best:.4g} N"
-                + (f" with the bases at {np.round(bestB, 2).tolist()}" if bestB is not None else " (no free one)"),
+                + (f" with the bases at {', '.join(map(fmt_point, bestB))}" if bestB is not None else " (no free one)"),
                 "no-placement",
                 where,
                 best,
@@ -483,7 +485,7 @@ def _plan_search(
             if not len(Bs) and s > 0:
                 where = tuple(float(v) for v in np.round(S[s], 4))
                 raise NoPlanFound(
-                    f"no base placement for the platform at {list(where)} (between task points {int(seg[s]) + 1} "
+                    f"no base placement for the platform at {fmt_point(where)} (between task points {int(seg[s]) + 1} "
                     f"and {int(seg[s]) + 2}) with μ ≥ {params.margin:g} N; best μ found {best:.4g} N",
                     "no-placement",
                     where,
@@ -501,7 +503,7 @@ def _plan_search(
             where = tuple(float(v) for v in np.round(S[max(s - 1, 0)], 4))
             raise NoPlanFound(
                 f"placements exist but no collision-free base motion (each base ≤ {params.max_move:g} m per step, "
-                f"bases 2 r_mb apart) follows the platform beyond {list(where)} (station {s} of {len(S)}, between "
+                f"bases 2 r_mb apart) follows the platform beyond {fmt_point(where)} (station {s} of {len(S)}, between "
                 f"task points {int(seg[s]) + 1} and {min(int(seg[s]) + 2, len(scene.tasks))}), after "
                 f"{params.stall_rounds} rounds of repositioning the bases there",
                 "not-connectable",
@@ -536,9 +538,10 @@ def _plan_search(
         if not reach[goal].any():
             far = int(st[reach].max())
             where = tuple(float(v) for v in np.round(S[far], 4))
+            at = fmt_point(where)
             raise NoPlanFound(
                 f"placements exist at every platform position but no certified base motion joins them: the bases "
-                f"follow the platform only up to {list(where)} (station {far + 1} of {len(S)}, between task points "
+                f"follow the platform only up to {at} (station {far + 1} of {len(S)}, between task points "
                 f"{int(seg[far]) + 1} and {min(int(seg[far]) + 2, len(scene.tasks))}); {removed} motions failed the "
                 f"μ certification, {len(src_a)} were tried",
                 "not-connectable",
@@ -564,7 +567,7 @@ def _plan_search(
         if rounds >= params.max_rounds:
             raise NoPlanFound(
                 f"no certified motion after {rounds} searches ({removed} motions removed); last failure near the "
-                f"platform at {np.round(Pm[cert.fail], 3).tolist()}",
+                f"platform at {fmt_point(Pm[cert.fail])}",
                 "not-connectable",
                 tuple(float(v) for v in Pm[cert.fail]),
             )

@@ -19,8 +19,8 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from tmr.cli_args import out_path, positive_float, positive_int
-from tmr.console import LOG, add_manners, progress_enabled
+from tmr.cli_args import ArgumentParser, add_common, count, positive_float
+from tmr.console import LOG, progress_enabled
 from tmr.console import run as run_command
 from tmr.errors import TmrError
 
@@ -39,17 +39,17 @@ OWNED_NAMES = (
 VOLATILE_NAMES = ("timing.json",)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="python -m tmr.replay",
+def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
+    """The parser of ``python -m tmr.replay``; ``prog``: the name it shows (``tmr replay`` through the dispatcher)."""
+    p = ArgumentParser(
+        prog=prog or "python -m tmr.replay",
         description="Replay a plan in the MuJoCo physics engine and check that it holds up: tethers off the floor "
         "and the obstacles, robots on their trajectories (tmr.plan), or the MoPICK platform held with its bases "
         "on the ground (tmr.mcdpr plan).",
     )
     p.add_argument("run", help="output directory of tmr.plan or tmr.mcdpr plan")
-    p.add_argument("--out", type=out_path, help="where to write the replay (default RUN/replay)")
     p.add_argument("--gif", action="store_true", help="also write replay.gif, rendered offscreen from the simulation")
-    p.add_argument("--links", type=positive_int, help="links per tether (chain, default 16)")
+    p.add_argument("--links", type=count, help="links per tether (chain, default 16)")
     p.add_argument("--timestep", type=positive_float, help="physics step [s] (default 0.005; must divide Ts)")
     p.add_argument(
         "--track",
@@ -64,8 +64,8 @@ def build_parser() -> argparse.ArgumentParser:
         default="horizontal",
         help="winch law: hold the horizontal tension T0 (the planner's model, default) or the winch-end tension",
     )
-    p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
-    add_manners(p)  # --quiet/--verbose/--debug (tmr.console)
+    # no --seed (nothing random), no --html/--export: the replay's --gif is its own (rendered from the simulation)
+    add_common(p, out=None, out_help="where to write the replay (default RUN/replay)", views=False)
     return p
 
 
@@ -145,10 +145,10 @@ def _mcdpr(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str
     return (0 if rp.verdict.ok else 1), names, text
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     """Exit code (module docstring); messages through logging (``tmr.console``: --quiet, --verbose, --debug, one
-    line per error, Ctrl-C exits 130)."""
-    return run_command(_main, build_parser().parse_args(argv))
+    line per error, Ctrl-C exits 130); ``prog``: the name messages use (``tmr replay`` through the dispatcher)."""
+    return run_command(_main, build_parser(prog).parse_args(argv))
 
 
 def _main(args: argparse.Namespace) -> int:

@@ -28,32 +28,14 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from tmr.cli_args import out_path
-from tmr.cli_args import positive_int as _positive
-from tmr.console import LOG, add_manners, progress_enabled
+from tmr.cli_args import ArgumentParser, add_common, param, positive_float
+from tmr.cli_args import count as _positive
+from tmr.console import LOG, progress_enabled
 from tmr.console import run as run_cli
 from tmr.planner import METHODS
 from tmr.sweep.errors import SweepError
 
 __all__ = ["build_parser", "main"]
-
-
-def _param(text: str) -> tuple[str, Any]:
-    key, sep, value = text.partition("=")
-    if not sep or not key:
-        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
-    val: Any
-    try:
-        val = int(value)
-    except ValueError:
-        try:
-            val = float(value)
-        except ValueError:
-            val = value  # string parameters, e.g. solver=daqp
-    else:
-        if val != val or val in (float("inf"), float("-inf")):
-            raise argparse.ArgumentTypeError(f"expected a finite value, got {text!r}")
-    return key, val
 
 
 def _var(text: str) -> Any:
@@ -70,27 +52,32 @@ def _var(text: str) -> Any:
     return Variable(key, low, high)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="python -m tmr.sweep",
+def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
+    """The parser of ``python -m tmr.sweep``; ``prog``: the name it shows (``tmr sweep`` through the dispatcher)."""
+    p = ArgumentParser(
+        prog=prog or "python -m tmr.sweep",
         description="Parameter sweeps of the tethered-chain planner (Caruso 2021 §5.1, §4.2.2): a sensitivity grid, "
         "NSGA-II tuning (moga) and a scenarios x methods table (bench), on every core or a Dask cluster.",
     )
     sub = p.add_subparsers(dest="command", required=True)
-    common = argparse.ArgumentParser(add_help=False)
-    common.add_argument("--seed", type=int, default=0, help="seed of the leader's RRT* (and of NSGA-II); default 0")
+    common = ArgumentParser(add_help=False)
     common.add_argument(
-        "--set", type=_param, action="append", default=[], metavar="NAME=VALUE", help="fixed parameter override"
+        "--set",
+        type=param,
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="fixed parameter override by its field name in tmr.params (repeatable)",
     )
-    common.add_argument("--out", type=out_path, default="runs/sweep", help="output directory (default runs/sweep)")
     common.add_argument("--jobs", type=_positive, help="local worker processes (default: all cores; 1 = serial)")
     common.add_argument("--scheduler", help="Dask scheduler address tcp://host:port (instead of local processes)")
     common.add_argument(
-        "--connect-timeout", type=float, default=10.0, help="seconds to wait for the Dask scheduler (default 10)"
+        "--connect-timeout",
+        type=positive_float,
+        default=10.0,
+        help="seconds to wait for the Dask scheduler (default 10)",
     )
-    common.add_argument("--no-progress", action="store_true", help="no progress bar")
-    common.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
-    add_manners(common)
+    add_common(common, out="runs/sweep", seed_help="seed of the leader's RRT* and of NSGA-II", views=False)
 
     s = sub.add_parser("sensitivity", parents=[common], help="k_v0 × d_min grid (Caruso 2021 §5.1, Fig. 9)")
     s.add_argument("--scenario", default="D", help="scenario (default D, the paper's plane case study)")
@@ -104,8 +91,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--n", type=_positive, nargs="+", default=[13], help="grid points per axis, or two: columns rows (default 13)"
     )
-    s.add_argument("--low", type=float, default=0.5, help="lowest factor on the nominal values (default 0.5)")
-    s.add_argument("--high", type=float, default=2.0, help="highest factor on the nominal values (default 2.0)")
+    s.add_argument("--low", type=positive_float, default=0.5, help="lowest factor on the nominal values (default 0.5)")
+    s.add_argument(
+        "--high", type=positive_float, default=2.0, help="highest factor on the nominal values (default 2.0)"
+    )
 
     m = sub.add_parser("moga", parents=[common], help="NSGA-II tuning of the controller parameters (§4.2.2)")
     m.add_argument("--scenario", default="D", help="scenario to tune on (default D, the paper's plane case study)")
@@ -249,8 +238,16 @@ def _validate(args: argparse.Namespace) -> None:
         load_scenario(name)
     check_overrides(dict(args.set))
     if getattr(args, "var", None):
+        from dataclasses import fields
+
+        from tmr.params import PARAM_CLASSES
+
+        kinds = {f.name: (cls, type(getattr(cls(), f.name))) for cls in PARAM_CLASSES for f in fields(cls)}
         for v in args.var:
             check_overrides({v.name: v.low, **dict(args.set)})
+            cls, kind = kinds[v.name]
+            if kind is not float:  # NSGA-II proposes real numbers: an int field would refuse them mid-run
+                raise SweepError(f"--var {v.name}: {cls.__name__}.{v.name} is not a real number; vary a float field")
     from tmr.outdir import check_out
 
     check_out(Path(args.out), owned_names(args))
@@ -283,9 +280,10 @@ def write_outputs(out: Path, files: dict[str, Callable[[Path], Any]], owned: Any
         return stage.publish()
 
 
-def main(argv: list[str] | None = None, executor: Any = None) -> int:
-    """Entry point; ``executor`` (an object with ``map``) overrides ``--jobs``/``--scheduler`` (for tests)."""
-    args = build_parser().parse_args(argv)
+def main(argv: list[str] | None = None, executor: Any = None, prog: str | None = None) -> int:
+    """Entry point; ``executor`` (an object with ``map``) overrides ``--jobs``/``--scheduler`` (for tests); ``prog``:
+    the name messages use (``tmr sweep`` through the dispatcher)."""
+    args = build_parser(prog).parse_args(argv)
     return run_cli(lambda a: _main(a, executor), args)
 
 
@@ -295,7 +293,7 @@ def _main(args: argparse.Namespace, executor: Any = None) -> int:
     own = executor is None
     _validate(args)
     if own:
-        progress = progress_enabled() and not args.no_progress
+        progress = progress_enabled()  # a terminal, not --quiet, not --no-progress
         executor = make_executor(args.jobs, args.scheduler, progress=progress, timeout=args.connect_timeout)
     try:
         run = {"sensitivity": _sensitivity, "moga": _moga, "bench": _bench}[args.command]

@@ -40,7 +40,7 @@ class Executor(Protocol):
 def _bar(total: int, desc: str, progress: bool) -> Any:
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc or None, disable=not progress, leave=False, dynamic_ncols=True)
+    return tqdm(total=total, desc=desc or "runs", unit="run", disable=not progress, leave=False, dynamic_ncols=True)
 
 
 class SerialExecutor:
