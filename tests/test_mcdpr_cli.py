@@ -250,9 +250,10 @@ def test_empty_robot_file_is_refused_not_the_default_robot(tmp_path, capsys) -> 
 
 def test_workspace_no_plots(tmp_path, capsys) -> None:
     out = tmp_path / "ws"
-    out.mkdir()
-    (out / "workspace.png").write_bytes(b"older run")
+    assert main(["workspace", "--cell", "0.2", "--out", str(out)]) == 0  # an older run, with its figure
+    assert (out / "workspace.png").is_file()
+    capsys.readouterr()
     assert main(["workspace", "--cell", "0.2", "--no-plots", "--out", str(out)]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["workspace.csv", "workspace.json"]
+    assert sorted(p.name for p in out.iterdir()) == [".tmr-outputs.json", "workspace.csv", "workspace.json"]
     stdout = capsys.readouterr().out
-    assert "wrote workspace.json, workspace.csv" in stdout and "N at (" in stdout  # max μ at (x, y), mm
+    assert "wrote workspace.csv, workspace.json" in stdout and "N at (" in stdout  # max μ at (x, y), mm

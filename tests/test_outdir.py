@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from tmr.outdir import MANIFEST, OutDirError, Stage, check_out, is_tmr_output, read_manifest
+from tmr.outdir import MANIFEST, OutDirError, Stage, check_out, is_complete, is_tmr_output, read_manifest
 
 OWN = ("a.txt", "b.txt", "timings.json", "bag")
 
@@ -72,11 +72,11 @@ def test_an_out_with_files_of_the_user_is_filled_entry_by_entry(tmp_path):
     (out / "notes.txt").write_text("mine")
     (out / "mine").mkdir()
     inode = os.stat(out).st_ino
-    assert _publish(out, {"a.txt": "2", "bag/m.yaml": "n"}) == ["a.txt", "bag"]
+    assert _publish(out, {"a.txt": "2", "bag/m.yaml": "n", "timings.json": "t"}) == ["a.txt", "bag", "timings.json"]
     assert os.stat(out).st_ino == inode
-    assert _listing(out) == [MANIFEST, "a.txt", "bag", "mine", "notes.txt"]  # b.txt, tmr's, not written: removed
+    assert _listing(out) == [MANIFEST, "a.txt", "bag", "mine", "notes.txt", "timings.json"]  # b.txt not written
     assert (out / "notes.txt").read_text() == "mine" and (out / "bag" / "m.yaml").read_text() == "n"
-    assert set(read_manifest(out)) == {"a.txt", "bag/m.yaml"} and _listing(tmp_path) == ["A"]
+    assert set(read_manifest(out)) == {"a.txt", "bag/m.yaml", "timings.json"} and _listing(tmp_path) == ["A"]
 
 
 @pytest.mark.parametrize("make", ["file", "changed", "symlink", "dir", "dir_with_extra"])
@@ -167,18 +167,6 @@ def test_a_stale_staging_directory_is_removed_by_the_next_run_a_live_one_is_not(
         procs[1].wait()
 
 
-def test_temporaries_of_an_older_tmr_are_removed_others_kept(tmp_path):
-    out = tmp_path / "A"
-    old = tmp_path / ".A.k3x9_q2z"  # what an older tmr's mkdtemp(prefix=".A.") left when killed
-    old.mkdir()
-    (old / "a.txt").write_text("old")
-    foreign = tmp_path / ".A.zzzzzzzz"
-    foreign.mkdir()
-    (foreign / "thesis.tex").write_text("not an output name")
-    _publish(out, {"a.txt": "1"})
-    assert not old.exists() and foreign.is_dir()
-
-
 # ----------------------------------------------------------------------------------------------------------
 # fault injection: SIGKILL at every step of a publication, and at random moments of real runs
 # ----------------------------------------------------------------------------------------------------------
@@ -249,7 +237,11 @@ def test_sigkill_at_every_step_of_a_publication(tmp_path, user_file):
         else:
             assert now["notes.txt"] == b"mine"
             assert all(n in files for n in now if n != "notes.txt" and MANIFEST not in n), k  # all still tmr's
-        for init in out.parent.glob(".A.tmr-init-*"):  # killed between creating its staging directory and locking
+            new = {n: d for n, d in now.items() if n != "notes.txt" and MANIFEST not in n}
+            mixed = new not in ({n: d for n, d in old.items() if n != "notes.txt" and MANIFEST not in n},
+                                {"a.txt": b"new a.txt", "bag/m.yaml": b"new bag/m.yaml"})  # fmt: skip
+            assert not (mixed and is_complete(out)), k  # a mix is flagged: readers refuse it until a run completes
+        for init in out.parent.glob(".tmr-init-*"):  # killed between creating its staging directory and locking
             os.utime(init, (time.time() - 120, time.time() - 120))  # it: removed once unlocked and a minute old
         _publish(out, {"a.txt": "next"}, owned)  # the next run: accepted, and cleans up
         assert _listing(out.parent) == ["A"] and (out / "a.txt").read_text() == "next"
@@ -335,7 +327,7 @@ def test_a_full_disk_gives_one_line_and_leaves_the_older_outputs_whole(small_dis
     code = main(["--scenario", "A", "--robots", "4", "--gif", "--html", "--out", str(out)])  # does not fit
     err = capsys.readouterr().err
     assert code == 2 and len(err.strip().splitlines()) == 1 and "No space left on device" in err, err
-    assert "nothing in it changed" in err and _complete(out) == older
+    assert "nothing changed" in err and _complete(out) == older
     assert _listing(small_disk) == ["A"]  # no staging directory, no temporary file
 
 
@@ -405,6 +397,15 @@ def test_export_replaces_its_own_bag_and_refuses_anothers(run_dir, tmp_path, cap
     (theirs / "metadata.yaml").write_text("rosbag2_bagfile_information: {}")
     assert main(["export", str(run_dir), "--out", str(theirs)]) == 2
     assert "not written by tmr" in capsys.readouterr().err and _listing(theirs) == ["metadata.yaml"]
+
+
+def test_journal_keeps_both_digests_and_untracked_entries():
+    from tmr.outdir import _journal
+
+    old = {"a": "1", "t": None, "gone": "9"}
+    new = {"a": "2", "t": None, "b": "3", "u": None}
+    assert _journal(old, new) == {"a": ("1", "2"), "t": None, "gone": "9", "b": "3", "u": None}
+    assert _journal({"a": "1"}, {"a": "1"}) == {"a": "1"} and _journal({"a": "1"}, {"a": None}) == {"a": None}
 
 
 def test_manifest_bytes_are_deterministic(tmp_path):

@@ -485,7 +485,9 @@ def test_reused_out_keeps_no_stale_outputs(tmp_path, capsys):
     (out / "replay").mkdir()  # tmr.replay's check of the older plan, with its own manifest
     (out / "replay" / "replay.json").write_text("{}")
     (out / "replay" / MANIFEST).write_text(
-        json.dumps({"format": "tmr-outputs/1", "files": {"replay.json": hashlib.sha256(b"{}").hexdigest()}})
+        json.dumps(
+            {"format": "tmr-outputs/1", "kind": "replay", "files": {"replay.json": hashlib.sha256(b"{}").hexdigest()}}
+        )
     )
     (out / "notes.txt").write_text("mine")  # a file and a directory of the user
     (out / "mine").mkdir()

@@ -479,6 +479,10 @@ def load_run(path: str | os.PathLike[str]) -> ChainRun | McdprRun:
         raise RunDirError(f"{where} does not exist: give the --out directory of tmr.plan or tmr.mcdpr plan")
     if not p.is_dir():
         raise RunDirError(f"{where} is not a directory: give the --out directory of tmr.plan or tmr.mcdpr plan")
+    from tmr.outdir import is_complete
+
+    if not is_complete(p):
+        raise RunDirError(f"{where} was being written when its run was stopped (its files may mix two runs); rerun it")
     if not (p / "run.json").is_file():
         hint = "re-run tmr.mcdpr plan" if (p / "plan.json").is_file() else "re-run tmr.plan"
         if not any((p / n).is_file() for n in ("trajectories.json", "plan.json")):

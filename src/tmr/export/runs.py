@@ -123,7 +123,11 @@ def load_motion(
     """
     from tmr.rundir import load_run
 
+    from tmr.outdir import is_complete
+
     p = Path(path)
+    if p.is_dir() and not is_complete(p):
+        raise ExportError(f"{p} was being written when its run was stopped (its files may mix two runs); rerun it")
     if p.is_dir() and not (p / "run.json").exists() and (p / "trajectory.json").is_file():
         return _ccma(p, rate, description)
     run = load_run(p)

@@ -173,7 +173,7 @@ def _main(args: argparse.Namespace) -> int:
         import mujoco  # noqa: F401
     except ImportError as exc:
         raise TmrError(f"the replay needs MuJoCo: pip install 'mujoco>=4.0' ({exc})") from None
-    with Stage(out, OWNED_NAMES, VOLATILE_NAMES) as stage:  # staged, then published in one step
+    with Stage(out, OWNED_NAMES, VOLATILE_NAMES, kind="replay") as stage:  # staged, then published in one step
         code, names, text = (_chain if run.kind == "chain" else _mcdpr)(args, run, stage.path)
         names = stage.publish()
     LOG.info(text.split("\nFAILED: ")[0])
