@@ -17,13 +17,14 @@ complete, so an interrupted run leaves no half-written file); any other exceptio
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import os
 import signal
 import sys
 import tempfile
 import warnings
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +35,7 @@ __all__ = [
     "EXIT_INTERRUPTED",
     "add_manners",
     "check_out_dir",
+    "children_without_ctrl_c",
     "progress_enabled",
     "remove_stale",
     "run",
@@ -138,6 +140,24 @@ def _ignore_further_interrupts() -> None:
         _state["sigint"] = signal.signal(signal.SIGINT, signal.SIG_IGN)
     except ValueError:  # not the main thread: signals cannot be set there
         pass
+
+
+@contextlib.contextmanager
+def children_without_ctrl_c() -> Iterator[None]:
+    """Block SIGINT in the calling thread while worker processes are started in this block.
+
+    Ctrl-C at a terminal signals the whole process group, workers included. A worker forked or spawned here starts
+    with SIGINT blocked (the mask is inherited), so it never raises KeyboardInterrupt (a traceback of its own on the
+    shared stderr) before its initialiser ignores SIGINT; the parent, which stops its workers, gets a Ctrl-C that
+    came meanwhile as soon as the block ends. Does nothing where ``signal.pthread_sigmask`` does not exist."""
+    if not hasattr(signal, "pthread_sigmask"):  # pragma: no cover - Windows
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def check_out_dir(out: Path) -> None:

@@ -28,6 +28,8 @@ import os
 import shutil
 import sys
 import tempfile
+import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -54,8 +56,22 @@ OUTPUT_NAMES = (
     "distance_errors.png",
     "speeds.png",
 )
-#: Keys of the metrics that are timings: written to ``timings.json``, not ``metrics.json``.
-TIMING_KEYS = ("wall_time", "ms_per_step")
+#: Keys of the metrics that are timings [s] (``ms_per_step`` [ms]): written to ``timings.json``, not ``metrics.json``.
+#: ``wall_time`` is the whole planning time, from the route to the checked plan (every ``--robots auto`` attempt);
+#: the parts: ``route_time`` (the route and its robot counts, before anything else), ``other_attempts_time`` (the
+#: ``--robots auto`` attempts before the one kept), ``problem_time`` (the leader's path, references and start of the
+#: plan kept), ``qp_time`` (its qp runs; the warm start of ``horizon``), ``nlp_time`` (the horizon NLP) — their sum
+#: is at most ``wall_time`` (the rest: the checks). ``outputs_time``: writing the files before ``timings.json``.
+TIMING_KEYS = (
+    "wall_time",
+    "ms_per_step",
+    "route_time",
+    "other_attempts_time",
+    "problem_time",
+    "qp_time",
+    "nlp_time",
+    "outputs_time",
+)
 
 
 def _xy(text: str) -> tuple[float, float]:
@@ -261,6 +277,7 @@ def write_outputs(
     rendered by ``pool`` (a :class:`tmr.plotpool.FigurePool`) if given, else here."""
     from tmr import io
 
+    start = time.perf_counter()
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
@@ -269,7 +286,6 @@ def write_outputs(
         values = metrics.to_dict() | (extra or {})
         timings = {key: values.pop(key) for key in TIMING_KEYS if key in values}
         io.write_metrics_json(values, tmp / "metrics.json")
-        io.write_metrics_json(timings, tmp / "timings.json")  # kept apart: metrics.json is reproducible
         from tmr.rundir import write_chain_run
 
         write_chain_run(tmp / "run.json", plan, env, extra)  # scenario, map and tether parameters (tmr.replay)
@@ -289,6 +305,8 @@ def write_outputs(
 
                 for name, (function, args, kwargs) in figures.items():
                     plot.save_figure(getattr(plot, function)(*args, **kwargs), tmp / name)
+        timings["outputs_time"] = time.perf_counter() - start
+        io.write_metrics_json(timings, tmp / "timings.json")  # kept apart: metrics.json is reproducible
         out.mkdir(parents=True, exist_ok=True)
         names = sorted(p.name for p in tmp.iterdir())
         for name in names:
@@ -349,6 +367,7 @@ def _plan_once(args: argparse.Namespace, scenario: Any, n_robots: int | None, ro
     and for N ≥ its N_min no tighter margin is tried): the route is not computed twice."""
     from tmr.planner import build_problem, solve
 
+    start = time.perf_counter()
     overrides = dict(args.set) | ({"solver": args.solver} if args.solver else {})
     problem = build_problem(
         scenario,
@@ -360,7 +379,10 @@ def _plan_once(args: argparse.Namespace, scenario: Any, n_robots: int | None, ro
         route=args.route,
         known_route=route if _route_fits(args, route, n_robots or 0) else None,
     )
+    problem_time = time.perf_counter() - start
+    LOG.debug("planning with %d robots: %s", problem.chain.n_robots, args.method)
     plan, metrics = solve(problem, args.method, time_limit=args.time_limit, progress=progress_enabled())
+    plan.diagnostics["timings"] = dict(plan.diagnostics.get("timings", {}), problem_time=problem_time)
     return problem, plan, metrics
 
 
@@ -369,6 +391,20 @@ def _route_fits(args: argparse.Namespace, route: Any, n: int) -> bool:
     (not ``auto``: its guide is already the chain off the route if that is what N needs) or N is at least what
     the route chain needs."""
     return n >= max(2, route.n_min) and (args.robots != "auto" or n >= route.n_route)
+
+
+def _whole_planning(
+    plan: Any, metrics: Any, start: float, route_time: float, other_attempts_time: float
+) -> tuple[Any, Any, dict[str, float]]:
+    """The plan and metrics with the whole planning time since ``start`` [s] (route, every attempt, warm start, NLP,
+    checks) as ``wall_time`` (and ``ms_per_step``), and the parts for ``timings.json`` (:data:`TIMING_KEYS`)."""
+    wall = time.perf_counter() - start
+    plan.wall_time = wall
+    steps = plan.t.size - 1
+    metrics = replace(metrics, wall_time=wall, ms_per_step=1000.0 * wall / steps if steps > 0 else float("nan"))
+    parts = {"route_time": route_time, "other_attempts_time": other_attempts_time}
+    parts |= {key: float(v) for key, v in plan.diagnostics.get("timings", {}).items() if key in TIMING_KEYS}
+    return plan, metrics, parts
 
 
 def _short(reason: Any, width: int = 90) -> str:
@@ -502,7 +538,9 @@ def _main(args: argparse.Namespace) -> int:
             raise TmrError("--robots auto chooses the number of robots, so it cannot take --start; give --robots N")
         check_out(Path(args.out))
         scenario = load_inputs(args)
+        start = time.perf_counter()
         rt, n_first = precheck(args, scenario)
+        route_time = time.perf_counter() - start
         env = scenario.environment
         LOG.debug(
             "map %s: room %s m, robot radius r = %g m (obstacles grown by r, robots >= %g m apart)",
@@ -525,6 +563,7 @@ def _main(args: argparse.Namespace) -> int:
                 last = rt.n_route + AUTO_EXTRA  # n_route ≥ n_min
                 problem = None
                 for n in range(rt.n_min, last + 1):
+                    attempt_start = time.perf_counter()
                     try:
                         attempt = _plan_once(args, scenario, n, rt)
                     except TmrError as exc:  # refused, no start placement or no path with this N: try the next one
@@ -540,11 +579,16 @@ def _main(args: argparse.Namespace) -> int:
                     return 1
                 auto_note = f"{summary_line}; chose N = {problem.chain.n_robots}"
             else:
+                attempt_start = time.perf_counter()
                 problem, plan, metrics = _plan_once(args, scenario, n_first, rt)
+            plan, metrics, timings = _whole_planning(
+                plan, metrics, start, route_time, attempt_start - start - route_time
+            )
+            LOG.debug("writing the outputs")
             filtered, filter_note = filter_within_limits(
                 plan, problem.env, problem.time_params.Ts, cutoff_hz=args.filter_cutoff
             )
-            extra = _extras(problem, plan, auto_note) | ({"filter_note": filter_note} if filter_note else {})
+            extra = _extras(problem, plan, auto_note) | ({"filter_note": filter_note} if filter_note else {}) | timings
             names = write_outputs(
                 Path(args.out),
                 plan,
@@ -557,6 +601,11 @@ def _main(args: argparse.Namespace) -> int:
                 pool=pool,
             )
             names += write_views(args, Path(args.out), lambda: chain_motion(plan, problem.env, problem.chain_params))
+        except BaseException:
+            if pool is not None:  # Ctrl-C or an error: do not wait for a figure being rendered
+                pool.terminate()
+                pool = None
+            raise
         finally:
             if pool is not None:
                 pool.close()
