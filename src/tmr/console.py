@@ -111,6 +111,7 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
             return body(args)
     except KeyboardInterrupt:
         _ignore_further_interrupts()  # a second Ctrl-C (or one sent to the whole process group) while reporting
+        _handled_interrupt()
         if debug:
             LOG.exception("interrupted")
         else:
@@ -133,6 +134,19 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
         _state["quiet"] = False
         if _state.get("sigint") is not None:  # give the caller (e.g. a test session) its handler back
             signal.signal(signal.SIGINT, _state.pop("sigint"))
+
+
+def _handled_interrupt() -> None:
+    """Tell CPython the KeyboardInterrupt was handled. CPython 3.11 records a KeyboardInterrupt that leaves code run
+    by ``exec`` of a string (dataclasses, rosbags' message types, ...) as unhandled, even if it is caught further
+    out, and ``python -m`` then ends the process by SIGINT instead of with the exit code (returncode -2, not 130).
+    """
+    import ctypes
+
+    try:
+        ctypes.c_int.in_dll(ctypes.pythonapi, "_Py_UnhandledKeyboardInterrupt").value = 0
+    except (AttributeError, OSError, ValueError):  # pragma: no cover - another Python (the flag lives elsewhere)
+        pass
 
 
 def _ignore_further_interrupts() -> None:

@@ -66,7 +66,9 @@ class FigurePool:
         """Stop the workers now, without waiting for a figure they are rendering (after Ctrl-C or an error)."""
         for process in list((getattr(self._pool, "_processes", None) or {}).values()):
             process.terminate()
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        # wait for the pool's thread (it sees the workers gone at once): left running, it raced the interpreter's
+        # exit, which then printed "OSError: Bad file descriptor" from concurrent.futures after "interrupted"
+        self._pool.shutdown(wait=True, cancel_futures=True)
 
     def __enter__(self) -> FigurePool:
         return self

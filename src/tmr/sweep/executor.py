@@ -107,10 +107,12 @@ class LocalExecutor:
         except BaseException as exc:
             # one task failed (or Ctrl-C): drop the tasks not started yet instead of running them all first
             pool, self._pool = self._pool, None
-            pool.shutdown(wait=False, cancel_futures=True)
             if isinstance(exc, KeyboardInterrupt):  # Ctrl-C: stop the running tasks too, do not wait for them
                 for proc in list((getattr(pool, "_processes", None) or {}).values()):
                     proc.terminate()
+            # after Ctrl-C the pool's thread ends at once (its workers are gone): waited for, it does not race the
+            # interpreter's exit (an "OSError: Bad file descriptor" from concurrent.futures after "interrupted")
+            pool.shutdown(wait=isinstance(exc, KeyboardInterrupt), cancel_futures=True)
             if isinstance(exc, BrokenProcessPool):
                 raise SweepError(f"a worker process died ({exc}); out of memory? try fewer --jobs") from exc
             raise
