@@ -102,6 +102,7 @@ def interrupt(argv: list[str], trigger: str | None, delay: float, out: Path, tim
         text=True,
         start_new_session=True,
         env=env,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # a foreground job's Ctrl-C
     )
     seen = threading.Event()
     err: list[str] = []

@@ -562,6 +562,7 @@ def _main(args: argparse.Namespace) -> int:
                 tried = []
                 last = rt.n_route + AUTO_EXTRA  # n_route ≥ n_min
                 problem = None
+                attempts_time = kept_time = 0.0  # [s]: every attempt, the one whose plan is kept
                 for n in range(rt.n_min, last + 1):
                     attempt_start = time.perf_counter()
                     try:
@@ -569,7 +570,10 @@ def _main(args: argparse.Namespace) -> int:
                     except TmrError as exc:  # refused, no start placement or no path with this N: try the next one
                         tried.append(f"{n}: {_short(exc)}")
                         continue
+                    finally:
+                        attempts_time += time.perf_counter() - attempt_start
                     problem, plan, metrics = attempt
+                    kept_time = time.perf_counter() - attempt_start
                     tried.append(f"{n}: {'planned' if plan.success else _short(plan.failure)}")
                     if plan.success:
                         break
@@ -578,12 +582,11 @@ def _main(args: argparse.Namespace) -> int:
                     LOG.error("no plan found: %s", summary_line)
                     return 1
                 auto_note = f"{summary_line}; chose N = {problem.chain.n_robots}"
+                other_attempts_time = attempts_time - kept_time
             else:
-                attempt_start = time.perf_counter()
                 problem, plan, metrics = _plan_once(args, scenario, n_first, rt)
-            plan, metrics, timings = _whole_planning(
-                plan, metrics, start, route_time, attempt_start - start - route_time
-            )
+                other_attempts_time = 0.0
+            plan, metrics, timings = _whole_planning(plan, metrics, start, route_time, other_attempts_time)
             LOG.debug("writing the outputs")
             filtered, filter_note = filter_within_limits(
                 plan, problem.env, problem.time_params.Ts, cutoff_hz=args.filter_cutoff
