@@ -83,9 +83,23 @@ def test_ctrl_c_in_exec_code_still_exits_130(tmp_path):
     assert (p.returncode, p.stderr.strip()) == (130, "interrupted")
 
 
-def _interrupt(argv: list[str], trigger: str, delay: float, timeout: float = 300.0) -> tuple[int, str, float]:
+@pytest.mark.parametrize("delay", [0.3, 0.5])
+def test_ctrl_c_during_the_imports_is_one_line_and_130(tmp_path, delay):
+    """Before tmr.console.run takes over (``python -m tmr.plan`` imports numpy and tmr's modules first), a Ctrl-C
+    was a traceback and death by SIGINT (returncode -2; 2 tries in 8 at 0.4–0.5 s). (Earlier, in the interpreter's
+    own start-up — site.py and the venv's .pth files, the first ~0.15 s — Ctrl-C is Python's: "Fatal Python error".)
+    """
+    out = tmp_path / "out"
+    code, err, latency = _interrupt(["--scenario", "A", "--method", "qp", "--out", str(out)], None, delay)
+    print(f"Ctrl-C {delay} s after the start: stopped {latency:.3f} s after the signal")
+    assert (code, err.strip()) == (130, "interrupted"), f"exit {code}, stderr {err[-800:]!r}"
+    assert not out.exists()
+
+
+def _interrupt(argv: list[str], trigger: str | None, delay: float, timeout: float = 300.0) -> tuple[int, str, float]:
     """Run ``python -m tmr.plan -v ARGV`` in its own process group; ``delay`` s after the stdout line matching
-    ``trigger``, SIGINT to the whole group (Ctrl-C at a terminal); returns (exit code, stderr, signal → exit [s])."""
+    ``trigger`` (None: the start), SIGINT to the whole group (Ctrl-C at a terminal); returns (exit code, stderr,
+    signal → exit [s])."""
     p = subprocess.Popen(
         [sys.executable, "-m", "tmr.plan", "-v", *argv],
         stdout=subprocess.PIPE,
@@ -100,7 +114,7 @@ def _interrupt(argv: list[str], trigger: str, delay: float, timeout: float = 300
 
     def read_out() -> None:
         for line in p.stdout:  # type: ignore[union-attr]
-            if re.search(trigger, line):
+            if trigger is not None and re.search(trigger, line):
                 seen.set()
 
     def read_err() -> None:
@@ -109,6 +123,8 @@ def _interrupt(argv: list[str], trigger: str, delay: float, timeout: float = 300
     readers = [threading.Thread(target=f, daemon=True) for f in (read_out, read_err)]
     for t in readers:
         t.start()
+    if trigger is None:  # from the start
+        seen.set()
     while not seen.wait(0.01) and p.poll() is None:
         pass
     assert seen.is_set(), f"the run ended before the phase ({trigger!r}): {''.join(err)[-500:]}"

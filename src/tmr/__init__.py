@@ -10,6 +10,7 @@ Quick start::
 
 from __future__ import annotations
 
+import sys
 from importlib import import_module
 from typing import TYPE_CHECKING, Any
 
@@ -121,3 +122,23 @@ __all__ = [
     "TetherRegulation",
     "TmrError",
 ]
+
+
+def _ctrl_c_before_run(exc_type: type[BaseException], exc: BaseException, tb: Any) -> None:
+    """``sys.excepthook`` for a Ctrl-C in a ``python -m tmr.<command>`` run before :func:`tmr.console.run` took
+    over (the command's imports, its argument parsing): the one line ``interrupted`` and exit 130, as later in the
+    run, not a traceback and death by SIGINT. Anything else, and any other program, goes to the previous hook."""
+    spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+    if issubclass(exc_type, KeyboardInterrupt) and str(getattr(spec, "name", "")).startswith("tmr."):
+        import os
+
+        try:
+            sys.stderr.write("interrupted\n")
+            sys.stderr.flush()
+        finally:
+            os._exit(130)
+    _previous_excepthook(exc_type, exc, tb)
+
+
+_previous_excepthook = sys.excepthook
+sys.excepthook = _ctrl_c_before_run

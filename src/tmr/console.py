@@ -12,6 +12,14 @@ stderr. :func:`run` calls a command's body and turns what it raises into the exi
 line ``interrupted`` and 130 (outputs are written to a temporary directory and moved into ``--out`` only when
 complete, so an interrupted run leaves no half-written file); any other exception → one line naming it and
 1, with ``--debug`` the traceback.
+
+Ctrl-C stops every command at the first press, in every phase: Python code at once (KeyboardInterrupt), a solver
+at its next iteration. Where a solver catches SIGINT itself, the stop is handed on, never read as an ordinary
+failed or early stop: IPOPT's iteration callback stops it and KeyboardInterrupt follows
+(:mod:`tmr.formulations.horizon`); OSQP's "interrupted" status delivers the SIGINT again
+(:mod:`tmr.formulations.qp`). Worker processes (figures, sweeps) start with SIGINT blocked
+(:func:`children_without_ctrl_c`), ignore it, and are terminated, not waited for. Measured per phase by
+``benchmarks/interrupt.py``.
 """
 
 from __future__ import annotations
