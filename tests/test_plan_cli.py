@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tmr.plan import main
+from tmr.plan import TIMING_KEYS, main
 
 FAST = ["--iterations", "300"]
 
@@ -67,7 +67,8 @@ def test_same_seed_same_bytes(tmp_path, capsys):
     # the timings are apart: metrics.json has none, timings.json has them
     assert "wall_time" not in json.loads((outs[0] / "metrics.json").read_text())
     timings = json.loads((outs[0] / "timings.json").read_text())
-    assert set(timings) == {"wall_time", "ms_per_step"} and timings["wall_time"] > 0
+    assert set(timings) == set(TIMING_KEYS) - {"nlp_time"} and timings["wall_time"] > 0  # the default method: qp
+    assert not set(TIMING_KEYS) & set(json.loads((outs[0] / "metrics.json").read_text()))
 
 
 def test_robots_override_and_start(tmp_path, capsys):
