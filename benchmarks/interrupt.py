@@ -44,12 +44,12 @@ PHASES = [
     Phase(
         "startup (imports, route)", [*PLAN, "--scenario", "A", "--method", "qp", "--out", "{out}"], None, (0.25, 1.5)
     ),
-    Phase("qp loop", [*PLAN, "--scenario", "A", "--method", "qp", "--out", "{out}"], r"^planning with", (0.0, 1.5)),
+    Phase("qp loop", [*PLAN, "--scenario", "A", "--method", "qp", "--out", "{out}"], r"^planning with", (0.0, 0.8)),
     Phase(
         "IPOPT (horizon)",
         [*PLAN, "--scenario", "A", "--method", "horizon", "--out", "{out}"],
         r"^horizon NLP round",
-        (0.0, 1.5),
+        (0.0, 0.8),
     ),
     Phase(
         "outputs and figures",
@@ -69,7 +69,7 @@ PHASES = [
         "ROS bag",
         [*PLAN, "--scenario", "A", "--method", "qp", "--no-plots", "--export", "mcap", "--out", "{out}"],
         r"^ROS bag:",
-        (0.0, 0.5),
+        (0.0, 0.25),
         out_must_be_empty=False,
     ),
     Phase(
@@ -91,6 +91,7 @@ class Try:
     to_line: float  # signal → the line "interrupted" on stderr [s]
     left: list[str]  # files in --out
     ok: bool
+    late: bool = False  # the run had finished (its last line printed) before the signal: not counted
 
 
 def interrupt(argv: list[str], trigger: str | None, delay: float, out: Path, timeout: float = 300.0) -> Try:
@@ -109,10 +110,14 @@ def interrupt(argv: list[str], trigger: str | None, delay: float, out: Path, tim
     err: list[str] = []
     pattern = re.compile(trigger) if trigger else None
 
+    finished: list[float] = []
+
     def read_out() -> None:
         for line in p.stdout:  # type: ignore[union-attr]
             if pattern is not None and pattern.search(line):
                 seen.set()
+            if line.startswith("  wrote "):  # the run's last line
+                finished.append(time.monotonic())
 
     line_at: list[float] = []
 
@@ -150,7 +155,8 @@ def interrupt(argv: list[str], trigger: str | None, delay: float, out: Path, tim
     latency = ended - sent if sent == sent else math_nan
     to_line = line_at[0] - sent if line_at and sent == sent else math_nan
     ok = p.returncode == 130 and stderr == "interrupted"
-    return Try("", delay, p.returncode, stderr, latency, to_line, left, ok)
+    late = sent != sent or bool(finished and finished[0] <= sent)
+    return Try("", delay, p.returncode, stderr, latency, to_line, left, ok, late)
 
 
 def main() -> None:
@@ -167,7 +173,7 @@ def main() -> None:
         if args.only and args.only not in ph.name:
             continue
         n = args.issue_tries if ph.name.startswith("issue") else args.tries
-        tries = []
+        tries, late = [], 0
         for i in range(n):
             work = Path(tempfile.mkdtemp(prefix="tmr-int-"))
             try:
@@ -175,6 +181,10 @@ def main() -> None:
             finally:
                 shutil.rmtree(work, ignore_errors=True)
             tr.phase = ph.name
+            if tr.late:
+                print(f"{ph.name[:40]:40s} {i + 1:3d}/{n} delay {tr.delay:5.2f} s: the run had ended, not counted")
+                late += 1
+                continue
             if ph.out_must_be_empty and tr.left:
                 tr.ok = False
             tries.append(tr)
@@ -194,8 +204,8 @@ def main() -> None:
         mx = max(lat) if lat else float("nan")
         p90 = statistics.quantiles(lat, n=10)[-1] if len(lat) >= 2 else mx
         rows.append(
-            f"| {ph.name} | {len(tries)} | {ok} | {lost} | {line_med:.3f} | {line_max:.3f} | {med:.3f} | {p90:.3f} "
-            f"| {mx:.3f} |"
+            f"| {ph.name} | {len(tries)} | {late} | {ok} | {lost} | {line_med:.3f} | {line_max:.3f} | {med:.3f} "
+            f"| {p90:.3f} | {mx:.3f} |"
         )
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     text = "\n".join(
@@ -207,11 +217,12 @@ def main() -> None:
             "process group at a seeded random delay after the `-v` line that opens the phase; latency = signal → "
             "exit (the line `interrupted` comes first; "
             "the rest is the interpreter's exit). ok = exit 130, stderr exactly `interrupted`, and (before the "
-            "outputs are published) nothing in `--out`; lost = the run went on to exit 0/1.",
+            "outputs are published) nothing in `--out`; lost = the run went on to exit 0/1; "
+            "too late = the run had printed its last line before the signal (not counted in the tries).",
             "",
-            "| phase | tries | ok | lost | to the line: median [s] | max [s] | to the exit: median [s] | 90% [s] "
-            "| max [s] |",
-            "|---|---|---|---|---|---|---|---|---|",
+            "| phase | tries | too late | ok | lost | to the line: median [s] | max [s] | to the exit: median [s] "
+            "| 90% [s] | max [s] |",
+            "|---|---|---|---|---|---|---|---|---|---|",
             *rows,
             "",
             *(["Failures:", "", *details] if details else ["No failure."]),

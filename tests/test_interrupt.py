@@ -83,6 +83,35 @@ def test_ctrl_c_in_exec_code_still_exits_130(tmp_path):
     assert (p.returncode, p.stderr.strip()) == (130, "interrupted")
 
 
+def test_ctrl_c_raised_where_python_ignores_it_is_raised_again(tmp_path):
+    """A KeyboardInterrupt raised inside a weakref callback (importlib's module-lock cleanup) or a ``__del__`` can
+    only be ignored by Python ("Exception ignored in ..."): the Ctrl-C was lost and the run went on to exit 0 (1 try
+    in 40 at 1 s into ``tmr plan``). tmr raises it again in the main thread."""
+    (tmp_path / "weakbody.py").write_text(
+        "import argparse, os, signal, sys, weakref\n"
+        "from tmr.console import run\n"
+        "class X: pass\n"
+        "def body(args):\n"
+        "    def cb(ref):\n"
+        "        os.kill(os.getpid(), signal.SIGINT)  # raised inside the callback: Python ignores it there\n"
+        "    x = X(); r = weakref.ref(x, cb); del x\n"
+        "    for _ in range(10**7): pass  # the run goes on\n"
+        "    return 0\n"
+        "sys.exit(run(body, argparse.Namespace()))\n"
+    )
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path), SRC]))
+    p = subprocess.run(
+        [sys.executable, "-m", "weakbody"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+        start_new_session=True,
+        preexec_fn=_sigint_default,
+    )
+    assert (p.returncode, p.stderr.strip()) == (130, "interrupted")
+
+
 @pytest.mark.parametrize("delay", [0.3, 0.5])
 def test_ctrl_c_during_the_imports_is_one_line_and_130(tmp_path, delay):
     """Before tmr.console.run takes over (``python -m tmr.plan`` imports numpy and tmr's modules first), a Ctrl-C

@@ -113,6 +113,7 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
     quiet, verbose, debug = (bool(getattr(args, k, False)) for k in ("quiet", "verbose", "debug"))
     setup_logging(quiet, verbose)
     logging.captureWarnings(True)
+    _state["running"] = True  # a KeyboardInterrupt Python can only ignore is raised again (tmr._ctrl_c_not_lost)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("default")  # each distinct warning once, through logging
@@ -140,6 +141,7 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
     finally:
         logging.captureWarnings(False)
         _state["quiet"] = False
+        _state["running"] = False
         if _state.get("sigint") is not None:  # give the caller (e.g. a test session) its handler back
             signal.signal(signal.SIGINT, _state.pop("sigint"))
 
