@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tmr.plan import main
+from tmr.plan import TIMING_KEYS, main
 
 FAST = ["--iterations", "300"]
 
@@ -69,7 +69,8 @@ def test_same_seed_same_bytes(tmp_path, capsys):
     # the timings are apart: metrics.json has none, timings.json has them
     assert "wall_time" not in json.loads((outs[0] / "metrics.json").read_text())
     timings = json.loads((outs[0] / "timings.json").read_text())
-    assert set(timings) == {"wall_time", "ms_per_step"} and timings["wall_time"] > 0
+    assert set(timings) == set(TIMING_KEYS) - {"nlp_time"} and timings["wall_time"] > 0  # the default method: qp
+    assert not set(TIMING_KEYS) & set(json.loads((outs[0] / "metrics.json").read_text()))
 
 
 def test_robots_override_and_start(tmp_path, capsys):
@@ -154,6 +155,16 @@ def test_hard_constraint_methods_on_scenario_a(tmp_path, capsys, method):
     metrics = json.loads((out / "metrics.json").read_text())
     assert code == 0 and metrics["success"] and metrics["method"] == method
     assert metrics["n_violation_steps"] == 0 and metrics["min_tether_clearance"] > 0
+    # the plan's wall time is the whole planning time (horizon: it was the NLP's alone, or the qp's when the warm
+    # start was returned); timings.json holds the parts, inside it
+    timings = json.loads((out / "timings.json").read_text())
+    parts = ("route_time", "other_attempts_time", "problem_time", "qp_time", "nlp_time")
+    assert set(parts) - {"nlp_time"} <= set(timings) and ("nlp_time" in timings) == (method == "horizon")
+    assert timings["wall_time"] >= sum(timings.get(k, 0.0) for k in parts) > 0
+    assert 0 < timings["qp_time"] < timings["wall_time"] and timings["outputs_time"] > 0
+    if method == "horizon":
+        assert 0 < timings["nlp_time"] < timings["wall_time"]
+    assert f"wall_time                {timings['wall_time']:.6g}" in stdout  # the summary's is the same
 
 
 def _corridor(tmp_path: Path) -> Path:

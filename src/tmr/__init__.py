@@ -10,6 +10,7 @@ Quick start::
 
 from __future__ import annotations
 
+import sys
 from importlib import import_module
 from typing import TYPE_CHECKING, Any
 
@@ -123,3 +124,53 @@ __all__ = [
     "TetherRegulation",
     "TmrError",
 ]
+
+
+def _tmr_command_running() -> bool:
+    """Whether this process runs a tmr command: ``python -m tmr.<command>``, or :func:`tmr.console.run` active."""
+    spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+    console = sys.modules.get("tmr.console")
+    return str(getattr(spec, "name", "")).startswith("tmr.") or bool(console and console._state.get("running"))
+
+
+def _ctrl_c_before_run(exc_type: type[BaseException], exc: BaseException, tb: Any) -> None:
+    """``sys.excepthook`` for a Ctrl-C in a ``python -m tmr.<command>`` run before :func:`tmr.console.run` took
+    over (the command's imports, its argument parsing): the one line ``interrupted`` and exit 130, as later in the
+    run, not a traceback and death by SIGINT. Anything else, and any other program, goes to the previous hook."""
+    if issubclass(exc_type, KeyboardInterrupt) and _tmr_command_running():
+        import os
+
+        try:
+            sys.stderr.write("interrupted\n")
+            sys.stderr.flush()
+        finally:
+            os._exit(130)
+    _previous_excepthook(exc_type, exc, tb)
+
+
+def _ctrl_c_not_lost(unraisable: Any) -> None:
+    """``sys.unraisablehook``: a Ctrl-C whose KeyboardInterrupt was raised where Python can only ignore it (a weakref
+    callback such as importlib's module-lock cleanup, a ``__del__``) was lost — "Exception ignored in ..." and the
+    run went on to the end (1 try in 40 at 1 s into ``tmr plan``). In a tmr command it is raised again in the main
+    thread, 10 ms later, by another thread (:func:`_thread.interrupt_main`; from here it would be raised at once,
+    inside this hook, and ignored again). Anything else goes to the previous hook."""
+    if isinstance(unraisable.exc_value, KeyboardInterrupt) and _tmr_command_running():
+        import _thread
+
+        _thread.start_new_thread(_interrupt_main_soon, ())
+        return
+    _previous_unraisablehook(unraisable)
+
+
+def _interrupt_main_soon() -> None:
+    import _thread
+    import time
+
+    time.sleep(0.01)
+    _thread.interrupt_main()
+
+
+_previous_excepthook = sys.excepthook
+sys.excepthook = _ctrl_c_before_run
+_previous_unraisablehook = sys.unraisablehook
+sys.unraisablehook = _ctrl_c_not_lost

@@ -14,6 +14,7 @@ Deterministic: the same motion gives the same bytes.
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 from typing import Any
@@ -320,6 +321,7 @@ def write_gif(
     from tqdm import tqdm
 
     idx = frame_indices(motion, fps, max_frames)
+    logging.getLogger("tmr").debug("GIF: drawing %d frames", len(idx))
     frames = tqdm(sc.frames(idx), total=len(idx), desc="gif frames", unit="frame", leave=False, disable=not progress)
     images = [im.convert("RGB") for im in frames]
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".gif")

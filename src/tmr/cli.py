@@ -82,11 +82,11 @@ def main(argv: list[str] | None = None) -> int:
         hint = f"; did you mean '{close[0]}'?" if close else f"; commands: {', '.join(COMMANDS)}"
         print(f"tmr: error: unknown command '{name}'{hint}", file=sys.stderr)
         return 2
-    entry = _load(name)
-    if entry is None:
-        print(f"tmr: error: 'tmr {name}' is not available in this version of tmr", file=sys.stderr)
-        return 2
     try:
+        entry = _load(name)  # the command's imports: a Ctrl-C here is one line and 130 too
+        if entry is None:
+            print(f"tmr: error: 'tmr {name}' is not available in this version of tmr", file=sys.stderr)
+            return 2
         return int(entry(args[1:], prog=f"tmr {name}"))  # the tool's messages name it as it was called
     except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)

@@ -13,16 +13,25 @@ stderr. :func:`run` calls a command's body and turns what it raises into the exi
 line ``interrupted`` and 130 (outputs are staged and published into ``--out`` in one step, :mod:`tmr.outdir`, so
 an interrupted run leaves no half-written file); any other exception → one line naming it and
 1, with ``--debug`` the traceback.
+
+Ctrl-C stops every command at the first press, in every phase: Python code at once (KeyboardInterrupt), a solver
+at its next iteration. Where a solver catches SIGINT itself, the stop is handed on, never read as an ordinary
+failed or early stop: IPOPT's iteration callback stops it and KeyboardInterrupt follows
+(:mod:`tmr.formulations.horizon`); OSQP's "interrupted" status delivers the SIGINT again
+(:mod:`tmr.formulations.qp`). Worker processes (figures, sweeps) start with SIGINT blocked
+(:func:`children_without_ctrl_c`), ignore it, and are terminated, not waited for. Measured per phase by
+``benchmarks/interrupt.py``.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import signal
 import sys
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 from tmr.errors import TmrError
@@ -31,6 +40,7 @@ __all__ = [
     "LOG",
     "EXIT_INTERRUPTED",
     "add_manners",
+    "children_without_ctrl_c",
     "progress_enabled",
     "run",
     "set_progress",
@@ -107,12 +117,14 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
     quiet, verbose, debug = (bool(getattr(args, k, False)) for k in ("quiet", "verbose", "debug"))
     setup_logging(quiet, verbose)
     logging.captureWarnings(True)
+    _state["running"] = True  # a KeyboardInterrupt Python can only ignore is raised again (tmr._ctrl_c_not_lost)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("default")  # each distinct warning once, through logging
             return body(args)
     except KeyboardInterrupt:
         _ignore_further_interrupts()  # a second Ctrl-C (or one sent to the whole process group) while reporting
+        _handled_interrupt()
         if debug:
             LOG.exception("interrupted")
         else:
@@ -133,8 +145,22 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
     finally:
         logging.captureWarnings(False)
         _state["quiet"] = False
+        _state["running"] = False
         if _state.get("sigint") is not None:  # give the caller (e.g. a test session) its handler back
             signal.signal(signal.SIGINT, _state.pop("sigint"))
+
+
+def _handled_interrupt() -> None:
+    """Tell CPython the KeyboardInterrupt was handled. CPython 3.11 records a KeyboardInterrupt that leaves code run
+    by ``exec`` of a string (dataclasses, rosbags' message types, ...) as unhandled, even if it is caught further
+    out, and ``python -m`` then ends the process by SIGINT instead of with the exit code (returncode -2, not 130).
+    """
+    import ctypes
+
+    try:
+        ctypes.c_int.in_dll(ctypes.pythonapi, "_Py_UnhandledKeyboardInterrupt").value = 0
+    except (AttributeError, OSError, ValueError):  # pragma: no cover - another Python (the flag lives elsewhere)
+        pass
 
 
 def _ignore_further_interrupts() -> None:
@@ -142,3 +168,21 @@ def _ignore_further_interrupts() -> None:
         _state["sigint"] = signal.signal(signal.SIGINT, signal.SIG_IGN)
     except ValueError:  # not the main thread: signals cannot be set there
         pass
+
+
+@contextlib.contextmanager
+def children_without_ctrl_c() -> Iterator[None]:
+    """Block SIGINT in the calling thread while worker processes are started in this block.
+
+    Ctrl-C at a terminal signals the whole process group, workers included. A worker forked or spawned here starts
+    with SIGINT blocked (the mask is inherited), so it never raises KeyboardInterrupt (a traceback of its own on the
+    shared stderr) before its initialiser ignores SIGINT; the parent, which stops its workers, gets a Ctrl-C that
+    came meanwhile as soon as the block ends. Does nothing where ``signal.pthread_sigmask`` does not exist."""
+    if not hasattr(signal, "pthread_sigmask"):  # pragma: no cover - Windows
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)

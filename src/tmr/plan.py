@@ -27,6 +27,8 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -51,8 +53,22 @@ OUTPUT_NAMES = (
     "distance_errors.png",
     "speeds.png",
 )
-#: Keys of the metrics that are timings: written to ``timings.json``, not ``metrics.json``.
-TIMING_KEYS = ("wall_time", "ms_per_step")
+#: Keys of the metrics that are timings [s] (``ms_per_step`` [ms]): written to ``timings.json``, not ``metrics.json``.
+#: ``wall_time`` is the whole planning time, from the route to the checked plan (every ``--robots auto`` attempt);
+#: the parts: ``route_time`` (the route and its robot counts, before anything else), ``other_attempts_time`` (the
+#: ``--robots auto`` attempts before the one kept), ``problem_time`` (the leader's path, references and start of the
+#: plan kept), ``qp_time`` (its qp runs; the warm start of ``horizon``), ``nlp_time`` (the horizon NLP) — their sum
+#: is at most ``wall_time`` (the rest: the checks). ``outputs_time``: writing the files before ``timings.json``.
+TIMING_KEYS = (
+    "wall_time",
+    "ms_per_step",
+    "route_time",
+    "other_attempts_time",
+    "problem_time",
+    "qp_time",
+    "nlp_time",
+    "outputs_time",
+)
 #: Every entry of ``--out`` a plan owns: its files, its views, and the physics replay of the plan (``tmr replay``
 #: writes ``replay/``). Those tmr wrote before and a new run does not write are removed when it publishes; an entry
 #: of one of these names that tmr did not write makes the run refuse its ``--out`` (:mod:`tmr.outdir`).
@@ -240,13 +256,13 @@ def write_outputs(
     :class:`tmr.plotpool.FigurePool`) if given, else here."""
     from tmr import io
 
+    start = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     io.write_trajectories_json(plan, out / "trajectories.json", filtered=filtered)
     io.write_trajectories_csv(plan, out / "trajectories.csv", filtered=filtered)
     values = metrics.to_dict() | (extra or {})
     timings = {key: values.pop(key) for key in TIMING_KEYS if key in values}
     io.write_metrics_json(values, out / "metrics.json")
-    io.write_metrics_json(timings, out / "timings.json")  # kept apart: metrics.json is reproducible
     from tmr.rundir import write_chain_run
 
     write_chain_run(out / "run.json", plan, env, extra)  # scenario, map and tether parameters (tmr.replay)
@@ -268,6 +284,8 @@ def write_outputs(
             for name, (function, args, kwargs) in figures.items():
                 plot.save_figure(getattr(plot, function)(*args, **kwargs), out / name)
         names += list(figures)
+    timings["outputs_time"] = time.perf_counter() - start
+    io.write_metrics_json(timings, out / "timings.json")  # kept apart: metrics.json is reproducible
     return sorted(names)
 
 
@@ -317,6 +335,7 @@ def _plan_once(args: argparse.Namespace, scenario: Any, n_robots: int | None, ro
     and for N ≥ its N_min no tighter margin is tried): the route is not computed twice."""
     from tmr.planner import build_problem, solve
 
+    start = time.perf_counter()
     overrides = dict(args.set) | ({"solver": args.solver} if args.solver else {})
     problem = build_problem(
         scenario,
@@ -328,7 +347,10 @@ def _plan_once(args: argparse.Namespace, scenario: Any, n_robots: int | None, ro
         route=args.route,
         known_route=route if _route_fits(args, route, n_robots or 0) else None,
     )
+    problem_time = time.perf_counter() - start
+    LOG.debug("planning with %d robots: %s", problem.chain.n_robots, args.method)
     plan, metrics = solve(problem, args.method, time_limit=args.time_limit, progress=progress_enabled())
+    plan.diagnostics["timings"] = dict(plan.diagnostics.get("timings", {}), problem_time=problem_time)
     return problem, plan, metrics
 
 
@@ -337,6 +359,20 @@ def _route_fits(args: argparse.Namespace, route: Any, n: int) -> bool:
     (not ``auto``: its guide is already the chain off the route if that is what N needs) or N is at least what
     the route chain needs."""
     return n >= max(2, route.n_min) and (args.robots != "auto" or n >= route.n_route)
+
+
+def _whole_planning(
+    plan: Any, metrics: Any, start: float, route_time: float, other_attempts_time: float
+) -> tuple[Any, Any, dict[str, float]]:
+    """The plan and metrics with the whole planning time since ``start`` [s] (route, every attempt, warm start, NLP,
+    checks) as ``wall_time`` (and ``ms_per_step``), and the parts for ``timings.json`` (:data:`TIMING_KEYS`)."""
+    wall = time.perf_counter() - start
+    plan.wall_time = wall
+    steps = plan.t.size - 1
+    metrics = replace(metrics, wall_time=wall, ms_per_step=1000.0 * wall / steps if steps > 0 else float("nan"))
+    parts = {"route_time": route_time, "other_attempts_time": other_attempts_time}
+    parts |= {key: float(v) for key, v in plan.diagnostics.get("timings", {}).items() if key in TIMING_KEYS}
+    return plan, metrics, parts
 
 
 def _short(reason: Any, width: int = 90) -> str:
@@ -481,7 +517,9 @@ def _main(args: argparse.Namespace) -> int:
             raise TmrError("--robots auto chooses the number of robots, so it cannot take --start; give --robots N")
         check_out(Path(args.out))
         scenario = load_inputs(args)
+        start = time.perf_counter()
         rt, n_first = precheck(args, scenario)
+        route_time = time.perf_counter() - start
         env = scenario.environment
         LOG.debug(
             "map %s: room %s m, robot radius r = %g m (obstacles grown by r, robots >= %g m apart)",
@@ -507,13 +545,18 @@ def _main(args: argparse.Namespace) -> int:
                 last = min(rt.n_route + AUTO_EXTRA, fit)  # n_route ≥ n_min
                 capped = f" (at most {fit} robots fit in the free area)" if last < rt.n_route + AUTO_EXTRA else ""
                 problem = None
+                attempts_time = kept_time = 0.0  # [s]: every attempt, the one whose plan is kept
                 for n in range(rt.n_min, last + 1):
+                    attempt_start = time.perf_counter()
                     try:
                         attempt = _plan_once(args, scenario, n, rt)
                     except TmrError as exc:  # refused, no start placement or no path with this N: try the next one
                         tried.append(f"{n}: {_short(exc)}")
                         continue
+                    finally:
+                        attempts_time += time.perf_counter() - attempt_start
                     problem, plan, metrics = attempt
+                    kept_time = time.perf_counter() - attempt_start
                     tried.append(f"{n}: {'planned' if plan.success else _short(plan.failure)}")
                     if plan.success:
                         break
@@ -522,12 +565,16 @@ def _main(args: argparse.Namespace) -> int:
                     LOG.error("no plan found: %s", summary_line)
                     return 1
                 auto_note = f"{summary_line}; chose N = {problem.chain.n_robots}"
+                other_attempts_time = attempts_time - kept_time
             else:
                 problem, plan, metrics = _plan_once(args, scenario, n_first, rt)
+                other_attempts_time = 0.0
+            plan, metrics, timings = _whole_planning(plan, metrics, start, route_time, other_attempts_time)
+            LOG.debug("writing the outputs")
             filtered, filter_note = filter_within_limits(
                 plan, problem.env, problem.time_params.Ts, cutoff_hz=args.filter_cutoff
             )
-            extra = _extras(problem, plan, auto_note) | ({"filter_note": filter_note} if filter_note else {})
+            extra = _extras(problem, plan, auto_note) | ({"filter_note": filter_note} if filter_note else {}) | timings
             from tmr.outdir import Stage
 
             with Stage(args.out, OWNED_NAMES, VOLATILE_NAMES) as stage:  # everything staged, then one publication
@@ -544,6 +591,11 @@ def _main(args: argparse.Namespace) -> int:
                 )
                 write_views(args, stage.path, lambda: chain_motion(plan, problem.env, problem.chain_params))
                 names = stage.publish()
+        except BaseException:
+            if pool is not None:  # Ctrl-C or an error: do not wait for a figure being rendered
+                pool.terminate()
+                pool = None
+            raise
         finally:
             if pool is not None:
                 pool.close()

@@ -13,6 +13,8 @@ This is the library entry point behind ``python -m tmr.plan``::
 
 from __future__ import annotations
 
+import math
+import time
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
@@ -528,30 +530,52 @@ def solve(
     horizon plan is never worse than its ``qp`` warm start: if IPOPT fails, it is the best feasible iterate or the
     warm start itself (``diagnostics["horizon_result"]`` says which); if nothing feasible is found, the failed plan
     names the violated limits.
+
+    The plan's ``wall_time`` (and its metrics' ``wall_time``, ``ms_per_step``) is the whole of this call [s]: every
+    qp run (the train-reference retry too), the horizon's warm start and NLP, and the checks;
+    ``plan.diagnostics["timings"]`` holds the parts [s]: ``qp_time`` (for ``horizon``: its qp warm start) and
+    ``nlp_time`` (``horizon`` only; IPOPT's rounds with their transcription and fallback choice).
     """
+    start = time.perf_counter()
     if method == "qp":
-        return _solve_qp(problem, progress)[1:]
+        result, metrics = _solve_qp(problem, progress)[1:]
+        return _whole(result, metrics, start, qp_time=time.perf_counter() - start)
     if method != "horizon":
-        return _checked(problem, method, progress)
+        result, metrics = _checked(problem, method, progress)
+        return _whole(result, metrics, start)
     # a whole-trajectory NLP, not a per-step formulation
     from tmr.formulations.horizon import DEFAULT_TIME_LIMIT, HorizonInfeasible, plan_horizon  # casadi: when used
 
     problem, warm, warm_metrics = _horizon_warm_start(problem, progress)
+    qp_done = time.perf_counter()
     limit = DEFAULT_TIME_LIMIT if time_limit is None else time_limit
     try:
         result = plan_horizon(problem, warm, time_limit=limit, progress=progress)
     except HorizonInfeasible as exc:
+        parts = dict(qp_time=qp_done - start, nlp_time=time.perf_counter() - qp_done)
         warm.method = "horizon"
         first = str(exc).split(";")[0]
         if warm.success:  # the NLP's own rows are stricter than the checks: the verified warm start stands
             warm.diagnostics = dict(warm.diagnostics, horizon_result="warm_start")
             warm.diagnostics["horizon_note"] = f"{first}; returned its qp warm start, which passes every check"
-            return warm, evaluate(warm, problem.env)
+            return _whole(warm, evaluate(warm, problem.env), start, **parts)
         warm.success = False
         reason = f"horizon: {exc}"
         warm.failure = reason if warm.failure is None else f"{reason}; its qp warm start: {warm.failure}"
-        return warm, evaluate(warm, problem.env)
-    return result, check(result, problem.env, goal_tolerance=problem.path_params.goal_tolerance)
+        return _whole(warm, evaluate(warm, problem.env), start, **parts)
+    parts = dict(qp_time=qp_done - start, nlp_time=time.perf_counter() - qp_done)
+    metrics = check(result, problem.env, goal_tolerance=problem.path_params.goal_tolerance)
+    return _whole(result, metrics, start, **parts)
+
+
+def _whole(result: Plan, metrics: Metrics, start: float, **parts: float) -> tuple[Plan, Metrics]:
+    """``result`` and its ``metrics`` with the wall time [s] since ``start`` (:func:`perf_counter
+    <time.perf_counter>`) in place of the last loop's; the parts [s] in ``result.diagnostics["timings"]``."""
+    wall = time.perf_counter() - start
+    result.wall_time = wall
+    result.diagnostics["timings"] = {key: float(value) for key, value in parts.items()}
+    steps = result.t.size - 1
+    return result, replace(metrics, wall_time=wall, ms_per_step=1000.0 * wall / steps if steps > 0 else math.nan)
 
 
 def _checked(problem: Problem, method: str | Formulation, progress: bool) -> tuple[Plan, Metrics]:

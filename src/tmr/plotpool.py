@@ -17,6 +17,8 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import PurePath
 from typing import Any
 
+from tmr.console import children_without_ctrl_c
+
 __all__ = ["FigurePool"]
 
 
@@ -42,9 +44,10 @@ class FigurePool:
         method = "fork" if sys.platform.startswith("linux") else "spawn"  # fork is unsafe on macOS
         sys.stdout.flush()  # a forked worker must not write the parent's buffered output a second time
         sys.stderr.flush()
-        self._pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context(method), initializer=_warm)
-        for _ in range(workers):  # start every worker now (spawn starts one per pending task)
-            self._pool.submit(int)
+        with children_without_ctrl_c():  # a Ctrl-C to the process group is this process's, never a worker's
+            self._pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context(method), initializer=_warm)
+            for _ in range(workers):  # start every worker now (spawn starts one per pending task)
+                self._pool.submit(int)
 
     def render(self, figures: dict[str, tuple[str, tuple[Any, ...], dict[str, Any]]]) -> dict[str, bytes]:
         """Render ``{file name: (tmr.plot function name, args, kwargs)}``; returns ``{file name: bytes}`` in the
@@ -59,8 +62,19 @@ class FigurePool:
         """Stop the workers (after any figure they are rendering)."""
         self._pool.shutdown(wait=True, cancel_futures=True)
 
+    def terminate(self) -> None:
+        """Stop the workers now, without waiting for a figure they are rendering (after Ctrl-C or an error)."""
+        for process in list((getattr(self._pool, "_processes", None) or {}).values()):
+            process.terminate()
+        # wait for the pool's thread (it sees the workers gone at once): left running, it raced the interpreter's
+        # exit, which then printed "OSError: Bad file descriptor" from concurrent.futures after "interrupted"
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
     def __enter__(self) -> FigurePool:
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    def __exit__(self, exc_type: object, *exc: object) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.terminate()

@@ -30,6 +30,7 @@ The bag is deterministic: the same motion gives the same bytes (no wall-clock ti
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 import shutil
@@ -232,6 +233,7 @@ def write_bag(
     m = _Msgs(ts)
     ser = ts.serialize_cdr
     t = np.asarray(motion.t, dtype=float)
+    logging.getLogger("tmr").debug("ROS bag: %d samples, storage %s", t.size, storage)
     stamps = [stamp_ns(v) for v in t]
     ns0 = stamps[0]
     zero = QosTime(sec=0, nsec=0)

@@ -121,9 +121,8 @@ def load_motion(
     checked plan, default) or ``"filtered"`` (the low-passed positions the robots track) for chain runs;
     ``description`` the CCMA system file of a run not made from a shipped example.
     """
-    from tmr.rundir import load_run
-
     from tmr.outdir import is_complete
+    from tmr.rundir import load_run
 
     p = Path(path)
     if p.is_dir() and not is_complete(p):

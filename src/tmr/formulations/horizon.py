@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import contextlib
 import heapq
+import logging
 import math
 import signal
 import sys
@@ -851,6 +852,8 @@ class _Pool:
         return best
 
 
+_LOG = logging.getLogger("tmr")
+
 #: Set while an NLP runs when Ctrl-C arrives: IPOPT stops at its next iteration, then KeyboardInterrupt is raised.
 _INTERRUPT = threading.Event()
 
@@ -1060,6 +1063,7 @@ def plan_horizon(
                 elif ls_duals:
                     kwargs.update(lam_g0=_leader_multipliers(model, tr, x_start, obj_scale))
                 t3 = time.perf_counter()
+                _LOG.debug("horizon NLP round %d %s: IPOPT on %d rows", rnd, label, tr.size)
                 with _ctrl_c_stops_ipopt():
                     sol = solver(**kwargs)
                 t4 = time.perf_counter()

@@ -39,6 +39,7 @@ step's status per level is in ``diagnostics["qp_level:<name>"]`` (:data:`LEVEL_S
 from __future__ import annotations
 
 import importlib.util
+import signal
 import time
 import warnings
 from collections.abc import Container, Sequence
@@ -75,6 +76,15 @@ OSQP_COARSE = dict(eps_abs=1e-5, eps_rel=1e-5, max_iter=400)
 FALLBACK_SOLVERS: tuple[str, ...] = ("daqp", "clarabel")
 #: OSQP's infinity: bounds beyond it are clipped.
 OSQP_INFTY = 1e30
+
+
+def _ctrl_c_again(status: str) -> None:
+    """OSQP (and SCS, through qpsolvers) install their own SIGINT handler while they iterate: a Ctrl-C then stops
+    the solve with the status ``"interrupted"`` and never reaches Python, so the run went on with a failed step (about
+    one Ctrl-C in 12 was lost during the QP loop). Deliver that Ctrl-C again, to Python's handler, restored by the
+    solver on return: KeyboardInterrupt by default; a process that ignores SIGINT (a sweep worker) goes on."""
+    if "interrupt" in status.lower():
+        signal.raise_signal(signal.SIGINT)
 
 
 #: Python module of each default fallback backend: whether it is installed is asked without importing qpsolvers
@@ -202,8 +212,11 @@ class _OsqpLevel:
         """One OSQP solve with the current data and settings: (info, x, y)."""
         if self.core is not None:
             self.core.solve()
-            return self.core.info, self.core.solution.x, self.core.solution.y
+            info = self.core.info
+            _ctrl_c_again(str(info.status))
+            return info, self.core.solution.x, self.core.solution.y
         res = self.solver.solve(raise_error=False)  # pragma: no cover - an osqp without the extension attribute
+        _ctrl_c_again(str(res.info.status))  # pragma: no cover
         return res.info, res.x, res.y  # pragma: no cover
 
     def solve(
@@ -317,6 +330,7 @@ class _QpsolversLevel:
             extras = getattr(sol, "extras", None) or {}
             why = extras.get("status", extras.get("info", None))
             why = getattr(why, "status", why)
+            _ctrl_c_again(str(why))  # OSQP and SCS stop on Ctrl-C with the status "interrupted"
             return None, f"{self.solver}: {why if why is not None else 'infeasible or failed'}", 0
         x = np.array(x, dtype=float)
         if self.polish is None:

@@ -98,6 +98,7 @@ def _chain(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str
     for name, value in (("n_links", args.links), ("timestep", args.timestep), ("tolerance", args.tolerance)):
         if value is not None:
             cfg = replace(cfg, **{name: value})
+    LOG.debug("MuJoCo replay of %s", run.label)
     with _bar("replay") as progress:
         rp = replay_chain(run, cfg, progress=progress)
     verdict = chain_verdict(rp, run)

@@ -21,6 +21,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Protocol, TypeVar
 
+from tmr.console import children_without_ctrl_c
 from tmr.sweep.errors import SweepError
 
 T = TypeVar("T")
@@ -95,7 +96,8 @@ class LocalExecutor:
             methods = multiprocessing.get_all_start_methods()
             ctx = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
             self._pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=_ignore_sigint)
-        futures = {self._pool.submit(fn, item): i for i, item in enumerate(items)}
+        with children_without_ctrl_c():  # workers started by submit never see the group's Ctrl-C (tmr.console)
+            futures = {self._pool.submit(fn, item): i for i, item in enumerate(items)}
         out: list[Any] = [None] * len(items)
         try:
             with _bar(len(items), desc, self.progress) as bar:
@@ -105,10 +107,12 @@ class LocalExecutor:
         except BaseException as exc:
             # one task failed (or Ctrl-C): drop the tasks not started yet instead of running them all first
             pool, self._pool = self._pool, None
-            pool.shutdown(wait=False, cancel_futures=True)
             if isinstance(exc, KeyboardInterrupt):  # Ctrl-C: stop the running tasks too, do not wait for them
                 for proc in list((getattr(pool, "_processes", None) or {}).values()):
                     proc.terminate()
+            # after Ctrl-C the pool's thread ends at once (its workers are gone): waited for, it does not race the
+            # interpreter's exit (an "OSError: Bad file descriptor" from concurrent.futures after "interrupted")
+            pool.shutdown(wait=isinstance(exc, KeyboardInterrupt), cancel_futures=True)
             if isinstance(exc, BrokenProcessPool):
                 raise SweepError(f"a worker process died ({exc}); out of memory? try fewer --jobs") from exc
             raise
