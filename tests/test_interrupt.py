@@ -57,6 +57,21 @@ def test_ctrl_c_inside_an_osqp_solve_raises_keyboard_interrupt():
     assert time.perf_counter() - start < STOPPED
 
 
+def _run_module(tmp_path, name: str) -> subprocess.CompletedProcess:
+    """``python -m NAME`` with ``tmp_path`` and tmr's sources on the path, SIGINT at its default (not ignored,
+    whatever started pytest), in a session of its own."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path), SRC]))
+    return subprocess.run(
+        [sys.executable, "-m", name],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+        start_new_session=True,
+        preexec_fn=_sigint_default,
+    )
+
+
 def test_ctrl_c_in_exec_code_still_exits_130(tmp_path):
     """CPython 3.11 marks a KeyboardInterrupt that leaves code run by ``exec`` of a string (dataclasses, rosbags'
     message types) as unhandled even when caught; ``python -m`` then died by SIGINT (returncode -2, in the ROS bag
@@ -70,16 +85,7 @@ def test_ctrl_c_in_exec_code_still_exits_130(tmp_path):
         "    exec('while True: pass')\n"
         "sys.exit(run(body, argparse.Namespace()))\n"
     )
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path), SRC]))
-    p = subprocess.run(
-        [sys.executable, "-m", "execbody"],
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=60,
-        start_new_session=True,  # SIGINT not ignored, whatever started pytest
-        preexec_fn=_sigint_default,
-    )
+    p = _run_module(tmp_path, "execbody")
     assert (p.returncode, p.stderr.strip()) == (130, "interrupted")
 
 
@@ -99,16 +105,7 @@ def test_ctrl_c_raised_where_python_ignores_it_is_raised_again(tmp_path):
         "    return 0\n"
         "sys.exit(run(body, argparse.Namespace()))\n"
     )
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path), SRC]))
-    p = subprocess.run(
-        [sys.executable, "-m", "weakbody"],
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=60,
-        start_new_session=True,
-        preexec_fn=_sigint_default,
-    )
+    p = _run_module(tmp_path, "weakbody")
     assert (p.returncode, p.stderr.strip()) == (130, "interrupted")
 
 
