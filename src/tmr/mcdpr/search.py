@@ -234,46 +234,112 @@ def refuse_upfront(robot: Robot, scene: Scene, rws: NDArray[np.float64]) -> floa
 
 
 def _motion(
-    Bn: NDArray[np.float64], Pn: NDArray[np.float64], th0: NDArray[np.float64], d_platform: float
+    Bn: NDArray[np.float64],
+    Pn: NDArray[np.float64],
+    th0: NDArray[np.float64],
+    d_platform: float,
+    alone: NDArray[np.bool_] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.intp]]:
-    """Samples of the executed motion through the nodes Bn (K, p, 2), Pn (K, 3) starting with headings th0 (p,):
-    per edge an in-place turn of the moving bases to their drive direction (or its opposite, the nearer; ≤ 90°),
-    then a straight simultaneous drive with the platform, in steps of ≤ d_platform. Returns P, B, H and the edge
-    index of each piece (T − 1,)."""
+    """Samples of the executed motion through the nodes Bn (K, p, 2), Pn (K, 3) starting with headings th0 (p,).
+
+    Per edge, the moving bases turn to their drive direction (or its opposite, the nearer; ≤ 90°) **in place and
+    one at a time**, in base order, while the others and the platform hold (one sample per single-base turn); then
+
+    * together (``alone[e]`` False, the default): all bases drive straight simultaneously with the platform;
+    * one by one (``alone[e]`` True): each moving base, right after its own turn, drives alone to its target
+      while the others and the platform hold (base-only reconfiguration), then the platform moves alone.
+
+    Drives are sampled in steps of ≤ d_platform (platform, or the lone base). Returns P, B, H and the edge index of
+    each piece (T − 1,)."""
     P, B, H, edge = [Pn[0]], [Bn[0]], [th0.astype(float)], []
     th = th0.astype(float).copy()
-    for e in range(len(Bn) - 1):
-        d = Bn[e + 1] - Bn[e]
-        moving = np.linalg.norm(d, axis=-1) > 1e-9
-        ang = np.arctan2(d[:, 1], d[:, 0])
-        fwd = wrap(ang - th)
-        turn = np.where(np.abs(fwd) <= np.pi / 2, fwd, wrap(fwd - np.pi))
-        new = np.where(moving, wrap(th + turn), th)
-        if np.any(np.abs(wrap(new - th)) > 1e-12):
-            P.append(Pn[e])
-            B.append(Bn[e])
-            H.append(new)
-            edge.append(e)
-        th = new
-        dp = Pn[e + 1] - Pn[e]
-        n = max(1, math.ceil(max(float(np.hypot(dp[0], dp[1])), abs(float(dp[2]))) / d_platform - 1e-9))
+
+    def drive(p0: NDArray[np.float64], p1: NDArray[np.float64], b0: NDArray[np.float64], b1: NDArray[np.float64],
+              e: int) -> None:  # fmt: skip
+        dp, db = p1 - p0, b1 - b0
+        length = max(float(np.hypot(dp[0], dp[1])), abs(float(dp[2])), float(np.max(np.linalg.norm(db, axis=-1))))
+        n = max(1, math.ceil(length / d_platform - 1e-9))
         for k in range(1, n + 1):
-            P.append(Pn[e] + dp * k / n)
-            B.append(Bn[e] + d * k / n)
+            P.append(p0 + dp * k / n)
+            B.append(b0 + db * k / n)
             H.append(th)
             edge.append(e)
+
+    for e in range(len(Bn) - 1):
+        d = Bn[e + 1] - Bn[e]
+        new = _turned(th, d)
+        one = alone is not None and bool(alone[e])
+        cur = Bn[e].copy()
+        for j in range(len(th)):
+            if abs(float(wrap(new[j] - th[j]))) > 1e-12:
+                th = th.copy()
+                th[j] = new[j]
+                P.append(Pn[e])
+                B.append(cur.copy())
+                H.append(th)
+                edge.append(e)
+            if one and np.linalg.norm(d[j]) > 1e-9:
+                th = th.copy()
+                th[j] = new[j]
+                nxt = cur.copy()
+                nxt[j] = Bn[e + 1, j]
+                drive(Pn[e], Pn[e], cur, nxt, e)
+                cur = nxt
+        th = new  # (turns below 1e-12 rad get no sample of their own)
+        if one:
+            if np.linalg.norm(Pn[e + 1] - Pn[e]) > 0:
+                drive(Pn[e], Pn[e + 1], Bn[e + 1], Bn[e + 1], e)
+        else:
+            drive(Pn[e], Pn[e + 1], Bn[e], Bn[e + 1], e)
     return np.array(P), np.array(B), np.array(H), np.array(edge, dtype=np.intp)
 
 
-def _edges_ok(robot: Robot, scene: Scene, Ba: NDArray[np.float64], Bb: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """Straight simultaneous drives Ba → Bb (n, p, 2): collision-free (exact) and bases 2 r_mb apart."""
+def _turned(th: NDArray[np.float64], d: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Headings (p,) [rad] after the in-place turns before the drives d (p, 2) [m]: a moving base turns to its drive
+    direction or the opposite one, whichever is nearer (≤ 90°, a differential drive also reverses); the others keep
+    theirs."""
+    moving = np.linalg.norm(d, axis=-1) > 1e-9
+    fwd = wrap(np.arctan2(d[:, 1], d[:, 0]) - th)
+    turn = np.where(np.abs(fwd) <= np.pi / 2, fwd, wrap(fwd - np.pi))
+    return np.where(moving, wrap(th + turn), th)
+
+
+def _edges_ok(
+    robot: Robot,
+    scene: Scene,
+    Ba: NDArray[np.float64],
+    Bb: NDArray[np.float64],
+    alone: NDArray[np.bool_] | None = None,
+) -> NDArray[np.bool_]:
+    """Straight drives Ba → Bb (n, p, 2): collision-free (exact) and bases 2 r_mb apart, the bases driving
+    simultaneously or, where ``alone`` (n,) is True, one by one in base order (see :func:`_motion`)."""
     if not len(Ba):
         return np.zeros(0, bool)
     free = np.all(segment_clearance(scene, robot.base_radius, Ba, Bb) > 0, axis=-1)
     if robot.n_bases > 1:
         iu = np.triu_indices(robot.n_bases, 1)
-        free &= _min_pair_distance(Ba, Bb, iu) > 2 * robot.base_radius
+        two = 2 * robot.base_radius
+        one = np.zeros(len(Ba), bool) if alone is None else np.asarray(alone, bool)
+        if np.any(~one):
+            free[~one] &= _min_pair_distance(Ba[~one], Bb[~one], iu) > two
+        if np.any(one):
+            free[one] &= _one_by_one_apart(Ba[one], Bb[one], iu, two)
     return free
+
+
+def _one_by_one_apart(
+    Ba: NDArray[np.float64], Bb: NDArray[np.float64], iu: tuple[NDArray[np.intp], NDArray[np.intp]], two: float
+) -> NDArray[np.bool_]:
+    """(n,) the bases stay more than ``two`` m apart when they drive Ba → Bb (n, p, 2) one at a time, in base order
+    (base j drives while the bases before it are at Bb and the ones after it at Ba; closed form per drive)."""
+    ok = np.ones(len(Ba), bool)
+    cur = Ba.copy()
+    for j in range(Ba.shape[1]):
+        nxt = cur.copy()
+        nxt[:, j] = Bb[:, j]
+        ok &= _min_pair_distance(cur, nxt, iu) > two
+        cur = nxt
+    return ok
 
 
 class _GraphBuilder:
@@ -290,6 +356,24 @@ class _GraphBuilder:
         self.src: list[NDArray[np.intp]] = []
         self.dst: list[NDArray[np.intp]] = []
         self.rng = np.random.default_rng(params.seed)
+        self.parent: dict[int, int] = {}  # follow node → the node it was translated from
+
+    def follow(self, i: int, P_from: NDArray[np.float64], P: NDArray[np.float64], s: int) -> NDArray[np.intp]:
+        """Node i's placement (platform at P_from) translated with the platform to station s at P (3,) [m], added
+        when free, apart and with μ ≥ margin (at every or the best heading, as the other placements); its id (1,)
+        or none."""
+        Bi = self.B[i] + (P[:2] - P_from[:2])
+        cand = Bi[None]
+        ok = np.all(point_clearance(self.scene, self.robot.base_radius, cand) > 0, axis=-1) & _apart(self.robot, cand)
+        if not ok[0]:
+            return np.zeros(0, np.intp)
+        p = self.params
+        mu = worst_heading_mu(self.robot, P, cand, self.rws, p.headings, p.best_heading)
+        if not mu[0] >= p.margin:
+            return np.zeros(0, np.intp)
+        ids = self.add(cand, mu, s)
+        self.parent[int(ids[0])] = i
+        return ids
 
     def add(self, Bs: NDArray[np.float64], mus: NDArray[np.float64], s: int) -> NDArray[np.intp]:
         ids = np.arange(len(self.B), len(self.B) + len(Bs))
@@ -459,6 +543,10 @@ def _plan_search(
     # station (the bases stay) and the same translated with the platform (the formation follows it)
     g = _GraphBuilder(robot, scene, rws, params, mu_start)
     reach_prev = np.zeros(1, np.intp)  # global indices of the reachable nodes of the previous station
+    # the start formation carried along with the platform (every base drives the platform's step), kept as a node of
+    # every station while valid whatever its μ ranks: the bases turn in place one at a time to the travel direction,
+    # then drive with the platform, which may be the only way out of a start that is safe at its headings only
+    follow: int | None = 0
     bar = None
     if progress:
         from tqdm import tqdm
@@ -490,6 +578,9 @@ def _plan_search(
                     best,
                 )
             ids = g.add(Bs, mus, s)
+            if attempt == 0:
+                fid = g.follow(follow, S[s - 1], S[s], s) if follow is not None and s > 0 else np.zeros(0, np.intp)
+            ids = np.concatenate([ids, fid])
             prev_ids = reach_prev if s > 0 else np.zeros(1, np.intp)
             targets = np.concatenate([ids, prev_ids]) if s == 0 else ids
             reach = g.reach(prev_ids, targets, ids)
@@ -497,6 +588,10 @@ def _plan_search(
                 reach = np.union1d([0], reach)
             if len(reach):
                 break
+        if s > 0 and follow is not None:
+            nxt = np.flatnonzero(g.st[reach] == s)
+            mine = [int(i) for i in reach[nxt] if g.parent.get(int(i)) == follow]
+            follow = mine[0] if mine else None
         if not len(reach):
             where = tuple(float(v) for v in np.round(S[max(s - 1, 0)], 4))
             raise NoPlanFound(
@@ -513,8 +608,10 @@ def _plan_search(
     P = S[st]
     if bar is not None:
         bar.close()
-    src_a = np.concatenate(g.src)
-    dst_a = np.concatenate(g.dst)
+    # one edge per ordered pair (a pair found twice, e.g. by a stall round, would count twice in the sparse sum)
+    pairs = np.unique(np.stack([np.concatenate(g.src), np.concatenate(g.dst)], axis=1), axis=0)
+    src_a, dst_a = pairs[:, 0], pairs[:, 1]
+    pair_id = {(int(a), int(b)): i for i, (a, b) in enumerate(pairs)}
     w = (
         np.linalg.norm(B[dst_a] - B[src_a], axis=-1).sum(axis=-1)
         + 0.01
@@ -524,10 +621,12 @@ def _plan_search(
 
     N = len(B)
     alive = np.ones(len(src_a), bool)
+    alone = np.zeros(len(src_a), bool)  # executed one base at a time (see _motion), after failing together
     goal = np.flatnonzero(st == len(S) - 1)
     th0 = scene.headings.astype(float)
     rounds = 0
     removed = 0
+    switched = 0
     while True:
         rounds += 1
         G = coo_matrix((w[alive], (src_a[alive], dst_a[alive])), shape=(N, N)).tocsr()
@@ -550,17 +649,24 @@ def _plan_search(
         while path[-1] != 0:
             path.append(int(pred[path[-1]]))
         path = path[::-1]
-        Pm, Bm, Hm, edge = _motion(B[path], P[path], th0, params.d_platform)
+        ids = np.array([pair_id[(a, b)] for a, b in zip(path[:-1], path[1:], strict=True)], dtype=np.intp)
+        Pm, Bm, Hm, edge = _motion(B[path], P[path], th0, params.d_platform, alone[ids])
         cert = certify(robot, Pm, Bm, Hm, rws)
         if cert.ok:
             break
         bad_pieces = np.flatnonzero(~(cert.lower > 0))
         bad_edges = np.unique(edge[np.floor(cert.u[bad_pieces]).astype(np.intp)])
-        eid = {(int(a), int(b)): i for i, (a, b) in enumerate(zip(src_a, dst_a, strict=True)) if alive[i]}
         for e in bad_edges:
-            i = eid[(path[e], path[e + 1])]
-            alive[i] = False
-            removed += 1
+            # a motion that fails with the bases driving together is tried once more one base at a time (base-only
+            # reconfiguration while the platform holds, then the platform alone); failing that, it is deleted
+            i = int(ids[e])
+            a, b = path[e], path[e + 1]
+            if not alone[i] and _edges_ok(robot, scene, B[a][None], B[b][None], np.ones(1, bool))[0]:
+                alone[i] = True
+                switched += 1
+            else:
+                alive[i] = False
+                removed += 1
         if rounds >= params.max_rounds:
             raise NoPlanFound(
                 f"no certified motion after {rounds} searches ({removed} motions removed); last failure near the "
@@ -572,15 +678,15 @@ def _plan_search(
 
     # smoothing: relax the nodes towards their neighbours' midpoints, then shortcut inside each task segment;
     # every change is checked (exact collision, spacing, certified μ) and the whole result certified again
-    Bn, Pn, sn = B[path].copy(), P[path].copy(), st[path].copy()
-    Bn = _relax(robot, scene, Bn, Pn, th0, rws, params)
-    idx, shortcuts = _shortcut(robot, scene, Bn, Pn, sn, th0, rws, params, task_at)
-    Pm, Bm, Hm, edge = _motion(Bn[idx], Pn[idx], th0, params.d_platform)
+    Bn, Pn, sn, mode = B[path].copy(), P[path].copy(), st[path].copy(), alone[ids]
+    Bn = _relax(robot, scene, Bn, Pn, th0, rws, params, mode)
+    idx, shortcuts, mode_s = _shortcut(robot, scene, Bn, Pn, sn, th0, rws, params, task_at, mode)
+    Pm, Bm, Hm, edge = _motion(Bn[idx], Pn[idx], th0, params.d_platform, mode_s)
     cert = certify(robot, Pm, Bm, Hm, rws)
-    out = idx
+    out, sn_out = idx, sn[idx]
     if not cert.ok:  # the local checks do not see a changed turn further on: keep the certified search path
-        out = path
-        Pm, Bm, Hm, edge = _motion(B[path], P[path], th0, params.d_platform)
+        out, sn_out = path, sn
+        Pm, Bm, Hm, edge = _motion(B[path], P[path], th0, params.d_platform, mode)
         cert = certify(robot, Pm, Bm, Hm, rws)
     t_smooth = time.perf_counter() - t0
 
@@ -588,7 +694,7 @@ def _plan_search(
     piece = np.floor(cert.u[:-1]).astype(np.intp)
     lower = np.full(len(Pm) - 1, np.inf)
     np.minimum.at(lower, piece, cert.lower)
-    labels = _labels(Pm, S, seg, task_at)
+    labels = _labels(edge, seg[sn_out], np.linalg.norm(np.diff(Pm, axis=0), axis=-1) > 1e-12)
     cap = capacity(robot, Pm, Bm, Hm, rws)
     tens = tensions(robot, cap.W, cap.lo, cap.hi)
     t_end = time.perf_counter() - t0
@@ -598,6 +704,8 @@ def _plan_search(
         "edges": int(len(src_a)),
         "rounds": rounds,
         "edges_removed": removed,
+        "edges_one_by_one": switched,
+        "path_one_by_one": int(np.sum(mode_s if out is idx else mode)),
         "path_nodes": len(path),
         "smoothed_nodes": len(out),
         "shortcuts": shortcuts,
@@ -639,11 +747,7 @@ def _arrival_headings(Bn: NDArray[np.float64], th0: NDArray[np.float64]) -> NDAr
     th = th0.astype(float).copy()
     out[0] = th
     for e in range(len(Bn) - 1):
-        d = Bn[e + 1] - Bn[e]
-        moving = np.linalg.norm(d, axis=-1) > 1e-9
-        fwd = wrap(np.arctan2(d[:, 1], d[:, 0]) - th)
-        turn = np.where(np.abs(fwd) <= np.pi / 2, fwd, wrap(fwd - np.pi))
-        th = np.where(moving, wrap(th + turn), th)
+        th = _turned(th, Bn[e + 1] - Bn[e])
         out[e + 1] = th
     return out
 
@@ -656,11 +760,13 @@ def _local_ok(
     th: NDArray[np.float64],
     rws: NDArray[np.float64],
     d_platform: float,
+    alone: NDArray[np.bool_] | None = None,
 ) -> bool:
-    """The motion through the nodes Bn, Pn (starting with headings th) is collision-free, spaced and certified."""
-    if not np.all(_edges_ok(robot, scene, Bn[:-1], Bn[1:])):
+    """The motion through the nodes Bn, Pn (starting with headings th; edges executed together or, where ``alone``,
+    one base at a time) is collision-free, spaced and certified."""
+    if not np.all(_edges_ok(robot, scene, Bn[:-1], Bn[1:], alone)):
         return False
-    Pm, Bm, Hm, _ = _motion(Bn, Pn, th, d_platform)
+    Pm, Bm, Hm, _ = _motion(Bn, Pn, th, d_platform, alone)
     return certify(robot, Pm, Bm, Hm, rws).ok
 
 
@@ -672,14 +778,17 @@ def _relax(
     th0: NDArray[np.float64],
     rws: NDArray[np.float64],
     params: SearchParams,
+    alone: NDArray[np.bool_] | None = None,
     sweeps: int = 4,
 ) -> NDArray[np.float64]:
     """Move every inner node's bases half-way towards the midpoint of their neighbours when the motion from the
     node before to the node two after stays collision-free, spaced and certified (removes zig-zags and spurs).
 
     Nodes k ≡ r (mod 3) are tried together (their windows k−1…k+2 share no moved node), all windows certified in
-    one batched :func:`certify` call; the whole smoothed path is certified again by the caller."""
+    one batched :func:`certify` call; the whole smoothed path is certified again by the caller. ``alone`` (K − 1,):
+    the edges executed one base at a time (:func:`_motion`), kept as they are."""
     Bn = Bn.copy()
+    alone = np.zeros(len(Bn) - 1, bool) if alone is None else np.asarray(alone, bool)
     for _ in range(sweeps):
         moved = False
         for r in range(1, 4):
@@ -702,9 +811,10 @@ def _relax(
                 hi = min(k + 3, len(Bn))
                 trial = Bn[k - 1 : hi].copy()
                 trial[1] = new[k]
-                if not np.all(_edges_ok(robot, scene, trial[:-1], trial[1:])):
+                mode = alone[k - 1 : hi - 1]
+                if not np.all(_edges_ok(robot, scene, trial[:-1], trial[1:], mode)):
                     continue
-                Pm, Bm, Hm, _ = _motion(trial, Pn[k - 1 : hi], arrive[k - 1], params.d_platform)
+                Pm, Bm, Hm, _ = _motion(trial, Pn[k - 1 : hi], arrive[k - 1], params.d_platform, mode)
                 parts.append((Pm, Bm, Hm))
                 owner += [len(windows)] * (len(Pm) - 1) + [-1]
                 windows.append(k)
@@ -736,10 +846,19 @@ def _shortcut(
     rws: NDArray[np.float64],
     params: SearchParams,
     task_at: list[int],
-) -> tuple[list[int], int]:
-    """Indices of the nodes kept: from node i, a straight motion to the farthest node j of the same task segment
-    whose motion is collision-free, spaced and certified (the nodes in between are dropped)."""
+    alone: NDArray[np.bool_] | None = None,
+) -> tuple[list[int], int, NDArray[np.bool_]]:
+    """Indices of the nodes kept: from node i, a straight motion (the bases together) to the farthest node j of the
+    same task segment whose motion is collision-free, spaced and certified (the nodes in between are dropped), and
+    the mode of each kept edge (``alone`` (K − 1,): executed one base at a time, kept for an edge not shortcut).
+
+    Never shortcut away: a task point. The nodes i … j of a shortcut have non-decreasing stations with no task
+    point's station strictly between stations i and j (:func:`_same_line`, on the station *indices*, so a route
+    that returns to an earlier task point, e.g. t0 → t1 → t0, keeps the visit of t1 although the nodes before and
+    after it are at the same place)."""
+    alone = np.zeros(len(Bn) - 1, bool) if alone is None else np.asarray(alone, bool)
     out = [0]
+    modes: list[bool] = []
     th = th0.astype(float).copy()
     i = 0
     shortcuts = 0
@@ -755,9 +874,10 @@ def _shortcut(
                 shortcuts += 1
                 break
         th = _arrival_headings(Bn[[i, j_best]], th)[-1]
+        modes.append(bool(alone[i]) if j_best == i + 1 else False)
         out.append(j_best)
         i = j_best
-    return out, shortcuts
+    return out, shortcuts, np.array(modes, bool)
 
 
 def _same_line(sts: NDArray[np.intp], task_at: list[int]) -> bool:
@@ -770,21 +890,16 @@ def _same_line(sts: NDArray[np.intp], task_at: list[int]) -> bool:
     return not inner
 
 
-def _labels(
-    Pm: NDArray[np.float64], S: NDArray[np.float64], seg: NDArray[np.int64], task_at: list[int]
-) -> NDArray[np.int64]:
-    """Segment index of each sample: the task segment the platform last moved along (waits keep the label)."""
-    tasks = S[task_at]
-    out = np.zeros(len(Pm), np.int64)
+def _labels(edge: NDArray[np.intp], seg: NDArray[np.int64], moves: NDArray[np.bool_]) -> NDArray[np.int64]:
+    """Task segment index (T,) of each sample of a :func:`_motion`: ``edge`` (T − 1,) the path edge of each piece,
+    ``seg`` (K,) the segment of each path node's station, ``moves`` (T − 1,) the platform moves on the piece. A piece
+    on which the platform moves takes its edge's target segment; turns and waits keep the label (so the last sample
+    of segment i is the platform at task point i + 1). From the path, not from the geometry: on a route back to an
+    earlier task point the segments overlap."""
+    out = np.zeros(len(edge) + 1, np.int64)
     cur = 0
-    for r in range(1, len(Pm)):
-        d = Pm[r] - Pm[r - 1]
-        if np.linalg.norm(d) > 1e-12:
-            mid = 0.5 * (Pm[r] + Pm[r - 1])
-            # the segment whose line contains the midpoint (distance to each segment)
-            a, b = tasks[:-1], tasks[1:]
-            v = b - a
-            s = np.clip(np.einsum("ki,ki->k", mid - a, v) / np.maximum(np.einsum("ki,ki->k", v, v), 1e-300), 0, 1)
-            cur = int(np.argmin(np.linalg.norm(a + s[:, None] * v - mid, axis=-1)))
-        out[r] = cur
+    for r, e in enumerate(edge):
+        if moves[r]:
+            cur = int(seg[e + 1])
+        out[r + 1] = cur
     return out
