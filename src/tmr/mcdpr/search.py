@@ -17,11 +17,14 @@ of the motions, shortcut smoothing, and verdicts (our planner; Rasheed 2019 eq. 
    ``mu_weight``/μ. Dijkstra (scipy.sparse.csgraph) from the start to any placement of the last station; none →
    ``not-connectable`` with the farthest platform position reached.
 5. **Lazy certification** (Bohlin & Kavraki's lazy PRM): the edges of the shortest path are executed as in-place
-   turns (to the drive direction or its opposite) and straight drives, and certified by
-   :func:`tmr.mcdpr.certify.certify` (μ's lower bound > 0 on every piece, adaptive bisection); failing edges are
-   deleted and the search repeats.
+   turns of one base at a time (to the drive direction or its opposite) and straight drives, the bases together
+   with the platform, and certified by :func:`tmr.mcdpr.certify.certify` (μ's lower bound > 0 on every piece,
+   adaptive bisection); a failing edge is executed one base at a time (base-only reconfiguration while the platform
+   holds, then the platform alone), failing again it is deleted, and the search repeats. The start formation
+   carried along with the platform is a node of every station while valid.
 6. **Shortcuts**: within each task segment, consecutive path nodes are replaced by one straight motion from node i
-   to the farthest node j (≤ ``shortcut`` ahead) whose motion is collision-free and certified.
+   to the farthest node j (≤ ``shortcut`` ahead) whose motion is collision-free and certified; never past a task
+   point (by station index: a route back to an earlier task point keeps every visit).
 """
 
 from __future__ import annotations
