@@ -5,7 +5,8 @@ paper's greedy two-stage planner (Rasheed 2019), from easy to infeasible.
 
 A benchmark, not a test. Every scene is generated here (deterministic): an open room, the shipped fig2, fig2 with a
 table (and its task point) moved, rings of disc obstacles the bases must go round, a task point in a corner, a wall
-the bases cannot cross, heavy payloads and infeasible starts. For each scene the expected verdict is stated (plan /
+the bases cannot cross, heavy payloads and infeasible starts, bases starting across the direction of travel (they
+must turn one at a time), routes back to an earlier task point. For each scene the expected verdict is stated (plan /
 refused up front with the limit / no placement / not connectable) and compared with what the planners return:
 
 * ``search`` — :func:`tmr.mcdpr.search.plan_search` (exit 0 plan, 1 no plan found, 2 refused);
@@ -79,6 +80,26 @@ def _moved(name: str, dx: float, dy: float) -> dict[str, Any]:
     return d
 
 
+def _across(travel_deg: int, n_tasks: int) -> dict[str, Any]:
+    """Bases on the four axes of the first task point, 1.4 m out, all heading across the direction of travel;
+    ``n_tasks`` task points 2 m apart along a line at 1 m height (turning the four bases together passes μ < 0, one
+    at a time μ ≥ 0.319 N, then the formation drives with the platform at μ = 1.437 N)."""
+    u = np.array([math.cos(math.radians(travel_deg)), math.sin(math.radians(travel_deg))])
+    t0 = np.array([6.0, 6.0]) - u * (n_tasks - 1)
+    return {
+        "name": f"across_{travel_deg}deg_{n_tasks}tasks",
+        "bounds": [0, 0, 12, 12],
+        "tasks": [[*np.round(t0 + 2.0 * k * u, 9).tolist(), 1.0] for k in range(n_tasks)],
+        "bases": [
+            np.round(t0 + 1.4 * np.array([math.cos(a), math.sin(a)]), 9).tolist() for a in np.arange(4) * math.pi / 2
+        ],
+        "headings": [math.radians(travel_deg) + math.pi / 2] * 4,
+    }
+
+
+ACROSS = ((0, 2), (0, 3), (0, 4), (90, 3), (180, 4), (270, 2))
+
+
 def scenes() -> list[tuple[str, dict[str, Any], float, str]]:
     """(name, scene mapping, platform mass [kg], expected verdict) of every benchmark scene."""
     open_room = {
@@ -103,6 +124,13 @@ def scenes() -> list[tuple[str, dict[str, Any], float, str]]:
         "bases": [[4, 0.6], [6, 0.6], [6, 2.4], [4, 2.4]],
         "obstacles": _ring(12, 1.4, 0.2, (5.0, 4.0)),
     }
+    round_trip = {  # pick and return: t0 → t1 → t0
+        "name": "round_trip",
+        "bounds": [0, 0, 10, 7],
+        "tasks": [[3.0, 3.5, 0.8], [6.0, 3.5, 0.8], [3.0, 3.5, 0.8]],
+        "bases": [[2, 2.5], [4, 2.5], [4, 4.5], [2, 4.5]],
+    }
+    round_trip2 = {**round_trip, "name": "round_trip_twice", "tasks": round_trip["tasks"] + round_trip["tasks"][1:]}
     corner = {**open_room, "name": "corner", "tasks": [[3, 3, 0.8], [0.3, 0.3, 0.8]]}
     wall = {
         "name": "wall",
@@ -126,6 +154,9 @@ def scenes() -> list[tuple[str, dict[str, Any], float, str]]:
         ("ring", ring, 0.5, "plan"),
         ("ring_3tasks", ring3, 0.5, "plan"),
         ("ring_from_below", ring_below, 0.5, "plan"),
+        *((f"across_{a}deg_{n}tasks", _across(a, n), 0.5, "plan") for a, n in ACROSS),
+        ("round_trip", round_trip, 0.5, "plan"),
+        ("round_trip_twice", round_trip2, 0.5, "plan"),
         ("corner", corner, 0.5, "no-placement"),
         ("fig2_table2_at_wall", _moved("fig2_table2_at_wall", 0.0, 1.2), 0.5, "no-placement"),
         ("wall", wall, 0.5, "not-connectable"),

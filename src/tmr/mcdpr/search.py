@@ -17,11 +17,16 @@ of the motions, shortcut smoothing, and verdicts (our planner; Rasheed 2019 eq. 
    ``mu_weight``/μ. Dijkstra (scipy.sparse.csgraph) from the start to any placement of the last station; none →
    ``not-connectable`` with the farthest platform position reached.
 5. **Lazy certification** (Bohlin & Kavraki's lazy PRM): the edges of the shortest path are executed as in-place
-   turns (to the drive direction or its opposite) and straight drives, and certified by
-   :func:`tmr.mcdpr.certify.certify` (μ's lower bound > 0 on every piece, adaptive bisection); failing edges are
-   deleted and the search repeats.
+   turns of the moving bases together (to the drive direction or its opposite) and straight drives, the bases
+   together with the platform, and certified by :func:`tmr.mcdpr.certify.certify` (μ's lower bound > 0 on every
+   piece, adaptive bisection); a failing edge is deleted and the search repeats. Only when the goal is then out of
+   reach are the failed edges tried again in a fallback execution: the bases turning one at a time, then (failing
+   again) one base at a time turning and driving while the platform holds, then the platform alone. The start
+   formation carried along with the platform is a node of every station while valid (an extra way through the
+   graph: it does not steer where the other placements are sampled).
 6. **Shortcuts**: within each task segment, consecutive path nodes are replaced by one straight motion from node i
-   to the farthest node j (≤ ``shortcut`` ahead) whose motion is collision-free and certified.
+   to the farthest node j (≤ ``shortcut`` ahead) whose motion is collision-free and certified; never past a task
+   point (by station index: a route back to an earlier task point keeps every visit).
 """
 
 from __future__ import annotations
@@ -234,47 +239,134 @@ def refuse_upfront(robot: Robot, scene: Scene, rws: NDArray[np.float64]) -> floa
     )
 
 
+#: Execution modes of a graph edge (:func:`_motion`), tried in this order by the lazy certification: the moving
+#: bases turn in place together, then drive together with the platform (the planner's motion);
+TOGETHER = 0
+#: the same, but the bases turn in place one at a time (a start safe only at its own headings, e.g. bases heading
+#: across the travel, may pass μ < 0 when they all turn at once);
+SINGLE_TURNS = 1
+#: one base at a time turns and drives alone while the others and the platform hold, then the platform moves alone.
+ONE_BY_ONE = 2
+
+
 def _motion(
-    Bn: NDArray[np.float64], Pn: NDArray[np.float64], th0: NDArray[np.float64], d_platform: float
+    Bn: NDArray[np.float64],
+    Pn: NDArray[np.float64],
+    th0: NDArray[np.float64],
+    d_platform: float,
+    mode: NDArray[np.integer] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.intp]]:
-    """Samples of the executed motion through the nodes Bn (K, p, 2), Pn (K, 3) starting with headings th0 (p,):
-    per edge an in-place turn of the moving bases to their drive direction (or its opposite, the nearer; ≤ 90°),
-    then a straight simultaneous drive with the platform, in steps of ≤ d_platform. Returns P, B, H and the edge
-    index of each piece (T − 1,)."""
+    """Samples of the executed motion through the nodes Bn (K, p, 2), Pn (K, 3) starting with headings th0 (p,).
+
+    Per edge e, the moving bases turn in place to their drive direction (or its opposite, the nearer; ≤ 90°), then
+    drive straight, as ``mode[e]`` says (default :data:`TOGETHER` for every edge):
+
+    * :data:`TOGETHER`: all moving bases turn at once (one sample), then drive simultaneously with the platform;
+    * :data:`SINGLE_TURNS`: they turn one at a time, in base order, while the others and the platform hold (one
+      sample per single-base turn), then drive simultaneously with the platform;
+    * :data:`ONE_BY_ONE`: each moving base in turn turns and drives alone to its target while the others and the
+      platform hold (base-only reconfiguration), then the platform moves alone.
+
+    Drives are sampled in steps of ≤ d_platform of the platform (or of the lone base of a base-only drive). Returns
+    P, B, H and the edge index of each piece (T − 1,)."""
     P, B, H, edge = [Pn[0]], [Bn[0]], [th0.astype(float)], []
     th = th0.astype(float).copy()
-    for e in range(len(Bn) - 1):
-        d = Bn[e + 1] - Bn[e]
-        moving = np.linalg.norm(d, axis=-1) > 1e-9
-        ang = np.arctan2(d[:, 1], d[:, 0])
-        fwd = wrap(ang - th)
-        turn = np.where(np.abs(fwd) <= np.pi / 2, fwd, wrap(fwd - np.pi))
-        new = np.where(moving, wrap(th + turn), th)
-        if np.any(np.abs(wrap(new - th)) > 1e-12):
-            P.append(Pn[e])
-            B.append(Bn[e])
-            H.append(new)
-            edge.append(e)
-        th = new
-        dp = Pn[e + 1] - Pn[e]
-        n = max(1, math.ceil(max(float(np.hypot(dp[0], dp[1])), abs(float(dp[2]))) / d_platform - 1e-9))
+
+    def drive(p0: NDArray[np.float64], p1: NDArray[np.float64], b0: NDArray[np.float64], b1: NDArray[np.float64],
+              e: int) -> None:  # fmt: skip
+        dp, db = p1 - p0, b1 - b0
+        length = max(float(np.hypot(dp[0], dp[1])), abs(float(dp[2])))
+        if length == 0:  # a base-only drive (ONE_BY_ONE): steps of the base
+            length = float(np.max(np.linalg.norm(db, axis=-1)))
+        n = max(1, math.ceil(length / d_platform - 1e-9))
         for k in range(1, n + 1):
-            P.append(Pn[e] + dp * k / n)
-            B.append(Bn[e] + d * k / n)
+            P.append(p0 + dp * k / n)
+            B.append(b0 + db * k / n)
             H.append(th)
             edge.append(e)
+
+    for e in range(len(Bn) - 1):
+        d = Bn[e + 1] - Bn[e]
+        new = _turned(th, d)
+        m = TOGETHER if mode is None else int(mode[e])
+        cur = Bn[e].copy()
+        if m == TOGETHER:
+            if np.any(np.abs(wrap(new - th)) > 1e-12):
+                P.append(Pn[e])
+                B.append(cur)
+                H.append(new)
+                edge.append(e)
+        else:
+            for j in range(len(th)):
+                if abs(float(wrap(new[j] - th[j]))) > 1e-12:
+                    th = th.copy()
+                    th[j] = new[j]
+                    P.append(Pn[e])
+                    B.append(cur.copy())
+                    H.append(th)
+                    edge.append(e)
+                if m == ONE_BY_ONE and np.linalg.norm(d[j]) > 1e-9:
+                    th = th.copy()
+                    th[j] = new[j]
+                    nxt = cur.copy()
+                    nxt[j] = Bn[e + 1, j]
+                    drive(Pn[e], Pn[e], cur, nxt, e)
+                    cur = nxt
+        th = new  # (turns below 1e-12 rad get no sample of their own)
+        if m == ONE_BY_ONE:
+            if np.linalg.norm(Pn[e + 1] - Pn[e]) > 0:
+                drive(Pn[e], Pn[e + 1], Bn[e + 1], Bn[e + 1], e)
+        else:
+            drive(Pn[e], Pn[e + 1], Bn[e], Bn[e + 1], e)
     return np.array(P), np.array(B), np.array(H), np.array(edge, dtype=np.intp)
 
 
-def _edges_ok(robot: Robot, scene: Scene, Ba: NDArray[np.float64], Bb: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """Straight simultaneous drives Ba → Bb (n, p, 2): collision-free (exact) and bases 2 r_mb apart."""
+def _turned(th: NDArray[np.float64], d: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Headings (p,) [rad] after the in-place turns before the drives d (p, 2) [m]: a moving base turns to its drive
+    direction or the opposite one, whichever is nearer (≤ 90°, a differential drive also reverses); the others keep
+    theirs."""
+    moving = np.linalg.norm(d, axis=-1) > 1e-9
+    fwd = wrap(np.arctan2(d[:, 1], d[:, 0]) - th)
+    turn = np.where(np.abs(fwd) <= np.pi / 2, fwd, wrap(fwd - np.pi))
+    return np.where(moving, wrap(th + turn), th)
+
+
+def _edges_ok(
+    robot: Robot,
+    scene: Scene,
+    Ba: NDArray[np.float64],
+    Bb: NDArray[np.float64],
+    mode: NDArray[np.integer] | None = None,
+) -> NDArray[np.bool_]:
+    """Straight drives Ba → Bb (n, p, 2): collision-free (exact) and bases 2 r_mb apart, the bases driving
+    simultaneously or, where ``mode`` (n,) is :data:`ONE_BY_ONE`, one by one in base order (see :func:`_motion`)."""
     if not len(Ba):
         return np.zeros(0, bool)
     free = np.all(segment_clearance(scene, robot.base_radius, Ba, Bb) > 0, axis=-1)
     if robot.n_bases > 1:
         iu = np.triu_indices(robot.n_bases, 1)
-        free &= _min_pair_distance(Ba, Bb, iu) > 2 * robot.base_radius
+        two = 2 * robot.base_radius
+        one = np.zeros(len(Ba), bool) if mode is None else np.asarray(mode) == ONE_BY_ONE
+        if np.any(~one):
+            free[~one] &= _min_pair_distance(Ba[~one], Bb[~one], iu) > two
+        if np.any(one):
+            free[one] &= _one_by_one_apart(Ba[one], Bb[one], iu, two)
     return free
+
+
+def _one_by_one_apart(
+    Ba: NDArray[np.float64], Bb: NDArray[np.float64], iu: tuple[NDArray[np.intp], NDArray[np.intp]], two: float
+) -> NDArray[np.bool_]:
+    """(n,) the bases stay more than ``two`` m apart when they drive Ba → Bb (n, p, 2) one at a time, in base order
+    (base j drives while the bases before it are at Bb and the ones after it at Ba; closed form per drive)."""
+    ok = np.ones(len(Ba), bool)
+    cur = Ba.copy()
+    for j in range(Ba.shape[1]):
+        nxt = cur.copy()
+        nxt[:, j] = Bb[:, j]
+        ok &= _min_pair_distance(cur, nxt, iu) > two
+        cur = nxt
+    return ok
 
 
 class _GraphBuilder:
@@ -291,6 +383,28 @@ class _GraphBuilder:
         self.src: list[NDArray[np.intp]] = []
         self.dst: list[NDArray[np.intp]] = []
         self.rng = np.random.default_rng(params.seed)
+        self.parent: dict[int, int] = {}  # follow node → the node it was translated from
+
+    def follow(self, i: int, P_from: NDArray[np.float64], P: NDArray[np.float64], s: int) -> NDArray[np.intp]:
+        """Node i's placement (platform at P_from) translated with the platform to station s at P (3,) [m], added
+        when free, apart and with μ ≥ margin (at every or the best heading, as the other placements); its id (1,)
+        or none."""
+        Bi = self.B[i] + (P[:2] - P_from[:2])
+        cand = Bi[None]
+        ok = np.all(point_clearance(self.scene, self.robot.base_radius, cand) > 0, axis=-1) & _apart(self.robot, cand)
+        if not ok[0]:
+            return np.zeros(0, np.intp)
+        p = self.params
+        mu = worst_heading_mu(self.robot, P, cand, self.rws, p.headings, p.best_heading)
+        if not mu[0] >= p.margin:
+            return np.zeros(0, np.intp)
+        ids = self.add(cand, mu, s)
+        self.parent[int(ids[0])] = i
+        return ids
+
+    def carried(self, ids: NDArray[np.intp]) -> NDArray[np.bool_]:
+        """(n,) which of the node ids are the carried start formation (added by :meth:`follow`)."""
+        return np.isin(ids, np.fromiter(self.parent, np.intp, len(self.parent)))
 
     def add(self, Bs: NDArray[np.float64], mus: NDArray[np.float64], s: int) -> NDArray[np.intp]:
         ids = np.arange(len(self.B), len(self.B) + len(Bs))
@@ -461,6 +575,11 @@ def _plan_search(
     # station (the bases stay) and the same translated with the platform (the formation follows it)
     g = _GraphBuilder(robot, scene, rws, params, mu_start)
     reach_prev = np.zeros(1, np.intp)  # global indices of the reachable nodes of the previous station
+    # the start formation carried along with the platform (every base drives the platform's step), kept as a node of
+    # every station while valid whatever its μ ranks: the bases turn in place to the travel direction (one at a time
+    # where turning together fails the certification), then drive with the platform, which may be the only way out
+    # of a start that is safe at its headings only
+    follow: int | None = 0
     bar = None
     if progress:
         from tqdm import tqdm
@@ -471,10 +590,18 @@ def _plan_search(
             bar.update(1)
         reach = np.zeros(0, np.intp)
         for attempt in range(params.stall_rounds + 1):
+            # the sampling (anchors, kept placements, repositioning) draws on the reachable nodes other than the
+            # carried start formation, unless it is the only one: it is an extra way through the graph, not one that
+            # steers where the other placements are sampled (which shifted them and cost fig2 45 % of its μ at the
+            # samples: 2.45 → 1.34 N)
+            carried = g.carried(reach_prev)
+            own = reach_prev[~carried] if not carried.all() else reach_prev
             if attempt:  # stalled: the bases reposition while the platform waits at the previous station
-                reach_prev = g.expand(S[s - 1], s - 1, reach_prev)
-            Bprev = g.B[reach_prev]
-            top = np.argsort(-g.mu[reach_prev], kind="stable")[: params.keep]
+                reach_prev = np.union1d(g.expand(S[s - 1], s - 1, own), reach_prev)
+                carried = g.carried(reach_prev)
+                own = reach_prev[~carried] if not carried.all() else reach_prev
+            Bprev = g.B[own]
+            top = np.argsort(-g.mu[own], kind="stable")[: params.keep]
             shift = S[s, :2] - S[max(s - 1, 0), :2]
             # local expansion: every base of the best reachable placements moved by up to max_move (seeded)
             anchors = Bprev[top[: params.expand]]
@@ -492,6 +619,9 @@ def _plan_search(
                     best,
                 )
             ids = g.add(Bs, mus, s)
+            if attempt == 0:
+                fid = g.follow(follow, S[s - 1], S[s], s) if follow is not None and s > 0 else np.zeros(0, np.intp)
+            ids = np.concatenate([ids, fid])
             prev_ids = reach_prev if s > 0 else np.zeros(1, np.intp)
             targets = np.concatenate([ids, prev_ids]) if s == 0 else ids
             reach = g.reach(prev_ids, targets, ids)
@@ -499,6 +629,10 @@ def _plan_search(
                 reach = np.union1d([0], reach)
             if len(reach):
                 break
+        if s > 0 and follow is not None:
+            nxt = np.flatnonzero(g.st[reach] == s)
+            mine = [int(i) for i in reach[nxt] if g.parent.get(int(i)) == follow]
+            follow = mine[0] if mine else None
         if not len(reach):
             where = tuple(float(v) for v in np.round(S[max(s - 1, 0)], 4))
             raise NoPlanFound(
@@ -515,8 +649,10 @@ def _plan_search(
     P = S[st]
     if bar is not None:
         bar.close()
-    src_a = np.concatenate(g.src)
-    dst_a = np.concatenate(g.dst)
+    # one edge per ordered pair (a pair found twice, e.g. by a stall round, would count twice in the sparse sum)
+    pairs = np.unique(np.stack([np.concatenate(g.src), np.concatenate(g.dst)], axis=1), axis=0)
+    src_a, dst_a = pairs[:, 0], pairs[:, 1]
+    pair_id = {(int(a), int(b)): i for i, (a, b) in enumerate(pairs)}
     w = (
         np.linalg.norm(B[dst_a] - B[src_a], axis=-1).sum(axis=-1)
         + 0.01
@@ -526,15 +662,29 @@ def _plan_search(
 
     N = len(B)
     alive = np.ones(len(src_a), bool)
+    # how each edge is executed (_motion): TOGETHER first; an edge that fails the certification is deleted, and only
+    # when the goal is then out of reach are the failed ones tried again in their next mode (SINGLE_TURNS, then
+    # ONE_BY_ONE), so a plan that certifies with the bases turning together keeps them turning together
+    mode = np.full(len(src_a), TOGETHER, np.int8)
+    failed = np.zeros(len(src_a), bool)  # deleted after failing in a mode that has a fallback
     goal = np.flatnonzero(st == len(S) - 1)
     th0 = scene.headings.astype(float)
     rounds = 0
     removed = 0
+    fallbacks = 0
     while True:
         rounds += 1
         G = coo_matrix((w[alive], (src_a[alive], dst_a[alive])), shape=(N, N)).tocsr()
         dist, pred = dijkstra(G, directed=True, indices=0, return_predecessors=True)
         reach = np.isfinite(dist)
+        if not reach[goal].any() and failed.any():
+            again = np.flatnonzero(failed)
+            mode[again] += 1
+            failed[again] = False
+            fallbacks += len(again)
+            # one base at a time has its own spacing check (a base passes the others at their start or goal)
+            alive[again] = _edges_ok(robot, scene, B[src_a[again]], B[dst_a[again]], mode[again])
+            continue
         if not reach[goal].any():
             far = int(st[reach].max())
             where = tuple(float(v) for v in np.round(S[far], 4))
@@ -553,17 +703,16 @@ def _plan_search(
         while path[-1] != 0:
             path.append(int(pred[path[-1]]))
         path = path[::-1]
-        Pm, Bm, Hm, edge = _motion(B[path], P[path], th0, params.d_platform)
+        ids = np.array([pair_id[(a, b)] for a, b in zip(path[:-1], path[1:], strict=True)], dtype=np.intp)
+        Pm, Bm, Hm, edge = _motion(B[path], P[path], th0, params.d_platform, mode[ids])
         cert = certify(robot, Pm, Bm, Hm, rws)
         if cert.ok:
             break
         bad_pieces = np.flatnonzero(~(cert.lower > 0))
-        bad_edges = np.unique(edge[np.floor(cert.u[bad_pieces]).astype(np.intp)])
-        eid = {(int(a), int(b)): i for i, (a, b) in enumerate(zip(src_a, dst_a, strict=True)) if alive[i]}
-        for e in bad_edges:
-            i = eid[(path[e], path[e + 1])]
-            alive[i] = False
-            removed += 1
+        bad = ids[np.unique(edge[np.floor(cert.u[bad_pieces]).astype(np.intp)])]
+        alive[bad] = False
+        failed[bad] = mode[bad] < ONE_BY_ONE
+        removed += len(bad)
         if rounds >= params.max_rounds:
             raise NoPlanFound(
                 f"no certified motion after {rounds} searches ({removed} motions removed); last failure near the "
@@ -575,15 +724,15 @@ def _plan_search(
 
     # smoothing: relax the nodes towards their neighbours' midpoints, then shortcut inside each task segment;
     # every change is checked (exact collision, spacing, certified μ) and the whole result certified again
-    Bn, Pn, sn = B[path].copy(), P[path].copy(), st[path].copy()
-    Bn = _relax(robot, scene, Bn, Pn, th0, rws, params)
-    idx, shortcuts = _shortcut(robot, scene, Bn, Pn, sn, th0, rws, params, task_at)
-    Pm, Bm, Hm, edge = _motion(Bn[idx], Pn[idx], th0, params.d_platform)
+    Bn, Pn, sn, mode_p = B[path].copy(), P[path].copy(), st[path].copy(), mode[ids]
+    Bn = _relax(robot, scene, Bn, Pn, th0, rws, params, mode_p)
+    idx, shortcuts, mode_s = _shortcut(robot, scene, Bn, Pn, sn, th0, rws, params, task_at, mode_p)
+    Pm, Bm, Hm, edge = _motion(Bn[idx], Pn[idx], th0, params.d_platform, mode_s)
     cert = certify(robot, Pm, Bm, Hm, rws)
-    out = idx
+    out, sn_out = idx, sn[idx]
     if not cert.ok:  # the local checks do not see a changed turn further on: keep the certified search path
-        out = path
-        Pm, Bm, Hm, edge = _motion(B[path], P[path], th0, params.d_platform)
+        out, sn_out = path, sn
+        Pm, Bm, Hm, edge = _motion(B[path], P[path], th0, params.d_platform, mode_p)
         cert = certify(robot, Pm, Bm, Hm, rws)
     t_smooth = time.perf_counter() - t0
 
@@ -591,7 +740,7 @@ def _plan_search(
     piece = np.floor(cert.u[:-1]).astype(np.intp)
     lower = np.full(len(Pm) - 1, np.inf)
     np.minimum.at(lower, piece, cert.lower)
-    labels = _labels(Pm, S, seg, task_at)
+    labels = _labels(edge, seg[sn_out], np.linalg.norm(np.diff(Pm, axis=0), axis=-1) > 1e-12)
     cap = capacity(robot, Pm, Bm, Hm, rws)
     tens = tensions(robot, cap.W, cap.lo, cap.hi)
     t_end = time.perf_counter() - t0
@@ -601,6 +750,9 @@ def _plan_search(
         "edges": int(len(src_a)),
         "rounds": rounds,
         "edges_removed": removed,
+        "edges_fallback": fallbacks,
+        "path_single_turns": int(np.sum((mode_s if out is idx else mode_p) == SINGLE_TURNS)),
+        "path_one_by_one": int(np.sum((mode_s if out is idx else mode_p) == ONE_BY_ONE)),
         "path_nodes": len(path),
         "smoothed_nodes": len(out),
         "shortcuts": shortcuts,
@@ -642,11 +794,7 @@ def _arrival_headings(Bn: NDArray[np.float64], th0: NDArray[np.float64]) -> NDAr
     th = th0.astype(float).copy()
     out[0] = th
     for e in range(len(Bn) - 1):
-        d = Bn[e + 1] - Bn[e]
-        moving = np.linalg.norm(d, axis=-1) > 1e-9
-        fwd = wrap(np.arctan2(d[:, 1], d[:, 0]) - th)
-        turn = np.where(np.abs(fwd) <= np.pi / 2, fwd, wrap(fwd - np.pi))
-        th = np.where(moving, wrap(th + turn), th)
+        th = _turned(th, Bn[e + 1] - Bn[e])
         out[e + 1] = th
     return out
 
@@ -659,11 +807,13 @@ def _local_ok(
     th: NDArray[np.float64],
     rws: NDArray[np.float64],
     d_platform: float,
+    mode: NDArray[np.integer] | None = None,
 ) -> bool:
-    """The motion through the nodes Bn, Pn (starting with headings th) is collision-free, spaced and certified."""
-    if not np.all(_edges_ok(robot, scene, Bn[:-1], Bn[1:])):
+    """The motion through the nodes Bn, Pn (starting with headings th; each edge executed in its ``mode``, default
+    :data:`TOGETHER`, see :func:`_motion`) is collision-free, spaced and certified."""
+    if not np.all(_edges_ok(robot, scene, Bn[:-1], Bn[1:], mode)):
         return False
-    Pm, Bm, Hm, _ = _motion(Bn, Pn, th, d_platform)
+    Pm, Bm, Hm, _ = _motion(Bn, Pn, th, d_platform, mode)
     return certify(robot, Pm, Bm, Hm, rws).ok
 
 
@@ -675,14 +825,17 @@ def _relax(
     th0: NDArray[np.float64],
     rws: NDArray[np.float64],
     params: SearchParams,
+    mode: NDArray[np.integer] | None = None,
     sweeps: int = 4,
 ) -> NDArray[np.float64]:
     """Move every inner node's bases half-way towards the midpoint of their neighbours when the motion from the
     node before to the node two after stays collision-free, spaced and certified (removes zig-zags and spurs).
 
     Nodes k ≡ r (mod 3) are tried together (their windows k−1…k+2 share no moved node), all windows certified in
-    one batched :func:`certify` call; the whole smoothed path is certified again by the caller."""
+    one batched :func:`certify` call; the whole smoothed path is certified again by the caller. ``mode`` (K − 1,):
+    how each edge is executed (:func:`_motion`; default :data:`TOGETHER`), kept as it is."""
     Bn = Bn.copy()
+    mode = np.full(len(Bn) - 1, TOGETHER, np.int8) if mode is None else np.asarray(mode)
     for _ in range(sweeps):
         moved = False
         for r in range(1, 4):
@@ -705,9 +858,10 @@ def _relax(
                 hi = min(k + 3, len(Bn))
                 trial = Bn[k - 1 : hi].copy()
                 trial[1] = new[k]
-                if not np.all(_edges_ok(robot, scene, trial[:-1], trial[1:])):
+                how = mode[k - 1 : hi - 1]
+                if not np.all(_edges_ok(robot, scene, trial[:-1], trial[1:], how)):
                     continue
-                Pm, Bm, Hm, _ = _motion(trial, Pn[k - 1 : hi], arrive[k - 1], params.d_platform)
+                Pm, Bm, Hm, _ = _motion(trial, Pn[k - 1 : hi], arrive[k - 1], params.d_platform, how)
                 parts.append((Pm, Bm, Hm))
                 owner += [len(windows)] * (len(Pm) - 1) + [-1]
                 windows.append(k)
@@ -739,10 +893,19 @@ def _shortcut(
     rws: NDArray[np.float64],
     params: SearchParams,
     task_at: list[int],
-) -> tuple[list[int], int]:
-    """Indices of the nodes kept: from node i, a straight motion to the farthest node j of the same task segment
-    whose motion is collision-free, spaced and certified (the nodes in between are dropped)."""
+    mode: NDArray[np.integer] | None = None,
+) -> tuple[list[int], int, NDArray[np.int8]]:
+    """Indices of the nodes kept: from node i, a straight motion (:data:`TOGETHER`) to the farthest node j of the
+    same task segment whose motion is collision-free, spaced and certified (the nodes in between are dropped), and
+    the mode of each kept edge (``mode`` (K − 1,), default :data:`TOGETHER`: kept for an edge not shortcut).
+
+    Never shortcut away: a task point. The nodes i … j of a shortcut have non-decreasing stations with no task
+    point's station strictly between stations i and j (:func:`_same_line`, on the station *indices*, so a route
+    that returns to an earlier task point, e.g. t0 → t1 → t0, keeps the visit of t1 although the nodes before and
+    after it are at the same place)."""
+    mode = np.full(len(Bn) - 1, TOGETHER, np.int8) if mode is None else np.asarray(mode)
     out = [0]
+    modes: list[int] = []
     th = th0.astype(float).copy()
     i = 0
     shortcuts = 0
@@ -758,9 +921,10 @@ def _shortcut(
                 shortcuts += 1
                 break
         th = _arrival_headings(Bn[[i, j_best]], th)[-1]
+        modes.append(int(mode[i]) if j_best == i + 1 else TOGETHER)
         out.append(j_best)
         i = j_best
-    return out, shortcuts
+    return out, shortcuts, np.array(modes, np.int8)
 
 
 def _same_line(sts: NDArray[np.intp], task_at: list[int]) -> bool:
@@ -773,21 +937,16 @@ def _same_line(sts: NDArray[np.intp], task_at: list[int]) -> bool:
     return not inner
 
 
-def _labels(
-    Pm: NDArray[np.float64], S: NDArray[np.float64], seg: NDArray[np.int64], task_at: list[int]
-) -> NDArray[np.int64]:
-    """Segment index of each sample: the task segment the platform last moved along (waits keep the label)."""
-    tasks = S[task_at]
-    out = np.zeros(len(Pm), np.int64)
+def _labels(edge: NDArray[np.intp], seg: NDArray[np.int64], moves: NDArray[np.bool_]) -> NDArray[np.int64]:
+    """Task segment index (T,) of each sample of a :func:`_motion`: ``edge`` (T − 1,) the path edge of each piece,
+    ``seg`` (K,) the segment of each path node's station, ``moves`` (T − 1,) the platform moves on the piece. A piece
+    on which the platform moves takes its edge's target segment; turns and waits keep the label (so the last sample
+    of segment i is the platform at task point i + 1). From the path, not from the geometry: on a route back to an
+    earlier task point the segments overlap."""
+    out = np.zeros(len(edge) + 1, np.int64)
     cur = 0
-    for r in range(1, len(Pm)):
-        d = Pm[r] - Pm[r - 1]
-        if np.linalg.norm(d) > 1e-12:
-            mid = 0.5 * (Pm[r] + Pm[r - 1])
-            # the segment whose line contains the midpoint (distance to each segment)
-            a, b = tasks[:-1], tasks[1:]
-            v = b - a
-            s = np.clip(np.einsum("ki,ki->k", mid - a, v) / np.maximum(np.einsum("ki,ki->k", v, v), 1e-300), 0, 1)
-            cur = int(np.argmin(np.linalg.norm(a + s[:, None] * v - mid, axis=-1)))
-        out[r] = cur
+    for r, e in enumerate(edge):
+        if moves[r]:
+            cur = int(seg[e + 1])
+        out[r + 1] = cur
     return out
