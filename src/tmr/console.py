@@ -118,9 +118,14 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
     setup_logging(quiet, verbose)
     logging.captureWarnings(True)
     _state["running"] = True  # a KeyboardInterrupt Python can only ignore is raised again (tmr._ctrl_c_not_lost)
+    if not verbose:  # a file left open by an interrupted import or write is reported when it is freed, perhaps
+        # after this function (a second line after 'interrupted'): not a user's concern, for the whole process
+        warnings.filterwarnings("ignore", category=ResourceWarning)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("default")  # each distinct warning once, through logging
+            if not verbose:
+                warnings.filterwarnings("ignore", category=ResourceWarning)
             return body(args)
     except KeyboardInterrupt:
         _ignore_further_interrupts()  # a second Ctrl-C (or one sent to the whole process group) while reporting
