@@ -154,15 +154,15 @@ def run(args: argparse.Namespace) -> int:
     from tmr.ccma.paths import make_path
     from tmr.ccma.reach import check_reach, height_range
     from tmr.ccma.sim import end_effector_pose, reference_state
-    from tmr.ccma.system import build_system, load_description
+    from tmr.ccma.system import described_system
     from tmr.metrics import json_safe
 
     # ---- validate and compute everything before writing
     from tmr.outdir import check_out
 
     out = check_out(Path(args.out), OWNED_NAMES)
-    desc = load_description(args.description or args.example)
-    model = EnergyModel(build_system(desc), compile=args.compile)
+    desc, system = described_system(args.description or args.example)
+    model = EnergyModel(system, compile=args.compile)
     st0 = reference_state(model)
     p0, r0 = end_effector_pose(model, st0)
     path = make_path(

@@ -104,7 +104,8 @@ def _main(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     out = Path(args.out) if args.out else _default_out(run_dir, args.format)
     if not run_dir.is_dir():
-        raise TmrError(f"{run_dir} is not a directory: give the --out directory of a tmr run")
+        what = "is not a directory" if run_dir.exists() else "does not exist"
+        raise TmrError(f"{run_dir} {what}: give the --out directory of a tmr run")
     check_out(out, args.format)
     from tmr.export.runs import load_motion
 
