@@ -83,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     if name not in COMMANDS:
         close = difflib.get_close_matches(name, list(COMMANDS), n=1)
         hint = f"; did you mean '{close[0]}'?" if close else f"; commands: {', '.join(COMMANDS)}"
-        print(f"tmr: error: unknown command '{name}'{hint}", file=sys.stderr)
+        print(f"tmr: error: unknown command {name!r}{hint}", file=sys.stderr)
         return 2
     entry = _load(name)
     if entry is None:
