@@ -60,7 +60,11 @@ def test_bad_out_exit_2_one_line_nothing_written(run_dir, tmp_path, capsys, make
 
 def test_not_a_run_dir(tmp_path, capsys):
     assert main([str(tmp_path / "missing")]) == 2
-    assert "is not a directory" in capsys.readouterr().err
+    assert "missing does not exist" in capsys.readouterr().err  # not "is not a directory": it is not there at all
+    (tmp_path / "f").write_text("x")
+    assert main([str(tmp_path / "f")]) == 2
+    assert "f is not a directory" in capsys.readouterr().err
+    (tmp_path / "f").unlink()
     assert main([str(tmp_path)]) == 2
     assert "not a tmr run directory" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []

@@ -62,12 +62,15 @@ def _load(name: str) -> Callable[..., int] | None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``tmr`` console script; returns the exit code."""
     args = list(sys.argv[1:] if argv is None else argv)
-    if not args or args[0] in ("-h", "--help"):
+    if not args:  # a refusal is one line
+        print(f"tmr: error: a command is required: {', '.join(COMMANDS)} (see tmr --help)", file=sys.stderr)
+        return 2
+    if args[0] in ("-h", "--help"):
         try:
-            print(_usage(), file=sys.stdout if args else sys.stderr)
+            print(_usage())
         except BrokenPipeError:  # e.g. tmr --help | head -3
             pass
-        return 0 if args else 2
+        return 0
     if args[0] == "--version":
         from importlib.metadata import PackageNotFoundError, version
 
@@ -80,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     if name not in COMMANDS:
         close = difflib.get_close_matches(name, list(COMMANDS), n=1)
         hint = f"; did you mean '{close[0]}'?" if close else f"; commands: {', '.join(COMMANDS)}"
-        print(f"tmr: error: unknown command '{name}'{hint}", file=sys.stderr)
+        print(f"tmr: error: unknown command {name!r}{hint}", file=sys.stderr)
         return 2
     try:
         entry = _load(name)  # the command's imports: a Ctrl-C here is one line and 130 too

@@ -30,6 +30,7 @@ __all__ = [
     "finite_float",
     "out_path",
     "param",
+    "path_arg",
     "point",
     "points",
     "positive_float",
@@ -67,6 +68,7 @@ class ArgumentParser(argparse.ArgumentParser):
             names = match.group(1).split("/")
             message = f"{next((n for n in names if n.startswith('--')), names[-1])}: {message[match.end() :]}"
         hint = f" (see {self.prog} --help)" if message.startswith(("unrecognized", "the following")) else ""
+        message = _one_line(message)  # a value with a line break (--set $'a\nb=1') still makes one line
         self.exit(2, f"{self.prog}: error: {message}{hint}\n")
 
     def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
@@ -75,6 +77,11 @@ class ArgumentParser(argparse.ArgumentParser):
 
         set_progress(not getattr(ns, "no_progress", False))  # --no-progress: tmr.console.progress_enabled
         return ns, rest
+
+
+def _one_line(text: str) -> str:
+    """``text`` with its line breaks written as ``\\n`` / ``\\r``: an error is one line whatever the user typed."""
+    return text.replace("\r", "\\r").replace("\n", "\\n")
 
 
 def _number(text: str, what: str) -> float:
@@ -188,6 +195,17 @@ def param(text: str) -> tuple[str, Any]:
     except ParameterError as exc:
         raise argparse.ArgumentTypeError(f"{key}={value}: {exc}") from None
     return key, typed
+
+
+def path_arg(text: str) -> str:
+    """A file or directory the user names (``--scenario``, ``--map``, ``--scene``, a run directory, ...): not empty,
+    not blank, no NUL byte. An empty value would otherwise mean the default (``--map ''`` planned scenario A) or the
+    current directory; whether the file exists and can be read is judged by its reader (:mod:`tmr.files`)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("must name a file, got an empty value")
+    if "\0" in text:
+        raise argparse.ArgumentTypeError("must not contain a NUL byte")
+    return text
 
 
 def out_path(text: str) -> str:

@@ -183,11 +183,13 @@ class Environment:
         xmin, ymin, xmax, ymax = self.bounds
         r = self.safety_radius
 
-        ncells = math.prod(self._grid_shape())
+        cells = [(hi - lo) / self.resolution for lo, hi in ((xmin, xmax), (ymin, ymax))]  # inf for a 1e308 m room
+        ncells = math.prod(self._grid_shape()) if all(map(math.isfinite, cells)) else math.inf
         if ncells > _MAX_CELLS:
             raise ParameterError(
                 f"{where}: a {xmax - xmin:g} m x {ymax - ymin:g} m room at resolution {self.resolution:g} m "
-                f"needs {ncells:,} grid cells (limit {_MAX_CELLS:,}); use a coarser resolution"
+                f"needs {f'{ncells:,}' if math.isfinite(ncells) else 'over 1e308'} grid cells (limit "
+                f"{_MAX_CELLS:,}); use a coarser resolution"
             )
 
         self.room = box(xmin, ymin, xmax, ymax)

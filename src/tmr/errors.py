@@ -15,8 +15,24 @@ def fmt_point(p: Iterable[float]) -> str:
     return f"({', '.join(parts)})"
 
 
+def _rebuild(cls: type, args: tuple, state: dict) -> Exception:
+    exc = cls.__new__(cls, *args)
+    exc.args = args
+    exc.__dict__.update(state)
+    return exc
+
+
 class TmrError(Exception):
     """Base class of every error tmr raises on purpose."""
+
+    def __str__(self) -> str:
+        # one line whatever a path or a value in the message holds (a file named "a\nb.toml")
+        return super().__str__().replace("\r", "\\r").replace("\n", "\\n")
+
+    def __reduce__(self) -> tuple:
+        # picklable whatever its subclass's __init__ takes (e.g. TooManyRobotsError(message, fit)): a sweep worker
+        # that raises one hands it back to the parent instead of breaking the process pool
+        return (_rebuild, (type(self), self.args, dict(self.__dict__)))
 
 
 class ParameterError(TmrError, ValueError):

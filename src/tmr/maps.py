@@ -438,9 +438,16 @@ def _geojson_geometry(obj: Any, props: dict[str, Any], what: str) -> list[BaseGe
 
 def _load_geojson(path: Path) -> tuple[list[BaseGeometry], Bounds | None]:
     try:
-        doc = json.loads(path.read_text(encoding="utf-8-sig"))
-    except UnicodeDecodeError:
-        raise MapError(f"{path}: not a text file (GeoJSON expected)") from None
+        return _read_geojson(path)
+    except RecursionError:  # [[[[... or GeometryCollections nested deeper than the parser's stack
+        raise MapError(f"{path}: nested too deeply to be a map (GeoJSON expected)") from None
+
+
+def _read_geojson(path: Path) -> tuple[list[BaseGeometry], Bounds | None]:
+    from tmr.files import read_text
+
+    try:
+        doc = json.loads(read_text(path, "GeoJSON map", MapError, encoding="utf-8-sig"))
     except json.JSONDecodeError as exc:
         raise MapError(f"{path}: not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
     if not isinstance(doc, dict) or "type" not in doc:
@@ -477,10 +484,9 @@ _WKT_BOUNDS = re.compile(r"^#\s*bounds\s*[:=]\s*(.*)$", re.IGNORECASE)
 
 
 def _load_wkt(path: Path) -> tuple[list[BaseGeometry], Bounds | None]:
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError:
-        raise MapError(f"{path}: not a text file (WKT expected)") from None
+    from tmr.files import read_text
+
+    text = read_text(path, "WKT map", MapError, encoding="utf-8-sig")
     bounds = None
     body: list[tuple[int, str]] = []
     for lineno, line in enumerate(text.splitlines(), start=1):

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from tmr.cli_args import ArgumentParser, add_common, bounds, count, param, point, points, positive_float
+from tmr.cli_args import ArgumentParser, add_common, bounds, count, param, path_arg, point, points, positive_float
 from tmr.console import LOG, progress_enabled
 from tmr.console import run as run_cli
 from tmr.errors import NoPathFound, TmrError
@@ -103,9 +103,13 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     )
     src = p.add_argument_group("scenario")
     src.add_argument(
-        "--scenario", help="built-in scenario A, B, C, D (Caruso 2021), E (tmr's), or a path to a scenario TOML file"
+        "--scenario",
+        type=path_arg,
+        help="built-in scenario A, B, C, D (Caruso 2021), E (tmr's), or a path to a scenario TOML file",
     )
-    src.add_argument("--map", help="map file: ROS map_server .yaml (+ .pgm), .geojson or .wkt (needs --base, --goal)")
+    src.add_argument(
+        "--map", type=path_arg, help="map file: ROS map_server .yaml (+ .pgm), .geojson or .wkt (needs --base, --goal)"
+    )
     src.add_argument("--bounds", type=bounds, help="room bounds xmin,ymin,xmax,ymax [m] for a GeoJSON/WKT --map")
     src.add_argument("--base", type=point, help="tether anchor X,Y [m]")
     src.add_argument("--goal", type=point, help="leader goal X,Y [m]")
@@ -408,7 +412,7 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
     the free space at once (before the route search).
     """
     from tmr.params import ChainParams, PathParams, PinvParams, QPParams, TaskParams, TimeParams, apply_overrides
-    from tmr.route import TooFewRobotsError, plan_route
+    from tmr.route import TooFewRobotsError, check_fit, plan_route
     from tmr.spans import span_limits
 
     values = {"safety_radius": scenario.environment.safety_radius} | dict(scenario.params or {}) | dict(args.set)
@@ -426,6 +430,8 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
             f"(Ts = {made[TimeParams].Ts:g} s)"
         )
     n = args.robots if isinstance(args.robots, int) else scenario.n_robots  # --start has n positions (load_inputs)
+    if args.robots != "auto":  # before span_limits allocates a row per robot (--robots 10**23 is refused, not a crash)
+        check_fit(scenario.environment, scenario.base, n)
     rt = plan_route(
         scenario.environment,
         scenario.base,

@@ -241,12 +241,11 @@ def build_problem(
                 if start.ndim == 2 and start.shape[1] == 2
                 else f"start must be {N} (x, y) positions [m], got shape {start.shape}"
             )
+    env = scenario.environment
+    check_fit(env, scenario.base, N)  # before anything sized by N: n_robots=10**23 is refused, not a MemoryError
     chain = Chain(N, base=scenario.base)
     limits = span_limits(N, chain_params)
-    env = scenario.environment
     goal = np.asarray(scenario.goal, float)
-    if known_route is not None:  # plan_route(robots=N) checks it first
-        check_fit(env, scenario.base, N)
     rt = known_route if known_route is not None else plan_route(env, scenario.base, goal, limits, robots=N)
     why = rt.refusal(N)
     # N_min is a verdict of the route-guided search; only the proven bound binds other routes and given starts

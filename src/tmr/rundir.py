@@ -385,6 +385,8 @@ def _read_json(path: Path, where: str) -> dict[str, Any]:
         raise RunDirError(f"{where}: cannot read {path.name} ({exc.strerror or exc})") from None
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise RunDirError(f"{where}: {path.name} is not valid JSON ({exc}); re-run the planner") from None
+    except RecursionError:  # [[[[... nested deeper than the parser's stack
+        raise RunDirError(f"{where}: {path.name} is nested too deeply to be a tmr file; re-run the planner") from None
     if not isinstance(doc, dict):
         raise RunDirError(f"{where}: {path.name} is not a JSON object; re-run the planner")
     return doc

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from tmr.cli_args import ArgumentParser, add_common, count
+from tmr.cli_args import ArgumentParser, add_common, count, path_arg
 from tmr.cli_args import positive_float as _positive
 from tmr.console import LOG, add_manners, progress_enabled
 from tmr.console import run as run_cli
@@ -62,8 +62,12 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     add_manners(sub.add_parser("list", help="list the shipped example systems"))
     r = sub.add_parser("run", help="track an end-effector path and write trajectories and figures")
     src = r.add_mutually_exclusive_group()
-    src.add_argument("--example", default="4dof-reduced", help="shipped example (see 'list'; default 4dof-reduced)")
-    src.add_argument("--description", help="path of a system description TOML file instead of an example")
+    src.add_argument(
+        "--example", type=path_arg, default="4dof-reduced", help="shipped example (see 'list'; default 4dof-reduced)"
+    )
+    src.add_argument(
+        "--description", type=path_arg, help="path of a system description TOML file instead of an example"
+    )
     r.add_argument(
         "--path",
         default="vcircle",
@@ -150,15 +154,15 @@ def run(args: argparse.Namespace) -> int:
     from tmr.ccma.paths import make_path
     from tmr.ccma.reach import check_reach, height_range
     from tmr.ccma.sim import end_effector_pose, reference_state
-    from tmr.ccma.system import build_system, load_description
+    from tmr.ccma.system import described_system
     from tmr.metrics import json_safe
 
     # ---- validate and compute everything before writing
     from tmr.outdir import check_out
 
     out = check_out(Path(args.out), OWNED_NAMES)
-    desc = load_description(args.description or args.example)
-    model = EnergyModel(build_system(desc), compile=args.compile)
+    desc, system = described_system(args.description or args.example)
+    model = EnergyModel(system, compile=args.compile)
     st0 = reference_state(model)
     p0, r0 = end_effector_pose(model, st0)
     path = make_path(

@@ -67,6 +67,7 @@ __all__ = [
     "System",
     "build_system",
     "example_names",
+    "described_system",
     "load_description",
     "load_system",
 ]
@@ -406,4 +407,15 @@ def load_description(source: str | Path) -> dict[str, Any]:
 
 def load_system(source: str | Path) -> System:
     """:func:`build_system` of :func:`load_description`."""
-    return build_system(load_description(source))
+    return described_system(source)[1]
+
+
+def described_system(source: str | Path) -> tuple[dict[str, Any], System]:
+    """The description of ``source`` (:func:`load_description`) and its :class:`System`; a description that does not
+    build is refused with a message naming the file (or the example) first."""
+    desc = load_description(source)
+    try:
+        return desc, build_system(desc)
+    except DescriptionError as exc:
+        label = f"example {source!r}" if isinstance(source, str) and source in example_names() else str(source)
+        raise DescriptionError(f"{label}: {exc}") from None

@@ -23,7 +23,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from tmr.cli_args import ArgumentParser, add_common, positive_float
+from tmr.cli_args import ArgumentParser, add_common, path_arg, positive_float
 from tmr.console import LOG, progress_enabled
 from tmr.console import run as run_cli
 from tmr.errors import TmrError
@@ -38,7 +38,9 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
         description="Export a tmr run directory as a ROS 2 bag (MCAP or SQLite 3, via rosbags), an animated GIF or "
         "an interactive HTML view.",
     )
-    p.add_argument("run_dir", metavar="RUN_DIR", help="--out directory of tmr.plan, tmr.mcdpr plan or tmr.ccma run")
+    p.add_argument(
+        "run_dir", type=path_arg, metavar="RUN_DIR", help="--out directory of tmr.plan, tmr.mcdpr plan or tmr.ccma run"
+    )
     p.add_argument(
         "--format",
         default="mcap",
@@ -58,7 +60,7 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
         choices=("raw", "filtered"),
         help="chain runs: the checked plan (raw, default) or the low-passed positions the robots track (filtered)",
     )
-    p.add_argument("--description", help="CCMA runs: the system description TOML the run was made from")
+    p.add_argument("--description", type=path_arg, help="CCMA runs: the system description TOML the run was made from")
     add_common(  # no figures, no seed (nothing random), no views: the format is --format
         p,
         out=None,
@@ -102,7 +104,8 @@ def _main(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     out = Path(args.out) if args.out else _default_out(run_dir, args.format)
     if not run_dir.is_dir():
-        raise TmrError(f"{run_dir} is not a directory: give the --out directory of a tmr run")
+        what = "is not a directory" if run_dir.exists() else "does not exist"
+        raise TmrError(f"{run_dir} {what}: give the --out directory of a tmr run")
     check_out(out, args.format)
     from tmr.export.runs import load_motion
 

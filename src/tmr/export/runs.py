@@ -88,7 +88,11 @@ def _ccma(path: Path, rate: float, description: str | None) -> Motion:
         raise ExportError(
             f"{where}: the run's system {system!r} is not a shipped example ({exc}); give its --description FILE"
         ) from None
-    model = EnergyModel(build_system(desc))
+    try:
+        built = build_system(desc)
+    except TmrError as exc:
+        raise ExportError(f"{description or system}: {exc}") from None
+    model = EnergyModel(built)
     if model.system.name != system or [a.name for a in model.system.agents] != names or u.shape[1:] != (model.nu,):
         raise ExportError(f"{where}: the description does not describe the run's system {system!r}")
     st = reference_state(model)

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from tmr.cli_args import ArgumentParser, add_common, count, points
+from tmr.cli_args import ArgumentParser, add_common, count, path_arg, points
 from tmr.cli_args import positive_float as _positive
 from tmr.console import LOG, progress_enabled
 from tmr.console import run as run_cli
@@ -47,6 +47,28 @@ def _triple(text: str) -> tuple[float, float, float]:
     return parts[0], parts[1], parts[2]
 
 
+#: The smallest step of the search and of the planners' grids [m]: a finer one would not finish (1e-300 asks for
+#: 1e300 stations).
+MIN_STEP = 1e-3
+#: The most B-spline samples per iterate (``--upsample``).
+MAX_UPSAMPLE = 1000
+
+
+def _step(text: str) -> float:
+    """A length step [m] of the planners: finite, ≥ :data:`MIN_STEP`."""
+    v = _positive(text)
+    if v < MIN_STEP:
+        raise argparse.ArgumentTypeError(f"must be ≥ {MIN_STEP:g} m, got {text!r}")
+    return v
+
+
+def _upsample(text: str) -> int:
+    v = count(text)
+    if v > MAX_UPSAMPLE:
+        raise argparse.ArgumentTypeError(f"must be ≤ {MAX_UPSAMPLE}, got {v}")
+    return v
+
+
 def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     """The parser of ``python -m tmr.mcdpr``; ``prog``: the name it shows (``tmr mcdpr`` through the dispatcher)."""
     p = ArgumentParser(
@@ -55,8 +77,10 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     )
     sub = p.add_subparsers(dest="command", required=True)
     pl = sub.add_parser("plan", help="path planning of the bases and the platform (search or the paper's greedy)")
-    pl.add_argument("--scene", default="fig2", help="built-in scene name (fig2) or a scene TOML file (default fig2)")
-    pl.add_argument("--robot", help="robot TOML file (default: the shipped MoPICK description)")
+    pl.add_argument(
+        "--scene", type=path_arg, default="fig2", help="built-in scene name (fig2) or a scene TOML file (default fig2)"
+    )
+    pl.add_argument("--robot", type=path_arg, help="robot TOML file (default: the shipped MoPICK description)")
     pl.add_argument(
         "--planner",
         choices=("search", "greedy"),
@@ -69,19 +93,21 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
         default="closed-form",
         help="tension distribution: null-space closed form (min 2-norm), qp (min 2-norm, DAQP), lp (min-max, HiGHS)",
     )
-    pl.add_argument("--station-step", type=_positive, default=0.25, help="search: platform station spacing [m]")
+    pl.add_argument("--station-step", type=_step, default=0.25, help="search: platform station spacing [m]")
     pl.add_argument("--margin", type=_positive, default=0.3, help="search: μ of a placement at any heading [N]")
-    pl.add_argument("--max-move", type=_positive, default=0.6, help="search: base move per graph edge [m] (0.6)")
-    pl.add_argument("--d-base", type=_positive, default=0.2, help="base step d_j of the stage-1 grid [m] (0.2)")
-    pl.add_argument("--min-step", type=_positive, default=0.05, help="smallest retried base step [m] (0.05)")
-    pl.add_argument("--d-platform", type=_positive, default=0.05, help="platform step d_MP of stage 2 [m] (0.05)")
+    pl.add_argument("--max-move", type=_step, default=0.6, help="search: base move per graph edge [m] (0.6)")
+    pl.add_argument("--d-base", type=_step, default=0.2, help="base step d_j of the stage-1 grid [m] (0.2)")
+    pl.add_argument("--min-step", type=_step, default=0.05, help="smallest retried base step [m] (0.05)")
+    pl.add_argument("--d-platform", type=_step, default=0.05, help="platform step d_MP of stage 2 [m] (0.05)")
     pl.add_argument("--max-iter", type=count, default=200, help="stage-1 iterations per way-point (200)")
-    pl.add_argument("--upsample", type=count, default=10, help="B-spline samples per iterate (10)")
+    pl.add_argument("--upsample", type=_upsample, default=10, help="B-spline samples per iterate (10)")
     pl.add_argument("--external", type=_triple, help="external wrench box half-widths FX,FY,FZ [N] (scene's)")
     add_common(pl, out="runs/mcdpr", seed_help="search: seed of the random base moves round the best placements")
     ws = sub.add_parser("workspace", help="map of μ over platform positions with the bases parked (wrench-feasible)")
-    ws.add_argument("--scene", default="fig2", help="built-in scene name or scene TOML file (default fig2)")
-    ws.add_argument("--robot", help="robot TOML file (default: the shipped MoPICK description)")
+    ws.add_argument(
+        "--scene", type=path_arg, default="fig2", help="built-in scene name or scene TOML file (default fig2)"
+    )
+    ws.add_argument("--robot", type=path_arg, help="robot TOML file (default: the shipped MoPICK description)")
     ws.add_argument("--bases", type=points, help="parked bases X1,Y1;X2,Y2;... [m] (default: the scene's start)")
     ws.add_argument("--z", type=_positive, help="platform height [m] (default: the first task point's)")
     ws.add_argument("--cell", type=_positive, default=0.05, help="grid cell [m] (0.05)")

@@ -52,7 +52,9 @@ def workspace(
         raise ParameterError(f"the platform height must be in (0, {ztop:g}) m (below the cable exits), got {z}")
     nx, ny = int(np.floor((x1 - x0) / cell)), int(np.floor((y1 - y0) / cell))
     if nx < 1 or ny < 1 or nx * ny > 4_000_000:
-        raise ParameterError(f"a {nx} x {ny} grid is empty or too large; choose another cell size")
+        raise ParameterError(
+            f"a {nx:.3g} x {ny:.3g} grid is empty or too large (more than 4e6 cells); choose another cell size"
+        )
     x = x0 + cell * (np.arange(nx) + 0.5)
     y = y0 + cell * (np.arange(ny) + 0.5)
     X, Y = np.meshgrid(x, y)

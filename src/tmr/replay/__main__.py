@@ -19,7 +19,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from tmr.cli_args import ArgumentParser, add_common, count, positive_float
+from tmr.cli_args import ArgumentParser, add_common, count, path_arg, positive_float
 from tmr.console import LOG, progress_enabled
 from tmr.console import run as run_command
 from tmr.errors import TmrError
@@ -47,10 +47,10 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
         "and the obstacles, robots on their trajectories (tmr.plan), or the MoPICK platform held with its bases "
         "on the ground (tmr.mcdpr plan).",
     )
-    p.add_argument("run", help="output directory of tmr.plan or tmr.mcdpr plan")
+    p.add_argument("run", type=path_arg, help="output directory of tmr.plan or tmr.mcdpr plan")
     p.add_argument("--gif", action="store_true", help="also write replay.gif, rendered offscreen from the simulation")
     p.add_argument("--links", type=count, help="links per tether (chain, default 16)")
-    p.add_argument("--timestep", type=positive_float, help="physics step [s] (default 0.005; must divide Ts)")
+    p.add_argument("--timestep", type=_timestep, help="physics step [s] (default 0.005; must divide Ts)")
     p.add_argument(
         "--track",
         choices=["filtered", "raw"],
@@ -86,6 +86,17 @@ def _bar(desc: str) -> Iterator[Callable[[float], None] | None]:
         yield update
     finally:
         bar.close()
+
+
+#: The smallest physics step [s] (``--timestep``): 5000 steps per 0.05 s sample already take hours.
+MIN_TIMESTEP = 1e-5
+
+
+def _timestep(text: str) -> float:
+    v = positive_float(text)
+    if v < MIN_TIMESTEP:  # 1e-300 would ask for 5e298 physics steps per sample
+        raise argparse.ArgumentTypeError(f"must be ≥ {MIN_TIMESTEP:g} s, got {text!r}")
+    return v
 
 
 def _chain(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str], str]:

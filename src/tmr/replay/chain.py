@@ -32,6 +32,10 @@ Array = NDArray[np.float64]
 __all__ = ["ChainReplay", "ReplayConfig", "build_chain_model", "replay_chain"]
 
 
+#: The most links per tether (``--links``): a tether of 1000 links already takes minutes to simulate.
+MAX_LINKS = 1000
+
+
 @dataclass(frozen=True)
 class ReplayConfig:
     """Choices of the replay (``formulations/replay.md`` gives the reasons). Units: m, kg, N, s.
@@ -65,6 +69,10 @@ class ReplayConfig:
     winch: str = "horizontal"
     obstacle_height: float = OBSTACLE_HEIGHT
     settle: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.n_links <= MAX_LINKS:  # refused before a model of 10**23 bodies is built
+            raise ReplayError(f"--links must be 1 … {MAX_LINKS} links per tether, got {self.n_links}")
 
     @property
     def kp(self) -> float:

@@ -28,7 +28,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from tmr.cli_args import ArgumentParser, add_common, param, positive_float
+from tmr.cli_args import ArgumentParser, add_common, param, path_arg, positive_float
 from tmr.cli_args import count as _positive
 from tmr.console import LOG, progress_enabled
 from tmr.console import run as run_cli
@@ -80,7 +80,7 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     add_common(common, out="runs/sweep", seed_help="seed of the leader's RRT* and of NSGA-II", views=False)
 
     s = sub.add_parser("sensitivity", parents=[common], help="k_v0 × d_min grid (Caruso 2021 §5.1, Fig. 9)")
-    s.add_argument("--scenario", default="D", help="scenario (default D, the paper's plane case study)")
+    s.add_argument("--scenario", type=path_arg, default="D", help="scenario (default D, the paper's plane case study)")
     s.add_argument(
         "--methods",
         nargs="+",
@@ -97,7 +97,9 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     )
 
     m = sub.add_parser("moga", parents=[common], help="NSGA-II tuning of the controller parameters (§4.2.2)")
-    m.add_argument("--scenario", default="D", help="scenario to tune on (default D, the paper's plane case study)")
+    m.add_argument(
+        "--scenario", type=path_arg, default="D", help="scenario to tune on (default D, the paper's plane case study)"
+    )
     m.add_argument(
         "--method", default="pinv", choices=["pinv", "qp"], help="formulation whose parameters are tuned (default pinv)"
     )
@@ -108,7 +110,9 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     )
 
     b = sub.add_parser("bench", parents=[common], help="scenarios × methods table")
-    b.add_argument("--scenarios", nargs="+", default=["A", "B", "C", "D"], help="scenarios (default A B C D)")
+    b.add_argument(
+        "--scenarios", type=path_arg, nargs="+", default=["A", "B", "C", "D"], help="scenarios (default A B C D)"
+    )
     b.add_argument(
         "--methods", nargs="+", default=list(METHODS), choices=list(METHODS), help="formulations (default: all)"
     )

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tmr.params import PinvParams, QPParams
-from tmr.sweep.errors import SweepError
+from tmr.sweep.errors import MAX_RUNS, SweepError
 from tmr.sweep.runs import RunResult, RunSpec
 
 __all__ = ["SWEEP_AXES", "UNITS", "Grid", "SensitivityResult", "sensitivity_grid", "sensitivity_specs"]
@@ -88,6 +88,8 @@ def sensitivity_grid(
     nx, ny = (n, n) if isinstance(n, int) else tuple(n)
     if nx < 2 or ny < 2:
         raise SweepError(f"a sensitivity grid needs at least 2 points per axis, got {nx} × {ny}")
+    if nx * ny > MAX_RUNS:
+        raise SweepError(f"a {nx} × {ny} grid is {nx * ny:.3g} plans, more than {MAX_RUNS}; give a smaller --n")
     if not (math.isfinite(low) and math.isfinite(high) and 0 < low < high):
         raise SweepError(f"need 0 < low < high factors, got low={low}, high={high}")
     x_name, y_name = SWEEP_AXES[method]

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tmr.sweep.errors import SweepError
+from tmr.sweep.errors import MAX_RUNS, SweepError
 from tmr.sweep.executor import Executor, SerialExecutor
 from tmr.sweep.runs import RunResult, RunSpec, check_overrides, evaluate_run
 
@@ -166,6 +166,10 @@ def run_moga(
         check_overrides({v.name: v.high})
     if pop_size < 2 or n_gen < 1:
         raise SweepError(f"need pop_size ≥ 2 and n_gen ≥ 1, got {pop_size}, {n_gen}")
+    if pop_size * n_gen > MAX_RUNS:
+        raise SweepError(
+            f"{pop_size} × {n_gen} (--pop × --gen) is {pop_size * n_gen:.3g} plans, more than {MAX_RUNS}; give fewer"
+        )
     base = {k: val for k, val in (base or {}).items() if k not in names}
     check_overrides(base)
     executor = executor or SerialExecutor()
