@@ -1,4 +1,4 @@
-"""Whole-horizon NLP (``tmr.formulations.horizon``): feasibility, optimality, cost vs warm start, fallbacks (never
+"""Whole-horizon NLP (``tmr.control.horizon``): feasibility, optimality, cost vs warm start, fallbacks (never
 worse than the warm start), time limit, clear failures, no import of the planner."""
 
 from __future__ import annotations
@@ -15,12 +15,10 @@ import numpy as np
 import pytest
 from shapely.geometry import Point
 
-import tmr.formulations.horizon as horizon_module
-from tmr.chain import Chain
-from tmr.clik import Plan
-from tmr.environment import Environment
-from tmr.errors import InfeasibleStep, ParameterError, TmrError
-from tmr.formulations.horizon import (
+import tmr.control.horizon as horizon_module
+from tmr.checks.metrics import fitness
+from tmr.control.clik import Plan
+from tmr.control.horizon import (
     DEFAULT_TIME_LIMIT,
     GROUPS,
     HorizonInfeasible,
@@ -30,11 +28,13 @@ from tmr.formulations.horizon import (
     plan_horizon,
     samples_needed,
 )
-from tmr.metrics import fitness
-from tmr.params import ChainParams, PathParams, PinvParams, QPParams, TaskParams, TimeParams
-from tmr.path import time_law
+from tmr.errors import InfeasibleStep, ParameterError, TmrError
+from tmr.model.chain import Chain
+from tmr.model.params import ChainParams, PathParams, PinvParams, QPParams, TaskParams, TimeParams
 from tmr.planner import Problem, check, solve, span_limits
-from tmr.scenario import Scenario
+from tmr.route.path import time_law
+from tmr.world.environment import Environment
+from tmr.world.scenario import Scenario
 
 COLUMN = (4.2, 2.0)  # a disc column of radius 0.3 m (0.8 m once inflated) right under the follower's tether
 PAST = ((3.2, 2.9), (3.9, 2.95), (4.6, 2.9))  # the leader passes above the column: feasible
@@ -246,13 +246,13 @@ def test_module_does_not_import_the_planner():
         "spec = importlib.util.find_spec('tmr')\n"
         "pkg = types.ModuleType('tmr'); pkg.__path__ = list(spec.submodule_search_locations)\n"
         "sys.modules['tmr'] = pkg\n"
-        "import tmr.formulations.horizon\n"
+        "import tmr.control.horizon\n"
         "print(sorted(m for m in sys.modules if m.startswith('tmr')))\n"
         "assert 'tmr.planner' not in sys.modules\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
-    assert "'tmr.formulations.horizon'" in out.stdout and "tmr.planner" not in out.stdout
+    assert "'tmr.control.horizon'" in out.stdout and "tmr.planner" not in out.stdout
     tree = ast.parse(Path(horizon_module.__file__).read_text(encoding="utf-8"))
     imported = set()
     for node in ast.walk(tree):
@@ -464,7 +464,7 @@ def test_ctrl_c_during_the_nlp_stops_ipopt_and_is_raised_after_it() -> None:
     import os
     import signal
 
-    from tmr.formulations import horizon as hz
+    from tmr.control import horizon as hz
 
     outer = signal.getsignal(signal.SIGINT)  # a shell's background job starts with SIGINT ignored: test as a user's
     signal.signal(signal.SIGINT, signal.default_int_handler)  # foreground run, whatever launched pytest

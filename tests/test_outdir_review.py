@@ -1,4 +1,4 @@
-"""tmr.outdir, the cold review's findings (issue 30 items 1, 2): each test reproduces one finding; all failed on
+"""tmr.io.outdir, the cold review's findings (issue 30 items 1, 2): each test reproduces one finding; all failed on
 the reviewed commit (dfab91b) and pass since.
 """
 
@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-import tmr.outdir as od
-from tmr.outdir import MANIFEST, OutDirError, Stage, check_out, read_manifest
+import tmr.io.outdir as od
+from tmr.io.outdir import MANIFEST, OutDirError, Stage, check_out, read_manifest
 
 OWN = ("a.txt", "b.txt", "timings.json", "bag")
 

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 import shapely
 
-from tmr.maps import load_environment
 from tmr.sweep import rooms
 from tmr.sweep.rooms import (
     DENSITIES,
@@ -25,6 +24,7 @@ from tmr.sweep.rooms import (
     write_geojson,
     xy_arg,
 )
+from tmr.world.maps import load_environment
 
 R = rooms.SAFETY_RADIUS
 D_MAX = rooms.default_d_max()
@@ -84,7 +84,7 @@ def test_goal_class(every_room, density, goal_class) -> None:
     assert room.straight <= length + 1e-9
     if room.route_source == "route":
         # n_lower comes from the shortest path with no margin (through slits the route's margin avoids), so it
-        # may be below route_length / d_max; above it only where the corner proof (tmr.reach) makes it n_min
+        # may be below route_length / d_max; above it only where the corner proof (tmr.route.reach) makes it n_min
         assert room.n_min >= room.n_lower >= 1
         assert room.n_lower <= np.ceil(room.route_length / D_MAX - 1e-9) or room.n_lower == room.n_min
 
@@ -233,7 +233,7 @@ def test_run_room_runs_the_command_line_and_checks_it() -> None:
 
 
 def test_decide_count_bounds_the_fewest_robots() -> None:
-    """Where tmr.route's proven bound is below the plans' count: dense-mid-671599181 (N_lower 2, N_min 3): a chain
+    """Where tmr.route.route's proven bound is below the plans' count: dense-mid-671599181 (N_lower 2, N_min 3): a chain
     of 2 whose tethers are merely clear (0.0599 m, short of the 0.06 m the plans keep) is found and passes the
     independent check, so the problem's N_min is 2, decided. narrow-corner-2929554679 (N_lower 4, N_min 6): 4 is
     proven too few by the corner proof, so N_min ≥ 5, and the widest beam finds a chain of 5 round the other side of

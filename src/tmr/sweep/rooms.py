@@ -16,7 +16,7 @@ Densities (what the obstacles look like):
 * ``long_walls`` — 2–3 parallel walls 14–17 m long, attached alternately to opposite sides of the room
   (a serpentine: long detours).
 
-Goal classes (route length = the shortest free route of :func:`tmr.route.plan_route` when that module exists,
+Goal classes (route length = the shortest free route of :func:`tmr.route.route.plan_route` when that module exists,
 otherwise the straight distance; see :attr:`Room.route_source`):
 
 * ``near`` — route 2–6 m; ``mid`` — route 6–12 m; ``far`` — route > 3 d_max = 16.8 m (beyond three robots);
@@ -31,7 +31,7 @@ check, so the GeoJSON file describes exactly the room that was checked.
 
 :func:`run_room` runs one room through the whole command line (``python -m tmr.plan --map ...``) in a
 subprocess and checks its trajectories **independently** of tmr (:func:`independent_check`: shapely distances to
-the raw obstacles, no ``tmr.environment`` or ``tmr.metrics`` query).
+the raw obstacles, no ``tmr.world.environment`` or ``tmr.checks.metrics`` query).
 """
 
 from __future__ import annotations
@@ -54,8 +54,8 @@ import shapely
 from numpy.typing import NDArray
 from shapely.geometry.base import BaseGeometry
 
-from tmr.environment import QUAD_SEGS, Environment
 from tmr.errors import TmrError
+from tmr.world.environment import QUAD_SEGS, Environment
 
 __all__ = [
     "BOUNDS",
@@ -124,13 +124,13 @@ class Room:
         specs: how each obstacle is written to GeoJSON: ``("disc", x, y, radius)``, ``("polygon", coords)`` or
             ``("wall", ((x0, y0), (x1, y1)), width)``.
         connected: the goal lies in the free-space component of the base (shapely: one polygon of the free space
-            holds both; independent of tmr.route).
+            holds both; independent of tmr.route.route).
         straight: straight base–goal distance.
-        route_length, n_min, n_lower: from :func:`tmr.route.plan_route` (None when the module is missing or the
+        route_length, n_min, n_lower: from :func:`tmr.route.route.plan_route` (None when the module is missing or the
             goal is not connected).
-        route_source: ``"route"`` (classified by tmr.route) or ``"straight"`` (straight distance; tmr.route
+        route_source: ``"route"`` (classified by tmr.route.route) or ``"straight"`` (straight distance; tmr.route.route
             missing).
-        route_error: the NoRouteError message of tmr.route for this goal (only ``corner`` goals may have one: in
+        route_error: the NoRouteError message of tmr.route.route for this goal (only ``corner`` goals may have one: in
             another piece of free space, or connected but through a gap the route module finds too narrow).
         d_max: the longest tether span used for ``far`` goals and for ``n_lower``.
         base_clearance, goal_clearance: exact clearance of base and goal from the grown obstacles.
@@ -160,7 +160,7 @@ class Room:
     route_points: NDArray[np.float64] | None = field(default=None, repr=False)
 
     def environment(self, safety_radius: float = SAFETY_RADIUS) -> Environment:
-        """The room as an :class:`~tmr.environment.Environment` (obstacles grown by ``safety_radius``)."""
+        """The room as an :class:`~tmr.world.environment.Environment` (obstacles grown by ``safety_radius``)."""
         return Environment.from_geometry(self.obstacles, self.bounds, safety_radius=safety_radius)
 
     def summary(self) -> dict[str, Any]:
@@ -189,7 +189,7 @@ class Room:
 
 @functools.lru_cache(maxsize=1)
 def _default_limits() -> tuple[tuple[float, float], ...]:
-    from tmr.params import ChainParams
+    from tmr.model.params import ChainParams
     from tmr.planner import span_limits
 
     return tuple((float(lo), float(hi)) for lo, hi in span_limits(2, ChainParams()))
@@ -208,7 +208,8 @@ def _r(v: float) -> float:
 
 
 def _geometry(spec: tuple[Any, ...]) -> BaseGeometry:
-    """The geometry tmr.maps.load_environment builds from the GeoJSON feature of ``spec`` (same buffer settings)."""
+    """The geometry tmr.world.maps.load_environment builds from the GeoJSON feature of ``spec`` (same buffer
+    settings)."""
     kind = spec[0]
     if kind == "disc":
         _, x, y, radius = spec
@@ -342,7 +343,7 @@ def _obstacle_specs(rng: np.random.Generator, density: str) -> list[tuple[Any, .
 # ------------------------------------------------------------------------------------------------------------
 def _route_module() -> Any:
     try:
-        import tmr.route as route
+        import tmr.route.route as route
     except ImportError:
         return None
     return route if hasattr(route, "plan_route") else None
@@ -379,7 +380,7 @@ def span_rows(d_max: float | None = None) -> NDArray[np.float64]:
 
 
 def _route(route_mod: Any, env: Environment, base: NDArray, goal: NDArray, d_max: float) -> tuple[Any, str | None]:
-    """(tmr.route.plan_route(...), None) or (None, the refusal's message: no free route, or a blocked route)."""
+    """(tmr.route.route.plan_route(...), None) or (None, the refusal's message: no free route, or a blocked route)."""
     try:
         return route_mod.plan_route(env, base, goal, span_rows(d_max)), None
     except route_mod.RouteVerdict as exc:
@@ -396,7 +397,7 @@ def _pick_goal(
     corner: NDArray | None = None,
 ) -> tuple[NDArray, bool, Any, str | None] | None:
     """(goal, connected, route or None, route error or None) for one base, or None if no goal of the class was
-    found. ``connected``: base and goal in one piece of free space (shapely, independent of tmr.route).
+    found. ``connected``: base and goal in one piece of free space (shapely, independent of tmr.route.route).
     ``corner``: the corner of a ``corner`` goal (default: the room corner farthest from the base)."""
     if goal_class == "corner":
         if corner is None:
@@ -534,7 +535,8 @@ def room_set(n_rooms: int, seed: int = 0) -> list[tuple[int, str, str]]:
 # GeoJSON
 # ------------------------------------------------------------------------------------------------------------
 def room_geojson(room: Room) -> dict[str, Any]:
-    """The room as a GeoJSON FeatureCollection with a top-level ``bounds`` (loadable by tmr.maps.load_environment):
+    """The room as a GeoJSON FeatureCollection with a top-level ``bounds`` (loadable by
+    tmr.world.maps.load_environment):
     discs as Points with a ``radius``, walls as LineStrings with a ``width``, the rest as Polygons. Base, goal
     and the generator inputs go into a top-level ``tmr_room`` member (ignored by the loader)."""
     features = []
@@ -584,7 +586,7 @@ def independent_check(
     d_max: float,
     safety_radius: float = SAFETY_RADIUS,
 ) -> dict[str, Any]:
-    """Hard limits of a plan checked with shapely alone (no tmr.environment / tmr.metrics query).
+    """Hard limits of a plan checked with shapely alone (no tmr.world.environment / tmr.checks.metrics query).
 
     Args:
         positions: (K+1, N, 2) robot centres [m], robot 1 next to the anchor, robot N the leader.
@@ -674,9 +676,10 @@ def decide_count(room: Room) -> dict[str, Any]:
     (chords keeping 0.06 m): the problem's N_min (chords merely clear of the grown obstacles) is at least
     ``n_proven`` and at most ``n_clear``.
 
-    * ``n_proven``: one more than the largest N < ``n_min`` proven too few by :func:`tmr.route.proven_too_few` (the
+    * ``n_proven``: one more than the largest N < ``n_min`` proven too few by :func:`tmr.route.route.proven_too_few`
+    (the
       proof as the command line runs it), else ``n_lower``;
-    * ``n_clear``: the robots of the first chain :func:`tmr.route.clear_chain` finds for N = ``n_proven``,
+    * ``n_clear``: the robots of the first chain :func:`tmr.route.route.clear_chain` finds for N = ``n_proven``,
       ``n_proven`` + 1, … < ``n_min`` that also passes :func:`independent_check` (shapely alone: chords clear of the
       raw obstacles grown by r, to 1 mm, spans ≤ d_max, robots 2r apart); None if none is found.
 
@@ -685,7 +688,7 @@ def decide_count(room: Room) -> dict[str, Any]:
     (``clear_margin``: that chain's least tether clearance by the independent check [m]). A picklable task for the
     sweep executors; seconds per room.
     """
-    from tmr.route import clear_chain, proven_too_few
+    from tmr.route.route import clear_chain, proven_too_few
 
     out: dict[str, Any] = {"room": room.name, "n_proven": room.n_lower, "n_clear": None, "clear_margin": None}
     if room.n_min is None or room.n_lower is None or room.n_lower >= room.n_min:
@@ -750,7 +753,7 @@ def _num(v: Any) -> float | None:
 
 
 def _leader_route_length(room: Room, start: NDArray[np.float64]) -> float | None:
-    """Shortest free route [m] (tmr.route) from the leader's start to the goal, or None (no route module, no
+    """Shortest free route [m] (tmr.route.route) from the leader's start to the goal, or None (no route module, no
     route)."""
     route_mod = _route_module()
     if route_mod is None:
@@ -777,7 +780,7 @@ def run_room(spec: RoomRun) -> dict[str, Any]:
     ``min_robot_clearance``,
     ``min_tether_clearance``, ``max_span_ratio``, ``final_leader_error``, ``d_max``), ``leader_length`` (path
     length of the leader [m]), ``leader_route_length`` (shortest free route from the leader's *start* to the goal,
-    :func:`tmr.route.plan_route`: the leader starts along the route, not at the anchor), ``route_ratio``
+    :func:`tmr.route.route.plan_route`: the leader starts along the route, not at the anchor), ``route_ratio``
     (leader_length / leader_route_length), and
     :func:`independent_check` of the raw trajectories (plus ``ind_filtered_*`` minima of the filtered ones).
     """
