@@ -19,7 +19,7 @@ What a run should do, from the shortest tether route of :func:`tmr.route.route.p
 
 Each plan's raw trajectories are checked **independently** of tmr's own metrics (shapely distances to the raw
 obstacles and walls minus r for every robot centre and every straight tether chord anchor → robot 1 → … → robot N,
-spans vs d_max, every robot pair ≥ 2r; :func:`tmr.sweep.rooms.independent_check`, 1 mm tolerance on clearances).
+spans vs d_max, every robot pair ≥ 2r; :func:`tmr.sweep.room_runs.independent_check`, 1 mm tolerance on clearances).
 
 Writes ``benchmarks/results/random_rooms.md``, ``.csv`` (one row per run) and ``.png`` (success per density × N,
 histograms of whole-process times). BLAS runs on one thread per process unless OPENBLAS_NUM_THREADS/OMP_NUM_THREADS
@@ -53,17 +53,8 @@ from provenance import source_version, versions  # noqa: E402
 
 from tmr.route.route import CHORD_CLEARANCE  # noqa: E402
 from tmr.sweep.executor import make_executor  # noqa: E402
-from tmr.sweep.rooms import (  # noqa: E402
-    DENSITIES,
-    GOAL_CLASSES,
-    Room,
-    RoomRun,
-    decide_count,
-    default_d_max,
-    room_from_spec,
-    room_set,
-    run_room,
-)
+from tmr.sweep.room_runs import RoomRun, decide_count, run_room  # noqa: E402
+from tmr.sweep.rooms import DENSITIES, GOAL_CLASSES, Room, default_d_max, room_from_spec, room_set  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PACKAGES = ("numpy", "scipy", "shapely", "osqp", "ompl")
@@ -83,7 +74,8 @@ TARGET_MEDIAN_PLAN_S = 2.0  # s, whole process, median
 # classification
 # ----------------------------------------------------------------------------------------------------------------
 EXPECT_PLAN = "plan"  # route found and N >= N_min (or auto)
-EXPECT_REFUSE_NMIN = "refuse: N < N_min"  # N < n_proven: proven too few (tmr.route.reach, tmr.sweep.rooms.decide_count)
+#: N < n_proven: proven too few (tmr.route.reach, tmr.sweep.room_runs.decide_count)
+EXPECT_REFUSE_NMIN = "refuse: N < N_min"
 #: n_clear ≤ N < n_min: a chain of N merely clear of the grown obstacles exists (found, checked independently), so N
 #: is not below the problem's N_min; the plans keep 0.06 m, which takes n_min: exit 1 naming the clearance, or a plan
 EXPECT_CLOSER = "plan, or name the clearance: only a chain nearer the obstacles than plans keep is known"
@@ -420,7 +412,8 @@ def main(argv: list[str] | None = None) -> int:
     w(
         f"In {len(gap_rooms)} of the {len(routed)} rooms with a route, `tmr.route.route`'s proven bound N_lower is "
         f"below "
-        "N_min, the plans' count (tethers keeping 0.06 m). There `tmr.sweep.rooms.decide_count` tries the proof for "
+        "N_min, the plans' count (tethers keeping 0.06 m). There `tmr.sweep.room_runs.decide_count` tries the proof "
+        "for "
         "every N below N_min and searches a chain merely clear of the grown obstacles (the problem's definition of "
         f"N_min), checked independently ({t_decide:.0f} s): the problem's N_min is decided in {exact} of them, so in "
         f"{len(routed) - len(gap_rooms) + exact} of the {len(routed)} in all.\n\n"

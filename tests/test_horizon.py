@@ -16,6 +16,8 @@ import pytest
 from shapely.geometry import Point
 
 import tmr.control.horizon as horizon_module
+import tmr.control.horizon_model as horizon_model
+import tmr.control.horizon_pool as horizon_pool
 from tmr.checks.metrics import fitness
 from tmr.control.clik import Plan
 from tmr.control.horizon import (
@@ -253,9 +255,12 @@ def test_module_does_not_import_the_planner():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "'tmr.control.horizon'" in out.stdout and "tmr.planner" not in out.stdout
-    tree = ast.parse(Path(horizon_module.__file__).read_text(encoding="utf-8"))
     imported = set()
-    for node in ast.walk(tree):
+    for node in (
+        node
+        for module in (horizon_module, horizon_model, horizon_pool)  # the solve rounds, transcription, fallbacks
+        for node in ast.walk(ast.parse(Path(module.__file__).read_text(encoding="utf-8")))
+    ):
         if isinstance(node, ast.ImportFrom) and node.module:
             imported.add(node.module)
         elif isinstance(node, ast.Import):
@@ -349,14 +354,15 @@ def test_warm_start_as_given_with_a_lagging_leader_is_the_last_fallback(feasible
     s = np.linspace(0.0, 1.0, q.shape[0])
     q[:, -1] += 0.003 * np.sin(np.pi * s) ** 2  # the leader's tether up to 3 mm longer mid-way, smoothly
     lagging = dataclasses.replace(warm, q=q, method="lagging")
-    real = horizon_module._project_leader
+    real = horizon_model._project_leader
 
     def spoiled(su, Q):
         out = real(su, Q)
         out[1:, 0] += 0.5  # turn the first tether by 0.5 rad: the leader leaves its reference
         return out
 
-    monkeypatch.setattr(horizon_module, "_project_leader", spoiled)
+    for module in (horizon_model, horizon_pool):  # every projection: the warm start's and the fallback's
+        monkeypatch.setattr(module, "_project_leader", spoiled)
     plan = plan_horizon(problem, lagging, time_limit=1e-3)
     d = plan.diagnostics
     assert d["horizon_result"] == "warm_start"

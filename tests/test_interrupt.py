@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tmr.control import qp
+from tmr.control import qp_backends
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 #: "stopped" rather than "went on to the end" (a lost Ctrl-C): not a timing requirement.
@@ -41,7 +41,7 @@ def test_ctrl_c_inside_an_osqp_solve_raises_keyboard_interrupt():
     n, m = 300, 600
     A = rng.normal(size=(m, n))
     Jw, tw = rng.normal(size=(n, n)), rng.normal(size=n)
-    level = qp._OsqpLevel(1e-6)
+    level = qp_backends._OsqpLevel(1e-6)
     level.solve(A, -np.ones(m), np.ones(m), Jw, tw)  # the workspace is set up: the next call only solves
     # a solve that never converges (tolerances below rounding), ended only by the Ctrl-C or OSQP's time limit
     level.solver.update_settings(eps_abs=1e-15, eps_rel=1e-15, max_iter=10**9, time_limit=30.0)

@@ -302,7 +302,7 @@ def test_too_few_robots_for_the_clearance_exit_1_with_it(tmp_path, capsys):
 
 def test_clearance_verdict_from_the_wider_tight_search(tmp_path, capsys):
     """narrow-corner-1142507027 with 5 robots: no chain of 5 keeping 0.06 m is found and none is proven impossible;
-    the fine search for a closer chain, twice as wide as the witness search (tmr.route.route.TIGHT_BEAM), finds one
+    the fine search for a closer chain, twice as wide as the witness search (tmr.route.witness.TIGHT_BEAM), finds one
     whose
     tether passes 0.00074 m from the obstacles (the witness search's width finds none), and widening it
     (tmr.route.chain_clearance) moves that tether to 0.035 m, still short of 0.06 m: exit 1 naming the clearance,

@@ -10,7 +10,8 @@ from shapely.geometry import Point
 
 from tmr.control.clik import run
 from tmr.control.limits import JointBox, Limit, LimitRows, ObstacleClearance, RobotSeparation, RobotSpeed, link_pattern
-from tmr.control.qp import OSQP_COARSE, Level, LexicographicQP, orthonormal_rows, solvers
+from tmr.control.qp import Level, LexicographicQP, orthonormal_rows, solvers
+from tmr.control.qp_backends import OSQP_COARSE
 from tmr.control.tasks import (
     Damping,
     LeaderTracking,

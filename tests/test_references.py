@@ -170,7 +170,7 @@ def test_leader_stops_at_a_hairpin_instead_of_a_spline_cusp() -> None:
 
 def test_start_placement_turns_round_a_wall_end_off_the_route():
     """A route that hugs a thin wall's end at δ holds no two robots 2r apart on either side whose tether clears
-    the end: robots along it turn there only with points off the bend (``tmr.route.route.bend_offsets``)."""
+    the end: robots along it turn there only with points off the bend (``tmr.route.geodesic.bend_offsets``)."""
     from tmr.route.references import _along
 
     env = Environment.from_geometry(box(4.9, 0.0, 5.1, 5.0), (0, 0, 10, 10), 0.5, 0.05)

@@ -11,19 +11,8 @@ import pytest
 import shapely
 
 from tmr.sweep import rooms
-from tmr.sweep.rooms import (
-    DENSITIES,
-    GOAL_CLASSES,
-    MIN_CLEARANCE,
-    Room,
-    RoomRun,
-    generate_room,
-    independent_check,
-    room_set,
-    run_room,
-    write_geojson,
-    xy_arg,
-)
+from tmr.sweep.room_runs import RoomRun, independent_check, run_room, xy_arg
+from tmr.sweep.rooms import DENSITIES, GOAL_CLASSES, MIN_CLEARANCE, Room, generate_room, room_set, write_geojson
 from tmr.world.maps import load_environment
 
 R = rooms.SAFETY_RADIUS
@@ -239,7 +228,8 @@ def test_decide_count_bounds_the_fewest_robots() -> None:
     proven too few by the corner proof, so N_min ≥ 5, and the widest beam finds a chain of 5 round the other side of
     two walls, clear by 0.036 m once widened: N_min = 5, decided. walls-corner-2032780706: 5 is proven too few (the
     narrowing), so no gap is left."""
-    from tmr.sweep.rooms import decide_count, generate_room
+    from tmr.sweep.room_runs import decide_count
+    from tmr.sweep.rooms import generate_room
 
     room = generate_room(671599181, "dense", "mid")
     assert (room.n_lower, room.n_min) == (2, 3)

@@ -13,9 +13,9 @@ from shapely.geometry import LineString, Point, box
 from tmr.errors import ParameterError
 from tmr.model.params import ChainParams
 from tmr.model.spans import span_limits
+from tmr.route.geodesic import SPACING_MARGIN
 from tmr.route.route import (
     CHORD_CLEARANCE,
-    SPACING_MARGIN,
     BlockedRouteError,
     NoRouteError,
     Route,
@@ -124,7 +124,8 @@ def test_gap_wider_than_2r_but_nearer_than_the_chord_clearance():
     away through it (n_lower = 1); keeping 0.06 m takes the way round the wall's end, 4 robots. With 2 or 3 robots
     nothing is proven, and the route says what stops them: the clearance, a chain through the gap passing ≤ 0.025 m
     (the 2-robot search: the best on its grid, just off the gap's middle line)."""
-    from tmr.route.route import CHORD_CLEARANCE, tight_chain
+    from tmr.route.route import CHORD_CLEARANCE
+    from tmr.route.witness import tight_chain
 
     w = 1.05
     env = Environment.from_geometry(
@@ -238,7 +239,7 @@ def test_shortest_path_tree_matches_scipy_dijkstra() -> None:
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import dijkstra
 
-    from tmr.route.route import shortest_path_tree
+    from tmr.route.geodesic import shortest_path_tree
 
     rng = np.random.default_rng(7)
     for trial in range(30):

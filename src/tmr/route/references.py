@@ -27,15 +27,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tmr.route.geodesic import SPACING_MARGIN, anchor_tether_clearance, bend_offsets
 from tmr.route.path import Trajectory, time_law
 from tmr.route.route import (
     CHORD_CLEARANCE,
-    SPACING_MARGIN,
     BlockedRouteError,
     Route,
     RouteVerdict,
-    anchor_tether_clearance,
-    bend_offsets,
     guide_arcs,
     plan_route,
     point_at,
@@ -202,7 +200,7 @@ def _along(
     2r + 0.05 m from the previous one and preferably ``spacing`` [m], on a chord from the previous one that keeps
     ``CHORD_START_CLEARANCE`` (a chord must not cut a corner of the route: at a hairpin the robot sits at its
     apex); the last one at least ``ahead`` [m] of route before the end. With ``bends``, points off the
-    polyline's bends are candidates too (:func:`tmr.route.route.bend_offsets`: round a wall's end, robots 2r apart
+    polyline's bends are candidates too (:func:`tmr.route.geodesic.bend_offsets`: round a wall's end, robots 2r apart
     cannot both stand on a route that hugs it) and every robot keeps 2r + 0.05 m from all placed before it. No
     chord is longer than ``reach`` [m]. Every robot keeps 2r + 0.05 m from the points ``avoid`` (k, 2) too (robots
     parked before the polyline starts). None if they do not fit."""
