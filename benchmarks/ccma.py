@@ -250,7 +250,7 @@ example on 2 cores. {"; ".join(verdict(mode) for mode in args.modes)}.
         # ---- convergence figure (Kumar 2019 Fig. 5 analogue) and the README figure
         from matplotlib.figure import Figure
 
-        from tmr.plot import save_figure
+        from tmr.views.plot import save_figure
 
         fig = Figure(figsize=(10, 4.2))
         axes = [fig.add_subplot(1, 2, k + 1) for k in range(2)]

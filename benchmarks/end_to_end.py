@@ -16,9 +16,10 @@ spreads over all of them:
   ``sys.modules`` (found by a probe run, imported in the same order: ``imports``), then runs ``tmr.plan.main`` itself
   with thin timers wrapped round the functions it calls: ``inputs`` (scenario and map), ``route`` (the shortest route
   and the refusal check), ``path`` (the anchor's RRT*, ``--route rrt`` only), ``start`` (start placement),
-  ``refs`` (route references and the leader's time law), ``loop`` (the control loop, ``tmr.clik.run``),
+  ``refs`` (route references and the leader's time law), ``loop`` (the control loop, ``tmr.control.clik.run``),
   ``horizon`` (the whole-horizon NLP), ``checks`` (the exact checks and metrics), ``filter`` (the zero-phase filter),
-  ``writing`` (JSON, CSV, run.json), ``plots`` (importing ``tmr.plot`` and drawing and saving the figures); ``other``
+  ``writing`` (JSON, CSV, run.json), ``plots`` (importing ``tmr.views.plot`` and drawing and saving the figures);
+  ``other``
   is what ``main`` spent outside those. ``startup`` is ``python -c pass``. Medians over ``--breakdown-repeats``.
 * **import tmr** — ``python -X importtime -c "import tmr"``: the cumulative time of the ``tmr`` entry, and the wall
   time of ``python -c "import tmr"``.
@@ -134,7 +135,7 @@ def child(spec: dict[str, Any]) -> dict[str, float]:
                 pass
     acc["imports"] = time.perf_counter() - t0
 
-    import tmr.metrics as metrics_mod
+    import tmr.checks.metrics as metrics_mod
     import tmr.plan as plan_mod
     import tmr.planner as planner_mod
 
@@ -148,14 +149,14 @@ def child(spec: dict[str, Any]) -> dict[str, float]:
     _wrap(planner_mod, "_trajectory_along", "refs", acc)
     _wrap(planner_mod, "plan", "loop", acc)
     _wrap(planner_mod, "check", "checks", acc)
-    if "tmr.formulations.horizon" in sys.modules:  # a horizon run (its modules were imported above)
-        _wrap(sys.modules["tmr.formulations.horizon"], "plan_horizon", "horizon", acc)
+    if "tmr.control.horizon" in sys.modules:  # a horizon run (its modules were imported above)
+        _wrap(sys.modules["tmr.control.horizon"], "plan_horizon", "horizon", acc)
     _wrap(metrics_mod, "filter_trajectories", "filter", acc)
     _wrap(plan_mod, "write_outputs", "writing", acc)
     plots_import = 0.0
     if spec["plots"]:
         t1 = time.perf_counter()
-        import tmr.plot as plot_mod  # matplotlib: counted in plots
+        import tmr.views.plot as plot_mod  # matplotlib: counted in plots
 
         plots_import = time.perf_counter() - t1
         for name in ("plot_chain_poses", "plot_trajectories", "plot_distance_errors", "plot_speeds", "save_figure"):

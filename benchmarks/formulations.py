@@ -33,13 +33,13 @@ from typing import Any
 
 import numpy as np
 
-from tmr.metrics import distance_errors
+from tmr.checks.metrics import distance_errors
 from tmr.planner import METHODS, build_problem, solve
-from tmr.plot import plot_chain_poses, save_figure
-from tmr.scenario import load_scenario
 from tmr.sweep.bench import BENCH_HEADER, bench_cells
 from tmr.sweep.report import csv_text, fmt, markdown_table
 from tmr.sweep.runs import RunResult, RunSpec, score
+from tmr.views.plot import plot_chain_poses, save_figure
+from tmr.world.scenario import load_scenario
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"
@@ -74,7 +74,7 @@ def scenario_figure(scenario: str, cells: list[tuple[str, Any, Any]]) -> Any:
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
 
-    from tmr.plot import _draw_environment, _pose_indices  # house plotting helpers (private, same package)
+    from tmr.views.plot import _draw_environment, _pose_indices  # house plotting helpers (private, same package)
 
     n = len(cells)
     fig = Figure(figsize=(5.0 * n, 8.0), layout="constrained")

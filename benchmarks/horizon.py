@@ -53,9 +53,9 @@ METRIC_KEYS = (
 def child(scenario: str, seed: int) -> dict:
     """One cold run (in its own process); returns a JSON-ready dict."""
     t0 = time.perf_counter()
-    from tmr.formulations.horizon import plan_horizon
+    from tmr.control.horizon import plan_horizon
     from tmr.planner import build_problem, check, solve
-    from tmr.scenario import load_scenario
+    from tmr.world.scenario import load_scenario
 
     t_import = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -173,7 +173,8 @@ def tables(rows: dict[str, list[dict]], seed: int, repeats: int) -> tuple[str, l
         )
     md.write(
         f"\nSeed {seed}; {platform.machine()} with {os.cpu_count()} cores, Python {platform.python_version()}. "
-        "f1–f4: Caruso 2021 eq. 24–27 (`tmr.metrics.fitness`). Clearances are exact (shapely) signed distances to the "
+        "f1–f4: Caruso 2021 eq. 24–27 (`tmr.checks.metrics.fitness`). Clearances are exact (shapely) signed distances "
+        "to the "
         "obstacles grown by the 0.5 m safety radius. `horizon wall` = the qp warm start plus "
         "`plan_horizon(problem, qp_plan)`, so it includes the qp plan, the transcription and every IPOPT round; "
         "`build` (RRT* + time law) and `process` (interpreter, imports, build, both planners, checks) are outside it.\n"

@@ -57,7 +57,7 @@ PHASES = [
         r"^writing the outputs",
         (0.0, 0.6),
     ),
-    # --gif and --export write after the outputs are published (tmr.views): --out is not empty then
+    # --gif and --export write after the outputs are published (tmr.views.flags): --out is not empty then
     Phase(
         "GIF",
         [*PLAN, "--scenario", "A", "--method", "qp", "--no-plots", "--gif", "--out", "{out}"],

@@ -38,7 +38,7 @@ if not any(v in os.environ for v in THREAD_VARS):
 
 import numpy as np  # noqa: E402
 
-from tmr.io import atomic_write_text  # noqa: E402
+from tmr.io.outputs import atomic_write_text  # noqa: E402
 from tmr.mcdpr.capacity import capacity, required_wrench_set  # noqa: E402
 from tmr.mcdpr.capacity_hull import box_rows, capacity_margin_hull  # noqa: E402
 from tmr.mcdpr.capacity_lp import capacity_lp  # noqa: E402

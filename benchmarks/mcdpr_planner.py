@@ -45,7 +45,7 @@ else:  # pragma: no cover
 
 import numpy as np  # noqa: E402
 
-from tmr.io import atomic_write_text  # noqa: E402
+from tmr.io.outputs import atomic_write_text  # noqa: E402
 from tmr.mcdpr.capacity import required_wrench_set  # noqa: E402
 from tmr.mcdpr.errors import NoPlanFound, TaskRefused  # noqa: E402
 from tmr.mcdpr.planner import check, plan  # noqa: E402

@@ -47,9 +47,9 @@ from provenance import source_version, versions  # noqa: E402
 from qp_step import cluttered_band  # noqa: E402
 from tests.test_qp_priority import excess  # noqa: E402
 
-from tmr.formulations.qp import solvers as qp_solvers  # noqa: E402
+from tmr.control.qp import solvers as qp_solvers  # noqa: E402
 from tmr.planner import Problem, build_problem, check, make_qp, plan  # noqa: E402
-from tmr.scenario import load_scenario  # noqa: E402
+from tmr.world.scenario import load_scenario  # noqa: E402
 
 PACKAGES = ("numpy", "scipy", "osqp", "qpsolvers", "daqp", "proxsuite", "clarabel", "cvxpy")
 DEFAULT_SOLVERS = ("osqp", "daqp", "proxqp", "clarabel")

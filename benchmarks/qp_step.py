@@ -5,7 +5,7 @@
 
 A benchmark, not a test. For every chain size N it builds one deterministic problem on a cluttered band (see
 :func:`cluttered_band`), then runs ``pinv`` and ``qp`` with every solver ``--repeats`` times (interleaved: repeat r of
-every formulation before repeat r + 1) with :func:`tmr.clik.run`, exactly as :func:`tmr.planner.solve` does, and
+every formulation before repeat r + 1) with :func:`tmr.control.clik.run`, exactly as :func:`tmr.planner.solve` does, and
 checks every plan with :func:`tmr.planner.check`. Reported per (N, method, solver):
 
 * ``ms/step`` — loop wall time ``plan.wall_time`` / steps attempted (the loop includes the per-step distance-field
@@ -57,17 +57,17 @@ from shapely.geometry import Point  # noqa: E402
 #: Distributions whose versions the table records.
 PACKAGES = ("numpy", "scipy", "osqp", "qpsolvers", "daqp", "proxsuite", "shapely")
 
-from tmr.environment import Environment  # noqa: E402
-from tmr.formulations.qp import solvers as qp_solvers  # noqa: E402
+from tmr.control.qp import solvers as qp_solvers  # noqa: E402
 from tmr.planner import Problem, build_problem, check, make_pinv, make_qp  # noqa: E402
 from tmr.planner import plan as run_formulation  # noqa: E402
-from tmr.scenario import Scenario  # noqa: E402
+from tmr.world.environment import Environment  # noqa: E402
+from tmr.world.scenario import Scenario  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
 DEFAULT_SIZES = (3, 10, 30, 100)
 DEFAULT_SOLVERS = ("osqp", "osqp-cold", "qpsolvers-osqp", "daqp", "proxqp")
-#: ``osqp`` without the warm active-set layer (:mod:`tmr.formulations.activeset`): OSQP alone, its answers unpolished.
+#: ``osqp`` without the warm active-set layer (:mod:`tmr.control.activeset`): OSQP alone, its answers unpolished.
 COLD = "osqp-cold"
 DEFAULT_STEPS = ("30:150", "100:20")
 
@@ -442,7 +442,7 @@ steps* = steps where the acceleration limits were dropped to find a solution. *r
 found (`FAIL: <violated constraint> ×<samples>`; `infeasible at step k` = `InfeasibleStep`, the run stopped and its
 timing covers the steps done). Step caps: {capped}; a capped run uses the first K steps of the same trajectory and
 skips the goal check. `qpsolvers-osqp` sets up a fresh OSQP problem per level and step; `osqp` keeps a persistent
-workspace per level, with the warm active-set layer (`tmr.formulations.activeset`: the previous step's active set
+workspace per level, with the warm active-set layer (`tmr.control.activeset`: the previous step's active set
 solved by one KKT solve and verified; on a miss a coarse OSQP pass, 1e-5 and ≤ 400 iterations, then its KKT polish);
 `osqp-cold` is the same workspace without that layer (OSQP alone at 1e-8, unpolished); `daqp` and `proxqp` are the
 warm-startable active-set / proximal solvers through qpsolvers (their answers polished by the same KKT check).

@@ -11,7 +11,7 @@ rooms wall the goal off (a "no free route" refusal test). Every (room, method, N
 subprocess (``python -m tmr.plan --map ROOM.geojson --base=X,Y --goal=X,Y --robots N --method M --no-plots``),
 timed from process start to exit, through ``tmr.sweep.executor.make_executor`` (all cores by default, or Dask).
 
-What a run should do, from the shortest tether route of :func:`tmr.route.plan_route` (N_min = fewest robots):
+What a run should do, from the shortest tether route of :func:`tmr.route.route.plan_route` (N_min = fewest robots):
 
 * goal not connected to the base (another piece of free space, checked with shapely): exit 2, "no free route";
 * N < N_min: exit 2 with one line, fast;
@@ -19,7 +19,7 @@ What a run should do, from the shortest tether route of :func:`tmr.route.plan_ro
 
 Each plan's raw trajectories are checked **independently** of tmr's own metrics (shapely distances to the raw
 obstacles and walls minus r for every robot centre and every straight tether chord anchor → robot 1 → … → robot N,
-spans vs d_max, every robot pair ≥ 2r; :func:`tmr.sweep.rooms.independent_check`, 1 mm tolerance on clearances).
+spans vs d_max, every robot pair ≥ 2r; :func:`tmr.sweep.room_runs.independent_check`, 1 mm tolerance on clearances).
 
 Writes ``benchmarks/results/random_rooms.md``, ``.csv`` (one row per run) and ``.png`` (success per density × N,
 histograms of whole-process times). BLAS runs on one thread per process unless OPENBLAS_NUM_THREADS/OMP_NUM_THREADS
@@ -51,19 +51,10 @@ if PINNED:
 import numpy as np  # noqa: E402
 from provenance import source_version, versions  # noqa: E402
 
-from tmr.route import CHORD_CLEARANCE  # noqa: E402
+from tmr.route.route import CHORD_CLEARANCE  # noqa: E402
 from tmr.sweep.executor import make_executor  # noqa: E402
-from tmr.sweep.rooms import (  # noqa: E402
-    DENSITIES,
-    GOAL_CLASSES,
-    Room,
-    RoomRun,
-    decide_count,
-    default_d_max,
-    room_from_spec,
-    room_set,
-    run_room,
-)
+from tmr.sweep.room_runs import RoomRun, decide_count, run_room  # noqa: E402
+from tmr.sweep.rooms import DENSITIES, GOAL_CLASSES, Room, default_d_max, room_from_spec, room_set  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PACKAGES = ("numpy", "scipy", "shapely", "osqp", "ompl")
@@ -75,7 +66,7 @@ ROBOTS = ("2", "3", "5", "8", "auto")
 TARGET_AUTO_SUCCESS = 0.98  # fraction of connected goals planned with --robots auto (qp)
 TARGET_REFUSE_S = 1.0  # s, whole process, every N < N_min
 #: Part of tmr.plan's exit-1 verdict when a chain of N was found that only a tether's clearance keeps from being
-#: planned (tmr.route.Route.refusal with ``tight_chain``).
+#: planned (tmr.route.route.Route.refusal with ``tight_chain``).
 TIGHT_VERDICT = f"keeping {CHORD_CLEARANCE:g} m from the obstacles was found, only closer ones"
 TARGET_MEDIAN_PLAN_S = 2.0  # s, whole process, median
 
@@ -83,14 +74,17 @@ TARGET_MEDIAN_PLAN_S = 2.0  # s, whole process, median
 # classification
 # ----------------------------------------------------------------------------------------------------------------
 EXPECT_PLAN = "plan"  # route found and N >= N_min (or auto)
-EXPECT_REFUSE_NMIN = "refuse: N < N_min"  # N < n_proven: proven too few (tmr.reach, tmr.sweep.rooms.decide_count)
+#: N < n_proven: proven too few (tmr.route.reach, tmr.sweep.room_runs.decide_count)
+EXPECT_REFUSE_NMIN = "refuse: N < N_min"
 #: n_clear ≤ N < n_min: a chain of N merely clear of the grown obstacles exists (found, checked independently), so N
 #: is not below the problem's N_min; the plans keep 0.06 m, which takes n_min: exit 1 naming the clearance, or a plan
 EXPECT_CLOSER = "plan, or name the clearance: only a chain nearer the obstacles than plans keep is known"
 #: n_proven ≤ N < n_clear (or n_min when no clear chain is known): neither proven too few nor a chain found
 EXPECT_UNDECIDED = "undecided: N_min unknown (no proof, no chain)"
 EXPECT_REFUSE_DISCONNECTED = "refuse: not connected"
-EXPECT_ROUTE_GAP = "route module refuses a connected goal"  # shapely connects base and goal, tmr.route finds no chain
+EXPECT_ROUTE_GAP = (
+    "route module refuses a connected goal"  # shapely connects base and goal, tmr.route.route finds no chain
+)
 
 
 def expectation(row: dict[str, Any]) -> str:
@@ -295,12 +289,12 @@ def write_figure(rows: list[dict[str, Any]], method: str, robots: list[str], pat
 
 
 def import_baseline(repeats: int = 3) -> float:
-    """Median wall time [s] of importing what a refusal needs (tmr.plan, tmr.scenario, tmr.route) in a new
+    """Median wall time [s] of importing what a refusal needs (tmr.plan, tmr.world.scenario, tmr.route.route) in a new
     process: the floor of every whole-process time."""
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-c", "import tmr.plan, tmr.scenario, tmr.route"], check=True)
+        subprocess.run([sys.executable, "-c", "import tmr.plan, tmr.world.scenario, tmr.route.route"], check=True)
         times.append(time.perf_counter() - t0)
     return statistics.median(times)
 
@@ -391,9 +385,12 @@ def main(argv: list[str] | None = None) -> int:
     w(f"{len(rooms_ok)} rooms (`tmr.sweep.rooms.room_set({n_rooms}, seed={args.seed})`, 20 m × 20 m, r = 0.5 m, ")
     w(f"d_max = {default_d_max():.3f} m)")
     w(f"; {len(gen_errors)} could not be generated: {'; '.join(gen_errors)}" if gen_errors else "")
-    w(". Goal classes by the shortest free route of `tmr.route.plan_route`: near 2–6 m, mid 6–12 m, far > 3 d_max; ")
+    w(
+        ". Goal classes by the shortest free route of `tmr.route.route.plan_route`: near 2–6 m, mid 6–12 m, far > 3 "
+        "d_max; "
+    )
     w("corner = within 3 m of the corner farthest from the base (a quarter walled off).\n\n")
-    w("| density | " + " | ".join(GOAL_CLASSES) + " | goal not connected | connected, no route (tmr.route) | ")
+    w("| density | " + " | ".join(GOAL_CLASSES) + " | goal not connected | connected, no route (tmr.route.route) | ")
     w("N_min median (max) |\n|---|" + "---:|" * (len(GOAL_CLASSES) + 3) + "\n")
     for d in DENSITIES:
         rs = [r for r in rooms_ok if r.density == d]
@@ -406,14 +403,17 @@ def main(argv: list[str] | None = None) -> int:
     w(f" | {sum(not r.connected for r in rooms_ok)} | {sum(r.connected and r.n_min is None for r in rooms_ok)} | |\n\n")
     w(
         "*goal not connected*: base and goal lie in different pieces of the free space (shapely, independent of "
-        "tmr.route); every run should refuse. *connected, no route*: shapely connects them but `tmr.route` finds no "
+        "tmr.route.route); every run should refuse. *connected, no route*: shapely connects them but "
+        "`tmr.route.route` finds no "
         "chain of free tether chords (a gap it judges too narrow); these are reported apart from the targets.\n\n"
     )
     exact = sum(d["n_clear"] is not None and d["n_clear"] == d["n_proven"] for d in decided.values())
     routed = [r for r in rooms_ok if r.n_min is not None and r.n_lower is not None]
     w(
-        f"In {len(gap_rooms)} of the {len(routed)} rooms with a route, `tmr.route`'s proven bound N_lower is below "
-        "N_min, the plans' count (tethers keeping 0.06 m). There `tmr.sweep.rooms.decide_count` tries the proof for "
+        f"In {len(gap_rooms)} of the {len(routed)} rooms with a route, `tmr.route.route`'s proven bound N_lower is "
+        f"below "
+        "N_min, the plans' count (tethers keeping 0.06 m). There `tmr.sweep.room_runs.decide_count` tries the proof "
+        "for "
         "every N below N_min and searches a chain merely clear of the grown obstacles (the problem's definition of "
         f"N_min), checked independently ({t_decide:.0f} s): the problem's N_min is decided in {exact} of them, so in "
         f"{len(routed) - len(gap_rooms) + exact} of the {len(routed)} in all.\n\n"
@@ -421,7 +421,8 @@ def main(argv: list[str] | None = None) -> int:
 
     w("## Per method and N\n\n")
     w(
-        "*reachable*: the goal is connected, `tmr.route` finds a route and N ≥ N_min (every connected goal with a "
+        "*reachable*: the goal is connected, `tmr.route.route` finds a route and N ≥ N_min (every connected goal with "
+        "a "
         "route for `auto`). *success*: exit 0 among reachable. *correct refusals*: exit 2 among the others (N proven "
         "below N_min, goal not connected). *closer*: runs with N below the plans' count whose N is not below the "
         "N_min of chords merely clear of the grown obstacles (a chain of N found and checked independently), as "
@@ -433,7 +434,7 @@ def main(argv: list[str] | None = None) -> int:
         "leader's start to the goal (successful plans). Independent minima over every successful plan (exit 0): "
         "robot = min over robots and steps of the distance of the centre to the raw obstacles and walls − r; tether = "
         "the same for every straight chord; *viol.*: successful plans breaking an independent check (raw "
-        "trajectories; in brackets: the filtered ones). *gap*: runs on connected goals `tmr.route` refuses, as "
+        "trajectories; in brackets: the filtered ones). *gap*: runs on connected goals `tmr.route.route` refuses, as "
         "refused / planned.\n\n"
     )
     w(
@@ -455,7 +456,8 @@ def main(argv: list[str] | None = None) -> int:
             w(f"| {_fmt(s['max_span'], '.3f')} | {s['violations']} ({s['filtered_violations']}) ")
             w(f"| {s['gap_refused']} / {s['gap_planned']} of {s['gap']} |\n")
     w(
-        f"\n`python -c 'import tmr.plan, tmr.scenario, tmr.route'` (what a refusal imports) takes {baseline:.2f} s "
+        f"\n`python -c 'import tmr.plan, tmr.world.scenario, tmr.route.route'` (what a refusal imports) takes "
+        f"{baseline:.2f} s "
         "here (median of 3, before the runs): the floor under every whole-process time above.\n\n"
     )
     for method in methods:
@@ -521,7 +523,7 @@ def main(argv: list[str] | None = None) -> int:
     lines.append(
         (
             "N below the plans' count (tethers keeping 0.06 m) but not below N_min (a chain of N whose tethers are "
-            "merely clear of the grown obstacles, found by `tmr.route.clear_chain` and checked independently): "
+            "merely clear of the grown obstacles, found by `tmr.route.route.clear_chain` and checked independently): "
             "exit 1 naming the clearance, or a plan",
             f"{len(closer_ok)}/{len(closer)}"
             + (f" (those chains' least tether clearance {min(margins):.3f}–{max(margins):.3f} m)" if margins else ""),

@@ -29,7 +29,7 @@ RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def static_rows() -> list[dict]:
-    from tmr.catenary import CatenaryParams, max_span, solve
+    from tmr.model.catenary import CatenaryParams, max_span, solve
     from tmr.replay.tether import hang
 
     P = CatenaryParams()
@@ -62,9 +62,9 @@ def plan(tmp: Path, scenario: str, method: str, route: str = "shortest") -> tupl
 
 
 def chain_row(run_dir: Path, repeats: int, figure: Path | None = None) -> dict:
+    from tmr.io.rundir import load_run
     from tmr.replay.chain import replay_chain
     from tmr.replay.report import chain_verdict
-    from tmr.rundir import load_run
 
     run = load_run(run_dir)
     reps = [replay_chain(run) for _ in range(repeats)]
@@ -73,8 +73,8 @@ def chain_row(run_dir: Path, repeats: int, figure: Path | None = None) -> dict:
     if figure is not None:
         import matplotlib.pyplot as plt
 
-        from tmr.plot import save_figure
         from tmr.replay.figures import plot_heights
+        from tmr.views.plot import save_figure
 
         fig = plot_heights(rp, f"MuJoCo replay: {run.label} — lowest point of each tether")
         save_figure(fig, figure)
@@ -107,8 +107,8 @@ def chain_row(run_dir: Path, repeats: int, figure: Path | None = None) -> dict:
 
 
 def mcdpr_row(tmp: Path) -> dict:
+    from tmr.io.rundir import load_run
     from tmr.replay.mcdpr import edge_margins, replay_mcdpr
-    from tmr.rundir import load_run
 
     out = tmp / "mcdpr"
     subprocess.run([sys.executable, "-m", "tmr.mcdpr", "plan", "--out", str(out), "--no-plots"], check=False)
@@ -151,7 +151,7 @@ def main() -> None:
         " CPU time of the process in that loop (the machine's 2 cores are shared with other jobs: the wall figure"
         " depends on their load, the CPU figure is what one free core would give).",
         "",
-        "## Static tether between two fixed ends (`tmr.replay.tether.hang`, 2 s settled) vs `tmr.catenary`",
+        "## Static tether between two fixed ends (`tmr.replay.tether.hang`, 2 s settled) vs `tmr.model.catenary`",
         "",
         "Relative errors: lowest point / sag (H − z_min), paid-out length, tension at the winch and at the far end.",
         "",

@@ -21,8 +21,8 @@ import time
 from pathlib import Path
 
 from tmr.planner import METHODS, build_problem, solve
-from tmr.plot import plot_chain_poses, save_figure
-from tmr.scenario import load_scenario
+from tmr.views.plot import plot_chain_poses, save_figure
+from tmr.world.scenario import load_scenario
 
 RESULTS = Path(__file__).resolve().parent / "results"
 

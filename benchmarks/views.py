@@ -3,8 +3,9 @@
     python benchmarks/views.py [--scenarios A E] [--repeats 3]
 
 A benchmark, not a test. For each built-in chain scenario it plans with ``qp`` (the default route), builds the
-:class:`tmr.motion.Motion` once, then writes ``--repeats`` times (interleaved) the animation
-(:func:`tmr.animate.write_gif`), the interactive view (:func:`tmr.htmlview.write_html`) and the bag in MCAP and SQLite 3
+:class:`tmr.views.motion.Motion` once, then writes ``--repeats`` times (interleaved) the animation
+(:func:`tmr.views.animate.write_gif`), the interactive view (:func:`tmr.views.htmlview.write_html`) and the bag in MCAP
+and SQLite 3
 storage (:func:`tmr.export.rosbag.write_bag`), and reports the median wall time, the file size, the frames, and the
 bag's message count. Also writes the scenario A animation shown at the top of the README,
 ``benchmarks/results/A_qp_motion.gif`` (the same bytes as ``python -m tmr.plan --scenario A --gif``).
@@ -44,12 +45,12 @@ def main(argv: list[str] | None = None) -> int:
 
     from rosbags.rosbag2 import Reader
 
-    from tmr.animate import frame_indices, write_gif
     from tmr.export.rosbag import write_bag
-    from tmr.htmlview import write_html
-    from tmr.motion import chain_motion
     from tmr.planner import build_problem, solve
-    from tmr.scenario import load_scenario
+    from tmr.views.animate import frame_indices, write_gif
+    from tmr.views.htmlview import write_html
+    from tmr.views.motion import chain_motion
+    from tmr.world.scenario import load_scenario
 
     measured = source_version()  # before measuring: the code the timings belong to
     rows = []

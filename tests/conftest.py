@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from shapely.geometry import Point
 
-from tmr.environment import Environment
-from tmr.path import time_law
+from tmr.route.path import time_law
+from tmr.world.environment import Environment
 
 
 @pytest.fixture(scope="session")

@@ -1,4 +1,5 @@
-"""Small real plans for the tests of the views and exports (tmr.motion, tmr.animate, tmr.htmlview, tmr.export)."""
+"""Small real plans for the tests of the views and exports (tmr.views.motion, tmr.views.animate, tmr.views.htmlview,
+tmr.export)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ import numpy as np
 def scenario_a() -> tuple[Any, Any, Any]:
     """(plan, environment, chain params) of scenario A planned with qp (about 0.5 s, once per session)."""
     from tmr.planner import build_problem, solve
-    from tmr.scenario import load_scenario
+    from tmr.world.scenario import load_scenario
 
     problem = build_problem(load_scenario("A"))
     plan, _ = solve(problem, "qp")
@@ -46,10 +47,10 @@ def mopick_plan(n: int = 12) -> tuple[Any, Any, Any]:
 
 
 def write_mopick_run(path: Path) -> tuple[Any, Any, Any]:
-    """A ``tmr.mcdpr plan``-style directory (run.json via tmr.rundir, plan.json with the samples) of
+    """A ``tmr.mcdpr plan``-style directory (run.json via tmr.io.rundir, plan.json with the samples) of
     :func:`mopick_plan`."""
     from tmr.mcdpr.planner import PlannerParams
-    from tmr.rundir import write_mcdpr_run
+    from tmr.mcdpr.rundir import write_mcdpr_run
 
     robot, scene, res = mopick_plan()
     path.mkdir(parents=True, exist_ok=True)

@@ -9,7 +9,7 @@ import pytest
 import qpsolvers
 import scipy.sparse as sp
 
-from tmr.formulations.activeset import WarmActiveSet, active_set
+from tmr.control.activeset import WarmActiveSet, active_set
 
 
 def random_qp(seed: int, n: int = 8, m: int = 14, n_eq: int = 2):

@@ -463,7 +463,7 @@ def test_tmr_errors_pickle_whatever_their_init():
     """A TmrError raised in a sweep worker comes back to the parent: before, TooManyRobotsError(message, fit) could
     not be unpickled and the process pool broke ("a worker process died")."""
     from tmr.mcdpr.errors import NoPlanFound
-    from tmr.route import TooFewRobotsError, TooManyRobotsError
+    from tmr.route.route import TooFewRobotsError, TooManyRobotsError
 
     for exc in (TooManyRobotsError("5 robots do not fit", 3), TooFewRobotsError("needs 6", 6, True),
                 NoPlanFound("no plan", "stage1", (1.0, 2.0), 0.5)):  # fmt: skip

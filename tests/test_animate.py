@@ -1,4 +1,4 @@
-"""tmr.animate: the GIF of a plan (frames, timing, size, what a frame shows)."""
+"""tmr.views.animate: the GIF of a plan (frames, timing, size, what a frame shows)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,9 @@ import pytest
 from PIL import Image, ImageSequence
 
 from tests.motion_data import mopick_plan, scenario_a
-from tmr.animate import _Scene, frame_indices, render_frame, write_gif
-from tmr.motion import Motion, Track, chain_motion, mcdpr_motion
+from tmr.mcdpr.motion import mcdpr_motion
+from tmr.views.animate import _Scene, frame_indices, render_frame, write_gif
+from tmr.views.motion import Motion, Track, chain_motion
 
 
 def _motion(k: int, ts: float = 0.05, timed: bool = True) -> Motion:

@@ -1,4 +1,4 @@
-"""Tests of tmr.catenary against independent numerics (ODE, quadrature, shooting) and closed forms."""
+"""Tests of tmr.model.catenary against independent numerics (ODE, quadrature, shooting) and closed forms."""
 
 from __future__ import annotations
 
@@ -12,7 +12,8 @@ from hypothesis import strategies as st
 from scipy.integrate import quad, solve_ivp
 from scipy.optimize import brentq
 
-from tmr.catenary import (
+from tmr.errors import ParameterError
+from tmr.model.catenary import (
     G0,
     Catenary,
     CatenaryParams,
@@ -23,7 +24,6 @@ from tmr.catenary import (
     solve,
     tether_max_spans,
 )
-from tmr.errors import ParameterError
 
 P = CatenaryParams()
 C = 13.5 / (0.15 * 9.81)

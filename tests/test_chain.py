@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tmr.chain import Chain, dh_transform
 from tmr.errors import ParameterError
+from tmr.model.chain import Chain, dh_transform
 
 
 def random_q(chain: Chain, rng: np.random.Generator) -> np.ndarray:

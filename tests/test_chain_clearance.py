@@ -1,13 +1,13 @@
-"""tmr.chain_clearance: the widening of a chain of straight tethers, against hand-computed optima and finite
+"""tmr.route.chain_clearance: the widening of a chain of straight tethers, against hand-computed optima and finite
 differences."""
 
 import numpy as np
 import pytest
 from shapely.geometry import LineString, Point, box
 
-from tmr.chain_clearance import _Problem, chain_margin, pad_chain, widen_chain
-from tmr.environment import Environment
 from tmr.errors import ParameterError
+from tmr.route.chain_clearance import _Problem, chain_margin, pad_chain, widen_chain
+from tmr.world.environment import Environment
 
 SPANS = np.array([[0.6, 5.6], [1.1, 5.6]])
 

@@ -7,7 +7,7 @@ import re
 
 import pytest
 
-from tmr.cli_args import positive_float, positive_int
+from tmr.io.cli_args import positive_float, positive_int
 
 
 def test_positive_int():
@@ -27,8 +27,8 @@ def test_positive_float():
 # ---- one validator per parameter type ------------------------------------------------------------------------
 
 from tmr import cli  # noqa: E402
-from tmr.cli_args import SEED_MAX, bounds, count, param, point, points, seed  # noqa: E402
 from tmr.errors import fmt_point  # noqa: E402
+from tmr.io.cli_args import SEED_MAX, bounds, count, param, point, points, seed  # noqa: E402
 
 
 def test_count_refuses_fractions_instead_of_truncating():
@@ -41,7 +41,7 @@ def test_count_refuses_fractions_instead_of_truncating():
 def test_seed_range_is_what_every_rng_accepts():
     import numpy as np
 
-    from tmr.path import _as_int
+    from tmr.route.path import _as_int
 
     assert seed("0") == 0 and seed(str(SEED_MAX)) == SEED_MAX
     for bad in ("-1", "1e308", "2.5", str(SEED_MAX + 1), "x"):
@@ -80,7 +80,7 @@ def test_param_is_typed_by_its_tmr_params_field():
 
 def test_int_fields_refuse_fractions_in_every_path():
     from tmr.errors import ParameterError
-    from tmr.params import PathParams, apply_overrides
+    from tmr.model.params import PathParams, apply_overrides
 
     assert apply_overrides(PathParams(), {"path_iterations": 2.0})[0].path_iterations == 2
     with pytest.raises(ParameterError, match="whole number"):
@@ -211,7 +211,7 @@ def test_seed_is_one_type_everywhere():
 
 
 def test_no_progress_turns_every_bar_off():
-    from tmr import console
+    from tmr.io import console
     from tmr.plan import build_parser
 
     class Terminal:

@@ -1,4 +1,4 @@
-"""tmr.console: the manners every command line shares (logging streams and levels, exit codes of what a command
+"""tmr.io.console: the manners every command line shares (logging streams and levels, exit codes of what a command
 raises, Ctrl-C, library warnings, progress bars, --out checks and the stale-output cleanup)."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import logging
 import numpy as np
 import pytest
 
-from tmr import console
 from tmr.errors import TmrError
+from tmr.io import console
 
 
 def _args(*flags: str) -> argparse.Namespace:

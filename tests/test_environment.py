@@ -1,4 +1,5 @@
-"""Tests of tmr.environment: inflation, distance field vs exact distance, gradient, errors (map files: test_maps)."""
+"""Tests of tmr.world.environment: inflation, distance field vs exact distance, gradient, errors (map files:
+test_maps)."""
 
 from __future__ import annotations
 
@@ -10,9 +11,9 @@ import pytest
 import shapely
 from shapely.geometry import LineString, Point, Polygon, box
 
-from tmr.environment import Environment, bilinear_interpolate
 from tmr.errors import MapError, ParameterError
-from tmr.scenario import builtin_scenarios, load_scenario
+from tmr.world.environment import Environment, bilinear_interpolate
+from tmr.world.scenario import builtin_scenarios, load_scenario
 
 R = 0.5  # safety radius [m]
 

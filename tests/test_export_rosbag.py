@@ -13,7 +13,8 @@ from shapely.geometry import Polygon
 from tests.motion_data import mopick_plan, scenario_a
 from tmr.errors import TmrError
 from tmr.export.rosbag import write_bag
-from tmr.motion import chain_motion, mcdpr_motion
+from tmr.mcdpr.motion import mcdpr_motion
+from tmr.views.motion import chain_motion
 
 TS = get_typestore(Stores.ROS2_JAZZY)
 
@@ -103,7 +104,7 @@ def test_team_trajectory_and_tf(chain_bag):
 def test_tethers_are_the_textbook_catenary(chain_bag):
     """Every tether strip runs from the anchor / previous robot to the robot and hangs as the level catenary
     z(x) = H − c (cosh(s / 2c) − cosh((x − s/2) / c)), c = T0 / (ρ g) (Caruso 2021 eq. 22), written here from the
-    textbook, not from tmr.catenary."""
+    textbook, not from tmr.model.catenary."""
     plan, _, cp, msgs, _, _ = chain_bag
     assert cp.base_height == cp.exit_height  # the level-ends formula below
     c = cp.horizontal_tension / (cp.cable_mass_per_length * 9.81)
@@ -198,7 +199,7 @@ def test_refusals(tmp_path):
 
 def test_ccma_agents_links_end_effector(tmp_path):
     """CCMA: agents with their yaw, the end-effector, one LINE_STRIP per link; no room (a CCMA run has none)."""
-    from tmr.motion import ccma_motion
+    from tmr.ccma.motion import ccma_motion
 
     k = 4
     s = np.linspace(0.0, 1.0, k)

@@ -11,7 +11,7 @@ from tests.motion_data import write_mopick_run
 from tmr.errors import TmrError
 from tmr.export.rosbag import write_bag
 from tmr.export.runs import ExportError, load_motion
-from tmr.motion import mcdpr_motion
+from tmr.mcdpr.motion import mcdpr_motion
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,6 @@
 """Fuzz tests (hypothesis, derandomized): scenario TOML, GeoJSON, WKT and map YAML texts, and command lines drawn
 from the real flag names with nasty values. The property: a loader either loads or raises a
-:class:`tmr.errors.TmrError` (what ``tmr.console.run`` maps to exit 2) with a one-line message; a command exits 0, 1
+:class:`tmr.errors.TmrError` (what ``tmr.io.console.run`` maps to exit 2) with a one-line message; a command exits 0, 1
 or 2 — 2 with one line on stderr — never with a traceback or an "internal error", and a refusal writes nothing.
 """
 
@@ -105,7 +105,7 @@ def room_dir(tmp_path: Path) -> Path:
 @FUZZ
 @given(text=toml_texts)
 def test_fuzz_scenario_toml(room_dir, text):
-    from tmr.scenario import load_scenario
+    from tmr.world.scenario import load_scenario
 
     p = room_dir / "s.toml"
     p.write_text(text, encoding="utf-8")
@@ -151,7 +151,7 @@ geojson_texts = st.one_of(geojson_docs.map(lambda d: json.dumps(d, allow_nan=Tru
 @FUZZ
 @given(text=geojson_texts)
 def test_fuzz_geojson(tmp_path, text):
-    from tmr.maps import load_environment
+    from tmr.world.maps import load_environment
 
     p = tmp_path / "m.geojson"
     p.write_text(text, encoding="utf-8")
@@ -180,7 +180,7 @@ wkt_texts = st.lists(wkt_lines, max_size=4).map("\n".join)
 @FUZZ
 @given(text=wkt_texts)
 def test_fuzz_wkt(tmp_path, text):
-    from tmr.maps import load_environment
+    from tmr.world.maps import load_environment
 
     p = tmp_path / "m.wkt"
     p.write_text(text, encoding="utf-8")
@@ -209,7 +209,7 @@ yaml_docs = st.fixed_dictionaries(
 def test_fuzz_map_yaml(tmp_path, doc, raw, image):
     import yaml
 
-    from tmr.maps import load_environment
+    from tmr.world.maps import load_environment
 
     tmp_path = fresh(tmp_path)
     (tmp_path / "m.yaml").write_text(raw if raw is not None else yaml.safe_dump(doc, allow_unicode=True))

@@ -1,4 +1,4 @@
-"""Whole-horizon NLP (``tmr.formulations.horizon``): feasibility, optimality, cost vs warm start, fallbacks (never
+"""Whole-horizon NLP (``tmr.control.horizon``): feasibility, optimality, cost vs warm start, fallbacks (never
 worse than the warm start), time limit, clear failures, no import of the planner."""
 
 from __future__ import annotations
@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 from shapely.geometry import Point
 
-import tmr.formulations.horizon as horizon_module
-from tmr.chain import Chain
-from tmr.clik import Plan
-from tmr.environment import Environment
-from tmr.errors import InfeasibleStep, ParameterError, TmrError
-from tmr.formulations.horizon import (
+import tmr.control.horizon as horizon_module
+import tmr.control.horizon_model as horizon_model
+import tmr.control.horizon_pool as horizon_pool
+from tmr.checks.metrics import fitness
+from tmr.control.clik import Plan
+from tmr.control.horizon import (
     DEFAULT_TIME_LIMIT,
     GROUPS,
     HorizonInfeasible,
@@ -30,11 +30,13 @@ from tmr.formulations.horizon import (
     plan_horizon,
     samples_needed,
 )
-from tmr.metrics import fitness
-from tmr.params import ChainParams, PathParams, PinvParams, QPParams, TaskParams, TimeParams
-from tmr.path import time_law
+from tmr.errors import InfeasibleStep, ParameterError, TmrError
+from tmr.model.chain import Chain
+from tmr.model.params import ChainParams, PathParams, PinvParams, QPParams, TaskParams, TimeParams
 from tmr.planner import Problem, check, solve, span_limits
-from tmr.scenario import Scenario
+from tmr.route.path import time_law
+from tmr.world.environment import Environment
+from tmr.world.scenario import Scenario
 
 COLUMN = (4.2, 2.0)  # a disc column of radius 0.3 m (0.8 m once inflated) right under the follower's tether
 PAST = ((3.2, 2.9), (3.9, 2.95), (4.6, 2.9))  # the leader passes above the column: feasible
@@ -246,16 +248,19 @@ def test_module_does_not_import_the_planner():
         "spec = importlib.util.find_spec('tmr')\n"
         "pkg = types.ModuleType('tmr'); pkg.__path__ = list(spec.submodule_search_locations)\n"
         "sys.modules['tmr'] = pkg\n"
-        "import tmr.formulations.horizon\n"
+        "import tmr.control.horizon\n"
         "print(sorted(m for m in sys.modules if m.startswith('tmr')))\n"
         "assert 'tmr.planner' not in sys.modules\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
-    assert "'tmr.formulations.horizon'" in out.stdout and "tmr.planner" not in out.stdout
-    tree = ast.parse(Path(horizon_module.__file__).read_text(encoding="utf-8"))
+    assert "'tmr.control.horizon'" in out.stdout and "tmr.planner" not in out.stdout
     imported = set()
-    for node in ast.walk(tree):
+    for node in (
+        node
+        for module in (horizon_module, horizon_model, horizon_pool)  # the solve rounds, transcription, fallbacks
+        for node in ast.walk(ast.parse(Path(module.__file__).read_text(encoding="utf-8")))
+    ):
         if isinstance(node, ast.ImportFrom) and node.module:
             imported.add(node.module)
         elif isinstance(node, ast.Import):
@@ -349,14 +354,15 @@ def test_warm_start_as_given_with_a_lagging_leader_is_the_last_fallback(feasible
     s = np.linspace(0.0, 1.0, q.shape[0])
     q[:, -1] += 0.003 * np.sin(np.pi * s) ** 2  # the leader's tether up to 3 mm longer mid-way, smoothly
     lagging = dataclasses.replace(warm, q=q, method="lagging")
-    real = horizon_module._project_leader
+    real = horizon_model._project_leader
 
     def spoiled(su, Q):
         out = real(su, Q)
         out[1:, 0] += 0.5  # turn the first tether by 0.5 rad: the leader leaves its reference
         return out
 
-    monkeypatch.setattr(horizon_module, "_project_leader", spoiled)
+    for module in (horizon_model, horizon_pool):  # every projection: the warm start's and the fallback's
+        monkeypatch.setattr(module, "_project_leader", spoiled)
     plan = plan_horizon(problem, lagging, time_limit=1e-3)
     d = plan.diagnostics
     assert d["horizon_result"] == "warm_start"
@@ -464,7 +470,7 @@ def test_ctrl_c_during_the_nlp_stops_ipopt_and_is_raised_after_it() -> None:
     import os
     import signal
 
-    from tmr.formulations import horizon as hz
+    from tmr.control import horizon as hz
 
     outer = signal.getsignal(signal.SIGINT)  # a shell's background job starts with SIGINT ignored: test as a user's
     signal.signal(signal.SIGINT, signal.default_int_handler)  # foreground run, whatever launched pytest

@@ -1,4 +1,4 @@
-"""tmr.htmlview: the self-contained plotly view (offline, frames, slider, equal aspect, data = the plan)."""
+"""tmr.views.htmlview: the self-contained plotly view (offline, frames, slider, equal aspect, data = the plan)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from tests.motion_data import mopick_plan, scenario_a
-from tmr.animate import frame_indices
-from tmr.htmlview import build_figure, write_html
-from tmr.motion import chain_motion, mcdpr_motion
+from tmr.mcdpr.motion import mcdpr_motion
+from tmr.views.animate import frame_indices
+from tmr.views.htmlview import build_figure, write_html
+from tmr.views.motion import chain_motion
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,7 @@ import pytest
 #: Heavy stacks no ``tmr.plan --method qp --no-plots`` run needs (issue 14), and the plotting/solver extras.
 NEVER_FOR_QP = ("cvxpy", "casadi", "dask", "pymoo", "matplotlib", "plotly", "PIL", "mujoco", "rosbags")
 #: scipy packages that cost 0.3-0.7 s each to import (they pull in one another) and that a qp run does without: the
-#: time law's splines and the trajectory filter are tmr.splines and tmr.lowpass.
+#: time law's splines and the trajectory filter are tmr.route.splines and tmr.checks.lowpass.
 SCIPY_NEVER_FOR_QP = ("scipy.interpolate", "scipy.signal", "scipy.stats", "scipy.optimize")
 
 _PROBE = """

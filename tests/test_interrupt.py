@@ -1,4 +1,4 @@
-"""Ctrl-C stops every phase of a run: exit 130, one line ``interrupted``, nothing written (``tmr.console``).
+"""Ctrl-C stops every phase of a run: exit 130, one line ``interrupted``, nothing written (``tmr.io.console``).
 
 The latencies are printed (``pytest -s``), never asserted tightly: the bound of 10 s only tells "stopped" from "the
 run went on" (a lost Ctrl-C ran to the end). ``benchmarks/interrupt.py`` repeats each phase at random delays.
@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tmr.formulations import qp
+from tmr.control import qp_backends
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 #: "stopped" rather than "went on to the end" (a lost Ctrl-C): not a timing requirement.
@@ -41,7 +41,7 @@ def test_ctrl_c_inside_an_osqp_solve_raises_keyboard_interrupt():
     n, m = 300, 600
     A = rng.normal(size=(m, n))
     Jw, tw = rng.normal(size=(n, n)), rng.normal(size=n)
-    level = qp._OsqpLevel(1e-6)
+    level = qp_backends._OsqpLevel(1e-6)
     level.solve(A, -np.ones(m), np.ones(m), Jw, tw)  # the workspace is set up: the next call only solves
     # a solve that never converges (tolerances below rounding), ended only by the Ctrl-C or OSQP's time limit
     level.solver.update_settings(eps_abs=1e-15, eps_rel=1e-15, max_iter=10**9, time_limit=30.0)
@@ -78,7 +78,7 @@ def test_ctrl_c_in_exec_code_still_exits_130(tmp_path):
     phase 4 tries in 5) instead of exiting 130 after the one line."""
     (tmp_path / "execbody.py").write_text(
         "import argparse, os, signal, sys\n"
-        "from tmr.console import run\n"
+        "from tmr.io.console import run\n"
         "def body(args):\n"
         "    signal.signal(signal.SIGALRM, lambda *a: os.kill(os.getpid(), signal.SIGINT))\n"
         "    signal.setitimer(signal.ITIMER_REAL, 0.2)\n"
@@ -95,7 +95,7 @@ def test_ctrl_c_raised_where_python_ignores_it_is_raised_again(tmp_path):
     in 40 at 1 s into ``tmr plan``). tmr raises it again in the main thread."""
     (tmp_path / "weakbody.py").write_text(
         "import argparse, os, signal, sys, weakref\n"
-        "from tmr.console import run\n"
+        "from tmr.io.console import run\n"
         "class X: pass\n"
         "def body(args):\n"
         "    def cb(ref):\n"
@@ -111,7 +111,7 @@ def test_ctrl_c_raised_where_python_ignores_it_is_raised_again(tmp_path):
 
 @pytest.mark.parametrize("delay", [0.3, 0.5])
 def test_ctrl_c_during_the_imports_is_one_line_and_130(tmp_path, delay):
-    """Before tmr.console.run takes over (``python -m tmr.plan`` imports numpy and tmr's modules first), a Ctrl-C
+    """Before tmr.io.console.run takes over (``python -m tmr.plan`` imports numpy and tmr's modules first), a Ctrl-C
     was a traceback and death by SIGINT (returncode -2; 2 tries in 8 at 0.4–0.5 s). (Earlier, in the interpreter's
     own start-up — site.py and the venv's .pth files, the first ~0.15 s — Ctrl-C is Python's: "Fatal Python error".)
     """
@@ -175,7 +175,7 @@ def _interrupt(argv: list[str], trigger: str | None, delay: float, timeout: floa
         ("qp loop", ["--scenario", "A", "--method", "qp"], r"^planning with", (0.2, 0.6)),
         # IPOPT (casadi): the iteration callback stops it, then KeyboardInterrupt (no "time limit"/"best iterate")
         ("IPOPT", ["--scenario", "A", "--method", "horizon", "--no-plots"], r"^horizon NLP round", (0.3,)),
-        # the GIF is staged with the other outputs (tmr.outdir): nothing is published
+        # the GIF is staged with the other outputs (tmr.io.outdir): nothing is published
         ("GIF", ["--scenario", "A", "--method", "qp", "--no-plots", "--gif"], r"^GIF: drawing", (0.3,)),
     ],
 )

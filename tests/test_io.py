@@ -1,4 +1,4 @@
-"""Tests of tmr.io: atomic writes, trajectory JSON/CSV, metrics JSON (deterministic bytes)."""
+"""Tests of tmr.io.outputs: atomic writes, trajectory JSON/CSV, metrics JSON (deterministic bytes)."""
 
 from __future__ import annotations
 
@@ -10,10 +10,11 @@ import os
 import numpy as np
 import pytest
 
-import tmr.io as tio
-from tmr.clik import Plan
+import tmr.io.outputs as tio
+from tmr.checks.metrics import filter_trajectories
+from tmr.control.clik import Plan
 from tmr.errors import ParameterError
-from tmr.io import (
+from tmr.io.outputs import (
     TRAJECTORY_FORMAT,
     atomic_write_bytes,
     atomic_write_text,
@@ -22,7 +23,6 @@ from tmr.io import (
     write_trajectories_csv,
     write_trajectories_json,
 )
-from tmr.metrics import filter_trajectories
 
 
 def make_plan(K: int = 40, N: int = 3, Ts: float = 0.05) -> Plan:

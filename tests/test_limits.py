@@ -5,9 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tmr.chain import Chain
-from tmr.errors import ParameterError
-from tmr.limits import (
+from tmr.control.limits import (
     JointBox,
     KeepInPolygon,
     ObstacleClearance,
@@ -18,7 +16,9 @@ from tmr.limits import (
     link_pattern,
     robot_link_pattern,
 )
-from tmr.tasks import StepContext
+from tmr.control.tasks import StepContext
+from tmr.errors import ParameterError
+from tmr.model.chain import Chain
 
 LIMITS = np.array([[0.5, 5.596], [1.0, 5.596], [1.0, 5.596]])
 

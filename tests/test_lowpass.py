@@ -1,4 +1,5 @@
-"""Tests of tmr.lowpass: the Butterworth design and the zero-phase filter against their definitions and scipy.signal."""
+"""Tests of tmr.checks.lowpass: the Butterworth design and the zero-phase filter against their definitions and
+scipy.signal."""
 
 from __future__ import annotations
 
@@ -6,8 +7,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from tmr.checks.lowpass import butter_lowpass, filtfilt, lfilter
 from tmr.errors import ParameterError
-from tmr.lowpass import butter_lowpass, filtfilt, lfilter
 
 
 @pytest.mark.parametrize("order", [1, 2, 3, 4, 6])

@@ -1,4 +1,4 @@
-"""Tests of tmr.maps: ROS map_server / Nav2 maps read with PyYAML and Pillow, GeoJSON and WKT, and their errors.
+"""Tests of tmr.world.maps: ROS map_server / Nav2 maps read with PyYAML and Pillow, GeoJSON and WKT, and their errors.
 
 The occupancy of every pixel is checked against the map_server definition written out here (shade = value / full
 scale, occupancy 1 - shade or shade with negate, thresholds), not against the loader's own code.
@@ -16,9 +16,9 @@ import shapely
 from PIL import Image
 from shapely.geometry import Point, box
 
-from tmr.environment import Environment
 from tmr.errors import MapError
-from tmr.maps import (
+from tmr.world.environment import Environment
+from tmr.world.maps import (
     load_environment,
     load_map,
     occupancy,
@@ -392,10 +392,10 @@ def test_scale_mode_transparent_pixels_are_unknown(tmp_path: Path) -> None:
 
 def test_environment_has_no_file_loader() -> None:
     """Map files are the loader's job: the environment answers geometric queries only."""
-    import tmr.environment
+    import tmr.world.environment
 
     assert not hasattr(Environment, "from_file")
-    source = Path(tmr.environment.__file__).read_text()
+    source = Path(tmr.world.environment.__file__).read_text()
     assert "yaml" not in source.lower().replace("map_server", "") or "import yaml" not in source
     assert "PGM" not in source and "def read_pgm" not in source
 

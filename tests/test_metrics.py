@@ -1,4 +1,4 @@
-"""Tests of tmr.metrics: fitness f1..f4 (Caruso 2021 eq. 24–27), clearances, violations, filtering."""
+"""Tests of tmr.checks.metrics: fitness f1..f4 (Caruso 2021 eq. 24–27), clearances, violations, filtering."""
 
 from __future__ import annotations
 
@@ -9,10 +9,7 @@ import numpy as np
 import pytest
 from shapely.geometry import Point
 
-from tmr.clik import Plan
-from tmr.environment import Environment
-from tmr.errors import ParameterError
-from tmr.metrics import (
+from tmr.checks.metrics import (
     VIOLATION_KINDS,
     clearances,
     distance_errors,
@@ -23,6 +20,9 @@ from tmr.metrics import (
     limit_breaks,
     robot_separations,
 )
+from tmr.control.clik import Plan
+from tmr.errors import ParameterError
+from tmr.world.environment import Environment
 
 
 def make_env(obstacles, bounds, safety_radius=0.5):

@@ -1,4 +1,4 @@
-"""tmr.motion: plans as timed geometry (tethers as catenaries, MoPICK cables, CCMA links)."""
+"""tmr.views.motion: plans as timed geometry (tethers as catenaries, MoPICK cables, CCMA links)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from tests.motion_data import mopick_plan, scenario_a
-from tmr.catenary import CatenaryParams
 from tmr.errors import ParameterError
-from tmr.motion import Motion, Track, catenary_polylines, chain_motion, mcdpr_motion, sample_stamps
+from tmr.mcdpr.motion import mcdpr_motion
+from tmr.model.catenary import CatenaryParams
+from tmr.views.motion import Motion, Track, catenary_polylines, chain_motion, sample_stamps
 
 
 def test_chain_motion_robots_tethers_points():
@@ -98,12 +99,12 @@ def test_motion_refuses_inconsistent_samples():
 
 
 def test_views_frame_an_occupancy_maps_known_area_not_the_whole_image():
-    """A ROS map is often a small arena in a large unknown image: with ``env.known_free`` set (tmr.maps) the views
+    """A ROS map is often a small arena in a large unknown image: with ``env.known_free`` set (tmr.world.maps) the views
     frame the known area and the plan, not the 20 m room; other maps frame the room as before."""
     plan, env, cp = scenario_a()
     whole = chain_motion(plan, env, cp)
     assert whole.view is None and whole.extent(pad=0.0) == tuple(float(v) for v in env.bounds)
-    env.known_free = (2.0, 3.0, 6.0, 7.0)  # as tmr.maps sets it for an occupancy map
+    env.known_free = (2.0, 3.0, 6.0, 7.0)  # as tmr.world.maps sets it for an occupancy map
     try:
         framed = chain_motion(plan, env, cp)
     finally:

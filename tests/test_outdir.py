@@ -1,4 +1,4 @@
-"""tmr.outdir: --out checked first, outputs staged and published in one step, only tmr's own files replaced.
+"""tmr.io.outdir: --out checked first, outputs staged and published in one step, only tmr's own files replaced.
 
 The fault-injection tests kill real processes with SIGKILL (at random moments of a real ``tmr plan`` run, and at
 every rename of a publication) and fill a real, small tmpfs (ENOSPC); they need Linux, and root for the mounts.
@@ -20,8 +20,8 @@ from pathlib import Path
 
 import pytest
 
-import tmr.outdir as od
-from tmr.outdir import MANIFEST, OutDirError, Stage, check_out, is_complete, is_tmr_output, read_manifest
+import tmr.io.outdir as od
+from tmr.io.outdir import MANIFEST, OutDirError, Stage, check_out, is_complete, is_tmr_output, read_manifest
 
 OWN = ("a.txt", "b.txt", "timings.json", "bag")
 
@@ -143,7 +143,7 @@ def test_an_error_or_ctrl_c_while_staging_leaves_out_untouched(tmp_path):
 _HOLD = textwrap.dedent(
     """
     import sys, time
-    from tmr.outdir import Stage
+    from tmr.io.outdir import Stage
     with Stage(sys.argv[1], ["a.txt"]) as stage:
         (stage.path / "a.txt").write_text("staged")
         print(stage.path, flush=True)
@@ -175,8 +175,8 @@ def test_a_stale_staging_directory_is_removed_by_the_next_run_a_live_one_is_not(
 _KILL_AT = textwrap.dedent(
     """
     import os, shutil, signal, sys
-    import tmr.outdir as od
-    from tmr.outdir import Stage
+    import tmr.io.outdir as od
+    from tmr.io.outdir import Stage
 
     out, k, files, owned = sys.argv[1], int(sys.argv[2]), sys.argv[3].split(","), sys.argv[4].split(",")
     calls = [0]
@@ -402,7 +402,7 @@ def test_export_replaces_its_own_bag_and_refuses_anothers(run_dir, tmp_path, cap
 
 
 def test_journal_keeps_both_digests_and_untracked_entries():
-    from tmr.outdir import _journal
+    from tmr.io.outdir import _journal
 
     old = {"a": "1", "t": None, "gone": "9"}
     new = {"a": "2", "t": None, "b": "3", "u": None}

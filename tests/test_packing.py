@@ -1,4 +1,4 @@
-"""tmr.route.packing_bound / check_fit: how many robots of radius r can stand in the free space at once, a bound
+"""tmr.route.route.packing_bound / check_fit: how many robots of radius r can stand in the free space at once, a bound
 checked against packings built by hand (it must never be below one) and against the hexagonal count (it must not be
 loose), and refused before any route search."""
 
@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from shapely.geometry import box
 
-import tmr.route as route_mod
-from tmr.environment import Environment
-from tmr.params import ChainParams
-from tmr.route import TooManyRobotsError, check_fit, packing_bound, plan_route
-from tmr.scenario import load_scenario
-from tmr.spans import span_limits
+import tmr.route.route as route_mod
+from tmr.model.params import ChainParams
+from tmr.model.spans import span_limits
+from tmr.route.route import TooManyRobotsError, check_fit, packing_bound, plan_route
+from tmr.world.environment import Environment
+from tmr.world.scenario import load_scenario
 
 
 def hex_points(xmin: float, ymin: float, xmax: float, ymax: float, d: float, dx: float = 0.0, dy: float = 0.0):

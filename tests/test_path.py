@@ -1,4 +1,4 @@
-"""Tests of tmr.path: RRT* leader path (OMPL) and the B-spline / minimum-jerk time law (Caruso 2021 §4.2)."""
+"""Tests of tmr.route.path: RRT* leader path (OMPL) and the B-spline / minimum-jerk time law (Caruso 2021 §4.2)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tmr.environment import Environment
 from tmr.errors import ParameterError, PathError
-from tmr.path import Trajectory, leader_trajectory, path_length, plan_leader_path, time_law
+from tmr.route.path import Trajectory, leader_trajectory, path_length, plan_leader_path, time_law
+from tmr.world.environment import Environment
 
 BOUNDS = (0.0, 0.0, 10.0, 10.0)
 DISC_CENTRES = [(5.0, 5.0), (3.0, 3.0), (7.0, 7.0), (3.0, 7.0), (7.0, 3.0)]

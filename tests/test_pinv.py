@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tmr.chain import Chain
-from tmr.clik import run
-from tmr.formulations.pinv import PinvController, dls_inverse, null_space_projector
-from tmr.tasks import LeaderTracking, ObstacleEvasion, StepContext, TetherRegulation
+from tmr.control.clik import run
+from tmr.control.pinv import PinvController, dls_inverse, null_space_projector
+from tmr.control.tasks import LeaderTracking, ObstacleEvasion, StepContext, TetherRegulation
+from tmr.model.chain import Chain
 
 from .conftest import straight_trajectory
 

@@ -34,7 +34,7 @@ def test_scenario_a_writes_every_output(tmp_path, capsys):
     names = sorted(p.name for p in out.iterdir())
     assert names == sorted(
         [
-            ".tmr-outputs.json",  # what tmr wrote here (tmr.outdir)
+            ".tmr-outputs.json",  # what tmr wrote here (tmr.io.outdir)
             "chain_poses.png",
             "distance_errors.png",
             "metrics.json",
@@ -302,9 +302,11 @@ def test_too_few_robots_for_the_clearance_exit_1_with_it(tmp_path, capsys):
 
 def test_clearance_verdict_from_the_wider_tight_search(tmp_path, capsys):
     """narrow-corner-1142507027 with 5 robots: no chain of 5 keeping 0.06 m is found and none is proven impossible;
-    the fine search for a closer chain, twice as wide as the witness search (tmr.route.TIGHT_BEAM), finds one whose
+    the fine search for a closer chain, twice as wide as the witness search (tmr.route.witness.TIGHT_BEAM), finds one
+    whose
     tether passes 0.00074 m from the obstacles (the witness search's width finds none), and widening it
-    (tmr.chain_clearance) moves that tether to 0.035 m, still short of 0.06 m: exit 1 naming the clearance, nothing
+    (tmr.route.chain_clearance) moves that tether to 0.035 m, still short of 0.06 m: exit 1 naming the clearance,
+    nothing
     written."""
     args, out = _room_args(tmp_path, 1142507027, "narrow", "corner", "5")
     code, stdout, err = run_cli(args, capsys)
@@ -394,7 +396,8 @@ def test_robots_auto_rejects_start_and_reports_every_try(tmp_path, capsys):
     p = tmp_path / "slot.geojson"
     p.write_text('{"type": "FeatureCollection", "bounds": [0, 0, 2.2, 1.4], "features": []}')
     code, _, err = run_cli(["--map", str(p), "--base", "0.6,0.7", "--goal", "1.6,0.7", "--robots", "auto"], capsys)
-    # at most 3 robots of 0.5 m fit in the 1.2 m x 0.4 m of free centres (tmr.route.packing_bound): N = 4 is not tried
+    # at most 3 robots of 0.5 m fit in the 1.2 m x 0.4 m of free centres (tmr.route.route.packing_bound): N = 4 is not
+    # tried
     assert err.startswith("no plan found: --robots auto: N_min = 1 (at most 3 robots fit in the free area); 1: ")
     assert code == 1 and "; 3: " in err and "; 4: " not in err and not out.exists()
 
@@ -488,7 +491,7 @@ def test_bad_values_one_clear_line(tmp_path, capsys, flag, match):
 
 
 def test_reused_out_keeps_no_stale_outputs(tmp_path, capsys):
-    from tmr.outdir import MANIFEST
+    from tmr.io.outdir import MANIFEST
 
     out = tmp_path / "out"
     code, _, err = run_cli(["--scenario", "A", "--out", str(out), "--gif", *FAST], capsys)  # an older run
@@ -586,12 +589,12 @@ def test_quiet_verbose_debug_and_interrupt(tmp_path, capsys, monkeypatch):
 def test_more_robots_than_fit_refused_before_the_route_search(tmp_path, capsys, monkeypatch, where):
     """--robots 1000: at most 112 robots of 0.5 m fit in scenario A (Oler's bound on its free space), 133 in a
     30 m x 4 m corridor; refused with that number before any route is searched (exit 2, one line, nothing written)."""
-    import tmr.route
+    import tmr.route.route
 
     def boom(*a, **k):
         raise AssertionError("searched a route for more robots than fit")
 
-    monkeypatch.setattr(tmr.route, "_along", boom)
+    monkeypatch.setattr(tmr.route.route, "_along", boom)
     args = ["--scenario", "A"] if where == "scenario" else ["--map", str(_corridor(tmp_path)), "--base", "1,2"]
     args += ["--goal", "25,2"] if where == "map" else []
     out = tmp_path / "out"

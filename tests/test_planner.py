@@ -7,13 +7,13 @@ import json
 import numpy as np
 import pytest
 
-from tmr import catenary
-from tmr.chain import Chain
+from tmr.checks.metrics import evaluate
 from tmr.errors import ParameterError, ScenarioError
-from tmr.metrics import evaluate
-from tmr.params import ChainParams, PathParams, PinvParams, QPParams, TimeParams, apply_overrides
+from tmr.model import catenary
+from tmr.model.chain import Chain
+from tmr.model.params import ChainParams, PathParams, PinvParams, QPParams, TimeParams, apply_overrides
 from tmr.planner import build_problem, check, default_start, solve, span_limits
-from tmr.scenario import load_scenario
+from tmr.world.scenario import load_scenario
 
 
 def test_span_limits_from_bubbles_and_catenary():
@@ -90,8 +90,8 @@ def test_plan_verdict_is_taken_from_recorded_states():
 
 def test_rrt_route_plans_one_rrt_star_path_for_start_and_leader(monkeypatch):
     """--route rrt: the anchor→goal RRT* path places the robots and its tail is the leader's path (issue 14)."""
-    import tmr.path
     import tmr.planner
+    import tmr.route.path
 
     calls = []
     real = tmr.planner.plan_leader_path
@@ -101,7 +101,7 @@ def test_rrt_route_plans_one_rrt_star_path_for_start_and_leader(monkeypatch):
         return real(*args, **kwargs)
 
     monkeypatch.setattr(tmr.planner, "plan_leader_path", counting)
-    monkeypatch.setattr(tmr.path, "plan_leader_path", counting)  # what tmr.path.leader_trajectory calls
+    monkeypatch.setattr(tmr.route.path, "plan_leader_path", counting)  # what tmr.route.path.leader_trajectory calls
     sc = load_scenario("A")
     problem = build_problem(sc, seed=0, path_iterations=300, route="rrt")
     assert len(calls) == 1  # one RRT*, from the anchor
@@ -148,7 +148,7 @@ def test_horizon_warm_start_puts_the_followers_on_the_tether_tasks(monkeypatch):
     """The horizon NLP starts from the qp plan without the route references (closer to the paper's fitness, which it
     minimises: f2, span uniformity, much lower); if that plan fails a check, from the usual qp plan."""
     from tmr import planner
-    from tmr.metrics import fitness
+    from tmr.checks.metrics import fitness
 
     problem = build_problem(load_scenario("A"))
     assert problem.references is not None and problem.path_params.route_weight > 0

@@ -1,4 +1,4 @@
-"""Tests of tmr.plot: Figs. 5–8 of Caruso 2021 built on a synthetic 3-robot plan around a disc."""
+"""Tests of tmr.views.plot: Figs. 5–8 of Caruso 2021 built on a synthetic 3-robot plan around a disc."""
 
 from __future__ import annotations
 
@@ -11,10 +11,10 @@ from matplotlib.collections import PatchCollection
 from matplotlib.figure import Figure
 from shapely.geometry import Point
 
-from tmr.clik import Plan
-from tmr.environment import Environment
-from tmr.metrics import filter_trajectories
-from tmr.plot import plot_chain_poses, plot_distance_errors, plot_speeds, plot_trajectories, save_figure
+from tmr.checks.metrics import filter_trajectories
+from tmr.control.clik import Plan
+from tmr.views.plot import plot_chain_poses, plot_distance_errors, plot_speeds, plot_trajectories, save_figure
+from tmr.world.environment import Environment
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 BOUNDS = (0.0, 0.0, 10.0, 10.0)
@@ -150,8 +150,8 @@ def test_view_bounds_frames_the_known_area_of_an_occupancy_map(tmp_path):
     """A map_saver map that is mostly unknown is framed on its known free area and the plan, not the whole image;
     a geometric room is framed whole."""
     from tests.test_maps import _turtlebot3_world
-    from tmr.maps import load_environment
-    from tmr.plot import view_bounds
+    from tmr.views.plot import view_bounds
+    from tmr.world.maps import load_environment
 
     env = load_environment(_turtlebot3_world(tmp_path), safety_radius=0.15)
     pts = np.array([[-2.0, 0.0], [1.5, 2.5]])

@@ -1,4 +1,4 @@
-"""tmr.plotpool: figures rendered by worker processes are byte-identical to those rendered in the caller."""
+"""tmr.views.plotpool: figures rendered by worker processes are byte-identical to those rendered in the caller."""
 
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ import pytest
 from shapely.geometry import Point
 
 from tests.test_plot import make_env, synthetic_plan
-from tmr import plot
-from tmr.metrics import filter_trajectories
-from tmr.plotpool import FigurePool
+from tmr.checks.metrics import filter_trajectories
+from tmr.views import plot
+from tmr.views.plotpool import FigurePool
 
 
 def test_pool_renders_the_same_bytes_as_the_caller():

@@ -8,15 +8,24 @@ import numpy as np
 import pytest
 from shapely.geometry import Point
 
-from tmr.chain import Chain
-from tmr.clik import run
-from tmr.environment import Environment
+from tmr.control.clik import run
+from tmr.control.limits import JointBox, Limit, LimitRows, ObstacleClearance, RobotSeparation, RobotSpeed, link_pattern
+from tmr.control.qp import Level, LexicographicQP, orthonormal_rows, solvers
+from tmr.control.qp_backends import OSQP_COARSE
+from tmr.control.tasks import (
+    Damping,
+    LeaderTracking,
+    Smoothness,
+    SpanUniformity,
+    StepContext,
+    TaskRows,
+    TetherRegulation,
+)
 from tmr.errors import InfeasibleStep, ParameterError
-from tmr.formulations.qp import OSQP_COARSE, Level, LexicographicQP, orthonormal_rows, solvers
-from tmr.limits import JointBox, Limit, LimitRows, ObstacleClearance, RobotSeparation, RobotSpeed, link_pattern
+from tmr.model.chain import Chain
 from tmr.planner import build_problem, make_qp, plan, solve
-from tmr.scenario import Scenario
-from tmr.tasks import Damping, LeaderTracking, Smoothness, SpanUniformity, StepContext, TaskRows, TetherRegulation
+from tmr.world.environment import Environment
+from tmr.world.scenario import Scenario
 
 from .conftest import straight_trajectory
 

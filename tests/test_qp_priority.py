@@ -1,7 +1,7 @@
 """Strict priority of the lexicographic QP under stress, checked against an independent textbook solver.
 
 The reference (:func:`reference_optima`) is written from the definition of a lexicographic (strict-priority)
-optimisation problem, not from ``tmr.formulations.qp``: with S_0 the set of x meeting the hard rows,
+optimisation problem, not from ``tmr.control.qp``: with S_0 the set of x meeting the hard rows,
 
     f_i* = min { f_i(x) : x ∈ S_{i−1} },     S_i = { x ∈ S_{i−1} : f_i(x) = f_i* },
 
@@ -30,11 +30,10 @@ from hypothesis import HealthCheck, given, reject, settings
 from hypothesis import strategies as st
 from shapely.geometry import Point
 
-from tmr.chain import Chain
-from tmr.clik import run
-from tmr.environment import Environment
-from tmr.errors import InfeasibleStep, ParameterError
-from tmr.formulations.qp import (
+from tmr.checks.metrics import QP_LEVEL_STATUS, evaluate
+from tmr.control.clik import run
+from tmr.control.limits import JointBox, Limit, LimitRows, RobotSpeed
+from tmr.control.qp import (
     EMPTY,
     FAILED,
     LEVEL_STATUS,
@@ -45,11 +44,12 @@ from tmr.formulations.qp import (
     LexicographicQP,
     solvers,
 )
-from tmr.limits import JointBox, Limit, LimitRows, RobotSpeed
-from tmr.metrics import QP_LEVEL_STATUS, evaluate
+from tmr.control.tasks import Damping, LeaderTracking, Smoothness, StepContext, TaskRows
+from tmr.errors import InfeasibleStep, ParameterError
+from tmr.model.chain import Chain
 from tmr.planner import build_problem, make_qp, plan
-from tmr.scenario import Scenario, load_scenario
-from tmr.tasks import Damping, LeaderTracking, Smoothness, StepContext, TaskRows
+from tmr.world.environment import Environment
+from tmr.world.scenario import Scenario, load_scenario
 
 from .conftest import straight_trajectory
 
@@ -72,7 +72,7 @@ class ReferenceFailure(AssertionError):
 
 
 def level_values(record, x: np.ndarray) -> list[float | None]:
-    """f_i(x) = Σ w ‖J x − t‖² of every level of a :class:`tmr.formulations.qp.StepRecord` (None: no task)."""
+    """f_i(x) = Σ w ‖J x − t‖² of every level of a :class:`tmr.control.qp.StepRecord` (None: no task)."""
     return [None if not lv else float(sum(w * np.sum((J @ x - t) ** 2) for J, t, w in lv)) for lv in record.levels]
 
 

@@ -1,4 +1,4 @@
-"""The corner proof (tmr.reach): cases worked by hand, the ray table's geometry, and real chains never refuted."""
+"""The corner proof (tmr.route.reach): cases worked by hand, the ray table's geometry, and real chains never refuted."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from shapely.geometry import LineString, box
 
-from tmr.environment import Environment
-from tmr.reach import REACH_CELL, REFINE_WORK, chain_is_impossible, ray_table
-from tmr.route import TooFewRobotsError, plan_route
+from tmr.route.reach import REACH_CELL, REFINE_WORK, chain_is_impossible, ray_table
+from tmr.route.route import TooFewRobotsError, plan_route
+from tmr.world.environment import Environment
 
 D_MAX = 5.596
 LIM = np.array([[0.5, D_MAX], [1.0, D_MAX]])
@@ -78,7 +78,7 @@ def test_u_shaped_wall_chain_of_the_route_is_never_refuted():
 
 def test_random_rooms_station_chains_are_never_refuted():
     """On seeded random rooms, no prefix of a real chain (the route's stations) is ever proven impossible."""
-    from tmr.route import RouteVerdict
+    from tmr.route.route import RouteVerdict
     from tmr.sweep.rooms import room_from_spec, room_set, span_rows
 
     lim = span_rows()
@@ -107,7 +107,7 @@ def test_the_half_size_cells_prove_what_the_first_grid_cannot():
     0.22 m in the relaxation), proven with h = 0.05 m (0.13 m). The refinement rung runs exactly when 8× the first
     attempt's ray tests fit ``refine_work`` (a count: the same verdict on any machine), and the route then refuses
     3 robots as proven."""
-    from tmr.reach import _prove
+    from tmr.route.reach import _prove
     from tmr.sweep.rooms import generate_room, span_rows
 
     room = generate_room(732277931, "medium", "corner")
@@ -155,7 +155,7 @@ def test_ray_table_cache_on_disk(tmp_path, monkeypatch):
     not match its SHA-256 (deviations lowered: they set the proof's relaxation, so a lower one would prove too much),
     or one holding another radius's table is rebuilt and replaced; a cache directory that cannot be written costs
     nothing but the build."""
-    from tmr import reach
+    from tmr.route import reach
 
     def same(a, b):
         return all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
@@ -195,7 +195,7 @@ def test_ray_table_cache_on_disk(tmp_path, monkeypatch):
 def test_chain_deviations_by_hand():
     """A chain bent along the x axis, (3, 1) → (2, 0) → (1, 0) → origin, is 2/√10 = 0.632 cells off the segment
     origin → (3, 1) at (2, 0) (by hand); the table's deviations are the function's."""
-    from tmr.reach import chain_deviations
+    from tmr.route.reach import chain_deviations
 
     radius = 3
     off, ring, pred, dev = ray_table(radius)
@@ -223,7 +223,7 @@ def _check_chain(env, chain, anchor, goal, spans, clearance, first):
 
 def test_find_chain_round_the_short_wall():
     """The fewest-robot witness round the 5 m wall has 3 robots (2 are proven impossible above)."""
-    from tmr.reach import find_chain
+    from tmr.route.reach import find_chain
 
     env = _short_wall()
     spans = np.array([[0.6, D_MAX], [1.1, D_MAX]])
@@ -249,7 +249,7 @@ def test_proof_verdict_and_work_pinned(seed, density, goal_class, robots, cell, 
     the same verdict and count (a region of interest too small, or a cell closed too early, changes the count).
     Pruned by the goal's visible region too (the default): the same verdicts here, and no more ray tests in these
     cases (fewer sources per level; not a bound in general: a level's smaller set may have a longer boundary)."""
-    from tmr.reach import _prove
+    from tmr.route.reach import _prove
     from tmr.sweep.rooms import generate_room, span_rows
 
     room = generate_room(seed, density, goal_class)
@@ -263,7 +263,7 @@ def test_the_quarter_size_cells_prove_what_the_half_size_ones_cannot():
     """dense-far-2845717476 with 3 robots: proven neither with h = 0.1 m nor 0.05 m cells (obstacles shrunk by 0.22
     and 0.13 m), but with 0.025 m (0.074 m). The second refinement runs exactly when 8× the second attempt's ray
     tests fit ``refine_work``; then the route refuses 3 robots as proven."""
-    from tmr.reach import REFINE_LEVELS, _prove
+    from tmr.route.reach import REFINE_LEVELS, _prove
     from tmr.sweep.rooms import generate_room, span_rows
 
     room = generate_room(2845717476, "dense", "far")
@@ -285,8 +285,8 @@ def test_fine_search_finds_the_chain_the_coarse_one_misses():
     """walls-mid-3947533108 with 3 robots: the route chain needs 4, and no 3-robot chain is on the 0.25 m grid of the
     coarse search; the geodesic beam on its 0.1 m grid finds one, checked here by the definition (chords in the span
     limits and clearer than 0.06 m, robots 2r + 0.1 m apart)."""
-    from tmr import reach
-    from tmr.route import CHORD_CLEARANCE
+    from tmr.route import reach
+    from tmr.route.route import CHORD_CLEARANCE
     from tmr.sweep.rooms import generate_room, span_rows
 
     room = generate_room(3947533108, "walls", "mid")
@@ -303,10 +303,11 @@ def test_fine_search_finds_the_chain_the_coarse_one_misses():
 
 
 def test_geodesic_distance_bounds_the_shortest_path():
-    """The fine search's heuristic, against the exact shortest path of the visibility graph (tmr.route) round the 5 m
+    """The fine search's heuristic, against the exact shortest path of the visibility graph (tmr.route.route) round the
+    5 m
     wall: an 8-neighbour wavefront is never shorter than the true distance by more than a cell's diagonal, and at most
     8.3 % (the octile metric's worst case, 1 / cos 22.5° − 1) plus two cells longer."""
-    from tmr.reach import _GEODESIC_CELL, _geodesic
+    from tmr.route.reach import _GEODESIC_CELL, _geodesic
 
     env = _short_wall()
     geo = _geodesic(env, np.array(G))
@@ -323,7 +324,7 @@ def test_geodesic_distance_bounds_the_shortest_path():
 def test_chain_off_the_route_needs_fewer_robots():
     """medium-far-3985118755: the chain along the shortest route needs 6 robots; one off it needs 4, which the
     length proves are needed (n_lower = 4), so N_min = 4 is exact; with N = 4 the guide is that chain."""
-    from tmr.route import CHORD_CLEARANCE
+    from tmr.route.route import CHORD_CLEARANCE
     from tmr.sweep.rooms import generate_room, span_rows
 
     room = generate_room(3985118755, "medium", "far")
@@ -367,7 +368,7 @@ def test_narrowing_proves_a_straight_chain_to_a_few_centimetres():
     """An empty corridor, 3 robots of 5.596 m: a goal 3 d_max + 3 cm away is proven out of reach by the narrowing
     (robot k within Σ d of either end, to e = 8.8 mm at h = 0.0125 m) where the grid alone cannot; 1 cm short of
     3 d_max the chain exists (robots evenly spaced) and the narrowing ends every level without a proof."""
-    from tmr.reach import NARROW_LEVELS, _narrow
+    from tmr.route.reach import NARROW_LEVELS, _narrow
 
     env = Environment.from_geometry([], (0.0, 0.0, 30.0, 4.0))
     a = np.array([1.0, 2.0])
@@ -385,8 +386,8 @@ def test_narrowing_never_refutes_a_chain_clear_by_a_millimetre():
     """walls-corner-2032780706 with the goal moved 0.2 m back along the last tether of its widest 5-robot chain: a
     chain of 5 now exists, clear of the grown obstacles by 0.9 mm (exact check); the narrowing runs to its last level
     and proves nothing. Moved 0.05 m, the widest chain enters the obstacles by 4 cm, and the narrowing proves it."""
-    from tmr.chain_clearance import chain_margin, widen_chain
-    from tmr.reach import _narrow
+    from tmr.route.chain_clearance import chain_margin, widen_chain
+    from tmr.route.reach import _narrow
     from tmr.sweep.rooms import generate_room
 
     room = generate_room(2032780706, "walls", "corner")
@@ -414,7 +415,7 @@ def test_narrowing_proves_what_the_finest_grid_cannot():
     the narrowing proves it at h = 0.025 m within its budget (a count: the same verdict on any machine), and the
     route refuses 5 robots as proven. The widest 5-robot chain found (SLSQP from many starts) still enters the grown
     obstacles by 5.7 cm."""
-    from tmr.reach import NARROW_WORK, _narrow
+    from tmr.route.reach import NARROW_WORK, _narrow
     from tmr.sweep.rooms import generate_room, span_rows
 
     room = generate_room(2032780706, "walls", "corner")
@@ -428,7 +429,7 @@ def test_narrowing_proves_what_the_finest_grid_cannot():
     assert proven is True and work <= NARROW_WORK
     assert chain_is_impossible(*args, refine_work=REFINE_WORK, narrow_work=work)
     assert not chain_is_impossible(*args, refine_work=REFINE_WORK, narrow_work=work - 1)  # one test over the budget
-    from tmr.route import proven_too_few
+    from tmr.route.route import proven_too_few
 
     assert proven_too_few(env, room.base, room.goal, lim, 5) and not proven_too_few(env, room.base, room.goal, lim, 6)
     route = plan_route(env, room.base, room.goal, lim, robots=5)

@@ -96,31 +96,32 @@ def gif(name: str) -> tuple[int, float]:
 
 @cache
 def route_e() -> Any:
-    """The shortest free route of built-in scenario E (tmr.route.plan_route, as tests/test_scenario.py builds it)."""
+    """The shortest free route of built-in scenario E (tmr.route.route.plan_route, as tests/test_scenario.py builds
+    it)."""
     from tmr import load_scenario
-    from tmr.catenary import max_span
-    from tmr.route import plan_route
+    from tmr.model.catenary import max_span
+    from tmr.route.route import plan_route
 
     sc = load_scenario("E")
     return plan_route(sc.environment, sc.base, sc.goal, [[0.5, max_span()], [1.0, max_span()]])
 
 
 def d_max() -> float:
-    from tmr.catenary import max_span
+    from tmr.model.catenary import max_span
 
     return max_span()
 
 
 def steps_rrt() -> int:
     """Samples per robot of a ``--route rrt`` plan: T_end / Ts + 1."""
-    from tmr.params import TimeParams
+    from tmr.model.params import TimeParams
 
     p = TimeParams()
     return round(p.T_end / p.Ts) + 1
 
 
 def chord_clearance() -> float:
-    from tmr.route import CHORD_CLEARANCE
+    from tmr.route.route import CHORD_CLEARANCE
 
     return CHORD_CLEARANCE
 
@@ -187,7 +188,7 @@ def sensitivity_first_tether_failure() -> tuple[int, int, float]:
 
 
 def static_tether_error(links: str) -> float:
-    """Largest relative error of the MuJoCo tether against tmr.catenary over the spans of replay.md."""
+    """Largest relative error of the MuJoCo tether against tmr.model.catenary over the spans of replay.md."""
     table = re.findall(
         rf"\| {links} \| [\d.]+ \| ([-+.\de]+) \| ([-+.\de]+) \| ([-+.\de]+) \| ([-+.\de]+) \|", text("replay.md")
     )
@@ -241,7 +242,7 @@ QUOTES = [
         lambda: (1000 * replay(D_QP, "min_tether_m"), 1000 * replay(D_QP, "catenary_then_m")),
     ),
     Quote(r"The replay passes \(no contact, tracking within (\S+) mm\)", lambda: replay(D_QP, "track_max_mm")),
-    Quote(r"matches `tmr.catenary` to (\S+) or better", lambda: static_tether_error("16"), ">="),
+    Quote(r"matches `tmr.model.catenary` to (\S+) or better", lambda: static_tether_error("16"), ">="),
     Quote(
         r"replays with the platform within (\S+) mm of its path",
         lambda: float(mopick_replay()["platform error max / rms [mm]"].split(" / ")[0]),

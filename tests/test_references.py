@@ -1,4 +1,5 @@
-"""tmr.references and tmr.tasks.RouteFollowers: start placement, stations, time law from limits, follower rows."""
+"""tmr.route.references and tmr.control.tasks.RouteFollowers: start placement, stations, time law from limits,
+follower rows."""
 
 from __future__ import annotations
 
@@ -6,14 +7,14 @@ import numpy as np
 import pytest
 from shapely.geometry import Point, box
 
-from tmr.chain import Chain
-from tmr.environment import Environment
+from tmr.control.tasks import RouteFollowers, StepContext
 from tmr.errors import ParameterError
-from tmr.params import ChainParams
-from tmr.references import chain_reference, leader_duration, start_placement
-from tmr.route import guide_arcs, plan_route
-from tmr.spans import span_limits
-from tmr.tasks import RouteFollowers, StepContext
+from tmr.model.chain import Chain
+from tmr.model.params import ChainParams
+from tmr.model.spans import span_limits
+from tmr.route.references import chain_reference, leader_duration, start_placement
+from tmr.route.route import guide_arcs, plan_route
+from tmr.world.environment import Environment
 
 SPACING = 1.2
 
@@ -76,7 +77,7 @@ def test_followers_trail_the_leader_and_never_go_back():
     env = Environment.from_geometry([box(9.9, 0.0, 10.1, 16.0)], (0.0, 0.0, 20.0, 20.0))
     route, ref, lim = plan_refs(env, (8.0, 2.0), (12.0, 2.0), 7)
     # arc progress of each follower along the guide is monotone
-    from tmr.references import _arc_of
+    from tmr.route.references import _arc_of
 
     g = ref.guide
     ga = guide_arcs(g)
@@ -134,8 +135,8 @@ def test_route_followers_rows():
 def test_leader_stops_at_a_hairpin_instead_of_a_spline_cusp() -> None:
     """A route that turns back round a wall's end: one minimum-jerk piece per leg, the leader at rest at the apex
     (one interpolating spline through it has a cusp and is refused)."""
-    from tmr.path import time_law
-    from tmr.references import _leader_law, leader_duration
+    from tmr.route.path import time_law
+    from tmr.route.references import _leader_law, leader_duration
 
     # a leader's route in a seeded random room (dense-near-533521220) round the tip of an obstacle at (4.0, 4.9)
     lead = np.array(
@@ -169,8 +170,8 @@ def test_leader_stops_at_a_hairpin_instead_of_a_spline_cusp() -> None:
 
 def test_start_placement_turns_round_a_wall_end_off_the_route():
     """A route that hugs a thin wall's end at δ holds no two robots 2r apart on either side whose tether clears
-    the end: robots along it turn there only with points off the bend (``tmr.route.bend_offsets``)."""
-    from tmr.references import _along
+    the end: robots along it turn there only with points off the bend (``tmr.route.geodesic.bend_offsets``)."""
+    from tmr.route.references import _along
 
     env = Environment.from_geometry(box(4.9, 0.0, 5.1, 5.0), (0, 0, 10, 10), 0.5, 0.05)
     n = 8
@@ -194,7 +195,7 @@ def test_followers_see_the_robot_ahead_through_a_narrow_door() -> None:
     """In a door whose free gap is narrower than 2 x 0.1 m, a guide point is still visible from the samples just
     behind it: the visibility margin drops to the guide's own clearance there (less 0.01 m), instead of hiding every
     sample in the door (the references then jumped)."""
-    from tmr.references import VISIBLE_CLEARANCE, _visible_back
+    from tmr.route.references import VISIBLE_CLEARANCE, _visible_back
 
     # wall at x = 5 with a door whose grown gap is 0.16 m wide around y = 5
     wall = [box(4.9, 0.0, 5.1, 4.42), box(4.9, 5.58, 5.1, 10.0)]
@@ -217,7 +218,7 @@ def test_walk_in_view_keeps_the_tether_off_the_corner_an_s_door_would_press_it_o
     """Robot 0 rests at its station; robot 1's guide path turns round a block that the chord from robot 0's station
     cuts. After ``_walk_in_view`` robot 1 stays in view of robot 0 (every chord free) and still ends at its
     station at the same step; without it some chord is blocked."""
-    from tmr.references import _walk_in_view
+    from tmr.route.references import _walk_in_view
 
     env = Environment.from_geometry([box(4.0, 3.0, 5.0, 4.0)], (0, 0, 10, 10), 0.5, 0.05)
     s0 = np.array([2.0, 2.0])
@@ -268,7 +269,7 @@ def test_eight_robots_park_near_the_anchor_of_a_short_route(seed: int, density: 
     P, parked = start_placement(env, route, 8, lim[:, 0].max() + 0.2, span_limits=lim)
     assert P.shape == (8, 2) and parked >= 1
     # without the compact walks: the same placement in the first three rooms, none in the last two
-    import tmr.references as references
+    import tmr.route.references as references
 
     snakes = references._snakes
     monkeypatch.setattr(
@@ -312,8 +313,8 @@ def test_robots_before_the_stations_stay_when_parking_one_more_overshoots(monkey
     stations (the goal alone) are kept: robots 1-4 stay where they start (``parked`` = 4, their references never
     move), robot 5 goes to the goal, 2r + 0.02 m from every staying robot. Without the fallback it is the old
     BlockedRouteError."""
-    import tmr.references as references
-    from tmr.route import BlockedRouteError
+    import tmr.route.references as references
+    from tmr.route.route import BlockedRouteError
     from tmr.sweep.rooms import generate_room
 
     room = generate_room(4097576486, "narrow", "near")

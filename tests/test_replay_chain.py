@@ -30,11 +30,11 @@ def min_jerk(a: np.ndarray, b: np.ndarray, T: float, hold: float = 0.5) -> np.nd
 
 def write_run(out: Path, obstacles: list, anchor: tuple[float, float], robot_path: np.ndarray) -> Path:
     """A one-robot run directory written by tmr's own writers (trajectories.json + run.json) for a hand-made plan."""
-    from tmr import io
-    from tmr.catenary import tether_max_spans
-    from tmr.environment import Environment
-    from tmr.params import ChainParams, TimeParams, as_dict
-    from tmr.rundir import write_chain_run
+    from tmr.io import outputs as io
+    from tmr.io.rundir import write_chain_run
+    from tmr.model.catenary import tether_max_spans
+    from tmr.model.params import ChainParams, TimeParams, as_dict
+    from tmr.world.environment import Environment
 
     env = Environment.from_geometry(obstacles, (0.0, 0.0, 12.0, 10.0))
     robots = robot_path[:, None, :]

@@ -14,9 +14,9 @@ pytest.importorskip("mujoco")
 from tmr.mcdpr.capacity import capacity, required_wrench_set  # noqa: E402
 from tmr.mcdpr.planner import PlannerParams  # noqa: E402
 from tmr.mcdpr.robot import mopick  # noqa: E402
+from tmr.mcdpr.rundir import McdprRun, mcdpr_run_dict  # noqa: E402
 from tmr.mcdpr.scene import load_scene  # noqa: E402
 from tmr.replay.mcdpr import McdprConfig, edge_margins, replay_mcdpr  # noqa: E402
-from tmr.rundir import McdprRun, mcdpr_run_dict  # noqa: E402
 
 
 def static_run(platform: list[float]) -> McdprRun:

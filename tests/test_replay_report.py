@@ -13,9 +13,9 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo's first import: offscreen rendering for --gif
 pytest.importorskip("mujoco")
 
+from tmr.io.rundir import load_run  # noqa: E402
 from tmr.replay.chain import replay_chain  # noqa: E402
 from tmr.replay.report import chain_document, chain_verdict, write_chain_outputs  # noqa: E402
-from tmr.rundir import load_run  # noqa: E402
 
 from .test_replay_chain import min_jerk, write_run  # noqa: E402
 

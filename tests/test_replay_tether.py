@@ -11,7 +11,7 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo's first import: offscreen rendering for --gif
 pytest.importorskip("mujoco")
 
-from tmr.catenary import CatenaryParams, max_span  # noqa: E402
+from tmr.model.catenary import CatenaryParams, max_span  # noqa: E402
 from tmr.replay.tether import catenary_nodes, hang  # noqa: E402
 
 RHO, G, T0, H = 0.15, 9.81, 13.5, 0.43

@@ -10,21 +10,10 @@ import numpy as np
 import pytest
 import shapely
 
-from tmr.maps import load_environment
 from tmr.sweep import rooms
-from tmr.sweep.rooms import (
-    DENSITIES,
-    GOAL_CLASSES,
-    MIN_CLEARANCE,
-    Room,
-    RoomRun,
-    generate_room,
-    independent_check,
-    room_set,
-    run_room,
-    write_geojson,
-    xy_arg,
-)
+from tmr.sweep.room_runs import RoomRun, independent_check, run_room, xy_arg
+from tmr.sweep.rooms import DENSITIES, GOAL_CLASSES, MIN_CLEARANCE, Room, generate_room, room_set, write_geojson
+from tmr.world.maps import load_environment
 
 R = rooms.SAFETY_RADIUS
 D_MAX = rooms.default_d_max()
@@ -84,7 +73,7 @@ def test_goal_class(every_room, density, goal_class) -> None:
     assert room.straight <= length + 1e-9
     if room.route_source == "route":
         # n_lower comes from the shortest path with no margin (through slits the route's margin avoids), so it
-        # may be below route_length / d_max; above it only where the corner proof (tmr.reach) makes it n_min
+        # may be below route_length / d_max; above it only where the corner proof (tmr.route.reach) makes it n_min
         assert room.n_min >= room.n_lower >= 1
         assert room.n_lower <= np.ceil(room.route_length / D_MAX - 1e-9) or room.n_lower == room.n_min
 
@@ -233,13 +222,14 @@ def test_run_room_runs_the_command_line_and_checks_it() -> None:
 
 
 def test_decide_count_bounds_the_fewest_robots() -> None:
-    """Where tmr.route's proven bound is below the plans' count: dense-mid-671599181 (N_lower 2, N_min 3): a chain
+    """Where tmr.route.route's proven bound is below the plans' count: dense-mid-671599181 (N_lower 2, N_min 3): a chain
     of 2 whose tethers are merely clear (0.0599 m, short of the 0.06 m the plans keep) is found and passes the
     independent check, so the problem's N_min is 2, decided. narrow-corner-2929554679 (N_lower 4, N_min 6): 4 is
     proven too few by the corner proof, so N_min ≥ 5, and the widest beam finds a chain of 5 round the other side of
     two walls, clear by 0.036 m once widened: N_min = 5, decided. walls-corner-2032780706: 5 is proven too few (the
     narrowing), so no gap is left."""
-    from tmr.sweep.rooms import decide_count, generate_room
+    from tmr.sweep.room_runs import decide_count
+    from tmr.sweep.rooms import generate_room
 
     room = generate_room(671599181, "dense", "mid")
     assert (room.n_lower, room.n_min) == (2, 3)

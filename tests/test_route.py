@@ -1,4 +1,4 @@
-"""tmr.route: shortest free route and the robots it needs, against routes and counts computed by hand."""
+"""tmr.route.route: shortest free route and the robots it needs, against routes and counts computed by hand."""
 
 from __future__ import annotations
 
@@ -10,12 +10,12 @@ import pytest
 import shapely
 from shapely.geometry import LineString, Point, box
 
-from tmr.environment import Environment
 from tmr.errors import ParameterError
-from tmr.params import ChainParams
-from tmr.route import (
+from tmr.model.params import ChainParams
+from tmr.model.spans import span_limits
+from tmr.route.geodesic import SPACING_MARGIN
+from tmr.route.route import (
     CHORD_CLEARANCE,
-    SPACING_MARGIN,
     BlockedRouteError,
     NoRouteError,
     Route,
@@ -25,7 +25,7 @@ from tmr.route import (
     point_at,
     stations,
 )
-from tmr.spans import span_limits
+from tmr.world.environment import Environment
 
 LIM = span_limits(3, ChainParams())
 D_MAX = float(LIM[0, 1])  # 5.596 m with the paper's data
@@ -124,7 +124,8 @@ def test_gap_wider_than_2r_but_nearer_than_the_chord_clearance():
     away through it (n_lower = 1); keeping 0.06 m takes the way round the wall's end, 4 robots. With 2 or 3 robots
     nothing is proven, and the route says what stops them: the clearance, a chain through the gap passing ≤ 0.025 m
     (the 2-robot search: the best on its grid, just off the gap's middle line)."""
-    from tmr.route import CHORD_CLEARANCE, tight_chain
+    from tmr.route.route import CHORD_CLEARANCE
+    from tmr.route.witness import tight_chain
 
     w = 1.05
     env = Environment.from_geometry(
@@ -238,7 +239,7 @@ def test_shortest_path_tree_matches_scipy_dijkstra() -> None:
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import dijkstra
 
-    from tmr.route import shortest_path_tree
+    from tmr.route.geodesic import shortest_path_tree
 
     rng = np.random.default_rng(7)
     for trial in range(30):
@@ -264,9 +265,9 @@ def test_shortest_path_tree_matches_scipy_dijkstra() -> None:
 
 def test_a_widened_chain_is_the_witness(monkeypatch):
     """dense-far-2639215061 with 3 robots: the route chain needs 4, and neither search finds a chain of 3 keeping
-    0.06 m; one found with the obstacles grown by 0.1 m less, widened (tmr.chain_clearance), keeps it. Checked by
+    0.06 m; one found with the obstacles grown by 0.1 m less, widened (tmr.route.chain_clearance), keeps it. Checked by
     the definition (spans, clearances, spacing); without the widening the count stays 4."""
-    from tmr import chain_clearance
+    from tmr.route import chain_clearance
     from tmr.sweep.rooms import generate_room, span_rows
 
     room = generate_room(2639215061, "dense", "far")

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 import shapely
 
-from tmr.rundir import RUN_FORMAT, ChainRun, McdprRun, RunDirError, load_run
+from tmr.io.rundir import RUN_FORMAT, ChainRun, RunDirError, load_run
+from tmr.mcdpr.rundir import McdprRun
 
 
 @pytest.fixture(scope="module")
@@ -32,8 +33,8 @@ def mcdpr_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_chain_record_has_scenario_map_and_tether(chain_dir: Path) -> None:
-    from tmr.catenary import max_span
-    from tmr.scenario import load_scenario
+    from tmr.model.catenary import max_span
+    from tmr.world.scenario import load_scenario
 
     rec = json.loads((chain_dir / "run.json").read_text())
     assert rec["format"] == RUN_FORMAT and rec["kind"] == "chain"
@@ -52,7 +53,7 @@ def test_chain_record_has_scenario_map_and_tether(chain_dir: Path) -> None:
 
 
 def test_chain_geometry_round_trips_exactly(chain_dir: Path) -> None:
-    from tmr.scenario import load_scenario
+    from tmr.world.scenario import load_scenario
 
     run = load_run(chain_dir)
     assert isinstance(run, ChainRun)

@@ -1,4 +1,4 @@
-"""Tests of tmr.scenario: built-in scenarios A-D (Caruso 2021 §5), TOML loading, validation errors."""
+"""Tests of tmr.world.scenario: built-in scenarios A-D (Caruso 2021 §5), TOML loading, validation errors."""
 
 from __future__ import annotations
 
@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import shapely
 
-from tmr.environment import Environment
 from tmr.errors import MapError, ParameterError, ScenarioError
-from tmr.scenario import SCENARIO_DIR, Scenario, builtin_scenarios, load_scenario, scenario_from_map
+from tmr.world.environment import Environment
+from tmr.world.scenario import SCENARIO_DIR, Scenario, builtin_scenarios, load_scenario, scenario_from_map
 
-D_MAX = 5.6  # m, tether max horizontal span (tmr.catenary.max_span() with the paper's parameters)
+D_MAX = 5.6  # m, tether max horizontal span (tmr.model.catenary.max_span() with the paper's parameters)
 
 # Hand-made final chains (robots 1 and 2; robot 3 = leader at the goal) showing that every built-in goal can
 # be reached by three straight tethers of at most D_MAX that go round the obstacles.
@@ -43,7 +43,7 @@ def test_builtin_names() -> None:
 
 def test_scenario_e_needs_more_than_three_robots(scenarios: dict[str, Scenario]) -> None:
     """E (tmr's): the straight line is 4 m, the route over the wall's end about 30.4 m, so 3 robots are refused."""
-    from tmr.route import plan_route
+    from tmr.route.route import plan_route
 
     sc = scenarios["E"]
     route = plan_route(sc.environment, sc.base, sc.goal, [[0.5, D_MAX], [1.0, D_MAX]])

@@ -1,4 +1,5 @@
-"""Tests of tmr.splines: the not-a-knot cubic and the cubic Hermite interpolant against their definitions and scipy."""
+"""Tests of tmr.route.splines: the not-a-knot cubic and the cubic Hermite interpolant against their definitions and
+scipy."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import pytest
 from scipy.interpolate import CubicHermiteSpline, CubicSpline, make_interp_spline
 
 from tmr.errors import ParameterError
-from tmr.splines import HermiteSpline, NotAKnotSpline
+from tmr.route.splines import HermiteSpline, NotAKnotSpline
 
 
 def _knots(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:

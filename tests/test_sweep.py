@@ -14,7 +14,6 @@ import pytest
 
 from tmr.errors import InfeasibleStep, TmrError
 from tmr.planner import build_problem, solve
-from tmr.scenario import load_scenario
 from tmr.sweep import (
     LocalExecutor,
     RunSpec,
@@ -30,6 +29,7 @@ from tmr.sweep.cli import main
 from tmr.sweep.grid import SensitivityResult
 from tmr.sweep.moga import Variable, choose, pareto_indices, run_moga
 from tmr.sweep.report import csv_text, heatmap_figure, sensitivity_markdown
+from tmr.world.scenario import load_scenario
 
 #: a short plan: 6 s of the leader's time law (120 steps), a cheap RRT*
 FAST = {"T_end": 6.0, "path_iterations": 200}

@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tmr.chain import Chain
-from tmr.errors import ParameterError
-from tmr.tasks import (
+from tmr.control.tasks import (
     LeaderTracking,
     ObstacleEvasion,
     StepContext,
     TetherRegulation,
     joint_limit_gain_coefficients,
 )
+from tmr.errors import ParameterError
+from tmr.model.chain import Chain
 
 LIMITS = np.array([[0.5, 5.6], [1.0, 5.6], [1.0, 5.6]])
 

@@ -1,4 +1,5 @@
-"""Train references (tmr.train): every state keeps the limits, checked here with shapely directly; the QP falls back
+"""Train references (tmr.route.train): every state keeps the limits, checked here with shapely directly; the QP falls
+back
 to them when the trailing references fail; a stall is a TrainError naming the robot and the limit."""
 
 from __future__ import annotations
@@ -10,10 +11,10 @@ import pytest
 import shapely
 
 from tmr.planner import build_problem, solve, train_problem
-from tmr.references import _anticipate
-from tmr.scenario import load_scenario, scenario_from_map
+from tmr.route.references import _anticipate
+from tmr.route.train import TrainError, TrainLimits, train_reference
 from tmr.sweep.rooms import generate_room, write_geojson
-from tmr.train import TrainError, TrainLimits, train_reference
+from tmr.world.scenario import load_scenario, scenario_from_map
 
 #: A narrow door the shortest route crosses at a slant: the trailing references leave the leader 0.6 m short.
 DOOR_ROOM = (960306805, "narrow", "mid")
@@ -95,7 +96,7 @@ def test_train_is_deterministic(door_problem) -> None:
 
 
 #: Three narrow doors the guide meets at a slant, 6 robots: the train stalls along the guide and along it pulled
-#: taut (a robot in a door, its neighbour round a jamb), and passes along the axial guide (tmr.train._axial).
+#: taut (a robot in a door, its neighbour round a jamb), and passes along the axial guide (tmr.route.train._axial).
 SLANT_ROOM = (3896625273, "narrow", "far")
 
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tmr.chain import Chain
 from tmr.errors import ParameterError
-from tmr.velocity import VelocityMap, robot_pattern
+from tmr.model.chain import Chain
+from tmr.model.velocity import VelocityMap, robot_pattern
 
 
 def chain_and_q(N: int, seed: int) -> tuple[Chain, np.ndarray]:

@@ -1,4 +1,4 @@
-"""tmr.views: --gif / --html / --export on the planners' command lines; stale views are removed."""
+"""tmr.views.flags: --gif / --html / --export on the planners' command lines; stale views are removed."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from PIL import Image
 from rosbags.rosbag2 import Reader
 
 from tests.motion_data import mopick_plan
-from tmr.motion import mcdpr_motion
-from tmr.views import BAG_DIR, GIF_NAME, HTML_NAME, add_view_args, write_views
+from tmr.mcdpr.motion import mcdpr_motion
+from tmr.views.flags import BAG_DIR, GIF_NAME, HTML_NAME, add_view_args, write_views
 
 
 def _args(*argv: str) -> argparse.Namespace:

@@ -27,35 +27,35 @@ from tmr.errors import (
 #: Public names and the module defining each: imported on first use (PEP 562), so ``import tmr`` and the command
 #: lines load only what a run needs (no solver, OMPL or plotting stack for a refused task).
 _LAZY = {
-    "Chain": "tmr.chain",
-    "Plan": "tmr.clik",
-    "run": "tmr.clik",
-    "Environment": "tmr.environment",
-    "Level": "tmr.formulations.qp",
-    "LexicographicQP": "tmr.formulations.qp",
-    "KeepInPolygon": "tmr.limits",
-    "Limit": "tmr.limits",
-    "LimitRows": "tmr.limits",
-    "link_pattern": "tmr.limits",
-    "Metrics": "tmr.metrics",
-    "evaluate": "tmr.metrics",
+    "Chain": "tmr.model.chain",
+    "Plan": "tmr.control.clik",
+    "run": "tmr.control.clik",
+    "Environment": "tmr.world.environment",
+    "Level": "tmr.control.qp",
+    "LexicographicQP": "tmr.control.qp",
+    "KeepInPolygon": "tmr.control.limits",
+    "Limit": "tmr.control.limits",
+    "LimitRows": "tmr.control.limits",
+    "link_pattern": "tmr.control.limits",
+    "Metrics": "tmr.checks.metrics",
+    "evaluate": "tmr.checks.metrics",
     "Problem": "tmr.planner",
     "build_problem": "tmr.planner",
     "check": "tmr.planner",
     "make_pinv": "tmr.planner",
     "make_qp": "tmr.planner",
     "solve": "tmr.planner",
-    "Route": "tmr.route",
-    "plan_route": "tmr.route",
-    "Scenario": "tmr.scenario",
-    "builtin_scenarios": "tmr.scenario",
-    "load_scenario": "tmr.scenario",
-    "LeaderTracking": "tmr.tasks",
-    "ObstacleEvasion": "tmr.tasks",
-    "StepContext": "tmr.tasks",
-    "Task": "tmr.tasks",
-    "TaskRows": "tmr.tasks",
-    "TetherRegulation": "tmr.tasks",
+    "Route": "tmr.route.route",
+    "plan_route": "tmr.route.route",
+    "Scenario": "tmr.world.scenario",
+    "builtin_scenarios": "tmr.world.scenario",
+    "load_scenario": "tmr.world.scenario",
+    "LeaderTracking": "tmr.control.tasks",
+    "ObstacleEvasion": "tmr.control.tasks",
+    "StepContext": "tmr.control.tasks",
+    "Task": "tmr.control.tasks",
+    "TaskRows": "tmr.control.tasks",
+    "TetherRegulation": "tmr.control.tasks",
 }
 
 
@@ -73,16 +73,16 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
-    from tmr.chain import Chain
-    from tmr.clik import Plan, run
-    from tmr.environment import Environment
-    from tmr.formulations.qp import Level, LexicographicQP
-    from tmr.limits import KeepInPolygon, Limit, LimitRows, link_pattern
-    from tmr.metrics import Metrics, evaluate
+    from tmr.checks.metrics import Metrics, evaluate
+    from tmr.control.clik import Plan, run
+    from tmr.control.limits import KeepInPolygon, Limit, LimitRows, link_pattern
+    from tmr.control.qp import Level, LexicographicQP
+    from tmr.control.tasks import LeaderTracking, ObstacleEvasion, StepContext, Task, TaskRows, TetherRegulation
+    from tmr.model.chain import Chain
     from tmr.planner import Problem, build_problem, check, make_pinv, make_qp, solve
-    from tmr.route import Route, plan_route
-    from tmr.scenario import Scenario, builtin_scenarios, load_scenario
-    from tmr.tasks import LeaderTracking, ObstacleEvasion, StepContext, Task, TaskRows, TetherRegulation
+    from tmr.route.route import Route, plan_route
+    from tmr.world.environment import Environment
+    from tmr.world.scenario import Scenario, builtin_scenarios, load_scenario
 
 __version__ = "0.1.0"
 
@@ -127,14 +127,14 @@ __all__ = [
 
 
 def _tmr_command_running() -> bool:
-    """Whether this process runs a tmr command: ``python -m tmr.<command>``, or :func:`tmr.console.run` active."""
+    """Whether this process runs a tmr command: ``python -m tmr.<command>``, or :func:`tmr.io.console.run` active."""
     spec = getattr(sys.modules.get("__main__"), "__spec__", None)
-    console = sys.modules.get("tmr.console")
+    console = sys.modules.get("tmr.io.console")
     return str(getattr(spec, "name", "")).startswith("tmr.") or bool(console and console._state.get("running"))
 
 
 def _ctrl_c_before_run(exc_type: type[BaseException], exc: BaseException, tb: Any) -> None:
-    """``sys.excepthook`` for a Ctrl-C in a ``python -m tmr.<command>`` run before :func:`tmr.console.run` took
+    """``sys.excepthook`` for a Ctrl-C in a ``python -m tmr.<command>`` run before :func:`tmr.io.console.run` took
     over (the command's imports, its argument parsing): the one line ``interrupted`` and exit 130, as later in the
     run, not a traceback and death by SIGINT. Anything else, and any other program, goes to the previous hook."""
     if issubclass(exc_type, KeyboardInterrupt) and _tmr_command_running():

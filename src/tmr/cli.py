@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(entry(args[1:], prog=f"tmr {name}"))  # the tool's messages name it as it was called
     except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
-    except KeyboardInterrupt:  # a tool without tmr.console.run
+    except KeyboardInterrupt:  # a tool without tmr.io.console.run
         print("interrupted", file=sys.stderr)
         return 130
 

@@ -6,14 +6,14 @@ and prints a metrics summary. Inputs are validated before anything is written; a
 directory first and moved into ``--out`` only when every one of them is complete.
 
 Before any motion is planned, the shortest free route from the anchor to the goal tells whether the goal can be
-reached and with how many robots (:mod:`tmr.route`); ``--robots auto`` takes the fewest that plan.
+reached and with how many robots (:mod:`tmr.route.route`); ``--robots auto`` takes the fewest that plan.
 
 One robot radius r (``--robot-radius R``, or ``--set safety_radius=R``; default the scenario's) is used everywhere:
 the obstacles are grown by it, the robots kept 2r apart, the route and the messages use it.
 
-Messages go through :mod:`logging` (``--quiet``, ``--verbose``; ``--debug`` shows tracebacks, :mod:`tmr.console`).
+Messages go through :mod:`logging` (``--quiet``, ``--verbose``; ``--debug`` shows tracebacks, :mod:`tmr.io.console`).
 ``metrics.json`` holds no timing, so two runs with the same inputs write the same bytes; the planner's wall time is
-in ``timings.json``. Outputs are staged and published into ``--out`` in one step (:mod:`tmr.outdir`): a re-used
+in ``timings.json``. Outputs are staged and published into ``--out`` in one step (:mod:`tmr.io.outdir`): a re-used
 ``--out`` keeps no output of an older run (:data:`OWNED_NAMES`), and a file tmr did not write is never replaced or
 removed (such a file under an output's name is refused up front, exit 2).
 
@@ -34,14 +34,14 @@ from typing import Any
 
 import numpy as np
 
-from tmr.cli_args import ArgumentParser, add_common, bounds, count, param, path_arg, point, points, positive_float
-from tmr.console import LOG, progress_enabled
-from tmr.console import run as run_cli
 from tmr.errors import NoPathFound, TmrError
-from tmr.motion import chain_motion
-from tmr.views import VIEW_NAMES, write_views
+from tmr.io.cli_args import ArgumentParser, add_common, bounds, count, param, path_arg, point, points, positive_float
+from tmr.io.console import LOG, progress_enabled
+from tmr.io.console import run as run_cli
+from tmr.views.flags import VIEW_NAMES, write_views
+from tmr.views.motion import chain_motion
 
-#: Every file ``python -m tmr.plan`` writes into ``--out`` besides the views (:data:`tmr.views.VIEW_NAMES`).
+#: Every file ``python -m tmr.plan`` writes into ``--out`` besides the views (:data:`tmr.views.flags.VIEW_NAMES`).
 OUTPUT_NAMES = (
     "trajectories.json",
     "trajectories.csv",
@@ -71,7 +71,7 @@ TIMING_KEYS = (
 )
 #: Every entry of ``--out`` a plan owns: its files, its views, and the physics replay of the plan (``tmr replay``
 #: writes ``replay/``). Those tmr wrote before and a new run does not write are removed when it publishes; an entry
-#: of one of these names that tmr did not write makes the run refuse its ``--out`` (:mod:`tmr.outdir`).
+#: of one of these names that tmr did not write makes the run refuse its ``--out`` (:mod:`tmr.io.outdir`).
 OWNED_NAMES = OUTPUT_NAMES + VIEW_NAMES + ("replay",)
 #: Outputs whose bytes change from run to run (listed in the manifest without a hash).
 VOLATILE_NAMES = ("timings.json",)
@@ -163,7 +163,7 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="override a parameter of tmr.params by its field name, e.g. --set d_min=0.6 (repeatable)",
+        help="override a parameter of tmr.model.params by its field name, e.g. --set d_min=0.6 (repeatable)",
     )
     p.add_argument(
         "--filter-cutoff",
@@ -215,9 +215,9 @@ def load_inputs(args: argparse.Namespace) -> Any:
     """Scenario object from the arguments (built-in, TOML, or map + base + goal)."""
     from dataclasses import replace
 
-    from tmr.scenario import load_scenario, scenario_from_map
+    from tmr.world.scenario import load_scenario, scenario_from_map
 
-    r = robot_radius(args)  # one r: the obstacles are grown by it and the chain keeps it (tmr.scenario)
+    r = robot_radius(args)  # one r: the obstacles are grown by it and the chain keeps it (tmr.world.scenario)
     if args.map:
         if args.scenario:
             raise TmrError("give either --scenario or --map, not both")
@@ -255,10 +255,10 @@ def write_outputs(
     route: Any = None,
     pool: Any = None,
 ) -> list[str]:
-    """Write every output of a plan into the directory ``out`` (a :class:`tmr.outdir.Stage`'s directory when run
+    """Write every output of a plan into the directory ``out`` (a :class:`tmr.io.outdir.Stage`'s directory when run
     from the command line) and return the names written; the figures are rendered by ``pool`` (a
-    :class:`tmr.plotpool.FigurePool`) if given, else here."""
-    from tmr import io
+    :class:`tmr.views.plotpool.FigurePool`) if given, else here."""
+    from tmr.io import outputs as io
 
     start = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
@@ -267,7 +267,7 @@ def write_outputs(
     values = metrics.to_dict() | (extra or {})
     timings = {key: values.pop(key) for key in TIMING_KEYS if key in values}
     io.write_metrics_json(values, out / "metrics.json")
-    from tmr.rundir import write_chain_run
+    from tmr.io.rundir import write_chain_run
 
     write_chain_run(out / "run.json", plan, env, extra)  # scenario, map and tether parameters (tmr.replay)
     names = ["trajectories.json", "trajectories.csv", "metrics.json", "timings.json", "run.json"]
@@ -283,7 +283,7 @@ def write_outputs(
             for name, data in rendered.items():
                 io.atomic_write_bytes(out / name, data)
         else:
-            from tmr import plot
+            from tmr.views import plot
 
             for name, (function, args, kwargs) in figures.items():
                 plot.save_figure(getattr(plot, function)(*args, **kwargs), out / name)
@@ -407,13 +407,14 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
     """The route and the robots it needs, before the planner (and its solvers) are even imported.
 
     Returns the route and the N to plan with (``args.robots``; its N_min for ``auto``). Raises
-    :class:`tmr.route.NoRouteError` / :class:`tmr.route.TooFewRobotsError` / :class:`tmr.route.TooManyRobotsError`
+    :class:`tmr.route.route.NoRouteError` / :class:`tmr.route.route.TooFewRobotsError` /
+    :class:`tmr.route.route.TooManyRobotsError`
     (exit 2) for a task proven impossible: no free route, fewer robots than the route needs, or more than fit in
     the free space at once (before the route search).
     """
-    from tmr.params import ChainParams, PathParams, PinvParams, QPParams, TaskParams, TimeParams, apply_overrides
-    from tmr.route import TooFewRobotsError, check_fit, plan_route
-    from tmr.spans import span_limits
+    from tmr.model.params import ChainParams, PathParams, PinvParams, QPParams, TaskParams, TimeParams, apply_overrides
+    from tmr.model.spans import span_limits
+    from tmr.route.route import TooFewRobotsError, check_fit, plan_route
 
     values = {"safety_radius": scenario.environment.safety_radius} | dict(scenario.params or {}) | dict(args.set)
     rest = dict(values)
@@ -422,7 +423,7 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
         made[cls], rest = apply_overrides(cls(), rest)
     chain_params = made[ChainParams]
     if rest:
-        raise TmrError(f"unknown parameter(s) {sorted(rest)}; the names are the fields of tmr.params")
+        raise TmrError(f"unknown parameter(s) {sorted(rest)}; the names are the fields of tmr.model.params")
     nyquist = 0.5 / made[TimeParams].Ts
     if not args.filter_cutoff < nyquist:  # refused before the route and the plan, not after them
         raise TmrError(
@@ -472,8 +473,8 @@ def _join_negative(argv: list[str]) -> list[str]:
 
 
 def check_out(out: Path) -> None:
-    """Refuse, before any planning, an ``--out`` that cannot take a plan (:func:`tmr.outdir.check_out`)."""
-    from tmr.outdir import check_out as check
+    """Refuse, before any planning, an ``--out`` that cannot take a plan (:func:`tmr.io.outdir.check_out`)."""
+    from tmr.io.outdir import check_out as check
 
     check(out, OWNED_NAMES)
 
@@ -487,12 +488,13 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
 
 
 def _figure_pool(args: argparse.Namespace) -> Any:
-    """Workers that import matplotlib while the plan is computed (:mod:`tmr.plotpool`), when figures are wanted and
+    """Workers that import matplotlib while the plan is computed (:mod:`tmr.views.plotpool`), when figures are wanted
+    and
     there is a core to spare; else None (figures rendered in this process)."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     if args.no_plots or cores < 2:
         return None
-    from tmr.plotpool import FigurePool
+    from tmr.views.plotpool import FigurePool
 
     try:
         return FigurePool()
@@ -516,7 +518,7 @@ def _pooled(pool: Any, figures: dict[str, Any]) -> dict[str, bytes] | None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from tmr.route import RouteVerdict
+    from tmr.route.route import RouteVerdict
 
     try:
         if args.robots == "auto" and args.start is not None:
@@ -540,11 +542,11 @@ def _main(args: argparse.Namespace) -> int:
 
         pool = _figure_pool(args)
         try:
-            from tmr.metrics import filter_within_limits
+            from tmr.checks.metrics import filter_within_limits
 
             auto_note = None
             if args.robots == "auto":
-                from tmr.route import packing_bound
+                from tmr.route.route import packing_bound
 
                 tried = []
                 fit = packing_bound(env, scenario.base).n_max  # no more robots than fit in the free space at once
@@ -581,7 +583,7 @@ def _main(args: argparse.Namespace) -> int:
                 plan, problem.env, problem.time_params.Ts, cutoff_hz=args.filter_cutoff
             )
             extra = _extras(problem, plan, auto_note) | ({"filter_note": filter_note} if filter_note else {}) | timings
-            from tmr.outdir import Stage
+            from tmr.io.outdir import Stage
 
             with Stage(args.out, OWNED_NAMES, VOLATILE_NAMES) as stage:  # everything staged, then one publication
                 write_outputs(
@@ -607,7 +609,7 @@ def _main(args: argparse.Namespace) -> int:
                 pool.close()
     except (RouteVerdict, NoPathFound) as exc:  # a verdict of a search (not proven impossible): exit 1
         if getattr(exc, "proven", False):
-            raise  # a TmrError: one line, exit 2 (tmr.console.run)
+            raise  # a TmrError: one line, exit 2 (tmr.io.console.run)
         LOG.error("no plan found: %s", exc)
         return 1
     if auto_note:

@@ -1,8 +1,8 @@
 """From a scenario to a checked plan: scenario → route → chain, limits, start → references → formulation → plan →
 checks → metrics.
 
-The route (:mod:`tmr.route`) comes first: a goal with no free route, or a chain with fewer robots than the route
-needs, is refused before any motion is planned (:class:`tmr.route.NoRouteError`, :class:`TooFewRobotsError`).
+The route (:mod:`tmr.route.route`) comes first: a goal with no free route, or a chain with fewer robots than the route
+needs, is refused before any motion is planned (:class:`tmr.route.route.NoRouteError`, :class:`TooFewRobotsError`).
 
 This is the library entry point behind ``python -m tmr.plan``::
 
@@ -21,27 +21,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tmr.chain import Chain
-from tmr.clik import Formulation, Plan, run
-from tmr.errors import ParameterError, PathError, ScenarioError, fmt_point
-from tmr.limits import JointBox, Limit, ObstacleClearance, RobotAcceleration, RobotSeparation, RobotSpeed
-from tmr.metrics import Metrics, evaluate, fitness
-from tmr.params import (
-    ChainParams,
-    PathParams,
-    PinvParams,
-    QPParams,
-    TaskParams,
-    TimeParams,
-    apply_overrides,
-    as_dict,
-)
-from tmr.path import Trajectory, leader_trajectory, path_length, plan_leader_path, time_law
-from tmr.references import ChainReference, chain_reference, start_placement
-from tmr.route import Route, TooFewRobotsError, check_fit, plan_route
-from tmr.scenario import Scenario
-from tmr.spans import span_limits
-from tmr.tasks import (
+from tmr.checks.metrics import Metrics, evaluate, fitness
+from tmr.control.clik import Formulation, Plan, run
+from tmr.control.limits import JointBox, Limit, ObstacleClearance, RobotAcceleration, RobotSeparation, RobotSpeed
+from tmr.control.tasks import (
     Damping,
     LeaderTracking,
     ObstacleEvasion,
@@ -51,10 +34,27 @@ from tmr.tasks import (
     Task,
     TetherRegulation,
 )
+from tmr.errors import ParameterError, PathError, ScenarioError, fmt_point
+from tmr.model.chain import Chain
+from tmr.model.params import (
+    ChainParams,
+    PathParams,
+    PinvParams,
+    QPParams,
+    TaskParams,
+    TimeParams,
+    apply_overrides,
+    as_dict,
+)
+from tmr.model.spans import span_limits
+from tmr.route.path import Trajectory, leader_trajectory, path_length, plan_leader_path, time_law
+from tmr.route.references import ChainReference, chain_reference, start_placement
+from tmr.route.route import Route, TooFewRobotsError, check_fit, plan_route
+from tmr.world.scenario import Scenario
 
 if TYPE_CHECKING:  # the formulations import their solvers (osqp, qpsolvers): loaded by the method that runs
-    from tmr.formulations.pinv import PinvController
-    from tmr.formulations.qp import Level, LexicographicQP
+    from tmr.control.pinv import PinvController
+    from tmr.control.qp import Level, LexicographicQP
 
 Array = NDArray[np.float64]
 
@@ -125,7 +125,7 @@ def default_start(
 
 
 def _anchor_path(env: Any, base: Array, goal: Array, *, seed: int, iterations: int, clearance: float) -> Array | None:
-    """The RRT* path from the anchor to the goal (:func:`tmr.path.plan_leader_path`), or None if it finds none."""
+    """The RRT* path from the anchor to the goal (:func:`tmr.route.path.plan_leader_path`), or None if it finds none."""
     try:
         return plan_leader_path(env, base, goal, seed=seed, iterations=iterations, clearance=clearance)
     except PathError:
@@ -203,7 +203,7 @@ def build_problem(
     Raises:
         NoRouteError: the goal is not connected to the anchor through free space.
         TooFewRobotsError: N < the robots the route needs (checked before any motion planning).
-        TooManyRobotsError: N robots do not fit in the free space at once (:func:`tmr.route.check_fit`).
+        TooManyRobotsError: N robots do not fit in the free space at once (:func:`tmr.route.route.check_fit`).
     """
     if route not in ROUTES:
         raise ParameterError(f"unknown route {route!r}; available: {', '.join(ROUTES)}")
@@ -331,7 +331,8 @@ def _trajectory_along(
     env: Any, waypoints: Array, time_params: TimeParams, path_params: PathParams
 ) -> Trajectory | None:
     """The leader's B-spline time law over T_end (Caruso 2021 §4.2) along ``waypoints`` already planned, with the
-    spline clearance :func:`tmr.path.leader_trajectory` uses; None if the path is too short or no spline through it
+    spline clearance :func:`tmr.route.path.leader_trajectory` uses; None if the path is too short or no spline through
+    it
     keeps that clearance (the caller then plans the leader's own RRT* path)."""
     if len(waypoints) < 2 or path_length(waypoints) <= 1e-9:
         return None
@@ -407,7 +408,7 @@ def make_pinv(problem: Problem, extra_tasks: tuple[Task, ...] = ()) -> PinvContr
 
     ``extra_tasks`` are appended to the priority stack after the obstacle task (eq. 5), highest first.
     """
-    from tmr.formulations.pinv import PinvController
+    from tmr.control.pinv import PinvController
 
     p = problem.pinv_params
     leader, tether = make_tasks(problem)
@@ -428,10 +429,10 @@ def make_qp(
     """The lexicographic QP with hard clearance, span, separation and speed limits (``formulations/qp.md``).
 
     ``extra_limits`` are added to the hard limits of every level; ``extra_levels`` are inserted after the leader
-    level (so they outrank tether regulation and energy), highest first. Train references (:mod:`tmr.train`, every
+    level (so they outrank tether regulation and energy), highest first. Train references (:mod:`tmr.route.train`, every
     state checked) are tracked in a level of their own after those; trailing ones are a task of the tether level.
     """
-    from tmr.formulations.qp import Level, LexicographicQP
+    from tmr.control.qp import Level, LexicographicQP
 
     p, chain = problem.qp_params, problem.chain
     leader, tether = make_tasks(problem)
@@ -494,7 +495,7 @@ def formulation(problem: Problem, method: str | Formulation) -> Formulation:
 
 
 def plan(problem: Problem, method: str | Formulation = "pinv", *, progress: bool = False) -> Plan:
-    """Run ``method`` along the problem's leader trajectory (:func:`tmr.clik.run`); the plan is not checked yet.
+    """Run ``method`` along the problem's leader trajectory (:func:`tmr.control.clik.run`); the plan is not checked yet.
     ``progress``: a bar of the steps on stderr once the run takes 2 s."""
     return run(
         problem.chain,
@@ -543,7 +544,7 @@ def solve(
         result, metrics = _checked(problem, method, progress)
         return _whole(result, metrics, start)
     # a whole-trajectory NLP, not a per-step formulation
-    from tmr.formulations.horizon import DEFAULT_TIME_LIMIT, HorizonInfeasible, plan_horizon  # casadi: when used
+    from tmr.control.horizon import DEFAULT_TIME_LIMIT, HorizonInfeasible, plan_horizon  # casadi: when used
 
     problem, warm, warm_metrics = _horizon_warm_start(problem, progress)
     qp_done = time.perf_counter()
@@ -584,11 +585,11 @@ def _checked(problem: Problem, method: str | Formulation, progress: bool) -> tup
 
 
 def train_problem(problem: Problem) -> Problem:
-    """``problem`` with train references (:mod:`tmr.train`: one robot at a time, every state checked) in place of
+    """``problem`` with train references (:mod:`tmr.route.train`: one robot at a time, every state checked) in place of
     its trailing ones: same route, start and stations; the leader's trajectory and the duration come from the
     train. The train keeps the QP's own limits plus a little (clearance d_safe + 5 mm, separation 2r + margin +
-    5 mm, spans ≥ d_lo + span margin). Raises :class:`tmr.train.TrainError` if the train stalls."""
-    from tmr.train import TRAIN_CLEARANCE, TrainLimits, train_reference
+    5 mm, spans ≥ d_lo + span margin). Raises :class:`tmr.route.train.TrainError` if the train stalls."""
+    from tmr.route.train import TRAIN_CLEARANCE, TrainLimits, train_reference
 
     if problem.references is None:
         raise ParameterError("train references need a route-guided problem (route='shortest')")
@@ -654,7 +655,7 @@ def _solve_qp(problem: Problem, progress: bool) -> tuple[Problem, Plan, Metrics]
     ref = problem.references
     if ref is None or result.success or ref.mode != "trail" or problem.fixed_duration or problem.chain.n_robots < 2:
         return problem, result, metrics
-    from tmr.train import TrainError
+    from tmr.route.train import TrainError
 
     first = str(result.failure).split(";")[0]
     try:

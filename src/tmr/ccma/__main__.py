@@ -33,12 +33,12 @@ from typing import Any
 
 import numpy as np
 
-from tmr.cli_args import ArgumentParser, add_common, count, path_arg
-from tmr.cli_args import positive_float as _positive
-from tmr.console import LOG, add_manners, progress_enabled
-from tmr.console import run as run_cli
-from tmr.motion import ccma_track_motion
-from tmr.views import VIEW_NAMES, write_views
+from tmr.ccma.motion import ccma_track_motion
+from tmr.io.cli_args import ArgumentParser, add_common, count, path_arg
+from tmr.io.cli_args import positive_float as _positive
+from tmr.io.console import LOG, add_manners, progress_enabled
+from tmr.io.console import run as run_cli
+from tmr.views.flags import VIEW_NAMES, write_views
 
 TRAJECTORY_FORMAT = "tmr-ccma-trajectory/1"
 #: Every file name ``run`` may write into ``--out``.
@@ -46,7 +46,7 @@ OUTPUT_NAMES = ("trajectory.csv", "trajectory.json", "summary.json", "mechanism.
 #: Every entry of ``--out`` a run owns (its files and views): those tmr wrote before and a run does not produce are
 #: removed when it publishes, so no file of an earlier run survives next to the new ones; other files are never
 #: touched, and a file tmr did not write under one of these names makes the run refuse its ``--out``
-#: (:mod:`tmr.outdir`).
+#: (:mod:`tmr.io.outdir`).
 OWNED_NAMES = OUTPUT_NAMES + VIEW_NAMES
 
 
@@ -155,10 +155,10 @@ def run(args: argparse.Namespace) -> int:
     from tmr.ccma.reach import check_reach, height_range
     from tmr.ccma.sim import end_effector_pose, reference_state
     from tmr.ccma.system import described_system
-    from tmr.metrics import json_safe
+    from tmr.checks.metrics import json_safe
 
     # ---- validate and compute everything before writing
-    from tmr.outdir import check_out
+    from tmr.io.outdir import check_out
 
     out = check_out(Path(args.out), OWNED_NAMES)
     desc, system = described_system(args.description or args.example)
@@ -327,18 +327,18 @@ def _write_outputs(
     out: Path, texts: dict[str, str], figures: dict[str, Any] | None = None, views: Any = None
 ) -> list[str]:
     """Stage the files (``views(directory)`` writes the views asked for) and publish them into ``out`` in one step
-    (:mod:`tmr.outdir`: outputs of an earlier run this one does not produce are removed, other files left alone);
+    (:mod:`tmr.io.outdir`: outputs of an earlier run this one does not produce are removed, other files left alone);
     return the names written."""
     from tmr.ccma.errors import CcmaError
-    from tmr.io import atomic_write_text
-    from tmr.outdir import Stage
+    from tmr.io.outdir import Stage
+    from tmr.io.outputs import atomic_write_text
 
     try:
         with Stage(out, OWNED_NAMES) as stage:
             for name, text in texts.items():
                 atomic_write_text(stage.path / name, text)
             if figures:
-                from tmr.plot import save_figure
+                from tmr.views.plot import save_figure
 
                 for name, fig in figures.items():
                     save_figure(fig, stage.path / name)

@@ -4,15 +4,15 @@ Reads the output directory of ``tmr.plan``, ``tmr.mcdpr plan`` or ``tmr.ccma run
 
 * ``--format mcap`` (default) or ``sqlite3``: a ROS 2 bag (rosbag2 directory, written with ``rosbags``, no ROS
   installation needed) — topics and types in :mod:`tmr.export.rosbag` — default ``RUN_DIR/ros2_bag``;
-* ``--format gif``: the animation (:mod:`tmr.animate`), default ``RUN_DIR/motion.gif``;
-* ``--format html``: the interactive view (:mod:`tmr.htmlview`), default ``RUN_DIR/motion.html``.
+* ``--format gif``: the animation (:mod:`tmr.views.animate`), default ``RUN_DIR/motion.gif``;
+* ``--format html``: the interactive view (:mod:`tmr.views.htmlview`), default ``RUN_DIR/motion.html``.
 
 Open the bag in Foxglove (File → Open local file → ``ros2_bag/ros2_bag.mcap``) or play it with
 ``ros2 bag play RUN_DIR/ros2_bag`` (ROS 2 Jazzy or newer; MCAP storage plugin).
 
 Exit codes: 0 written; 2 bad input (not a run directory, an older run without ``run.json``, an ``--out`` that is
 a file or a non-bag directory, or an existing ``--out`` tmr did not write; one line on stderr, nothing written);
-130 interrupted (Ctrl-C). The export is staged beside ``--out`` and published in one rename (:mod:`tmr.outdir`), so
+130 interrupted (Ctrl-C). The export is staged beside ``--out`` and published in one rename (:mod:`tmr.io.outdir`), so
 nothing half-written is ever left, and it replaces only an earlier export that tmr wrote. A progress bar on a
 terminal.
 """
@@ -23,10 +23,10 @@ import argparse
 import sys
 from pathlib import Path
 
-from tmr.cli_args import ArgumentParser, add_common, path_arg, positive_float
-from tmr.console import LOG, progress_enabled
-from tmr.console import run as run_cli
 from tmr.errors import TmrError
+from tmr.io.cli_args import ArgumentParser, add_common, path_arg, positive_float
+from tmr.io.console import LOG, progress_enabled
+from tmr.io.console import run as run_cli
 
 FORMATS = ("mcap", "sqlite3", "gif", "html")
 
@@ -72,7 +72,7 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
 
 
 def _default_out(run_dir: Path, fmt: str) -> Path:
-    from tmr.views import BAG_DIR, GIF_NAME, HTML_NAME
+    from tmr.views.flags import BAG_DIR, GIF_NAME, HTML_NAME
 
     return run_dir / {"gif": GIF_NAME, "html": HTML_NAME}.get(fmt, BAG_DIR)
 
@@ -80,8 +80,8 @@ def _default_out(run_dir: Path, fmt: str) -> Path:
 def check_out(out: Path, fmt: str) -> None:
     """Refuse before reading anything an ``--out`` that cannot take the export (TmrError, exit 2): a bag is a
     directory, a GIF or HTML view a file, and an existing ``--out`` is replaced only if tmr wrote it
-    (:func:`tmr.outdir.check_out`)."""
-    from tmr.outdir import check_out as check
+    (:func:`tmr.io.outdir.check_out`)."""
+    from tmr.io.outdir import check_out as check
 
     if fmt in ("mcap", "sqlite3"):
         if out.exists() and not out.is_dir():
@@ -110,9 +110,9 @@ def _main(args: argparse.Namespace) -> int:
     from tmr.export.runs import load_motion
 
     motion = load_motion(run_dir, rate=args.rate, trajectory=args.trajectory, description=args.description)
-    from tmr.outdir import Stage
+    from tmr.io.outdir import Stage
 
-    with Stage(out, file=True) as stage:  # staged beside --out, then one rename (tmr.outdir)
+    with Stage(out, file=True) as stage:  # staged beside --out, then one rename (tmr.io.outdir)
         staged = stage.path / out.name
         if args.format in ("mcap", "sqlite3"):
             from tmr.export.rosbag import topics, write_bag
@@ -120,12 +120,12 @@ def _main(args: argparse.Namespace) -> int:
             write_bag(motion, staged, storage=args.format, progress=progress_enabled())
             what = f"ROS 2 bag ({args.format}, {len(topics(motion))} topics, {motion.n_samples} samples)"
         elif args.format == "gif":
-            from tmr.animate import frame_indices, write_gif
+            from tmr.views.animate import frame_indices, write_gif
 
             write_gif(motion, staged, progress=progress_enabled())
             what = f"animation ({len(frame_indices(motion))} frames, {staged.stat().st_size / 1e6:.2f} MB)"
         else:
-            from tmr.htmlview import write_html
+            from tmr.views.htmlview import write_html
 
             write_html(motion, staged)
             what = f"interactive view ({staged.stat().st_size / 1e6:.2f} MB)"

@@ -1,4 +1,4 @@
-"""A :class:`tmr.motion.Motion` as a ROS 2 bag (rosbag2, MCAP storage) written with the ``rosbags`` library.
+"""A :class:`tmr.views.motion.Motion` as a ROS 2 bag (rosbag2, MCAP storage) written with the ``rosbags`` library.
 
 No ROS installation is needed: messages are serialised to CDR with the ROS 2 Jazzy type definitions shipped in
 ``rosbags``. Topics (frame ``map``; every stamp is the plan's time t_k, stored as ``round(t_k · 1e9)`` ns):
@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from tmr.motion import OBSTACLE_HEIGHT, Motion
+from tmr.views.motion import OBSTACLE_HEIGHT, Motion
 
 __all__ = ["FRAME", "TOPIC_TYPES", "stamp_ns", "topics", "write_bag"]
 

@@ -1,6 +1,6 @@
-"""Run directories → :class:`tmr.motion.Motion`: what ``python -m tmr.export`` reads.
+"""Run directories → :class:`tmr.views.motion.Motion`: what ``python -m tmr.export`` reads.
 
-* a ``tmr.plan`` directory (``run.json`` kind ``chain`` + ``trajectories.json``, :func:`tmr.rundir.load_run`): the
+* a ``tmr.plan`` directory (``run.json`` kind ``chain`` + ``trajectories.json``, :func:`tmr.io.rundir.load_run`): the
   robots, the anchor, the goal, the recorded obstacle polygons (raw and grown) and the tether parameters, so the
   catenaries are those the plan was checked with;
 * a ``tmr.mcdpr plan`` directory (``run.json`` kind ``mcdpr`` + ``plan.json``): robot, scene, sampled bases,
@@ -15,12 +15,11 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from tmr.errors import TmrError
-from tmr.motion import Motion
+from tmr.views.motion import Motion
 
 __all__ = ["ExportError", "load_motion"]
 
@@ -32,40 +31,12 @@ class ExportError(TmrError):
     """A run directory cannot be exported (one-line message)."""
 
 
-def _chain(run: Any, trajectory: str) -> Motion:
-    from tmr.motion import tethered_chain
-
-    rec = run.record
-    robots = run.filtered if trajectory == "filtered" else run.robots
-    verdict = "" if rec.get("success", True) else " — FAILED"
-    what = "filtered trajectory" if trajectory == "filtered" else f"{run.n_robots} tethered robots"
-    return tethered_chain(
-        t=run.t,
-        robots=robots,
-        anchor=run.anchor,
-        goal=run.goal,
-        radius=run.robot_radius,
-        cat=run.catenary_params(),
-        obstacles=tuple(run.obstacles),
-        inflated=tuple(run.grown),
-        bounds=run.bounds,
-        title=f"Scenario {rec['scenario']}, {rec['method']}: {what}{verdict}",
-        view=run.known_free,
-    )
-
-
-def _mcdpr(run: Any, rate: float) -> Motion:
-    from tmr.motion import mcdpr_motion
-
-    return mcdpr_motion(run.robot(), run.scene(), run, rate=rate)
-
-
 def _ccma(path: Path, rate: float, description: str | None) -> Motion:
     from tmr.ccma.energy import EnergyModel
+    from tmr.ccma.motion import ccma_motion
     from tmr.ccma.plot import body_segments
     from tmr.ccma.sim import agent_poses, end_effector_pose, reference_state, simulate
     from tmr.ccma.system import build_system, load_description
-    from tmr.motion import ccma_motion
 
     where = str(path)
     try:
@@ -125,15 +96,12 @@ def load_motion(
     checked plan, default) or ``"filtered"`` (the low-passed positions the robots track) for chain runs;
     ``description`` the CCMA system file of a run not made from a shipped example.
     """
-    from tmr.outdir import is_complete
-    from tmr.rundir import load_run
+    from tmr.io.outdir import is_complete
+    from tmr.io.rundir import load_run
 
     p = Path(path)
     if p.is_dir() and not is_complete(p):
         raise ExportError(f"{p} was being written when its run was stopped (its files may mix two runs); rerun it")
     if p.is_dir() and not (p / "run.json").exists() and (p / "trajectory.json").is_file():
         return _ccma(p, rate, description)
-    run = load_run(p)
-    if run.kind == "chain":
-        return _chain(run, trajectory)
-    return _mcdpr(run, rate)
+    return load_run(p).motion(rate=rate, trajectory=trajectory)  # each kind builds its own Motion

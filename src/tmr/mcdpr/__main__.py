@@ -4,7 +4,7 @@ Plans a MoPICK-type MCDPR task with the two-stage planner (Rasheed 2019 sec. 5),
 tensions within the tipping-tightened bounds, no base collision), and writes ``plan.json``, ``bases.csv``,
 ``platform.csv`` and the figures ``topview.png``, ``mu.png``, ``tensions.png`` into ``--out``. Inputs are validated
 before anything is written (``--out`` must be, or become, a directory, and hold no file tmr did not write under an
-output's name); the files are staged and published into ``--out`` in one step (:mod:`tmr.outdir`): outputs an older
+output's name); the files are staged and published into ``--out`` in one step (:mod:`tmr.io.outdir`): outputs an older
 run wrote in ``--out`` that this run does not produce (e.g. the figures after ``--no-plots``) are removed, other
 files are never touched. The planner is deterministic (no random choices): same inputs, same bytes.
 
@@ -26,13 +26,13 @@ from typing import Any
 
 import numpy as np
 
-from tmr.cli_args import ArgumentParser, add_common, count, path_arg, points
-from tmr.cli_args import positive_float as _positive
-from tmr.console import LOG, progress_enabled
-from tmr.console import run as run_cli
 from tmr.errors import TmrError, fmt_point
-from tmr.motion import mcdpr_motion
-from tmr.views import VIEW_NAMES, write_views
+from tmr.io.cli_args import ArgumentParser, add_common, count, path_arg, points
+from tmr.io.cli_args import positive_float as _positive
+from tmr.io.console import LOG, progress_enabled
+from tmr.io.console import run as run_cli
+from tmr.mcdpr.motion import mcdpr_motion
+from tmr.views.flags import VIEW_NAMES, write_views
 
 PLAN_FORMAT = "tmr-mcdpr-plan/1"
 
@@ -125,9 +125,9 @@ def _inputs(args: argparse.Namespace) -> tuple[Path, Any, Any]:
     of a ``plan`` or ``workspace`` run; TmrError (exit 2) on bad input."""
     import dataclasses
 
+    from tmr.io.outdir import check_out
     from tmr.mcdpr.robot import load_robot, mopick
     from tmr.mcdpr.scene import load_scene
-    from tmr.outdir import check_out
 
     out = Path(args.out)
     check_out(out, OWNED_NAMES if args.command == "plan" else WORKSPACE_NAMES)
@@ -143,7 +143,7 @@ def workspace_main(args: argparse.Namespace) -> int:
     written)."""
     import dataclasses
 
-    from tmr.io import atomic_write_text
+    from tmr.io.outputs import atomic_write_text
     from tmr.mcdpr.capacity import required_wrench_set
     from tmr.mcdpr.plot import plot_workspace
     from tmr.mcdpr.workspace import workspace
@@ -177,9 +177,9 @@ def workspace_main(args: argparse.Namespace) -> int:
             "mu_max_at": [float(ws.x[k % len(ws.x)]), float(ws.y[k // len(ws.x)])],
         }
         X, Y = np.meshgrid(ws.x, ws.y)
-        from tmr.outdir import Stage
+        from tmr.io.outdir import Stage
 
-        with Stage(out, WORKSPACE_NAMES) as stage:  # staged, then published in one step (tmr.outdir)
+        with Stage(out, WORKSPACE_NAMES) as stage:  # staged, then published in one step (tmr.io.outdir)
             tmp = stage.path
             atomic_write_text(tmp / "workspace.json", json.dumps(_jsonable(summary), indent=1, sort_keys=True) + "\n")
             floats = np.column_stack([X.ravel(), Y.ravel(), ws.mu.ravel()])
@@ -289,14 +289,14 @@ def write_outputs(
     out: Path, robot: Any, scene: Any, env: Any, params: Any, result: Any, chk: Any, plots: bool
 ) -> list[str]:
     """Write every output of a plan into the directory ``out`` (the staging directory of a
-    :class:`tmr.outdir.Stage` from the command line); return the names written."""
-    from tmr.io import atomic_write_text
+    :class:`tmr.io.outdir.Stage` from the command line); return the names written."""
+    from tmr.io.outputs import atomic_write_text
 
     tmp = Path(out)
     tmp.mkdir(parents=True, exist_ok=True)
     text = json.dumps(plan_dict(robot, scene, params, result, chk), indent=1, sort_keys=True)
     atomic_write_text(tmp / "plan.json", text + "\n")
-    from tmr.rundir import write_mcdpr_run
+    from tmr.mcdpr.rundir import write_mcdpr_run
 
     write_mcdpr_run(tmp / "run.json", robot, scene, params)  # robot and scene geometry (tmr.replay)
     T, p = result.bases.shape[:2]
@@ -375,10 +375,10 @@ def _main(args: argparse.Namespace) -> int:
             result.tensions = distribute(args.tension, cap.W, weight, cap.lo, cap.hi)
             result.tension_method = args.tension
         chk = check(robot, env, result)
-        from tmr.outdir import Stage
+        from tmr.io.outdir import Stage
 
         try:
-            with Stage(out, OWNED_NAMES) as stage:  # staged, then published in one step (tmr.outdir)
+            with Stage(out, OWNED_NAMES) as stage:  # staged, then published in one step (tmr.io.outdir)
                 write_outputs(stage.path, robot, scene, env, params, result, chk, not args.no_plots)
                 write_views(args, stage.path, lambda: mcdpr_motion(robot, scene, result))
                 names = stage.publish()

@@ -32,7 +32,6 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import BSpline
 
-from tmr.environment import Environment
 from tmr.errors import fmt_point
 from tmr.mcdpr.capacity import capacity, required_wrench_set
 from tmr.mcdpr.capacity_hull import box_rows
@@ -40,6 +39,7 @@ from tmr.mcdpr.errors import InfeasibleWrench, ParameterError
 from tmr.mcdpr.robot import Robot
 from tmr.mcdpr.scene import Scene, waypoints
 from tmr.mcdpr.tension import TensionProblem, closed_form_batch
+from tmr.world.environment import Environment
 
 __all__ = ["Plan", "PlannerParams", "base_search", "check", "plan", "platform_search", "smooth_paths"]
 

@@ -13,10 +13,10 @@ import shapely  # noqa: E402
 from matplotlib.patches import Circle  # noqa: E402
 from matplotlib.patches import Polygon as MplPolygon
 
-from tmr.environment import Environment  # noqa: E402
 from tmr.mcdpr.planner import Plan  # noqa: E402
 from tmr.mcdpr.robot import Robot  # noqa: E402
 from tmr.mcdpr.scene import Scene  # noqa: E402
+from tmr.world.environment import Environment  # noqa: E402
 
 __all__ = ["plot_mu", "plot_tensions", "plot_topview", "plot_workspace"]
 

@@ -1,7 +1,8 @@
 """Planning scene of an MCDPR task: room, tables, cylindrical obstacles, task and way-points (Rasheed 2019 sec. 4).
 
 Obstacles (tables as rectangles, obstacles as discs; shapely) are inflated by the base radius r_mb (the "safe region
-around obstacles" of Rasheed 2019 Fig. 2) through :class:`tmr.environment.Environment`, so a base is a point that must
+around obstacles" of Rasheed 2019 Fig. 2) through :class:`tmr.world.environment.Environment`, so a base is a point that
+must
 stay in the free space. The platform passes over the tables (it flies above them), the bases must not. Way-points are
 the task points (above tables: pick/place) plus intermediate points between consecutive task points, each shifted
 sideways to maximise its distance to the nearest (raw) obstacle (Rasheed 2019 sec. 4).
@@ -35,10 +36,10 @@ from shapely import affinity
 from shapely.geometry import Point, box
 from shapely.geometry.base import BaseGeometry
 
-from tmr.environment import Environment
 from tmr.errors import TmrError
 from tmr.mcdpr.errors import ScenarioError
 from tmr.mcdpr.robot import Robot
+from tmr.world.environment import Environment
 
 if sys.version_info >= (3, 11):
     import tomllib

@@ -7,7 +7,7 @@ verdict.
 Exit codes: 0 the replay confirms the plan (every check passed); 1 it does not (the first reason printed: which
 check, when, where, by how much); 2 bad input (a missing, older or corrupt run directory, a bad option, an
 ``--out`` that cannot take the replay): one line on stderr, nothing written. The outputs are staged and published
-into ``--out`` in one step (:mod:`tmr.outdir`).
+into ``--out`` in one step (:mod:`tmr.io.outdir`).
 """
 
 from __future__ import annotations
@@ -19,10 +19,10 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from tmr.cli_args import ArgumentParser, add_common, count, path_arg, positive_float
-from tmr.console import LOG, progress_enabled
-from tmr.console import run as run_command
 from tmr.errors import TmrError
+from tmr.io.cli_args import ArgumentParser, add_common, count, path_arg, positive_float
+from tmr.io.console import LOG, progress_enabled
+from tmr.io.console import run as run_command
 
 #: Every file ``tmr replay`` may write into its ``--out`` (chain and MoPICK replays).
 OWNED_NAMES = (
@@ -158,14 +158,14 @@ def _mcdpr(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
-    """Exit code (module docstring); messages through logging (``tmr.console``: --quiet, --verbose, --debug, one
+    """Exit code (module docstring); messages through logging (``tmr.io.console``: --quiet, --verbose, --debug, one
     line per error, Ctrl-C exits 130); ``prog``: the name messages use (``tmr replay`` through the dispatcher)."""
     return run_command(_main, build_parser(prog).parse_args(argv))
 
 
 def _main(args: argparse.Namespace) -> int:
-    from tmr.outdir import Stage, check_out
-    from tmr.rundir import RunDirError, load_run
+    from tmr.io.outdir import Stage, check_out
+    from tmr.io.rundir import RunDirError, load_run
 
     out = check_out(Path(args.out) if args.out else Path(args.run) / "replay", OWNED_NAMES)  # first: exit 2 at once
     try:

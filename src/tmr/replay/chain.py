@@ -9,7 +9,7 @@ robot j-1's exit point (the anchor for j = 1).
 
 :func:`replay_chain` steps the model over the plan and records, at every plan sample, the robots' positions, each
 tether's lowest point, paid-out length and end tensions next to the static catenary of the same ends
-(:func:`tmr.catenary.solve`), and every contact of the physics steps (tether-obstacle, tether-floor,
+(:func:`tmr.model.catenary.solve`), and every contact of the physics steps (tether-obstacle, tether-floor,
 robot-obstacle, robot-robot).
 """
 
@@ -145,7 +145,7 @@ CONTACT_KINDS = ("robot-obstacle", "robot-robot", "tether-obstacle", "tether-flo
 
 
 def build_chain_model(run: Any, cfg: ReplayConfig, track: Array | None = None) -> ChainModel:
-    """Compile the MuJoCo model of a :class:`tmr.rundir.ChainRun` (robots start at the tracked trajectory's first
+    """Compile the MuJoCo model of a :class:`tmr.io.rundir.ChainRun` (robots start at the tracked trajectory's first
     sample, yaw 0)."""
     import mujoco
 
@@ -284,13 +284,13 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
     """Simulate the run's plan in MuJoCo and measure it (see the module docstring).
 
     Args:
-        run: a :class:`tmr.rundir.ChainRun`.
+        run: a :class:`tmr.io.rundir.ChainRun`.
         cfg: replay choices.
         progress: optional callable(fraction) called every plan sample.
     """
     import mujoco
 
-    from tmr.catenary import solve
+    from tmr.model.catenary import solve
 
     cfg = cfg or ReplayConfig()
     if cfg.track not in ("filtered", "raw"):

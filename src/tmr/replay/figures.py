@@ -1,5 +1,5 @@
 """Figures of a replay (matplotlib, Agg): tether heights and tensions against the catenary, tracking errors,
-planned and simulated paths over the map. Every figure is written with :func:`tmr.plot.save_figure`."""
+planned and simulated paths over the map. Every figure is written with :func:`tmr.views.plot.save_figure`."""
 
 from __future__ import annotations
 
@@ -124,7 +124,7 @@ def chain_figures(out: Path, rp: Any, run: Any) -> list[str]:
     """Write the four PNG figures of a chain replay into ``out``; return their names."""
     import matplotlib.pyplot as plt
 
-    from tmr.plot import save_figure
+    from tmr.views.plot import save_figure
 
     label = f"MuJoCo replay: {run.label}"
     figs = {

@@ -73,7 +73,7 @@ def write_gif(frames: list[Any], path: Path) -> None:
     """Frames (PIL images) to an animated GIF at :data:`FPS`, written atomically."""
     import io
 
-    from tmr.io import atomic_write_bytes
+    from tmr.io.outputs import atomic_write_bytes
 
     buf = io.BytesIO()
     frames[0].save(buf, format="GIF", save_all=True, append_images=frames[1:], duration=int(1000 / FPS), loop=0)

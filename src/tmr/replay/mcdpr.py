@@ -263,7 +263,7 @@ def _tilt(quat: Array) -> float:
 
 
 def replay_mcdpr(run: Any, cfg: McdprConfig | None = None, robot: Any = None, progress: Any = None) -> McdprReplay:
-    """Simulate a :class:`tmr.rundir.McdprRun` (``robot`` overrides the run's robot, e.g. a heavier platform);
+    """Simulate a :class:`tmr.mcdpr.rundir.McdprRun` (``robot`` overrides the run's robot, e.g. a heavier platform);
     ``progress``: optional callable(fraction) called every plan sample."""
     import mujoco
     from scipy.optimize import lsq_linear
@@ -656,7 +656,7 @@ def mcdpr_figures(out: Path, rp: McdprReplay, run: Any) -> list[str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from tmr.plot import save_figure
+    from tmr.views.plot import save_figure
 
     fig, ax = plt.subplots(3, 1, figsize=(8.0, 8.5), sharex=True)
     ax[0].plot(rp.t, 1000 * rp.platform_error, color="k")
@@ -684,7 +684,7 @@ def mcdpr_figures(out: Path, rp: McdprReplay, run: Any) -> list[str]:
 
 
 def write_mcdpr_outputs(out: Path, rp: McdprReplay, run: Any, plots: bool = True, gif: bool = False) -> list[str]:
-    from tmr.io import atomic_write_text
+    from tmr.io.outputs import atomic_write_text
     from tmr.replay.report import _dump, write_timing
 
     out.mkdir(parents=True, exist_ok=True)

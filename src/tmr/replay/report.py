@@ -184,7 +184,7 @@ def chain_document(rp: ChainReplay, run: Any, verdict: Verdict) -> dict[str, Any
 
 
 def _dump(doc: dict[str, Any]) -> str:
-    from tmr.io import _dumps_readable
+    from tmr.io.outputs import _dumps_readable
 
     return _dumps_readable(_f_tree(doc)) + "\n"
 
@@ -198,7 +198,7 @@ def _f_tree(x: Any) -> Any:
 def write_timing(out: Path, rp: Any) -> None:
     """``timing.json``: wall, CPU and simulated time [s] of a chain or MoPICK replay and its real-time factors (kept
     apart from ``replay.json``, which is the same bytes for the same plan)."""
-    from tmr.io import atomic_write_text
+    from tmr.io.outputs import atomic_write_text
 
     timing = {
         "wall_time": rp.wall_time,
@@ -212,7 +212,7 @@ def write_timing(out: Path, rp: Any) -> None:
 
 def write_chain_outputs(out: Path, rp: ChainReplay, run: Any, verdict: Verdict, plots: bool = True) -> list[str]:
     """Write ``replay.json``, ``timing.json`` and the figures into ``out``; return the file names."""
-    from tmr.io import atomic_write_text
+    from tmr.io.outputs import atomic_write_text
 
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "replay.json", _dump(chain_document(rp, run, verdict)))

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from tmr.catenary import CatenaryParams, solve
+from tmr.model.catenary import CatenaryParams, solve
 
 Array = NDArray[np.float64]
 

@@ -3,7 +3,7 @@
 MuJoCo collides meshes through their convex hulls, so every obstacle polygon is split into convex pieces first:
 a convex polygon (its area equals its hull's to 1e-9 relative) is one piece; any other polygon is cut into the
 triangles of its constrained Delaunay triangulation (``shapely.constrained_delaunay_triangles``), each a convex
-prism. Grid maps arrive here as the polygons of their occupied cells (``tmr.environment``). Prisms reach from the
+prism. Grid maps arrive here as the polygons of their occupied cells (``tmr.world.environment``). Prisms reach from the
 floor to :data:`OBSTACLE_HEIGHT`, above every tether exit, so a tether can only pass round them.
 
 Collision bits (``contype``/``conaffinity``, a pair collides if either's type meets the other's affinity):

@@ -14,7 +14,7 @@ whichever the executor. Inputs are validated first; files are written to a tempo
 
 A re-used ``--out`` keeps no output of an older run of the same command (the files of :func:`owned_names` that this
 run did not write are deleted; other files are left alone). Messages go through :mod:`logging` (``--quiet``,
-``--verbose``, ``--debug``: :mod:`tmr.console`); the progress bar is drawn on a terminal only, not with ``--quiet``
+``--verbose``, ``--debug``: :mod:`tmr.io.console`); the progress bar is drawn on a terminal only, not with ``--quiet``
 or ``--no-progress``.
 
 Exit codes: 0 done; 2 bad input or a run error (nothing written); 130 interrupted (Ctrl-C; nothing written).
@@ -28,10 +28,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from tmr.cli_args import ArgumentParser, add_common, param, path_arg, positive_float
-from tmr.cli_args import count as _positive
-from tmr.console import LOG, progress_enabled
-from tmr.console import run as run_cli
+from tmr.io.cli_args import ArgumentParser, add_common, param, path_arg, positive_float
+from tmr.io.cli_args import count as _positive
+from tmr.io.console import LOG, progress_enabled
+from tmr.io.console import run as run_cli
 from tmr.planner import METHODS
 from tmr.sweep.errors import SweepError
 
@@ -67,7 +67,7 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="fixed parameter override by its field name in tmr.params (repeatable)",
+        help="fixed parameter override by its field name in tmr.model.params (repeatable)",
     )
     common.add_argument("--jobs", type=_positive, help="local worker processes (default: all cores; 1 = serial)")
     common.add_argument("--scheduler", help="Dask scheduler address tcp://host:port (instead of local processes)")
@@ -229,14 +229,14 @@ def _bench(args: argparse.Namespace, executor: Any) -> dict[str, Callable[[Path]
 
 
 def _save(fig: Any, path: Path) -> None:
-    from tmr.plot import save_figure
+    from tmr.views.plot import save_figure
 
     save_figure(fig, path)
 
 
 def _validate(args: argparse.Namespace) -> None:
-    from tmr.scenario import load_scenario
     from tmr.sweep.runs import check_overrides
+    from tmr.world.scenario import load_scenario
 
     for name in getattr(args, "scenarios", None) or [args.scenario]:
         load_scenario(name)
@@ -244,7 +244,7 @@ def _validate(args: argparse.Namespace) -> None:
     if getattr(args, "var", None):
         from dataclasses import fields
 
-        from tmr.params import PARAM_CLASSES
+        from tmr.model.params import PARAM_CLASSES
 
         kinds = {f.name: (cls, type(getattr(cls(), f.name))) for cls in PARAM_CLASSES for f in fields(cls)}
         for v in args.var:
@@ -252,7 +252,7 @@ def _validate(args: argparse.Namespace) -> None:
             cls, kind = kinds[v.name]
             if kind is not float:  # NSGA-II proposes real numbers: an int field would refuse them mid-run
                 raise SweepError(f"--var {v.name}: {cls.__name__}.{v.name} is not a real number; vary a float field")
-    from tmr.outdir import check_out
+    from tmr.io.outdir import check_out
 
     check_out(Path(args.out), owned_names(args))
 
@@ -274,9 +274,9 @@ def owned_names(args: argparse.Namespace) -> list[str]:
 
 def write_outputs(out: Path, files: dict[str, Callable[[Path], Any]], owned: Any = None) -> list[str]:
     """Write every file (``files``: name → writer of that path) into a staging directory, then publish them into
-    ``out`` in one step (:mod:`tmr.outdir`); files of ``owned`` names an older sweep wrote there and this one did
+    ``out`` in one step (:mod:`tmr.io.outdir`); files of ``owned`` names an older sweep wrote there and this one did
     not are removed."""
-    from tmr.outdir import Stage
+    from tmr.io.outdir import Stage
 
     with Stage(out, sorted(set(owned or ()) | set(files)), volatile=[n for n in files if "timing" in n]) as stage:
         for name, writer in files.items():

@@ -21,7 +21,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Protocol, TypeVar
 
-from tmr.console import children_without_ctrl_c
+from tmr.io.console import children_without_ctrl_c
 from tmr.sweep.errors import SweepError
 
 T = TypeVar("T")
@@ -96,7 +96,7 @@ class LocalExecutor:
             methods = multiprocessing.get_all_start_methods()
             ctx = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
             self._pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=_ignore_sigint)
-        with children_without_ctrl_c():  # workers started by submit never see the group's Ctrl-C (tmr.console)
+        with children_without_ctrl_c():  # workers started by submit never see the group's Ctrl-C (tmr.io.console)
             futures = {self._pool.submit(fn, item): i for i, item in enumerate(items)}
         out: list[Any] = [None] * len(items)
         try:

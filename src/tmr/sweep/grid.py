@@ -2,7 +2,8 @@
 counterparts, see :data:`SWEEP_AXES`).
 
 The paper writes the interval as ``k_v0 = k_v0* + [−50 %, +100 %]`` and ``d_min = d_min* + [−50 %, +100 %]`` with
-k_v0* = 0.05 m²/s and d_min* = 0.5 m (the defaults of :class:`tmr.params.PinvParams`), i.e. k_v0 ∈ [0.025, 0.1] m²/s
+k_v0* = 0.05 m²/s and d_min* = 0.5 m (the defaults of :class:`tmr.model.params.PinvParams`), i.e. k_v0 ∈ [0.025, 0.1]
+m²/s
 and d_min ∈ [0.25, 1.0] m.
 """
 
@@ -16,7 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tmr.params import PinvParams, QPParams
+from tmr.model.params import PinvParams, QPParams
 from tmr.sweep.errors import MAX_RUNS, SweepError
 from tmr.sweep.runs import RunResult, RunSpec
 

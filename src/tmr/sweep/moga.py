@@ -34,7 +34,7 @@ PENALTY = 1e30
 
 @dataclass(frozen=True)
 class Variable:
-    """A decision variable: parameter ``name`` (a ``tmr.params`` field) in [low, high] (its SI unit)."""
+    """A decision variable: parameter ``name`` (a ``tmr.model.params`` field) in [low, high] (its SI unit)."""
 
     name: str
     low: float

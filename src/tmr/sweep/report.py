@@ -1,7 +1,7 @@
 """Deterministic outputs of the sweeps: CSV rows, Markdown tables, Fig. 9-style heatmaps (Caruso 2021 §5.1).
 
 CSV floats are written with ``repr`` (shortest round-trip), so the same results give the same bytes; figures go
-through :func:`tmr.plot.save_figure` (no dates in the metadata).
+through :func:`tmr.views.plot.save_figure` (no dates in the metadata).
 """
 
 from __future__ import annotations

@@ -19,10 +19,10 @@ from typing import Any
 import numpy as np
 
 from tmr.errors import InfeasibleStep
-from tmr.params import ChainParams, PathParams, PinvParams, QPParams, TaskParams, TimeParams, apply_overrides
+from tmr.model.params import ChainParams, PathParams, PinvParams, QPParams, TaskParams, TimeParams, apply_overrides
 from tmr.planner import METHODS, Problem, build_problem, solve
-from tmr.scenario import load_scenario
 from tmr.sweep.errors import SweepError
+from tmr.world.scenario import load_scenario
 
 __all__ = [
     "CONTROLLER_PARAMS",
@@ -61,7 +61,7 @@ class RunSpec:
         scenario: built-in scenario name (A–D) or a scenario TOML path.
         method: ``"pinv"``, ``"qp"`` or ``"horizon"``.
         seed: seed of the leader's RRT* (the task's only random input).
-        overrides: parameter overrides by field name (``tmr.params``), e.g. ``(("k_v0", 0.05), ("d_min", 0.5))``.
+        overrides: parameter overrides by field name (``tmr.model.params``), e.g. ``(("k_v0", 0.05), ("d_min", 0.5))``.
         n_robots: number of robots (``None``: the scenario's).
         repeats: plans run for the timing fields (median); the scores are those of the last (all are identical).
         route: leader route (``tmr.planner.ROUTES``); sweeps default to ``"rrt"``, the paper's RRT* leader over 15 s,
@@ -144,7 +144,7 @@ def check_overrides(overrides: dict[str, Any]) -> None:
     """Raise :class:`SweepError` for an unknown parameter name or a value the parameter dataclasses reject."""
     unknown = sorted(set(overrides) - _ALL_PARAMS)
     if unknown:
-        raise SweepError(f"unknown parameter(s) {unknown}; see tmr.params for the names")
+        raise SweepError(f"unknown parameter(s) {unknown}; see tmr.model.params for the names")
     rest = dict(overrides)
     for cls in (ChainParams, TimeParams, PathParams, TaskParams, PinvParams, QPParams):
         try:
@@ -231,7 +231,7 @@ def evaluate_run(spec: RunSpec) -> RunResult:
 
 
 def score(spec: RunSpec, plan: Any, m: Any, goal_tolerance: float, walls: Sequence[float] = ()) -> RunResult:
-    """The :class:`RunResult` of a checked plan and its :class:`tmr.metrics.Metrics` (``walls``: loop wall times
+    """The :class:`RunResult` of a checked plan and its :class:`tmr.checks.metrics.Metrics` (``walls``: loop wall times
     [s] of the repeats, median reported)."""
     derr = np.asarray(plan.spans) - np.asarray(plan.spans).mean(axis=1, keepdims=True)
     wall = statistics.median(walls) if walls else math.nan

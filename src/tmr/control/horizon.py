@@ -1,0 +1,513 @@
+"""Whole-horizon trajectory optimisation of the chain (``--method horizon``; math in ``formulations/horizon.md``).
+
+One nonlinear program over every knot of the plan instead of one QP per step (Caruso 2021 fitness eq. 24–27 as the
+objective, the hard limits of ``formulations/qp.md`` as constraints)::
+
+    min_{q_0..q_K}  w1 f1 + w2 f2 + w4 f4  (+ w3 f3 when the leader has a tolerance)
+    s.t.  q_0 = start
+          x_N(q_k) = x_d(t_k)                              leader on its time-parametrised reference, k = 1..K
+          c(p_{k,j,s}) ≥ d_safe                            robots and tether samples clear of the inflated obstacles
+          d_lo + m ≤ d_{k,i} ≤ d_max − m                   tether spans (catenary) = prismatic joints q[1::2]
+          ‖x_i(q_k) − x_j(q_k)‖² ≥ (2r + m_s)²              robot–robot separation, every pair
+          |q̇_k| ≤ (ω_max, v_d,max),  |q̈_k| ≤ a_max          joint speed and acceleration (q̇_{−1} = q̇_K = 0)
+          |ẋ_{i,k}|, |ẍ_{i,k}| ≤ v_rob, a_rob per axis      robot Cartesian speed and acceleration
+
+with q̇_k = (q_{k+1} − q_k)/Ts, q̈_k = (q̇_k − q̇_{k−1})/Ts. The clearance c is a cubic tensor B-spline whose control points
+are the environment's signed-distance grid (:func:`distance_spline`). The NLP is written with whole-horizon matrix
+expressions (all knots at once, casadi MX) and solved by IPOPT from the ``qp`` plan.
+
+Clearance rows are **generated lazily**: a transcription holds the rows of the samples closer than ``activation`` to
+the obstacles along the warm start (every row of every other group is always there); after each solve the clearance of
+every sample at every knot is evaluated, and if one that was left out is violated, the samples within ``activation`` at
+the new solution are added and IPOPT restarts primal–dual warm. The final point is a KKT point of the relaxed problem
+that satisfies every row of the full one, hence a KKT point of the full problem (the rows left out are inactive, with
+zero multipliers).
+
+**Never worse than the warm start.** The warm start (a plan of the same problem, required: the planner passes its
+``qp`` plan; this module never imports :mod:`tmr.planner`) is IPOPT's initial point and the last fallback. If IPOPT
+stops without a solution (both attempts of a round), the time limit is reached, rows left out stay violated after
+``max_rounds``, or the optimum costs more than the warm start, :func:`plan_horizon` returns the cheapest IPOPT iterate
+that satisfies every row of every group (casadi ``iteration_callback``; the leader projected on its reference) or else
+the warm start itself if it satisfies them; only if none does it raise :class:`HorizonInfeasible`.
+``diagnostics["horizon_result"]`` is ``"optimal"``, ``"best_feasible_iterate"`` or ``"warm_start"`` and
+``diagnostics["horizon_note"]`` says why in one line.
+
+Public API: :func:`plan_horizon` (→ :class:`tmr.control.clik.Plan`), :data:`DEFAULT_TIME_LIMIT`,
+:class:`HorizonOptions`,
+:class:`HorizonInfeasible` (:class:`Violation`), :func:`distance_spline`, :func:`samples_needed`,
+:func:`objective_terms`, :func:`objective`.
+
+Modules: this one runs the solve rounds (:func:`plan_horizon`, IPOPT's callback, Ctrl-C, the time limit);
+:mod:`tmr.control.horizon_model` is the transcription (options, objective, the NLP's expressions, the warm start);
+:mod:`tmr.control.horizon_pool` the checks and fallbacks (violated rows, the start check, the pool of iterates).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import signal
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import asdict
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from numpy.typing import NDArray
+from tqdm import tqdm
+
+from tmr.control.clik import Plan
+from tmr.control.horizon_model import (
+    GROUPS,
+    HorizonInfeasible,
+    HorizonOptions,
+    Violation,
+    _leader_multipliers,
+    _Model,
+    _options,
+    _Setup,
+    _Transcription,
+    _warm_start,
+    _weighted,
+    distance_spline,
+    objective,
+    objective_terms,
+    samples_needed,
+)
+from tmr.control.horizon_pool import (
+    _POOL_SCREEN,
+    _POOL_SIZE,
+    _Candidate,
+    _check_start,
+    _cost,
+    _describe,
+    _Pool,
+    _violations,
+    _warm_candidate,
+)
+from tmr.errors import ParameterError
+
+Array = NDArray[np.float64]
+
+__all__ = [
+    "DEFAULT_TIME_LIMIT",
+    "GROUPS",
+    "HorizonInfeasible",
+    "HorizonOptions",
+    "Violation",
+    "distance_spline",
+    "objective",
+    "objective_terms",
+    "plan_horizon",
+    "samples_needed",
+]
+
+
+#: Wall-clock limit [s] of a whole :func:`plan_horizon` call used by the command line (``--time-limit``); the library
+#: default is no limit (``time_limit=None``). Successful runs on A–D take 2.5–4.5 s.
+DEFAULT_TIME_LIMIT: float = 60.0
+
+_SUCCESS = ("Solve_Succeeded",)
+_ACCEPTABLE = ("Solved_To_Acceptable_Level",)
+_WALL_TIME = "Maximum_WallTime_Exceeded"
+
+_LOG = logging.getLogger("tmr")
+
+#: Set while an NLP runs when Ctrl-C arrives: IPOPT stops at its next iteration, then KeyboardInterrupt is raised.
+_INTERRUPT = threading.Event()
+
+
+@contextlib.contextmanager
+def _ctrl_c_stops_ipopt() -> Iterator[None]:
+    """Ctrl-C during IPOPT: casadi catches the KeyboardInterrupt raised inside the iteration callback and IPOPT goes
+    on (or its caller retries), so the first Ctrl-C was lost. Here SIGINT only sets :data:`_INTERRUPT`; the callback
+    then asks IPOPT to stop, and KeyboardInterrupt is raised once the solver has returned."""
+    _INTERRUPT.clear()
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        yield  # a worker that ignores Ctrl-C (tmr.sweep: the parent stops it) keeps ignoring it
+        return
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: _INTERRUPT.set())
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if _INTERRUPT.is_set():
+        raise KeyboardInterrupt
+
+
+class _IterationCallback(ca.Callback):
+    """IPOPT's per-iteration hook (casadi ``iteration_callback``): advances the progress bar and offers the iterate
+    to the pool. Stops IPOPT (returns 1) only after Ctrl-C (:func:`_ctrl_c_stops_ipopt`)."""
+
+    def __init__(self, tr: _Transcription, pool: _Pool, bar: Any, label: str) -> None:
+        ca.Callback.__init__(self)
+        self.nx, self.ng = int(tr.lbx.size), int(tr.size)
+        self.tr, self.pool, self.bar, self.label = tr, pool, bar, label
+        self.iteration = 0
+        self._names = list(ca.nlpsol_out())
+        self.construct("horizon_iteration", {})
+
+    def get_n_in(self) -> int:
+        return ca.nlpsol_n_out()
+
+    def get_n_out(self) -> int:
+        return 1
+
+    def get_name_in(self, i: int) -> str:
+        return str(ca.nlpsol_out(i))
+
+    def get_name_out(self, i: int) -> str:
+        return "ret"
+
+    def get_sparsity_in(self, i: int) -> ca.Sparsity:
+        name = ca.nlpsol_out(i)
+        if name == "f":
+            return ca.Sparsity.scalar()
+        if name in ("x", "lam_x"):
+            return ca.Sparsity.dense(self.nx)
+        if name in ("g", "lam_g"):
+            return ca.Sparsity.dense(self.ng)
+        return ca.Sparsity(0, 0)
+
+    def eval(self, arg: list[Any]) -> list[Any]:
+        a = dict(zip(self._names, arg, strict=True))
+        x = np.asarray(a["x"], dtype=float).ravel()
+        g = np.asarray(a["g"], dtype=float).ravel()
+        f = float(a["f"])
+        tr = self.tr
+        viol = max(
+            float(np.max(tr.lbg - g, initial=0.0)),
+            float(np.max(g - tr.ubg, initial=0.0)),
+            float(np.max(tr.lbx - x, initial=0.0)),
+            float(np.max(x - tr.ubx, initial=0.0)),
+        )
+        self.pool.offer(f, viol, x, f"{self.label}, iteration {self.iteration}")
+        self.iteration += 1
+        self.bar.update(1)
+        self.bar.set_postfix_str(f"cost/warm {f:.3g}, row violation {viol:.1e}", refresh=False)
+        return [1 if _INTERRUPT.is_set() else 0]
+
+
+def _time_limit(time_limit: float | None) -> float:
+    if time_limit is None:
+        return math.inf
+    if isinstance(time_limit, bool) or not isinstance(time_limit, (int, float)) or not time_limit > 0:
+        raise ParameterError(f"time_limit must be a number of seconds > 0 (or None: no limit), got {time_limit!r}")
+    return float(time_limit)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# the planner
+# ----------------------------------------------------------------------------------------------------------------
+def plan_horizon(
+    problem: Any,
+    warm_start: Plan | None,
+    *,
+    time_limit: float | None = None,
+    progress: bool = False,
+    **options: Any,
+) -> Plan:
+    """Plan the whole horizon at once: one NLP over q_0..q_K solved by IPOPT (``formulations/horizon.md``).
+
+    Never worse than its warm start: the plan returned is IPOPT's optimum if it satisfies every hard-constraint row
+    and costs no more than the warm start; otherwise (IPOPT stopped without a solution, the time limit was reached,
+    rows left out stayed violated, or the optimum costs more) the cheapest IPOPT iterate that satisfies every row, or
+    else the warm start itself if it does (see :func:`_warm_candidate`). ``diagnostics["horizon_result"]`` says which.
+
+    Args:
+        problem: a :class:`tmr.planner.Problem` (chain, environment, leader trajectory, limits, parameters); only its
+            attributes are used (this module does not import the planner).
+        warm_start: a plan of the same problem whose joints ``q`` start IPOPT, required — the planner passes its
+            ``qp`` plan (``tmr.planner.solve(problem, "qp")[0]``); it is also the fallback if it satisfies the hard
+            constraints (``warm_start.success`` and every row).
+        time_limit: wall-clock limit [s] for the whole call (``None``: none; the CLI uses
+            :data:`DEFAULT_TIME_LIMIT` = 60 s): each IPOPT solve gets the remaining budget as ``max_wall_time`` and no
+            round or retry starts once it is spent; the overrun is at most one transcription (0.2–0.3 s on A–D), one
+            IPOPT iteration and the fallback check. A run that does not reach it gives the same plan as without.
+        progress: show a tqdm bar of the IPOPT iterations on stderr (only if stderr is a terminal).
+        **options: fields of :class:`HorizonOptions` (weights, leader tolerance, samples, IPOPT options, …).
+
+    Returns:
+        A :class:`tmr.control.clik.Plan`, ``method="horizon"``: ``q`` the trajectory, ``qdot[k] = (q[k+1] − q[k])/Ts``,
+        ``qdot[K] = 0``, ``robots`` its forward kinematics, ``success=True``; ``diagnostics`` holds
+        ``horizon_result`` ("optimal", "best_feasible_iterate" or "warm_start"), ``horizon_note`` (one line: what
+        IPOPT did and what was returned), ``horizon_stop`` ("converged", "ipopt_failed", "time_limit",
+        "rows_left_out"), IPOPT's status and iterations, the objective returned and at the warm start, f1–f4, the
+        largest row violation, the row counts, the rounds and the time split (warm-start preparation, transcription,
+        solve); ``wall_time`` is the total. Run :func:`tmr.planner.check` on it for the exact (shapely) verification.
+
+    Raises:
+        ParameterError: no warm start, a warm start of the wrong shape, a bad option or time limit.
+        HorizonInfeasible: the start violates a hard constraint, or neither IPOPT's optimum, nor an iterate, nor the
+            warm start satisfies them; the message names the violated constraint groups with knots, times and
+            amounts (also in ``.violations``).
+    """
+    start_time = time.perf_counter()
+    if warm_start is None:
+        raise ParameterError(
+            "plan_horizon needs a warm start: a Plan of the same problem, e.g. the qp plan "
+            "tmr.planner.solve(problem, 'qp')[0] (tmr.planner.solve(problem, 'horizon') computes and passes it)"
+        )
+    limit = _time_limit(time_limit)
+    deadline = start_time + limit
+    opts = _options(options)
+    su = _Setup(problem, opts)
+    env = problem.env
+    bad = _check_start(su, env)
+    if bad:
+        raise HorizonInfeasible(
+            "horizon NLP: the start configuration violates hard constraints, so no trajectory satisfies them: "
+            + _describe(bad),
+            bad,
+            status="start_infeasible",
+        )
+    tol = max(10 * opts.constr_viol_tol, 1e-6)  # a row "holds" if violated by at most this (its unit)
+    t0 = time.perf_counter()
+    Qw, Qraw, info = _warm_start(su, warm_start)
+    warm_time = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    model = _Model(su, distance_spline(env))
+    xv = Qw.ravel()
+    vals = model.values(xv)
+    masks = {name: model.near(name, vals[name]) for name in model.rows}
+    J_warm = _cost(su, Qw)
+    obj_scale = max(J_warm, 1e-6) if opts.scale_objective else 1.0
+    trans_time, solve_time = time.perf_counter() - t0, 0.0
+    t0 = time.perf_counter()
+    warm_c, warm_why = _warm_candidate(model, warm_start, Qw, Qraw, tol)
+    viol = _violations(model, vals, Qw, tol)  # at the current point (the last iterate once IPOPT ran)
+    info["warm_start_time"] = warm_time + time.perf_counter() - t0
+    pool = _Pool(_POOL_SIZE, _POOL_SCREEN, (warm_c.J if warm_c else math.inf) / obj_scale)
+    rounds: list[dict[str, Any]] = []
+    tr: _Transcription | None = None
+    lam: tuple[Array, Array] | None = None
+    stats: dict[str, Any] = {}
+    status = ""
+    stop = ""  # why the rounds ended: converged, ipopt_failed, time_limit, rows_left_out
+    attempts = [("primary", {}, False)]
+    if opts.retry:
+        attempts.append(("retry", dict(opts.retry_ipopt), opts.leader_tolerance == 0))
+    bar = tqdm(  # no total: IPOPT's iterations are counted, its rounds named ("horizon NLP, round 1 (primary solve)")
+        desc="horizon NLP",
+        unit="IPOPT iteration",
+        bar_format="{desc}: {n_fmt} IPOPT iterations [{elapsed}{postfix}]",
+        file=sys.stderr,
+        leave=False,
+        disable=not (progress and _is_terminal(sys.stderr)),
+    )
+    try:
+        for rnd in range(1, opts.max_rounds + 1):
+            if time.perf_counter() >= deadline:
+                stop = "time_limit"
+                break
+            t1 = time.perf_counter()
+            prev, tr = tr, _Transcription(model, masks)
+            trans_time += time.perf_counter() - t1
+            x_start, lam_start = xv, lam
+            ok = False
+            for label, extra, ls_duals in attempts:
+                remaining = deadline - time.perf_counter()
+                if remaining <= 0:
+                    stop = "time_limit"
+                    break
+                if math.isfinite(limit):
+                    extra = dict(extra, max_wall_time=float(remaining))
+                bar.set_description_str(f"horizon NLP, round {rnd} ({label} solve)")
+                t2 = time.perf_counter()
+                callback = _IterationCallback(tr, pool, bar, f"round {rnd} {label}")
+                solver = tr.solver(obj_scale, extra, callback)
+                kwargs: dict[str, Any] = dict(x0=x_start, lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg)
+                if prev is not None and lam_start is not None:  # primal–dual warm start from the previous round
+                    kwargs.update(lam_x0=lam_start[0], lam_g0=tr.carry_multipliers(prev, lam_start[1]))
+                elif ls_duals:
+                    kwargs.update(lam_g0=_leader_multipliers(model, tr, x_start, obj_scale))
+                t3 = time.perf_counter()
+                _LOG.debug("horizon NLP round %d %s: IPOPT on %d rows", rnd, label, tr.size)
+                with _ctrl_c_stops_ipopt():
+                    sol = solver(**kwargs)
+                t4 = time.perf_counter()
+                trans_time += t3 - t2
+                solve_time += t4 - t3
+                stats = solver.stats()
+                status = str(stats.get("return_status", ""))
+                xv = np.asarray(sol["x"], dtype=float).ravel()
+                lam = (np.asarray(sol["lam_x"], dtype=float).ravel(), np.asarray(sol["lam_g"], dtype=float).ravel())
+                vals = model.values(xv)
+                viol = _violations(model, vals, xv.reshape(su.K + 1, su.n), tol=tol)
+                rounds.append(
+                    dict(
+                        round=rnd,
+                        attempt=label,
+                        status=status,
+                        iterations=int(stats.get("iter_count", -1)),
+                        rows=int(tr.size),
+                        clearance_rows=int(tr.index["clearance"].size),
+                        violated=len(viol),
+                        transcription_time=(t2 - t1 if label == "primary" else 0.0) + t3 - t2,
+                        solve_time=t4 - t3,
+                        t_wall={k[7:]: round(float(v), 4) for k, v in stats.items() if k.startswith("t_wall_nlp")},
+                    )
+                )
+                ok = status in _SUCCESS or (opts.accept_acceptable and status in _ACCEPTABLE)
+                if ok:
+                    break
+                if status == _WALL_TIME:
+                    stop = "time_limit"
+                    break
+            if stop:
+                break
+            if not ok:
+                stop = "ipopt_failed"
+                break
+            if not viol:
+                stop = "converged"
+                break
+            masks = {name: masks[name] | model.near(name, vals[name]) for name in model.rows}
+        else:
+            stop = "rows_left_out"
+    finally:
+        bar.close()
+
+    # what happened, in words; then the choice: optimum, best feasible iterate, warm start
+    last = rounds[-1]["round"] if rounds else 0
+    tried = " and ".join(f"{r['attempt']}: {r['status']!r} after {r['iterations']} iterations"
+                         for r in rounds if r["round"] == last)  # fmt: skip
+    iterations = int(sum(r["iterations"] for r in rounds))
+    if stop == "converged":
+        what = f"IPOPT solved the NLP ({status}, {iterations} iterations in {last} round(s))"
+    elif stop == "ipopt_failed":
+        what = f"IPOPT stopped without a solution in round {last} ({tried})"
+    elif stop == "time_limit":
+        where = (
+            f"in round {last} ({tried})"
+            if rounds and rounds[-1]["status"] == _WALL_TIME
+            else (f"after round {last} ({tried})" if rounds else "before IPOPT started")
+        )
+        what = f"time limit of {limit:g} s reached {where}"
+    else:
+        what = f"rows left out of the NLP were still violated after {opts.max_rounds} rounds of constraint generation"
+    final: _Candidate | None = None
+    if stop == "converged":
+        Q = xv.reshape(su.K + 1, su.n)
+        final = _Candidate(Q, _cost(su, Q), "optimal", "the optimum")
+    if final is not None and (warm_c is None or final.J <= warm_c.J):
+        chosen: _Candidate | None = final
+    else:
+        if final is not None:
+            what = f"IPOPT's optimum ({status}, objective {final.J:.6g}) costs more than the warm start"
+        chosen = pool.best(model, tol, warm_c.J if warm_c else math.inf) or warm_c
+    if chosen is None:
+        warm_note = f"; the warm start is no fallback: {warm_why}"
+        diag = _diagnostics(model, tr, stats, xv, vals, rounds, info, J_warm, trans_time, solve_time, start_time)
+        diag.update(horizon_stop=stop, time_limit=time_limit, time_limit_hit=stop == "time_limit")
+        if stop == "rows_left_out":
+            message = (
+                f"horizon NLP: rows left out of the NLP are still violated after {opts.max_rounds} rounds of "
+                "constraint generation (raise max_rounds or activation): " + _describe(viol)
+            )
+        else:
+            lead = {"ipopt_failed": f"IPOPT found no solution in round {last} ({tried})"}.get(stop, what)
+            at = "no iterate satisfies the hard constraints; violated constraints at its last iterate: "
+            if not rounds:
+                at = "violated constraints at the initial point (the warm start, leader projected): "
+            message = f"horizon NLP: {lead}; {at}" + (
+                _describe(viol) if viol else "none above tolerance (not converged: raise max_iter)"
+            )
+        raise HorizonInfeasible(message + warm_note, viol, status=status or stop, diagnostics=diag)
+
+    Q = chosen.Q
+    xv = Q.ravel()
+    vals = model.values(xv)
+    diag = _diagnostics(model, tr, stats, xv, vals, rounds, info, J_warm, trans_time, solve_time, start_time)
+    versus = f"warm start {warm_c.J:.6g}" if warm_c else f"warm start {J_warm:.6g}, outside the NLP's own rows"
+    returned = {"optimal": "returned the optimum"}.get(chosen.result, f"returned {chosen.detail}")
+    diag.update(
+        horizon_result=chosen.result,
+        horizon_note=f"{what}; {returned} (objective {chosen.J:.6g} vs {versus})",
+        horizon_stop=stop,
+        time_limit=time_limit,
+        time_limit_hit=stop == "time_limit",
+        objective_warm_start_fallback=warm_c.J if warm_c else math.inf,
+        warm_start_fallback=warm_c.detail if warm_c else f"none: {warm_why}",
+        iterates_kept=len(pool),
+    )
+    return Plan(
+        method="horizon",
+        scenario=problem.scenario.name,
+        t=su.t.copy(),
+        q=Q,
+        qdot=np.vstack([np.diff(Q, axis=0) / su.Ts, np.zeros((1, su.n))]),
+        robots=su.robots(Q),
+        base=problem.chain.base.copy(),
+        reference=su.ref.copy(),
+        spans=Q[:, 1::2].copy(),
+        span_limits=su.limits.copy(),
+        safety_radius=su.r,
+        success=True,
+        failure=None,
+        diagnostics=diag,
+        wall_time=time.perf_counter() - start_time,
+        params=dict(problem.params_dict(), **{f"horizon_{k}": v for k, v in asdict(opts).items()}),
+        goal=np.asarray(problem.scenario.goal, float).copy(),
+    )
+
+
+def _is_terminal(stream: Any) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
+def _diagnostics(
+    model: _Model,
+    tr: _Transcription | None,
+    stats: dict[str, Any],
+    xv: Array,
+    vals: dict[str, Array],
+    rounds: list[dict[str, Any]],
+    info: dict[str, Any],
+    J_warm: float,
+    trans_time: float,
+    solve_time: float,
+    start_time: float,
+) -> dict[str, Any]:
+    su = model.su
+    f1, f2, f3, f4 = (float(v) for v in model.terms(xv))
+    worst = 0.0
+    for name in model.rows:
+        a = model.violation(name, vals[name])
+        a[:, model.fixed_columns(name)] = -np.inf
+        worst = max(worst, float(a.max(initial=-np.inf)))
+    clr = vals["clearance"].copy()
+    return {
+        "ipopt_status": str(stats.get("return_status", "")),
+        "ipopt_success": bool(stats.get("success", False)),
+        "ipopt_iterations": int(sum(r["iterations"] for r in rounds)),
+        "objective": _weighted({"f1": f1, "f2": f2, "f3": f3, "f4": f4}, su.opts),
+        "objective_warm_start": float(J_warm),
+        "objective_warm_start_raw": float(info.get("objective_warm_start_raw", math.nan)),
+        "f1": f1,
+        "f2": f2,
+        "f3": f3,
+        "f4": f4,
+        "constraint_violation": max(worst, 0.0),
+        "variables": int(model.x.shape[0]),
+        "rows": int(tr.size) if tr is not None else 0,
+        "rows_full": int(sum(vals[g].shape[0] * np.count_nonzero(~model.fixed_columns(g)) for g in model.rows)),
+        "clearance_rows": int(tr.index["clearance"].size) if tr is not None else 0,
+        "samples_per_link": int(su.S),
+        "rounds": len({r["round"] for r in rounds}),
+        "round_log": rounds,
+        "warm_start_method": info.get("warm_start_method", ""),
+        "warm_start_success": info.get("warm_start_success"),
+        "warm_start_time": float(info.get("warm_start_time", 0.0)),
+        "transcription_time": float(trans_time),
+        "solve_time": float(solve_time),
+        "total_time": time.perf_counter() - start_time,
+        "min_field_clearance": clr[:, :].min(axis=0),  # (K+1,) per knot, spline field [m]
+    }

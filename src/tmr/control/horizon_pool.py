@@ -1,0 +1,215 @@
+"""Checks and fallbacks of the whole-horizon NLP: the transcribed rows a horizon violates, the start checked before
+solving, and the pool of feasible iterates kept in case IPOPT stops early (the best one is returned when it does not
+converge). Used by :func:`tmr.control.horizon.plan_horizon`.
+"""
+
+from __future__ import annotations
+
+import heapq
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tmr.control.clik import Plan
+from tmr.control.horizon_model import GROUPS, Violation, _Model, _project_leader, _Setup, _weighted, objective_terms
+
+Array = NDArray[np.float64]
+
+
+_POOL_SIZE = 64  # iterates kept for the fallback (the cheapest ones; 64 × 9 k doubles ≈ 4.6 MB on A–D)
+_POOL_SCREEN = 1e-3  # kept only if no transcribed row is violated by more than this (the leader is projected after)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# violations
+# ----------------------------------------------------------------------------------------------------------------
+def _violations(model: _Model, vals: dict[str, Array], Q: Array, tol: float) -> list[Violation]:
+    """Worst violated row per (group, knot), over every row of every group (fixed start columns excluded)."""
+    su = model.su
+    out: dict[tuple[str, int], Violation] = {}
+
+    def put(name: str, k: int, item: str, amount: float, unit: str) -> None:
+        key = (name, k)
+        if key not in out or amount > out[key].amount:
+            out[key] = Violation(name, k, float(su.t[k]), item, float(amount), unit)
+
+    for name, r in model.rows.items():
+        a = model.violation(name, vals[name])
+        a[:, model.fixed_columns(name)] = 0.0
+        for i, c in zip(*np.nonzero(a > tol), strict=True):
+            put(name, int(r.knots[c]), r.items[i], a[i, c], r.unit)
+    d = Q[:, 1::2]
+    a = np.maximum(su.span_lo - d, d - su.span_hi)
+    a[0] = 0.0
+    for k, i in zip(*np.nonzero(a > tol), strict=True):
+        put("span", int(k), f"tether {i + 1}", a[k, i], "m")
+    order = {g: i for i, g in enumerate(GROUPS)}
+    return sorted(out.values(), key=lambda v: (order[v.group], v.knot))
+
+
+def _describe(violations: list[Violation], worst: int = 3) -> str:
+    """One line per violated group: how many knots, the time span, the worst rows."""
+    parts = []
+    for name in GROUPS:
+        vs = [v for v in violations if v.group == name]
+        if not vs:
+            continue
+        top = sorted(vs, key=lambda v: -v.amount)[:worst]
+        w = "; ".join(f"{v.item} at knot {v.knot} (t = {v.t:.2f} s) by {v.amount:.3g} {v.unit}" for v in top)
+        k0, k1 = min(v.knot for v in vs), max(v.knot for v in vs)
+        t0, t1 = min(v.t for v in vs), max(v.t for v in vs)
+        where = f"k = {k0} (t = {t0:.2f} s)" if k0 == k1 else f"k = {k0}–{k1} (t = {t0:.2f}–{t1:.2f} s)"
+        parts.append(f"{name}: {len(vs)} knot(s), {where}, worst: {w}")
+    return " | ".join(parts)
+
+
+def _check_start(su: _Setup, env: Any) -> list[Violation]:
+    """Hard constraints the fixed start q_0 violates (then no trajectory can satisfy the rows of knot 1)."""
+    out = []
+    d = su.q0[1::2]
+    for i in range(su.N):
+        lo, hi = su.limits[i]
+        if d[i] > hi:
+            out.append(
+                Violation(
+                    "span",
+                    0,
+                    0.0,
+                    f"tether {i + 1}: start span {d[i]:.3f} m > d_max = {hi:.3f} m",
+                    float(d[i] - hi),
+                    "m",
+                )
+            )
+        elif d[i] < lo:
+            out.append(
+                Violation(
+                    "span",
+                    0,
+                    0.0,
+                    f"tether {i + 1}: start span {d[i]:.3f} m < d_lo = {lo:.3f} m",
+                    float(lo - d[i]),
+                    "m",
+                )
+            )
+    R = su.robots(su.q0)[0]
+    c = np.asarray(env.exact_clearance(R), dtype=float)
+    for i in np.flatnonzero(c < 0):
+        out.append(Violation("clearance", 0, 0.0, f"robot {i + 1} starts inside an obstacle", float(-c[i]), "m"))
+    for i, j in su.pairs:
+        gap = 2 * su.r - float(np.linalg.norm(R[i] - R[j]))
+        if gap > 0:
+            out.append(Violation("separation", 0, 0.0, f"robots {i + 1}–{j + 1} start closer than 2r", gap, "m"))
+    e = float(np.linalg.norm(R[-1] - su.ref[0]))
+    if e > max(su.opts.leader_tolerance, 1e-6):
+        out.append(Violation("leader", 0, 0.0, f"robot {su.N} starts off the reference", e, "m"))
+    return out
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# fallbacks: the warm start and the best feasible iterate
+# ----------------------------------------------------------------------------------------------------------------
+class _Candidate(NamedTuple):
+    """A trajectory that satisfies every hard-constraint row: what :func:`plan_horizon` may return."""
+
+    Q: Array  #: (K+1, n) joints
+    J: float  #: weighted objective w1 f1 + w2 f2 + w4 f4 (+ w3 f3)
+    result: str  #: "optimal", "best_feasible_iterate" or "warm_start"
+    detail: str  #: where it comes from, for the note
+
+
+def _cost(su: _Setup, Q: Array) -> float:
+    return _weighted(objective_terms(Q, su.Ts, su.ref, su.base), su.opts)
+
+
+def _warm_candidate(model: _Model, warm: Plan, Qw: Array, raw: Array, tol: float) -> tuple[_Candidate | None, str]:
+    """The warm start as a fallback if it satisfies the hard constraints (else ``None`` and why not).
+
+    Only a successful plan (``warm.success``: for the planner's ``qp`` plan, verified by :func:`tmr.planner.check`
+    with exact clearances of robots and tether segments) is a fallback, and every row must hold at ``tol`` except that
+    a clearance sample may read up to ``field_error`` [m] below ``d_safe`` in the spline field (the warm start kept
+    d_safe in its own formulation's distance field; the two fields differ by up to the spline's error budget). Tried in
+    order: (1) the warm start as given, if it starts at q_0 and every row holds at ``tol`` (the fallback is then the
+    warm start itself, cost included); (2) the warm start with its leader projected on the reference (IPOPT's initial
+    point); (3) with the equality leader, the warm start as given with its leader within ``warm_start_leader_error``
+    [m] of the reference at every knot (a ``qp`` plan lags its reference by a few mm: CLIK).
+    """
+    su = model.su
+    if not warm.success:
+        return None, f"the {warm.method} plan failed ({warm.failure or 'no reason given'})"
+    name = f"the warm-start {warm.method} plan"
+    slack = float(su.opts.field_error)
+
+    def blocking(viol: list[Violation]) -> list[Violation]:
+        return [v for v in viol if not (v.group == "clearance" and v.amount <= slack)]
+
+    def dip(viol: list[Violation]) -> str:
+        a = max((v.amount for v in viol if v.group == "clearance"), default=0.0)
+        return f"; clearance up to {1e3 * a:.2f} mm below d_safe in the spline field" if a > 0 else ""
+
+    at_start = bool(np.allclose(raw[0], su.q0, rtol=0.0, atol=1e-9))
+    viol_raw = _violations(model, model.values(raw.ravel()), raw, tol)
+    if at_start and not viol_raw:
+        return _Candidate(raw, _cost(su, raw), "warm_start", name), ""
+    viol = _violations(model, model.values(Qw.ravel()), Qw, tol)
+    if not blocking(viol):
+        detail = f"{name}, leader projected on the reference" if su.opts.leader_tolerance == 0 else name
+        return _Candidate(Qw, _cost(su, Qw), "warm_start", detail + dip(viol)), ""
+    why = f"the {warm.method} plan violates {_describe(blocking(viol), worst=1)}"
+    if su.opts.leader_tolerance == 0 and at_start:
+        err = float(np.max(np.linalg.norm(su.robots(raw[1:])[:, -1] - su.ref[1:], axis=1)))
+        rest = blocking([v for v in viol_raw if v.group != "leader"])
+        if not rest and err <= su.opts.warm_start_leader_error:
+            detail = f"{name} as given, leader within {1e3 * err:.1f} mm of the reference" + dip(viol_raw)
+            return _Candidate(raw, _cost(su, raw), "warm_start", detail), ""
+        groups = [g for g in GROUPS if any(v.group == g for v in rest)]
+        why += f" (as given: leader up to {err:.3g} m off the reference"
+        why += f", and {', '.join(groups)} violated)" if rest else ")"
+    return None, why
+
+
+class _Pool:
+    """The ``keep`` lowest-cost IPOPT iterates (over every solve) that nearly satisfy the transcribed rows.
+
+    An iterate is kept if its scaled cost is below ``f_limit`` (the feasible warm start's) and no transcribed row or
+    bound is violated by more than ``screen`` (the leader rows are projected afterwards). Only copies are made during
+    the solve; :meth:`best` runs the full check (every row of every group, the clearance of every sample) afterwards,
+    and only when a fallback is needed, so a successful solve pays nothing but the copies.
+    """
+
+    def __init__(self, keep: int, screen: float, f_limit: float) -> None:
+        self.keep, self.screen, self.f_limit = keep, screen, f_limit
+        self._heap: list[tuple[float, int, Array, str]] = []  # (−f, seq, x, where): the costliest kept on top
+        self._seq = 0
+
+    def offer(self, f: float, viol: float, x: Array, where: str) -> None:
+        if not (f < self.f_limit and viol <= self.screen):
+            return
+        if len(self._heap) >= self.keep and -self._heap[0][0] <= f:
+            return
+        item = (-f, self._seq, np.array(x, dtype=float), where)
+        self._seq += 1
+        if len(self._heap) < self.keep:
+            heapq.heappush(self._heap, item)
+        else:
+            heapq.heapreplace(self._heap, item)
+
+    def __len__(self) -> int:
+        return len(self._heap)
+
+    def best(self, model: _Model, tol: float, J_limit: float) -> _Candidate | None:
+        """The lowest-cost kept iterate that satisfies every row at ``tol`` (leader projected on the reference with
+        the equality leader) and costs less than ``J_limit``; ``None`` if there is none."""
+        su = model.su
+        best: _Candidate | None = None
+        for _, _, x, where in sorted(self._heap, key=lambda item: (-item[0], item[1])):
+            Q = x.reshape(su.K + 1, su.n)
+            if su.opts.leader_tolerance == 0:
+                Q = _project_leader(su, Q)
+            if _violations(model, model.values(Q.ravel()), Q, tol):
+                continue
+            J = _cost(su, Q)
+            if J < J_limit and (best is None or J < best.J):
+                best = _Candidate(Q, J, "best_feasible_iterate", f"its best feasible iterate ({where})")
+                break  # ascending cost: the next ones cost more (up to the tiny change of the projection)
+        return best

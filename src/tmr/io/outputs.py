@@ -1,0 +1,220 @@
+"""Output files of a plan: per-robot trajectories (JSON, CSV), metrics (JSON), atomic writes.
+
+Every writer goes through :func:`atomic_write_bytes`: the data is written to a temporary file in the target's
+directory, flushed and fsync'ed, then moved over the target with ``os.replace`` (atomic on POSIX and Windows),
+so a reader never sees a half-written file and a failed write leaves any previous file intact.
+
+Outputs are deterministic: the same plan gives the same bytes (stable key order, floats written with Python's
+shortest round-trip ``repr``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import io as _io
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tmr.checks.metrics import json_safe, sample_time
+from tmr.errors import ParameterError
+
+__all__ = [
+    "TRAJECTORY_FORMAT",
+    "atomic_write_bytes",
+    "atomic_write_text",
+    "trajectories_dict",
+    "write_metrics_json",
+    "write_trajectories_csv",
+    "write_trajectories_json",
+]
+
+#: Value of the "format" key of the trajectory JSON written by :func:`write_trajectories_json`.
+TRAJECTORY_FORMAT = "tmr-trajectories/1"
+
+
+# ----------------------------------------------------------------------------------------------------------
+# atomic writes
+# ----------------------------------------------------------------------------------------------------------
+def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically; return the path.
+
+    The bytes go to a temporary file created with ``tempfile.mkstemp`` in the same directory (so
+    ``os.replace`` never crosses file systems), are flushed and fsync'ed, and the temporary file is renamed
+    over ``path``. On any error the temporary file is removed and the previous content of ``path`` (if any) is
+    untouched. Missing parent directories are created. A new file gets mode 0644; an existing file keeps its
+    mode.
+    """
+    path = Path(path)
+    parent = path.parent
+    parent.mkdir(parents=True, exist_ok=True)
+    try:
+        mode = path.stat().st_mode & 0o7777
+    except FileNotFoundError:
+        mode = 0o644
+    fd, tmp = tempfile.mkstemp(dir=parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        with contextlib.suppress(OSError):  # not every file system supports chmod
+            os.chmod(tmp, mode)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    if hasattr(os, "O_DIRECTORY"):  # make the rename durable (POSIX); best effort
+        with contextlib.suppress(OSError):
+            dfd = os.open(parent, os.O_RDONLY | os.O_DIRECTORY)
+            try:
+                os.fsync(dfd)
+            finally:
+                os.close(dfd)
+    return path
+
+
+def atomic_write_text(path: str | os.PathLike[str], text: str, encoding: str = "utf-8") -> Path:
+    """Write ``text`` to ``path`` atomically (see :func:`atomic_write_bytes`); newlines are written as
+    ``\\n``."""
+    return atomic_write_bytes(path, text.encode(encoding))
+
+
+# ----------------------------------------------------------------------------------------------------------
+# trajectories
+# ----------------------------------------------------------------------------------------------------------
+def _positions(robots: np.ndarray, name: str, n_samples: int, n_robots: int) -> np.ndarray:
+    arr = np.asarray(robots, dtype=float)
+    if arr.shape != (n_samples, n_robots, 2):
+        raise ParameterError(f"{name} must have shape ({n_samples}, {n_robots}, 2) like plan.robots, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        k = int(np.flatnonzero(~np.isfinite(arr).all(axis=(1, 2)))[0])
+        raise ParameterError(f"{name} has a non-finite position at sample {k}; cannot export the trajectory")
+    return arr
+
+
+def _robot_entries(t: list[float], robots: np.ndarray) -> list[dict[str, Any]]:
+    return [
+        {"name": f"robot{i + 1}", "t": t, "x": robots[:, i, 0].tolist(), "y": robots[:, i, 1].tolist()}
+        for i in range(robots.shape[1])
+    ]
+
+
+def trajectories_dict(plan: Any, filtered: np.ndarray | None = None) -> dict[str, Any]:
+    """Per-robot trajectories of a plan as a JSON-ready dict (format ``"tmr-trajectories/1"``).
+
+    Caruso 2021 §5.2: one ROS node per robot loads that robot's (t, x, y) from a JSON file and tracks it with
+    a PID.
+    Layout (key order as written)::
+
+        {
+          "format": "tmr-trajectories/1",
+          "scenario": "A", "method": "qp", "success": true, "failure": null,
+          "Ts": 0.05,                      # sample time [s]
+          "n_robots": 3,
+          "leader": "robot3",              # robot N = the manipulator end-effector
+          "base": [x, y],                  # tether anchor [m]
+          "robots": [                      # raw planner output, robot 1 (next to the base) .. robot N
+            {"name": "robot1", "t": [s...], "x": [m...], "y": [m...]},
+            ...
+          ],
+          "filtered": [ ...same as "robots"... ]   # only if `filtered` is given: zero-phase low-pass
+        }                                          # (tmr.checks.metrics.filter_trajectories); robots track these
+
+    All lists of one robot have K+1 entries; ``t`` starts at the plan's first sample (0 s normally). A robot
+    node reads ``doc["filtered"]`` if present, else ``doc["robots"]``, and picks its entry by ``name``.
+
+    Args:
+        plan: a :class:`tmr.control.clik.Plan` (fields ``t``, ``robots``, ``base``, ``scenario``, ``method``,
+            ``success``, ``failure``).
+        filtered: optional (K+1, N, 2) filtered positions [m].
+    """
+    t_arr = np.asarray(plan.t, dtype=float)
+    robots = np.asarray(plan.robots, dtype=float)
+    n_samples, n_robots = robots.shape[:2]
+    if t_arr.shape != (n_samples,):
+        raise ParameterError(f"plan.t has shape {t_arr.shape} but plan.robots has {n_samples} samples")
+    robots = _positions(robots, "plan.robots", n_samples, n_robots)
+    t = t_arr.tolist()
+    doc: dict[str, Any] = {
+        "format": TRAJECTORY_FORMAT,
+        "scenario": str(plan.scenario),
+        "method": str(plan.method),
+        "success": bool(plan.success),
+        "failure": None if plan.failure is None else str(plan.failure),
+        "Ts": json_safe(sample_time(t_arr, default=math.nan)),
+        "n_robots": int(n_robots),
+        "leader": f"robot{n_robots}",
+        "base": np.asarray(plan.base, dtype=float)[:2].tolist(),
+        "robots": _robot_entries(t, robots),
+    }
+    if filtered is not None:
+        doc["filtered"] = _robot_entries(t, _positions(filtered, "filtered", n_samples, n_robots))
+    return doc
+
+
+def _dumps(doc: Any, indent: int | None) -> str:
+    # allow_nan=False: a NaN/inf left in the document is a bug, fail instead of writing invalid JSON
+    return json.dumps(doc, indent=indent, ensure_ascii=False, allow_nan=False) + "\n"
+
+
+def _dumps_readable(doc: Any, level: int = 0, indent: int = 2) -> str:
+    """JSON with dicts indented one key a line and lists of scalars kept on one line (no trailing newline)."""
+    pad, inner = " " * (indent * level), " " * (indent * (level + 1))
+    if isinstance(doc, dict):
+        if not doc:
+            return "{}"
+        items = [f"{inner}{_dumps(str(k), None)[:-1]}: {_dumps_readable(v, level + 1, indent)}" for k, v in doc.items()]
+        return "{\n" + ",\n".join(items) + "\n" + pad + "}"
+    if isinstance(doc, list) and any(isinstance(v, (dict, list)) for v in doc):
+        items = [inner + _dumps_readable(v, level + 1, indent) for v in doc]
+        return "[\n" + ",\n".join(items) + "\n" + pad + "]"
+    return json.dumps(doc, ensure_ascii=False, allow_nan=False)
+
+
+def write_trajectories_json(plan: Any, path: str | os.PathLike[str], filtered: np.ndarray | None = None) -> Path:
+    """Write :func:`trajectories_dict` to ``path`` as compact JSON (atomic, deterministic)."""
+    return atomic_write_text(path, _dumps(trajectories_dict(plan, filtered), indent=None))
+
+
+def write_trajectories_csv(plan: Any, path: str | os.PathLike[str], filtered: np.ndarray | None = None) -> Path:
+    """Write the trajectories as CSV (atomic, deterministic).
+
+    Columns: ``t`` [s], then ``robot1_x, robot1_y, ..., robotN_x, robotN_y`` [m] (raw), then if ``filtered``
+    is given ``robot1_x_filtered, robot1_y_filtered, ...``. One row per sample (K+1 rows after the header);
+    floats are written with ``repr`` (shortest round-trip form); ``\\n`` line endings.
+    """
+    doc = trajectories_dict(plan, filtered)  # validates shapes and finiteness
+    n = doc["n_robots"]
+    t = np.asarray(plan.t, dtype=float)
+    blocks = [np.asarray(plan.robots, dtype=float).reshape(t.size, 2 * n)]
+    header = ["t"] + [f"robot{i + 1}_{c}" for i in range(n) for c in ("x", "y")]
+    if filtered is not None:
+        blocks.append(np.asarray(filtered, dtype=float).reshape(t.size, 2 * n))
+        header += [f"robot{i + 1}_{c}_filtered" for i in range(n) for c in ("x", "y")]
+    table = np.concatenate([t[:, None], *blocks], axis=1)
+    buf = _io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(header)
+    writer.writerows([[repr(v) for v in row] for row in table.tolist()])
+    return atomic_write_text(path, buf.getvalue())
+
+
+def write_metrics_json(metrics_dict: Any, path: str | os.PathLike[str]) -> Path:
+    """Write a metrics dict (e.g. ``Metrics.to_dict()``, or a :class:`tmr.checks.metrics.Metrics`) as readable JSON:
+    one key a line, lists of numbers on one line.
+
+    The dict is passed through :func:`tmr.checks.metrics.json_safe` first: numpy values become plain Python values
+    and non-finite floats become ``"inf"``/``"-inf"``/``"nan"`` strings. Key order is preserved (deterministic
+    bytes).
+    """
+    if hasattr(metrics_dict, "to_dict"):
+        metrics_dict = metrics_dict.to_dict()
+    return atomic_write_text(path, _dumps_readable(json_safe(metrics_dict)) + "\n")

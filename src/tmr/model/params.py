@@ -1,0 +1,317 @@
+"""Parameters of the tethered-chain planner, with the paper's values as defaults (Caruso 2021, DESIGN seed values).
+
+Every field is in SI units. Values the paper leaves out are chosen here and documented in ``formulations/pinv.md``.
+Scenario files override any field by name in their ``[params]`` table (see :func:`apply_overrides`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any, TypeVar
+
+from tmr.errors import ParameterError
+
+T = TypeVar("T")
+
+
+def _validate(obj: Any, positive: tuple[str, ...] = (), nonnegative: tuple[str, ...] = ()) -> None:
+    """Every numeric field finite; the fields named in ``positive`` > 0 and in ``nonnegative`` ≥ 0."""
+    cls = type(obj).__name__
+    for f in fields(obj):
+        v = getattr(obj, f.name)
+        if isinstance(v, bool):
+            continue
+        if isinstance(v, (int, float)) and not math.isfinite(v):
+            raise ParameterError(f"{cls}.{f.name} must be finite, got {v!r}")
+    for name in positive:
+        if getattr(obj, name) <= 0:
+            raise ParameterError(f"{cls}.{name} must be > 0, got {getattr(obj, name)!r}")
+    for name in nonnegative:
+        if getattr(obj, name) < 0:
+            raise ParameterError(f"{cls}.{name} must be ≥ 0, got {getattr(obj, name)!r}")
+
+
+@dataclass(frozen=True)
+class ChainParams:
+    """Physical chain parameters (Caruso 2021 §4 and §4.2.1).
+
+    Attributes:
+        safety_radius: robot safety bubble r [m]; obstacles are grown by it, two robots must stay ≥ 2r apart.
+        exit_height: height H where a tether leaves a robot [m].
+        base_height: height of the fixed tether anchor [m].
+        pulley_torque: winch pulley resisting torque [N m].
+        pulley_radius: winch pulley radius [m]; horizontal tension T0 = torque / radius.
+        cable_mass_per_length: ρ [kg/m].
+        ground_clearance: lowest allowed height of the cable [m].
+    """
+
+    safety_radius: float = 0.5
+    exit_height: float = 0.43
+    base_height: float = 0.43
+    pulley_torque: float = 1.35
+    pulley_radius: float = 0.1
+    cable_mass_per_length: float = 0.15
+    ground_clearance: float = 0.0
+
+    def __post_init__(self) -> None:
+        _validate(
+            self,
+            positive=("safety_radius", "exit_height", "pulley_torque", "pulley_radius", "cable_mass_per_length"),
+        )
+
+    @property
+    def horizontal_tension(self) -> float:
+        """T0 = pulley torque / pulley radius [N] (Caruso 2021 §4.2.1: 13.5 N)."""
+        return self.pulley_torque / self.pulley_radius
+
+
+@dataclass(frozen=True)
+class TimeParams:
+    """Time law of the leader (Caruso 2021 §4.2): duration T_end [s] and sampling period Ts [s]."""
+
+    T_end: float = 15.0
+    Ts: float = 0.05
+
+    def __post_init__(self) -> None:
+        _validate(self)
+        if self.T_end <= 0 or self.Ts <= 0 or self.Ts > self.T_end:
+            raise ParameterError(f"need 0 < Ts ≤ T_end, got Ts={self.Ts}, T_end={self.T_end}")
+
+    @property
+    def steps(self) -> int:
+        """Number of integration steps K = T_end / Ts (300 for the paper)."""
+        return int(round(self.T_end / self.Ts))
+
+
+@dataclass(frozen=True)
+class PathParams:
+    """Leader path planning (Caruso 2021 §4.2 "Planner": RRT*).
+
+    Attributes:
+        path_clearance: margin [m] the leader's RRT* path keeps from the inflated obstacles. The default keeps the
+            leader outside the obstacle task's danger zone (d_min + ε) where the map allows; if no path exists with
+            it, the planner retries with half of it, then with ``path_clearance_min``.
+        path_clearance_min: smallest margin tried [m].
+        path_iterations: RRT* iterations (termination by count, so the path is a function of the seed).
+        goal_tolerance: the plan fails if the leader ends farther than this from the goal [m].
+        leader_speed: peak speed of the leader's time law along the route [m/s]; with ``leader_accel`` [m/s²] it
+            sets the duration T_end from the route length unless T_end is given (``tmr.route.references``).
+        route_gain: gain [1/s] of the followers' tracking of their route references (``RouteFollowers``).
+        route_weight: weight of that task in the QP's tether level.
+        route_settle: time [s] the route references hold still at their end, the leader on the goal, so that the
+            followers come to rest on their stations before the plan ends (not added to a ``T_end`` the user set).
+    """
+
+    path_clearance: float = 0.6
+    path_clearance_min: float = 0.05
+    path_iterations: int = 1000
+    goal_tolerance: float = 0.1
+    leader_speed: float = 0.8
+    leader_accel: float = 0.5
+    route_gain: float = 1.0
+    route_weight: float = 10.0
+    route_settle: float = 2.0
+
+    def __post_init__(self) -> None:
+        _validate(self)
+        if self.path_clearance < 0 or self.path_clearance_min < 0 or self.path_iterations < 1:
+            raise ParameterError(f"need path_clearance ≥ 0, path_clearance_min ≥ 0, path_iterations ≥ 1; got {self}")
+        if not 0.0 <= self.route_settle <= 60.0:
+            raise ParameterError(f"need 0 ≤ route_settle ≤ 60 [s], got {self.route_settle}")
+        if min(self.leader_speed, self.leader_accel, self.route_gain) <= 0 or self.route_weight < 0:
+            raise ParameterError(
+                "need leader_speed > 0 [m/s], leader_accel > 0 [m/s²], route_gain > 0 [1/s], route_weight ≥ 0; "
+                f"got {self.leader_speed}, {self.leader_accel}, {self.route_gain}, {self.route_weight}"
+            )
+
+    @property
+    def clearances(self) -> tuple[float, ...]:
+        """Margins tried in order [m]."""
+        c = self.path_clearance
+        return tuple(sorted({c, max(c / 2, self.path_clearance_min), min(c, self.path_clearance_min)}, reverse=True))
+
+
+@dataclass(frozen=True)
+class TaskParams:
+    """Parameters of the tasks shared by every formulation (Caruso 2021 §4.1).
+
+    Attributes:
+        clik_gain: K of eq. 20 (scalar times identity) [1/s].
+        samples_per_link: points per tether where clearance is sampled (critical point, clearance rows).
+        span_target_fraction: target d_t of eq. 13 as a fraction of [d_lo, d_max]; 0.5 is the range midpoint of the
+            joint-range criterion the paper cites (Siciliano 2009).
+        gain_floor: G of eq. 23 [1/s].
+        gain_edge: extra gain of each exponential of eq. 23 at its limit [1/s].
+        gain_length: decay length 1/|b| of the exponentials of eq. 23 [m].
+    """
+
+    clik_gain: float = 5.0
+    samples_per_link: int = 20
+    span_target_fraction: float = 0.5
+    gain_floor: float = 0.5
+    gain_edge: float = 5.0
+    gain_length: float = 0.2
+
+    def __post_init__(self) -> None:
+        _validate(self, positive=("clik_gain", "gain_length"))
+        if self.samples_per_link < 1:
+            raise ParameterError(f"samples_per_link must be ≥ 1, got {self.samples_per_link}")
+        if not 0 <= self.span_target_fraction <= 1:
+            raise ParameterError(f"span_target_fraction must be in [0, 1], got {self.span_target_fraction}")
+
+
+@dataclass(frozen=True)
+class PinvParams:
+    """Parameters of the faithful task-priority CLIK baseline (Caruso 2021 §3, §4.1.3).
+
+    Attributes:
+        dls_damping: λ of the damped least-squares pseudoinverse J# = Jᵀ(JJᵀ + λI)⁻¹, λ ∈ ]0, 1[ (§3).
+        d_min: activation distance of the obstacle task (eq. 17), measured from the inflated obstacles [m].
+        k_v0: evasion speed constant, v0 = k_v0 / ‖d_c − x_c‖ [m²/s] (§4.1.3).
+        hysteresis: ε of eq. 17 — the task is released at d_min + ε [m].
+        min_evasion_distance: floor on ‖d_c − x_c‖ in v0 so the speed stays finite at contact [m] (not in the paper).
+    """
+
+    dls_damping: float = 0.01
+    d_min: float = 0.5
+    k_v0: float = 0.05
+    hysteresis: float = 0.1
+    min_evasion_distance: float = 0.05
+
+    def __post_init__(self) -> None:
+        _validate(self, positive=("d_min", "k_v0", "hysteresis", "min_evasion_distance"))
+        if not 0 < self.dls_damping < 1:
+            raise ParameterError(f"dls_damping λ must be in ]0, 1[ (Caruso 2021 §3), got {self.dls_damping}")
+
+
+@dataclass(frozen=True)
+class QPParams:
+    """Parameters of the lexicographic QP (``formulations/qp.md``). Units: m, s, rad.
+
+    Attributes:
+        d_safe: clearance every robot and tether sample keeps from the inflated obstacles [m].
+        clearance_rows_per_link: clearance rows per tether: 0 = every sample (safe default); k > 0 = the k lowest
+            local minima of its clearance profile (fewer rows for long chains, see ``ObstacleClearance``).
+        clearance_activation: samples farther than this from the obstacles give inactive rows [m].
+        approach_rate: a distance to its limit (clearance, separation) may shrink at most at this rate times the
+            remaining margin [1/s] (velocity damper), so the acceleration bound can always stop an approach.
+        separation_margin: robots keep 2r + this from each other [m].
+        separation_neighbours: separation rows per robot (its nearest robots; ≥ N−1 means every pair).
+        robot_speed_max: Cartesian speed bound of every robot, per axis [m/s].
+        joint_speed_max: |θ̇| bound [rad/s].
+        span_speed_max: |ḋ| bound [m/s].
+        accel_max: |q̇_k − q̇_{k−1}| ≤ accel_max · Ts [rad/s², m/s²].
+        robot_accel_max: Cartesian acceleration bound of every robot, per axis [m/s²].
+        span_margin: spans stay in [d_lo + margin, d_max − margin] [m].
+        uniformity_gain: rate at which adjacent span differences decay (level 2) [1/s].
+        tether_smoothness: weight of ‖q̇ − q̇_{k−1}‖² inside level 2 (next to the tether regulation, weight 1): the
+            tether level fixes N of the 2N − 2 joint velocities left by the leader, so smoothness must act there too.
+        energy_weight: weight of ‖q̇‖² at level 3; smoothness_weight: weight of ‖q̇ − q̇_{k−1}‖² at level 3.
+        solver: "osqp" (persistent workspace) or a qpsolvers backend.
+    """
+
+    d_safe: float = 0.05
+    clearance_rows_per_link: int = 0
+    clearance_activation: float = 1.5
+    approach_rate: float = 2.0
+    separation_margin: float = 0.02
+    separation_neighbours: int = 2
+    robot_speed_max: float = 2.5
+    joint_speed_max: float = 3.0
+    span_speed_max: float = 3.0
+    accel_max: float = 20.0
+    robot_accel_max: float = 6.0
+    span_margin: float = 0.01
+    uniformity_gain: float = 1.0
+    tether_smoothness: float = 100.0
+    energy_weight: float = 1.0
+    smoothness_weight: float = 10.0
+    solver: str = "osqp"
+
+    def __post_init__(self) -> None:
+        _validate(
+            self,
+            positive=(
+                "robot_speed_max",
+                "joint_speed_max",
+                "span_speed_max",
+                "accel_max",
+                "robot_accel_max",
+                "approach_rate",
+                "clearance_activation",
+            ),
+            nonnegative=(
+                "d_safe",
+                "separation_margin",
+                "span_margin",
+                "uniformity_gain",
+                "energy_weight",
+                "smoothness_weight",
+                "tether_smoothness",
+            ),
+        )
+        if self.clearance_rows_per_link < 0 or self.separation_neighbours < 1:
+            raise ParameterError("need clearance_rows_per_link ≥ 0 and separation_neighbours ≥ 1")
+
+
+#: Every parameter class, in the order the planner applies overrides (a name belongs to one of them).
+PARAM_CLASSES: tuple[type, ...] = (ChainParams, TimeParams, PathParams, TaskParams, PinvParams, QPParams)
+
+
+def convert_field(cls: type, name: str, value: Any) -> Any:
+    """``value`` (a number, or its text from a command line or a file) as the type of field ``name`` of ``cls``:
+    an int field takes only whole numbers (``2.5`` is refused, not truncated), a float field only finite numbers, a
+    str field text. ParameterError naming the field otherwise."""
+    default = getattr(cls(), name)
+    kind = type(default)
+    label = f"{cls.__name__}.{name}"
+    if kind is str:
+        if not isinstance(value, str):
+            raise ParameterError(f"{label} takes text, got {value!r}")
+        return value
+    if isinstance(value, bool):
+        raise ParameterError(f"{label} takes a number, got {value!r}")
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{label} takes a number, got {value!r}") from None
+    if not math.isfinite(number):
+        raise ParameterError(f"{label} must be finite, got {value!r}")
+    if kind is int:
+        if isinstance(value, str):
+            try:
+                return int(value.strip())
+            except ValueError:
+                pass
+        if not number.is_integer():
+            raise ParameterError(f"{label} takes a whole number, got {value!r}")
+        return int(value) if isinstance(value, int) else int(number)
+    return number
+
+
+def apply_overrides(obj: T, overrides: dict[str, Any], *, strict: bool = False) -> tuple[T, dict[str, Any]]:
+    """Return ``obj`` with the fields named in ``overrides`` replaced, and the overrides it did not use.
+
+    With ``strict=True`` an unknown name raises ``ParameterError``. Types follow the field's default type
+    (:func:`convert_field`: an int field refuses 2.5).
+    """
+    names = {f.name: f for f in fields(obj)}  # type: ignore[arg-type]
+    used: dict[str, Any] = {}
+    rest: dict[str, Any] = {}
+    for key, value in overrides.items():
+        if key in names:
+            used[key] = convert_field(type(obj), key, value)
+        else:
+            rest[key] = value
+    if strict and rest:
+        raise ParameterError(f"unknown parameter(s) {sorted(rest)}")
+    return replace(obj, **used), rest  # type: ignore[type-var]
+
+
+def as_dict(*objs: Any) -> dict[str, Any]:
+    """Flatten parameter dataclasses into one JSON-ready dict (for metrics.json)."""
+    out: dict[str, Any] = {}
+    for o in objs:
+        out.update(asdict(o))
+    return out

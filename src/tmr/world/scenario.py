@@ -1,0 +1,293 @@
+"""Scenarios: an environment, the tether anchor (base), the leader's goal and the team size.
+
+The four built-in scenarios A-D reproduce the settings of Caruso 2021 §5 (three omnidirectional robots
+tethered in a chain to a fixed base): A square room with five disc columns, goal behind the middle one; B a
+curved high-curvature corridor leaving the room, goal at its end; C a small maze, goal in the top-right
+corner; D a hangar with a Cessna C-172, the leader goes round the plane to the opposite side. They are data
+files in ``tmr/scenarios/`` (TOML + GeoJSON, format in ``tmr/scenarios/README.md``); any TOML file of the same
+format loads with :func:`load_scenario`.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tmr.errors import ParameterError, ScenarioError
+from tmr.world.environment import DEFAULT_RESOLUTION, DEFAULT_SAFETY_RADIUS, Environment
+from tmr.world.maps import load_environment
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - python 3.10
+    import tomli as tomllib
+
+__all__ = ["SCENARIO_DIR", "Scenario", "builtin_scenarios", "load_scenario", "scenario_from_map"]
+
+SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+
+_TOP_KEYS = {"name", "description", "robots", "base", "goal", "start", "map", "params"}
+_MAP_KEYS = {"file", "bounds", "safety_radius", "resolution"}
+
+
+@dataclass
+class Scenario:
+    """A planning problem: environment, base (tether anchor), leader goal, optional start, team size.
+
+    ``base`` and ``goal`` are (2,) [m]; ``start`` is (N, 2) [m], robot 1..N with robot N the leader, or None
+    when the planner chooses the initial chain; ``params`` holds optional overrides of chain/controller
+    parameters (the TOML ``[params]`` table). Validated on construction: N >= 1 integer, finite coordinates
+    (ParameterError); base, goal and start points in free space (exact clearance > 0) and in one connected
+    free region (ScenarioError).
+    """
+
+    name: str
+    description: str
+    environment: Environment
+    base: NDArray[np.float64]
+    goal: NDArray[np.float64]
+    start: NDArray[np.float64] | None
+    n_robots: int
+    params: dict[str, Any] = field(default_factory=dict)
+    source: Path | None = None
+
+    def __post_init__(self) -> None:
+        label = self._label()
+        if isinstance(self.n_robots, bool | np.bool_) or not isinstance(self.n_robots, int | np.integer):
+            raise ParameterError(f"{label}: robots must be an integer >= 1, got {self.n_robots!r}")
+        if self.n_robots < 1:
+            raise ParameterError(f"{label}: robots must be >= 1 (number of tethered robots), got {self.n_robots}")
+        self.n_robots = int(self.n_robots)
+        self.base = _point(self.base, "base", label)
+        self.goal = _point(self.goal, "goal", label)
+        if self.start is not None:
+            start = _finite_array(self.start, "start", label)
+            if start.shape != (self.n_robots, 2):
+                raise ParameterError(
+                    f"{label}: start must list one [x, y] per robot, shape ({self.n_robots}, 2); got shape "
+                    f"{start.shape}"
+                )
+            self.start = start
+        _check_params(self.params, label)
+        self._check_free()
+
+    def _label(self) -> str:
+        return f"scenario {self.name!r}" + (f" ({self.source})" if self.source is not None else "")
+
+    def _check_free(self) -> None:
+        env = self.environment
+        label = self._label()
+        names = ["base", "goal"]
+        pts = [self.base, self.goal]
+        if self.start is not None:
+            names += [f"start of robot {k + 1}" for k in range(self.n_robots)]
+            pts += list(self.start)
+        P = np.array(pts)
+        clear = env.exact_clearance(P)
+        xmin, ymin, xmax, ymax = env.bounds
+        for nm, p, c in zip(names, P, clear, strict=True):
+            if not (xmin <= p[0] <= xmax and ymin <= p[1] <= ymax):
+                raise ScenarioError(f"{label}: {nm} ({p[0]:.6g}, {p[1]:.6g}) m is outside the room {env.bounds}")
+            known = getattr(env, "known_free", None)
+            if (
+                not c > 0.0
+                and known is not None
+                and not (known[0] <= p[0] <= known[2] and known[1] <= p[1] <= known[3])
+            ):
+                raise ScenarioError(
+                    f"{label}: {nm} ({p[0]:g}, {p[1]:g}) m is outside the map's known free area (x {known[0]:.6g} .. "
+                    f"{known[2]:.6g} m, y {known[1]:.6g} .. {known[3]:.6g} m; unknown and occupied cells are obstacles)"
+                )
+            if not c > 0.0:
+                raise ScenarioError(
+                    f"{label}: {nm} ({p[0]:g}, {p[1]:g}) m is not in free space: clearance {c:.3f} m to the "
+                    f"obstacles and walls grown by the safety radius {env.safety_radius:g} m (must be > 0); "
+                    f"move it away from the obstacles"
+                )
+        # every point must lie in the same connected piece of free space as the base
+        r = float(env.safety_radius)
+        gap = float(np.linalg.norm(P[1] - P[0]))
+        if gap < r:  # the leader's disc would cover the anchor: no robot can stand at the goal
+            raise ScenarioError(
+                f"{label}: the goal ({P[1][0]:g}, {P[1][1]:g}) m is {gap:.3g} m from the base (the tether anchor), "
+                f"within the robot radius {r:g} m: no robot can stand there; move the goal away from the anchor"
+            )
+        region = env.free_region(P)
+        for nm, p, reg in zip(names[1:], P[1:], region[1:], strict=True):
+            if reg != region[0]:
+                raise ScenarioError(
+                    f"{label}: no free route from the base to the {nm} ({p[0]:g}, {p[1]:g}) m: they lie in "
+                    f"different connected regions of free space (the obstacles grown by {env.safety_radius:g} m "
+                    "separate them)"
+                )
+
+
+def _finite_array(value: Any, what: str, label: str) -> NDArray[np.float64]:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{label}: {what} must be numbers [m], got {value!r}") from None
+    if not np.all(np.isfinite(arr)):
+        raise ParameterError(f"{label}: {what} contains NaN or inf: {arr.tolist()}")
+    return arr
+
+
+def _point(value: Any, what: str, label: str) -> NDArray[np.float64]:
+    arr = _finite_array(value, what, label)
+    if arr.shape != (2,):
+        raise ParameterError(f"{label}: {what} must be [x, y] in metres, got {np.asarray(value).tolist()!r}")
+    return arr
+
+
+def _check_params(params: Any, label: str, prefix: str = "params") -> None:
+    if not isinstance(params, dict):
+        raise ParameterError(f"{label}: {prefix} must be a table of name = value, got {type(params).__name__}")
+    for key, val in params.items():
+        _check_param_value(val, f"{prefix}.{key}", label)
+
+
+def _check_param_value(val: Any, name: str, label: str) -> None:
+    if isinstance(val, dict):
+        _check_params(val, label, name)
+    elif isinstance(val, list | tuple):
+        for k, v in enumerate(val):
+            _check_param_value(v, f"{name}[{k}]", label)
+    elif isinstance(val, float) and not math.isfinite(val):
+        raise ParameterError(f"{label}: {name} = {val} is not a finite number")
+
+
+def builtin_scenarios() -> list[str]:
+    """Names of the built-in scenarios (``["A", "B", "C", "D"]``): the TOML files in ``tmr/scenarios/``."""
+    return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
+
+
+def load_scenario(name_or_path: str | Path, safety_radius: float | None = None) -> Scenario:
+    """Load a built-in scenario by name ("A".."D", case-insensitive) or a scenario TOML file by path.
+
+    ``safety_radius`` [m]: the robot radius r to grow the obstacles by, instead of the file's (``[params]``
+    ``safety_radius``, else ``[map] safety_radius``, else 0.5 m); base, goal and start are checked with it.
+
+    Raises ScenarioError for an unknown name, a missing or malformed TOML, missing keys or points not in free
+    space; ParameterError for N < 1 robots or NaN/inf numbers; MapError for a bad map file.
+    """
+    if isinstance(name_or_path, str) and not any(sep in name_or_path for sep in "/\\") and "." not in name_or_path:
+        builtins = builtin_scenarios()
+        match = [b for b in builtins if b.lower() == name_or_path.strip().lower()]
+        if match:
+            return _load_toml(SCENARIO_DIR / f"{match[0]}.toml", safety_radius)
+        if not Path(name_or_path).exists():
+            raise ScenarioError(
+                f"unknown scenario {name_or_path!r}: built-in scenarios are {', '.join(builtins)}; "
+                f"or give the path of a scenario .toml file"
+            )
+    path = Path(name_or_path)
+    if not path.exists():
+        raise ScenarioError(
+            f"{path}: scenario file not found (built-in scenarios are {', '.join(builtin_scenarios())})"
+        )
+    return _load_toml(path, safety_radius)
+
+
+def _load_toml(path: Path, safety_radius: float | None = None) -> Scenario:
+    from tmr.files import read_text
+
+    text = read_text(path, "scenario TOML", ScenarioError)  # a directory, random bytes: one line, exit 2
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
+    label = f"scenario file {path}"
+    unknown = set(doc) - _TOP_KEYS
+    if unknown:
+        raise ScenarioError(f"{label}: unknown keys {sorted(unknown)}; allowed: {sorted(_TOP_KEYS)}")
+    for key in ("base", "goal", "map"):
+        if key not in doc:
+            raise ScenarioError(f"{label}: missing required key {key!r}")
+    name = doc.get("name", path.stem)
+    description = doc.get("description", "")
+    if not isinstance(name, str) or not isinstance(description, str):
+        raise ScenarioError(f"{label}: name and description must be strings")
+    robots = doc.get("robots", 3)
+    if isinstance(robots, float) and robots.is_integer():
+        robots = int(robots)
+
+    m = doc["map"]
+    if not isinstance(m, dict):
+        raise ScenarioError(f"{label}: [map] must be a table with file, bounds, safety_radius, resolution")
+    unknown = set(m) - _MAP_KEYS
+    if unknown:
+        raise ScenarioError(f"{label}: unknown keys in [map] {sorted(unknown)}; allowed: {sorted(_MAP_KEYS)}")
+    if not isinstance(m.get("file"), str):
+        raise ScenarioError(f'{label}: [map] needs file = "<map file relative to the TOML>"')
+    map_path = Path(m["file"])
+    if not map_path.is_absolute():
+        map_path = path.parent / map_path
+    params = doc.get("params", {})
+    if safety_radius is None and isinstance(params, dict) and "safety_radius" in params:
+        safety_radius = _number(params["safety_radius"], "params.safety_radius", label)  # one r: the chain's
+    if safety_radius is None:
+        safety_radius = _number(m.get("safety_radius", DEFAULT_SAFETY_RADIUS), "map.safety_radius", label)
+    env = load_environment(
+        map_path,
+        bounds=m.get("bounds"),
+        safety_radius=safety_radius,
+        resolution=_number(m.get("resolution", DEFAULT_RESOLUTION), "map.resolution", label),
+    )
+    return Scenario(
+        name=name,
+        description=description,
+        environment=env,
+        base=doc["base"],
+        goal=doc["goal"],
+        start=doc.get("start"),
+        n_robots=robots,
+        params=(dict(params) | ({"safety_radius": env.safety_radius} if "safety_radius" in params else {}))
+        if isinstance(params, dict)
+        else params,
+        source=path,
+    )
+
+
+def _number(value: Any, what: str, label: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ParameterError(f"{label}: {what} must be a number, got {value!r}")
+    if not math.isfinite(value):
+        raise ParameterError(f"{label}: {what} = {value} is not a finite number")
+    return float(value)
+
+
+def scenario_from_map(
+    map_path: str | Path,
+    base: ArrayLike,
+    goal: ArrayLike,
+    start: ArrayLike | None = None,
+    n_robots: int = 3,
+    *,
+    bounds: tuple[float, float, float, float] | None = None,
+    safety_radius: float = DEFAULT_SAFETY_RADIUS,
+    resolution: float = DEFAULT_RESOLUTION,
+    name: str | None = None,
+) -> Scenario:
+    """Scenario from a map file plus base and goal [m] (the ``--map --base --goal`` command-line use).
+
+    ``map_path``: any format of :func:`tmr.world.maps.load_map`; ``bounds`` is needed for GeoJSON/WKT files that
+    do not carry their own. Validated like a scenario file (ScenarioError / ParameterError / MapError).
+    """
+    p = Path(map_path)
+    env = load_environment(p, bounds=bounds, safety_radius=safety_radius, resolution=resolution)
+    return Scenario(
+        name=name if name is not None else p.stem,
+        description=f"map {p.name}",
+        environment=env,
+        base=base,  # type: ignore[arg-type]  # converted and validated in Scenario.__post_init__
+        goal=goal,  # type: ignore[arg-type]
+        start=start,  # type: ignore[arg-type]
+        n_robots=n_robots,
+        source=p,
+    )
