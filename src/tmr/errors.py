@@ -58,3 +58,8 @@ class NoPathFound(PathError):
 
 class InfeasibleStep(TmrError):
     """A formulation step has no solution that satisfies the hard constraints."""
+
+
+class TetherSpanError(ParameterError):
+    """A tether cannot hang between its two ends at the given winch tension (the span is longer than the longest
+    catenary that tension can hold, or the winch cannot even carry the cable's weight): no equilibrium exists."""

@@ -1,0 +1,346 @@
+"""Catenary model of a drone tether between two 3-D ends at different heights (Caruso 2021 §4.2.1 in 3-D).
+
+The tether hangs in the vertical plane through its two ends. In that plane, with ``x`` the horizontal distance from
+the *lower* end A towards the upper end B and ``z`` the height, the shape is the catenary (Irvine 1981, §1.2)
+
+    z(x) = z0 + a (cosh((x - x0) / a) - 1),      a = H / (rho g),
+
+and the tension at a point is ``T = H cosh((x - x0)/a) = rho g (a + z - z0)``: it grows with height, so
+``T_B - T_A = rho g h`` with ``h = z_B - z_A``.
+
+Which end is given. Caruso 2021 §4.2.1 models each winch as a pulley with a constant resisting torque T_r, i.e. a
+constant tension T_w = T_r / r where the cable leaves the pulley. Here the winch sits by default at the LOWER end
+of each tether (``winch_end="lower"``): the first tether's winch is the ground station (tethered multirotors reel
+their tether at the ground), and for a drone-to-drone tether the spool is carried by the lower drone, so the upper
+drone carries only cable. With the winch tension at the lower end, the upper end's tension is
+``T_w + rho g h`` in closed form, whatever the span: the pull the upper drone must hold is known before the shape
+is solved. ``winch_end="upper"`` is supported too (then ``T_A = T_w - rho g h`` must stay > 0). On level ends both
+choices coincide. Unlike the ground model (``tmr.model.catenary``, where the winch fixes the *horizontal* tension
+T0), the winch here fixes the tension *magnitude* at its end, and H follows from the geometry: on a near-vertical
+tether H -> 0 while the tension stays T_w.
+
+Solution. With theta = (x - x0)/a, theta_A = -x0/a at A and theta_B = theta_A + d/a at B, the two end tensions give
+``a cosh(theta_A) = m = T_A/(rho g)`` and ``a cosh(theta_B) = m + h``. For a trial theta_A,
+``a = m / cosh(theta_A)`` and ``sinh(theta_B) = sqrt(k^2 sinh^2(theta_A) + k^2 - 1)``, k = 1 + h/m, so the span is a
+function ``d(theta_A)`` of one variable; ``brentq`` finds the root of ``d(theta_A) - d`` in a bracket found on a grid.
+At a given end tension there are generally two equilibria (a shallow and a deep sag); the solver returns the shallow
+one, the branch joined continuously to the taut limit (theta_A -> +inf). Only that one is stable under a
+constant-tension winch: with Pi(L) = rho g \\int z ds + T_w L, dPi/dL = T_w - T_A(L), and on the shallow branch the end
+tension falls as the paid-out length L grows (a perturbation is pulled back), on the deep branch it rises. If the
+span exceeds the largest span the tension can hold (the maximum of d(theta_A)), ``TetherSpanError`` is raised.
+
+Everything in SI units: metres, newtons, kilograms; z is the height above the floor (z = 0).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, fields
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.optimize import brentq, minimize_scalar
+
+from tmr.errors import ParameterError, TetherSpanError, fmt_point
+from tmr.model.catenary import G0
+
+__all__ = ["DroneTetherParams", "Catenary3D", "solve3d", "tether_limits", "VERTICAL_SPAN"]
+
+VERTICAL_SPAN = 1e-9  # horizontal spans below this [m] are a vertical tether (no catenary, a = None)
+
+_GRID = np.linspace(-40.0, 40.0, 4001)  # trial theta_A values for the bracket (cosh(40) ~ 1.2e17 stays finite)
+
+
+@dataclass(frozen=True)
+class DroneTetherParams:
+    """A light drone tether and a small quadrotor (defaults with their reasoning).
+
+    Attributes:
+        mass_per_length: rho [kg/m], default 0.015: a thin power/data micro-tether; tethers sold for small
+            multirotors weigh on the order of 10-30 g/m (vs the ground robots' 0.15 kg/m, Caruso 2021).
+        g: gravitational acceleration [m/s^2], 9.81.
+        winch_tension: T_w [N], the constant tension the winch keeps at its end (Caruso 2021's constant pulley
+            torque / pulley radius), default 2.0 N: about 14 % of the default drone's weight, and with
+            rho g = 0.147 N/m a level span of up to 1.3255 T_w / (rho g) = 18.0 m.
+        winch_end: ``"lower"`` (default) or ``"upper"``: the end of each tether where the winch acts (module doc).
+        tether_length: longest cable a winch can pay out [m], default 20.0 m.
+        clearance: c_t [m], the whole curve must stay at least this far from every obstacle and the floor,
+            default 0.2 m.
+        drone_mass: [kg], default 1.5 kg (a small quadrotor of the F450 / 5-inch-long-range class with battery).
+        thrust_to_weight: total maximal thrust / weight [-], default 2.0 (the usual minimum for a controllable
+            multirotor).
+        control_reserve: fraction of the maximal thrust kept for attitude control and gusts [-], default 0.25.
+        drone_radius: radius of the sphere enclosing the drone with its propellers [m], default 0.3 m.
+
+    Raises:
+        ParameterError: a value is not a finite real number or is out of range.
+    """
+
+    mass_per_length: float = 0.015
+    g: float = G0
+    winch_tension: float = 2.0
+    winch_end: str = "lower"
+    tether_length: float = 20.0
+    clearance: float = 0.2
+    drone_mass: float = 1.5
+    thrust_to_weight: float = 2.0
+    control_reserve: float = 0.25
+    drone_radius: float = 0.3
+
+    def __post_init__(self) -> None:
+        if self.winch_end not in ("lower", "upper"):
+            raise ParameterError(f"DroneTetherParams.winch_end must be 'lower' or 'upper', got {self.winch_end!r}")
+        for f in fields(self):
+            if f.name == "winch_end":
+                continue
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+                raise ParameterError(f"DroneTetherParams.{f.name} must be a real number, got {value!r}")
+            value = float(value)
+            if not math.isfinite(value):
+                raise ParameterError(f"DroneTetherParams.{f.name} must be finite, got {value!r}")
+            object.__setattr__(self, f.name, value)
+        for name in ("mass_per_length", "g", "winch_tension", "tether_length", "drone_mass", "thrust_to_weight"):
+            if getattr(self, name) <= 0.0:
+                raise ParameterError(f"DroneTetherParams.{name} must be > 0, got {getattr(self, name)!r}")
+        for name in ("clearance", "drone_radius"):
+            if getattr(self, name) < 0.0:
+                raise ParameterError(f"DroneTetherParams.{name} must be >= 0 m, got {getattr(self, name)!r}")
+        if not 0.0 <= self.control_reserve < 1.0:
+            raise ParameterError(f"DroneTetherParams.control_reserve must be in [0, 1), got {self.control_reserve!r}")
+
+    @property
+    def weight_per_length(self) -> float:
+        """rho g [N/m]."""
+        return self.mass_per_length * self.g
+
+    @property
+    def spare_thrust(self) -> float:
+        """Thrust left to pull a tether while hovering [N]: (1 - reserve) * T/W * m g - m g (defaults: 7.36 N).
+
+        Used as the bound on the tension magnitude at a drone end; conservative, since the thrust needed is
+        |m g e_z - F| <= m g + |F| for the tether force F on the drone."""
+        weight = self.drone_mass * self.g
+        return max(0.0, (1.0 - self.control_reserve) * self.thrust_to_weight * weight - weight)
+
+
+@dataclass(frozen=True)
+class Catenary3D:
+    """A tether hanging between ``p`` and ``q`` (3-D, z up, metres; forces in newtons).
+
+    Attributes:
+        p, q: the two ends, shape (3,) [m].
+        u: horizontal unit vector from p towards q (``(1, 0, 0)`` for a vertical tether) [-].
+        d: horizontal span |(q - p)_xy| [m]. h: height difference q_z - p_z [m].
+        a: catenary parameter H / (rho g) [m], ``None`` for a vertical tether (d < ``VERTICAL_SPAN``).
+        x0: horizontal position of the vertex along ``u`` from p [m] (may lie outside [0, d]); ``None`` if vertical.
+        z0: height of the vertex [m]; ``None`` if vertical.
+        horizontal_tension: H [N] (0 for a vertical tether).
+        length: arc length L [m].
+        lowest: lowest point of the cable itself, shape (3,) [m] (the vertex, or the lower end when the vertex lies
+            outside the span).
+        tension_p, tension_q: tension magnitude at p and at q [N].
+        force_p, force_q: force of the cable on the end p / q, shape (3,) [N]; force_p + force_q = -rho g L e_z.
+        weight_per_length: rho g [N/m].
+    """
+
+    p: np.ndarray
+    q: np.ndarray
+    u: np.ndarray
+    d: float
+    h: float
+    a: float | None
+    x0: float | None
+    z0: float | None
+    horizontal_tension: float
+    length: float
+    lowest: np.ndarray
+    tension_p: float
+    tension_q: float
+    force_p: np.ndarray
+    force_q: np.ndarray
+    weight_per_length: float
+
+    def points(self, k: int = 64) -> np.ndarray:
+        """``k`` >= 2 points of the curve, equally spaced in arc length from p to q, shape (k, 3) [m].
+
+        Consecutive points are L/(k-1) apart along the cable, so every point of the cable lies within L/(2(k-1)) of a
+        sample: a clearance check on the samples with that margin added holds for the whole curve."""
+        if int(k) < 2:
+            raise ParameterError(f"a tether needs at least 2 sample points, got {k!r}")
+        s = np.linspace(0.0, self.length, int(k))  # arc length from p
+        if self.a is None:
+            return self.p + np.outer(s * np.sign(self.h), [0.0, 0.0, 1.0])
+        a = self.a
+        theta_p = (0.0 - self.x0) / a
+        theta = np.arcsinh(np.sinh(theta_p) + s / a)  # ds = a cosh(theta) dtheta
+        x = self.x0 + a * theta
+        z = self.z0 + a * (np.cosh(theta) - 1.0)
+        return np.column_stack((self.p[0] + x * self.u[0], self.p[1] + x * self.u[1], z))
+
+
+def _as_point(name: str, value: ArrayLike) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"{name} must be a 3-D point, got {value!r}") from exc
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise ParameterError(f"{name} must be a finite 3-D point (x, y, z), got {value!r}")
+    return arr
+
+
+def _span(theta_a: np.ndarray | float, m: float, k: float) -> np.ndarray | float:
+    """d(theta_A) / m: horizontal span over m for a lower-end angle parameter theta_A (k = 1 + h/m)."""
+    sh = np.sinh(theta_a)
+    theta_b = np.arcsinh(np.sqrt(k * k * sh * sh + (k * k - 1.0)))
+    return (theta_b - theta_a) / np.cosh(theta_a)
+
+
+def _solve_theta(d: float, h: float, m: float) -> float:
+    """theta_A of the shallow (stable) catenary through A=(0,0), B=(d,h), h >= 0, with a cosh(theta_A) = m."""
+    k = 1.0 + h / m
+    target = d / m
+    vals = _span(_GRID, m, k)
+    j = int(np.argmax(vals))
+    lo, hi = _GRID[max(j - 1, 0)], _GRID[min(j + 1, len(_GRID) - 1)]
+    res = minimize_scalar(lambda t: -_span(t, m, k), bounds=(lo, hi), method="bounded", options={"xatol": 1e-13})
+    theta_star, d_max = (float(res.x), -float(res.fun)) if -res.fun >= vals[j] else (float(_GRID[j]), float(vals[j]))
+    if target > d_max:
+        raise TetherSpanError(
+            f"a span of {d:.3f} m at a height difference of {h:.3f} m is longer than the {d_max * m:.3f} m the "
+            f"tether can hold at an end tension of {m:.3f} m of cable weight; raise the winch tension or close the span"
+        )
+    above = np.nonzero((_GRID > theta_star) & (vals >= target))[0]
+    if above.size:
+        i = int(above[-1])
+        if i + 1 >= len(_GRID):  # a span shorter than the grid resolves: nearer vertical than d(40) m
+            return float(_GRID[-1])
+        lo, hi = float(_GRID[i]), float(_GRID[i + 1])
+    else:
+        lo, hi = theta_star, float(_GRID[np.searchsorted(_GRID, theta_star, side="right")])
+    if _span(lo, m, k) == target:
+        return lo
+    return float(brentq(lambda t: _span(t, m, k) - target, lo, hi, xtol=1e-15, rtol=4 * np.finfo(float).eps))
+
+
+def solve3d(
+    p: ArrayLike, q: ArrayLike, params: DroneTetherParams | None = None, *, winch_tension: float | None = None
+) -> Catenary3D:
+    """The tether between ``p`` and ``q`` [m] with the winch keeping ``winch_tension`` [N] (default
+    ``params.winch_tension``) at ``params.winch_end``. Ties (level ends) put the winch at p.
+
+    Raises:
+        ParameterError: p or q is not a finite 3-D point, they coincide, or the tension is not finite and > 0.
+        TetherSpanError: no catenary exists (span too long for the tension, or with the winch at the upper end its
+            tension does not even carry the weight of a vertical cable).
+    """
+    prm = params if params is not None else DroneTetherParams()
+    p_ = _as_point("tether end p", p)
+    q_ = _as_point("tether end q", q)
+    tw = prm.winch_tension if winch_tension is None else winch_tension
+    if (
+        isinstance(tw, bool)
+        or not isinstance(tw, (int, float, np.integer, np.floating))
+        or not (math.isfinite(tw) and tw > 0)
+    ):
+        raise ParameterError(f"the winch tension must be a finite number > 0 N, got {tw!r}")
+    w = prm.weight_per_length
+    dxy = q_[:2] - p_[:2]
+    d = float(np.hypot(dxy[0], dxy[1]))
+    h = float(q_[2] - p_[2])
+    if d < VERTICAL_SPAN and abs(h) < VERTICAL_SPAN:
+        raise ParameterError(f"the tether's two ends coincide at {fmt_point(p_)}")
+    p_lower = h >= 0.0  # A = p, B = q
+    dh = abs(h)
+    t_a = float(tw) if prm.winch_end == "lower" else float(tw) - w * dh  # tension at the lower end A
+    if t_a <= 0.0:
+        raise TetherSpanError(
+            f"a winch tension of {float(tw):.3f} N at the upper end cannot carry {dh:.3f} m of tether "
+            f"({w * dh:.3f} N); raise the winch tension above that"
+        )
+    t_b = t_a + w * dh
+    t_p, t_q = (t_a, t_b) if p_lower else (t_b, t_a)
+    ez = np.array([0.0, 0.0, 1.0])
+    if d < VERTICAL_SPAN:
+        up = ez if p_lower else -ez  # from p towards q
+        return Catenary3D(
+            p=p_, q=q_, u=np.array([1.0, 0.0, 0.0]), d=d, h=h, a=None, x0=None, z0=None, horizontal_tension=0.0,
+            length=dh, lowest=(p_ if p_lower else q_).copy(), tension_p=t_p, tension_q=t_q,
+            force_p=t_p * up, force_q=-t_q * up, weight_per_length=w,
+        )  # fmt: skip
+    u = np.array([dxy[0] / d, dxy[1] / d, 0.0])
+    m = t_a / w
+    theta_a = _solve_theta(d, dh, m)
+    a = m / math.cosh(theta_a)
+    k = 1.0 + dh / m
+    sh_a = math.sinh(theta_a)
+    sh_b = math.sqrt(k * k * sh_a * sh_a + (k * k - 1.0))
+    theta_b = math.asinh(sh_b)
+    z_a = min(p_[2], q_[2])
+    z0 = z_a - m + a  # z_A = z0 + a (cosh(theta_A) - 1) and a cosh(theta_A) = m
+    x0_a = -a * theta_a  # vertex from A along A -> B
+    x0 = x0_a if p_lower else d - x0_a
+    H = w * a
+    length = a * (sh_b - sh_a)
+    if theta_a <= 0.0 <= theta_b:  # vertex within the span
+        lowest = np.array([p_[0] + x0 * u[0], p_[1] + x0 * u[1], z0])
+    else:
+        lowest = (p_ if p_lower else q_).copy()
+    # force of the cable on A pulls towards B along the tangent: (H, H sinh(theta_A)); on B: -(H, H sinh(theta_B))
+    if p_lower:
+        f_p = H * u + H * sh_a * ez
+        f_q = -H * u - H * sh_b * ez
+    else:  # p = B and q = A: the cable pulls p towards q (+u) and down, q towards p (-u)
+        f_p = H * u - H * sh_b * ez
+        f_q = -H * u + H * sh_a * ez
+    return Catenary3D(
+        p=p_, q=q_, u=u, d=d, h=h, a=a, x0=x0, z0=z0, horizontal_tension=H, length=length, lowest=lowest,
+        tension_p=t_p, tension_q=t_q, force_p=f_p, force_q=f_q, weight_per_length=w,
+    )  # fmt: skip
+
+
+def tether_limits(
+    cat: Catenary3D,
+    params: DroneTetherParams | None = None,
+    *,
+    drone_ends: tuple[bool, bool] = (True, True),
+    distance: Callable[[np.ndarray], np.ndarray] | None = None,
+    samples: int = 128,
+) -> list[str]:
+    """The limits ``cat`` violates, one message each (empty list: every limit holds).
+
+    Limits: arc length <= ``tether_length``; tension at each drone end (``drone_ends`` for p, q) <= the drone's
+    ``spare_thrust``; the whole curve (``samples`` points, with the sampling margin L/(2(samples-1)) added) at least
+    ``clearance`` above the floor z = 0 and, if ``distance`` is given (points (K, 3) -> distances (K,) [m] to the
+    nearest obstacle), from every obstacle.
+    """
+    prm = params if params is not None else DroneTetherParams()
+    out: list[str] = []
+    if cat.length > prm.tether_length:
+        out.append(f"tether of {cat.length:.3f} m is longer than the {prm.tether_length:.3f} m the winch holds")
+    for is_drone, name, end, t in (
+        (drone_ends[0], "p", cat.p, cat.tension_p),
+        (drone_ends[1], "q", cat.q, cat.tension_q),
+    ):
+        if is_drone and t > prm.spare_thrust:
+            out.append(
+                f"tether pulls the drone at {fmt_point(end)} (end {name}) with {t:.3f} N, more than its spare "
+                f"thrust {prm.spare_thrust:.3f} N"
+            )
+    pts = cat.points(samples)
+    margin = cat.length / (2.0 * (samples - 1))
+    if cat.lowest[2] < prm.clearance:
+        out.append(
+            f"tether's lowest point {fmt_point(cat.lowest)} is less than the clearance {prm.clearance:.3f} m above "
+            "the floor"
+        )
+    if distance is not None:
+        dist = np.asarray(distance(pts), dtype=float).reshape(-1)
+        i = int(np.argmin(dist))
+        if dist[i] - margin < prm.clearance:
+            out.append(
+                f"tether passes {max(dist[i] - margin, 0.0):.3f} m from an obstacle at {fmt_point(pts[i])}, less "
+                f"than the clearance {prm.clearance:.3f} m"
+            )
+    return out

@@ -1,0 +1,176 @@
+"""tmr.model.catenary3d: the drone tether between ends at different heights, checked against independent solutions
+(the textbook closed form for level ends, and shooting with the cable ODE through scipy's solve_ivp)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
+
+from tmr.errors import ParameterError, TetherSpanError
+from tmr.model.catenary3d import DroneTetherParams, solve3d, tether_limits
+
+P = DroneTetherParams()
+W = P.weight_per_length
+CASES = [  # (p, q, winch tension [N]) with level, rising, falling, steep, near-taut and long sagging spans
+    ((0.0, 0.0, 1.0), (5.0, 0.0, 1.0), 2.0),
+    ((0.0, 0.0, 1.0), (3.0, 4.0, 6.0), 2.0),
+    ((3.0, 4.0, 6.0), (0.0, 0.0, 1.0), 2.0),
+    ((1.0, -2.0, 0.5), (1.3, -2.4, 9.5), 1.0),
+    ((0.0, 0.0, 2.0), (10.0, 0.0, 4.0), 50.0),
+    ((0.0, 0.0, 5.0), (-12.0, 5.0, 3.0), 2.5),
+]
+
+
+def shoot(cat, k_from_p=True):
+    """Integrate dx/ds = H/T, dz/ds = V/T, dV/ds = rho g from p with the end tension and angle of ``cat``'s
+    solution; returns the end point (3-D) reached after the solution's arc length."""
+    H = cat.horizontal_tension
+    # the cable leaves p along the force it exerts on p: vertical force component V = force_p[2] (upwards +)
+    V0 = cat.force_p[2]
+    assert math.isclose(math.hypot(H, V0), cat.tension_p, rel_tol=1e-12)
+
+    def rhs(s, y):
+        x, z, V = y
+        T = math.hypot(H, V)
+        return [H / T, V / T, W]
+
+    sol = solve_ivp(rhs, (0.0, cat.length), [0.0, cat.p[2], V0], rtol=1e-11, atol=1e-12, method="DOP853")
+    x, z, V = sol.y[:, -1]
+    end = np.array([cat.p[0] + x * cat.u[0], cat.p[1] + x * cat.u[1], z])
+    return end, math.hypot(H, V)
+
+
+@pytest.mark.parametrize("p,q,tw", CASES)
+def test_shooting_from_p_arrives_at_q_with_the_same_length_and_tension(p, q, tw):
+    cat = solve3d(p, q, winch_tension=tw)
+    end, t_end = shoot(cat)
+    np.testing.assert_allclose(end, q, atol=1e-7)
+    assert t_end == pytest.approx(cat.tension_q, rel=1e-8)
+
+
+def test_level_ends_match_the_closed_form():
+    # level ends: T_end = H cosh(d/(2a)) with a = H/(rho g), vertex at mid-span, L = 2 a sinh(d/(2a))
+    for d, tw in ((5.0, 2.0), (15.0, 2.0), (0.5, 0.3), (17.9, 2.0)):
+        cat = solve3d((0.0, 0.0, 3.0), (d, 0.0, 3.0), winch_tension=tw)
+        a = cat.a
+        assert W * a * math.cosh(d / (2 * a)) == pytest.approx(tw, rel=1e-12)
+        assert cat.x0 == pytest.approx(d / 2, abs=1e-9)
+        assert cat.length == pytest.approx(2 * a * math.sinh(d / (2 * a)), rel=1e-12)
+        assert cat.lowest[2] == pytest.approx(3.0 - a * (math.cosh(d / (2 * a)) - 1), abs=1e-9)
+        # m = a cosh(d/2a) has two roots; the solution is the larger a (no root above it) and the shorter cable
+        m = tw / W
+        t = np.linspace(a * (1 + 1e-6), 50 * a, 20000)
+        assert np.all(t * np.cosh(d / (2 * t)) > m)
+        t_min = d / (2 * 1.1996786402577337)  # where a cosh(d/2a) is smallest
+        deep = brentq(lambda t, d=d, m=m: t * math.cosh(d / (2 * t)) - m, d / 2 / 30, t_min)
+        assert deep < t_min < a and 2 * deep * math.sinh(d / (2 * deep)) > cat.length
+
+
+def test_level_span_limit_is_the_textbook_maximum():
+    # max over a of d with a cosh(d/2a) = m is d = 2 m t / cosh t with t tanh t = 1 (t = 1.19968), 1.32549 m
+    m = P.winch_tension / W
+    d_max = 2 * m * 1.1996786402577337 / math.cosh(1.1996786402577337)
+    solve3d((0, 0, 5), (d_max * (1 - 1e-6), 0, 5))
+    with pytest.raises(TetherSpanError, match="longer than"):
+        solve3d((0, 0, 5), (d_max * (1 + 1e-6), 0, 5))
+
+
+@pytest.mark.parametrize("p,q,tw", CASES)
+def test_sampled_curve_passes_through_both_ends_and_is_a_catenary(p, q, tw):
+    cat = solve3d(p, q, winch_tension=tw)
+    pts = cat.points(201)
+    np.testing.assert_allclose(pts[0], p, atol=1e-9)
+    np.testing.assert_allclose(pts[-1], q, atol=1e-8)
+    # samples are equally spaced in arc length, and their polyline is as long as the cable (to O(1/k^2))
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    assert seg.sum() == pytest.approx(cat.length, rel=1e-4)
+    # in the vertical plane through p and q
+    off = (pts[:, :2] - np.asarray(p)[:2]) @ np.array([-cat.u[1], cat.u[0]])
+    assert np.abs(off).max() < 1e-9
+    assert pts[:, 2].min() >= cat.lowest[2] - 1e-9
+
+
+@pytest.mark.parametrize("p,q,tw", CASES)
+def test_end_tensions_identities_and_equilibrium(p, q, tw):
+    cat = solve3d(p, q, winch_tension=tw)
+    top, bottom = (cat.tension_q, cat.tension_p) if q[2] >= p[2] else (cat.tension_p, cat.tension_q)
+    assert top - bottom == pytest.approx(W * abs(q[2] - p[2]), rel=1e-9, abs=1e-12)
+    assert bottom == pytest.approx(tw)  # the winch at the lower end
+    for f, t in ((cat.force_p, cat.tension_p), (cat.force_q, cat.tension_q)):
+        assert np.linalg.norm(f) == pytest.approx(t, rel=1e-12)
+        # H = T cos(angle of the cable at the end)
+        assert np.linalg.norm(f[:2]) == pytest.approx(cat.horizontal_tension, rel=1e-12)
+    np.testing.assert_allclose(cat.force_p + cat.force_q, [0, 0, -W * cat.length], atol=1e-9)
+    assert cat.horizontal_tension == pytest.approx(W * cat.a)
+
+
+def test_winch_at_the_upper_end():
+    prm = DroneTetherParams(winch_end="upper")
+    cat = solve3d((0, 0, 1), (3, 0, 6), prm)
+    assert cat.tension_q == pytest.approx(2.0) and cat.tension_p == pytest.approx(2.0 - W * 5)
+    end, _ = shoot(cat)
+    np.testing.assert_allclose(end, cat.q, atol=1e-7)
+    with pytest.raises(TetherSpanError, match="cannot carry"):
+        solve3d((0, 0, 1), (3, 0, 30), prm)  # 29 m of tether weigh 4.27 N > 2 N
+
+
+def test_vertical_and_nearly_vertical_limits():
+    cat = solve3d((1, 2, 1), (1, 2, 6))
+    assert cat.a is None and cat.length == 5.0 and cat.horizontal_tension == 0.0
+    np.testing.assert_allclose(cat.force_p, [0, 0, 2.0])
+    np.testing.assert_allclose(cat.force_q, [0, 0, -(2.0 + 5 * W)])
+    np.testing.assert_allclose(cat.points(5)[:, 2], [1, 2.25, 3.5, 4.75, 6])
+    np.testing.assert_allclose(solve3d((1, 2, 6), (1, 2, 1)).points(3)[:, 2], [6, 3.5, 1])
+    near = solve3d((1, 2, 1), (1 + 1e-6, 2, 6))
+    assert near.length == pytest.approx(5.0, abs=1e-9) and near.tension_q == pytest.approx(2.0 + 5 * W)
+    assert near.horizontal_tension < 1e-5
+    np.testing.assert_allclose(near.points(11)[-1], near.q, atol=1e-8)
+
+
+def test_nearly_straight_limit():
+    # a very high winch tension: the cable tends to the chord (length -> chord, sag -> 0)
+    p, q = np.array([0.0, 0.0, 2.0]), np.array([6.0, 8.0, 7.0])
+    cat = solve3d(p, q, winch_tension=1e5)
+    chord = np.linalg.norm(q - p)
+    assert cat.length == pytest.approx(chord, rel=1e-8) and cat.length > chord
+    s = np.linspace(0, 1, 51)[:, None]
+    np.testing.assert_allclose(cat.points(51), p + s * (q - p), atol=1e-4)
+    end, _ = shoot(cat)
+    np.testing.assert_allclose(end, q, atol=1e-7)
+
+
+def test_no_solution_and_bad_input():
+    with pytest.raises(TetherSpanError, match="longer than"):
+        solve3d((0, 0, 1), (30, 0, 5))  # 2 N holds ~18 m level, less here
+    assert isinstance(TetherSpanError("x"), ParameterError)
+    with pytest.raises(ParameterError, match="coincide"):
+        solve3d((0, 0, 1), (0, 0, 1))
+    with pytest.raises(ParameterError, match="winch tension"):
+        solve3d((0, 0, 1), (1, 0, 1), winch_tension=-1.0)
+    with pytest.raises(ParameterError, match="3-D point"):
+        solve3d((0, 0), (1, 0, 1))
+    with pytest.raises(ParameterError, match="winch_end"):
+        DroneTetherParams(winch_end="middle")
+
+
+def test_limits_length_thrust_floor_and_obstacle():
+    assert P.spare_thrust == pytest.approx(0.75 * 2 * 1.5 * 9.81 - 1.5 * 9.81)
+    ok = solve3d((0, 0, 3), (4, 0, 5))
+    assert tether_limits(ok) == []
+    low = solve3d((0, 0, 1), (15, 0, 1))  # sags 2.0 m: below the floor
+    assert any("floor" in r for r in tether_limits(low))
+    strong = solve3d((0, 0, 3), (4, 0, 5), winch_tension=9.0)
+    msgs = tether_limits(strong, drone_ends=(False, True))
+    assert len(msgs) == 1 and "(4, 0, 5) (end q)" in msgs[0]
+    assert any("longer than" in r for r in tether_limits(ok, DroneTetherParams(tether_length=4.0)))
+    # a ball obstacle of radius 0.5 m just under the middle of the cable: the curve, not the chord, is checked
+    mid = ok.points(3)[1]
+    centre = mid - np.array([0, 0, 0.6])
+    dist = lambda pts: np.linalg.norm(pts - centre, axis=1) - 0.5  # noqa: E731
+    assert any("obstacle" in r for r in tether_limits(ok, distance=dist))
+    far = lambda pts: np.linalg.norm(pts - centre + [0, 0, 2.0], axis=1) - 0.5  # noqa: E731
+    assert tether_limits(ok, distance=far) == []
