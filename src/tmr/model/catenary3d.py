@@ -44,6 +44,7 @@ from scipy.optimize import brentq, minimize_scalar
 
 from tmr.errors import ParameterError, TetherSpanError, fmt_point
 from tmr.model.catenary import G0
+from tmr.model.params import _validate
 
 __all__ = ["DroneTetherParams", "Catenary3D", "solve3d", "tether_limits", "VERTICAL_SPAN"]
 
@@ -97,16 +98,12 @@ class DroneTetherParams:
             value = getattr(self, f.name)
             if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
                 raise ParameterError(f"DroneTetherParams.{f.name} must be a real number, got {value!r}")
-            value = float(value)
-            if not math.isfinite(value):
-                raise ParameterError(f"DroneTetherParams.{f.name} must be finite, got {value!r}")
-            object.__setattr__(self, f.name, value)
-        for name in ("mass_per_length", "g", "winch_tension", "tether_length", "drone_mass", "thrust_to_weight"):
-            if getattr(self, name) <= 0.0:
-                raise ParameterError(f"DroneTetherParams.{name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("clearance", "drone_radius"):
-            if getattr(self, name) < 0.0:
-                raise ParameterError(f"DroneTetherParams.{name} must be >= 0 m, got {getattr(self, name)!r}")
+            object.__setattr__(self, f.name, float(value))
+        _validate(  # finite, and the ranges: the parameter classes' one check (tmr.model.params)
+            self,
+            positive=("mass_per_length", "g", "winch_tension", "tether_length", "drone_mass", "thrust_to_weight"),
+            nonnegative=("clearance", "drone_radius"),
+        )
         if not 0.0 <= self.control_reserve < 1.0:
             raise ParameterError(f"DroneTetherParams.control_reserve must be in [0, 1), got {self.control_reserve!r}")
 
