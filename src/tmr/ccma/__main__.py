@@ -328,25 +328,21 @@ def _write_outputs(
 ) -> list[str]:
     """Stage the files (``views(directory)`` writes the views asked for) and publish them into ``out`` in one step
     (:mod:`tmr.io.outdir`: outputs of an earlier run this one does not produce are removed, other files left alone);
-    return the names written."""
-    from tmr.ccma.errors import CcmaError
+    return the names written. A write error is one line, exit 2 (:class:`tmr.io.outdir.OutDirError`)."""
     from tmr.io.outdir import Stage
     from tmr.io.outputs import atomic_write_text
 
-    try:
-        with Stage(out, OWNED_NAMES) as stage:
-            for name, text in texts.items():
-                atomic_write_text(stage.path / name, text)
-            if figures:
-                from tmr.views.plot import save_figure
+    with Stage(out, OWNED_NAMES) as stage:
+        for name, text in texts.items():
+            atomic_write_text(stage.path / name, text)
+        if figures:
+            from tmr.views.plot import save_figure
 
-                for name, fig in figures.items():
-                    save_figure(fig, stage.path / name)
-            if views is not None:
-                views(stage.path)
-            return stage.publish()
-    except OSError as exc:  # e.g. removed, made read-only or full since the check
-        raise CcmaError(f"--out {str(out)!r}: cannot write the outputs: {exc.strerror or exc}") from exc
+            for name, fig in figures.items():
+                save_figure(fig, stage.path / name)
+        if views is not None:
+            views(stage.path)
+        return stage.publish()
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:

@@ -484,11 +484,13 @@ class Stage:
             _lock(self._fd)
             path = init.with_name(_STAGE_TAG + init.name[len(_INIT_TAG) :])
             os.rename(init, path)
-        except BaseException:
+        except BaseException as exc:
             shutil.rmtree(init, ignore_errors=True)
             if self._fd is not None:
                 os.close(self._fd)
                 self._fd = None
+            if isinstance(exc, OSError):
+                raise OutDirError(f"--out {self.out}: cannot stage the outputs ({exc.strerror or exc})") from None
             raise
         self._path = path
         return self

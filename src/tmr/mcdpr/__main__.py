@@ -377,13 +377,10 @@ def _main(args: argparse.Namespace) -> int:
         chk = check(robot, env, result)
         from tmr.io.outdir import Stage
 
-        try:
-            with Stage(out, OWNED_NAMES) as stage:  # staged, then published in one step (tmr.io.outdir)
-                write_outputs(stage.path, robot, scene, env, params, result, chk, not args.no_plots)
-                write_views(args, stage.path, lambda: mcdpr_motion(robot, scene, result))
-                names = stage.publish()
-        except OSError as exc:
-            raise TmrError(f"cannot write the outputs to {out}: {exc.strerror or exc}") from exc
+        with Stage(out, OWNED_NAMES) as stage:  # staged, then published in one step (tmr.io.outdir)
+            write_outputs(stage.path, robot, scene, env, params, result, chk, not args.no_plots)
+            write_views(args, stage.path, lambda: mcdpr_motion(robot, scene, result))
+            names = stage.publish()
     except TmrError as exc:
         LOG.error(f"error: {exc}")
         return 2
