@@ -100,8 +100,9 @@ def load_motion(
     from tmr.io.rundir import load_run
 
     p = Path(path)
-    if p.is_dir() and not is_complete(p):
-        raise ExportError(f"{p} was being written when its run was stopped (its files may mix two runs); rerun it")
     if p.is_dir() and not (p / "run.json").exists() and (p / "trajectory.json").is_file():
+        if not is_complete(p):  # a CCMA run has no run.json: load_run's check does not see it
+            raise ExportError(f"{p} was being written when its run was stopped (its files may mix two runs); rerun it")
         return _ccma(p, rate, description)
-    return load_run(p).motion(rate=rate, trajectory=trajectory)  # each kind builds its own Motion
+    return load_run(p).motion(rate=rate, trajectory=trajectory)  # each kind builds its own Motion (and load_run
+    # refuses a run directory whose publication was stopped part-way)

@@ -60,14 +60,6 @@ def wanted(args: argparse.Namespace) -> bool:
     return bool(getattr(args, "gif", False) or getattr(args, "html", False) or getattr(args, "export", None))
 
 
-def _progress(total: int, what: str) -> Any:
-    from tqdm import tqdm
-
-    from tmr.io.console import progress_enabled  # a terminal, and not --quiet
-
-    return tqdm(total=total, desc=what, unit="view", leave=False, disable=not progress_enabled())
-
-
 def write_views(args: argparse.Namespace, out: Path, motion: Callable[[], Any]) -> list[str]:
     """Write the views ``args`` ask for into the directory ``out``; return the names written.
 
