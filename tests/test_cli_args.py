@@ -7,14 +7,9 @@ import re
 
 import pytest
 
-from tmr.io.cli_args import positive_float, positive_int
-
-
-def test_positive_int():
-    assert positive_int("3") == 3
-    for bad in ("0", "-2", "2.5", "x", ""):
-        with pytest.raises(argparse.ArgumentTypeError):
-            positive_int(bad)
+from tmr import cli
+from tmr.errors import fmt_point
+from tmr.io.cli_args import SEED_MAX, bounds, count, param, point, points, positive_float, seed
 
 
 def test_positive_float():
@@ -26,14 +21,10 @@ def test_positive_float():
 
 # ---- one validator per parameter type ------------------------------------------------------------------------
 
-from tmr import cli  # noqa: E402
-from tmr.errors import fmt_point  # noqa: E402
-from tmr.io.cli_args import SEED_MAX, bounds, count, param, point, points, seed  # noqa: E402
-
 
 def test_count_refuses_fractions_instead_of_truncating():
-    assert count("7") == 7
-    for bad in ("2.5", "1e3", "0", "-1", "x"):
+    assert count("7") == 7 and count("3") == 3
+    for bad in ("2.5", "1e3", "0", "-1", "-2", "x", ""):
         with pytest.raises(argparse.ArgumentTypeError):
             count(bad)
 

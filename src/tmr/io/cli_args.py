@@ -34,7 +34,6 @@ __all__ = [
     "point",
     "points",
     "positive_float",
-    "positive_int",
     "seed",
 ]
 
@@ -105,10 +104,6 @@ def count(text: str) -> int:
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be ≥ 1, got {v}")
     return v
-
-
-#: The historical name of :func:`count`.
-positive_int = count
 
 
 def seed(text: str) -> int:
