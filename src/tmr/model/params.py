@@ -255,6 +255,87 @@ class QPParams:
             raise ParameterError("need clearance_rows_per_link ≥ 0 and separation_neighbours ≥ 1")
 
 
+@dataclass(frozen=True)
+class DroneParams:
+    """Parameters of the drone-chain planner (``formulations/drones.md``; tether and drone physics are in
+    :class:`tmr.model.catenary3d.DroneTetherParams`). Units: m, s. A drone scenario's ``[params]`` overrides them.
+
+    Attributes:
+        Ts: sampling period [s].
+        leader_speed: cruise speed of the leader along the route [m/s]; leader_accel: its acceleration [m/s²].
+        drone_speed_max: speed bound of every drone, per axis [m/s].
+        drone_accel_max: acceleration bound of every drone, per axis [m/s²] (comfort limit: dropped only if the
+            safety limits alone have no solution, as on the ground).
+        d_safe: clearance every drone keeps beyond its radius r from the obstacles, walls, floor and ceiling [m].
+        separation_margin: drones keep 2r + this from each other [m].
+        approach_rate: a distance to its limit may shrink at most at this rate times the remaining margin [1/s]
+            (velocity damper, as ``QPParams.approach_rate``).
+        tether_samples: points per tether where the curve's clearance is a row of the QP (interior points of the
+            catenary, at equal arc length).
+        clearance_activation: samples farther than this from their limit give inactive rows [m].
+        length_margin: arc length ≤ tether_length − this [m]; tension_margin: end tension ≤ spare thrust − this [N].
+        route_gain: gain of the followers' route references [1/s]; leader_gain: CLIK gain of the leader task [1/s].
+        span_target_fraction: tether regulation pulls each chord towards this fraction of the route spacing [-].
+        energy_weight: weight of ‖v‖² at the last level; smoothness_weight: weight of ‖v − v_{k−1}‖².
+        goal_tolerance: the leader must end this close to the goal [m].
+        settle: time added after the leader's reference reaches the goal [s].
+        grid: cell size of the 3-D route grid [m].
+        solver: "osqp" or a qpsolvers backend.
+    """
+
+    Ts: float = 0.05
+    leader_speed: float = 1.0
+    leader_accel: float = 1.0
+    drone_speed_max: float = 2.0
+    drone_accel_max: float = 4.0
+    d_safe: float = 0.02
+    separation_margin: float = 0.05
+    approach_rate: float = 2.0
+    tether_samples: int = 8
+    clearance_activation: float = 1.5
+    length_margin: float = 0.05
+    tension_margin: float = 0.05
+    route_gain: float = 1.0
+    leader_gain: float = 10.0
+    span_target_fraction: float = 1.0
+    energy_weight: float = 1.0
+    smoothness_weight: float = 10.0
+    goal_tolerance: float = 0.1
+    settle: float = 2.0
+    grid: float = 0.25
+    solver: str = "osqp"
+
+    def __post_init__(self) -> None:
+        _validate(
+            self,
+            positive=(
+                "Ts",
+                "leader_speed",
+                "leader_accel",
+                "drone_speed_max",
+                "drone_accel_max",
+                "approach_rate",
+                "clearance_activation",
+                "goal_tolerance",
+                "grid",
+            ),
+            nonnegative=(
+                "d_safe",
+                "separation_margin",
+                "length_margin",
+                "tension_margin",
+                "route_gain",
+                "leader_gain",
+                "span_target_fraction",
+                "energy_weight",
+                "smoothness_weight",
+                "settle",
+            ),
+        )
+        if self.tether_samples < 1:
+            raise ParameterError(f"DroneParams.tether_samples must be ≥ 1, got {self.tether_samples!r}")
+
+
 #: Every parameter class, in the order the planner applies overrides (a name belongs to one of them).
 PARAM_CLASSES: tuple[type, ...] = (ChainParams, TimeParams, PathParams, TaskParams, PinvParams, QPParams)
 
