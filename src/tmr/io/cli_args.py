@@ -170,17 +170,23 @@ def param(text: str) -> tuple[str, Any]:
     from dataclasses import fields
 
     from tmr.errors import ParameterError
-    from tmr.model.params import PARAM_CLASSES, convert_field
+    from tmr.model.params import PARAM_CLASSES, DroneParams, convert_field
 
     key, sep, value = (part.strip() for part in text.partition("="))
     if not sep or not key or not value:
         raise argparse.ArgumentTypeError(f"expected NAME=VALUE, e.g. d_min=0.6, got {text!r}")
     known = {f.name: cls for cls in PARAM_CLASSES for f in fields(cls)}
+    drone_classes: tuple[type, ...] = (DroneParams,)
+    if key not in known:  # a drone chain's parameter (tmr.planner3d refuses the ground ones for drones, and back)
+        from tmr.model.catenary3d import DroneTetherParams
+
+        drone_classes += (DroneTetherParams,)
+        known |= {f.name: cls for cls in drone_classes for f in fields(cls) if f.name not in known}
     cls = known.get(key)
     if cls is None:
         close = difflib.get_close_matches(key, list(known), n=3)
         hint = f"; did you mean {' or '.join(close)}?" if close else ""
-        names = ", ".join(c.__name__ for c in PARAM_CLASSES)
+        names = ", ".join(c.__name__ for c in PARAM_CLASSES + drone_classes)
         raise argparse.ArgumentTypeError(
             f"{key}={value}: unknown parameter {key!r}{hint} (the names are the fields of {names} in tmr.model.params)"
         )

@@ -1,0 +1,193 @@
+"""From a drone scenario to a checked plan: scenario → 3-D route (and the robots it needs) → references and start
+→ per-step formulation (``qp`` or ``pinv``) → plan → independent check (``formulations/drones.md``).
+
+Caruso 2021 states the chain in 3-D (its Fig. 1: tethered drones); this is that chain, planned as the ground one is
+(:mod:`tmr.planner`): the route comes first, so a goal with no free route or a chain shorter than the route's proven
+lower bound is refused before any motion is planned (:class:`NoRouteError`, :class:`TooFewRobotsError`).
+
+Library use::
+
+    from tmr.world.drones import load_drone_scenario
+    from tmr.planner3d import plan_drones
+    plan, metrics = plan_drones(load_drone_scenario("F"), robots="auto")
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, fields, replace
+from typing import TYPE_CHECKING, Any, Literal
+
+from tmr.errors import ParameterError, TmrError
+from tmr.model.catenary3d import DroneTetherParams
+from tmr.model.params import DroneParams, apply_overrides
+
+if TYPE_CHECKING:
+    from tmr.checks.drones import DroneMetrics
+    from tmr.control.plan3d import DronePlan
+    from tmr.route.route3d import DroneReferences, Route3D
+    from tmr.world.drones import DroneScenario
+    from tmr.world.world3d import World3D
+
+__all__ = ["DRONE_METHODS", "DroneProblem", "drone_parameters", "route_drones", "build_drone_problem", "solve_drones",
+           "plan_drones"]  # fmt: skip
+
+#: Per-step formulations of a drone chain: the lexicographic QP with hard limits, the paper's CLIK baseline.
+DRONE_METHODS = ("qp", "pinv")
+#: ``robots="auto"`` tries N_min, N_min + 1, … up to this many drones more.
+AUTO_EXTRA = 3
+
+
+@dataclass
+class DroneProblem:
+    """Everything a drone formulation needs, built once (:func:`build_drone_problem`)."""
+
+    scenario: DroneScenario
+    world: World3D
+    tether: DroneTetherParams
+    params: DroneParams
+    route: Route3D
+    references: DroneReferences
+    n_robots: int
+
+
+def drone_parameters(
+    scenario: DroneScenario, overrides: dict[str, Any] | None = None
+) -> tuple[DroneParams, DroneTetherParams]:
+    """The planner's and the tether's parameters: the scenario's ``[params]`` then ``overrides`` (``--set``) applied
+    by field name to :class:`DroneParams` and :class:`DroneTetherParams` (the scenario's ``[tether]`` is already in
+    ``scenario.tether``). ParameterError naming any name that is neither."""
+    values = dict(scenario.params or {}) | dict(overrides or {})
+    params, rest = apply_overrides(DroneParams(), values)
+    tether_fields = {f.name for f in fields(DroneTetherParams)}
+    tether_values = {k: v for k, v in rest.items() if k in tether_fields}
+    rest = {k: v for k, v in rest.items() if k not in tether_fields}
+    if rest:
+        raise ParameterError(
+            f"unknown drone parameter(s) {sorted(rest)}; the names are the fields of DroneParams and "
+            "DroneTetherParams (formulations/drones.md)"
+        )
+    try:
+        tether = replace(scenario.tether, **tether_values)
+    except TypeError as exc:  # pragma: no cover - names filtered above
+        raise ParameterError(str(exc)) from None
+    return params, tether
+
+
+def route_drones(
+    scenario: DroneScenario, params: DroneParams, tether: DroneTetherParams, robots: int | Literal["auto"] | None
+) -> tuple[Route3D, int]:
+    """The 3-D route and the number of drones to plan with first: ``robots`` (the scenario's if None), or the
+    route's proven minimum for ``"auto"``. Raises NoRouteError (no free route) and TooFewRobotsError (fewer drones
+    than the proven lower bound), both exit 2, before any motion is planned."""
+    from tmr.route.geodesic import TooFewRobotsError
+    from tmr.route.route3d import plan_route3d
+
+    route = plan_route3d(scenario.world, scenario.base, scenario.goal, tether, grid=params.grid)
+    if robots == "auto":
+        return route, max(1, route.min_robots)
+    n = scenario.n_robots if robots is None else int(robots)
+    if n < route.min_robots:
+        raise TooFewRobotsError(
+            f"{n} drone{'s' if n != 1 else ''} cannot reach the goal: any free curve from the anchor to the goal is at "
+            f"least {route.lower_bound_length:.3f} m long and each tether holds at most {tether.tether_length:.3f} m, "
+            f"so at least {route.min_robots} drones are needed",
+            route.min_robots,
+            proven=True,
+        )
+    return route, n
+
+
+def build_drone_problem(
+    scenario: DroneScenario,
+    n_robots: int,
+    *,
+    params: DroneParams | None = None,
+    tether: DroneTetherParams | None = None,
+    route: Route3D | None = None,
+) -> DroneProblem:
+    """The problem of planning ``n_robots`` drones: the route (computed if not given), the references of every drone
+    along it and the start (:func:`tmr.route.route3d.drone_references`)."""
+    from tmr.route.route3d import drone_references, plan_route3d
+
+    if params is None or tether is None:
+        p, t = drone_parameters(scenario)
+        params, tether = params or p, tether or t
+    world = scenario.world
+    if route is None:
+        route = plan_route3d(world, scenario.base, scenario.goal, tether, grid=params.grid)
+    refs = drone_references(
+        route, n_robots, world=world, tether=tether, Ts=params.Ts, speed=params.leader_speed,
+        accel=params.leader_accel, settle=params.settle,
+    )  # fmt: skip
+    return DroneProblem(scenario, world, tether, params, route, refs, n_robots)
+
+
+def solve_drones(
+    problem: DroneProblem, method: str = "qp", *, progress: bool = False
+) -> tuple[DronePlan, DroneMetrics]:
+    """Plan with ``method`` (``"qp"`` or ``"pinv"``) and check every hard limit with the independent checker.
+
+    The plan's ``wall_time`` is the whole of this call [s]; ``diagnostics["timings"]`` its parts."""
+    from tmr.checks.drones import check_drone_plan
+    from tmr.control.drones import make_drone_pinv, make_drone_qp
+    from tmr.control.run3d import run_drones
+
+    if method not in DRONE_METHODS:
+        raise ParameterError(f"unknown method {method!r} for a drone chain; available: {', '.join(DRONE_METHODS)}")
+    start = time.perf_counter()
+    make = make_drone_qp if method == "qp" else make_drone_pinv
+    formulation = make(problem.world, problem.tether, problem.params, problem.n_robots, problem.references)
+    plan = run_drones(
+        problem.world, problem.references, formulation, problem.references.start_positions,
+        tether=problem.tether, params=problem.params, base=problem.scenario.base, goal=problem.scenario.goal,
+        scenario=problem.scenario.name, progress=progress,
+    )  # fmt: skip
+    run_time = time.perf_counter() - start
+    metrics = check_drone_plan(plan, problem.scenario.world_table, base_dir=problem.scenario.base_dir,
+                               goal_tolerance=problem.params.goal_tolerance)  # fmt: skip
+    plan.wall_time = time.perf_counter() - start
+    plan.diagnostics["timings"] = {"qp_time": run_time, "check_time": plan.wall_time - run_time}
+    return plan, metrics
+
+
+def plan_drones(
+    scenario: DroneScenario,
+    robots: int | Literal["auto"] | None = None,
+    method: str = "qp",
+    *,
+    overrides: dict[str, Any] | None = None,
+    progress: bool = False,
+) -> tuple[DronePlan, DroneMetrics]:
+    """Route, refuse or plan, and check: the whole of ``tmr plan`` for a drone scenario, as a library call.
+
+    ``robots``: N, ``"auto"`` (the fewest from the route's proven minimum that give a plan passing every check,
+    trying up to :data:`AUTO_EXTRA` more), or None (the scenario's). Raises NoRouteError / TooFewRobotsError (exit
+    2) before planning; returns the last plan tried with its metrics (``plan.success`` says whether it passed)."""
+    start = time.perf_counter()
+    params, tether = drone_parameters(scenario, overrides)
+    route, n_first = route_drones(scenario, params, tether, robots)
+    route_time = time.perf_counter() - start
+    last = n_first + AUTO_EXTRA if robots == "auto" else n_first
+    tried: list[str] = []
+    result: tuple[DronePlan, DroneMetrics] | None = None
+    for n in range(n_first, last + 1):
+        try:
+            problem = build_drone_problem(scenario, n, params=params, tether=tether, route=route)
+        except TmrError as exc:
+            if robots != "auto":
+                raise
+            tried.append(f"{n}: {str(exc).split(';')[0]}")
+            continue
+        result = solve_drones(problem, method, progress=progress)
+        tried.append(f"{n}: {'planned' if result[0].success else str(result[0].failure).split(';')[0]}")
+        if result[0].success:
+            break
+    if result is None:
+        raise TmrError(f"--robots auto: no start placement for N = {n_first}…{last}: " + "; ".join(tried))
+    plan, metrics = result
+    if robots == "auto":
+        plan.diagnostics["robots_auto"] = f"N_min = {route.min_robots}; " + "; ".join(tried)
+    plan.diagnostics.setdefault("timings", {})["route_time"] = route_time
+    plan.wall_time = time.perf_counter() - start
+    return plan, metrics
