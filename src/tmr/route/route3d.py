@@ -42,7 +42,7 @@ from scipy.sparse.csgraph import dijkstra
 from tmr.errors import ParameterError, TetherSpanError, TmrError, fmt_point
 from tmr.model.catenary3d import DroneTetherParams, solve3d
 from tmr.route.geodesic import NoRouteError, TooFewRobotsError
-from tmr.world.world3d import World3D
+from tmr.world.world3d import World3D, _PlacedBox, box_obstacle
 
 Array = NDArray[np.float64]
 
@@ -188,17 +188,14 @@ def _obstacle_distance(world: World3D, pts: Array, cap: float) -> Array:
     """Signed distance [m] of points (n, 3) to the obstacles only (no room, no radius), exact where below ``cap``,
     else ``cap`` (a value ≥ cap means "at least cap")."""
     out = np.full(len(pts), cap)
-    if not world.obstacles:
-        return out
-    near = np.zeros(len(pts), dtype=bool)
-    for ob in world.obstacles:
+    lo, hi = np.asarray(world.bounds[:3]), np.asarray(world.bounds[3:])
+    span = float(np.max(hi - lo)) + 10.0 * cap + 10.0
+    for ob in world.obstacles:  # one at a time: inside an overlap, the deepest single depth
         gap = np.linalg.norm(np.maximum(0.0, np.maximum(ob.lo - pts, pts - ob.hi)), axis=1)
-        near |= gap < cap
-    if near.any():
-        lo, hi = np.asarray(world.bounds[:3]), np.asarray(world.bounds[3:])
-        span = float(np.max(hi - lo)) + 10.0 * cap + 10.0
-        bare = World3D(world.obstacles, np.r_[lo - span, hi + span], 0.0)  # the walls far away: obstacles only
-        out[near] = np.minimum(bare.exact_clearance(pts[near]), cap)
+        near = np.flatnonzero(gap < cap)
+        if len(near):
+            alone = World3D([ob], np.r_[lo - span, hi + span], 0.0)  # the walls far away: this obstacle only
+            out[near] = np.minimum(out[near], alone.exact_clearance(pts[near]))
     return out
 
 
@@ -324,12 +321,26 @@ def plan_route3d(
     h = lat.h
     nodes = lat.nodes()
     slack = math.sqrt(3.0) * h
-    obst = _obstacle_distance(world, nodes, cap=max(r + ROUTE_MARGIN, c_t) + 0.01)  # the tests below need no more
+    cap = max(r + ROUTE_MARGIN, c_t) + 0.01  # the tests below need no more
+    obst = _obstacle_distance(world, nodes, cap=cap)
     floor, side = _wall_distance(bounds, nodes)
     t_field = time.perf_counter()
 
-    # the lower bound (and the proof of no route) on U
-    in_u = (obst > c_t - slack) & (floor > c_t - slack) & (side > -slack)
+    # the lower bound (and the proof of no route) on U. Boxes standing on the floor are extended below it (they then
+    # lie in obstacles ∪ {z < zmin}, so a point c_t from both is c_t from them): a node on the floor under a box is
+    # then inside it, not on its surface
+    zmin = bounds[2]
+    if any(isinstance(ob.geometry, _PlacedBox) and ob.lo[2] <= zmin for ob in world.obstacles):
+        deep = [
+            box_obstacle(np.r_[ob.lo[:2], zmin - 10.0], ob.hi, ob.name)
+            if isinstance(ob.geometry, _PlacedBox) and ob.lo[2] <= zmin
+            else ob
+            for ob in world.obstacles
+        ]
+        obst_u = _obstacle_distance(World3D(deep, bounds, 0.0), nodes, cap=cap)
+    else:
+        obst_u = obst
+    in_u = (obst_u > c_t - slack) & (floor > c_t - slack) & (side > -slack)
     gu = _graph(lat, in_u)
     goal_node = int(lat.flat(lat.cell(g)))
     phi = dijkstra(gu, directed=True, indices=goal_node)  # gu holds both directions

@@ -116,7 +116,9 @@ class DroneScenario:
         c_t = self.tether.clearance
         for nm, p in (("base", self.base), ("goal", self.goal)):
             if np.any(p < lo) or np.any(p > hi):
-                raise ScenarioError(f"{label}: the {nm} {fmt_point(p)} is outside the room {fmt_point(self.world.bounds)}")
+                raise ScenarioError(
+                    f"{label}: the {nm} {fmt_point(p)} is outside the room {fmt_point(self.world.bounds)}"
+                )
         # the winch: the tether leaves it, so it keeps the tether's clearance c_t (from obstacles, walls and floor)
         bare = float(self.world.with_safety_radius(0.0).exact_clearance(self.base))
         if not bare >= c_t:
