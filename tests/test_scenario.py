@@ -242,8 +242,8 @@ def test_bad_toml_and_map(tmp_path: Path) -> None:
 
 
 def test_unknown_builtin_lists_available() -> None:
-    with pytest.raises(ScenarioError, match="unknown scenario 'F'.*A, B, C, D, E"):
-        load_scenario("F")
+    with pytest.raises(ScenarioError, match="unknown scenario 'Z'.*A, B, C, D, E"):
+        load_scenario("Z")  # F is a drone scenario now (tests/test_drone_scenario.py)
     with pytest.raises(ScenarioError, match="not found"):
         load_scenario("no/such/file.toml")
 

@@ -28,11 +28,11 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - python 3.10
     import tomli as tomllib
 
-__all__ = ["SCENARIO_DIR", "Scenario", "builtin_scenarios", "load_scenario", "scenario_from_map"]
+__all__ = ["SCENARIO_DIR", "Scenario", "builtin_scenarios", "file_kind", "load_scenario", "scenario_from_map"]
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 
-_TOP_KEYS = {"name", "description", "robots", "base", "goal", "start", "map", "params"}
+_TOP_KEYS = {"name", "kind", "description", "robots", "base", "goal", "start", "map", "params"}
 _MAP_KEYS = {"file", "bounds", "safety_radius", "resolution"}
 
 
@@ -163,8 +163,20 @@ def _check_param_value(val: Any, name: str, label: str) -> None:
 
 
 def builtin_scenarios() -> list[str]:
-    """Names of the built-in scenarios (``["A", "B", "C", "D"]``): the TOML files in ``tmr/scenarios/``."""
-    return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
+    """Names of the built-in ground scenarios (``["A", "B", "C", "D", "E"]``): the TOML files in ``scenarios/``
+    without ``kind = "drone"`` (those are :func:`tmr.world.drones.builtin_drone_scenarios`)."""
+    return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml") if file_kind(p) == "ground")
+
+
+def file_kind(path: Path) -> str:
+    """The ``kind`` of a scenario TOML file: ``"ground"`` (the default) or ``"drone"``; ``"ground"`` for a file that
+    does not parse (its loader reports why)."""
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return "ground"
+    kind = doc.get("kind", "ground")
+    return kind if isinstance(kind, str) else "ground"
 
 
 def load_scenario(name_or_path: str | Path, safety_radius: float | None = None) -> Scenario:
@@ -178,7 +190,8 @@ def load_scenario(name_or_path: str | Path, safety_radius: float | None = None) 
     """
     if isinstance(name_or_path, str) and not any(sep in name_or_path for sep in "/\\") and "." not in name_or_path:
         builtins = builtin_scenarios()
-        match = [b for b in builtins if b.lower() == name_or_path.strip().lower()]
+        everything = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))  # a drone name: refused by _load_toml
+        match = [b for b in everything if b.lower() == name_or_path.strip().lower()]
         if match:
             return _load_toml(SCENARIO_DIR / f"{match[0]}.toml", safety_radius)
         if not Path(name_or_path).exists():
@@ -203,6 +216,13 @@ def _load_toml(path: Path, safety_radius: float | None = None) -> Scenario:
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
     label = f"scenario file {path}"
+    kind = doc.get("kind", "ground")
+    if kind == "drone":
+        raise ScenarioError(
+            f'{label} is a drone scenario (kind = "drone"): load it with tmr.world.drones.load_drone_scenario'
+        )
+    if kind != "ground":
+        raise ScenarioError(f'{label}: kind must be "ground" (the default) or "drone", got {kind!r}')
     unknown = set(doc) - _TOP_KEYS
     if unknown:
         raise ScenarioError(f"{label}: unknown keys {sorted(unknown)}; allowed: {sorted(_TOP_KEYS)}")

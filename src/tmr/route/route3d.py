@@ -1,0 +1,610 @@
+"""The drone chain's global route in 3-D: the leader's shortest free route, a proven lower bound on any chain's
+length, the fewest drones, the refusals, and references for every drone along the route (``formulations/drones.md``,
+section "Route (3-D)").
+
+1. **Route.** A lattice of spacing h over the room (h = ``grid``, raised so the lattice keeps at most
+   ``MAX_NODES`` nodes); a node is free for a drone if its exact clearance (obstacles and room grown by r) exceeds
+   ``ROUTE_MARGIN``. Dijkstra (``scipy.sparse.csgraph``) on the 26-connected lattice with Euclidean edge lengths from
+   the node nearest the base whose straight segment from the base keeps the tether clearance c_t, to the node nearest
+   the goal seen from it; then the node path is shortened greedily (from each point, the farthest later point whose
+   segment keeps clearance > ``ROUTE_MARGIN``, tested exactly with ``World3D.segment_is_free``).
+2. **Lower bound.** Every chain that reaches the goal carries a continuous tether curve from the base to the goal
+   whose points keep c_t from the obstacles and the floor (the tether limit) and lie in the room: a set F_t. Each
+   lattice cube that meets F_t has its 8 corners within √3 h of a point of F_t, so it lies in the union U of the cubes
+   whose corners all pass the test "obstacle distance > c_t − √3 h, height above the floor > c_t − √3 h, distance
+   to the walls and ceiling > −√3 h". On the corners, Φ = the 26-connected lattice distance to the goal's cube
+   (Dijkstra), extended to U linearly on the Kuhn (Freudenthal) simplices of each cube: a continuous piecewise linear
+   function whose gradient norm on U is at most Λ, the largest over the simplices of U (computed). Along any curve
+   γ ⊂ F_t ⊂ U from the base to the goal, Φ(base) − Φ(goal) ≤ Λ · length(γ), so
+
+       length(γ) ≥ max(|goal − base|, (Φ(base) − Φ(goal)) / Λ) =: ``lower_bound_length``,
+
+   and since every tether's arc is ≤ L_max, N ≥ ``min_robots`` = ⌈lower_bound_length / L_max⌉. If the goal is not in
+   the component of U holding the base, no chain reaches it: :class:`NoRouteError` (proven).
+3. **References.** :func:`drone_references`: the leader follows the route with a minimum-jerk arc-length law; drone j
+   moves along the same route from its start arc to j/N of the route's length, in step with the leader's progress, so
+   the chain lies along the route and winds round only what the route winds round.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from tmr.errors import ParameterError, TetherSpanError, TmrError, fmt_point
+from tmr.model.catenary3d import DroneTetherParams, solve3d
+from tmr.route.geodesic import NoRouteError, TooFewRobotsError
+from tmr.world.world3d import World3D, _PlacedBox, box_obstacle
+
+Array = NDArray[np.float64]
+
+__all__ = [
+    "KAPPA",
+    "MAX_NODES",
+    "ROUTE_MARGIN",
+    "DroneReferences",
+    "NoRouteError",
+    "Route3D",
+    "StartError",
+    "TooFewRobotsError",
+    "check_drone_count",
+    "chain_violations",
+    "drone_references",
+    "plan_route3d",
+]
+
+#: Clearance [m] the route keeps beyond the drone radius r (above the QP's d_safe = 0.02 m).
+ROUTE_MARGIN = 0.05
+#: Most lattice nodes of a route search; a finer ``grid`` is coarsened to keep the search under 1 s on 2 cores.
+MAX_NODES = 100_000
+#: Worst over-estimate of the 26-connected lattice metric over the Euclidean one: a displacement with sorted
+#: components a ≥ b ≥ c costs a + (√2 − 1) b + (√3 − √2) c, at most KAPPA times its length.
+KAPPA = math.sqrt(1.0 + (math.sqrt(2.0) - 1.0) ** 2 + (math.sqrt(3.0) - math.sqrt(2.0)) ** 2)
+
+_STEPS = np.array([d for d in itertools.product((-1, 0, 1), repeat=3) if d > (0, 0, 0)])  # 13 half-neighbourhood
+_PERMS = list(itertools.permutations(range(3)))
+
+
+class StartError(TmrError):
+    """No start placement along the route keeps every limit (the drones, their spacing and every tether)."""
+
+
+@dataclass
+class Route3D:
+    """The leader's route and what it proves (units: m).
+
+    Attributes:
+        path: (M, 3) the route, base first, goal last (a free polyline: segments after the first keep clearance
+            > ``ROUTE_MARGIN`` beyond r; the first, from the ground winch, keeps the tether clearance c_t).
+        length: its length [m] (an upper bound on the shortest free route's).
+        lower_bound_length: a proven lower bound on the length of any chain's tether curve from base to goal [m].
+        min_robots: ⌈lower_bound_length / L_max⌉, the proven fewest drones.
+        base, goal: (3,) [m]. grid: the lattice spacing used [m]. tether: the tether parameters.
+        euclidean: |goal − base| [m]. grid_bound: (Φ(base) − Φ(goal)) / Λ [m]. lipschitz: Λ [-].
+        diagnostics: timings [s], node counts, the route's gap over the bound.
+    """
+
+    path: Array
+    length: float
+    lower_bound_length: float
+    min_robots: int
+    base: Array
+    goal: Array
+    grid: float
+    tether: DroneTetherParams
+    euclidean: float
+    grid_bound: float
+    lipschitz: float
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def arcs(self) -> Array:
+        """Cumulative arc length [m] at each route point, (M,)."""
+        return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(self.path, axis=0), axis=1))])
+
+    def point_at(self, s: ArrayLike) -> Array:
+        """Route points at arc lengths ``s`` [m] (clipped to [0, length]), shape ``s.shape + (3,)``."""
+        return _point_at(self.path, self.arcs, s)
+
+
+def _point_at(path: Array, arcs: Array, s: ArrayLike) -> Array:
+    s_ = np.clip(np.asarray(s, dtype=float), 0.0, arcs[-1])
+    return np.stack([np.interp(s_, arcs, path[:, k]) for k in range(3)], axis=-1)
+
+
+def _tangent_at(path: Array, arcs: Array, s: ArrayLike) -> Array:
+    """Unit tangent of the polyline at arc lengths s (the segment's; the last segment's at the end)."""
+    seg = np.diff(path, axis=0)
+    lens = np.linalg.norm(seg, axis=1)
+    unit = seg / np.maximum(lens, 1e-12)[:, None]
+    i = np.clip(np.searchsorted(arcs, np.asarray(s, dtype=float), side="right") - 1, 0, len(seg) - 1)
+    return unit[i]
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# the lattice
+# ----------------------------------------------------------------------------------------------------------------
+@dataclass
+class _Lattice:
+    origin: Array
+    h: float
+    shape: tuple[int, int, int]
+
+    @property
+    def n(self) -> int:
+        return int(np.prod(self.shape))
+
+    def nodes(self) -> Array:
+        ii = np.indices(self.shape).reshape(3, -1).T
+        return self.origin + self.h * ii
+
+    def cell(self, p: Array) -> NDArray[np.int64]:
+        """Index (3,) of the lattice cube holding p (its lowest corner)."""
+        c = np.floor((np.asarray(p) - self.origin) / self.h).astype(np.int64)
+        return np.clip(c, 0, np.array(self.shape) - 2)
+
+    def flat(self, ijk: NDArray[np.int64]) -> NDArray[np.int64]:
+        return np.ravel_multi_index(tuple(np.asarray(ijk).T), self.shape)
+
+
+def _lattice(bounds: Array, grid: float) -> _Lattice:
+    lo, hi = bounds[:3], bounds[3:]
+    h = max(float(grid), float((np.prod(hi - lo) / MAX_NODES) ** (1.0 / 3.0)))
+    for _ in range(50):  # one cube beyond the room on each side, at most MAX_NODES nodes
+        shape = tuple(int(math.ceil((hi[k] - lo[k]) / h)) + 3 for k in range(3))
+        if np.prod(shape) <= MAX_NODES:
+            break
+        h *= 1.05
+    return _Lattice(lo - h, h, shape)  # type: ignore[arg-type]
+
+
+def _graph(lat: _Lattice, ok: NDArray[np.bool_]) -> Any:
+    """The 26-connected lattice graph on the nodes ``ok`` (flat (n,)), edge weights the Euclidean lengths [m]."""
+    shape = lat.shape
+    okg = ok.reshape(shape)
+    idx = np.arange(lat.n).reshape(shape)
+    rows, cols, wts = [], [], []
+    for d in _STEPS:
+        a = tuple(slice(max(0, -k), s - max(0, k)) for k, s in zip(d, shape, strict=True))
+        b = tuple(slice(max(0, k), s - max(0, -k)) for k, s in zip(d, shape, strict=True))
+        m = okg[a] & okg[b]
+        rows.append(idx[a][m])
+        cols.append(idx[b][m])
+        wts.append(np.full(int(m.sum()), lat.h * float(np.linalg.norm(d))))
+    r, c, w = np.concatenate(rows), np.concatenate(cols), np.concatenate(wts)
+    data = np.concatenate([w, w])
+    return coo_matrix((data, (np.concatenate([r, c]), np.concatenate([c, r]))), shape=(lat.n, lat.n)).tocsr()
+
+
+def _obstacle_distance(world: World3D, pts: Array, cap: float) -> Array:
+    """Signed distance [m] of points (n, 3) to the obstacles only (no room, no radius), exact where below ``cap``,
+    else ``cap`` (a value ≥ cap means "at least cap")."""
+    out = np.full(len(pts), cap)
+    lo, hi = np.asarray(world.bounds[:3]), np.asarray(world.bounds[3:])
+    span = float(np.max(hi - lo)) + 10.0 * cap + 10.0
+    for ob in world.obstacles:  # one at a time: inside an overlap, the deepest single depth
+        gap = np.linalg.norm(np.maximum(0.0, np.maximum(ob.lo - pts, pts - ob.hi)), axis=1)
+        near = np.flatnonzero(gap < cap)
+        if len(near):
+            alone = World3D([ob], np.r_[lo - span, hi + span], 0.0)  # the walls far away: this obstacle only
+            out[near] = np.minimum(out[near], alone.exact_clearance(pts[near]))
+    return out
+
+
+def _wall_distance(bounds: Array, pts: Array) -> tuple[Array, Array]:
+    """(distance to the floor, distance to the four walls and the ceiling) [m], > 0 inside the room."""
+    lo, hi = bounds[:3], bounds[3:]
+    floor = pts[:, 2] - lo[2]
+    side = np.min(np.concatenate([pts[:, :2] - lo[:2], hi - pts], axis=1), axis=1)
+    return floor, side
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# the lower bound: a piecewise linear potential on the Kuhn simplices
+# ----------------------------------------------------------------------------------------------------------------
+def _lipschitz(phi: Array, lat: _Lattice) -> tuple[float, NDArray[np.bool_]]:
+    """Largest gradient norm Λ [-] of the Kuhn-simplex interpolant of ``phi`` (flat, inf outside) over the cubes
+    whose 8 corners are finite, and the mask of those cubes (shape - 1)."""
+    P = phi.reshape(lat.shape)
+    nx, ny, nz = (s - 1 for s in lat.shape)
+
+    def corner(o: tuple[int, int, int]) -> Array:
+        return P[o[0] : o[0] + nx, o[1] : o[1] + ny, o[2] : o[2] + nz]
+
+    corners = {o: corner(o) for o in itertools.product((0, 1), repeat=3)}
+    good = np.ones((nx, ny, nz), dtype=bool)
+    for v in corners.values():
+        good &= np.isfinite(v)
+    if not good.any():
+        return 1.0, good
+    lam = 0.0
+    for perm in _PERMS:
+        v = [0, 0, 0]
+        prev = corners[(0, 0, 0)][good]
+        g2 = np.zeros_like(prev)
+        for axis in perm:
+            v[axis] = 1
+            cur = corners[(v[0], v[1], v[2])][good]
+            g2 += (cur - prev) ** 2
+            prev = cur
+        lam = max(lam, float(np.sqrt(g2.max())) / lat.h)
+    return max(lam, 1e-12), good
+
+
+def _interp(phi: Array, lat: _Lattice, p: Array) -> float:
+    """The Kuhn-simplex interpolant of ``phi`` at p (inf if a corner of its simplex is inf)."""
+    c = lat.cell(p)
+    f = np.clip((p - (lat.origin + lat.h * c)) / lat.h, 0.0, 1.0)
+    order = np.argsort(-f, kind="stable")
+    v = c.copy()
+    val = float(phi[lat.flat(v)])
+    for axis in order:
+        nxt = v.copy()
+        nxt[axis] += 1
+        val += f[axis] * (float(phi[lat.flat(nxt)]) - float(phi[lat.flat(v)]))
+        v = nxt
+    return val
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# the route
+# ----------------------------------------------------------------------------------------------------------------
+def _attach(world: World3D, lat: _Lattice, free: NDArray[np.bool_], p: Array, radius: float, what: str) -> int:
+    """The free node nearest p whose segment from p keeps clearance > 0 in ``world`` with safety radius ``radius``."""
+    c = lat.cell(p)
+    w = world.with_safety_radius(radius)
+    for reach in (2, 4, 8):
+        lo = np.maximum(c - reach + 1, 0)
+        hi = np.minimum(c + reach + 1, np.array(lat.shape) - 1)
+        ii = np.indices(tuple(hi - lo + 1)).reshape(3, -1).T + lo
+        flat = lat.flat(ii)
+        ok = free[flat]
+        if not ok.any():
+            continue
+        flat, ii = flat[ok], ii[ok]
+        pts = lat.origin + lat.h * ii
+        order = np.argsort(np.linalg.norm(pts - p, axis=1), kind="stable")[:64]
+        seen = w.segment_is_free(np.broadcast_to(p, (len(order), 3)), pts[order])
+        if seen.any():
+            return int(flat[order[int(np.argmax(seen))]])
+    raise NoRouteError(f"no free space for a drone next to the {what} {fmt_point(p)} (lattice {lat.h:.3f} m)")
+
+
+def _shorten(world: World3D, path: Array, margin: float) -> Array:
+    """Greedy shortcut: from each kept point the farthest later point whose segment keeps clearance > margin."""
+    out = [path[0]]
+    i = 0
+    while i < len(path) - 1:
+        cand = np.arange(len(path) - 1, i, -1)
+        ok = world.segment_is_free(np.broadcast_to(path[i], (len(cand), 3)), path[cand], margin)
+        j = int(cand[int(np.argmax(ok))]) if ok.any() else i + 1
+        out.append(path[j])
+        i = j
+    return np.asarray(out)
+
+
+def plan_route3d(
+    world: World3D, base: ArrayLike, goal: ArrayLike, tether: DroneTetherParams, *, grid: float = 0.25
+) -> Route3D:
+    """The leader's shortest free route from the ground winch ``base`` to ``goal`` and the proven lower bound.
+
+    Args:
+        world: the room and obstacles; ``world.safety_radius`` is the drone radius r [m].
+        base: the anchor (3,) [m] (the loader checks it keeps c_t from obstacles, walls and floor).
+        goal: the leader's goal (3,) [m] (free for a drone).
+        tether: tether parameters (c_t = ``clearance``, L_max = ``tether_length``).
+        grid: lattice spacing h [m] (> 0); raised to keep at most ``MAX_NODES`` nodes.
+
+    Raises:
+        NoRouteError: no chain can reach the goal (proven, exit 2: the goal is outside the component of U holding the
+            base, module doc), or none was found for a drone at this lattice (``proven = False``, exit 1).
+        ParameterError: bad points or grid.
+    """
+    t0 = time.perf_counter()
+    b = np.asarray(base, dtype=float).reshape(-1)
+    g = np.asarray(goal, dtype=float).reshape(-1)
+    if b.shape != (3,) or g.shape != (3,) or not np.all(np.isfinite(np.r_[b, g])):
+        raise ParameterError(f"base and goal must be finite 3-D points, got {base!r} and {goal!r}")
+    if not (isinstance(grid, int | float) and math.isfinite(grid) and grid > 0):
+        raise ParameterError(f"the route grid must be a number > 0 m, got {grid!r}")
+    bounds = np.asarray(world.bounds, dtype=float)
+    r, c_t = world.safety_radius, tether.clearance
+    lat = _lattice(bounds, grid)
+    h = lat.h
+    nodes = lat.nodes()
+    slack = math.sqrt(3.0) * h
+    cap = max(r + ROUTE_MARGIN, c_t) + 0.01  # the tests below need no more
+    obst = _obstacle_distance(world, nodes, cap=cap)
+    floor, side = _wall_distance(bounds, nodes)
+    t_field = time.perf_counter()
+
+    # the lower bound (and the proof of no route) on U. Boxes standing on the floor are extended below it (they then
+    # lie in obstacles ∪ {z < zmin}, so a point c_t from both is c_t from them): a node on the floor under a box is
+    # then inside it, not on its surface
+    zmin = bounds[2]
+    if any(isinstance(ob.geometry, _PlacedBox) and ob.lo[2] <= zmin for ob in world.obstacles):
+        deep = [
+            box_obstacle(np.r_[ob.lo[:2], zmin - 10.0], ob.hi, ob.name)
+            if isinstance(ob.geometry, _PlacedBox) and ob.lo[2] <= zmin
+            else ob
+            for ob in world.obstacles
+        ]
+        obst_u = _obstacle_distance(World3D(deep, bounds, 0.0), nodes, cap=cap)
+    else:
+        obst_u = obst
+    in_u = (obst_u > c_t - slack) & (floor > c_t - slack) & (side > -slack)
+    gu = _graph(lat, in_u)
+    goal_node = int(lat.flat(lat.cell(g)))
+    phi = dijkstra(gu, directed=True, indices=goal_node)  # gu holds both directions
+    phi[~in_u] = np.inf
+    lam, _ = _lipschitz(phi, lat)
+    phi_b, phi_g = _interp(phi, lat, b), _interp(phi, lat, g)
+    if not math.isfinite(phi_b):
+        raise NoRouteError(
+            f"the goal {fmt_point(g)} cannot be reached from the base {fmt_point(b)}: no curve keeping the tether "
+            f"clearance {c_t:.3f} m from the obstacles and the floor joins them"
+        )
+    euclid = float(np.linalg.norm(g - b))
+    grid_bound = max(0.0, (phi_b - phi_g) / lam)
+    lower = max(euclid, grid_bound)
+    t_bound = time.perf_counter()
+
+    # the leader's route on the drones' free nodes
+    free = (np.minimum(obst, side) - r > ROUTE_MARGIN) & (floor - r > ROUTE_MARGIN)  # a subset of U
+    start = _attach(world, lat, free, b, c_t, "base")
+    end = _attach(world, lat, free, g, r, "goal")
+    keep = np.flatnonzero(free)
+    local = np.full(lat.n, -1)
+    local[keep] = np.arange(len(keep))
+    gr = gu[keep][:, keep]  # U's graph restricted to the drones' free nodes
+    dist_l, pred_l = dijkstra(gr, directed=True, indices=int(local[start]), return_predecessors=True)
+    dist = np.full(lat.n, np.inf)
+    dist[keep] = dist_l
+    pred = np.full(lat.n, -9999)
+    pred[keep] = np.where(pred_l >= 0, keep[np.maximum(pred_l, 0)], -9999)
+    if not math.isfinite(dist[end]):
+        err = NoRouteError(
+            f"no free route for a drone (radius {r:.3f} m) from the base {fmt_point(b)} to the goal {fmt_point(g)} "
+            f"on a {h:.3f} m lattice"
+        )
+        err.proven = False
+        raise err
+    chain = [end]
+    while chain[-1] != start:
+        chain.append(int(pred[chain[-1]]))
+    node_path = nodes[np.asarray(chain[::-1])]
+    path = np.vstack([b, node_path, g])
+    path = np.vstack([path[:2], _shorten(world, path[1:], ROUTE_MARGIN)])  # the winch leg stays as attached
+    keep = np.r_[True, np.linalg.norm(np.diff(path, axis=0), axis=1) > 1e-9]
+    path = path[keep]
+    length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
+    lower = min(lower, length)  # a bound above a found route would be a bug in the proof's arithmetic
+    n_min = max(1, int(math.ceil(lower / tether.tether_length - 1e-9)))
+    t_end = time.perf_counter()
+    return Route3D(
+        path=path,
+        length=length,
+        lower_bound_length=lower,
+        min_robots=n_min,
+        base=b,
+        goal=g,
+        grid=h,
+        tether=tether,
+        euclidean=euclid,
+        grid_bound=grid_bound,
+        lipschitz=lam,
+        diagnostics={
+            "nodes": lat.n,
+            "free_nodes": int(free.sum()),
+            "bound_nodes": int(in_u.sum()),
+            "grid_length": float(dist[end]),
+            "gap": length / lower - 1.0 if lower > 0 else 0.0,
+            "time_field": t_field - t0,
+            "time_bound": t_bound - t_field,
+            "time_route": t_end - t_bound,
+            "time": t_end - t0,
+        },
+    )
+
+
+def check_drone_count(route: Route3D, n: int) -> None:
+    """Refuse ``n`` drones below the proven fewest: :class:`TooFewRobotsError` (proven, exit 2) with the numbers."""
+    if n < route.min_robots:
+        L = route.tether.tether_length
+        raise TooFewRobotsError(
+            f"{n} drone{'s' if n != 1 else ''} cannot reach the goal {fmt_point(route.goal)}: any chain's tethers run "
+            f"at least {route.lower_bound_length:.3f} m from the base {fmt_point(route.base)}, more than {n} x "
+            f"{L:.3f} m of tether; the fewest is {route.min_robots}",
+            route.min_robots,
+            proven=True,
+        )
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# references
+# ----------------------------------------------------------------------------------------------------------------
+@dataclass
+class DroneReferences:
+    """References of every drone along the route (units: m, s).
+
+    Attributes:
+        t: times (K+1,) [s], step Ts.
+        x, xd: the leader's reference position and velocity (K+1, 3).
+        positions, velocities: every drone's reference (K+1, N, 3), drone N the leader (``positions[:, -1] == x``).
+        arcs: each drone's arc length along the route (K+1, N) [m].
+        start_positions: (N, 3) a start keeping every limit (:func:`chain_violations` is empty for it).
+        final_positions: (N, 3) where the references end (drone j at j/N of the route, the leader at the goal).
+        route: the route.
+        diagnostics: ``final_violations`` (list of messages for the end placement; the per-step planner may need to
+            move off the route to keep the tether limits there), ``start_arcs``.
+    """
+
+    t: Array
+    x: Array
+    xd: Array
+    positions: Array
+    velocities: Array
+    arcs: Array
+    start_positions: Array
+    final_positions: Array
+    route: Route3D
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+
+
+def chain_violations(
+    world: World3D,
+    base: Array,
+    positions: Array,
+    tether: DroneTetherParams,
+    *,
+    d_safe: float = 0.02,
+    separation_margin: float = 0.05,
+    samples: int = 64,
+) -> list[str]:
+    """Every limit a chain placement violates, one message each (empty: valid): drone clearance > d_safe beyond r,
+    drones ≥ 2r + margin apart, every tether's catenary (``solve3d``) solvable, arc ≤ L_max, drone-end tensions ≤
+    spare thrust, the whole curve (``samples`` points plus the sampling margin) ≥ c_t from the obstacles and the floor
+    and inside the room."""
+    out: list[str] = []
+    P = np.asarray(positions, dtype=float)
+    r = world.safety_radius
+    clear = world.exact_clearance(P)
+    for j, (p, c) in enumerate(zip(P, clear, strict=True)):
+        if not c > d_safe:
+            out.append(f"drone {j + 1} at {fmt_point(p)} has clearance {c:.3f} m beyond its radius (< {d_safe:.3f})")
+    for i in range(len(P)):
+        for j in range(i + 1, len(P)):
+            gap = float(np.linalg.norm(P[i] - P[j]))
+            if gap < 2 * r + separation_margin:
+                out.append(f"drones {i + 1} and {j + 1} are {gap:.3f} m apart (< {2 * r + separation_margin:.3f})")
+    ends = np.vstack([base, P])
+    for j in range(len(P)):
+        try:
+            cat = solve3d(ends[j], ends[j + 1], tether)
+        except (TetherSpanError, ParameterError) as exc:
+            out.append(f"tether {j + 1}: {exc}")
+            continue
+        if cat.length > tether.tether_length:
+            out.append(f"tether {j + 1} is {cat.length:.3f} m long (> L_max {tether.tether_length:.3f} m)")
+        for t_end, is_drone in ((cat.tension_p, j > 0), (cat.tension_q, True)):
+            if is_drone and t_end > tether.spare_thrust:
+                out.append(f"tether {j + 1} pulls a drone with {t_end:.3f} N (> {tether.spare_thrust:.3f} N)")
+        pts = cat.points(samples)
+        margin = cat.length / (2.0 * (samples - 1))
+        obst = _obstacle_distance(world, pts, cap=tether.clearance + margin + 1.0)
+        floor, side = _wall_distance(np.asarray(world.bounds, dtype=float), pts)
+        worst = np.minimum(obst, floor) - margin
+        k = int(np.argmin(worst))
+        if worst[k] < tether.clearance or side.min() < 0.0:
+            out.append(
+                f"tether {j + 1} passes {max(float(worst[k]), 0.0):.3f} m from an obstacle or the floor at "
+                f"{fmt_point(pts[k])} (< c_t {tether.clearance:.3f} m)"
+            )
+    return out
+
+
+def _min_jerk(ds: float, speed: float, accel: float, Ts: float) -> tuple[float, int]:
+    """Duration T [s] (a multiple of Ts, K steps) of s(τ) = ds (10τ³ − 15τ⁴ + 6τ⁵): peak speed 1.875 ds/T ≤ speed,
+    peak acceleration 5.7735 ds/T² ≤ accel."""
+    if ds <= 0.0:
+        return 0.0, 0
+    T = max(1.875 * ds / speed, math.sqrt(5.7735 * ds / accel), Ts)
+    K = int(math.ceil(T / Ts - 1e-9))
+    return K * Ts, K
+
+
+def drone_references(
+    route: Route3D,
+    n: int,
+    *,
+    Ts: float = 0.05,
+    speed: float = 1.0,
+    accel: float = 1.0,
+    settle: float = 2.0,
+    world: World3D,
+    d_safe: float = 0.02,
+    separation_margin: float = 0.05,
+) -> DroneReferences:
+    """References for ``n`` drones along ``route`` and a verified start.
+
+    Start: drone 1 at the first route point free for a drone (beyond the winch leg), drone j + 1 a spacing
+    2r + margin + 0.1 m further along the route; if a limit fails (:func:`chain_violations`) the whole placement slides
+    along the route in 0.1 m steps (up to a third of the route). The leader then follows the route from its start arc
+    to the goal with a minimum-jerk law (peak speed ≤ ``speed`` [m/s], acceleration ≤ ``accel`` [m/s²]), then holds
+    for ``settle`` [s]; drone j moves along the route from its start arc to j/N of the route's length in proportion
+    to the leader's progress (its share of the leader's arc length).
+
+    Raises:
+        StartError: no valid start found (one line with the first violation).
+        ParameterError: n < 1 or bad times.
+    """
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
+        raise ParameterError(f"the number of drones must be an integer >= 1, got {n!r}")
+    for nm, v in (("Ts", Ts), ("speed", speed), ("accel", accel)):
+        if not (math.isfinite(v) and v > 0):
+            raise ParameterError(f"{nm} must be a number > 0, got {v!r}")
+    if not (math.isfinite(settle) and settle >= 0):
+        raise ParameterError(f"settle must be a number >= 0 s, got {settle!r}")
+    tether = route.tether
+    path, arcs = route.path, route.arcs
+    L = float(arcs[-1])
+    r = world.safety_radius
+    spacing = 2.0 * r + separation_margin + 0.1
+    s_first = float(arcs[1]) if len(arcs) > 2 else 0.0  # the end of the winch leg: the first point free for a drone
+    first_error = ""
+    start_arcs = None
+    for shift in np.arange(0.0, max(L / 3.0, 0.1), 0.1):
+        sa = s_first + shift + spacing * np.arange(n)
+        if sa[-1] > L:
+            break
+        P = _point_at(path, arcs, sa)
+        bad = chain_violations(world, route.base, P, tether, d_safe=d_safe, separation_margin=separation_margin)
+        if not bad:
+            start_arcs = sa
+            break
+        first_error = first_error or bad[0]
+    if start_arcs is None:
+        raise StartError(
+            f"no start for {n} drones along the route from {fmt_point(route.base)}: "
+            + (first_error or f"the route ({L:.3f} m) is too short for {n} drones {spacing:.3f} m apart")
+        )
+    end_arcs = L * np.arange(1, n + 1) / n
+    ds = L - start_arcs[-1]
+    T, K = _min_jerk(ds, speed, accel, Ts)
+    Ks = int(math.ceil(settle / Ts - 1e-9))
+    t = Ts * np.arange(K + Ks + 1)
+    tau = np.clip(t / T, 0.0, 1.0) if T > 0 else np.ones_like(t)
+    phi = 10 * tau**3 - 15 * tau**4 + 6 * tau**5
+    dphi = (30 * tau**2 - 60 * tau**3 + 30 * tau**4) / T if T > 0 else np.zeros_like(t)
+    dphi[t > T] = 0.0
+    S = start_arcs[None, :] + (end_arcs - start_arcs)[None, :] * phi[:, None]  # (K+1, N)
+    Sd = (end_arcs - start_arcs)[None, :] * dphi[:, None]
+    pos = _point_at(path, arcs, S)
+    vel = _tangent_at(path, arcs, S) * Sd[..., None]
+    final = _point_at(path, arcs, end_arcs)
+    return DroneReferences(
+        t=t,
+        x=pos[:, -1].copy(),
+        xd=vel[:, -1].copy(),
+        positions=pos,
+        velocities=vel,
+        arcs=S,
+        start_positions=_point_at(path, arcs, start_arcs),
+        final_positions=final,
+        route=route,
+        diagnostics={
+            "start_arcs": start_arcs.tolist(),
+            "final_violations": chain_violations(
+                world, route.base, final, tether, d_safe=d_safe, separation_margin=separation_margin
+            ),
+            "travel_time": T,
+        },
+    )

@@ -1,0 +1,165 @@
+"""The drone chain's 3-D route (tmr.route.route3d): route, proven lower bound, refusals, references."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tmr.model.catenary3d import DroneTetherParams
+from tmr.route.route3d import (
+    KAPPA,
+    ROUTE_MARGIN,
+    NoRouteError,
+    StartError,
+    TooFewRobotsError,
+    chain_violations,
+    check_drone_count,
+    drone_references,
+    plan_route3d,
+)
+from tmr.world.drones import load_drone_scenario
+from tmr.world.world3d import World3D, box_obstacle
+
+TETHER = DroneTetherParams()
+ROOM = (0.0, 0.0, 0.0, 10.0, 10.0, 4.0)
+
+
+def _wall_world() -> World3D:
+    """A full-height wall x = 4.5 .. 5.5 from y = 0 to y = 8: the way round is past its end at y = 8 (1 m thick: the
+    bound's enlargement by √3 h would close a thin wall's gap, see formulations/drones.md)."""
+    return World3D([box_obstacle([4.5, 0.0, 0.0], [5.5, 8.0, 4.0])], ROOM, 0.3)
+
+
+def test_kappa_is_the_worst_lattice_overestimate():
+    rng = np.random.default_rng(0)
+    v = np.abs(rng.normal(size=(20000, 3)))
+    s = -np.sort(-v, axis=1)
+    cost = s[:, 0] + (math.sqrt(2) - 1) * s[:, 1] + (math.sqrt(3) - math.sqrt(2)) * s[:, 2]
+    ratio = cost / np.linalg.norm(v, axis=1)
+    assert ratio.max() <= KAPPA + 1e-12 and ratio.max() > KAPPA - 1e-3
+
+
+def test_open_room_route_is_the_straight_line():
+    w = World3D([], ROOM, 0.3)
+    b, g = np.array([1.0, 1.0, 0.3]), np.array([8.0, 7.0, 2.5])
+    rt = plan_route3d(w, b, g, TETHER, grid=0.25)
+    # the winch leg up to the first free node, then straight on
+    assert rt.length == pytest.approx(np.linalg.norm(g - b), abs=0.2)
+    assert rt.lower_bound_length == pytest.approx(np.linalg.norm(g - b))
+    assert rt.min_robots == 1 and rt.lower_bound_length <= rt.length
+
+
+def test_route_round_a_wall_against_the_exact_shortest_path():
+    w = _wall_world()
+    b, g = np.array([2.0, 2.0, 1.0]), np.array([8.0, 2.0, 1.0])
+    rt = plan_route3d(w, b, g, TETHER, grid=0.2)
+    # shortest tether-clear path (clearance c_t past the wall's end at y = 8, level at z = 1; the rounded corners
+    # of the grown wall make the true one a little shorter than this polyline, by less than 2 c_t (1 - π/4)):
+    c = TETHER.clearance
+    corner_a, corner_b = np.array([4.5, 8.0 + c, 1.0]), np.array([5.5, 8.0 + c, 1.0])
+    exact = np.linalg.norm(corner_a - b) + np.linalg.norm(corner_b - corner_a) + np.linalg.norm(g - corner_b)
+    # the bound is below the shortest curve any chain can take (here the straight line's: Λ = √3 at the ridge
+    # behind the wall makes the lattice potential's bound weaker, formulations/drones.md)
+    assert rt.euclidean <= rt.lower_bound_length <= exact - 2 * c * (1 - math.pi / 4)
+    assert rt.grid_bound <= rt.lower_bound_length and 1.0 <= rt.lipschitz <= math.sqrt(3) + 1e-9
+    # the drones' route keeps r + margin: longer than the tether-clear path, within the lattice's error
+    assert exact < rt.length < KAPPA * exact
+    # every segment after the winch leg keeps the route margin, exactly
+    seg = w.segment_clearance(rt.path[1:-1], rt.path[2:])
+    assert np.all(seg > ROUTE_MARGIN - 1e-9)
+    assert np.all(w.with_safety_radius(TETHER.clearance).segment_is_free(rt.path[0], rt.path[1]))
+    assert np.array_equal(rt.path[0], b) and np.array_equal(rt.path[-1], g)
+
+
+def test_too_few_robots_refused_with_the_numbers():
+    w = _wall_world()
+    tp = DroneTetherParams(tether_length=2.5)
+    rt = plan_route3d(w, [2.0, 2.0, 1.0], [8.0, 2.0, 1.0], tp, grid=0.25)
+    assert rt.min_robots == math.ceil(rt.lower_bound_length / 2.5) >= 3
+    check_drone_count(rt, rt.min_robots)
+    with pytest.raises(TooFewRobotsError, match=r"fewest is \d") as exc:
+        check_drone_count(rt, rt.min_robots - 1)
+    assert exc.value.proven and exc.value.needed == rt.min_robots and "\n" not in str(exc.value)
+
+
+def test_enclosed_goal_is_proven_unreachable():
+    # the goal inside a closed box shell (walls 0.2 m thick): no curve reaches it
+    shell = [  # walls 0.8 m thick round a 1.6 m x 1.6 m x 1.4 m cell
+        box_obstacle([5.0, 5.0, 0.0], [9.0, 5.8, 3.0]),
+        box_obstacle([5.0, 8.2, 0.0], [9.0, 9.0, 3.0]),
+        box_obstacle([5.0, 5.0, 0.0], [5.8, 9.0, 3.0]),
+        box_obstacle([8.2, 5.0, 0.0], [9.0, 9.0, 3.0]),
+        box_obstacle([5.0, 5.0, 2.2], [9.0, 9.0, 3.0]),
+    ]
+    w = World3D(shell, ROOM, 0.3)
+    with pytest.raises(NoRouteError, match="cannot be reached") as exc:
+        plan_route3d(w, [1.0, 1.0, 0.3], [7.0, 7.0, 1.2], TETHER)
+    assert exc.value.proven
+
+
+def test_narrow_gap_for_the_tether_but_not_for_a_drone_is_not_proven():
+    # a 0.5 m slot in a wall: a tether passes (c_t = 0.2 each side), a drone (r = 0.3) does not
+    w = World3D(
+        [box_obstacle([4.9, 0.0, 0.0], [5.1, 4.75, 4.0]), box_obstacle([4.9, 5.25, 0.0], [5.1, 10.0, 4.0])], ROOM, 0.3
+    )
+    with pytest.raises(NoRouteError, match="no free route for a drone") as exc:
+        plan_route3d(w, [1.0, 5.0, 0.3], [8.0, 5.0, 2.0], TETHER)
+    assert not exc.value.proven
+
+
+def test_h_needs_five_drones_and_refuses_four():
+    sc = load_drone_scenario("H")
+    rt = plan_route3d(sc.world, sc.base, sc.goal, sc.tether, grid=0.25)
+    assert rt.min_robots == 5 == sc.n_robots
+    assert rt.lower_bound_length <= rt.length < 1.05 * rt.lower_bound_length
+    with pytest.raises(TooFewRobotsError, match="4 drones cannot reach"):
+        check_drone_count(rt, 4)
+
+
+@pytest.mark.parametrize("name", ["F", "G", "H"])
+def test_references_follow_the_route_from_a_valid_start(name):
+    sc = load_drone_scenario(name)
+    rt = plan_route3d(sc.world, sc.base, sc.goal, sc.tether)
+    n = int(sc.n_robots)
+    ref = drone_references(rt, n, Ts=0.05, speed=1.0, accel=1.0, settle=2.0, world=sc.world)
+    K1 = len(ref.t)
+    assert ref.positions.shape == ref.velocities.shape == (K1, n, 3) and ref.x.shape == (K1, 3)
+    # the start keeps every limit, checked here independently of chain_violations for the spacing and clearance
+    P = ref.start_positions
+    assert chain_violations(sc.world, sc.base, P, sc.tether) == []
+    gaps = np.linalg.norm(P[:, None] - P[None], axis=2)[np.triu_indices(n, 1)]
+    assert gaps.min() >= 2 * sc.world.safety_radius + 0.05
+    assert np.all(sc.world.exact_clearance(P) > 0.02)
+    np.testing.assert_allclose(ref.positions[0], P)
+    np.testing.assert_allclose(ref.x[-1], sc.goal, atol=1e-9)
+    np.testing.assert_allclose(ref.positions[:, -1], ref.x)
+    # every drone stays on the route (distance to the polyline ~ 0) and ends at its share of the route's length
+    np.testing.assert_allclose(ref.arcs[-1], rt.length * np.arange(1, n + 1) / n)
+    np.testing.assert_allclose(ref.positions, rt.point_at(ref.arcs), atol=1e-12)
+    assert np.all(np.diff(ref.arcs, axis=1)[0] > 0) and np.all(np.diff(ref.arcs, axis=1)[-1] > 0)  # order kept
+    # velocities are the derivative of the positions (finite differences, away from route corners)
+    fd = np.diff(ref.positions, axis=0) / 0.05
+    mid = 0.5 * (ref.velocities[1:] + ref.velocities[:-1])
+    close = np.linalg.norm(fd - mid, axis=2) < 0.05
+    assert close.mean() > 0.97
+    assert np.abs(ref.xd).max() <= 1.0 + 1e-9 and np.all(ref.velocities[-1] == 0.0)
+
+
+def test_chain_violations_sees_the_sag_the_chord_misses():
+    sc = load_drone_scenario("G")
+    base = sc.base
+    low = np.array([[2.5, 3.0, 1.0], [4.5, 3.0, 2.1], [9.5, 3.0, 2.1]])
+    msgs = chain_violations(sc.world, base, low, sc.tether)
+    assert len(msgs) == 1 and msgs[0].startswith("tether 3 passes")
+    high = low.copy()
+    high[1:, 2] = 2.3  # 0.065 m to spare (the check adds the sampling margin L/126)
+    assert chain_violations(sc.world, base, high, sc.tether) == []
+
+
+def test_no_start_for_too_many_drones_on_a_short_route():
+    w = World3D([], ROOM, 0.3)
+    rt = plan_route3d(w, [1.0, 1.0, 0.3], [2.0, 1.0, 1.0], TETHER)
+    with pytest.raises(StartError, match="no start for 5 drones"):
+        drone_references(rt, 5, world=w)
