@@ -123,3 +123,13 @@ def test_reachable_by_construction_agrees_with_the_voxel_flood_fill(worlds):
 def test_reachable_by_construction_agrees_with_the_voxel_flood_fill_everywhere(worlds):
     for w in worlds:
         assert voxel_reachable(w.scenario["world"], w.base, w.goal) == w.reachable, w.name
+
+
+def test_the_drone_scenario_loader_reads_the_generated_files(worlds, tmp_path):
+    drones = pytest.importorskip("tmr.world.drones")  # piece A of issue 32 (the scenario loader)
+    for w in worlds[:8]:
+        sc = drones.load_drone_scenario(w.write(tmp_path))
+        assert sc.name == w.name
+        assert np.array_equal(sc.base, w.base) and np.array_equal(sc.goal, w.goal)
+        assert sc.tether.tether_length == w.tether_length and sc.tether.drone_radius == DRONE_RADIUS
+        assert len(sc.world.obstacles) == len(w.scenario["world"]["obstacles"])
