@@ -153,6 +153,11 @@ def _in_process(scenario: Any, robots: str, plan_seed: int) -> dict[str, Any]:
         row["proven"] = getattr(exc, "proven", None)
         row["message"] = str(exc).splitlines()[0][:300] if str(exc) else kind
         return row
+    except Exception as exc:  # a bug, not a verdict: recorded (and listed in the report) so the sweep goes on
+        row["call_s"] = time.perf_counter() - t0
+        row["outcome"] = f"crash: {type(exc).__name__}"
+        row["message"] = f"{type(exc).__name__}: {exc}".splitlines()[0][:300]
+        return row
     row["call_s"] = time.perf_counter() - t0
     violations = _violations(plan, metrics)
     step = np.asarray(plan.diagnostics.get("step_time", []), dtype=float)
@@ -314,12 +319,14 @@ def report(rows: list[dict[str, Any]], h_rows: list[dict[str, Any]], worlds: lis
     w(f"{_frac(len(auto_ok), len(auto_reach))} | {_ok(rate >= TARGET_AUTO_SUCCESS)} |\n")
     slow = max(refuse_t, default=0.0)
     w(f"| every N below the proven bound refused, in < {TARGET_REFUSE_S:g} s (in-process) | ")
-    w(f"{_frac(len(below_refused), len(below))}; median {_fmt(_med(refuse_t), '.3f')} s, max {_fmt(slow, '.3f')} s | ")
+    w(f"{_frac(len(below_refused), len(below))}; median {_fmt(_med(refuse_t), '.3f')} s, ")
+    w(f"max {_fmt(max(refuse_t, default=None), '.3f')} s | ")
     w(f"{_ok(len(below_refused) == len(below) and slow < TARGET_REFUSE_S)} |\n")
     slow_nr = max(no_route_t, default=0.0)
     w(f"| unreachable goals refused (no route), in < {TARGET_REFUSE_S:g} s (in-process) | ")
     w(f"{_frac(len(no_route_ok), len(no_route))}; median {_fmt(_med(no_route_t), '.3f')} s, max ")
-    w(f"{_fmt(slow_nr, '.3f')} s | {_ok(len(no_route_ok) == len(no_route) and slow_nr < TARGET_REFUSE_S)} |\n")
+    w(f"{_fmt(max(no_route_t, default=None), '.3f')} s | ")
+    w(f"{_ok(len(no_route_ok) == len(no_route) and slow_nr < TARGET_REFUSE_S)} |\n")
     w(f"| 0 violations by the independent check | {violations} in {len(plans)} plans | {_ok(violations == 0)} |\n")
     mw = _med(whole)
     w(f"| median whole-process time < {TARGET_MEDIAN_WHOLE_S:g} s | {_fmt(mw)} s over {len(whole)} runs | ")
@@ -374,9 +381,13 @@ def report(rows: list[dict[str, Any]], h_rows: list[dict[str, Any]], worlds: lis
         w(f"{_fmt(_med(ref), '.3f')} / {_fmt(max(ref, default=None), '.3f')} | ")
         w(f"{sum(int(r.get('violations') or 0) for r in rs)} | {_fmt(_med(wt))} / {_fmt(max(wt, default=None))} | ")
         w(f"{_fmt(_med(st), '.3f')} |\n")
-    odd = [r for r in rows if r["outcome"].startswith("error") or (r["outcome"] == "planned" and _below_bound(r))]
+    odd = [
+        r
+        for r in rows
+        if r["outcome"].startswith(("error", "crash")) or (r["outcome"] == "planned" and _below_bound(r))
+    ]
     if odd:
-        w("\nUnexpected outcomes (an error, or a plan below the proven bound):\n\n")
+        w("\nUnexpected outcomes (an error or a crash, or a plan below the proven bound):\n\n")
         for r in odd[:30]:
             w(f"- {r['world']} N = {r['robots']}: {r['outcome']} — {r.get('message', '')}\n")
     failed = [r for r in plans if r["outcome"] == "failed check"]
@@ -395,7 +406,8 @@ def report(rows: list[dict[str, Any]], h_rows: list[dict[str, Any]], worlds: lis
         w(f"| drones | {NEPTUNE['drones']} | {h5.get('n_used', h5['robots'])} |\n")
         w(f"| obstacles | {NEPTUNE['obstacles']} | 9 pillars |\n")
         w(f"| arena | {NEPTUNE['arena']} | 30 m × 30 m × 8 m, corner to corner |\n")
-        w(f"| tethers | {NEPTUNE['tethers']} | a chain: winch → drone 1 → … → drone 5, catenaries ")
+        w(f"| tethers | {NEPTUNE['tethers']} | a chain: winch → drone 1 → … → ")
+        w(f"drone {h5.get('n_used', h5['robots'])}, catenaries ")
         w(f"(L_max {_fmt(h5.get('tether_length'), '.1f')} m each) |\n")
         w(f"| planning time | {NEPTUNE['planning']} | whole plan in {_fmt(h5.get('call_s'))} s in-process; whole ")
         w(f"process {_fmt(h5.get('whole_s'))} s (median of {info['h_repeats']}, min {_fmt(h5.get('whole_s_min'))}, ")
