@@ -18,7 +18,9 @@ import time
 from dataclasses import dataclass, fields, replace
 from typing import TYPE_CHECKING, Any, Literal
 
-from tmr.errors import ParameterError, TmrError
+import numpy as np
+
+from tmr.errors import ParameterError, TmrError, fmt_point
 from tmr.model.catenary3d import DroneTetherParams
 from tmr.model.params import DroneParams, apply_overrides
 
@@ -79,23 +81,33 @@ def route_drones(
 ) -> tuple[Route3D, int]:
     """The 3-D route and the number of drones to plan with first: ``robots`` (the scenario's if None), or the
     route's proven minimum for ``"auto"``. Raises NoRouteError (no free route) and TooFewRobotsError (fewer drones
-    than the proven lower bound), both exit 2, before any motion is planned."""
-    from tmr.route.geodesic import TooFewRobotsError
-    from tmr.route.route3d import plan_route3d
+    than the proven lower bound), both exit 2, before any motion is planned.
 
+    The straight line is a lower bound on any curve from the anchor to the goal, so a count below
+    ⌈|goal − base| / L_max⌉ is refused before the route's lattice is even built."""
+    import math
+
+    from tmr.route.geodesic import TooFewRobotsError
+    from tmr.route.route3d import check_drone_count, plan_route3d
+
+    wanted = scenario.n_robots if robots is None else robots
+    if wanted != "auto":
+        n = int(wanted)
+        straight = float(np.linalg.norm(np.asarray(scenario.goal) - np.asarray(scenario.base)))
+        fewest = max(1, math.ceil(straight / tether.tether_length - 1e-12))
+        if n < fewest:
+            raise TooFewRobotsError(
+                f"{n} drone{'s' if n != 1 else ''} cannot reach the goal {fmt_point(scenario.goal)}: it is "
+                f"{straight:.3f} m from the base {fmt_point(scenario.base)} in a straight line, more than {n} x "
+                f"{tether.tether_length:.3f} m of tether; the fewest is at least {fewest}",
+                fewest,
+                proven=True,
+            )
     route = plan_route3d(scenario.world, scenario.base, scenario.goal, tether, grid=params.grid)
-    if robots == "auto":
+    if wanted == "auto":
         return route, max(1, route.min_robots)
-    n = scenario.n_robots if robots is None else int(robots)
-    if n < route.min_robots:
-        raise TooFewRobotsError(
-            f"{n} drone{'s' if n != 1 else ''} cannot reach the goal: any free curve from the anchor to the goal is at "
-            f"least {route.lower_bound_length:.3f} m long and each tether holds at most {tether.tether_length:.3f} m, "
-            f"so at least {route.min_robots} drones are needed",
-            route.min_robots,
-            proven=True,
-        )
-    return route, n
+    check_drone_count(route, int(wanted))
+    return route, int(wanted)
 
 
 def build_drone_problem(
@@ -117,8 +129,8 @@ def build_drone_problem(
     if route is None:
         route = plan_route3d(world, scenario.base, scenario.goal, tether, grid=params.grid)
     refs = drone_references(
-        route, n_robots, world=world, tether=tether, Ts=params.Ts, speed=params.leader_speed,
-        accel=params.leader_accel, settle=params.settle,
+        route, n_robots, world=world, Ts=params.Ts, speed=params.leader_speed, accel=params.leader_accel,
+        settle=params.settle, d_safe=params.d_safe, separation_margin=params.separation_margin,
     )  # fmt: skip
     return DroneProblem(scenario, world, tether, params, route, refs, n_robots)
 
