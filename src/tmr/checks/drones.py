@@ -760,7 +760,9 @@ def check_drone_plan(
     # -- tether curves ----------------------------------------------------------------------------------------
     base_clear = float(w.distance(base[None])[0][0])
     limit = np.full((n_k, n), c_t)
-    limit[:, 0] = min(c_t, base_clear)  # no closer than the winch itself (a winch on the floor)
+    # no closer than the winch itself (a winch on the floor), less the sampling resolution: a curve that starts
+    # exactly at its limit can be certified only to within FINE of it
+    limit[:, 0] = min(c_t, base_clear - FINE)
     t_min, t_s, t_lb, t_what, n_samples = _curve_clearance(w, cur, limit, tol)
     bad_curve = (t_lb < limit - tol) & cur.valid
     t_point = lambda k, j: curve_points(cur, np.array([k * n + j]), np.array([t_s[k, j]]))[0]  # noqa: E731
