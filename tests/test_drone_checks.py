@@ -142,6 +142,35 @@ def test_mesh_distance_is_the_box_formula_on_a_box_mesh():
     np.testing.assert_allclose(mesh_signed_distance(pts, mesh), box_signed_distance(pts, BOX[None])[:, 0], atol=1e-9)
 
 
+def u_mesh(z0: float = 0.0, z1: float = 1.0) -> trimesh.Trimesh:
+    """The U prism as a closed triangle mesh (side quads, caps from shapely's constrained Delaunay triangles)."""
+    import shapely
+
+    ring = np.asarray(U.exterior.coords)[:-1]  # counter-clockwise
+    n = len(ring)
+    verts = np.vstack([np.c_[ring, np.full(n, z0)], np.c_[ring, np.full(n, z1)]])
+    faces = [f for i in range(n) for f in ([i, (i + 1) % n, n + (i + 1) % n], [i, n + (i + 1) % n, n + i])]
+    index = {tuple(v): i for i, v in enumerate(ring.tolist())}
+    for t in shapely.get_parts(shapely.constrained_delaunay_triangles(U)):
+        k = [index[tuple(v)] for v in np.asarray(t.exterior.coords)[:3].tolist()]
+        if Polygon(ring[k]).exterior.is_ccw is False:
+            k = [k[0], k[2], k[1]]
+        faces += [[n + k[0], n + k[1], n + k[2]], [k[0], k[2], k[1]]]
+    mesh = trimesh.Trimesh(verts, np.asarray(faces), process=False)
+    assert mesh.is_watertight and mesh.volume == pytest.approx(U.area)
+    return mesh
+
+
+@pytest.mark.parametrize("flip", [False, True])
+def test_mesh_distance_of_a_concave_mesh_is_the_prism_formula(flip):
+    mesh = u_mesh()
+    if flip:  # inside out: the sign must not depend on the faces' orientation
+        mesh = trimesh.Trimesh(mesh.vertices, mesh.faces[:, ::-1], process=False)
+    pts = np.random.default_rng(5).uniform([-1, -1, -1], [4, 4, 2], (600, 3))
+    pts = np.vstack([pts, [[1.5, 2.0, 0.5], [1.5, 1.0 + 1e-3, 0.5], [1.0, 3.0, 1.0], [0.5, 2.9, 0.99]]])
+    np.testing.assert_allclose(mesh_signed_distance(pts, mesh), prism_signed_distance(pts, U, 0.0, 1.0), atol=1e-9)
+
+
 def test_world_from_the_table_with_a_mesh_file(tmp_path):
     trimesh.creation.box(bounds=BOX.reshape(2, 3)).export(tmp_path / "crate.stl")
     table = {

@@ -19,10 +19,12 @@ formula of this module. At every step of the plan it checks:
 
 Curve sampling. The signed distance D to a union of closed sets is 1-Lipschitz, so on a piece of curve of arc length
 delta between samples with distances d0 and d1 every point is at least ``(d0 + d1 - delta) / 2`` from the obstacles.
-Each curve is sampled every <= 0.5 m, then every piece whose bound comes within 5 cm of its limit is split (4 ways)
-until it is <= 2 cm long, and a piece whose bound is below the limit while both samples are above it is split
-further until <= 2 mm: a violation is reported only if the certified bound is below the limit (the sampled value
-is given in the message), so the verdict is exact to within 1 mm of arc.
+Each curve is sampled every <= 0.5 m, then every piece whose bound comes within 5 cm of its limit and below the
+curve's least sample so far (only there can the least distance lie) is split (4 ways) until it is <= 2 cm long, and
+while no sample of the curve is below its limit, a piece whose bound is below it is split further until <= 2 mm: a
+violation is reported only if the certified bound is below the limit (the sampled value is given in the message), so
+the verdict is exact to within 1 mm of arc, and the least distance reported near a limit is within 1 cm of the
+curve's.
 
 Units: metres, seconds, newtons. Steps k = 0..K index ``plan.t``; drone i (1..N) is ``plan.robots[:, i-1]``;
 tether j (1..N) joins point j-1 (point 0 the anchor) and drone j.
@@ -89,7 +91,7 @@ COARSE = 0.5  # first arc spacing of the curve samples [m]
 DENSE = 0.02  # arc spacing near a limit [m] (within BAND of it)
 FINE = 0.002  # arc spacing where the certified bound and the samples disagree about a limit [m]
 BAND = 0.05  # pieces whose bound is within this of the limit are sampled DENSE [m]
-EXACT_RANGE = 2.0  # distances are exact up to limit + this; farther, a lower bound (bounding boxes) [m]
+EXACT_RANGE = 1.0  # distances are exact up to limit + this; farther, a lower bound (bounding boxes) [m]
 MODEL_TOL = 1e-6  # through-the-ends residual [m], relative winch tension error [-], vertical tether span [m]
 _ROOM_FACES = ("the wall x = xmin", "the wall y = ymin", "the floor", "the wall x = xmax", "the wall y = ymax",
                "the ceiling")  # fmt: skip
@@ -147,30 +149,45 @@ def _winding_number(points: Array, tri: Array) -> Array:
 def mesh_signed_distance(points: Array, mesh: Any) -> Array:
     """Signed distance [m] from points (P, 3) to a closed trimesh mesh: (P,), negative inside.
 
-    Unsigned distance: ``trimesh.triangles.closest_point`` on the (point, triangle) pairs whose triangle's bounding box
-    is not farther than the point's nearest vertex (a bound on the distance); sign from the winding number."""
+    Unsigned distance: ``trimesh.triangles.closest_point`` on the triangles whose centroid lies within the point's
+    nearest-vertex distance (an upper bound on the distance, scipy ``cKDTree``) plus the largest centroid-to-vertex
+    radius, i.e. every triangle that can be the nearest. Sign: where the nearest point is inside its triangle's face,
+    the side of that face (outward normals; a mesh of negative volume is turned inside out); on an edge or a vertex,
+    outside if outside the convex hull (scipy ``ConvexHull``), else the generalized winding number."""
+    import itertools
+
     import trimesh
+    from scipy.spatial import ConvexHull, cKDTree
 
     p = np.asarray(points, dtype=float).reshape(-1, 3)
     if p.shape[0] == 0:
         return np.zeros(0)
     tri = np.asarray(mesh.triangles, dtype=float)
-    lo, hi = tri.min(axis=1), tri.max(axis=1)
-    out = np.empty(p.shape[0])
-    step = max(1, 2_000_000 // max(1, len(tri)))
-    verts = np.asarray(mesh.vertices, dtype=float)
-    for s in range(0, p.shape[0], step):
-        q = p[s : s + step]
-        ub = np.sqrt(((q[:, None, :] - verts[None]) ** 2).sum(-1).min(axis=1))  # nearest vertex >= distance
-        gap = np.maximum(np.maximum(lo[None] - q[:, None], q[:, None] - hi[None]), 0.0)
-        lb = np.linalg.norm(gap, axis=-1)  # (P, T) box distance <= distance to that triangle
-        ip, it = np.nonzero(lb <= ub[:, None] + 1e-12)
-        cp = trimesh.triangles.closest_point(tri[it], q[ip])
-        dist = np.linalg.norm(cp - q[ip], axis=1)
-        best = np.full(q.shape[0], np.inf)
-        np.minimum.at(best, ip, dist)
-        out[s : s + step] = best
-    inside = _winding_number(p, tri) > 0.5
+    cen = tri.mean(axis=1)
+    reach = float(np.linalg.norm(tri - cen[:, None], axis=-1).max())
+    ub, _ = cKDTree(np.asarray(mesh.vertices, dtype=float)).query(p)
+    lists = cKDTree(cen).query_ball_point(p, ub + reach * (1 + 1e-12) + 1e-12, return_sorted=False)
+    counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists))
+    it = np.fromiter(itertools.chain.from_iterable(lists), dtype=np.int64, count=int(counts.sum()))
+    ip = np.repeat(np.arange(p.shape[0]), counts)
+    cp = trimesh.triangles.closest_point(tri[it], p[ip])
+    dist = np.linalg.norm(cp - p[ip], axis=1)
+    order = np.lexsort((dist, ip))
+    first = order[np.r_[True, ip[order][1:] != ip[order][:-1]]]  # each point's nearest pair
+    near_t, near_c, out = it[first], cp[first], dist[first]
+    normals = np.cross(tri[near_t, 1] - tri[near_t, 0], tri[near_t, 2] - tri[near_t, 0])
+    if float(getattr(mesh, "volume", 1.0)) < 0.0:
+        normals = -normals
+    bary = trimesh.triangles.points_to_barycentric(tri[near_t], near_c)
+    on_face = np.all(bary > 1e-9, axis=1)
+    side = np.einsum("ij,ij->i", normals, p - near_c)
+    inside = on_face & (side < 0.0)
+    rest = np.nonzero(~on_face & (out > 0.0))[0]
+    if rest.size:  # outside the convex hull is outside; the winding number for the others
+        hull = ConvexHull(np.asarray(mesh.vertices, dtype=float)).equations  # outward normal, offset
+        rest = rest[(p[rest] @ hull[:, :3].T + hull[:, 3]).max(axis=1) <= 0.0]
+    if rest.size:
+        inside[rest] = _winding_number(p[rest], tri) > 0.5
     return np.where(inside, -out, out)
 
 
@@ -452,7 +469,7 @@ def _curve_clearance(
     lim = limit.reshape(-1)
     n_c = length.size
     ok = np.isfinite(length)
-    counts = np.where(ok, np.maximum(1, np.ceil(length / COARSE)).astype(np.int64), 1)
+    counts = np.maximum(1, np.ceil(np.where(ok, length, 0.0) / COARSE)).astype(np.int64)
     cid = np.repeat(np.arange(n_c), counts + 1)
     start = np.cumsum(counts + 1) - (counts + 1)
     frac = (np.arange(cid.size) - start[cid]) / counts[cid]
@@ -486,9 +503,10 @@ def _curve_clearance(
         delta = s1 - s0
         lb = 0.5 * (d0 + d1 - delta)
         sl = lim[seg_c]
-        need = ((lb < sl + BAND) & (delta > DENSE)) | (
-            (lb < sl - tol) & (np.minimum(d0, d1) >= sl - tol) & (delta > FINE)
-        )
+        undecided = (lb < sl - tol) & (np.minimum(d0, d1) >= sl - tol) & (best[seg_c] >= sl - tol)
+        # dense near the limit, only where the curve's least distance may lie (a piece with lb >= the least sample
+        # cannot hold a lower one); finer where the verdict is still open
+        need = ((lb < sl + BAND) & (lb < best[seg_c]) & (delta > DENSE)) | (undecided & (delta > FINE))
         done = ~need
         np.minimum.at(lower, seg_c[done], lb[done])
         if not need.any():
