@@ -227,7 +227,12 @@ def table(obstacles=(), bounds=ROOM):
 
 def test_a_clean_plan_passes():
     plan = make_plan()
-    m = check_drone_plan(plan, table([{"box": [8.5, 0.0, 0.0, 9.0, 10.0, 4.0]}]))
+
+    class Scenario:  # the checker also takes the scenario itself (its world table, meshes beside its file)
+        world_table = table([{"box": [8.5, 0.0, 0.0, 9.0, 10.0, 4.0]}])
+        source = None
+
+    m = check_drone_plan(plan, Scenario())
     assert m.success and m.failure is None and m.failures == [] and plan.success and plan.failure is None
     assert m.n_violation_steps == 0 and all(v is None for v in m.first_violation.values())
     assert m.max_end_residual < 1e-9 and m.max_winch_tension_error < 1e-9
@@ -335,6 +340,8 @@ def test_leader_off_the_goal_and_record_and_model_errors():
     assert k == K and "0.200 m from the goal" in msg
     k, msg = _only(check_drone_plan(make_plan(safety_radius=0.25), table()), "record")
     assert k == 0 and "drone radius 0.250 m" in msg
+    m = check_drone_plan(make_plan(), table([{"box": [0.5, 4.5, 0.0, 1.5, 5.5, 0.6]}]))  # the winch in a box
+    assert m.first_violation["record"] == 0 and "the anchor (1, 5, 0.5) is 0.100 m inside" in m.failures[0]
     plan = make_plan()
     plan.tether_a[30, 1] *= 1.01
     k, msg = _only(check_drone_plan(plan, table()), "tether_model")

@@ -274,12 +274,17 @@ def _numbers(value: Any, n: int, where: str) -> Array:
     return arr
 
 
-def check_world(table: Mapping[str, Any] | CheckWorld, base_dir: str | Path = ".") -> CheckWorld:
+def check_world(table: Any, base_dir: str | Path = ".") -> CheckWorld:
     """The checker's world from a scenario's ``[world]`` table (``bounds``, ``safety_radius``, ``obstacles`` with
-    ``box`` | ``prism`` + ``z`` | ``mesh``; mesh files relative to ``base_dir``); a :class:`CheckWorld` is returned
-    as it is. Raises a one-line :class:`MapError` on a malformed table."""
+    ``box`` | ``prism`` + ``z`` | ``mesh``; mesh files relative to ``base_dir``), or from a scenario object with
+    ``world_table`` and ``source`` (meshes beside its file); a :class:`CheckWorld` is returned as it is. Raises a
+    one-line :class:`MapError` on a malformed table."""
     if isinstance(table, CheckWorld):
         return table
+    if hasattr(table, "world_table"):  # a DroneScenario: its [world] table, meshes beside its file
+        source = getattr(table, "source", None)
+        base_dir = Path(source).parent if source is not None else base_dir
+        table = table.world_table
     if not isinstance(table, Mapping) or "bounds" not in table:
         raise MapError("the checker needs the scenario's [world] table with 'bounds'")
     bounds = _numbers(table["bounds"], 6, "[world] bounds")
@@ -620,7 +625,7 @@ def _t(t: Array, k: int) -> str:
 
 def check_drone_plan(
     plan: Any,
-    world: Mapping[str, Any] | CheckWorld,
+    world: Any,
     *,
     base_dir: str | Path = ".",
     params: Any = None,
@@ -632,7 +637,8 @@ def check_drone_plan(
     Args:
         plan: a :class:`tmr.control.plan3d.DronePlan` (read by its fields: ``t``, ``robots``, ``base``, ``goal``,
             ``reference``, ``tether_a``, ``tether``, ``safety_radius``, ``bounds``, ``failure``, ``params``).
-        world: the scenario's ``[world]`` table (or a :class:`CheckWorld` from :func:`check_world`).
+        world: the scenario's ``[world]`` table, the scenario itself (``world_table``, ``source``) or a
+            :class:`CheckWorld` (:func:`check_world`).
         base_dir: folder the table's mesh files are relative to (the scenario file's folder).
         params: the planner parameters (a ``DroneParams`` or a dict) for ``drone_speed_max``, ``drone_accel_max``,
             ``goal_tolerance``; default: ``plan.params``, then 2 m/s, 4 m/s², 0.1 m.
@@ -777,6 +783,10 @@ def check_drone_plan(
 
     # -- tether curves ----------------------------------------------------------------------------------------
     base_clear = float(w.distance(base[None])[0][0])
+    if base_clear < -tol:
+        steps["record"][0] = True
+        reasons.setdefault("record", f"the anchor {fmt_point(base)} is {-base_clear:.3f} m inside an obstacle or "
+                           "outside the room")  # fmt: skip
     limit = np.full((n_k, n), c_t)
     # no closer than the winch itself (a winch on the floor), less the sampling resolution: a curve that starts
     # exactly at its limit can be certified only to within FINE of it
