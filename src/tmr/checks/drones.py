@@ -667,7 +667,7 @@ def check_drone_plan(
     goal = np.asarray(plan.goal, dtype=float)
     Ts = float((t[-1] - t[0]) / (n_k - 1)) if n_k > 1 else math.nan
     diag = plan.diagnostics if isinstance(getattr(plan, "diagnostics", None), dict) else {}
-    planner_failure = diag.get("planner_failure", plan.failure) if "planner_failure" in diag else plan.failure
+    planner_failure = diag["planner_failure"] if "planner_failure" in diag else plan.failure
 
     steps: dict[str, NDArray[np.bool_]] = {kind: np.zeros(n_k, dtype=bool) for kind in DRONE_VIOLATION_KINDS}
     reasons: dict[str, str] = {}
