@@ -389,7 +389,7 @@ RunLoader = Callable[[Path, dict[str, Any], str], Any]
 _LOADERS: dict[str, RunLoader] = {}
 #: Module that registers a system's kind when imported: imported on the first read of that kind, so this shared
 #: module never imports a system package (data flows one way: the systems know the run files, not the reverse).
-KIND_MODULES: dict[str, str] = {"mcdpr": "tmr.mcdpr.rundir"}
+KIND_MODULES: dict[str, str] = {"mcdpr": "tmr.mcdpr.rundir", "drone": "tmr.io.drones"}
 
 
 def register_kind(kind: str, loader: RunLoader) -> None:

@@ -1,0 +1,153 @@
+"""tmr.io.drones: a drone plan's output files (trajectories with z and tether a, run.json of kind "drone", metrics)
+written through the staged publication, read back by tmr.io.rundir.load_run, and rewritten byte for byte."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tmr.checks.drones import check_drone_plan
+from tmr.control.plan3d import DronePlan
+from tmr.io.drones import (
+    DRONE_OUTPUT_NAMES,
+    DRONE_VOLATILE_NAMES,
+    DroneRun,
+    write_drone_outputs,
+)
+from tmr.io.outdir import MANIFEST, Stage
+from tmr.io.rundir import RunDirError, load_run
+from tmr.model.catenary3d import DroneTetherParams, solve3d
+
+P = DroneTetherParams()
+K = 40
+WORLD = {
+    "bounds": [0.0, 0.0, 0.0, 10.0, 10.0, 4.0],
+    "safety_radius": 0.3,
+    "obstacles": [{"box": [6.0, 0.0, 0.0, 6.5, 3.0, 4.0]}, {"prism": [[1, 8], [3, 8], [2, 9.5]], "z": [0.0, 1.5]}],
+}
+
+
+def drone_plan() -> DronePlan:
+    """Two drones; drone 2 passes straight over drone 1 at k = 20 (tether 2 vertical there: a = NaN)."""
+    k = np.arange(K + 1, dtype=float)
+    robots = np.zeros((K + 1, 2, 3))
+    robots[:, 0] = np.column_stack([np.full_like(k, 3.0), np.full_like(k, 5.0), 1.5 + 0.01 * k])
+    robots[:, 1] = np.column_stack([2.0 + 0.05 * k, np.full_like(k, 5.0), np.full_like(k, 2.5)])
+    pts = np.concatenate([np.broadcast_to([1.0, 5.0, 0.5], (K + 1, 1, 3)), robots], axis=1)
+    a = np.array([[np.nan if (c := solve3d(r[j], r[j + 1], P)).a is None else c.a for j in range(2)] for r in pts])
+    vel = np.zeros_like(robots)
+    vel[:-1] = np.diff(robots, axis=0) / 0.05
+    return DronePlan(
+        method="qp", scenario="two", t=k * 0.05, robots=robots, velocities=vel, base=np.array([1.0, 5.0, 0.5]),
+        goal=robots[-1, -1].copy(), reference=robots[:, -1] + 0.01, tether_a=a, tether=P, safety_radius=0.3,
+        bounds=np.array(WORLD["bounds"]), success=False, failure=None, wall_time=0.123,
+        diagnostics={"step_time": np.full(K + 1, 1e-3)}, params={"Ts": 0.05, "grid": 0.25},
+    )  # fmt: skip
+
+
+def info(tmp_path: Path) -> dict:
+    src = tmp_path / "two.toml"
+    return {"name": "two", "description": "two drones", "world_table": WORLD, "source": src, "text": "name = 'two'\n"}
+
+
+def written(tmp_path: Path, name: str) -> tuple[Path, DronePlan]:
+    plan = drone_plan()
+    metrics = check_drone_plan(plan, WORLD)
+    out = tmp_path / name
+    with Stage(out, DRONE_OUTPUT_NAMES, DRONE_VOLATILE_NAMES) as stage:
+        names = write_drone_outputs(stage.path, plan, metrics, info(tmp_path), extra={"n_min": 1, "route_time": 0.5})
+        assert names == sorted(DRONE_OUTPUT_NAMES)
+        stage.publish()
+    return out, plan
+
+
+def test_files_hold_z_and_every_tether_a_with_null_when_vertical(tmp_path):
+    out, plan = written(tmp_path, "run")
+    assert np.isnan(plan.tether_a[20, 1]) and not np.isnan(plan.tether_a[19, 1])
+    assert plan.success, plan.failure
+    traj = json.loads((out / "trajectories.json").read_text())
+    assert traj["format"] == "tmr-drone-trajectories/1" and traj["leader"] == "robot2" and traj["base"] == [1, 5, 0.5]
+    r2 = traj["robots"][1]
+    assert r2["name"] == "robot2" and r2["z"] == plan.robots[:, 1, 2].tolist() and len(r2["t"]) == K + 1
+    t2 = traj["tethers"][1]
+    assert (
+        (t2["from"], t2["to"]) == ("robot1", "robot2") and t2["a"][20] is None and t2["a"][19] == plan.tether_a[19, 1]
+    )
+    rows = list(csv.reader((out / "trajectories.csv").open()))
+    assert rows[0] == ["t", "robot1_x", "robot1_y", "robot1_z", "robot2_x", "robot2_y", "robot2_z", "tether1_a",
+                       "tether2_a"]  # fmt: skip
+    assert len(rows) == K + 2 and rows[21][8] == "" and float(rows[22][6]) == 2.5
+    run = json.loads((out / "run.json").read_text())
+    assert run["kind"] == "drone" and run["format"] == "tmr-run/1" and run["world"] == json.loads(json.dumps(WORLD))
+    assert run["winch_end"] == "lower" and run["tension_max"] == P.spare_thrust and run["rho"] == 0.015
+    assert run["tether_clearance"] == 0.2 and run["tether_length_max"] == 20.0 and run["winch_tension"] == 2.0
+    assert run["world_dir"] == str(tmp_path.resolve()) and run["scenario_text"] == "name = 'two'\n"
+    assert run["summary"]["success"] is True and run["params"] == {"Ts": 0.05, "grid": 0.25}
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["success"] is True and metrics["n_min"] == 1 and "per_step" not in metrics
+    assert "route_time" not in metrics and "check_time" not in metrics
+    timings = json.loads((out / "timings.json").read_text())
+    assert timings["wall_time"] == 0.123 and timings["route_time"] == 0.5 and timings["step_time_median"] == 1e-3
+    manifest = json.loads((out / MANIFEST).read_text())
+    assert manifest["files"]["timings.json"] is None and manifest["files"]["run.json"]
+
+
+def test_load_run_rebuilds_the_plan_and_rewrites_the_same_bytes(tmp_path):
+    out, plan = written(tmp_path, "a")
+    run = load_run(out)
+    assert isinstance(run, DroneRun) and run.kind == "drone" and run.n_robots == 2
+    back = run.plan()
+    for name in ("t", "robots", "velocities", "base", "goal", "reference", "bounds"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(plan, name))
+    np.testing.assert_array_equal(back.tether_a, plan.tether_a)  # NaN where vertical, both
+    assert back.tether == plan.tether and back.success and back.failure is None and back.params == plan.params
+    # the recorded world, re-checked, gives the same metrics
+    again = run.check()
+    assert again.to_dict(per_step=False) | {"n_min": 1} == run.metrics
+    second = tmp_path / "b"
+    with Stage(second, DRONE_OUTPUT_NAMES, DRONE_VOLATILE_NAMES) as stage:
+        back.wall_time, back.diagnostics["step_time"] = plan.wall_time, plan.diagnostics["step_time"]
+        metrics = check_drone_plan(back, run.world_table, base_dir=run.world_dir)
+        write_drone_outputs(stage.path, back, metrics, info(tmp_path), extra={"n_min": 1, "route_time": 0.5})
+        stage.publish()
+    for name in ("trajectories.json", "trajectories.csv", "metrics.json", "run.json"):
+        assert (out / name).read_bytes() == (second / name).read_bytes(), name
+
+
+def test_the_same_plan_gives_the_same_bytes(tmp_path):
+    a, _ = written(tmp_path, "one")
+    b, _ = written(tmp_path, "two")
+    for name in ("trajectories.json", "trajectories.csv", "metrics.json", "run.json"):
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+
+
+def test_a_failed_check_is_recorded_and_read_back(tmp_path):
+    plan = drone_plan()
+    metrics = check_drone_plan(plan, WORLD, params={"drone_speed_max": 0.5})  # drone 2 flies at 1 m/s
+    assert not plan.success and plan.failure.startswith("drone 2 moves at 1.000 m/s along x at t = 0.00 s")
+    write_drone_outputs(tmp_path / "f", plan, metrics, info(tmp_path))
+    run = load_run(tmp_path / "f")
+    assert run.record["success"] is False and run.plan().failure == plan.failure
+    assert json.loads((tmp_path / "f" / "metrics.json").read_text())["f1"] == "inf"
+
+
+@pytest.mark.parametrize(
+    "damage",
+    [
+        lambda d: (d / "trajectories.json").write_text("{"),
+        lambda d: (d / "trajectories.json").write_text(json.dumps({"format": "tmr-trajectories/1"})),
+        lambda d: (d / "trajectories.json").write_text(
+            (d / "trajectories.json").read_text().replace('"z": [', '"zz": [', 1)
+        ),
+    ],
+)
+def test_damaged_files_give_one_line(tmp_path, damage):
+    out, _ = written(tmp_path, "d")
+    damage(out)
+    with pytest.raises(RunDirError) as err:
+        load_run(out)
+    assert "\n" not in str(err.value) and "re-run" in str(err.value)
