@@ -156,8 +156,7 @@ def solve_drones(
         scenario=problem.scenario.name, progress=progress,
     )  # fmt: skip
     run_time = time.perf_counter() - start
-    metrics = check_drone_plan(plan, problem.scenario.world_table, base_dir=problem.scenario.base_dir,
-                               goal_tolerance=problem.params.goal_tolerance)  # fmt: skip
+    metrics = check_drone_plan(plan, problem.scenario, params=problem.params)
     plan.wall_time = time.perf_counter() - start
     plan.diagnostics["timings"] = {"qp_time": run_time, "check_time": plan.wall_time - run_time}
     return plan, metrics
