@@ -46,7 +46,16 @@ from tmr.errors import ParameterError, TetherSpanError, fmt_point
 from tmr.model.catenary import G0
 from tmr.model.params import _validate
 
-__all__ = ["DroneTetherParams", "Catenary3D", "solve3d", "tether_limits", "VERTICAL_SPAN"]
+__all__ = [
+    "DroneTetherParams",
+    "Catenary3D",
+    "CatenarySensitivity",
+    "solve3d",
+    "sensitivities",
+    "theta_lower",
+    "tether_limits",
+    "VERTICAL_SPAN",
+]
 
 VERTICAL_SPAN = 1e-9  # horizontal spans below this [m] are a vertical tether (no catenary, a = None)
 
@@ -194,8 +203,49 @@ def _span(theta_a: np.ndarray | float, m: float, k: float) -> np.ndarray | float
     return (theta_b - theta_a) / np.cosh(theta_a)
 
 
-def _solve_theta(d: float, h: float, m: float) -> float:
-    """theta_A of the shallow (stable) catenary through A=(0,0), B=(d,h), h >= 0, with a cosh(theta_A) = m."""
+def _newton_theta(d: float, h: float, m: float, guess: float) -> float | None:
+    """theta_A by Newton's method on ``m span(theta_A) = d`` from ``guess`` (a warm start: the previous step's value),
+    or None when it does not converge to the shallow branch (then the bracket method decides).
+
+    The shallow branch is where the span falls as theta_A grows (beyond the maximum of d(theta_A)): a root with
+    d span / d theta_A < 0 is on it, and the span has a single maximum, so that root is the one the bracket finds.
+    """
+    k = 1.0 + h / m
+    target = d / m
+    t = float(guess)
+    kk = k * k
+    for _ in range(30):
+        if not -40.0 <= t <= 40.0:
+            return None
+        sh, ch = math.sinh(t), math.cosh(t)
+        r2 = kk * sh * sh + (kk - 1.0)
+        if r2 <= 0.0:
+            return None
+        sb = math.sqrt(r2)
+        tb = math.asinh(sb)
+        f = (tb - t) / ch - target
+        # d/dt [(theta_B - t)/cosh t] with d theta_B/dt = k^2 sh ch / (sb sqrt(1 + sb^2))
+        dtb = kk * sh * ch / (sb * math.sqrt(1.0 + r2)) if sb > 0.0 else 0.0
+        df = ((dtb - 1.0) - (tb - t) * math.tanh(t)) / ch
+        if not df < 0.0:
+            return None
+        step = f / df
+        t -= step
+        if abs(step) <= 1e-14 * max(1.0, abs(t)):
+            sh = math.sinh(t)
+            ok = abs(_span(t, m, k) - target) <= 1e-12 * max(1.0, target)
+            return t if ok else None
+    return None
+
+
+def _solve_theta(d: float, h: float, m: float, guess: float | None = None) -> float:
+    """theta_A of the shallow (stable) catenary through A=(0,0), B=(d,h), h >= 0, with a cosh(theta_A) = m.
+
+    ``guess``: a warm start (Newton, :func:`_newton_theta`); the grid-bracketed root is the fallback."""
+    if guess is not None and math.isfinite(guess):
+        t = _newton_theta(d, h, m, guess)
+        if t is not None:
+            return t
     k = 1.0 + h / m
     target = d / m
     vals = _span(_GRID, m, k)
@@ -222,10 +272,19 @@ def _solve_theta(d: float, h: float, m: float) -> float:
 
 
 def solve3d(
-    p: ArrayLike, q: ArrayLike, params: DroneTetherParams | None = None, *, winch_tension: float | None = None
+    p: ArrayLike,
+    q: ArrayLike,
+    params: DroneTetherParams | None = None,
+    *,
+    winch_tension: float | None = None,
+    warm: Catenary3D | None = None,
 ) -> Catenary3D:
     """The tether between ``p`` and ``q`` [m] with the winch keeping ``winch_tension`` [N] (default
     ``params.winch_tension``) at ``params.winch_end``. Ties (level ends) put the winch at p.
+
+    ``warm``: the same tether a moment ago (e.g. the previous step's): its theta_A starts a Newton iteration
+    (a few microseconds instead of the grid bracket's ~0.25 ms); the result is the same shallow branch, and the
+    bracket method runs whenever Newton does not converge onto it.
 
     Raises:
         ParameterError: p or q is not a finite 3-D point, they coincide, or the tension is not finite and > 0.
@@ -268,7 +327,7 @@ def solve3d(
         )  # fmt: skip
     u = np.array([dxy[0] / d, dxy[1] / d, 0.0])
     m = t_a / w
-    theta_a = _solve_theta(d, dh, m)
+    theta_a = _solve_theta(d, dh, m, None if warm is None else theta_lower(warm))
     a = m / math.cosh(theta_a)
     k = 1.0 + dh / m
     sh_a = math.sinh(theta_a)
@@ -294,6 +353,139 @@ def solve3d(
     return Catenary3D(
         p=p_, q=q_, u=u, d=d, h=h, a=a, x0=x0, z0=z0, horizontal_tension=H, length=length, lowest=lowest,
         tension_p=t_p, tension_q=t_q, force_p=f_p, force_q=f_q, weight_per_length=w,
+    )  # fmt: skip
+
+
+def theta_lower(cat: Catenary3D) -> float | None:
+    """theta_A = (x_A - x0)/a at the lower end A of ``cat`` (None for a vertical tether): the one unknown that
+    :func:`solve3d` solves for, e.g. to warm-start the next solve of the same tether."""
+    if cat.a is None or cat.x0 is None:
+        return None
+    x0_a = cat.x0 if cat.h >= 0.0 else cat.d - cat.x0  # vertex from A along A -> B
+    return -x0_a / cat.a
+
+
+@dataclass(frozen=True)
+class CatenarySensitivity:
+    """How a tether's sample points, arc length and end tensions move with its two ends (:func:`sensitivities`).
+
+    Attributes:
+        fractions: arc fractions sigma of the samples, (k,) [-] (sigma = 0 at p, 1 at q).
+        points: the samples, at arc length sigma L from p, (k, 3) [m].
+        dpoints_dp, dpoints_dq: their Jacobians w.r.t. p and q, (k, 3, 3) [m/m]: dX_i = dpoints_dp[i] dp + dpoints_dq[i] dq.
+        length: arc length L [m]; dlength_dp, dlength_dq: its gradients (3,) [m/m].
+        tension_p, tension_q: end tensions [N]; dtension_p_dp, dtension_p_dq, dtension_q_dp, dtension_q_dq: their
+            gradients (3,) [N/m].
+    """
+
+    fractions: np.ndarray
+    points: np.ndarray
+    dpoints_dp: np.ndarray
+    dpoints_dq: np.ndarray
+    length: float
+    dlength_dp: np.ndarray
+    dlength_dq: np.ndarray
+    tension_p: float
+    tension_q: float
+    dtension_p_dp: np.ndarray
+    dtension_p_dq: np.ndarray
+    dtension_q_dp: np.ndarray
+    dtension_q_dq: np.ndarray
+
+
+_CSTEP = 1e-30  # complex-step size: derivatives of the closed-form parts exact to rounding (Squire & Trapp 1998)
+
+
+def _plane(theta: complex, d: complex, dh: complex, tw: float, w: float, upper: bool, sig: np.ndarray) -> tuple:
+    """The catenary in its plane from the lower end A = (0, 0) with B = (d, dh): the residual of the span equation
+    R = a (theta_B - theta_A) - d, the arc length L, and the samples (x, z) relative to A at arc fractions ``sig``
+    from A. Closed form in (theta_A, d, dh): complex arguments give derivatives by the complex step."""
+    m = tw / w - dh if upper else tw / w + 0.0 * dh  # a cosh(theta_A) = T_A / (rho g)
+    k = 1.0 + dh / m
+    ch = np.cosh(theta)
+    sh = np.sinh(theta)
+    a = m / ch
+    sb = np.sqrt(k * k * sh * sh + (k * k - 1.0))
+    L = a * (sb - sh)
+    R = a * (np.arcsinh(sb) - theta) - d
+    th = np.arcsinh(sh + sig * (sb - sh))  # ds = a cosh(theta) dtheta: s = a (sinh th - sinh theta_A)
+    return R, L, a * (th - theta), a * (np.cosh(th) - ch)
+
+
+def sensitivities(
+    cat: Catenary3D, fractions: ArrayLike, params: DroneTetherParams | None = None
+) -> CatenarySensitivity:
+    """Sample points of ``cat`` at fixed arc fractions, its arc length and end tensions, with their Jacobians w.r.t.
+    both ends (3x3 per point, 3-vectors for L and the tensions).
+
+    Implicit differentiation of the catenary equations: with A the lower end, B the upper one, d the horizontal span
+    and h = z_B - z_A >= 0, the shape is fixed by the one unknown theta_A solving R(theta_A, d, h) = 0 (the span
+    equation of :func:`solve3d`); the implicit function theorem gives d theta_A / d(d, h) = -R_(d,h) / R_theta, and
+    every output y(theta_A, d, h) (closed form) changes by y_(d,h) + y_theta d theta_A / d(d, h). The partials of
+    the closed forms come from the complex step (exact to rounding). In 3-D a point at (x, z) in the plane is
+    X = A + x u + z e_z with u the horizontal unit vector A -> B; d d = u.(dB - dA)_xy, d h = dB_z - dA_z and
+    d u = (I - u u^T)(dB - dA)_xy / d, so dX/dB is the 3x3 block below and dX/dA = I - dX/dB (translation).
+    A vertical tether (straight) moves as X = p + sigma (q - p). At level ends (h = 0) the lower end swaps and the
+    Jacobians are one-sided (the tension at each end has a kink there).
+    """
+    prm = params if params is not None else DroneTetherParams()
+    sig = np.asarray(fractions, dtype=float).reshape(-1)
+    w = cat.weight_per_length
+    up = prm.winch_end == "upper"
+    ez = np.array([0.0, 0.0, 1.0])
+    p_lower = cat.h >= 0.0
+    # end tensions: T_A = T_w (lower winch) or T_w - w h; T_B = T_A + w h; h = z_B - z_A
+    dta_dh = -w if up else 0.0
+    dtb_dh = dta_dh + w
+    if cat.a is None:
+        X = cat.p + sig[:, None] * (cat.q - cat.p)
+        Jq = sig[:, None, None] * np.eye(3)
+        Jp = (1.0 - sig)[:, None, None] * np.eye(3)
+        dL_dB = ez.copy()
+    else:
+        theta = theta_lower(cat)
+        assert theta is not None
+        dh = abs(cat.h)
+        tw = cat.tension_p if p_lower else cat.tension_q  # T_A
+        tw = tw if not up else tw + w * dh  # the winch's T_w
+        sig_a = sig if p_lower else 1.0 - sig
+        # one vectorised pass: row 0 perturbs theta_A, row 1 d, row 2 h (imaginary parts), all rows share the values
+        E = 1j * _CSTEP * np.eye(3)
+        R, L, xs, zs = _plane(theta + E[:, :1], cat.d + E[:, 1:2], dh + E[:, 2:], tw, w, up, sig_a[None, :])
+        R_t, R_d, R_h = np.imag(R[:, 0]) / _CSTEP
+        L_t, L_d, L_h = np.imag(L[:, 0]) / _CSTEP
+        dt_dd, dt_dh = -R_d / R_t, -R_h / R_t
+        x, z = np.real(xs[0]), np.real(zs[0])
+        x_t, x_d, x_h = np.imag(xs) / _CSTEP
+        z_t, z_d, z_h = np.imag(zs) / _CSTEP
+        x_dd, x_dh = x_d + x_t * dt_dd, x_h + x_t * dt_dh
+        z_dd, z_dh = z_d + z_t * dt_dd, z_h + z_t * dt_dh
+        L_dd, L_dh = L_d + L_t * dt_dd, L_h + L_t * dt_dh
+        A, B = (cat.p, cat.q) if p_lower else (cat.q, cat.p)
+        u = cat.u if p_lower else -cat.u  # horizontal A -> B
+        u2 = u[:2]
+        X = A + x[:, None] * u + z[:, None] * ez
+        uu = np.outer(u2, u2)
+        JB = np.zeros((sig.size, 3, 3))
+        JB[:, :2, :2] = x_dd[:, None, None] * uu + (x / cat.d)[:, None, None] * (np.eye(2) - uu)
+        JB[:, :2, 2] = x_dh[:, None] * u2
+        JB[:, 2, :2] = z_dd[:, None] * u2
+        JB[:, 2, 2] = z_dh
+        JA = np.eye(3) - JB
+        Jp, Jq = (JA, JB) if p_lower else (JB, JA)
+        dL_dB = np.array([L_dd * u2[0], L_dd * u2[1], L_dh])
+    dL_dA = -dL_dB
+    dTA_dB, dTB_dB = dta_dh * ez, dtb_dh * ez
+    if p_lower:  # p = A, q = B
+        dL_dp, dL_dq = dL_dA, dL_dB
+        tp_p, tp_q, tq_p, tq_q = -dTA_dB, dTA_dB, -dTB_dB, dTB_dB
+    else:  # p = B, q = A
+        dL_dp, dL_dq = dL_dB, dL_dA
+        tp_p, tp_q, tq_p, tq_q = dTB_dB, -dTB_dB, dTA_dB, -dTA_dB
+    return CatenarySensitivity(
+        fractions=sig, points=X, dpoints_dp=Jp, dpoints_dq=Jq, length=cat.length, dlength_dp=dL_dp,
+        dlength_dq=dL_dq, tension_p=cat.tension_p, tension_q=cat.tension_q, dtension_p_dp=tp_p,
+        dtension_p_dq=tp_q, dtension_q_dp=tq_p, dtension_q_dq=tq_q,
     )  # fmt: skip
 
 
