@@ -31,7 +31,7 @@ from tmr.control.pinv import dls_inverse, null_space_projector
 from tmr.control.qp import Level, LexicographicQP
 from tmr.control.tasks import Task, TaskRows
 from tmr.errors import ParameterError
-from tmr.model.catenary3d import Catenary3D, CatenarySensitivity, DroneTetherParams, sensitivities, solve3d
+from tmr.model.catenary3d import Catenary3D, DroneTetherParams, TetherSensitivities, sensitivities_batch, solve3d
 from tmr.model.chain import Chain
 from tmr.model.params import DroneParams
 from tmr.model.velocity import VelocityMap3D
@@ -158,8 +158,8 @@ class DroneStepContext:
 
     Attributes (after ``update``): k, points (N+1, 3) (anchor then drones) [m], v_prev (3N,) the previous step's
     velocities [m/s], velocity_map (:class:`VelocityMap3D`), qdot_prev = T v_prev (link rates), catenaries (one
-    :class:`Catenary3D` per tether, tether j from point j−1 to point j), sens (their :class:`CatenarySensitivity` at
-    the interior fractions i/(m+1), i = 1..m), drone_clearance (N,) [m] and drone_gradient (N, 3) (the world grown by
+    :class:`Catenary3D` per tether, tether j from point j−1 to point j), sens (their stacked
+    :class:`~tmr.model.catenary3d.TetherSensitivities` at the interior fractions i/(m+1), i = 1..m), drone_clearance (N,) [m] and drone_gradient (N, 3) (the world grown by
     the drone radius), sample_points (N, m, 3); each tether as the polyline through its ends and samples, per piece
     (N, m+1): segment_clearance [m], segment_gradient (N, m+1, 3), segment_t (the nearest point's parameter on the
     piece) in the world with radius 0 (the bare obstacles and walls); x_d, xd_d the leader's reference, ref_positions (N, 3), ref_velocities (N, 3).
@@ -216,8 +216,8 @@ class DroneStepContext:
         self.qdot_prev = self.velocity_map.T @ self.v_prev
         warm = self.catenaries if len(self.catenaries) == N else [None] * N
         self.catenaries = [solve3d(P[j], P[j + 1], self.tether, warm=warm[j]) for j in range(N)]
-        self.sens: list[CatenarySensitivity] = [sensitivities(c, self.fractions, self.tether) for c in self.catenaries]
-        samples = np.stack([s.points for s in self.sens])  # (N, m, 3)
+        self.sens: TetherSensitivities = sensitivities_batch(self.catenaries, self.fractions, self.tether)
+        samples = self.sens.points  # (N, m, 3)
         m = self.fractions.size
         c0, g0 = self.world.clearance_and_gradient(P[1:])
         self.drone_clearance, self.drone_gradient = c0, g0
@@ -440,8 +440,7 @@ class TetherClearance(_TetherRows):
         eye = np.eye(3)
         Jp = np.empty((N, m + 2, 3, 3))
         Jq = np.empty((N, m + 2, 3, 3))
-        for j, s in enumerate(ctx.sens):
-            Jp[j, 1:-1], Jq[j, 1:-1] = s.dpoints_dp, s.dpoints_dq
+        Jp[:, 1:-1], Jq[:, 1:-1] = ctx.sens.dpoints_dp, ctx.sens.dpoints_dq
         Jp[:, 0], Jq[:, 0], Jp[:, -1], Jq[:, -1] = eye, 0.0, 0.0, eye
         t = ctx.segment_t[..., None, None]  # (N, m+1, 1, 1)
         Jp_x = (1.0 - t) * Jp[:, :-1] + t * Jp[:, 1:]
@@ -468,9 +467,8 @@ class TetherLength(_TetherRows):
         return self._mask(self.N, 1)
 
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
-        dp = np.stack([s.dlength_dp for s in ctx.sens])[:, None, :]
-        dq = np.stack([s.dlength_dq for s in ctx.sens])[:, None, :]
-        L = np.array([s.length for s in ctx.sens])
+        S = ctx.sens
+        dp, dq, L = S.dlength_dp[:, None, :], S.dlength_dq[:, None, :], S.length
         upper = -approach_bound(self.L_max - L, 0.0, self.rate, ctx.Ts)
         return LimitRows(ctx.Ts * self._scatter(self.N, 1, dp, dq), np.full(self.N, -np.inf), upper)
 
@@ -490,9 +488,9 @@ class TetherTension(_TetherRows):
 
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
         S = ctx.sens
-        dp = np.stack([np.stack([s.dtension_p_dp, s.dtension_q_dp]) for s in S])  # (N, 2, 3)
-        dq = np.stack([np.stack([s.dtension_p_dq, s.dtension_q_dq]) for s in S])
-        T = np.array([[s.tension_p, s.tension_q] for s in S])
+        dp = np.stack([S.dtension_p_dp, S.dtension_q_dp], axis=1)  # (N, 2, 3)
+        dq = np.stack([S.dtension_p_dq, S.dtension_q_dq], axis=1)
+        T = np.column_stack([S.tension_p, S.tension_q])
         upper = -approach_bound(self.T_max - T, 0.0, self.rate, ctx.Ts)
         A = self._scatter(self.N, 2, dp, dq)
         upper = upper.reshape(-1)
@@ -658,7 +656,6 @@ class DronePinv:
                 j, s = divmod(i - N, ctx.fractions.size + 1)
                 t = ctx.segment_t[j, s]
                 sens = ctx.sens[j]
-                m = ctx.fractions.size
                 eye, zero = np.eye(3), np.zeros((3, 3))
                 Dp = [eye, *sens.dpoints_dp, zero]
                 Dq = [zero, *sens.dpoints_dq, eye]
@@ -668,7 +665,6 @@ class DronePinv:
                 if j > 0:
                     Jc = Jc + dXdp @ JR[j - 1]
                 g = ctx.segment_gradient[j, s]
-                del m
             Jo = (g @ Jc)[None, :]
             vo = np.array([p.leader_gain * (self.danger - margins[i])])
             qdot = qdot + P @ (dls_inverse(Jo, self.damping) @ (vo - Jo @ qdot))

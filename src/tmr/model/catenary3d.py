@@ -52,6 +52,8 @@ __all__ = [
     "CatenarySensitivity",
     "solve3d",
     "sensitivities",
+    "sensitivities_batch",
+    "TetherSensitivities",
     "theta_lower",
     "tether_limits",
     "VERTICAL_SPAN",
@@ -412,6 +414,32 @@ def _plane(theta: complex, d: complex, dh: complex, tw: float, w: float, upper: 
     return R, L, a * (th - theta), a * (np.cosh(th) - ch)
 
 
+@dataclass(frozen=True)
+class TetherSensitivities:
+    """:class:`CatenarySensitivity` of M tethers at once, stacked: points (M, k, 3), dpoints_dp/dq (M, k, 3, 3),
+    length (M,), dlength_dp/dq (M, 3), tension_p/q (M,), dtension_p_dp … dtension_q_dq (M, 3) (same units)."""
+
+    fractions: np.ndarray
+    points: np.ndarray
+    dpoints_dp: np.ndarray
+    dpoints_dq: np.ndarray
+    length: np.ndarray
+    dlength_dp: np.ndarray
+    dlength_dq: np.ndarray
+    tension_p: np.ndarray
+    tension_q: np.ndarray
+    dtension_p_dp: np.ndarray
+    dtension_p_dq: np.ndarray
+    dtension_q_dp: np.ndarray
+    dtension_q_dq: np.ndarray
+
+    def __getitem__(self, i: int) -> CatenarySensitivity:
+        """Tether i's :class:`CatenarySensitivity`."""
+        return CatenarySensitivity(
+            self.fractions, *(getattr(self, f.name)[i] for f in fields(self) if f.name != "fractions")
+        )
+
+
 def sensitivities(
     cat: Catenary3D, fractions: ArrayLike, params: DroneTetherParams | None = None
 ) -> CatenarySensitivity:
@@ -428,64 +456,87 @@ def sensitivities(
     A vertical tether (straight) moves as X = p + sigma (q - p). At level ends (h = 0) the lower end swaps and the
     Jacobians are one-sided (the tension at each end has a kink there).
     """
+    return sensitivities_batch([cat], fractions, params)[0]
+
+
+def sensitivities_batch(
+    cats: list[Catenary3D], fractions: ArrayLike, params: DroneTetherParams | None = None
+) -> TetherSensitivities:
+    """:func:`sensitivities` of several tethers at once (vectorised over the tethers: one numpy pass for a chain)."""
     prm = params if params is not None else DroneTetherParams()
     sig = np.asarray(fractions, dtype=float).reshape(-1)
-    w = cat.weight_per_length
+    M, k = len(cats), sig.size
     up = prm.winch_end == "upper"
     ez = np.array([0.0, 0.0, 1.0])
-    p_lower = cat.h >= 0.0
+    w = np.array([c.weight_per_length for c in cats])
+    p = np.array([c.p for c in cats]).reshape(M, 3)
+    q = np.array([c.q for c in cats]).reshape(M, 3)
+    h = q[:, 2] - p[:, 2]
+    p_lower = h >= 0.0
+    dh = np.abs(h)
+    vertical = np.array([c.a is None for c in cats], dtype=bool)
+    X = p[:, None, :] + sig[None, :, None] * (q - p)[:, None, :]  # vertical tethers: straight
+    JB = np.zeros((M, k, 3, 3))
+    JB[:] = sig[None, :, None, None] * np.eye(3)
+    dL_dB = np.tile(ez, (M, 1))
+    cv = np.flatnonzero(~vertical)
+    if cv.size:
+        theta = np.array([theta_lower(cats[i]) for i in cv])
+        d = np.array([cats[i].d for i in cv])
+        wv, hv, low = w[cv], dh[cv], p_lower[cv]
+        t_a = np.array([cats[i].tension_p if low[j] else cats[i].tension_q for j, i in enumerate(cv)])
+        tw = t_a + wv * hv if up else t_a  # the winch's T_w
+        sig_a = np.where(low[:, None], sig[None, :], 1.0 - sig[None, :])  # fractions from A
+        E = 1j * _CSTEP
+        # axis 1: perturbation of theta_A, d, h (imaginary parts); axis 2: the samples
+        th3 = theta[:, None, None] + E * np.array([1.0, 0.0, 0.0])[None, :, None]
+        d3 = d[:, None, None] + E * np.array([0.0, 1.0, 0.0])[None, :, None]
+        h3 = hv[:, None, None] + E * np.array([0.0, 0.0, 1.0])[None, :, None]
+        R, L, xs, zs = _plane(th3, d3, h3, tw[:, None, None], wv[:, None, None], up, sig_a[:, None, :])
+        Ri, Li = np.imag(R[:, :, 0]) / _CSTEP, np.imag(L[:, :, 0]) / _CSTEP  # (C, 3)
+        dt_dd, dt_dh = -Ri[:, 1] / Ri[:, 0], -Ri[:, 2] / Ri[:, 0]
+        xi, zi = np.imag(xs) / _CSTEP, np.imag(zs) / _CSTEP  # (C, 3, k)
+        x, z = np.real(xs[:, 0]), np.real(zs[:, 0])  # (C, k)
+        x_dd = xi[:, 1] + xi[:, 0] * dt_dd[:, None]
+        x_dh = xi[:, 2] + xi[:, 0] * dt_dh[:, None]
+        z_dd = zi[:, 1] + zi[:, 0] * dt_dd[:, None]
+        z_dh = zi[:, 2] + zi[:, 0] * dt_dh[:, None]
+        L_dd = Li[:, 1] + Li[:, 0] * dt_dd
+        L_dh = Li[:, 2] + Li[:, 0] * dt_dh
+        A = np.where(low[:, None], p[cv], q[cv])
+        u = np.array([cats[i].u for i in cv]) * np.where(low, 1.0, -1.0)[:, None]  # horizontal A -> B
+        u2 = u[:, :2]
+        X[cv] = A[:, None, :] + x[..., None] * u[:, None, :] + z[..., None] * ez
+        uu = u2[:, :, None] * u2[:, None, :]  # (C, 2, 2)
+        J = np.zeros((cv.size, k, 3, 3))
+        J[:, :, :2, :2] = x_dd[..., None, None] * uu[:, None] + (x / d[:, None])[..., None, None] * (
+            np.eye(2) - uu[:, None]
+        )
+        J[:, :, :2, 2] = x_dh[..., None] * u2[:, None, :]
+        J[:, :, 2, :2] = z_dd[..., None] * u2[:, None, :]
+        J[:, :, 2, 2] = z_dh
+        JB[cv] = J
+        dL_dB[cv] = np.column_stack([L_dd * u2[:, 0], L_dd * u2[:, 1], L_dh])
+    # vertical tethers: B is q when p is lower (X = p + sigma (q - p) has dX/dq = sigma I = the JB set above)
+    JA = np.eye(3) - JB
+    lowv = p_lower[:, None, None, None]
+    Jp = np.where(lowv | vertical[:, None, None, None], JA, JB)
+    Jq = np.where(lowv | vertical[:, None, None, None], JB, JA)
+    dL_dB = np.where((~p_lower & vertical)[:, None], -dL_dB, dL_dB)  # vertical: dL/dq = sign(h) e_z
+    lw = p_lower[:, None] | vertical[:, None]
+    dL_dp = np.where(lw, -dL_dB, dL_dB)
+    dL_dq = -dL_dp
     # end tensions: T_A = T_w (lower winch) or T_w - w h; T_B = T_A + w h; h = z_B - z_A
-    dta_dh = -w if up else 0.0
-    dtb_dh = dta_dh + w
-    if cat.a is None:
-        X = cat.p + sig[:, None] * (cat.q - cat.p)
-        Jq = sig[:, None, None] * np.eye(3)
-        Jp = (1.0 - sig)[:, None, None] * np.eye(3)
-        dL_dB = ez.copy()
-    else:
-        theta = theta_lower(cat)
-        assert theta is not None
-        dh = abs(cat.h)
-        tw = cat.tension_p if p_lower else cat.tension_q  # T_A
-        tw = tw if not up else tw + w * dh  # the winch's T_w
-        sig_a = sig if p_lower else 1.0 - sig
-        # one vectorised pass: row 0 perturbs theta_A, row 1 d, row 2 h (imaginary parts), all rows share the values
-        E = 1j * _CSTEP * np.eye(3)
-        R, L, xs, zs = _plane(theta + E[:, :1], cat.d + E[:, 1:2], dh + E[:, 2:], tw, w, up, sig_a[None, :])
-        R_t, R_d, R_h = np.imag(R[:, 0]) / _CSTEP
-        L_t, L_d, L_h = np.imag(L[:, 0]) / _CSTEP
-        dt_dd, dt_dh = -R_d / R_t, -R_h / R_t
-        x, z = np.real(xs[0]), np.real(zs[0])
-        x_t, x_d, x_h = np.imag(xs) / _CSTEP
-        z_t, z_d, z_h = np.imag(zs) / _CSTEP
-        x_dd, x_dh = x_d + x_t * dt_dd, x_h + x_t * dt_dh
-        z_dd, z_dh = z_d + z_t * dt_dd, z_h + z_t * dt_dh
-        L_dd, L_dh = L_d + L_t * dt_dd, L_h + L_t * dt_dh
-        A, B = (cat.p, cat.q) if p_lower else (cat.q, cat.p)
-        u = cat.u if p_lower else -cat.u  # horizontal A -> B
-        u2 = u[:2]
-        X = A + x[:, None] * u + z[:, None] * ez
-        uu = np.outer(u2, u2)
-        JB = np.zeros((sig.size, 3, 3))
-        JB[:, :2, :2] = x_dd[:, None, None] * uu + (x / cat.d)[:, None, None] * (np.eye(2) - uu)
-        JB[:, :2, 2] = x_dh[:, None] * u2
-        JB[:, 2, :2] = z_dd[:, None] * u2
-        JB[:, 2, 2] = z_dh
-        JA = np.eye(3) - JB
-        Jp, Jq = (JA, JB) if p_lower else (JB, JA)
-        dL_dB = np.array([L_dd * u2[0], L_dd * u2[1], L_dh])
-    dL_dA = -dL_dB
-    dTA_dB, dTB_dB = dta_dh * ez, dtb_dh * ez
-    if p_lower:  # p = A, q = B
-        dL_dp, dL_dq = dL_dA, dL_dB
-        tp_p, tp_q, tq_p, tq_q = -dTA_dB, dTA_dB, -dTB_dB, dTB_dB
-    else:  # p = B, q = A
-        dL_dp, dL_dq = dL_dB, dL_dA
-        tp_p, tp_q, tq_p, tq_q = dTB_dB, -dTB_dB, dTA_dB, -dTA_dB
-    return CatenarySensitivity(
-        fractions=sig, points=X, dpoints_dp=Jp, dpoints_dq=Jq, length=cat.length, dlength_dp=dL_dp,
-        dlength_dq=dL_dq, tension_p=cat.tension_p, tension_q=cat.tension_q, dtension_p_dp=tp_p,
-        dtension_p_dq=tp_q, dtension_q_dp=tq_p, dtension_q_dq=tq_q,
+    dta = (-w if up else 0.0 * w)[:, None] * ez
+    dtb = dta + w[:, None] * ez
+    pl = p_lower[:, None]
+    tp_p = np.where(pl, -dta, dtb)
+    tq_q = np.where(pl, dtb, -dta)
+    return TetherSensitivities(
+        fractions=sig, points=X, dpoints_dp=Jp, dpoints_dq=Jq, length=np.array([c.length for c in cats]),
+        dlength_dp=dL_dp, dlength_dq=dL_dq, tension_p=np.array([c.tension_p for c in cats]),
+        tension_q=np.array([c.tension_q for c in cats]), dtension_p_dp=tp_p, dtension_p_dq=-tp_p,
+        dtension_q_dp=-tq_q, dtension_q_dq=tq_q,
     )  # fmt: skip
 
 
