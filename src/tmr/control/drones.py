@@ -159,10 +159,11 @@ class DroneStepContext:
     Attributes (after ``update``): k, points (N+1, 3) (anchor then drones) [m], v_prev (3N,) the previous step's
     velocities [m/s], velocity_map (:class:`VelocityMap3D`), qdot_prev = T v_prev (link rates), catenaries (one
     :class:`Catenary3D` per tether, tether j from point j−1 to point j), sens (their stacked
-    :class:`~tmr.model.catenary3d.TetherSensitivities` at the interior fractions i/(m+1), i = 1..m), drone_clearance (N,) [m] and drone_gradient (N, 3) (the world grown by
-    the drone radius), sample_points (N, m, 3); each tether as the polyline through its ends and samples, per piece
-    (N, m+1): segment_clearance [m], segment_gradient (N, m+1, 3), segment_t (the nearest point's parameter on the
-    piece) in the world with radius 0 (the bare obstacles and walls); x_d, xd_d the leader's reference, ref_positions (N, 3), ref_velocities (N, 3).
+    :class:`~tmr.model.catenary3d.TetherSensitivities` at the interior fractions i/(m+1), i = 1..m),
+    drone_clearance (N,) [m] and drone_gradient (N, 3) (the world grown by the drone radius), sample_points
+    (N, m, 3); each tether as the polyline through its ends and samples, per piece (N, m+1): segment_clearance [m],
+    segment_gradient (N, m+1, 3), segment_t (the nearest point's parameter on the piece), in the world with radius 0
+    (the bare obstacles and walls); x_d, xd_d the leader's reference; ref_positions, ref_velocities (N, 3).
     q: the 3N joints (``pinv`` only, else None).
 
     Args:
@@ -604,8 +605,9 @@ def make_drone_qp(
     ]
     if N > 1:
         limits.append(
-            DroneSeparation(chain, r, p.separation_margin, neighbours=N - 1, activation=2 * r + 3.0,
-                            approach_rate=p.approach_rate)  # fmt: skip
+            DroneSeparation(
+                chain, r, p.separation_margin, neighbours=N - 1, activation=2 * r + 3.0, approach_rate=p.approach_rate
+            )  # fmt: skip
         )
     qp = LexicographicQP(chain, levels, limits, _FreeBox(chain.dof), solver=p.solver)  # type: ignore[arg-type]
     return DroneQP(qp, ctx)

@@ -374,7 +374,8 @@ class CatenarySensitivity:
     Attributes:
         fractions: arc fractions sigma of the samples, (k,) [-] (sigma = 0 at p, 1 at q).
         points: the samples, at arc length sigma L from p, (k, 3) [m].
-        dpoints_dp, dpoints_dq: their Jacobians w.r.t. p and q, (k, 3, 3) [m/m]: dX_i = dpoints_dp[i] dp + dpoints_dq[i] dq.
+        dpoints_dp, dpoints_dq: their Jacobians w.r.t. p and q, (k, 3, 3) [m/m]:
+            dX_i = dpoints_dp[i] dp + dpoints_dq[i] dq.
         length: arc length L [m]; dlength_dp, dlength_dq: its gradients (3,) [m/m].
         tension_p, tension_q: end tensions [N]; dtension_p_dp, dtension_p_dq, dtension_q_dp, dtension_q_dq: their
             gradients (3,) [N/m].

@@ -169,7 +169,8 @@ class VelocityMap3D:
     ``q̇_j = [ω_j1, ω_j2, ḋ_j]``: the angular rates of u_j about the orthonormal pair (e1_j, e2_j) ⟂ u_j and the
     length rate, with w_j = ṗ_j − ṗ_{j−1}:
 
-        ω_j1 = e1_jᵀ w_j / d_j,   ω_j2 = e2_jᵀ w_j / d_j,   ḋ_j = u_jᵀ w_j;   w_j = d_j (ω_j1 e1_j + ω_j2 e2_j) + ḋ_j u_j.
+        ω_j1 = e1_jᵀ w_j / d_j,   ω_j2 = e2_jᵀ w_j / d_j,   ḋ_j = u_jᵀ w_j;
+        w_j = d_j (ω_j1 e1_j + ω_j2 e2_j) + ḋ_j u_j.
 
     The pair is built at each configuration from the coordinate axis least aligned with u_j (e1 = that axis made
     ⟂ u_j, e2 = u_j × e1), so the map is defined and well conditioned for every nonzero link — a vertical tether
