@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from tmr.control.drones import TetherClearance, make_drone_pinv, make_drone_qp
+from tmr.control.limits import Limit, LimitRows
 from tmr.control.qp import LEVEL_STATUS
 from tmr.control.run3d import line_references, run_drones
 from tmr.model.catenary3d import DroneTetherParams, solve3d, tether_limits
@@ -154,3 +155,31 @@ def test_pinv_runs_the_papers_clik_on_the_spatial_chain():
         np.testing.assert_allclose(f.context.chain.robots(plan.q[k]), plan.robots[k], atol=1e-12)
     assert np.linalg.norm(plan.robots[-1, -1] - plan.goal) < PRM.goal_tolerance
     assert np.nanmax(plan.diagnostics["obstacle_active"]) > 0  # the soft obstacle task acted
+
+
+class _Impossible(Limit):
+    """Drone 1 faster than the speed bound (x): contradicts DroneSpeed, a safety limit."""
+
+    name = "impossible"
+    space = "robot"
+
+    def pattern(self, chain):
+        mask = np.zeros((1, 3 * chain.n_robots), dtype=bool)
+        mask[0, 0] = True
+        return mask
+
+    def compute(self, ctx):
+        A = np.zeros((1, 3 * ctx.chain.n_robots))
+        A[0, 0] = 1.0
+        return LimitRows(A, np.array([10.0]), np.array([np.inf]))
+
+
+def test_an_infeasible_step_fails_the_plan_with_the_reason():
+    world = World3D([], [0, 0, 0, 10, 10, 5], TP.drone_radius)
+    ref = line_references([1.0, 5.0, 0.5], [2.0, 5.0, 1.5], [6.0, 5.0, 2.0], 2, Ts=PRM.Ts)
+    f = make_drone_qp(world, TP, PRM, 2, ref)
+    f.qp.limits.append(_Impossible())
+    plan = run_drones(world, ref, f, ref.start_positions, tether=TP, params=PRM)
+    assert not plan.success
+    assert plan.failure.startswith("step 0 (t = 0.00 s): the hard constraints have no common solution")
+    assert plan.robots.shape[0] == 1 and np.all(plan.velocities == 0.0)

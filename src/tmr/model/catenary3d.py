@@ -235,8 +235,8 @@ def _newton_theta(d: float, h: float, m: float, guess: float) -> float | None:
         t -= step
         if abs(step) <= 1e-14 * max(1.0, abs(t)):
             sh = math.sinh(t)
-            ok = abs(_span(t, m, k) - target) <= 1e-12 * max(1.0, target)
-            return t if ok else None
+            span = (math.asinh(math.sqrt(kk * sh * sh + (kk - 1.0))) - t) / math.cosh(t)
+            return t if abs(span - target) <= 1e-12 * max(1.0, target) else None
     return None
 
 
