@@ -183,3 +183,33 @@ def test_an_infeasible_step_fails_the_plan_with_the_reason():
     assert not plan.success
     assert plan.failure.startswith("step 0 (t = 0.00 s): the hard constraints have no common solution")
     assert plan.robots.shape[0] == 1 and np.all(plan.velocities == 0.0)
+
+
+def test_segment_nearest_matches_coal_and_the_point_queries():
+    from tmr.control.drones import segment_box_distance, segment_nearest
+    from tmr.world.world3d import prism_obstacle
+
+    rng = np.random.default_rng(5)
+    obstacles = [box_obstacle([2, 2, 0], [4, 5, 1.5]), box_obstacle([6, 1, 1], [7, 3, 4]),
+                 prism_obstacle([[1, 6], [3, 7], [2, 9]], [0.0, 2.5])]  # fmt: skip
+    world = World3D(obstacles, [0, 0, 0, 10, 10, 5], 0.0)
+    a = rng.uniform([0, 0, 0], [10, 10, 5], (400, 3))
+    b = a + rng.normal(scale=1.5, size=a.shape)
+    b = np.clip(b, 0.01, [9.99, 9.99, 4.99])
+    c, g, t = segment_nearest(world, a, b)
+    np.testing.assert_allclose(c, world.segment_clearance(a, b), atol=1e-7)  # coal's capsule queries
+    X = a + t[:, None] * (b - a)
+    free = c > 1e-6
+    cx, gx = world.clearance_and_gradient(X[free])
+    np.testing.assert_allclose(cx, c[free], atol=1e-7)  # the nearest point has the segment's clearance
+    np.testing.assert_allclose(np.linalg.norm(g, axis=1), 1.0, atol=1e-9)
+    # the same gradient, but where two walls (or a wall and an obstacle) tie, where either is one
+    assert np.mean(np.all(np.abs(gx - g[free]) < 1e-5, axis=1)) > 0.97
+    # the closed form against a dense sampling of the segment
+    lo, hi = np.array([2.0, 2, 0]), np.array([4.0, 5, 1.5])
+    d, tb = segment_box_distance(a, b, lo, hi)
+    s = np.linspace(0, 1, 2001)
+    P = a[:, None, :] + s[None, :, None] * (b - a)[:, None, :]
+    dense = np.linalg.norm(P - np.clip(P, lo, hi), axis=2)
+    assert np.all(d <= dense.min(axis=1) + 1e-12)
+    assert np.all(d >= dense.min(axis=1) - np.linalg.norm(b - a, axis=1) / 2000)

@@ -97,11 +97,43 @@ def _segment_frames(a: Array, b: Array) -> tuple[Array, Array, Array]:
     return R, 0.5 * (a + b), 0.5 * length
 
 
+def segment_box_distance(a: Array, b: Array, lo: Array, hi: Array) -> tuple[Array, Array]:
+    """Exact distance [m] from the segments a–b (M, 3) to the axis-aligned box [lo, hi], and the parameter t ∈ [0, 1]
+    of the segment's nearest point (M,), vectorised. Along a segment the squared distance is piecewise quadratic in
+    t, with breakpoints where a coordinate crosses a face: on each of the (≤ 7) pieces the minimiser is the clipped
+    stationary point of its quadratic; the smallest over the pieces is the minimum (the distance is convex in t).
+    0 for a segment touching or crossing the box (its depth is not computed here)."""
+    v = b - a
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cross = np.concatenate([(lo - a) / v, (hi - a) / v], axis=1)  # (M, 6); ±inf/nan where v_k = 0
+    cross = np.where(np.isfinite(cross), np.clip(cross, 0.0, 1.0), 0.0)
+    knots = np.sort(np.concatenate([np.zeros((a.shape[0], 1)), cross, np.ones((a.shape[0], 1))], axis=1), axis=1)
+    t0, t1 = knots[:, :-1], knots[:, 1:]  # (M, 7) pieces
+    x_mid = a[:, None, :] + (0.5 * (t0 + t1))[..., None] * v[:, None, :]  # (M, 7, 3)
+    below, above = x_mid < lo, x_mid > hi
+    bound = np.where(below, lo, np.where(above, hi, 0.0))
+    active = below | above
+    off = np.where(active, a[:, None, :] - bound, 0.0)  # x_k(t) − bound_k = off_k + t v_k on the active axes
+    vv = np.where(active, v[:, None, :], 0.0)
+    den = np.einsum("mpk,mpk->mp", vv, vv)
+    num = -np.einsum("mpk,mpk->mp", off, vv)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ts = np.where(den > 0.0, num / den, t0)
+    ts = np.clip(ts, t0, t1)
+    X = a[:, None, :] + ts[..., None] * v[:, None, :]
+    gap = X - np.clip(X, lo, hi)
+    dist = np.sqrt(np.einsum("mpk,mpk->mp", gap, gap))
+    best = np.argmin(dist, axis=1)
+    rows = np.arange(a.shape[0])
+    return dist[rows, best], ts[rows, best]
+
+
 def segment_nearest(world: World3D, a: Array, b: Array, cap: float = np.inf) -> tuple[Array, Array, Array]:
     """Clearance [m] of the segments a–b (M, 3) in ``world`` (its walls included), the unit gradient (M, 3) of the
     clearance at the segment's nearest point (from the obstacle's nearest point towards it; away from the nearest wall)
-    and that point's parameter t ∈ [0, 1] along a → b (M,). A capsule query of radius 0 per candidate obstacle (coal,
-    as :meth:`World3D.segment_clearance`, with the capsules' placements computed at once); the walls' term is affine
+    and that point's parameter t ∈ [0, 1] along a → b (M,). Boxes in closed form (:func:`segment_box_distance`), other
+    obstacles (and a piece touching a box) by a capsule query of radius 0 (coal, as :meth:`World3D.segment_clearance`,
+    with the capsules' placements computed at once); the walls' term is affine
     along a segment, so its minimum is at an end. Obstacles whose bounding box is farther than ``cap`` [m] from a
     segment are not queried: a clearance above ``cap`` is reported as some value above it (exact below it)."""
     import coal
@@ -123,20 +155,28 @@ def segment_nearest(world: World3D, a: Array, b: Array, cap: float = np.inf) -> 
         cand = np.flatnonzero(gap < np.minimum(out, cap + world.safety_radius))
         if len(cand) == 0:
             continue
-        if frames is None:
-            frames = _segment_frames(a, b)
-        R, mid, half = frames
         inside = np.zeros(len(cand), dtype=bool)
         if not ob.signed:
             assert ob.triangles is not None
             w = _winding_number(np.vstack([a[cand], b[cand]]), ob.triangles)
             inside = (np.abs(w[: len(cand)]) > 0.5) | (np.abs(w[len(cand) :]) > 0.5)
         geom = ob.geometry
-        if isinstance(geom, _PlacedBox):
+        if isinstance(geom, _PlacedBox):  # boxes in numpy (exact); coal only for a piece touching or inside one
+            dist, tb = segment_box_distance(a[cand], b[cand], ob.lo, ob.hi)
+            closer = (dist > 1e-9) & (dist < out[cand])
+            i = cand[closer]
+            X = a[i] + tb[closer, None] * (b[i] - a[i])
+            grad[i] = (X - np.clip(X, ob.lo, ob.hi)) / dist[closer, None]
+            out[i], t[i] = dist[closer], tb[closer]
+            cand = cand[dist <= 1e-9]
             shape2, place2 = geom.box, _placement(geom.centre)
         else:
             shape2, place2 = geom, _IDENTITY
+        if len(cand) and frames is None:
+            frames = _segment_frames(a, b)
+        R, mid, half = frames if frames is not None else (None, None, None)
         for k, i in enumerate(cand):
+            assert R is not None and mid is not None and half is not None
             capsule.halfLength = max(float(half[i]), 1e-12)
             res.clear()
             d = float(coal.distance(capsule, coal.Transform3s(R[i], mid[i]), shape2, place2, _REQUEST, res))

@@ -81,8 +81,8 @@ def run_drones(
     scenario: str = "",
     goal: ArrayLike | None = None,
 ) -> DronePlan:
-    """Integrate ``formulation`` (:func:`~tmr.control.drones.make_drone_qp` or ``make_drone_pinv``) along the
-    references from the drones at ``start`` (N, 3) [m].
+    """Integrate ``formulation`` (:func:`~tmr.control.drones.make_drone_qp` or ``make_drone_pinv``, built for the
+    same world, tether, parameters and references) along the references from the drones at ``start`` (N, 3) [m].
 
     ``diagnostics``: per step (K+1,) ``step_time`` [s] (the whole step: catenaries, world queries, rows and the
     QP), ``leader_residual`` [m/s] (the leader task's residual: > 0 when a limit holds the leader back), the
@@ -97,7 +97,7 @@ def run_drones(
     ref = references
     K = len(ref.t) - 1
     Ts = params.Ts
-    if abs(float(ref.t[1] - ref.t[0]) - Ts) > 1e-9 if K > 0 else False:
+    if K > 0 and abs(float(ref.t[1] - ref.t[0]) - Ts) > 1e-9:
         raise ParameterError(f"the references are sampled every {ref.t[1] - ref.t[0]:.4f} s, the plan every {Ts} s")
     joints = formulation.integrates == "joints"
     q = chain.q_from_positions(P) if joints else None
