@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -174,3 +175,96 @@ def test_limits_length_thrust_floor_and_obstacle():
     assert any("obstacle" in r for r in tether_limits(ok, distance=dist))
     far = lambda pts: np.linalg.norm(pts - centre + [0, 0, 2.0], axis=1) - 0.5  # noqa: E731
     assert tether_limits(ok, distance=far) == []
+
+
+# ---------------------------------------------------------------------------------------------- sensitivities
+SENS_CASES = [  # rising, falling, both lower-end sides, steep, long sagging, nearly level (h > 0)
+    ((0.0, 0.0, 1.0), (3.0, 1.0, 2.5)),
+    ((3.0, 1.0, 2.5), (0.0, 0.0, 1.0)),
+    ((1.0, 1.0, 3.0), (6.0, -2.0, 1.0)),
+    ((0.0, 0.0, 1.0), (0.3, 0.2, 6.0)),
+    ((0.0, 0.0, 2.0), (12.0, 3.0, 2.4)),
+    ((0.0, 0.0, 2.0), (4.0, 0.0, 2.05)),
+]
+
+
+def _fd_sensitivities(p, q, prm, sig, eps=1e-6):
+    """Central finite differences of solve3d's samples (at arc fractions sig), length and end tensions."""
+    from tmr.model.catenary3d import sensitivities
+
+    out = {k: np.zeros(s) for k, s in [("Jp", (sig.size, 3, 3)), ("Jq", (sig.size, 3, 3)), ("Lp", 3), ("Lq", 3)]}
+    out.update({k: np.zeros(3) for k in ("Tpp", "Tpq", "Tqp", "Tqq")})
+    for i in range(3):
+        e = np.zeros(3)
+        e[i] = eps
+        for end, J, Lk, Tp, Tq in (("p", "Jp", "Lp", "Tpp", "Tqp"), ("q", "Jq", "Lq", "Tpq", "Tqq")):
+            a, b = (p + e, q) if end == "p" else (p, q + e)
+            c, d = (p - e, q) if end == "p" else (p, q - e)
+            hi, lo = solve3d(a, b, prm), solve3d(c, d, prm)
+            out[J][:, :, i] = (sensitivities(hi, sig, prm).points - sensitivities(lo, sig, prm).points) / (2 * eps)
+            out[Lk][i] = (hi.length - lo.length) / (2 * eps)
+            out[Tp][i] = (hi.tension_p - lo.tension_p) / (2 * eps)
+            out[Tq][i] = (hi.tension_q - lo.tension_q) / (2 * eps)
+    return out
+
+
+@pytest.mark.parametrize("winch_end", ["lower", "upper"])
+@pytest.mark.parametrize("p,q", SENS_CASES)
+def test_sensitivities_match_central_differences_of_solve3d(p, q, winch_end):
+    from tmr.model.catenary3d import sensitivities
+
+    prm = DroneTetherParams(winch_end=winch_end)
+    p, q = np.asarray(p, float), np.asarray(q, float)
+    sig = np.array([0.0, 0.1, 0.37, 0.5, 0.81, 1.0])
+    cat = solve3d(p, q, prm)
+    S = sensitivities(cat, sig, prm)
+    fd = _fd_sensitivities(p, q, prm, sig)
+    # the samples are the curve's points at those arc fractions (Catenary3D.points samples equal arc lengths)
+    np.testing.assert_allclose(S.points[[0, 3, 5]], cat.points(3), atol=1e-12)
+    np.testing.assert_allclose(S.dpoints_dp, fd["Jp"], atol=2e-7)
+    np.testing.assert_allclose(S.dpoints_dq, fd["Jq"], atol=2e-7)
+    np.testing.assert_allclose(S.dlength_dp, fd["Lp"], atol=2e-7)
+    np.testing.assert_allclose(S.dlength_dq, fd["Lq"], atol=2e-7)
+    for name, key in (("dtension_p_dp", "Tpp"), ("dtension_p_dq", "Tpq"), ("dtension_q_dp", "Tqp")):
+        np.testing.assert_allclose(getattr(S, name), fd[key], atol=2e-7)
+    np.testing.assert_allclose(S.dtension_q_dq, fd["Tqq"], atol=2e-7)
+    # the ends move with their own end only; moving both ends together translates every point
+    np.testing.assert_allclose(S.dpoints_dp[0], np.eye(3), atol=1e-9)
+    np.testing.assert_allclose(S.dpoints_dq[-1], np.eye(3), atol=1e-9)
+    np.testing.assert_allclose(S.dpoints_dp + S.dpoints_dq, np.broadcast_to(np.eye(3), S.dpoints_dp.shape), atol=1e-12)
+
+
+def test_sensitivities_of_a_vertical_tether_and_the_batch():
+    from tmr.model.catenary3d import sensitivities, sensitivities_batch
+
+    sig = np.array([0.25, 0.5])
+    up, down = solve3d((1, 2, 1), (1, 2, 5)), solve3d((1, 2, 5), (1, 2, 1))
+    for cat, sign in ((up, 1.0), (down, -1.0)):
+        S = sensitivities(cat, sig)
+        np.testing.assert_allclose(S.points, cat.p + sig[:, None] * (cat.q - cat.p))
+        np.testing.assert_allclose(S.dlength_dq, [0, 0, sign])
+        np.testing.assert_allclose(S.dlength_dp, [0, 0, -sign])
+        eps = 1e-6  # along z the tether stays vertical: finite differences apply
+        hi = solve3d(cat.p, cat.q + [0, 0, eps])
+        lo = solve3d(cat.p, cat.q - [0, 0, eps])
+        fd = (sensitivities(hi, sig).points - sensitivities(lo, sig).points) / (2 * eps)
+        np.testing.assert_allclose(S.dpoints_dq[:, :, 2], fd, atol=1e-8)
+    cats = [solve3d(*pq) for pq in SENS_CASES] + [up, down]
+    B = sensitivities_batch(cats, sig)
+    for i, cat in enumerate(cats):
+        one = sensitivities(cat, sig)
+        np.testing.assert_allclose(B[i].dpoints_dq, one.dpoints_dq, atol=1e-15)
+        np.testing.assert_allclose(B[i].dlength_dp, one.dlength_dp, atol=1e-15)
+
+
+@pytest.mark.parametrize("p,q,tw", CASES)
+def test_warm_start_finds_the_same_shallow_catenary(p, q, tw):
+    cold = solve3d(p, q, winch_tension=tw)
+    moved = np.asarray(q, float) + [0.05, -0.03, 0.04]
+    warm = solve3d(p, moved, winch_tension=tw, warm=cold)
+    ref = solve3d(p, moved, winch_tension=tw)
+    assert warm.a == pytest.approx(ref.a, rel=1e-11)
+    assert warm.length == pytest.approx(ref.length, rel=1e-12)
+    # a guess on the deep (unstable) branch, or far away, still ends on the shallow branch
+    deep = dataclasses.replace(cold, x0=cold.d / 2 + 30.0 * cold.a if cold.h >= 0 else cold.d / 2 - 30.0 * cold.a)
+    assert solve3d(p, moved, winch_tension=tw, warm=deep).a == pytest.approx(ref.a, rel=1e-11)

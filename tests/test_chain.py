@@ -150,3 +150,27 @@ def test_bad_inputs():
         chain.q_from_positions([[0.0, 0.0], [1.0, 1.0]])
     with pytest.raises(ParameterError, match="link indices"):
         chain.point_jacobians([0, 1, 0, 1], [3], [0.5])
+
+
+@pytest.mark.parametrize("n", [1, 3, 5])
+def test_spatial_q_from_positions_round_trip_and_finite_differences(n):
+    rng = np.random.default_rng(40 + n)
+    chain = Chain(n, base=(1.0, 2.0, 0.3), spatial=True)
+    for _ in range(5):
+        q = rng.uniform(-3.0, 3.0, chain.dof)
+        q[chain.prismatic_index] = rng.uniform(0.5, 3.0, n)
+        P = chain.robots(q)
+        q2 = chain.q_from_positions(P)
+        np.testing.assert_allclose(chain.robots(q2), P, atol=1e-12)
+        np.testing.assert_allclose(q2[chain.prismatic_index], q[chain.prismatic_index], atol=1e-12)
+        # finite differences: the robots' Jacobian times dq/dP is the identity on the positions
+        delta = rng.normal(size=(n, 3))
+        eps = 1e-6
+        dq = (chain.q_from_positions(P + eps * delta) - chain.q_from_positions(P - eps * delta)) / (2 * eps)
+        J = chain.robot_jacobians(q2).reshape(3 * n, chain.dof)
+        np.testing.assert_allclose(J @ dq, delta.reshape(-1), atol=1e-6)
+    # vertical links (gimbal lock of the yaw) still round-trip
+    P = np.array([[1.0, 2.0, 3.0], [1.0, 2.0, 5.0], [2.0, 2.0, 5.0], [2.0, 2.0, 1.0], [0.0, 0.0, 0.5]])[:n]
+    np.testing.assert_allclose(chain.robots(chain.q_from_positions(P)), P, atol=1e-12)
+    with pytest.raises(ParameterError):
+        chain.q_from_positions(np.vstack([chain.base, P[1:]]) if n > 1 else chain.base[None, :])

@@ -1,9 +1,10 @@
 """Lexicographic QP per step with hard safety constraints (``--method qp``; math in ``formulations/qp.md``).
 
-Each step solves a strict priority stack of QPs in x = [v, q̇]: the robot velocities v = [ṗ1, …, ṗN] (2N, planar)
-and the joint rates q̇, tied by q̇ = T v (:mod:`tmr.model.velocity`, T banded). Rows on robots and tether points are local
-in v, joint-space rows (tether regulation, smoothness, energy, the joint box) are simplest on q̇, and every task and
-limit declares which one it writes (``space``):
+Each step solves a strict priority stack of QPs in x = [v, q̇]: the robot velocities v = [ṗ1, …, ṗN] (dim·N: 2N
+planar, 3N for a spatial chain of drones) and the joint rates q̇, tied by q̇ = T v (:mod:`tmr.model.velocity`, T
+banded; for a spatial chain q̇ are the singularity-free link coordinates of :class:`~tmr.model.velocity.VelocityMap3D`).
+Rows on robots and tether points are local in v, joint-space rows (tether regulation, smoothness, energy, the joint
+box) are simplest on q̇, and every task and limit declares which one it writes (``space``):
 
     level i:  min_x Σ_t w_t ‖J_t x − t_t‖² + ε‖x‖²
               s.t.  q̇ − T v = 0,   lb ≤ q̇ ≤ ub              (coupling; joint speed, acceleration, span: JointBox)
@@ -53,7 +54,7 @@ from tmr.control.qp_backends import FALLBACK_SOLVERS, _installed, _OsqpLevel, _Q
 from tmr.control.tasks import StepContext, Task
 from tmr.errors import InfeasibleStep, ParameterError
 from tmr.model.chain import Chain
-from tmr.model.velocity import robot_pattern
+from tmr.model.velocity import robot_pattern, robot_pattern3d
 
 if TYPE_CHECKING:
     pass
@@ -160,7 +161,8 @@ class LexicographicQP:
     without the comfort limits, raises :class:`InfeasibleStep`.
 
     Args:
-        chain: the chain (planar).
+        chain: the chain: planar, or spatial (``Chain(spatial=True)``; its steps' ``velocity_map`` is then a
+            :class:`~tmr.model.velocity.VelocityMap3D`, x = [v, link rates], n = 3N).
         levels: priority levels, highest first; each a :class:`Level` of (task, weight) pairs.
         limits: hard limits shared by every level.
         box: joint box bounds (speed, acceleration, span), imposed as rows ``lb ≤ T v ≤ ub``.
@@ -207,8 +209,6 @@ class LexicographicQP:
             raise ParameterError("the QP stack needs at least one level, and every level at least one task")
         if solver != "osqp" and solver not in solvers():  # "osqp" is always there: no qpsolvers import
             raise ParameterError(f"unknown QP solver {solver!r}; available: {', '.join(solvers())}")
-        if chain.spatial:
-            raise ParameterError("the lexicographic QP plans planar chains (robot-velocity coordinates)")
         for level in levels:
             for task, w in level.tasks:
                 if not (np.isfinite(w) and w >= 0):
@@ -283,7 +283,7 @@ class LexicographicQP:
         ):
             _, J, Jw, sw, full = cached
         else:
-            n = 2 * self.chain.n_robots
+            n = self.chain.dof
             m = sum(t.size for _, t in parts)
             J = np.zeros((m, 2 * n))
             sw = np.empty(m)
@@ -331,7 +331,7 @@ class LexicographicQP:
 
     def _prepare(self, ctx: StepContext, rows: list) -> None:
         """Check the limits' row counts against their patterns; allocate the row buffer and the declared pattern."""
-        n = 2 * self.chain.n_robots
+        n = self.chain.dof
         patterns = [lim.pattern(self.chain) for lim in self.limits]
         for lim, r, d in zip(self.limits, rows, patterns, strict=True):
             if r.A.shape != d.shape:
@@ -353,7 +353,7 @@ class LexicographicQP:
         self._buffer[:n, n:] = -np.eye(n)
         self._buffer[n : 2 * n, n:] = np.eye(n)
         declared = np.zeros((start, 2 * n), dtype=bool)
-        declared[:n, :n] = robot_pattern(np.eye(n, dtype=bool))
+        declared[:n, :n] = (robot_pattern3d if self.chain.spatial else robot_pattern)(np.eye(n, dtype=bool))
         declared[:n, n:] = np.eye(n, dtype=bool)
         declared[n : 2 * n, n:] = np.eye(n, dtype=bool)
         for (r, c, _, _), d in zip(self._spans, patterns, strict=True):
@@ -362,7 +362,7 @@ class LexicographicQP:
 
     def _rows(self, ctx: StepContext, rows: list) -> Array:
         """The hard rows on x = [v, q̇] of this step, written into the persistent buffer: a view (m0, 2n)."""
-        n = 2 * self.chain.n_robots
+        n = self.chain.dof
         B = self._buffer
         B[:n, :n] = ctx.velocity_map.T
         for (r, c, shape, bounds), lr, lim in zip(self._spans, rows, self.limits, strict=True):
@@ -384,7 +384,7 @@ class LexicographicQP:
         (:data:`LEVEL_STATUS`), ``diagnostics["fallback_solves"]`` the solves by a fallback backend.
         """
         t0 = time.perf_counter()
-        n = 2 * self.chain.n_robots
+        n = self.chain.dof
         fallbacks = self.fallbacks
         rows = [lim.compute(ctx) for lim in self.limits]
         if self._declared is None:
@@ -618,7 +618,7 @@ class LexicographicQP:
         self, ctx: StepContext, A0: Array, rows: list, x: Array, relaxed: bool, status: list[int]
     ) -> StepRecord:
         """This step's problem and solution (see :class:`StepRecord`); every level's rows are rebuilt."""
-        n = 2 * self.chain.n_robots
+        n = self.chain.dof
         levels = []
         for level in self.levels:
             out = []
@@ -655,7 +655,7 @@ class LexicographicQP:
 
     def _explain(self, ctx: StepContext, status: str, A0: Array, lo0: Array, up0: Array, relax: bool) -> str:
         """A message naming the step, the solver status and the limits the previous motion would violate."""
-        n = 2 * self.chain.n_robots
+        n = self.chain.dof
         x = np.concatenate([ctx.velocity_map.robot_velocities(ctx.qdot_prev), ctx.qdot_prev])
         r = A0 @ x
         gap = np.maximum(lo0 - r, r - up0)

@@ -46,7 +46,18 @@ from tmr.errors import ParameterError, TetherSpanError, fmt_point
 from tmr.model.catenary import G0
 from tmr.model.params import _validate
 
-__all__ = ["DroneTetherParams", "Catenary3D", "solve3d", "tether_limits", "VERTICAL_SPAN"]
+__all__ = [
+    "DroneTetherParams",
+    "Catenary3D",
+    "CatenarySensitivity",
+    "solve3d",
+    "sensitivities",
+    "sensitivities_batch",
+    "TetherSensitivities",
+    "theta_lower",
+    "tether_limits",
+    "VERTICAL_SPAN",
+]
 
 VERTICAL_SPAN = 1e-9  # horizontal spans below this [m] are a vertical tether (no catenary, a = None)
 
@@ -194,8 +205,49 @@ def _span(theta_a: np.ndarray | float, m: float, k: float) -> np.ndarray | float
     return (theta_b - theta_a) / np.cosh(theta_a)
 
 
-def _solve_theta(d: float, h: float, m: float) -> float:
-    """theta_A of the shallow (stable) catenary through A=(0,0), B=(d,h), h >= 0, with a cosh(theta_A) = m."""
+def _newton_theta(d: float, h: float, m: float, guess: float) -> float | None:
+    """theta_A by Newton's method on ``m span(theta_A) = d`` from ``guess`` (a warm start: the previous step's value),
+    or None when it does not converge to the shallow branch (then the bracket method decides).
+
+    The shallow branch is where the span falls as theta_A grows (beyond the maximum of d(theta_A)): a root with
+    d span / d theta_A < 0 is on it, and the span has a single maximum, so that root is the one the bracket finds.
+    """
+    k = 1.0 + h / m
+    target = d / m
+    t = float(guess)
+    kk = k * k
+    for _ in range(30):
+        if not -40.0 <= t <= 40.0:
+            return None
+        sh, ch = math.sinh(t), math.cosh(t)
+        r2 = kk * sh * sh + (kk - 1.0)
+        if r2 <= 0.0:
+            return None
+        sb = math.sqrt(r2)
+        tb = math.asinh(sb)
+        f = (tb - t) / ch - target
+        # d/dt [(theta_B - t)/cosh t] with d theta_B/dt = k^2 sh ch / (sb sqrt(1 + sb^2))
+        dtb = kk * sh * ch / (sb * math.sqrt(1.0 + r2)) if sb > 0.0 else 0.0
+        df = ((dtb - 1.0) - (tb - t) * math.tanh(t)) / ch
+        if not df < 0.0:
+            return None
+        step = f / df
+        t -= step
+        if abs(step) <= 1e-14 * max(1.0, abs(t)):
+            sh = math.sinh(t)
+            span = (math.asinh(math.sqrt(kk * sh * sh + (kk - 1.0))) - t) / math.cosh(t)
+            return t if abs(span - target) <= 1e-12 * max(1.0, target) else None
+    return None
+
+
+def _solve_theta(d: float, h: float, m: float, guess: float | None = None) -> float:
+    """theta_A of the shallow (stable) catenary through A=(0,0), B=(d,h), h >= 0, with a cosh(theta_A) = m.
+
+    ``guess``: a warm start (Newton, :func:`_newton_theta`); the grid-bracketed root is the fallback."""
+    if guess is not None and math.isfinite(guess):
+        t = _newton_theta(d, h, m, guess)
+        if t is not None:
+            return t
     k = 1.0 + h / m
     target = d / m
     vals = _span(_GRID, m, k)
@@ -222,10 +274,19 @@ def _solve_theta(d: float, h: float, m: float) -> float:
 
 
 def solve3d(
-    p: ArrayLike, q: ArrayLike, params: DroneTetherParams | None = None, *, winch_tension: float | None = None
+    p: ArrayLike,
+    q: ArrayLike,
+    params: DroneTetherParams | None = None,
+    *,
+    winch_tension: float | None = None,
+    warm: Catenary3D | None = None,
 ) -> Catenary3D:
     """The tether between ``p`` and ``q`` [m] with the winch keeping ``winch_tension`` [N] (default
     ``params.winch_tension``) at ``params.winch_end``. Ties (level ends) put the winch at p.
+
+    ``warm``: the same tether a moment ago (e.g. the previous step's): its theta_A starts a Newton iteration
+    (a few microseconds instead of the grid bracket's ~0.25 ms); the result is the same shallow branch, and the
+    bracket method runs whenever Newton does not converge onto it.
 
     Raises:
         ParameterError: p or q is not a finite 3-D point, they coincide, or the tension is not finite and > 0.
@@ -268,7 +329,7 @@ def solve3d(
         )  # fmt: skip
     u = np.array([dxy[0] / d, dxy[1] / d, 0.0])
     m = t_a / w
-    theta_a = _solve_theta(d, dh, m)
+    theta_a = _solve_theta(d, dh, m, None if warm is None else theta_lower(warm))
     a = m / math.cosh(theta_a)
     k = 1.0 + dh / m
     sh_a = math.sinh(theta_a)
@@ -294,6 +355,189 @@ def solve3d(
     return Catenary3D(
         p=p_, q=q_, u=u, d=d, h=h, a=a, x0=x0, z0=z0, horizontal_tension=H, length=length, lowest=lowest,
         tension_p=t_p, tension_q=t_q, force_p=f_p, force_q=f_q, weight_per_length=w,
+    )  # fmt: skip
+
+
+def theta_lower(cat: Catenary3D) -> float | None:
+    """theta_A = (x_A - x0)/a at the lower end A of ``cat`` (None for a vertical tether): the one unknown that
+    :func:`solve3d` solves for, e.g. to warm-start the next solve of the same tether."""
+    if cat.a is None or cat.x0 is None:
+        return None
+    x0_a = cat.x0 if cat.h >= 0.0 else cat.d - cat.x0  # vertex from A along A -> B
+    return -x0_a / cat.a
+
+
+@dataclass(frozen=True)
+class CatenarySensitivity:
+    """How a tether's sample points, arc length and end tensions move with its two ends (:func:`sensitivities`).
+
+    Attributes:
+        fractions: arc fractions sigma of the samples, (k,) [-] (sigma = 0 at p, 1 at q).
+        points: the samples, at arc length sigma L from p, (k, 3) [m].
+        dpoints_dp, dpoints_dq: their Jacobians w.r.t. p and q, (k, 3, 3) [m/m]:
+            dX_i = dpoints_dp[i] dp + dpoints_dq[i] dq.
+        length: arc length L [m]; dlength_dp, dlength_dq: its gradients (3,) [m/m].
+        tension_p, tension_q: end tensions [N]; dtension_p_dp, dtension_p_dq, dtension_q_dp, dtension_q_dq: their
+            gradients (3,) [N/m].
+    """
+
+    fractions: np.ndarray
+    points: np.ndarray
+    dpoints_dp: np.ndarray
+    dpoints_dq: np.ndarray
+    length: float
+    dlength_dp: np.ndarray
+    dlength_dq: np.ndarray
+    tension_p: float
+    tension_q: float
+    dtension_p_dp: np.ndarray
+    dtension_p_dq: np.ndarray
+    dtension_q_dp: np.ndarray
+    dtension_q_dq: np.ndarray
+
+
+_CSTEP = 1e-30  # complex-step size: derivatives of the closed-form parts exact to rounding (Squire & Trapp 1998)
+
+
+def _plane(theta: complex, d: complex, dh: complex, tw: float, w: float, upper: bool, sig: np.ndarray) -> tuple:
+    """The catenary in its plane from the lower end A = (0, 0) with B = (d, dh): the residual of the span equation
+    R = a (theta_B - theta_A) - d, the arc length L, and the samples (x, z) relative to A at arc fractions ``sig``
+    from A. Closed form in (theta_A, d, dh): complex arguments give derivatives by the complex step."""
+    m = tw / w - dh if upper else tw / w + 0.0 * dh  # a cosh(theta_A) = T_A / (rho g)
+    k = 1.0 + dh / m
+    ch = np.cosh(theta)
+    sh = np.sinh(theta)
+    a = m / ch
+    sb = np.sqrt(k * k * sh * sh + (k * k - 1.0))
+    L = a * (sb - sh)
+    R = a * (np.arcsinh(sb) - theta) - d
+    th = np.arcsinh(sh + sig * (sb - sh))  # ds = a cosh(theta) dtheta: s = a (sinh th - sinh theta_A)
+    return R, L, a * (th - theta), a * (np.cosh(th) - ch)
+
+
+@dataclass(frozen=True)
+class TetherSensitivities:
+    """:class:`CatenarySensitivity` of M tethers at once, stacked: points (M, k, 3), dpoints_dp/dq (M, k, 3, 3),
+    length (M,), dlength_dp/dq (M, 3), tension_p/q (M,), dtension_p_dp … dtension_q_dq (M, 3) (same units)."""
+
+    fractions: np.ndarray
+    points: np.ndarray
+    dpoints_dp: np.ndarray
+    dpoints_dq: np.ndarray
+    length: np.ndarray
+    dlength_dp: np.ndarray
+    dlength_dq: np.ndarray
+    tension_p: np.ndarray
+    tension_q: np.ndarray
+    dtension_p_dp: np.ndarray
+    dtension_p_dq: np.ndarray
+    dtension_q_dp: np.ndarray
+    dtension_q_dq: np.ndarray
+
+    def __getitem__(self, i: int) -> CatenarySensitivity:
+        """Tether i's :class:`CatenarySensitivity`."""
+        return CatenarySensitivity(
+            self.fractions, *(getattr(self, f.name)[i] for f in fields(self) if f.name != "fractions")
+        )
+
+
+def sensitivities(
+    cat: Catenary3D, fractions: ArrayLike, params: DroneTetherParams | None = None
+) -> CatenarySensitivity:
+    """Sample points of ``cat`` at fixed arc fractions, its arc length and end tensions, with their Jacobians w.r.t.
+    both ends (3x3 per point, 3-vectors for L and the tensions).
+
+    Implicit differentiation of the catenary equations: with A the lower end, B the upper one, d the horizontal span
+    and h = z_B - z_A >= 0, the shape is fixed by the one unknown theta_A solving R(theta_A, d, h) = 0 (the span
+    equation of :func:`solve3d`); the implicit function theorem gives d theta_A / d(d, h) = -R_(d,h) / R_theta, and
+    every output y(theta_A, d, h) (closed form) changes by y_(d,h) + y_theta d theta_A / d(d, h). The partials of
+    the closed forms come from the complex step (exact to rounding). In 3-D a point at (x, z) in the plane is
+    X = A + x u + z e_z with u the horizontal unit vector A -> B; d d = u.(dB - dA)_xy, d h = dB_z - dA_z and
+    d u = (I - u u^T)(dB - dA)_xy / d, so dX/dB is the 3x3 block below and dX/dA = I - dX/dB (translation).
+    A vertical tether (straight) moves as X = p + sigma (q - p). At level ends (h = 0) the lower end swaps and the
+    Jacobians are one-sided (the tension at each end has a kink there).
+    """
+    return sensitivities_batch([cat], fractions, params)[0]
+
+
+def sensitivities_batch(
+    cats: list[Catenary3D], fractions: ArrayLike, params: DroneTetherParams | None = None
+) -> TetherSensitivities:
+    """:func:`sensitivities` of several tethers at once (vectorised over the tethers: one numpy pass for a chain)."""
+    prm = params if params is not None else DroneTetherParams()
+    sig = np.asarray(fractions, dtype=float).reshape(-1)
+    M, k = len(cats), sig.size
+    up = prm.winch_end == "upper"
+    ez = np.array([0.0, 0.0, 1.0])
+    w = np.array([c.weight_per_length for c in cats])
+    p = np.array([c.p for c in cats]).reshape(M, 3)
+    q = np.array([c.q for c in cats]).reshape(M, 3)
+    h = q[:, 2] - p[:, 2]
+    p_lower = h >= 0.0
+    dh = np.abs(h)
+    vertical = np.array([c.a is None for c in cats], dtype=bool)
+    X = p[:, None, :] + sig[None, :, None] * (q - p)[:, None, :]  # vertical tethers: straight
+    JB = np.zeros((M, k, 3, 3))
+    JB[:] = sig[None, :, None, None] * np.eye(3)
+    dL_dB = np.tile(ez, (M, 1))
+    cv = np.flatnonzero(~vertical)
+    if cv.size:
+        theta = np.array([theta_lower(cats[i]) for i in cv])
+        d = np.array([cats[i].d for i in cv])
+        wv, hv, low = w[cv], dh[cv], p_lower[cv]
+        t_a = np.array([cats[i].tension_p if low[j] else cats[i].tension_q for j, i in enumerate(cv)])
+        tw = t_a + wv * hv if up else t_a  # the winch's T_w
+        sig_a = np.where(low[:, None], sig[None, :], 1.0 - sig[None, :])  # fractions from A
+        E = 1j * _CSTEP
+        # axis 1: perturbation of theta_A, d, h (imaginary parts); axis 2: the samples
+        th3 = theta[:, None, None] + E * np.array([1.0, 0.0, 0.0])[None, :, None]
+        d3 = d[:, None, None] + E * np.array([0.0, 1.0, 0.0])[None, :, None]
+        h3 = hv[:, None, None] + E * np.array([0.0, 0.0, 1.0])[None, :, None]
+        R, L, xs, zs = _plane(th3, d3, h3, tw[:, None, None], wv[:, None, None], up, sig_a[:, None, :])
+        Ri, Li = np.imag(R[:, :, 0]) / _CSTEP, np.imag(L[:, :, 0]) / _CSTEP  # (C, 3)
+        dt_dd, dt_dh = -Ri[:, 1] / Ri[:, 0], -Ri[:, 2] / Ri[:, 0]
+        xi, zi = np.imag(xs) / _CSTEP, np.imag(zs) / _CSTEP  # (C, 3, k)
+        x, z = np.real(xs[:, 0]), np.real(zs[:, 0])  # (C, k)
+        x_dd = xi[:, 1] + xi[:, 0] * dt_dd[:, None]
+        x_dh = xi[:, 2] + xi[:, 0] * dt_dh[:, None]
+        z_dd = zi[:, 1] + zi[:, 0] * dt_dd[:, None]
+        z_dh = zi[:, 2] + zi[:, 0] * dt_dh[:, None]
+        L_dd = Li[:, 1] + Li[:, 0] * dt_dd
+        L_dh = Li[:, 2] + Li[:, 0] * dt_dh
+        A = np.where(low[:, None], p[cv], q[cv])
+        u = np.array([cats[i].u for i in cv]) * np.where(low, 1.0, -1.0)[:, None]  # horizontal A -> B
+        u2 = u[:, :2]
+        X[cv] = A[:, None, :] + x[..., None] * u[:, None, :] + z[..., None] * ez
+        uu = u2[:, :, None] * u2[:, None, :]  # (C, 2, 2)
+        J = np.zeros((cv.size, k, 3, 3))
+        J[:, :, :2, :2] = x_dd[..., None, None] * uu[:, None] + (x / d[:, None])[..., None, None] * (
+            np.eye(2) - uu[:, None]
+        )
+        J[:, :, :2, 2] = x_dh[..., None] * u2[:, None, :]
+        J[:, :, 2, :2] = z_dd[..., None] * u2[:, None, :]
+        J[:, :, 2, 2] = z_dh
+        JB[cv] = J
+        dL_dB[cv] = np.column_stack([L_dd * u2[:, 0], L_dd * u2[:, 1], L_dh])
+    # vertical tethers: B is q when p is lower (X = p + sigma (q - p) has dX/dq = sigma I = the JB set above)
+    JA = np.eye(3) - JB
+    lowv = p_lower[:, None, None, None]
+    Jp = np.where(lowv | vertical[:, None, None, None], JA, JB)
+    Jq = np.where(lowv | vertical[:, None, None, None], JB, JA)
+    dL_dB = np.where((~p_lower & vertical)[:, None], -dL_dB, dL_dB)  # vertical: dL/dq = sign(h) e_z
+    lw = p_lower[:, None] | vertical[:, None]
+    dL_dp = np.where(lw, -dL_dB, dL_dB)
+    dL_dq = -dL_dp
+    # end tensions: T_A = T_w (lower winch) or T_w - w h; T_B = T_A + w h; h = z_B - z_A
+    dta = (-w if up else 0.0 * w)[:, None] * ez
+    dtb = dta + w[:, None] * ez
+    pl = p_lower[:, None]
+    tp_p = np.where(pl, -dta, dtb)
+    tq_q = np.where(pl, dtb, -dta)
+    return TetherSensitivities(
+        fractions=sig, points=X, dpoints_dp=Jp, dpoints_dq=Jq, length=np.array([c.length for c in cats]),
+        dlength_dp=dL_dp, dlength_dq=dL_dq, tension_p=np.array([c.tension_p for c in cats]),
+        tension_q=np.array([c.tension_q for c in cats]), dtension_p_dp=tp_p, dtension_p_dq=-tp_p,
+        dtension_q_dp=-tq_q, dtension_q_dq=tq_q,
     )  # fmt: skip
 
 

@@ -238,21 +238,39 @@ class Chain:
 
     # ------------------------------------------------------------------ inverse of the placement
     def q_from_positions(self, positions: ArrayLike) -> Array:
-        """Joint vector placing the robots at ``positions`` (N, 2) — planar only.
+        """Joint vector placing the robots at ``positions`` (N, dim) [m]: the inverse of :meth:`robots`.
+
+        Planar: ``[θ_j, d_j]``. Spatial: per robot j, in the frame R at the end of link j−1 (frame 3(j−1) of
+        :meth:`frames`), the D–H model moves the tether along ``(cos β cos θ, cos β sin θ, sin β)`` with θ = α + the
+        yaw offset; so d_j = |p_j − p_{j−1}|, β_j = asin(z) and α_j = atan2(y, x) − offset of Rᵀ u_j (a vertical link
+        in that frame leaves α free: 0). Angles in (−π, π].
 
         Raises ``ParameterError`` when two consecutive points coincide (zero span: heading undefined).
         """
-        if self.spatial:
-            raise ParameterError("q_from_positions is defined for planar chains only")
         P = np.asarray(positions, dtype=float)
-        if P.shape != (self.n_robots, 2) or not np.all(np.isfinite(P)):
-            raise ParameterError(f"positions must be finite, shape ({self.n_robots}, 2); got {P.shape}")
+        if P.shape != (self.n_robots, self.dim) or not np.all(np.isfinite(P)):
+            raise ParameterError(f"positions must be finite, shape ({self.n_robots}, {self.dim}); got {P.shape}")
         full = np.vstack([self.base, P])
         diff = np.diff(full, axis=0)
         d = np.linalg.norm(diff, axis=1)
         if np.any(d < 1e-9):
             k = int(np.argmin(d)) + 1
             raise ParameterError(f"robot {k} coincides with the previous point of the chain: spans must be > 0")
+        if self.spatial:
+            q = np.zeros(self.dof)
+            frame = np.eye(3)  # rotation of frame 0 (the base)
+            tab_alpha, offset = self._dh_alpha, self._dh_offset
+            for j in range(self.n_robots):
+                local = frame.T @ (diff[j] / d[j])
+                beta = float(np.arcsin(np.clip(local[2], -1.0, 1.0)))
+                yaw = float(np.arctan2(local[1], local[0])) if np.hypot(local[0], local[1]) > 1e-12 else offset[3 * j]
+                alpha = (yaw - offset[3 * j] + np.pi) % (2 * np.pi) - np.pi
+                q[3 * j : 3 * j + 3] = alpha, beta, d[j]
+                i = np.arange(3 * j, 3 * j + 3)
+                theta = np.where(self.is_prismatic[i], 0.0, q[i]) + offset[i]
+                for R in dh_transform(theta, np.zeros(3), np.zeros(3), tab_alpha[i])[:, :3, :3]:
+                    frame = frame @ R
+            return q
         phi = np.unwrap(np.arctan2(diff[:, 1], diff[:, 0]))
         theta = np.diff(np.r_[0.0, phi])
         theta = (theta + np.pi) % (2 * np.pi) - np.pi

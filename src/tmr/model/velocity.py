@@ -1,4 +1,5 @@
-"""Two velocity coordinates of a planar chain: joint rates q̇ and robot velocities v, and the maps between them.
+"""Two velocity coordinates of a chain: joint rates q̇ and robot velocities v, and the maps between them (planar:
+:class:`VelocityMap`; spatial, tethered drones: :class:`VelocityMap3D` with singularity-free link coordinates).
 
 Joint rates ``q̇ = [θ̇1, ḋ1, …, θ̇N, ḋN]`` are the manipulator's coordinates (Caruso 2021 §3). Robot velocities
 ``v = [ṗ1, …, ṗN]`` (2N, m/s, the Cartesian velocity of every robot) are an equivalent set for a planar chain with
@@ -159,3 +160,98 @@ def robot_pattern(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
     b = w.copy()
     b[:, :-1] |= w[:, 1:]
     return np.repeat(b, 2, axis=1).reshape(m, 2 * N)
+
+
+class VelocityMap3D:
+    """The maps between robot velocities v (3N) and singularity-free link coordinates q̇ (3N) of a spatial chain.
+
+    Link j joins robot j−1 and robot j (robot 0 the fixed anchor) with direction u_j and length d_j > 0. Its rates are
+    ``q̇_j = [ω_j1, ω_j2, ḋ_j]``: the angular rates of u_j about the orthonormal pair (e1_j, e2_j) ⟂ u_j and the
+    length rate, with w_j = ṗ_j − ṗ_{j−1}:
+
+        ω_j1 = e1_jᵀ w_j / d_j,   ω_j2 = e2_jᵀ w_j / d_j,   ḋ_j = u_jᵀ w_j;
+        w_j = d_j (ω_j1 e1_j + ω_j2 e2_j) + ḋ_j u_j.
+
+    The pair is built at each configuration from the coordinate axis least aligned with u_j (e1 = that axis made
+    ⟂ u_j, e2 = u_j × e1), so the map is defined and well conditioned for every nonzero link — a vertical tether
+    included — unlike the chain's D–H angles (α, β), whose yaw is singular when a link is vertical (gimbal lock).
+    T (q̇ = T v) is block bidiagonal: link j's three rows touch robots j−1 and j only. Same methods as
+    :class:`VelocityMap`.
+
+    Args:
+        points: anchor and robots, ``(N+1, 3)`` [m]; consecutive points must differ.
+    """
+
+    def __init__(self, points: Array) -> None:
+        P = np.asarray(points, dtype=float)
+        if P.ndim != 2 or P.shape[1] != 3 or P.shape[0] < 2:
+            raise ParameterError(f"a spatial velocity map needs points (N+1, 3), got shape {P.shape}")
+        diff = np.diff(P, axis=0)
+        d = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+        if np.min(d) < 1e-9:
+            raise ParameterError(f"link coordinates need every link longer than 0, got lengths {d}")
+        u = diff / d[:, None]
+        N = d.size
+        k = np.argmin(np.abs(u), axis=1)  # the axis least aligned with u_j
+        a = np.zeros((N, 3))
+        a[np.arange(N), k] = 1.0
+        e1 = a - np.einsum("ij,ij->i", a, u)[:, None] * u
+        e1 /= np.linalg.norm(e1, axis=1)[:, None]
+        e2 = np.cross(u, e1)
+        self.n_robots = N
+        self.d = d
+        self.u = u
+        self.e1, self.e2 = e1, e2
+        #: per link, the rows (3, 3) mapping w_j to q̇_j: [e1/d; e2/d; u]
+        self.R = np.stack([e1 / d[:, None], e2 / d[:, None], u], axis=1)
+        self._T: Array | None = None
+
+    def joint_rates(self, v: Array) -> Array:
+        """q̇ = T v: link rates [rad/s, rad/s, m/s per link] of robot velocities ``v`` (3N,) [m/s]."""
+        V = np.asarray(v, dtype=float).reshape(self.n_robots, 3)
+        w = V.copy()
+        w[1:] -= V[:-1]
+        return np.einsum("jkl,jl->jk", self.R, w).reshape(-1)
+
+    def robot_velocities(self, qdot: Array) -> Array:
+        """v (3N,) [m/s] of link rates ``qdot`` (3N,): w_j = d_j (ω1 e1 + ω2 e2) + ḋ u, ṗ_j = Σ_{i≤j} w_i."""
+        Q = np.asarray(qdot, dtype=float).reshape(self.n_robots, 3)
+        w = (self.d * Q[:, 0])[:, None] * self.e1 + (self.d * Q[:, 1])[:, None] * self.e2 + Q[:, 2:3] * self.u
+        return np.cumsum(w, axis=0).reshape(-1)
+
+    def to_robot(self, A: Array) -> Array:
+        """Rows ``A`` on q̇, (m, 3N), as rows on v: ``A T`` (m, 3N); rounding noise is removed."""
+        A = np.asarray(A, dtype=float)
+        N = self.n_robots
+        W = np.einsum("mjk,jkl->mjl", A.reshape(A.shape[0], N, 3), self.R)  # coefficient of w_j
+        B = W.copy()
+        B[:, :-1] -= W[:, 1:]  # coefficient of ṗ_j: W_j − W_(j+1)
+        return _denoise(B.reshape(A.shape[0], 3 * N))
+
+    @property
+    def T(self) -> Array:
+        """The matrix T of ``q̇ = T v``, (3N, 3N), block bidiagonal (computed once per map)."""
+        if self._T is None:
+            N = self.n_robots
+            T = np.zeros((N, 3, N, 3))
+            j = np.arange(N)
+            T[j, :, j, :] = self.R
+            T[j[1:], :, j[1:] - 1, :] = -self.R[1:]
+            self._T = T.reshape(3 * N, 3 * N)
+        return self._T
+
+    @staticmethod
+    def to_joint(B: Array, robot_jacobians: Array) -> Array:
+        """Rows ``B`` on v, (m, 3N), as rows on q̇ through the robots' Jacobians (N, 3, n) in those coordinates."""
+        J = np.asarray(robot_jacobians, dtype=float)
+        return np.asarray(B, dtype=float) @ J.reshape(-1, J.shape[-1])
+
+
+def robot_pattern3d(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """Sparsity in v of rows whose sparsity in the link rates of :class:`VelocityMap3D` is ``mask`` (m, 3N)."""
+    m, n = mask.shape
+    N = n // 3
+    w = mask.reshape(m, N, 3).any(axis=2)  # coefficient of w_j (all three components)
+    b = w.copy()
+    b[:, :-1] |= w[:, 1:]
+    return np.repeat(b, 3, axis=1).reshape(m, 3 * N)

@@ -1,0 +1,736 @@
+"""Tasks and hard limits of a tethered drone chain, and its two formulations (``formulations/drones.md``, sections
+"Per-step QP (3-D)" and "pinv (3-D)").
+
+The QP works in the drones' velocities v = [ṗ1, …, ṗN] (3N, m/s): every row on a drone or a tether point is local in
+v (no gimbal lock at vertical tethers), and :class:`~tmr.model.velocity.VelocityMap3D` gives the singularity-free
+link coordinates the lexicographic QP couples to v. Each tether hangs as the catenary of
+:mod:`tmr.model.catenary3d`; its sample points, arc length and end tensions move with its two ends through the
+Jacobians of :func:`~tmr.model.catenary3d.sensitivities`, so a limit on the curve is a linear row in the ends'
+velocities. Every limit is linearised at the current positions and kept over one step with the velocity damper of
+the ground chain (:func:`tmr.control.limits.approach_bound`): a margin g ≥ 0 may shrink at most by
+``min(rate Ts, 1) g`` in one step.
+
+:func:`make_drone_qp` stacks, as the ground planner does (``tmr.planner.make_qp``): level 1 the leader's reference,
+level 2 the tethers' regulation with the followers' route references (and a little smoothness), level 3 energy and
+smoothness; hard limits every level keeps: drone clearance, the room (floor, ceiling, walls), separation, tether
+curve clearance, arc length, drone-end tension, speed and acceleration (the last one a comfort limit).
+:func:`make_drone_pinv` is Caruso 2021's CLIK (eq. 5) on the 3N-joint ``Chain(spatial=True)``: leader task, then a
+soft obstacle task at the critical point, tether regulation in the null space (gradient projection, eq. 7).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tmr.control.limits import Limit, LimitRows, RobotSeparation, _infinite, approach_bound
+from tmr.control.pinv import dls_inverse, null_space_projector
+from tmr.control.qp import Level, LexicographicQP
+from tmr.control.tasks import Task, TaskRows
+from tmr.errors import ParameterError
+from tmr.model.catenary3d import Catenary3D, DroneTetherParams, TetherSensitivities, sensitivities_batch, solve3d
+from tmr.model.chain import Chain
+from tmr.model.params import DroneParams
+from tmr.model.velocity import VelocityMap3D
+from tmr.world.world3d import World3D
+
+Array = NDArray[np.float64]
+
+__all__ = [
+    "DroneReferencesLike",
+    "DroneStepContext",
+    "DroneLeader",
+    "DroneFollowers",
+    "TetherChords",
+    "DroneEnergy",
+    "DroneSmoothness",
+    "DroneClearance",
+    "RoomBounds",
+    "DroneSeparation",
+    "TetherClearance",
+    "TetherLength",
+    "TetherTension",
+    "DroneSpeed",
+    "DroneAcceleration",
+    "DroneQP",
+    "DronePinv",
+    "make_drone_qp",
+    "make_drone_pinv",
+]
+
+
+class DroneReferencesLike(Protocol):
+    """What the formulations read of the references (``tmr.route.route3d.DroneReferences`` has it): times t (K+1,)
+    [s], the leader's x (K+1, 3) [m] and xd (K+1, 3) [m/s], every drone's positions (K+1, N, 3) [m] and velocities
+    (K+1, N, 3) [m/s] along the route."""
+
+    t: Array
+    x: Array
+    xd: Array
+    positions: Array
+    velocities: Array
+
+
+class _FreeBox:
+    """The QP's box on the link rates: none (every drone limit is a row on v); kept for the QP's interface."""
+
+    def __init__(self, n: int) -> None:
+        self.lo, self.hi = np.full(n, -np.inf), np.full(n, np.inf)
+
+    def compute(self, ctx: Any, relax: bool = False) -> tuple[Array, Array]:
+        return self.lo, self.hi
+
+
+def _segment_frames(a: Array, b: Array) -> tuple[Array, Array, Array]:
+    """Per segment a–b (M, 3): the rotation (M, 3, 3) whose z axis is along it, its midpoint (M, 3) and half length
+    (M,) — the placement of coal's capsule (axis z) — all at once in numpy."""
+    v = b - a
+    length = np.sqrt(np.einsum("ij,ij->i", v, v))
+    u = v / np.maximum(length, 1e-300)[:, None]
+    helper = np.where((np.abs(u[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    e1 = np.cross(helper, u)
+    e1 /= np.maximum(np.linalg.norm(e1, axis=1), 1e-300)[:, None]
+    R = np.stack([e1, np.cross(u, e1), u], axis=2)
+    return R, 0.5 * (a + b), 0.5 * length
+
+
+def segment_box_distance(a: Array, b: Array, lo: Array, hi: Array) -> tuple[Array, Array]:
+    """Exact distance [m] from the segments a–b (M, 3) to the axis-aligned box [lo, hi], and the parameter t ∈ [0, 1]
+    of the segment's nearest point (M,), vectorised. Along a segment the squared distance is piecewise quadratic in
+    t, with breakpoints where a coordinate crosses a face: on each of the (≤ 7) pieces the minimiser is the clipped
+    stationary point of its quadratic; the smallest over the pieces is the minimum (the distance is convex in t).
+    0 for a segment touching or crossing the box (its depth is not computed here)."""
+    v = b - a
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cross = np.concatenate([(lo - a) / v, (hi - a) / v], axis=1)  # (M, 6); ±inf/nan where v_k = 0
+    cross = np.where(np.isfinite(cross), np.clip(cross, 0.0, 1.0), 0.0)
+    knots = np.sort(np.concatenate([np.zeros((a.shape[0], 1)), cross, np.ones((a.shape[0], 1))], axis=1), axis=1)
+    t0, t1 = knots[:, :-1], knots[:, 1:]  # (M, 7) pieces
+    x_mid = a[:, None, :] + (0.5 * (t0 + t1))[..., None] * v[:, None, :]  # (M, 7, 3)
+    below, above = x_mid < lo, x_mid > hi
+    bound = np.where(below, lo, np.where(above, hi, 0.0))
+    active = below | above
+    off = np.where(active, a[:, None, :] - bound, 0.0)  # x_k(t) − bound_k = off_k + t v_k on the active axes
+    vv = np.where(active, v[:, None, :], 0.0)
+    den = np.einsum("mpk,mpk->mp", vv, vv)
+    num = -np.einsum("mpk,mpk->mp", off, vv)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ts = np.where(den > 0.0, num / den, t0)
+    ts = np.clip(ts, t0, t1)
+    X = a[:, None, :] + ts[..., None] * v[:, None, :]
+    gap = X - np.clip(X, lo, hi)
+    dist = np.sqrt(np.einsum("mpk,mpk->mp", gap, gap))
+    best = np.argmin(dist, axis=1)
+    rows = np.arange(a.shape[0])
+    return dist[rows, best], ts[rows, best]
+
+
+def segment_nearest(world: World3D, a: Array, b: Array, cap: float = np.inf) -> tuple[Array, Array, Array]:
+    """Clearance [m] of the segments a–b (M, 3) in ``world`` (its walls included), the unit gradient (M, 3) of the
+    clearance at the segment's nearest point (from the obstacle's nearest point towards it; away from the nearest wall)
+    and that point's parameter t ∈ [0, 1] along a → b (M,). Boxes in closed form (:func:`segment_box_distance`), other
+    obstacles (and a piece touching a box) by a capsule query of radius 0 (coal, as :meth:`World3D.segment_clearance`,
+    with the capsules' placements computed at once); the walls' term is affine
+    along a segment, so its minimum is at an end. Obstacles whose bounding box is farther than ``cap`` [m] from a
+    segment are not queried: a clearance above ``cap`` is reported as some value above it (exact below it)."""
+    import coal
+
+    from tmr.world.world3d import _IDENTITY, _REQUEST, _PlacedBox, _placement, _winding_number
+
+    ca, ga = world._wall(a)
+    cb, gb = world._wall(b)
+    at_b = cb < ca
+    out = np.where(at_b, cb, ca)
+    grad = np.where(at_b[:, None], gb, ga)
+    t = at_b.astype(float)
+    lo_seg, hi_seg = np.minimum(a, b), np.maximum(a, b)
+    frames: tuple[Array, Array, Array] | None = None
+    capsule = coal.Capsule(0.0, 1.0)
+    res = coal.DistanceResult()
+    for ob in world.obstacles:
+        gap = np.linalg.norm(np.maximum(0.0, np.maximum(ob.lo - hi_seg, lo_seg - ob.hi)), axis=1)
+        cand = np.flatnonzero(gap < np.minimum(out, cap + world.safety_radius))
+        if len(cand) == 0:
+            continue
+        inside = np.zeros(len(cand), dtype=bool)
+        if not ob.signed:
+            assert ob.triangles is not None
+            w = _winding_number(np.vstack([a[cand], b[cand]]), ob.triangles)
+            inside = (np.abs(w[: len(cand)]) > 0.5) | (np.abs(w[len(cand) :]) > 0.5)
+        geom = ob.geometry
+        if isinstance(geom, _PlacedBox):  # boxes in numpy (exact); coal only for a piece touching or inside one
+            dist, tb = segment_box_distance(a[cand], b[cand], ob.lo, ob.hi)
+            closer = (dist > 1e-9) & (dist < out[cand])
+            i = cand[closer]
+            X = a[i] + tb[closer, None] * (b[i] - a[i])
+            grad[i] = (X - np.clip(X, ob.lo, ob.hi)) / dist[closer, None]
+            out[i], t[i] = dist[closer], tb[closer]
+            cand = cand[dist <= 1e-9]
+            shape2, place2 = geom.box, _placement(geom.centre)
+        else:
+            shape2, place2 = geom, _IDENTITY
+        if len(cand) and frames is None:
+            frames = _segment_frames(a, b)
+        R, mid, half = frames if frames is not None else (None, None, None)
+        for k, i in enumerate(cand):
+            assert R is not None and mid is not None and half is not None
+            capsule.halfLength = max(float(half[i]), 1e-12)
+            res.clear()
+            d = float(coal.distance(capsule, coal.Transform3s(R[i], mid[i]), shape2, place2, _REQUEST, res))
+            if inside[k]:
+                d = -abs(d) if d > 0 else d
+            if d < out[i]:
+                out[i] = d
+                p1, p2 = np.asarray(res.getNearestPoint1()), np.asarray(res.getNearestPoint2())
+                v = p1 - p2
+                nv = float(np.sqrt(v @ v))
+                if nv > 1e-12:
+                    grad[i] = math.copysign(1.0, d) * v / nv
+                t[i] = min(1.0, max(0.0, 0.5 + float((p1 - mid[i]) @ R[i][:, 2]) / (2.0 * half[i])))
+    return out - world.safety_radius, grad, t
+
+
+class DroneStepContext:
+    """Per-step state of the drone chain shared by tasks and limits (computed once per step by :meth:`update`).
+
+    Attributes (after ``update``): k, points (N+1, 3) (anchor then drones) [m], v_prev (3N,) the previous step's
+    velocities [m/s], velocity_map (:class:`VelocityMap3D`), qdot_prev = T v_prev (link rates), catenaries (one
+    :class:`Catenary3D` per tether, tether j from point j−1 to point j), sens (their stacked
+    :class:`~tmr.model.catenary3d.TetherSensitivities` at the interior fractions i/(m+1), i = 1..m),
+    drone_clearance (N,) [m] and drone_gradient (N, 3) (the world grown by the drone radius), sample_points
+    (N, m, 3); each tether as the polyline through its ends and samples, per piece (N, m+1): segment_clearance [m],
+    segment_gradient (N, m+1, 3), segment_t (the nearest point's parameter on the piece), in the world with radius 0
+    (the bare obstacles and walls); x_d, xd_d the leader's reference; ref_positions, ref_velocities (N, 3).
+    q: the 3N joints (``pinv`` only, else None).
+
+    Args:
+        chain: ``Chain(n, base, spatial=True)``.
+        world: the world with ``safety_radius`` = the drone radius r.
+        tether: tether and drone parameters.
+        references: the route references (:class:`DroneReferencesLike`).
+        Ts: sampling period [s]; samples: interior tether samples m per tether.
+        cap: tether pieces farther than this [m] from an obstacle's bounding box skip the exact query (their rows
+            are inactive: use the limits' activation distance).
+    """
+
+    def __init__(
+        self,
+        chain: Chain,
+        world: World3D,
+        tether: DroneTetherParams,
+        references: DroneReferencesLike,
+        Ts: float,
+        samples: int,
+        cap: float = np.inf,
+    ) -> None:
+        if not chain.spatial:
+            raise ParameterError("a drone chain is a spatial chain: Chain(n, base, spatial=True)")
+        self.chain = chain
+        self.world = world
+        self.bare = world.with_safety_radius(0.0)
+        self.tether = tether
+        self.references = references
+        self.Ts = float(Ts)
+        self.fractions = np.arange(1, int(samples) + 1) / (int(samples) + 1)
+        #: tether pieces farther than this from every obstacle are not queried exactly [m] (their rows are inactive)
+        self.cap = float(cap)
+        self.k = 0
+        self.q: Array | None = None
+        self.catenaries: list[Catenary3D] = []
+
+    def update(self, k: int, positions: Array, v_prev: Array, q: Array | None = None) -> None:
+        """The quantities of step ``k`` with the drones at ``positions`` (N, 3) [m] after velocities ``v_prev`` (3N,).
+
+        Raises:
+            TetherSpanError: a tether has no catenary (its span is too long for the winch tension).
+        """
+        N = self.chain.n_robots
+        self.k = int(k)
+        self.q = q
+        P = np.vstack([self.chain.base[None, :], np.asarray(positions, dtype=float).reshape(N, 3)])
+        self.points = P
+        self.v_prev = np.asarray(v_prev, dtype=float).reshape(-1)
+        self.velocity_map = VelocityMap3D(P)
+        self.qdot_prev = self.velocity_map.T @ self.v_prev
+        warm = self.catenaries if len(self.catenaries) == N else [None] * N
+        self.catenaries = [solve3d(P[j], P[j + 1], self.tether, warm=warm[j]) for j in range(N)]
+        self.sens: TetherSensitivities = sensitivities_batch(self.catenaries, self.fractions, self.tether)
+        samples = self.sens.points  # (N, m, 3)
+        m = self.fractions.size
+        c0, g0 = self.world.clearance_and_gradient(P[1:])
+        self.drone_clearance, self.drone_gradient = c0, g0
+        # each tether as the polyline p, X_1..X_m, q: its m+1 pieces, each with its point nearest an obstacle or wall
+        poly = np.concatenate([P[:-1, None, :], samples, P[1:, None, :]], axis=1)  # (N, m+2, 3)
+        c, g, t = segment_nearest(self.bare, poly[:, :-1].reshape(-1, 3), poly[:, 1:].reshape(-1, 3), self.cap)
+        self.segment_clearance = c.reshape(N, m + 1)
+        self.segment_gradient = g.reshape(N, m + 1, 3)
+        self.segment_t = t.reshape(N, m + 1)
+        self.sample_points = samples
+        ref = self.references
+        kk = min(self.k, len(ref.t) - 1)
+        self.x_d, self.xd_d = ref.x[kk], ref.xd[kk]
+        self.ref_positions, self.ref_velocities = ref.positions[kk], ref.velocities[kk]
+
+    @property
+    def robot_jacobians(self) -> Array:
+        """Joint-space Jacobians of every drone (N, 3, 3N) (``pinv``: needs ``q``)."""
+        if self.q is None:
+            raise ParameterError("the drones' joint Jacobians need the joint vector q (pinv)")
+        return self.chain.robot_jacobians(self.q)
+
+
+# ---------------------------------------------------------------------------------------------------------- tasks
+class _DroneTask(Task):
+    space = "robot"
+
+
+class DroneLeader(_DroneTask):
+    """Leader tracking in 3-D (Caruso 2021 eq. 20 on v): ``ṗ_N = ẋ_d + K (x_d − p_N)`` (3 rows) [m/s]."""
+
+    name = "leader"
+
+    def __init__(self, n_robots: int, gain: float) -> None:
+        self.gain = float(gain)
+        J = np.zeros((3, 3 * n_robots))
+        J[:, -3:] = np.eye(3)
+        J.flags.writeable = False
+        self.J = J
+
+    def compute(self, ctx: DroneStepContext) -> TaskRows:  # type: ignore[override]
+        return TaskRows(self.J, ctx.xd_d + self.gain * (ctx.x_d - ctx.points[-1]))
+
+
+class DroneFollowers(_DroneTask):
+    """Followers' route references: ``ṗ_i = ṗ_ref,i + K (p_ref,i − p_i)`` for drones 1..N−1 (3(N−1) rows) [m/s], so
+    that the chain follows the route (and does not wind round a pillar the route does not)."""
+
+    name = "followers"
+
+    def __init__(self, n_robots: int, gain: float) -> None:
+        self.gain = float(gain)
+        J = np.eye(3 * n_robots)[: 3 * (n_robots - 1)].copy()
+        J.flags.writeable = False
+        self.J = J
+
+    def compute(self, ctx: DroneStepContext) -> TaskRows:  # type: ignore[override]
+        P, R, V = ctx.points[1:-1], ctx.ref_positions[:-1], ctx.ref_velocities[:-1]
+        return TaskRows(self.J, (V + self.gain * (R - P)).reshape(-1))
+
+
+class TetherChords(_DroneTask):
+    """Tether regulation: each chord length c_j = |p_j − p_{j−1}| towards ``fraction`` × the references' spacing,
+    ``u_jᵀ(ṗ_j − ṗ_{j−1}) = K (c*_j − c_j)`` (N rows) [m/s] — the drone counterpart of the ground chain's span
+    regulation (Caruso 2021 eq. 13, 23)."""
+
+    name = "tethers"
+
+    def __init__(self, n_robots: int, gain: float, fraction: float) -> None:
+        self.gain, self.fraction = float(gain), float(fraction)
+
+    def compute(self, ctx: DroneStepContext) -> TaskRows:  # type: ignore[override]
+        vm = ctx.velocity_map
+        N = vm.n_robots
+        J = np.zeros((N, N, 3))
+        j = np.arange(N)
+        J[j, j] = vm.u
+        J[j[1:], j[1:] - 1] = -vm.u[1:]
+        ref = np.vstack([ctx.chain.base[None, :], ctx.ref_positions])
+        target = self.fraction * np.linalg.norm(np.diff(ref, axis=0), axis=1)
+        return TaskRows(J.reshape(N, 3 * N), self.gain * (target - vm.d))
+
+
+class DroneEnergy(_DroneTask):
+    """Energy: ``v ≈ 0`` (3N rows)."""
+
+    name = "energy"
+
+    def __init__(self, n_robots: int) -> None:
+        self.J = np.eye(3 * n_robots)
+        self.J.flags.writeable = False
+        self.zero = np.zeros(3 * n_robots)
+
+    def compute(self, ctx: DroneStepContext) -> TaskRows:  # type: ignore[override]
+        return TaskRows(self.J, self.zero)
+
+
+class DroneSmoothness(DroneEnergy):
+    """Smoothness: ``v ≈ v_{k−1}`` (3N rows)."""
+
+    name = "smoothness"
+
+    def compute(self, ctx: DroneStepContext) -> TaskRows:  # type: ignore[override]
+        return TaskRows(self.J, ctx.v_prev)
+
+
+# --------------------------------------------------------------------------------------------------------- limits
+def _robot_pattern(N: int, rows_robots: list[list[int]]) -> NDArray[np.bool_]:
+    """(m, 3N) mask: row r may touch the 0-based drones in ``rows_robots[r]`` (3 columns each)."""
+    mask = np.zeros((len(rows_robots), N, 3), dtype=bool)
+    for r, robots in enumerate(rows_robots):
+        mask[r, robots] = True
+    return mask.reshape(len(rows_robots), 3 * N)
+
+
+class _DroneLimit(Limit):
+    space = "robot"
+
+
+class DroneClearance(_DroneLimit):
+    """Every drone at least ``d_safe`` beyond its radius r from every obstacle and the room's walls, floor and ceiling
+    (World3D's clearance, exact, with its gradient): ``Ts ∇dᵀ ṗ_i ≥ −min(rate Ts, 1)(d − d_safe)`` (N rows; a drone
+    farther than ``activation`` has an inactive row). As :class:`tmr.control.limits.ObstacleClearance` on the ground:
+    the distance to a convex obstacle is convex, so its linearisation is conservative."""
+
+    name = "drone_clearance"
+
+    def __init__(self, n_robots: int, d_safe: float, approach_rate: float, activation: float) -> None:
+        self.N, self.d_safe, self.rate, self.activation = n_robots, float(d_safe), float(approach_rate), activation
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        return _robot_pattern(self.N, [[i] for i in range(self.N)])
+
+    def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
+        N = self.N
+        A = np.zeros((N, N, 3))
+        A[np.arange(N), np.arange(N)] = ctx.Ts * ctx.drone_gradient
+        d = ctx.drone_clearance
+        lower = approach_bound(d, self.d_safe, self.rate, ctx.Ts)
+        lower[d > self.activation] = -np.inf
+        return LimitRows(A.reshape(N, 3 * N), lower, _infinite(N))
+
+
+class RoomBounds(_DroneLimit):
+    """Every drone inside the room shrunk by r + d_safe, per axis (altitude between floor and ceiling included):
+    ``lo ≤ p + Ts ṗ ≤ hi`` with the velocity damper on both sides (3N rows, exact: the walls are planes)."""
+
+    name = "room"
+
+    def __init__(self, n_robots: int, bounds: Any, margin: float, approach_rate: float) -> None:
+        b = np.asarray(bounds, dtype=float)
+        self.N, self.lo, self.hi, self.rate = n_robots, b[:3] + margin, b[3:] - margin, float(approach_rate)
+        self.eye = np.eye(3 * n_robots)
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        return np.eye(3 * self.N, dtype=bool)
+
+    def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
+        P = ctx.points[1:]
+        low = approach_bound((P - self.lo).reshape(-1), 0.0, self.rate, ctx.Ts)
+        high = -approach_bound((self.hi - P).reshape(-1), 0.0, self.rate, ctx.Ts)
+        return LimitRows(ctx.Ts * self.eye, low, high)
+
+
+class DroneSeparation(RobotSeparation):
+    """Drones at least 2r + margin apart, every pair (:class:`tmr.control.limits.RobotSeparation` in 3-D)."""
+
+    name = "separation"
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        N = chain.n_robots
+        i = np.repeat(np.arange(N), self.k)
+        robot = np.repeat(np.arange(N), 3)[None, :]
+        return np.abs(robot - i[:, None]) <= self.k
+
+
+class _TetherRows(_DroneLimit):
+    """Rows on tether j's two ends: point j−1 (a drone for j ≥ 2, the fixed anchor for j = 1) and drone j."""
+
+    @staticmethod
+    def _scatter(N: int, per: int, dp: Array, dq: Array) -> Array:
+        """A (N·per, 3N) from per-row gradients w.r.t. the tether's p end ``dp`` and q end ``dq``, (N, per, 3)."""
+        A = np.zeros((N, per, N, 3))
+        j = np.arange(N)
+        A[j, :, j, :] = dq
+        A[j[1:], :, j[1:] - 1, :] = dp[1:]
+        return A.reshape(N * per, 3 * N)
+
+    def _mask(self, N: int, per: int) -> NDArray[np.bool_]:
+        return _robot_pattern(N, [[j - 1, j] if j else [j] for j in range(N) for _ in range(per)])
+
+
+class TetherClearance(_TetherRows):
+    """The whole tether curve at least c_t (+ ``margin``) from every obstacle, the floor and the walls.
+
+    Each catenary is sampled at the m interior arc fractions i/(m+1) and seen as the polyline through its ends and the
+    samples; each of its m+1 pieces gives a row at its point nearest an obstacle (or wall), X = (1−t) X_i + t X_{i+1}
+    with clearance c and unit gradient n (World3D with radius 0, coal capsule queries):
+    ``Ts nᵀ (∂X/∂p ṗ + ∂X/∂q q̇) ≥ −min(rate Ts, 1)(c − c_t − margin)`` (N·(m+1) rows; the anchor end of tether 1 is
+    fixed). ∂X_i/∂(p, q) come from implicit differentiation of the catenary
+    (:func:`~tmr.model.catenary3d.sensitivities`): the sag's motion is in the row, not only the chord's. A piece of
+    arc length δ departs from its chord by at most δ²/(8a) (a the catenary parameter: 0.8 cm for δ = 0.9 m, a = 13 m),
+    which ``margin`` covers; rows on pieces (not points) leave no gap between samples where an obstacle edge slips in.
+    """
+
+    name = "tether_clearance"
+
+    def __init__(self, n_robots: int, samples: int, c_t: float, margin: float, rate: float, activation: float) -> None:
+        self.N, self.m = n_robots, int(samples)
+        self.c_min, self.rate, self.activation = float(c_t) + float(margin), float(rate), float(activation)
+        f = np.arange(1, self.m + 1) / (self.m + 1)
+        self._ends = (np.r_[1.0, np.zeros(self.m), 0.0], np.r_[0.0, np.zeros(self.m), 1.0])  # p, q weights
+        self.fractions = f
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        return self._mask(self.N, self.m + 1)
+
+    def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
+        N, m = self.N, self.m
+        eye = np.eye(3)
+        Jp = np.empty((N, m + 2, 3, 3))
+        Jq = np.empty((N, m + 2, 3, 3))
+        Jp[:, 1:-1], Jq[:, 1:-1] = ctx.sens.dpoints_dp, ctx.sens.dpoints_dq
+        Jp[:, 0], Jq[:, 0], Jp[:, -1], Jq[:, -1] = eye, 0.0, 0.0, eye
+        t = ctx.segment_t[..., None, None]  # (N, m+1, 1, 1)
+        Jp_x = (1.0 - t) * Jp[:, :-1] + t * Jp[:, 1:]
+        Jq_x = (1.0 - t) * Jq[:, :-1] + t * Jq[:, 1:]
+        g = ctx.segment_gradient
+        dp = np.einsum("jik,jikl->jil", g, Jp_x)
+        dq = np.einsum("jik,jikl->jil", g, Jq_x)
+        A = ctx.Ts * self._scatter(N, m + 1, dp, dq)
+        c = ctx.segment_clearance.reshape(-1)
+        lower = approach_bound(c, self.c_min, self.rate, ctx.Ts)
+        lower[c > self.activation] = -np.inf
+        return LimitRows(A, lower, _infinite(c.size))
+
+
+class TetherLength(_TetherRows):
+    """Arc length L_j ≤ L_max − margin: ``Ts (∇_p L ṗ + ∇_q L q̇) ≤ min(rate Ts, 1)(L_max − margin − L)`` (N rows)."""
+
+    name = "tether_length"
+
+    def __init__(self, n_robots: int, L_max: float, rate: float) -> None:
+        self.N, self.L_max, self.rate = n_robots, float(L_max), float(rate)
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        return self._mask(self.N, 1)
+
+    def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
+        S = ctx.sens
+        dp, dq, L = S.dlength_dp[:, None, :], S.dlength_dq[:, None, :], S.length
+        upper = -approach_bound(self.L_max - L, 0.0, self.rate, ctx.Ts)
+        return LimitRows(ctx.Ts * self._scatter(self.N, 1, dp, dq), np.full(self.N, -np.inf), upper)
+
+
+class TetherTension(_TetherRows):
+    """Tension at every drone end ≤ spare thrust − margin (the winch's end of tether 1 is the ground station: no row
+    there, its tension is the constant-ish winch side): 2 rows per tether (p end, q end; the p end of tether 1 has a
+    zero row), ``Ts ∇T · (ṗ, q̇) ≤ min(rate Ts, 1)(T_max − T)``."""
+
+    name = "tether_tension"
+
+    def __init__(self, n_robots: int, T_max: float, rate: float) -> None:
+        self.N, self.T_max, self.rate = n_robots, float(T_max), float(rate)
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        return self._mask(self.N, 2)
+
+    def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
+        S = ctx.sens
+        dp = np.stack([S.dtension_p_dp, S.dtension_q_dp], axis=1)  # (N, 2, 3)
+        dq = np.stack([S.dtension_p_dq, S.dtension_q_dq], axis=1)
+        T = np.column_stack([S.tension_p, S.tension_q])
+        upper = -approach_bound(self.T_max - T, 0.0, self.rate, ctx.Ts)
+        A = self._scatter(self.N, 2, dp, dq)
+        upper = upper.reshape(-1)
+        upper[0] = np.inf  # tether 1's p end is the ground winch, not a drone
+        A[0] = 0.0
+        return LimitRows(ctx.Ts * A, np.full(2 * self.N, -np.inf), upper)
+
+
+class DroneSpeed(_DroneLimit):
+    """|ṗ_i,axis| ≤ v_max per axis [m/s] (3N rows)."""
+
+    name = "drone_speed"
+
+    def __init__(self, n_robots: int, v_max: float) -> None:
+        v = np.full(3 * n_robots, float(v_max))
+        self.N, self.rows = n_robots, LimitRows(np.eye(3 * n_robots), -v, v)
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        return np.eye(3 * self.N, dtype=bool)
+
+    def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
+        return self.rows
+
+
+class DroneAcceleration(DroneSpeed):
+    """|ṗ_i − ṗ_i,k−1| ≤ a_max Ts per axis (3N rows; a comfort limit, dropped for a step only if the safety limits
+    alone have no solution)."""
+
+    name = "drone_acceleration"
+    relaxable = True
+
+    def __init__(self, n_robots: int, a_max: float) -> None:
+        super().__init__(n_robots, 1.0)
+        self.a_max = float(a_max)
+
+    def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
+        dv = self.a_max * ctx.Ts
+        return LimitRows(self.rows.A, ctx.v_prev - dv, ctx.v_prev + dv)
+
+
+# --------------------------------------------------------------------------------------------------- formulations
+def _anchor(references: Any, base: Any | None) -> Array:
+    """The anchor: ``base`` if given, else ``references.base``."""
+    b = base if base is not None else getattr(references, "base", None)
+    if b is None:
+        raise ParameterError("the drone chain needs its anchor: pass base=(x, y, z) or references with a .base")
+    return np.asarray(b, dtype=float)
+
+
+class DroneQP:
+    """The lexicographic QP on the drones' velocities (:func:`make_drone_qp`); ``step`` returns v (3N,) [m/s]."""
+
+    name = "qp"
+    integrates = "robots"
+
+    def __init__(self, qp: LexicographicQP, context: DroneStepContext) -> None:
+        self.qp, self.context = qp, context
+
+    def reset(self) -> None:
+        self.qp.reset()
+
+    def step(self, ctx: DroneStepContext) -> tuple[Array, dict[str, float]]:
+        qdot, diag = self.qp.step(ctx)  # type: ignore[arg-type]
+        return ctx.velocity_map.robot_velocities(qdot), diag
+
+    @property
+    def level_keys(self) -> list[str]:
+        return self.qp.level_keys
+
+
+def make_drone_qp(
+    world: World3D,
+    tether: DroneTetherParams,
+    params: DroneParams,
+    n: int,
+    references: DroneReferencesLike,
+    base: Any | None = None,
+) -> DroneQP:
+    """The drone chain's lexicographic QP (``formulations/drones.md``, "Per-step QP (3-D)").
+
+    Args:
+        world: the world, ``safety_radius`` = the drone radius r [m].
+        tether: tether and drone parameters (c_t, L_max, spare thrust).
+        params: planner parameters (gains, margins, limits, ``tether_samples``).
+        n: number of drones N.
+        references: the route references (leader and every drone).
+        base: the anchor (ground winch) (3,) [m]; default: ``references.base``.
+    """
+    chain = Chain(int(n), _anchor(references, base), spatial=True)
+    p = params
+    act = p.clearance_activation
+    ctx = DroneStepContext(chain, world, tether, references, p.Ts, p.tether_samples, cap=act + tether.clearance)
+    N = chain.n_robots
+    tether_level: list[tuple[Task, float]] = [(TetherChords(N, p.route_gain, p.span_target_fraction), 1.0)]
+    if N > 1:
+        tether_level.append((DroneFollowers(N, p.route_gain), 1.0))
+    levels = [
+        Level([(DroneLeader(N, p.leader_gain), 1.0)], "leader"),
+        Level(tether_level, "tethers"),
+        Level([(DroneEnergy(N), p.energy_weight), (DroneSmoothness(N), p.smoothness_weight)], "energy"),
+    ]
+    r = world.safety_radius
+    limits: list[Limit] = [
+        DroneClearance(N, p.d_safe, p.approach_rate, act),
+        RoomBounds(N, world.bounds, r + p.d_safe, p.approach_rate),
+        TetherClearance(N, p.tether_samples, tether.clearance, p.d_safe, p.approach_rate, act + tether.clearance),
+        TetherLength(N, tether.tether_length - p.length_margin, p.approach_rate),
+        TetherTension(N, tether.spare_thrust - p.tension_margin, p.approach_rate),
+        DroneSpeed(N, p.drone_speed_max),
+        DroneAcceleration(N, p.drone_accel_max),
+    ]
+    if N > 1:
+        limits.append(
+            DroneSeparation(
+                chain, r, p.separation_margin, neighbours=N - 1, activation=2 * r + 3.0, approach_rate=p.approach_rate
+            )  # fmt: skip
+        )
+    qp = LexicographicQP(chain, levels, limits, _FreeBox(chain.dof), solver=p.solver)  # type: ignore[arg-type]
+    return DroneQP(qp, ctx)
+
+
+class DronePinv:
+    """Caruso 2021's CLIK (eq. 5) on the 3N-joint ``Chain(spatial=True)`` (:func:`make_drone_pinv`); ``step``
+    returns the joint rates q̇ (3N,), integrated by the loop.
+
+    Tasks by priority: the leader (eq. 20, J_e), then — only while the critical point (the drone or tether sample
+    nearest its limit) is within ``danger`` of it — a soft obstacle task pushing that point away along the clearance
+    gradient (eq. 14–18: ``∇cᵀ J_c q̇ = k_o (danger − (c − c_min))``); tether regulation (chord lengths towards
+    the references' spacing, on the prismatic joints) by the gradient projection method in the null space of both
+    (eq. 7). J_c of a tether sample is ∂X/∂p J_{j−1} + ∂X/∂q J_j (catenary sensitivities times the drones' joint
+    Jacobians). Soft: nothing stops a limit from being crossed (the paper's baseline).
+    """
+
+    name = "pinv"
+    integrates = "joints"
+
+    def __init__(self, context: DroneStepContext, params: DroneParams, tether: DroneTetherParams) -> None:
+        self.context, self.p, self.tether = context, params, tether
+        self.danger = params.clearance_activation
+        self.damping = 1e-4
+
+    def reset(self) -> None:
+        pass
+
+    def step(self, ctx: DroneStepContext) -> tuple[Array, dict[str, float]]:
+        chain, p = ctx.chain, self.p
+        JR = ctx.robot_jacobians  # (N, 3, 3N)
+        N = chain.n_robots
+        J_e = JR[-1]
+        v_e = ctx.xd_d + p.leader_gain * (ctx.x_d - ctx.points[-1])
+        qdot = dls_inverse(J_e, self.damping) @ v_e
+        P = null_space_projector(J_e)
+        rows = [J_e]
+        # critical point: a drone (clearance beyond d_safe) or a tether sample (beyond c_t)
+        margins = np.concatenate(
+            [ctx.drone_clearance - p.d_safe, ctx.segment_clearance.reshape(-1) - self.tether.clearance]
+        )
+        i = int(np.argmin(margins))
+        active = margins[i] < self.danger
+        if active:
+            if i < N:
+                g, Jc = ctx.drone_gradient[i], JR[i]
+            else:  # the nearest point of piece s of tether j: X = (1 − t) X_s + t X_{s+1} (X_0 = p, X_{m+1} = q)
+                j, s = divmod(i - N, ctx.fractions.size + 1)
+                t = ctx.segment_t[j, s]
+                sens = ctx.sens[j]
+                eye, zero = np.eye(3), np.zeros((3, 3))
+                Dp = [eye, *sens.dpoints_dp, zero]
+                Dq = [zero, *sens.dpoints_dq, eye]
+                dXdp = (1.0 - t) * Dp[s] + t * Dp[s + 1]
+                dXdq = (1.0 - t) * Dq[s] + t * Dq[s + 1]
+                Jc = dXdq @ JR[j]
+                if j > 0:
+                    Jc = Jc + dXdp @ JR[j - 1]
+                g = ctx.segment_gradient[j, s]
+            Jo = (g @ Jc)[None, :]
+            vo = np.array([p.leader_gain * (self.danger - margins[i])])
+            qdot = qdot + P @ (dls_inverse(Jo, self.damping) @ (vo - Jo @ qdot))
+            rows.append(Jo)
+            P = null_space_projector(np.vstack(rows))
+        ref = np.vstack([chain.base[None, :], ctx.ref_positions])
+        target = p.span_target_fraction * np.linalg.norm(np.diff(ref, axis=0), axis=1)
+        opt = np.zeros(chain.dof)
+        opt[chain.prismatic_index] = p.route_gain * (target - np.linalg.norm(np.diff(ctx.points, axis=0), axis=1))
+        qdot = qdot + P @ opt
+        return qdot, {"obstacle_active": float(active), "critical_clearance": float(margins[i])}
+
+
+def make_drone_pinv(
+    world: World3D,
+    tether: DroneTetherParams,
+    params: DroneParams,
+    n: int,
+    references: DroneReferencesLike,
+    base: Any | None = None,
+) -> DronePinv:
+    """Caruso 2021's CLIK on the spatial chain (``formulations/drones.md``, "pinv (3-D)"); arguments as
+    :func:`make_drone_qp`."""
+    chain = Chain(int(n), _anchor(references, base), spatial=True)
+    cap = params.clearance_activation + tether.clearance  # the soft task acts within the danger distance only
+    ctx = DroneStepContext(chain, world, tether, references, params.Ts, params.tether_samples, cap=cap)
+    return DronePinv(ctx, params, tether)

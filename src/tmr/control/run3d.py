@@ -1,0 +1,177 @@
+"""The drone chain's planning loop: references + formulation → :class:`~tmr.control.plan3d.DronePlan`
+(``formulations/drones.md``, "Per-step QP (3-D)").
+
+Each step k the formulation returns the drones' velocities v_k (``qp``) or joint rates q̇_k (``pinv``) from the state
+at t_k, and the state integrates by explicit Euler (Caruso 2021 eq. 21): ``p_{k+1} = p_k + Ts v_k`` or
+``q_{k+1} = q_k + Ts q̇_k`` with the drones from the forward kinematics. Every tether's catenary parameter a is
+recorded per step (NaN for a vertical tether). A step without a solution (:class:`~tmr.errors.InfeasibleStep`, or a
+tether span that no catenary holds) ends the run: the plan is returned up to that step, failed, with the reason.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tmr.control.drones import DronePinv, DroneQP, DroneReferencesLike
+from tmr.control.plan3d import DronePlan
+from tmr.errors import InfeasibleStep, ParameterError, TetherSpanError
+from tmr.model.catenary3d import DroneTetherParams
+from tmr.model.params import DroneParams
+from tmr.world.world3d import World3D
+
+Array = NDArray[np.float64]
+
+__all__ = ["run_drones", "LineReferences", "line_references"]
+
+
+@dataclass
+class LineReferences:
+    """References along a straight segment (tests and hand-made worlds; the route planner gives real ones).
+
+    Attributes: base (3,) [m]; t (K+1,) [s]; x, xd the leader's (K+1, 3) [m, m/s]; positions, velocities of every
+    drone (K+1, N, 3) [m, m/s]; start_positions (N, 3) [m]."""
+
+    base: Array
+    t: Array
+    x: Array
+    xd: Array
+    positions: Array
+    velocities: Array
+    start_positions: Array
+
+
+def line_references(
+    base: ArrayLike,
+    start: ArrayLike,
+    goal: ArrayLike,
+    n: int,
+    *,
+    Ts: float = 0.05,
+    speed: float = 1.0,
+    settle: float = 2.0,
+) -> LineReferences:
+    """Drone i (1..N) at ``(i/N)`` of the way from ``base`` to the leader's point, the leader moving at ``speed``
+    [m/s] from ``start`` to ``goal`` (trapezoid-free: constant speed, then ``settle`` s at the goal)."""
+    b, s, g = (np.asarray(v, dtype=float) for v in (base, start, goal))
+    T = float(np.linalg.norm(g - s)) / float(speed)
+    K = int(np.ceil((T + settle) / Ts))
+    t = np.arange(K + 1) * Ts
+    frac = np.clip(t / T, 0.0, 1.0) if T > 0 else np.ones_like(t)
+    x = s + frac[:, None] * (g - s)
+    xd = np.where((t < T)[:, None], (g - s) / max(T, 1e-12), 0.0)
+    w = np.arange(1, n + 1) / n
+    pos = b + w[None, :, None] * (x[:, None, :] - b)
+    vel = w[None, :, None] * xd[:, None, :]
+    return LineReferences(b, t, x, xd, pos, vel, pos[0].copy())
+
+
+def run_drones(
+    world: World3D,
+    references: DroneReferencesLike,
+    formulation: DroneQP | DronePinv,
+    start: ArrayLike,
+    *,
+    tether: DroneTetherParams,
+    params: DroneParams,
+    scenario: str = "",
+    goal: ArrayLike | None = None,
+) -> DronePlan:
+    """Integrate ``formulation`` (:func:`~tmr.control.drones.make_drone_qp` or ``make_drone_pinv``, built for the
+    same world, tether, parameters and references) along the references from the drones at ``start`` (N, 3) [m].
+
+    ``diagnostics``: per step (K+1,) ``step_time`` [s] (the whole step: catenaries, world queries, rows and the
+    QP), ``leader_residual`` [m/s] (the leader task's residual: > 0 when a limit holds the leader back), the
+    formulation's own (``qp_level:<name>`` status codes of :data:`tmr.control.qp.LEVEL_STATUS`, ...), and under
+    ``"timings"`` the loop's wall time. The plan is not checked (``success`` is True if every step was computed;
+    the checker decides).
+    """
+    ctx = formulation.context
+    chain = ctx.chain
+    N = chain.n_robots
+    P = np.asarray(start, dtype=float).reshape(N, 3)
+    ref = references
+    K = len(ref.t) - 1
+    Ts = params.Ts
+    if K > 0 and abs(float(ref.t[1] - ref.t[0]) - Ts) > 1e-9:
+        raise ParameterError(f"the references are sampled every {ref.t[1] - ref.t[0]:.4f} s, the plan every {Ts} s")
+    joints = formulation.integrates == "joints"
+    q = chain.q_from_positions(P) if joints else None
+    robots = np.zeros((K + 1, N, 3))
+    vel = np.zeros((K + 1, N, 3))
+    qs = np.zeros((K + 1, chain.dof)) if joints else None
+    a = np.full((K + 1, N), np.nan)
+    diag: dict[str, Any] = {}
+    failure: str | None = None
+    formulation.reset()
+    v_prev = np.zeros(3 * N)
+    t_start = time.perf_counter()
+    last = K
+
+    def record(k: int) -> None:
+        if qs is not None:
+            qs[k] = q
+        a[k] = [np.nan if c.a is None else c.a for c in ctx.catenaries]
+
+    for k in range(K + 1):
+        t0 = time.perf_counter()
+        robots[k] = P
+        try:
+            ctx.update(k, P, v_prev, q)
+        except TetherSpanError as exc:
+            failure = f"step {k} (t = {k * Ts:.2f} s): {exc}"
+            last = k - 1
+            break
+        record(k)
+        if k == K:
+            break
+        try:
+            out, d = formulation.step(ctx)
+        except InfeasibleStep as exc:
+            failure = str(exc)
+            last = k
+            break
+        if joints:
+            assert q is not None
+            q = q + Ts * out
+            P_next = chain.robots(q)
+            v = ((P_next - P) / Ts).reshape(-1)
+        else:
+            v = out
+            P_next = P + Ts * v.reshape(N, 3)
+        vel[k] = v.reshape(N, 3)
+        d["step_time"] = time.perf_counter() - t0
+        lead = ctx.xd_d + params.leader_gain * (ctx.x_d - P[-1])
+        d.setdefault("leader_residual", float(np.linalg.norm(v[-3:] - lead)))
+        for key, val in d.items():
+            diag.setdefault(key, np.full(K + 1, np.nan))[k] = val
+        P, v_prev = P_next, v
+    n = max(last, 0) + 1
+    wall = time.perf_counter() - t_start
+    diagnostics: dict[str, Any] = {key: val[:n] for key, val in diag.items()}
+    diagnostics["timings"] = {"loop": wall}
+    plan_params = {"planner": asdict(params), "tether": asdict(tether)}
+    return DronePlan(
+        method=formulation.name,
+        scenario=scenario,
+        t=np.asarray(ref.t[:n], dtype=float),
+        robots=robots[:n],
+        velocities=np.vstack([vel[: n - 1], np.zeros((1, N, 3))]) if n else vel[:0],
+        base=chain.base.copy(),
+        goal=np.asarray(ref.x[-1] if goal is None else goal, dtype=float),
+        reference=np.asarray(ref.x[:n], dtype=float),
+        tether_a=a[:n],
+        tether=tether,
+        safety_radius=world.safety_radius,
+        bounds=np.asarray(world.bounds, dtype=float),
+        success=failure is None,
+        failure=failure,
+        diagnostics=diagnostics,
+        wall_time=wall,
+        params=plan_params,
+        q=None if qs is None else qs[:n],
+    )

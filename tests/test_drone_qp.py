@@ -1,0 +1,215 @@
+"""The drone chain's per-step QP and pinv (tmr.control.drones, tmr.control.run3d) on hand-made 3-D worlds with
+straight-line references: every hard limit re-checked at every step with the catenary model's own check
+(tether_limits: 128 samples with the sampling margin), World3D's exact clearances and plain geometry."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from tmr.control.drones import TetherClearance, make_drone_pinv, make_drone_qp
+from tmr.control.limits import Limit, LimitRows
+from tmr.control.qp import LEVEL_STATUS
+from tmr.control.run3d import line_references, run_drones
+from tmr.model.catenary3d import DroneTetherParams, solve3d, tether_limits
+from tmr.model.params import DroneParams
+from tmr.world.world3d import World3D, box_obstacle
+
+TP = DroneTetherParams()
+PRM = DroneParams()
+
+
+def _plan(world, ref, n, method="qp", tether=TP, params=PRM, drop=()):
+    make = make_drone_qp if method == "qp" else make_drone_pinv
+    f = make(world, tether, params, n, ref)
+    if drop:
+        f.qp.limits = [lim for lim in f.qp.limits if not isinstance(lim, drop)]
+    return run_drones(world, ref, f, ref.start_positions, tether=tether, params=params)
+
+
+def _violations(plan, world, tether=TP, params=PRM):
+    """Every hard limit at every step, measured independently of the QP's rows."""
+    bare = world.with_safety_radius(0.0)
+    out = []
+    N = plan.n_robots
+    for k in range(len(plan.t)):
+        P = plan.points(k)
+        for j in range(N):
+            cat = solve3d(P[j], P[j + 1], tether)
+            a = np.nan if cat.a is None else cat.a
+            assert np.isnan(a) == np.isnan(plan.tether_a[k, j]) and (
+                np.isnan(a) or a == pytest.approx(plan.tether_a[k, j])
+            )
+            out += [f"k={k} tether {j + 1}: {m}" for m in tether_limits(cat, tether, drone_ends=(j > 0, True),
+                                                                        distance=bare.clearance)]  # fmt: skip
+        c = world.clearance(plan.robots[k])
+        out += [f"k={k} drone clearance {x:.4f}" for x in c if x < -1e-9]
+        for i in range(N):
+            for j in range(i + 1, N):
+                gap = np.linalg.norm(P[i + 1] - P[j + 1])
+                if gap < 2 * world.safety_radius - 1e-9:
+                    out.append(f"k={k} drones {i + 1},{j + 1} {gap:.3f} m apart")
+    V = plan.velocities
+    if np.max(np.abs(V)) > params.drone_speed_max + 1e-6:
+        out.append(f"speed {np.max(np.abs(V)):.4f}")
+    acc = np.abs(np.diff(V[:-1], axis=0)) / plan.Ts
+    if acc.size and np.max(acc) > params.drone_accel_max + 1e-5 and not np.any(plan.diagnostics.get("relaxed", 0)):
+        out.append(f"acceleration {np.max(acc):.4f}")
+    return out
+
+
+def _low_box():
+    """A low box under the tether's path: the straight chord from the anchor clears it by more than c_t, the sagging
+    catenary does not (checked in the test)."""
+    world = World3D([box_obstacle([4.0, 3.0, 0.0], [6.0, 7.0, 1.0])], [0, 0, 0, 10, 10, 5], TP.drone_radius)
+    ref = line_references([1.0, 5.0, 0.5], [3.0, 5.0, 1.6], [9.0, 5.0, 2.0], 2, Ts=PRM.Ts)
+    return world, ref
+
+
+def test_low_box_the_qp_keeps_the_sagging_curve_clear():
+    world, ref = _low_box()
+    plan = _plan(world, ref, 2)
+    assert plan.success, plan.failure
+    assert _violations(plan, world) == []
+    assert np.linalg.norm(plan.robots[-1, -1] - plan.goal) < PRM.goal_tolerance
+    assert np.all(np.isfinite(plan.diagnostics["step_time"][:-1]))  # (the last state has no step)
+    assert set(np.unique(plan.diagnostics["qp_level:leader"][:-1])) == {float(LEVEL_STATUS.index("solved"))}
+    # without the tether-clearance rows the same references drag the sag into the box while the chord stays clear:
+    # the limit is what keeps the curve out
+    free = _plan(world, ref, 2, drop=(TetherClearance,))
+    bare = world.with_safety_radius(0.0)
+    sag_only = []
+    for k in range(len(free.t)):
+        P = free.points(k)
+        for j in range(2):
+            chord = bare.segment_clearance(P[j], P[j + 1])
+            curve = bare.clearance(solve3d(P[j], P[j + 1], TP).points(128)).min()
+            if chord >= TP.clearance and curve < TP.clearance - 0.01:
+                sag_only.append(k)
+    assert sag_only, "the test world should make the sag, not the chord, bind"
+    assert any("tether passes" in v for v in _violations(free, world))
+
+
+def test_wall_with_a_window():
+    wall = [  # x in [4.8, 5.2]; window y in [3.5, 6.5], z in [1.0, 3.0]
+        box_obstacle([4.8, 0.0, 0.0], [5.2, 3.5, 4.0]),
+        box_obstacle([4.8, 6.5, 0.0], [5.2, 10.0, 4.0]),
+        box_obstacle([4.8, 3.5, 0.0], [5.2, 6.5, 1.0]),
+        box_obstacle([4.8, 3.5, 3.0], [5.2, 6.5, 4.0]),
+    ]
+    world = World3D(wall, [0, 0, 0, 10, 10, 4], TP.drone_radius)
+    ref = line_references([1.0, 5.0, 0.3], [2.5, 5.0, 2.0], [8.5, 5.0, 2.0], 3, Ts=PRM.Ts)
+    plan = _plan(world, ref, 3)
+    assert plan.success, plan.failure
+    assert _violations(plan, world) == []
+    assert np.linalg.norm(plan.robots[-1, -1] - plan.goal) < PRM.goal_tolerance
+    assert np.all(plan.robots[-1, 1:, 0] > 5.2)  # drones 2 and 3 went through, tether 2 passes the window
+
+
+def test_pulled_apart_until_the_arc_length_binds():
+    tether = dataclasses.replace(TP, tether_length=4.0)
+    world = World3D([], [0, 0, 0, 20, 10, 5], tether.drone_radius)
+    ref = line_references([1.0, 5.0, 0.5], [2.0, 5.0, 2.0], [14.0, 5.0, 2.0], 2, Ts=PRM.Ts)
+    plan = _plan(world, ref, 2, tether=tether)
+    assert plan.success, plan.failure
+    assert _violations(plan, world, tether) == []
+    lengths = np.array([[solve3d(*plan.points(k)[j : j + 2], tether).length for j in range(2)]
+                        for k in range(len(plan.t))])  # fmt: skip
+    bound = tether.tether_length - PRM.length_margin
+    assert lengths.max() <= bound + 0.005  # the linearised row is exact to first order; the margin covers the rest
+    assert lengths.max() > bound - 0.02  # it binds ...
+    assert np.nanmax(plan.diagnostics["leader_residual"]) > 0.1  # ... and holds the leader back
+    assert np.linalg.norm(plan.robots[-1, -1] - plan.goal) > 1.0
+
+
+def test_drone_end_tension_binds_when_climbing():
+    tether = dataclasses.replace(TP, thrust_to_weight=1.5, control_reserve=0.2)  # spare thrust 2.94 N: h <= 6.1 m
+    world = World3D([], [0, 0, 0, 10, 10, 12], tether.drone_radius)
+    ref = line_references([5.0, 5.0, 0.3], [5.5, 5.0, 1.5], [6.0, 5.0, 11.0], 1, Ts=PRM.Ts)
+    plan = _plan(world, ref, 1, tether=tether)
+    assert plan.success, plan.failure
+    assert _violations(plan, world, tether) == []
+    T = np.array([solve3d(plan.base, plan.robots[k, 0], tether).tension_q for k in range(len(plan.t))])
+    assert T.max() <= tether.spare_thrust - PRM.tension_margin + 0.005
+    assert T.max() > tether.spare_thrust - PRM.tension_margin - 0.02
+
+
+def test_span_no_catenary_holds_fails_the_plan_with_the_reason():
+    world = World3D([], [0, 0, 0, 40, 10, 5], TP.drone_radius)
+    ref = line_references([1.0, 5.0, 0.5], [25.0, 5.0, 0.6], [30.0, 5.0, 1.0], 1, Ts=PRM.Ts)
+    plan = _plan(world, ref, 1)
+    assert not plan.success
+    assert "step 0" in plan.failure and "longer than" in plan.failure
+    assert plan.robots.shape[0] == 1
+
+
+def test_pinv_runs_the_papers_clik_on_the_spatial_chain():
+    world, ref = _low_box()
+    plan = _plan(world, ref, 2, method="pinv")
+    assert plan.success, plan.failure
+    assert plan.q is not None and plan.q.shape == (len(plan.t), 6)
+    f = make_drone_pinv(world, TP, PRM, 2, ref)
+    for k in (0, len(plan.t) // 2, len(plan.t) - 1):
+        np.testing.assert_allclose(f.context.chain.robots(plan.q[k]), plan.robots[k], atol=1e-12)
+    assert np.linalg.norm(plan.robots[-1, -1] - plan.goal) < PRM.goal_tolerance
+    assert np.nanmax(plan.diagnostics["obstacle_active"]) > 0  # the soft obstacle task acted
+
+
+class _Impossible(Limit):
+    """Drone 1 faster than the speed bound (x): contradicts DroneSpeed, a safety limit."""
+
+    name = "impossible"
+    space = "robot"
+
+    def pattern(self, chain):
+        mask = np.zeros((1, 3 * chain.n_robots), dtype=bool)
+        mask[0, 0] = True
+        return mask
+
+    def compute(self, ctx):
+        A = np.zeros((1, 3 * ctx.chain.n_robots))
+        A[0, 0] = 1.0
+        return LimitRows(A, np.array([10.0]), np.array([np.inf]))
+
+
+def test_an_infeasible_step_fails_the_plan_with_the_reason():
+    world = World3D([], [0, 0, 0, 10, 10, 5], TP.drone_radius)
+    ref = line_references([1.0, 5.0, 0.5], [2.0, 5.0, 1.5], [6.0, 5.0, 2.0], 2, Ts=PRM.Ts)
+    f = make_drone_qp(world, TP, PRM, 2, ref)
+    f.qp.limits.append(_Impossible())
+    plan = run_drones(world, ref, f, ref.start_positions, tether=TP, params=PRM)
+    assert not plan.success
+    assert plan.failure.startswith("step 0 (t = 0.00 s): the hard constraints have no common solution")
+    assert plan.robots.shape[0] == 1 and np.all(plan.velocities == 0.0)
+
+
+def test_segment_nearest_matches_coal_and_the_point_queries():
+    from tmr.control.drones import segment_box_distance, segment_nearest
+    from tmr.world.world3d import prism_obstacle
+
+    rng = np.random.default_rng(5)
+    obstacles = [box_obstacle([2, 2, 0], [4, 5, 1.5]), box_obstacle([6, 1, 1], [7, 3, 4]),
+                 prism_obstacle([[1, 6], [3, 7], [2, 9]], [0.0, 2.5])]  # fmt: skip
+    world = World3D(obstacles, [0, 0, 0, 10, 10, 5], 0.0)
+    a = rng.uniform([0, 0, 0], [10, 10, 5], (400, 3))
+    b = a + rng.normal(scale=1.5, size=a.shape)
+    b = np.clip(b, 0.01, [9.99, 9.99, 4.99])
+    c, g, t = segment_nearest(world, a, b)
+    np.testing.assert_allclose(c, world.segment_clearance(a, b), atol=1e-7)  # coal's capsule queries
+    X = a + t[:, None] * (b - a)
+    free = c > 1e-6
+    cx, gx = world.clearance_and_gradient(X[free])
+    np.testing.assert_allclose(cx, c[free], atol=1e-7)  # the nearest point has the segment's clearance
+    np.testing.assert_allclose(np.linalg.norm(g, axis=1), 1.0, atol=1e-9)
+    # the same gradient, but where two walls (or a wall and an obstacle) tie, where either is one
+    assert np.mean(np.all(np.abs(gx - g[free]) < 1e-5, axis=1)) > 0.97
+    # the closed form against a dense sampling of the segment
+    lo, hi = np.array([2.0, 2, 0]), np.array([4.0, 5, 1.5])
+    d, tb = segment_box_distance(a, b, lo, hi)
+    s = np.linspace(0, 1, 2001)
+    P = a[:, None, :] + s[None, :, None] * (b - a)[:, None, :]
+    dense = np.linalg.norm(P - np.clip(P, lo, hi), axis=2)
+    assert np.all(d <= dense.min(axis=1) + 1e-12)
+    assert np.all(d >= dense.min(axis=1) - np.linalg.norm(b - a, axis=1) / 2000)
