@@ -149,11 +149,12 @@ def solve_drones(
         raise ParameterError(f"unknown method {method!r} for a drone chain; available: {', '.join(DRONE_METHODS)}")
     start = time.perf_counter()
     make = make_drone_qp if method == "qp" else make_drone_pinv
-    formulation = make(problem.world, problem.tether, problem.params, problem.n_robots, problem.references)
+    formulation = make(
+        problem.world, problem.tether, problem.params, problem.n_robots, problem.references, base=problem.scenario.base
+    )
     plan = run_drones(
         problem.world, problem.references, formulation, problem.references.start_positions,
-        tether=problem.tether, params=problem.params, base=problem.scenario.base, goal=problem.scenario.goal,
-        scenario=problem.scenario.name, progress=progress,
+        tether=problem.tether, params=problem.params, goal=problem.scenario.goal, scenario=problem.scenario.name,
     )  # fmt: skip
     run_time = time.perf_counter() - start
     metrics = check_drone_plan(plan, problem.scenario, params=problem.params)
