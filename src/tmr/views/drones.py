@@ -349,11 +349,13 @@ def tether_clearance(plan: Any, world: Any) -> Any:
     ax.grid(True, lw=0.3, alpha=0.5)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     ax.set_title(
-        _title(plan, f"tether clearance (min {dist[k, j]:.3f} m, tether {j + 1} at t = {t[k]:.2f} s, "
-               f"{fmt_point(where[k, j])})"),
+        _title(
+            plan,
+            f"tether clearance (min {dist[k, j]:.3f} m, tether {j + 1} at t = {t[k]:.2f} s, {fmt_point(where[k, j])})",
+        ),
         y=1.0,
         fontsize=9,
-    )  # fmt: skip
+    )
     return fig
 
 
@@ -484,8 +486,23 @@ def _palette() -> list[tuple[int, int, int]]:
     shades = [
         tuple(int(v) for v in _FACE_DARK + (_FACE_LIGHT - _FACE_DARK) * s / (_SHADES - 1)) for s in range(_SHADES)
     ]
-    named = [_hex(c) for c in (TETHER_COLOR, LEADER_COLOR, DRONE_COLOR, REFERENCE_COLOR, "#0b3d66", "#8a4100",
-                               "#2ca02c", "#d62728", "#f4f4f4", "#e6e6e6", "#c8c8c8", "#ffffff")]  # fmt: skip
+    named = [
+        _hex(c)
+        for c in (
+            TETHER_COLOR,
+            LEADER_COLOR,
+            DRONE_COLOR,
+            REFERENCE_COLOR,
+            "#0b3d66",
+            "#8a4100",
+            "#2ca02c",
+            "#d62728",
+            "#f4f4f4",
+            "#e6e6e6",
+            "#c8c8c8",
+            "#ffffff",
+        )
+    ]
     return greys + shades + named  # type: ignore[return-value]
 
 
@@ -536,8 +553,12 @@ class _GifScene:
             dr_.line([tuple(p) for p in ends.tolist()], fill=(204, 204, 204), width=1)
         title = _title(plan, "tethered drone chain")
         dr_.text((10, 8), title, fill=(0, 0, 0), font=self.font)
-        dr_.text((10, 24), f"grid {step:g} m; tethers drawn as catenaries; r = {float(plan.safety_radius):g} m",
-                 fill=(85, 85, 85), font=self.small)  # fmt: skip
+        dr_.text(
+            (10, 24),
+            f"grid {step:g} m; tethers drawn as catenaries; r = {float(plan.safety_radius):g} m",
+            fill=(85, 85, 85),
+            font=self.small,
+        )
         self.background = bg
         self.r = float(plan.safety_radius)
         self.z0 = z0
@@ -605,9 +626,7 @@ class _GifScene:
         t = np.asarray(self.plan.t, dtype=float)
         w, h = im.size
         d.text((w - 175, h - 22), f"t = {t[k]:6.2f} s / {t[-1]:.2f} s", fill=(0, 0, 0), font=self.font)
-        from PIL import Image as _I
-
-        return im.quantize(palette=self.palette, dither=_I.Dither.NONE)
+        return im.quantize(palette=self.palette, dither=Image.Dither.NONE)
 
 
 def _grid_step(span: float) -> float:
@@ -660,8 +679,16 @@ def write_gif_3d(
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     n = len(frame_indices_3d(plan.t, fps, max_frames))
-    frames = list(tqdm(gif_frames(plan, world, fps, max_frames, size), total=n, desc="gif frames", unit="frame",
-                       leave=False, disable=not progress))  # fmt: skip
+    frames = list(
+        tqdm(
+            gif_frames(plan, world, fps, max_frames, size),
+            total=n,
+            desc="gif frames",
+            unit="frame",
+            leave=False,
+            disable=not progress,
+        )
+    )
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".gif")
     os.close(fd)
     try:
@@ -698,28 +725,86 @@ def build_figure_3d(plan: Any, world: Any, max_frames: int = 150) -> Any:
     for i, ob in enumerate(world.obstacles):
         dr = obstacle_mesh(ob)
         v, f = dr.vertices, dr.faces
-        fig.add_trace(go.Mesh3d(x=v[:, 0], y=v[:, 1], z=v[:, 2], i=f[:, 0], j=f[:, 1], k=f[:, 2], color=OBSTACLE_COLOR,
-                                opacity=0.35, flatshading=True, name="obstacle", legendgroup="obstacle",
-                                showlegend=i == 0, hovertext=dr.name, hoverinfo="text"))  # fmt: skip
+        fig.add_trace(
+            go.Mesh3d(
+                x=v[:, 0],
+                y=v[:, 1],
+                z=v[:, 2],
+                i=f[:, 0],
+                j=f[:, 1],
+                k=f[:, 2],
+                color=OBSTACLE_COLOR,
+                opacity=0.35,
+                flatshading=True,
+                name="obstacle",
+                legendgroup="obstacle",
+                showlegend=i == 0,
+                hovertext=dr.name,
+                hoverinfo="text",
+            )
+        )
         e = dr.edges
         xs, ys, zs = (np.column_stack([e[:, 0, c], e[:, 1, c], np.full(len(e), np.nan)]).ravel() for c in range(3))
-        fig.add_trace(go.Scatter3d(x=xs, y=ys, z=zs, mode="lines", line={"color": "#424242", "width": 2},
-                                   showlegend=False, hoverinfo="skip", legendgroup="obstacle"))  # fmt: skip
+        fig.add_trace(
+            go.Scatter3d(
+                x=xs,
+                y=ys,
+                z=zs,
+                mode="lines",
+                line={"color": "#424242", "width": 2},
+                showlegend=False,
+                hoverinfo="skip",
+                legendgroup="obstacle",
+            )
+        )
     x0, y0, z0, x1, y1, z1 = (float(v) for v in world.bounds)
-    fig.add_trace(go.Mesh3d(x=[x0, x1, x1, x0], y=[y0, y0, y1, y1], z=[z0] * 4, i=[0, 0], j=[1, 2], k=[2, 3],
-                            color="#d9d9d9", opacity=0.4, name="floor", hoverinfo="skip"))  # fmt: skip
+    fig.add_trace(
+        go.Mesh3d(
+            x=[x0, x1, x1, x0],
+            y=[y0, y0, y1, y1],
+            z=[z0] * 4,
+            i=[0, 0],
+            j=[1, 2],
+            k=[2, 3],
+            color="#d9d9d9",
+            opacity=0.4,
+            name="floor",
+            hoverinfo="skip",
+        )
+    )
     edges = _room_edges(world.bounds)
     xs, ys, zs = ([v for a, b in edges for v in (a[c], b[c], None)] for c in range(3))
-    fig.add_trace(go.Scatter3d(x=xs, y=ys, z=zs, mode="lines", line={"color": "#bbbbbb", "width": 1}, name="room",
-                               hoverinfo="skip"))  # fmt: skip
+    fig.add_trace(
+        go.Scatter3d(
+            x=xs, y=ys, z=zs, mode="lines", line={"color": "#bbbbbb", "width": 1}, name="room", hoverinfo="skip"
+        )
+    )
     ref = np.asarray(plan.reference, dtype=float)
-    fig.add_trace(go.Scatter3d(x=ref[:, 0], y=ref[:, 1], z=ref[:, 2], mode="lines", name="leader reference",
-                               line={"color": REFERENCE_COLOR, "width": 3, "dash": "dash"}, hoverinfo="skip"))  # fmt: skip
+    fig.add_trace(
+        go.Scatter3d(
+            x=ref[:, 0],
+            y=ref[:, 1],
+            z=ref[:, 2],
+            mode="lines",
+            name="leader reference",
+            line={"color": REFERENCE_COLOR, "width": 3, "dash": "dash"},
+            hoverinfo="skip",
+        )
+    )
     for name, p, sym, col in (("anchor", plan.base, "square", "black"), ("goal", plan.goal, "diamond", LEADER_COLOR)):
         p = np.asarray(p, dtype=float)
-        fig.add_trace(go.Scatter3d(x=[p[0]], y=[p[1]], z=[p[2]], mode="markers+text", text=[name], name=name,
-                                   marker={"symbol": sym, "size": 6, "color": col},
-                                   hovertemplate=f"{name}: (%{{x:.3f}}, %{{y:.3f}}, %{{z:.3f}}) m<extra></extra>"))  # fmt: skip
+        fig.add_trace(
+            go.Scatter3d(
+                x=[p[0]],
+                y=[p[1]],
+                z=[p[2]],
+                mode="markers+text",
+                text=[name],
+                name=name,
+                marker={"symbol": sym, "size": 6, "color": col},
+                hovertemplate=f"{name}: (%{{x:.3f}}, %{{y:.3f}}, %{{z:.3f}}) m<extra></extra>",
+            )
+        )
     n_static = len(fig.data)
     t = np.asarray(plan.t, dtype=float)
     idx = frame_indices_3d(t, 10.0, max_frames)
@@ -728,21 +813,45 @@ def build_figure_3d(plan: Any, world: Any, max_frames: int = 150) -> Any:
     n = plan.robots.shape[1]
     first = _moving_traces(plan, int(idx[0]), curves[0], leader[:1])
     for j in range(n):
-        fig.add_trace(go.Scatter3d(**first[j], mode="lines", line={"color": TETHER_COLOR, "width": 5},
-                                   legendgroup="tether", showlegend=j == 0, hoverinfo="name"))  # fmt: skip
-    fig.add_trace(go.Scatter3d(**first[n], mode="lines", line={"color": "#17a589", "width": 3}, name="leader trail",
-                               hoverinfo="skip"))  # fmt: skip
+        fig.add_trace(
+            go.Scatter3d(
+                **first[j],
+                mode="lines",
+                line={"color": TETHER_COLOR, "width": 5},
+                legendgroup="tether",
+                showlegend=j == 0,
+                hoverinfo="name",
+            )
+        )
+    fig.add_trace(
+        go.Scatter3d(
+            **first[n], mode="lines", line={"color": "#17a589", "width": 3}, name="leader trail", hoverinfo="skip"
+        )
+    )
     r = float(plan.safety_radius)
-    fig.add_trace(go.Scatter3d(**first[n + 1], mode="markers", hoverinfo="text", name=f"drone (r = {r:g} m)",
-                               marker={"size": 7, "color": _drone_colors(n), "line": {"color": "black", "width": 1}}))  # fmt: skip
+    fig.add_trace(
+        go.Scatter3d(
+            **first[n + 1],
+            mode="markers",
+            hoverinfo="text",
+            name=f"drone (r = {r:g} m)",
+            marker={"size": 7, "color": _drone_colors(n), "line": {"color": "black", "width": 1}},
+        )
+    )
     fig.data[n_static]["name"] = "tether (catenary)"
     moving = list(range(n_static, len(fig.data)))
     frames = []
     for s, k in enumerate(idx):
         data = _moving_traces(plan, int(k), curves[s], leader[: s + 1])
         data[0]["name"] = "tether (catenary)"
-        frames.append(go.Frame(data=[go.Scatter3d(**d_) for d_ in data], traces=moving, name=str(int(k)),
-                               layout={"title": {"text": f"{_title(plan, 'drone chain')} — t = {t[k]:.2f} s"}}))  # fmt: skip
+        frames.append(
+            go.Frame(
+                data=[go.Scatter3d(**d_) for d_ in data],
+                traces=moving,
+                name=str(int(k)),
+                layout={"title": {"text": f"{_title(plan, 'drone chain')} — t = {t[k]:.2f} s"}},
+            )
+        )
     fig.frames = frames
     slider = {
         "active": 0,
@@ -752,18 +861,35 @@ def build_figure_3d(plan: Any, world: Any, max_frames: int = 150) -> Any:
         "len": 0.8,
         "font": {"size": 9},
         "steps": [
-            {"label": f"{t[k]:.2f}", "method": "animate",
-             "args": [[str(int(k))], {"mode": "immediate", "frame": {"duration": 0, "redraw": True},
-                                      "transition": {"duration": 0}}]}
+            {
+                "label": f"{t[k]:.2f}",
+                "method": "animate",
+                "args": [
+                    [str(int(k))],
+                    {"mode": "immediate", "frame": {"duration": 0, "redraw": True}, "transition": {"duration": 0}},
+                ],
+            }
             for k in idx
         ],
-    }  # fmt: skip
+    }
     buttons = [
-        {"label": "▶ play", "method": "animate",
-         "args": [None, {"frame": {"duration": 100, "redraw": True}, "fromcurrent": True, "transition": {"duration": 0}}]},
-        {"label": "❚❚ pause", "method": "animate",
-         "args": [[None], {"mode": "immediate", "frame": {"duration": 0, "redraw": False}, "transition": {"duration": 0}}]},
-    ]  # fmt: skip
+        {
+            "label": "▶ play",
+            "method": "animate",
+            "args": [
+                None,
+                {"frame": {"duration": 100, "redraw": True}, "fromcurrent": True, "transition": {"duration": 0}},
+            ],
+        },
+        {
+            "label": "❚❚ pause",
+            "method": "animate",
+            "args": [
+                [None],
+                {"mode": "immediate", "frame": {"duration": 0, "redraw": False}, "transition": {"duration": 0}},
+            ],
+        },
+    ]
     span = np.array([x1 - x0, y1 - y0, z1 - z0])
     ratio = span / span.max()
     fig.update_layout(
@@ -779,10 +905,19 @@ def build_figure_3d(plan: Any, world: Any, max_frames: int = 150) -> Any:
         template="plotly_white",
         height=760,
         legend={"orientation": "h", "y": -0.05},
-        updatemenus=[{"type": "buttons", "direction": "left", "x": 0.0, "y": 0.0, "xanchor": "left", "yanchor": "top",
-                      "buttons": buttons}],
+        updatemenus=[
+            {
+                "type": "buttons",
+                "direction": "left",
+                "x": 0.0,
+                "y": 0.0,
+                "xanchor": "left",
+                "yanchor": "top",
+                "buttons": buttons,
+            }
+        ],
         sliders=[slider],
-    )  # fmt: skip
+    )
     return fig
 
 
