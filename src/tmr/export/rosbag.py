@@ -35,6 +35,8 @@ import math
 import os
 import shutil
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -204,17 +206,11 @@ def _scene_markers(m: _Msgs, motion: Motion, ns0: int) -> list[Any]:
     return out
 
 
-def write_bag(
-    motion: Motion, path: str | os.PathLike[str], overwrite: bool = True, storage: str = "mcap", progress: bool = False
-) -> Path:
-    """Write ``motion`` as a rosbag2 directory (rosbag2 metadata version 9) at ``path``; return the path.
-
-    ``storage``: ``"mcap"`` (default; Foxglove opens it directly, ``ros2 bag play`` with the MCAP plugin) or
-    ``"sqlite3"`` (rosbag2's older default). ``progress``: a tqdm bar over the samples on stderr.
-
-    The bag is written into a temporary sibling directory and moved to ``path`` only when complete, replacing an
-    older bag there if ``overwrite`` (else :class:`tmr.errors.TmrError` when ``path`` exists).
-    """
+@contextmanager
+def _staged_bag(path: Path, overwrite: bool, storage: str, topic_types: dict[str, str]) -> Iterator[Any]:
+    """A rosbags ``Writer`` on a temporary sibling of ``path`` with a connection per topic (latched: the topics
+    written once, ``/path``, ``/tmr/team/trajectory``, ``/tmr/scene``), its connections and typestore; the bag is
+    moved to ``path`` only when the block ends without error (replacing an older one if ``overwrite``)."""
     from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
@@ -230,12 +226,6 @@ def write_bag(
     if path.exists() and not path.is_dir():
         raise TmrError(f"{path} is a file, not a bag directory")
     ts = get_typestore(Stores.ROS2_JAZZY)
-    m = _Msgs(ts)
-    ser = ts.serialize_cdr
-    t = np.asarray(motion.t, dtype=float)
-    logging.getLogger("tmr").debug("ROS bag: %d samples, storage %s", t.size, storage)
-    stamps = [stamp_ns(v) for v in t]
-    ns0 = stamps[0]
     zero = QosTime(sec=0, nsec=0)
     latched = Qos(
         QosHistory.KEEP_LAST,
@@ -254,71 +244,91 @@ def write_bag(
     try:
         with Writer(tmp, version=9, storage_plugin=plugins[storage]) as w:
             conns = {}
-            for topic, msgtype in topics(motion).items():
+            for topic, msgtype in topic_types.items():
                 once = topic.endswith("/path") or topic in ("/tmr/team/trajectory", "/tmr/scene")
                 conns[topic] = w.add_connection(
                     topic, msgtype, typestore=ts, offered_qos_profiles=[latched] if once else []
                 )
-            # once, at t_0: scene, paths, team trajectory
-            scene = ts.types["visualization_msgs/msg/MarkerArray"](markers=_scene_markers(m, motion, ns0))
-            w.write(conns["/tmr/scene"], ns0, ser(scene, TOPIC_TYPES["markers"]))
-            for tr in motion.tracks:
-                poses = [
-                    ts.types["geometry_msgs/msg/PoseStamped"](header=m.header(s), pose=m.pose(tr.xyz[k], _yaw(tr, k)))
-                    for k, s in enumerate(stamps)
-                ]
-                msg = ts.types["nav_msgs/msg/Path"](header=m.header(ns0), poses=poses)
-                w.write(conns[f"/tmr/{tr.name}/path"], ns0, ser(msg, TOPIC_TYPES["path"]))
-            P = ts.types["trajectory_msgs/msg/MultiDOFJointTrajectoryPoint"]
-            points = [
-                P(
-                    transforms=[m.transform(tr.xyz[k], _yaw(tr, k)) for tr in motion.tracks],
-                    velocities=[],
-                    accelerations=[],
-                    time_from_start=m.duration(s - ns0),
-                )
-                for k, s in enumerate(stamps)
-            ]
-            traj = ts.types["trajectory_msgs/msg/MultiDOFJointTrajectory"](
-                header=m.header(ns0), joint_names=[tr.name for tr in motion.tracks], points=points
-            )
-            w.write(conns["/tmr/team/trajectory"], ns0, ser(traj, TOPIC_TYPES["trajectory"]))
-            # per sample
-            TS = ts.types["geometry_msgs/msg/TransformStamped"]
-            MA = ts.types["visualization_msgs/msg/MarkerArray"]
-            from tqdm import tqdm
-
-            for k, s in enumerate(tqdm(stamps, desc="bag samples", unit="sample", leave=False, disable=not progress)):
-                for tr in motion.tracks:
-                    msg = ts.types["geometry_msgs/msg/PoseStamped"](
-                        header=m.header(s), pose=m.pose(tr.xyz[k], _yaw(tr, k))
-                    )
-                    w.write(conns[f"/tmr/{tr.name}/pose"], s, ser(msg, TOPIC_TYPES["pose"]))
-                lines = [
-                    m.marker(s, ln.kind, i, "LINE_STRIP", ln.kind, (_line_width(ln), 0, 0), ln.points[k])
-                    for i, ln in enumerate(motion.lines)
-                ]
-                w.write(conns["/tmr/lines"], s, ser(MA(markers=lines), TOPIC_TYPES["markers"]))
-                bodies = []
-                for i, tr in enumerate(motion.tracks):
-                    if tr.radius > 0:
-                        d = 2.0 * tr.radius
-                        p = (tr.xyz[k][0], tr.xyz[k][1], 0.5 * tr.xyz[k][2] if tr.xyz[k][2] > 0 else 0.05)
-                        h = max(float(tr.xyz[k][2]), 0.1)
-                        bodies.append(m.marker(s, "bodies", i, "CYLINDER", tr.role, (d, d, h), pose=(p, _yaw(tr, k))))
-                    else:
-                        bodies.append(
-                            m.marker(s, "bodies", i, "SPHERE", tr.role, (0.06, 0.06, 0.06), pose=(tr.xyz[k], None))
-                        )
-                w.write(conns["/tmr/bodies"], s, ser(MA(markers=bodies), TOPIC_TYPES["markers"]))
-                tfs = [
-                    TS(header=m.header(s), child_frame_id=tr.name, transform=m.transform(tr.xyz[k], _yaw(tr, k)))
-                    for tr in motion.tracks
-                ]
-                w.write(conns["/tf"], s, ser(ts.types["tf2_msgs/msg/TFMessage"](transforms=tfs), TOPIC_TYPES["tf"]))
+            yield w, conns, ts
         if path.exists():
             shutil.rmtree(path)
         os.replace(tmp, path)
-        return path
     finally:
         shutil.rmtree(tmp_parent, ignore_errors=True)
+
+
+def write_bag(
+    motion: Motion, path: str | os.PathLike[str], overwrite: bool = True, storage: str = "mcap", progress: bool = False
+) -> Path:
+    """Write ``motion`` as a rosbag2 directory (rosbag2 metadata version 9) at ``path``; return the path.
+
+    ``storage``: ``"mcap"`` (default; Foxglove opens it directly, ``ros2 bag play`` with the MCAP plugin) or
+    ``"sqlite3"`` (rosbag2's older default). ``progress``: a tqdm bar over the samples on stderr.
+
+    The bag is written into a temporary sibling directory and moved to ``path`` only when complete, replacing an
+    older bag there if ``overwrite`` (else :class:`tmr.errors.TmrError` when ``path`` exists).
+    """
+    path = Path(path)
+    t = np.asarray(motion.t, dtype=float)
+    logging.getLogger("tmr").debug("ROS bag: %d samples, storage %s", t.size, storage)
+    stamps = [stamp_ns(v) for v in t]
+    ns0 = stamps[0]
+    with _staged_bag(path, overwrite, storage, topics(motion)) as (w, conns, ts):
+        m = _Msgs(ts)
+        ser = ts.serialize_cdr
+        # once, at t_0: scene, paths, team trajectory
+        scene = ts.types["visualization_msgs/msg/MarkerArray"](markers=_scene_markers(m, motion, ns0))
+        w.write(conns["/tmr/scene"], ns0, ser(scene, TOPIC_TYPES["markers"]))
+        for tr in motion.tracks:
+            poses = [
+                ts.types["geometry_msgs/msg/PoseStamped"](header=m.header(s), pose=m.pose(tr.xyz[k], _yaw(tr, k)))
+                for k, s in enumerate(stamps)
+            ]
+            msg = ts.types["nav_msgs/msg/Path"](header=m.header(ns0), poses=poses)
+            w.write(conns[f"/tmr/{tr.name}/path"], ns0, ser(msg, TOPIC_TYPES["path"]))
+        P = ts.types["trajectory_msgs/msg/MultiDOFJointTrajectoryPoint"]
+        points = [
+            P(
+                transforms=[m.transform(tr.xyz[k], _yaw(tr, k)) for tr in motion.tracks],
+                velocities=[],
+                accelerations=[],
+                time_from_start=m.duration(s - ns0),
+            )
+            for k, s in enumerate(stamps)
+        ]
+        traj = ts.types["trajectory_msgs/msg/MultiDOFJointTrajectory"](
+            header=m.header(ns0), joint_names=[tr.name for tr in motion.tracks], points=points
+        )
+        w.write(conns["/tmr/team/trajectory"], ns0, ser(traj, TOPIC_TYPES["trajectory"]))
+        # per sample
+        TS = ts.types["geometry_msgs/msg/TransformStamped"]
+        MA = ts.types["visualization_msgs/msg/MarkerArray"]
+        from tqdm import tqdm
+
+        for k, s in enumerate(tqdm(stamps, desc="bag samples", unit="sample", leave=False, disable=not progress)):
+            for tr in motion.tracks:
+                msg = ts.types["geometry_msgs/msg/PoseStamped"](header=m.header(s), pose=m.pose(tr.xyz[k], _yaw(tr, k)))
+                w.write(conns[f"/tmr/{tr.name}/pose"], s, ser(msg, TOPIC_TYPES["pose"]))
+            lines = [
+                m.marker(s, ln.kind, i, "LINE_STRIP", ln.kind, (_line_width(ln), 0, 0), ln.points[k])
+                for i, ln in enumerate(motion.lines)
+            ]
+            w.write(conns["/tmr/lines"], s, ser(MA(markers=lines), TOPIC_TYPES["markers"]))
+            bodies = []
+            for i, tr in enumerate(motion.tracks):
+                if tr.radius > 0:
+                    d = 2.0 * tr.radius
+                    p = (tr.xyz[k][0], tr.xyz[k][1], 0.5 * tr.xyz[k][2] if tr.xyz[k][2] > 0 else 0.05)
+                    h = max(float(tr.xyz[k][2]), 0.1)
+                    bodies.append(m.marker(s, "bodies", i, "CYLINDER", tr.role, (d, d, h), pose=(p, _yaw(tr, k))))
+                else:
+                    bodies.append(
+                        m.marker(s, "bodies", i, "SPHERE", tr.role, (0.06, 0.06, 0.06), pose=(tr.xyz[k], None))
+                    )
+            w.write(conns["/tmr/bodies"], s, ser(MA(markers=bodies), TOPIC_TYPES["markers"]))
+            tfs = [
+                TS(header=m.header(s), child_frame_id=tr.name, transform=m.transform(tr.xyz[k], _yaw(tr, k)))
+                for tr in motion.tracks
+            ]
+            w.write(conns["/tf"], s, ser(ts.types["tf2_msgs/msg/TFMessage"](transforms=tfs), TOPIC_TYPES["tf"]))
+    return path
