@@ -230,7 +230,7 @@ def chain_poses_3d(plan: Any, world: Any, poses: int = 5, route: Any = None) -> 
     robots = np.asarray(plan.robots, dtype=float)
     x0, y0, z0, x1, y1, z1 = (float(v) for v in world.bounds)
     fig = _new_figure(8.5, 7.0)
-    ax = fig.add_axes((0.0, 0.12, 0.88, 0.8), projection="3d")
+    ax = fig.add_axes((-0.04, 0.08, 0.9, 0.88), projection="3d")
     ax.set_proj_type("persp", focal_length=0.6)
     handles: list[Any] = []
     faces, edges = [], []
@@ -284,7 +284,7 @@ def chain_poses_3d(plan: Any, world: Any, poses: int = 5, route: Any = None) -> 
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
     ax.set_zlim(z0, z1)
-    ax.set_box_aspect((x1 - x0, y1 - y0, z1 - z0), zoom=0.95)
+    ax.set_box_aspect((x1 - x0, y1 - y0, z1 - z0), zoom=1.02)
     ax.view_init(elev=28.0, azim=-60.0)
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
