@@ -379,7 +379,7 @@ def tensions(plan: Any) -> Any:
     ax.axhline(spare, color="#d62728", ls="--", lw=1.3, label=f"spare thrust {spare:.3g} N")
     ax.set_xlabel("time [s]")
     ax.set_ylabel("tension at the drone [N]")
-    ax.set_ylim(0.0, max(spare, float(np.nanmax(tq))) * 1.1)
+    ax.set_ylim(0.0, max(spare, float(np.nanmax(tq)), float(np.nanmax(tp[:, 1:], initial=0.0))) * 1.1)
     ax.grid(True, lw=0.3, alpha=0.5)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     ax.set_title(_title(plan, "tether tensions at the drones"), y=1.0)
