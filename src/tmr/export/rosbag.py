@@ -25,6 +25,10 @@ Bodies are the motion's tracks: ``robot1..N`` (chain), ``base1..p`` and ``platfo
 ``end_effector`` (CCMA). Orientation is the body's yaw when it has one (MoPICK bases, CCMA agents), else identity
 (omnidirectional chain robots carry no heading).
 
+A tethered drone chain (issue 32) has its own writer, :func:`write_drone_bag`, with the same topics from a
+``DronePlan`` and its ``World3D``: 3-D poses, each tether's catenary as a ``LINE_STRIP``, the drones as spheres and the
+obstacles' surfaces as ``TRIANGLE_LIST`` markers.
+
 The bag is deterministic: the same motion gives the same bytes (no wall-clock time is written).
 """
 
@@ -35,6 +39,8 @@ import math
 import os
 import shutil
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +48,7 @@ import numpy as np
 
 from tmr.views.motion import OBSTACLE_HEIGHT, Motion
 
-__all__ = ["FRAME", "TOPIC_TYPES", "stamp_ns", "topics", "write_bag"]
+__all__ = ["FRAME", "TOPIC_TYPES", "drone_topics", "stamp_ns", "topics", "write_bag", "write_drone_bag"]
 
 FRAME = "map"
 
@@ -204,17 +210,11 @@ def _scene_markers(m: _Msgs, motion: Motion, ns0: int) -> list[Any]:
     return out
 
 
-def write_bag(
-    motion: Motion, path: str | os.PathLike[str], overwrite: bool = True, storage: str = "mcap", progress: bool = False
-) -> Path:
-    """Write ``motion`` as a rosbag2 directory (rosbag2 metadata version 9) at ``path``; return the path.
-
-    ``storage``: ``"mcap"`` (default; Foxglove opens it directly, ``ros2 bag play`` with the MCAP plugin) or
-    ``"sqlite3"`` (rosbag2's older default). ``progress``: a tqdm bar over the samples on stderr.
-
-    The bag is written into a temporary sibling directory and moved to ``path`` only when complete, replacing an
-    older bag there if ``overwrite`` (else :class:`tmr.errors.TmrError` when ``path`` exists).
-    """
+@contextmanager
+def _staged_bag(path: Path, overwrite: bool, storage: str, topic_types: dict[str, str]) -> Iterator[Any]:
+    """A rosbags ``Writer`` on a temporary sibling of ``path`` with a connection per topic (latched: the topics
+    written once, ``/path``, ``/tmr/team/trajectory``, ``/tmr/scene``), its connections and typestore; the bag is
+    moved to ``path`` only when the block ends without error (replacing an older one if ``overwrite``)."""
     from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
@@ -230,12 +230,6 @@ def write_bag(
     if path.exists() and not path.is_dir():
         raise TmrError(f"{path} is a file, not a bag directory")
     ts = get_typestore(Stores.ROS2_JAZZY)
-    m = _Msgs(ts)
-    ser = ts.serialize_cdr
-    t = np.asarray(motion.t, dtype=float)
-    logging.getLogger("tmr").debug("ROS bag: %d samples, storage %s", t.size, storage)
-    stamps = [stamp_ns(v) for v in t]
-    ns0 = stamps[0]
     zero = QosTime(sec=0, nsec=0)
     latched = Qos(
         QosHistory.KEEP_LAST,
@@ -254,71 +248,216 @@ def write_bag(
     try:
         with Writer(tmp, version=9, storage_plugin=plugins[storage]) as w:
             conns = {}
-            for topic, msgtype in topics(motion).items():
+            for topic, msgtype in topic_types.items():
                 once = topic.endswith("/path") or topic in ("/tmr/team/trajectory", "/tmr/scene")
                 conns[topic] = w.add_connection(
                     topic, msgtype, typestore=ts, offered_qos_profiles=[latched] if once else []
                 )
-            # once, at t_0: scene, paths, team trajectory
-            scene = ts.types["visualization_msgs/msg/MarkerArray"](markers=_scene_markers(m, motion, ns0))
-            w.write(conns["/tmr/scene"], ns0, ser(scene, TOPIC_TYPES["markers"]))
-            for tr in motion.tracks:
-                poses = [
-                    ts.types["geometry_msgs/msg/PoseStamped"](header=m.header(s), pose=m.pose(tr.xyz[k], _yaw(tr, k)))
-                    for k, s in enumerate(stamps)
-                ]
-                msg = ts.types["nav_msgs/msg/Path"](header=m.header(ns0), poses=poses)
-                w.write(conns[f"/tmr/{tr.name}/path"], ns0, ser(msg, TOPIC_TYPES["path"]))
-            P = ts.types["trajectory_msgs/msg/MultiDOFJointTrajectoryPoint"]
-            points = [
-                P(
-                    transforms=[m.transform(tr.xyz[k], _yaw(tr, k)) for tr in motion.tracks],
-                    velocities=[],
-                    accelerations=[],
-                    time_from_start=m.duration(s - ns0),
-                )
-                for k, s in enumerate(stamps)
-            ]
-            traj = ts.types["trajectory_msgs/msg/MultiDOFJointTrajectory"](
-                header=m.header(ns0), joint_names=[tr.name for tr in motion.tracks], points=points
-            )
-            w.write(conns["/tmr/team/trajectory"], ns0, ser(traj, TOPIC_TYPES["trajectory"]))
-            # per sample
-            TS = ts.types["geometry_msgs/msg/TransformStamped"]
-            MA = ts.types["visualization_msgs/msg/MarkerArray"]
-            from tqdm import tqdm
-
-            for k, s in enumerate(tqdm(stamps, desc="bag samples", unit="sample", leave=False, disable=not progress)):
-                for tr in motion.tracks:
-                    msg = ts.types["geometry_msgs/msg/PoseStamped"](
-                        header=m.header(s), pose=m.pose(tr.xyz[k], _yaw(tr, k))
-                    )
-                    w.write(conns[f"/tmr/{tr.name}/pose"], s, ser(msg, TOPIC_TYPES["pose"]))
-                lines = [
-                    m.marker(s, ln.kind, i, "LINE_STRIP", ln.kind, (_line_width(ln), 0, 0), ln.points[k])
-                    for i, ln in enumerate(motion.lines)
-                ]
-                w.write(conns["/tmr/lines"], s, ser(MA(markers=lines), TOPIC_TYPES["markers"]))
-                bodies = []
-                for i, tr in enumerate(motion.tracks):
-                    if tr.radius > 0:
-                        d = 2.0 * tr.radius
-                        p = (tr.xyz[k][0], tr.xyz[k][1], 0.5 * tr.xyz[k][2] if tr.xyz[k][2] > 0 else 0.05)
-                        h = max(float(tr.xyz[k][2]), 0.1)
-                        bodies.append(m.marker(s, "bodies", i, "CYLINDER", tr.role, (d, d, h), pose=(p, _yaw(tr, k))))
-                    else:
-                        bodies.append(
-                            m.marker(s, "bodies", i, "SPHERE", tr.role, (0.06, 0.06, 0.06), pose=(tr.xyz[k], None))
-                        )
-                w.write(conns["/tmr/bodies"], s, ser(MA(markers=bodies), TOPIC_TYPES["markers"]))
-                tfs = [
-                    TS(header=m.header(s), child_frame_id=tr.name, transform=m.transform(tr.xyz[k], _yaw(tr, k)))
-                    for tr in motion.tracks
-                ]
-                w.write(conns["/tf"], s, ser(ts.types["tf2_msgs/msg/TFMessage"](transforms=tfs), TOPIC_TYPES["tf"]))
+            yield w, conns, ts
         if path.exists():
             shutil.rmtree(path)
         os.replace(tmp, path)
-        return path
     finally:
         shutil.rmtree(tmp_parent, ignore_errors=True)
+
+
+def write_bag(
+    motion: Motion, path: str | os.PathLike[str], overwrite: bool = True, storage: str = "mcap", progress: bool = False
+) -> Path:
+    """Write ``motion`` as a rosbag2 directory (rosbag2 metadata version 9) at ``path``; return the path.
+
+    ``storage``: ``"mcap"`` (default; Foxglove opens it directly, ``ros2 bag play`` with the MCAP plugin) or
+    ``"sqlite3"`` (rosbag2's older default). ``progress``: a tqdm bar over the samples on stderr.
+
+    The bag is written into a temporary sibling directory and moved to ``path`` only when complete, replacing an
+    older bag there if ``overwrite`` (else :class:`tmr.errors.TmrError` when ``path`` exists).
+    """
+    path = Path(path)
+    t = np.asarray(motion.t, dtype=float)
+    logging.getLogger("tmr").debug("ROS bag: %d samples, storage %s", t.size, storage)
+    stamps = [stamp_ns(v) for v in t]
+    ns0 = stamps[0]
+    with _staged_bag(path, overwrite, storage, topics(motion)) as (w, conns, ts):
+        m = _Msgs(ts)
+        ser = ts.serialize_cdr
+        # once, at t_0: scene, paths, team trajectory
+        scene = ts.types["visualization_msgs/msg/MarkerArray"](markers=_scene_markers(m, motion, ns0))
+        w.write(conns["/tmr/scene"], ns0, ser(scene, TOPIC_TYPES["markers"]))
+        for tr in motion.tracks:
+            poses = [
+                ts.types["geometry_msgs/msg/PoseStamped"](header=m.header(s), pose=m.pose(tr.xyz[k], _yaw(tr, k)))
+                for k, s in enumerate(stamps)
+            ]
+            msg = ts.types["nav_msgs/msg/Path"](header=m.header(ns0), poses=poses)
+            w.write(conns[f"/tmr/{tr.name}/path"], ns0, ser(msg, TOPIC_TYPES["path"]))
+        P = ts.types["trajectory_msgs/msg/MultiDOFJointTrajectoryPoint"]
+        points = [
+            P(
+                transforms=[m.transform(tr.xyz[k], _yaw(tr, k)) for tr in motion.tracks],
+                velocities=[],
+                accelerations=[],
+                time_from_start=m.duration(s - ns0),
+            )
+            for k, s in enumerate(stamps)
+        ]
+        traj = ts.types["trajectory_msgs/msg/MultiDOFJointTrajectory"](
+            header=m.header(ns0), joint_names=[tr.name for tr in motion.tracks], points=points
+        )
+        w.write(conns["/tmr/team/trajectory"], ns0, ser(traj, TOPIC_TYPES["trajectory"]))
+        # per sample
+        TS = ts.types["geometry_msgs/msg/TransformStamped"]
+        MA = ts.types["visualization_msgs/msg/MarkerArray"]
+        from tqdm import tqdm
+
+        for k, s in enumerate(tqdm(stamps, desc="bag samples", unit="sample", leave=False, disable=not progress)):
+            for tr in motion.tracks:
+                msg = ts.types["geometry_msgs/msg/PoseStamped"](header=m.header(s), pose=m.pose(tr.xyz[k], _yaw(tr, k)))
+                w.write(conns[f"/tmr/{tr.name}/pose"], s, ser(msg, TOPIC_TYPES["pose"]))
+            lines = [
+                m.marker(s, ln.kind, i, "LINE_STRIP", ln.kind, (_line_width(ln), 0, 0), ln.points[k])
+                for i, ln in enumerate(motion.lines)
+            ]
+            w.write(conns["/tmr/lines"], s, ser(MA(markers=lines), TOPIC_TYPES["markers"]))
+            bodies = []
+            for i, tr in enumerate(motion.tracks):
+                if tr.radius > 0:
+                    d = 2.0 * tr.radius
+                    p = (tr.xyz[k][0], tr.xyz[k][1], 0.5 * tr.xyz[k][2] if tr.xyz[k][2] > 0 else 0.05)
+                    h = max(float(tr.xyz[k][2]), 0.1)
+                    bodies.append(m.marker(s, "bodies", i, "CYLINDER", tr.role, (d, d, h), pose=(p, _yaw(tr, k))))
+                else:
+                    bodies.append(
+                        m.marker(s, "bodies", i, "SPHERE", tr.role, (0.06, 0.06, 0.06), pose=(tr.xyz[k], None))
+                    )
+            w.write(conns["/tmr/bodies"], s, ser(MA(markers=bodies), TOPIC_TYPES["markers"]))
+            tfs = [
+                TS(header=m.header(s), child_frame_id=tr.name, transform=m.transform(tr.xyz[k], _yaw(tr, k)))
+                for tr in motion.tracks
+            ]
+            w.write(conns["/tf"], s, ser(ts.types["tf2_msgs/msg/TFMessage"](transforms=tfs), TOPIC_TYPES["tf"]))
+    return path
+
+
+# ----------------------------------------------------------------------------------------------------------
+# drone chains (issue 32): 3-D poses, catenary line strips, obstacle surfaces
+# ----------------------------------------------------------------------------------------------------------
+#: Points per tether LINE_STRIP of a drone bag (ends included), equally spaced in arc length.
+DRONE_CURVE_POINTS = 24
+
+
+def drone_topics(n: int) -> dict[str, str]:
+    """Every topic :func:`write_drone_bag` writes for ``n`` drones → its message type (the chain bag's topics)."""
+    out: dict[str, str] = {}
+    for i in range(1, n + 1):
+        out[f"/tmr/robot{i}/pose"] = TOPIC_TYPES["pose"]
+        out[f"/tmr/robot{i}/path"] = TOPIC_TYPES["path"]
+    out["/tmr/team/trajectory"] = TOPIC_TYPES["trajectory"]
+    out["/tmr/lines"] = TOPIC_TYPES["markers"]
+    out["/tmr/bodies"] = TOPIC_TYPES["markers"]
+    out["/tmr/scene"] = TOPIC_TYPES["markers"]
+    out["/tf"] = TOPIC_TYPES["tf"]
+    return out
+
+
+def _drone_scene(m: _Msgs, plan: Any, world: Any, ns0: int) -> list[Any]:
+    """Obstacles (TRIANGLE_LIST surface + LINE_LIST edges each), the room's 12 edges, the leader's reference,
+    anchor and goal (SPHERE + label)."""
+    from tmr.views.drones import _room_edges, obstacle_mesh
+
+    out: list[Any] = []
+    for i, ob in enumerate(world.obstacles):
+        dr = obstacle_mesh(ob)
+        tris = dr.vertices[dr.faces].reshape(-1, 3)
+        out.append(m.marker(ns0, "obstacles", i, "TRIANGLE_LIST", "obstacle", (1.0, 1.0, 1.0), tris, text=dr.name))
+        out.append(m.marker(ns0, "obstacle_edges", i, "LINE_LIST", "inflated", (0.02, 0, 0), dr.edges.reshape(-1, 3)))
+    room = np.array([p for edge in _room_edges(world.bounds) for p in edge])
+    out.append(m.marker(ns0, "room", 0, "LINE_LIST", "room", (0.03, 0, 0), room))
+    ref = np.asarray(plan.reference, dtype=float)
+    out.append(m.marker(ns0, "reference", 0, "LINE_STRIP", "point", (0.02, 0, 0), ref))
+    for j, (name, p) in enumerate((("anchor", plan.base), ("goal", plan.goal))):
+        p = np.asarray(p, dtype=float)
+        out.append(m.marker(ns0, "points", j, "SPHERE", "point", (0.15, 0.15, 0.15), pose=(p, None)))
+        top = (float(p[0]), float(p[1]), float(p[2]) + 0.25)
+        out.append(m.marker(ns0, "labels", j, "TEXT_VIEW_FACING", "room", (0, 0, 0.2), pose=(top, None), text=name))
+    return out
+
+
+def write_drone_bag(
+    plan: Any,
+    world: Any,
+    path: str | os.PathLike[str],
+    overwrite: bool = True,
+    storage: str = "mcap",
+    progress: bool = False,
+) -> Path:
+    """Write a drone chain's plan (:class:`tmr.control.plan3d.DronePlan` and its :class:`tmr.world.world3d.World3D`)
+    as a rosbag2 directory at ``path``, with the chain bag's topics (:func:`drone_topics`, frame ``map``, stamps
+    ``round(t_k · 1e9)`` ns):
+
+    - ``/tmr/robot<i>/pose``, ``/tf`` (per step), ``/tmr/robot<i>/path``, ``/tmr/team/trajectory`` (once): the
+      drones' 3-D positions (identity orientation: the plan carries no attitude);
+    - ``/tmr/lines`` (per step): one ``LINE_STRIP`` per tether (ns ``tether``, id j - 1 for tether j), its catenary
+      rebuilt from the two ends and the recorded ``a`` at :data:`DRONE_CURVE_POINTS` points of equal arc length
+      (:func:`tmr.views.drones.tether_curves`);
+    - ``/tmr/bodies`` (per step): each drone a ``SPHERE`` of diameter 2r;
+    - ``/tmr/scene`` (once, latched): each obstacle's surface as a ``TRIANGLE_LIST`` and its edges as a ``LINE_LIST``,
+      the room's edges, the leader's reference, anchor and goal.
+
+    Storage, overwrite and atomicity as :func:`write_bag`; the same plan gives the same bytes.
+    """
+    from tmr.views.drones import tether_curves
+
+    path = Path(path)
+    robots = np.asarray(plan.robots, dtype=float)
+    k_steps, n = robots.shape[:2]
+    stamps = [stamp_ns(v) for v in np.asarray(plan.t, dtype=float)]
+    ns0 = stamps[0]
+    curves = tether_curves(plan, DRONE_CURVE_POINTS)
+    names = [f"robot{i}" for i in range(1, n + 1)]
+    roles = ["robot"] * (n - 1) + ["leader"]
+    d = 2.0 * float(plan.safety_radius)
+    logging.getLogger("tmr").debug("ROS bag (drones): %d steps, storage %s", k_steps, storage)
+    with _staged_bag(path, overwrite, storage, drone_topics(n)) as (w, conns, ts):
+        m = _Msgs(ts)
+        ser = ts.serialize_cdr
+        T = ts.types
+        MA = T["visualization_msgs/msg/MarkerArray"]
+        w.write(conns["/tmr/scene"], ns0, ser(MA(markers=_drone_scene(m, plan, world, ns0)), TOPIC_TYPES["markers"]))
+        for i, name in enumerate(names):
+            poses = [
+                T["geometry_msgs/msg/PoseStamped"](header=m.header(s), pose=m.pose(robots[k, i], None))
+                for k, s in enumerate(stamps)
+            ]
+            msg = T["nav_msgs/msg/Path"](header=m.header(ns0), poses=poses)
+            w.write(conns[f"/tmr/{name}/path"], ns0, ser(msg, TOPIC_TYPES["path"]))
+        P = T["trajectory_msgs/msg/MultiDOFJointTrajectoryPoint"]
+        points = [
+            P(
+                transforms=[m.transform(robots[k, i], None) for i in range(n)],
+                velocities=[],
+                accelerations=[],
+                time_from_start=m.duration(s - ns0),
+            )
+            for k, s in enumerate(stamps)
+        ]
+        traj = T["trajectory_msgs/msg/MultiDOFJointTrajectory"](header=m.header(ns0), joint_names=names, points=points)
+        w.write(conns["/tmr/team/trajectory"], ns0, ser(traj, TOPIC_TYPES["trajectory"]))
+        TS = T["geometry_msgs/msg/TransformStamped"]
+        from tqdm import tqdm
+
+        for k, s in enumerate(tqdm(stamps, desc="bag samples", unit="sample", leave=False, disable=not progress)):
+            for i, name in enumerate(names):
+                msg = T["geometry_msgs/msg/PoseStamped"](header=m.header(s), pose=m.pose(robots[k, i], None))
+                w.write(conns[f"/tmr/{name}/pose"], s, ser(msg, TOPIC_TYPES["pose"]))
+            lines = [m.marker(s, "tether", j, "LINE_STRIP", "tether", (0.03, 0, 0), curves[k, j]) for j in range(n)]
+            w.write(conns["/tmr/lines"], s, ser(MA(markers=lines), TOPIC_TYPES["markers"]))
+            bodies = [
+                m.marker(s, "bodies", i, "SPHERE", roles[i], (d, d, d), pose=(robots[k, i], None)) for i in range(n)
+            ]
+            w.write(conns["/tmr/bodies"], s, ser(MA(markers=bodies), TOPIC_TYPES["markers"]))
+            tfs = [
+                TS(header=m.header(s), child_frame_id=name, transform=m.transform(robots[k, i], None))
+                for i, name in enumerate(names)
+            ]
+            w.write(conns["/tf"], s, ser(T["tf2_msgs/msg/TFMessage"](transforms=tfs), TOPIC_TYPES["tf"]))
+    return path
