@@ -72,7 +72,12 @@ TIMING_KEYS = (
 #: Every entry of ``--out`` a plan owns: its files, its views, and the physics replay of the plan (``tmr replay``
 #: writes ``replay/``). Those tmr wrote before and a new run does not write are removed when it publishes; an entry
 #: of one of these names that tmr did not write makes the run refuse its ``--out`` (:mod:`tmr.io.outdir`).
-OWNED_NAMES = OUTPUT_NAMES + VIEW_NAMES + ("replay",)
+OWNED_NAMES = (
+    OUTPUT_NAMES
+    + ("chain_poses_3d.png", "altitude.png", "tether_clearance.png", "tensions.png")
+    + VIEW_NAMES
+    + ("replay",)
+)  # the drone figures: tmr.plan3d.DRONE_FIGURES
 #: Outputs whose bytes change from run to run (listed in the manifest without a hash).
 VOLATILE_NAMES = ("timings.json",)
 
@@ -524,6 +529,13 @@ def _main(args: argparse.Namespace) -> int:
         if args.robots == "auto" and args.start is not None:
             raise TmrError("--robots auto chooses the number of robots, so it cannot take --start; give --robots N")
         check_out(Path(args.out))
+        if args.scenario and not args.map:
+            from tmr.world.drones import scenario_kind
+
+            if scenario_kind(args.scenario) == "drone":  # a tethered drone chain in 3-D (formulations/drones.md)
+                from tmr.plan3d import main_drones
+
+                return main_drones(args, OWNED_NAMES, VOLATILE_NAMES)
         scenario = load_inputs(args)
         start = time.perf_counter()
         rt, n_first = precheck(args, scenario)

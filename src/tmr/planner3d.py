@@ -170,12 +170,16 @@ def plan_drones(
     *,
     overrides: dict[str, Any] | None = None,
     progress: bool = False,
+    details: dict[str, Any] | None = None,
 ) -> tuple[DronePlan, DroneMetrics]:
     """Route, refuse or plan, and check: the whole of ``tmr plan`` for a drone scenario, as a library call.
 
     ``robots``: N, ``"auto"`` (the fewest from the route's proven minimum that give a plan passing every check,
     trying up to :data:`AUTO_EXTRA` more), or None (the scenario's). Raises NoRouteError / TooFewRobotsError (exit
-    2) before planning; returns the last plan tried with its metrics (``plan.success`` says whether it passed)."""
+    2) before planning; returns the last plan tried with its metrics (``plan.success`` says whether it passed).
+    ``details``, if given, receives the ``route`` (:class:`Route3D`) and the ``problem`` of the plan returned; the
+    plan's ``diagnostics`` get ``route_length``, ``route_lower_bound``, ``n_min`` [m, m, -] and, for ``auto``,
+    ``robots_auto`` (every count tried and why it failed)."""
     start = time.perf_counter()
     params, tether = drone_parameters(scenario, overrides)
     route, n_first = route_drones(scenario, params, tether, robots)
@@ -192,6 +196,8 @@ def plan_drones(
             tried.append(f"{n}: {str(exc).split(';')[0]}")
             continue
         result = solve_drones(problem, method, progress=progress)
+        if details is not None:
+            details.update(route=route, problem=problem)
         tried.append(f"{n}: {'planned' if result[0].success else str(result[0].failure).split(';')[0]}")
         if result[0].success:
             break
@@ -200,6 +206,9 @@ def plan_drones(
     plan, metrics = result
     if robots == "auto":
         plan.diagnostics["robots_auto"] = f"N_min = {route.min_robots}; " + "; ".join(tried)
+    plan.diagnostics.update(
+        route_length=float(route.length), route_lower_bound=float(route.lower_bound_length), n_min=int(route.min_robots)
+    )
     plan.diagnostics.setdefault("timings", {})["route_time"] = route_time
     plan.wall_time = time.perf_counter() - start
     return plan, metrics

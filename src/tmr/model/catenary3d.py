@@ -40,7 +40,6 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.optimize import brentq, minimize_scalar
 
 from tmr.errors import ParameterError, TetherSpanError, fmt_point
 from tmr.model.catenary import G0
@@ -253,6 +252,8 @@ def _solve_theta(d: float, h: float, m: float, guess: float | None = None) -> fl
     vals = _span(_GRID, m, k)
     j = int(np.argmax(vals))
     lo, hi = _GRID[max(j - 1, 0)], _GRID[min(j + 1, len(_GRID) - 1)]
+    from scipy.optimize import brentq, minimize_scalar  # here: a warm-started solve never needs them
+
     res = minimize_scalar(lambda t: -_span(t, m, k), bounds=(lo, hi), method="bounded", options={"xatol": 1e-13})
     theta_star, d_max = (float(res.x), -float(res.fun)) if -res.fun >= vals[j] else (float(_GRID[j]), float(vals[j]))
     if target > d_max:
