@@ -107,6 +107,8 @@ def _main(args: argparse.Namespace) -> int:
         what = "is not a directory" if run_dir.exists() else "does not exist"
         raise TmrError(f"{run_dir} {what}: give the --out directory of a tmr run")
     check_out(out, args.format)
+    if _is_drone_run(run_dir):
+        return _export_drones(args, run_dir, out)
     from tmr.export.runs import load_motion
 
     motion = load_motion(run_dir, rate=args.rate, trajectory=args.trajectory, description=args.description)
@@ -133,6 +135,48 @@ def _main(args: argparse.Namespace) -> int:
     LOG.info(f"tmr.export: {motion.title}")
     if not motion.timed:
         LOG.info(f"  note: {motion.notes[0]}")
+    LOG.info(f"  wrote {what} to {out}")
+    return 0
+
+
+def _is_drone_run(run_dir: Path) -> bool:
+    """Whether ``run_dir`` holds a drone-chain run (``run.json`` kind ``drone``, :mod:`tmr.io.drones`)."""
+    import json
+
+    try:
+        return json.loads((run_dir / "run.json").read_text(encoding="utf-8")).get("kind") == "drone"
+    except (OSError, ValueError, AttributeError):
+        return False  # no or unreadable run.json: the readers of every kind say what is wrong
+
+
+def _export_drones(args: argparse.Namespace, run_dir: Path, out: Path) -> int:
+    """A drone run exported in 3-D (:mod:`tmr.views.drones`, :func:`tmr.export.rosbag.write_drone_bag`)."""
+    from tmr.io.outdir import Stage
+    from tmr.io.rundir import load_run
+
+    if args.trajectory != "raw":
+        raise TmrError("--trajectory filtered: a drone run records the checked plan only (--trajectory raw)")
+    run = load_run(run_dir)
+    plan, world = run.plan(), run.world()
+    with Stage(out, file=True) as stage:
+        staged = stage.path / out.name
+        if args.format in ("mcap", "sqlite3"):
+            from tmr.export.rosbag import drone_topics, write_drone_bag
+
+            write_drone_bag(plan, world, staged, storage=args.format, progress=progress_enabled())
+            what = f"ROS 2 bag ({args.format}, {len(drone_topics(plan.n_robots))} topics, {plan.t.size} samples)"
+        elif args.format == "gif":
+            from tmr.views.drones import write_gif_3d
+
+            write_gif_3d(plan, world, staged, progress=progress_enabled())
+            what = f"3-D animation ({staged.stat().st_size / 1e6:.2f} MB)"
+        else:
+            from tmr.views.drones import write_html_3d
+
+            write_html_3d(plan, world, staged)
+            what = f"interactive 3-D view ({staged.stat().st_size / 1e6:.2f} MB)"
+        stage.publish()
+    LOG.info(f"tmr.export: {run.label}")
     LOG.info(f"  wrote {what} to {out}")
     return 0
 

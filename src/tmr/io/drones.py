@@ -298,6 +298,19 @@ class DroneRun:
         d = self.record.get("world_dir")
         return Path(d) if d else self.path
 
+    def world(self) -> Any:
+        """The run's :class:`tmr.world.world3d.World3D`, rebuilt from the recorded ``[world]`` table (RunDirError if
+        the run recorded none or it no longer loads, e.g. a mesh file moved)."""
+        from tmr.errors import TmrError
+        from tmr.world.world3d import world3d_from_table
+
+        if self.world_table is None:
+            raise RunDirError(f"{self.path}: run.json records no world; re-run the planner")
+        try:
+            return world3d_from_table(self.world_table, self.world_dir, where=f"{self.path / 'run.json'} [world]")
+        except TmrError as exc:
+            raise RunDirError(f"{self.path}: the run's world does not load: {exc}") from None
+
     def tether_params(self) -> Any:
         """The plan's :class:`tmr.model.catenary3d.DroneTetherParams`."""
         from tmr.model.catenary3d import DroneTetherParams

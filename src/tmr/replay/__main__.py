@@ -177,6 +177,11 @@ def _main(args: argparse.Namespace) -> int:
                 f"{args.run} is a tmr.ccma run: the physics replay covers tmr.plan and tmr.mcdpr runs"
             ) from exc
         raise
+    if run.kind == "drone":
+        raise TmrError(
+            f"{args.run} is a drone-chain run: the physics replay covers ground chains (tmr plan) and MoPICK runs "
+            "(tmr mcdpr plan); drone chains are not replayed yet"
+        )
     if args.gif:
         from tmr.replay.gif import select_backend
 
