@@ -99,6 +99,21 @@ def test_enclosed_goal_is_proven_unreachable():
     assert exc.value.proven
 
 
+@pytest.mark.parametrize("thickness", [0.2, 0.4, 1.0])
+def test_a_wall_across_the_room_is_proven_to_block(thickness):
+    """A wall from wall to wall and floor to ceiling, thinner than the bound's lattice slack: the cube-connectivity
+    proof (projection on the room shrunk by c) still proves it blocks; with a 0.8 m window a route is found."""
+    x0 = 5.0 - thickness / 2
+    wall = box_obstacle([x0, 0.0, 0.0], [x0 + thickness, 10.0, 4.0])
+    with pytest.raises(NoRouteError, match="cannot be reached") as exc:
+        plan_route3d(World3D([wall], ROOM, 0.3), [1.0, 5.0, 0.3], [9.0, 5.0, 2.0], TETHER)
+    assert exc.value.proven
+    left = box_obstacle([x0, 0.0, 0.0], [x0 + thickness, 4.6, 4.0])
+    right = box_obstacle([x0, 5.4, 0.0], [x0 + thickness, 10.0, 4.0])
+    route = plan_route3d(World3D([left, right], ROOM, 0.3), [1.0, 5.0, 0.3], [9.0, 5.0, 2.0], TETHER)
+    assert route.length >= route.lower_bound_length >= 8.0
+
+
 def test_narrow_gap_for_the_tether_but_not_for_a_drone_is_not_proven():
     # a 0.5 m slot in a wall: a tether passes (c_t = 0.2 each side), a drone (r = 0.3) does not
     w = World3D(

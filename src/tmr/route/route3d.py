@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import dijkstra
+from scipy.sparse.csgraph import connected_components, dijkstra
 
 from tmr.errors import ParameterError, TetherSpanError, TmrError, fmt_point
 from tmr.model.catenary3d import DroneTetherParams, solve3d
@@ -197,6 +197,40 @@ def _obstacle_distance(world: World3D, pts: Array, cap: float) -> Array:
             alone = World3D([ob], np.r_[lo - span, hi + span], 0.0)  # the walls far away: this obstacle only
             out[near] = np.minimum(out[near], alone.exact_clearance(pts[near]))
     return out
+
+
+def _cells_disconnected(world: World3D, lat: _Lattice, nodes: Array, b: Array, g: Array, c: float) -> bool:
+    """A proof that no curve keeping ``c`` [m] from the obstacles and the room's walls, floor and ceiling joins ``b``
+    to ``g`` (True), or none (False).
+
+    The lattice's cubes (side h, one per node) cover the room; a curve passes through a 26-connected sequence of
+    them, and every cube it meets holds a curve point p within ρ = h√3/2 of the cube's node q. Such a p lies in the
+    room shrunk by c (a box R'), so the projection q' of q on R' is at most as far from p as q is (R' is convex):
+    |q − q'| ≤ ρ and, the distance to the obstacles being 1-Lipschitz, d(q') ≥ c − ρ. The nodes passing both tests
+    hold every cube such a curve meets; if the cubes of b and g are in different 26-connected components of them,
+    no such curve exists. Unlike the bound's enlarged space (slack √3 h on each distance alone), the projection sees
+    an obstacle and a wall together: a wall across the room, touching its walls, blocks the proof's space too."""
+    if c <= 0.0:
+        return False
+    rho = 0.5 * math.sqrt(3.0) * lat.h
+    bounds = np.asarray(world.bounds, dtype=float)
+    lo, hi = bounds[:3] + c, bounds[3:] - c
+    if np.any(lo > hi):
+        return False
+    q = np.clip(nodes, lo, hi)
+    near = np.linalg.norm(nodes - q, axis=1) <= rho
+    ok = near.copy()
+    ok[near] = _obstacle_distance(world, q[near], cap=c + 0.01) >= c - rho
+    top = np.array(lat.shape) - 1
+
+    def node(p: Array) -> int:  # the node whose cube (centred on it) holds p
+        return int(lat.flat(np.clip(np.rint((p - lat.origin) / lat.h).astype(np.int64), 0, top)))
+
+    nb, ng = node(b), node(g)
+    if not (ok[nb] and ok[ng]):
+        return not ok[ng] if ok[nb] else False  # b's own cube always holds b: a failed test there proves nothing
+    _, labels = connected_components(_graph(lat, ok), directed=False)
+    return bool(labels[nb] != labels[ng])
 
 
 def _wall_distance(bounds: Array, pts: Array) -> tuple[Array, Array]:
@@ -371,6 +405,13 @@ def plan_route3d(
     pred = np.full(lat.n, -9999)
     pred[keep] = np.where(pred_l >= 0, keep[np.maximum(pred_l, 0)], -9999)
     if not math.isfinite(dist[end]):
+        c = min(c_t, r, float(world.with_safety_radius(0.0).exact_clearance(b[None, :])[0]) - 0.002)
+        if _cells_disconnected(world, lat, nodes, b, g, c):
+            raise NoRouteError(
+                f"the goal {fmt_point(g)} cannot be reached from the base {fmt_point(b)}: no curve keeping "
+                f"{c:.3f} m from the obstacles, the walls, the floor and the ceiling joins them (the tethers keep "
+                f"c_t = {c_t:.3f} m, the drones r = {r:.3f} m)"
+            )
         err = NoRouteError(
             f"no free route for a drone (radius {r:.3f} m) from the base {fmt_point(b)} to the goal {fmt_point(g)} "
             f"on a {h:.3f} m lattice"
