@@ -142,7 +142,7 @@ def _in_process(scenario: Any, robots: str, plan_seed: int) -> dict[str, Any]:
     row: dict[str, Any] = {}
     t0 = time.perf_counter()
     try:
-        plan, metrics = plan_drones(scenario, robots=n, method="qp", seed=plan_seed)
+        plan, metrics = plan_drones(scenario, robots=n, method="qp")
     except TmrError as exc:
         row["call_s"] = time.perf_counter() - t0
         kind = type(exc).__name__
