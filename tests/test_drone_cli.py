@@ -152,3 +152,45 @@ def test_pinv_is_the_soft_baseline_and_its_verdict_is_honest(tmp_path, capsys):
     rows = np.asarray(json.loads((out / "trajectories.json").read_text())["robots"][2]["x"])
     assert rows.size > 100
     assert Path(out / "run.json").is_file()
+
+
+def _open_room(tmp_path: Path, robots: str, tether_length: float, extra: str = "") -> Path:
+    path = tmp_path / "open.toml"
+    path.write_text(
+        f'name = "open"\nkind = "drone"\nrobots = {robots}\nbase = [1.0, 5.0, 0.3]\ngoal = [9.0, 5.0, 2.0]\n{extra}'
+        "[world]\nbounds = [0.0, 0.0, 0.0, 10.0, 10.0, 4.0]\nsafety_radius = 0.3\n"
+        f"[tether]\ntether_length = {tether_length}\n"
+    )
+    return path
+
+
+def test_robots_auto_in_the_file_is_honoured(tmp_path, capsys):
+    """robots = "auto" in the scenario means --robots auto (here 8.18 m in a straight line, 5 m tethers: 2 drones)."""
+    out = tmp_path / "o"
+    code, stdout, stderr = run_cli(["--scenario", str(_open_room(tmp_path, '"auto"', 5.0)), "--no-plots",
+                                    "--out", str(out)], capsys)  # fmt: skip
+    assert code == 0, stderr
+    assert "--robots auto" in stdout and json.loads((out / "metrics.json").read_text())["n_robots"] == 2
+
+
+def test_the_straight_bound_counts_the_goal_tolerance(tmp_path, capsys):
+    """The goal is 8.179 m from the base; the leader must end within 0.5 m of it, so the chain spans ≥ 7.679 m:
+    3 × 2.7 m = 8.1 m of tether is not refused up front (no proof), 3 × 2.5 m = 7.5 m is (exit 2)."""
+    ok = _open_room(tmp_path, "3", 2.7, "[params]\ngoal_tolerance = 0.5\n")
+    code, stdout, stderr = run_cli(["--scenario", str(ok), "--no-plots", "--out", str(tmp_path / "a")], capsys)
+    assert code != 2 and "cannot reach" not in stdout + stderr
+    bad = _open_room(tmp_path, "3", 2.5, "[params]\ngoal_tolerance = 0.5\n")
+    code, stdout, stderr = run_cli(["--scenario", str(bad), "--no-plots", "--out", str(tmp_path / "b")], capsys)
+    assert code == 2 and "within the goal tolerance 0.5 m" in stdout + stderr
+
+
+def test_a_winch_tension_no_drone_can_hold_is_refused_up_front(tmp_path, capsys):
+    out = tmp_path / "x"
+    code, stdout, stderr = run_cli(["--scenario", "F", "--set", "winch_tension=8", "--out", str(out)], capsys)
+    assert code == 2 and "spare thrust 7.357 N" in stdout + stderr and not out.exists()
+    assert len((stdout + stderr).strip().splitlines()) == 1
+
+
+def test_filter_cutoff_is_refused_for_drones(tmp_path, capsys):
+    code, stdout, stderr = run_cli(["--scenario", "F", "--filter-cutoff", "2", "--out", str(tmp_path / "x")], capsys)
+    assert code == 2 and "--filter-cutoff" in stdout + stderr

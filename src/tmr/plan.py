@@ -110,7 +110,8 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     src.add_argument(
         "--scenario",
         type=path_arg,
-        help="built-in scenario A, B, C, D (Caruso 2021), E (tmr's), or a path to a scenario TOML file",
+        help="built-in scenario A, B, C, D (Caruso 2021), E (tmr's), F, G, H (tethered drones in 3-D), or a path to a "
+        'scenario TOML file (kind = "drone" for a drone chain)',
     )
     src.add_argument(
         "--map", type=path_arg, help="map file: ROS map_server .yaml (+ .pgm), .geojson or .wkt (needs --base, --goal)"
@@ -133,8 +134,8 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
         "--robot-radius",
         type=positive_float,
         metavar="R",
-        help="robot radius r [m] (default: the scenario's, 0.5): obstacles grown by r, robots kept 2r apart, the "
-        "route and the messages use it; same as --set safety_radius=R",
+        help="robot radius r [m] (default: the scenario's; 0.5 for ground robots, 0.3 for drones): obstacles grown "
+        "by r, robots kept 2r apart, the route and the messages use it; same as --set safety_radius=R",
     )
     p.add_argument(
         "--method",

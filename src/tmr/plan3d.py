@@ -4,7 +4,8 @@ by :mod:`tmr.planner3d` and written by :mod:`tmr.io.drones` and :mod:`tmr.views.
 Same verdicts as the ground chain: exit 0 a plan that passed every check of the independent checker
 (:mod:`tmr.checks.drones`); 1 no plan found or a check failed (outputs of a computed plan written, the reason
 printed); 2 bad input or a task proven impossible up front (no free route, fewer drones than the proven bound: one
-line, nothing written). Options of the ground chain that have no meaning for drones are refused with one line.
+line, nothing written). Options of the ground chain that have no meaning for drones are refused with one line;
+``--seed`` is accepted and changes nothing (the drone pipeline has no random part: its route is a lattice search).
 """
 
 from __future__ import annotations
@@ -42,6 +43,10 @@ def _refuse_ground_options(args: argparse.Namespace) -> None:
             f'{", ".join(given)}: not taken by a drone scenario (kind = "drone"): its base, goal and world are in '
             "the scenario file"
         )
+    from tmr.plan import FILTER_CUTOFF
+
+    if args.filter_cutoff != FILTER_CUTOFF:
+        raise TmrError("--filter-cutoff: a drone plan is written as checked, without a trajectory filter")
     if args.route != "shortest":
         raise TmrError(f"--route {args.route}: a drone chain follows its 3-D shortest route (--route shortest)")
     if args.method == "horizon":
@@ -99,8 +104,18 @@ def summary(plan: Any, metrics: Any) -> str:
         ("binding_limit", metrics.binding_limit),
         ("wall_time", plan.wall_time),
     ]
+    notes = {
+        "min_drone_clearance": "m beyond r",
+        "min_separation": "m between centres",
+        "min_tether_clearance": "m, whole curves",
+        "peak_speed": "m/s, per axis",
+        "peak_acceleration": "m/s², per axis",
+        "max_drone_tension": "N at a drone end",
+        "wall_time": "s",
+    }
     for key, value in rows:
-        lines.append(f"  {key:24s} {value:.6g}" if isinstance(value, float) else f"  {key:24s} {value}")
+        text = f"{value:.6g}" if isinstance(value, float) else f"{value}"
+        lines.append(f"  {key:24s} {text}" + (f"  ({notes[key]})" if key in notes else ""))
     tc = metrics.binding.get("tether_clearance")
     if tc:
         lines.append(

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from tmr.errors import ParameterError, TmrError, fmt_point
+from tmr.errors import ParameterError, fmt_point
 from tmr.model.catenary3d import DroneTetherParams
 from tmr.model.params import DroneParams, apply_overrides
 
@@ -93,13 +93,16 @@ def route_drones(
     wanted = scenario.n_robots if robots is None else robots
     if wanted != "auto":
         n = int(wanted)
+        # the leader must end within the goal tolerance: the chain spans at least |goal − base| − tolerance
         straight = float(np.linalg.norm(np.asarray(scenario.goal) - np.asarray(scenario.base)))
-        fewest = max(1, math.ceil(straight / tether.tether_length - 1e-12))
+        reach = max(0.0, straight - params.goal_tolerance)
+        fewest = max(1, math.ceil(reach / tether.tether_length - 1e-12))
         if n < fewest:
             raise TooFewRobotsError(
                 f"{n} drone{'s' if n != 1 else ''} cannot reach the goal {fmt_point(scenario.goal)}: it is "
-                f"{straight:.3f} m from the base {fmt_point(scenario.base)} in a straight line, more than {n} x "
-                f"{tether.tether_length:.3f} m of tether; the fewest is at least {fewest}",
+                f"{straight:.3f} m from the base {fmt_point(scenario.base)} in a straight line ({reach:.3f} m to "
+                f"within the goal tolerance {params.goal_tolerance:g} m), more than {n} x {tether.tether_length:.3f} m "
+                f"of tether; the fewest is at least {fewest}",
                 fewest,
                 proven=True,
             )
@@ -180,18 +183,23 @@ def plan_drones(
     ``details``, if given, receives the ``route`` (:class:`Route3D`) and the ``problem`` of the plan returned; the
     plan's ``diagnostics`` get ``route_length``, ``route_lower_bound``, ``n_min`` [m, m, -] and, for ``auto``,
     ``robots_auto`` (every count tried and why it failed)."""
+    from tmr.route.route3d import StartError
+
     start = time.perf_counter()
     params, tether = drone_parameters(scenario, overrides)
-    route, n_first = route_drones(scenario, params, tether, robots)
+    check_thrust(tether)
+    wanted = scenario.n_robots if robots is None else robots  # the file may say "auto" too
+    route, n_first = route_drones(scenario, params, tether, wanted)
     route_time = time.perf_counter() - start
-    last = n_first + AUTO_EXTRA if robots == "auto" else n_first
+    auto = wanted == "auto"
+    last = n_first + AUTO_EXTRA if auto else n_first
     tried: list[str] = []
     result: tuple[DronePlan, DroneMetrics] | None = None
     for n in range(n_first, last + 1):
         try:
             problem = build_drone_problem(scenario, n, params=params, tether=tether, route=route)
-        except TmrError as exc:
-            if robots != "auto":
+        except StartError as exc:
+            if not auto:
                 raise
             tried.append(f"{n}: {str(exc).split(';')[0]}")
             continue
@@ -202,9 +210,9 @@ def plan_drones(
         if result[0].success:
             break
     if result is None:
-        raise TmrError(f"--robots auto: no start placement for N = {n_first}…{last}: " + "; ".join(tried))
+        raise StartError(f"--robots auto: no valid start for N = {n_first} … {last} drones (N = {tried[0]})")
     plan, metrics = result
-    if robots == "auto":
+    if auto:
         plan.diagnostics["robots_auto"] = f"N_min = {route.min_robots}; " + "; ".join(tried)
     plan.diagnostics.update(
         route_length=float(route.length), route_lower_bound=float(route.lower_bound_length), n_min=int(route.min_robots)
@@ -212,3 +220,16 @@ def plan_drones(
     plan.diagnostics.setdefault("timings", {})["route_time"] = route_time
     plan.wall_time = time.perf_counter() - start
     return plan, metrics
+
+
+def check_thrust(tether: DroneTetherParams) -> None:
+    """Refuse (ParameterError, exit 2) a tether no drone can hold: with the winch at the lower end of each tether the
+    tension is T_w there and grows with height (T_B = T_w + ρ g h), so every drone end of every tether pulls with at
+    least T_w; a T_w above the drones' spare thrust (:attr:`DroneTetherParams.spare_thrust`) leaves no plan."""
+    if tether.winch_end == "lower" and tether.winch_tension >= tether.spare_thrust:
+        raise ParameterError(
+            f"the winch tension {tether.winch_tension:.3f} N is at least the drones' spare thrust "
+            f"{tether.spare_thrust:.3f} N (mass {tether.drone_mass:g} kg, thrust/weight {tether.thrust_to_weight:g}, "
+            f"reserve {tether.control_reserve:g}): every drone end of a tether pulls with at least the winch tension, "
+            "so no drone can hold one; lower winch_tension or give the drones more thrust"
+        )

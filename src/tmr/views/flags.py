@@ -42,7 +42,11 @@ EXPORT_FORMATS = ("mcap", "sqlite3")
 def add_view_args(parser: argparse.ArgumentParser) -> None:
     """Add ``--gif``, ``--html`` and ``--export FORMAT`` to ``parser`` (one argument group)."""
     g = parser.add_argument_group("views and exports")
-    g.add_argument("--gif", action="store_true", help=f"also write {GIF_NAME}, an animation of the plan (top view)")
+    g.add_argument(
+        "--gif",
+        action="store_true",
+        help=f"also write {GIF_NAME}, an animation of the plan (top view; a 3-D perspective for drones)",
+    )
     g.add_argument(
         "--html",
         action="store_true",
