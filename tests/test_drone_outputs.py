@@ -31,8 +31,9 @@ WORLD = {
 }
 
 
-def drone_plan() -> DronePlan:
-    """Two drones; drone 2 passes straight over drone 1 at k = 20 (tether 2 vertical there: a = NaN)."""
+def drone_plan(Ts: float = 0.05, params: dict | None = None) -> DronePlan:
+    """Two drones; drone 2 passes straight over drone 1 at k = 20 (tether 2 vertical there: a = NaN); drone 2 flies
+    at 0.05 m / Ts along x (1 m/s by default)."""
     k = np.arange(K + 1, dtype=float)
     robots = np.zeros((K + 1, 2, 3))
     robots[:, 0] = np.column_stack([np.full_like(k, 3.0), np.full_like(k, 5.0), 1.5 + 0.01 * k])
@@ -40,12 +41,12 @@ def drone_plan() -> DronePlan:
     pts = np.concatenate([np.broadcast_to([1.0, 5.0, 0.5], (K + 1, 1, 3)), robots], axis=1)
     a = np.array([[np.nan if (c := solve3d(r[j], r[j + 1], P)).a is None else c.a for j in range(2)] for r in pts])
     vel = np.zeros_like(robots)
-    vel[:-1] = np.diff(robots, axis=0) / 0.05
+    vel[:-1] = np.diff(robots, axis=0) / Ts
     return DronePlan(
-        method="qp", scenario="two", t=k * 0.05, robots=robots, velocities=vel, base=np.array([1.0, 5.0, 0.5]),
+        method="qp", scenario="two", t=k * Ts, robots=robots, velocities=vel, base=np.array([1.0, 5.0, 0.5]),
         goal=robots[-1, -1].copy(), reference=robots[:, -1] + 0.01, tether_a=a, tether=P, safety_radius=0.3,
         bounds=np.array(WORLD["bounds"]), success=False, failure=None, wall_time=0.123,
-        diagnostics={"step_time": np.full(K + 1, 1e-3)}, params={"Ts": 0.05, "grid": 0.25},
+        diagnostics={"step_time": np.full(K + 1, 1e-3)}, params=params or {"Ts": 0.05, "grid": 0.25},
     )  # fmt: skip
 
 
@@ -151,3 +152,21 @@ def test_damaged_files_give_one_line(tmp_path, damage):
     with pytest.raises(RunDirError) as err:
         load_run(out)
     assert "\n" not in str(err.value) and "re-run" in str(err.value)
+
+
+@pytest.mark.parametrize(("Ts", "speed_max", "passes"), [(0.02, 5.0, True), (0.05, 0.5, False)])
+def test_a_rerun_check_uses_the_recorded_planner_limits(tmp_path, Ts, speed_max, passes):
+    """run_drones records plan.params = {"planner": DroneParams, "tether": ...}: DroneRun.check() must use those
+    limits, not the defaults (2 m/s, 4 m/s², 0.1 m). Drone 2 flies at 2.5 m/s (Ts 0.02 s) or 1 m/s (Ts 0.05 s)."""
+    limits = {"drone_speed_max": speed_max, "drone_accel_max": 60.0, "goal_tolerance": 0.05}
+    plan = drone_plan(Ts, {"planner": {"Ts": Ts, **limits}, "tether": {"clearance": 0.2}})
+    metrics = check_drone_plan(plan, WORLD)
+    assert metrics.speed_max == speed_max and metrics.accel_max == 60.0 and metrics.goal_tolerance == 0.05
+    assert metrics.success is passes, metrics.failure
+    write_drone_outputs(tmp_path / "r", plan, metrics, info(tmp_path))
+    again = load_run(tmp_path / "r").check()
+    assert again.success is passes and again.failure == metrics.failure
+    assert again.to_dict(per_step=False) == json.loads((tmp_path / "r" / "metrics.json").read_text())
+    # a flat dict still works, and explicit params win over the plan's
+    assert check_drone_plan(drone_plan(Ts, limits), WORLD).speed_max == speed_max
+    assert check_drone_plan(plan, WORLD, params={"drone_speed_max": 7.0}, update_plan=False).speed_max == 7.0

@@ -604,13 +604,28 @@ class DroneMetrics:
         return json_safe(d)
 
 
+def _lookup(params: Any, name: str) -> Any:
+    """``name`` in planner parameters: a ``DroneParams``, a flat dict, or the plan record's nested
+    ``{"planner": {...}, "tether": {...}}`` (what :func:`tmr.control.run3d.run_drones` stores in ``plan.params``)."""
+    if params is None:
+        return None
+    if not isinstance(params, Mapping):
+        return getattr(params, name, None)
+    if params.get(name) is not None:
+        return params[name]
+    nested = params.get("planner")
+    if isinstance(nested, Mapping):
+        return nested.get(name)
+    return getattr(nested, name, None) if nested is not None else None
+
+
 def _param(plan: Any, params: Any, name: str, default: float) -> float:
-    if params is not None:
-        v = params.get(name) if isinstance(params, Mapping) else getattr(params, name, None)
+    """A planner limit: from ``params``, else ``plan.params`` (flat or under ``"planner"``), else ``default``."""
+    for source in (params, getattr(plan, "params", None)):
+        v = _lookup(source, name)
         if v is not None:
             return float(v)
-    v = (getattr(plan, "params", None) or {}).get(name)
-    return float(v) if v is not None else default
+    return default
 
 
 def _m(value: float, limit: float) -> str:
@@ -641,7 +656,8 @@ def check_drone_plan(
             :class:`CheckWorld` (:func:`check_world`).
         base_dir: folder the table's mesh files are relative to (the scenario file's folder).
         params: the planner parameters (a ``DroneParams`` or a dict) for ``drone_speed_max``, ``drone_accel_max``,
-            ``goal_tolerance``; default: ``plan.params``, then 2 m/s, 4 m/s², 0.1 m.
+            ``goal_tolerance``; default: ``plan.params`` (flat, or the planner's record ``{"planner": {...}}``),
+            then 2 m/s, 4 m/s², 0.1 m.
         tolerance: slack [m] before a length limit counts as broken; speeds get 2 tol / Ts, accelerations 4 tol / Ts².
         update_plan: set ``plan.success`` / ``plan.failure`` from the check (the planner's own failure, kept in
             ``plan.diagnostics["planner_failure"]``, stays first).
