@@ -321,7 +321,7 @@ def check_world(table: Any, base_dir: str | Path = ".") -> CheckWorld:
             except Exception as exc:  # trimesh raises many types on missing or corrupt files
                 raise MapError(f"[world] {at}: cannot read the mesh {path} ({type(exc).__name__})") from None
             obstacles.append(("mesh", mesh))
-            at = f"{at} (mesh '{item['mesh']}')"
+            at = f"{at} (mesh '{Path(str(item['mesh'])).name}')"  # the file's name: the same in the run's copy
         else:
             raise MapError(f"[world] {at} needs one of box, prism, mesh")
         names.append(at)

@@ -8,11 +8,15 @@
   (``null`` for a vertical tether): any reader rebuilds each curve from its two ends and a.
 * ``trajectories.csv`` — one row per step: ``t``, then ``robot<i>_x, _y, _z``, then ``tether<j>_a`` (empty: vertical).
 * ``metrics.json`` — :class:`tmr.checks.drones.DroneMetrics` without its per-step series (plus the glue's extras).
-* ``run.json`` — ``kind = "drone"``: the world (the scenario's ``[world]`` table, the folder its mesh files are in,
-  the scenario file's text), ``safety_radius``, ``tether_clearance``, ``rho``, ``g``, ``tension_max``,
-  ``tether_length_max``, ``winch_end``, ``winch_tension``, every tether parameter, the planner parameters and a
-  summary of the check.
+* ``run.json`` — ``kind = "drone"``: the world (the scenario's ``[world]`` table, its mesh paths made relative to the
+  run directory; the scenario file's name and text), ``safety_radius``, ``tether_clearance``, ``rho``, ``g``,
+  ``tension_max``, ``tether_length_max``, ``winch_end``, ``winch_tension``, every tether parameter, the planner
+  parameters and a summary of the check.
 * ``timings.json`` — wall times (not reproducible, so kept apart and listed without a hash in the manifest).
+* ``world_meshes/`` (:data:`DRONE_MESH_DIR`, only for a world with meshes) — a byte copy of every mesh file of the
+  world, ``world_meshes/<file name>`` (``world_meshes/obstacle<k>/<file name>`` when two different files share a
+  name): the run directory is self-contained (moved or copied, ``tmr export`` and :meth:`DroneRun.check` still
+  read its world), and run.json holds no absolute path.
 
 Every file goes through the atomic writers of :mod:`tmr.io.outputs`; the same plan gives the same bytes (fixed key
 order, floats in shortest round-trip form). :func:`load_drone_run` (registered for ``kind = "drone"`` with
@@ -39,6 +43,7 @@ from tmr.errors import ParameterError
 from tmr.io.rundir import RUN_FORMAT, RunDirError, _dump, _read_json, _safe, _version, register_kind
 
 __all__ = [
+    "DRONE_MESH_DIR",
     "DRONE_OUTPUT_NAMES",
     "DRONE_TRAJECTORY_FORMAT",
     "DRONE_VOLATILE_NAMES",
@@ -46,6 +51,7 @@ __all__ = [
     "drone_run_dict",
     "drone_trajectories_dict",
     "load_drone_run",
+    "world_meshes",
     "write_drone_outputs",
     "write_drone_trajectories_csv",
     "write_drone_trajectories_json",
@@ -55,8 +61,17 @@ Array = NDArray[np.float64]
 
 #: ``format`` of a drone plan's ``trajectories.json``.
 DRONE_TRAJECTORY_FORMAT = "tmr-drone-trajectories/1"
-#: Every file :func:`write_drone_outputs` writes (the glue's ``Stage(owned=...)`` adds its figures).
-DRONE_OUTPUT_NAMES = ("trajectories.json", "trajectories.csv", "metrics.json", "run.json", "timings.json")
+#: The directory of the run that holds a copy of the world's mesh files (written only for a world with meshes).
+DRONE_MESH_DIR = "world_meshes"
+#: Every entry :func:`write_drone_outputs` may write (the glue's ``Stage(owned=...)`` adds its figures).
+DRONE_OUTPUT_NAMES = (
+    "trajectories.json",
+    "trajectories.csv",
+    "metrics.json",
+    "run.json",
+    "timings.json",
+    DRONE_MESH_DIR,
+)
 #: Files whose bytes change from run to run (``Stage(volatile=...)``).
 DRONE_VOLATILE_NAMES = ("timings.json",)
 
@@ -152,6 +167,44 @@ def _info(scenario_info: Any, key: str) -> Any:
     return getattr(scenario_info, key, None)
 
 
+def _mesh_base(scenario_info: Any) -> Path:
+    """The folder the scenario's mesh paths are relative to: its file's folder (the current directory if unknown)."""
+    source = _info(scenario_info, "source")
+    return Path(source).parent if source is not None else Path(".")
+
+
+def world_meshes(world_table: Any, base: str | os.PathLike[str]) -> tuple[Any, list[tuple[Path, str]]]:
+    """The ``[world]`` table with every ``mesh`` path replaced by its copy in the run directory, and the copies to
+    make as (source file, path relative to the run directory) pairs, in table order (module doc: the names).
+
+    Args:
+        world_table: the scenario's ``[world]`` table (returned as it is when it has no mesh or is not a table).
+        base: the folder the table's mesh paths are relative to (the scenario file's).
+    """
+    if not isinstance(world_table, Mapping) or not isinstance(world_table.get("obstacles"), list):
+        return world_table, []
+    items = world_table["obstacles"]
+    is_mesh = [isinstance(it, Mapping) and isinstance(it.get("mesh"), str) for it in items]
+    meshes = {k: items[k]["mesh"] for k in range(len(items)) if is_mesh[k]}
+    if not meshes:
+        return world_table, []
+    sources = {k: Path(base) / f for k, f in meshes.items()}
+    files = {k: os.path.normcase(os.path.abspath(p)) for k, p in sources.items()}
+    by_name: dict[str, set[str]] = {}
+    for k, p in sources.items():
+        by_name.setdefault(p.name, set()).add(files[k])
+    dest: dict[str, str] = {}  # one copy per source file
+    copies: list[tuple[Path, str]] = []
+    obstacles = list(items)
+    for k, p in sources.items():
+        if files[k] not in dest:
+            shared = len(by_name[p.name]) > 1
+            dest[files[k]] = f"{DRONE_MESH_DIR}/obstacle{k}/{p.name}" if shared else f"{DRONE_MESH_DIR}/{p.name}"
+            copies.append((p, dest[files[k]]))
+        obstacles[k] = {**items[k], "mesh": dest[files[k]]}
+    return {**world_table, "obstacles": obstacles}, copies
+
+
 def drone_run_dict(plan: Any, metrics: Any = None, scenario_info: Any = None) -> dict[str, Any]:
     """The ``run.json`` document of a drone plan (format :data:`tmr.io.rundir.RUN_FORMAT`, ``kind = "drone"``).
 
@@ -160,12 +213,13 @@ def drone_run_dict(plan: Any, metrics: Any = None, scenario_info: Any = None) ->
         metrics: its :class:`tmr.checks.drones.DroneMetrics` (for the summary), or None.
         scenario_info: the scenario (a ``DroneScenario`` or a dict) for ``name``, ``description``, ``world_table``
             (the parsed ``[world]`` table), ``source`` (the scenario file: its folder holds the mesh files) and
-            ``text`` (the file's content); None records no world.
+            ``text`` (the file's content); None records no world. Mesh paths are recorded as their copies in the
+            run directory (:func:`world_meshes`; :func:`write_drone_outputs` makes the copies).
     """
     teth = plan.tether
     t = np.asarray(plan.t, dtype=float)
     source = _info(scenario_info, "source")
-    world = _info(scenario_info, "world_table")
+    world, _ = world_meshes(_info(scenario_info, "world_table"), _mesh_base(scenario_info))
     m = metrics.to_dict(per_step=False) if hasattr(metrics, "to_dict") else dict(metrics or {})
     summary_keys = ("success", "failure", "min_drone_clearance", "min_altitude_margin", "min_separation",
                     "min_tether_clearance", "max_tether_length", "max_drone_tension", "peak_speed",
@@ -200,7 +254,6 @@ def drone_run_dict(plan: Any, metrics: Any = None, scenario_info: Any = None) ->
             "winch_tension": teth.winch_tension,
             "tether": asdict(teth),
             "world": world,
-            "world_dir": None if source is None else str(Path(source).resolve().parent),
             "scenario_file": None if source is None else Path(source).name,
             "scenario_text": _info(scenario_info, "text"),
             "summary": {k: m[k] for k in summary_keys if k in m},
@@ -220,14 +273,27 @@ def write_drone_outputs(
 ) -> list[str]:
     """Write trajectories.json, trajectories.csv, metrics.json, run.json and timings.json of a checked drone plan into
     ``stage_dir`` (a :class:`tmr.io.outdir.Stage`'s directory; stage it with ``owned`` including
-    :data:`DRONE_OUTPUT_NAMES` and ``volatile`` :data:`DRONE_VOLATILE_NAMES`); return the names written, sorted.
+    :data:`DRONE_OUTPUT_NAMES` and ``volatile`` :data:`DRONE_VOLATILE_NAMES`), and for a world with meshes a copy
+    of its mesh files in :data:`DRONE_MESH_DIR`; return the names written, sorted.
+
+    Raises:
+        MapError: a mesh file of the world cannot be read (one line).
 
     ``extra`` (route, N_min, auto-count note: JSON-able) is added to metrics.json; keys ending in ``_time`` go to
     timings.json with the plan's ``wall_time``, the check's time and the median per-step time."""
-    from tmr.io.outputs import atomic_write_text, write_metrics_json
+    from tmr.errors import MapError
+    from tmr.io.outputs import atomic_write_bytes, atomic_write_text, write_metrics_json
 
     out = Path(stage_dir)
     out.mkdir(parents=True, exist_ok=True)
+    _, copies = world_meshes(_info(scenario_info, "world_table"), _mesh_base(scenario_info))
+    for src, rel in copies:
+        try:
+            data = src.read_bytes()
+        except OSError as exc:
+            raise MapError(f"cannot copy the world's mesh {src} into the run ({exc.strerror or exc})") from None
+        (out / rel).parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(out / rel, data)
     write_drone_trajectories_json(plan, out / "trajectories.json")
     write_drone_trajectories_csv(plan, out / "trajectories.csv")
     values = metrics.to_dict(per_step=False) if hasattr(metrics, "to_dict") else dict(metrics)
@@ -245,7 +311,7 @@ def write_drone_outputs(
     write_metrics_json(values | ex, out / "metrics.json")
     atomic_write_text(out / "run.json", _dump(drone_run_dict(plan, metrics, scenario_info)))
     write_metrics_json(timings, out / "timings.json")
-    return sorted(DRONE_OUTPUT_NAMES)
+    return sorted(n for n in DRONE_OUTPUT_NAMES if n != DRONE_MESH_DIR or copies)
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -294,9 +360,10 @@ class DroneRun:
 
     @property
     def world_dir(self) -> Path:
-        """The folder the table's mesh files are relative to (the scenario's; the run directory if unknown)."""
+        """The folder the table's mesh paths are relative to: the run directory (its :data:`DRONE_MESH_DIR` holds
+        the copies), or the absolute ``world_dir`` an older run recorded."""
         d = self.record.get("world_dir")
-        return Path(d) if d else self.path
+        return Path(d) if isinstance(d, str) and d and Path(d).is_absolute() else self.path
 
     def world(self) -> Any:
         """The run's :class:`tmr.world.world3d.World3D`, rebuilt from the recorded ``[world]`` table (RunDirError if
