@@ -233,3 +233,32 @@ def test_mesh_copies_get_distinct_names(tmp_path):
     assert [rel for _, rel in copies] == [rewritten["obstacles"][k]["mesh"] for k in (0, 2, 3)]
     assert table["obstacles"][0] == {"mesh": "a/crate.stl"}  # the scenario's table is left as it is
     assert world_meshes(WORLD, tmp_path) == (WORLD, [])
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "words"),
+    [
+        ("n_robots", "three", "n_robots must be a whole number"),
+        ("n_robots", 0, "n_robots must be a whole number"),
+        ("safety_radius", "x", "safety_radius must be a number"),
+        ("anchor", [1.0, 2.0], "anchor must be 3 finite numbers"),
+        ("bounds", [0, 0, 0, 10, 10, "4"], "bounds must be 6 finite numbers"),
+        ("bounds", [0, 0, 4, 10, 10, 0], "max > min"),
+        ("tether", {"mass_per_length": "x"}, "tether parameters are malformed"),
+        ("tether", 5, "tether must be a table"),
+        ("scenario", None, "scenario must be a string"),
+        ("success", "yes", "success must be true or false"),
+        ("params", [1], "params must be a table"),
+        ("params", {"planner": {"drone_speed_max": "fast"}}, "params.planner.drone_speed_max must be a positive"),
+        ("params", {"goal_tolerance": -1}, "params.goal_tolerance must be a positive"),
+    ],
+)
+def test_a_corrupt_run_json_gives_one_line(tmp_path, key, value, words):
+    """A wrong type in run.json is a one-line RunDirError (exit 2), not an internal error from a ValueError later."""
+    out, _ = written(tmp_path, "c")
+    rec = json.loads((out / "run.json").read_text())
+    rec[key] = value
+    (out / "run.json").write_text(json.dumps(rec))
+    with pytest.raises(RunDirError) as err:
+        load_run(out).check()
+    assert words in str(err.value) and "\n" not in str(err.value) and "re-run" in str(err.value)

@@ -384,7 +384,7 @@ class DroneRun:
 
         try:
             return DroneTetherParams(**self.record["tether"])
-        except (TypeError, KeyError, ParameterError) as exc:
+        except (TypeError, ValueError, KeyError, ParameterError) as exc:
             raise RunDirError(
                 f"{self.path}: run.json tether parameters are malformed ({exc}); re-run the planner"
             ) from None
@@ -436,15 +436,74 @@ def _array(doc: Any, where: str, what: str) -> Array:
         raise RunDirError(f"{where}: trajectories.json {what} is not numeric; re-run the planner") from None
 
 
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+#: Planner limits the checker reads from run.json's ``params`` (flat or under ``"planner"``).
+_CHECKED_PARAMS = ("drone_speed_max", "drone_accel_max", "goal_tolerance")
+
+
+def _validate_record(rec: dict[str, Any], where: str) -> None:
+    """One-line :class:`RunDirError` for a run.json field of the wrong type (a corrupt or hand-edited file), so that
+    no reader meets a ValueError later (module doc: the fields)."""
+
+    def bad(key: str, what: str) -> RunDirError:
+        shown = repr(rec[key])
+        shown = shown if len(shown) <= 40 else shown[:37] + "..."
+        return RunDirError(f"{where}: run.json {key} must be {what}, got {shown}; it is corrupt, re-run the planner")
+
+    for key in ("scenario", "method"):
+        if not isinstance(rec[key], str):
+            raise bad(key, "a string")
+    n = rec["n_robots"]
+    if not isinstance(n, int) or isinstance(n, bool) or n < 1:
+        raise bad("n_robots", "a whole number >= 1")
+    for key, size in (("anchor", 3), ("goal", 3), ("bounds", 6)):
+        v = rec[key]
+        if not isinstance(v, list) or len(v) != size or not all(_is_number(x) for x in v):
+            raise bad(key, f"{size} finite numbers")
+    b = rec["bounds"]
+    if any(b[i + 3] <= b[i] for i in range(3)):
+        raise bad("bounds", "xmin ymin zmin xmax ymax zmax with max > min")
+    if not _is_number(rec["safety_radius"]) or rec["safety_radius"] < 0:
+        raise bad("safety_radius", "a number of metres >= 0")
+    if not isinstance(rec["tether"], Mapping):
+        raise bad("tether", "a table of the tether parameters")
+    if "success" in rec and not isinstance(rec["success"], bool):
+        raise bad("success", "true or false")
+    for key in ("failure", "planner_failure", "world_dir"):
+        if rec.get(key) is not None and not isinstance(rec[key], str):
+            raise bad(key, "a string or null")
+    for key in ("world", "params"):
+        if rec.get(key) is not None and not isinstance(rec[key], Mapping):
+            raise bad(key, "a table or null")
+    params = rec.get("params") or {}
+    planner = params.get("planner")
+    if planner is not None and not isinstance(planner, Mapping):
+        raise RunDirError(f"{where}: run.json params.planner must be a table; it is corrupt, re-run the planner")
+    for table, prefix in ((params, "params"), (planner or {}, "params.planner")):
+        for name in _CHECKED_PARAMS:
+            v = table.get(name)
+            if v is not None and not (_is_number(v) and v > 0):
+                raise RunDirError(
+                    f"{where}: run.json {prefix}.{name} must be a positive number, got {v!r:.40}; it is corrupt, "
+                    "re-run the planner"
+                )
+
+
 def load_drone_run(path: Path, rec: dict[str, Any], where: str) -> DroneRun:
     """Read a drone run directory whose ``run.json`` is ``rec`` (``kind = "drone"``): :class:`DroneRun`.
 
     Raises:
-        RunDirError: a missing or malformed trajectories.json (one line, says to re-run the planner).
+        RunDirError: a run.json field missing or of the wrong type, a missing or malformed trajectories.json, tether
+            parameters that do not make a :class:`tmr.model.catenary3d.DroneTetherParams` (one line, says to re-run
+            the planner).
     """
     for key in ("scenario", "method", "n_robots", "anchor", "goal", "bounds", "safety_radius", "tether"):
         if key not in rec:
             raise RunDirError(f"{where}: run.json lacks {key!r}; it is corrupt, re-run the planner")
+    _validate_record(rec, where)
     traj = _read_json(Path(path) / "trajectories.json", where)
     if traj.get("format") != DRONE_TRAJECTORY_FORMAT:
         raise RunDirError(f"{where}: trajectories.json has format {traj.get('format')!r}; re-run the planner")
@@ -463,7 +522,7 @@ def load_drone_run(path: Path, rec: dict[str, Any], where: str) -> DroneRun:
         raise RunDirError(f"{where}: trajectories.json arrays do not match {n} drones x {k} samples; re-run it")
     metrics_path = Path(path) / "metrics.json"
     metrics = _read_json(metrics_path, where) if metrics_path.is_file() else None
-    return DroneRun(
+    run = DroneRun(
         path=Path(path),
         record=rec,
         t=t,
@@ -476,6 +535,8 @@ def load_drone_run(path: Path, rec: dict[str, Any], where: str) -> DroneRun:
         bounds=_array(rec["bounds"], where, "bounds"),
         metrics=metrics,
     )
+    run.tether_params()  # RunDirError now, not when a view asks for it
+    return run
 
 
 register_kind("drone", load_drone_run)
