@@ -85,6 +85,16 @@ def test_the_deep_sag_equilibrium_and_a_wrong_a_are_caught():
     assert abs(rebuild(p, q, cat.a * 1.001, P).winch_error[0, 0]) > 1e-4  # not the equilibrium
 
 
+@pytest.mark.parametrize("scale", [0.2, 0.7, 3.0, 100.0])
+def test_the_end_residual_holds_for_any_a_so_the_winch_tension_pins_a(scale):
+    """As documented: the closed form passes through both ends for every a > 0 (the residual only measures rounding);
+    a wrong a is caught by the winch tension."""
+    p, q = np.array([0.0, 0.0, 2.0]), np.array([6.0, 1.0, 3.5])
+    cur = rebuild(p, q, solve3d(p, q, P).a * scale, P)
+    assert cur.valid[0, 0] and cur.end_residual[0, 0] < 1e-9
+    assert abs(cur.winch_error[0, 0]) > 1e-3
+
+
 def test_vertical_tether_is_straight_with_the_weight_added_upwards():
     p, q = (2.0, 2.0, 1.0), (2.0, 2.0, 4.0)
     cat = solve3d(p, q, P)

@@ -185,3 +185,38 @@ def test_write_drone_views(plan, world, tmp_path):
     assert names == ["ros2_bag", "motion.html", "motion.gif"]
     assert (tmp_path / "ros2_bag" / "ros2_bag.mcap").is_file()
     assert D.write_drone_views(plan, world, tmp_path / "none") == []
+
+
+def test_html_bytes_do_not_depend_on_where_the_world_was_read(plan, tmp_path):
+    """The hover text names "obstacle #k" (and a mesh's file name), not the world's source label: the plan-time
+    world (a scenario file's path) and the export-time one (the run's run.json, its meshes copied) draw the same
+    bytes, and no install path leaks into motion.html."""
+    import trimesh
+
+    from tmr.world.world3d import world3d_from_table
+
+    for folder in ("scenario", "run/world_meshes"):
+        (tmp_path / folder).mkdir(parents=True)
+        trimesh.creation.box(bounds=[[6.0, 1.0, 0.0], [7.0, 2.0, 1.0]]).export(tmp_path / folder / "crate.stl")
+    table = {
+        "bounds": list(BOUNDS),
+        "safety_radius": 0.3,
+        "obstacles": [{"box": [4.0, 0.0, 0.0, 4.5, 3.0, 2.5]}, {"prism": [[1, 6], [2, 6], [1.5, 7]], "z": [0, 1.5]}],
+    }
+    plan_time = world3d_from_table(
+        {**table, "obstacles": [*table["obstacles"], {"mesh": "crate.stl"}]},
+        tmp_path / "scenario",
+        where=f"scenario file {tmp_path / 'scenario' / 'X.toml'} [world]",
+    )
+    export_time = world3d_from_table(
+        {**table, "obstacles": [*table["obstacles"], {"mesh": "world_meshes/crate.stl"}]},
+        tmp_path / "run",
+        where="runs/X/run.json [world]",
+    )
+    a = D.write_html_3d(plan, plan_time, tmp_path / "a.html").read_bytes()
+    b = D.write_html_3d(plan, export_time, tmp_path / "b.html").read_bytes()
+    assert a == b
+    assert str(tmp_path).encode() not in a and b"run.json" not in a and b"scenario file" not in a
+    assert [D.obstacle_label(k, ob) for k, ob in enumerate(export_time.obstacles)] == [
+        "obstacle #0", "obstacle #1", "obstacle #2 (mesh 'crate.stl')",
+    ]  # fmt: skip

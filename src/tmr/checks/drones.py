@@ -7,7 +7,9 @@ formula of this module. At every step of the plan it checks:
 
 * the plan record: finite positions, the radius and room it was made with are the world's;
 * each tether's model: the rebuilt catenary passes through both ends, holds the winch tension T_w at the winch end
-  (the recorded ``a`` is the equilibrium) and is the stable (shallow) equilibrium;
+  (the recorded ``a`` is the equilibrium) and is the stable (shallow) equilibrium. The through-the-ends test holds
+  for every a > 0 (the closed form solves z(d) = z_Q for the vertex), so it only measures rounding; it is the winch
+  tension test that pins a;
 * drone clearance >= r from every obstacle and the side walls; altitude within [zmin + r, zmax - r];
 * drones >= 2 r apart;
 * every tether's whole curve >= c_t from every obstacle, the floor, the ceiling and the walls (tether 1 no closer
@@ -321,7 +323,7 @@ def check_world(table: Any, base_dir: str | Path = ".") -> CheckWorld:
             except Exception as exc:  # trimesh raises many types on missing or corrupt files
                 raise MapError(f"[world] {at}: cannot read the mesh {path} ({type(exc).__name__})") from None
             obstacles.append(("mesh", mesh))
-            at = f"{at} (mesh '{item['mesh']}')"
+            at = f"{at} (mesh '{Path(str(item['mesh'])).name}')"  # the file's name: the same in the run's copy
         else:
             raise MapError(f"[world] {at} needs one of box, prism, mesh")
         names.append(at)
@@ -346,7 +348,8 @@ class TetherCurves:
         sinh_p, cosh_p, sinh_q, cosh_q: at the ends (vertical: 0/1, unused).
         length: arc length [m]; tension_p, tension_q: tension at each end [N].
         winch_at_p: bool, the winch end; winch_error: tension at the winch end - T_w [N].
-        end_residual: largest |z(x) - z_end| of the vertex form at both ends [m].
+        end_residual: largest |z(x) - z_end| of the vertex form at both ends [m]: rounding only (the vertex is
+            solved from both ends, so every a > 0 passes through them; ``winch_error`` is what pins a).
         stable: the shallow (stable) equilibrium: dT/da > 0 at fixed ends.
         valid: a is a positive finite number (or NaN with d <= MODEL_TOL).
     """
@@ -548,6 +551,27 @@ class DroneMetrics:
     ``binding``: per limit, its least margin (limit side minus value, in the limit's unit; negative: violated), where
     (step, t, what, point) and the margin as a fraction of the limit; ``binding_limit`` is the limit with the least
     fraction. ``per_step``: series (K+1,) or (K+1, N) for the views.
+
+    The summary fields do not share one convention; each, over every step k (and drone/tether/pair/axis):
+
+    * ``min_drone_clearance`` [m]: a MARGIN — least (distance from a drone's centre to the nearest obstacle or side
+      wall) − r; ≥ 0 passes (``per_step["drone_clearance"]`` likewise).
+    * ``min_altitude_margin`` [m]: a MARGIN — least min(z − (zmin + r), (zmax − r) − z); ≥ 0 passes.
+    * ``min_separation`` [m]: a RAW DISTANCE — least centre-to-centre distance of two drones (+inf for one drone);
+      passes if ≥ 2r (``per_step["separation"]`` likewise).
+    * ``min_tether_clearance`` [m]: a RAW DISTANCE — least distance of any tether's curve to an obstacle, the floor,
+      the ceiling or a wall (vertical tethers included; NaN if no tether could be rebuilt); compared with
+      ``tether_clearance_limit`` c_t (tether 1 with min(c_t, the winch's own clearance − 2 mm)).
+    * ``max_tether_length`` [m]: a RAW VALUE — longest arc length; passes if ≤ ``tether_length_max``.
+    * ``max_drone_tension`` [N]: a RAW VALUE — largest tension at a drone end (the end Q at drone j of every tether j,
+      and the end P of tethers 2..N; not the anchor's end); passes if ≤ ``tension_max`` (the spare thrust).
+    * ``peak_speed`` [m/s], ``peak_acceleration`` [m/s²]: PER AXIS — the largest |component| of the finite-difference
+      velocity (p_{k+1} − p_k)/Ts and acceleration (p_{k+1} − 2p_k + p_{k−1})/Ts² over x, y, z (not the norm),
+      as the per-axis limits ``speed_max``, ``accel_max`` are; 0 for a plan too short to difference.
+    * ``final_leader_error`` [m]: |leader's last position − goal| (Euclidean); passes if ≤ ``goal_tolerance``.
+      ``max_tracking_error`` [m]: largest |leader − its reference| (Euclidean), not a limit.
+    * ``max_end_residual`` [m]: largest miss of a rebuilt catenary at its ends — rounding only, it holds for every
+      a > 0; ``max_winch_tension_error`` [N]: largest |tension at the winch end − T_w|, what pins the recorded a.
     """
 
     scenario: str
@@ -604,13 +628,28 @@ class DroneMetrics:
         return json_safe(d)
 
 
+def _lookup(params: Any, name: str) -> Any:
+    """``name`` in planner parameters: a ``DroneParams``, a flat dict, or the plan record's nested
+    ``{"planner": {...}, "tether": {...}}`` (what :func:`tmr.control.run3d.run_drones` stores in ``plan.params``)."""
+    if params is None:
+        return None
+    if not isinstance(params, Mapping):
+        return getattr(params, name, None)
+    if params.get(name) is not None:
+        return params[name]
+    nested = params.get("planner")
+    if isinstance(nested, Mapping):
+        return nested.get(name)
+    return getattr(nested, name, None) if nested is not None else None
+
+
 def _param(plan: Any, params: Any, name: str, default: float) -> float:
-    if params is not None:
-        v = params.get(name) if isinstance(params, Mapping) else getattr(params, name, None)
+    """A planner limit: from ``params``, else ``plan.params`` (flat or under ``"planner"``), else ``default``."""
+    for source in (params, getattr(plan, "params", None)):
+        v = _lookup(source, name)
         if v is not None:
             return float(v)
-    v = (getattr(plan, "params", None) or {}).get(name)
-    return float(v) if v is not None else default
+    return default
 
 
 def _m(value: float, limit: float) -> str:
@@ -641,7 +680,8 @@ def check_drone_plan(
             :class:`CheckWorld` (:func:`check_world`).
         base_dir: folder the table's mesh files are relative to (the scenario file's folder).
         params: the planner parameters (a ``DroneParams`` or a dict) for ``drone_speed_max``, ``drone_accel_max``,
-            ``goal_tolerance``; default: ``plan.params``, then 2 m/s, 4 m/s², 0.1 m.
+            ``goal_tolerance``; default: ``plan.params`` (flat, or the planner's record ``{"planner": {...}}``),
+            then 2 m/s, 4 m/s², 0.1 m.
         tolerance: slack [m] before a length limit counts as broken; speeds get 2 tol / Ts, accelerations 4 tol / Ts².
         update_plan: set ``plan.success`` / ``plan.failure`` from the check (the planner's own failure, kept in
             ``plan.diagnostics["planner_failure"]``, stays first).

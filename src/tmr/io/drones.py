@@ -8,11 +8,15 @@
   (``null`` for a vertical tether): any reader rebuilds each curve from its two ends and a.
 * ``trajectories.csv`` — one row per step: ``t``, then ``robot<i>_x, _y, _z``, then ``tether<j>_a`` (empty: vertical).
 * ``metrics.json`` — :class:`tmr.checks.drones.DroneMetrics` without its per-step series (plus the glue's extras).
-* ``run.json`` — ``kind = "drone"``: the world (the scenario's ``[world]`` table, the folder its mesh files are in,
-  the scenario file's text), ``safety_radius``, ``tether_clearance``, ``rho``, ``g``, ``tension_max``,
-  ``tether_length_max``, ``winch_end``, ``winch_tension``, every tether parameter, the planner parameters and a
-  summary of the check.
+* ``run.json`` — ``kind = "drone"``: the world (the scenario's ``[world]`` table, its mesh paths made relative to the
+  run directory; the scenario file's name and text), ``safety_radius``, ``tether_clearance``, ``rho``, ``g``,
+  ``tension_max``, ``tether_length_max``, ``winch_end``, ``winch_tension``, every tether parameter, the planner
+  parameters and a summary of the check.
 * ``timings.json`` — wall times (not reproducible, so kept apart and listed without a hash in the manifest).
+* ``world_meshes/`` (:data:`DRONE_MESH_DIR`, only for a world with meshes) — a byte copy of every mesh file of the
+  world, ``world_meshes/<file name>`` (``world_meshes/obstacle<k>/<file name>`` when two different files share a
+  name): the run directory is self-contained (moved or copied, ``tmr export`` and :meth:`DroneRun.check` still
+  read its world), and run.json holds no absolute path.
 
 Every file goes through the atomic writers of :mod:`tmr.io.outputs`; the same plan gives the same bytes (fixed key
 order, floats in shortest round-trip form). :func:`load_drone_run` (registered for ``kind = "drone"`` with
@@ -39,6 +43,7 @@ from tmr.errors import ParameterError
 from tmr.io.rundir import RUN_FORMAT, RunDirError, _dump, _read_json, _safe, _version, register_kind
 
 __all__ = [
+    "DRONE_MESH_DIR",
     "DRONE_OUTPUT_NAMES",
     "DRONE_TRAJECTORY_FORMAT",
     "DRONE_VOLATILE_NAMES",
@@ -46,6 +51,7 @@ __all__ = [
     "drone_run_dict",
     "drone_trajectories_dict",
     "load_drone_run",
+    "world_meshes",
     "write_drone_outputs",
     "write_drone_trajectories_csv",
     "write_drone_trajectories_json",
@@ -55,8 +61,17 @@ Array = NDArray[np.float64]
 
 #: ``format`` of a drone plan's ``trajectories.json``.
 DRONE_TRAJECTORY_FORMAT = "tmr-drone-trajectories/1"
-#: Every file :func:`write_drone_outputs` writes (the glue's ``Stage(owned=...)`` adds its figures).
-DRONE_OUTPUT_NAMES = ("trajectories.json", "trajectories.csv", "metrics.json", "run.json", "timings.json")
+#: The directory of the run that holds a copy of the world's mesh files (written only for a world with meshes).
+DRONE_MESH_DIR = "world_meshes"
+#: Every entry :func:`write_drone_outputs` may write (the glue's ``Stage(owned=...)`` adds its figures).
+DRONE_OUTPUT_NAMES = (
+    "trajectories.json",
+    "trajectories.csv",
+    "metrics.json",
+    "run.json",
+    "timings.json",
+    DRONE_MESH_DIR,
+)
 #: Files whose bytes change from run to run (``Stage(volatile=...)``).
 DRONE_VOLATILE_NAMES = ("timings.json",)
 
@@ -152,6 +167,44 @@ def _info(scenario_info: Any, key: str) -> Any:
     return getattr(scenario_info, key, None)
 
 
+def _mesh_base(scenario_info: Any) -> Path:
+    """The folder the scenario's mesh paths are relative to: its file's folder (the current directory if unknown)."""
+    source = _info(scenario_info, "source")
+    return Path(source).parent if source is not None else Path(".")
+
+
+def world_meshes(world_table: Any, base: str | os.PathLike[str]) -> tuple[Any, list[tuple[Path, str]]]:
+    """The ``[world]`` table with every ``mesh`` path replaced by its copy in the run directory, and the copies to
+    make as (source file, path relative to the run directory) pairs, in table order (module doc: the names).
+
+    Args:
+        world_table: the scenario's ``[world]`` table (returned as it is when it has no mesh or is not a table).
+        base: the folder the table's mesh paths are relative to (the scenario file's).
+    """
+    if not isinstance(world_table, Mapping) or not isinstance(world_table.get("obstacles"), list):
+        return world_table, []
+    items = world_table["obstacles"]
+    is_mesh = [isinstance(it, Mapping) and isinstance(it.get("mesh"), str) for it in items]
+    meshes = {k: items[k]["mesh"] for k in range(len(items)) if is_mesh[k]}
+    if not meshes:
+        return world_table, []
+    sources = {k: Path(base) / f for k, f in meshes.items()}
+    files = {k: os.path.normcase(os.path.abspath(p)) for k, p in sources.items()}
+    by_name: dict[str, set[str]] = {}
+    for k, p in sources.items():
+        by_name.setdefault(p.name, set()).add(files[k])
+    dest: dict[str, str] = {}  # one copy per source file
+    copies: list[tuple[Path, str]] = []
+    obstacles = list(items)
+    for k, p in sources.items():
+        if files[k] not in dest:
+            shared = len(by_name[p.name]) > 1
+            dest[files[k]] = f"{DRONE_MESH_DIR}/obstacle{k}/{p.name}" if shared else f"{DRONE_MESH_DIR}/{p.name}"
+            copies.append((p, dest[files[k]]))
+        obstacles[k] = {**items[k], "mesh": dest[files[k]]}
+    return {**world_table, "obstacles": obstacles}, copies
+
+
 def drone_run_dict(plan: Any, metrics: Any = None, scenario_info: Any = None) -> dict[str, Any]:
     """The ``run.json`` document of a drone plan (format :data:`tmr.io.rundir.RUN_FORMAT`, ``kind = "drone"``).
 
@@ -160,12 +213,13 @@ def drone_run_dict(plan: Any, metrics: Any = None, scenario_info: Any = None) ->
         metrics: its :class:`tmr.checks.drones.DroneMetrics` (for the summary), or None.
         scenario_info: the scenario (a ``DroneScenario`` or a dict) for ``name``, ``description``, ``world_table``
             (the parsed ``[world]`` table), ``source`` (the scenario file: its folder holds the mesh files) and
-            ``text`` (the file's content); None records no world.
+            ``text`` (the file's content); None records no world. Mesh paths are recorded as their copies in the
+            run directory (:func:`world_meshes`; :func:`write_drone_outputs` makes the copies).
     """
     teth = plan.tether
     t = np.asarray(plan.t, dtype=float)
     source = _info(scenario_info, "source")
-    world = _info(scenario_info, "world_table")
+    world, _ = world_meshes(_info(scenario_info, "world_table"), _mesh_base(scenario_info))
     m = metrics.to_dict(per_step=False) if hasattr(metrics, "to_dict") else dict(metrics or {})
     summary_keys = ("success", "failure", "min_drone_clearance", "min_altitude_margin", "min_separation",
                     "min_tether_clearance", "max_tether_length", "max_drone_tension", "peak_speed",
@@ -200,7 +254,6 @@ def drone_run_dict(plan: Any, metrics: Any = None, scenario_info: Any = None) ->
             "winch_tension": teth.winch_tension,
             "tether": asdict(teth),
             "world": world,
-            "world_dir": None if source is None else str(Path(source).resolve().parent),
             "scenario_file": None if source is None else Path(source).name,
             "scenario_text": _info(scenario_info, "text"),
             "summary": {k: m[k] for k in summary_keys if k in m},
@@ -220,14 +273,27 @@ def write_drone_outputs(
 ) -> list[str]:
     """Write trajectories.json, trajectories.csv, metrics.json, run.json and timings.json of a checked drone plan into
     ``stage_dir`` (a :class:`tmr.io.outdir.Stage`'s directory; stage it with ``owned`` including
-    :data:`DRONE_OUTPUT_NAMES` and ``volatile`` :data:`DRONE_VOLATILE_NAMES`); return the names written, sorted.
+    :data:`DRONE_OUTPUT_NAMES` and ``volatile`` :data:`DRONE_VOLATILE_NAMES`), and for a world with meshes a copy
+    of its mesh files in :data:`DRONE_MESH_DIR`; return the names written, sorted.
+
+    Raises:
+        MapError: a mesh file of the world cannot be read (one line).
 
     ``extra`` (route, N_min, auto-count note: JSON-able) is added to metrics.json; keys ending in ``_time`` go to
     timings.json with the plan's ``wall_time``, the check's time and the median per-step time."""
-    from tmr.io.outputs import atomic_write_text, write_metrics_json
+    from tmr.errors import MapError
+    from tmr.io.outputs import atomic_write_bytes, atomic_write_text, write_metrics_json
 
     out = Path(stage_dir)
     out.mkdir(parents=True, exist_ok=True)
+    _, copies = world_meshes(_info(scenario_info, "world_table"), _mesh_base(scenario_info))
+    for src, rel in copies:
+        try:
+            data = src.read_bytes()
+        except OSError as exc:
+            raise MapError(f"cannot copy the world's mesh {src} into the run ({exc.strerror or exc})") from None
+        (out / rel).parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(out / rel, data)
     write_drone_trajectories_json(plan, out / "trajectories.json")
     write_drone_trajectories_csv(plan, out / "trajectories.csv")
     values = metrics.to_dict(per_step=False) if hasattr(metrics, "to_dict") else dict(metrics)
@@ -245,7 +311,7 @@ def write_drone_outputs(
     write_metrics_json(values | ex, out / "metrics.json")
     atomic_write_text(out / "run.json", _dump(drone_run_dict(plan, metrics, scenario_info)))
     write_metrics_json(timings, out / "timings.json")
-    return sorted(DRONE_OUTPUT_NAMES)
+    return sorted(n for n in DRONE_OUTPUT_NAMES if n != DRONE_MESH_DIR or copies)
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -294,9 +360,10 @@ class DroneRun:
 
     @property
     def world_dir(self) -> Path:
-        """The folder the table's mesh files are relative to (the scenario's; the run directory if unknown)."""
+        """The folder the table's mesh paths are relative to: the run directory (its :data:`DRONE_MESH_DIR` holds
+        the copies), or the absolute ``world_dir`` an older run recorded."""
         d = self.record.get("world_dir")
-        return Path(d) if d else self.path
+        return Path(d) if isinstance(d, str) and d and Path(d).is_absolute() else self.path
 
     def world(self) -> Any:
         """The run's :class:`tmr.world.world3d.World3D`, rebuilt from the recorded ``[world]`` table (RunDirError if
@@ -317,7 +384,7 @@ class DroneRun:
 
         try:
             return DroneTetherParams(**self.record["tether"])
-        except (TypeError, KeyError, ParameterError) as exc:
+        except (TypeError, ValueError, KeyError, ParameterError) as exc:
             raise RunDirError(
                 f"{self.path}: run.json tether parameters are malformed ({exc}); re-run the planner"
             ) from None
@@ -369,15 +436,74 @@ def _array(doc: Any, where: str, what: str) -> Array:
         raise RunDirError(f"{where}: trajectories.json {what} is not numeric; re-run the planner") from None
 
 
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+#: Planner limits the checker reads from run.json's ``params`` (flat or under ``"planner"``).
+_CHECKED_PARAMS = ("drone_speed_max", "drone_accel_max", "goal_tolerance")
+
+
+def _validate_record(rec: dict[str, Any], where: str) -> None:
+    """One-line :class:`RunDirError` for a run.json field of the wrong type (a corrupt or hand-edited file), so that
+    no reader meets a ValueError later (module doc: the fields)."""
+
+    def bad(key: str, what: str) -> RunDirError:
+        shown = repr(rec[key])
+        shown = shown if len(shown) <= 40 else shown[:37] + "..."
+        return RunDirError(f"{where}: run.json {key} must be {what}, got {shown}; it is corrupt, re-run the planner")
+
+    for key in ("scenario", "method"):
+        if not isinstance(rec[key], str):
+            raise bad(key, "a string")
+    n = rec["n_robots"]
+    if not isinstance(n, int) or isinstance(n, bool) or n < 1:
+        raise bad("n_robots", "a whole number >= 1")
+    for key, size in (("anchor", 3), ("goal", 3), ("bounds", 6)):
+        v = rec[key]
+        if not isinstance(v, list) or len(v) != size or not all(_is_number(x) for x in v):
+            raise bad(key, f"{size} finite numbers")
+    b = rec["bounds"]
+    if any(b[i + 3] <= b[i] for i in range(3)):
+        raise bad("bounds", "xmin ymin zmin xmax ymax zmax with max > min")
+    if not _is_number(rec["safety_radius"]) or rec["safety_radius"] < 0:
+        raise bad("safety_radius", "a number of metres >= 0")
+    if not isinstance(rec["tether"], Mapping):
+        raise bad("tether", "a table of the tether parameters")
+    if "success" in rec and not isinstance(rec["success"], bool):
+        raise bad("success", "true or false")
+    for key in ("failure", "planner_failure", "world_dir"):
+        if rec.get(key) is not None and not isinstance(rec[key], str):
+            raise bad(key, "a string or null")
+    for key in ("world", "params"):
+        if rec.get(key) is not None and not isinstance(rec[key], Mapping):
+            raise bad(key, "a table or null")
+    params = rec.get("params") or {}
+    planner = params.get("planner")
+    if planner is not None and not isinstance(planner, Mapping):
+        raise RunDirError(f"{where}: run.json params.planner must be a table; it is corrupt, re-run the planner")
+    for table, prefix in ((params, "params"), (planner or {}, "params.planner")):
+        for name in _CHECKED_PARAMS:
+            v = table.get(name)
+            if v is not None and not (_is_number(v) and v > 0):
+                raise RunDirError(
+                    f"{where}: run.json {prefix}.{name} must be a positive number, got {v!r:.40}; it is corrupt, "
+                    "re-run the planner"
+                )
+
+
 def load_drone_run(path: Path, rec: dict[str, Any], where: str) -> DroneRun:
     """Read a drone run directory whose ``run.json`` is ``rec`` (``kind = "drone"``): :class:`DroneRun`.
 
     Raises:
-        RunDirError: a missing or malformed trajectories.json (one line, says to re-run the planner).
+        RunDirError: a run.json field missing or of the wrong type, a missing or malformed trajectories.json, tether
+            parameters that do not make a :class:`tmr.model.catenary3d.DroneTetherParams` (one line, says to re-run
+            the planner).
     """
     for key in ("scenario", "method", "n_robots", "anchor", "goal", "bounds", "safety_radius", "tether"):
         if key not in rec:
             raise RunDirError(f"{where}: run.json lacks {key!r}; it is corrupt, re-run the planner")
+    _validate_record(rec, where)
     traj = _read_json(Path(path) / "trajectories.json", where)
     if traj.get("format") != DRONE_TRAJECTORY_FORMAT:
         raise RunDirError(f"{where}: trajectories.json has format {traj.get('format')!r}; re-run the planner")
@@ -396,7 +522,7 @@ def load_drone_run(path: Path, rec: dict[str, Any], where: str) -> DroneRun:
         raise RunDirError(f"{where}: trajectories.json arrays do not match {n} drones x {k} samples; re-run it")
     metrics_path = Path(path) / "metrics.json"
     metrics = _read_json(metrics_path, where) if metrics_path.is_file() else None
-    return DroneRun(
+    run = DroneRun(
         path=Path(path),
         record=rec,
         t=t,
@@ -409,6 +535,8 @@ def load_drone_run(path: Path, rec: dict[str, Any], where: str) -> DroneRun:
         bounds=_array(rec["bounds"], where, "bounds"),
         metrics=metrics,
     )
+    run.tether_params()  # RunDirError now, not when a view asks for it
+    return run
 
 
 register_kind("drone", load_drone_run)

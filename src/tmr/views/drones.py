@@ -25,9 +25,10 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from collections.abc import Iterator
 from dataclasses import dataclass
-from pathlib import Path
+from pathlib import Path, PurePath
 from typing import Any
 
 import numpy as np
@@ -46,6 +47,7 @@ __all__ = [
     "figures",
     "frame_indices_3d",
     "gif_frames",
+    "obstacle_label",
     "obstacle_mesh",
     "save_figures",
     "tensions",
@@ -109,6 +111,15 @@ def obstacle_mesh(ob: Any) -> ObstacleDrawing:
         edges.reshape(-1, 2, 3),
         str(ob.name),
     )
+
+
+def obstacle_label(k: int, ob: Any) -> str:
+    """What the HTML view calls obstacle ``k`` of a world: ``"obstacle #k"``, with the file's name for a mesh
+    (``"obstacle #2 (mesh 'hangar.stl')"``). Never the world's source label (a scenario file's or run's path, as in
+    ``ob.name``): the same plan draws the same bytes wherever its world was read from, and no path leaks out."""
+    found = re.search(r"mesh '(.*)'\)?$", str(getattr(ob, "name", "")))
+    label = f"obstacle #{k}"
+    return f"{label} (mesh '{PurePath(found.group(1)).name}')" if found else label
 
 
 def _ends(plan: Any) -> tuple[Array, Array]:
@@ -739,7 +750,7 @@ def build_figure_3d(plan: Any, world: Any, max_frames: int = 150) -> Any:
                 name="obstacle",
                 legendgroup="obstacle",
                 showlegend=i == 0,
-                hovertext=dr.name,
+                hovertext=obstacle_label(i, ob),
                 hoverinfo="text",
             )
         )
