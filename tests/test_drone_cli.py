@@ -194,3 +194,13 @@ def test_a_winch_tension_no_drone_can_hold_is_refused_up_front(tmp_path, capsys)
 def test_filter_cutoff_is_refused_for_drones(tmp_path, capsys):
     code, stdout, stderr = run_cli(["--scenario", "F", "--filter-cutoff", "2", "--out", str(tmp_path / "x")], capsys)
     assert code == 2 and "--filter-cutoff" in stdout + stderr
+
+
+def test_tmr_plan_owns_every_drone_output():
+    """A re-used --out keeps no drone output of an older run: tmr plan owns every name a drone run writes."""
+    from tmr.io.drones import DRONE_OUTPUT_NAMES
+    from tmr.plan import OWNED_NAMES
+    from tmr.plan3d import DRONE_FIGURES
+    from tmr.views.flags import VIEW_NAMES
+
+    assert set(DRONE_OUTPUT_NAMES) | set(DRONE_FIGURES) | set(VIEW_NAMES) <= set(OWNED_NAMES)

@@ -74,10 +74,10 @@ TIMING_KEYS = (
 #: of one of these names that tmr did not write makes the run refuse its ``--out`` (:mod:`tmr.io.outdir`).
 OWNED_NAMES = (
     OUTPUT_NAMES
-    + ("chain_poses_3d.png", "altitude.png", "tether_clearance.png", "tensions.png")
+    + ("chain_poses_3d.png", "altitude.png", "tether_clearance.png", "tensions.png", "world_meshes")
     + VIEW_NAMES
     + ("replay",)
-)  # the drone figures: tmr.plan3d.DRONE_FIGURES
+)  # the drone figures (tmr.plan3d.DRONE_FIGURES), meshes (tmr.io.drones)
 #: Outputs whose bytes change from run to run (listed in the manifest without a hash).
 VOLATILE_NAMES = ("timings.json",)
 
