@@ -111,7 +111,8 @@ def test_base_and_goal_checked(tmp_path, base, goal, match):
 
 
 def test_params_take_their_fields_types(tmp_path):
-    sc = load_drone_scenario(_write(tmp_path, HEAD + WORLD + '[params]\nTs = 1\ntether_samples = 6.0\nsolver = "osqp"\n'))
+    params = '[params]\nTs = 1\ntether_samples = 6.0\nsolver = "osqp"\n'
+    sc = load_drone_scenario(_write(tmp_path, HEAD + WORLD + params))
     assert sc.params == {"Ts": 1.0, "tether_samples": 6, "solver": "osqp"}
     assert type(sc.params["Ts"]) is float and type(sc.params["tether_samples"]) is int
 
