@@ -15,12 +15,16 @@ section "Route (3-D)").
    to the walls and ceiling > −√3 h". On the corners, Φ = the 26-connected lattice distance to the goal's cube
    (Dijkstra), extended to U linearly on the Kuhn (Freudenthal) simplices of each cube: a continuous piecewise linear
    function whose gradient norm on U is at most Λ, the largest over the simplices of U (computed). Along any curve
-   γ ⊂ F_t ⊂ U from the base to the goal, Φ(base) − Φ(goal) ≤ Λ · length(γ), so
+   γ ⊂ F_t ⊂ U from the base to a point g' within tol = ``goal_tolerance`` of the goal (where the leader succeeds),
+   Φ(base) − Φ(g') ≤ Λ · length(γ) and Φ(g') ≤ Φ_ball (the largest corner value of the cubes meeting the ball, or
+   Φ(goal) + Λ·tol when the ball keeps c_t), so
 
-       length(γ) ≥ max(|goal − base|, (Φ(base) − Φ(goal)) / Λ) =: ``lower_bound_length``,
+       length(γ) ≥ max(|goal − base| − tol, (Φ(base) − Φ_ball) / Λ, 0) =: ``lower_bound_length``,
 
    and since every tether's arc is ≤ L_max, N ≥ ``min_robots`` = ⌈lower_bound_length / L_max⌉. If the goal is not in
-   the component of U holding the base, no chain reaches it: :class:`NoRouteError` (proven).
+   the component of U holding the base, no chain reaches it: :class:`NoRouteError` (proven). If U joins them but no
+   drone route is found, ``_cells_disconnected`` tries a tighter proof, on a finer lattice (h < c/√3, any plane wall)
+   when the route's is too coarse.
 3. **References.** :func:`drone_references`: the leader follows the route with a minimum-jerk arc-length law; drone j
    moves along the same route from its start arc to j/N of the route's length, in step with the leader's progress, so
    the chain lies along the route and winds round only what the route winds round.
