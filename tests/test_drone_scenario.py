@@ -83,6 +83,9 @@ def test_minimal_file_and_auto(tmp_path):
         ("[tether]\ntether_length = -1.0\n", ParameterError, "tether_length"),
         ("[params]\nspeed = 3\n", ParameterError, r"unknown \[params\]"),
         ("[params]\nTs = 0.0\n", ParameterError, "Ts"),
+        ('[params]\nTs = "a"\n', ParameterError, r"\[params\]: DroneParams.Ts takes a number, got 'a'$"),
+        ("[params]\ntether_samples = 2.5\n", ParameterError, "DroneParams.tether_samples takes a whole number"),
+        ("[params]\nsolver = 3\n", ParameterError, "DroneParams.solver takes text"),
     ],
 )
 def test_bad_keys_and_values_refused(tmp_path, extra, error, match):
@@ -105,6 +108,26 @@ def test_base_and_goal_checked(tmp_path, base, goal, match):
     text = HEAD.replace("[1.0, 5.0, 0.3]", base).replace("[9.0, 5.0, 2.0]", goal) + WORLD + BOX
     with pytest.raises(ScenarioError, match=match):
         load_drone_scenario(_write(tmp_path, text))
+
+
+def test_params_take_their_fields_types(tmp_path):
+    params = '[params]\nTs = 1\ntether_samples = 6.0\nsolver = "osqp"\n'
+    sc = load_drone_scenario(_write(tmp_path, HEAD + WORLD + params))
+    assert sc.params == {"Ts": 1.0, "tether_samples": 6, "solver": "osqp"}
+    assert type(sc.params["Ts"]) is float and type(sc.params["tether_samples"]) is int
+
+
+@pytest.mark.parametrize("point", ["[true, 5.0, 0.3]", "[1.0, false, 0.3]"])
+def test_booleans_are_not_coordinates(tmp_path, point):
+    with pytest.raises(ParameterError, match="base must be"):
+        load_drone_scenario(_write(tmp_path, HEAD.replace("[1.0, 5.0, 0.3]", point) + WORLD))
+
+
+def test_a_world_table_without_kind_points_at_the_drone_kind(tmp_path):
+    p = _write(tmp_path, HEAD.replace('kind = "drone"\n', "") + WORLD)
+    with pytest.raises(ScenarioError, match=r'a \[world\] table is a drone scenario: add kind = "drone"') as exc:
+        load_scenario(p)
+    assert "\n" not in str(exc.value)
 
 
 def test_base_may_be_nearer_than_r_to_the_floor(tmp_path):

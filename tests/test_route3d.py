@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from tmr.model.catenary3d import DroneTetherParams
+from tmr.errors import ParameterError
+from tmr.model.catenary3d import DroneTetherParams, solve3d
 from tmr.route.route3d import (
     KAPPA,
     ROUTE_MARGIN,
@@ -20,7 +21,7 @@ from tmr.route.route3d import (
     plan_route3d,
 )
 from tmr.world.drones import load_drone_scenario
-from tmr.world.world3d import World3D, box_obstacle
+from tmr.world.world3d import World3D, box_obstacle, prism_obstacle
 
 TETHER = DroneTetherParams()
 ROOM = (0.0, 0.0, 0.0, 10.0, 10.0, 4.0)
@@ -47,8 +48,11 @@ def test_open_room_route_is_the_straight_line():
     rt = plan_route3d(w, b, g, TETHER, grid=0.25)
     # the winch leg up to the first free node, then straight on
     assert rt.length == pytest.approx(np.linalg.norm(g - b), abs=0.2)
-    assert rt.lower_bound_length == pytest.approx(np.linalg.norm(g - b))
+    # the leader succeeds within goal_tolerance (0.1 m) of the goal: the straight term is |goal − base| − 0.1
+    assert rt.lower_bound_length == pytest.approx(np.linalg.norm(g - b) - 0.1)
     assert rt.min_robots == 1 and rt.lower_bound_length <= rt.length
+    exact = plan_route3d(w, b, g, TETHER, grid=0.25, goal_tolerance=0.0)
+    assert exact.lower_bound_length == pytest.approx(np.linalg.norm(g - b))
 
 
 def test_route_round_a_wall_against_the_exact_shortest_path():
@@ -62,7 +66,7 @@ def test_route_round_a_wall_against_the_exact_shortest_path():
     exact = np.linalg.norm(corner_a - b) + np.linalg.norm(corner_b - corner_a) + np.linalg.norm(g - corner_b)
     # the bound is below the shortest curve any chain can take (here the straight line's: Λ = √3 at the ridge
     # behind the wall makes the lattice potential's bound weaker, formulations/drones.md)
-    assert rt.euclidean <= rt.lower_bound_length <= exact - 2 * c * (1 - math.pi / 4)
+    assert rt.euclidean - 0.1 <= rt.lower_bound_length <= exact - 0.1 - 2 * c * (1 - math.pi / 4)
     assert rt.grid_bound <= rt.lower_bound_length and 1.0 <= rt.lipschitz <= math.sqrt(3) + 1e-9
     # the drones' route keeps r + margin: longer than the tether-clear path, within the lattice's error
     assert exact < rt.length < KAPPA * exact
@@ -112,6 +116,29 @@ def test_a_wall_across_the_room_is_proven_to_block(thickness):
     right = box_obstacle([x0, 5.4, 0.0], [x0 + thickness, 10.0, 4.0])
     route = plan_route3d(World3D([left, right], ROOM, 0.3), [1.0, 5.0, 0.3], [9.0, 5.0, 2.0], TETHER)
     assert route.length >= route.lower_bound_length >= 8.0
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.05, 0.1, 0.125])
+@pytest.mark.parametrize("thickness", [0.05, 0.2, 0.4])
+def test_a_thin_wall_off_the_lattice_is_proven_to_block(thickness, offset):
+    """A wall wall-to-wall and floor-to-ceiling whose faces fall anywhere between the 0.25 m lattice's nodes: with
+    ρ = h√3/2 = 0.217 m > c = 0.2 m a node on its face passed the coarse test (x = 5.0-5.2 and 5.0-5.05 were exit 1);
+    the second, finer lattice (h < c/√3) proves it."""
+    x0 = 5.0 + offset
+    wall = box_obstacle([x0, 0.0, 0.0], [x0 + thickness, 10.0, 4.0])
+    with pytest.raises(NoRouteError, match="cannot be reached") as exc:
+        plan_route3d(World3D([wall], ROOM, 0.3), [1.0, 5.0, 0.3], [9.0, 5.0, 2.0], TETHER)
+    assert exc.value.proven
+
+
+@pytest.mark.slow
+def test_an_oblique_thin_wall_is_proven_to_block():
+    """A 7 cm thick wall across the room's diagonal, touching the walls x = 0 and y = 0 (a prism on a strip); its
+    bounding box covers the room, so the fine proof measures every node exactly (2.8 s)."""
+    wall = prism_obstacle([[0.0, 9.0], [9.0, 0.0], [9.05, 0.05], [0.05, 9.05]], [0.0, 4.0])
+    with pytest.raises(NoRouteError, match="cannot be reached") as exc:
+        plan_route3d(World3D([wall], ROOM, 0.3), [1.0, 1.0, 0.3], [8.0, 8.0, 2.0], TETHER)
+    assert exc.value.proven
 
 
 def test_narrow_gap_for_the_tether_but_not_for_a_drone_is_not_proven():
@@ -178,3 +205,56 @@ def test_no_start_for_too_many_drones_on_a_short_route():
     rt = plan_route3d(w, [1.0, 1.0, 0.3], [2.0, 1.0, 1.0], TETHER)
     with pytest.raises(StartError, match="no start for 5 drones"):
         drone_references(rt, 5, world=w)
+
+
+def test_a_lattice_too_coarse_for_the_base_is_not_a_proof():
+    # F with grid = 5 m: no lattice node free for a drone near the base; a lattice verdict (exit 1), not a proof
+    sc = load_drone_scenario("F")
+    with pytest.raises(NoRouteError, match="finer grid") as exc:
+        plan_route3d(sc.world, sc.base, sc.goal, sc.tether, grid=5.0)
+    assert not exc.value.proven
+
+
+def test_a_base_exactly_c_t_above_the_floor_starts():
+    """The loader accepts a winch c_t above the floor: the winch leg keeps c_t (clearance 0 with radius c_t at the
+    base), and the start's first tether, whose lowest point is the base, is not refused by a sampling margin."""
+    sc = load_drone_scenario("F")
+    for z in (0.2, 0.2001):
+        base = np.array([1.0, 5.0, z])
+        rt = plan_route3d(sc.world, base, sc.goal, sc.tether)
+        ref = drone_references(rt, 3, world=sc.world)
+        assert chain_violations(sc.world, base, ref.start_positions, sc.tether) == []
+    # a tether that does dip under c_t above the floor is still refused, at its lowest point
+    w = World3D([], ROOM, 0.3)
+    p, q = np.array([1.0, 5.0, 0.2]), np.array([6.0, 5.0, 0.5])
+    msgs = chain_violations(w, p, q[None, :], TETHER)
+    dense = solve3d(p, q, TETHER).points(20001)[:, 2].min()  # the sag's depth, 0.25 mm arc spacing
+    assert dense < 0.1 and len(msgs) == 1 and msgs[0].startswith(f"tether 1 passes {dense:.3f} m from")
+
+
+def test_the_goal_tolerance_bound_is_below_the_shortest_curve_to_the_ball():
+    """Behind the wall of _wall_world the shortest tether-clear curve to the ball B(goal, tol) is the one to the goal
+    less tol (the last leg points at the goal); the bound stays below it and drops by tol where the straight term
+    binds; the tolerance is checked."""
+    w = _wall_world()
+    b, g = np.array([2.0, 2.0, 1.0]), np.array([8.0, 2.0, 1.0])
+    c = TETHER.clearance
+    corner_a, corner_b = np.array([4.5, 8.0 + c, 1.0]), np.array([5.5, 8.0 + c, 1.0])
+    exact = np.linalg.norm(corner_a - b) + np.linalg.norm(corner_b - corner_a) + np.linalg.norm(g - corner_b)
+    for tol in (0.0, 0.5, 1.5):
+        rt = plan_route3d(w, b, g, TETHER, grid=0.25, goal_tolerance=tol)
+        assert rt.lower_bound_length <= exact - tol - 2 * c * (1 - math.pi / 4)
+        assert rt.lower_bound_length >= np.linalg.norm(g - b) - tol - 1e-12
+    for bad in (-0.1, float("nan"), True):
+        with pytest.raises(ParameterError, match="goal tolerance"):
+            plan_route3d(w, b, g, TETHER, goal_tolerance=bad)
+
+
+def test_a_bound_above_the_route_is_an_internal_error(monkeypatch):
+    # a proof bug injected (Λ a tenth of the true one): the bound exceeds the found route; it was clamped silently
+    import tmr.route.route3d as route3d
+
+    true_lipschitz = route3d._lipschitz
+    monkeypatch.setattr(route3d, "_lipschitz", lambda phi, lat: (0.1 * true_lipschitz(phi, lat)[0], None))
+    with pytest.raises(AssertionError, match=r"lower bound \d+\.\d+ m exceeds the route found"):
+        plan_route3d(_wall_world(), [2.0, 2.0, 1.0], [8.0, 2.0, 1.0], TETHER)

@@ -206,6 +206,11 @@ def test_the_loader_builds_the_world_from_a_scenario_table(tmp_path):
             "not a simple polygon",
         ),
         ({"bounds": [0, 0, 0, 1, 1, 1], "obstacles": [{"mesh": "absent.stl"}]}, "no such file"),
+        ({"bounds": [0, 0, 0, 1, 1, 1], "obstacles": [{"mesh": "meshes"}]}, "is a directory"),
+        (  # plain numbers, not numpy's repr
+            {"bounds": [0, 0, 0, 1, 1, 1], "obstacles": [{"prism": [[0, 0], [1, 0], [0, 1]], "z": [1.5, 0]}]},
+            "got [1.5, 0.0]",
+        ),
         ({"bounds": [0, 0, 0, 1, 1, 1], "obstacles": [{"mesh": "corrupt.stl"}]}, "mesh 'corrupt.stl'"),
         ({"bounds": [0, 0, 0, 1, 1, 1], "obstacles": [{"mesh": "open.stl"}]}, "not closed"),
     ],
@@ -215,6 +220,7 @@ def test_the_loader_refuses_bad_tables_with_one_line(tmp_path, table, message):
     open_mesh = trimesh.creation.box(extents=[1, 1, 1])
     open_mesh.update_faces(np.arange(len(open_mesh.faces) - 2))  # two triangles missing
     open_mesh.export(tmp_path / "open.stl")
+    (tmp_path / "meshes").mkdir()
     with pytest.raises(MapError) as err:
         world3d_from_table(table, base=tmp_path)
     text = str(err.value)

@@ -15,12 +15,16 @@ section "Route (3-D)").
    to the walls and ceiling > −√3 h". On the corners, Φ = the 26-connected lattice distance to the goal's cube
    (Dijkstra), extended to U linearly on the Kuhn (Freudenthal) simplices of each cube: a continuous piecewise linear
    function whose gradient norm on U is at most Λ, the largest over the simplices of U (computed). Along any curve
-   γ ⊂ F_t ⊂ U from the base to the goal, Φ(base) − Φ(goal) ≤ Λ · length(γ), so
+   γ ⊂ F_t ⊂ U from the base to a point g' within tol = ``goal_tolerance`` of the goal (where the leader succeeds),
+   Φ(base) − Φ(g') ≤ Λ · length(γ) and Φ(g') ≤ Φ_ball (the largest corner value of the cubes meeting the ball, or
+   Φ(goal) + Λ·tol when the ball keeps c_t), so
 
-       length(γ) ≥ max(|goal − base|, (Φ(base) − Φ(goal)) / Λ) =: ``lower_bound_length``,
+       length(γ) ≥ max(|goal − base| − tol, (Φ(base) − Φ_ball) / Λ, 0) =: ``lower_bound_length``,
 
    and since every tether's arc is ≤ L_max, N ≥ ``min_robots`` = ⌈lower_bound_length / L_max⌉. If the goal is not in
-   the component of U holding the base, no chain reaches it: :class:`NoRouteError` (proven).
+   the component of U holding the base, no chain reaches it: :class:`NoRouteError` (proven). If U joins them but no
+   drone route is found, ``_cells_disconnected`` tries a tighter proof, on a finer lattice (h < c/√3, any plane wall)
+   when the route's is too coarse.
 3. **References.** :func:`drone_references`: the leader follows the route with a minimum-jerk arc-length law; drone j
    moves along the same route from its start arc to j/N of the route's length, in step with the leader's progress, so
    the chain lies along the route and winds round only what the route winds round.
@@ -49,6 +53,8 @@ Array = NDArray[np.float64]
 __all__ = [
     "KAPPA",
     "MAX_NODES",
+    "PROOF_MAX_NODES",
+    "PROOF_SPACING",
     "ROUTE_MARGIN",
     "DroneReferences",
     "NoRouteError",
@@ -65,6 +71,10 @@ __all__ = [
 ROUTE_MARGIN = 0.05
 #: Most lattice nodes of a route search; a finer ``grid`` is coarsened to keep the search under 1 s on 2 cores.
 MAX_NODES = 100_000
+#: The no-route proof's second lattice: spacing PROOF_SPACING · c [m] (< c/√3: any plane wall, however thin and
+#: wherever it cuts the lattice, separates the nodes passing the proof's test), at most PROOF_MAX_NODES nodes.
+PROOF_SPACING = 0.95 / math.sqrt(3.0)
+PROOF_MAX_NODES = 400_000
 #: Worst over-estimate of the 26-connected lattice metric over the Euclidean one: a displacement with sorted
 #: components a ≥ b ≥ c costs a + (√2 − 1) b + (√3 − √2) c, at most KAPPA times its length.
 KAPPA = math.sqrt(1.0 + (math.sqrt(2.0) - 1.0) ** 2 + (math.sqrt(3.0) - math.sqrt(2.0)) ** 2)
@@ -155,12 +165,12 @@ class _Lattice:
         return np.ravel_multi_index(tuple(np.asarray(ijk).T), self.shape)
 
 
-def _lattice(bounds: Array, grid: float) -> _Lattice:
+def _lattice(bounds: Array, grid: float, max_nodes: int = MAX_NODES) -> _Lattice:
     lo, hi = bounds[:3], bounds[3:]
-    h = max(float(grid), float((np.prod(hi - lo) / MAX_NODES) ** (1.0 / 3.0)))
-    for _ in range(50):  # one cube beyond the room on each side, at most MAX_NODES nodes
+    h = max(float(grid), float((np.prod(hi - lo) / max_nodes) ** (1.0 / 3.0)))
+    for _ in range(50):  # one cube beyond the room on each side, at most max_nodes nodes
         shape = tuple(int(math.ceil((hi[k] - lo[k]) / h)) + 3 for k in range(3))
-        if np.prod(shape) <= MAX_NODES:
+        if np.prod(shape) <= max_nodes:
             break
         h *= 1.05
     return _Lattice(lo - h, h, shape)  # type: ignore[arg-type]
@@ -288,11 +298,27 @@ def _interp(phi: Array, lat: _Lattice, p: Array) -> float:
     return val
 
 
+def _ball_max(phi: Array, lat: _Lattice, g: Array, tol: float) -> float:
+    """An upper bound of the Kuhn-simplex interpolant of ``phi`` on U ∩ B(g, tol): the largest finite value at the
+    corners of the cubes meeting the box [g − tol, g + tol] (on a cube of U the interpolant is a convex combination
+    of its corners, all finite)."""
+    top = np.array(lat.shape) - 2
+    lo = np.clip(np.floor((g - tol - lat.origin) / lat.h).astype(np.int64), 0, top)
+    hi = np.clip(np.floor((g + tol - lat.origin) / lat.h).astype(np.int64), 0, top) + 1
+    ii = np.indices(tuple(hi - lo + 1)).reshape(3, -1).T + lo
+    vals = phi[lat.flat(ii)]
+    vals = vals[np.isfinite(vals)]
+    return float(vals.max()) if len(vals) else math.inf
+
+
 # ----------------------------------------------------------------------------------------------------------------
 # the route
 # ----------------------------------------------------------------------------------------------------------------
-def _attach(world: World3D, lat: _Lattice, free: NDArray[np.bool_], p: Array, radius: float, what: str) -> int:
-    """The free node nearest p whose segment from p keeps clearance > 0 in ``world`` with safety radius ``radius``."""
+def _attach(
+    world: World3D, lat: _Lattice, free: NDArray[np.bool_], p: Array, radius: float, what: str, margin: float = 0.0
+) -> int:
+    """The free node nearest p whose segment from p keeps clearance > ``margin`` in ``world`` with safety radius
+    ``radius``. None found: :class:`NoRouteError` with ``proven = False`` (a lattice verdict, exit 1)."""
     c = lat.cell(p)
     w = world.with_safety_radius(radius)
     for reach in (2, 4, 8):
@@ -306,10 +332,15 @@ def _attach(world: World3D, lat: _Lattice, free: NDArray[np.bool_], p: Array, ra
         flat, ii = flat[ok], ii[ok]
         pts = lat.origin + lat.h * ii
         order = np.argsort(np.linalg.norm(pts - p, axis=1), kind="stable")[:64]
-        seen = w.segment_is_free(np.broadcast_to(p, (len(order), 3)), pts[order])
+        seen = w.segment_is_free(np.broadcast_to(p, (len(order), 3)), pts[order], margin)
         if seen.any():
             return int(flat[order[int(np.argmax(seen))]])
-    raise NoRouteError(f"no free space for a drone next to the {what} {fmt_point(p)} (lattice {lat.h:.3f} m)")
+    err = NoRouteError(
+        f"no free lattice node for a drone reachable from the {what} {fmt_point(p)} on a {lat.h:.3f} m lattice "
+        "(not proven: a finer grid may find one)"
+    )
+    err.proven = False
+    raise err
 
 
 def _shorten(world: World3D, path: Array, margin: float) -> Array:
@@ -326,7 +357,13 @@ def _shorten(world: World3D, path: Array, margin: float) -> Array:
 
 
 def plan_route3d(
-    world: World3D, base: ArrayLike, goal: ArrayLike, tether: DroneTetherParams, *, grid: float = 0.25
+    world: World3D,
+    base: ArrayLike,
+    goal: ArrayLike,
+    tether: DroneTetherParams,
+    *,
+    grid: float = 0.25,
+    goal_tolerance: float = 0.1,
 ) -> Route3D:
     """The leader's shortest free route from the ground winch ``base`` to ``goal`` and the proven lower bound.
 
@@ -336,6 +373,8 @@ def plan_route3d(
         goal: the leader's goal (3,) [m] (free for a drone).
         tether: tether parameters (c_t = ``clearance``, L_max = ``tether_length``).
         grid: lattice spacing h [m] (> 0); raised to keep at most ``MAX_NODES`` nodes.
+        goal_tolerance: the leader succeeds anywhere within this distance of ``goal`` [m] (``DroneParams.
+            goal_tolerance``): the bound is on curves from the base to that ball (module doc).
 
     Raises:
         NoRouteError: no chain can reach the goal (proven, exit 2: the goal is outside the component of U holding the
@@ -349,6 +388,10 @@ def plan_route3d(
         raise ParameterError(f"base and goal must be finite 3-D points, got {base!r} and {goal!r}")
     if not (isinstance(grid, int | float) and math.isfinite(grid) and grid > 0):
         raise ParameterError(f"the route grid must be a number > 0 m, got {grid!r}")
+    tol = goal_tolerance
+    if isinstance(tol, bool) or not (isinstance(tol, int | float) and math.isfinite(tol) and tol >= 0):
+        raise ParameterError(f"the goal tolerance must be a number >= 0 m, got {goal_tolerance!r}")
+    tol = float(tol)
     bounds = np.asarray(world.bounds, dtype=float)
     r, c_t = world.safety_radius, tether.clearance
     lat = _lattice(bounds, grid)
@@ -381,19 +424,29 @@ def plan_route3d(
     phi[~in_u] = np.inf
     lam, _ = _lipschitz(phi, lat)
     phi_b, phi_g = _interp(phi, lat, b), _interp(phi, lat, g)
+    # the leader succeeds anywhere in the ball B(g, tol): if the ball keeps c_t from everything (bare clearance of g
+    # >= c_t + tol) it lies in F_t, so a curve reaching it extends to g inside F_t, and the proofs about g hold for it
+    bare_g = float(world.with_safety_radius(0.0).exact_clearance(g[None, :])[0])
+    ball_in_ft = bare_g - tol >= c_t
     if not math.isfinite(phi_b):
-        raise NoRouteError(
+        err = NoRouteError(
             f"the goal {fmt_point(g)} cannot be reached from the base {fmt_point(b)}: no curve keeping the tether "
             f"clearance {c_t:.3f} m from the obstacles and the floor joins them"
         )
+        err.proven = ball_in_ft
+        raise err
     euclid = float(np.linalg.norm(g - b))
-    grid_bound = max(0.0, (phi_b - phi_g) / lam)
-    lower = max(euclid, grid_bound)
+    # a curve ending at g' in the ball: Φ(base) − Φ(g') ≤ Λ·length, with Φ(g') ≤ the largest corner value of the
+    # cubes meeting the ball, or ≤ Φ(g) + Λ·tol when the segment g'–g lies in U (the ball in F_t)
+    grid_bound = max(0.0, (phi_b - _ball_max(phi, lat, g, tol)) / lam)
+    if ball_in_ft:
+        grid_bound = max(grid_bound, (phi_b - phi_g) / lam - tol)
+    lower = max(euclid - tol, grid_bound, 0.0)
     t_bound = time.perf_counter()
 
     # the leader's route on the drones' free nodes
     free = (np.minimum(obst, side) - r > ROUTE_MARGIN) & (floor - r > ROUTE_MARGIN)  # a subset of U
-    start = _attach(world, lat, free, b, c_t, "base")
+    start = _attach(world, lat, free, b, c_t, "base", margin=-1e-9)  # the winch may sit exactly c_t from the floor
     end = _attach(world, lat, free, g, r, "goal")
     keep = np.flatnonzero(free)
     local = np.full(lat.n, -1)
@@ -406,7 +459,14 @@ def plan_route3d(
     pred[keep] = np.where(pred_l >= 0, keep[np.maximum(pred_l, 0)], -9999)
     if not math.isfinite(dist[end]):
         c = min(c_t, r, float(world.with_safety_radius(0.0).exact_clearance(b[None, :])[0]) - 0.002)
-        if _cells_disconnected(world, lat, nodes, b, g, c):
+        proven = bare_g - tol >= c and _cells_disconnected(world, lat, nodes, b, g, c)
+        if not proven and bare_g - tol >= c and c > 0.0 and h >= PROOF_SPACING * c:
+            # the lattice may straddle a thin wall (ρ = h√3/2 against c): once more on a lattice fine enough to see
+            # any plane wall, h < c/√3 (formulations/drones.md), within PROOF_MAX_NODES
+            fine = _lattice(bounds, PROOF_SPACING * c, max_nodes=PROOF_MAX_NODES)
+            if fine.h < h:
+                proven = _cells_disconnected(world, fine, fine.nodes(), b, g, c)
+        if proven:
             raise NoRouteError(
                 f"the goal {fmt_point(g)} cannot be reached from the base {fmt_point(b)}: no curve keeping "
                 f"{c:.3f} m from the obstacles, the walls, the floor and the ceiling joins them (the tethers keep "
@@ -427,7 +487,11 @@ def plan_route3d(
     keep = np.r_[True, np.linalg.norm(np.diff(path, axis=0), axis=1) > 1e-9]
     path = path[keep]
     length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
-    lower = min(lower, length)  # a bound above a found route would be a bug in the proof's arithmetic
+    if lower > length + 1e-9:  # the route is a free curve the bound covers: a bound above it is a bug in the proof
+        raise AssertionError(
+            f"internal error: the proven lower bound {lower:.6f} m exceeds the route found, {length:.6f} m "
+            f"(straight {euclid:.6f} m, grid {grid_bound:.6f} m, Λ = {lam:.6f}, h = {h:.4f} m)"
+        )
     n_min = max(1, int(math.ceil(lower / tether.tether_length - 1e-9)))
     t_end = time.perf_counter()
     return Route3D(
@@ -512,8 +576,8 @@ def chain_violations(
 ) -> list[str]:
     """Every limit a chain placement violates, one message each (empty: valid): drone clearance > d_safe beyond r,
     drones ≥ 2r + margin apart, every tether's catenary (``solve3d``) solvable, arc ≤ L_max, drone-end tensions ≤
-    spare thrust, the whole curve (``samples`` points plus the sampling margin) ≥ c_t from the obstacles and the floor
-    and inside the room."""
+    spare thrust, the whole curve ≥ c_t from the obstacles (``samples`` points at arc spacing Δ and the bound
+    (d_k + d_{k+1} − Δ)/2 between neighbours) and the floor (the catenary's lowest point, exactly), inside the room."""
     out: list[str] = []
     P = np.asarray(positions, dtype=float)
     r = world.safety_radius
@@ -539,15 +603,25 @@ def chain_violations(
             if is_drone and t_end > tether.spare_thrust:
                 out.append(f"tether {j + 1} pulls a drone with {t_end:.3f} N (> {tether.spare_thrust:.3f} N)")
         pts = cat.points(samples)
-        margin = cat.length / (2.0 * (samples - 1))
-        obst = _obstacle_distance(world, pts, cap=tether.clearance + margin + 1.0)
-        floor, side = _wall_distance(np.asarray(world.bounds, dtype=float), pts)
-        worst = np.minimum(obst, floor) - margin
-        k = int(np.argmin(worst))
-        if worst[k] < tether.clearance or side.min() < 0.0:
+        spacing = cat.length / (samples - 1)
+        obst = _obstacle_distance(world, pts, cap=tether.clearance + spacing + 1.0)
+        # between samples k and k+1 (arc spacing Δ) the 1-Lipschitz obstacle distance is at least
+        # max(d_k − s, d_{k+1} − (Δ − s)) ≥ (d_k + d_{k+1} − Δ)/2 (never below min(d_k, d_{k+1}) − Δ/2)
+        pair = np.minimum(np.minimum(obst[:-1], obst[1:]), 0.5 * (obst[:-1] + obst[1:] - spacing))
+        i = int(np.argmin(pair))
+        at = pts[i] if obst[i] <= obst[i + 1] else pts[i + 1]
+        worst = float(pair[i])
+        # the floor exactly: the lowest point of the catenary (the vertex, or the lower end); a base exactly c_t above
+        # the floor keeps c_t. The walls and the ceiling: a catenary is a segment in plan and convex in height, so
+        # its end samples are its extremes there
+        floor_gap = float(cat.lowest[2] - world.bounds[2])
+        if floor_gap < worst:
+            worst, at = floor_gap, cat.lowest
+        _, side = _wall_distance(np.asarray(world.bounds, dtype=float), pts)
+        if worst < tether.clearance or side.min() < 0.0:
             out.append(
-                f"tether {j + 1} passes {max(float(worst[k]), 0.0):.3f} m from an obstacle or the floor at "
-                f"{fmt_point(pts[k])} (< c_t {tether.clearance:.3f} m)"
+                f"tether {j + 1} passes {max(worst, 0.0):.3f} m from an obstacle or the floor at "
+                f"{fmt_point(at)} (< c_t {tether.clearance:.3f} m)"
             )
     return out
 

@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from tmr.errors import MapError, ParameterError, ScenarioError, fmt_point
 from tmr.model.catenary3d import DroneTetherParams
-from tmr.model.params import DroneParams
+from tmr.model.params import DroneParams, convert_field
 from tmr.world.scenario import SCENARIO_DIR, file_kind
 from tmr.world.world3d import World3D, world3d_from_table
 
@@ -95,6 +95,10 @@ class DroneScenario:
         unknown = sorted(set(self.params) - _PARAM_KEYS)
         if unknown:
             raise ParameterError(f"{label}: unknown [params] {unknown}; known: {sorted(_PARAM_KEYS)}")
+        try:  # the field's type, as --set converts it ("a" for a number is refused, 2.5 for an int too)
+            self.params = {k: convert_field(DroneParams, k, v) for k, v in self.params.items()}
+        except ParameterError as exc:
+            raise ParameterError(f"{label}: [params]: {exc}") from None
         self.drone_params()  # the values: DroneParams' own checks
         if self.tether.drone_radius != self.world.safety_radius:
             self.tether = dataclasses.replace(self.tether, drone_radius=self.world.safety_radius)
@@ -142,6 +146,8 @@ class DroneScenario:
 
 
 def _point3(value: Any, what: str, label: str) -> NDArray[np.float64]:
+    if isinstance(value, list | tuple) and any(isinstance(v, bool | np.bool_) for v in value):
+        raise ParameterError(f"{label}: {what} must be [x, y, z] in metres, got {value!r} (true/false is not a number)")
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):

@@ -225,7 +225,8 @@ def _load_toml(path: Path, safety_radius: float | None = None) -> Scenario:
         raise ScenarioError(f'{label}: kind must be "ground" (the default) or "drone", got {kind!r}')
     unknown = set(doc) - _TOP_KEYS
     if unknown:
-        raise ScenarioError(f"{label}: unknown keys {sorted(unknown)}; allowed: {sorted(_TOP_KEYS)}")
+        hint = ' (a [world] table is a drone scenario: add kind = "drone")' if "world" in unknown else ""
+        raise ScenarioError(f"{label}: unknown keys {sorted(unknown)}; allowed: {sorted(_TOP_KEYS)}{hint}")
     for key in ("base", "goal", "map"):
         if key not in doc:
             raise ScenarioError(f"{label}: missing required key {key!r}")

@@ -124,7 +124,8 @@ def prism_obstacle(polygon: ArrayLike, z: ArrayLike, name: str = "prism") -> Obs
     if xy.ndim != 2 or xy.shape[1] != 2 or len(xy) < 3 or not np.all(np.isfinite(xy)):
         raise MapError(f"{name}: the footprint must be at least 3 finite [x, y] points")
     if zz.shape != (2,) or not np.all(np.isfinite(zz)) or zz[1] <= zz[0]:
-        raise MapError(f"{name}: z must be 2 finite numbers [z0, z1] with z1 > z0, got {z!r}")
+        shown = zz.tolist() if zz.ndim else z
+        raise MapError(f"{name}: z must be 2 finite numbers [z0, z1] with z1 > z0, got {shown!r}")
     poly = Polygon(xy)
     if not poly.is_valid or poly.area <= 0.0:
         raise MapError(f"{name}: the footprint is not a simple polygon ({shapely.is_valid_reason(poly)})")
@@ -156,6 +157,8 @@ def mesh_obstacle(path: str | Path, name: str | None = None) -> Obstacle3D:
     """A closed triangle mesh read from an STL/OBJ/PLY file (coordinates in metres) with trimesh."""
     p = Path(path)
     label = name or f"mesh '{p.name}'"
+    if p.is_dir():
+        raise MapError(f"{label}: {p} is a directory, not a mesh file")
     if not p.is_file():
         raise MapError(f"{label}: no such file: {p}")
     import trimesh  # only meshes and non-convex prisms need it (0.14 s to import)
