@@ -10,7 +10,7 @@ scenario TOML under ``--work`` and, in a worker process (``--jobs``, default 2),
 
 1. **in-process** (the figures of the tables but the whole-process time): the scenario is loaded with
    ``tmr.world.drones.load_drone_scenario``; the proven bound once per world with
-   ``tmr.route.route3d.plan_route3d(world, base, goal, tether, grid=DroneParams.grid)`` (``min_robots``,
+   ``tmr.route.route3d.plan_route3d(world, base, goal, tether, grid=DroneParams.grid, goal_tolerance=...)`` (``min_robots``,
    ``lower_bound_length``; NoRouteError: no route), timed; then ``tmr.planner3d.plan_drones(scenario, robots=N,
    method="qp", seed=--plan-seed)``, timed from the call to its return or its refusal (TooFewRobotsError /
    NoRouteError: the refusal time, target < 1 s). A returned plan carries the independent checker's verdict
@@ -124,7 +124,10 @@ def _bound(scenario: Any) -> dict[str, Any]:
     plan_route3d = importlib.import_module("tmr.route.route3d").plan_route3d
     t0 = time.perf_counter()
     try:
-        route = plan_route3d(scenario.world, scenario.base, scenario.goal, scenario.tether, grid=params.grid)
+        route = plan_route3d(
+            scenario.world, scenario.base, scenario.goal, scenario.tether, grid=params.grid,
+            goal_tolerance=params.goal_tolerance,
+        )  # fmt: skip
     except Exception as exc:  # NoRouteError (or whatever A raises for it): recorded, not fatal
         return {"bound": None, "route": type(exc).__name__, "route_s": time.perf_counter() - t0}
     return {

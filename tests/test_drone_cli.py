@@ -66,7 +66,7 @@ def test_too_few_drones_refused_up_front(tmp_path, capsys):
     code, stdout, stderr = run_cli(["--scenario", "H", "--robots", "4", "--out", str(out)], capsys)
     assert code == 2
     text = (stdout + stderr).strip()
-    assert len(text.splitlines()) == 1 and "the fewest is" in text and "38.222 m" in text
+    assert len(text.splitlines()) == 1 and "the fewest is" in text and "38.122 m" in text
     assert not out.exists()
 
 

@@ -106,7 +106,9 @@ def route_drones(
                 fewest,
                 proven=True,
             )
-    route = plan_route3d(scenario.world, scenario.base, scenario.goal, tether, grid=params.grid)
+    route = plan_route3d(
+        scenario.world, scenario.base, scenario.goal, tether, grid=params.grid, goal_tolerance=params.goal_tolerance
+    )
     if wanted == "auto":
         return route, max(1, route.min_robots)
     check_drone_count(route, int(wanted))
@@ -130,7 +132,9 @@ def build_drone_problem(
         params, tether = params or p, tether or t
     world = scenario.world
     if route is None:
-        route = plan_route3d(world, scenario.base, scenario.goal, tether, grid=params.grid)
+        route = plan_route3d(
+            world, scenario.base, scenario.goal, tether, grid=params.grid, goal_tolerance=params.goal_tolerance
+        )
     refs = drone_references(
         route, n_robots, world=world, Ts=params.Ts, speed=params.leader_speed, accel=params.leader_accel,
         settle=params.settle, d_safe=params.d_safe, separation_margin=params.separation_margin,
