@@ -10,9 +10,9 @@ scenario TOML under ``--work`` and, in a worker process (``--jobs``, default 2),
 
 1. **in-process** (the figures of the tables but the whole-process time): the scenario is loaded with
    ``tmr.world.drones.load_drone_scenario``; the proven bound once per world with
-   ``tmr.route.route3d.plan_route3d(world, base, goal, tether, grid=DroneParams.grid, goal_tolerance=...)`` (``min_robots``,
+   ``tmr.route.route3d.plan_route3d(world, base, goal, tether, grid=..., goal_tolerance=...)`` (``min_robots``,
    ``lower_bound_length``; NoRouteError: no route), timed; then ``tmr.planner3d.plan_drones(scenario, robots=N,
-   method="qp", seed=--plan-seed)``, timed from the call to its return or its refusal (TooFewRobotsError /
+   method="qp")``, timed from the call to its return or its refusal (TooFewRobotsError /
    NoRouteError: the refusal time, target < 1 s). A returned plan carries the independent checker's verdict
    (``plan.success``; ``plan.failure`` with one reason per violated limit, joined by "; ") and the per-step QP times
    ``plan.diagnostics["step_time"]`` [s];
