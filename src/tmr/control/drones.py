@@ -128,6 +128,10 @@ def segment_box_distance(a: Array, b: Array, lo: Array, hi: Array) -> tuple[Arra
     return dist[rows, best], ts[rows, best]
 
 
+#: the inward normals of the room's six faces (x = xmin, y = ymin, z = zmin, x = xmax, y = ymax, z = zmax)
+_WALL_NORMALS = np.vstack([np.eye(3), -np.eye(3)])
+
+
 def segment_nearest_k(
     world: World3D, a: Array, b: Array, k: int, cap: float = np.inf, walls: bool = True
 ) -> tuple[Array, Array, Array, NDArray[np.int64]]:
@@ -150,15 +154,12 @@ def segment_nearest_k(
     items_g: list[Array] = []
     items_t: list[Array] = []
     if walls:  # the six faces of the room, each an obstacle of its own (x = xmin, y = ymin, z = zmin, then the max)
-        blo, bhi = np.asarray(world.bounds[:3], dtype=float), np.asarray(world.bounds[3:], dtype=float)
-        for axis in range(3):
-            for sign, plane in ((1.0, blo[axis]), (-1.0, bhi[axis])):
-                ga, gb = sign * (a[:, axis] - plane), sign * (b[:, axis] - plane)
-                items_c.append(np.minimum(ga, gb))
-                items_t.append((gb < ga).astype(float))
-                g = np.zeros((M, 3))
-                g[:, axis] = sign
-                items_g.append(g)
+        bounds = np.asarray(world.bounds, dtype=float)
+        ga = np.concatenate([a - bounds[:3], bounds[3:] - a], axis=1)  # (M, 6)
+        gb = np.concatenate([b - bounds[:3], bounds[3:] - b], axis=1)
+        items_c.append(np.minimum(ga, gb))
+        items_t.append((gb < ga).astype(float))
+        items_g.append(np.broadcast_to(_WALL_NORMALS, (M, 6, 3)))
     lo_seg, hi_seg = np.minimum(a, b), np.maximum(a, b)
     frames: tuple[Array, Array, Array] | None = None
     capsule = coal.Capsule(0.0, 1.0)
@@ -208,22 +209,69 @@ def segment_nearest_k(
                 grad[i] = off / max(float(np.linalg.norm(off)), 1e-12)
             if half[i] > 1e-12:
                 t[i] = min(1.0, max(0.0, 0.5 + float((p1 - mid[i]) @ R[i][:, 2]) / (2.0 * half[i])))
-        items_c.append(out)
-        items_g.append(grad)
-        items_t.append(t)
-    C = np.column_stack(items_c) if items_c else np.full((M, 1), np.inf)
-    G = np.stack(items_g, axis=1) if items_g else np.zeros((M, 1, 3))
-    T = np.column_stack(items_t) if items_t else np.zeros((M, 1))
+        items_c.append(out[:, None])
+        items_g.append(grad[:, None, :])
+        items_t.append(t[:, None])
+    k = int(k)
+    short = k - sum(c.shape[1] for c in items_c)
+    if short > 0:  # fewer obstacles than slots: empty slots
+        items_c.append(np.full((M, short), np.inf))
+        items_g.append(np.zeros((M, short, 3)))
+        items_t.append(np.zeros((M, short)))
+    C = np.concatenate(items_c, axis=1)
+    G = np.concatenate(items_g, axis=1)
+    T = np.concatenate(items_t, axis=1)
     count = np.count_nonzero(C < cap + world.safety_radius, axis=1)
-    kk = min(int(k), C.shape[1])
-    order = np.argsort(C, axis=1, kind="stable")[:, :kk]
+    order = np.argsort(C, axis=1, kind="stable")[:, :k] if C.shape[1] > 1 else np.zeros((M, 1), dtype=np.intp)
     rows = np.arange(M)[:, None]
-    c, g, t = C[rows, order], G[rows, order], T[rows, order]
-    if kk < k:
-        c = np.pad(c, ((0, 0), (0, k - kk)), constant_values=np.inf)
-        g = np.pad(g, ((0, 0), (0, k - kk), (0, 0)))
-        t = np.pad(t, ((0, 0), (0, k - kk)))
-    return c - world.safety_radius, g, t, count
+    return C[rows, order] - world.safety_radius, G[rows, order], T[rows, order], count
+
+
+def point_nearest_k(world: World3D, points: Array, k: int, cap: float = np.inf) -> tuple[Array, Array, Array]:
+    """:func:`segment_nearest_k` for points (M, 3) and the obstacles only (no walls), cheaper: per point and slot
+    (M, k), sorted, the clearance [m] from that obstacle (World3D's radius subtracted; negative inside), its unit
+    gradient (M, k, 3) and how many obstacles are within ``cap`` [m] (M,). Boxes in closed form (inside: the depth to
+    the nearest face), other obstacles by coal's point query (as :meth:`World3D.clearance`)."""
+    from tmr.world.world3d import _POINT, _PlacedBox, _placement, _query, _winding_number
+
+    M = points.shape[0]
+    k = int(k)
+    C = np.full((M, max(k, len(world.obstacles))), np.inf)
+    G = np.zeros((M, C.shape[1], 3))
+    r = world.safety_radius
+    for o, ob in enumerate(world.obstacles):
+        gap = np.linalg.norm(np.maximum(0.0, np.maximum(ob.lo - points, points - ob.hi)), axis=1)
+        cand = np.flatnonzero(gap < cap + r)
+        if len(cand) == 0:
+            continue
+        p = points[cand]
+        if isinstance(ob.geometry, _PlacedBox):
+            off = p - np.clip(p, ob.lo, ob.hi)
+            d = np.sqrt(np.einsum("ij,ij->i", off, off))
+            g = off / np.maximum(d, 1e-300)[:, None]
+            inside = d <= 0.0
+            if inside.any():  # the depth to the nearest face, the gradient along its outward normal
+                faces = np.concatenate([p[inside] - ob.lo, ob.hi - p[inside]], axis=1)
+                f = np.argmin(faces, axis=1)
+                d[inside] = -faces[np.arange(len(f)), f]
+                g[inside] = -_WALL_NORMALS[f]
+        else:
+            d, g = np.empty(len(cand)), np.zeros((len(cand), 3))
+            sign = np.ones(len(cand))
+            if not ob.signed:
+                assert ob.triangles is not None
+                sign = np.where(np.abs(_winding_number(p, ob.triangles)) > 0.5, -1.0, 1.0)
+            for i in range(len(cand)):
+                di, _, q = _query(_POINT, _placement(p[i]), ob)
+                d[i] = di if ob.signed else sign[i] * abs(di)
+                v = p[i] - q
+                nv = float(np.linalg.norm(v))
+                g[i] = math.copysign(1.0, d[i]) * v / nv if nv > 1e-12 else 0.0
+        C[cand, o], G[cand, o] = d, g
+    count = np.count_nonzero(C < cap + r, axis=1)
+    order = np.argsort(C, axis=1, kind="stable")[:, :k]
+    rows = np.arange(M)[:, None]
+    return C[rows, order] - r, G[rows, order], count
 
 
 def segment_nearest(world: World3D, a: Array, b: Array, cap: float = np.inf) -> tuple[Array, Array, Array]:
@@ -316,7 +364,7 @@ class DroneStepContext:
         c0, g0 = self.world.clearance_and_gradient(P[1:])
         self.drone_clearance, self.drone_gradient = c0, g0
         kd = self.drone_nearest
-        cd, gd, _, nd = segment_nearest_k(self.world, P[1:], P[1:], kd, self.drone_cap, walls=False)
+        cd, gd, nd = point_nearest_k(self.world, P[1:], kd, self.drone_cap)
         self.drone_obstacle_clearance, self.drone_obstacle_gradient = cd, gd
         # each tether as the polyline p, X_1..X_m, q: its m+1 pieces, each with its points nearest its k nearest
         # obstacles (walls included), one per obstacle
@@ -565,12 +613,11 @@ class TetherClearance(_TetherRows):
         Jp[:, 1:-1], Jq[:, 1:-1] = ctx.sens.dpoints_dp, ctx.sens.dpoints_dq
         Jp[:, 0], Jq[:, 0], Jp[:, -1], Jq[:, -1] = eye, 0.0, 0.0, eye
         # n ᵀ ∂X/∂p with X = (1 − t) X_i + t X_{i+1}: (N, m+1, k, 3), one per piece and obstacle
-        g = ctx.piece_gradient
         t = ctx.piece_t[..., None]
-        gp0, gp1 = np.einsum("jisk,jikl->jisl", g, Jp[:, :-1]), np.einsum("jisk,jikl->jisl", g, Jp[:, 1:])
-        gq0, gq1 = np.einsum("jisk,jikl->jisl", g, Jq[:, :-1]), np.einsum("jisk,jikl->jisl", g, Jq[:, 1:])
-        dp = ((1.0 - t) * gp0 + t * gp1).reshape(N, (m + 1) * k, 3)
-        dq = ((1.0 - t) * gq0 + t * gq1).reshape(N, (m + 1) * k, 3)
+        g1 = t * ctx.piece_gradient  # (N, m+1, k, 3)
+        g0 = ctx.piece_gradient - g1
+        dp = (g0 @ Jp[:, :-1] + g1 @ Jp[:, 1:]).reshape(N, (m + 1) * k, 3)
+        dq = (g0 @ Jq[:, :-1] + g1 @ Jq[:, 1:]).reshape(N, (m + 1) * k, 3)
         A = ctx.Ts * self._scatter(N, (m + 1) * k, dp, dq)
         c = ctx.piece_clearance.reshape(N, -1)
         need = self.c_min + ctx.chord_deviation[:, None]  # (N, 1): c_t + margin + the arc's departure from its chord
