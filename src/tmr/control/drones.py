@@ -133,7 +133,7 @@ _WALL_NORMALS = np.vstack([np.eye(3), -np.eye(3)])
 
 
 def segment_nearest_k(
-    world: World3D, a: Array, b: Array, k: int, cap: float = np.inf, walls: bool = True
+    world: World3D, a: Array, b: Array, k: int, cap: float = np.inf, walls: bool = True, within: float | None = None
 ) -> tuple[Array, Array, Array, NDArray[np.int64]]:
     """The ``k`` nearest obstacles of each segment a–b (M, 3), one by one: per segment and slot (M, k), sorted by
     clearance, the clearance [m] of the segment from that obstacle (the room's six walls each count as one when
@@ -144,7 +144,8 @@ def segment_nearest_k(
     affine along a segment, so its minimum is at an end. A point is the segment a = b. Obstacles whose bounding box
     is farther than ``cap`` [m] (beyond the world's safety radius) from a segment are not queried; a slot with no
     obstacle left has clearance +inf, gradient 0 and t = 0. Also returns, as the fourth value, how many obstacles
-    within ``cap`` each segment has (M,): more than ``k`` means the farthest of them got no slot."""
+    each segment has within a clearance ``within`` [m] (default ``cap``) (M,): more than ``k`` means the farthest of
+    them got no slot."""
     import coal
 
     from tmr.world.world3d import _IDENTITY, _REQUEST, _PlacedBox, _placement, _winding_number
@@ -221,7 +222,7 @@ def segment_nearest_k(
     C = np.concatenate(items_c, axis=1)
     G = np.concatenate(items_g, axis=1)
     T = np.concatenate(items_t, axis=1)
-    count = np.count_nonzero(C < cap + world.safety_radius, axis=1)
+    count = np.count_nonzero(C <= (cap if within is None else within) + world.safety_radius, axis=1)
     order = np.argsort(C, axis=1, kind="stable")[:, :k] if C.shape[1] > 1 else np.zeros((M, 1), dtype=np.intp)
     rows = np.arange(M)[:, None]
     return C[rows, order] - world.safety_radius, G[rows, order], T[rows, order], count
@@ -268,7 +269,7 @@ def point_nearest_k(world: World3D, points: Array, k: int, cap: float = np.inf) 
                 nv = float(np.linalg.norm(v))
                 g[i] = math.copysign(1.0, d[i]) * v / nv if nv > 1e-12 else 0.0
         C[cand, o], G[cand, o] = d, g
-    count = np.count_nonzero(C < cap + r, axis=1)
+    count = np.count_nonzero(C <= cap + r, axis=1)
     order = np.argsort(C, axis=1, kind="stable")[:, :k]
     rows = np.arange(M)[:, None]
     return C[rows, order] - r, G[rows, order], count
@@ -371,7 +372,7 @@ class DroneStepContext:
         kt = self.nearest
         poly = np.concatenate([P[:-1, None, :], samples, P[1:, None, :]], axis=1)  # (N, m+2, 3)
         ends = poly[:, :-1].reshape(-1, 3), poly[:, 1:].reshape(-1, 3)
-        c, g, t, nt = segment_nearest_k(self.bare, *ends, kt, self.cap)
+        c, g, t, nt = segment_nearest_k(self.bare, *ends, kt, self.cap + 0.5, within=self.cap)
         self.piece_clearance = c.reshape(N, m + 1, kt)
         self.piece_gradient = g.reshape(N, m + 1, kt, 3)
         self.piece_t = t.reshape(N, m + 1, kt)
@@ -759,7 +760,7 @@ def make_drone_qp(
     p = params
     act = p.clearance_activation
     ctx = DroneStepContext(
-        chain, world, tether, references, p.Ts, p.tether_samples, cap=act + tether.clearance + 0.5,
+        chain, world, tether, references, p.Ts, p.tether_samples, cap=act + tether.clearance,
         nearest=nearest, drone_nearest=drone_nearest, drone_cap=act,
     )  # fmt: skip
     N = chain.n_robots
