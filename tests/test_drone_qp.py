@@ -261,8 +261,10 @@ def test_segment_and_point_queries_give_each_obstacle_its_own_slot():
         alone = World3D([ob], [-50, -50, -50, 50, 50, 50], 0.0).segment_clearance(a, b)
         free = alone > 1e-6
         assert np.all(np.min(np.abs(c[free] - alone[free, None]), axis=1) < 1e-7)
-    X = a[:, None, :] + t[..., None] * (b - a)[:, None, :]  # the slot's point on the segment is the nearest one
+    X = a[:, None, :] + t[..., None] * (b - a)[:, None, :]  # each slot's point is that obstacle's nearest one:
     free = c > 1e-6
+    assert np.all(world.clearance(X)[free] <= c[free] + 1e-7)  # the world is at most that far from it
+    np.testing.assert_allclose(world.clearance(X[:, 0])[free[:, 0]], c[free[:, 0], 0], atol=1e-7)
     np.testing.assert_allclose(np.linalg.norm(g[free], axis=-1), 1.0, atol=1e-9)
     # at the window's corner (jamb x sill) both boxes have a row of their own
     cc, _, _, _ = segment_nearest_k(world, np.array([[5.0, 4.3, 1.5]]), np.array([[5.0, 4.3, 1.6]]), 3, cap=1.0)

@@ -741,8 +741,8 @@ def make_drone_qp(
     n: int,
     references: DroneReferencesLike,
     base: Any | None = None,
-    nearest: int = 4,
-    drone_nearest: int = 2,
+    nearest: int | None = None,
+    drone_nearest: int | None = None,
 ) -> DroneQP:
     """The drone chain's lexicographic QP (``formulations/drones.md``, "Per-step QP (3-D)").
 
@@ -753,10 +753,20 @@ def make_drone_qp(
         n: number of drones N.
         references: the route references (leader and every drone).
         base: the anchor (ground winch) (3,) [m]; default: ``references.base``.
-        nearest: obstacles (each wall one) per tether piece with a row of their own (``TetherClearance``).
-        drone_nearest: obstacles per drone with a row of their own (``DroneClearance``; walls are ``RoomBounds``).
+        nearest: obstacles (each wall one) per tether piece with a row of their own (``TetherClearance``); default
+            min(6, obstacles + 6).
+        drone_nearest: obstacles per drone with a row of their own (``DroneClearance``; walls are ``RoomBounds``);
+            default min(5, obstacles).
+
+    The default slots cover every obstacle within the activation distance on the measured worlds (window worlds of
+    ``tmr.sweep.rooms3d`` and F, G, H: at most 6 per tether piece, walls included, and 5 per drone);
+    ``diagnostics["uncovered_obstacles"]`` counts, per step, the (piece or drone, obstacle) pairs within it left
+    without a row.
     """
     chain = Chain(int(n), _anchor(references, base), spatial=True)
+    n_obstacles = len(world.obstacles)
+    nearest = min(6, n_obstacles + 6) if nearest is None else int(nearest)
+    drone_nearest = min(5, max(n_obstacles, 1)) if drone_nearest is None else int(drone_nearest)
     p = params
     act = p.clearance_activation
     ctx = DroneStepContext(
