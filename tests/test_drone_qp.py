@@ -293,3 +293,19 @@ def test_window_corner_tether_clearance_is_a_hard_limit():
     plan, metrics = plan_drones(scenario)
     assert plan.success, plan.failure
     assert metrics.min_tether_clearance >= TP.clearance
+
+
+def test_sliding_across_a_taut_tether_does_not_creep_past_the_length():
+    """The leader's reference passes the anchor farther than the tether reaches: the drone slides across its taut
+    tether, which lengthens it to second order (|Δ|²/(2c) per step) where the linear row sees no change; the row's
+    second-order term keeps the arc within L_max − margin (it crept 1 cm past it)."""
+    tether = dataclasses.replace(TP, tether_length=4.0)
+    world = World3D([], [0, 0, 0, 20, 20, 6], tether.drone_radius)
+    ref = line_references([10.0, 10.0, 0.5], [7.0, 6.5, 2.0], [16.0, 6.5, 2.0], 1, Ts=PRM.Ts, speed=2.0)
+    ref.start_positions[:] = [[8.5, 8.0, 1.5]]
+    plan = _plan(world, ref, 1, tether=tether)
+    assert plan.success, plan.failure
+    L = np.array([solve3d(*plan.points(k), tether).length for k in range(len(plan.t))])
+    bound = tether.tether_length - PRM.length_margin
+    assert L.max() <= bound + 1e-3
+    assert L.max() > bound - 0.01  # it binds

@@ -628,12 +628,17 @@ class TetherClearance(_TetherRows):
 
 
 class TetherLength(_TetherRows):
-    """Arc length L_j ≤ L_max − margin: ``Ts (∇_p L ṗ + ∇_q L q̇) ≤ min(rate Ts, 1)(L_max − margin − L)`` (N rows)."""
+    """Arc length L_j ≤ L_max − margin: ``Ts (∇_p L ṗ + ∇_q L q̇) ≤ min(rate Ts, 1)(L_max − margin − L) − e_j``
+    (N rows), with e_j the second-order growth the linear row misses: moving one end across the chord c_j by Δ (the
+    relative displacement of the ends in one step) lengthens the chord by |Δ|²/(2 c_j), the arc by
+    |∇_q L| |Δ|²/(2 c_j); with the previous step's relative velocity w and the acceleration bound a_max per axis,
+    |Δ| ≤ Ts (|w| + 2√3 a_max Ts). Without it a chain held at full stretch, its drones sliding across their tethers,
+    crept past the limit by ~0.5 mm per step (window-0-1 of ``tmr.sweep.rooms3d``: 7.025 m > L_max 7.02 m)."""
 
     name = "tether_length"
 
-    def __init__(self, n_robots: int, L_max: float, rate: float) -> None:
-        self.N, self.L_max, self.rate = n_robots, float(L_max), float(rate)
+    def __init__(self, n_robots: int, L_max: float, rate: float, a_max: float = 0.0) -> None:
+        self.N, self.L_max, self.rate, self.a_max = n_robots, float(L_max), float(rate), float(a_max)
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
         return self._mask(self.N, 1)
@@ -641,7 +646,12 @@ class TetherLength(_TetherRows):
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
         S = ctx.sens
         dp, dq, L = S.dlength_dp[:, None, :], S.dlength_dq[:, None, :], S.length
-        upper = -approach_bound(self.L_max - L, 0.0, self.rate, ctx.Ts)
+        V = np.vstack([np.zeros((1, 3)), ctx.v_prev.reshape(-1, 3)])  # the anchor does not move
+        w = np.linalg.norm(np.diff(V, axis=0), axis=1)
+        step = ctx.Ts * (w + 2.0 * math.sqrt(3.0) * self.a_max * ctx.Ts)
+        chord = np.maximum(ctx.velocity_map.d, 1e-9)
+        growth = np.linalg.norm(S.dlength_dq, axis=1) * step**2 / (2.0 * chord)
+        upper = -approach_bound(self.L_max - L, 0.0, self.rate, ctx.Ts) - growth
         return LimitRows(ctx.Ts * self._scatter(self.N, 1, dp, dq), np.full(self.N, -np.inf), upper)
 
 
@@ -789,7 +799,7 @@ def make_drone_qp(
         TetherClearance(
             N, p.tether_samples, tether.clearance, p.d_safe, p.approach_rate, act + tether.clearance, nearest
         ),
-        TetherLength(N, tether.tether_length - p.length_margin, p.approach_rate),
+        TetherLength(N, tether.tether_length - p.length_margin, p.approach_rate, p.drone_accel_max),
         TetherTension(N, tether.spare_thrust - p.tension_margin, p.approach_rate),
         DroneSpeed(N, p.drone_speed_max),
         DroneAcceleration(N, p.drone_accel_max),
