@@ -197,7 +197,9 @@ def test_segment_nearest_matches_coal_and_the_point_queries():
     b = a + rng.normal(scale=1.5, size=a.shape)
     b = np.clip(b, 0.01, [9.99, 9.99, 4.99])
     c, g, t = segment_nearest(world, a, b)
-    np.testing.assert_allclose(c, world.segment_clearance(a, b), atol=1e-7)  # coal's capsule queries
+    ref = world.segment_clearance(a, b)  # coal's capsule queries; a blocked segment's depth is one obstacle's
+    np.testing.assert_allclose(c[ref > 0], ref[ref > 0], atol=1e-7)
+    assert np.all(c[ref <= 0] <= 1e-9)
     X = a + t[:, None] * (b - a)
     free = c > 1e-6
     cx, gx = world.clearance_and_gradient(X[free])
@@ -213,3 +215,97 @@ def test_segment_nearest_matches_coal_and_the_point_queries():
     dense = np.linalg.norm(P - np.clip(P, lo, hi), axis=2)
     assert np.all(d <= dense.min(axis=1) + 1e-12)
     assert np.all(d >= dense.min(axis=1) - np.linalg.norm(b - a, axis=1) / 2000)
+
+
+def test_few_samples_the_arc_between_them_keeps_c_t():
+    """Two samples per tether: pieces of ~1 m whose arc departs from the chord by δ²/(8a) ≈ 1-3 cm, more than d_safe
+    covers; the rows add that departure per tether, so the catenary itself (128 samples) keeps c_t (it did not)."""
+    world, ref = _low_box()
+    params = dataclasses.replace(PRM, tether_samples=2)
+    plan = _plan(world, ref, 2, params=params)
+    assert plan.success, plan.failure
+    assert _violations(plan, world, params=params) == []
+
+
+def test_chord_deviation_bounds_the_arc_between_samples():
+    world, ref = _low_box()
+    f = make_drone_qp(world, TP, dataclasses.replace(PRM, tether_samples=2), 2, ref)
+    ctx = f.context
+    ctx.update(0, [[3.0, 5.0, 1.0], [6.5, 5.0, 1.2]], np.zeros(6))
+    for j, cat in enumerate(ctx.catenaries):
+        X = cat.points(301)  # equal arc length: pieces of 100 points between the 2 interior samples
+        worst = 0.0
+        for s in range(3):
+            a, b, arc = X[100 * s], X[100 * (s + 1)], X[100 * s : 100 * (s + 1) + 1]
+            u = (b - a) / np.linalg.norm(b - a)
+            off = (arc - a) - ((arc - a) @ u)[:, None] * u
+            worst = max(worst, np.linalg.norm(off, axis=1).max())
+        assert worst <= ctx.chord_deviation[j] + 1e-9  # a bound ...
+        assert worst >= 0.9 * ctx.chord_deviation[j]  # ... and a tight one (the curvature is ≈ 1/a throughout)
+
+
+def test_segment_and_point_queries_give_each_obstacle_its_own_slot():
+    from tmr.control.drones import point_nearest_k, segment_nearest_k
+    from tmr.world.world3d import prism_obstacle
+
+    obstacles = [box_obstacle([4.8, 0.0, 0.0], [5.2, 4.0, 4.0]), box_obstacle([4.8, 4.0, 0.0], [5.2, 6.0, 1.2]),
+                 prism_obstacle([[6, 6], [7, 6], [6.5, 7]], [0.0, 2.0])]  # fmt: skip
+    bounds = [0, 0, 0, 10, 10, 4]
+    world = World3D(obstacles, bounds, 0.0)
+    rng = np.random.default_rng(3)
+    a = rng.uniform([3.5, 2.5, 0.5], [7.5, 7.5, 3.0], (300, 3))
+    b = a + rng.normal(scale=0.8, size=a.shape)
+    c, g, t, count = segment_nearest_k(world, a, b, 9)
+    assert np.all(count == 9) and np.all(np.diff(c, axis=1) >= 0)  # every obstacle and wall, nearest first
+    for ob in obstacles:  # each obstacle's own clearance is one of the slots (far walls: the obstacle alone)
+        alone = World3D([ob], [-50, -50, -50, 50, 50, 50], 0.0).segment_clearance(a, b)
+        free = alone > 1e-6
+        assert np.all(np.min(np.abs(c[free] - alone[free, None]), axis=1) < 1e-7)
+    X = a[:, None, :] + t[..., None] * (b - a)[:, None, :]  # each slot's point is that obstacle's nearest one:
+    free = c > 1e-6
+    assert np.all(world.clearance(X)[free] <= c[free] + 1e-7)  # the world is at most that far from it
+    np.testing.assert_allclose(world.clearance(X[:, 0])[free[:, 0]], c[free[:, 0], 0], atol=1e-7)
+    np.testing.assert_allclose(np.linalg.norm(g[free], axis=-1), 1.0, atol=1e-9)
+    # at the window's corner (jamb x sill) both boxes have a row of their own
+    cc, _, _, _ = segment_nearest_k(world, np.array([[5.0, 4.3, 1.5]]), np.array([[5.0, 4.3, 1.6]]), 3, cap=1.0)
+    assert cc[0, 0] == pytest.approx(0.3) and cc[0, 1] == pytest.approx(0.3)  # sill 0.3 below, jamb 0.3 aside
+    # points: the obstacles only, each with its exact clearance and gradient
+    r = 0.3
+    P = rng.uniform([3.5, 2.5, 0.5], [7.5, 7.5, 3.0], (300, 3))
+    cp, gp, n = point_nearest_k(world.with_safety_radius(r), P, 3)
+    assert np.all(n == 3)
+    for ob in obstacles:
+        alone, ga = World3D([ob], [-50, -50, -50, 50, 50, 50], r).clearance_and_gradient(P)
+        slot = np.argmin(np.abs(cp - alone[:, None]), axis=1)
+        np.testing.assert_allclose(cp[np.arange(len(P)), slot], alone, atol=1e-7)
+        ok = alone > -r + 1e-6
+        np.testing.assert_allclose(gp[np.arange(len(P)), slot][ok], ga[ok], atol=1e-6)
+
+
+def test_window_corner_tether_clearance_is_a_hard_limit():
+    """Scenario F with the winch beside the window's jamb: tether 2 passes the corner where the jamb meets the sill,
+    the nearest obstacle alternating between them; with one row per obstacle the checker finds the curve clear (it
+    found tether 2 at 0.198 m from the jamb, less than c_t, with one row for the nearest obstacle per piece)."""
+    from tmr.planner3d import plan_drones
+    from tmr.world.drones import load_drone_scenario
+
+    scenario = dataclasses.replace(load_drone_scenario("F"), base=np.array([4.55, 1.0, 0.3]))
+    plan, metrics = plan_drones(scenario)
+    assert plan.success, plan.failure
+    assert metrics.min_tether_clearance >= TP.clearance
+
+
+def test_sliding_across_a_taut_tether_does_not_creep_past_the_length():
+    """The leader's reference passes the anchor farther than the tether reaches: the drone slides across its taut
+    tether, which lengthens it to second order (|Δ|²/(2c) per step) where the linear row sees no change; the row's
+    second-order term keeps the arc within L_max − margin (it crept 1 cm past it)."""
+    tether = dataclasses.replace(TP, tether_length=4.0)
+    world = World3D([], [0, 0, 0, 20, 20, 6], tether.drone_radius)
+    ref = line_references([10.0, 10.0, 0.5], [7.0, 6.5, 2.0], [16.0, 6.5, 2.0], 1, Ts=PRM.Ts, speed=2.0)
+    ref.start_positions[:] = [[8.5, 8.0, 1.5]]
+    plan = _plan(world, ref, 1, tether=tether)
+    assert plan.success, plan.failure
+    L = np.array([solve3d(*plan.points(k), tether).length for k in range(len(plan.t))])
+    bound = tether.tether_length - PRM.length_margin
+    assert L.max() <= bound + 1e-3
+    assert L.max() > bound - 0.01  # it binds

@@ -89,7 +89,7 @@ def _segment_frames(a: Array, b: Array) -> tuple[Array, Array, Array]:
     (M,) — the placement of coal's capsule (axis z) — all at once in numpy."""
     v = b - a
     length = np.sqrt(np.einsum("ij,ij->i", v, v))
-    u = v / np.maximum(length, 1e-300)[:, None]
+    u = np.where((length > 0.0)[:, None], v / np.maximum(length, 1e-300)[:, None], [0.0, 0.0, 1.0])  # a point: any axis
     helper = np.where((np.abs(u[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
     e1 = np.cross(helper, u)
     e1 /= np.maximum(np.linalg.norm(e1, axis=1), 1e-300)[:, None]
@@ -128,33 +128,49 @@ def segment_box_distance(a: Array, b: Array, lo: Array, hi: Array) -> tuple[Arra
     return dist[rows, best], ts[rows, best]
 
 
-def segment_nearest(world: World3D, a: Array, b: Array, cap: float = np.inf) -> tuple[Array, Array, Array]:
-    """Clearance [m] of the segments a–b (M, 3) in ``world`` (its walls included), the unit gradient (M, 3) of the
-    clearance at the segment's nearest point (from the obstacle's nearest point towards it; away from the nearest wall)
-    and that point's parameter t ∈ [0, 1] along a → b (M,). Boxes in closed form (:func:`segment_box_distance`), other
-    obstacles (and a piece touching a box) by a capsule query of radius 0 (coal, as :meth:`World3D.segment_clearance`,
-    with the capsules' placements computed at once); the walls' term is affine
-    along a segment, so its minimum is at an end. Obstacles whose bounding box is farther than ``cap`` [m] from a
-    segment are not queried: a clearance above ``cap`` is reported as some value above it (exact below it)."""
+#: the inward normals of the room's six faces (x = xmin, y = ymin, z = zmin, x = xmax, y = ymax, z = zmax)
+_WALL_NORMALS = np.vstack([np.eye(3), -np.eye(3)])
+
+
+def segment_nearest_k(
+    world: World3D, a: Array, b: Array, k: int, cap: float = np.inf, walls: bool = True, within: float | None = None
+) -> tuple[Array, Array, Array, NDArray[np.int64]]:
+    """The ``k`` nearest obstacles of each segment a–b (M, 3), one by one: per segment and slot (M, k), sorted by
+    clearance, the clearance [m] of the segment from that obstacle (the room's six walls each count as one when
+    ``walls``), the unit gradient (M, k, 3) of that clearance at the segment's point nearest it (from the obstacle's
+    nearest point towards it; away from the wall) and that point's parameter t ∈ [0, 1] along a → b. Boxes in closed
+    form (:func:`segment_box_distance`), other obstacles (and a segment touching a box) by a capsule query of radius 0
+    (coal, as :meth:`World3D.segment_clearance`, with the capsules' placements computed at once); a wall's term is
+    affine along a segment, so its minimum is at an end. A point is the segment a = b. Obstacles whose bounding box
+    is farther than ``cap`` [m] (beyond the world's safety radius) from a segment are not queried; a slot with no
+    obstacle left has clearance +inf, gradient 0 and t = 0. Also returns, as the fourth value, how many obstacles
+    each segment has within a clearance ``within`` [m] (default ``cap``) (M,): more than ``k`` means the farthest of
+    them got no slot."""
     import coal
 
     from tmr.world.world3d import _IDENTITY, _REQUEST, _PlacedBox, _placement, _winding_number
 
-    ca, ga = world._wall(a)
-    cb, gb = world._wall(b)
-    at_b = cb < ca
-    out = np.where(at_b, cb, ca)
-    grad = np.where(at_b[:, None], gb, ga)
-    t = at_b.astype(float)
+    M = a.shape[0]
+    items_c: list[Array] = []
+    items_g: list[Array] = []
+    items_t: list[Array] = []
+    if walls:  # the six faces of the room, each an obstacle of its own (x = xmin, y = ymin, z = zmin, then the max)
+        bounds = np.asarray(world.bounds, dtype=float)
+        ga = np.concatenate([a - bounds[:3], bounds[3:] - a], axis=1)  # (M, 6)
+        gb = np.concatenate([b - bounds[:3], bounds[3:] - b], axis=1)
+        items_c.append(np.minimum(ga, gb))
+        items_t.append((gb < ga).astype(float))
+        items_g.append(np.broadcast_to(_WALL_NORMALS, (M, 6, 3)))
     lo_seg, hi_seg = np.minimum(a, b), np.maximum(a, b)
     frames: tuple[Array, Array, Array] | None = None
     capsule = coal.Capsule(0.0, 1.0)
     res = coal.DistanceResult()
     for ob in world.obstacles:
         gap = np.linalg.norm(np.maximum(0.0, np.maximum(ob.lo - hi_seg, lo_seg - ob.hi)), axis=1)
-        cand = np.flatnonzero(gap < np.minimum(out, cap + world.safety_radius))
+        cand = np.flatnonzero(gap < cap + world.safety_radius)
         if len(cand) == 0:
             continue
+        out, grad, t = np.full(M, np.inf), np.zeros((M, 3)), np.zeros(M)
         inside = np.zeros(len(cand), dtype=bool)
         if not ob.signed:
             assert ob.triangles is not None
@@ -163,34 +179,108 @@ def segment_nearest(world: World3D, a: Array, b: Array, cap: float = np.inf) -> 
         geom = ob.geometry
         if isinstance(geom, _PlacedBox):  # boxes in numpy (exact); coal only for a piece touching or inside one
             dist, tb = segment_box_distance(a[cand], b[cand], ob.lo, ob.hi)
-            closer = (dist > 1e-9) & (dist < out[cand])
+            closer = dist > 1e-9
             i = cand[closer]
             X = a[i] + tb[closer, None] * (b[i] - a[i])
             grad[i] = (X - np.clip(X, ob.lo, ob.hi)) / dist[closer, None]
             out[i], t[i] = dist[closer], tb[closer]
-            cand = cand[dist <= 1e-9]
+            inside = inside[~closer]
+            cand = cand[~closer]
             shape2, place2 = geom.box, _placement(geom.centre)
         else:
             shape2, place2 = geom, _IDENTITY
         if len(cand) and frames is None:
             frames = _segment_frames(a, b)
         R, mid, half = frames if frames is not None else (None, None, None)
-        for k, i in enumerate(cand):
+        for kk, i in enumerate(cand):
             assert R is not None and mid is not None and half is not None
             capsule.halfLength = max(float(half[i]), 1e-12)
             res.clear()
             d = float(coal.distance(capsule, coal.Transform3s(R[i], mid[i]), shape2, place2, _REQUEST, res))
-            if inside[k]:
+            if inside[kk]:
                 d = -abs(d) if d > 0 else d
-            if d < out[i]:
-                out[i] = d
-                p1, p2 = np.asarray(res.getNearestPoint1()), np.asarray(res.getNearestPoint2())
-                v = p1 - p2
-                nv = float(np.sqrt(v @ v))
-                if nv > 1e-12:
-                    grad[i] = math.copysign(1.0, d) * v / nv
+            out[i] = d
+            p1, p2 = np.asarray(res.getNearestPoint1()), np.asarray(res.getNearestPoint2())
+            v = p1 - p2
+            nv = float(np.sqrt(v @ v))
+            if nv > 1e-12:
+                grad[i] = math.copysign(1.0, d) * v / nv
+            else:  # touching: away from the centre of the obstacle's bounding box
+                off = 0.5 * (a[i] + b[i]) - 0.5 * (ob.lo + ob.hi)
+                grad[i] = off / max(float(np.linalg.norm(off)), 1e-12)
+            if half[i] > 1e-12:
                 t[i] = min(1.0, max(0.0, 0.5 + float((p1 - mid[i]) @ R[i][:, 2]) / (2.0 * half[i])))
-    return out - world.safety_radius, grad, t
+        items_c.append(out[:, None])
+        items_g.append(grad[:, None, :])
+        items_t.append(t[:, None])
+    k = int(k)
+    short = k - sum(c.shape[1] for c in items_c)
+    if short > 0:  # fewer obstacles than slots: empty slots
+        items_c.append(np.full((M, short), np.inf))
+        items_g.append(np.zeros((M, short, 3)))
+        items_t.append(np.zeros((M, short)))
+    C = np.concatenate(items_c, axis=1)
+    G = np.concatenate(items_g, axis=1)
+    T = np.concatenate(items_t, axis=1)
+    count = np.count_nonzero(C <= (cap if within is None else within) + world.safety_radius, axis=1)
+    order = np.argsort(C, axis=1, kind="stable")[:, :k] if C.shape[1] > 1 else np.zeros((M, 1), dtype=np.intp)
+    rows = np.arange(M)[:, None]
+    return C[rows, order] - world.safety_radius, G[rows, order], T[rows, order], count
+
+
+def point_nearest_k(world: World3D, points: Array, k: int, cap: float = np.inf) -> tuple[Array, Array, Array]:
+    """:func:`segment_nearest_k` for points (M, 3) and the obstacles only (no walls), cheaper: per point and slot
+    (M, k), sorted, the clearance [m] from that obstacle (World3D's radius subtracted; negative inside), its unit
+    gradient (M, k, 3) and how many obstacles are within ``cap`` [m] (M,). Boxes in closed form (inside: the depth to
+    the nearest face), other obstacles by coal's point query (as :meth:`World3D.clearance`)."""
+    from tmr.world.world3d import _POINT, _PlacedBox, _placement, _query, _winding_number
+
+    M = points.shape[0]
+    k = int(k)
+    C = np.full((M, max(k, len(world.obstacles))), np.inf)
+    G = np.zeros((M, C.shape[1], 3))
+    r = world.safety_radius
+    for o, ob in enumerate(world.obstacles):
+        gap = np.linalg.norm(np.maximum(0.0, np.maximum(ob.lo - points, points - ob.hi)), axis=1)
+        cand = np.flatnonzero(gap < cap + r)
+        if len(cand) == 0:
+            continue
+        p = points[cand]
+        if isinstance(ob.geometry, _PlacedBox):
+            off = p - np.clip(p, ob.lo, ob.hi)
+            d = np.sqrt(np.einsum("ij,ij->i", off, off))
+            g = off / np.maximum(d, 1e-300)[:, None]
+            inside = d <= 0.0
+            if inside.any():  # the depth to the nearest face, the gradient along its outward normal
+                faces = np.concatenate([p[inside] - ob.lo, ob.hi - p[inside]], axis=1)
+                f = np.argmin(faces, axis=1)
+                d[inside] = -faces[np.arange(len(f)), f]
+                g[inside] = -_WALL_NORMALS[f]
+        else:
+            d, g = np.empty(len(cand)), np.zeros((len(cand), 3))
+            sign = np.ones(len(cand))
+            if not ob.signed:
+                assert ob.triangles is not None
+                sign = np.where(np.abs(_winding_number(p, ob.triangles)) > 0.5, -1.0, 1.0)
+            for i in range(len(cand)):
+                di, _, q = _query(_POINT, _placement(p[i]), ob)
+                d[i] = di if ob.signed else sign[i] * abs(di)
+                v = p[i] - q
+                nv = float(np.linalg.norm(v))
+                g[i] = math.copysign(1.0, d[i]) * v / nv if nv > 1e-12 else 0.0
+        C[cand, o], G[cand, o] = d, g
+    count = np.count_nonzero(C <= cap + r, axis=1)
+    order = np.argsort(C, axis=1, kind="stable")[:, :k]
+    rows = np.arange(M)[:, None]
+    return C[rows, order] - r, G[rows, order], count
+
+
+def segment_nearest(world: World3D, a: Array, b: Array, cap: float = np.inf) -> tuple[Array, Array, Array]:
+    """Clearance [m] of the segments a–b (M, 3) in ``world`` (its walls included), the unit gradient (M, 3) of the
+    clearance at the segment's nearest point and that point's parameter t ∈ [0, 1] along a → b (M,): the nearest
+    slot of :func:`segment_nearest_k`. Obstacles farther than ``cap`` [m] are not queried (the walls always are)."""
+    c, g, t, _ = segment_nearest_k(world, a, b, 1, cap)
+    return c[:, 0], g[:, 0], t[:, 0]
 
 
 class DroneStepContext:
@@ -203,8 +293,14 @@ class DroneStepContext:
     drone_clearance (N,) [m] and drone_gradient (N, 3) (the world grown by the drone radius), sample_points
     (N, m, 3); each tether as the polyline through its ends and samples, per piece (N, m+1): segment_clearance [m],
     segment_gradient (N, m+1, 3), segment_t (the nearest point's parameter on the piece), in the world with radius 0
-    (the bare obstacles and walls); x_d, xd_d the leader's reference; ref_positions, ref_velocities (N, 3).
-    q: the 3N joints (``pinv`` only, else None).
+    (the bare obstacles and walls); the same per piece and per obstacle for the ``nearest`` nearest obstacles
+    (:func:`segment_nearest_k`, each wall one obstacle): piece_clearance (N, m+1, k) [m] (+inf: no obstacle within
+    the cap), piece_gradient (N, m+1, k, 3), piece_t (N, m+1, k); chord_deviation (N,) [m] the bound on how far each
+    tether's arc departs from its chord over one piece, min(δ²/(8a), δ/2) with δ = L/(m+1) (0 for a vertical tether);
+    and per drone and obstacle (no walls: :class:`RoomBounds` has them) drone_obstacle_clearance (N, k_d) [m] and
+    drone_obstacle_gradient (N, k_d, 3); uncovered: how many (piece or drone, obstacle) pairs within the cap got no
+    slot this step (0 when ``nearest`` covers them all). x_d, xd_d the leader's reference; ref_positions,
+    ref_velocities (N, 3). q: the 3N joints (``pinv`` only, else None).
 
     Args:
         chain: ``Chain(n, base, spatial=True)``.
@@ -214,6 +310,8 @@ class DroneStepContext:
         Ts: sampling period [s]; samples: interior tether samples m per tether.
         cap: tether pieces farther than this [m] from an obstacle's bounding box skip the exact query (their rows
             are inactive: use the limits' activation distance).
+        nearest: obstacles (walls included) per tether piece with a row of their own; drone_nearest: obstacles per
+            drone (walls excluded), within ``drone_cap`` [m].
     """
 
     def __init__(
@@ -225,6 +323,9 @@ class DroneStepContext:
         Ts: float,
         samples: int,
         cap: float = np.inf,
+        nearest: int = 1,
+        drone_nearest: int = 1,
+        drone_cap: float = np.inf,
     ) -> None:
         if not chain.spatial:
             raise ParameterError("a drone chain is a spatial chain: Chain(n, base, spatial=True)")
@@ -237,6 +338,7 @@ class DroneStepContext:
         self.fractions = np.arange(1, int(samples) + 1) / (int(samples) + 1)
         #: tether pieces farther than this from every obstacle are not queried exactly [m] (their rows are inactive)
         self.cap = float(cap)
+        self.nearest, self.drone_nearest, self.drone_cap = int(nearest), int(drone_nearest), float(drone_cap)
         self.k = 0
         self.q: Array | None = None
         self.catenaries: list[Catenary3D] = []
@@ -262,12 +364,25 @@ class DroneStepContext:
         m = self.fractions.size
         c0, g0 = self.world.clearance_and_gradient(P[1:])
         self.drone_clearance, self.drone_gradient = c0, g0
-        # each tether as the polyline p, X_1..X_m, q: its m+1 pieces, each with its point nearest an obstacle or wall
+        kd = self.drone_nearest
+        cd, gd, nd = point_nearest_k(self.world, P[1:], kd, self.drone_cap)
+        self.drone_obstacle_clearance, self.drone_obstacle_gradient = cd, gd
+        # each tether as the polyline p, X_1..X_m, q: its m+1 pieces, each with its points nearest its k nearest
+        # obstacles (walls included), one per obstacle
+        kt = self.nearest
         poly = np.concatenate([P[:-1, None, :], samples, P[1:, None, :]], axis=1)  # (N, m+2, 3)
-        c, g, t = segment_nearest(self.bare, poly[:, :-1].reshape(-1, 3), poly[:, 1:].reshape(-1, 3), self.cap)
-        self.segment_clearance = c.reshape(N, m + 1)
-        self.segment_gradient = g.reshape(N, m + 1, 3)
-        self.segment_t = t.reshape(N, m + 1)
+        ends = poly[:, :-1].reshape(-1, 3), poly[:, 1:].reshape(-1, 3)
+        c, g, t, nt = segment_nearest_k(self.bare, *ends, kt, self.cap + 0.5, within=self.cap)
+        self.piece_clearance = c.reshape(N, m + 1, kt)
+        self.piece_gradient = g.reshape(N, m + 1, kt, 3)
+        self.piece_t = t.reshape(N, m + 1, kt)
+        self.segment_clearance = self.piece_clearance[..., 0]
+        self.segment_gradient = self.piece_gradient[..., 0, :]
+        self.segment_t = self.piece_t[..., 0]
+        self.uncovered = int(np.maximum(nt - kt, 0).sum() + np.maximum(nd - kd, 0).sum())
+        delta = np.array([cat.length for cat in self.catenaries]) / (m + 1)
+        a = np.array([np.inf if cat.a is None else cat.a for cat in self.catenaries])
+        self.chord_deviation = np.minimum(delta**2 / (8.0 * a), 0.5 * delta)
         self.sample_points = samples
         ref = self.references
         kk = min(self.k, len(ref.t) - 1)
@@ -379,27 +494,33 @@ class _DroneLimit(Limit):
 
 
 class DroneClearance(_DroneLimit):
-    """Every drone at least ``d_safe`` beyond its radius r from every obstacle and the room's walls, floor and ceiling
-    (World3D's clearance, exact, with its gradient): ``Ts ∇dᵀ ṗ_i ≥ −min(rate Ts, 1)(d − d_safe)`` (N rows; a drone
-    farther than ``activation`` has an inactive row). As :class:`tmr.control.limits.ObstacleClearance` on the ground:
-    the distance to a convex obstacle is convex, so its linearisation is conservative."""
+    """Every drone at least ``d_safe`` beyond its radius r from every obstacle (the room's walls, floor and ceiling
+    are :class:`RoomBounds`' rows): one row per drone and obstacle for its ``nearest`` nearest obstacles, each with
+    the exact clearance d to that obstacle and its gradient, ``Ts ∇dᵀ ṗ_i ≥ −min(rate Ts, 1)(d − d_safe)`` (N·k
+    rows; an obstacle farther than ``activation`` gives an inactive row). One row per obstacle, not one for the
+    nearest: where two obstacles meet (a window's jamb and sill) the nearest one alternates between steps, and the
+    obstacle without a row could be approached without limit for that step. As
+    :class:`tmr.control.limits.ObstacleClearance` on the ground: the distance to a convex obstacle is convex, so its
+    linearisation is conservative."""
 
     name = "drone_clearance"
 
-    def __init__(self, n_robots: int, d_safe: float, approach_rate: float, activation: float) -> None:
+    def __init__(self, n_robots: int, d_safe: float, approach_rate: float, activation: float, nearest: int = 1) -> None:
         self.N, self.d_safe, self.rate, self.activation = n_robots, float(d_safe), float(approach_rate), activation
+        self.nearest = int(nearest)
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
-        return _robot_pattern(self.N, [[i] for i in range(self.N)])
+        return _robot_pattern(self.N, [[i] for i in range(self.N) for _ in range(self.nearest)])
 
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
-        N = self.N
-        A = np.zeros((N, N, 3))
-        A[np.arange(N), np.arange(N)] = ctx.Ts * ctx.drone_gradient
-        d = ctx.drone_clearance
+        N, k = self.N, self.nearest
+        A = np.zeros((N, k, N, 3))
+        i = np.arange(N)
+        A[i, :, i, :] = ctx.Ts * ctx.drone_obstacle_gradient
+        d = ctx.drone_obstacle_clearance.reshape(-1)
         lower = approach_bound(d, self.d_safe, self.rate, ctx.Ts)
-        lower[d > self.activation] = -np.inf
-        return LimitRows(A.reshape(N, 3 * N), lower, _infinite(N))
+        lower[~(d <= self.activation)] = -np.inf
+        return LimitRows(A.reshape(N * k, 3 * N), lower, _infinite(N * k))
 
 
 class RoomBounds(_DroneLimit):
@@ -455,54 +576,69 @@ class TetherClearance(_TetherRows):
     """The whole tether curve at least c_t (+ ``margin``) from every obstacle, the floor and the walls.
 
     Each catenary is sampled at the m interior arc fractions i/(m+1) and seen as the polyline through its ends and the
-    samples; each of its m+1 pieces gives a row at its point nearest an obstacle (or wall), X = (1−t) X_i + t X_{i+1}
-    with clearance c and unit gradient n (World3D with radius 0, coal capsule queries):
-    ``Ts nᵀ (∂X/∂p ṗ + ∂X/∂q q̇) ≥ −min(rate Ts, 1)(c − c_t − margin)`` (N·(m+1) rows; the anchor end of tether 1 is
-    fixed). ∂X_i/∂(p, q) come from implicit differentiation of the catenary
+    samples; each of its m+1 pieces gives one row per obstacle for its ``nearest`` nearest obstacles (each wall of the
+    room is one), at the piece's point nearest that obstacle, X = (1−t) X_i + t X_{i+1} with clearance c and unit
+    gradient n (World3D with radius 0, coal capsule queries):
+    ``Ts nᵀ (∂X/∂p ṗ + ∂X/∂q q̇) ≥ −min(rate Ts, 1)(c − c_t − margin − e_j)`` (N·(m+1)·k rows; the anchor end of
+    tether 1 is fixed). ∂X_i/∂(p, q) come from implicit differentiation of the catenary
     (:func:`~tmr.model.catenary3d.sensitivities`): the sag's motion is in the row, not only the chord's. A piece of
-    arc length δ departs from its chord by at most δ²/(8a) (a the catenary parameter: 0.8 cm for δ = 0.9 m, a = 13 m),
-    which ``margin`` covers; rows on pieces (not points) leave no gap between samples where an obstacle edge slips in.
+    arc length δ = L_j/(m+1) departs from its chord by at most e_j = min(δ²/(8a_j), δ/2) (the catenary's curvature is
+    at most 1/a, and an arc of curvature ≤ κ stays within (1 − cos(κδ/2))/κ ≤ κδ²/8 of its chord): adding it per
+    tether keeps the curve, not only the polyline, c_t + margin away. One row per (piece, obstacle) and not one for
+    the piece's nearest obstacle: where two obstacles meet (a window's jamb and sill) the nearest one alternates
+    between steps and the other, without a row, could be approached without limit for that step. With ``nearest``
+    slots a piece near more than ``nearest`` obstacles (walls counted) leaves the farthest without a row
+    (``DroneStepContext.uncovered`` counts them; :func:`make_drone_qp` sizes the slots so that it stays 0 on the
+    worlds it was measured on).
     """
 
     name = "tether_clearance"
 
-    def __init__(self, n_robots: int, samples: int, c_t: float, margin: float, rate: float, activation: float) -> None:
-        self.N, self.m = n_robots, int(samples)
+    def __init__(
+        self, n_robots: int, samples: int, c_t: float, margin: float, rate: float, activation: float, nearest: int = 1
+    ) -> None:
+        self.N, self.m, self.nearest = n_robots, int(samples), int(nearest)
         self.c_min, self.rate, self.activation = float(c_t) + float(margin), float(rate), float(activation)
         f = np.arange(1, self.m + 1) / (self.m + 1)
         self._ends = (np.r_[1.0, np.zeros(self.m), 0.0], np.r_[0.0, np.zeros(self.m), 1.0])  # p, q weights
         self.fractions = f
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
-        return self._mask(self.N, self.m + 1)
+        return self._mask(self.N, (self.m + 1) * self.nearest)
 
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
-        N, m = self.N, self.m
+        N, m, k = self.N, self.m, self.nearest
         eye = np.eye(3)
         Jp = np.empty((N, m + 2, 3, 3))
         Jq = np.empty((N, m + 2, 3, 3))
         Jp[:, 1:-1], Jq[:, 1:-1] = ctx.sens.dpoints_dp, ctx.sens.dpoints_dq
         Jp[:, 0], Jq[:, 0], Jp[:, -1], Jq[:, -1] = eye, 0.0, 0.0, eye
-        t = ctx.segment_t[..., None, None]  # (N, m+1, 1, 1)
-        Jp_x = (1.0 - t) * Jp[:, :-1] + t * Jp[:, 1:]
-        Jq_x = (1.0 - t) * Jq[:, :-1] + t * Jq[:, 1:]
-        g = ctx.segment_gradient
-        dp = np.einsum("jik,jikl->jil", g, Jp_x)
-        dq = np.einsum("jik,jikl->jil", g, Jq_x)
-        A = ctx.Ts * self._scatter(N, m + 1, dp, dq)
-        c = ctx.segment_clearance.reshape(-1)
-        lower = approach_bound(c, self.c_min, self.rate, ctx.Ts)
-        lower[c > self.activation] = -np.inf
-        return LimitRows(A, lower, _infinite(c.size))
+        # n ᵀ ∂X/∂p with X = (1 − t) X_i + t X_{i+1}: (N, m+1, k, 3), one per piece and obstacle
+        t = ctx.piece_t[..., None]
+        g1 = t * ctx.piece_gradient  # (N, m+1, k, 3)
+        g0 = ctx.piece_gradient - g1
+        dp = (g0 @ Jp[:, :-1] + g1 @ Jp[:, 1:]).reshape(N, (m + 1) * k, 3)
+        dq = (g0 @ Jq[:, :-1] + g1 @ Jq[:, 1:]).reshape(N, (m + 1) * k, 3)
+        A = ctx.Ts * self._scatter(N, (m + 1) * k, dp, dq)
+        c = ctx.piece_clearance.reshape(N, -1)
+        need = self.c_min + ctx.chord_deviation[:, None]  # (N, 1): c_t + margin + the arc's departure from its chord
+        lower = -np.minimum(self.rate * ctx.Ts, 1.0) * np.maximum(c - need, 0.0)
+        lower[~(c <= self.activation + ctx.chord_deviation[:, None])] = -np.inf
+        return LimitRows(A, lower.reshape(-1), _infinite(c.size))
 
 
 class TetherLength(_TetherRows):
-    """Arc length L_j ≤ L_max − margin: ``Ts (∇_p L ṗ + ∇_q L q̇) ≤ min(rate Ts, 1)(L_max − margin − L)`` (N rows)."""
+    """Arc length L_j ≤ L_max − margin: ``Ts (∇_p L ṗ + ∇_q L q̇) ≤ min(rate Ts, 1)(L_max − margin − L) − e_j``
+    (N rows), with e_j the second-order growth the linear row misses: moving one end across the chord c_j by Δ (the
+    relative displacement of the ends in one step) lengthens the chord by |Δ|²/(2 c_j), the arc by
+    |∇_q L| |Δ|²/(2 c_j); with the previous step's relative velocity w and the acceleration bound a_max per axis,
+    |Δ| ≤ Ts (|w| + 2√3 a_max Ts). Without it a chain held at full stretch, its drones sliding across their tethers,
+    crept past the limit by ~0.5 mm per step (window-0-1 of ``tmr.sweep.rooms3d``: 7.025 m > L_max 7.02 m)."""
 
     name = "tether_length"
 
-    def __init__(self, n_robots: int, L_max: float, rate: float) -> None:
-        self.N, self.L_max, self.rate = n_robots, float(L_max), float(rate)
+    def __init__(self, n_robots: int, L_max: float, rate: float, a_max: float = 0.0) -> None:
+        self.N, self.L_max, self.rate, self.a_max = n_robots, float(L_max), float(rate), float(a_max)
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
         return self._mask(self.N, 1)
@@ -510,7 +646,12 @@ class TetherLength(_TetherRows):
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
         S = ctx.sens
         dp, dq, L = S.dlength_dp[:, None, :], S.dlength_dq[:, None, :], S.length
-        upper = -approach_bound(self.L_max - L, 0.0, self.rate, ctx.Ts)
+        V = np.vstack([np.zeros((1, 3)), ctx.v_prev.reshape(-1, 3)])  # the anchor does not move
+        w = np.linalg.norm(np.diff(V, axis=0), axis=1)
+        step = ctx.Ts * (w + 2.0 * math.sqrt(3.0) * self.a_max * ctx.Ts)
+        chord = np.maximum(ctx.velocity_map.d, 1e-9)
+        growth = np.linalg.norm(S.dlength_dq, axis=1) * step**2 / (2.0 * chord)
+        upper = -approach_bound(self.L_max - L, 0.0, self.rate, ctx.Ts) - growth
         return LimitRows(ctx.Ts * self._scatter(self.N, 1, dp, dq), np.full(self.N, -np.inf), upper)
 
 
@@ -595,6 +736,7 @@ class DroneQP:
 
     def step(self, ctx: DroneStepContext) -> tuple[Array, dict[str, float]]:
         qdot, diag = self.qp.step(ctx)  # type: ignore[arg-type]
+        diag["uncovered_obstacles"] = float(ctx.uncovered)
         return ctx.velocity_map.robot_velocities(qdot), diag
 
     @property
@@ -609,6 +751,8 @@ def make_drone_qp(
     n: int,
     references: DroneReferencesLike,
     base: Any | None = None,
+    nearest: int | None = None,
+    drone_nearest: int | None = None,
 ) -> DroneQP:
     """The drone chain's lexicographic QP (``formulations/drones.md``, "Per-step QP (3-D)").
 
@@ -619,11 +763,26 @@ def make_drone_qp(
         n: number of drones N.
         references: the route references (leader and every drone).
         base: the anchor (ground winch) (3,) [m]; default: ``references.base``.
+        nearest: obstacles (each wall one) per tether piece with a row of their own (``TetherClearance``); default
+            min(6, obstacles + 6).
+        drone_nearest: obstacles per drone with a row of their own (``DroneClearance``; walls are ``RoomBounds``);
+            default min(5, obstacles).
+
+    The default slots cover every obstacle within the activation distance on the measured worlds (window worlds of
+    ``tmr.sweep.rooms3d`` and F, G, H: at most 6 per tether piece, walls included, and 5 per drone);
+    ``diagnostics["uncovered_obstacles"]`` counts, per step, the (piece or drone, obstacle) pairs within it left
+    without a row.
     """
     chain = Chain(int(n), _anchor(references, base), spatial=True)
+    n_obstacles = len(world.obstacles)
+    nearest = min(6, n_obstacles + 6) if nearest is None else int(nearest)
+    drone_nearest = min(5, max(n_obstacles, 1)) if drone_nearest is None else int(drone_nearest)
     p = params
     act = p.clearance_activation
-    ctx = DroneStepContext(chain, world, tether, references, p.Ts, p.tether_samples, cap=act + tether.clearance)
+    ctx = DroneStepContext(
+        chain, world, tether, references, p.Ts, p.tether_samples, cap=act + tether.clearance,
+        nearest=nearest, drone_nearest=drone_nearest, drone_cap=act,
+    )  # fmt: skip
     N = chain.n_robots
     tether_level: list[tuple[Task, float]] = [(TetherChords(N, p.route_gain, p.span_target_fraction), 1.0)]
     if N > 1:
@@ -635,10 +794,12 @@ def make_drone_qp(
     ]
     r = world.safety_radius
     limits: list[Limit] = [
-        DroneClearance(N, p.d_safe, p.approach_rate, act),
+        DroneClearance(N, p.d_safe, p.approach_rate, act, drone_nearest),
         RoomBounds(N, world.bounds, r + p.d_safe, p.approach_rate),
-        TetherClearance(N, p.tether_samples, tether.clearance, p.d_safe, p.approach_rate, act + tether.clearance),
-        TetherLength(N, tether.tether_length - p.length_margin, p.approach_rate),
+        TetherClearance(
+            N, p.tether_samples, tether.clearance, p.d_safe, p.approach_rate, act + tether.clearance, nearest
+        ),
+        TetherLength(N, tether.tether_length - p.length_margin, p.approach_rate, p.drone_accel_max),
         TetherTension(N, tether.spare_thrust - p.tension_margin, p.approach_rate),
         DroneSpeed(N, p.drone_speed_max),
         DroneAcceleration(N, p.drone_accel_max),
