@@ -180,9 +180,9 @@ def _resolve(name_or_path: str | Path) -> Path:
                 "the path of a scenario .toml file"
             )
     path = Path(name_or_path)
-    if not path.is_file():
+    if not path.exists():
         raise ScenarioError(f"{path}: scenario file not found (built-in scenarios are {', '.join(_all_builtins())})")
-    return path
+    return path  # a directory or an unreadable file: tmr.files.read_text says which, in one line
 
 
 def _read(path: Path) -> tuple[str, dict[str, Any]]:
