@@ -208,6 +208,8 @@ class Quote(NamedTuple):
 D_QP = "scenario D, qp, route shortest"
 RR = "random_rooms.md"
 
+DR = "drones.md"
+
 QUOTES = [
     # the GIF at the top and its description under "ROS 2 bags, animations and interactive views"
     Quote(r"Scenario A: (\d+) frames, ([\d.]+) MB", lambda: gif("A_qp_motion.gif")),
@@ -222,6 +224,34 @@ QUOTES = [
     Quote(
         r"settle on their stations \((\S+) s, shown in real time\)",
         lambda: cell("views.csv", "plan_s", scenario="A", output="gif"),
+    ),
+    # tethered drone chains in 3-D (benchmarks/results/drones.md, its targets table)
+    Quote(
+        r"`--robots auto` planned (\d+) of the (\d+) reachable goals",
+        lambda: md(DR, r"`auto` plans ≥ 95% of the reachable goals \(passing the check\) \| (\d+)/(\d+)"),
+    ),
+    Quote(
+        r"every drone count below the proven bound was refused \((\d+)/(\d+), before any motion is planned\)",
+        lambda: md(DR, r"every N below the proven bound refused, in < 1 s \(in-process\) \| (\d+)/(\d+)"),
+    ),
+    Quote(
+        r"the unreachable goals were refused in (\S+) s median",
+        lambda: md(
+            DR,
+            r"unreachable goals refused \(no route\), in < 1 s \(in-process\) \| \d+/\d+ \(\d+ %\); median ([\d.]+) s",
+        ),
+    ),
+    Quote(
+        r"the independent check refused (\d+) of the (\d+) plans made",
+        lambda: md(DR, r"0 violations by the independent check \| (\d+) in (\d+) plans"),
+    ),
+    Quote(
+        r"the per-step QP took (\S+) ms median for 8 drones",
+        lambda: md(DR, r"per-step QP time for 8 drones ≤ 2 ms median \| ([\d.]+) ms"),
+    ),
+    Quote(
+        r"H with 5 drones (\S+) s for the whole process",
+        lambda: md(DR, r"H arena, 5 drones, whole process < 2 s \| ([\d.]+) s"),
     ),
     # what it does, the command line
     Quote(r"clears the floor \((\S+) m with the paper's data", d_max),
