@@ -242,7 +242,7 @@ QUOTES = [
         ),
     ),
     Quote(
-        r"the independent check refused (\d+) of the (\d+) plans made",
+        r"the independent check found (\d+) violated limits in the (\d+) plans made",
         lambda: md(DR, r"0 violations by the independent check \| (\d+) in (\d+) plans"),
     ),
     Quote(
