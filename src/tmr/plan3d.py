@@ -128,17 +128,15 @@ def summary(plan: Any, metrics: Any) -> str:
 def main_drones(args: argparse.Namespace, owned: tuple[str, ...], volatile: tuple[str, ...]) -> int:
     """``tmr plan`` for a drone scenario (``args`` already parsed; ``--out`` already checked). Returns the exit code."""
     from tmr.planner3d import plan_drones
+    from tmr.route.route3d import StartError
 
     _refuse_ground_options(args)
     scenario = load_drone_inputs(args)
-    robots = args.robots if args.robots is not None else None
     start = time.perf_counter()
-    from tmr.route.route3d import StartError
-
     details: dict[str, Any] = {}
     try:
         plan, metrics = plan_drones(
-            scenario, robots, args.method, overrides=_overrides(args), progress=progress_enabled(), details=details
+            scenario, args.robots, args.method, overrides=_overrides(args), progress=progress_enabled(), details=details
         )
     except StartError as exc:  # a verdict of the start search along the route, not a proof: no plan found
         LOG.error("no plan found: %s", exc)
@@ -153,19 +151,17 @@ def main_drones(args: argparse.Namespace, owned: tuple[str, ...], volatile: tupl
     from tmr.io.drones import write_drone_outputs
     from tmr.io.outdir import Stage
 
-    with Stage(args.out, owned, volatile) as stage:
-        names = write_drone_outputs(stage.path, plan, metrics, scenario, extra=extra)
-        if not args.no_plots:
-            from tmr.views.drones import save_figures
+    with Stage(args.out, owned, volatile) as stage:  # staged, then published in one step (tmr.io.outdir)
+        write_drone_outputs(stage.path, plan, metrics, scenario, extra=extra)
+        if not args.no_plots or args.gif or args.html or args.export:  # matplotlib only then (0.4 s to import)
+            from tmr.views.drones import save_figures, write_drone_views
 
-            save_figures(plan, scenario.world, stage.path, route=route)
-            names += list(DRONE_FIGURES)
-        from tmr.views.drones import write_drone_views
-
-        names += write_drone_views(
-            plan, scenario.world, stage.path, gif=args.gif, html=args.html, export=args.export,
-            progress=progress_enabled(),
-        )  # fmt: skip
+            if not args.no_plots:
+                save_figures(plan, scenario.world, stage.path, route=route)  # the DRONE_FIGURES
+            write_drone_views(
+                plan, scenario.world, stage.path, gif=args.gif, html=args.html, export=args.export,
+                progress=progress_enabled(),
+            )  # fmt: skip
         published = stage.publish()
     LOG.debug("drone run written in %.2f s after planning", time.perf_counter() - start - plan.wall_time)
     if "robots_auto" in extra:
