@@ -310,13 +310,13 @@ def write_gif(
     max_frames: int = 200,
     progress: bool = False,
 ) -> Path:
-    """Write the animation of ``motion`` as a GIF at ``path`` (atomic: a temporary file, then renamed); return
-    the path. ``fps`` frames per second; ``dpi`` sets the size (6.4 in wide → 512 px at 80 dpi); ``progress``: a
+    """Write the animation of ``motion`` as a GIF at ``path`` (atomic: :func:`tmr.io.outputs.atomic_write_bytes`);
+    return the path. ``fps`` frames per second; ``dpi`` sets the size (6.4 in wide → 512 px at 80 dpi); ``progress``: a
     tqdm bar over the frames on stderr."""
-    import tempfile
+    import io
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    from tmr.io.outputs import atomic_write_bytes
+
     sc = _Scene(motion, dpi=dpi)
     from tqdm import tqdm
 
@@ -324,13 +324,6 @@ def write_gif(
     logging.getLogger("tmr").debug("GIF: drawing %d frames", len(idx))
     frames = tqdm(sc.frames(idx), total=len(idx), desc="gif frames", unit="frame", leave=False, disable=not progress)
     images = [im.convert("RGB") for im in frames]
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".gif")
-    os.close(fd)
-    try:  # as matplotlib's PillowWriter saves its frames, with the frames drawn by blitting
-        images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:], duration=int(1000 / fps), loop=0)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+    buf = io.BytesIO()  # saved as matplotlib's PillowWriter saves its frames, with the frames drawn by blitting
+    images[0].save(buf, format="GIF", save_all=True, append_images=images[1:], duration=int(1000 / fps), loop=0)
+    return atomic_write_bytes(path, buf.getvalue())

@@ -682,13 +682,13 @@ def write_gif_3d(
     progress: bool = False,
 ) -> Path:
     """Write the 3-D perspective animation of the plan (≤ ``max_frames`` frames at ``fps``, ``size`` px) as a GIF at
-    ``path`` (atomic: a temporary file, then renamed); the same plan gives the same bytes."""
-    import tempfile
+    ``path`` (atomic: :func:`tmr.io.outputs.atomic_write_bytes`); the same plan gives the same bytes."""
+    import io
 
     from tqdm import tqdm
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    from tmr.io.outputs import atomic_write_bytes
+
     n = len(frame_indices_3d(plan.t, fps, max_frames))
     frames = list(
         tqdm(
@@ -700,16 +700,9 @@ def write_gif_3d(
             disable=not progress,
         )
     )
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".gif")
-    os.close(fd)
-    try:
-        frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], duration=int(1000 / fps), loop=0)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+    buf = io.BytesIO()
+    frames[0].save(buf, format="GIF", save_all=True, append_images=frames[1:], duration=int(1000 / fps), loop=0)
+    return atomic_write_bytes(path, buf.getvalue())
 
 
 # ----------------------------------------------------------------------------------------------------------
