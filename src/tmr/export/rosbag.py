@@ -39,7 +39,7 @@ import math
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -84,10 +84,15 @@ def stamp_ns(t: float) -> int:
 
 def topics(motion: Motion) -> dict[str, str]:
     """Every topic :func:`write_bag` writes for ``motion`` → its message type."""
+    return _topics(tr.name for tr in motion.tracks)
+
+
+def _topics(bodies: Iterable[str]) -> dict[str, str]:
+    """The topics of a bag whose moving bodies are ``bodies`` (a pose and a path each) → their message types."""
     out: dict[str, str] = {}
-    for tr in motion.tracks:
-        out[f"/tmr/{tr.name}/pose"] = TOPIC_TYPES["pose"]
-        out[f"/tmr/{tr.name}/path"] = TOPIC_TYPES["path"]
+    for name in bodies:
+        out[f"/tmr/{name}/pose"] = TOPIC_TYPES["pose"]
+        out[f"/tmr/{name}/path"] = TOPIC_TYPES["path"]
     out["/tmr/team/trajectory"] = TOPIC_TYPES["trajectory"]
     out["/tmr/lines"] = TOPIC_TYPES["markers"]
     out["/tmr/bodies"] = TOPIC_TYPES["markers"]
@@ -347,16 +352,7 @@ DRONE_CURVE_POINTS = 24
 
 def drone_topics(n: int) -> dict[str, str]:
     """Every topic :func:`write_drone_bag` writes for ``n`` drones → its message type (the chain bag's topics)."""
-    out: dict[str, str] = {}
-    for i in range(1, n + 1):
-        out[f"/tmr/robot{i}/pose"] = TOPIC_TYPES["pose"]
-        out[f"/tmr/robot{i}/path"] = TOPIC_TYPES["path"]
-    out["/tmr/team/trajectory"] = TOPIC_TYPES["trajectory"]
-    out["/tmr/lines"] = TOPIC_TYPES["markers"]
-    out["/tmr/bodies"] = TOPIC_TYPES["markers"]
-    out["/tmr/scene"] = TOPIC_TYPES["markers"]
-    out["/tf"] = TOPIC_TYPES["tf"]
-    return out
+    return _topics(f"robot{i}" for i in range(1, n + 1))
 
 
 def _drone_scene(m: _Msgs, plan: Any, world: Any, ns0: int) -> list[Any]:
