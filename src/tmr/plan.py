@@ -531,7 +531,7 @@ def _main(args: argparse.Namespace) -> int:
             raise TmrError("--robots auto chooses the number of robots, so it cannot take --start; give --robots N")
         check_out(Path(args.out))
         if args.scenario and not args.map:
-            from tmr.world.drones import scenario_kind
+            from tmr.world.scenario import scenario_kind  # reads the file only: no 3-D import for ground
 
             if scenario_kind(args.scenario) == "drone":  # a tethered drone chain in 3-D (formulations/drones.md)
                 from tmr.plan3d import main_drones

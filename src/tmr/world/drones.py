@@ -38,13 +38,13 @@ from numpy.typing import NDArray
 from tmr.errors import MapError, ParameterError, ScenarioError, fmt_point
 from tmr.model.catenary3d import DroneTetherParams
 from tmr.model.params import DroneParams, convert_field
-from tmr.world.scenario import SCENARIO_DIR, file_kind
+from tmr.world.scenario import all_builtins, file_kind, read_scenario_toml, resolve_scenario, scenario_kind
 from tmr.world.world3d import World3D, world3d_from_table
 
 if sys.version_info >= (3, 11):
-    import tomllib
+    pass
 else:  # pragma: no cover - python 3.10
-    import tomli as tomllib
+    pass
 
 __all__ = ["DroneScenario", "builtin_drone_scenarios", "load_drone_scenario", "scenario_kind"]
 
@@ -159,52 +159,9 @@ def _point3(value: Any, what: str, label: str) -> NDArray[np.float64]:
     return arr
 
 
-def _all_builtins() -> dict[str, Path]:
-    return {p.stem: p for p in sorted(SCENARIO_DIR.glob("*.toml"))}
-
-
 def builtin_drone_scenarios() -> list[str]:
     """Names of the built-in drone scenarios (``["F", "G", "H"]``): the ``kind = "drone"`` files in ``scenarios/``."""
-    return sorted(name for name, p in _all_builtins().items() if file_kind(p) == "drone")
-
-
-def _resolve(name_or_path: str | Path) -> Path:
-    """A built-in name (case-insensitive, ground or drone) or a path -> the file (ScenarioError if none)."""
-    if isinstance(name_or_path, str) and not any(sep in name_or_path for sep in "/\\") and "." not in name_or_path:
-        match = [p for n, p in _all_builtins().items() if n.lower() == name_or_path.strip().lower()]
-        if match:
-            return match[0]
-        if not Path(name_or_path).exists():
-            raise ScenarioError(
-                f"unknown scenario {name_or_path!r}: built-in scenarios are {', '.join(_all_builtins())}; or give "
-                "the path of a scenario .toml file"
-            )
-    path = Path(name_or_path)
-    if not path.exists():
-        raise ScenarioError(f"{path}: scenario file not found (built-in scenarios are {', '.join(_all_builtins())})")
-    return path  # a directory or an unreadable file: tmr.files.read_text says which, in one line
-
-
-def _read(path: Path) -> tuple[str, dict[str, Any]]:
-    from tmr.files import read_text
-
-    text = read_text(path, "scenario TOML", ScenarioError)
-    try:
-        return text, tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
-
-
-def scenario_kind(name_or_path: str | Path) -> Literal["ground", "drone"]:
-    """``"drone"`` for a scenario with ``kind = "drone"``, ``"ground"`` for the others (the default kind).
-
-    Raises ScenarioError for an unknown name, a missing or unreadable file, invalid TOML or another kind."""
-    path = _resolve(name_or_path)
-    _, doc = _read(path)
-    kind = doc.get("kind", "ground")
-    if kind not in ("ground", "drone"):
-        raise ScenarioError(f'scenario file {path}: kind must be "ground" (the default) or "drone", got {kind!r}')
-    return kind  # type: ignore[no-any-return]
+    return sorted(name for name, p in all_builtins().items() if file_kind(p) == "drone")
 
 
 def load_drone_scenario(name_or_path: str | Path) -> DroneScenario:
@@ -216,8 +173,8 @@ def load_drone_scenario(name_or_path: str | Path) -> DroneScenario:
         MapError: a bad ``[world]`` table or mesh file.
         ParameterError: bad ``robots``, ``[tether]`` or ``[params]`` values, NaN/inf coordinates.
     """
-    path = _resolve(name_or_path)
-    text, doc = _read(path)
+    path = resolve_scenario(name_or_path)
+    text, doc = read_scenario_toml(path)
     label = f"scenario file {path}"
     kind = doc.get("kind", "ground")
     if kind != "drone":

@@ -14,7 +14,7 @@ import math
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -28,7 +28,18 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - python 3.10
     import tomli as tomllib
 
-__all__ = ["SCENARIO_DIR", "Scenario", "builtin_scenarios", "file_kind", "load_scenario", "scenario_from_map"]
+__all__ = [
+    "SCENARIO_DIR",
+    "Scenario",
+    "all_builtins",
+    "builtin_scenarios",
+    "file_kind",
+    "load_scenario",
+    "read_scenario_toml",
+    "resolve_scenario",
+    "scenario_from_map",
+    "scenario_kind",
+]
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 
@@ -177,6 +188,52 @@ def file_kind(path: Path) -> str:
         return "ground"
     kind = doc.get("kind", "ground")
     return kind if isinstance(kind, str) else "ground"
+
+
+def all_builtins() -> dict[str, Path]:
+    """Every built-in scenario, ground and drone: its name → its TOML file in ``scenarios/``."""
+    return {p.stem: p for p in sorted(SCENARIO_DIR.glob("*.toml"))}
+
+
+def resolve_scenario(name_or_path: str | Path) -> Path:
+    """A built-in name (case-insensitive, ground or drone) or a path -> the file (ScenarioError if none)."""
+    if isinstance(name_or_path, str) and not any(sep in name_or_path for sep in "/\\") and "." not in name_or_path:
+        match = [p for n, p in all_builtins().items() if n.lower() == name_or_path.strip().lower()]
+        if match:
+            return match[0]
+        if not Path(name_or_path).exists():
+            raise ScenarioError(
+                f"unknown scenario {name_or_path!r}: built-in scenarios are {', '.join(all_builtins())}; or give "
+                "the path of a scenario .toml file"
+            )
+    path = Path(name_or_path)
+    if not path.exists():
+        raise ScenarioError(f"{path}: scenario file not found (built-in scenarios are {', '.join(all_builtins())})")
+    return path  # a directory or an unreadable file: tmr.files.read_text says which, in one line
+
+
+def read_scenario_toml(path: Path) -> tuple[str, dict[str, Any]]:
+    """The text of a scenario file and its TOML table (ScenarioError, one line, for unreadable text or invalid TOML)."""
+    from tmr.files import read_text
+
+    text = read_text(path, "scenario TOML", ScenarioError)
+    try:
+        return text, tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
+
+
+def scenario_kind(name_or_path: str | Path) -> Literal["ground", "drone"]:
+    """``"drone"`` for a scenario with ``kind = "drone"``, ``"ground"`` for the others (the default kind). Reads the
+    file only: ``tmr plan`` asks it of every scenario before it loads one (no 3-D geometry imported for a ground run).
+
+    Raises ScenarioError for an unknown name, a missing or unreadable file, invalid TOML or another kind."""
+    path = resolve_scenario(name_or_path)
+    _, doc = read_scenario_toml(path)
+    kind = doc.get("kind", "ground")
+    if kind not in ("ground", "drone"):
+        raise ScenarioError(f'scenario file {path}: kind must be "ground" (the default) or "drone", got {kind!r}')
+    return kind  # type: ignore[no-any-return]
 
 
 def load_scenario(name_or_path: str | Path, safety_radius: float | None = None) -> Scenario:
