@@ -58,7 +58,7 @@ def test_g_the_tethers_sag_is_what_binds(tmp_path, capsys):
     assert code == 0, stderr
     tc = json.loads((out / "metrics.json").read_text())["binding"]["tether_clearance"]
     assert 0.2 <= tc["curve_clearance"] < 0.23  # c_t = 0.2 m: the curve keeps the limit, with < 3 cm to spare
-    assert tc["chord_clearance"] > tc["curve_clearance"] + 0.1  # the straight chord would be far clear
+    assert tc["chord_clearance"] > tc["curve_clearance"] + 0.08  # the straight chord would be far clear (0.32 m)
 
 
 def test_too_few_drones_refused_up_front(tmp_path, capsys):
@@ -106,7 +106,7 @@ def test_a_drone_parameter_is_applied_and_recorded(tmp_path, capsys):
     run = json.loads((out / "run.json").read_text())
     assert run["params"]["planner"]["leader_speed"] == 0.5
     traj = json.loads((out / "trajectories.json").read_text())
-    assert traj["robots"][0]["t"][-1] > 20.0  # the default 1 m/s takes 14.55 s on F
+    assert traj["robots"][0]["t"][-1] > 12.0  # the default 1.5 m/s takes 7 s on F
 
 
 @pytest.mark.slow

@@ -258,3 +258,22 @@ def test_a_bound_above_the_route_is_an_internal_error(monkeypatch):
     monkeypatch.setattr(route3d, "_lipschitz", lambda phi, lat: (0.1 * true_lipschitz(phi, lat)[0], None))
     with pytest.raises(AssertionError, match=r"lower bound \d+\.\d+ m exceeds the route found"):
         plan_route3d(_wall_world(), [2.0, 2.0, 1.0], [8.0, 2.0, 1.0], TETHER)
+
+
+@pytest.mark.parametrize(("ds", "speed", "accel"), [(35.7, 1.5, 1.0), (2.0, 1.5, 1.0), (0.3, 2.0, 4.0), (10.0, 1.0, 0.5)])
+def test_cruise_law_keeps_its_speed_and_acceleration(ds, speed, accel):
+    """The leader's time law: from rest to rest over ds, speed ≤ the cruise speed, acceleration ≤ accel (finite
+    differences of the sampled law, within their O(Ts) error), the cruise reached when the route is long enough."""
+    from tmr.route.route3d import _cruise_law
+
+    Ts = 0.01
+    phi, dphi, K = _cruise_law(ds, speed, accel, Ts)
+    s, v = phi * ds, dphi * ds
+    assert phi[0] == 0.0 and phi[-1] == 1.0 and v[0] == 0.0 and v[-1] == 0.0 and len(phi) == K + 1
+    assert np.all(np.diff(s) >= -1e-12)  # never backwards
+    assert v.max() <= speed + 1e-9
+    np.testing.assert_allclose(np.diff(s) / Ts, 0.5 * (v[1:] + v[:-1]), atol=2 * accel * Ts)  # v is ds/dt
+    assert np.abs(np.diff(v) / Ts).max() <= accel * (1 + 1e-6)
+    V = min(speed, math.sqrt(ds * accel / 1.5))
+    assert v.max() == pytest.approx(V, rel=1e-3)
+    assert K * Ts == pytest.approx(ds / V + 1.5 * V / accel, abs=Ts)  # travel time ds / V + T_r

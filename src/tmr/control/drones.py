@@ -698,11 +698,12 @@ class DroneSpeed(_DroneLimit):
 
 
 class DroneAcceleration(DroneSpeed):
-    """|ṗ_i − ṗ_i,k−1| ≤ a_max Ts per axis (3N rows; a comfort limit, dropped for a step only if the safety limits
-    alone have no solution)."""
+    """|ṗ_i − ṗ_i,k−1| ≤ a_max Ts per axis (3N rows). A hard limit (issue 32 lists it with the others; the checker
+    enforces it): a step where it and the safety limits have no common solution ends the plan, failed, with the
+    reason — it is never dropped (unlike the ground chain's comfort limit)."""
 
     name = "drone_acceleration"
-    relaxable = True
+    relaxable = False
 
     def __init__(self, n_robots: int, a_max: float) -> None:
         super().__init__(n_robots, 1.0)

@@ -5,7 +5,8 @@ Each step k the formulation returns the drones' velocities v_k (``qp``) or joint
 at t_k, and the state integrates by explicit Euler (Caruso 2021 eq. 21): ``p_{k+1} = p_k + Ts v_k`` or
 ``q_{k+1} = q_k + Ts q̇_k`` with the drones from the forward kinematics. Every tether's catenary parameter a is
 recorded per step (NaN for a vertical tether). A step without a solution (:class:`~tmr.errors.InfeasibleStep`, or a
-tether span that no catenary holds) ends the run: the plan is returned up to that step, failed, with the reason.
+tether span that no catenary holds) ends the run: the plan is returned up to that step, failed, with the reason; so
+does a leader that the hard limits held back from the goal (farther than the goal tolerance at the end).
 """
 
 from __future__ import annotations
@@ -19,14 +20,18 @@ from numpy.typing import ArrayLike, NDArray
 
 from tmr.control.drones import DronePinv, DroneQP, DroneReferencesLike
 from tmr.control.plan3d import DronePlan
-from tmr.errors import InfeasibleStep, ParameterError, TetherSpanError
+from tmr.errors import InfeasibleStep, ParameterError, TetherSpanError, fmt_point
 from tmr.model.catenary3d import DroneTetherParams
 from tmr.model.params import DroneParams
 from tmr.world.world3d import World3D
 
 Array = NDArray[np.float64]
 
-__all__ = ["run_drones", "LineReferences", "line_references"]
+__all__ = ["run_drones", "LineReferences", "line_references", "REST_SPEED"]
+
+#: A drone is at rest when no velocity component exceeds this [m/s] (the plan's end: see :func:`run_drones`); stopping
+#: from it within one step takes 1 m/s², a quarter of the default acceleration limit.
+REST_SPEED = 0.05
 
 
 @dataclass
@@ -84,11 +89,16 @@ def run_drones(
     """Integrate ``formulation`` (:func:`~tmr.control.drones.make_drone_qp` or ``make_drone_pinv``, built for the
     same world, tether, parameters and references) along the references from the drones at ``start`` (N, 3) [m].
 
+    The plan ends at the references' last sample, or earlier — at the first step after the references have stopped
+    moving where the leader is within half the goal tolerance of ``goal`` and every drone at rest (no velocity
+    component above :data:`REST_SPEED` [m/s]): the references' settling time (``DroneParams.settle``) is the most the
+    plan waits for the chain to come to rest, not a fixed tail.
+
     ``diagnostics``: per step (K+1,) ``step_time`` [s] (the whole step: catenaries, world queries, rows and the
     QP), ``leader_residual`` [m/s] (the leader task's residual: > 0 when a limit holds the leader back), the
     formulation's own (``qp_level:<name>`` status codes of :data:`tmr.control.qp.LEVEL_STATUS`, ...), and under
-    ``"timings"`` the loop's wall time. The plan is not checked (``success`` is True if every step was computed;
-    the checker decides).
+    ``"timings"`` the loop's wall time. The plan is not checked (``success`` is True if every step was computed and
+    the leader ended within the goal tolerance; the independent checker decides the rest).
     """
     ctx = formulation.context
     chain = ctx.chain
@@ -117,6 +127,11 @@ def run_drones(
             qs[k] = q
         a[k] = [np.nan if c.a is None else c.a for c in ctx.catenaries]
 
+    # the references' last change: after it the plan may end early, once the chain has come to rest at the goal
+    moving = np.flatnonzero(np.any(np.diff(np.asarray(ref.positions), axis=0) != 0.0, axis=(1, 2)))
+    k_end = int(moving[-1]) + 1 if len(moving) else 0
+    g_end = np.asarray(ref.x[-1] if goal is None else goal, dtype=float)
+    near = 0.5 * params.goal_tolerance
     for k in range(K + 1):
         t0 = time.perf_counter()
         robots[k] = P
@@ -127,7 +142,12 @@ def run_drones(
             last = k - 1
             break
         record(k)
-        if k == K:
+        if k == K or (
+            k >= k_end
+            and float(np.linalg.norm(P[-1] - g_end)) <= near
+            and float(np.max(np.abs(v_prev), initial=0.0)) <= REST_SPEED
+        ):
+            last = k
             break
         try:
             out, d = formulation.step(ctx)
@@ -151,6 +171,14 @@ def run_drones(
             diag.setdefault(key, np.full(K + 1, np.nan))[k] = val
         P, v_prev = P_next, v
     n = max(last, 0) + 1
+    short = float(np.linalg.norm(robots[n - 1, -1] - g_end))
+    if failure is None and short > params.goal_tolerance:
+        res = diag.get("leader_residual", np.zeros(1))[: max(n - 1, 1)]
+        failure = (
+            f"the leader stopped {short:.3f} m from the goal {fmt_point(g_end)} (tolerance {params.goal_tolerance:g} m) "
+            f"at {fmt_point(robots[n - 1, -1])}, t = {(n - 1) * Ts:.2f} s: the hard limits held it back "
+            f"(leader task residual {float(res[-1]) if res.size else 0.0:.3f} m/s at the end)"
+        )
     wall = time.perf_counter() - t_start
     diagnostics: dict[str, Any] = {key: val[:n] for key, val in diag.items()}
     diagnostics["timings"] = {"loop": wall}

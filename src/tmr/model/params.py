@@ -262,10 +262,12 @@ class DroneParams:
 
     Attributes:
         Ts: sampling period [s].
-        leader_speed: cruise speed of the leader along the route [m/s]; leader_accel: its acceleration [m/s²].
+        leader_speed: cruise speed of the leader along the route [m/s] (below ``drone_speed_max`` so that the
+            leader's CLIK has room to correct); leader_accel: its acceleration [m/s²] (the time law:
+            :func:`tmr.route.route3d._cruise_law`).
         drone_speed_max: speed bound of every drone, per axis [m/s].
-        drone_accel_max: acceleration bound of every drone, per axis [m/s²] (comfort limit: dropped only if the
-            safety limits alone have no solution, as on the ground).
+        drone_accel_max: acceleration bound of every drone, per axis [m/s²] (a hard limit: never dropped; a step
+            where it cannot hold ends the plan, failed).
         d_safe: clearance every drone keeps beyond its radius r from the obstacles, walls, floor and ceiling [m].
         separation_margin: drones keep 2r + this from each other [m].
         approach_rate: a distance to its limit may shrink at most at this rate times the remaining margin [1/s]
@@ -278,13 +280,14 @@ class DroneParams:
         span_target_fraction: tether regulation pulls each chord towards this fraction of the route spacing [-].
         energy_weight: weight of ‖v‖² at the last level; smoothness_weight: weight of ‖v − v_{k−1}‖².
         goal_tolerance: the leader must end this close to the goal [m].
-        settle: time added after the leader's reference reaches the goal [s].
+        settle: the most time added after the leader's reference reaches the goal [s]; the plan ends as soon as the
+            leader is within half the goal tolerance and every drone at rest (:func:`tmr.control.run3d.run_drones`).
         grid: cell size of the 3-D route grid [m].
         solver: "osqp" or a qpsolvers backend.
     """
 
     Ts: float = 0.05
-    leader_speed: float = 1.0
+    leader_speed: float = 1.5
     leader_accel: float = 1.0
     drone_speed_max: float = 2.0
     drone_accel_max: float = 4.0
@@ -301,7 +304,7 @@ class DroneParams:
     energy_weight: float = 1.0
     smoothness_weight: float = 10.0
     goal_tolerance: float = 0.1
-    settle: float = 2.0
+    settle: float = 8.0
     grid: float = 0.25
     solver: str = "osqp"
 
