@@ -260,7 +260,9 @@ def test_a_bound_above_the_route_is_an_internal_error(monkeypatch):
         plan_route3d(_wall_world(), [2.0, 2.0, 1.0], [8.0, 2.0, 1.0], TETHER)
 
 
-@pytest.mark.parametrize(("ds", "speed", "accel"), [(35.7, 1.5, 1.0), (2.0, 1.5, 1.0), (0.3, 2.0, 4.0), (10.0, 1.0, 0.5)])
+@pytest.mark.parametrize(
+    ("ds", "speed", "accel"), [(35.7, 1.5, 1.0), (2.0, 1.5, 1.0), (0.3, 2.0, 4.0), (10.0, 1.0, 0.5)]
+)
 def test_cruise_law_keeps_its_speed_and_acceleration(ds, speed, accel):
     """The leader's time law: from rest to rest over ds, speed ≤ the cruise speed, acceleration ≤ accel (finite
     differences of the sampled law, within their O(Ts) error), the cruise reached when the route is long enough."""

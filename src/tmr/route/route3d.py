@@ -25,8 +25,8 @@ section "Route (3-D)").
    the component of U holding the base, no chain reaches it: :class:`NoRouteError` (proven). If U joins them but no
    drone route is found, ``_cells_disconnected`` tries a tighter proof, on a finer lattice (h < c/√3, any plane wall)
    when the route's is too coarse.
-3. **References.** :func:`drone_references`: the leader follows the route with a smooth trapezoid in arc length (:func:`_cruise_law`); drone j
-   moves along the same route from its start arc to j/N of the route's length, in step with the leader's progress, so
+3. **References.** :func:`drone_references`: the leader follows the route with a smooth trapezoid in arc length
+   (:func:`_cruise_law`); drone j moves along the same route from its start arc to j/N of the route's length, in step with the leader's progress, so
    the chain lies along the route and winds round only what the route winds round.
 """
 
@@ -678,8 +678,8 @@ def drone_references(
     Start: drone 1 at the first route point free for a drone (beyond the winch leg), drone j + 1 a spacing
     2r + margin + 0.1 m further along the route; if a limit fails (:func:`chain_violations`) the whole placement slides
     along the route in 0.1 m steps (up to a third of the route). The leader then follows the route from its start arc
-    to the goal with a smooth trapezoid (:func:`_cruise_law`: cruise ≤ ``speed`` [m/s], acceleration ≤ ``accel`` [m/s²]), then holds
-    for ``settle`` [s]; drone j moves along the route from its start arc to j/N of the route's length in proportion
+    to the goal with a smooth trapezoid (:func:`_cruise_law`: cruise ≤ ``speed`` [m/s], acceleration ≤ ``accel``
+    [m/s²]), then holds for ``settle`` [s]; drone j moves along the route from its start arc to j/N of the route's length in proportion
     to the leader's progress (its share of the leader's arc length).
 
     Raises:
