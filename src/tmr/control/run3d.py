@@ -176,8 +176,9 @@ def run_drones(
         res = diag.get("leader_residual", np.zeros(1))[: max(n - 1, 1)]
         failure = (
             f"the leader stopped {short:.3f} m from the goal {fmt_point(g_end)} "
-            f"(tolerance {params.goal_tolerance:g} m) at {fmt_point(robots[n - 1, -1])}, t = {(n - 1) * Ts:.2f} s: the hard limits held it back "
-            f"(leader task residual {float(res[-1]) if res.size else 0.0:.3f} m/s at the end)"
+            f"(tolerance {params.goal_tolerance:g} m) at {fmt_point(robots[n - 1, -1])}, t = {(n - 1) * Ts:.2f} s: "
+            f"the hard limits held it back (leader task residual {float(res[-1]) if res.size else 0.0:.3f} m/s "
+            "at the end)"
         )
     wall = time.perf_counter() - t_start
     diagnostics: dict[str, Any] = {key: val[:n] for key, val in diag.items()}

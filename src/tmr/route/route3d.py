@@ -26,8 +26,8 @@ section "Route (3-D)").
    drone route is found, ``_cells_disconnected`` tries a tighter proof, on a finer lattice (h < c/√3, any plane wall)
    when the route's is too coarse.
 3. **References.** :func:`drone_references`: the leader follows the route with a smooth trapezoid in arc length
-   (:func:`_cruise_law`); drone j moves along the same route from its start arc to j/N of the route's length, in step with the leader's progress, so
-   the chain lies along the route and winds round only what the route winds round.
+   (:func:`_cruise_law`); drone j moves along the same route from its start arc to j/N of the route's length, in step
+   with the leader's progress, so the chain lies along the route and winds round only what the route winds round.
 """
 
 from __future__ import annotations
@@ -679,8 +679,8 @@ def drone_references(
     2r + margin + 0.1 m further along the route; if a limit fails (:func:`chain_violations`) the whole placement slides
     along the route in 0.1 m steps (up to a third of the route). The leader then follows the route from its start arc
     to the goal with a smooth trapezoid (:func:`_cruise_law`: cruise ≤ ``speed`` [m/s], acceleration ≤ ``accel``
-    [m/s²]), then holds for ``settle`` [s]; drone j moves along the route from its start arc to j/N of the route's length in proportion
-    to the leader's progress (its share of the leader's arc length).
+    [m/s²]), then holds for ``settle`` [s]; drone j moves along the route from its start arc to j/N of the route's
+    length in proportion to the leader's progress (its share of the leader's arc length).
 
     Raises:
         StartError: no valid start found (one line with the first violation).
