@@ -165,11 +165,10 @@ def segment_nearest_k(
     frames: tuple[Array, Array, Array] | None = None
     capsule = coal.Capsule(0.0, 1.0)
     res = coal.DistanceResult()
-    for ob in world.obstacles:
-        gap = np.linalg.norm(np.maximum(0.0, np.maximum(ob.lo - hi_seg, lo_seg - ob.hi)), axis=1)
-        cand = np.flatnonzero(gap < cap + world.safety_radius)
-        if len(cand) == 0:
-            continue
+    near = world.box_gaps(lo_seg, hi_seg) < cap + world.safety_radius  # (O, M): every obstacle at once
+    for o in np.flatnonzero(near.any(axis=1)):
+        ob = world.obstacles[o]
+        cand = np.flatnonzero(near[o])
         out, grad, t = np.full(M, np.inf), np.zeros((M, 3)), np.zeros(M)
         inside = np.zeros(len(cand), dtype=bool)
         if not ob.signed:
@@ -240,11 +239,10 @@ def point_nearest_k(world: World3D, points: Array, k: int, cap: float = np.inf) 
     C = np.full((M, max(k, len(world.obstacles))), np.inf)
     G = np.zeros((M, C.shape[1], 3))
     r = world.safety_radius
-    for o, ob in enumerate(world.obstacles):
-        gap = np.linalg.norm(np.maximum(0.0, np.maximum(ob.lo - points, points - ob.hi)), axis=1)
-        cand = np.flatnonzero(gap < cap + r)
-        if len(cand) == 0:
-            continue
+    near = world.box_gaps(points, points) < cap + r  # (O, M)
+    for o in np.flatnonzero(near.any(axis=1)):
+        ob = world.obstacles[o]
+        cand = np.flatnonzero(near[o])
         p = points[cand]
         if isinstance(ob.geometry, _PlacedBox):
             off = p - np.clip(p, ob.lo, ob.hi)
@@ -362,8 +360,7 @@ class DroneStepContext:
         self.sens: TetherSensitivities = sensitivities_batch(self.catenaries, self.fractions, self.tether)
         samples = self.sens.points  # (N, m, 3)
         m = self.fractions.size
-        c0, g0 = self.world.clearance_and_gradient(P[1:])
-        self.drone_clearance, self.drone_gradient = c0, g0
+        self._drone_nearest_obstacle: tuple[Array, Array] | None = None  # pinv's, on first use this step
         kd = self.drone_nearest
         cd, gd, nd = point_nearest_k(self.world, P[1:], kd, self.drone_cap)
         self.drone_obstacle_clearance, self.drone_obstacle_gradient = cd, gd
@@ -372,7 +369,7 @@ class DroneStepContext:
         kt = self.nearest
         poly = np.concatenate([P[:-1, None, :], samples, P[1:, None, :]], axis=1)  # (N, m+2, 3)
         ends = poly[:, :-1].reshape(-1, 3), poly[:, 1:].reshape(-1, 3)
-        c, g, t, nt = segment_nearest_k(self.bare, *ends, kt, self.cap + 0.5, within=self.cap)
+        c, g, t, nt = segment_nearest_k(self.bare, *ends, kt, self.cap)
         self.piece_clearance = c.reshape(N, m + 1, kt)
         self.piece_gradient = g.reshape(N, m + 1, kt, 3)
         self.piece_t = t.reshape(N, m + 1, kt)
@@ -388,6 +385,21 @@ class DroneStepContext:
         kk = min(self.k, len(ref.t) - 1)
         self.x_d, self.xd_d = ref.x[kk], ref.xd[kk]
         self.ref_positions, self.ref_velocities = ref.positions[kk], ref.velocities[kk]
+
+    @property
+    def drone_clearance(self) -> Array:
+        """Clearance of every drone (N,) [m] in the world grown by r (walls included), computed on first use."""
+        return self._drone_world()[0]
+
+    @property
+    def drone_gradient(self) -> Array:
+        """Unit gradient (N, 3) of :attr:`drone_clearance`."""
+        return self._drone_world()[1]
+
+    def _drone_world(self) -> tuple[Array, Array]:
+        if self._drone_nearest_obstacle is None:  # only pinv's soft obstacle task reads it: the QP has per-obstacle rows
+            self._drone_nearest_obstacle = self.world.clearance_and_gradient(self.points[1:])
+        return self._drone_nearest_obstacle
 
     @property
     def robot_jacobians(self) -> Array:

@@ -81,7 +81,7 @@ def orthonormal_rows(J: Array, F: Array, rtol: float = 1e-9) -> Array:
     G = J - (J @ F.T) @ F if F.shape[0] else J
     if G.shape[0] == 0:
         return np.zeros((0, J.shape[1]))
-    Q, R, _ = scipy.linalg.qr(G.T, mode="economic", pivoting=True)  # columns of Q span the row space of G
+    Q, R, _ = scipy.linalg.qr(G.T, mode="economic", pivoting=True, check_finite=False)  # columns of Q span G's rows
     d = np.abs(np.diag(R))
     keep = d > rtol * max(1.0, float(d.max()) if d.size else 0.0)
     rows = Q[:, keep].T

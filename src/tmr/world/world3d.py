@@ -258,6 +258,15 @@ class World3D:
         self.bounds: Bounds3 = tuple(float(v) for v in b)  # type: ignore[assignment]
         self.safety_radius: float = r
         self._lo, self._hi = b[:3], b[3:]
+        #: the obstacles' bounding boxes stacked (O, 3) each [m]: broad-phase tests of every obstacle at once
+        self.aabb_lo = np.array([ob.lo for ob in self.obstacles], dtype=float).reshape(-1, 3)
+        self.aabb_hi = np.array([ob.hi for ob in self.obstacles], dtype=float).reshape(-1, 3)
+
+    def box_gaps(self, lo: NDArray[np.float64], hi: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Distance [m] from every obstacle's bounding box to each box [lo, hi] (M, 3) (a point: lo = hi): (O, M),
+        a lower bound of the distance to the obstacle itself."""
+        gap = np.maximum(0.0, np.maximum(self.aabb_lo[:, None, :] - hi[None], lo[None] - self.aabb_hi[:, None, :]))
+        return np.sqrt(np.einsum("omk,omk->om", gap, gap))
 
     def __repr__(self) -> str:
         return f"World3D({len(self.obstacles)} obstacles, bounds={_fmt(self.bounds)}, r={self.safety_radius:.3f})"
