@@ -90,6 +90,15 @@ NEPTUNE = {
 }
 
 
+def _why(message: str) -> str:
+    """The kind of a planner's own failure, from its message."""
+    if message.startswith("the leader stopped"):
+        return "the leader held back short of the goal"
+    if "no catenary" in message or "span" in message:
+        return "a tether span no catenary holds"
+    return "a step without a solution" if message else "(no message)"
+
+
 # ----------------------------------------------------------------------------------------------------------------
 # one world, every N (runs in a worker process)
 # ----------------------------------------------------------------------------------------------------------------
@@ -108,15 +117,15 @@ def _last_line(text: str) -> str:
     return lines[-1][:300] if lines else ""
 
 
-def _violations(plan: Any, metrics: Any) -> list[str]:
-    """The checker's reasons: ``metrics.violations`` if the checker exposes such a list, else ``plan.failure``
-    split at "; " (the brief: one reason per violated limit) when the plan failed."""
-    listed = getattr(metrics, "violations", None)
-    if isinstance(listed, list | tuple):
-        return [str(v) for v in listed]
-    if plan.success or not plan.failure:
-        return []
-    return [p.strip() for p in str(plan.failure).split("; ") if p.strip()]
+#: What the checker reports that is not a broken hard limit: the planner's own failure (it stopped: an infeasible
+#: step, a span no catenary holds, the leader held back) and the leader short of the goal (the task, not a limit).
+NOT_LIMITS = ("planner", "goal")
+
+
+def _violations(metrics: Any) -> list[str]:
+    """The kinds of hard limit the independent checker found broken in a plan (``plan.failure`` has their first
+    step's reasons); the planner's own failure and the goal are not limits (:data:`NOT_LIMITS`)."""
+    return [k for k, step in metrics.first_violation.items() if step is not None and k not in NOT_LIMITS]
 
 
 def _bound(scenario: Any) -> dict[str, Any]:
@@ -162,16 +171,16 @@ def _in_process(scenario: Any, robots: str, plan_seed: int) -> dict[str, Any]:
         row["message"] = f"{type(exc).__name__}: {exc}".splitlines()[0][:300]
         return row
     row["call_s"] = time.perf_counter() - t0
-    violations = _violations(plan, metrics)
+    violations = _violations(metrics)
     step = np.asarray(plan.diagnostics.get("step_time", []), dtype=float)
     step = step[np.isfinite(step)]
     row.update(
-        outcome="planned" if plan.success else "failed check",
+        outcome="planned" if plan.success else "failed check" if violations else "no plan",
         n_used=plan.n_robots,
         steps=int(plan.t.size - 1),
         plan_duration=float(plan.t[-1]) if plan.t.size else 0.0,
         violations=len(violations),
-        message="; ".join(violations)[:300] if violations else (plan.failure or ""),
+        message=(plan.failure or "")[:300],
         step_ms_median=float(np.median(step)) * 1e3 if step.size else None,
         step_ms_p90=float(np.percentile(step, 90)) * 1e3 if step.size else None,
         step_ms_max=float(step.max()) * 1e3 if step.size else None,
@@ -195,7 +204,9 @@ def _expected_exit(row: dict[str, Any]) -> int | None:
     """The exit code ``tmr plan`` should give for the in-process verdict (a refusal that is not proven: 1)."""
     if row["outcome"].startswith("refused") and row.get("proven") is False:
         return 1
-    return {"planned": 0, "failed check": 1, "refused: too few": 2, "refused: no route": 2}.get(row["outcome"])
+    return {"planned": 0, "failed check": 1, "no plan": 1, "refused: too few": 2, "refused: no route": 2}.get(
+        row["outcome"]
+    )
 
 
 def run_world(task: dict[str, Any]) -> list[dict[str, Any]]:
@@ -311,7 +322,7 @@ def report(rows: list[dict[str, Any]], h_rows: list[dict[str, Any]], worlds: lis
     no_route = [r for r in rows if r["world"] not in reach]
     no_route_ok = [r for r in no_route if r["outcome"] == "refused: no route"]
     no_route_t = _vals(no_route_ok, "call_s")
-    plans = [r for r in rows if r["outcome"] in ("planned", "failed check")]
+    plans = [r for r in rows if r["outcome"] in ("planned", "failed check", "no plan")]
     violations = sum(int(r.get("violations") or 0) for r in plans)
     whole = _vals(rows, "whole_s")
     step8 = _vals([r for r in plans if r.get("n_used") == 8], "step_ms_median")
@@ -330,7 +341,8 @@ def report(rows: list[dict[str, Any]], h_rows: list[dict[str, Any]], worlds: lis
     w(f"{_frac(len(no_route_ok), len(no_route))}; median {_fmt(_med(no_route_t), '.3f')} s, max ")
     w(f"{_fmt(max(no_route_t, default=None), '.3f')} s | ")
     w(f"{_ok(len(no_route_ok) == len(no_route) and slow_nr < TARGET_REFUSE_S)} |\n")
-    w(f"| 0 violations by the independent check | {violations} in {len(plans)} plans | {_ok(violations == 0)} |\n")
+    w(f"| 0 violations by the independent check (hard limits broken, in every plan computed) | {violations} in ")
+    w(f"{len(plans)} plans | {_ok(violations == 0)} |\n")
     mw = _med(whole)
     w(f"| median whole-process time < {TARGET_MEDIAN_WHOLE_S:g} s | {_fmt(mw)} s over {len(whole)} runs | ")
     w(f"{_ok(mw is not None and mw < TARGET_MEDIAN_WHOLE_S)} |\n")
@@ -369,18 +381,22 @@ def report(rows: list[dict[str, Any]], h_rows: list[dict[str, Any]], worlds: lis
     w(f"{_fmt(_med(route_s), '.3f')} s, max {_fmt(max(route_s, default=None), '.3f')} s.\n\n")
 
     # ---------------------------------------------------------------- per N
-    w("## Per N\n\n| N | runs | below bound | refused (too few) | refused (no route) | planned | failed check | ")
+    w("## Per N\n\n*No plan*: the planner stopped and said why (the leader held back short of the goal by the hard ")
+    w("limits, or a step where they have no common solution): exit 1, with no limit broken. *Failed check*: a plan ")
+    w("in which the independent checker found a hard limit broken.\n\n")
+    w("| N | runs | below bound | refused (too few) | refused (no route) | planned | no plan | failed check | ")
     w("other | refusal median / max [s] | violations | whole process median / max [s] | step median [ms] |\n")
-    w("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n")
+    w("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n")
     for n in info["robots"]:
         rs = [r for r in rows if r["robots"] == n]
         c = Counter(r["outcome"] for r in rs)
         other = len(rs) - c["refused: too few"] - c["refused: no route"] - c["planned"] - c["failed check"]
+        other -= c["no plan"]
         ref = _vals([r for r in rs if r["outcome"].startswith("refused")], "call_s")
         wt = _vals(rs, "whole_s")
-        st = _vals([r for r in rs if r["outcome"] in ("planned", "failed check")], "step_ms_median")
+        st = _vals([r for r in rs if r["outcome"] in ("planned", "failed check", "no plan")], "step_ms_median")
         w(f"| {n} | {len(rs)} | {sum(_below_bound(r) for r in rs)} | {c['refused: too few']} | ")
-        w(f"{c['refused: no route']} | {c['planned']} | {c['failed check']} | {other} | ")
+        w(f"{c['refused: no route']} | {c['planned']} | {c['no plan']} | {c['failed check']} | {other} | ")
         w(f"{_fmt(_med(ref), '.3f')} / {_fmt(max(ref, default=None), '.3f')} | ")
         w(f"{sum(int(r.get('violations') or 0) for r in rs)} | {_fmt(_med(wt))} / {_fmt(max(wt, default=None))} | ")
         w(f"{_fmt(_med(st), '.3f')} |\n")
@@ -393,6 +409,10 @@ def report(rows: list[dict[str, Any]], h_rows: list[dict[str, Any]], worlds: lis
         w("\nUnexpected outcomes (an error or a crash, or a plan below the proven bound):\n\n")
         for r in odd[:30]:
             w(f"- {r['world']} N = {r['robots']}: {r['outcome']} — {r.get('message', '')}\n")
+    stopped = Counter(_why(r.get("message", "")) for r in plans if r["outcome"] == "no plan")
+    if stopped:
+        w("\nWhy the planner stopped (*no plan*): ")
+        w("; ".join(f"{why}: {c}" for why, c in stopped.most_common()) + ".\n")
     failed = [r for r in plans if r["outcome"] == "failed check"]
     if failed:
         w("\nPlans the independent check refused:\n\n")

@@ -325,3 +325,34 @@ def test_the_plan_ends_once_the_chain_rests_at_the_goal():
     assert np.linalg.norm(plan.robots[-1, -1] - plan.goal) <= PRM.goal_tolerance / 2
     assert np.abs(plan.velocities[-2]).max() <= REST_SPEED  # at rest when it stops
     assert np.abs(plan.velocities[-3]).max() > REST_SPEED  # and not one step later than that
+
+
+def test_slowed_references_keep_the_path_at_half_speed():
+    from tmr.control.run3d import slowed_references
+
+    ref = line_references([1.0, 5.0, 0.3], [2.0, 5.0, 2.0], [8.0, 5.0, 2.0], 2, Ts=PRM.Ts, settle=1.0)
+    K = len(ref.t) - 1
+    s = slowed_references(ref, 20, 40)
+    assert len(s.t) == K + 40 + 1
+    np.testing.assert_allclose(np.diff(s.t), PRM.Ts)
+    np.testing.assert_allclose(s.positions[:21], ref.positions[:21])  # unchanged before k0
+    np.testing.assert_allclose(s.positions[20 + 80 :], ref.positions[60:])  # and after the slow part, shifted
+    np.testing.assert_allclose(s.positions[20:101:2], ref.positions[20:61])  # the slow part: every sample, twice
+    np.testing.assert_allclose(s.xd[21:100], np.tile(0.5 * ref.xd[21], (79, 1)), atol=1e-12)  # at half the speed
+    np.testing.assert_allclose(s.positions[-1], ref.positions[-1])
+
+
+def test_a_step_without_a_solution_slows_the_chain_down_instead_of_failing(tmp_path):
+    """window-0-5 of the seeded drone worlds with 4 drones: at full speed a tether's clearance rows and the
+    acceleration bounds conflict at t = 15.95 s (no common solution); going back 1 s and taking the next 3 s at half
+    speed gives a plan that passes the independent check."""
+    from tmr.planner3d import plan_drones
+    from tmr.sweep.rooms3d import drone_worlds
+    from tmr.world.drones import load_drone_scenario
+
+    world = next(w for w in drone_worlds(6, seed=0) if w.name == "window-0-5")
+    scenario = load_drone_scenario(str(world.write(tmp_path)))
+    plan, metrics = plan_drones(scenario, robots=4)
+    assert plan.diagnostics["slowed_down"] == ["t = 15.95 s"]
+    assert plan.success, plan.failure
+    assert metrics.success and metrics.peak_acceleration <= PRM.drone_accel_max + 1e-6

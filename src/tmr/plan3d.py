@@ -143,7 +143,7 @@ def main_drones(args: argparse.Namespace, owned: tuple[str, ...], volatile: tupl
         return 1
     route = details.get("route")
     extra: dict[str, Any] = {"n_robots": plan.n_robots}
-    for key in ("route_length", "route_lower_bound", "n_min", "robots_auto"):
+    for key in ("route_length", "route_lower_bound", "n_min", "robots_auto", "slowed_down"):
         if key in plan.diagnostics:
             extra[key] = plan.diagnostics[key]
     timings = {k: float(v) for k, v in plan.diagnostics.get("timings", {}).items()}
@@ -167,6 +167,11 @@ def main_drones(args: argparse.Namespace, owned: tuple[str, ...], volatile: tupl
     if "robots_auto" in extra:
         LOG.info("--robots auto: %s; chose N = %d", extra["robots_auto"], plan.n_robots)
     LOG.info(summary(plan, metrics))
+    if "slowed_down" in extra:
+        LOG.info(
+            "  slowed down              at %s (the hard limits had no common solution at full speed: the plan went "
+            "back 1 s and took the next 3 s of the route at half speed)", ", ".join(extra["slowed_down"])
+        )
     LOG.info("  wrote %s to %s", ", ".join(published), Path(args.out))
     if not plan.success:
         LOG.error("plan FAILED: %s", plan.failure)

@@ -400,6 +400,8 @@ class LexicographicQP:
                 result = self._solve_levels(ctx, A0, rows, objectives, relax=False, optimistic=False, solves=solves)
             relaxed = 0.0
         except InfeasibleStep:
+            if not any(lim.relaxable for lim in self.limits):
+                raise  # nothing to drop: every limit is hard
             result = self._solve_levels(ctx, A0, rows, objectives, relax=True, optimistic=False, solves=solves)
             relaxed = 1.0
         assert result is not None

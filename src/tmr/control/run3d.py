@@ -27,11 +27,57 @@ from tmr.world.world3d import World3D
 
 Array = NDArray[np.float64]
 
-__all__ = ["run_drones", "LineReferences", "line_references", "REST_SPEED"]
+__all__ = ["run_drones", "LineReferences", "line_references", "slowed_references", "REST_SPEED"]
 
 #: A drone is at rest when no velocity component exceeds this [m/s] (the plan's end: see :func:`run_drones`); stopping
 #: from it within one step takes 1 m/s², a quarter of the default acceleration limit.
 REST_SPEED = 0.05
+#: A step where the hard limits have no common solution: go back this long [s], ...
+BACK_S = 1.0
+#: ... take this long of the references [s] at half speed (twice the time), then go on; at most SLOW_DOWNS times.
+SLOW_S = 3.0
+SLOW_DOWNS = 3
+
+
+def _grow(x: Array, n: int, fill: float = 0.0) -> Array:
+    """``x`` with its first axis extended to ``n`` (new entries ``fill``)."""
+    if x.shape[0] >= n:
+        return x
+    return np.concatenate([x, np.full((n - x.shape[0], *x.shape[1:]), fill)])
+
+
+def slowed_references(ref: DroneReferencesLike, k0: int, steps: int) -> LineReferences:
+    """``ref`` re-timed: the same paths, but from sample ``k0`` the next ``steps`` samples' worth of motion at half
+    speed (over 2 ``steps`` samples), then the rest as before. Positions are interpolated linearly between the
+    original samples; velocities are the original ones interpolated, halved over the slow part (Ts unchanged)."""
+    t = np.asarray(ref.t, dtype=float)
+    K = len(t) - 1
+    Ts = float(t[1] - t[0]) if K > 0 else 0.0
+    k1 = min(K, k0 + steps)
+    j = np.arange(K + (k1 - k0) + 1, dtype=float)
+    tau = np.where(j <= k0, j, np.where(j <= k0 + 2 * (k1 - k0), k0 + 0.5 * (j - k0), j - (k1 - k0)))
+    rate = np.where((j > k0) & (j <= k0 + 2 * (k1 - k0)), 0.5, 1.0)
+    i = np.minimum(np.floor(tau).astype(int), max(K - 1, 0))
+    w = (tau - i)[:, None]
+
+    def at(x: Array) -> Array:
+        x = np.asarray(x, dtype=float)
+        if K == 0:
+            return np.repeat(x[:1], len(j), axis=0)
+        ww = w.reshape(-1, *([1] * (x.ndim - 1)))
+        return (1.0 - ww) * x[i] + ww * x[i + 1]
+
+    r = rate.reshape(-1, 1)
+    base = np.asarray(getattr(ref, "base", np.asarray(ref.positions)[0, 0]), dtype=float)
+    return LineReferences(
+        base=base,
+        t=Ts * j,
+        x=at(ref.x),
+        xd=at(ref.xd) * r,
+        positions=at(ref.positions),
+        velocities=at(ref.velocities) * r[:, :, None],
+        start_positions=np.asarray(getattr(ref, "start_positions", np.asarray(ref.positions)[0]), dtype=float),
+    )
 
 
 @dataclass
@@ -121,18 +167,18 @@ def run_drones(
     v_prev = np.zeros(3 * N)
     t_start = time.perf_counter()
     last = K
+    slowed: list[str] = []
 
-    def record(k: int) -> None:
-        if qs is not None:
-            qs[k] = q
-        a[k] = [np.nan if c.a is None else c.a for c in ctx.catenaries]
+    def end_of_motion(r: DroneReferencesLike) -> int:
+        """The references' last change: after it the plan may end early, once the chain rests at the goal."""
+        moving = np.flatnonzero(np.any(np.diff(np.asarray(r.positions), axis=0) != 0.0, axis=(1, 2)))
+        return int(moving[-1]) + 1 if len(moving) else 0
 
-    # the references' last change: after it the plan may end early, once the chain has come to rest at the goal
-    moving = np.flatnonzero(np.any(np.diff(np.asarray(ref.positions), axis=0) != 0.0, axis=(1, 2)))
-    k_end = int(moving[-1]) + 1 if len(moving) else 0
+    k_end = end_of_motion(ref)
     g_end = np.asarray(ref.x[-1] if goal is None else goal, dtype=float)
     near = 0.5 * params.goal_tolerance
-    for k in range(K + 1):
+    k = 0
+    while True:
         t0 = time.perf_counter()
         robots[k] = P
         try:
@@ -141,7 +187,9 @@ def run_drones(
             failure = f"step {k} (t = {k * Ts:.2f} s): {exc}"
             last = k - 1
             break
-        record(k)
+        if qs is not None:
+            qs[k] = q
+        a[k] = [np.nan if c.a is None else c.a for c in ctx.catenaries]
         if k == K or (
             k >= k_end
             and float(np.linalg.norm(P[-1] - g_end)) <= near
@@ -152,7 +200,21 @@ def run_drones(
         try:
             out, d = formulation.step(ctx)
         except InfeasibleStep as exc:
-            failure = str(exc)
+            if len(slowed) < SLOW_DOWNS and k > 0 and not joints:
+                # the hard limits conflict at this speed (a damper asks a drone to brake harder than a_max):
+                # go back BACK_S and take the next SLOW_S of the references at half speed, then go on
+                k0 = max(0, k - int(round(BACK_S / Ts)))
+                ref = slowed_references(ref, k0, int(round(SLOW_S / Ts)))
+                slowed.append(f"t = {k * Ts:.2f} s")
+                ctx.references = ref
+                K, k_end = len(ref.t) - 1, end_of_motion(ref)
+                robots, vel, a = _grow(robots, K + 1), _grow(vel, K + 1), _grow(a, K + 1, np.nan)
+                diag = {key: _grow(val, K + 1, np.nan) for key, val in diag.items()}
+                k, P = k0, robots[k0].copy()
+                v_prev = vel[k0 - 1].reshape(-1).copy() if k0 > 0 else np.zeros(3 * N)
+                formulation.reset()
+                continue
+            failure = str(exc) + (f" (after slowing down at {', '.join(slowed)})" if slowed else "")
             last = k
             break
         if joints:
@@ -170,6 +232,7 @@ def run_drones(
         for key, val in d.items():
             diag.setdefault(key, np.full(K + 1, np.nan))[k] = val
         P, v_prev = P_next, v
+        k += 1
     n = max(last, 0) + 1
     short = float(np.linalg.norm(robots[n - 1, -1] - g_end))
     if failure is None and short > params.goal_tolerance:
@@ -183,6 +246,8 @@ def run_drones(
     wall = time.perf_counter() - t_start
     diagnostics: dict[str, Any] = {key: val[:n] for key, val in diag.items()}
     diagnostics["timings"] = {"loop": wall}
+    if slowed:
+        diagnostics["slowed_down"] = slowed
     plan_params = {"planner": asdict(params), "tether": asdict(tether)}
     return DronePlan(
         method=formulation.name,
