@@ -170,7 +170,8 @@ def main_drones(args: argparse.Namespace, owned: tuple[str, ...], volatile: tupl
     if "slowed_down" in extra:
         LOG.info(
             "  slowed down              at %s (the hard limits had no common solution at full speed: the plan went "
-            "back 1 s and took the next 3 s of the route at half speed)", ", ".join(extra["slowed_down"])
+            "back 1 s and took the next 3 s of the route at half speed)",
+            ", ".join(extra["slowed_down"]),
         )
     LOG.info("  wrote %s to %s", ", ".join(published), Path(args.out))
     if not plan.success:

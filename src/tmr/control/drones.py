@@ -397,7 +397,7 @@ class DroneStepContext:
         return self._drone_world()[1]
 
     def _drone_world(self) -> tuple[Array, Array]:
-        if self._drone_nearest_obstacle is None:  # only pinv's soft obstacle task reads it: the QP has per-obstacle rows
+        if self._drone_nearest_obstacle is None:  # only pinv reads it: the QP has its per-obstacle rows
             self._drone_nearest_obstacle = self.world.clearance_and_gradient(self.points[1:])
         return self._drone_nearest_obstacle
 
