@@ -221,28 +221,40 @@ class CheckWorld:
         lo, hi = np.asarray(data.bounds, dtype=float)
         return np.concatenate([lo, hi])
 
-    def obstacle_distance(self, points: Array, cutoff: float = math.inf) -> tuple[Array, NDArray[np.int64]]:
+    def aabbs(self) -> Array:
+        """Every obstacle's axis-aligned bounding box (B, 6) = (xmin, ymin, zmin, xmax, ymax, zmax) [m]."""
+        return np.array([self._aabb(k) for k in range(len(self.obstacles))]).reshape(-1, 6)
+
+    def obstacle_distance(
+        self, points: Array, cutoff: float = math.inf, mask: NDArray[np.bool_] | None = None
+    ) -> tuple[Array, NDArray[np.int64]]:
         """Signed distance to the nearest obstacle (P,) [m] (+inf without obstacles) and its index (-1 if none).
 
         Exact where it is below ``cutoff`` [m]; a point farther than ``cutoff`` from a prism's or mesh's bounding box
-        gets the box distance, a lower bound (>= cutoff)."""
+        gets the box distance, a lower bound (>= cutoff). ``mask`` (P, B) bool: only obstacle k is measured from
+        point p where ``mask[p, k]`` (default: every one)."""
         p = np.asarray(points, dtype=float).reshape(-1, 3)
         best = np.full(p.shape[0], np.inf)
         which = np.full(p.shape[0], -1, dtype=np.int64)
         for k, (kind, data) in enumerate(self.obstacles):
+            sel = slice(None) if mask is None else np.flatnonzero(mask[:, k])
+            ps = p[sel]
+            if ps.shape[0] == 0:
+                continue
+            best_s = best[sel]
             if kind == "box":
-                dist = box_signed_distance(p, data)[:, 0]
+                dist = box_signed_distance(ps, data)[:, 0]
             else:
-                dist = box_signed_distance(p, self._aabb(k))[:, 0]
-                near = np.nonzero(dist < np.minimum(cutoff, best))[0]  # only there can the exact value matter
+                dist = box_signed_distance(ps, self._aabb(k))[:, 0]
+                near = np.nonzero(dist < np.minimum(cutoff, best_s))[0]  # only there can the exact value matter
                 if near.size:
                     if kind == "prism":
-                        dist[near] = prism_signed_distance(p[near], *data)
+                        dist[near] = prism_signed_distance(ps[near], *data)
                     else:
-                        dist[near] = mesh_signed_distance(p[near], data)
-            closer = dist < best
-            best = np.where(closer, dist, best)
-            which = np.where(closer, k, which)
+                        dist[near] = mesh_signed_distance(ps[near], data)
+            closer = dist < best_s
+            best[sel] = np.where(closer, dist, best_s)
+            which[sel] = np.where(closer, k, which[sel])
         return best, which
 
     def room_distance(self, points: Array) -> tuple[Array, NDArray[np.int64]]:
@@ -253,10 +265,13 @@ class CheckWorld:
         i = np.argmin(faces, axis=1)
         return faces[np.arange(p.shape[0]), i], i
 
-    def distance(self, points: Array, cutoff: float = math.inf) -> tuple[Array, NDArray[np.int64]]:
+    def distance(
+        self, points: Array, cutoff: float = math.inf, mask: NDArray[np.bool_] | None = None
+    ) -> tuple[Array, NDArray[np.int64]]:
         """Distance to the nearest obstacle or room face (P,) [m] and what it is: obstacle index k >= 0, or
-        -1 - face for a room face (see :meth:`room_distance`)."""
-        d_o, k_o = self.obstacle_distance(points, cutoff)
+        -1 - face for a room face (see :meth:`room_distance`). ``mask`` as in :meth:`obstacle_distance`: the answer
+        is the same as without it if every obstacle left out at a point is farther from it than a room face."""
+        d_o, k_o = self.obstacle_distance(points, cutoff, mask)
         d_r, f_r = self.room_distance(points)
         room = d_r < d_o
         return np.where(room, d_r, d_o), np.where(room, -1 - f_r, k_o)
@@ -467,6 +482,57 @@ def curve_points(curves: TetherCurves, index: NDArray[np.int64], s: Array) -> Ar
     return np.where(vert[:, None], straight, out)
 
 
+def curve_boxes(curves: TetherCurves) -> Array:
+    """An axis-aligned box (N_c, 6) [m] around every point :func:`curve_points` gives on each tether (flat index
+    into the (K+1, N) arrays), or the whole space (±inf) where there is no closed-form bound.
+
+    A catenary lies in the vertical plane through its ends, its horizontal coordinate x = a (θ - θ_P) running from
+    0 to d as θ goes from θ_P to θ_Q: its horizontal extent is that of the chord. Its height z - z_P =
+    a (cosh θ - cosh θ_P) is convex in θ, so it is highest at an end and lowest at an end or, when θ_P < 0 < θ_Q,
+    at the vertex θ = 0: z_P + a (1 - cosh θ_P). A vertical (or null-a) tether is its chord. The box is padded by
+    1 mm + 1e-9 of the numbers' size, far more than the rounding of the closed forms. Tethers that are not a valid
+    curve with d > 0 (``curve_points`` still samples them) get the whole space."""
+    p = curves.p.reshape(-1, 3)
+    q = curves.q.reshape(-1, 3)
+    a = curves.a.reshape(-1)
+    sp, cp, sq = curves.sinh_p.reshape(-1), curves.cosh_p.reshape(-1), curves.sinh_q.reshape(-1)
+    length = curves.length.reshape(-1)
+    straight = curves.vertical.reshape(-1) | ~np.isfinite(a)
+    curved = ~straight & curves.valid.reshape(-1) & (curves.d.reshape(-1) > 0.0)
+    lo, hi = np.minimum(p, q), np.maximum(p, q)
+    with np.errstate(invalid="ignore", over="ignore"):
+        vertex = np.where(curved & (sp < 0.0) & (sq > 0.0), p[:, 2] + np.where(curved, a, 0.0) * (1.0 - cp), np.inf)
+        lo[:, 2] = np.minimum(lo[:, 2], vertex)
+        size = np.abs(np.concatenate([lo, hi], axis=1)).max(axis=1) + np.where(
+            curved, length * (1.0 + np.abs(sp) + np.abs(sq)), 0.0
+        )
+        pad = 1e-3 + 1e-9 * size
+        box = np.concatenate([lo - pad[:, None], hi + pad[:, None]], axis=1)
+    known = (straight | curved) & np.isfinite(box).all(axis=1)
+    return np.where(known[:, None], box, np.array([-np.inf] * 3 + [np.inf] * 3))
+
+
+def _candidates(world: CheckWorld, boxes: Array) -> NDArray[np.bool_]:
+    """(N_c, B) bool: obstacle k may be nearer than a room face to some point of the box ``boxes[c]`` (N_c, 6) [m].
+
+    Every point p of box c is within U_c = min over the six room faces of the face's greatest distance over the
+    box of a room face (the room distance is the least face distance). If the box and obstacle k's bounding box
+    are disjoint, at a distance g > 0, then p is outside that bounding box and its distance to obstacle k (exact,
+    or the bounding box's own as :meth:`CheckWorld.obstacle_distance` may give) is >= g; so when g > U_c a room
+    face is strictly nearer than obstacle k at every point of the box, and leaving k out changes neither the
+    distance :meth:`CheckWorld.distance` gives nor what it names."""
+    obs = world.aabbs()
+    if obs.shape[0] == 0:
+        return np.zeros((boxes.shape[0], 0), dtype=bool)
+    b = world.bounds
+    with np.errstate(invalid="ignore"):
+        u = np.minimum((boxes[:, 3:] - b[:3]).min(axis=1), (b[3:] - boxes[:, :3]).min(axis=1))  # (N_c,)
+        gap = np.maximum(np.maximum(boxes[:, None, :3] - obs[None, :, 3:], obs[None, :, :3] - boxes[:, None, 3:]), 0.0)
+        g = np.sqrt((gap * gap).sum(axis=-1))  # (N_c, B)
+        far = (g > 0.0) & (g > u[:, None])
+    return ~far
+
+
 def _curve_clearance(
     world: CheckWorld, curves: TetherCurves, limit: Array, tol: float
 ) -> tuple[Array, Array, Array, NDArray[np.int64], int]:
@@ -483,16 +549,20 @@ def _curve_clearance(
     frac = (np.arange(cid.size) - start[cid]) / counts[cid]
     s = np.where(ok[cid], frac * np.where(ok, length, 0.0)[cid], 0.0)
     cutoff = float(np.max(lim)) + EXACT_RANGE
-    dist, what = world.distance(curve_points(curves, cid, s), cutoff)
+    cand = _candidates(world, curve_boxes(curves))  # (n_c, B): the obstacles that may be a curve's nearest thing
+    dist, what = world.distance(curve_points(curves, cid, s), cutoff, cand[cid])
     best = np.full(n_c, np.inf)
     best_s = np.zeros(n_c)
     best_what = np.full(n_c, -1, dtype=np.int64)
 
     def keep_min(c: NDArray[np.int64], ss: Array, dd: Array, ww: NDArray[np.int64]) -> None:
-        order = np.lexsort((dd, c))
-        c, ss, dd, ww = c[order], ss[order], dd[order], ww[order]
-        first = np.r_[True, c[1:] != c[:-1]]
-        c, ss, dd, ww = c[first], ss[first], dd[first], ww[first]
+        """Each curve's least sample of this batch (``c`` is sorted: the samples of a curve are contiguous; ties:
+        the first) replaces its best if lower."""
+        head = np.flatnonzero(np.r_[True, c[1:] != c[:-1]])
+        low = np.fmin.reduceat(dd, head)  # NaN only if every sample of the curve is NaN (then no update)
+        at = np.flatnonzero(dd == np.repeat(low, np.diff(np.r_[head, c.size])))
+        at = at[np.r_[True, c[at][1:] != c[at][:-1]]] if at.size else at  # the first least sample per curve
+        c, ss, dd, ww = c[at], ss[at], dd[at], ww[at]
         better = dd < best[c]
         best[c[better]], best_s[c[better]], best_what[c[better]] = dd[better], ss[better], ww[better]
 
@@ -522,7 +592,7 @@ def _curve_clearance(
         c, a0, a1, e0, e1 = seg_c[need], s0[need], s1[need], d0[need], d1[need]
         mids = a0[:, None] + (a1 - a0)[:, None] * np.array([0.25, 0.5, 0.75])[None]
         mc = np.repeat(c, 3)
-        md, mw = world.distance(curve_points(curves, mc, mids.reshape(-1)), cutoff)
+        md, mw = world.distance(curve_points(curves, mc, mids.reshape(-1)), cutoff, cand[mc])
         n_samples += int(mc.size)
         keep_min(mc, mids.reshape(-1), md, mw)
         grid_s = np.column_stack([a0, mids, a1])
