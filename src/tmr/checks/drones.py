@@ -26,7 +26,15 @@ curve's least sample so far (only there can the least distance lie) is split (4 
 while no sample of the curve is below its limit, a piece whose bound is below it is split further until <= 2 mm: a
 violation is reported only if the certified bound is below the limit (the sampled value is given in the message), so
 the verdict is exact to within 1 mm of arc, and the least distance reported near a limit is within 1 cm of the
-curve's.
+curve's. Two shortcuts keep those answers (``formulations/drones.md``, "Fast path"): an obstacle is measured only from
+the tethers whose bounding box (:func:`curve_boxes`) may be nearer to it than a room face (then a room face is nearer
+at every point, and the sample's distance and what it names are unchanged); and each piece gets a second lower bound,
+the least room distance over it (exact: a wall's distance is monotone along the curve, the floor's convex, least at an
+end or the vertex) with the obstacles' own 1-Lipschitz bound, which decides the 2 mm refinement and is the certified
+one, and a piece is split towards 2 cm only if it, less the limit, is <= the least margin found so far over the ranked
+tethers (every ancestor of a sample with the plan's least margin passes: its bound is <= that sample's distance), so
+the plan's least margin and where it is are those of the full sampling; a tether far from it keeps fewer samples (its
+per-step least sample is then only an upper bound).
 
 Units: metres, seconds, newtons. Steps k = 0..K index ``plan.t``; drone i (1..N) is ``plan.robots[:, i-1]``;
 tether j (1..N) joins point j-1 (point 0 the anchor) and drone j.
@@ -512,8 +520,9 @@ def curve_boxes(curves: TetherCurves) -> Array:
     return np.where(known[:, None], box, np.array([-np.inf] * 3 + [np.inf] * 3))
 
 
-def _candidates(world: CheckWorld, boxes: Array) -> NDArray[np.bool_]:
-    """(N_c, B) bool: obstacle k may be nearer than a room face to some point of the box ``boxes[c]`` (N_c, 6) [m].
+def _candidates(world: CheckWorld, boxes: Array) -> tuple[NDArray[np.bool_], Array]:
+    """Which obstacles may be nearer than a room face to the points of the boxes ``boxes`` (N_c, 6) [m]: (N_c, B)
+    bool, and the least distance [m] from each box to an obstacle left out (+inf if none).
 
     Every point p of box c is within U_c = min over the six room faces of the face's greatest distance over the
     box of a room face (the room distance is the least face distance). If the box and obstacle k's bounding box
@@ -523,25 +532,28 @@ def _candidates(world: CheckWorld, boxes: Array) -> NDArray[np.bool_]:
     distance :meth:`CheckWorld.distance` gives nor what it names."""
     obs = world.aabbs()
     if obs.shape[0] == 0:
-        return np.zeros((boxes.shape[0], 0), dtype=bool)
+        return np.zeros((boxes.shape[0], 0), dtype=bool), np.full(boxes.shape[0], np.inf)
     b = world.bounds
     with np.errstate(invalid="ignore"):
         u = np.minimum((boxes[:, 3:] - b[:3]).min(axis=1), (b[3:] - boxes[:, :3]).min(axis=1))  # (N_c,)
         gap = np.maximum(np.maximum(boxes[:, None, :3] - obs[None, :, 3:], obs[None, :, :3] - boxes[:, None, 3:]), 0.0)
         g = np.sqrt((gap * gap).sum(axis=-1))  # (N_c, B)
         far = (g > 0.0) & (g > u[:, None])
-    return ~far
+    return ~far, np.where(far, g, np.inf).min(axis=1)
 
 
 def _curve_clearance(
-    world: CheckWorld, curves: TetherCurves, limit: Array, tol: float
+    world: CheckWorld, curves: TetherCurves, limit: Array, tol: float, ranked: NDArray[np.bool_] | None = None
 ) -> tuple[Array, Array, Array, NDArray[np.int64], int]:
     """Per tether (K+1, N): the least sampled distance [m], the arc length where it is [m], the certified lower
     bound on the whole curve's distance [m], the nearest thing's index (:meth:`CheckWorld.distance`); and the number
-    of points sampled."""
+    of points sampled. ``ranked`` (K+1, N) bool: the tethers whose least margin (least sample - limit) is reported
+    (default: all); pieces that cannot hold a sample below the least margin of these so far are not refined
+    (module doc, "Curve sampling")."""
     length = curves.length.reshape(-1)
     lim = limit.reshape(-1)
     n_c = length.size
+    rank = np.ones(n_c, dtype=bool) if ranked is None else np.asarray(ranked, dtype=bool).reshape(-1)
     ok = np.isfinite(length)
     counts = np.maximum(1, np.ceil(np.where(ok, length, 0.0) / COARSE)).astype(np.int64)
     cid = np.repeat(np.arange(n_c), counts + 1)
@@ -549,8 +561,27 @@ def _curve_clearance(
     frac = (np.arange(cid.size) - start[cid]) / counts[cid]
     s = np.where(ok[cid], frac * np.where(ok, length, 0.0)[cid], 0.0)
     cutoff = float(np.max(lim)) + EXACT_RANGE
-    cand = _candidates(world, curve_boxes(curves))  # (n_c, B): the obstacles that may be a curve's nearest thing
-    dist, what = world.distance(curve_points(curves, cid, s), cutoff, cand[cid])
+    # the obstacles that may be a curve's nearest thing, and a lower bound on the distance to the others
+    cand, g_out = _candidates(world, curve_boxes(curves))
+    # the lowest point of a curve that has one inside (θ_P < 0 < θ_Q): its arc length and its height above the floor
+    curved = ~curves.vertical.reshape(-1) & np.isfinite(curves.a.reshape(-1)) & curves.valid.reshape(-1)
+    curved &= curves.d.reshape(-1) > 0.0
+    sp, cp = curves.sinh_p.reshape(-1), curves.cosh_p.reshape(-1)
+    aa = np.where(curved, curves.a.reshape(-1), 0.0)
+    has_v = curved & (sp < 0.0) & (curves.sinh_q.reshape(-1) > 0.0)
+    s_v = np.where(has_v, -aa * sp, np.nan)
+    floor_v = np.where(has_v, curves.p.reshape(-1, 3)[:, 2] - aa * sp * sp / (1.0 + cp) - world.bounds[2], np.inf)
+
+    def measure(c: NDArray[np.int64], ss: Array) -> tuple[Array, NDArray[np.int64], Array, Array]:
+        """Distance [m] and nearest thing (as :meth:`CheckWorld.distance`) at arc ``ss`` of curves ``c``, the room
+        faces' distance and a lower bound on the obstacles' [m]."""
+        pts = curve_points(curves, c, ss)
+        d_o, k_o = world.obstacle_distance(pts, cutoff, cand[c])
+        d_r, f_r = world.room_distance(pts)
+        room = d_r < d_o
+        return np.where(room, d_r, d_o), np.where(room, -1 - f_r, k_o), d_r, np.minimum(d_o, g_out[c])
+
+    dist, what, room_d, obst_d = measure(cid, s)
     best = np.full(n_c, np.inf)
     best_s = np.zeros(n_c)
     best_what = np.full(n_c, -1, dtype=np.int64)
@@ -568,38 +599,41 @@ def _curve_clearance(
 
     keep_min(cid, s, dist, what)
     n_samples = int(cid.size)
-    last = np.r_[cid[1:] != cid[:-1], True]
-    seg_c, s0, s1, d0, d1 = (
-        cid[~last],
-        s[:-1][~last[:-1]],
-        s[1:][~last[:-1]],
-        dist[:-1][~last[:-1]],
-        dist[1:][~last[:-1]],
-    )
+    first, second = np.r_[cid[1:] == cid[:-1], False], np.r_[False, cid[1:] == cid[:-1]]  # a piece's two ends
+    seg_c, s0, s1 = cid[first], s[first], s[second]
+    d0, d1, r0, r1, o0, o1 = dist[first], dist[second], room_d[first], room_d[second], obst_d[first], obst_d[second]
     lower = np.full(n_c, np.inf)
     while seg_c.size:
         delta = s1 - s0
         lb = 0.5 * (d0 + d1 - delta)
         sl = lim[seg_c]
-        undecided = (lb < sl - tol) & (np.minimum(d0, d1) >= sl - tol) & (best[seg_c] >= sl - tol)
+        # the piece's least room distance (exact: each face's distance is monotone or, the floor's, convex along
+        # the curve) and the obstacles' 1-Lipschitz bound: no point of the piece is nearer than the lesser
+        vc = s_v[seg_c]
+        room_lo = np.minimum(np.minimum(r0, r1), np.where((vc >= s0) & (vc <= s1), floor_v[seg_c], np.inf))
+        lb2 = np.maximum(lb, np.minimum(room_lo, 0.5 * (o0 + o1 - delta)) - 1e-9)
+        undecided = (lb2 < sl - tol) & (np.minimum(d0, d1) >= sl - tol) & (best[seg_c] >= sl - tol)
+        m_rank = np.min(np.where(rank & np.isfinite(best), best - lim, np.inf))  # the least reported margin so far
         # dense near the limit, only where the curve's least distance may lie (a piece with lb >= the least sample
-        # cannot hold a lower one); finer where the verdict is still open
-        need = ((lb < sl + BAND) & (lb < best[seg_c]) & (delta > DENSE)) | (undecided & (delta > FINE))
+        # cannot hold a lower one) and the plan's least margin may (lb2 - limit <= the least so far); finer where
+        # the verdict is still open
+        dense = (lb < sl + BAND) & (lb < best[seg_c]) & (lb2 - sl <= m_rank) & (delta > DENSE)
+        need = dense | (undecided & (delta > FINE))
         done = ~need
-        np.minimum.at(lower, seg_c[done], lb[done])
+        np.minimum.at(lower, seg_c[done], lb2[done])
         if not need.any():
             break
-        c, a0, a1, e0, e1 = seg_c[need], s0[need], s1[need], d0[need], d1[need]
+        c, a0, a1 = seg_c[need], s0[need], s1[need]
         mids = a0[:, None] + (a1 - a0)[:, None] * np.array([0.25, 0.5, 0.75])[None]
         mc = np.repeat(c, 3)
-        md, mw = world.distance(curve_points(curves, mc, mids.reshape(-1)), cutoff, cand[mc])
+        md, mw, mr, mo = measure(mc, mids.reshape(-1))
         n_samples += int(mc.size)
         keep_min(mc, mids.reshape(-1), md, mw)
-        grid_s = np.column_stack([a0, mids, a1])
-        grid_d = np.column_stack([e0, md.reshape(-1, 3), e1])
         seg_c = np.repeat(c, 4)
-        s0, s1 = grid_s[:, :-1].reshape(-1), grid_s[:, 1:].reshape(-1)
-        d0, d1 = grid_d[:, :-1].reshape(-1), grid_d[:, 1:].reshape(-1)
+        grid = [np.column_stack([e0[need], m.reshape(-1, 3), e1[need]]) for e0, m, e1 in
+                ((s0, mids, s1), (d0, md, d1), (r0, mr, r1), (o0, mo, o1))]  # fmt: skip
+        s0, d0, r0, o0 = (g[:, :-1].reshape(-1) for g in grid)
+        s1, d1, r1, o1 = (g[:, 1:].reshape(-1) for g in grid)
     lower = np.minimum(lower, best)  # a curve of one point (zero length) has no piece
     shape = curves.length.shape
     return best.reshape(shape), best_s.reshape(shape), lower.reshape(shape), best_what.reshape(shape), n_samples
@@ -901,7 +935,7 @@ def check_drone_plan(
     # no closer than the winch itself (a winch on the floor), less the sampling resolution: a curve that starts
     # exactly at its limit can be certified only to within FINE of it
     limit[:, 0] = min(c_t, base_clear - FINE)
-    t_min, t_s, t_lb, t_what, n_samples = _curve_clearance(w, cur, limit, tol)
+    t_min, t_s, t_lb, t_what, n_samples = _curve_clearance(w, cur, limit, tol, cur.valid)
     bad_curve = (t_lb < limit - tol) & cur.valid
     t_point = lambda k, j: curve_points(cur, np.array([k * n + j]), np.array([t_s[k, j]]))[0]  # noqa: E731
 
@@ -1051,7 +1085,7 @@ def check_drone_plan(
             "drone_clearance": clear.min(axis=1),
             "altitude_margin": alt.min(axis=1),
             "separation": sep.min(axis=1) if sep.size else np.full(n_k, math.inf),
-            "tether_clearance": t_min,
+            "tether_clearance": t_min,  # least sample: within 1 cm of the curve's only near the plan's least margin
             "tether_length": cur.length,
             "tension_p": cur.tension_p,
             "tension_q": cur.tension_q,
