@@ -363,3 +363,59 @@ def test_the_planners_own_failure_stays_first_and_the_check_is_idempotent():
     m1 = check_drone_plan(plan, table())
     m2 = check_drone_plan(plan, table())
     assert not plan.success and m1.failures == m2.failures == ["the QP had no solution at t = 2.00 s"]
+
+
+def _dense(base, drone):
+    """The checker's rebuilt curve base -> drone sampled every 0.1 mm (the truth of these tests) and its length."""
+    cur = rebuild(base, drone, solve3d(base, drone, P).a, P)
+    length = float(cur.length[0, 0])
+    s = np.linspace(0.0, length, int(length / 1e-4))
+    return curve_points(cur, np.zeros(s.size, dtype=np.int64), s), s, length
+
+
+def _top(make, pts, target):
+    """The top z of the box ``make(top)`` whose least distance to ``pts`` is ``target``."""
+    return brentq(lambda top: box_signed_distance(pts, make(top)[None]).min() - target, -1.0, 2.0)
+
+
+@pytest.mark.parametrize("dip", [0.001, -0.001])
+@pytest.mark.parametrize("what", ["post", "floor"])
+def test_a_curve_1_mm_inside_c_t_between_coarse_samples_is_caught(what, dip):
+    # one sagging tether from (1, 5, 2) to (7.3, 5, 2.4) at step 0, with a 4 mm post under it between two coarse
+    # samples (0.5 m apart), or the floor, placed so that the curve's least distance (the truth: the curve sampled
+    # every 0.1 mm) is c_t - dip: 1 mm inside c_t must fail, 1 mm outside must pass. At step 1 the tether passes
+    # 3 mm over a wide box: the plan's least margin so far is small, so only the pieces whose bound is near it
+    # are refined (the fast path) and the bounds of the others must hold
+    base = np.array([1.0, 5.0, 2.0])
+    robots = np.array([[[7.3, 5.0, 2.4]], [[7.3, 8.5, 3.0]]])
+    pts, s, length = _dense(base, robots[0, 0])
+    far, _, _ = _dense(base, robots[1, 0])
+    c_t = P.clearance
+    v = far[np.argmin(far[:, 2])]
+
+    def wide(top):
+        return np.array([v[0] - 0.5, v[1] - 0.3, -1.0, v[0] + 0.5, v[1] + 0.3, top])
+
+    obstacles = [{"box": wide(_top(wide, far, c_t + 0.003)).tolist()}]
+    room = ROOM
+    if what == "post":
+        x = float(pts[np.searchsorted(s, length / np.ceil(length / 0.5) * 3.5), 0])  # between coarse samples 3, 4
+
+        def post(top):
+            return np.array([x - 0.002, 4.5, -1.0, x + 0.002, 5.5, top])
+
+        obstacles.append({"box": post(_top(post, pts, c_t - dip)).tolist()})
+    else:
+        room = [0.0, 0.0, float(pts[:, 2].min()) - (c_t - dip), 10.0, 10.0, 4.0]
+        assert far[:, 2].min() - room[2] > c_t + 0.02
+    plan = make_plan(robots, base=base, bounds=room)
+    m = check_drone_plan(plan, table(obstacles, bounds=room), params={"drone_speed_max": 1e3, "drone_accel_max": 1e6})
+    truth = c_t - dip
+    if dip > 0:
+        k, msg = _only(m, "tether_clearance")
+        assert k == 0 and msg.startswith("tether 1 curve 0.199 m from ")
+        assert ("obstacle #1" if what == "post" else "the floor") in msg
+        assert truth - 1e-9 <= m.min_tether_clearance <= truth + 0.01  # the least sample: within 1 cm of the truth
+    else:
+        assert m.success, m.failures
+        assert m.min_tether_clearance == pytest.approx(c_t + 0.003, abs=0.01)

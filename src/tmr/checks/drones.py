@@ -26,7 +26,15 @@ curve's least sample so far (only there can the least distance lie) is split (4 
 while no sample of the curve is below its limit, a piece whose bound is below it is split further until <= 2 mm: a
 violation is reported only if the certified bound is below the limit (the sampled value is given in the message), so
 the verdict is exact to within 1 mm of arc, and the least distance reported near a limit is within 1 cm of the
-curve's.
+curve's. Two shortcuts keep those answers (``formulations/drones.md``, "Fast path"): an obstacle is measured only from
+the tethers whose bounding box (:func:`curve_boxes`) may be nearer to it than a room face (then a room face is nearer
+at every point, and the sample's distance and what it names are unchanged); and each piece gets a second lower bound,
+the least room distance over it (exact: a wall's distance is monotone along the curve, the floor's convex, least at an
+end or the vertex) with the obstacles' own 1-Lipschitz bound, which decides the 2 mm refinement and is the certified
+one, and a piece is split towards 2 cm only if it, less the limit, is <= the least margin found so far over the ranked
+tethers (every ancestor of a sample with the plan's least margin passes: its bound is <= that sample's distance), so
+the plan's least margin and where it is are those of the full sampling; a tether far from it keeps fewer samples (its
+per-step least sample is then only an upper bound).
 
 Units: metres, seconds, newtons. Steps k = 0..K index ``plan.t``; drone i (1..N) is ``plan.robots[:, i-1]``;
 tether j (1..N) joins point j-1 (point 0 the anchor) and drone j.
@@ -221,28 +229,40 @@ class CheckWorld:
         lo, hi = np.asarray(data.bounds, dtype=float)
         return np.concatenate([lo, hi])
 
-    def obstacle_distance(self, points: Array, cutoff: float = math.inf) -> tuple[Array, NDArray[np.int64]]:
+    def aabbs(self) -> Array:
+        """Every obstacle's axis-aligned bounding box (B, 6) = (xmin, ymin, zmin, xmax, ymax, zmax) [m]."""
+        return np.array([self._aabb(k) for k in range(len(self.obstacles))]).reshape(-1, 6)
+
+    def obstacle_distance(
+        self, points: Array, cutoff: float = math.inf, mask: NDArray[np.bool_] | None = None
+    ) -> tuple[Array, NDArray[np.int64]]:
         """Signed distance to the nearest obstacle (P,) [m] (+inf without obstacles) and its index (-1 if none).
 
         Exact where it is below ``cutoff`` [m]; a point farther than ``cutoff`` from a prism's or mesh's bounding box
-        gets the box distance, a lower bound (>= cutoff)."""
+        gets the box distance, a lower bound (>= cutoff). ``mask`` (P, B) bool: only obstacle k is measured from
+        point p where ``mask[p, k]`` (default: every one)."""
         p = np.asarray(points, dtype=float).reshape(-1, 3)
         best = np.full(p.shape[0], np.inf)
         which = np.full(p.shape[0], -1, dtype=np.int64)
         for k, (kind, data) in enumerate(self.obstacles):
+            sel = slice(None) if mask is None else np.flatnonzero(mask[:, k])
+            ps = p[sel]
+            if ps.shape[0] == 0:
+                continue
+            best_s = best[sel]
             if kind == "box":
-                dist = box_signed_distance(p, data)[:, 0]
+                dist = box_signed_distance(ps, data)[:, 0]
             else:
-                dist = box_signed_distance(p, self._aabb(k))[:, 0]
-                near = np.nonzero(dist < np.minimum(cutoff, best))[0]  # only there can the exact value matter
+                dist = box_signed_distance(ps, self._aabb(k))[:, 0]
+                near = np.nonzero(dist < np.minimum(cutoff, best_s))[0]  # only there can the exact value matter
                 if near.size:
                     if kind == "prism":
-                        dist[near] = prism_signed_distance(p[near], *data)
+                        dist[near] = prism_signed_distance(ps[near], *data)
                     else:
-                        dist[near] = mesh_signed_distance(p[near], data)
-            closer = dist < best
-            best = np.where(closer, dist, best)
-            which = np.where(closer, k, which)
+                        dist[near] = mesh_signed_distance(ps[near], data)
+            closer = dist < best_s
+            best[sel] = np.where(closer, dist, best_s)
+            which[sel] = np.where(closer, k, which[sel])
         return best, which
 
     def room_distance(self, points: Array) -> tuple[Array, NDArray[np.int64]]:
@@ -253,10 +273,13 @@ class CheckWorld:
         i = np.argmin(faces, axis=1)
         return faces[np.arange(p.shape[0]), i], i
 
-    def distance(self, points: Array, cutoff: float = math.inf) -> tuple[Array, NDArray[np.int64]]:
+    def distance(
+        self, points: Array, cutoff: float = math.inf, mask: NDArray[np.bool_] | None = None
+    ) -> tuple[Array, NDArray[np.int64]]:
         """Distance to the nearest obstacle or room face (P,) [m] and what it is: obstacle index k >= 0, or
-        -1 - face for a room face (see :meth:`room_distance`)."""
-        d_o, k_o = self.obstacle_distance(points, cutoff)
+        -1 - face for a room face (see :meth:`room_distance`). ``mask`` as in :meth:`obstacle_distance`: the answer
+        is the same as without it if every obstacle left out at a point is farther from it than a room face."""
+        d_o, k_o = self.obstacle_distance(points, cutoff, mask)
         d_r, f_r = self.room_distance(points)
         room = d_r < d_o
         return np.where(room, d_r, d_o), np.where(room, -1 - f_r, k_o)
@@ -467,15 +490,70 @@ def curve_points(curves: TetherCurves, index: NDArray[np.int64], s: Array) -> Ar
     return np.where(vert[:, None], straight, out)
 
 
+def curve_boxes(curves: TetherCurves) -> Array:
+    """An axis-aligned box (N_c, 6) [m] around every point :func:`curve_points` gives on each tether (flat index
+    into the (K+1, N) arrays), or the whole space (±inf) where there is no closed-form bound.
+
+    A catenary lies in the vertical plane through its ends, its horizontal coordinate x = a (θ - θ_P) running from
+    0 to d as θ goes from θ_P to θ_Q: its horizontal extent is that of the chord. Its height z - z_P =
+    a (cosh θ - cosh θ_P) is convex in θ, so it is highest at an end and lowest at an end or, when θ_P < 0 < θ_Q,
+    at the vertex θ = 0: z_P + a (1 - cosh θ_P). A vertical (or null-a) tether is its chord. The box is padded by
+    1 mm + 1e-9 of the numbers' size, far more than the rounding of the closed forms. Tethers that are not a valid
+    curve with d > 0 (``curve_points`` still samples them) get the whole space."""
+    p = curves.p.reshape(-1, 3)
+    q = curves.q.reshape(-1, 3)
+    a = curves.a.reshape(-1)
+    sp, cp, sq = curves.sinh_p.reshape(-1), curves.cosh_p.reshape(-1), curves.sinh_q.reshape(-1)
+    length = curves.length.reshape(-1)
+    straight = curves.vertical.reshape(-1) | ~np.isfinite(a)
+    curved = ~straight & curves.valid.reshape(-1) & (curves.d.reshape(-1) > 0.0)
+    lo, hi = np.minimum(p, q), np.maximum(p, q)
+    with np.errstate(invalid="ignore", over="ignore"):
+        vertex = np.where(curved & (sp < 0.0) & (sq > 0.0), p[:, 2] + np.where(curved, a, 0.0) * (1.0 - cp), np.inf)
+        lo[:, 2] = np.minimum(lo[:, 2], vertex)
+        size = np.abs(np.concatenate([lo, hi], axis=1)).max(axis=1) + np.where(
+            curved, length * (1.0 + np.abs(sp) + np.abs(sq)), 0.0
+        )
+        pad = 1e-3 + 1e-9 * size
+        box = np.concatenate([lo - pad[:, None], hi + pad[:, None]], axis=1)
+    known = (straight | curved) & np.isfinite(box).all(axis=1)
+    return np.where(known[:, None], box, np.array([-np.inf] * 3 + [np.inf] * 3))
+
+
+def _candidates(world: CheckWorld, boxes: Array) -> tuple[NDArray[np.bool_], Array]:
+    """Which obstacles may be nearer than a room face to the points of the boxes ``boxes`` (N_c, 6) [m]: (N_c, B)
+    bool, and the least distance [m] from each box to an obstacle left out (+inf if none).
+
+    Every point p of box c is within U_c = min over the six room faces of the face's greatest distance over the
+    box of a room face (the room distance is the least face distance). If the box and obstacle k's bounding box
+    are disjoint, at a distance g > 0, then p is outside that bounding box and its distance to obstacle k (exact,
+    or the bounding box's own as :meth:`CheckWorld.obstacle_distance` may give) is >= g; so when g > U_c a room
+    face is strictly nearer than obstacle k at every point of the box, and leaving k out changes neither the
+    distance :meth:`CheckWorld.distance` gives nor what it names."""
+    obs = world.aabbs()
+    if obs.shape[0] == 0:
+        return np.zeros((boxes.shape[0], 0), dtype=bool), np.full(boxes.shape[0], np.inf)
+    b = world.bounds
+    with np.errstate(invalid="ignore"):
+        u = np.minimum((boxes[:, 3:] - b[:3]).min(axis=1), (b[3:] - boxes[:, :3]).min(axis=1))  # (N_c,)
+        gap = np.maximum(np.maximum(boxes[:, None, :3] - obs[None, :, 3:], obs[None, :, :3] - boxes[:, None, 3:]), 0.0)
+        g = np.sqrt((gap * gap).sum(axis=-1))  # (N_c, B)
+        far = (g > 0.0) & (g > u[:, None])
+    return ~far, np.where(far, g, np.inf).min(axis=1)
+
+
 def _curve_clearance(
-    world: CheckWorld, curves: TetherCurves, limit: Array, tol: float
+    world: CheckWorld, curves: TetherCurves, limit: Array, tol: float, ranked: NDArray[np.bool_] | None = None
 ) -> tuple[Array, Array, Array, NDArray[np.int64], int]:
     """Per tether (K+1, N): the least sampled distance [m], the arc length where it is [m], the certified lower
     bound on the whole curve's distance [m], the nearest thing's index (:meth:`CheckWorld.distance`); and the number
-    of points sampled."""
+    of points sampled. ``ranked`` (K+1, N) bool: the tethers whose least margin (least sample - limit) is reported
+    (default: all); pieces that cannot hold a sample below the least margin of these so far are not refined
+    (module doc, "Curve sampling")."""
     length = curves.length.reshape(-1)
     lim = limit.reshape(-1)
     n_c = length.size
+    rank = np.ones(n_c, dtype=bool) if ranked is None else np.asarray(ranked, dtype=bool).reshape(-1)
     ok = np.isfinite(length)
     counts = np.maximum(1, np.ceil(np.where(ok, length, 0.0) / COARSE)).astype(np.int64)
     cid = np.repeat(np.arange(n_c), counts + 1)
@@ -483,53 +561,79 @@ def _curve_clearance(
     frac = (np.arange(cid.size) - start[cid]) / counts[cid]
     s = np.where(ok[cid], frac * np.where(ok, length, 0.0)[cid], 0.0)
     cutoff = float(np.max(lim)) + EXACT_RANGE
-    dist, what = world.distance(curve_points(curves, cid, s), cutoff)
+    # the obstacles that may be a curve's nearest thing, and a lower bound on the distance to the others
+    cand, g_out = _candidates(world, curve_boxes(curves))
+    # the lowest point of a curve that has one inside (θ_P < 0 < θ_Q): its arc length and its height above the floor
+    curved = ~curves.vertical.reshape(-1) & np.isfinite(curves.a.reshape(-1)) & curves.valid.reshape(-1)
+    curved &= curves.d.reshape(-1) > 0.0
+    sp, cp = curves.sinh_p.reshape(-1), curves.cosh_p.reshape(-1)
+    aa = np.where(curved, curves.a.reshape(-1), 0.0)
+    has_v = curved & (sp < 0.0) & (curves.sinh_q.reshape(-1) > 0.0)
+    s_v = np.where(has_v, -aa * sp, np.nan)
+    floor_v = np.where(has_v, curves.p.reshape(-1, 3)[:, 2] - aa * sp * sp / (1.0 + cp) - world.bounds[2], np.inf)
+
+    def measure(c: NDArray[np.int64], ss: Array) -> tuple[Array, NDArray[np.int64], Array, Array]:
+        """Distance [m] and nearest thing (as :meth:`CheckWorld.distance`) at arc ``ss`` of curves ``c``, the room
+        faces' distance and a lower bound on the obstacles' [m]."""
+        pts = curve_points(curves, c, ss)
+        d_o, k_o = world.obstacle_distance(pts, cutoff, cand[c])
+        d_r, f_r = world.room_distance(pts)
+        room = d_r < d_o
+        return np.where(room, d_r, d_o), np.where(room, -1 - f_r, k_o), d_r, np.minimum(d_o, g_out[c])
+
+    dist, what, room_d, obst_d = measure(cid, s)
     best = np.full(n_c, np.inf)
     best_s = np.zeros(n_c)
     best_what = np.full(n_c, -1, dtype=np.int64)
 
     def keep_min(c: NDArray[np.int64], ss: Array, dd: Array, ww: NDArray[np.int64]) -> None:
-        order = np.lexsort((dd, c))
-        c, ss, dd, ww = c[order], ss[order], dd[order], ww[order]
-        first = np.r_[True, c[1:] != c[:-1]]
-        c, ss, dd, ww = c[first], ss[first], dd[first], ww[first]
+        """Each curve's least sample of this batch (``c`` is sorted: the samples of a curve are contiguous; ties:
+        the first) replaces its best if lower."""
+        head = np.flatnonzero(np.r_[True, c[1:] != c[:-1]])
+        low = np.fmin.reduceat(dd, head)  # NaN only if every sample of the curve is NaN (then no update)
+        at = np.flatnonzero(dd == np.repeat(low, np.diff(np.r_[head, c.size])))
+        at = at[np.r_[True, c[at][1:] != c[at][:-1]]] if at.size else at  # the first least sample per curve
+        c, ss, dd, ww = c[at], ss[at], dd[at], ww[at]
         better = dd < best[c]
         best[c[better]], best_s[c[better]], best_what[c[better]] = dd[better], ss[better], ww[better]
 
     keep_min(cid, s, dist, what)
     n_samples = int(cid.size)
-    last = np.r_[cid[1:] != cid[:-1], True]
-    seg_c, s0, s1, d0, d1 = (
-        cid[~last],
-        s[:-1][~last[:-1]],
-        s[1:][~last[:-1]],
-        dist[:-1][~last[:-1]],
-        dist[1:][~last[:-1]],
-    )
+    first, second = np.r_[cid[1:] == cid[:-1], False], np.r_[False, cid[1:] == cid[:-1]]  # a piece's two ends
+    seg_c, s0, s1 = cid[first], s[first], s[second]
+    d0, d1, r0, r1, o0, o1 = dist[first], dist[second], room_d[first], room_d[second], obst_d[first], obst_d[second]
     lower = np.full(n_c, np.inf)
     while seg_c.size:
         delta = s1 - s0
         lb = 0.5 * (d0 + d1 - delta)
         sl = lim[seg_c]
-        undecided = (lb < sl - tol) & (np.minimum(d0, d1) >= sl - tol) & (best[seg_c] >= sl - tol)
+        # the piece's least room distance (exact: each face's distance is monotone or, the floor's, convex along
+        # the curve) and the obstacles' 1-Lipschitz bound: no point of the piece is nearer than the lesser
+        vc = s_v[seg_c]
+        room_lo = np.minimum(np.minimum(r0, r1), np.where((vc >= s0) & (vc <= s1), floor_v[seg_c], np.inf))
+        lb2 = np.maximum(lb, np.minimum(room_lo, 0.5 * (o0 + o1 - delta)) - 1e-9)
+        undecided = (lb2 < sl - tol) & (np.minimum(d0, d1) >= sl - tol) & (best[seg_c] >= sl - tol)
+        m_rank = np.min(np.where(rank & np.isfinite(best), best - lim, np.inf))  # the least reported margin so far
         # dense near the limit, only where the curve's least distance may lie (a piece with lb >= the least sample
-        # cannot hold a lower one); finer where the verdict is still open
-        need = ((lb < sl + BAND) & (lb < best[seg_c]) & (delta > DENSE)) | (undecided & (delta > FINE))
+        # cannot hold a lower one) and the plan's least margin may (lb2 - limit <= the least so far); finer where
+        # the verdict is still open
+        dense = (lb < sl + BAND) & (lb < best[seg_c]) & (lb2 - sl <= m_rank) & (delta > DENSE)
+        need = dense | (undecided & (delta > FINE))
         done = ~need
-        np.minimum.at(lower, seg_c[done], lb[done])
+        np.minimum.at(lower, seg_c[done], lb2[done])
         if not need.any():
             break
-        c, a0, a1, e0, e1 = seg_c[need], s0[need], s1[need], d0[need], d1[need]
+        c, a0, a1 = seg_c[need], s0[need], s1[need]
         mids = a0[:, None] + (a1 - a0)[:, None] * np.array([0.25, 0.5, 0.75])[None]
         mc = np.repeat(c, 3)
-        md, mw = world.distance(curve_points(curves, mc, mids.reshape(-1)), cutoff)
+        md, mw, mr, mo = measure(mc, mids.reshape(-1))
         n_samples += int(mc.size)
         keep_min(mc, mids.reshape(-1), md, mw)
-        grid_s = np.column_stack([a0, mids, a1])
-        grid_d = np.column_stack([e0, md.reshape(-1, 3), e1])
         seg_c = np.repeat(c, 4)
-        s0, s1 = grid_s[:, :-1].reshape(-1), grid_s[:, 1:].reshape(-1)
-        d0, d1 = grid_d[:, :-1].reshape(-1), grid_d[:, 1:].reshape(-1)
+        grid = [np.column_stack([e0[need], m.reshape(-1, 3), e1[need]]) for e0, m, e1 in
+                ((s0, mids, s1), (d0, md, d1), (r0, mr, r1), (o0, mo, o1))]  # fmt: skip
+        s0, d0, r0, o0 = (g[:, :-1].reshape(-1) for g in grid)
+        s1, d1, r1, o1 = (g[:, 1:].reshape(-1) for g in grid)
     lower = np.minimum(lower, best)  # a curve of one point (zero length) has no piece
     shape = curves.length.shape
     return best.reshape(shape), best_s.reshape(shape), lower.reshape(shape), best_what.reshape(shape), n_samples
@@ -831,7 +935,7 @@ def check_drone_plan(
     # no closer than the winch itself (a winch on the floor), less the sampling resolution: a curve that starts
     # exactly at its limit can be certified only to within FINE of it
     limit[:, 0] = min(c_t, base_clear - FINE)
-    t_min, t_s, t_lb, t_what, n_samples = _curve_clearance(w, cur, limit, tol)
+    t_min, t_s, t_lb, t_what, n_samples = _curve_clearance(w, cur, limit, tol, cur.valid)
     bad_curve = (t_lb < limit - tol) & cur.valid
     t_point = lambda k, j: curve_points(cur, np.array([k * n + j]), np.array([t_s[k, j]]))[0]  # noqa: E731
 
@@ -981,7 +1085,7 @@ def check_drone_plan(
             "drone_clearance": clear.min(axis=1),
             "altitude_margin": alt.min(axis=1),
             "separation": sep.min(axis=1) if sep.size else np.full(n_k, math.inf),
-            "tether_clearance": t_min,
+            "tether_clearance": t_min,  # least sample: within 1 cm of the curve's only near the plan's least margin
             "tether_length": cur.length,
             "tension_p": cur.tension_p,
             "tension_q": cur.tension_q,
