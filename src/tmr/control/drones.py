@@ -188,27 +188,31 @@ def segment_nearest_k(
             shape2, place2 = geom.box, _placement(geom.centre)
         else:
             shape2, place2 = geom, _IDENTITY
-        if len(cand) and frames is None:
-            frames = _segment_frames(a, b)
-        R, mid, half = frames if frames is not None else (None, None, None)
-        for kk, i in enumerate(cand):
-            assert R is not None and mid is not None and half is not None
-            capsule.halfLength = max(float(half[i]), 1e-12)
-            res.clear()
-            d = float(coal.distance(capsule, coal.Transform3s(R[i], mid[i]), shape2, place2, _REQUEST, res))
-            if inside[kk]:
-                d = -abs(d) if d > 0 else d
-            out[i] = d
-            p1, p2 = np.asarray(res.getNearestPoint1()), np.asarray(res.getNearestPoint2())
+        if len(cand):
+            if frames is None:
+                frames = _segment_frames(a, b)
+            R, mid, half = frames
+            # the queries alone in the loop (coal: ~2 µs each); their results are turned into rows at once below
+            nc = len(cand)
+            d = np.empty(nc)
+            p1, p2 = np.empty((nc, 3)), np.empty((nc, 3))
+            halves = np.maximum(half[cand], 1e-12).tolist()
+            for kk, i in enumerate(cand.tolist()):
+                capsule.halfLength = halves[kk]
+                res.clear()
+                d[kk] = coal.distance(capsule, coal.Transform3s(R[i], mid[i]), shape2, place2, _REQUEST, res)
+                p1[kk] = res.getNearestPoint1()
+                p2[kk] = res.getNearestPoint2()
+            d = np.where(inside & (d > 0.0), -np.abs(d), d)
+            out[cand] = d
             v = p1 - p2
-            nv = float(np.sqrt(v @ v))
-            if nv > 1e-12:
-                grad[i] = math.copysign(1.0, d) * v / nv
-            else:  # touching: away from the centre of the obstacle's bounding box
-                off = 0.5 * (a[i] + b[i]) - 0.5 * (ob.lo + ob.hi)
-                grad[i] = off / max(float(np.linalg.norm(off)), 1e-12)
-            if half[i] > 1e-12:
-                t[i] = min(1.0, max(0.0, 0.5 + float((p1 - mid[i]) @ R[i][:, 2]) / (2.0 * half[i])))
+            nv = np.sqrt(np.einsum("ij,ij->i", v, v))
+            off = 0.5 * (a[cand] + b[cand]) - 0.5 * (ob.lo + ob.hi)  # touching: away from the bounding box's centre
+            off /= np.maximum(np.linalg.norm(off, axis=1), 1e-12)[:, None]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                grad[cand] = np.where((nv > 1e-12)[:, None], np.copysign(1.0, d)[:, None] * v / nv[:, None], off)
+                along = np.einsum("ij,ij->i", p1 - mid[cand], R[cand][:, :, 2]) / (2.0 * half[cand])
+            t[cand] = np.where(half[cand] > 1e-12, np.clip(0.5 + along, 0.0, 1.0), 0.0)
         items_c.append(out[:, None])
         items_g.append(grad[:, None, :])
         items_t.append(t[:, None])
