@@ -122,6 +122,9 @@ def test_pulled_apart_until_the_arc_length_binds():
     assert lengths.max() > bound - 0.02  # it binds ...
     assert np.nanmax(plan.diagnostics["leader_residual"]) > 0.1  # ... and holds the leader back
     assert np.linalg.norm(plan.robots[-1, -1] - plan.goal) > 1.0
+    # stalled: it stopped STALL_S after the references came to rest, not at the end of their settle
+    k_end = int(np.flatnonzero(np.any(np.diff(ref.positions, axis=0) != 0, axis=(1, 2)))[-1]) + 1
+    assert len(plan.t) - 1 == k_end + round(1.0 / PRM.Ts) < len(ref.t) - 1
 
 
 def test_drone_end_tension_binds_when_climbing():

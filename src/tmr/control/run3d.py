@@ -37,6 +37,10 @@ BACK_S = 1.0
 #: ... take this long of the references [s] at half speed (twice the time), then go on; at most SLOW_DOWNS times.
 SLOW_S = 3.0
 SLOW_DOWNS = 3
+#: After the references stop, a leader farther than the goal tolerance that got less than STALL_GAIN [m] closer over
+#: the last STALL_S [s] has stalled: the plan ends there (failed: held back), without waiting for the whole settle.
+STALL_S = 1.0
+STALL_GAIN = 0.01
 
 
 def _grow(x: Array, n: int, fill: float = 0.0) -> Array:
@@ -177,6 +181,7 @@ def run_drones(
     k_end = end_of_motion(ref)
     g_end = np.asarray(ref.x[-1] if goal is None else goal, dtype=float)
     near = 0.5 * params.goal_tolerance
+    stall = int(round(STALL_S / Ts))
     k = 0
     while True:
         t0 = time.perf_counter()
@@ -190,11 +195,20 @@ def run_drones(
         if qs is not None:
             qs[k] = q
         a[k] = [np.nan if c.a is None else c.a for c in ctx.catenaries]
-        if k == K or (
-            k >= k_end
-            and float(np.linalg.norm(P[-1] - g_end)) <= near
-            and float(np.max(np.abs(v_prev), initial=0.0)) <= REST_SPEED
-        ):
+        if k >= k_end:  # the references are at rest: the plan ends once the chain rests at the goal, or stalls
+            gap = float(np.linalg.norm(P[-1] - g_end))
+            if k == K or (gap <= near and float(np.max(np.abs(v_prev), initial=0.0)) <= REST_SPEED):
+                last = k
+                break
+            kb = k - stall
+            if (
+                kb >= k_end
+                and gap > params.goal_tolerance
+                and float(np.linalg.norm(robots[kb, -1] - g_end)) - gap < STALL_GAIN
+            ):
+                last = k  # held back: another second brought the leader less than STALL_GAIN closer
+                break
+        elif k == K:
             last = k
             break
         try:
