@@ -90,6 +90,13 @@ NEPTUNE = {
 }
 
 
+def _median_ms(seconds: Any) -> float | None:
+    """Median [ms] of the finite entries of a per-step series [s] (None if there are none)."""
+    x = np.asarray([] if seconds is None else seconds, dtype=float)
+    x = x[np.isfinite(x)]
+    return float(np.median(x)) * 1e3 if x.size else None
+
+
 def _why(message: str) -> str:
     """The kind of a planner's own failure, from its message."""
     if message.startswith("the leader stopped"):
@@ -184,6 +191,7 @@ def _in_process(scenario: Any, robots: str, plan_seed: int) -> dict[str, Any]:
         step_ms_median=float(np.median(step)) * 1e3 if step.size else None,
         step_ms_p90=float(np.percentile(step, 90)) * 1e3 if step.size else None,
         step_ms_max=float(step.max()) * 1e3 if step.size else None,
+        qp_ms_median=_median_ms(plan.diagnostics.get("qp_step_time")),
         leader_error=float(np.linalg.norm(plan.robots[-1, -1] - plan.goal)),
     )
     return row
@@ -284,7 +292,8 @@ def _below_bound(row: dict[str, Any]) -> bool:
 CSV_FIELDS = [
     "world", "family", "reachable", "tether_length", "robots", "route", "bound", "route_length",
     "lower_bound_length", "route_s", "load_s", "outcome", "needed", "proven", "call_s", "n_used", "steps",
-    "plan_duration", "violations", "step_ms_median", "step_ms_p90", "step_ms_max", "leader_error", "exit_code",
+    "plan_duration", "violations", "step_ms_median", "step_ms_p90", "step_ms_max", "qp_ms_median", "leader_error",
+    "exit_code",
     "exit_agrees", "whole_s", "whole_s_min", "whole_s_max", "message", "stderr_last",
 ]  # fmt: skip
 
@@ -347,8 +356,10 @@ def report(rows: list[dict[str, Any]], h_rows: list[dict[str, Any]], worlds: lis
     w(f"| median whole-process time < {TARGET_MEDIAN_WHOLE_S:g} s | {_fmt(mw)} s over {len(whole)} runs | ")
     w(f"{_ok(mw is not None and mw < TARGET_MEDIAN_WHOLE_S)} |\n")
     m8 = _med(step8)
-    w(f"| per-step QP time for 8 drones ≤ {TARGET_STEP_MS:g} ms median | {_fmt(m8, '.3f')} ms (median of the ")
-    w(f"{len(step8)} plans' medians) | {_ok(m8 is not None and m8 <= TARGET_STEP_MS)} |\n")
+    q8 = _med(_vals([r for r in plans if r.get("n_used") == 8], "qp_ms_median"))
+    w(f"| per-step QP time for 8 drones ≤ {TARGET_STEP_MS:g} ms median | {_fmt(m8, '.3f')} ms for the whole step ")
+    w(f"(catenaries, world queries, rows, QP), of which the QP {_fmt(q8, '.3f')} ms (medians of the {len(step8)} ")
+    w(f"plans' medians) | {_ok(m8 is not None and m8 <= TARGET_STEP_MS)} |\n")
     if h5:
         hw = h5.get("whole_s")
         w(f"| H arena, 5 drones, whole process < {TARGET_H_S:g} s | {_fmt(hw)} s (median of {info['h_repeats']}), ")

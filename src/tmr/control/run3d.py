@@ -145,10 +145,12 @@ def run_drones(
     plan waits for the chain to come to rest, not a fixed tail.
 
     ``diagnostics``: per step (K+1,) ``step_time`` [s] (the whole step: catenaries, world queries, rows and the
-    QP), ``leader_residual`` [m/s] (the leader task's residual: > 0 when a limit holds the leader back), the
-    formulation's own (``qp_level:<name>`` status codes of :data:`tmr.control.qp.LEVEL_STATUS`, ...), and under
-    ``"timings"`` the loop's wall time. The plan is not checked (``success`` is True if every step was computed and
-    the leader ended within the goal tolerance; the independent checker decides the rest).
+    QP), ``qp_step_time`` [s] (the QP's part: its rows and solves; ``qp`` only), ``leader_residual`` [m/s] (the
+    leader task's residual: > 0 when a limit holds the leader back), the formulation's own (``qp_level:<name>``
+    status codes of :data:`tmr.control.qp.LEVEL_STATUS`, ...), ``slowed_down`` (where the references were slowed,
+    if they were) and under ``"timings"`` the loop's wall time. The plan is not checked (``success`` is True if
+    every step was computed and the leader ended within the goal tolerance; the independent checker decides the
+    rest).
     """
     ctx = formulation.context
     chain = ctx.chain
@@ -240,6 +242,8 @@ def run_drones(
             v = out
             P_next = P + Ts * v.reshape(N, 3)
         vel[k] = v.reshape(N, 3)
+        if "step_time" in d:  # the formulation's own (the QP: its rows and solves), apart from the whole step
+            d["qp_step_time"] = d["step_time"]
         d["step_time"] = time.perf_counter() - t0
         lead = ctx.xd_d + params.leader_gain * (ctx.x_d - P[-1])
         d.setdefault("leader_residual", float(np.linalg.norm(v[-3:] - lead)))
