@@ -15,6 +15,7 @@ from tmr.route.route3d import (
     NoRouteError,
     StartError,
     TooFewRobotsError,
+    _boxes_disconnected,
     chain_violations,
     check_drone_count,
     drone_references,
@@ -258,3 +259,64 @@ def test_a_bound_above_the_route_is_an_internal_error(monkeypatch):
     monkeypatch.setattr(route3d, "_lipschitz", lambda phi, lat: (0.1 * true_lipschitz(phi, lat)[0], None))
     with pytest.raises(AssertionError, match=r"lower bound \d+\.\d+ m exceeds the route found"):
         plan_route3d(_wall_world(), [2.0, 2.0, 1.0], [8.0, 2.0, 1.0], TETHER)
+
+
+def _window_wall(height: float, thickness: float = 0.3) -> World3D:
+    """A wall x = 5 .. 5 + thickness across the room, floor to ceiling, with a 2 m wide window of ``height`` from
+    z = 2 (four boxes)."""
+    x0, x1 = 5.0, 5.0 + thickness
+    return World3D(
+        [
+            box_obstacle([x0, 0.0, 0.0], [x1, 10.0, 2.0]),
+            box_obstacle([x0, 0.0, 2.0 + height], [x1, 10.0, 4.0]),
+            box_obstacle([x0, 0.0, 2.0], [x1, 4.0, 2.0 + height]),
+            box_obstacle([x0, 6.0, 2.0], [x1, 10.0, 2.0 + height]),
+        ],
+        ROOM,
+        0.3,
+    )
+
+
+@pytest.mark.parametrize("height", [0.3, 0.36, 0.39])
+def test_a_window_lower_than_twice_the_clearance_is_proven_closed(height):
+    """A window lower than 2c = 0.4 m (c = c_t = 0.2 m): no curve keeping c passes, at any lattice. The lattice
+    proofs leave 0.36-0.39 m unproven (their slack ρ ≥ 0.095 m on each side; the benchmark's closed windows and
+    low-wall gaps of 0.30-0.38 m were exit 1); the exact proof on the boxes' faces proves them."""
+    w = _window_wall(height)
+    b, g = np.array([1.0, 5.0, 0.4]), np.array([9.0, 5.0, 2.0])
+    assert _boxes_disconnected(w, b, g, 0.2)
+    with pytest.raises(NoRouteError, match="cannot be reached") as exc:
+        plan_route3d(w, b, g, TETHER)
+    assert exc.value.proven
+
+
+@pytest.mark.parametrize("height", [0.41, 0.5])
+def test_a_window_a_tether_passes_is_not_proven_closed(height):
+    """A window higher than 2c: a curve keeping c = 0.2 m passes through its middle, so the exact proof must not
+    separate (a drone, 2r = 0.6 m, still cannot: a lattice verdict, exit 1); nor with the window's own edges
+    touching the room's walls (a gap between the wall and the room's side)."""
+    w = _window_wall(height)
+    b, g = np.array([1.0, 5.0, 0.4]), np.array([9.0, 5.0, 2.0])
+    assert not _boxes_disconnected(w, b, g, 0.2)
+    assert _boxes_disconnected(w, b, g, 0.5 * height + 0.01)
+    with pytest.raises(NoRouteError, match="no free route for a drone") as exc:
+        plan_route3d(w, b, g, TETHER)
+    assert not exc.value.proven
+    side_gap = World3D([box_obstacle([5.0, 0.0, 0.0], [5.3, 10.0 - 2 * 0.2 - 0.01, 4.0])], ROOM, 0.3)
+    assert not _boxes_disconnected(side_gap, b, g, 0.2)
+    assert _boxes_disconnected(side_gap, b, g, 0.21)
+
+
+def test_the_box_proof_sees_an_edge_pinch():
+    """Two wall halves offset in x and overlapping in y by nothing: their edges leave a diagonal slot 0.25 m wide
+    (0.25/√2 along each axis): a curve keeping 0.2 m needs 0.4, so the slot is closed; the corner/edge blocks of
+    the c-neighbourhood (c/√2 along two axes) close it, face slabs alone would not."""
+    d = 0.25 / math.sqrt(2.0)
+    w = World3D(
+        [box_obstacle([4.0, 0.0, 0.0], [5.0, 5.0, 4.0]), box_obstacle([5.0 + d, 5.0 + d, 0.0], [6.0, 10.0, 4.0])],
+        ROOM,
+        0.3,
+    )
+    b, g = np.array([1.0, 5.0, 0.4]), np.array([9.0, 5.0, 2.0])
+    assert _boxes_disconnected(w, b, g, 0.2)
+    assert not _boxes_disconnected(w, b, g, 0.12)
