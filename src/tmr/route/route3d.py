@@ -39,14 +39,15 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import shapely
 from numpy.typing import ArrayLike, NDArray
 from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.sparse.csgraph import dijkstra
 
 from tmr.errors import ParameterError, TetherSpanError, TmrError, fmt_point
 from tmr.model.catenary3d import DroneTetherParams, solve3d
 from tmr.route.geodesic import NoRouteError, TooFewRobotsError
-from tmr.world.world3d import World3D, _PlacedBox, box_obstacle
+from tmr.world.world3d import Obstacle3D, World3D, _PlacedBox, box_obstacle
 
 Array = NDArray[np.float64]
 
@@ -203,10 +204,64 @@ def _obstacle_distance(world: World3D, pts: Array, cap: float) -> Array:
     for ob in world.obstacles:  # one at a time: inside an overlap, the deepest single depth
         gap = np.linalg.norm(np.maximum(0.0, np.maximum(ob.lo - pts, pts - ob.hi)), axis=1)
         near = np.flatnonzero(gap < cap)
-        if len(near):
-            alone = World3D([ob], np.r_[lo - span, hi + span], 0.0)  # the walls far away: this obstacle only
-            out[near] = np.minimum(out[near], alone.exact_clearance(pts[near]))
+        if not len(near):
+            continue
+        if isinstance(ob.geometry, _PlacedBox):  # the box's signed distance in closed form (as coal's sphere-box)
+            p = pts[near]
+            inside = np.minimum(np.min(p - ob.lo, axis=1), np.min(ob.hi - p, axis=1))
+            d = np.where(inside > 0.0, -inside, gap[near])
+        else:
+            footprint = _vertical_prism(ob)
+            if footprint is not None:
+                d = _prism_distance(footprint, float(ob.lo[2]), float(ob.hi[2]), pts[near])
+            else:
+                alone = World3D([ob], np.r_[lo - span, hi + span], 0.0)  # the walls far away: this obstacle only
+                d = alone.exact_clearance(pts[near])
+        out[near] = np.minimum(out[near], d)
     return out
+
+
+def _vertical_prism(ob: Obstacle3D) -> Any:
+    """The footprint (a shapely Polygon) of a convex obstacle that is a vertical prism (every hull point at its
+    lowest or highest z, the same xy at both), else None."""
+    if ob.triangles is not None or not hasattr(ob.geometry, "points"):
+        return None
+    pts = np.asarray(ob.geometry.points(), dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 6:
+        return None
+    low, high = np.isclose(pts[:, 2], ob.lo[2], atol=1e-12), np.isclose(pts[:, 2], ob.hi[2], atol=1e-12)
+    if not np.all(low | high):
+        return None
+    a, b = np.unique(np.round(pts[low, :2], 12), axis=0), np.unique(np.round(pts[high, :2], 12), axis=0)
+    if a.shape != b.shape or not np.array_equal(a, b):
+        return None
+    return shapely.MultiPoint(a).convex_hull
+
+
+def _prism_distance(footprint: Any, z0: float, z1: float, pts: Array) -> Array:
+    """Signed distance [m] of points (n, 3) to the vertical prism footprint × [z0, z1] (< 0 inside): outside,
+    √(d_xy² + d_z²) with d_xy the planar distance to the footprint (shapely) and d_z to [z0, z1]; inside, minus the
+    smallest of the depth in plan (the distance to the footprint's boundary) and to the two caps."""
+    xy = shapely.points(pts[:, :2])
+    dxy = shapely.distance(footprint, xy)
+    dz = np.maximum(0.0, np.maximum(z0 - pts[:, 2], pts[:, 2] - z1))
+    out = np.sqrt(dxy**2 + dz**2)
+    inside = (dxy == 0.0) & (dz == 0.0)
+    if inside.any():
+        depth = shapely.distance(footprint.exterior, xy[inside])
+        p = pts[inside]
+        out[inside] = -np.minimum(depth, np.minimum(p[:, 2] - z0, z1 - p[:, 2]))
+    return out
+
+
+def _components26(mask: NDArray[np.bool_]) -> NDArray[np.int64]:
+    """Labels (flat) of the 26-connected components of a 3-D mask (0 outside it): ``scipy.ndimage.label`` with the
+    full 3 × 3 × 3 structure, the same components as the 26-connected lattice graph (imported here: only the
+    no-route proofs need it)."""
+    from scipy import ndimage
+
+    labels, _ = ndimage.label(mask, structure=np.ones((3, 3, 3), dtype=bool))
+    return np.asarray(labels).reshape(-1)
 
 
 def _cells_disconnected(world: World3D, lat: _Lattice, nodes: Array, b: Array, g: Array, c: float) -> bool:
@@ -239,7 +294,7 @@ def _cells_disconnected(world: World3D, lat: _Lattice, nodes: Array, b: Array, g
     nb, ng = node(b), node(g)
     if not (ok[nb] and ok[ng]):
         return not ok[ng] if ok[nb] else False  # b's own cube always holds b: a failed test there proves nothing
-    _, labels = connected_components(_graph(lat, ok), directed=False)
+    labels = _components26(ok.reshape(lat.shape))
     return bool(labels[nb] != labels[ng])
 
 
@@ -303,7 +358,7 @@ def _boxes_disconnected(world: World3D, b: Array, g: Array, c: float) -> bool:
     flat = free.reshape(-1)
     if not (flat[nb] and flat[ng]):
         return False
-    _, labels = connected_components(_graph(_Lattice(np.zeros(3), 1.0, shape), flat), directed=False)
+    labels = _components26(free)
     return bool(labels[nb] != labels[ng])
 
 
