@@ -320,3 +320,22 @@ def test_the_box_proof_sees_an_edge_pinch():
     b, g = np.array([1.0, 5.0, 0.4]), np.array([9.0, 5.0, 2.0])
     assert _boxes_disconnected(w, b, g, 0.2)
     assert not _boxes_disconnected(w, b, g, 0.12)
+
+
+def test_route_and_references_import_no_scipy_optimize():
+    """scipy.optimize costs ~0.2 s to import; the route, the references and the start's cold catenary solves need
+    none of it (a refusal or a start-up pays only for what it uses)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from tmr.route.route3d import drone_references, plan_route3d\n"
+        "from tmr.world.drones import load_drone_scenario\n"
+        "sc = load_drone_scenario('F')\n"
+        "rt = plan_route3d(sc.world, sc.base, sc.goal, sc.tether)\n"
+        "drone_references(rt, 3, world=sc.world)\n"
+        "print(sorted(m for m in sys.modules if m.startswith('scipy.optimize')))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr
