@@ -339,3 +339,27 @@ def test_route_and_references_import_no_scipy_optimize():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
+def test_the_lattice_graph_is_the_26_neighbourhood():
+    """_graph's CSR rows (built from the neighbour offsets) against a plain enumeration of each node's 26 neighbours on
+    a small lattice with random holes: same neighbours, Euclidean edge lengths h|d|."""
+    import itertools
+
+    from tmr.route.route3d import _graph, _lattice
+
+    lat = _lattice(np.array([0.0, 0.0, 0.0, 3.0, 4.0, 5.0]), 1.0)
+    ok = np.random.default_rng(1).random(lat.n) < 0.7
+    g = _graph(lat, ok)
+    for i in range(lat.n):
+        want = {}
+        if ok[i]:
+            ijk = np.array(np.unravel_index(i, lat.shape))
+            for d in itertools.product((-1, 0, 1), repeat=3):
+                j = ijk + d
+                if any(d) and np.all(j >= 0) and np.all(j < lat.shape):
+                    f = int(np.ravel_multi_index(tuple(j), lat.shape))
+                    if ok[f]:
+                        want[f] = lat.h * math.sqrt(sum(abs(v) for v in d))
+        row = slice(g.indptr[i], g.indptr[i + 1])
+        assert dict(zip(g.indices[row].tolist(), g.data[row].tolist(), strict=True)) == pytest.approx(want)

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 import shapely
 from numpy.typing import ArrayLike, NDArray
-from scipy.sparse import coo_matrix
+from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from tmr.errors import ParameterError, TetherSpanError, TmrError, fmt_point
@@ -178,21 +178,25 @@ def _lattice(bounds: Array, grid: float, max_nodes: int = MAX_NODES) -> _Lattice
 
 
 def _graph(lat: _Lattice, ok: NDArray[np.bool_]) -> Any:
-    """The 26-connected lattice graph on the nodes ``ok`` (flat (n,)), edge weights the Euclidean lengths [m]."""
-    shape = lat.shape
-    okg = ok.reshape(shape)
-    idx = np.arange(lat.n).reshape(shape)
-    rows, cols, wts = [], [], []
-    for d in _STEPS:
-        a = tuple(slice(max(0, -k), s - max(0, k)) for k, s in zip(d, shape, strict=True))
-        b = tuple(slice(max(0, k), s - max(0, -k)) for k, s in zip(d, shape, strict=True))
-        m = okg[a] & okg[b]
-        rows.append(idx[a][m])
-        cols.append(idx[b][m])
-        wts.append(np.full(int(m.sum()), lat.h * float(np.linalg.norm(d))))
-    r, c, w = np.concatenate(rows), np.concatenate(cols), np.concatenate(wts)
-    data = np.concatenate([w, w])
-    return coo_matrix((data, (np.concatenate([r, c]), np.concatenate([c, r]))), shape=(lat.n, lat.n)).tocsr()
+    """The 26-connected lattice graph on the nodes ``ok`` (flat (n,)), edge weights the Euclidean lengths [m]: a
+    symmetric CSR matrix built row by row (each row's columns ascending, as ``coo_matrix.tocsr`` leaves them)."""
+    shape = np.array(lat.shape)
+    strides = np.array([shape[1] * shape[2], shape[2], 1])
+    dirs = np.array(sorted((d for d in itertools.product((-1, 0, 1), repeat=3) if any(d)), key=lambda d: d @ strides))
+    offs = dirs @ strides  # ascending: the columns of a row in order
+    weights = np.array([lat.h * float(np.linalg.norm(d)) for d in dirs])
+    padded = np.zeros(shape + 2, dtype=bool)  # a border of False: no neighbour off the lattice
+    padded[1:-1, 1:-1, 1:-1] = ok.reshape(lat.shape)
+    pstrides = np.array([(shape[1] + 2) * (shape[2] + 2), shape[2] + 2, 1])
+    rows = np.flatnonzero(ok)
+    prow = (np.stack(np.unravel_index(rows, lat.shape), axis=1) + 1) @ pstrides  # the same nodes in ``padded``
+    valid = padded.reshape(-1)[prow[:, None] + (dirs @ pstrides)[None, :]]
+    nbr = rows[:, None] + offs[None, :]
+    indptr = np.zeros(lat.n + 1, dtype=np.int64)
+    indptr[rows + 1] = valid.sum(axis=1)
+    np.cumsum(indptr, out=indptr)
+    data = np.broadcast_to(weights, valid.shape)[valid]
+    return csr_matrix((data, nbr[valid], indptr), shape=(lat.n, lat.n))
 
 
 def _obstacle_distance(world: World3D, pts: Array, cap: float) -> Array:
