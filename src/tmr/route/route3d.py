@@ -187,16 +187,20 @@ def _graph(lat: _Lattice, ok: NDArray[np.bool_]) -> Any:
     weights = np.array([lat.h * float(np.linalg.norm(d)) for d in dirs])
     padded = np.zeros(shape + 2, dtype=bool)  # a border of False: no neighbour off the lattice
     padded[1:-1, 1:-1, 1:-1] = ok.reshape(lat.shape)
+    pflat = padded.reshape(-1)
     pstrides = np.array([(shape[1] + 2) * (shape[2] + 2), shape[2] + 2, 1])
-    rows = np.flatnonzero(ok)
+    rows = np.flatnonzero(ok).astype(np.int32)
     prow = (np.stack(np.unravel_index(rows, lat.shape), axis=1) + 1) @ pstrides  # the same nodes in ``padded``
-    valid = padded.reshape(-1)[prow[:, None] + (dirs @ pstrides)[None, :]]
-    nbr = rows[:, None] + offs[None, :]
-    indptr = np.zeros(lat.n + 1, dtype=np.int64)
-    indptr[rows + 1] = valid.sum(axis=1)
+    valid = np.empty((len(rows), len(dirs)), dtype=bool)
+    for k, po in enumerate(dirs @ pstrides):
+        valid[:, k] = pflat[prow + po]
+    counts = valid.sum(axis=1)
+    indptr = np.zeros(lat.n + 1, dtype=np.int32)
+    indptr[rows + 1] = counts
     np.cumsum(indptr, out=indptr)
+    cols = np.repeat(rows, counts) + np.broadcast_to(offs.astype(np.int32), valid.shape)[valid]
     data = np.broadcast_to(weights, valid.shape)[valid]
-    return csr_matrix((data, nbr[valid], indptr), shape=(lat.n, lat.n))
+    return csr_matrix((data, cols, indptr), shape=(lat.n, lat.n))
 
 
 def _obstacle_distance(world: World3D, pts: Array, cap: float) -> Array:
