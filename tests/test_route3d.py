@@ -135,7 +135,7 @@ def test_a_thin_wall_off_the_lattice_is_proven_to_block(thickness, offset):
 @pytest.mark.slow
 def test_an_oblique_thin_wall_is_proven_to_block():
     """A 7 cm thick wall across the room's diagonal, touching the walls x = 0 and y = 0 (a prism on a strip); its
-    bounding box covers the room, so the fine proof measures every node exactly (2.8 s)."""
+    bounding box covers the room, so the fine proof measures every node exactly (0.6 s; 2.8 s with coal per point)."""
     wall = prism_obstacle([[0.0, 9.0], [9.0, 0.0], [9.05, 0.05], [0.05, 9.05]], [0.0, 4.0])
     with pytest.raises(NoRouteError, match="cannot be reached") as exc:
         plan_route3d(World3D([wall], ROOM, 0.3), [1.0, 1.0, 0.3], [8.0, 8.0, 2.0], TETHER)

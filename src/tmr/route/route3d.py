@@ -23,8 +23,10 @@ section "Route (3-D)").
 
    and since every tether's arc is ≤ L_max, N ≥ ``min_robots`` = ⌈lower_bound_length / L_max⌉. If the goal is not in
    the component of U holding the base, no chain reaches it: :class:`NoRouteError` (proven). If U joins them but no
-   drone route is found, ``_cells_disconnected`` tries a tighter proof, on a finer lattice (h < c/√3, any plane wall)
-   when the route's is too coarse.
+   drone route is found, ``_boxes_disconnected`` tries an exact proof on the box obstacles (the cells of the grid of
+   their faces grown by c, no lattice resolution: a window lower than 2c is closed however it lies), then, only when
+   the world holds other obstacles, ``_cells_disconnected`` a lattice proof, on a finer lattice (h < c/√3, any plane
+   wall) when the route's is too coarse.
 3. **References.** :func:`drone_references`: the leader follows the route with a minimum-jerk arc-length law; drone j
    moves along the same route from its start arc to j/N of the route's length, in step with the leader's progress, so
    the chain lies along the route and winds round only what the route winds round.
