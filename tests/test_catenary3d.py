@@ -268,3 +268,30 @@ def test_warm_start_finds_the_same_shallow_catenary(p, q, tw):
     # a guess on the deep (unstable) branch, or far away, still ends on the shallow branch
     deep = dataclasses.replace(cold, x0=cold.d / 2 + 30.0 * cold.a if cold.h >= 0 else cold.d / 2 - 30.0 * cold.a)
     assert solve3d(p, moved, winch_tension=tw, warm=deep).a == pytest.approx(ref.a, rel=1e-11)
+
+
+def test_a_cold_solve_is_the_bracket_methods_root_on_the_shallow_branch():
+    """The cold solve starts Newton inside the grid bracket instead of scipy's minimize_scalar + brentq: on 2000 random
+    spans the angle is the root brentq finds in that bracket (the last grid angle beyond the span's maximum that
+    still reaches the target, and the next) to 1e-12, and the span errors are the same."""
+    from tmr.model.catenary3d import _GRID, _solve_theta, _span
+
+    rng = np.random.default_rng(3)
+    checked = 0
+    for _ in range(2000):
+        d, h, m = 10 ** rng.uniform(-3, 1.3), rng.uniform(0.0, 10.0), 10 ** rng.uniform(-1, 2)
+        k, target = 1.0 + h / m, d / m
+        vals = _span(_GRID, m, k)
+        j = int(np.argmax(vals))
+        beyond = np.nonzero(vals[j + 1 :] >= target)[0]
+        if not beyond.size:
+            with pytest.raises(TetherSpanError):
+                _solve_theta(d, h, m)
+            continue
+        i = j + 1 + int(beyond[-1])
+        if i + 1 >= len(_GRID):
+            continue
+        ref = brentq(lambda t, m=m, k=k, y=target: _span(t, m, k) - y, _GRID[i], _GRID[i + 1], xtol=1e-15)
+        assert _solve_theta(d, h, m) == pytest.approx(ref, rel=1e-12, abs=1e-12)
+        checked += 1
+    assert checked > 1000

@@ -251,6 +251,16 @@ def _solve_theta(d: float, h: float, m: float, guess: float | None = None) -> fl
     target = d / m
     vals = _span(_GRID, m, k)
     j = int(np.argmax(vals))
+    if guess is None:
+        # a cold start without scipy.optimize (its import costs ~0.2 s of a start-up or a refusal): Newton from the
+        # middle of the shallow branch's grid bracket (the last angle beyond the maximum whose span reaches the
+        # target, and the next); the root it returns is on the shallow branch, so it is the bracket method's
+        beyond = np.nonzero(vals[j + 1 :] >= target)[0]
+        i = j + 1 + int(beyond[-1]) if beyond.size else len(_GRID)
+        if i + 1 < len(_GRID):
+            t = _newton_theta(d, h, m, 0.5 * (float(_GRID[i]) + float(_GRID[i + 1])))
+            if t is not None:
+                return t
     lo, hi = _GRID[max(j - 1, 0)], _GRID[min(j + 1, len(_GRID) - 1)]
     from scipy.optimize import brentq, minimize_scalar  # here: a warm-started solve never needs them
 

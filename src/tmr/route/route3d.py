@@ -23,8 +23,10 @@ section "Route (3-D)").
 
    and since every tether's arc is ≤ L_max, N ≥ ``min_robots`` = ⌈lower_bound_length / L_max⌉. If the goal is not in
    the component of U holding the base, no chain reaches it: :class:`NoRouteError` (proven). If U joins them but no
-   drone route is found, ``_cells_disconnected`` tries a tighter proof, on a finer lattice (h < c/√3, any plane wall)
-   when the route's is too coarse.
+   drone route is found, ``_boxes_disconnected`` tries an exact proof on the box obstacles (the cells of the grid of
+   their faces grown by c, no lattice resolution: a window lower than 2c is closed however it lies), then, only when
+   the world holds other obstacles, ``_cells_disconnected`` a lattice proof, on a finer lattice (h < c/√3, any plane
+   wall) when the route's is too coarse.
 3. **References.** :func:`drone_references`: the leader follows the route with a smooth trapezoid in arc length
    (:func:`_cruise_law`); drone j moves along the same route from its start arc to j/N of the route's length, in step
    with the leader's progress, so the chain lies along the route and winds round only what the route winds round.
@@ -39,14 +41,15 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import shapely
 from numpy.typing import ArrayLike, NDArray
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
 
 from tmr.errors import ParameterError, TetherSpanError, TmrError, fmt_point
 from tmr.model.catenary3d import DroneTetherParams, solve3d
 from tmr.route.geodesic import NoRouteError, TooFewRobotsError
-from tmr.world.world3d import World3D, _PlacedBox, box_obstacle
+from tmr.world.world3d import Obstacle3D, World3D, _PlacedBox, box_obstacle
 
 Array = NDArray[np.float64]
 
@@ -177,21 +180,29 @@ def _lattice(bounds: Array, grid: float, max_nodes: int = MAX_NODES) -> _Lattice
 
 
 def _graph(lat: _Lattice, ok: NDArray[np.bool_]) -> Any:
-    """The 26-connected lattice graph on the nodes ``ok`` (flat (n,)), edge weights the Euclidean lengths [m]."""
-    shape = lat.shape
-    okg = ok.reshape(shape)
-    idx = np.arange(lat.n).reshape(shape)
-    rows, cols, wts = [], [], []
-    for d in _STEPS:
-        a = tuple(slice(max(0, -k), s - max(0, k)) for k, s in zip(d, shape, strict=True))
-        b = tuple(slice(max(0, k), s - max(0, -k)) for k, s in zip(d, shape, strict=True))
-        m = okg[a] & okg[b]
-        rows.append(idx[a][m])
-        cols.append(idx[b][m])
-        wts.append(np.full(int(m.sum()), lat.h * float(np.linalg.norm(d))))
-    r, c, w = np.concatenate(rows), np.concatenate(cols), np.concatenate(wts)
-    data = np.concatenate([w, w])
-    return coo_matrix((data, (np.concatenate([r, c]), np.concatenate([c, r]))), shape=(lat.n, lat.n)).tocsr()
+    """The 26-connected lattice graph on the nodes ``ok`` (flat (n,)), edge weights the Euclidean lengths [m]: a
+    symmetric CSR matrix built row by row (each row's columns ascending, as ``coo_matrix.tocsr`` leaves them)."""
+    shape = np.array(lat.shape)
+    strides = np.array([shape[1] * shape[2], shape[2], 1])
+    dirs = np.array(sorted((d for d in itertools.product((-1, 0, 1), repeat=3) if any(d)), key=lambda d: d @ strides))
+    offs = dirs @ strides  # ascending: the columns of a row in order
+    weights = np.array([lat.h * float(np.linalg.norm(d)) for d in dirs])
+    padded = np.zeros(shape + 2, dtype=bool)  # a border of False: no neighbour off the lattice
+    padded[1:-1, 1:-1, 1:-1] = ok.reshape(lat.shape)
+    pflat = padded.reshape(-1)
+    pstrides = np.array([(shape[1] + 2) * (shape[2] + 2), shape[2] + 2, 1])
+    rows = np.flatnonzero(ok).astype(np.int32)
+    prow = (np.stack(np.unravel_index(rows, lat.shape), axis=1) + 1) @ pstrides  # the same nodes in ``padded``
+    valid = np.empty((len(rows), len(dirs)), dtype=bool)
+    for k, po in enumerate(dirs @ pstrides):
+        valid[:, k] = pflat[prow + po]
+    counts = valid.sum(axis=1)
+    indptr = np.zeros(lat.n + 1, dtype=np.int32)
+    indptr[rows + 1] = counts
+    np.cumsum(indptr, out=indptr)
+    cols = np.repeat(rows, counts) + np.broadcast_to(offs.astype(np.int32), valid.shape)[valid]
+    data = np.broadcast_to(weights, valid.shape)[valid]
+    return csr_matrix((data, cols, indptr), shape=(lat.n, lat.n))
 
 
 def _obstacle_distance(world: World3D, pts: Array, cap: float) -> Array:
@@ -203,10 +214,64 @@ def _obstacle_distance(world: World3D, pts: Array, cap: float) -> Array:
     for ob in world.obstacles:  # one at a time: inside an overlap, the deepest single depth
         gap = np.linalg.norm(np.maximum(0.0, np.maximum(ob.lo - pts, pts - ob.hi)), axis=1)
         near = np.flatnonzero(gap < cap)
-        if len(near):
-            alone = World3D([ob], np.r_[lo - span, hi + span], 0.0)  # the walls far away: this obstacle only
-            out[near] = np.minimum(out[near], alone.exact_clearance(pts[near]))
+        if not len(near):
+            continue
+        if isinstance(ob.geometry, _PlacedBox):  # the box's signed distance in closed form (as coal's sphere-box)
+            p = pts[near]
+            inside = np.minimum(np.min(p - ob.lo, axis=1), np.min(ob.hi - p, axis=1))
+            d = np.where(inside > 0.0, -inside, gap[near])
+        else:
+            footprint = _vertical_prism(ob)
+            if footprint is not None:
+                d = _prism_distance(footprint, float(ob.lo[2]), float(ob.hi[2]), pts[near])
+            else:
+                alone = World3D([ob], np.r_[lo - span, hi + span], 0.0)  # the walls far away: this obstacle only
+                d = alone.exact_clearance(pts[near])
+        out[near] = np.minimum(out[near], d)
     return out
+
+
+def _vertical_prism(ob: Obstacle3D) -> Any:
+    """The footprint (a shapely Polygon) of a convex obstacle that is a vertical prism (every hull point at its
+    lowest or highest z, the same xy at both), else None."""
+    if ob.triangles is not None or not hasattr(ob.geometry, "points"):
+        return None
+    pts = np.asarray(ob.geometry.points(), dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 6:
+        return None
+    low, high = np.isclose(pts[:, 2], ob.lo[2], atol=1e-12), np.isclose(pts[:, 2], ob.hi[2], atol=1e-12)
+    if not np.all(low | high):
+        return None
+    a, b = np.unique(np.round(pts[low, :2], 12), axis=0), np.unique(np.round(pts[high, :2], 12), axis=0)
+    if a.shape != b.shape or not np.array_equal(a, b):
+        return None
+    return shapely.MultiPoint(a).convex_hull
+
+
+def _prism_distance(footprint: Any, z0: float, z1: float, pts: Array) -> Array:
+    """Signed distance [m] of points (n, 3) to the vertical prism footprint × [z0, z1] (< 0 inside): outside,
+    √(d_xy² + d_z²) with d_xy the planar distance to the footprint (shapely) and d_z to [z0, z1]; inside, minus the
+    smallest of the depth in plan (the distance to the footprint's boundary) and to the two caps."""
+    xy = shapely.points(pts[:, :2])
+    dxy = shapely.distance(footprint, xy)
+    dz = np.maximum(0.0, np.maximum(z0 - pts[:, 2], pts[:, 2] - z1))
+    out = np.sqrt(dxy**2 + dz**2)
+    inside = (dxy == 0.0) & (dz == 0.0)
+    if inside.any():
+        depth = shapely.distance(footprint.exterior, xy[inside])
+        p = pts[inside]
+        out[inside] = -np.minimum(depth, np.minimum(p[:, 2] - z0, z1 - p[:, 2]))
+    return out
+
+
+def _components26(mask: NDArray[np.bool_]) -> NDArray[np.int64]:
+    """Labels (flat) of the 26-connected components of a 3-D mask (0 outside it): ``scipy.ndimage.label`` with the
+    full 3 × 3 × 3 structure, the same components as the 26-connected lattice graph (imported here: only the
+    no-route proofs need it)."""
+    from scipy import ndimage
+
+    labels, _ = ndimage.label(mask, structure=np.ones((3, 3, 3), dtype=bool))
+    return np.asarray(labels).reshape(-1)
 
 
 def _cells_disconnected(world: World3D, lat: _Lattice, nodes: Array, b: Array, g: Array, c: float) -> bool:
@@ -239,7 +304,71 @@ def _cells_disconnected(world: World3D, lat: _Lattice, nodes: Array, b: Array, g
     nb, ng = node(b), node(g)
     if not (ok[nb] and ok[ng]):
         return not ok[ng] if ok[nb] else False  # b's own cube always holds b: a failed test there proves nothing
-    _, labels = connected_components(_graph(lat, ok), directed=False)
+    labels = _components26(ok.reshape(lat.shape))
+    return bool(labels[nb] != labels[ng])
+
+
+def _boxes_disconnected(world: World3D, b: Array, g: Array, c: float) -> bool:
+    """An exact proof, at no lattice resolution, that no curve keeping ``c`` [m] from the obstacles and the room's
+    walls, floor and ceiling joins ``b`` to ``g`` (True), or none (False). Needs b and g ≥ c (+ 1 µm) from everything.
+
+    Only the axis-aligned boxes are used; the other obstacles are left out, which only enlarges the free set (so a
+    separation found without them holds with them). Every point within distance < c of a box B lies outside F_c, the
+    set of points ≥ c from everything; so do the points of these closed boxes, each inside B's open c-neighbourhood
+    (c' = c − ε, ε = 1 µm): B grown by c' along one axis (3 face slabs), by c'/√2 along two axes (3 edge bars) and by
+    c'/√3 along all three (the corner block). Let S = the room shrunk by c, less those boxes: F_c ⊂ S. The box faces
+    and the shrunk room's cut S into the cells of a rectilinear grid; each cell's interior lies inside one removed
+    box or meets none. S is relatively open in the shrunk room, so a point p of S has a neighbourhood in S, every
+    cell whose closure holds p is free, and those cells are 26-neighbours on the grid: a curve in S passes through a
+    26-connected sequence of free cells. If the cells holding b and g are in different 26-connected components, no
+    curve in S, hence in F_c, joins them. Exact for walls and openings (a window lower than 2c is closed however the
+    wall lies); it misses only the rounded parts of the c-neighbourhoods beyond the edge and corner blocks (points
+    farther than c/√3 from a box), which a narrow diagonal pinch between two boxes' edges may need."""
+    if c <= 0.0:
+        return False
+    bounds = np.asarray(world.bounds, dtype=float)
+    lo_r, hi_r = bounds[:3] + c, bounds[3:] - c
+    if np.any(lo_r >= hi_r):
+        return False
+    cc = c - 1e-6
+    grow = []  # (lo, hi) of the removed boxes
+    for ob in world.obstacles:
+        if not isinstance(ob.geometry, _PlacedBox):
+            continue
+        for k in range(3):  # the face slabs
+            d = np.zeros(3)
+            d[k] = cc
+            grow.append((ob.lo - d, ob.hi + d))
+        e = cc / math.sqrt(2.0)
+        for k in range(3):  # the edge bars, along axis k
+            d = np.full(3, e)
+            d[k] = 0.0
+            grow.append((ob.lo - d, ob.hi + d))
+        grow.append((ob.lo - cc / math.sqrt(3.0), ob.hi + cc / math.sqrt(3.0)))
+    if not grow:
+        return False
+    los = np.array([x[0] for x in grow])
+    his = np.array([x[1] for x in grow])
+    axes = [np.unique(np.clip(np.r_[lo_r[k], hi_r[k], los[:, k], his[:, k]], lo_r[k], hi_r[k])) for k in range(3)]
+    shape = tuple(len(a) - 1 for a in axes)
+    free = np.ones(shape, dtype=bool)
+    for blo, bhi in zip(los, his, strict=True):
+        i0 = [int(np.searchsorted(axes[k], blo[k], side="left")) for k in range(3)]
+        i1 = [int(np.searchsorted(axes[k], bhi[k], side="right")) - 1 for k in range(3)]
+        if all(i1[k] > i0[k] for k in range(3)):  # the cells between the box's own coordinates
+            free[i0[0] : i1[0], i0[1] : i1[1], i0[2] : i1[2]] = False
+
+    def cell(p: Array) -> int:  # a cell whose closure holds p (p in the shrunk room)
+        ijk = [int(np.clip(np.searchsorted(axes[k], p[k], side="right") - 1, 0, shape[k] - 1)) for k in range(3)]
+        return int(np.ravel_multi_index(tuple(ijk), shape))
+
+    if np.any(b < lo_r) or np.any(b > hi_r) or np.any(g < lo_r) or np.any(g > hi_r):
+        return False
+    nb, ng = cell(b), cell(g)
+    flat = free.reshape(-1)
+    if not (flat[nb] and flat[ng]):
+        return False
+    labels = _components26(free)
     return bool(labels[nb] != labels[ng])
 
 
@@ -459,8 +588,13 @@ def plan_route3d(
     pred[keep] = np.where(pred_l >= 0, keep[np.maximum(pred_l, 0)], -9999)
     if not math.isfinite(dist[end]):
         c = min(c_t, r, float(world.with_safety_radius(0.0).exact_clearance(b[None, :])[0]) - 0.002)
-        proven = bare_g - tol >= c and _cells_disconnected(world, lat, nodes, b, g, c)
-        if not proven and bare_g - tol >= c and c > 0.0 and h >= PROOF_SPACING * c:
+        # the exact proof on the boxes first (milliseconds); the lattice proofs only for the other obstacles (with
+        # boxes alone they could only add a pinch between two boxes' edges or corners, at 0.6-1.2 s)
+        lattice_proofs = not all(isinstance(ob.geometry, _PlacedBox) for ob in world.obstacles)
+        proven = bare_g - tol >= c and (
+            _boxes_disconnected(world, b, g, c) or (lattice_proofs and _cells_disconnected(world, lat, nodes, b, g, c))
+        )
+        if not proven and lattice_proofs and bare_g - tol >= c and c > 0.0 and h >= PROOF_SPACING * c:
             # the lattice may straddle a thin wall (ρ = h√3/2 against c): once more on a lattice fine enough to see
             # any plane wall, h < c/√3 (formulations/drones.md), within PROOF_MAX_NODES
             fine = _lattice(bounds, PROOF_SPACING * c, max_nodes=PROOF_MAX_NODES)
