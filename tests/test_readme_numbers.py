@@ -238,12 +238,17 @@ QUOTES = [
         r"the unreachable goals were refused in (\S+) s median",
         lambda: md(
             DR,
-            r"unreachable goals refused \(no route\), in < 1 s \(in-process\) \| \d+/\d+ \(\d+ %\); median ([\d.]+) s",
+            r"unreachable goals refused \(no route, or too few for the straight line\), in < 1 s \(in-process\) \| "
+            r"\d+/\d+ \(\d+ %\); median ([\d.]+) s",
         ),
     ),
     Quote(
         r"the independent check found (\d+) violated limits in the (\d+) plans made",
-        lambda: md(DR, r"0 violations by the independent check \| (\d+) in (\d+) plans"),
+        lambda: md(
+            DR,
+            r"0 violations by the independent check \(hard limits broken, in every plan computed\) \| "
+            r"(\d+) in (\d+) plans",
+        ),
     ),
     Quote(
         r"the per-step QP took (\S+) ms median for 8 drones",
