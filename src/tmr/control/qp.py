@@ -399,9 +399,7 @@ class LexicographicQP:
             if result is None:
                 result = self._solve_levels(ctx, A0, rows, objectives, relax=False, optimistic=False, solves=solves)
             relaxed = 0.0
-        except InfeasibleStep:
-            if not any(lim.relaxable for lim in self.limits):
-                raise  # nothing to drop: every limit is hard
+        except InfeasibleStep:  # without the comfort limits (with none, a second try on fresh workspaces)
             result = self._solve_levels(ctx, A0, rows, objectives, relax=True, optimistic=False, solves=solves)
             relaxed = 1.0
         assert result is not None
@@ -674,9 +672,11 @@ class LexicographicQP:
             if g.size and np.max(g) > self.feas_tol:
                 worst.append(f"{lim.name} (rows violated by up to {np.max(g):.3g})")
         names = ", ".join(worst) or "the joint box bounds together with the limits"
+        comfort = any(lim.relaxable for lim in self.limits)
         return (
             f"step {ctx.k} (t = {ctx.k * ctx.Ts:.2f} s): the hard constraints have no common solution "
-            f"(solver status: {status}{', even without the acceleration bounds' if relax else ''}); tightest: {names}. "
+            f"(solver status: {status}{', even without the acceleration bounds' if relax and comfort else ''}); "
+            f"tightest: {names}. "
             "Relax the speed bounds or the clearance margin, or give the leader a path farther from the obstacles."
         )
 
