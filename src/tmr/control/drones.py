@@ -84,25 +84,37 @@ class _FreeBox:
         return self.lo, self.hi
 
 
+def _cross(x: Array, y: Array) -> Array:
+    """Row-wise cross product x × y of (M, 3) arrays: np.cross's arithmetic (x1 y2 − x2 y1, …, bit for bit) in four
+    numpy calls instead of ~20 (np.cross moves axes and checks shapes: ~15 µs on a few rows)."""
+    return x[:, _NEXT] * y[:, _PREV] - x[:, _PREV] * y[:, _NEXT]
+
+
+_NEXT, _PREV = np.array([1, 2, 0]), np.array([2, 0, 1])
+_AXES = np.eye(3)
+
+
 def _segment_frames(a: Array, b: Array) -> tuple[Array, Array, Array]:
     """Per segment a–b (M, 3): the rotation (M, 3, 3) whose z axis is along it, its midpoint (M, 3) and half length
     (M,) — the placement of coal's capsule (axis z) — all at once in numpy."""
     v = b - a
     length = np.sqrt(np.einsum("ij,ij->i", v, v))
-    u = np.where((length > 0.0)[:, None], v / np.maximum(length, 1e-300)[:, None], [0.0, 0.0, 1.0])  # a point: any axis
-    helper = np.where((np.abs(u[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    e1 = np.cross(helper, u)
-    e1 /= np.maximum(np.linalg.norm(e1, axis=1), 1e-300)[:, None]
-    R = np.stack([e1, np.cross(u, e1), u], axis=2)
+    u = np.where((length > 0.0)[:, None], v / np.maximum(length, 1e-300)[:, None], _AXES[2])  # a point: any axis
+    helper = np.where((np.abs(u[:, 0]) < 0.9)[:, None], _AXES[0], _AXES[1])
+    e1 = _cross(helper, u)
+    e1 /= np.maximum(np.sqrt(np.add.reduce(e1 * e1, axis=1)), 1e-300)[:, None]  # np.linalg.norm's sum
+    R = np.stack([e1, _cross(u, e1), u], axis=2)
     return R, 0.5 * (a + b), 0.5 * length
 
 
 def segment_box_distance(a: Array, b: Array, lo: Array, hi: Array) -> tuple[Array, Array]:
-    """Exact distance [m] from the segments a–b (M, 3) to the axis-aligned box [lo, hi], and the parameter t ∈ [0, 1]
-    of the segment's nearest point (M,), vectorised. Along a segment the squared distance is piecewise quadratic in
-    t, with breakpoints where a coordinate crosses a face: on each of the (≤ 7) pieces the minimiser is the clipped
-    stationary point of its quadratic; the smallest over the pieces is the minimum (the distance is convex in t).
-    0 for a segment touching or crossing the box (its depth is not computed here)."""
+    """Exact distance [m] from the segments a–b (M, 3) to the axis-aligned box [lo, hi] (3,) — or, per segment, to
+    its own box (M, 3) each — and the parameter t ∈ [0, 1] of the segment's nearest point (M,), vectorised. Along a
+    segment the squared distance is piecewise quadratic in t, with breakpoints where a coordinate crosses a face: on
+    each of the (≤ 7) pieces the minimiser is the clipped stationary point of its quadratic; the smallest over the
+    pieces is the minimum (the distance is convex in t). 0 for a segment touching or crossing the box (its depth is
+    not computed here)."""
+    lo3, hi3 = (lo, hi) if np.ndim(lo) == 1 else (lo[:, None, :], hi[:, None, :])  # against the (M, 7, 3) pieces
     v = b - a
     with np.errstate(divide="ignore", invalid="ignore"):
         cross = np.concatenate([(lo - a) / v, (hi - a) / v], axis=1)  # (M, 6); ±inf/nan where v_k = 0
@@ -110,8 +122,8 @@ def segment_box_distance(a: Array, b: Array, lo: Array, hi: Array) -> tuple[Arra
     knots = np.sort(np.concatenate([np.zeros((a.shape[0], 1)), cross, np.ones((a.shape[0], 1))], axis=1), axis=1)
     t0, t1 = knots[:, :-1], knots[:, 1:]  # (M, 7) pieces
     x_mid = a[:, None, :] + (0.5 * (t0 + t1))[..., None] * v[:, None, :]  # (M, 7, 3)
-    below, above = x_mid < lo, x_mid > hi
-    bound = np.where(below, lo, np.where(above, hi, 0.0))
+    below, above = x_mid < lo3, x_mid > hi3
+    bound = np.where(below, lo3, np.where(above, hi3, 0.0))
     active = below | above
     off = np.where(active, a[:, None, :] - bound, 0.0)  # x_k(t) − bound_k = off_k + t v_k on the active axes
     vv = np.where(active, v[:, None, :], 0.0)
@@ -121,7 +133,7 @@ def segment_box_distance(a: Array, b: Array, lo: Array, hi: Array) -> tuple[Arra
         ts = np.where(den > 0.0, num / den, t0)
     ts = np.clip(ts, t0, t1)
     X = a[:, None, :] + ts[..., None] * v[:, None, :]
-    gap = X - np.clip(X, lo, hi)
+    gap = X - np.clip(X, lo3, hi3)
     dist = np.sqrt(np.einsum("mpk,mpk->mp", gap, gap))
     best = np.argmin(dist, axis=1)
     rows = np.arange(a.shape[0])
@@ -145,136 +157,199 @@ def segment_nearest_k(
     is farther than ``cap`` [m] (beyond the world's safety radius) from a segment are not queried; a slot with no
     obstacle left has clearance +inf, gradient 0 and t = 0. Also returns, as the fourth value, how many obstacles
     each segment has within a clearance ``within`` [m] (default ``cap``) (M,): more than ``k`` means the farthest of
-    them got no slot."""
-    import coal
+    them got no slot.
 
-    from tmr.world.world3d import _IDENTITY, _REQUEST, _PlacedBox, _placement, _winding_number
+    The work is per (segment, obstacle) candidate pair of the broad phase, not per obstacle: every box pair in one
+    call of :func:`segment_box_distance`, every other pair in one loop of coal queries (~2 µs each; their nearest
+    points turned into gradients at once after it), written into one (M, walls + obstacles) table sorted once."""
 
     M = a.shape[0]
-    items_c: list[Array] = []
-    items_g: list[Array] = []
-    items_t: list[Array] = []
-    if walls:  # the six faces of the room, each an obstacle of its own (x = xmin, y = ymin, z = zmin, then the max)
-        bounds = np.asarray(world.bounds, dtype=float)
-        ga = np.concatenate([a - bounds[:3], bounds[3:] - a], axis=1)  # (M, 6)
-        gb = np.concatenate([b - bounds[:3], bounds[3:] - b], axis=1)
-        items_c.append(np.minimum(ga, gb))
-        items_t.append((gb < ga).astype(float))
-        items_g.append(np.broadcast_to(_WALL_NORMALS, (M, 6, 3)))
-    lo_seg, hi_seg = np.minimum(a, b), np.maximum(a, b)
-    frames: tuple[Array, Array, Array] | None = None
-    capsule = coal.Capsule(0.0, 1.0)
-    res = coal.DistanceResult()
-    near = world.box_gaps(lo_seg, hi_seg) < cap + world.safety_radius  # (O, M): every obstacle at once
-    for o in np.flatnonzero(near.any(axis=1)):
-        ob = world.obstacles[o]
-        cand = np.flatnonzero(near[o])
-        out, grad, t = np.full(M, np.inf), np.zeros((M, 3)), np.zeros(M)
-        inside = np.zeros(len(cand), dtype=bool)
-        if not ob.signed:
-            assert ob.triangles is not None
-            w = _winding_number(np.vstack([a[cand], b[cand]]), ob.triangles)
-            inside = (np.abs(w[: len(cand)]) > 0.5) | (np.abs(w[len(cand) :]) > 0.5)
-        geom = ob.geometry
-        if isinstance(geom, _PlacedBox):  # boxes in numpy (exact); coal only for a piece touching or inside one
-            dist, tb = segment_box_distance(a[cand], b[cand], ob.lo, ob.hi)
-            closer = dist > 1e-9
-            i = cand[closer]
-            X = a[i] + tb[closer, None] * (b[i] - a[i])
-            grad[i] = (X - np.clip(X, ob.lo, ob.hi)) / dist[closer, None]
-            out[i], t[i] = dist[closer], tb[closer]
-            inside = inside[~closer]
-            cand = cand[~closer]
-            shape2, place2 = geom.box, _placement(geom.centre)
-        else:
-            shape2, place2 = geom, _IDENTITY
-        if len(cand):
-            if frames is None:
-                frames = _segment_frames(a, b)
-            R, mid, half = frames
-            # the queries alone in the loop (coal: ~2 µs each); their results are turned into rows at once below
-            nc = len(cand)
-            d = np.empty(nc)
-            p1, p2 = np.empty((nc, 3)), np.empty((nc, 3))
-            halves = np.maximum(half[cand], 1e-12).tolist()
-            for kk, i in enumerate(cand.tolist()):
-                capsule.halfLength = halves[kk]
-                res.clear()
-                d[kk] = coal.distance(capsule, coal.Transform3s(R[i], mid[i]), shape2, place2, _REQUEST, res)
-                p1[kk] = res.getNearestPoint1()
-                p2[kk] = res.getNearestPoint2()
-            d = np.where(inside & (d > 0.0), -np.abs(d), d)
-            out[cand] = d
-            v = p1 - p2
-            nv = np.sqrt(np.einsum("ij,ij->i", v, v))
-            off = 0.5 * (a[cand] + b[cand]) - 0.5 * (ob.lo + ob.hi)  # touching: away from the bounding box's centre
-            off /= np.maximum(np.linalg.norm(off, axis=1), 1e-12)[:, None]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                grad[cand] = np.where((nv > 1e-12)[:, None], np.copysign(1.0, d)[:, None] * v / nv[:, None], off)
-                along = np.einsum("ij,ij->i", p1 - mid[cand], R[cand][:, :, 2]) / (2.0 * half[cand])
-            t[cand] = np.where(half[cand] > 1e-12, np.clip(0.5 + along, 0.0, 1.0), 0.0)
-        items_c.append(out[:, None])
-        items_g.append(grad[:, None, :])
-        items_t.append(t[:, None])
     k = int(k)
-    short = k - sum(c.shape[1] for c in items_c)
-    if short > 0:  # fewer obstacles than slots: empty slots
-        items_c.append(np.full((M, short), np.inf))
-        items_g.append(np.zeros((M, short, 3)))
-        items_t.append(np.zeros((M, short)))
-    C = np.concatenate(items_c, axis=1)
-    G = np.concatenate(items_g, axis=1)
-    T = np.concatenate(items_t, axis=1)
+    W = 6 if walls else 0
+    n_obs = len(world.obstacles)
+    ncol = max(W + n_obs, k)  # walls, then one column per obstacle (+inf if not queried), then empty slots
+    C = np.full((M, ncol), np.inf)
+    G = np.zeros((M, ncol, 3))
+    T = np.zeros((M, ncol))
+    if walls:  # the six faces of the room, each an obstacle of its own (x = xmin, y = ymin, z = zmin, then the max)
+        lo_room, hi_room = world._lo, world._hi
+        ga = np.concatenate([a - lo_room, hi_room - a], axis=1)  # (M, 6)
+        gb = np.concatenate([b - lo_room, hi_room - b], axis=1)
+        np.minimum(ga, gb, out=C[:, :6])
+        T[:, :6] = gb < ga
+        G[:, :6] = _WALL_NORMALS
+    if n_obs:
+        near = world.box_gaps(np.minimum(a, b), np.maximum(a, b)) < cap + world.safety_radius  # (O, M)
+        co, cs = np.nonzero(near)  # the candidate pairs (obstacle, segment)
+        if world.is_box.any():  # boxes in numpy (exact), all pairs at once; coal only for a segment touching one
+            box = world.is_box[co]
+            bo, bs = co[box], cs[box]
+            lo, hi = world.aabb_lo[bo], world.aabb_hi[bo]
+            ab, bb = a[bs], b[bs]
+            dist, tb = segment_box_distance(ab, bb, lo, hi)
+            closer = dist > 1e-9
+            X = ab[closer] + tb[closer, None] * (bb[closer] - ab[closer])
+            cols = W + bo[closer]
+            C[bs[closer], cols], T[bs[closer], cols] = dist[closer], tb[closer]
+            G[bs[closer], cols] = (X - np.clip(X, lo[closer], hi[closer])) / dist[closer, None]
+            box[np.flatnonzero(box)[~closer]] = False  # the touching pairs: to coal
+            co, cs = co[~box], cs[~box]
+        if co.size:
+            _segment_coal_pairs(world, a, b, co, cs, C[:, W:], G[:, W:], T[:, W:])
     count = np.count_nonzero(C <= (cap if within is None else within) + world.safety_radius, axis=1)
-    order = np.argsort(C, axis=1, kind="stable")[:, :k] if C.shape[1] > 1 else np.zeros((M, 1), dtype=np.intp)
-    rows = np.arange(M)[:, None]
-    return C[rows, order] - world.safety_radius, G[rows, order], T[rows, order], count
+    order = np.argsort(C, axis=1, kind="stable")[:, :k] if ncol > 1 else np.zeros((M, 1), dtype=np.intp)
+    flat = order + _row_offsets(M, ncol)  # flat indices of the sorted slots (one take each, not 2-D fancy indexing)
+    return C.take(flat) - world.safety_radius, G.reshape(-1, 3)[flat], T.take(flat), count
+
+
+def _row_offsets(M: int, ncol: int) -> NDArray[np.intp]:
+    """(M, 1) offsets i·ncol of the rows of an (M, ncol) table in its flat form (cached: the shapes are per plan)."""
+    key = (M, ncol)
+    out = _ROW_OFFSETS.get(key)
+    if out is None:
+        out = _ROW_OFFSETS[key] = (np.arange(M) * ncol)[:, None]
+    return out
+
+
+_ROW_OFFSETS: dict[tuple[int, int], NDArray[np.intp]] = {}
+#: coal objects reused by every query (their values are set before each): the segments' capsule, placement and
+#: result, then the points' placement (a translation only) and result
+_COAL_SCRATCH: list[Any] = []
+
+
+def _coal_scratch() -> list[Any]:
+    import coal
+
+    return [
+        coal.Capsule(0.0, 1.0),
+        coal.Transform3s(),
+        coal.DistanceResult(),
+        coal.Transform3s(),
+        coal.DistanceResult(),
+    ]
+
+
+def _segment_coal_pairs(
+    world: World3D, a: Array, b: Array, co: NDArray[np.intp], cs: NDArray[np.intp], C: Array, G: Array, T: Array
+) -> None:
+    """coal's radius-0 capsule queries of the pairs (obstacle ``co``, segment ``cs``) of :func:`segment_nearest_k`,
+    written into its tables (columns per obstacle): C[cs, co] the clearance [m] (negative inside), G the unit
+    gradient (from the obstacle's nearest point towards the segment's; touching: away from the bounding box's
+    centre), T the nearest point's parameter along a → b. The queries alone in the loop (coal: ~2 µs each); their
+    results are turned into rows at once after it."""
+    import coal
+
+    from tmr.world.world3d import _REQUEST, _winding_number
+
+    if not _COAL_SCRATCH:
+        _COAL_SCRATCH.extend(_coal_scratch())
+    capsule, place, res = _COAL_SCRATCH[:3]
+    ca, cb = a[cs], b[cs]
+    R, mid, half = _segment_frames(ca, cb)
+    targets = world.coal_targets
+    d_l: list[float] = []
+    p1_l: list[Array] = []
+    p2_l: list[Array] = []
+    for Ri, mi, hl, o in zip(R, mid, np.maximum(half, 1e-12).tolist(), co.tolist(), strict=True):
+        capsule.halfLength = hl
+        place.setRotation(Ri)
+        place.setTranslation(mi)
+        res.clear()
+        shape2, place2 = targets[o]
+        d_l.append(coal.distance(capsule, place, shape2, place2, _REQUEST, res))
+        p1_l.append(res.getNearestPoint1())
+        p2_l.append(res.getNearestPoint2())
+    d = np.array(d_l)
+    p1, p2 = np.array(p1_l), np.array(p2_l)
+    if not world.is_signed.all():  # a triangle BVH: its sign from the winding number of the segment's ends
+        inside = np.zeros(co.size, dtype=bool)
+        for o in np.unique(co[~world.is_signed[co]]).tolist():
+            tri = world.obstacles[o].triangles
+            assert tri is not None
+            sel = co == o
+            w = _winding_number(np.vstack([ca[sel], cb[sel]]), tri)
+            n_sel = int(np.count_nonzero(sel))
+            inside[sel] = (np.abs(w[:n_sel]) > 0.5) | (np.abs(w[n_sel:]) > 0.5)
+        d = np.where(inside & (d > 0.0), -np.abs(d), d)
+    v = p1 - p2
+    nv = np.sqrt(np.einsum("ij,ij->i", v, v))
+    grad = np.copysign(1.0, d)[:, None] * v / np.maximum(nv, 1e-300)[:, None]
+    touching = ~(nv > 1e-12)
+    if touching.any():  # away from the bounding box's centre
+        off = 0.5 * (ca + cb) - 0.5 * (world.aabb_lo[co] + world.aabb_hi[co])
+        off /= np.maximum(np.sqrt(np.add.reduce(off * off, axis=1)), 1e-12)[:, None]
+        grad[touching] = off[touching]
+    along = np.einsum("ij,ij->i", p1 - mid, R[:, :, 2]) / np.maximum(2.0 * half, 1e-300)
+    C[cs, co] = d
+    G[cs, co] = grad
+    T[cs, co] = np.where(half > 1e-12, np.clip(0.5 + along, 0.0, 1.0), 0.0)
 
 
 def point_nearest_k(world: World3D, points: Array, k: int, cap: float = np.inf) -> tuple[Array, Array, Array]:
     """:func:`segment_nearest_k` for points (M, 3) and the obstacles only (no walls), cheaper: per point and slot
     (M, k), sorted, the clearance [m] from that obstacle (World3D's radius subtracted; negative inside), its unit
     gradient (M, k, 3) and how many obstacles are within ``cap`` [m] (M,). Boxes in closed form (inside: the depth to
-    the nearest face), other obstacles by coal's point query (as :meth:`World3D.clearance`)."""
-    from tmr.world.world3d import _POINT, _PlacedBox, _placement, _query, _winding_number
+    the nearest face), other obstacles by coal's point query (as :meth:`World3D.clearance`); per (point, obstacle)
+    candidate pair of the broad phase: every box pair at once, every other pair in one loop of coal queries."""
+    import coal
+
+    from tmr.world.world3d import _POINT, _REQUEST, _winding_number
 
     M = points.shape[0]
     k = int(k)
-    C = np.full((M, max(k, len(world.obstacles))), np.inf)
-    G = np.zeros((M, C.shape[1], 3))
+    ncol = max(k, len(world.obstacles))
+    C = np.full((M, ncol), np.inf)
+    G = np.zeros((M, ncol, 3))
     r = world.safety_radius
-    near = world.box_gaps(points, points) < cap + r  # (O, M)
-    for o in np.flatnonzero(near.any(axis=1)):
-        ob = world.obstacles[o]
-        cand = np.flatnonzero(near[o])
-        p = points[cand]
-        if isinstance(ob.geometry, _PlacedBox):
-            off = p - np.clip(p, ob.lo, ob.hi)
-            d = np.sqrt(np.einsum("ij,ij->i", off, off))
-            g = off / np.maximum(d, 1e-300)[:, None]
-            inside = d <= 0.0
-            if inside.any():  # the depth to the nearest face, the gradient along its outward normal
-                faces = np.concatenate([p[inside] - ob.lo, ob.hi - p[inside]], axis=1)
-                f = np.argmin(faces, axis=1)
-                d[inside] = -faces[np.arange(len(f)), f]
-                g[inside] = -_WALL_NORMALS[f]
-        else:
-            d, g = np.empty(len(cand)), np.zeros((len(cand), 3))
-            sign = np.ones(len(cand))
-            if not ob.signed:
-                assert ob.triangles is not None
-                sign = np.where(np.abs(_winding_number(p, ob.triangles)) > 0.5, -1.0, 1.0)
-            for i in range(len(cand)):
-                di, _, q = _query(_POINT, _placement(p[i]), ob)
-                d[i] = di if ob.signed else sign[i] * abs(di)
-                v = p[i] - q
-                nv = float(np.linalg.norm(v))
-                g[i] = math.copysign(1.0, d[i]) * v / nv if nv > 1e-12 else 0.0
-        C[cand, o], G[cand, o] = d, g
+    co, cs = np.nonzero(world.box_gaps(points, points) < cap + r)  # candidate pairs (obstacle, point)
+    if world.is_box.any():
+        box = world.is_box[co]
+        bo, bs = co[box], cs[box]
+        lo, hi = world.aabb_lo[bo], world.aabb_hi[bo]
+        p = points[bs]
+        off = p - np.clip(p, lo, hi)
+        d = np.sqrt(np.einsum("ij,ij->i", off, off))
+        g = off / np.maximum(d, 1e-300)[:, None]
+        inside = d <= 0.0
+        if inside.any():  # the depth to the nearest face, the gradient along its outward normal
+            faces = np.concatenate([p[inside] - lo[inside], hi[inside] - p[inside]], axis=1)
+            f = np.argmin(faces, axis=1)
+            d[inside] = -faces[np.arange(len(f)), f]
+            g[inside] = -_WALL_NORMALS[f]
+        C[bs, bo], G[bs, bo] = d, g
+        co, cs = co[~box], cs[~box]
+    if co.size:
+        if not _COAL_SCRATCH:
+            _COAL_SCRATCH.extend(_coal_scratch())
+        place, res = _COAL_SCRATCH[3:]  # a translation only (the segments' placement is rotated)
+        targets = world.coal_targets
+        d_l: list[float] = []
+        q_l: list[Array] = []
+        p = points[cs]
+        for pi, o in zip(p, co.tolist(), strict=True):  # the queries alone in the loop
+            place.setTranslation(pi)
+            res.clear()
+            shape2, place2 = targets[o]
+            d_l.append(coal.distance(_POINT, place, shape2, place2, _REQUEST, res))
+            q_l.append(res.getNearestPoint2())
+        d = np.array(d_l)
+        if not world.is_signed.all():  # a triangle BVH: its sign from the winding number
+            sign = np.ones(co.size)
+            for o in np.unique(co[~world.is_signed[co]]).tolist():
+                sel = co == o
+                tri = world.obstacles[o].triangles
+                assert tri is not None
+                sign[sel] = np.where(np.abs(_winding_number(p[sel], tri)) > 0.5, -1.0, 1.0)
+            d = np.where(world.is_signed[co], d, sign * np.abs(d))
+        v = p - np.array(q_l)
+        nv = np.sqrt((v[:, None, :] @ v[:, :, None])[:, 0, 0])  # a dot product per row, as np.linalg.norm(v_i)
+        g = np.copysign(1.0, d)[:, None] * v / np.maximum(nv, 1e-300)[:, None]
+        g[~(nv > 1e-12)] = 0.0
+        C[cs, co], G[cs, co] = d, g
     count = np.count_nonzero(C <= cap + r, axis=1)
     order = np.argsort(C, axis=1, kind="stable")[:, :k]
-    rows = np.arange(M)[:, None]
-    return C[rows, order] - r, G[rows, order], count
+    flat = order + _row_offsets(M, ncol)
+    return C.take(flat) - r, G.reshape(-1, 3)[flat], count
 
 
 def segment_nearest(world: World3D, a: Array, b: Array, cap: float = np.inf) -> tuple[Array, Array, Array]:
