@@ -572,6 +572,38 @@ class DroneSmoothness(DroneEnergy):
 
 
 # --------------------------------------------------------------------------------------------------------- limits
+_BLOCK_SCATTER: dict[tuple[int, int, int, int], NDArray[np.intp]] = {}
+
+
+def _block_scatter(N: int, per: int, width: int, pad: int) -> NDArray[np.intp]:
+    """Flat indices into a row-major (N·per, 3N + pad) table of N blocks (per, width): block j at rows j·per… and
+    columns 3j… (cached: the shapes are fixed for a plan). With pad = 3 and width = 6 a tether's rows on its two
+    ends, point j−1 (the anchor's columns in front) and drone j; with pad = 0 and width = 3 a drone's own rows."""
+    key = (N, per, width, pad)
+    idx = _BLOCK_SCATTER.get(key)
+    if idx is None:
+        j, r, c = np.ix_(np.arange(N), np.arange(per), np.arange(width))
+        idx = _BLOCK_SCATTER[key] = ((j * per + r) * (3 * N + pad) + 3 * j + c).ravel()
+    return idx
+
+
+def _row_norms(x: Array) -> Array:
+    """Euclidean norm of each row of x (M, 3): np.linalg.norm(x, axis=1)'s arithmetic without its wrapper."""
+    return np.sqrt(np.add.reduce(x * x, axis=1))
+
+
+def _minus_infinite(m: int) -> Array:
+    """A read-only vector of m −infinities (shared: lower bounds that never bind)."""
+    v = _MINUS_INF.get(m)
+    if v is None:
+        v = _MINUS_INF[m] = np.full(m, -np.inf)
+        v.flags.writeable = False
+    return v
+
+
+_MINUS_INF: dict[int, Array] = {}
+
+
 def _robot_pattern(N: int, rows_robots: list[list[int]]) -> NDArray[np.bool_]:
     """(m, 3N) mask: row r may touch the 0-based drones in ``rows_robots[r]`` (3 columns each)."""
     mask = np.zeros((len(rows_robots), N, 3), dtype=bool)
@@ -605,13 +637,12 @@ class DroneClearance(_DroneLimit):
 
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
         N, k = self.N, self.nearest
-        A = np.zeros((N, k, N, 3))
-        i = np.arange(N)
-        A[i, :, i, :] = ctx.Ts * ctx.drone_obstacle_gradient
+        A = np.zeros((N * k, 3 * N))
+        A.reshape(-1)[_block_scatter(N, k, 3, 0)] = (ctx.Ts * ctx.drone_obstacle_gradient).reshape(-1)
         d = ctx.drone_obstacle_clearance.reshape(-1)
         lower = approach_bound(d, self.d_safe, self.rate, ctx.Ts)
         lower[~(d <= self.activation)] = -np.inf
-        return LimitRows(A.reshape(N * k, 3 * N), lower, _infinite(N * k))
+        return LimitRows(A, lower, _infinite(N * k))
 
 
 class RoomBounds(_DroneLimit):
@@ -624,6 +655,7 @@ class RoomBounds(_DroneLimit):
         b = np.asarray(bounds, dtype=float)
         self.N, self.lo, self.hi, self.rate = n_robots, b[:3] + margin, b[3:] - margin, float(approach_rate)
         self.eye = np.eye(3 * n_robots)
+        self._A: tuple[float, Array] | None = None  # (Ts, Ts I): the rows are constant for a plan
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
         return np.eye(3 * self.N, dtype=bool)
@@ -632,7 +664,10 @@ class RoomBounds(_DroneLimit):
         P = ctx.points[1:]
         low = approach_bound((P - self.lo).reshape(-1), 0.0, self.rate, ctx.Ts)
         high = -approach_bound((self.hi - P).reshape(-1), 0.0, self.rate, ctx.Ts)
-        return LimitRows(ctx.Ts * self.eye, low, high)
+        if self._A is None or self._A[0] != ctx.Ts:
+            self._A = (ctx.Ts, ctx.Ts * self.eye)
+            self._A[1].flags.writeable = False
+        return LimitRows(self._A[1], low, high)
 
 
 class DroneSeparation(RobotSeparation):
@@ -651,13 +686,13 @@ class _TetherRows(_DroneLimit):
     """Rows on tether j's two ends: point j−1 (a drone for j ≥ 2, the fixed anchor for j = 1) and drone j."""
 
     @staticmethod
-    def _scatter(N: int, per: int, dp: Array, dq: Array) -> Array:
-        """A (N·per, 3N) from per-row gradients w.r.t. the tether's p end ``dp`` and q end ``dq``, (N, per, 3)."""
-        A = np.zeros((N, per, N, 3))
-        j = np.arange(N)
-        A[j, :, j, :] = dq
-        A[j[1:], :, j[1:] - 1, :] = dp[1:]
-        return A.reshape(N * per, 3 * N)
+    def _scatter(N: int, per: int, D: Array) -> Array:
+        """A (N·per, 3N) from per-row gradients D (N, per, 6) w.r.t. the tether's p end (D[..., :3]) and q end
+        (D[..., 3:]): tether j's rows touch point j−1 and drone j, six adjacent columns, written by one scatter
+        into a table with the anchor's three columns in front (dropped: the anchor does not move)."""
+        A = np.zeros((N * per, 3 * N + 3))
+        A.reshape(-1)[_block_scatter(N, per, 6, 3)] = D.reshape(-1)
+        return A[:, 3:]
 
     def _mask(self, N: int, per: int) -> NDArray[np.bool_]:
         return _robot_pattern(N, [[j - 1, j] if j else [j] for j in range(N) for _ in range(per)])
@@ -693,24 +728,24 @@ class TetherClearance(_TetherRows):
         f = np.arange(1, self.m + 1) / (self.m + 1)
         self._ends = (np.r_[1.0, np.zeros(self.m), 0.0], np.r_[0.0, np.zeros(self.m), 1.0])  # p, q weights
         self.fractions = f
+        # ∂X/∂(p, q) (N, m+2, 3, 6) of the polyline's points: the ends (I and 0) fixed, the samples' set per step
+        self._J = np.zeros((n_robots, self.m + 2, 3, 6))
+        self._J[:, 0, :, :3] = np.eye(3)
+        self._J[:, -1, :, 3:] = np.eye(3)
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
         return self._mask(self.N, (self.m + 1) * self.nearest)
 
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
         N, m, k = self.N, self.m, self.nearest
-        eye = np.eye(3)
-        Jp = np.empty((N, m + 2, 3, 3))
-        Jq = np.empty((N, m + 2, 3, 3))
-        Jp[:, 1:-1], Jq[:, 1:-1] = ctx.sens.dpoints_dp, ctx.sens.dpoints_dq
-        Jp[:, 0], Jq[:, 0], Jp[:, -1], Jq[:, -1] = eye, 0.0, 0.0, eye
-        # n ᵀ ∂X/∂p with X = (1 − t) X_i + t X_{i+1}: (N, m+1, k, 3), one per piece and obstacle
+        J = self._J  # [∂X/∂p | ∂X/∂q] per point: its rows' sums are those of two (3, 3) products, bit for bit
+        J[:, 1:-1, :, :3], J[:, 1:-1, :, 3:] = ctx.sens.dpoints_dp, ctx.sens.dpoints_dq
+        # n ᵀ ∂X/∂(p, q) with X = (1 − t) X_i + t X_{i+1}: (N, m+1, k, 6), one per piece and obstacle
         t = ctx.piece_t[..., None]
         g1 = t * ctx.piece_gradient  # (N, m+1, k, 3)
         g0 = ctx.piece_gradient - g1
-        dp = (g0 @ Jp[:, :-1] + g1 @ Jp[:, 1:]).reshape(N, (m + 1) * k, 3)
-        dq = (g0 @ Jq[:, :-1] + g1 @ Jq[:, 1:]).reshape(N, (m + 1) * k, 3)
-        A = ctx.Ts * self._scatter(N, (m + 1) * k, dp, dq)
+        D = g0 @ J[:, :-1] + g1 @ J[:, 1:]
+        A = self._scatter(N, (m + 1) * k, (ctx.Ts * D).reshape(N, (m + 1) * k, 6))
         c = ctx.piece_clearance.reshape(N, -1)
         need = self.c_min + ctx.chord_deviation[:, None]  # (N, 1): c_t + margin + the arc's departure from its chord
         lower = -np.minimum(self.rate * ctx.Ts, 1.0) * np.maximum(c - need, 0.0)
@@ -736,14 +771,16 @@ class TetherLength(_TetherRows):
 
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
         S = ctx.sens
-        dp, dq, L = S.dlength_dp[:, None, :], S.dlength_dq[:, None, :], S.length
-        V = np.vstack([np.zeros((1, 3)), ctx.v_prev.reshape(-1, 3)])  # the anchor does not move
-        w = np.linalg.norm(np.diff(V, axis=0), axis=1)
+        V = ctx.v_prev.reshape(-1, 3)
+        rel = V.copy()  # the ends' relative velocities (the anchor does not move)
+        rel[1:] -= V[:-1]
+        w = _row_norms(rel)
         step = ctx.Ts * (w + 2.0 * math.sqrt(3.0) * self.a_max * ctx.Ts)
         chord = np.maximum(ctx.velocity_map.d, 1e-9)
-        growth = np.linalg.norm(S.dlength_dq, axis=1) * step**2 / (2.0 * chord)
-        upper = -approach_bound(self.L_max - L, 0.0, self.rate, ctx.Ts) - growth
-        return LimitRows(ctx.Ts * self._scatter(self.N, 1, dp, dq), np.full(self.N, -np.inf), upper)
+        growth = _row_norms(S.dlength_dq) * step**2 / (2.0 * chord)
+        upper = -approach_bound(self.L_max - S.length, 0.0, self.rate, ctx.Ts) - growth
+        D = np.concatenate([S.dlength_dp, S.dlength_dq], axis=1)  # (N, 6)
+        return LimitRows(self._scatter(self.N, 1, ctx.Ts * D), _minus_infinite(self.N), upper)
 
 
 class TetherTension(_TetherRows):
@@ -761,15 +798,14 @@ class TetherTension(_TetherRows):
 
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
         S = ctx.sens
-        dp = np.stack([S.dtension_p_dp, S.dtension_q_dp], axis=1)  # (N, 2, 3)
-        dq = np.stack([S.dtension_p_dq, S.dtension_q_dq], axis=1)
+        # (N, 2, 6): per tether its p end's and q end's tension, each w.r.t. (p, q)
+        D = np.concatenate([S.dtension_p_dp, S.dtension_p_dq, S.dtension_q_dp, S.dtension_q_dq], axis=1)
+        D = (ctx.Ts * D).reshape(self.N, 2, 6)
+        D[0, 0] = 0.0  # tether 1's p end is the ground winch, not a drone
         T = np.column_stack([S.tension_p, S.tension_q])
-        upper = -approach_bound(self.T_max - T, 0.0, self.rate, ctx.Ts)
-        A = self._scatter(self.N, 2, dp, dq)
-        upper = upper.reshape(-1)
-        upper[0] = np.inf  # tether 1's p end is the ground winch, not a drone
-        A[0] = 0.0
-        return LimitRows(ctx.Ts * A, np.full(2 * self.N, -np.inf), upper)
+        upper = -approach_bound(self.T_max - T, 0.0, self.rate, ctx.Ts).reshape(-1)
+        upper[0] = np.inf
+        return LimitRows(self._scatter(self.N, 2, D), _minus_infinite(2 * self.N), upper)
 
 
 class DroneSpeed(_DroneLimit):
