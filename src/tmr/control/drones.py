@@ -21,6 +21,7 @@ soft obstacle task at the critical point, tether regulation in the null space (g
 from __future__ import annotations
 
 import math
+import threading
 from typing import Any, Protocol
 
 import numpy as np
@@ -212,21 +213,25 @@ def _row_offsets(M: int, ncol: int) -> NDArray[np.intp]:
 
 
 _ROW_OFFSETS: dict[tuple[int, int], NDArray[np.intp]] = {}
-#: coal objects reused by every query (their values are set before each): the segments' capsule, placement and
-#: result, then the points' placement (a translation only) and result
-_COAL_SCRATCH: list[Any] = []
+_COAL_SCRATCH = threading.local()
 
 
 def _coal_scratch() -> list[Any]:
-    import coal
+    """coal objects reused by every query of this thread (their values are set before each; constructing them costs
+    ~1 µs a query): the segments' capsule, placement and result, then the points' placement (a translation only, never
+    rotated) and result."""
+    objs = getattr(_COAL_SCRATCH, "objs", None)
+    if objs is None:
+        import coal
 
-    return [
-        coal.Capsule(0.0, 1.0),
-        coal.Transform3s(),
-        coal.DistanceResult(),
-        coal.Transform3s(),
-        coal.DistanceResult(),
-    ]
+        objs = _COAL_SCRATCH.objs = [
+            coal.Capsule(0.0, 1.0),
+            coal.Transform3s(),
+            coal.DistanceResult(),
+            coal.Transform3s(),
+            coal.DistanceResult(),
+        ]
+    return objs
 
 
 def _segment_coal_pairs(
@@ -241,9 +246,7 @@ def _segment_coal_pairs(
 
     from tmr.world.world3d import _REQUEST, _winding_number
 
-    if not _COAL_SCRATCH:
-        _COAL_SCRATCH.extend(_coal_scratch())
-    capsule, place, res = _COAL_SCRATCH[:3]
+    capsule, place, res = _coal_scratch()[:3]
     ca, cb = a[cs], b[cs]
     R, mid, half = _segment_frames(ca, cb)
     targets = world.coal_targets
@@ -319,9 +322,7 @@ def point_nearest_k(world: World3D, points: Array, k: int, cap: float = np.inf) 
         C[bs, bo], G[bs, bo] = d, g
         co, cs = co[~box], cs[~box]
     if co.size:
-        if not _COAL_SCRATCH:
-            _COAL_SCRATCH.extend(_coal_scratch())
-        place, res = _COAL_SCRATCH[3:]  # a translation only (the segments' placement is rotated)
+        place, res = _coal_scratch()[3:]  # a translation only (the segments' placement is rotated)
         targets = world.coal_targets
         d_l: list[float] = []
         q_l: list[Array] = []
