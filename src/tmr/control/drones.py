@@ -21,6 +21,7 @@ soft obstacle task at the critical point, tether regulation in the null space (g
 from __future__ import annotations
 
 import math
+import threading
 from typing import Any, Protocol
 
 import numpy as np
@@ -84,25 +85,37 @@ class _FreeBox:
         return self.lo, self.hi
 
 
+def _cross(x: Array, y: Array) -> Array:
+    """Row-wise cross product x × y of (M, 3) arrays: np.cross's arithmetic (x1 y2 − x2 y1, …, bit for bit) in four
+    numpy calls instead of ~20 (np.cross moves axes and checks shapes: ~15 µs on a few rows)."""
+    return x[:, _NEXT] * y[:, _PREV] - x[:, _PREV] * y[:, _NEXT]
+
+
+_NEXT, _PREV = np.array([1, 2, 0]), np.array([2, 0, 1])
+_AXES = np.eye(3)
+
+
 def _segment_frames(a: Array, b: Array) -> tuple[Array, Array, Array]:
     """Per segment a–b (M, 3): the rotation (M, 3, 3) whose z axis is along it, its midpoint (M, 3) and half length
     (M,) — the placement of coal's capsule (axis z) — all at once in numpy."""
     v = b - a
     length = np.sqrt(np.einsum("ij,ij->i", v, v))
-    u = np.where((length > 0.0)[:, None], v / np.maximum(length, 1e-300)[:, None], [0.0, 0.0, 1.0])  # a point: any axis
-    helper = np.where((np.abs(u[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    e1 = np.cross(helper, u)
-    e1 /= np.maximum(np.linalg.norm(e1, axis=1), 1e-300)[:, None]
-    R = np.stack([e1, np.cross(u, e1), u], axis=2)
+    u = np.where((length > 0.0)[:, None], v / np.maximum(length, 1e-300)[:, None], _AXES[2])  # a point: any axis
+    helper = np.where((np.abs(u[:, 0]) < 0.9)[:, None], _AXES[0], _AXES[1])
+    e1 = _cross(helper, u)
+    e1 /= np.maximum(np.sqrt(np.add.reduce(e1 * e1, axis=1)), 1e-300)[:, None]  # np.linalg.norm's sum
+    R = np.stack([e1, _cross(u, e1), u], axis=2)
     return R, 0.5 * (a + b), 0.5 * length
 
 
 def segment_box_distance(a: Array, b: Array, lo: Array, hi: Array) -> tuple[Array, Array]:
-    """Exact distance [m] from the segments a–b (M, 3) to the axis-aligned box [lo, hi], and the parameter t ∈ [0, 1]
-    of the segment's nearest point (M,), vectorised. Along a segment the squared distance is piecewise quadratic in
-    t, with breakpoints where a coordinate crosses a face: on each of the (≤ 7) pieces the minimiser is the clipped
-    stationary point of its quadratic; the smallest over the pieces is the minimum (the distance is convex in t).
-    0 for a segment touching or crossing the box (its depth is not computed here)."""
+    """Exact distance [m] from the segments a–b (M, 3) to the axis-aligned box [lo, hi] (3,) — or, per segment, to
+    its own box (M, 3) each — and the parameter t ∈ [0, 1] of the segment's nearest point (M,), vectorised. Along a
+    segment the squared distance is piecewise quadratic in t, with breakpoints where a coordinate crosses a face: on
+    each of the (≤ 7) pieces the minimiser is the clipped stationary point of its quadratic; the smallest over the
+    pieces is the minimum (the distance is convex in t). 0 for a segment touching or crossing the box (its depth is
+    not computed here)."""
+    lo3, hi3 = (lo, hi) if np.ndim(lo) == 1 else (lo[:, None, :], hi[:, None, :])  # against the (M, 7, 3) pieces
     v = b - a
     with np.errstate(divide="ignore", invalid="ignore"):
         cross = np.concatenate([(lo - a) / v, (hi - a) / v], axis=1)  # (M, 6); ±inf/nan where v_k = 0
@@ -110,8 +123,8 @@ def segment_box_distance(a: Array, b: Array, lo: Array, hi: Array) -> tuple[Arra
     knots = np.sort(np.concatenate([np.zeros((a.shape[0], 1)), cross, np.ones((a.shape[0], 1))], axis=1), axis=1)
     t0, t1 = knots[:, :-1], knots[:, 1:]  # (M, 7) pieces
     x_mid = a[:, None, :] + (0.5 * (t0 + t1))[..., None] * v[:, None, :]  # (M, 7, 3)
-    below, above = x_mid < lo, x_mid > hi
-    bound = np.where(below, lo, np.where(above, hi, 0.0))
+    below, above = x_mid < lo3, x_mid > hi3
+    bound = np.where(below, lo3, np.where(above, hi3, 0.0))
     active = below | above
     off = np.where(active, a[:, None, :] - bound, 0.0)  # x_k(t) − bound_k = off_k + t v_k on the active axes
     vv = np.where(active, v[:, None, :], 0.0)
@@ -121,7 +134,7 @@ def segment_box_distance(a: Array, b: Array, lo: Array, hi: Array) -> tuple[Arra
         ts = np.where(den > 0.0, num / den, t0)
     ts = np.clip(ts, t0, t1)
     X = a[:, None, :] + ts[..., None] * v[:, None, :]
-    gap = X - np.clip(X, lo, hi)
+    gap = X - np.clip(X, lo3, hi3)
     dist = np.sqrt(np.einsum("mpk,mpk->mp", gap, gap))
     best = np.argmin(dist, axis=1)
     rows = np.arange(a.shape[0])
@@ -145,136 +158,199 @@ def segment_nearest_k(
     is farther than ``cap`` [m] (beyond the world's safety radius) from a segment are not queried; a slot with no
     obstacle left has clearance +inf, gradient 0 and t = 0. Also returns, as the fourth value, how many obstacles
     each segment has within a clearance ``within`` [m] (default ``cap``) (M,): more than ``k`` means the farthest of
-    them got no slot."""
-    import coal
+    them got no slot.
 
-    from tmr.world.world3d import _IDENTITY, _REQUEST, _PlacedBox, _placement, _winding_number
+    The work is per (segment, obstacle) candidate pair of the broad phase, not per obstacle: every box pair in one
+    call of :func:`segment_box_distance`, every other pair in one loop of coal queries (~2 µs each; their nearest
+    points turned into gradients at once after it), written into one (M, walls + obstacles) table sorted once."""
 
     M = a.shape[0]
-    items_c: list[Array] = []
-    items_g: list[Array] = []
-    items_t: list[Array] = []
-    if walls:  # the six faces of the room, each an obstacle of its own (x = xmin, y = ymin, z = zmin, then the max)
-        bounds = np.asarray(world.bounds, dtype=float)
-        ga = np.concatenate([a - bounds[:3], bounds[3:] - a], axis=1)  # (M, 6)
-        gb = np.concatenate([b - bounds[:3], bounds[3:] - b], axis=1)
-        items_c.append(np.minimum(ga, gb))
-        items_t.append((gb < ga).astype(float))
-        items_g.append(np.broadcast_to(_WALL_NORMALS, (M, 6, 3)))
-    lo_seg, hi_seg = np.minimum(a, b), np.maximum(a, b)
-    frames: tuple[Array, Array, Array] | None = None
-    capsule = coal.Capsule(0.0, 1.0)
-    res = coal.DistanceResult()
-    near = world.box_gaps(lo_seg, hi_seg) < cap + world.safety_radius  # (O, M): every obstacle at once
-    for o in np.flatnonzero(near.any(axis=1)):
-        ob = world.obstacles[o]
-        cand = np.flatnonzero(near[o])
-        out, grad, t = np.full(M, np.inf), np.zeros((M, 3)), np.zeros(M)
-        inside = np.zeros(len(cand), dtype=bool)
-        if not ob.signed:
-            assert ob.triangles is not None
-            w = _winding_number(np.vstack([a[cand], b[cand]]), ob.triangles)
-            inside = (np.abs(w[: len(cand)]) > 0.5) | (np.abs(w[len(cand) :]) > 0.5)
-        geom = ob.geometry
-        if isinstance(geom, _PlacedBox):  # boxes in numpy (exact); coal only for a piece touching or inside one
-            dist, tb = segment_box_distance(a[cand], b[cand], ob.lo, ob.hi)
-            closer = dist > 1e-9
-            i = cand[closer]
-            X = a[i] + tb[closer, None] * (b[i] - a[i])
-            grad[i] = (X - np.clip(X, ob.lo, ob.hi)) / dist[closer, None]
-            out[i], t[i] = dist[closer], tb[closer]
-            inside = inside[~closer]
-            cand = cand[~closer]
-            shape2, place2 = geom.box, _placement(geom.centre)
-        else:
-            shape2, place2 = geom, _IDENTITY
-        if len(cand):
-            if frames is None:
-                frames = _segment_frames(a, b)
-            R, mid, half = frames
-            # the queries alone in the loop (coal: ~2 µs each); their results are turned into rows at once below
-            nc = len(cand)
-            d = np.empty(nc)
-            p1, p2 = np.empty((nc, 3)), np.empty((nc, 3))
-            halves = np.maximum(half[cand], 1e-12).tolist()
-            for kk, i in enumerate(cand.tolist()):
-                capsule.halfLength = halves[kk]
-                res.clear()
-                d[kk] = coal.distance(capsule, coal.Transform3s(R[i], mid[i]), shape2, place2, _REQUEST, res)
-                p1[kk] = res.getNearestPoint1()
-                p2[kk] = res.getNearestPoint2()
-            d = np.where(inside & (d > 0.0), -np.abs(d), d)
-            out[cand] = d
-            v = p1 - p2
-            nv = np.sqrt(np.einsum("ij,ij->i", v, v))
-            off = 0.5 * (a[cand] + b[cand]) - 0.5 * (ob.lo + ob.hi)  # touching: away from the bounding box's centre
-            off /= np.maximum(np.linalg.norm(off, axis=1), 1e-12)[:, None]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                grad[cand] = np.where((nv > 1e-12)[:, None], np.copysign(1.0, d)[:, None] * v / nv[:, None], off)
-                along = np.einsum("ij,ij->i", p1 - mid[cand], R[cand][:, :, 2]) / (2.0 * half[cand])
-            t[cand] = np.where(half[cand] > 1e-12, np.clip(0.5 + along, 0.0, 1.0), 0.0)
-        items_c.append(out[:, None])
-        items_g.append(grad[:, None, :])
-        items_t.append(t[:, None])
     k = int(k)
-    short = k - sum(c.shape[1] for c in items_c)
-    if short > 0:  # fewer obstacles than slots: empty slots
-        items_c.append(np.full((M, short), np.inf))
-        items_g.append(np.zeros((M, short, 3)))
-        items_t.append(np.zeros((M, short)))
-    C = np.concatenate(items_c, axis=1)
-    G = np.concatenate(items_g, axis=1)
-    T = np.concatenate(items_t, axis=1)
+    W = 6 if walls else 0
+    n_obs = len(world.obstacles)
+    ncol = max(W + n_obs, k)  # walls, then one column per obstacle (+inf if not queried), then empty slots
+    C = np.full((M, ncol), np.inf)
+    G = np.zeros((M, ncol, 3))
+    T = np.zeros((M, ncol))
+    if walls:  # the six faces of the room, each an obstacle of its own (x = xmin, y = ymin, z = zmin, then the max)
+        lo_room, hi_room = world._lo, world._hi
+        ga = np.concatenate([a - lo_room, hi_room - a], axis=1)  # (M, 6)
+        gb = np.concatenate([b - lo_room, hi_room - b], axis=1)
+        np.minimum(ga, gb, out=C[:, :6])
+        T[:, :6] = gb < ga
+        G[:, :6] = _WALL_NORMALS
+    if n_obs:
+        near = world.box_gaps(np.minimum(a, b), np.maximum(a, b)) < cap + world.safety_radius  # (O, M)
+        co, cs = np.nonzero(near)  # the candidate pairs (obstacle, segment)
+        if world.is_box.any():  # boxes in numpy (exact), all pairs at once; coal only for a segment touching one
+            box = world.is_box[co]
+            bo, bs = co[box], cs[box]
+            lo, hi = world.aabb_lo[bo], world.aabb_hi[bo]
+            ab, bb = a[bs], b[bs]
+            dist, tb = segment_box_distance(ab, bb, lo, hi)
+            closer = dist > 1e-9
+            X = ab[closer] + tb[closer, None] * (bb[closer] - ab[closer])
+            cols = W + bo[closer]
+            C[bs[closer], cols], T[bs[closer], cols] = dist[closer], tb[closer]
+            G[bs[closer], cols] = (X - np.clip(X, lo[closer], hi[closer])) / dist[closer, None]
+            box[np.flatnonzero(box)[~closer]] = False  # the touching pairs: to coal
+            co, cs = co[~box], cs[~box]
+        if co.size:
+            _segment_coal_pairs(world, a, b, co, cs, C[:, W:], G[:, W:], T[:, W:])
     count = np.count_nonzero(C <= (cap if within is None else within) + world.safety_radius, axis=1)
-    order = np.argsort(C, axis=1, kind="stable")[:, :k] if C.shape[1] > 1 else np.zeros((M, 1), dtype=np.intp)
-    rows = np.arange(M)[:, None]
-    return C[rows, order] - world.safety_radius, G[rows, order], T[rows, order], count
+    order = np.argsort(C, axis=1, kind="stable")[:, :k] if ncol > 1 else np.zeros((M, 1), dtype=np.intp)
+    flat = order + _row_offsets(M, ncol)  # flat indices of the sorted slots (one take each, not 2-D fancy indexing)
+    return C.take(flat) - world.safety_radius, G.reshape(-1, 3)[flat], T.take(flat), count
+
+
+def _row_offsets(M: int, ncol: int) -> NDArray[np.intp]:
+    """(M, 1) offsets i·ncol of the rows of an (M, ncol) table in its flat form (cached: the shapes are per plan)."""
+    key = (M, ncol)
+    out = _ROW_OFFSETS.get(key)
+    if out is None:
+        out = _ROW_OFFSETS[key] = (np.arange(M) * ncol)[:, None]
+    return out
+
+
+_ROW_OFFSETS: dict[tuple[int, int], NDArray[np.intp]] = {}
+_COAL_SCRATCH = threading.local()
+
+
+def _coal_scratch() -> list[Any]:
+    """coal objects reused by every query of this thread (their values are set before each; constructing them costs
+    ~1 µs a query): the segments' capsule, placement and result, then the points' placement (a translation only, never
+    rotated) and result."""
+    objs = getattr(_COAL_SCRATCH, "objs", None)
+    if objs is None:
+        import coal
+
+        objs = _COAL_SCRATCH.objs = [
+            coal.Capsule(0.0, 1.0),
+            coal.Transform3s(),
+            coal.DistanceResult(),
+            coal.Transform3s(),
+            coal.DistanceResult(),
+        ]
+    return objs
+
+
+def _segment_coal_pairs(
+    world: World3D, a: Array, b: Array, co: NDArray[np.intp], cs: NDArray[np.intp], C: Array, G: Array, T: Array
+) -> None:
+    """coal's radius-0 capsule queries of the pairs (obstacle ``co``, segment ``cs``) of :func:`segment_nearest_k`,
+    written into its tables (columns per obstacle): C[cs, co] the clearance [m] (negative inside), G the unit
+    gradient (from the obstacle's nearest point towards the segment's; touching: away from the bounding box's
+    centre), T the nearest point's parameter along a → b. The queries alone in the loop (coal: ~2 µs each); their
+    results are turned into rows at once after it."""
+    import coal
+
+    from tmr.world.world3d import _REQUEST, _winding_number
+
+    capsule, place, res = _coal_scratch()[:3]
+    ca, cb = a[cs], b[cs]
+    R, mid, half = _segment_frames(ca, cb)
+    targets = world.coal_targets
+    d_l: list[float] = []
+    p1_l: list[Array] = []
+    p2_l: list[Array] = []
+    for Ri, mi, hl, o in zip(R, mid, np.maximum(half, 1e-12).tolist(), co.tolist(), strict=True):
+        capsule.halfLength = hl
+        place.setRotation(Ri)
+        place.setTranslation(mi)
+        res.clear()
+        shape2, place2 = targets[o]
+        d_l.append(coal.distance(capsule, place, shape2, place2, _REQUEST, res))
+        p1_l.append(res.getNearestPoint1())
+        p2_l.append(res.getNearestPoint2())
+    d = np.array(d_l)
+    p1, p2 = np.array(p1_l), np.array(p2_l)
+    if not world.is_signed.all():  # a triangle BVH: its sign from the winding number of the segment's ends
+        inside = np.zeros(co.size, dtype=bool)
+        for o in np.unique(co[~world.is_signed[co]]).tolist():
+            tri = world.obstacles[o].triangles
+            assert tri is not None
+            sel = co == o
+            w = _winding_number(np.vstack([ca[sel], cb[sel]]), tri)
+            n_sel = int(np.count_nonzero(sel))
+            inside[sel] = (np.abs(w[:n_sel]) > 0.5) | (np.abs(w[n_sel:]) > 0.5)
+        d = np.where(inside & (d > 0.0), -np.abs(d), d)
+    v = p1 - p2
+    nv = np.sqrt(np.einsum("ij,ij->i", v, v))
+    grad = np.copysign(1.0, d)[:, None] * v / np.maximum(nv, 1e-300)[:, None]
+    touching = ~(nv > 1e-12)
+    if touching.any():  # away from the bounding box's centre
+        off = 0.5 * (ca + cb) - 0.5 * (world.aabb_lo[co] + world.aabb_hi[co])
+        off /= np.maximum(np.sqrt(np.add.reduce(off * off, axis=1)), 1e-12)[:, None]
+        grad[touching] = off[touching]
+    along = np.einsum("ij,ij->i", p1 - mid, R[:, :, 2]) / np.maximum(2.0 * half, 1e-300)
+    C[cs, co] = d
+    G[cs, co] = grad
+    T[cs, co] = np.where(half > 1e-12, np.clip(0.5 + along, 0.0, 1.0), 0.0)
 
 
 def point_nearest_k(world: World3D, points: Array, k: int, cap: float = np.inf) -> tuple[Array, Array, Array]:
     """:func:`segment_nearest_k` for points (M, 3) and the obstacles only (no walls), cheaper: per point and slot
     (M, k), sorted, the clearance [m] from that obstacle (World3D's radius subtracted; negative inside), its unit
     gradient (M, k, 3) and how many obstacles are within ``cap`` [m] (M,). Boxes in closed form (inside: the depth to
-    the nearest face), other obstacles by coal's point query (as :meth:`World3D.clearance`)."""
-    from tmr.world.world3d import _POINT, _PlacedBox, _placement, _query, _winding_number
+    the nearest face), other obstacles by coal's point query (as :meth:`World3D.clearance`); per (point, obstacle)
+    candidate pair of the broad phase: every box pair at once, every other pair in one loop of coal queries."""
+    import coal
+
+    from tmr.world.world3d import _POINT, _REQUEST, _winding_number
 
     M = points.shape[0]
     k = int(k)
-    C = np.full((M, max(k, len(world.obstacles))), np.inf)
-    G = np.zeros((M, C.shape[1], 3))
+    ncol = max(k, len(world.obstacles))
+    C = np.full((M, ncol), np.inf)
+    G = np.zeros((M, ncol, 3))
     r = world.safety_radius
-    near = world.box_gaps(points, points) < cap + r  # (O, M)
-    for o in np.flatnonzero(near.any(axis=1)):
-        ob = world.obstacles[o]
-        cand = np.flatnonzero(near[o])
-        p = points[cand]
-        if isinstance(ob.geometry, _PlacedBox):
-            off = p - np.clip(p, ob.lo, ob.hi)
-            d = np.sqrt(np.einsum("ij,ij->i", off, off))
-            g = off / np.maximum(d, 1e-300)[:, None]
-            inside = d <= 0.0
-            if inside.any():  # the depth to the nearest face, the gradient along its outward normal
-                faces = np.concatenate([p[inside] - ob.lo, ob.hi - p[inside]], axis=1)
-                f = np.argmin(faces, axis=1)
-                d[inside] = -faces[np.arange(len(f)), f]
-                g[inside] = -_WALL_NORMALS[f]
-        else:
-            d, g = np.empty(len(cand)), np.zeros((len(cand), 3))
-            sign = np.ones(len(cand))
-            if not ob.signed:
-                assert ob.triangles is not None
-                sign = np.where(np.abs(_winding_number(p, ob.triangles)) > 0.5, -1.0, 1.0)
-            for i in range(len(cand)):
-                di, _, q = _query(_POINT, _placement(p[i]), ob)
-                d[i] = di if ob.signed else sign[i] * abs(di)
-                v = p[i] - q
-                nv = float(np.linalg.norm(v))
-                g[i] = math.copysign(1.0, d[i]) * v / nv if nv > 1e-12 else 0.0
-        C[cand, o], G[cand, o] = d, g
+    co, cs = np.nonzero(world.box_gaps(points, points) < cap + r)  # candidate pairs (obstacle, point)
+    if world.is_box.any():
+        box = world.is_box[co]
+        bo, bs = co[box], cs[box]
+        lo, hi = world.aabb_lo[bo], world.aabb_hi[bo]
+        p = points[bs]
+        off = p - np.clip(p, lo, hi)
+        d = np.sqrt(np.einsum("ij,ij->i", off, off))
+        g = off / np.maximum(d, 1e-300)[:, None]
+        inside = d <= 0.0
+        if inside.any():  # the depth to the nearest face, the gradient along its outward normal
+            faces = np.concatenate([p[inside] - lo[inside], hi[inside] - p[inside]], axis=1)
+            f = np.argmin(faces, axis=1)
+            d[inside] = -faces[np.arange(len(f)), f]
+            g[inside] = -_WALL_NORMALS[f]
+        C[bs, bo], G[bs, bo] = d, g
+        co, cs = co[~box], cs[~box]
+    if co.size:
+        place, res = _coal_scratch()[3:]  # a translation only (the segments' placement is rotated)
+        targets = world.coal_targets
+        d_l: list[float] = []
+        q_l: list[Array] = []
+        p = points[cs]
+        for pi, o in zip(p, co.tolist(), strict=True):  # the queries alone in the loop
+            place.setTranslation(pi)
+            res.clear()
+            shape2, place2 = targets[o]
+            d_l.append(coal.distance(_POINT, place, shape2, place2, _REQUEST, res))
+            q_l.append(res.getNearestPoint2())
+        d = np.array(d_l)
+        if not world.is_signed.all():  # a triangle BVH: its sign from the winding number
+            sign = np.ones(co.size)
+            for o in np.unique(co[~world.is_signed[co]]).tolist():
+                sel = co == o
+                tri = world.obstacles[o].triangles
+                assert tri is not None
+                sign[sel] = np.where(np.abs(_winding_number(p[sel], tri)) > 0.5, -1.0, 1.0)
+            d = np.where(world.is_signed[co], d, sign * np.abs(d))
+        v = p - np.array(q_l)
+        nv = np.sqrt((v[:, None, :] @ v[:, :, None])[:, 0, 0])  # a dot product per row, as np.linalg.norm(v_i)
+        g = np.copysign(1.0, d)[:, None] * v / np.maximum(nv, 1e-300)[:, None]
+        g[~(nv > 1e-12)] = 0.0
+        C[cs, co], G[cs, co] = d, g
     count = np.count_nonzero(C <= cap + r, axis=1)
     order = np.argsort(C, axis=1, kind="stable")[:, :k]
-    rows = np.arange(M)[:, None]
-    return C[rows, order] - r, G[rows, order], count
+    flat = order + _row_offsets(M, ncol)
+    return C.take(flat) - r, G.reshape(-1, 3)[flat], count
 
 
 def segment_nearest(world: World3D, a: Array, b: Array, cap: float = np.inf) -> tuple[Array, Array, Array]:
@@ -497,6 +573,38 @@ class DroneSmoothness(DroneEnergy):
 
 
 # --------------------------------------------------------------------------------------------------------- limits
+_BLOCK_SCATTER: dict[tuple[int, int, int, int], NDArray[np.intp]] = {}
+
+
+def _block_scatter(N: int, per: int, width: int, pad: int) -> NDArray[np.intp]:
+    """Flat indices into a row-major (N·per, 3N + pad) table of N blocks (per, width): block j at rows j·per… and
+    columns 3j… (cached: the shapes are fixed for a plan). With pad = 3 and width = 6 a tether's rows on its two
+    ends, point j−1 (the anchor's columns in front) and drone j; with pad = 0 and width = 3 a drone's own rows."""
+    key = (N, per, width, pad)
+    idx = _BLOCK_SCATTER.get(key)
+    if idx is None:
+        j, r, c = np.ix_(np.arange(N), np.arange(per), np.arange(width))
+        idx = _BLOCK_SCATTER[key] = ((j * per + r) * (3 * N + pad) + 3 * j + c).ravel()
+    return idx
+
+
+def _row_norms(x: Array) -> Array:
+    """Euclidean norm of each row of x (M, 3): np.linalg.norm(x, axis=1)'s arithmetic without its wrapper."""
+    return np.sqrt(np.add.reduce(x * x, axis=1))
+
+
+def _minus_infinite(m: int) -> Array:
+    """A read-only vector of m −infinities (shared: lower bounds that never bind)."""
+    v = _MINUS_INF.get(m)
+    if v is None:
+        v = _MINUS_INF[m] = np.full(m, -np.inf)
+        v.flags.writeable = False
+    return v
+
+
+_MINUS_INF: dict[int, Array] = {}
+
+
 def _robot_pattern(N: int, rows_robots: list[list[int]]) -> NDArray[np.bool_]:
     """(m, 3N) mask: row r may touch the 0-based drones in ``rows_robots[r]`` (3 columns each)."""
     mask = np.zeros((len(rows_robots), N, 3), dtype=bool)
@@ -530,13 +638,12 @@ class DroneClearance(_DroneLimit):
 
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
         N, k = self.N, self.nearest
-        A = np.zeros((N, k, N, 3))
-        i = np.arange(N)
-        A[i, :, i, :] = ctx.Ts * ctx.drone_obstacle_gradient
+        A = np.zeros((N * k, 3 * N))
+        A.reshape(-1)[_block_scatter(N, k, 3, 0)] = (ctx.Ts * ctx.drone_obstacle_gradient).reshape(-1)
         d = ctx.drone_obstacle_clearance.reshape(-1)
         lower = approach_bound(d, self.d_safe, self.rate, ctx.Ts)
         lower[~(d <= self.activation)] = -np.inf
-        return LimitRows(A.reshape(N * k, 3 * N), lower, _infinite(N * k))
+        return LimitRows(A, lower, _infinite(N * k))
 
 
 class RoomBounds(_DroneLimit):
@@ -549,6 +656,7 @@ class RoomBounds(_DroneLimit):
         b = np.asarray(bounds, dtype=float)
         self.N, self.lo, self.hi, self.rate = n_robots, b[:3] + margin, b[3:] - margin, float(approach_rate)
         self.eye = np.eye(3 * n_robots)
+        self._A: tuple[float, Array] | None = None  # (Ts, Ts I): the rows are constant for a plan
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
         return np.eye(3 * self.N, dtype=bool)
@@ -557,7 +665,10 @@ class RoomBounds(_DroneLimit):
         P = ctx.points[1:]
         low = approach_bound((P - self.lo).reshape(-1), 0.0, self.rate, ctx.Ts)
         high = -approach_bound((self.hi - P).reshape(-1), 0.0, self.rate, ctx.Ts)
-        return LimitRows(ctx.Ts * self.eye, low, high)
+        if self._A is None or self._A[0] != ctx.Ts:
+            self._A = (ctx.Ts, ctx.Ts * self.eye)
+            self._A[1].flags.writeable = False
+        return LimitRows(self._A[1], low, high)
 
 
 class DroneSeparation(RobotSeparation):
@@ -576,13 +687,13 @@ class _TetherRows(_DroneLimit):
     """Rows on tether j's two ends: point j−1 (a drone for j ≥ 2, the fixed anchor for j = 1) and drone j."""
 
     @staticmethod
-    def _scatter(N: int, per: int, dp: Array, dq: Array) -> Array:
-        """A (N·per, 3N) from per-row gradients w.r.t. the tether's p end ``dp`` and q end ``dq``, (N, per, 3)."""
-        A = np.zeros((N, per, N, 3))
-        j = np.arange(N)
-        A[j, :, j, :] = dq
-        A[j[1:], :, j[1:] - 1, :] = dp[1:]
-        return A.reshape(N * per, 3 * N)
+    def _scatter(N: int, per: int, D: Array) -> Array:
+        """A (N·per, 3N) from per-row gradients D (N, per, 6) w.r.t. the tether's p end (D[..., :3]) and q end
+        (D[..., 3:]): tether j's rows touch point j−1 and drone j, six adjacent columns, written by one scatter
+        into a table with the anchor's three columns in front (dropped: the anchor does not move)."""
+        A = np.zeros((N * per, 3 * N + 3))
+        A.reshape(-1)[_block_scatter(N, per, 6, 3)] = D.reshape(-1)
+        return A[:, 3:]
 
     def _mask(self, N: int, per: int) -> NDArray[np.bool_]:
         return _robot_pattern(N, [[j - 1, j] if j else [j] for j in range(N) for _ in range(per)])
@@ -618,24 +729,24 @@ class TetherClearance(_TetherRows):
         f = np.arange(1, self.m + 1) / (self.m + 1)
         self._ends = (np.r_[1.0, np.zeros(self.m), 0.0], np.r_[0.0, np.zeros(self.m), 1.0])  # p, q weights
         self.fractions = f
+        # ∂X/∂(p, q) (N, m+2, 3, 6) of the polyline's points: the ends (I and 0) fixed, the samples' set per step
+        self._J = np.zeros((n_robots, self.m + 2, 3, 6))
+        self._J[:, 0, :, :3] = np.eye(3)
+        self._J[:, -1, :, 3:] = np.eye(3)
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
         return self._mask(self.N, (self.m + 1) * self.nearest)
 
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
         N, m, k = self.N, self.m, self.nearest
-        eye = np.eye(3)
-        Jp = np.empty((N, m + 2, 3, 3))
-        Jq = np.empty((N, m + 2, 3, 3))
-        Jp[:, 1:-1], Jq[:, 1:-1] = ctx.sens.dpoints_dp, ctx.sens.dpoints_dq
-        Jp[:, 0], Jq[:, 0], Jp[:, -1], Jq[:, -1] = eye, 0.0, 0.0, eye
-        # n ᵀ ∂X/∂p with X = (1 − t) X_i + t X_{i+1}: (N, m+1, k, 3), one per piece and obstacle
+        J = self._J  # [∂X/∂p | ∂X/∂q] per point: its rows' sums are those of two (3, 3) products, bit for bit
+        J[:, 1:-1, :, :3], J[:, 1:-1, :, 3:] = ctx.sens.dpoints_dp, ctx.sens.dpoints_dq
+        # n ᵀ ∂X/∂(p, q) with X = (1 − t) X_i + t X_{i+1}: (N, m+1, k, 6), one per piece and obstacle
         t = ctx.piece_t[..., None]
         g1 = t * ctx.piece_gradient  # (N, m+1, k, 3)
         g0 = ctx.piece_gradient - g1
-        dp = (g0 @ Jp[:, :-1] + g1 @ Jp[:, 1:]).reshape(N, (m + 1) * k, 3)
-        dq = (g0 @ Jq[:, :-1] + g1 @ Jq[:, 1:]).reshape(N, (m + 1) * k, 3)
-        A = ctx.Ts * self._scatter(N, (m + 1) * k, dp, dq)
+        D = g0 @ J[:, :-1] + g1 @ J[:, 1:]
+        A = self._scatter(N, (m + 1) * k, (ctx.Ts * D).reshape(N, (m + 1) * k, 6))
         c = ctx.piece_clearance.reshape(N, -1)
         need = self.c_min + ctx.chord_deviation[:, None]  # (N, 1): c_t + margin + the arc's departure from its chord
         lower = -np.minimum(self.rate * ctx.Ts, 1.0) * np.maximum(c - need, 0.0)
@@ -661,14 +772,16 @@ class TetherLength(_TetherRows):
 
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
         S = ctx.sens
-        dp, dq, L = S.dlength_dp[:, None, :], S.dlength_dq[:, None, :], S.length
-        V = np.vstack([np.zeros((1, 3)), ctx.v_prev.reshape(-1, 3)])  # the anchor does not move
-        w = np.linalg.norm(np.diff(V, axis=0), axis=1)
+        V = ctx.v_prev.reshape(-1, 3)
+        rel = V.copy()  # the ends' relative velocities (the anchor does not move)
+        rel[1:] -= V[:-1]
+        w = _row_norms(rel)
         step = ctx.Ts * (w + 2.0 * math.sqrt(3.0) * self.a_max * ctx.Ts)
         chord = np.maximum(ctx.velocity_map.d, 1e-9)
-        growth = np.linalg.norm(S.dlength_dq, axis=1) * step**2 / (2.0 * chord)
-        upper = -approach_bound(self.L_max - L, 0.0, self.rate, ctx.Ts) - growth
-        return LimitRows(ctx.Ts * self._scatter(self.N, 1, dp, dq), np.full(self.N, -np.inf), upper)
+        growth = _row_norms(S.dlength_dq) * step**2 / (2.0 * chord)
+        upper = -approach_bound(self.L_max - S.length, 0.0, self.rate, ctx.Ts) - growth
+        D = np.concatenate([S.dlength_dp, S.dlength_dq], axis=1)  # (N, 6)
+        return LimitRows(self._scatter(self.N, 1, ctx.Ts * D), _minus_infinite(self.N), upper)
 
 
 class TetherTension(_TetherRows):
@@ -686,15 +799,14 @@ class TetherTension(_TetherRows):
 
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
         S = ctx.sens
-        dp = np.stack([S.dtension_p_dp, S.dtension_q_dp], axis=1)  # (N, 2, 3)
-        dq = np.stack([S.dtension_p_dq, S.dtension_q_dq], axis=1)
+        # (N, 2, 6): per tether its p end's and q end's tension, each w.r.t. (p, q)
+        D = np.concatenate([S.dtension_p_dp, S.dtension_p_dq, S.dtension_q_dp, S.dtension_q_dq], axis=1)
+        D = (ctx.Ts * D).reshape(self.N, 2, 6)
+        D[0, 0] = 0.0  # tether 1's p end is the ground winch, not a drone
         T = np.column_stack([S.tension_p, S.tension_q])
-        upper = -approach_bound(self.T_max - T, 0.0, self.rate, ctx.Ts)
-        A = self._scatter(self.N, 2, dp, dq)
-        upper = upper.reshape(-1)
-        upper[0] = np.inf  # tether 1's p end is the ground winch, not a drone
-        A[0] = 0.0
-        return LimitRows(ctx.Ts * A, np.full(2 * self.N, -np.inf), upper)
+        upper = -approach_bound(self.T_max - T, 0.0, self.rate, ctx.Ts).reshape(-1)
+        upper[0] = np.inf
+        return LimitRows(self._scatter(self.N, 2, D), _minus_infinite(2 * self.N), upper)
 
 
 class DroneSpeed(_DroneLimit):

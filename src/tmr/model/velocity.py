@@ -186,18 +186,20 @@ class VelocityMap3D:
         P = np.asarray(points, dtype=float)
         if P.ndim != 2 or P.shape[1] != 3 or P.shape[0] < 2:
             raise ParameterError(f"a spatial velocity map needs points (N+1, 3), got shape {P.shape}")
-        diff = np.diff(P, axis=0)
+        # a few numpy calls on small arrays (this runs at every step of a drone plan): no np.diff / np.cross /
+        # np.linalg.norm wrappers, their arithmetic written out (same results bit for bit)
+        diff = P[1:] - P[:-1]
         d = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-        if np.min(d) < 1e-9:
+        if d.min() < 1e-9:
             raise ParameterError(f"link coordinates need every link longer than 0, got lengths {d}")
         u = diff / d[:, None]
         N = d.size
-        k = np.argmin(np.abs(u), axis=1)  # the axis least aligned with u_j
-        a = np.zeros((N, 3))
-        a[np.arange(N), k] = 1.0
-        e1 = a - np.einsum("ij,ij->i", a, u)[:, None] * u
-        e1 /= np.linalg.norm(e1, axis=1)[:, None]
-        e2 = np.cross(u, e1)
+        rows = np.arange(N)
+        k = np.abs(u).argmin(axis=1)  # the axis least aligned with u_j
+        # e1 = a − (aᵀu) u with a the unit axis k: aᵀu is u_k exactly (the other terms are ±0)
+        e1 = _EYE3[k] - u[rows, k][:, None] * u
+        e1 /= np.sqrt(np.add.reduce(e1 * e1, axis=1))[:, None]
+        e2 = u[:, _NEXT] * e1[:, _PREV] - u[:, _PREV] * e1[:, _NEXT]  # u × e1
         self.n_robots = N
         self.d = d
         self.u = u
@@ -233,10 +235,8 @@ class VelocityMap3D:
         """The matrix T of ``q̇ = T v``, (3N, 3N), block bidiagonal (computed once per map)."""
         if self._T is None:
             N = self.n_robots
-            T = np.zeros((N, 3, N, 3))
-            j = np.arange(N)
-            T[j, :, j, :] = self.R
-            T[j[1:], :, j[1:] - 1, :] = -self.R[1:]
+            T = np.zeros(9 * N * N)
+            T[_t3_scatter(N)] = np.concatenate([self.R, -self.R[1:]], axis=None)
             self._T = T.reshape(3 * N, 3 * N)
         return self._T
 
@@ -245,6 +245,26 @@ class VelocityMap3D:
         """Rows ``B`` on v, (m, 3N), as rows on q̇ through the robots' Jacobians (N, 3, n) in those coordinates."""
         J = np.asarray(robot_jacobians, dtype=float)
         return np.asarray(B, dtype=float) @ J.reshape(-1, J.shape[-1])
+
+
+_EYE3 = np.eye(3)
+_NEXT, _PREV = np.array([1, 2, 0]), np.array([2, 0, 1])
+_T3_SCATTER: dict[int, NDArray[np.intp]] = {}
+
+
+def _t3_scatter(N: int) -> NDArray[np.intp]:
+    """Flat indices into T (3N, 3N) of :attr:`VelocityMap3D.T`'s values: the blocks R_j at (j, j), then −R_j at
+    (j, j−1) for j ≥ 1, each block row-major (cached per N)."""
+    idx = _T3_SCATTER.get(N)
+    if idx is None:
+        j = np.arange(N)
+        r, c = np.arange(3)[:, None], np.arange(3)[None, :]
+
+        def block(rows: NDArray[np.intp], cols: NDArray[np.intp]) -> NDArray[np.intp]:
+            return ((3 * rows[:, None, None] + r) * 3 * N + 3 * cols[:, None, None] + c).ravel()
+
+        idx = _T3_SCATTER[N] = np.concatenate([block(j, j), block(j[1:], j[1:] - 1)])
+    return idx
 
 
 def robot_pattern3d(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:

@@ -261,6 +261,16 @@ class World3D:
         #: the obstacles' bounding boxes stacked (O, 3) each [m]: broad-phase tests of every obstacle at once
         self.aabb_lo = np.array([ob.lo for ob in self.obstacles], dtype=float).reshape(-1, 3)
         self.aabb_hi = np.array([ob.hi for ob in self.obstacles], dtype=float).reshape(-1, 3)
+        #: which obstacles are axis-aligned boxes (O,) (closed-form distances), and per obstacle the coal shape and
+        #: its placement for a query (the box and its centre; a hull or BVH in world coordinates, the identity)
+        self.is_box = np.array([isinstance(ob.geometry, _PlacedBox) for ob in self.obstacles], dtype=bool)
+        self.is_signed = np.array([ob.signed for ob in self.obstacles], dtype=bool)
+        self.coal_targets: tuple[tuple[Any, Any], ...] = tuple(
+            (ob.geometry.box, _placement(ob.geometry.centre))
+            if isinstance(ob.geometry, _PlacedBox)
+            else (ob.geometry, _IDENTITY)
+            for ob in self.obstacles
+        )
 
     def box_gaps(self, lo: NDArray[np.float64], hi: NDArray[np.float64]) -> NDArray[np.float64]:
         """Distance [m] from every obstacle's bounding box to each box [lo, hi] (M, 3) (a point: lo = hi): (O, M),
