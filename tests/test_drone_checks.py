@@ -16,7 +16,7 @@ from shapely.geometry import Polygon
 from tmr.checks.drones import (
     DRONE_VIOLATION_KINDS,
     box_signed_distance,
-    check_drone_plan,
+    check_drone_plan as _check_drone_plan,
     check_world,
     curve_points,
     mesh_signed_distance,
@@ -231,6 +231,12 @@ def make_plan(robots=None, prm=P, base=BASE, bounds=ROOM, **kw) -> DronePlan:
     return DronePlan(**fields)
 
 
+def check_drone_plan(plan, world, **kw):
+    """The checker on the synthetic plans below: they are cut out of a longer motion (they start and end moving),
+    so the start from rest and the final stop are not theirs to check (``rest_ends=False``; tested apart)."""
+    return _check_drone_plan(plan, world, **{"rest_ends": False, **kw})
+
+
 def table(obstacles=(), bounds=ROOM):
     return {"bounds": list(bounds), "safety_radius": 0.3, "obstacles": list(obstacles)}
 
@@ -419,3 +425,21 @@ def test_a_curve_1_mm_inside_c_t_between_coarse_samples_is_caught(what, dip):
     else:
         assert m.success, m.failures
         assert m.min_tether_clearance == pytest.approx(c_t + 0.003, abs=0.01)
+
+
+def test_a_plan_that_ends_or_starts_moving_breaks_the_acceleration_limit():
+    """tmr's plans start and end at rest: a plan whose last step still moves at 0.36 m/s stops at 7.2 m/s² (> 4), and
+    one that starts at 0.36 m/s from rest starts at 7.2 m/s²; with a smooth stop and start the same path passes."""
+    k = np.arange(K + 1, dtype=float)
+    ramp = np.clip(k / 10.0, 0.0, 1.0) * np.clip((K - k) / 10.0, 0.0, 1.0)  # speed factor: 0 at both ends
+    x = np.concatenate([[0.0], np.cumsum(0.02 * ramp[1:])])
+    smooth = np.zeros((K + 1, 2, 3))
+    smooth[:, 0] = np.column_stack([2 + x, np.full_like(k, 5.0), np.full_like(k, 1.9)])
+    smooth[:, 1] = np.column_stack([4 + x, np.full_like(k, 5.0), np.full_like(k, 2.0)])
+    assert _check_drone_plan(make_plan(smooth), table()).success
+    moving = smooth[: K - 8]  # cut while still at 0.36 m/s: the plan ends moving
+    k_bad, msg = _only(_check_drone_plan(make_plan(moving), table()), "acceleration")
+    assert k_bad == K - 9 and "7.200 m/s²" in msg and "stopping" in msg
+    late = smooth[8:]  # starts at 0.36 m/s from rest
+    k_bad, msg = _only(_check_drone_plan(make_plan(late), table()), "acceleration")
+    assert k_bad == 0 and "7.200 m/s²" in msg

@@ -113,7 +113,7 @@ def test_pulled_apart_until_the_arc_length_binds():
     world = World3D([], [0, 0, 0, 20, 10, 5], tether.drone_radius)
     ref = line_references([1.0, 5.0, 0.5], [2.0, 5.0, 2.0], [14.0, 5.0, 2.0], 2, Ts=PRM.Ts)
     plan = _plan(world, ref, 2, tether=tether)
-    assert not plan.success and plan.failure.startswith("the leader stopped")  # held back by the limit, and says so
+    assert not plan.success and plan.failure.startswith("the leader stalled")  # held back by the limit, and says so
     assert _violations(plan, world, tether) == []
     lengths = np.array([[solve3d(*plan.points(k)[j : j + 2], tether).length for j in range(2)]
                         for k in range(len(plan.t))])  # fmt: skip
@@ -132,7 +132,7 @@ def test_drone_end_tension_binds_when_climbing():
     world = World3D([], [0, 0, 0, 10, 10, 12], tether.drone_radius)
     ref = line_references([5.0, 5.0, 0.3], [5.5, 5.0, 1.5], [6.0, 5.0, 11.0], 1, Ts=PRM.Ts)
     plan = _plan(world, ref, 1, tether=tether)
-    assert not plan.success and plan.failure.startswith("the leader stopped")  # held back by the limit, and says so
+    assert not plan.success and plan.failure.startswith("the leader stalled")  # held back by the limit, and says so
     assert _violations(plan, world, tether) == []
     T = np.array([solve3d(plan.base, plan.robots[k, 0], tether).tension_q for k in range(len(plan.t))])
     assert T.max() <= tether.spare_thrust - PRM.tension_margin + 0.005
@@ -307,7 +307,7 @@ def test_sliding_across_a_taut_tether_does_not_creep_past_the_length():
     ref = line_references([10.0, 10.0, 0.5], [7.0, 6.5, 2.0], [16.0, 6.5, 2.0], 1, Ts=PRM.Ts, speed=2.0)
     ref.start_positions[:] = [[8.5, 8.0, 1.5]]
     plan = _plan(world, ref, 1, tether=tether)
-    assert not plan.success and plan.failure.startswith("the leader stopped")  # held back by the limit, and says so
+    assert not plan.success and plan.failure.startswith("the leader stalled")  # held back by the limit, and says so
     L = np.array([solve3d(*plan.points(k), tether).length for k in range(len(plan.t))])
     bound = tether.tether_length - PRM.length_margin
     assert L.max() <= bound + 1e-3
@@ -331,18 +331,26 @@ def test_the_plan_ends_once_the_chain_rests_at_the_goal():
 
 
 def test_slowed_references_keep_the_path_at_half_speed():
+    """The re-timed references: unchanged before k0, the same path, half the speed over the slow part, and the
+    speed changed smoothly (no jump of the reference velocity at the seams), the same end."""
     from tmr.control.run3d import slowed_references
 
     ref = line_references([1.0, 5.0, 0.3], [2.0, 5.0, 2.0], [8.0, 5.0, 2.0], 2, Ts=PRM.Ts, settle=1.0)
     K = len(ref.t) - 1
-    s = slowed_references(ref, 20, 40)
-    assert len(s.t) == K + 40 + 1
+    s = slowed_references(ref, 20, 40, ramp=20, base=[1.0, 5.0, 0.3])
     np.testing.assert_allclose(np.diff(s.t), PRM.Ts)
     np.testing.assert_allclose(s.positions[:21], ref.positions[:21])  # unchanged before k0
-    np.testing.assert_allclose(s.positions[20 + 80 :], ref.positions[60:])  # and after the slow part, shifted
-    np.testing.assert_allclose(s.positions[20:101:2], ref.positions[20:61])  # the slow part: every sample, twice
-    np.testing.assert_allclose(s.xd[21:100], np.tile(0.5 * ref.xd[21], (79, 1)), atol=1e-12)  # at half the speed
-    np.testing.assert_allclose(s.positions[-1], ref.positions[-1])
+    np.testing.assert_allclose(s.positions[-1], ref.positions[-1])  # the same end
+    assert K + 15 <= len(s.t) - 1 <= K + 25  # 40 samples' worth of motion: 20 at half speed, the ramps between
+    speed = np.linalg.norm(s.xd, axis=1)
+    assert speed[42:58].max() == pytest.approx(0.5, abs=1e-9)  # the hold, at half of 1 m/s
+    assert np.abs(np.diff(speed[5:100])).max() / PRM.Ts < 1.0  # smooth seams: 0.75 m/s² at most (it jumped 10 m/s²)
+    # the velocities are those of the positions (midpoint rule, exact to O(Ts · acceleration))
+    fd = np.diff(s.positions, axis=0) / PRM.Ts
+    np.testing.assert_allclose(fd[:100], 0.5 * (s.velocities[1:101] + s.velocities[:100]), atol=0.02)
+    # on the original path: the leader between start and goal on the line
+    np.testing.assert_allclose(s.x[:, 1:], np.tile([5.0, 2.0], (len(s.t), 1)), atol=1e-12)
+    np.testing.assert_allclose(s.base, [1.0, 5.0, 0.3])
 
 
 def test_a_step_without_a_solution_slows_the_chain_down_instead_of_failing(tmp_path):
@@ -356,6 +364,6 @@ def test_a_step_without_a_solution_slows_the_chain_down_instead_of_failing(tmp_p
     world = next(w for w in drone_worlds(6, seed=0) if w.name == "window-0-5")
     scenario = load_drone_scenario(str(world.write(tmp_path)))
     plan, metrics = plan_drones(scenario, robots=4)
-    assert plan.diagnostics["slowed_down"] == ["t = 15.95 s"]
+    assert plan.diagnostics["slowed_down"][0] == "t = 15.95 s"
     assert plan.success, plan.failure
     assert metrics.success and metrics.peak_acceleration <= PRM.drone_accel_max + 1e-6

@@ -774,6 +774,7 @@ def check_drone_plan(
     params: Any = None,
     tolerance: float = 1e-6,
     update_plan: bool = True,
+    rest_ends: bool = True,
 ) -> DroneMetrics:
     """Check every hard limit of a drone plan at every step, independently of the planner (module doc).
 
@@ -789,6 +790,9 @@ def check_drone_plan(
         tolerance: slack [m] before a length limit counts as broken; speeds get 2 tol / Ts, accelerations 4 tol / Ts².
         update_plan: set ``plan.success`` / ``plan.failure`` from the check (the planner's own failure, kept in
             ``plan.diagnostics["planner_failure"]``, stays first).
+        rest_ends: the plan starts and ends at rest, as tmr's do: the acceleration from rest to the first step's
+            velocity and from the last step's velocity to rest are checked too (False: only between steps, for
+            trajectories cut out of a longer motion).
 
     Returns:
         :class:`DroneMetrics`; ``failures`` has one line per violated limit kind (its first step).
@@ -993,22 +997,25 @@ def check_drone_plan(
 
         violate("speed", mask_v, speed_msg)
         bind("speed", -over_v, v_max, lambda i: (i // (3 * n), f"drone {(i // 3) % n + 1} along {axes[i % 3]}", None))
-        acc = np.diff(vel, axis=0) / Ts  # (K-1, N, 3) at steps 1..K-1
-        if acc.size:
-            over_a = np.abs(acc) - a_max
-            mask_a = np.zeros(n_k, dtype=bool)
-            mask_a[1:-1] = (over_a > 4 * tol / Ts**2).any(axis=(1, 2))
+        # the chain starts and ends at rest: the velocity is 0 before t_0 and after t_K, so the first step's start
+        # and the last step's stop are accelerations too
+        if rest_ends:
+            rest = np.zeros((1, n, 3))
+            acc = np.diff(np.concatenate([rest, vel, rest]), axis=0) / Ts  # (K+1, N, 3) at steps 0..K
+        else:  # at steps 1..K-1 (steps 0 and K: no acceleration known)
+            acc = np.concatenate([np.zeros((1, n, 3)), np.diff(vel, axis=0) / Ts, np.zeros((1, n, 3))])
+        over_a = np.abs(acc) - a_max
+        mask_a = (over_a > 4 * tol / Ts**2).any(axis=(1, 2))
 
-            def acc_msg(k: int) -> str:
-                i, ax = np.unravel_index(int(np.argmax(over_a[k - 1])), over_a[k - 1].shape)
-                return (f"drone {i + 1} accelerates at {abs(acc[k - 1, i, ax]):.3f} m/s² along {axes[ax]} at "
-                        f"{_t(t, k)}, more than {a_max:.3f} m/s²")  # fmt: skip
+        def acc_msg(k: int) -> str:
+            i, ax = np.unravel_index(int(np.argmax(over_a[k])), over_a[k].shape)
+            what = " (stopping: the plan ends there, at rest)" if k == n_k - 1 else ""
+            return (f"drone {i + 1} accelerates at {abs(acc[k, i, ax]):.3f} m/s² along {axes[ax]} at "
+                    f"{_t(t, k)}{what}, more than {a_max:.3f} m/s²")  # fmt: skip
 
-            violate("acceleration", mask_a, acc_msg)
-            bind("acceleration", -over_a, a_max,
-                 lambda i: (i // (3 * n) + 1, f"drone {(i // 3) % n + 1} along {axes[i % 3]}", None))  # fmt: skip
-        else:
-            over_a = np.zeros((0, n, 3))
+        violate("acceleration", mask_a, acc_msg)
+        bind("acceleration", -over_a, a_max,
+             lambda i: (i // (3 * n), f"drone {(i // 3) % n + 1} along {axes[i % 3]}", None))  # fmt: skip
     else:
         vel = np.zeros((0, n, 3))
         over_v = np.zeros((0, n, 3))

@@ -11,6 +11,7 @@ does a leader that the hard limits held back from the goal (farther than the goa
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -37,6 +38,8 @@ BACK_S = 1.0
 #: ... take this long of the references [s] at half speed (twice the time), then go on; at most SLOW_DOWNS times.
 SLOW_S = 3.0
 SLOW_DOWNS = 3
+#: The speed of the slowed references changes from full to half (and back) over this long [s], smoothly.
+RAMP_S = 1.0
 #: After the references stop, a leader farther than the goal tolerance that got less than STALL_GAIN [m] closer over
 #: the last STALL_S [s] has stalled: the plan ends there (failed: held back), without waiting for the whole settle.
 STALL_S = 1.0
@@ -50,32 +53,46 @@ def _grow(x: Array, n: int, fill: float = 0.0) -> Array:
     return np.concatenate([x, np.full((n - x.shape[0], *x.shape[1:]), fill)])
 
 
-def slowed_references(ref: DroneReferencesLike, k0: int, steps: int) -> LineReferences:
+def slowed_references(
+    ref: DroneReferencesLike, k0: int, steps: int, ramp: int = 20, base: ArrayLike | None = None
+) -> LineReferences:
     """``ref`` re-timed: the same paths, but from sample ``k0`` the next ``steps`` samples' worth of motion at half
-    speed (over 2 ``steps`` samples), then the rest as before. Positions are interpolated linearly between the
-    original samples; velocities are the original ones interpolated, halved over the slow part (Ts unchanged)."""
+    speed, then the rest as before. The speed factor falls from 1 to 1/2 over ``ramp`` samples by a smoothstep,
+    holds, and rises back the same way, so the references' accelerations stay of the order of the original ones
+    (no jump at the seams). With the factor ρ_j (original samples per new sample) the new sample j sits at the
+    original time τ_j = k0 + Σ_{i ≤ j} ρ_i; positions are interpolated linearly between the original samples and
+    velocities are the original ones at τ_j times ρ_j (Ts unchanged). ``base`` [m]: the anchor (``ref.base`` if it
+    has one)."""
     t = np.asarray(ref.t, dtype=float)
     K = len(t) - 1
     Ts = float(t[1] - t[0]) if K > 0 else 0.0
-    k1 = min(K, k0 + steps)
-    j = np.arange(K + (k1 - k0) + 1, dtype=float)
-    tau = np.where(j <= k0, j, np.where(j <= k0 + 2 * (k1 - k0), k0 + 0.5 * (j - k0), j - (k1 - k0)))
-    rate = np.where((j > k0) & (j <= k0 + 2 * (k1 - k0)), 0.5, 1.0)
+    R = max(int(ramp), 1)
+    u = np.arange(1, R + 1) / R
+    down = 1.0 - 0.5 * (3.0 * u**2 - 2.0 * u**3)  # 1 → 1/2
+    hold = max(0, int(math.ceil((steps - 2.0 * down.sum()) / 0.5)))
+    rates = np.concatenate([down, np.full(hold, 0.5), down[::-1][1:], [1.0]])  # 1/2 → 1 mirrors the fall
+    tau = np.concatenate([np.arange(k0 + 1, dtype=float), k0 + np.cumsum(rates)])
+    rate = np.concatenate([np.ones(k0 + 1), rates])
+    if tau[-1] < K:  # then the rest at full speed
+        extra = np.arange(1, int(math.ceil(K - tau[-1])) + 1, dtype=float)
+        tau, rate = np.concatenate([tau, tau[-1] + extra]), np.concatenate([rate, np.ones(extra.size)])
+    keep = np.concatenate([[True], tau[:-1] < K])  # up to the first sample at or beyond the end
+    tau, rate = np.minimum(tau[keep], K), rate[keep]
     i = np.minimum(np.floor(tau).astype(int), max(K - 1, 0))
-    w = (tau - i)[:, None]
+    w = tau - i
 
-    def at(x: Array) -> Array:
+    def at(x: ArrayLike) -> Array:
         x = np.asarray(x, dtype=float)
         if K == 0:
-            return np.repeat(x[:1], len(j), axis=0)
+            return np.repeat(x[:1], len(tau), axis=0)
         ww = w.reshape(-1, *([1] * (x.ndim - 1)))
         return (1.0 - ww) * x[i] + ww * x[i + 1]
 
-    r = rate.reshape(-1, 1)
-    base = np.asarray(getattr(ref, "base", np.asarray(ref.positions)[0, 0]), dtype=float)
+    r = np.where(tau < K, rate, 1.0).reshape(-1, 1)
+    anchor = base if base is not None else getattr(ref, "base", None)
     return LineReferences(
-        base=base,
-        t=Ts * j,
+        base=np.asarray(anchor if anchor is not None else np.full(3, np.nan), dtype=float),
+        t=Ts * np.arange(len(tau)),
         x=at(ref.x),
         xd=at(ref.xd) * r,
         positions=at(ref.positions),
@@ -184,6 +201,10 @@ def run_drones(
     g_end = np.asarray(ref.x[-1] if goal is None else goal, dtype=float)
     near = 0.5 * params.goal_tolerance
     stall = int(round(STALL_S / Ts))
+    # at rest: stopping from it within one step stays within half the acceleration bound
+    rest_speed = min(REST_SPEED, 0.5 * params.drone_accel_max * Ts)
+    failed_at: list[int] = []
+    ended = ""
     k = 0
     while True:
         t0 = time.perf_counter()
@@ -199,8 +220,8 @@ def run_drones(
         a[k] = [np.nan if c.a is None else c.a for c in ctx.catenaries]
         if k >= k_end:  # the references are at rest: the plan ends once the chain rests at the goal, or stalls
             gap = float(np.linalg.norm(P[-1] - g_end))
-            if k == K or (gap <= near and float(np.max(np.abs(v_prev), initial=0.0)) <= REST_SPEED):
-                last = k
+            if gap <= near and float(np.max(np.abs(v_prev), initial=0.0)) <= rest_speed:
+                last, ended = k, "rest"
                 break
             kb = k - stall
             if (
@@ -208,19 +229,22 @@ def run_drones(
                 and gap > params.goal_tolerance
                 and float(np.linalg.norm(robots[kb, -1] - g_end)) - gap < STALL_GAIN
             ):
-                last = k  # held back: another second brought the leader less than STALL_GAIN closer
+                last, ended = k, "stall"  # held back: another second brought the leader less than STALL_GAIN closer
                 break
-        elif k == K:
-            last = k
+        if k == K:
+            last, ended = k, "time"
             break
         try:
             out, d = formulation.step(ctx)
         except InfeasibleStep as exc:
             if len(slowed) < SLOW_DOWNS and k > 0 and not joints:
                 # the hard limits conflict at this speed (a damper asks a drone to brake harder than a_max):
-                # go back BACK_S and take the next SLOW_S of the references at half speed, then go on
-                k0 = max(0, k - int(round(BACK_S / Ts)))
-                ref = slowed_references(ref, k0, int(round(SLOW_S / Ts)))
+                # go back BACK_S (twice as far each time the same step fails again) and take the next SLOW_S of
+                # the references at half speed, then go on
+                again = sum(1 for kf in failed_at if kf == k)
+                failed_at.append(k)
+                k0 = max(0, k - int(round(BACK_S * 2**again / Ts)))
+                ref = slowed_references(ref, k0, int(round(SLOW_S / Ts)), ramp=int(round(RAMP_S / Ts)), base=chain.base)
                 slowed.append(f"t = {k * Ts:.2f} s")
                 ctx.references = ref
                 K, k_end = len(ref.t) - 1, end_of_motion(ref)
@@ -253,13 +277,25 @@ def run_drones(
         k += 1
     n = max(last, 0) + 1
     short = float(np.linalg.norm(robots[n - 1, -1] - g_end))
-    if failure is None and short > params.goal_tolerance:
-        res = diag.get("leader_residual", np.zeros(1))[: max(n - 1, 1)]
+    moving = np.abs(vel[n - 2]).max(axis=1) if n > 1 else np.zeros(N)  # each drone's largest velocity component
+    if failure is None and ended == "stall":
         failure = (
-            f"the leader stopped {short:.3f} m from the goal {fmt_point(g_end)} "
-            f"(tolerance {params.goal_tolerance:g} m) at {fmt_point(robots[n - 1, -1])}, t = {(n - 1) * Ts:.2f} s: "
-            f"the hard limits held it back (leader task residual {float(res[-1]) if res.size else 0.0:.3f} m/s "
-            "at the end)"
+            f"the leader stalled {short:.3f} m from the goal {fmt_point(g_end)} (tolerance {params.goal_tolerance:g} m)"
+            f" at {fmt_point(robots[n - 1, -1])}, t = {(n - 1) * Ts:.2f} s: the hard limits held it back (it came "
+            f"less than {STALL_GAIN * 100:g} cm closer in the last {STALL_S:g} s)"
+        )
+    elif failure is None and ended == "time" and (
+        short > params.goal_tolerance or moving.max(initial=0.0) > params.drone_accel_max * Ts
+    ):  # off the goal, or too fast to stop within one step (the checker counts the stop)
+        i = int(np.argmax(moving))
+        where = (
+            f"the leader is {short:.3f} m from the goal {fmt_point(g_end)} (tolerance {params.goal_tolerance:g} m)"
+            if short > params.goal_tolerance
+            else f"drone {i + 1} still moves at {moving[i]:.3f} m/s"
+        )
+        failure = (
+            f"the chain did not come to rest at the goal within the settling time ({params.settle:g} s after the "
+            f"references stop, t = {(n - 1) * Ts:.2f} s): {where}; a longer --set settle=... may let it"
         )
     wall = time.perf_counter() - t_start
     diagnostics: dict[str, Any] = {key: val[:n] for key, val in diag.items()}
