@@ -35,7 +35,7 @@ Everything in SI units: metres, newtons, kilograms; z is the height above the fl
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -50,6 +50,8 @@ __all__ = [
     "Catenary3D",
     "CatenarySensitivity",
     "solve3d",
+    "solve3d_batch",
+    "TetherCatenaries",
     "sensitivities",
     "sensitivities_batch",
     "TetherSensitivities",
@@ -338,20 +340,37 @@ def solve3d(
             length=dh, lowest=(p_ if p_lower else q_).copy(), tension_p=t_p, tension_q=t_q,
             force_p=t_p * up, force_q=-t_q * up, weight_per_length=w,
         )  # fmt: skip
-    u = np.array([dxy[0] / d, dxy[1] / d, 0.0])
     m = t_a / w
     theta_a = _solve_theta(d, dh, m, None if warm is None else theta_lower(warm))
+    return _catenary(p_, q_, d, h, m, theta_a, t_p, t_q, w)
+
+
+def _shape(d: float, h: float, m: float, theta_a: float, z_a: float) -> tuple[float, ...]:
+    """The scalars of a non-vertical tether from its solved theta_A (span d, height difference h = z_q - z_p [m],
+    m = T_A/(rho g) [m], z_a the lower end's height [m]): (a, x0 from p, z0, length, sinh theta_A, sinh theta_B,
+    theta_B) in the units of :class:`Catenary3D` (the closed forms of the module doc)."""
     a = m / math.cosh(theta_a)
-    k = 1.0 + dh / m
+    k = 1.0 + abs(h) / m
     sh_a = math.sinh(theta_a)
     sh_b = math.sqrt(k * k * sh_a * sh_a + (k * k - 1.0))
     theta_b = math.asinh(sh_b)
-    z_a = min(p_[2], q_[2])
     z0 = z_a - m + a  # z_A = z0 + a (cosh(theta_A) - 1) and a cosh(theta_A) = m
     x0_a = -a * theta_a  # vertex from A along A -> B
-    x0 = x0_a if p_lower else d - x0_a
+    x0 = x0_a if h >= 0.0 else d - x0_a
+    return a, x0, z0, a * (sh_b - sh_a), sh_a, sh_b, theta_b
+
+
+def _catenary(
+    p_: np.ndarray, q_: np.ndarray, d: float, h: float, m: float, theta_a: float, t_p: float, t_q: float, w: float
+) -> Catenary3D:
+    """The :class:`Catenary3D` of a non-vertical tether from its solved theta_A (arguments as in :func:`_shape`;
+    t_p, t_q the end tensions [N], w = rho g [N/m])."""
+    ez = np.array([0.0, 0.0, 1.0])
+    dxy = q_[:2] - p_[:2]
+    u = np.array([dxy[0] / d, dxy[1] / d, 0.0])
+    p_lower = h >= 0.0  # A = p, B = q
+    a, x0, z0, length, sh_a, sh_b, theta_b = _shape(d, h, m, theta_a, min(p_[2], q_[2]))
     H = w * a
-    length = a * (sh_b - sh_a)
     if theta_a <= 0.0 <= theta_b:  # vertex within the span
         lowest = np.array([p_[0] + x0 * u[0], p_[1] + x0 * u[1], z0])
     else:
@@ -376,6 +395,105 @@ def theta_lower(cat: Catenary3D) -> float | None:
         return None
     x0_a = cat.x0 if cat.h >= 0.0 else cat.d - cat.x0  # vertex from A along A -> B
     return -x0_a / cat.a
+
+
+class TetherCatenaries:
+    """N tethers of a chain solved at once (:func:`solve3d_batch`), stacked (tether j from ``points[j]`` to
+    ``points[j + 1]``).
+
+    Attributes:
+        p, q: the ends, (N, 3) [m]. u: horizontal unit vectors p -> q, (N, 3) ((1, 0, 0) for a vertical tether).
+        d, h: horizontal spans and height differences q_z - p_z, (N,) [m].
+        a, x0, z0: catenary parameter, vertex position along u from p and vertex height, (N,) [m]; NaN if vertical.
+        theta: theta_A at the lower end, (N,) [-], the value :func:`theta_lower` gives for each tether (NaN if
+            vertical): the warm start of the next :func:`solve3d_batch` and the unknown :func:`sensitivities_batch`
+            differentiates.
+        length: arc lengths (N,) [m]. tension_p, tension_q: end tensions (N,) [N]. vertical: (N,) bool.
+        weight_per_length: rho g [N/m].
+
+    ``cats[j]`` (and iterating) gives tether j's :class:`Catenary3D`, equal to what :func:`solve3d` returns for it,
+    built on first use: the per-step loop reads only the arrays.
+    """
+
+    def __init__(self, points: np.ndarray, params: DroneTetherParams) -> None:
+        N = points.shape[0] - 1
+        self.p, self.q = points[:-1], points[1:]
+        self.weight_per_length = params.weight_per_length
+        self.u = np.zeros((N, 3))
+        self.u[:, 0] = 1.0
+        self.d, self.h, self.a, self.x0, self.z0, self.theta, self.length, self.tension_p, self.tension_q = (
+            np.full(N, np.nan) for _ in range(9)
+        )
+        self.vertical = np.zeros(N, dtype=bool)
+        self._cats: list[Catenary3D | None] = [None] * N
+        self._solved: list[tuple[float, ...] | None] = [None] * N  # (d, h, m, theta_A, T_p, T_q) to build _cats
+
+    def __len__(self) -> int:
+        return len(self._cats)
+
+    def __getitem__(self, j: int) -> Catenary3D:
+        cat = self._cats[j]
+        if cat is None:
+            cat = self._cats[j] = _catenary(self.p[j], self.q[j], *self._solved[j], self.weight_per_length)
+        return cat
+
+    def __iter__(self) -> Iterator[Catenary3D]:
+        return (self[j] for j in range(len(self)))
+
+
+def solve3d_batch(
+    points: ArrayLike, params: DroneTetherParams | None = None, warm: ArrayLike | None = None
+) -> TetherCatenaries:
+    """The N tethers between consecutive ``points`` (N+1, 3) [m] at once: tether j is ``solve3d(points[j],
+    points[j + 1], params)`` (the winch tension ``params.winch_tension`` [N] at ``params.winch_end``).
+
+    ``warm``: (N,) theta_A of the same tethers a moment ago (the previous result's ``theta``; NaN: none), each the
+    warm start :func:`solve3d` takes from ``warm=``. The spans and heights are computed for all tethers in one numpy
+    pass and only the one-variable solve runs per tether (the scalar Newton of :func:`solve3d`, a few microseconds;
+    a numpy Newton over the tethers costs more in call overhead at chain sizes and rounds differently); a vertical
+    tether, or one whose winch cannot carry it, goes through :func:`solve3d` itself. The result equals
+    :func:`solve3d`'s per tether, to the bit.
+
+    Raises:
+        ParameterError: ``points`` is not an (N+1, 3) array of finite points with N >= 1, or two consecutive coincide.
+        TetherSpanError: a tether has no catenary (the first such tether's :func:`solve3d` message).
+    """
+    prm = params if params is not None else DroneTetherParams()
+    try:
+        P = np.asarray(points, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"the tether ends must be an (N+1, 3) array of points, got {points!r}") from exc
+    if P.ndim != 2 or P.shape[0] < 2 or P.shape[1] != 3:
+        raise ParameterError(f"the tether ends must be an (N+1, 3) array of points, got shape {P.shape}")
+    N = P.shape[0] - 1
+    if not np.isfinite(P).all():
+        for j in range(N):  # solve3d names the offending end
+            solve3d(P[j], P[j + 1], prm)
+    out = TetherCatenaries(P, prm)
+    D = out.q - out.p
+    d_all, h_all = np.hypot(D[:, 0], D[:, 1]), D[:, 2]
+    guesses = [None] * N if warm is None else np.asarray(warm, dtype=float).reshape(N).tolist()
+    tw, w, lower = prm.winch_tension, prm.weight_per_length, prm.winch_end == "lower"
+    for j, (d, h, guess) in enumerate(zip(d_all.tolist(), h_all.tolist(), guesses)):
+        dh = abs(h)
+        t_a = tw if lower else tw - w * dh  # tension at the lower end A, as in solve3d
+        if d < VERTICAL_SPAN or t_a <= 0.0:
+            cat = out._cats[j] = solve3d(P[j], P[j + 1], prm)  # vertical: a straight line; else its error
+            out.d[j], out.h[j], out.length[j] = cat.d, cat.h, cat.length
+            out.tension_p[j], out.tension_q[j], out.vertical[j] = cat.tension_p, cat.tension_q, True
+            continue
+        t_b = t_a + w * dh
+        t_p, t_q = (t_a, t_b) if h >= 0.0 else (t_b, t_a)
+        m = t_a / w
+        theta_a = _solve_theta(d, dh, m, guess if guess is None or math.isfinite(guess) else None)
+        a, x0, _, length, *_ = shape = _shape(d, h, m, theta_a, min(P[j, 2], P[j + 1, 2]))
+        out._solved[j] = (d, h, m, theta_a, t_p, t_q)
+        out.d[j], out.h[j], out.a[j], out.x0[j], out.z0[j], out.length[j] = d, h, a, x0, shape[2], length
+        out.tension_p[j], out.tension_q[j] = t_p, t_q
+        out.theta[j] = -(x0 if h >= 0.0 else d - x0) / a  # theta_lower's value (the warm start of solve3d)
+    cv = ~out.vertical
+    out.u[cv, :2] = D[cv, :2] / out.d[cv, None]
+    return out
 
 
 @dataclass(frozen=True)
@@ -471,32 +589,51 @@ def sensitivities(
     return sensitivities_batch([cat], fractions, params)[0]
 
 
+def _stack(cats: Sequence[Catenary3D]) -> TetherCatenaries:
+    """Tethers solved one by one (:func:`solve3d`) gathered into the arrays of a :class:`TetherCatenaries`."""
+    out = TetherCatenaries.__new__(TetherCatenaries)
+    M = len(cats)
+    out.p = np.array([c.p for c in cats]).reshape(M, 3)
+    out.q = np.array([c.q for c in cats]).reshape(M, 3)
+    out.u = np.array([c.u for c in cats]).reshape(M, 3)
+    out.vertical = np.array([c.a is None for c in cats], dtype=bool)
+    for name in ("d", "h", "length", "tension_p", "tension_q"):
+        setattr(out, name, np.array([getattr(c, name) for c in cats], dtype=float))
+    out.theta = np.array([np.nan if c.a is None else theta_lower(c) for c in cats], dtype=float)
+    w = {c.weight_per_length for c in cats}
+    out.weight_per_length = w.pop() if len(w) == 1 else np.array([c.weight_per_length for c in cats])
+    out._cats = list(cats)
+    return out
+
+
 def sensitivities_batch(
-    cats: list[Catenary3D], fractions: ArrayLike, params: DroneTetherParams | None = None
+    cats: Sequence[Catenary3D] | TetherCatenaries, fractions: ArrayLike, params: DroneTetherParams | None = None
 ) -> TetherSensitivities:
-    """:func:`sensitivities` of several tethers at once (vectorised over the tethers: one numpy pass for a chain)."""
+    """:func:`sensitivities` of several tethers at once (vectorised over the tethers: one numpy pass for a chain).
+
+    ``cats``: the tethers, as :class:`Catenary3D` objects or as the arrays :func:`solve3d_batch` returns (read as
+    they are: no per-tether gathering)."""
     prm = params if params is not None else DroneTetherParams()
     sig = np.asarray(fractions, dtype=float).reshape(-1)
-    M, k = len(cats), sig.size
+    C = cats if isinstance(cats, TetherCatenaries) else _stack(cats)
+    M, k = len(C), sig.size
     up = prm.winch_end == "upper"
     ez = np.array([0.0, 0.0, 1.0])
-    w = np.array([c.weight_per_length for c in cats])
-    p = np.array([c.p for c in cats]).reshape(M, 3)
-    q = np.array([c.q for c in cats]).reshape(M, 3)
-    h = q[:, 2] - p[:, 2]
-    p_lower = h >= 0.0
-    dh = np.abs(h)
-    vertical = np.array([c.a is None for c in cats], dtype=bool)
-    X = p[:, None, :] + sig[None, :, None] * (q - p)[:, None, :]  # vertical tethers: straight
-    JB = np.zeros((M, k, 3, 3))
-    JB[:] = sig[None, :, None, None] * np.eye(3)
-    dL_dB = np.tile(ez, (M, 1))
+    w = np.broadcast_to(C.weight_per_length, (M,))
+    p, q = C.p, C.q
+    p_lower = C.h >= 0.0
+    dh = np.abs(C.h)
+    vertical = C.vertical
     cv = np.flatnonzero(~vertical)
+    straight = cv.size < M  # vertical tethers: X = p + sigma (q - p), dX/dq = sigma I (the JB below)
+    if straight:
+        X = p[:, None, :] + sig[None, :, None] * (q - p)[:, None, :]
+        JB = np.zeros((M, k, 3, 3))
+        JB[:] = sig[None, :, None, None] * np.eye(3)
+        dL_dB = np.tile(ez, (M, 1))
     if cv.size:
-        theta = np.array([theta_lower(cats[i]) for i in cv])
-        d = np.array([cats[i].d for i in cv])
-        wv, hv, low = w[cv], dh[cv], p_lower[cv]
-        t_a = np.array([cats[i].tension_p if low[j] else cats[i].tension_q for j, i in enumerate(cv)])
+        theta, d, wv, hv, low = C.theta[cv], C.d[cv], w[cv], dh[cv], p_lower[cv]
+        t_a = np.where(low, C.tension_p[cv], C.tension_q[cv])
         tw = t_a + wv * hv if up else t_a  # the winch's T_w
         sig_a = np.where(low[:, None], sig[None, :], 1.0 - sig[None, :])  # fractions from A
         E = 1j * _CSTEP
@@ -516,9 +653,9 @@ def sensitivities_batch(
         L_dd = Li[:, 1] + Li[:, 0] * dt_dd
         L_dh = Li[:, 2] + Li[:, 0] * dt_dh
         A = np.where(low[:, None], p[cv], q[cv])
-        u = np.array([cats[i].u for i in cv]) * np.where(low, 1.0, -1.0)[:, None]  # horizontal A -> B
+        u = C.u[cv] * np.where(low, 1.0, -1.0)[:, None]  # horizontal A -> B
         u2 = u[:, :2]
-        X[cv] = A[:, None, :] + x[..., None] * u[:, None, :] + z[..., None] * ez
+        Xc = A[:, None, :] + x[..., None] * u[:, None, :] + z[..., None] * ez
         uu = u2[:, :, None] * u2[:, None, :]  # (C, 2, 2)
         J = np.zeros((cv.size, k, 3, 3))
         J[:, :, :2, :2] = x_dd[..., None, None] * uu[:, None] + (x / d[:, None])[..., None, None] * (
@@ -527,16 +664,20 @@ def sensitivities_batch(
         J[:, :, :2, 2] = x_dh[..., None] * u2[:, None, :]
         J[:, :, 2, :2] = z_dd[..., None] * u2[:, None, :]
         J[:, :, 2, 2] = z_dh
-        JB[cv] = J
-        dL_dB[cv] = np.column_stack([L_dd * u2[:, 0], L_dd * u2[:, 1], L_dh])
+        dLc = np.column_stack([L_dd * u2[:, 0], L_dd * u2[:, 1], L_dh])
+        if straight:
+            X[cv], JB[cv], dL_dB[cv] = Xc, J, dLc
+        else:
+            X, JB, dL_dB = Xc, J, dLc
     # vertical tethers: B is q when p is lower (X = p + sigma (q - p) has dX/dq = sigma I = the JB set above)
     JA = np.eye(3) - JB
-    lowv = p_lower[:, None, None, None]
-    Jp = np.where(lowv | vertical[:, None, None, None], JA, JB)
-    Jq = np.where(lowv | vertical[:, None, None, None], JB, JA)
-    dL_dB = np.where((~p_lower & vertical)[:, None], -dL_dB, dL_dB)  # vertical: dL/dq = sign(h) e_z
-    lw = p_lower[:, None] | vertical[:, None]
-    dL_dp = np.where(lw, -dL_dB, dL_dB)
+    lw = p_lower | vertical
+    lowv = lw[:, None, None, None]
+    Jp = np.where(lowv, JA, JB)
+    Jq = np.where(lowv, JB, JA)
+    if straight:
+        dL_dB = np.where((~p_lower & vertical)[:, None], -dL_dB, dL_dB)  # vertical: dL/dq = sign(h) e_z
+    dL_dp = np.where(lw[:, None], -dL_dB, dL_dB)
     dL_dq = -dL_dp
     # end tensions: T_A = T_w (lower winch) or T_w - w h; T_B = T_A + w h; h = z_B - z_A
     dta = (-w if up else 0.0 * w)[:, None] * ez
@@ -545,10 +686,9 @@ def sensitivities_batch(
     tp_p = np.where(pl, -dta, dtb)
     tq_q = np.where(pl, dtb, -dta)
     return TetherSensitivities(
-        fractions=sig, points=X, dpoints_dp=Jp, dpoints_dq=Jq, length=np.array([c.length for c in cats]),
-        dlength_dp=dL_dp, dlength_dq=dL_dq, tension_p=np.array([c.tension_p for c in cats]),
-        tension_q=np.array([c.tension_q for c in cats]), dtension_p_dp=tp_p, dtension_p_dq=-tp_p,
-        dtension_q_dp=-tq_q, dtension_q_dq=tq_q,
+        fractions=sig, points=X, dpoints_dp=Jp, dpoints_dq=Jq, length=C.length.copy(),
+        dlength_dp=dL_dp, dlength_dq=dL_dq, tension_p=C.tension_p.copy(), tension_q=C.tension_q.copy(),
+        dtension_p_dp=tp_p, dtension_p_dq=-tp_p, dtension_q_dp=-tq_q, dtension_q_dq=tq_q,
     )  # fmt: skip
 
 
