@@ -415,26 +415,33 @@ class TetherCatenaries:
     built on first use: the per-step loop reads only the arrays.
     """
 
-    def __init__(self, points: np.ndarray, params: DroneTetherParams) -> None:
-        N = points.shape[0] - 1
-        self.p, self.q = points[:-1], points[1:]
-        self.weight_per_length = params.weight_per_length
-        self.u = np.zeros((N, 3))
-        self.u[:, 0] = 1.0
-        self.d, self.h, self.a, self.x0, self.z0, self.theta, self.length, self.tension_p, self.tension_q = (
-            np.full(N, np.nan) for _ in range(9)
-        )
-        self.vertical = np.zeros(N, dtype=bool)
-        self._cats: list[Catenary3D | None] = [None] * N
-        self._solved: list[tuple[float, ...] | None] = [None] * N  # (d, h, m, theta_A, T_p, T_q) to build _cats
+    def __init__(
+        self,
+        p: np.ndarray,
+        q: np.ndarray,
+        table: np.ndarray,
+        vertical: np.ndarray,
+        weight_per_length: float | np.ndarray,
+        cats: list[Catenary3D | tuple[float, ...]],
+    ) -> None:
+        """``table``: (N, 11) columns d, h, a, x0, z0, theta, length, tension_p, tension_q, u_x, u_y (the
+        attributes); ``cats``: per tether its :class:`Catenary3D`, or the arguments (d, h, m, theta_A, T_p, T_q)
+        that build it (:func:`_catenary`)."""
+        self.p, self.q, self.vertical, self.weight_per_length = p, q, vertical, weight_per_length
+        self.d, self.h, self.a, self.x0, self.z0, self.theta, self.length, self.tension_p, self.tension_q = table[
+            :, :9
+        ].T
+        self.u = np.zeros((len(table), 3))
+        self.u[:, :2] = table[:, 9:]
+        self._cats = cats
 
     def __len__(self) -> int:
         return len(self._cats)
 
     def __getitem__(self, j: int) -> Catenary3D:
         cat = self._cats[j]
-        if cat is None:
-            cat = self._cats[j] = _catenary(self.p[j], self.q[j], *self._solved[j], self.weight_per_length)
+        if isinstance(cat, tuple):
+            cat = self._cats[j] = _catenary(self.p[j], self.q[j], *cat, float(self.weight_per_length))
         return cat
 
     def __iter__(self) -> Iterator[Catenary3D]:
@@ -469,31 +476,32 @@ def solve3d_batch(
     if not np.isfinite(P).all():
         for j in range(N):  # solve3d names the offending end
             solve3d(P[j], P[j + 1], prm)
-    out = TetherCatenaries(P, prm)
-    D = out.q - out.p
+    D = P[1:] - P[:-1]
     d_all, h_all = np.hypot(D[:, 0], D[:, 1]), D[:, 2]
     guesses = [None] * N if warm is None else np.asarray(warm, dtype=float).reshape(N).tolist()
     tw, w, lower = prm.winch_tension, prm.weight_per_length, prm.winch_end == "lower"
-    for j, (d, h, guess) in enumerate(zip(d_all.tolist(), h_all.tolist(), guesses)):
+    nan = math.nan
+    rows: list[tuple[float, ...]] = []
+    cats: list[Catenary3D | tuple[float, ...]] = []
+    z = P[:, 2].tolist()
+    for j, (d, h, dx, dy, guess) in enumerate(zip(d_all.tolist(), h_all.tolist(), *D[:, :2].T.tolist(), guesses)):
         dh = abs(h)
         t_a = tw if lower else tw - w * dh  # tension at the lower end A, as in solve3d
         if d < VERTICAL_SPAN or t_a <= 0.0:
-            cat = out._cats[j] = solve3d(P[j], P[j + 1], prm)  # vertical: a straight line; else its error
-            out.d[j], out.h[j], out.length[j] = cat.d, cat.h, cat.length
-            out.tension_p[j], out.tension_q[j], out.vertical[j] = cat.tension_p, cat.tension_q, True
+            cat = solve3d(P[j], P[j + 1], prm)  # vertical: a straight line; else its error
+            cats.append(cat)
+            rows.append((cat.d, cat.h, nan, nan, nan, nan, cat.length, cat.tension_p, cat.tension_q, 1.0, 0.0))
             continue
         t_b = t_a + w * dh
         t_p, t_q = (t_a, t_b) if h >= 0.0 else (t_b, t_a)
         m = t_a / w
         theta_a = _solve_theta(d, dh, m, guess if guess is None or math.isfinite(guess) else None)
-        a, x0, _, length, *_ = shape = _shape(d, h, m, theta_a, min(P[j, 2], P[j + 1, 2]))
-        out._solved[j] = (d, h, m, theta_a, t_p, t_q)
-        out.d[j], out.h[j], out.a[j], out.x0[j], out.z0[j], out.length[j] = d, h, a, x0, shape[2], length
-        out.tension_p[j], out.tension_q[j] = t_p, t_q
-        out.theta[j] = -(x0 if h >= 0.0 else d - x0) / a  # theta_lower's value (the warm start of solve3d)
-    cv = ~out.vertical
-    out.u[cv, :2] = D[cv, :2] / out.d[cv, None]
-    return out
+        a, x0, z0, length, *_ = _shape(d, h, m, theta_a, min(z[j], z[j + 1]))
+        cats.append((d, h, m, theta_a, t_p, t_q))
+        theta = -(x0 if h >= 0.0 else d - x0) / a  # theta_lower's value (the warm start of solve3d)
+        rows.append((d, h, a, x0, z0, theta, length, t_p, t_q, dx / d, dy / d))
+    vertical = np.array([isinstance(c, Catenary3D) for c in cats], dtype=bool)
+    return TetherCatenaries(P[:-1], P[1:], np.array(rows), vertical, w, cats)
 
 
 @dataclass(frozen=True)
@@ -526,18 +534,21 @@ class CatenarySensitivity:
 
 
 _CSTEP = 1e-30  # complex-step size: derivatives of the closed-form parts exact to rounding (Squire & Trapp 1998)
+_CSTEP3 = 1j * _CSTEP * np.eye(3)  # row i: the complex step along the i-th of (theta_A, d, h)
+_EYE2, _EYE3, _EZ = np.eye(2), np.eye(3), np.array([0.0, 0.0, 1.0])
 
 
 def _plane(theta: complex, d: complex, dh: complex, tw: float, w: float, upper: bool, sig: np.ndarray) -> tuple:
     """The catenary in its plane from the lower end A = (0, 0) with B = (d, dh): the residual of the span equation
     R = a (theta_B - theta_A) - d, the arc length L, and the samples (x, z) relative to A at arc fractions ``sig``
     from A. Closed form in (theta_A, d, dh): complex arguments give derivatives by the complex step."""
-    m = tw / w - dh if upper else tw / w + 0.0 * dh  # a cosh(theta_A) = T_A / (rho g)
+    m = tw / w - dh if upper else tw / w  # a cosh(theta_A) = T_A / (rho g)
     k = 1.0 + dh / m
+    kk = k * k
     ch = np.cosh(theta)
     sh = np.sinh(theta)
     a = m / ch
-    sb = np.sqrt(k * k * sh * sh + (k * k - 1.0))
+    sb = np.sqrt(kk * sh * sh + (kk - 1.0))
     L = a * (sb - sh)
     R = a * (np.arcsinh(sb) - theta) - d
     th = np.arcsinh(sh + sig * (sb - sh))  # ds = a cosh(theta) dtheta: s = a (sinh th - sinh theta_A)
@@ -590,20 +601,20 @@ def sensitivities(
 
 
 def _stack(cats: Sequence[Catenary3D]) -> TetherCatenaries:
-    """Tethers solved one by one (:func:`solve3d`) gathered into the arrays of a :class:`TetherCatenaries`."""
-    out = TetherCatenaries.__new__(TetherCatenaries)
+    """Tethers solved one by one (:func:`solve3d`) gathered into a :class:`TetherCatenaries`."""
     M = len(cats)
-    out.p = np.array([c.p for c in cats]).reshape(M, 3)
-    out.q = np.array([c.q for c in cats]).reshape(M, 3)
-    out.u = np.array([c.u for c in cats]).reshape(M, 3)
-    out.vertical = np.array([c.a is None for c in cats], dtype=bool)
-    for name in ("d", "h", "length", "tension_p", "tension_q"):
-        setattr(out, name, np.array([getattr(c, name) for c in cats], dtype=float))
-    out.theta = np.array([np.nan if c.a is None else theta_lower(c) for c in cats], dtype=float)
-    w = {c.weight_per_length for c in cats}
-    out.weight_per_length = w.pop() if len(w) == 1 else np.array([c.weight_per_length for c in cats])
-    out._cats = list(cats)
-    return out
+    table = np.array(
+        [
+            (c.d, c.h, *((math.nan,) * 4 if c.a is None else (c.a, c.x0, c.z0, theta_lower(c))), c.length,
+             c.tension_p, c.tension_q, c.u[0], c.u[1])
+            for c in cats
+        ],
+        dtype=float,
+    ).reshape(M, 11)  # fmt: skip
+    w = np.array([c.weight_per_length for c in cats])
+    vertical = np.array([c.a is None for c in cats], dtype=bool)
+    p, q = np.array([c.p for c in cats]).reshape(M, 3), np.array([c.q for c in cats]).reshape(M, 3)
+    return TetherCatenaries(p, q, table, vertical, w, list(cats))
 
 
 def sensitivities_batch(
@@ -618,67 +629,64 @@ def sensitivities_batch(
     C = cats if isinstance(cats, TetherCatenaries) else _stack(cats)
     M, k = len(C), sig.size
     up = prm.winch_end == "upper"
-    ez = np.array([0.0, 0.0, 1.0])
-    w = np.broadcast_to(C.weight_per_length, (M,))
+    ez = _EZ
+    w = np.full(M, C.weight_per_length)
     p, q = C.p, C.q
     p_lower = C.h >= 0.0
-    dh = np.abs(C.h)
     vertical = C.vertical
-    cv = np.flatnonzero(~vertical)
-    straight = cv.size < M  # vertical tethers: X = p + sigma (q - p), dX/dq = sigma I (the JB below)
+    lw = p_lower | vertical  # p is the end A (a vertical tether: p, whatever its height)
+    straight = bool(vertical.any())  # vertical tethers: X = p + sigma (q - p), dX/dq = sigma I (the JB below)
+    cv = np.flatnonzero(~vertical) if straight else None
     if straight:
         X = p[:, None, :] + sig[None, :, None] * (q - p)[:, None, :]
         JB = np.zeros((M, k, 3, 3))
-        JB[:] = sig[None, :, None, None] * np.eye(3)
+        JB[:] = sig[None, :, None, None] * _EYE3
         dL_dB = np.tile(ez, (M, 1))
-    if cv.size:
-        theta, d, wv, hv, low = C.theta[cv], C.d[cv], w[cv], dh[cv], p_lower[cv]
-        t_a = np.where(low, C.tension_p[cv], C.tension_q[cv])
+    if not vertical.all():
+        sel = slice(None) if cv is None else cv  # all tethers (the usual case: no copies) or the non-vertical
+        theta, d, wv, hv, low = C.theta[sel], C.d[sel], w[sel], np.abs(C.h[sel]), p_lower[sel]
+        t_a = np.where(low, C.tension_p[sel], C.tension_q[sel])
         tw = t_a + wv * hv if up else t_a  # the winch's T_w
-        sig_a = np.where(low[:, None], sig[None, :], 1.0 - sig[None, :])  # fractions from A
-        E = 1j * _CSTEP
-        # axis 1: perturbation of theta_A, d, h (imaginary parts); axis 2: the samples
-        th3 = theta[:, None, None] + E * np.array([1.0, 0.0, 0.0])[None, :, None]
-        d3 = d[:, None, None] + E * np.array([0.0, 1.0, 0.0])[None, :, None]
-        h3 = hv[:, None, None] + E * np.array([0.0, 0.0, 1.0])[None, :, None]
-        R, L, xs, zs = _plane(th3, d3, h3, tw[:, None, None], wv[:, None, None], up, sig_a[:, None, :])
-        Ri, Li = np.imag(R[:, :, 0]) / _CSTEP, np.imag(L[:, :, 0]) / _CSTEP  # (C, 3)
-        dt_dd, dt_dh = -Ri[:, 1] / Ri[:, 0], -Ri[:, 2] / Ri[:, 0]
-        xi, zi = np.imag(xs) / _CSTEP, np.imag(zs) / _CSTEP  # (C, 3, k)
-        x, z = np.real(xs[:, 0]), np.real(zs[:, 0])  # (C, k)
-        x_dd = xi[:, 1] + xi[:, 0] * dt_dd[:, None]
-        x_dh = xi[:, 2] + xi[:, 0] * dt_dh[:, None]
-        z_dd = zi[:, 1] + zi[:, 0] * dt_dd[:, None]
-        z_dh = zi[:, 2] + zi[:, 0] * dt_dh[:, None]
-        L_dd = Li[:, 1] + Li[:, 0] * dt_dd
-        L_dh = Li[:, 2] + Li[:, 0] * dt_dh
-        A = np.where(low[:, None], p[cv], q[cv])
-        u = C.u[cv] * np.where(low, 1.0, -1.0)[:, None]  # horizontal A -> B
+        sig_a = np.where(low[:, None], sig, 1.0 - sig)  # fractions from A
+        # axis 1: perturbation of theta_A, d, h (imaginary parts, Z[:, i, j] = (theta_A, d, h)_j + i eps delta_ij);
+        # axis 2: the samples
+        Z = np.array((theta, d, hv)).T[:, None, :] + _CSTEP3
+        R, L, xs, zs = _plane(Z[..., 0:1], Z[..., 1:2], Z[..., 2:3], tw[:, None, None], wv[:, None, None], up,
+                              sig_a[:, None, :])  # fmt: skip
+        Ri = R.imag[:, :, 0] / _CSTEP  # (C, 3): dR/d(theta_A, d, h)
+        dt = -Ri[:, 1:] / Ri[:, :1]  # (C, 2): d theta_A / d(d, h), implicit function theorem
+        # the samples' x (k), z (k) and L (1) with their partials (imaginary parts, axis 1) and their total
+        # derivatives along d and h (axis 1 of G)
+        Yi = np.concatenate((xs, zs, L), axis=2).imag / _CSTEP  # (C, 3, 2k+1)
+        G = Yi[:, 1:] + Yi[:, :1] * dt[:, :, None]  # (C, 2, 2k+1)
+        x, z = xs[:, 0].real, zs[:, 0].real  # (C, k)
+        x_dd, z_dd, L_dd = G[:, 0, :k], G[:, 0, k:-1], G[:, 0, -1]
+        x_dh, z_dh, L_dh = G[:, 1, :k], G[:, 1, k:-1], G[:, 1, -1]
+        A = np.where(low[:, None], p[sel], q[sel])
+        u = C.u[sel] * np.where(low, 1.0, -1.0)[:, None]  # horizontal A -> B
         u2 = u[:, :2]
         Xc = A[:, None, :] + x[..., None] * u[:, None, :] + z[..., None] * ez
         uu = u2[:, :, None] * u2[:, None, :]  # (C, 2, 2)
-        J = np.zeros((cv.size, k, 3, 3))
+        J = np.zeros((len(theta), k, 3, 3))
         J[:, :, :2, :2] = x_dd[..., None, None] * uu[:, None] + (x / d[:, None])[..., None, None] * (
-            np.eye(2) - uu[:, None]
+            _EYE2 - uu[:, None]
         )
         J[:, :, :2, 2] = x_dh[..., None] * u2[:, None, :]
         J[:, :, 2, :2] = z_dd[..., None] * u2[:, None, :]
         J[:, :, 2, 2] = z_dh
-        dLc = np.column_stack([L_dd * u2[:, 0], L_dd * u2[:, 1], L_dh])
+        dLc = np.concatenate((L_dd[:, None] * u2, L_dh[:, None]), axis=1)
         if straight:
             X[cv], JB[cv], dL_dB[cv] = Xc, J, dLc
         else:
             X, JB, dL_dB = Xc, J, dLc
     # vertical tethers: B is q when p is lower (X = p + sigma (q - p) has dX/dq = sigma I = the JB set above)
-    JA = np.eye(3) - JB
-    lw = p_lower | vertical
+    JA = _EYE3 - JB
     lowv = lw[:, None, None, None]
     Jp = np.where(lowv, JA, JB)
     Jq = np.where(lowv, JB, JA)
     if straight:
         dL_dB = np.where((~p_lower & vertical)[:, None], -dL_dB, dL_dB)  # vertical: dL/dq = sign(h) e_z
     dL_dp = np.where(lw[:, None], -dL_dB, dL_dB)
-    dL_dq = -dL_dp
     # end tensions: T_A = T_w (lower winch) or T_w - w h; T_B = T_A + w h; h = z_B - z_A
     dta = (-w if up else 0.0 * w)[:, None] * ez
     dtb = dta + w[:, None] * ez
@@ -687,7 +695,7 @@ def sensitivities_batch(
     tq_q = np.where(pl, dtb, -dta)
     return TetherSensitivities(
         fractions=sig, points=X, dpoints_dp=Jp, dpoints_dq=Jq, length=C.length.copy(),
-        dlength_dp=dL_dp, dlength_dq=dL_dq, tension_p=C.tension_p.copy(), tension_q=C.tension_q.copy(),
+        dlength_dp=dL_dp, dlength_dq=-dL_dp, tension_p=C.tension_p.copy(), tension_q=C.tension_q.copy(),
         dtension_p_dp=tp_p, dtension_p_dq=-tp_p, dtension_q_dp=-tq_q, dtension_q_dq=tq_q,
     )  # fmt: skip
 
