@@ -484,7 +484,9 @@ def solve3d_batch(
     rows: list[tuple[float, ...]] = []
     cats: list[Catenary3D | tuple[float, ...]] = []
     z = P[:, 2].tolist()
-    for j, (d, h, dx, dy, guess) in enumerate(zip(d_all.tolist(), h_all.tolist(), *D[:, :2].T.tolist(), guesses)):
+    for j, (d, h, dx, dy, guess) in enumerate(
+        zip(d_all.tolist(), h_all.tolist(), *D[:, :2].T.tolist(), guesses, strict=True)
+    ):
         dh = abs(h)
         t_a = tw if lower else tw - w * dh  # tension at the lower end A, as in solve3d
         if d < VERTICAL_SPAN or t_a <= 0.0:
@@ -549,9 +551,10 @@ def _plane(theta: complex, d: complex, dh: complex, tw: float, w: float, upper: 
     sh = np.sinh(theta)
     a = m / ch
     sb = np.sqrt(kk * sh * sh + (kk - 1.0))
-    L = a * (sb - sh)
+    span = sb - sh
+    L = a * span
     R = a * (np.arcsinh(sb) - theta) - d
-    th = np.arcsinh(sh + sig * (sb - sh))  # ds = a cosh(theta) dtheta: s = a (sinh th - sinh theta_A)
+    th = np.arcsinh(sh + sig * span)  # ds = a cosh(theta) dtheta: s = a (sinh th - sinh theta_A)
     return R, L, a * (th - theta), a * (np.cosh(th) - ch)
 
 
@@ -657,17 +660,18 @@ def sensitivities_batch(
         dt = -Ri[:, 1:] / Ri[:, :1]  # (C, 2): d theta_A / d(d, h), implicit function theorem
         # the samples' x (k), z (k) and L (1) with their partials (imaginary parts, axis 1) and their total
         # derivatives along d and h (axis 1 of G)
-        Yi = np.concatenate((xs, zs, L), axis=2).imag / _CSTEP  # (C, 3, 2k+1)
+        Y = np.concatenate((xs, zs, L), axis=2)  # (C, 3, 2k+1)
+        Yi = Y.imag / _CSTEP
         G = Yi[:, 1:] + Yi[:, :1] * dt[:, :, None]  # (C, 2, 2k+1)
         x, z = xs[:, 0].real, zs[:, 0].real  # (C, k)
         x_dd, z_dd, L_dd = G[:, 0, :k], G[:, 0, k:-1], G[:, 0, -1]
         x_dh, z_dh, L_dh = G[:, 1, :k], G[:, 1, k:-1], G[:, 1, -1]
         A = np.where(low[:, None], p[sel], q[sel])
-        u = C.u[sel] * np.where(low, 1.0, -1.0)[:, None]  # horizontal A -> B
+        u = np.where(low[:, None], C.u[sel], -C.u[sel])  # horizontal A -> B
         u2 = u[:, :2]
         Xc = A[:, None, :] + x[..., None] * u[:, None, :] + z[..., None] * ez
         uu = u2[:, :, None] * u2[:, None, :]  # (C, 2, 2)
-        J = np.zeros((len(theta), k, 3, 3))
+        J = np.empty((len(theta), k, 3, 3))
         J[:, :, :2, :2] = x_dd[..., None, None] * uu[:, None] + (x / d[:, None])[..., None, None] * (
             _EYE2 - uu[:, None]
         )
