@@ -467,7 +467,7 @@ def solve3d_batch(
     """
     prm = params if params is not None else DroneTetherParams()
     try:
-        P = np.asarray(points, dtype=float)
+        P = np.array(points, dtype=float)  # its own copy: the result keeps views of it
     except (TypeError, ValueError) as exc:
         raise ParameterError(f"the tether ends must be an (N+1, 3) array of points, got {points!r}") from exc
     if P.ndim != 2 or P.shape[0] < 2 or P.shape[1] != 3:
