@@ -295,3 +295,85 @@ def test_a_cold_solve_is_the_bracket_methods_root_on_the_shallow_branch():
         assert _solve_theta(d, h, m) == pytest.approx(ref, rel=1e-12, abs=1e-12)
         checked += 1
     assert checked > 1000
+
+
+def _chain_points(rng, n):
+    """n+1 random tether ends: spans of 0.5-12 m, height steps of +-4 m, plus the special cases below."""
+    steps = np.column_stack([rng.uniform(-8, 8, (n, 2)), rng.uniform(-4, 4, n)])
+    return np.vstack([[0.0, 0.0, 1.0], 1.0 + np.cumsum(steps, axis=0) * [1, 1, 0.5]])
+
+
+def _assert_same_catenary(a, b):
+    for f in dataclasses.fields(a):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        if x is None or y is None:
+            assert x is None and y is None, f.name
+        else:
+            np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-12, err_msg=f.name)
+
+
+@pytest.mark.parametrize("winch_end", ["lower", "upper"])
+def test_solve3d_batch_equals_solve3d_per_tether(winch_end):
+    """Random chains plus level ends, a vertical and a near-vertical tether, rising and falling ones: every tether of
+    the batch (cold, then warm-started from the previous batch) is solve3d's (cold, then warm from its previous
+    solve), and the sensitivities read from the batch's arrays equal those gathered from the objects."""
+    from tmr.model.catenary3d import sensitivities_batch, solve3d_batch, theta_lower
+
+    prm = DroneTetherParams(winch_end=winch_end, winch_tension=3.0)
+    rng = np.random.default_rng(7)
+    sig = np.arange(1, 9) / 9
+    special = np.array(
+        [[0.0, 0.0, 1.0], [4.0, 0.0, 1.0], [4.0, 0.0, 6.0], [4.0 + 1e-4, 0.0, 2.0], [1.0, 2.0, 3.0], [1.0, 2.0, 6.0]]
+    )
+    special[-1, :2] += 0.5 * 1e-9  # the last tether: vertical (span below VERTICAL_SPAN)
+    for P in [special] + [_chain_points(rng, 6) for _ in range(10)]:
+        batch = solve3d_batch(P, prm)
+        cats = [solve3d(P[j], P[j + 1], prm) for j in range(len(P) - 1)]
+        moved = P + rng.normal(0.0, 0.03, P.shape) * [1, 1, 1]
+        moved[-1, :2] = moved[-2, :2] if P is special else moved[-1, :2]  # keep the vertical tether vertical
+        warm_batch = solve3d_batch(moved, prm, batch.theta)
+        warm_cats = [solve3d(moved[j], moved[j + 1], prm, warm=cats[j]) for j in range(len(P) - 1)]
+        for b, objs in ((batch, cats), (warm_batch, warm_cats)):
+            assert len(b) == len(objs)
+            for j, cat in enumerate(objs):
+                _assert_same_catenary(b[j], cat)
+                t = theta_lower(cat)
+                assert (math.isnan(b.theta[j]) and t is None) or b.theta[j] == t
+                assert (
+                    b.length[j] == cat.length
+                    and b.tension_p[j] == cat.tension_p
+                    and bool(b.vertical[j]) == (cat.a is None)
+                )
+            S, R = sensitivities_batch(b, sig, prm), sensitivities_batch(objs, sig, prm)
+            for f in dataclasses.fields(S):
+                np.testing.assert_allclose(getattr(S, f.name), getattr(R, f.name), rtol=1e-12, atol=1e-12)
+    assert special[1, 2] == special[0, 2] and solve3d_batch(special, prm).vertical.tolist() == [
+        False,
+        True,
+        False,
+        False,
+        True,
+    ]
+
+
+def test_solve3d_batch_fails_like_solve3d():
+    """A span no catenary holds, a winch at the upper end that cannot carry its tether, coinciding or non-finite ends:
+    the batch raises solve3d's error with solve3d's message (for the first such tether)."""
+    from tmr.model.catenary3d import solve3d_batch
+
+    cases = [
+        (np.array([[0, 0, 1], [5, 0, 1], [35, 0, 5], [36, 0, 5]], float), P),  # tether 2: 30 m at 2 N
+        (np.array([[0, 0, 1], [1, 0, 1], [1.5, 0, 40]], float), DroneTetherParams(winch_end="upper")),
+        (np.array([[0, 0, 1], [2, 0, 1], [2, 0, 1]], float), P),
+        (np.array([[0, 0, 1], [2, 0, np.nan]], float), P),
+    ]
+    for pts, prm in cases:
+        with pytest.raises(ParameterError) as one:
+            for j in range(len(pts) - 1):
+                solve3d(pts[j], pts[j + 1], prm)
+        with pytest.raises(ParameterError) as batch:
+            solve3d_batch(pts, prm)
+        assert type(batch.value) is type(one.value) and str(batch.value) == str(one.value)
+    assert isinstance(one.value, ParameterError)
+    with pytest.raises(ParameterError, match=r"\(N\+1, 3\)"):
+        solve3d_batch(np.zeros((1, 3)))

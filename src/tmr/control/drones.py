@@ -32,7 +32,14 @@ from tmr.control.pinv import dls_inverse, null_space_projector
 from tmr.control.qp import Level, LexicographicQP
 from tmr.control.tasks import Task, TaskRows
 from tmr.errors import ParameterError
-from tmr.model.catenary3d import Catenary3D, DroneTetherParams, TetherSensitivities, sensitivities_batch, solve3d
+from tmr.model.catenary3d import (
+    Catenary3D,
+    DroneTetherParams,
+    TetherCatenaries,
+    TetherSensitivities,
+    sensitivities_batch,
+    solve3d_batch,
+)
 from tmr.model.chain import Chain
 from tmr.model.params import DroneParams
 from tmr.model.velocity import VelocityMap3D
@@ -365,8 +372,9 @@ class DroneStepContext:
     """Per-step state of the drone chain shared by tasks and limits (computed once per step by :meth:`update`).
 
     Attributes (after ``update``): k, points (N+1, 3) (anchor then drones) [m], v_prev (3N,) the previous step's
-    velocities [m/s], velocity_map (:class:`VelocityMap3D`), qdot_prev = T v_prev (link rates), catenaries (one
-    :class:`Catenary3D` per tether, tether j from point j−1 to point j), sens (their stacked
+    velocities [m/s], velocity_map (:class:`VelocityMap3D`), qdot_prev = T v_prev (link rates), tethers (the N
+    tethers' catenaries as arrays, :class:`~tmr.model.catenary3d.TetherCatenaries`, tether j from point j−1 to point
+    j), catenaries (the same as one :class:`Catenary3D` per tether, built on first use), sens (their stacked
     :class:`~tmr.model.catenary3d.TetherSensitivities` at the interior fractions i/(m+1), i = 1..m),
     drone_clearance (N,) [m] and drone_gradient (N, 3) (the world grown by the drone radius), sample_points
     (N, m, 3); each tether as the polyline through its ends and samples, per piece (N, m+1): segment_clearance [m],
@@ -419,7 +427,7 @@ class DroneStepContext:
         self.nearest, self.drone_nearest, self.drone_cap = int(nearest), int(drone_nearest), float(drone_cap)
         self.k = 0
         self.q: Array | None = None
-        self.catenaries: list[Catenary3D] = []
+        self.tethers: TetherCatenaries | None = None
 
     def update(self, k: int, positions: Array, v_prev: Array, q: Array | None = None) -> None:
         """The quantities of step ``k`` with the drones at ``positions`` (N, 3) [m] after velocities ``v_prev`` (3N,).
@@ -435,9 +443,9 @@ class DroneStepContext:
         self.v_prev = np.asarray(v_prev, dtype=float).reshape(-1)
         self.velocity_map = VelocityMap3D(P)
         self.qdot_prev = self.velocity_map.T @ self.v_prev
-        warm = self.catenaries if len(self.catenaries) == N else [None] * N
-        self.catenaries = [solve3d(P[j], P[j + 1], self.tether, warm=warm[j]) for j in range(N)]
-        self.sens: TetherSensitivities = sensitivities_batch(self.catenaries, self.fractions, self.tether)
+        warm = self.tethers.theta if self.tethers is not None and len(self.tethers) == N else None
+        self.tethers = solve3d_batch(P, self.tether, warm)
+        self.sens: TetherSensitivities = sensitivities_batch(self.tethers, self.fractions, self.tether)
         samples = self.sens.points  # (N, m, 3)
         m = self.fractions.size
         self._drone_nearest_obstacle: tuple[Array, Array] | None = None  # pinv's, on first use this step
@@ -457,14 +465,19 @@ class DroneStepContext:
         self.segment_gradient = self.piece_gradient[..., 0, :]
         self.segment_t = self.piece_t[..., 0]
         self.uncovered = int(np.maximum(nt - kt, 0).sum() + np.maximum(nd - kd, 0).sum())
-        delta = np.array([cat.length for cat in self.catenaries]) / (m + 1)
-        a = np.array([np.inf if cat.a is None else cat.a for cat in self.catenaries])
+        delta = self.tethers.length / (m + 1)
+        a = np.where(self.tethers.vertical, np.inf, self.tethers.a)
         self.chord_deviation = np.minimum(delta**2 / (8.0 * a), 0.5 * delta)
         self.sample_points = samples
         ref = self.references
         kk = min(self.k, len(ref.t) - 1)
         self.x_d, self.xd_d = ref.x[kk], ref.xd[kk]
         self.ref_positions, self.ref_velocities = ref.positions[kk], ref.velocities[kk]
+
+    @property
+    def catenaries(self) -> list[Catenary3D]:
+        """One :class:`Catenary3D` per tether (tether j from point j−1 to point j), built on first use this step."""
+        return [] if self.tethers is None else list(self.tethers)
 
     @property
     def drone_clearance(self) -> Array:

@@ -217,7 +217,7 @@ def run_drones(
             break
         if qs is not None:
             qs[k] = q
-        a[k] = [np.nan if c.a is None else c.a for c in ctx.catenaries]
+        a[k] = ctx.tethers.a  # NaN: vertical
         if k >= k_end:  # the references are at rest: the plan ends once the chain rests at the goal, or stalls
             gap = float(np.linalg.norm(P[-1] - g_end))
             if gap <= near and float(np.max(np.abs(v_prev), initial=0.0)) <= rest_speed:

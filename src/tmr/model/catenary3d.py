@@ -35,7 +35,7 @@ Everything in SI units: metres, newtons, kilograms; z is the height above the fl
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -50,6 +50,8 @@ __all__ = [
     "Catenary3D",
     "CatenarySensitivity",
     "solve3d",
+    "solve3d_batch",
+    "TetherCatenaries",
     "sensitivities",
     "sensitivities_batch",
     "TetherSensitivities",
@@ -338,20 +340,37 @@ def solve3d(
             length=dh, lowest=(p_ if p_lower else q_).copy(), tension_p=t_p, tension_q=t_q,
             force_p=t_p * up, force_q=-t_q * up, weight_per_length=w,
         )  # fmt: skip
-    u = np.array([dxy[0] / d, dxy[1] / d, 0.0])
     m = t_a / w
     theta_a = _solve_theta(d, dh, m, None if warm is None else theta_lower(warm))
+    return _catenary(p_, q_, d, h, m, theta_a, t_p, t_q, w)
+
+
+def _shape(d: float, h: float, m: float, theta_a: float, z_a: float) -> tuple[float, ...]:
+    """The scalars of a non-vertical tether from its solved theta_A (span d, height difference h = z_q - z_p [m],
+    m = T_A/(rho g) [m], z_a the lower end's height [m]): (a, x0 from p, z0, length, sinh theta_A, sinh theta_B,
+    theta_B) in the units of :class:`Catenary3D` (the closed forms of the module doc)."""
     a = m / math.cosh(theta_a)
-    k = 1.0 + dh / m
+    k = 1.0 + abs(h) / m
     sh_a = math.sinh(theta_a)
     sh_b = math.sqrt(k * k * sh_a * sh_a + (k * k - 1.0))
     theta_b = math.asinh(sh_b)
-    z_a = min(p_[2], q_[2])
     z0 = z_a - m + a  # z_A = z0 + a (cosh(theta_A) - 1) and a cosh(theta_A) = m
     x0_a = -a * theta_a  # vertex from A along A -> B
-    x0 = x0_a if p_lower else d - x0_a
+    x0 = x0_a if h >= 0.0 else d - x0_a
+    return a, x0, z0, a * (sh_b - sh_a), sh_a, sh_b, theta_b
+
+
+def _catenary(
+    p_: np.ndarray, q_: np.ndarray, d: float, h: float, m: float, theta_a: float, t_p: float, t_q: float, w: float
+) -> Catenary3D:
+    """The :class:`Catenary3D` of a non-vertical tether from its solved theta_A (arguments as in :func:`_shape`;
+    t_p, t_q the end tensions [N], w = rho g [N/m])."""
+    ez = np.array([0.0, 0.0, 1.0])
+    dxy = q_[:2] - p_[:2]
+    u = np.array([dxy[0] / d, dxy[1] / d, 0.0])
+    p_lower = h >= 0.0  # A = p, B = q
+    a, x0, z0, length, sh_a, sh_b, theta_b = _shape(d, h, m, theta_a, min(p_[2], q_[2]))
     H = w * a
-    length = a * (sh_b - sh_a)
     if theta_a <= 0.0 <= theta_b:  # vertex within the span
         lowest = np.array([p_[0] + x0 * u[0], p_[1] + x0 * u[1], z0])
     else:
@@ -376,6 +395,115 @@ def theta_lower(cat: Catenary3D) -> float | None:
         return None
     x0_a = cat.x0 if cat.h >= 0.0 else cat.d - cat.x0  # vertex from A along A -> B
     return -x0_a / cat.a
+
+
+class TetherCatenaries:
+    """N tethers of a chain solved at once (:func:`solve3d_batch`), stacked (tether j from ``points[j]`` to
+    ``points[j + 1]``).
+
+    Attributes:
+        p, q: the ends, (N, 3) [m]. u: horizontal unit vectors p -> q, (N, 3) ((1, 0, 0) for a vertical tether).
+        d, h: horizontal spans and height differences q_z - p_z, (N,) [m].
+        a, x0, z0: catenary parameter, vertex position along u from p and vertex height, (N,) [m]; NaN if vertical.
+        theta: theta_A at the lower end, (N,) [-], the value :func:`theta_lower` gives for each tether (NaN if
+            vertical): the warm start of the next :func:`solve3d_batch` and the unknown :func:`sensitivities_batch`
+            differentiates.
+        length: arc lengths (N,) [m]. tension_p, tension_q: end tensions (N,) [N]. vertical: (N,) bool.
+        weight_per_length: rho g [N/m].
+
+    ``cats[j]`` (and iterating) gives tether j's :class:`Catenary3D`, equal to what :func:`solve3d` returns for it,
+    built on first use: the per-step loop reads only the arrays.
+    """
+
+    def __init__(
+        self,
+        p: np.ndarray,
+        q: np.ndarray,
+        table: np.ndarray,
+        vertical: np.ndarray,
+        weight_per_length: float | np.ndarray,
+        cats: list[Catenary3D | tuple[float, ...]],
+    ) -> None:
+        """``table``: (N, 11) columns d, h, a, x0, z0, theta, length, tension_p, tension_q, u_x, u_y (the
+        attributes); ``cats``: per tether its :class:`Catenary3D`, or the arguments (d, h, m, theta_A, T_p, T_q)
+        that build it (:func:`_catenary`)."""
+        self.p, self.q, self.vertical, self.weight_per_length = p, q, vertical, weight_per_length
+        self.d, self.h, self.a, self.x0, self.z0, self.theta, self.length, self.tension_p, self.tension_q = table[
+            :, :9
+        ].T
+        self.u = np.zeros((len(table), 3))
+        self.u[:, :2] = table[:, 9:]
+        self._cats = cats
+
+    def __len__(self) -> int:
+        return len(self._cats)
+
+    def __getitem__(self, j: int) -> Catenary3D:
+        cat = self._cats[j]
+        if isinstance(cat, tuple):
+            cat = self._cats[j] = _catenary(self.p[j], self.q[j], *cat, float(self.weight_per_length))
+        return cat
+
+    def __iter__(self) -> Iterator[Catenary3D]:
+        return (self[j] for j in range(len(self)))
+
+
+def solve3d_batch(
+    points: ArrayLike, params: DroneTetherParams | None = None, warm: ArrayLike | None = None
+) -> TetherCatenaries:
+    """The N tethers between consecutive ``points`` (N+1, 3) [m] at once: tether j is ``solve3d(points[j],
+    points[j + 1], params)`` (the winch tension ``params.winch_tension`` [N] at ``params.winch_end``).
+
+    ``warm``: (N,) theta_A of the same tethers a moment ago (the previous result's ``theta``; NaN: none), each the
+    warm start :func:`solve3d` takes from ``warm=``. The spans and heights are computed for all tethers in one numpy
+    pass and only the one-variable solve runs per tether (the scalar Newton of :func:`solve3d`, a few microseconds;
+    a numpy Newton over the tethers costs more in call overhead at chain sizes and rounds differently); a vertical
+    tether, or one whose winch cannot carry it, goes through :func:`solve3d` itself. The result equals
+    :func:`solve3d`'s per tether, to the bit.
+
+    Raises:
+        ParameterError: ``points`` is not an (N+1, 3) array of finite points with N >= 1, or two consecutive coincide.
+        TetherSpanError: a tether has no catenary (the first such tether's :func:`solve3d` message).
+    """
+    prm = params if params is not None else DroneTetherParams()
+    try:
+        P = np.array(points, dtype=float)  # its own copy: the result keeps views of it
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"the tether ends must be an (N+1, 3) array of points, got {points!r}") from exc
+    if P.ndim != 2 or P.shape[0] < 2 or P.shape[1] != 3:
+        raise ParameterError(f"the tether ends must be an (N+1, 3) array of points, got shape {P.shape}")
+    N = P.shape[0] - 1
+    if not np.isfinite(P).all():
+        for j in range(N):  # solve3d names the offending end
+            solve3d(P[j], P[j + 1], prm)
+    D = P[1:] - P[:-1]
+    d_all, h_all = np.hypot(D[:, 0], D[:, 1]), D[:, 2]
+    guesses = [None] * N if warm is None else np.asarray(warm, dtype=float).reshape(N).tolist()
+    tw, w, lower = prm.winch_tension, prm.weight_per_length, prm.winch_end == "lower"
+    nan = math.nan
+    rows: list[tuple[float, ...]] = []
+    cats: list[Catenary3D | tuple[float, ...]] = []
+    z = P[:, 2].tolist()
+    for j, (d, h, dx, dy, guess) in enumerate(
+        zip(d_all.tolist(), h_all.tolist(), *D[:, :2].T.tolist(), guesses, strict=True)
+    ):
+        dh = abs(h)
+        t_a = tw if lower else tw - w * dh  # tension at the lower end A, as in solve3d
+        if d < VERTICAL_SPAN or t_a <= 0.0:
+            cat = solve3d(P[j], P[j + 1], prm)  # vertical: a straight line; else its error
+            cats.append(cat)
+            rows.append((cat.d, cat.h, nan, nan, nan, nan, cat.length, cat.tension_p, cat.tension_q, 1.0, 0.0))
+            continue
+        t_b = t_a + w * dh
+        t_p, t_q = (t_a, t_b) if h >= 0.0 else (t_b, t_a)
+        m = t_a / w
+        theta_a = _solve_theta(d, dh, m, guess if guess is None or math.isfinite(guess) else None)
+        a, x0, z0, length, *_ = _shape(d, h, m, theta_a, min(z[j], z[j + 1]))
+        cats.append((d, h, m, theta_a, t_p, t_q))
+        theta = -(x0 if h >= 0.0 else d - x0) / a  # theta_lower's value (the warm start of solve3d)
+        rows.append((d, h, a, x0, z0, theta, length, t_p, t_q, dx / d, dy / d))
+    vertical = np.array([isinstance(c, Catenary3D) for c in cats], dtype=bool)
+    return TetherCatenaries(P[:-1], P[1:], np.array(rows), vertical, w, cats)
 
 
 @dataclass(frozen=True)
@@ -408,21 +536,25 @@ class CatenarySensitivity:
 
 
 _CSTEP = 1e-30  # complex-step size: derivatives of the closed-form parts exact to rounding (Squire & Trapp 1998)
+_CSTEP3 = 1j * _CSTEP * np.eye(3)  # row i: the complex step along the i-th of (theta_A, d, h)
+_EYE2, _EYE3, _EZ = np.eye(2), np.eye(3), np.array([0.0, 0.0, 1.0])
 
 
 def _plane(theta: complex, d: complex, dh: complex, tw: float, w: float, upper: bool, sig: np.ndarray) -> tuple:
     """The catenary in its plane from the lower end A = (0, 0) with B = (d, dh): the residual of the span equation
     R = a (theta_B - theta_A) - d, the arc length L, and the samples (x, z) relative to A at arc fractions ``sig``
     from A. Closed form in (theta_A, d, dh): complex arguments give derivatives by the complex step."""
-    m = tw / w - dh if upper else tw / w + 0.0 * dh  # a cosh(theta_A) = T_A / (rho g)
+    m = tw / w - dh if upper else tw / w  # a cosh(theta_A) = T_A / (rho g)
     k = 1.0 + dh / m
+    kk = k * k
     ch = np.cosh(theta)
     sh = np.sinh(theta)
     a = m / ch
-    sb = np.sqrt(k * k * sh * sh + (k * k - 1.0))
-    L = a * (sb - sh)
+    sb = np.sqrt(kk * sh * sh + (kk - 1.0))
+    span = sb - sh
+    L = a * span
     R = a * (np.arcsinh(sb) - theta) - d
-    th = np.arcsinh(sh + sig * (sb - sh))  # ds = a cosh(theta) dtheta: s = a (sinh th - sinh theta_A)
+    th = np.arcsinh(sh + sig * span)  # ds = a cosh(theta) dtheta: s = a (sinh th - sinh theta_A)
     return R, L, a * (th - theta), a * (np.cosh(th) - ch)
 
 
@@ -471,73 +603,94 @@ def sensitivities(
     return sensitivities_batch([cat], fractions, params)[0]
 
 
+def _stack(cats: Sequence[Catenary3D]) -> TetherCatenaries:
+    """Tethers solved one by one (:func:`solve3d`) gathered into a :class:`TetherCatenaries`."""
+    M = len(cats)
+    table = np.array(
+        [
+            (c.d, c.h, *((math.nan,) * 4 if c.a is None else (c.a, c.x0, c.z0, theta_lower(c))), c.length,
+             c.tension_p, c.tension_q, c.u[0], c.u[1])
+            for c in cats
+        ],
+        dtype=float,
+    ).reshape(M, 11)  # fmt: skip
+    w = np.array([c.weight_per_length for c in cats])
+    vertical = np.array([c.a is None for c in cats], dtype=bool)
+    p, q = np.array([c.p for c in cats]).reshape(M, 3), np.array([c.q for c in cats]).reshape(M, 3)
+    return TetherCatenaries(p, q, table, vertical, w, list(cats))
+
+
 def sensitivities_batch(
-    cats: list[Catenary3D], fractions: ArrayLike, params: DroneTetherParams | None = None
+    cats: Sequence[Catenary3D] | TetherCatenaries, fractions: ArrayLike, params: DroneTetherParams | None = None
 ) -> TetherSensitivities:
-    """:func:`sensitivities` of several tethers at once (vectorised over the tethers: one numpy pass for a chain)."""
+    """:func:`sensitivities` of several tethers at once (vectorised over the tethers: one numpy pass for a chain).
+
+    ``cats``: the tethers, as :class:`Catenary3D` objects or as the arrays :func:`solve3d_batch` returns (read as
+    they are: no per-tether gathering)."""
     prm = params if params is not None else DroneTetherParams()
     sig = np.asarray(fractions, dtype=float).reshape(-1)
-    M, k = len(cats), sig.size
+    C = cats if isinstance(cats, TetherCatenaries) else _stack(cats)
+    M, k = len(C), sig.size
     up = prm.winch_end == "upper"
-    ez = np.array([0.0, 0.0, 1.0])
-    w = np.array([c.weight_per_length for c in cats])
-    p = np.array([c.p for c in cats]).reshape(M, 3)
-    q = np.array([c.q for c in cats]).reshape(M, 3)
-    h = q[:, 2] - p[:, 2]
-    p_lower = h >= 0.0
-    dh = np.abs(h)
-    vertical = np.array([c.a is None for c in cats], dtype=bool)
-    X = p[:, None, :] + sig[None, :, None] * (q - p)[:, None, :]  # vertical tethers: straight
-    JB = np.zeros((M, k, 3, 3))
-    JB[:] = sig[None, :, None, None] * np.eye(3)
-    dL_dB = np.tile(ez, (M, 1))
-    cv = np.flatnonzero(~vertical)
-    if cv.size:
-        theta = np.array([theta_lower(cats[i]) for i in cv])
-        d = np.array([cats[i].d for i in cv])
-        wv, hv, low = w[cv], dh[cv], p_lower[cv]
-        t_a = np.array([cats[i].tension_p if low[j] else cats[i].tension_q for j, i in enumerate(cv)])
+    ez = _EZ
+    w = np.full(M, C.weight_per_length)
+    p, q = C.p, C.q
+    p_lower = C.h >= 0.0
+    vertical = C.vertical
+    lw = p_lower | vertical  # p is the end A (a vertical tether: p, whatever its height)
+    straight = bool(vertical.any())  # vertical tethers: X = p + sigma (q - p), dX/dq = sigma I (the JB below)
+    cv = np.flatnonzero(~vertical) if straight else None
+    if straight:
+        X = p[:, None, :] + sig[None, :, None] * (q - p)[:, None, :]
+        JB = np.zeros((M, k, 3, 3))
+        JB[:] = sig[None, :, None, None] * _EYE3
+        dL_dB = np.tile(ez, (M, 1))
+    if not vertical.all():
+        sel = slice(None) if cv is None else cv  # all tethers (the usual case: no copies) or the non-vertical
+        theta, d, wv, hv, low = C.theta[sel], C.d[sel], w[sel], np.abs(C.h[sel]), p_lower[sel]
+        t_a = np.where(low, C.tension_p[sel], C.tension_q[sel])
         tw = t_a + wv * hv if up else t_a  # the winch's T_w
-        sig_a = np.where(low[:, None], sig[None, :], 1.0 - sig[None, :])  # fractions from A
-        E = 1j * _CSTEP
-        # axis 1: perturbation of theta_A, d, h (imaginary parts); axis 2: the samples
-        th3 = theta[:, None, None] + E * np.array([1.0, 0.0, 0.0])[None, :, None]
-        d3 = d[:, None, None] + E * np.array([0.0, 1.0, 0.0])[None, :, None]
-        h3 = hv[:, None, None] + E * np.array([0.0, 0.0, 1.0])[None, :, None]
-        R, L, xs, zs = _plane(th3, d3, h3, tw[:, None, None], wv[:, None, None], up, sig_a[:, None, :])
-        Ri, Li = np.imag(R[:, :, 0]) / _CSTEP, np.imag(L[:, :, 0]) / _CSTEP  # (C, 3)
-        dt_dd, dt_dh = -Ri[:, 1] / Ri[:, 0], -Ri[:, 2] / Ri[:, 0]
-        xi, zi = np.imag(xs) / _CSTEP, np.imag(zs) / _CSTEP  # (C, 3, k)
-        x, z = np.real(xs[:, 0]), np.real(zs[:, 0])  # (C, k)
-        x_dd = xi[:, 1] + xi[:, 0] * dt_dd[:, None]
-        x_dh = xi[:, 2] + xi[:, 0] * dt_dh[:, None]
-        z_dd = zi[:, 1] + zi[:, 0] * dt_dd[:, None]
-        z_dh = zi[:, 2] + zi[:, 0] * dt_dh[:, None]
-        L_dd = Li[:, 1] + Li[:, 0] * dt_dd
-        L_dh = Li[:, 2] + Li[:, 0] * dt_dh
-        A = np.where(low[:, None], p[cv], q[cv])
-        u = np.array([cats[i].u for i in cv]) * np.where(low, 1.0, -1.0)[:, None]  # horizontal A -> B
+        sig_a = np.where(low[:, None], sig, 1.0 - sig)  # fractions from A
+        # axis 1: perturbation of theta_A, d, h (imaginary parts, Z[:, i, j] = (theta_A, d, h)_j + i eps delta_ij);
+        # axis 2: the samples
+        Z = np.array((theta, d, hv)).T[:, None, :] + _CSTEP3
+        R, L, xs, zs = _plane(Z[..., 0:1], Z[..., 1:2], Z[..., 2:3], tw[:, None, None], wv[:, None, None], up,
+                              sig_a[:, None, :])  # fmt: skip
+        Ri = R.imag[:, :, 0] / _CSTEP  # (C, 3): dR/d(theta_A, d, h)
+        dt = -Ri[:, 1:] / Ri[:, :1]  # (C, 2): d theta_A / d(d, h), implicit function theorem
+        # the samples' x (k), z (k) and L (1) with their partials (imaginary parts, axis 1) and their total
+        # derivatives along d and h (axis 1 of G)
+        Y = np.concatenate((xs, zs, L), axis=2)  # (C, 3, 2k+1)
+        Yi = Y.imag / _CSTEP
+        G = Yi[:, 1:] + Yi[:, :1] * dt[:, :, None]  # (C, 2, 2k+1)
+        x, z = xs[:, 0].real, zs[:, 0].real  # (C, k)
+        x_dd, z_dd, L_dd = G[:, 0, :k], G[:, 0, k:-1], G[:, 0, -1]
+        x_dh, z_dh, L_dh = G[:, 1, :k], G[:, 1, k:-1], G[:, 1, -1]
+        A = np.where(low[:, None], p[sel], q[sel])
+        u = np.where(low[:, None], C.u[sel], -C.u[sel])  # horizontal A -> B
         u2 = u[:, :2]
-        X[cv] = A[:, None, :] + x[..., None] * u[:, None, :] + z[..., None] * ez
+        Xc = A[:, None, :] + x[..., None] * u[:, None, :] + z[..., None] * ez
         uu = u2[:, :, None] * u2[:, None, :]  # (C, 2, 2)
-        J = np.zeros((cv.size, k, 3, 3))
+        J = np.empty((len(theta), k, 3, 3))
         J[:, :, :2, :2] = x_dd[..., None, None] * uu[:, None] + (x / d[:, None])[..., None, None] * (
-            np.eye(2) - uu[:, None]
+            _EYE2 - uu[:, None]
         )
         J[:, :, :2, 2] = x_dh[..., None] * u2[:, None, :]
         J[:, :, 2, :2] = z_dd[..., None] * u2[:, None, :]
         J[:, :, 2, 2] = z_dh
-        JB[cv] = J
-        dL_dB[cv] = np.column_stack([L_dd * u2[:, 0], L_dd * u2[:, 1], L_dh])
+        dLc = np.concatenate((L_dd[:, None] * u2, L_dh[:, None]), axis=1)
+        if straight:
+            X[cv], JB[cv], dL_dB[cv] = Xc, J, dLc
+        else:
+            X, JB, dL_dB = Xc, J, dLc
     # vertical tethers: B is q when p is lower (X = p + sigma (q - p) has dX/dq = sigma I = the JB set above)
-    JA = np.eye(3) - JB
-    lowv = p_lower[:, None, None, None]
-    Jp = np.where(lowv | vertical[:, None, None, None], JA, JB)
-    Jq = np.where(lowv | vertical[:, None, None, None], JB, JA)
-    dL_dB = np.where((~p_lower & vertical)[:, None], -dL_dB, dL_dB)  # vertical: dL/dq = sign(h) e_z
-    lw = p_lower[:, None] | vertical[:, None]
-    dL_dp = np.where(lw, -dL_dB, dL_dB)
-    dL_dq = -dL_dp
+    JA = _EYE3 - JB
+    lowv = lw[:, None, None, None]
+    Jp = np.where(lowv, JA, JB)
+    Jq = np.where(lowv, JB, JA)
+    if straight:
+        dL_dB = np.where((~p_lower & vertical)[:, None], -dL_dB, dL_dB)  # vertical: dL/dq = sign(h) e_z
+    dL_dp = np.where(lw[:, None], -dL_dB, dL_dB)
     # end tensions: T_A = T_w (lower winch) or T_w - w h; T_B = T_A + w h; h = z_B - z_A
     dta = (-w if up else 0.0 * w)[:, None] * ez
     dtb = dta + w[:, None] * ez
@@ -545,10 +698,9 @@ def sensitivities_batch(
     tp_p = np.where(pl, -dta, dtb)
     tq_q = np.where(pl, dtb, -dta)
     return TetherSensitivities(
-        fractions=sig, points=X, dpoints_dp=Jp, dpoints_dq=Jq, length=np.array([c.length for c in cats]),
-        dlength_dp=dL_dp, dlength_dq=dL_dq, tension_p=np.array([c.tension_p for c in cats]),
-        tension_q=np.array([c.tension_q for c in cats]), dtension_p_dp=tp_p, dtension_p_dq=-tp_p,
-        dtension_q_dp=-tq_q, dtension_q_dq=tq_q,
+        fractions=sig, points=X, dpoints_dp=Jp, dpoints_dq=Jq, length=C.length.copy(),
+        dlength_dp=dL_dp, dlength_dq=-dL_dp, tension_p=C.tension_p.copy(), tension_q=C.tension_q.copy(),
+        dtension_p_dp=tp_p, dtension_p_dq=-tp_p, dtension_q_dp=-tq_q, dtension_q_dq=tq_q,
     )  # fmt: skip
 
 
