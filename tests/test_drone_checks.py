@@ -16,12 +16,14 @@ from shapely.geometry import Polygon
 from tmr.checks.drones import (
     DRONE_VIOLATION_KINDS,
     box_signed_distance,
-    check_drone_plan as _check_drone_plan,
     check_world,
     curve_points,
     mesh_signed_distance,
     prism_signed_distance,
     tether_curves,
+)
+from tmr.checks.drones import (
+    check_drone_plan as _check_drone_plan,
 )
 from tmr.control.plan3d import DronePlan
 from tmr.errors import fmt_point

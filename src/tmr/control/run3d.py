@@ -284,8 +284,10 @@ def run_drones(
             f" at {fmt_point(robots[n - 1, -1])}, t = {(n - 1) * Ts:.2f} s: the hard limits held it back (it came "
             f"less than {STALL_GAIN * 100:g} cm closer in the last {STALL_S:g} s)"
         )
-    elif failure is None and ended == "time" and (
-        short > params.goal_tolerance or moving.max(initial=0.0) > params.drone_accel_max * Ts
+    elif (
+        failure is None
+        and ended == "time"
+        and (short > params.goal_tolerance or moving.max(initial=0.0) > params.drone_accel_max * Ts)
     ):  # off the goal, or too fast to stop within one step (the checker counts the stop)
         i = int(np.argmax(moving))
         where = (
