@@ -204,3 +204,20 @@ def test_tmr_plan_owns_every_drone_output():
     from tmr.views.flags import VIEW_NAMES
 
     assert set(DRONE_OUTPUT_NAMES) | set(DRONE_FIGURES) | set(VIEW_NAMES) <= set(OWNED_NAMES)
+
+
+@pytest.mark.parametrize(
+    ("setting", "says"),
+    [
+        ("settle=1e9", "settle must be ≤ 60 s"),
+        ("leader_speed=3", "above drone_speed_max"),
+        ("leader_accel=5", "above drone_accel_max"),
+    ],
+)
+def test_drone_parameters_out_of_range_are_refused_in_one_line(tmp_path, capsys, setting, says):
+    out = tmp_path / "F"
+    code, stdout, stderr = run_cli(["--scenario", "F", "--no-plots", "--set", setting, "--out", str(out)], capsys)
+    assert code == 2
+    text = (stdout + stderr).strip()
+    assert len(text.splitlines()) == 1 and says in text
+    assert not out.exists()

@@ -840,8 +840,9 @@ class DroneSpeed(_DroneLimit):
 
 class DroneAcceleration(DroneSpeed):
     """|ṗ_i − ṗ_i,k−1| ≤ a_max Ts per axis (3N rows). A hard limit (issue 32 lists it with the others; the checker
-    enforces it): a step where it and the safety limits have no common solution ends the plan, failed, with the
-    reason — it is never dropped (unlike the ground chain's comfort limit)."""
+    enforces it): it is never dropped (unlike the ground chain's comfort limit); where it and the safety limits have
+    no common solution the loop slows the references down and retries, and the plan fails only if that does not
+    help (:func:`tmr.control.run3d.run_drones`)."""
 
     name = "drone_acceleration"
     relaxable = False

@@ -677,7 +677,12 @@ class LexicographicQP:
             f"step {ctx.k} (t = {ctx.k * ctx.Ts:.2f} s): the hard constraints have no common solution "
             f"(solver status: {status}{', even without the acceleration bounds' if relax and comfort else ''}); "
             f"tightest: {names}. "
-            "Relax the speed bounds or the clearance margin, or give the leader a path farther from the obstacles."
+            + (
+                "Relax the speed bounds or the clearance margin, or give the leader a path farther from the obstacles."
+                if comfort
+                else "The acceleration bounds are hard here: a slower leader (leader_speed, leader_accel) or a larger "
+                "acceleration bound gives the limits room to brake; or relax the clearance margin."
+            )
         )
 
 

@@ -255,6 +255,10 @@ class QPParams:
             raise ParameterError("need clearance_rows_per_link ≥ 0 and separation_neighbours ≥ 1")
 
 
+#: The longest a drone plan waits after its references stop [s] (``DroneParams.settle``).
+MAX_SETTLE = 60.0
+
+
 @dataclass(frozen=True)
 class DroneParams:
     """Parameters of the drone-chain planner (``formulations/drones.md``; tether and drone physics are in
@@ -266,8 +270,9 @@ class DroneParams:
             leader's CLIK has room to correct); leader_accel: its acceleration [m/s²] (the time law:
             :func:`tmr.route.route3d._cruise_law`).
         drone_speed_max: speed bound of every drone, per axis [m/s].
-        drone_accel_max: acceleration bound of every drone, per axis [m/s²] (a hard limit: never dropped; a step
-            where it cannot hold ends the plan, failed).
+        drone_accel_max: acceleration bound of every drone, per axis [m/s²] (a hard limit: never dropped; where it
+            and the safety limits have no common solution the plan slows down, then fails:
+            :func:`tmr.control.run3d.run_drones`).
         d_safe: clearance every drone keeps beyond its radius r from the obstacles, walls, floor and ceiling [m].
         separation_margin: drones keep 2r + this from each other [m].
         approach_rate: a distance to its limit may shrink at most at this rate times the remaining margin [1/s]
@@ -280,8 +285,9 @@ class DroneParams:
         span_target_fraction: tether regulation pulls each chord towards this fraction of the route spacing [-].
         energy_weight: weight of ‖v‖² at the last level; smoothness_weight: weight of ‖v − v_{k−1}‖².
         goal_tolerance: the leader must end this close to the goal [m].
-        settle: the most time added after the leader's reference reaches the goal [s]; the plan ends as soon as the
-            leader is within half the goal tolerance and every drone at rest (:func:`tmr.control.run3d.run_drones`).
+        settle: the most time added after the leader's reference reaches the goal [s] (≤ 60); the plan ends as soon
+            as the leader is within half the goal tolerance and every drone at rest
+            (:func:`tmr.control.run3d.run_drones`).
         grid: cell size of the 3-D route grid [m].
         solver: "osqp" or a qpsolvers backend.
     """
@@ -337,6 +343,18 @@ class DroneParams:
         )
         if self.tether_samples < 1:
             raise ParameterError(f"DroneParams.tether_samples must be ≥ 1, got {self.tether_samples!r}")
+        if self.settle > MAX_SETTLE:
+            raise ParameterError(f"DroneParams.settle must be ≤ {MAX_SETTLE:g} s, got {self.settle!r}")
+        if self.leader_speed > self.drone_speed_max:
+            raise ParameterError(
+                f"DroneParams.leader_speed {self.leader_speed:g} m/s is above drone_speed_max "
+                f"{self.drone_speed_max:g} m/s: no drone could follow its reference"
+            )
+        if self.leader_accel > self.drone_accel_max:
+            raise ParameterError(
+                f"DroneParams.leader_accel {self.leader_accel:g} m/s² is above drone_accel_max "
+                f"{self.drone_accel_max:g} m/s²: no drone could follow its reference"
+            )
 
 
 #: Every parameter class, in the order the planner applies overrides (a name belongs to one of them).
