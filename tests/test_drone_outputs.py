@@ -34,12 +34,14 @@ WORLD = {
 
 
 def drone_plan(Ts: float = 0.05, params: dict | None = None) -> DronePlan:
-    """Two drones; drone 2 passes straight over drone 1 at k = 20 (tether 2 vertical there: a = NaN); drone 2 flies
-    at 0.05 m / Ts along x (1 m/s by default)."""
+    """Two drones, from rest to rest (smoothstep profiles s(k/K) = 3(k/K)² − 2(k/K)³); drone 2 passes straight over
+    drone 1 at k = 20 (tether 2 vertical there: a = NaN); drone 2 flies 2 m along x (peak 0.075 m / Ts: 1.5 m/s by
+    default), drone 1 climbs 0.4 m."""
     k = np.arange(K + 1, dtype=float)
+    s = 3.0 * (k / K) ** 2 - 2.0 * (k / K) ** 3
     robots = np.zeros((K + 1, 2, 3))
-    robots[:, 0] = np.column_stack([np.full_like(k, 3.0), np.full_like(k, 5.0), 1.5 + 0.01 * k])
-    robots[:, 1] = np.column_stack([2.0 + 0.05 * k, np.full_like(k, 5.0), np.full_like(k, 2.5)])
+    robots[:, 0] = np.column_stack([np.full_like(k, 3.0), np.full_like(k, 5.0), 1.5 + 0.4 * s])
+    robots[:, 1] = np.column_stack([2.0 + 2.0 * s, np.full_like(k, 5.0), np.full_like(k, 2.5)])
     pts = np.concatenate([np.broadcast_to([1.0, 5.0, 0.5], (K + 1, 1, 3)), robots], axis=1)
     a = np.array([[np.nan if (c := solve3d(r[j], r[j + 1], P)).a is None else c.a for j in range(2)] for r in pts])
     vel = np.zeros_like(robots)
@@ -130,8 +132,8 @@ def test_the_same_plan_gives_the_same_bytes(tmp_path):
 
 def test_a_failed_check_is_recorded_and_read_back(tmp_path):
     plan = drone_plan()
-    metrics = check_drone_plan(plan, WORLD, params={"drone_speed_max": 0.5})  # drone 2 flies at 1 m/s
-    assert not plan.success and plan.failure.startswith("drone 2 moves at 1.000 m/s along x at t = 0.00 s")
+    metrics = check_drone_plan(plan, WORLD, params={"drone_speed_max": 0.5})  # drone 2 flies at up to 1.5 m/s
+    assert not plan.success and plan.failure.startswith("drone 2 moves at 0.599 m/s along x at t = 0.20 s")
     write_drone_outputs(tmp_path / "f", plan, metrics, info(tmp_path))
     run = load_run(tmp_path / "f")
     assert run.record["success"] is False and run.plan().failure == plan.failure
