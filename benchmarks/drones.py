@@ -99,8 +99,10 @@ def _median_ms(seconds: Any) -> float | None:
 
 def _why(message: str) -> str:
     """The kind of a planner's own failure, from its message."""
-    if message.startswith("the leader stopped"):
-        return "the leader held back short of the goal"
+    if message.startswith(("the leader stopped", "the leader stalled")):
+        return "the leader held back short of the goal (stalled)"
+    if message.startswith("the chain did not come to rest"):
+        return "the chain not at rest at the goal when the settling time ran out"
     if "no catenary" in message or "span" in message:
         return "a tether span no catenary holds"
     return "a step without a solution" if message else "(no message)"

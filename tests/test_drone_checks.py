@@ -445,3 +445,6 @@ def test_a_plan_that_ends_or_starts_moving_breaks_the_acceleration_limit():
     late = smooth[8:]  # starts at 0.36 m/s from rest
     k_bad, msg = _only(_check_drone_plan(make_plan(late), table()), "acceleration")
     assert k_bad == 0 and "7.200 m/s²" in msg
+    # a plan the planner failed was cut off where it stopped: its last state is not a stop, only its reason counts
+    k_bad, msg = _only(_check_drone_plan(make_plan(moving, failure="the leader stalled"), table()), "planner")
+    assert msg == "the leader stalled"

@@ -792,7 +792,8 @@ def check_drone_plan(
             ``plan.diagnostics["planner_failure"]``, stays first).
         rest_ends: the plan starts and ends at rest, as tmr's do: the acceleration from rest to the first step's
             velocity and from the last step's velocity to rest are checked too (False: only between steps, for
-            trajectories cut out of a longer motion).
+            trajectories cut out of a longer motion). The final stop is not checked on a plan the planner failed
+            (``plan.failure`` / ``planner_failure``): it was cut off where the planner stopped.
 
     Returns:
         :class:`DroneMetrics`; ``failures`` has one line per violated limit kind (its first step).
@@ -999,11 +1000,11 @@ def check_drone_plan(
         bind("speed", -over_v, v_max, lambda i: (i // (3 * n), f"drone {(i // 3) % n + 1} along {axes[i % 3]}", None))
         # the chain starts and ends at rest: the velocity is 0 before t_0 and after t_K, so the first step's start
         # and the last step's stop are accelerations too
-        if rest_ends:
-            rest = np.zeros((1, n, 3))
-            acc = np.diff(np.concatenate([rest, vel, rest]), axis=0) / Ts  # (K+1, N, 3) at steps 0..K
-        else:  # at steps 1..K-1 (steps 0 and K: no acceleration known)
-            acc = np.concatenate([np.zeros((1, n, 3)), np.diff(vel, axis=0) / Ts, np.zeros((1, n, 3))])
+        # a plan the planner itself failed was cut off where it stopped: its last state is not a stop at rest
+        rest_end = rest_ends and not planner_failure
+        before = np.zeros((1, n, 3)) if rest_ends else vel[:1]
+        after = np.zeros((1, n, 3)) if rest_end else vel[-1:]
+        acc = np.diff(np.concatenate([before, vel, after]), axis=0) / Ts  # (K+1, N, 3) at steps 0..K
         over_a = np.abs(acc) - a_max
         mask_a = (over_a > 4 * tol / Ts**2).any(axis=(1, 2))
 
