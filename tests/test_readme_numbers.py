@@ -251,8 +251,9 @@ QUOTES = [
         ),
     ),
     Quote(
-        r"the per-step QP took (\S+) ms median for 8 drones",
-        lambda: md(DR, r"per-step QP time for 8 drones ≤ 2 ms median \| ([\d.]+) ms"),
+        r"A whole step \(catenaries, world queries, rows and the QP\) took (\S+) ms median for 8\s+drones \(the QP "
+        r"(\S+) ms of it\)",
+        lambda: md(DR, r"per-step QP time for 8 drones ≤ 2 ms median \| ([\d.]+) ms .*?of which the QP ([\d.]+) ms"),
     ),
     Quote(
         r"H with 5 drones (\S+) s for the whole process",
