@@ -30,8 +30,8 @@ Array = NDArray[np.float64]
 
 __all__ = ["run_drones", "LineReferences", "line_references", "slowed_references", "REST_SPEED"]
 
-#: A drone is at rest when no velocity component exceeds this [m/s] (the plan's end: see :func:`run_drones`); stopping
-#: from it within one step takes 1 m/s², a quarter of the default acceleration limit.
+#: A drone is at rest when no velocity component exceeds this [m/s], or a_max Ts / 2 if less (the plan's end: see
+#: :func:`run_drones`): stopping from it within one step stays within half the acceleration bound.
 REST_SPEED = 0.05
 #: A step where the hard limits have no common solution: go back this long [s], ...
 BACK_S = 1.0
@@ -158,8 +158,12 @@ def run_drones(
 
     The plan ends at the references' last sample, or earlier — at the first step after the references have stopped
     moving where the leader is within half the goal tolerance of ``goal`` and every drone at rest (no velocity
-    component above :data:`REST_SPEED` [m/s]): the references' settling time (``DroneParams.settle``) is the most the
-    plan waits for the chain to come to rest, not a fixed tail.
+    component above :data:`REST_SPEED` [m/s], or a_max Ts / 2): the references' settling time
+    (``DroneParams.settle``) is the most the plan waits for the chain to come to rest, not a fixed tail. It fails
+    when the leader stalls (less than :data:`STALL_GAIN` closer over :data:`STALL_S`, farther than the goal
+    tolerance), or when the settling time is over with the leader off the goal or a drone too fast to stop within one
+    step; a step without a solution first slows the references down (:func:`slowed_references`, at most
+    :data:`SLOW_DOWNS` times).
 
     ``diagnostics``: per step (K+1,) ``step_time`` [s] (the whole step: catenaries, world queries, rows and the
     QP), ``qp_step_time`` [s] (the QP's part: its rows and solves; ``qp`` only), ``leader_residual`` [m/s] (the
