@@ -49,7 +49,7 @@ from scipy.sparse.csgraph import dijkstra
 from tmr.errors import ParameterError, TetherSpanError, TmrError, fmt_point
 from tmr.model.catenary3d import DroneTetherParams, solve3d
 from tmr.route.geodesic import NoRouteError, TooFewRobotsError
-from tmr.world.world3d import Obstacle3D, World3D, _PlacedBox, box_obstacle
+from tmr.world.world3d import Obstacle3D, World3D, _PlacedBox, aabb_gap, box_obstacle
 
 Array = NDArray[np.float64]
 
@@ -212,7 +212,7 @@ def _obstacle_distance(world: World3D, pts: Array, cap: float) -> Array:
     lo, hi = np.asarray(world.bounds[:3]), np.asarray(world.bounds[3:])
     span = float(np.max(hi - lo)) + 10.0 * cap + 10.0
     for ob in world.obstacles:  # one at a time: inside an overlap, the deepest single depth
-        gap = np.linalg.norm(np.maximum(0.0, np.maximum(ob.lo - pts, pts - ob.hi)), axis=1)
+        gap = aabb_gap(ob.lo, ob.hi, pts, pts)
         near = np.flatnonzero(gap < cap)
         if not len(near):
             continue

@@ -37,7 +37,7 @@ from shapely.geometry import Polygon
 
 from tmr.errors import MapError
 
-__all__ = ["Obstacle3D", "World3D", "box_obstacle", "mesh_obstacle", "prism_obstacle", "world3d_from_table"]
+__all__ = ["Obstacle3D", "World3D", "aabb_gap", "box_obstacle", "mesh_obstacle", "prism_obstacle", "world3d_from_table"]
 
 Bounds3 = tuple[float, float, float, float, float, float]
 
@@ -233,6 +233,15 @@ def _segment_shape(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[Any,
     return coal.Capsule(0.0, length), _placement(0.5 * (a + b), rot)
 
 
+def aabb_gap(
+    lo_a: NDArray[np.float64], hi_a: NDArray[np.float64], lo_b: NDArray[np.float64], hi_b: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Distance [m] between axis-aligned boxes [lo_a, hi_a] and [lo_b, hi_b] (broadcast, last axis x y z; a point:
+    lo = hi), 0 where they meet: the norm of the per-axis gaps (summed as ``np.linalg.norm`` sums them)."""
+    gap = np.maximum(0.0, np.maximum(lo_a - hi_b, lo_b - hi_a))
+    return np.sqrt(np.add.reduce(gap * gap, axis=-1))
+
+
 class World3D:
     """A room with box, prism and mesh obstacles; implements :class:`tmr.world.World` with points (..., 3).
 
@@ -274,9 +283,8 @@ class World3D:
 
     def box_gaps(self, lo: NDArray[np.float64], hi: NDArray[np.float64]) -> NDArray[np.float64]:
         """Distance [m] from every obstacle's bounding box to each box [lo, hi] (M, 3) (a point: lo = hi): (O, M),
-        a lower bound of the distance to the obstacle itself."""
-        gap = np.maximum(0.0, np.maximum(self.aabb_lo[:, None, :] - hi[None], lo[None] - self.aabb_hi[:, None, :]))
-        return np.sqrt(np.einsum("omk,omk->om", gap, gap))
+        a lower bound of the distance to the obstacle itself (:func:`aabb_gap` for all obstacles at once)."""
+        return aabb_gap(self.aabb_lo[:, None, :], self.aabb_hi[:, None, :], lo[None], hi[None])
 
     def __repr__(self) -> str:
         return f"World3D({len(self.obstacles)} obstacles, bounds={_fmt(self.bounds)}, r={self.safety_radius:.3f})"
@@ -298,7 +306,7 @@ class World3D:
 
     def _lower_bound(self, p: NDArray[np.float64], ob: Obstacle3D) -> NDArray[np.float64]:
         """Distance [m] of points (n, 3) to the obstacle's bounding box (a lower bound of the distance to it)."""
-        return np.linalg.norm(np.maximum(0.0, np.maximum(ob.lo - p, p - ob.hi)), axis=1)
+        return aabb_gap(ob.lo, ob.hi, p, p)
 
     def _signed(self, p: NDArray[np.float64], want_gradient: bool) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Signed distance [m] (no robot radius) of points (n, 3) and its gradient (n, 3)."""
@@ -357,7 +365,7 @@ class World3D:
         out = wall.copy()
         lo_seg, hi_seg = np.minimum(pa, pb), np.maximum(pa, pb)
         for ob in self.obstacles:
-            gap = np.linalg.norm(np.maximum(0.0, np.maximum(ob.lo - hi_seg, lo_seg - ob.hi)), axis=1)
+            gap = aabb_gap(ob.lo, ob.hi, lo_seg, hi_seg)
             cand = np.flatnonzero(gap < out)
             if len(cand) == 0:
                 continue
