@@ -144,32 +144,40 @@ def test_build_problem_takes_the_environments_robot_radius():
         build_problem(sc, overrides={"safety_radius": 0.5})
 
 
-def test_horizon_warm_start_puts_the_followers_on_the_tether_tasks(monkeypatch):
-    """The horizon NLP starts from the qp plan without the route references (closer to the paper's fitness, which it
-    minimises: f2, span uniformity, much lower); if that plan fails a check, from the usual qp plan."""
-    from tmr import planner
-    from tmr.checks.metrics import fitness
-
+@pytest.fixture(scope="module")
+def scenario_a_qp():
     problem = build_problem(load_scenario("A"))
-    assert problem.references is not None and problem.path_params.route_weight > 0
-    _, warm, _ = planner._horizon_warm_start(problem, progress=False)
-    _, routed, _ = planner._solve_qp(problem, progress=False)
-    assert warm.success and routed.success
-    assert warm.diagnostics["references_note"].startswith("horizon warm start")
-    assert fitness(warm)[1] < 0.5 * fitness(routed)[1]
+    return problem, *solve(problem, "qp")
 
-    real = planner.plan
 
-    def plain_fails(prob, method, progress=False):
-        result = real(prob, method, progress=progress)
-        if prob.path_params.route_weight == 0:
-            result.success, result.failure = False, "made to fail by the test"
-        return result
+@pytest.mark.parametrize("limit", [1e-3, 0.3], ids=["before IPOPT", "IPOPT stopped"])
+def test_horizon_stopped_early_is_never_worse_than_qp_in_any_term(scenario_a_qp, limit):
+    """``solve(problem, "horizon")`` starts from the very plan ``solve(problem, "qp")`` returns: stopped by its time
+    limit before IPOPT runs it returns that plan itself (same joints, bit for bit); stopped during IPOPT, a plan
+    whose f1, f2, f3, f4 are each ≤ the qp plan's, passing every check."""
+    problem, qp, qp_metrics = scenario_a_qp
+    plan, metrics = solve(problem, "horizon", time_limit=limit)
+    d = plan.diagnostics
+    assert plan.success and metrics.n_violation_steps == 0 and d["time_limit_hit"]
+    for k in ("f1", "f2", "f3", "f4"):
+        assert getattr(metrics, k) <= getattr(qp_metrics, k), k
+    if limit < 0.01:
+        assert d["horizon_result"] == "warm_start" and d["ipopt_iterations"] == 0
+        np.testing.assert_array_equal(plan.q, qp.q)
+        assert "the warm-start qp plan as given" in d["horizon_note"]
+    assert "vs its qp warm start: f1 " in d["horizon_note"] and "IPOPT iterations in all" in d["horizon_note"]
+    assert d["horizon_summary"]["warm_start_terms"]["f1"] == pytest.approx(qp_metrics.f1, rel=1e-9)
 
-    monkeypatch.setattr(planner, "plan", plain_fails)
-    _, fallback, _ = planner._horizon_warm_start(problem, progress=False)
-    assert fallback.success and "without them it failed: made to fail" in fallback.diagnostics["references_note"]
-    np.testing.assert_array_equal(fallback.robots, routed.robots)
+
+def test_horizon_converged_is_no_worse_than_qp_in_any_term(scenario_a_qp):
+    """IPOPT converges on A; its plan improves on the qp plan in every term (f1, f2, f4 are rows f_i ≤ f_i,qp)."""
+    problem, qp, qp_metrics = scenario_a_qp
+    plan, metrics = solve(problem, "horizon")
+    d = plan.diagnostics
+    assert d["horizon_result"] == "optimal" and plan.success and metrics.n_violation_steps == 0
+    assert metrics.f1 < qp_metrics.f1 and metrics.f2 < qp_metrics.f2 and metrics.f4 < qp_metrics.f4
+    assert metrics.f3 <= qp_metrics.f3  # the leader on its reference: ~0
+    assert d["horizon_summary"]["result"] == "optimal" and d["horizon_summary"]["iterations"] > 0
 
 
 def test_a_start_of_another_count_is_refused_before_the_route(monkeypatch):

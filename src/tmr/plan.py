@@ -25,6 +25,7 @@ nothing written).
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -406,6 +407,8 @@ def _extras(problem: Any, plan: Any, auto_note: str | None) -> dict[str, Any]:
     for key in ("references_note", "horizon_result", "horizon_note"):
         if isinstance(plan.diagnostics.get(key), str):
             out[key] = plan.diagnostics[key]
+    if isinstance(plan.diagnostics.get("horizon_summary"), dict):
+        out["horizon"] = plan.diagnostics["horizon_summary"]
     return out
 
 
@@ -633,7 +636,8 @@ def _main(args: argparse.Namespace) -> int:
     if "references_note" in extra:
         LOG.info("  references: %s", extra["references_note"])
     if "horizon_note" in extra:
-        LOG.info("  horizon: %s: %s", extra["horizon_result"], extra["horizon_note"])
+        nlp = plan.diagnostics.get("timings", {}).get("nlp_time", math.nan)
+        LOG.info("  horizon: %s (the NLP ran %.1f s): %s", extra["horizon_result"], nlp, extra["horizon_note"])
     LOG.info("  wrote %s to %s", ", ".join(names), args.out)
     if not plan.success:
         LOG.error("plan FAILED: %s", plan.failure)

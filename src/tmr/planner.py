@@ -527,9 +527,10 @@ def solve(
             steps, once they take 2 s; the horizon NLP's iterations).
 
     Returns the plan (``success`` False with the reason if a constraint is violated anywhere) and its metrics. The
-    horizon plan is never worse than its ``qp`` warm start: if IPOPT fails, it is the best feasible iterate or the
-    warm start itself (``diagnostics["horizon_result"]`` says which); if nothing feasible is found, the failed plan
-    names the violated limits.
+    horizon NLP starts from the very plan ``solve(problem, "qp")`` returns (trailing or train references, whichever
+    it used) and is never worse than it, in each of f1–f4 (rows of the NLP): if IPOPT fails, it is the best feasible
+    iterate or the ``qp`` plan itself (``diagnostics["horizon_result"]`` says which); if nothing feasible is found,
+    the failed plan names the violated limits.
 
     The plan's ``wall_time`` (and its metrics' ``wall_time``, ``ms_per_step``) is the whole of this call [s]: every
     qp run (the train-reference retry too), the horizon's warm start and NLP, and the checks;
@@ -546,7 +547,7 @@ def solve(
     # a whole-trajectory NLP, not a per-step formulation
     from tmr.control.horizon import DEFAULT_TIME_LIMIT, HorizonInfeasible, plan_horizon  # casadi: when used
 
-    problem, warm, warm_metrics = _horizon_warm_start(problem, progress)
+    problem, warm, warm_metrics = _solve_qp(problem, progress)  # the very plan ``--method qp`` returns
     qp_done = time.perf_counter()
     limit = DEFAULT_TIME_LIMIT if time_limit is None else time_limit
     try:
@@ -619,32 +620,6 @@ def train_problem(problem: Problem) -> Problem:
 
 #: What the train references keep beyond the QP's own clearance and separation [m].
 TRAIN_MARGIN = 0.005
-
-
-def _horizon_warm_start(problem: Problem, progress: bool) -> tuple[Problem, Plan, Metrics]:
-    """The ``qp`` plan the horizon NLP starts from: first with the followers on the paper's tether tasks alone
-    (the trailing route references off, ``route_weight = 0``), then, if that plan fails a check, :func:`_solve_qp`.
-
-    The NLP minimises the paper's fitness, whose span-uniformity term f2 (Caruso 2021 eq. 25) the route references
-    trade for keeping the followers on the route: from a route-following start IPOPT needed 130–184 iterations on
-    scenarios B and D (11 and 27 s), from the tether-task start 27–43 (4 s) to the same optimum. The leader and
-    its route, and so the homotopy, are the same in both (``benchmarks/results/end_to_end.md``)."""
-    ref = problem.references
-    if ref is not None and ref.mode == "trail" and problem.path_params.route_weight > 0 and problem.chain.n_robots > 1:
-        plain = replace(problem, path_params=replace(problem.path_params, route_weight=0.0))
-        result, metrics = _checked(plain, "qp", progress)
-        if result.success:
-            result.diagnostics["references_note"] = (
-                "horizon warm start: the qp plan with the followers on the tether tasks (route references off)"
-            )
-            return problem, result, metrics
-        problem, warm, warm_metrics = _solve_qp(problem, progress)
-        why = str(result.failure).split(";")[0]
-        note = f"horizon warm start: the qp plan with route references (without them it failed: {why})"
-        earlier = warm.diagnostics.get("references_note")
-        warm.diagnostics["references_note"] = f"{note}; {earlier}" if earlier else note
-        return problem, warm, warm_metrics
-    return _solve_qp(problem, progress)
 
 
 def _solve_qp(problem: Problem, progress: bool) -> tuple[Problem, Plan, Metrics]:

@@ -12,14 +12,17 @@ objective, the hard limits of ``formulations/qp.md`` as constraints)::
           |q̇_k| ≤ (ω_max, v_d,max),  |q̈_k| ≤ a_max          joint speed and acceleration (q̇_{−1} = q̇_K = 0)
           |ẋ_{i,k}|, |ẍ_{i,k}| ≤ v_rob, a_rob per axis      robot Cartesian speed and acceleration
 
-with q̇_k = (q_{k+1} − q_k)/Ts, q̈_k = (q̇_k − q̇_{k−1})/Ts. The clearance c is a cubic tensor B-spline whose control points
-are the environment's signed-distance grid (:func:`distance_spline`). The NLP is written with whole-horizon matrix
-expressions (all knots at once, casadi MX) and solved by IPOPT from the ``qp`` plan.
+with q̇_k = (q_{k+1} − q_k)/Ts, q̈_k = (q̇_k − q̇_{k−1})/Ts, and f_i ≤ f_i of the warm start for f1, f2, f4 (never worse
+than the ``qp`` plan in any term). The clearance c is a cubic tensor B-spline whose control points are the
+environment's signed-distance grid (:func:`distance_spline`). The variables are the robot positions at every knot (the
+joints are functions of them; the leader on its reference is a fixed variable), the NLP is written with whole-horizon
+matrix expressions (all knots at once, casadi MX) and solved by IPOPT from the ``qp`` plan.
 
-Clearance rows are **generated lazily**: a transcription holds the rows of the samples closer than ``activation`` to
-the obstacles along the warm start (every row of every other group is always there); after each solve the clearance of
-every sample at every knot is evaluated, and if one that was left out is violated, the samples within ``activation`` at
-the new solution are added and IPOPT restarts primal–dual warm. The final point is a KKT point of the relaxed problem
+Rows are **generated lazily**: a transcription holds the rows near their bounds along the warm start (clearance and
+separation within ``activation``, spans within ``activation`` of a limit, speeds and accelerations beyond
+``rate_activation`` of their bound; every leader and fitness row); after each solve every row of every group is
+evaluated, and if one that was left out is violated, the rows near the new solution are added and IPOPT restarts
+primal–dual warm. The final point is a KKT point of the relaxed problem
 that satisfies every row of the full one, hence a KKT point of the full problem (the rows left out are inactive, with
 zero multipliers).
 
@@ -66,7 +69,6 @@ from tmr.control.horizon_model import (
     HorizonInfeasible,
     HorizonOptions,
     Violation,
-    _leader_multipliers,
     _Model,
     _options,
     _Setup,
@@ -85,7 +87,9 @@ from tmr.control.horizon_pool import (
     _check_start,
     _cost,
     _describe,
+    _no_worse,
     _Pool,
+    _reference_violations,
     _violations,
     _warm_candidate,
 )
@@ -267,19 +271,31 @@ def plan_horizon(
         )
     tol = max(10 * opts.constr_viol_tol, 1e-6)  # a row "holds" if violated by at most this (its unit)
     t0 = time.perf_counter()
-    Qw, Qraw, info = _warm_start(su, warm_start)
+    Qraw, info = _warm_start(su, warm_start)
     warm_time = time.perf_counter() - t0
     t0 = time.perf_counter()
-    model = _Model(su, distance_spline(env))
-    xv = Qw.ravel()
+    model = _Model(su, distance_spline(env), bounds=info["warm_start_terms"])
+    xv = model.project(model.x_of(Qraw))  # IPOPT's initial point: q_0 = start, the equality leader on x_d
+    Qw = model.q_of(xv)
     vals = model.values(xv)
     masks = {name: model.near(name, vals[name]) for name in model.rows}
     J_warm = _cost(su, Qw)
     obj_scale = max(J_warm, 1e-6) if opts.scale_objective else 1.0
     trans_time, solve_time = time.perf_counter() - t0, 0.0
     t0 = time.perf_counter()
+    if opts.leader_tolerance == 0:  # the leader's own clearance rows depend on fixed variables only
+        bad = _reference_violations(model, vals, tol)
+        if bad:
+            raise HorizonInfeasible(
+                "horizon NLP: the leader's reference passes closer to the obstacles than d_safe (the equality leader "
+                "is on it at every knot), so no trajectory satisfies the rows: "
+                + _describe(bad)
+                + "; give it a leader tolerance (leader_tolerance > 0) or a reference that keeps clear",
+                bad,
+                status="reference_infeasible",
+            )
     warm_c, warm_why = _warm_candidate(model, warm_start, Qw, Qraw, tol)
-    viol = _violations(model, vals, Qw, tol)  # at the current point (the last iterate once IPOPT ran)
+    viol = _violations(model, vals, xv, tol)  # at the current point (the last iterate once IPOPT ran)
     info["warm_start_time"] = warm_time + time.perf_counter() - t0
     pool = _Pool(_POOL_SIZE, _POOL_SCREEN, (warm_c.J if warm_c else math.inf) / obj_scale)
     rounds: list[dict[str, Any]] = []
@@ -288,9 +304,9 @@ def plan_horizon(
     stats: dict[str, Any] = {}
     status = ""
     stop = ""  # why the rounds ended: converged, ipopt_failed, time_limit, rows_left_out
-    attempts = [("primary", {}, False)]
+    attempts = [("primary", {})]
     if opts.retry:
-        attempts.append(("retry", dict(opts.retry_ipopt), opts.leader_tolerance == 0))
+        attempts.append(("retry", dict(opts.retry_ipopt)))
     bar = tqdm(  # no total: IPOPT's iterations are counted, its rounds named ("horizon NLP, round 1 (primary solve)")
         desc="horizon NLP",
         unit="IPOPT iteration",
@@ -309,7 +325,7 @@ def plan_horizon(
             trans_time += time.perf_counter() - t1
             x_start, lam_start = xv, lam
             ok = False
-            for label, extra, ls_duals in attempts:
+            for label, extra in attempts:
                 remaining = deadline - time.perf_counter()
                 if remaining <= 0:
                     stop = "time_limit"
@@ -323,8 +339,6 @@ def plan_horizon(
                 kwargs: dict[str, Any] = dict(x0=x_start, lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg)
                 if prev is not None and lam_start is not None:  # primal–dual warm start from the previous round
                     kwargs.update(lam_x0=lam_start[0], lam_g0=tr.carry_multipliers(prev, lam_start[1]))
-                elif ls_duals:
-                    kwargs.update(lam_g0=_leader_multipliers(model, tr, x_start, obj_scale))
                 t3 = time.perf_counter()
                 _LOG.debug("horizon NLP round %d %s: IPOPT on %d rows", rnd, label, tr.size)
                 with _ctrl_c_stops_ipopt():
@@ -337,7 +351,7 @@ def plan_horizon(
                 xv = np.asarray(sol["x"], dtype=float).ravel()
                 lam = (np.asarray(sol["lam_x"], dtype=float).ravel(), np.asarray(sol["lam_g"], dtype=float).ravel())
                 vals = model.values(xv)
-                viol = _violations(model, vals, xv.reshape(su.K + 1, su.n), tol=tol)
+                viol = _violations(model, vals, xv, tol=tol)
                 rounds.append(
                     dict(
                         round=rnd,
@@ -392,12 +406,14 @@ def plan_horizon(
         what = f"rows left out of the NLP were still violated after {opts.max_rounds} rounds of constraint generation"
     final: _Candidate | None = None
     if stop == "converged":
-        Q = xv.reshape(su.K + 1, su.n)
+        Q = model.q_of(xv)
         final = _Candidate(Q, _cost(su, Q), "optimal", "the optimum")
-    if final is not None and (warm_c is None or final.J <= warm_c.J):
+    if final is not None and (warm_c is None or final.J <= warm_c.J) and _no_worse(model, final.Q):
         chosen: _Candidate | None = final
     else:
-        if final is not None:
+        if final is not None and not _no_worse(model, final.Q):
+            what = f"IPOPT's optimum ({status}) is worse than the warm start in a term of the fitness"
+        elif final is not None:
             what = f"IPOPT's optimum ({status}, objective {final.J:.6g}) costs more than the warm start"
         chosen = pool.best(model, tol, warm_c.J if warm_c else math.inf) or warm_c
     if chosen is None:
@@ -420,14 +436,31 @@ def plan_horizon(
         raise HorizonInfeasible(message + warm_note, viol, status=status or stop, diagnostics=diag)
 
     Q = chosen.Q
-    xv = Q.ravel()
+    xv = model.x_of(Q)
     vals = model.values(xv)
     diag = _diagnostics(model, tr, stats, xv, vals, rounds, info, J_warm, trans_time, solve_time, start_time)
     versus = f"warm start {warm_c.J:.6g}" if warm_c else f"warm start {J_warm:.6g}, outside the NLP's own rows"
     returned = {"optimal": "returned the optimum"}.get(chosen.result, f"returned {chosen.detail}")
+    ran = f"{iterations} IPOPT iterations in all"  # no seconds here: the note goes to metrics.json (reproducible)
+    terms = {k: float(diag[k]) for k in ("f1", "f2", "f3", "f4")}
+    before = info["warm_start_terms"]
+    change = ", ".join(f"{k} {terms[k]:.4g} ({_percent(terms[k], before[k])})" for k in ("f1", "f2", "f4"))
     diag.update(
         horizon_result=chosen.result,
-        horizon_note=f"{what}; {returned} (objective {chosen.J:.6g} vs {versus})",
+        horizon_note=(
+            f"{what}; {ran}; {returned} (objective {chosen.J:.6g} vs {versus}); vs its {info['warm_start_method']} "
+            f"warm start: {change}"
+        ),
+        horizon_summary=dict(
+            result=chosen.result,
+            stop=stop,
+            iterations=iterations,
+            rounds=last,
+            objective=chosen.J,
+            objective_warm_start=warm_c.J if warm_c else J_warm,
+            terms=terms,
+            warm_start_terms={k: float(v) for k, v in before.items()},
+        ),
         horizon_stop=stop,
         time_limit=time_limit,
         time_limit_hit=stop == "time_limit",
@@ -454,6 +487,13 @@ def plan_horizon(
         params=dict(problem.params_dict(), **{f"horizon_{k}": v for k, v in asdict(opts).items()}),
         goal=np.asarray(problem.scenario.goal, float).copy(),
     )
+
+
+def _percent(value: float, reference: float) -> str:
+    """``value`` against ``reference`` in words: "−79 % vs 230.4", "= 0 as the warm start"."""
+    if reference > 0:
+        return f"{100.0 * (value - reference) / reference:+.1f} % vs {reference:.4g}"
+    return f"warm start {reference:.4g}"
 
 
 def _is_terminal(stream: Any) -> bool:

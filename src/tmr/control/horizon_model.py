@@ -20,9 +20,13 @@ from tmr.errors import InfeasibleStep, ParameterError
 Array = NDArray[np.float64]
 
 
+#: The fitness rows hold f_i ≤ (1 − this) f_i,warm, so that IPOPT's constraint tolerance (1e-6) still gives ≤.
+_NO_WORSE_MARGIN = 1e-6
+
 #: Constraint groups of the NLP, in report order.
 GROUPS: tuple[str, ...] = (
     "leader",
+    "fitness",
     "clearance",
     "span",
     "separation",
@@ -54,7 +58,14 @@ class HorizonOptions:
             on A–D), used by :func:`samples_needed`.
         d_safe: clearance the samples keep [m]; ``None``: ``QPParams.d_safe`` (0.05 m).
         activation: clearance rows only for samples closer than this to the obstacles [m] along the warm start (or a
-            previous round's solution): the lazy rows, see the module docstring. Every other group is always complete.
+            previous round's solution), separation rows only for pairs closer than 2r + margin + this: the lazy rows,
+            see the module docstring.
+        rate_activation: speed and acceleration rows (joint and robot) only where the value is beyond this fraction
+            of its bound along the warm start (or a previous round's solution); 0 keeps every row. The leader rows
+            are always complete.
+        no_worse_terms: the rows f_i ≤ f_i of the warm start for f1, f2 and f4 (each one > 0 at the warm start,
+            group ``"fitness"``): the plan is no worse than its warm start in every term, not only in their weighted
+            sum (with the equality leader f3 = 0 ≤ the warm start's).
         max_rounds: transcriptions at most (a round adds the clearance rows that were left out and came out violated).
         max_iter, tol, acceptable_tol, acceptable_iter, constr_viol_tol, mu_strategy, mu_init, hessian,
             linear_solver, nlp_scaling, min_hessian_perturbation: IPOPT options (choices and measurements in
@@ -81,7 +92,9 @@ class HorizonOptions:
     samples_per_link: int | None = None
     field_error: float = 0.015
     d_safe: float | None = None
-    activation: float = 0.3
+    activation: float = 0.6
+    rate_activation: float = 0.5
+    no_worse_terms: bool = True
     max_rounds: int = 4
     max_iter: int = 200
     tol: float = 1e-6
@@ -119,6 +132,8 @@ class HorizonOptions:
             raise ParameterError(f"samples_per_link must be ≥ 1, got {self.samples_per_link}")
         if not self.activation > 0:
             raise ParameterError(f"activation must be > 0 m, got {self.activation}")
+        if not 0 <= self.rate_activation < 1:
+            raise ParameterError(f"rate_activation must be in [0, 1), got {self.rate_activation}")
         if self.max_rounds < 1 or self.max_iter < 1:
             raise ParameterError("max_rounds and max_iter must be ≥ 1")
         if self.hessian not in ("exact", "limited-memory"):
@@ -320,20 +335,39 @@ class _Rows(NamedTuple):
 
 
 class _Model:
-    """Whole-horizon symbolic model (casadi MX, every knot at once) and the full numeric evaluation of every row."""
+    """Whole-horizon symbolic model (casadi MX, every knot at once) and the full numeric evaluation of every row.
 
-    def __init__(self, su: _Setup, clr: ca.Function) -> None:
+    The decision variables are the **robot positions** at every knot, ``x = [P_0; P_1; …; P_K]`` with ``P_k = (x_1 …
+    x_N, y_1 … y_N)`` [m] (``formulations/horizon.md``, "Cartesian transcription"): every row then couples at most
+    three consecutive knots of at most two neighbouring robots, the leader on its reference is a fixed variable (no
+    row), and the joints of the paper (Caruso 2021 eq. 1–2) are functions of them — spans d_i = ‖p_i − p_{i−1}‖, and
+    per step the change of the absolute link heading Δφ_i = atan2(u_k × u_{k+1}, u_k · u_{k+1}), the joint rate
+    θ̇_i = (Δφ_i − Δφ_{i−1}) / Ts. In joint coordinates the leader equality was a sum of trigonometric terms of every
+    joint (the chain's forward kinematics) and IPOPT took hundreds of iterations from a route-following start; here
+    the objective (f1, f2, f4) carries the nonlinearity and the constraints are local. :meth:`q_of` maps positions
+    back to joints (headings unwrapped along the horizon from q_0), :meth:`x_of` joints to positions.
+
+    ``bounds``: the warm start's f1, f2, f4; with ``HorizonOptions.no_worse_terms`` every one > 0 becomes the row
+    f_i(x) / f_i,warm ≤ 1 (group ``"fitness"``): the plan is no worse than the warm start in each term.
+    """
+
+    def __init__(self, su: _Setup, clr: ca.Function, bounds: dict[str, float] | None = None) -> None:
         opts = su.opts
         N, n, K, Ts = su.N, su.n, su.K, su.Ts
         self.su, self.clr = su, clr
-        x = ca.MX.sym("q", n * (K + 1))  # x = [q_0; q_1; ...; q_K]
-        Q = ca.reshape(x, n, K + 1)  # column k = q_k
-        D = Q[1::2, :]
-        tril = ca.DM(np.tril(np.ones((N, N))))
-        Phi = ca.mtimes(tril, Q[0::2, :])  # absolute headings
-        X = su.base[0] + ca.mtimes(tril, D * ca.cos(Phi))  # (N, K+1) robot x
-        Y = su.base[1] + ca.mtimes(tril, D * ca.sin(Phi))
-        Qd = (Q[:, 1:] - Q[:, :-1]) / Ts  # q̇_0 .. q̇_{K−1}; q̇_K = 0
+        xs = ca.MX.sym("p", 2 * N * (K + 1))  # x = [P_0; P_1; ...; P_K], P_k = (x_1..x_N, y_1..y_N)
+        P = ca.reshape(xs, 2 * N, K + 1)  # column k = P_k
+        X, Y = P[:N, :], P[N:, :]
+        ones = ca.DM.ones(1, K + 1)
+        Ux = X - ca.vertcat(su.base[0] * ones, X[: N - 1, :])  # link vectors u_i = p_i − p_{i−1} (p_0: the base)
+        Uy = Y - ca.vertcat(su.base[1] * ones, Y[: N - 1, :])
+        D = ca.sqrt(Ux * Ux + Uy * Uy)  # spans (N, K+1)
+        cross = Ux[:, :-1] * Uy[:, 1:] - Uy[:, :-1] * Ux[:, 1:]
+        dot = Ux[:, :-1] * Ux[:, 1:] + Uy[:, :-1] * Uy[:, 1:]
+        dphi = ca.atan2(cross, dot)  # (N, K) heading change of every link per step
+        dtheta = dphi - ca.vertcat(ca.DM.zeros(1, K), dphi[: N - 1, :])  # relative joint angles' change
+        dD = D[:, 1:] - D[:, :-1]
+        Qd = ca.vertcat(*[r for i in range(N) for r in (dtheta[i, :], dD[i, :])]) / Ts  # q̇_0..q̇_{K−1}; q̇_K = 0
         zn = ca.DM.zeros(n, 1)
         Qdd = (ca.horzcat(Qd, zn) - ca.horzcat(zn, Qd)) / Ts  # q̈_0 (from rest) .. q̈_K (to rest)
         ex = X[N - 1, 1:] - su.ref[1:, 0].reshape(1, -1)
@@ -345,9 +379,17 @@ class _Model:
         J = opts.w_energy * f1 + opts.w_uniformity * f2 + opts.w_smoothness * f4
         if opts.leader_tolerance > 0:
             J = J + opts.w_tracking * f3
-        self.x, self.J = x, J
-        self.terms = ca.Function("terms", [x], [f1, f2, f3, f4])
-        self.grad = ca.Function("grad", [x], [ca.gradient(J, x)])
+        self.terms = ca.Function("terms", [xs], [f1, f2, f3, f4])
+
+        # bounds on the variables: the start fixed, the leader on its reference (equality leader)
+        lbx = np.full((K + 1, 2 * N), -np.inf)
+        ubx = np.full((K + 1, 2 * N), np.inf)
+        start = su.robots(su.q0)[0]
+        lbx[0] = ubx[0] = np.concatenate([start[:, 0], start[:, 1]])
+        if opts.leader_tolerance == 0:
+            lbx[1:, N - 1] = ubx[1:, N - 1] = su.ref[1:, 0]
+            lbx[1:, 2 * N - 1] = ubx[1:, 2 * N - 1] = su.ref[1:, 1]
+        self.lbx, self.ubx = lbx.ravel(), ubx.ravel()
 
         k1 = np.arange(1, K + 1)
         rows: dict[str, _Rows] = {}
@@ -360,19 +402,24 @@ class _Model:
                 [f"robot {N} (distance² to the reference)"],
                 "m²",
             )
-        else:
-            rows["leader"] = _Rows(
-                ca.vertcat(ex, ey), np.zeros(2), np.zeros(2), k1, [f"robot {N} x", f"robot {N} y"], "m"
-            )
-        # clearance sample points (N S, K+1), index in vec order = m + N S k
-        Ls = ca.DM(su.Ls)
-        ones = ca.DM.ones(1, K + 1)
-        self.Px = ca.vec(ca.mtimes(Ls, ca.vertcat(su.base[0] * ones, X)))
-        self.Py = ca.vec(ca.mtimes(Ls, ca.vertcat(su.base[1] * ones, Y)))
+        self.bounds = {k: float(v) for k, v in (bounds or {}).items()}
+        if opts.no_worse_terms and bounds:
+            terms = {"f1": f1, "f2": f2, "f4": f4}
+            names = [k for k in ("f1", "f2", "f4") if self.bounds.get(k, 0.0) > 0]
+            if names:
+                rows["fitness"] = _Rows(
+                    ca.vertcat(*[terms[k] / self.bounds[k] for k in names]),
+                    np.full(len(names), -np.inf),
+                    np.full(len(names), 1.0 - _NO_WORSE_MARGIN),
+                    np.array([K]),
+                    [f"{k} relative to the warm start's" for k in names],
+                    "× warm start",
+                )
         M = N * su.S
         rows["clearance"] = _Rows(
             None, np.full(M, su.d_safe), np.full(M, np.inf), np.arange(K + 1), su.sample_labels, "m"
         )
+        rows["span"] = _Rows(D, su.span_lo, su.span_hi, np.arange(K + 1), [f"tether {i + 1}" for i in range(N)], "m")
         if su.pairs:
             sep = ca.vertcat(*[(X[i, :] - X[j, :]) ** 2 + (Y[i, :] - Y[j, :]) ** 2 for i, j in su.pairs])
             rows["separation"] = _Rows(
@@ -399,12 +446,49 @@ class _Model:
         rows["robot_accel"] = _Rows(
             ca.vertcat(Ax, Ay), np.full(2 * N, -su.a_rob), np.full(2 * N, su.a_rob), np.arange(K + 1), rl, "m/s²"
         )
-        self.rows = rows
-        # numeric evaluation of every row of every group (the clearance of all samples through one mapped call)
         names = [g for g in rows if g != "clearance"]
+        x = xs
+        self.x, self.J = x, J
+        self.rows = rows
+        # clearance sample points (N S, K+1), index in vec order = m + N S k
+        Pm = ca.reshape(x, 2 * N, K + 1)
+        Ls, ones = ca.DM(su.Ls), ca.DM.ones(1, K + 1)
+        self.Px = ca.vec(ca.mtimes(Ls, ca.vertcat(su.base[0] * ones, Pm[:N, :])))
+        self.Py = ca.vec(ca.mtimes(Ls, ca.vertcat(su.base[1] * ones, Pm[N:, :])))
+        # numeric evaluation of every row of every group (the clearance of all samples through one mapped call)
         self._names = names
         self._full = ca.Function("rows", [x], [rows[g].expr for g in names] + [ca.horzcat(self.Px, self.Py).T])
         self._clr_all = clr.map(M * (K + 1))
+
+    # --- joints <-> positions --------------------------------------------------------------------------------
+    def x_of(self, Q: Array) -> Array:
+        """The variables (robot positions, see the class docstring) of joints Q (K+1, n)."""
+        R = self.su.robots(Q)  # (K+1, N, 2)
+        return np.concatenate([R[..., 0], R[..., 1]], axis=1).ravel()
+
+    def q_of(self, xv: Array) -> Array:
+        """Joints (K+1, n) of the variables ``xv``: spans ‖u_i‖, relative angles from the absolute link headings
+        unwrapped along the horizon from q_0's (so a heading that turns by more than π over the plan is kept);
+        q_0 is the start exactly."""
+        su = self.su
+        P = np.asarray(xv, dtype=float).reshape(su.K + 1, 2 * su.N)
+        R = np.stack([P[:, : su.N], P[:, su.N :]], axis=-1)
+        U = R - np.concatenate([np.broadcast_to(su.base, (su.K + 1, 1, 2)), R[:, :-1]], axis=1)
+        phi = np.unwrap(np.arctan2(U[..., 1], U[..., 0]), axis=0)
+        phi0 = np.cumsum(su.q0[0::2])
+        phi += 2 * np.pi * np.round((phi0 - phi[0]) / (2 * np.pi))
+        Q = np.empty((su.K + 1, su.n))
+        Q[:, 0::2] = np.diff(phi, axis=1, prepend=0.0)
+        Q[:, 1::2] = np.hypot(U[..., 0], U[..., 1])
+        Q[0] = su.q0
+        return Q
+
+    def project(self, xv: Array) -> Array:
+        """A copy of ``xv`` with the start and (equality leader) the leader on its reference: the fixed variables."""
+        out = np.array(xv, dtype=float)
+        fixed = self.lbx == self.ubx
+        out[fixed] = self.lbx[fixed]
+        return out
 
     def values(self, xv: Array) -> dict[str, Array]:
         """Every row of every group at ``xv``: name → (rows, cols) array (clearance: (N S, K+1))."""
@@ -415,9 +499,9 @@ class _Model:
         return vals
 
     def fixed_columns(self, name: str) -> NDArray[np.bool_]:
-        """Columns of a group that depend only on the fixed start q_0 (never rows of the NLP)."""
+        """Columns of a group that depend only on the fixed start (never rows of the NLP)."""
         knots = self.rows[name].knots
-        if name in ("clearance", "separation"):
+        if name in ("clearance", "separation", "span"):
             return knots == 0
         return np.zeros(knots.size, dtype=bool)
 
@@ -427,12 +511,23 @@ class _Model:
         return np.maximum(r.lo[:, None] - v, v - r.hi[:, None])
 
     def near(self, name: str, v: Array) -> NDArray[np.bool_]:
-        """Entries that are rows of the next transcription: every entry, except clearance samples farther than
-        ``activation`` from the obstacles (lazy rows)."""
+        """Entries that are rows of the next transcription (lazy rows): every leader and fitness entry; clearance
+        samples closer than ``activation`` to the obstacles; spans within ``activation`` of their limits; pairs closer
+        than 2r + margin + ``activation``; speeds and accelerations
+        beyond ``rate_activation`` times their bound; and every violated entry."""
+        opts = self.su.opts
         if name == "clearance":
-            m = (v < self.su.opts.activation) | (self.violation(name, v) > 0)
-        else:
+            m = v < opts.activation
+        elif name == "separation":
+            m = v < (self.su.sep_min + opts.activation) ** 2
+        elif name == "span":
+            r = self.rows[name]
+            m = (v < r.lo[:, None] + opts.activation) | (v > r.hi[:, None] - opts.activation)
+        elif name in ("leader", "fitness"):
             m = np.ones(v.shape, dtype=bool)
+        else:  # symmetric bounds ±b: |v| beyond a fraction of b
+            m = np.abs(v) >= opts.rate_activation * self.rows[name].hi[:, None]
+        m |= self.violation(name, v) > 0
         m[:, self.fixed_columns(name)] = False
         return m
 
@@ -441,9 +536,7 @@ class _Transcription:
     """The NLP of one round: the selected rows of every group, their bounds and labels, and the IPOPT solver."""
 
     def __init__(self, model: _Model, masks: dict[str, NDArray[np.bool_]]) -> None:
-        su = model.su
-        self.opts = su.opts
-        K, n = su.K, su.n
+        self.opts = model.su.opts
         g: list[Any] = []
         lbg: list[Array] = []
         ubg: list[Array] = []
@@ -451,7 +544,7 @@ class _Transcription:
         self.offset: dict[str, int] = {}
         start = 0
         for name in GROUPS:
-            if name not in model.rows or name == "span":
+            if name not in model.rows:
                 continue
             r = model.rows[name]
             mask = masks[name]
@@ -473,11 +566,8 @@ class _Transcription:
         self.g = ca.vertcat(*g) if g else ca.MX(0, 1)
         self.lbg = np.concatenate(lbg) if lbg else np.zeros(0)
         self.ubg = np.concatenate(ubg) if ubg else np.zeros(0)
-        lbx = np.full((K + 1, n), -np.inf)
-        ubx = np.full((K + 1, n), np.inf)
-        lbx[:, 1::2], ubx[:, 1::2] = su.span_lo, su.span_hi
-        lbx[0], ubx[0] = su.q0, su.q0  # q_0 fixed: IPOPT removes it (fixed_variable_treatment make_parameter)
-        self.lbx, self.ubx = lbx.ravel(), ubx.ravel()
+        # the start (and the equality leader) are fixed: IPOPT removes them (fixed_variable_treatment make_parameter)
+        self.lbx, self.ubx = model.lbx, model.ubx
         self.nlp = {"x": model.x, "f": model.J, "g": self.g}
 
     def solver(self, obj_scale: float, extra: dict[str, Any], callback: ca.Callback | None = None) -> ca.Function:
@@ -500,20 +590,6 @@ class _Transcription:
             same = oidx[pos] == idx
             out[self.offset[name] + np.flatnonzero(same)] = lam_g[old.offset[name] + pos[same]]
         return out
-
-
-def _leader_multipliers(model: _Model, tr: _Transcription, xv: Array, obj_scale: float) -> Array:
-    """Least-squares multipliers of the leader equality rows at ``xv`` (the others 0): per knot k ≥ 1,
-    λ_k = −(J_k J_kᵀ)⁻¹ J_k ∇_{q_k} f, so the first Hessian already carries the curvature of the leader constraint."""
-    su = model.su
-    Q = xv.reshape(su.K + 1, su.n)
-    grad = np.asarray(model.grad(xv), dtype=float).reshape(su.K + 1, su.n)[1:] / obj_scale
-    Je = _leader_jacobians(su, Q[1:])
-    lam = -np.linalg.solve(Je @ np.swapaxes(Je, 1, 2), (Je @ grad[..., None]))[..., 0]  # (K, 2)
-    out = np.zeros(tr.size)
-    idx = tr.index["leader"]  # flat entries of the (2, K) leader block, column-major: row + 2 col
-    out[tr.offset["leader"] : tr.offset["leader"] + idx.size] = lam.ravel()[idx]
-    return out
 
 
 def _solver_opts(opts: HorizonOptions, extra: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -548,35 +624,10 @@ def _solver_opts(opts: HorizonOptions, extra: dict[str, Any] | None = None) -> d
 # ----------------------------------------------------------------------------------------------------------------
 # warm start
 # ----------------------------------------------------------------------------------------------------------------
-def _leader_jacobians(su: _Setup, Q: Array) -> Array:
-    """(M, 2, n) Jacobians of the leader position at joints Q (M, n) (Caruso 2021 eq. 9, planar)."""
-    phi = np.cumsum(Q[:, 0::2], axis=1)
-    u = np.stack([np.cos(phi), np.sin(phi)], axis=-1)
-    P = np.cumsum(Q[:, 1::2, None] * u, axis=1)
-    rel = P[:, -1:, :] - np.concatenate([np.zeros((Q.shape[0], 1, 2)), P[:, :-1]], axis=1)
-    J = np.zeros((Q.shape[0], 2, su.n))
-    J[:, 0, 0::2], J[:, 1, 0::2] = -rel[..., 1], rel[..., 0]
-    J[:, :, 1::2] = np.swapaxes(u, 1, 2)
-    return J
-
-
-def _project_leader(su: _Setup, Q: Array) -> Array:
-    """A copy of joints Q (K+1, n) with the leader on its reference at every knot k ≥ 1: per knot, up to five
-    Gauss–Newton steps of minimum joint change q ← q + J_eᵀ(J_e J_eᵀ)⁻¹(x_d − x_N(q)) (to 10⁻¹² m)."""
-    Q = np.array(Q, dtype=float)
-    for _ in range(5):
-        e = su.ref[1:] - su.robots(Q[1:])[:, -1]
-        if np.max(np.abs(e)) < 1e-12:
-            break
-        Je = _leader_jacobians(su, Q[1:])
-        JJt = Je @ np.swapaxes(Je, 1, 2) + 1e-12 * np.eye(2)
-        Q[1:] += np.einsum("kji,kj->ki", Je, np.linalg.solve(JJt, e[..., None])[..., 0])
-    return Q
-
-
-def _warm_start(su: _Setup, warm: Plan) -> tuple[Array, Array, dict[str, Any]]:
-    """Joints (K+1, n) to start IPOPT from (the warm start's, q_0 = start, leader projected on x_d with the equality
-    leader) and the warm start's joints as given (padded with its last configuration if it stopped early)."""
+def _warm_start(su: _Setup, warm: Plan) -> tuple[Array, dict[str, Any]]:
+    """The warm start's joints (K+1, n) as given (padded with its last configuration if it stopped early) and notes
+    on it; :meth:`_Model.project` of :meth:`_Model.x_of` them is IPOPT's initial point (q_0 = start, the leader on
+    x_d with the equality leader)."""
     info: dict[str, Any] = {}
     Q = np.asarray(warm.q, dtype=float)
     if Q.ndim != 2 or Q.shape[1] != su.n or Q.shape[0] < 1:
@@ -587,9 +638,7 @@ def _warm_start(su: _Setup, warm: Plan) -> tuple[Array, Array, dict[str, Any]]:
     if Q.shape[0] < su.K + 1:  # a plan that stopped early: hold its last configuration
         Q = np.vstack([Q, np.repeat(Q[-1:], su.K + 1 - Q.shape[0], axis=0)])
     raw = Q[: su.K + 1].copy()
-    info["objective_warm_start_raw"] = _weighted(objective_terms(raw, su.Ts, su.ref, su.base), su.opts)
-    Q = raw.copy()
-    Q[0] = su.q0
-    if su.opts.leader_tolerance == 0:  # leader exactly on x_d, so IPOPT starts on the equality rows
-        Q = _project_leader(su, Q)
-    return Q, raw, info
+    terms = objective_terms(raw, su.Ts, su.ref, su.base)
+    info["objective_warm_start_raw"] = _weighted(terms, su.opts)
+    info["warm_start_terms"] = terms
+    return raw, info

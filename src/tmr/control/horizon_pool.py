@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tmr.control.clik import Plan
-from tmr.control.horizon_model import GROUPS, Violation, _Model, _project_leader, _Setup, _weighted, objective_terms
+from tmr.control.horizon_model import GROUPS, Violation, _Model, _Setup, _weighted, objective_terms
 
 Array = NDArray[np.float64]
 
@@ -24,8 +24,9 @@ _POOL_SCREEN = 1e-3  # kept only if no transcribed row is violated by more than 
 # ----------------------------------------------------------------------------------------------------------------
 # violations
 # ----------------------------------------------------------------------------------------------------------------
-def _violations(model: _Model, vals: dict[str, Array], Q: Array, tol: float) -> list[Violation]:
-    """Worst violated row per (group, knot), over every row of every group (fixed start columns excluded)."""
+def _violations(model: _Model, vals: dict[str, Array], xv: Array, tol: float) -> list[Violation]:
+    """Worst violated row per (group, knot), over every row of every group (fixed start columns excluded) and the
+    fixed variables of ``xv`` (the equality leader off its reference: group ``"leader"``)."""
     su = model.su
     out: dict[tuple[str, int], Violation] = {}
 
@@ -39,13 +40,26 @@ def _violations(model: _Model, vals: dict[str, Array], Q: Array, tol: float) -> 
         a[:, model.fixed_columns(name)] = 0.0
         for i, c in zip(*np.nonzero(a > tol), strict=True):
             put(name, int(r.knots[c]), r.items[i], a[i, c], r.unit)
-    d = Q[:, 1::2]
-    a = np.maximum(su.span_lo - d, d - su.span_hi)
-    a[0] = 0.0
-    for k, i in zip(*np.nonzero(a > tol), strict=True):
-        put("span", int(k), f"tether {i + 1}", a[k, i], "m")
+    if su.opts.leader_tolerance == 0:
+        P = np.asarray(xv, dtype=float).reshape(su.K + 1, 2 * su.N)
+        e = np.hypot(P[1:, su.N - 1] - su.ref[1:, 0], P[1:, -1] - su.ref[1:, 1])
+        for k in np.flatnonzero(e > tol):
+            put("leader", int(k) + 1, f"robot {su.N} (off the reference)", e[k], "m")
     order = {g: i for i, g in enumerate(GROUPS)}
     return sorted(out.values(), key=lambda v: (order[v.group], v.knot))
+
+
+def _reference_violations(model: _Model, vals: dict[str, Array], tol: float) -> list[Violation]:
+    """The equality leader's clearance rows (robot N, knots ≥ 1) that fail: they depend on fixed variables only, so
+    no trajectory satisfies them (checked before IPOPT)."""
+    su = model.su
+    row = su.N * su.S - 1  # the last sample of the last tether: the leader
+    a = model.violation("clearance", vals["clearance"][row : row + 1])[0]
+    return [
+        Violation("clearance", int(k), float(su.t[k]), su.sample_labels[row], float(a[k]), "m")
+        for k in np.flatnonzero(a > tol)
+        if k > 0
+    ]
 
 
 def _describe(violations: list[Violation], worst: int = 3) -> str:
@@ -122,6 +136,15 @@ def _cost(su: _Setup, Q: Array) -> float:
     return _weighted(objective_terms(Q, su.Ts, su.ref, su.base), su.opts)
 
 
+def _no_worse(model: _Model, Q: Array) -> bool:
+    """With ``no_worse_terms``: f1, f2 and f4 of joints Q are each ≤ the warm start's (as given) — exactly, not to
+    IPOPT's tolerance; always True without."""
+    if not (model.su.opts.no_worse_terms and model.bounds):
+        return True
+    terms = objective_terms(Q, model.su.Ts)
+    return all(terms[k] <= model.bounds[k] for k in ("f1", "f2", "f4") if k in model.bounds)
+
+
 def _warm_candidate(model: _Model, warm: Plan, Qw: Array, raw: Array, tol: float) -> tuple[_Candidate | None, str]:
     """The warm start as a fallback if it satisfies the hard constraints (else ``None`` and why not).
 
@@ -148,33 +171,47 @@ def _warm_candidate(model: _Model, warm: Plan, Qw: Array, raw: Array, tol: float
         return f"; clearance up to {1e3 * a:.2f} mm below d_safe in the spline field" if a > 0 else ""
 
     at_start = bool(np.allclose(raw[0], su.q0, rtol=0.0, atol=1e-9))
-    viol_raw = _violations(model, model.values(raw.ravel()), raw, tol)
+    x_raw, x_w = model.x_of(raw), model.x_of(Qw)
+    viol_raw = _violations(model, model.values(x_raw), x_raw, tol)
     if at_start and not viol_raw:
         return _Candidate(raw, _cost(su, raw), "warm_start", name), ""
-    viol = _violations(model, model.values(Qw.ravel()), Qw, tol)
-    if not blocking(viol):
-        detail = f"{name}, leader projected on the reference" if su.opts.leader_tolerance == 0 else name
-        return _Candidate(Qw, _cost(su, Qw), "warm_start", detail + dip(viol)), ""
-    why = f"the {warm.method} plan violates {_describe(blocking(viol), worst=1)}"
-    if su.opts.leader_tolerance == 0 and at_start:
+
+    def as_given() -> tuple[_Candidate | None, str]:
         err = float(np.max(np.linalg.norm(su.robots(raw[1:])[:, -1] - su.ref[1:], axis=1)))
         rest = blocking([v for v in viol_raw if v.group != "leader"])
         if not rest and err <= su.opts.warm_start_leader_error:
             detail = f"{name} as given, leader within {1e3 * err:.1f} mm of the reference" + dip(viol_raw)
             return _Candidate(raw, _cost(su, raw), "warm_start", detail), ""
         groups = [g for g in GROUPS if any(v.group == g for v in rest)]
-        why += f" (as given: leader up to {err:.3g} m off the reference"
-        why += f", and {', '.join(groups)} violated)" if rest else ")"
-    return None, why
+        why = f" (as given: leader up to {err:.3g} m off the reference"
+        return None, why + (f", and {', '.join(groups)} violated)" if rest else ")")
+
+    lagging = su.opts.leader_tolerance == 0 and at_start
+    given_why = ""
+    if lagging and su.opts.no_worse_terms:  # the warm start itself first: it is no worse than itself in every term
+        cand, given_why = as_given()
+        if cand is not None:
+            return cand, ""
+    viol = _violations(model, model.values(x_w), x_w, tol)
+    if not blocking(viol) and _no_worse(model, Qw):
+        detail = f"{name}, leader projected on the reference" if su.opts.leader_tolerance == 0 else name
+        return _Candidate(Qw, _cost(su, Qw), "warm_start", detail + dip(viol)), ""
+    why = f"the {warm.method} plan violates {_describe(blocking(viol), worst=1)}" if blocking(viol) else ""
+    why = why or f"the {warm.method} plan, leader projected on the reference, is worse in a term of the fitness"
+    if lagging and not su.opts.no_worse_terms:
+        cand, given_why = as_given()
+        if cand is not None:
+            return cand, ""
+    return None, why + given_why
 
 
 class _Pool:
     """The ``keep`` lowest-cost IPOPT iterates (over every solve) that nearly satisfy the transcribed rows.
 
     An iterate is kept if its scaled cost is below ``f_limit`` (the feasible warm start's) and no transcribed row or
-    bound is violated by more than ``screen`` (the leader rows are projected afterwards). Only copies are made during
-    the solve; :meth:`best` runs the full check (every row of every group, the clearance of every sample) afterwards,
-    and only when a fallback is needed, so a successful solve pays nothing but the copies.
+    bound is violated by more than ``screen`` (the fixed variables are projected afterwards). Only copies are made
+    during the solve; :meth:`best` runs the full check (every row of every group, the clearance of every sample)
+    afterwards, and only when a fallback is needed, so a successful solve pays nothing but the copies.
     """
 
     def __init__(self, keep: int, screen: float, f_limit: float) -> None:
@@ -198,15 +235,16 @@ class _Pool:
         return len(self._heap)
 
     def best(self, model: _Model, tol: float, J_limit: float) -> _Candidate | None:
-        """The lowest-cost kept iterate that satisfies every row at ``tol`` (leader projected on the reference with
-        the equality leader) and costs less than ``J_limit``; ``None`` if there is none."""
+        """The lowest-cost kept iterate that satisfies every row at ``tol`` (its fixed variables projected: the start,
+        the equality leader on its reference) and costs less than ``J_limit``; ``None`` if there is none."""
         su = model.su
         best: _Candidate | None = None
         for _, _, x, where in sorted(self._heap, key=lambda item: (-item[0], item[1])):
-            Q = x.reshape(su.K + 1, su.n)
-            if su.opts.leader_tolerance == 0:
-                Q = _project_leader(su, Q)
-            if _violations(model, model.values(Q.ravel()), Q, tol):
+            x = model.project(x)
+            if _violations(model, model.values(x), x, tol):
+                continue
+            Q = model.q_of(x)
+            if not _no_worse(model, Q):
                 continue
             J = _cost(su, Q)
             if J < J_limit and (best is None or J < best.J):
