@@ -1,6 +1,16 @@
-"""Whole-horizon NLP (``horizon``) vs the per-step lexicographic QP (``qp``) on scenarios A–D, with cold wall times.
+"""Whole-horizon NLP (``horizon``) vs the per-step lexicographic QP (``qp``) on scenarios A–D, with cold wall times;
+and at scale, on generated rooms and robot counts.
 
     python benchmarks/horizon.py [--scenarios A B C D] [--repeats 3] [--seed 0]
+    python benchmarks/horizon.py --rooms 16 [--robots 2,3,5,8,auto] [--time-limit 60] [--jobs 2] [--scenario-e 6]
+
+``--rooms K``: the first K rooms of :func:`tmr.sweep.rooms.room_set` (every density and goal class), each with every
+robot count of ``--robots``, and scenario E with ``--scenario-e`` robots: the whole command line ``python -m tmr.plan
+... --method horizon --no-plots`` in its own process (:func:`tmr.sweep.room_runs.run_room`). The horizon NLP starts
+from the very plan ``--method qp`` returns, and ``metrics.json`` records that plan's f1–f4 beside the horizon's, so
+no second run is needed. Per room class and N: optimal / best feasible iterate / warm start, whole-process time,
+f1–f4 against ``qp``, knots; a scaling plot of the whole-process time against knots × N with the exponent fitted on
+the optimal runs (target ≤ 1.3). Writes ``benchmarks/results/horizon_rooms.md``, ``.csv`` and ``.png``.
 
 A benchmark, not a test. Every repeat of every scenario runs in a **new Python process** (cold: imports, the lazy
 distance field of the map, the casadi transcription and IPOPT's first call all count), which
@@ -23,12 +33,14 @@ import argparse
 import csv
 import io
 import json
+import math
 import os
 import platform
 import statistics
 import subprocess
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -182,15 +194,174 @@ def tables(rows: dict[str, list[dict]], seed: int, repeats: int) -> tuple[str, l
     return md.getvalue(), csv_rows
 
 
+ROOM_KEYS = (
+    "room", "density", "goal_class", "robots", "n_robots", "exit_code", "horizon_result", "horizon_stop",
+    "horizon_iterations", "wall_time", "nlp_time", "qp_time", "knots", "route_length_cli", "independent_ok",
+    "horizon_f1", "qp_f1", "horizon_f2", "qp_f2", "horizon_f3", "qp_f3", "horizon_f4", "qp_f4", "stderr_last",
+)  # fmt: skip
+
+
+def _scenario_e(robots: int, time_limit: float) -> dict:
+    """Scenario E with ``robots`` robots, ``--method horizon``, the whole command line in its own process."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="tmr-horizon-E-") as tmp:
+        cmd = [sys.executable, "-m", "tmr.plan", "--scenario", "E", "--robots", str(robots), "--method", "horizon",
+               "--no-plots", "--time-limit", str(time_limit), "--out", str(Path(tmp) / "out")]  # fmt: skip
+        t0 = time.perf_counter()
+        proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        out: dict = {"room": "scenario E", "density": "E", "goal_class": "-", "robots": str(robots)}
+        out["wall_time"] = time.perf_counter() - t0
+        out["exit_code"] = proc.returncode
+        metrics_path, timings_path = Path(tmp) / "out" / "metrics.json", Path(tmp) / "out" / "timings.json"
+        m = json.loads(metrics_path.read_text()) if metrics_path.is_file() else {}
+        t = json.loads(timings_path.read_text()) if timings_path.is_file() else {}
+        hz = m.get("horizon", {})
+        out.update(n_robots=m.get("n_robots"), route_length_cli=m.get("route_length"), independent_ok=None)
+        out.update(horizon_result=hz.get("result"), horizon_stop=hz.get("stop"))
+        out["horizon_iterations"] = hz.get("iterations")
+        out.update(nlp_time=t.get("nlp_time"), qp_time=t.get("qp_time"))
+        traj = Path(tmp) / "out" / "trajectories.json"
+        out["knots"] = len(json.loads(traj.read_text())["t"]) if traj.is_file() else None
+        for k in ("f1", "f2", "f3", "f4"):
+            out[f"horizon_{k}"] = hz.get("terms", {}).get(k)
+            out[f"qp_{k}"] = hz.get("warm_start_terms", {}).get(k)
+        lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+        out["stderr_last"] = lines[-1].strip() if lines else ""
+        return out
+
+
+def rooms_main(args: argparse.Namespace) -> None:
+    """The ``--rooms`` mode (module docstring)."""
+    import numpy as np
+
+    from tmr.sweep.executor import make_executor
+    from tmr.sweep.room_runs import RoomRun, run_room
+    from tmr.sweep.rooms import room_from_spec, room_set
+
+    t_start = time.perf_counter()
+    robots = [r.strip() for r in args.robots.split(",") if r.strip()]
+    extra = ("--time-limit", str(args.time_limit))
+    executor = make_executor(args.jobs, None, progress=True)
+    try:
+        made = executor.map(room_from_spec, room_set(args.rooms, args.seed), desc="rooms")
+        rooms = [r for r in made if not isinstance(r, str)]
+        tasks = [RoomRun(room, "horizon", n, args.seed, args.timeout, None, extra) for room in rooms for n in robots]
+        rows = executor.map(run_room, tasks, desc="horizon runs")
+    finally:
+        executor.close()
+    if args.scenario_e:
+        rows.append(_scenario_e(args.scenario_e, args.time_limit))
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    with open(RESULTS / "horizon_rooms.csv", "w", newline="") as fh:
+        wr = csv.writer(fh)
+        wr.writerow(ROOM_KEYS)
+        for r in rows:
+            wr.writerow([r.get(k) for k in ROOM_KEYS])
+
+    planned = [r for r in rows if r.get("horizon_result")]
+    md = io.StringIO()
+    w = md.write
+    w("# horizon at scale: generated rooms and robot counts\n\n")
+    w(f"`python benchmarks/horizon.py --rooms {args.rooms} --robots {args.robots} --time-limit {args.time_limit:g} "
+      f"--jobs {args.jobs} --scenario-e {args.scenario_e}` — {datetime_now()}, {platform.machine()}, "
+      f"{os.cpu_count()} cores, {args.jobs} runs at a time; total {time.perf_counter() - t_start:.0f} s. "
+      "Every run is the whole command line `python -m tmr.plan --map ROOM --base --goal --robots N --method horizon "
+      "--no-plots` (or `--scenario E`) in its own process; *time* is that process, interpreter start to exit. The "
+      "`qp` columns are the plan `--method qp` returns for the same inputs (the horizon's warm start, recorded in "
+      "`metrics.json`).\n\n")  # fmt: skip
+    counts = Counter(r["horizon_result"] for r in planned)
+    refused = [r for r in rows if not r.get("horizon_result")]
+    w(f"**{len(planned)} plans**: {counts['optimal']} optimal, {counts['best_feasible_iterate']} best feasible "
+      f"iterate, {counts['warm_start']} the qp plan itself; {len(refused)} runs without a horizon plan (exit 2: N "
+      "below the route's proven count or no route; exit 1: no qp plan to start from).\n\n")  # fmt: skip
+    terms = ("f1", "f2", "f3", "f4")
+    worse = [r for r in planned if any((r[f"horizon_{k}"] or 0) > (r[f"qp_{k}"] or 0) for k in terms)]
+    w(f"Never worse than `qp`: {len(planned) - len(worse)}/{len(planned)} plans have every one of f1–f4 ≤ the qp "
+      "plan's.\n\n")  # fmt: skip
+    w("| class | N | runs | optimal | best iterate | qp plan | time median [s] | max [s] | knots median | "
+      "f1 / qp | f2 / qp | f4 / qp |\n|" + "---|" * 12 + "\n")  # fmt: skip
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for r in planned:
+        groups.setdefault((str(r["density"]), str(r["robots"])), []).append(r)
+
+    def ratio(rs: list[dict], k: str) -> str:
+        vals = [r[f"horizon_{k}"] / r[f"qp_{k}"] for r in rs if r[f"qp_{k}"]]
+        return f"{statistics.median(vals):.3f}" if vals else "–"
+
+    for (cls, n), rs in sorted(groups.items()):
+        times = [r["wall_time"] for r in rs]
+        c = Counter(r["horizon_result"] for r in rs)
+        w(f"| {cls} | {n} | {len(rs)} | {c['optimal']} | {c['best_feasible_iterate']} | {c['warm_start']} | "
+          f"{statistics.median(times):.1f} | {max(times):.1f} | {statistics.median(r['knots'] for r in rs):.0f} | "
+          f"{ratio(rs, 'f1')} | {ratio(rs, 'f2')} | {ratio(rs, 'f4')} |\n")  # fmt: skip
+    ok = [r for r in planned if r["horizon_result"] == "optimal" and r.get("knots") and r.get("n_robots")]
+    slope = math.nan
+    if len(ok) >= 3:
+        x = np.log([r["knots"] * r["n_robots"] for r in ok])
+        y = np.log([r["wall_time"] for r in ok])
+        slope = float(np.polyfit(x, y, 1)[0])
+    within = sum(1 for r in planned if r["wall_time"] < 10)
+    w(f"\nWhole process < 10 s: {within}/{len(planned)}. Fitted exponent of time ∝ (knots × N)^a over the "
+      f"{len(ok)} optimal runs: **a = {slope:.2f}** (target ≤ 1.3).\n\n![scaling](horizon_rooms.png)\n")  # fmt: skip
+    (RESULTS / "horizon_rooms.md").write_text(md.getvalue())
+    _rooms_plot(planned, slope)
+    print(md.getvalue())
+
+
+def datetime_now() -> str:
+    import datetime
+
+    return datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+
+
+def _rooms_plot(rows: list[dict], slope: float) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5), dpi=110)
+    style = {
+        "optimal": ("o", "tab:green"),
+        "best_feasible_iterate": ("s", "tab:orange"),
+        "warm_start": ("x", "tab:red"),
+    }
+    for result, (marker, color) in style.items():
+        rs = [r for r in rows if r["horizon_result"] == result and r.get("knots") and r.get("n_robots")]
+        if rs:
+            ax.scatter([r["knots"] * r["n_robots"] for r in rs], [r["wall_time"] for r in rs], marker=marker,
+                       color=color, label=f"{result.replace('_', ' ')} ({len(rs)})")  # fmt: skip
+    ax.axhline(10, color="grey", lw=0.8, ls="--", label="10 s target")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("knots × robots")
+    ax.set_ylabel("whole process [s]")
+    ax.set_title(f"horizon at scale: fitted exponent a = {slope:.2f} on the optimal runs")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(RESULTS / "horizon_rooms.png")
+    plt.close(fig)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scenarios", nargs="+", default=["A", "B", "C", "D"])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--rooms", type=int, default=0, help="the rooms mode: this many generated rooms")
+    ap.add_argument("--robots", default="2,3,5,8,auto", help="robot counts of the rooms mode")
+    ap.add_argument("--time-limit", type=float, default=60.0, help="--time-limit of every run [s]")
+    ap.add_argument("--timeout", type=float, default=300.0, help="a run taking longer is killed [s]")
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--scenario-e", type=int, default=6, help="also scenario E with this many robots (0: not)")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
         print(json.dumps(child(args.child, args.seed)))
+        return
+    if args.rooms:
+        rooms_main(args)
         return
     rows: dict[str, list[dict]] = {s: [] for s in args.scenarios}
     for rep in range(args.repeats):  # interleaved: repeat r of every scenario before repeat r + 1

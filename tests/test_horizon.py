@@ -496,3 +496,25 @@ def test_ctrl_c_during_the_nlp_stops_ipopt_and_is_raised_after_it() -> None:
             assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
     finally:
         signal.signal(signal.SIGINT, outer)
+
+
+def test_time_limit_stops_ipopt_at_the_next_iteration(feasible_warm, monkeypatch):
+    """IPOPT's own ``max_wall_time`` starts after casadi built the solver (seconds on long routes), so the iteration
+    callback stops IPOPT at the first iteration past the deadline: a deadline already passed stops it after one
+    initial point, reported as the time limit, with a feasible plan no worse than the warm start."""
+    from tmr.control import horizon
+
+    problem, warm, J_warm = feasible_warm
+
+    class Late(horizon._IterationCallback):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            self.deadline = -math.inf  # already passed
+
+    monkeypatch.setattr(horizon, "_IterationCallback", Late)
+    plan = plan_horizon(problem, warm, **WEIGHTED, time_limit=DEFAULT_TIME_LIMIT)
+    d = plan.diagnostics
+    assert d["horizon_stop"] == "time_limit" and d["time_limit_hit"]
+    assert d["ipopt_iterations"] <= 1 and d["round_log"][0]["status"] == "Maximum_WallTime_Exceeded"
+    assert plan.success and objective(plan.q, problem) <= J_warm
+    assert "time limit of 60 s reached in round 1" in d["horizon_note"]

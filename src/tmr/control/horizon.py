@@ -147,10 +147,12 @@ class _IterationCallback(ca.Callback):
     """IPOPT's per-iteration hook (casadi ``iteration_callback``): advances the progress bar and offers the iterate
     to the pool. Stops IPOPT (returns 1) only after Ctrl-C (:func:`_ctrl_c_stops_ipopt`)."""
 
-    def __init__(self, tr: _Transcription, pool: _Pool, bar: Any, label: str) -> None:
+    def __init__(self, tr: _Transcription, pool: _Pool, bar: Any, label: str, deadline: float = math.inf) -> None:
         ca.Callback.__init__(self)
         self.nx, self.ng = int(tr.lbx.size), int(tr.size)
         self.tr, self.pool, self.bar, self.label = tr, pool, bar, label
+        self.deadline = deadline  # time.perf_counter() at which IPOPT is asked to stop (the time limit)
+        self.timed_out = False
         self.iteration = 0
         self._names = list(ca.nlpsol_out())
         self.construct("horizon_iteration", {})
@@ -193,7 +195,9 @@ class _IterationCallback(ca.Callback):
         self.iteration += 1
         self.bar.update(1)
         self.bar.set_postfix_str(f"cost/warm {f:.3g}, row violation {viol:.1e}", refresh=False)
-        return [1 if _INTERRUPT.is_set() else 0]
+        if time.perf_counter() >= self.deadline:  # IPOPT's max_wall_time starts after the solver is built: not ours
+            self.timed_out = True
+        return [1 if _INTERRUPT.is_set() or self.timed_out else 0]
 
 
 def _time_limit(time_limit: float | None) -> float:
@@ -229,9 +233,11 @@ def plan_horizon(
             ``qp`` plan (``tmr.planner.solve(problem, "qp")[0]``); it is also the fallback if it satisfies the hard
             constraints (``warm_start.success`` and every row).
         time_limit: wall-clock limit [s] for the whole call (``None``: none; the CLI uses
-            :data:`DEFAULT_TIME_LIMIT` = 60 s): each IPOPT solve gets the remaining budget as ``max_wall_time`` and no
-            round or retry starts once it is spent; the overrun is at most one transcription (0.2–0.3 s on A–D), one
-            IPOPT iteration and the fallback check. A run that does not reach it gives the same plan as without.
+            :data:`DEFAULT_TIME_LIMIT` = 60 s): IPOPT is stopped at the first iteration past it (the iteration
+            callback; ``max_wall_time`` as a backstop), and no round or retry starts unless the remaining budget
+            exceeds the time the last solver took to build; the overrun is at most one IPOPT iteration, the first
+            solver's build if the limit falls inside it, and the fallback check. A run that does not reach it gives
+            the same plan as without.
         progress: show a tqdm bar of the IPOPT iterations on stderr (only if stderr is a terminal).
         **options: fields of :class:`HorizonOptions` (weights, leader tolerance, samples, IPOPT options, …).
 
@@ -277,6 +283,7 @@ def plan_horizon(
     model = _Model(su, distance_spline(env), bounds=info["warm_start_terms"])
     xv = model.project(model.x_of(Qraw))  # IPOPT's initial point: q_0 = start, the equality leader on x_d
     Qw = model.q_of(xv)
+    x_init = xv
     vals = model.values(xv)
     masks = {name: model.near(name, vals[name]) for name in model.rows}
     J_warm = _cost(su, Qw)
@@ -315,6 +322,7 @@ def plan_horizon(
         leave=False,
         disable=not (progress and _is_terminal(sys.stderr)),
     )
+    build_time = 0.0  # seconds the last solver took to build (casadi: the NLP's derivatives), outside IPOPT's clock
     try:
         for rnd in range(1, opts.max_rounds + 1):
             if time.perf_counter() >= deadline:
@@ -324,18 +332,21 @@ def plan_horizon(
             prev, tr = tr, _Transcription(model, masks)
             trans_time += time.perf_counter() - t1
             x_start, lam_start = xv, lam
+            if opts.restart_rounds and rnd > 1:  # the added rows, from the initial point (primal only)
+                x_start, lam_start = x_init, None
             ok = False
             for label, extra in attempts:
                 remaining = deadline - time.perf_counter()
-                if remaining <= 0:
+                if remaining <= build_time:  # building the solver alone would overrun the limit (as last time)
                     stop = "time_limit"
                     break
                 if math.isfinite(limit):
                     extra = dict(extra, max_wall_time=float(remaining))
                 bar.set_description_str(f"horizon NLP, round {rnd} ({label} solve)")
                 t2 = time.perf_counter()
-                callback = _IterationCallback(tr, pool, bar, f"round {rnd} {label}")
+                callback = _IterationCallback(tr, pool, bar, f"round {rnd} {label}", deadline)
                 solver = tr.solver(obj_scale, extra, callback)
+                build_time = time.perf_counter() - t2
                 kwargs: dict[str, Any] = dict(x0=x_start, lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg)
                 if prev is not None and lam_start is not None:  # primal–dual warm start from the previous round
                     kwargs.update(lam_x0=lam_start[0], lam_g0=tr.carry_multipliers(prev, lam_start[1]))
@@ -348,6 +359,8 @@ def plan_horizon(
                 solve_time += t4 - t3
                 stats = solver.stats()
                 status = str(stats.get("return_status", ""))
+                if callback.timed_out and not _INTERRUPT.is_set():
+                    status = _WALL_TIME  # stopped by the callback at the deadline ("User_Requested_Stop" to IPOPT)
                 xv = np.asarray(sol["x"], dtype=float).ravel()
                 lam = (np.asarray(sol["lam_x"], dtype=float).ravel(), np.asarray(sol["lam_g"], dtype=float).ravel())
                 vals = model.values(xv)

@@ -296,7 +296,18 @@ def run_room(spec: RoomRun) -> dict[str, Any]:
         for key in ("min_robot_clearance", "min_tether_clearance", "max_span_ratio", "final_leader_error", "d_max"):
             out[key] = _num(metrics.get(key))
         tfile = out_dir / "timings.json"  # the planner's wall time is kept apart from the reproducible metrics
-        out["plan_wall_time"] = _num(json.loads(tfile.read_text()).get("wall_time")) if tfile.is_file() else None
+        timings = json.loads(tfile.read_text()) if tfile.is_file() else {}
+        out["plan_wall_time"] = _num(timings.get("wall_time"))
+        hz = metrics.get("horizon")
+        if isinstance(hz, dict):  # --method horizon: what the NLP returned, against its qp warm start
+            out["horizon_result"] = hz.get("result")
+            out["horizon_stop"] = hz.get("stop")
+            out["horizon_iterations"] = hz.get("iterations")
+            out["nlp_time"] = _num(timings.get("nlp_time"))
+            out["qp_time"] = _num(timings.get("qp_time"))
+            for k in ("f1", "f2", "f3", "f4"):
+                out[f"horizon_{k}"] = _num(hz.get("terms", {}).get(k))
+                out[f"qp_{k}"] = _num(hz.get("warm_start_terms", {}).get(k))
 
         tpath = out_dir / "trajectories.json"
         out["leader_length"] = out["leader_route_length"] = out["route_ratio"] = None
@@ -306,6 +317,7 @@ def run_room(spec: RoomRun) -> dict[str, Any]:
             d_max = out["d_max"] if out["d_max"] is not None else default_d_max()
             base = np.asarray(doc.get("base", room.base), dtype=float)
             out.update(independent_check(P, base, room.obstacles, room.bounds, d_max))
+            out["knots"] = int(P.shape[0])
             leader = P[:, -1]
             out["leader_length"] = float(np.hypot(*np.diff(leader, axis=0).T).sum())
             out["leader_route_length"] = _leader_route_length(room, leader[0])
