@@ -205,6 +205,8 @@ def _scenario_e(robots: int, time_limit: float) -> dict:
     """Scenario E with ``robots`` robots, ``--method horizon``, the whole command line in its own process."""
     import tempfile
 
+    from tmr.sweep.room_runs import trajectory_positions
+
     with tempfile.TemporaryDirectory(prefix="tmr-horizon-E-") as tmp:
         cmd = [sys.executable, "-m", "tmr.plan", "--scenario", "E", "--robots", str(robots), "--method", "horizon",
                "--no-plots", "--time-limit", str(time_limit), "--out", str(Path(tmp) / "out")]  # fmt: skip
@@ -222,7 +224,7 @@ def _scenario_e(robots: int, time_limit: float) -> dict:
         out["horizon_iterations"] = hz.get("iterations")
         out.update(nlp_time=t.get("nlp_time"), qp_time=t.get("qp_time"))
         traj = Path(tmp) / "out" / "trajectories.json"
-        out["knots"] = len(json.loads(traj.read_text())["t"]) if traj.is_file() else None
+        out["knots"] = trajectory_positions(json.loads(traj.read_text())).shape[0] if traj.is_file() else None
         for k in ("f1", "f2", "f3", "f4"):
             out[f"horizon_{k}"] = hz.get("terms", {}).get(k)
             out[f"qp_{k}"] = hz.get("warm_start_terms", {}).get(k)
@@ -250,14 +252,19 @@ def rooms_main(args: argparse.Namespace) -> None:
         rows = executor.map(run_room, tasks, desc="horizon runs")
     finally:
         executor.close()
+    RESULTS.mkdir(parents=True, exist_ok=True)
+
+    def write_csv() -> None:  # after the rooms already: a failure of the E run loses nothing
+        with open(RESULTS / "horizon_rooms.csv", "w", newline="") as fh:
+            wr = csv.writer(fh)
+            wr.writerow(ROOM_KEYS)
+            for r in rows:
+                wr.writerow([r.get(k) for k in ROOM_KEYS])
+
+    write_csv()
     if args.scenario_e:
         rows.append(_scenario_e(args.scenario_e, args.time_limit))
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    with open(RESULTS / "horizon_rooms.csv", "w", newline="") as fh:
-        wr = csv.writer(fh)
-        wr.writerow(ROOM_KEYS)
-        for r in rows:
-            wr.writerow([r.get(k) for k in ROOM_KEYS])
+        write_csv()
 
     planned = [r for r in rows if r.get("horizon_result")]
     md = io.StringIO()

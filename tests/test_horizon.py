@@ -518,3 +518,17 @@ def test_time_limit_stops_ipopt_at_the_next_iteration(feasible_warm, monkeypatch
     assert d["ipopt_iterations"] <= 1 and d["round_log"][0]["status"] == "Maximum_WallTime_Exceeded"
     assert plan.success and objective(plan.q, problem) <= J_warm
     assert "time limit of 60 s reached in round 1" in d["horizon_note"]
+
+
+def test_an_nlp_too_big_to_build_within_the_limit_is_not_started(feasible_warm, monkeypatch):
+    """Building the solver cannot be interrupted: if its rows times the measured seconds per row exceed the remaining
+    time, IPOPT is not started and the warm start is returned, with the reason (and no limit: it is built)."""
+    from tmr.control import horizon
+
+    problem, warm, _ = feasible_warm
+    monkeypatch.setattr(horizon, "BUILD_SECONDS_PER_ROW", 1.0)  # a 200-row NLP would take minutes
+    plan = plan_horizon(problem, warm, **WEIGHTED, time_limit=DEFAULT_TIME_LIMIT)
+    d = plan.diagnostics
+    assert d["horizon_result"] == "warm_start" and d["ipopt_iterations"] == 0 and d["time_limit_hit"]
+    assert d["horizon_note"].startswith("IPOPT not started: the NLP has ") and "raise --time-limit" in d["horizon_note"]
+    assert plan_horizon(problem, warm, **WEIGHTED).diagnostics["horizon_result"] == "optimal"

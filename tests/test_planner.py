@@ -194,3 +194,30 @@ def test_a_start_of_another_count_is_refused_before_the_route(monkeypatch):
         build_problem(sc, start=[[2.0, 4.0], [3.2, 4.0]])
     with pytest.raises(ScenarioError, match="start lists 3 positions for 4 robots"):
         build_problem(sc, n_robots=4, start=[[2.0, 4.0], [3.2, 4.0], [4.4, 4.0]])
+
+
+def test_horizon_without_a_solution_returns_the_qp_plan_with_its_summary(scenario_a_qp, monkeypatch):
+    """When the NLP finds nothing its own (stricter) rows accept, the planner returns the very qp plan, which passed
+    every check, and says so: the run summary and metrics.json's ``horizon`` block name it, f1–f4 unchanged."""
+    from tmr.control import horizon
+    from tmr.control.horizon_model import HorizonInfeasible
+
+    problem, qp, qp_metrics = scenario_a_qp
+
+    def fails(*args, **kwargs):
+        raise HorizonInfeasible(
+            "horizon NLP: made to fail by the test; details", [], status="Infeasible_Problem_Detected"
+        )
+
+    monkeypatch.setattr(horizon, "plan_horizon", fails)
+    plan, metrics = solve(problem, "horizon")
+    d = plan.diagnostics
+    assert plan.success and d["horizon_result"] == "warm_start"
+    np.testing.assert_array_equal(plan.q, qp.q)
+    assert (
+        d["horizon_note"]
+        == "horizon NLP: made to fail by the test; returned its qp warm start, which passes every check"
+    )
+    summary = d["horizon_summary"]
+    assert summary["result"] == "warm_start" and summary["stop"] == "Infeasible_Problem_Detected"
+    assert summary["terms"] == summary["warm_start_terms"] and summary["terms"]["f1"] == pytest.approx(qp_metrics.f1)

@@ -557,9 +557,19 @@ def solve(
         warm.method = "horizon"
         first = str(exc).split(";")[0]
         if warm.success:  # the NLP's own rows are stricter than the checks: the verified warm start stands
+            warm_metrics = evaluate(warm, problem.env)
+            terms = {k: float(getattr(warm_metrics, k)) for k in ("f1", "f2", "f3", "f4")}
             warm.diagnostics = dict(warm.diagnostics, horizon_result="warm_start")
             warm.diagnostics["horizon_note"] = f"{first}; returned its qp warm start, which passes every check"
-            return _whole(warm, evaluate(warm, problem.env), start, **parts)
+            warm.diagnostics["horizon_summary"] = dict(
+                result="warm_start",
+                stop=exc.diagnostics.get("horizon_stop", exc.status),
+                iterations=int(exc.diagnostics.get("ipopt_iterations", 0)),
+                rounds=int(exc.diagnostics.get("rounds", 0)),
+                terms=terms,
+                warm_start_terms=dict(terms),
+            )
+            return _whole(warm, warm_metrics, start, **parts)
         warm.success = False
         reason = f"horizon: {exc}"
         warm.failure = reason if warm.failure is None else f"{reason}; its qp warm start: {warm.failure}"
