@@ -150,7 +150,8 @@ def _ctrl_c_stops_ipopt() -> Iterator[None]:
 
 class _IterationCallback(ca.Callback):
     """IPOPT's per-iteration hook (casadi ``iteration_callback``): advances the progress bar and offers the iterate
-    to the pool. Stops IPOPT (returns 1) only after Ctrl-C (:func:`_ctrl_c_stops_ipopt`)."""
+    to the pool. Stops IPOPT (returns 1) after Ctrl-C (:func:`_ctrl_c_stops_ipopt`) or once ``deadline`` (a
+    :func:`time.perf_counter` value: the time limit) has passed (``timed_out``)."""
 
     def __init__(self, tr: _Transcription, pool: _Pool, bar: Any, label: str, deadline: float = math.inf) -> None:
         ca.Callback.__init__(self)
@@ -239,10 +240,10 @@ def plan_horizon(
             constraints (``warm_start.success`` and every row).
         time_limit: wall-clock limit [s] for the whole call (``None``: none; the CLI uses
             :data:`DEFAULT_TIME_LIMIT` = 60 s): IPOPT is stopped at the first iteration past it (the iteration
-            callback; ``max_wall_time`` as a backstop), and no round or retry starts unless the remaining budget
-            exceeds the time the last solver took to build; the overrun is at most one IPOPT iteration, the first
-            solver's build if the limit falls inside it, and the fallback check. A run that does not reach it gives
-            the same plan as without.
+            callback; ``max_wall_time`` as a backstop), and no solver is built (round or retry) unless the remaining
+            budget exceeds its expected build time — the last build scaled by the rows, at least the rows times
+            :data:`BUILD_SECONDS_PER_ROW`; the overrun is at most one IPOPT iteration, a build whose estimate was too
+            low, and the fallback check. A run that does not reach it gives the same plan as without.
         progress: show a tqdm bar of the IPOPT iterations on stderr (only if stderr is a terminal).
         **options: fields of :class:`HorizonOptions` (weights, leader tolerance, samples, IPOPT options, …).
 
@@ -436,10 +437,11 @@ def plan_horizon(
     if stop == "converged":
         Q = model.q_of(xv)
         final = _Candidate(Q, _cost(su, Q), "optimal", "the optimum")
-    if final is not None and (warm_c is None or final.J <= warm_c.J) and _no_worse(model, final.Q):
+    final_no_worse = final is not None and _no_worse(model, final.Q)
+    if final is not None and (warm_c is None or final.J <= warm_c.J) and final_no_worse:
         chosen: _Candidate | None = final
     else:
-        if final is not None and not _no_worse(model, final.Q):
+        if final is not None and not final_no_worse:
             what = f"IPOPT's optimum ({status}) is worse than the warm start in a term of the fitness"
         elif final is not None:
             what = f"IPOPT's optimum ({status}, objective {final.J:.6g}) costs more than the warm start"
@@ -520,7 +522,7 @@ def plan_horizon(
 
 
 def _percent(value: float, reference: float) -> str:
-    """``value`` against ``reference`` in words: "−79 % vs 230.4", "= 0 as the warm start"."""
+    """``value`` against ``reference`` in words: "-78.7 % vs 230.4"; "warm start 0" for a reference of 0."""
     if reference > 0:
         return f"{100.0 * (value - reference) / reference:+.1f} % vs {reference:.4g}"
     return f"warm start {reference:.4g}"

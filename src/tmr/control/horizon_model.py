@@ -76,7 +76,7 @@ class HorizonOptions:
         accept_acceptable: also accept IPOPT's ``Solved_To_Acceptable_Level`` (KKT error below ``acceptable_tol`` for
             ``acceptable_iter`` iterations, constraint violation below ``constr_viol_tol``); the status is recorded.
         retry: if IPOPT stops without a solution, solve the round once more from the same start with ``retry_ipopt``
-            merged into the options and least-squares multipliers of the leader rows (another path to the optimum;
+            merged into the options (another path to the optimum;
             the fallbacks of :func:`plan_horizon` are used only if both attempts fail).
         warm_start_leader_error: with the equality leader, the warm start *as given* (not projected on the reference)
             is still a fallback if its leader stays within this distance [m] of the reference at every knot and every

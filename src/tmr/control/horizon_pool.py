@@ -153,9 +153,10 @@ def _warm_candidate(model: _Model, warm: Plan, Qw: Array, raw: Array, tol: float
     a clearance sample may read up to ``field_error`` [m] below ``d_safe`` in the spline field (the warm start kept
     d_safe in its own formulation's distance field; the two fields differ by up to the spline's error budget). Tried in
     order: (1) the warm start as given, if it starts at q_0 and every row holds at ``tol`` (the fallback is then the
-    warm start itself, cost included); (2) the warm start with its leader projected on the reference (IPOPT's initial
-    point); (3) with the equality leader, the warm start as given with its leader within ``warm_start_leader_error``
-    [m] of the reference at every knot (a ``qp`` plan lags its reference by a few mm: CLIK).
+    warm start itself, cost included); then, with the equality leader, (2) the warm start as given with its leader
+    within ``warm_start_leader_error`` [m] of the reference at every knot (a ``qp`` plan lags its reference by a few
+    mm: CLIK) and (3) the warm start with its leader set on the reference (IPOPT's initial point), if no worse in
+    f1, f2, f4 — (2) before (3) with ``no_worse_terms`` (the warm start is no worse than itself), else (3) first.
     """
     su = model.su
     if not warm.success:
