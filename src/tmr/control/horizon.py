@@ -19,8 +19,8 @@ joints are functions of them; the leader on its reference is a fixed variable), 
 matrix expressions (all knots at once, casadi MX) and solved by IPOPT from the ``qp`` plan.
 
 Rows are **generated lazily**: a transcription holds the rows near their bounds along the warm start (clearance and
-separation within ``activation``, spans within ``activation`` of a limit, speeds and accelerations beyond
-``rate_activation`` of their bound; every leader and fitness row); after each solve every row of every group is
+separation within ``activation``, speeds and accelerations beyond ``rate_activation`` of their bound; every leader,
+fitness and span row: the spans keep every link away from zero length); after each solve every row of every group is
 evaluated, and if one that was left out is violated, the rows near the new solution are added and IPOPT restarts
 primal–dual warm. The final point is a KKT point of the relaxed problem
 that satisfies every row of the full one, hence a KKT point of the full problem (the rows left out are inactive, with
@@ -75,6 +75,7 @@ from tmr.control.horizon_model import (
     _Transcription,
     _warm_start,
     _weighted,
+    distance_bspline,
     distance_spline,
     objective,
     objective_terms,
@@ -111,10 +112,11 @@ __all__ = [
 ]
 
 
-#: Seconds casadi takes to build IPOPT's solver per NLP row (the derivatives of the MX graph), measured on the
-#: 2-core reference machine: 7.5 s for the 31,308 rows of scenario E with 6 robots (0.24 ms), 1.9 s without its
-#: 23,173 clearance rows. A first round whose build would overrun the time limit is not started.
-BUILD_SECONDS_PER_ROW: float = 2.0e-4
+#: Seconds casadi takes to build IPOPT's solver per NLP row (the derivatives of the rows other than clearance, the
+#: structured clearance derivatives, the solver), measured on the 2-core reference machine: 1.87 s for the 32,522 rows
+#: of scenario E's first round with 6 robots (0.057 ms; 7.5 s for 31,308 rows with casadi's automatic derivatives).
+#: A first round whose build would overrun the time limit is not started.
+BUILD_SECONDS_PER_ROW: float = 6.0e-5
 
 #: Wall-clock limit [s] of a whole :func:`plan_horizon` call used by the command line (``--time-limit``); the library
 #: default is no limit (``time_limit=None``). Successful runs on A–D take 2.5–4.5 s.
@@ -286,7 +288,7 @@ def plan_horizon(
     Qraw, info = _warm_start(su, warm_start)
     warm_time = time.perf_counter() - t0
     t0 = time.perf_counter()
-    model = _Model(su, distance_spline(env), bounds=info["warm_start_terms"])
+    model = _Model(su, distance_spline(env), bounds=info["warm_start_terms"], bspline=distance_bspline(env))
     xv = model.project(model.x_of(Qraw))  # IPOPT's initial point: q_0 = start, the equality leader on x_d
     Qw = model.q_of(xv)
     x_init = xv

@@ -61,8 +61,8 @@ class HorizonOptions:
             previous round's solution), separation rows only for pairs closer than 2r + margin + this: the lazy rows,
             see the module docstring.
         rate_activation: speed and acceleration rows (joint and robot) only where the value is beyond this fraction
-            of its bound along the warm start (or a previous round's solution); 0 keeps every row. The leader rows
-            are always complete.
+            of its bound along the warm start (or a previous round's solution); 0 keeps every row. The leader,
+            fitness and span rows are always complete.
         no_worse_terms: the rows f_i ≤ f_i of the warm start for f1, f2 and f4 (each one > 0 at the warm start,
             group ``"fitness"``): the plan is no worse than its warm start in every term, not only in their weighted
             sum (with the equality leader f3 = 0 ≤ the warm start's).
@@ -73,6 +73,9 @@ class HorizonOptions:
         max_iter, tol, acceptable_tol, acceptable_iter, constr_viol_tol, mu_strategy, mu_init, hessian,
             linear_solver, nlp_scaling, min_hessian_perturbation: IPOPT options (choices and measurements in
             ``formulations/horizon.md``).
+        mumps_pivot_order: MUMPS's fill-reducing ordering (IPOPT ``mumps_pivot_order``): 0 = AMD (default; the
+            KKT systems are banded: scenario E, 6 robots, 10 iterations 0.9 s of linear algebra against 3.0 s with
+            MUMPS's automatic choice 7), 2 AMF, 4 PORD, 6 QAMD, 7 automatic.
         accept_acceptable: also accept IPOPT's ``Solved_To_Acceptable_Level`` (KKT error below ``acceptable_tol`` for
             ``acceptable_iter`` iterations, constraint violation below ``constr_viol_tol``); the status is recorded.
         retry: if IPOPT stops without a solution, solve the round once more from the same start with ``retry_ipopt``
@@ -109,6 +112,7 @@ class HorizonOptions:
     mu_init: float = 1e-3
     hessian: str = "exact"
     linear_solver: str = "mumps"
+    mumps_pivot_order: int = 0
     nlp_scaling: str = "none"
     min_hessian_perturbation: float = 1e-3
     accept_acceptable: bool = True
@@ -183,6 +187,18 @@ class HorizonInfeasible(InfeasibleStep):
 # ----------------------------------------------------------------------------------------------------------------
 # building blocks
 # ----------------------------------------------------------------------------------------------------------------
+def _spline_tables(env: Any) -> tuple[list[float], list[float], Array]:
+    """Knots (x, y) and control points (nx, ny) of the clearance B-spline: the environment's signed-distance samples
+    (``env._grid``, cell h = ``env.resolution``) on uniform knots centred on them (see :func:`distance_spline`)."""
+    fld, origin, _ = env._grid
+    d = np.asarray(fld[..., 0], dtype=float)
+    nx, ny = d.shape
+    h = float(env.resolution)
+    kx = (origin[0] + h * (np.arange(nx + 4) - 2.0)).tolist()
+    ky = (origin[1] + h * (np.arange(ny + 4) - 2.0)).tolist()
+    return kx, ky, d
+
+
 def distance_spline(env: Any) -> ca.Function:
     """Smooth signed distance to the inflated obstacles, ``f(p (2, 1)) -> c`` [m] (casadi; ``f.map(M)`` for batches).
 
@@ -195,17 +211,50 @@ def distance_spline(env: Any) -> ca.Function:
     within 0.5 m of the obstacles of A–D: overestimate ≤ 9 mm (99.9 % ≤ 2.7 mm).
 
     It is wrapped with ``never_inline`` so that an SX-expanded NLP keeps it as a call node (the B-spline node has no SX
-    form).
+    form). Its derivatives in the NLP come from :func:`distance_bspline` (the same spline), see :class:`_Transcription`.
     """
-    fld, origin, _ = env._grid
-    d = np.asarray(fld[..., 0], dtype=float)
-    nx, ny = d.shape
-    h = float(env.resolution)
-    kx = (origin[0] + h * (np.arange(nx + 4) - 2.0)).tolist()
-    ky = (origin[1] + h * (np.arange(ny + 4) - 2.0)).tolist()
+    kx, ky, d = _spline_tables(env)
     spline = ca.Function.bspline("clearance_spline", [kx, ky], d.ravel(order="F").tolist(), [3, 3], 1, {})
     p = ca.MX.sym("p", 2, 1)
     return ca.Function("clearance", [p], [spline(p)], {"never_inline": True})
+
+
+def distance_bspline(env: Any) -> Any:
+    """The spline of :func:`distance_spline` as a :class:`scipy.interpolate.NdBSpline` (same knots, control points
+    and degree 3 × 3): its first and second derivatives for the NLP's Jacobian and Hessian (:class:`_SplineDerivatives`;
+    casadi's own second derivative of its B-spline node costs 3.4 µs a point against scipy's 1.4 µs for all five)."""
+    from scipy.interpolate import NdBSpline
+
+    kx, ky, d = _spline_tables(env)
+    return NdBSpline((np.asarray(kx), np.asarray(ky)), d, 3)
+
+
+class _SplineDerivatives(ca.Callback):
+    """Derivatives of the clearance spline at n points, ``P (2, n) -> (a, b, c)`` each (1, n): order 1 gives
+    (∂c/∂x, ∂c/∂y, 0), order 2 (∂²c/∂x², ∂²c/∂x∂y, ∂²c/∂y²) [1, 1/m]. Evaluated by scipy (:func:`distance_bspline`);
+    never differentiated itself: the NLP's Jacobian and Hessian are assembled from them (:class:`_Transcription`)."""
+
+    def __init__(self, bspline: Any, n: int, order: int) -> None:
+        ca.Callback.__init__(self)
+        self.bspline, self.n = bspline, int(n)
+        self.nus = ((1, 0), (0, 1)) if order == 1 else ((2, 0), (1, 1), (0, 2))
+        self.construct(f"clearance_d{order}_{n}", {})
+
+    def get_n_in(self) -> int:
+        return 1
+
+    def get_n_out(self) -> int:
+        return len(self.nus)
+
+    def get_sparsity_in(self, i: int) -> ca.Sparsity:
+        return ca.Sparsity.dense(2, self.n)
+
+    def get_sparsity_out(self, i: int) -> ca.Sparsity:
+        return ca.Sparsity.dense(1, self.n)
+
+    def eval(self, arg: list[Any]) -> list[Any]:
+        pts = np.asarray(arg[0], dtype=float).T
+        return [self.bspline(pts, nu=nu).reshape(1, -1) for nu in self.nus]
 
 
 def samples_needed(span_max: float, r: float, d_safe: float, field_error: float) -> int:
@@ -355,10 +404,13 @@ class _Model:
     f_i(x) / f_i,warm ≤ 1 (group ``"fitness"``): the plan is no worse than the warm start in each term.
     """
 
-    def __init__(self, su: _Setup, clr: ca.Function, bounds: dict[str, float] | None = None) -> None:
+    def __init__(
+        self, su: _Setup, clr: ca.Function, bounds: dict[str, float] | None = None, bspline: Any = None
+    ) -> None:
         opts = su.opts
         N, n, K, Ts = su.N, su.n, su.K, su.Ts
         self.su, self.clr = su, clr
+        self.bspline = bspline  # the clearance spline in scipy: structured derivatives (None: casadi's own)
         xs = ca.MX.sym("p", 2 * N * (K + 1))  # x = [P_0; P_1; ...; P_K], P_k = (x_1..x_N, y_1..y_N)
         P = ca.reshape(xs, 2 * N, K + 1)  # column k = P_k
         X, Y = P[:N, :], P[N:, :]
@@ -464,6 +516,31 @@ class _Model:
         self._full = ca.Function("rows", [x], [rows[g].expr for g in names] + [ca.horzcat(self.Px, self.Py).T])
         self._clr_all = clr.map(M * (K + 1))
 
+    def point_maps(self, idx: NDArray[np.int_]) -> tuple[Any, Any, Array]:
+        """The clearance samples ``idx`` (flat, column-major in (N S, K+1)) as affine maps of the variables:
+        ``p_x = A_x x + b_x``, ``p_y = A_y x + b_y`` with sparse A (casadi DM, two entries a row: the tether's end
+        nodes at its knot, weights 1 − s and s) and b (n, 2) from the base (``formulations/horizon.md``)."""
+        from scipy.sparse import csc_matrix
+
+        su = self.su
+        N, S = su.N, su.S
+        m, k = idx % (N * S), idx // (N * S)
+        j, s = m // S, su.s[m % S]  # tether j runs from node j (0: the base, i ≥ 1: robot i − 1) to node j + 1
+        n = idx.size
+        rows = np.concatenate([np.flatnonzero(j > 0), np.arange(n)])
+        node = np.concatenate([j[j > 0] - 1, j])  # robot index of the start node (where not the base), the end node
+        w = np.concatenate([1.0 - s[j > 0], s])
+        col = k[rows] * 2 * N + node
+        b = np.where((j == 0)[:, None], (1.0 - s)[:, None] * su.base[None, :], 0.0)
+
+        def dm(cols: Array) -> Any:
+            a = csc_matrix((w, (rows, cols)), shape=(n, 2 * N * (su.K + 1)))
+            a.sort_indices()
+            sp = ca.Sparsity(n, a.shape[1], a.indptr.tolist(), a.indices.tolist())
+            return ca.DM(sp, a.data.tolist())
+
+        return dm(col), dm(col + N), b
+
     # --- joints <-> positions --------------------------------------------------------------------------------
     def x_of(self, Q: Array) -> Array:
         """The variables (robot positions, see the class docstring) of joints Q (K+1, n)."""
@@ -515,19 +592,18 @@ class _Model:
         return np.maximum(r.lo[:, None] - v, v - r.hi[:, None])
 
     def near(self, name: str, v: Array) -> NDArray[np.bool_]:
-        """Entries that are rows of the next transcription (lazy rows): every leader and fitness entry; clearance
-        samples closer than ``activation`` to the obstacles; spans within ``activation`` of their limits; pairs closer
-        than 2r + margin + ``activation``; speeds and accelerations
-        beyond ``rate_activation`` times their bound; and every violated entry."""
+        """Entries that are rows of the next transcription (lazy rows): every leader, fitness and span entry (the
+        span rows keep every link ≥ d_lo + margin > 0, away from the singularity of its heading atan2 and length:
+        left out, a long IPOPT step let a link collapse and the run diverge, see ``formulations/horizon.md``);
+        clearance samples closer than ``activation`` to the obstacles; pairs closer than 2r + margin +
+        ``activation``; speeds and accelerations beyond ``rate_activation`` times their bound; and every violated
+        entry."""
         opts = self.su.opts
         if name == "clearance":
             m = v < opts.activation
         elif name == "separation":
             m = v < (self.su.sep_min + opts.activation) ** 2
-        elif name == "span":
-            r = self.rows[name]
-            m = (v < r.lo[:, None] + opts.activation) | (v > r.hi[:, None] - opts.activation)
-        elif name in ("leader", "fitness"):
+        elif name in ("leader", "fitness", "span"):
             m = np.ones(v.shape, dtype=bool)
         else:  # symmetric bounds ±b: |v| beyond a fraction of b
             m = np.abs(v) >= opts.rate_activation * self.rows[name].hi[:, None]
@@ -537,15 +613,29 @@ class _Model:
 
 
 class _Transcription:
-    """The NLP of one round: the selected rows of every group, their bounds and labels, and the IPOPT solver."""
+    """The NLP of one round: the selected rows of every group, their bounds and labels, and the IPOPT solver.
+
+    With the model's scipy spline (``_Model.bspline``) the constraint Jacobian and the Hessian of the Lagrangian are
+    assembled here instead of casadi's automatic ones (casadi options ``jac_g``, ``hess_lag``): a clearance row
+    c(A x + b) has the Jacobian row ∇c(p)ᵀ A and adds Aᵀ (λ ∇²c(p)) A to the Hessian, with A the sparse point map
+    (:meth:`_Model.point_maps`, two robots a row) and ∇c, ∇²c from :class:`_SplineDerivatives`; every other row is
+    differentiated by casadi. The automatic Hessian colours the whole banded Lagrangian and evaluates every B-spline
+    once per colour (scenario E, 6 robots, 31,308 rows: 0.24 s Jacobian and 0.32 s Hessian per IPOPT iteration,
+    6 s to build; measured by ``benchmarks/horizon.py``'s derivative rows).
+    """
 
     def __init__(self, model: _Model, masks: dict[str, NDArray[np.bool_]]) -> None:
         self.opts = model.su.opts
+        self.model = model
         g: list[Any] = []
         lbg: list[Array] = []
         ubg: list[Array] = []
         self.index: dict[str, NDArray[np.int_]] = {}  # flat (column-major) entries of each group's (rows, cols)
         self.offset: dict[str, int] = {}
+        rest_before: list[Any] = []  # rows differentiated by casadi, before and after the clearance rows
+        rest_after: list[Any] = []
+        self._clr: tuple[Any, Any, Any] | None = None  # (A_x, A_y, points) of the clearance rows
+        x = model.x
         start = 0
         for name in GROUPS:
             if name not in model.rows:
@@ -558,11 +648,13 @@ class _Transcription:
                 continue
             rows = mask.shape[0]
             if name == "clearance":
-                il = idx.tolist()
-                P = ca.horzcat(model.Px[il], model.Py[il]).T
+                Ax, Ay, b = model.point_maps(idx)
+                P = ca.horzcat(ca.mtimes(Ax, x) + b[:, 0], ca.mtimes(Ay, x) + b[:, 1]).T
+                self._clr = (Ax, Ay, P)
                 g.append(ca.vec(model.clr.map(idx.size)(P)))
             else:
                 g.append(ca.vec(r.expr)[idx.tolist()])
+                (rest_after if self._clr is not None else rest_before).append(g[-1])
             lbg.append(r.lo[idx % rows])
             ubg.append(r.hi[idx % rows])
             start += idx.size
@@ -570,15 +662,59 @@ class _Transcription:
         self.g = ca.vertcat(*g) if g else ca.MX(0, 1)
         self.lbg = np.concatenate(lbg) if lbg else np.zeros(0)
         self.ubg = np.concatenate(ubg) if ubg else np.zeros(0)
+        self._rest = (ca.vertcat(*rest_before) if rest_before else ca.MX(0, 1),
+                      ca.vertcat(*rest_after) if rest_after else ca.MX(0, 1))  # fmt: skip
         # the start (and the equality leader) are fixed: IPOPT removes them (fixed_variable_treatment make_parameter)
         self.lbx, self.ubx = model.lbx, model.ubx
         self.nlp = {"x": model.x, "f": model.J, "g": self.g}
+        self._derivatives: dict[float, dict[str, Any]] = {}
+        self._callbacks: list[ca.Callback] = []  # the spline derivatives must outlive the functions that call them
+
+    def derivatives(self, obj_scale: float) -> dict[str, ca.Function]:
+        """casadi ``nlpsol`` options ``jac_g`` and ``hess_lag`` with the structured clearance derivatives (see the
+        class docstring) for the cost divided by ``obj_scale``; empty (casadi's own) without the scipy spline or
+        clearance rows."""
+        if self.model.bspline is None or self._clr is None:
+            return {}
+        if obj_scale in self._derivatives:
+            return self._derivatives[obj_scale]
+        x, f = self.model.x, self.model.J / obj_scale
+        Ax, Ay, P = self._clr
+        n = Ax.shape[0]
+        before, after = self._rest
+        nb, na = before.shape[0], after.shape[0]
+        d1, d2 = _SplineDerivatives(self.model.bspline, n, 1), _SplineDerivatives(self.model.bspline, n, 2)
+        self._callbacks += [d1, d2]
+        p = ca.MX.sym("p", 0, 1)
+        cx, cy = d1(P)
+        rest = ca.vertcat(before, after)
+        J_rest = ca.jacobian(rest, x)
+        J_clr = ca.mtimes(ca.diag(cx), Ax) + ca.mtimes(ca.diag(cy), Ay)
+        jac = ca.vertcat(J_rest[:nb, :], J_clr, J_rest[nb:, :])
+        jac_g = ca.Function("nlp_jac_g", [x, p], [self.g, jac], ["x", "p"], ["g", "jac_g_x"])
+        lam_f = ca.MX.sym("lam_f")
+        lam_g = ca.MX.sym("lam_g", self.size)
+        lam_c = lam_g[nb : nb + n]
+        lam_rest = ca.vertcat(lam_g[:nb], lam_g[nb + n : nb + n + na])
+        H_rest = ca.hessian(lam_f * f + ca.dot(lam_rest, rest), x)[0]
+        cxx, cxy, cyy = d2(P)
+        AxT, AyT = Ax.T, Ay.T
+        Wxx, Wxy, Wyy = ca.diag(lam_c * cxx.T), ca.diag(lam_c * cxy.T), ca.diag(lam_c * cyy.T)
+        Hxy = ca.mtimes(AxT, ca.mtimes(Wxy, Ay))
+        H_clr = ca.mtimes(AxT, ca.mtimes(Wxx, Ax)) + ca.mtimes(AyT, ca.mtimes(Wyy, Ay)) + Hxy + Hxy.T
+        hess = ca.triu(H_rest + H_clr)
+        hess_lag = ca.Function(
+            "nlp_hess_l", [x, p, lam_f, lam_g], [hess], ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]
+        )
+        self._derivatives[obj_scale] = {"jac_g": jac_g, "hess_lag": hess_lag}
+        return self._derivatives[obj_scale]
 
     def solver(self, obj_scale: float, extra: dict[str, Any], callback: ca.Callback | None = None) -> ca.Function:
         """IPOPT on this transcription, cost divided by ``obj_scale``, with ``extra`` IPOPT options and an optional
         casadi ``iteration_callback`` (called with x, f, g, … of every iterate; it must outlive the solver)."""
         nlp = dict(self.nlp, f=self.nlp["f"] / obj_scale)
         opts = _solver_opts(self.opts, extra)
+        opts.update(self.derivatives(obj_scale))
         if callback is not None:
             opts["iteration_callback"] = callback
         return ca.nlpsol("horizon", "ipopt", nlp, opts)
@@ -609,6 +745,7 @@ def _solver_opts(opts: HorizonOptions, extra: dict[str, Any] | None = None) -> d
         "mu_strategy": opts.mu_strategy,
         "mu_init": float(opts.mu_init),
         "linear_solver": opts.linear_solver,
+        "mumps_pivot_order": int(opts.mumps_pivot_order),
         "hessian_approximation": opts.hessian,
         "nlp_scaling_method": opts.nlp_scaling,
         "min_hessian_perturbation": float(opts.min_hessian_perturbation),
