@@ -154,7 +154,8 @@ def catenary_samples(
     z = a (cosh θ − cosh θ_A) above A. θ_A solves the span equation R = asinh(sinh θ_B) − θ_A − d cosh θ_A / m = 0
     (Caruso 2021 §4.2.1 in 3-D; ``formulations/drones.md``): the NLP keeps R = 0 as an equality row.
 
-    Works on casadi MX/SX or numpy arrays (elementwise; A, B as (3, M) or three rows). Returns (X (3 rows), R, L, a,
+    Works on casadi MX/SX or numpy arrays (elementwise; A, B as (3, M) or three rows; ``lib.fmax`` guards the square
+    root where dh < 0, outside the model). Returns (X (3 rows), R, L, a,
     sinh θ_B)."""
     lib = ca if any(isinstance(v, (ca.MX, ca.SX, ca.DM)) for v in (A, B, theta)) else np
     Ax, Ay, Az = A[0], A[1], A[2]
@@ -162,7 +163,8 @@ def catenary_samples(
     d = lib.sqrt(dx * dx + dy * dy + eps * eps)
     k = 1.0 + dh / m
     sh, ch = lib.sinh(theta), lib.cosh(theta)
-    sb = lib.sqrt(k * k * sh * sh + k * k - 1.0)
+    # sinh θ_B; the floor only acts off the model's domain (B below A at an iterate that violates its lower-end row)
+    sb = lib.sqrt(lib.fmax(k * k * sh * sh + k * k - 1.0, 1e-12))
     a = m / ch
     R = lib.asinh(sb) - theta - d * ch / m
     L = a * (sb - sh)
