@@ -524,6 +524,11 @@ class _Pool:
         return len(self._heap)
 
 
+def _weighted(terms: dict[str, float], opts: DroneHorizonOptions) -> float:
+    """w1 f1 + w2 f2 + w4 f4 (the NLP's cost before scaling)."""
+    return float(opts.w_energy * terms["f1"] + opts.w_uniformity * terms["f2"] + opts.w_smoothness * terms["f4"])
+
+
 def _checked_terms(robots: Array, Ts: float, base: Array) -> tuple[float, float, float]:
     """f1, f2, f4 exactly as :func:`tmr.checks.drones.check_drone_plan` computes them (robot coordinates, at rest
     before the first and after the last step; Caruso 2021 eq. 24, 25, 27)."""
@@ -595,8 +600,7 @@ def plan_horizon_drones(
     t0 = time.perf_counter()
     model = _Model(problem, warm_start, opts)
     model_time = time.perf_counter() - t0
-    J_warm = float(sum(w * v for w, v in zip((opts.w_energy, opts.w_uniformity, opts.w_smoothness),
-                                              (model.warm_terms[k] for k in ("f1", "f2", "f4")), strict=True)))  # fmt: skip
+    J_warm = _weighted(model.warm_terms, opts)
     obj_scale = max(J_warm, 1e-9)
     xv = model.x0
     vals = model.values(xv)
@@ -713,8 +717,7 @@ def plan_horizon_drones(
         result, plan, metrics, detail = chosen
     terms = {f"f{i + 1}": float(v) for i, v in enumerate(metrics.fitness_raw)}
     before = {f"f{i + 1}": v for i, v in enumerate(warm_fit)}
-    J = sum(w * terms[k] for w, k in zip((opts.w_energy, opts.w_uniformity, opts.w_smoothness), ("f1", "f2", "f4"),
-                                          strict=True))  # fmt: skip
+    J = _weighted(terms, opts)
     change = ", ".join(f"{k} {terms[k]:.4g} ({_percent(terms[k], before[k])})" for k in ("f1", "f2", "f3", "f4"))
     note = f"{what}; returned {detail} (objective {J:.6g} vs qp {J_warm:.6g}); vs qp: {change}"
     if rejected:
