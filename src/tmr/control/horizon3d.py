@@ -11,8 +11,9 @@ make_drone_qp`, as rows)::
           room shrunk by r + d_safe ∋ p_{i,k}                  (variable bounds, exact)
           R(θ_jk; ends) = 0                                    catenary of tether j at knot k (aux. variable θ_A)
           s_jk (z_q − z_p) ≥ 0                                 the lower end stays the lower end (s from the warm start)
-          D̃(p_{i,k}) ≥ r + max(d_safe, e_D)                   drone clearance (spline field, walls included)
+          D̃(p_{i,k}) ≥ r + max(d_safe, e_D)                   drone clearance (spline field of the obstacles)
           D̃(X_{j,k}(σ_i)) ≥ sqrt((c_t + ε_jk)² + δ_jk²/4) + max(d_safe, e_D)   tether curve samples, σ_i = i/(S_j+1)
+          z_low,jk ≥ z_min + c_t + d_safe                      the curve's lowest point above the floor (closed form)
           L_jk ≤ min(L_max − length margin, (S_j + 1) δ_max)   arc length (and the samples' spacing δ ≤ δ_max)
           T at every drone end ≤ spare thrust − tension margin (closed form: T_w + ρ g |h| at the upper end)
           |p_i − p_j|² ≥ (2r + separation margin)²             every pair
@@ -52,7 +53,6 @@ from tqdm import tqdm
 from tmr.control.horizon import (
     _INTERRUPT,
     _WALL_TIME,
-    BUILD_SECONDS_PER_ROW,
     DEFAULT_TIME_LIMIT,
     _ctrl_c_stops_ipopt,
     _is_terminal,
@@ -70,6 +70,11 @@ Array = NDArray[np.float64]
 __all__ = ["DEFAULT_TIME_LIMIT", "DroneHorizonOptions", "plan_horizon_drones", "DRONE_GROUPS"]
 
 _LOG = logging.getLogger("tmr")
+
+#: Seconds casadi takes to build IPOPT's solver per row of the drone NLP, measured on the 2-core machine: 0.17 ms on
+#: G (24,433 rows, 4.2 s), 0.68 ms on H (220,492 rows, 150 s: it grows with the size). A round whose build would
+#: overrun the time limit is not started.
+BUILD_SECONDS_PER_ROW: float = 7e-4
 _NO_WORSE_MARGIN = 1e-6
 _SUCCESS = ("Solve_Succeeded",)
 _ACCEPTABLE = ("Solved_To_Acceptable_Level",)
@@ -79,6 +84,7 @@ DRONE_GROUPS: tuple[str, ...] = (
     "fitness",
     "catenary",
     "lower_end",
+    "tether_floor",
     "drone_clearance",
     "tether_clearance",
     "tether_length",
@@ -231,9 +237,13 @@ class _Model:
         hi = np.minimum(probe_all.max(axis=0) + opts.corridor, b[3:] + 0.3)
         lo[2], hi[2] = b[2] - 0.3, b[5] + 0.3
         self.c_t = float(tether.clearance)
+        # the room's faces: the drones by variable bounds (r + d_safe inside); a tether lies in the vertical plane
+        # between its ends, so its curve stays as far from the side walls and the ceiling as its ends when
+        # r ≥ c_t, and its lowest point (closed form) has a row of its own above the floor. Else: faces in the field.
+        self.walls_in_field = r < self.c_t
         self.field = distance_field3d(
             world, lo, hi, h=opts.grid_step, cap=opts.field_cap, max_nodes=opts.max_nodes, probe=probe_all,
-            band=self.c_t, error_factor=opts.error_factor,
+            band=self.c_t, error_factor=opts.error_factor, walls=self.walls_in_field,
         )  # fmt: skip
         clr = self.field.function
         margin = max(float(params.d_safe), self.field.error)
@@ -282,6 +292,8 @@ class _Model:
         delta = L / Sdiv
         kappa = ca.cosh(ca.fmin(Th, 0.0)) / m
         eps_c = ca.fmin(kappa * delta * delta / 8.0, delta / 2.0)
+        # the lowest point of the curve: the vertex when it lies within the span (θ_A < 0), else the lower end A
+        self.z_low = A[2] - a * (ca.cosh(ca.fmin(Th, 0.0)) - 1.0)
         climit = np.full((N, 1), self.c_t)
         base_clear = float(self.field(self.base[None])[0])
         climit[0] = min(self.c_t, base_clear - 0.002)  # tether 1: no closer than its winch (as the checker)
@@ -318,6 +330,10 @@ class _Model:
         self.fitness_names = names
         g["catenary"] = _Group(Rc, np.zeros(N), np.zeros(N))
         g["lower_end"] = _Group(dh, np.zeros(N), np.full(N, np.inf))
+        floor = np.full(N, float(b[2] + self.c_t + params.d_safe) if not self.walls_in_field else -np.inf)
+        base_room = float(np.min(np.r_[self.base - b[:3], b[3:] - self.base]))
+        floor[0] = min(floor[0], float(b[2]) + base_room - 0.002)  # tether 1: no closer than its winch (checker)
+        g["tether_floor"] = _Group(self.z_low, floor, np.full(N, np.inf))
         drone_clr = ca.vertcat(*[clr.map(K + 1)(P[3 * i : 3 * i + 3, :]) for i in range(N)])
         g["drone_clearance"] = _Group(drone_clr, np.full(N, r + margin), np.full(N, np.inf))
         g["tether_length"] = _Group(L, np.full(N, -np.inf), self.L_cap)
@@ -413,8 +429,10 @@ class _Model:
             m = v < self.groups[name].lo[:, None] + o.activation
         elif name == "separation":
             m = v < (math.sqrt(self.groups[name].lo[0]) + o.activation) ** 2
-        elif name in ("lower_end",):
+        elif name == "lower_end":
             m = v < o.activation
+        elif name == "tether_floor":
+            m = v < self.groups[name].lo[:, None] + o.activation
         elif name == "tether_length":
             m = v > self.groups[name].hi[:, None] - o.activation
         elif name == "tension":
@@ -649,7 +667,8 @@ def plan_horizon_drones(
             rounds.append(
                 dict(round=rnd, status=status, iterations=int(stats.get("iter_count", -1)), rows=int(tr.size),
                      tether_clearance_rows=int(tr.index.get("tether_clearance", np.zeros(0)).size),
-                     worst_violation=viol, worst_group=where, build_time=t3 - t2, solve_time=t4 - t3)
+                     worst_violation=viol, worst_group=where, build_time=t3 - t2, solve_time=t4 - t3,
+                     t_wall={k[7:]: round(float(v), 3) for k, v in stats.items() if k.startswith("t_wall_nlp")})
             )  # fmt: skip
             ok = status in _SUCCESS or (opts.accept_acceptable and status in _ACCEPTABLE)
             if status == _WALL_TIME:
@@ -711,8 +730,9 @@ def plan_horizon_drones(
         "rows_left_out": f"rows left out were still violated after {opts.max_rounds} rounds",
     }[stop]  # fmt: skip
     if chosen is None:
-        result, plan, metrics, detail = "warm_start", warm_start, warm_metrics, "the qp plan itself"
+        result, plan, detail = "warm_start", warm_start, "the qp plan itself"
         plan.method = "horizon"
+        metrics = replace(warm_metrics, method="horizon")
     else:
         result, plan, metrics, detail = chosen
     terms = {f"f{i + 1}": float(v) for i, v in enumerate(metrics.fitness_raw)}

@@ -27,17 +27,18 @@ __all__ = ["EPS_SPAN", "DistanceField3D", "distance_field3d", "exact_distance", 
 EPS_SPAN = 1e-3
 
 
-def exact_distance(world: World3D, points: Array, cap: float) -> Array:
-    """Exact signed distance [m] of points (M, 3) to the raw obstacles (no drone radius) and to the room's six faces
-    (positive inside the room, negative inside an obstacle or outside the room), capped at ``cap`` [m]: obstacles
-    whose bounding box is farther than ``cap`` are not queried (their distance is ≥ cap). Boxes in closed form,
-    other obstacles by coal (:func:`tmr.control.drones.point_nearest_k`)."""
+def exact_distance(world: World3D, points: Array, cap: float, walls: bool = False) -> Array:
+    """Exact signed distance [m] of points (M, 3) to the raw obstacles (no drone radius) — and, with ``walls``, to the
+    room's six faces (positive inside the room) — negative inside an obstacle, capped at ``cap`` [m]: obstacles whose
+    bounding box is farther than ``cap`` are not queried (their distance is ≥ cap). Boxes in closed form, other
+    obstacles by coal (:func:`tmr.control.drones.point_nearest_k`)."""
     from tmr.control.drones import point_nearest_k
 
     P = np.asarray(points, dtype=float).reshape(-1, 3)
-    lo, hi = np.asarray(world.bounds[:3], float), np.asarray(world.bounds[3:], float)
-    walls = np.minimum((P - lo).min(axis=1), (hi - P).min(axis=1))
-    out = np.minimum(walls, cap)
+    out = np.full(P.shape[0], float(cap))
+    if walls:
+        lo, hi = np.asarray(world.bounds[:3], float), np.asarray(world.bounds[3:], float)
+        out = np.minimum(out, np.minimum((P - lo).min(axis=1), (hi - P).min(axis=1)))
     if world.obstacles:
         w0 = world.with_safety_radius(0.0)
         c = point_nearest_k(w0, P, 1, cap=cap)[0][:, 0]
@@ -93,8 +94,10 @@ def distance_field3d(
     error_points: int = 100_000,
     error_factor: float = 1.5,
     seed: int = 0,
+    walls: bool = False,
 ) -> DistanceField3D:
-    """The spline field over the box [lo, hi] (3,) [m] (grown by two cells so the spline is complete on it).
+    """The spline field over the box [lo, hi] (3,) [m] (grown by two cells so the spline is complete on it) of the
+    distance to the obstacles (and to the room's faces with ``walls``).
 
     The control points are the exact distance at the grid nodes (nothing is fitted: the quasi-interpolant of
     ``tmr.control.horizon_model.distance_spline`` in 3-D). The cell ``h`` [m] grows if the box would need more than
@@ -117,7 +120,7 @@ def distance_field3d(
     shape = tuple(int(v) for v in np.ceil((hi + 2.0 * h - origin) / h) + 1)
     axes = [origin[i] + h * np.arange(shape[i]) for i in range(3)]
     G = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    D = exact_distance(world, G, cap).reshape(shape)
+    D = exact_distance(world, G, cap, walls).reshape(shape)
     knots = [(origin[i] + h * (np.arange(shape[i] + 4) - 2.0)).tolist() for i in range(3)]
     spline = ca.Function.bspline("clearance3d_spline", knots, D.ravel(order="F").tolist(), [3, 3, 3], 1, {})
     p = ca.MX.sym("p", 3, 1)
@@ -131,7 +134,7 @@ def distance_field3d(
         pick = probe[rng.integers(0, probe.shape[0], size=error_points - error_points // 2)]
         pts.append(pick + rng.uniform(-0.5, 0.5, size=pick.shape))
     Q = np.clip(np.vstack(pts), lo, hi)
-    exact = exact_distance(world, Q, cap)
+    exact = exact_distance(world, Q, cap, walls)
     approx = field(Q)
     over = approx - exact
     near = (exact < cap - 2.0 * h) & (approx >= band)  # where the cap does not bind and a row could pass
