@@ -119,6 +119,10 @@ class DroneHorizonOptions:
             HorizonOptions`).
         accept_acceptable: also accept ``Solved_To_Acceptable_Level``.
         pool_checks: IPOPT iterates checked at most (the cheapest first) when the optimum is not returned.
+        leader: the leader's fixed path: ``"reference"`` (x_d(t_k) at every knot: f3 = 0), ``"warm_start"`` (the qp
+            plan's leader: f3 equal to the qp plan's) or ``"auto"`` (default): the reference unless it breaks the
+            leader's speed or acceleration bound itself (no plan on it can pass the checker) or the qp leader lags it
+            by more than ``leader_lag_max`` [m]; the choice is in ``horizon_note``.
     """
 
     w_energy: float = 1.0
@@ -149,6 +153,8 @@ class DroneHorizonOptions:
     expand: bool = False
     accept_acceptable: bool = True
     pool_checks: int = 3
+    leader: str = "auto"
+    leader_lag_max: float = 0.25
     ipopt: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -164,6 +170,8 @@ class DroneHorizonOptions:
             raise ParameterError(f"rate_activation must be in [0, 1), got {self.rate_activation}")
         if self.max_rounds < 1 or self.max_iter < 1:
             raise ParameterError("max_rounds and max_iter must be ≥ 1")
+        if self.leader not in ("auto", "reference", "warm_start"):
+            raise ParameterError(f"leader must be 'auto', 'reference' or 'warm_start', got {self.leader!r}")
 
 
 def _options(options: dict[str, Any]) -> DroneHorizonOptions:
@@ -202,9 +210,13 @@ class _Model:
         w = tether.weight_per_length
         self.upper_winch = tether.winch_end == "upper"
         self.tw, self.w = float(tether.winch_tension), float(w)
-        # the warm start with its leader on the reference: IPOPT's initial point
+        # the leader's fixed path: its reference, unless the reference itself breaks the leader's speed or
+        # acceleration bound (then no plan on it passes the checker) or the qp leader lags it by more than
+        # leader_lag_max (then the qp plan is far from any plan on it): then the qp plan's own leader (f3 unchanged)
+        vmax, amax = float(params.drone_speed_max), float(params.drone_accel_max)
+        self.lead, self.leader_note = self._leader(R0[:, -1], vmax, amax, opts)
         R = R0.copy()
-        R[:, -1] = self.ref
+        R[:, -1] = self.lead
         pts = np.concatenate([np.broadcast_to(self.base, (K + 1, 1, 3)), R], axis=1)
         dz = np.diff(pts[..., 2], axis=1)  # (K+1, N) z_q − z_p
         self.sign = np.where(dz >= 0.0, 1.0, -1.0)  # p is the lower end A where +1
@@ -264,7 +276,7 @@ class _Model:
         lbx[:] = np.tile(np.minimum(keep_lo, R.reshape(-1, 3).min(axis=0)), N)
         ubx[:] = np.tile(np.maximum(keep_hi, R.reshape(-1, 3).max(axis=0)), N)
         lbx[0] = ubx[0] = R[0].ravel()
-        lbx[:, 3 * (N - 1) :] = ubx[:, 3 * (N - 1) :] = self.ref
+        lbx[:, 3 * (N - 1) :] = ubx[:, 3 * (N - 1) :] = self.lead
         lbt = np.full((K + 1, N), -40.0)
         ubt = np.full((K + 1, N), 40.0)
         lbt[0] = ubt[0] = theta0[:, 0]
@@ -348,7 +360,6 @@ class _Model:
             )
             smin = (2 * r + params.separation_margin) ** 2
             g["separation"] = _Group(sep, np.full(len(self.pairs), smin), np.full(len(self.pairs), np.inf))
-        vmax, amax = float(params.drone_speed_max), float(params.drone_accel_max)
         g["speed"] = _Group(V, np.full(3 * N, -vmax), np.full(3 * N, vmax))
         g["acceleration"] = _Group(Acc, np.full(3 * N, -amax), np.full(3 * N, amax))
         self.groups = g
@@ -381,6 +392,27 @@ class _Model:
             self.dep[n] = rows_dep.reshape(e.shape, order="F")
         self.n_samples = int(self.samp[0].size)
         _LOG.debug("horizon3d: warm terms %s (NLP %s)", self.warm_terms, wterms)
+
+    def _leader(self, qp_leader: Array, vmax: float, amax: float, opts: DroneHorizonOptions) -> tuple[Array, str]:
+        """The leader's path (K+1, 3) [m] and a note on the choice (``opts.leader``)."""
+        ref, Ts = self.ref, self.Ts
+        if opts.leader == "warm_start":
+            return qp_leader.copy(), "the leader on the qp plan's path (leader='warm_start')"
+        v = np.diff(ref, axis=0) / Ts
+        acc = np.diff(np.concatenate([np.zeros((1, 3)), v, np.zeros((1, 3))]), axis=0) / Ts
+        lag = float(np.max(np.linalg.norm(qp_leader - ref, axis=1)))
+        why = []
+        if np.abs(v).max() > vmax + 1e-9:
+            why.append(f"its reference moves at {np.abs(v).max():.3f} m/s > {vmax:g} m/s")
+        if np.abs(acc).max() > amax + 1e-9:
+            k = int(np.argmax(np.abs(acc).max(axis=1)))
+            peak = float(np.abs(acc).max())
+            why.append(f"its reference accelerates at {peak:.3f} m/s² > {amax:g} m/s² (t = {k * Ts:.2f} s)")
+        if lag > opts.leader_lag_max:
+            why.append(f"the qp leader lags its reference by up to {lag:.3f} m > {opts.leader_lag_max:g} m")
+        if opts.leader == "reference" or not why:
+            return ref.copy(), "the leader on its reference"
+        return qp_leader.copy(), "the leader on the qp plan's path (" + "; ".join(why) + ")"
 
     def _m_numeric(self, dh: Array) -> Array:
         base = self.tw / self.w
@@ -706,7 +738,7 @@ def plan_horizon_drones(
     for result, robots, detail in candidates:
         robots = robots.copy()
         robots[0] = warm_start.robots[0]
-        robots[:, -1] = warm_start.reference
+        robots[:, -1] = model.lead
         try:
             cand = _plan_of(robots, warm_start, {}, params)
         except Exception as exc:  # a tether with no catenary: not a plan
@@ -739,7 +771,7 @@ def plan_horizon_drones(
     before = {f"f{i + 1}": v for i, v in enumerate(warm_fit)}
     J = _weighted(terms, opts)
     change = ", ".join(f"{k} {terms[k]:.4g} ({_percent(terms[k], before[k])})" for k in ("f1", "f2", "f3", "f4"))
-    note = f"{what}; returned {detail} (objective {J:.6g} vs qp {J_warm:.6g}); vs qp: {change}"
+    note = f"{model.leader_note}; {what}; returned {detail} (objective {J:.6g} vs qp {J_warm:.6g}); vs qp: {change}"
     if rejected:
         note += "; not returned: " + "; ".join(rejected)
     diag = dict(plan.diagnostics) if plan is warm_start else {}
@@ -747,6 +779,7 @@ def plan_horizon_drones(
         horizon_result=result,
         horizon_note=note,
         horizon_stop=stop,
+        horizon_leader=model.leader_note,
         horizon_summary=dict(
             result=result, stop=stop, iterations=iterations, rounds=len(rounds), objective=J,
             objective_warm_start=J_warm, terms=terms, warm_start_terms=before,
