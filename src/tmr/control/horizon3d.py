@@ -118,7 +118,9 @@ class DroneHorizonOptions:
             nlp_scaling, min_hessian_perturbation, expand, ipopt: IPOPT options (as :class:`tmr.control.horizon.
             HorizonOptions`).
         accept_acceptable: also accept ``Solved_To_Acceptable_Level``.
-        pool_checks: IPOPT iterates checked at most (the cheapest first) when the optimum is not returned.
+        pool_checks: IPOPT iterates checked at most by the checker (the cheapest first) when the optimum is not
+            returned; pool_screen: kept iterates (the cheapest first) whose every row is evaluated at most (0.3 s each
+            on H) to find those.
         leader: the leader's fixed path: ``"reference"`` (x_d(t_k) at every knot: f3 = 0), ``"warm_start"`` (the qp
             plan's leader: f3 equal to the qp plan's) or ``"auto"`` (default): the reference unless it breaks the
             leader's speed or acceleration bound itself (no plan on it can pass the checker) or the qp leader lags it
@@ -139,7 +141,7 @@ class DroneHorizonOptions:
     tension_activation: float = 1.0
     rate_activation: float = 0.5
     max_rounds: int = 4
-    max_iter: int = 200
+    max_iter: int = 1000
     tol: float = 1e-6
     acceptable_tol: float = 1e-4
     acceptable_iter: int = 10
@@ -153,6 +155,7 @@ class DroneHorizonOptions:
     expand: bool = False
     accept_acceptable: bool = True
     pool_checks: int = 3
+    pool_screen: int = 8
     leader: str = "auto"
     leader_lag_max: float = 0.25
     ipopt: dict[str, Any] = field(default_factory=dict)
@@ -550,7 +553,7 @@ class _Transcription:
 class _Pool:
     """The cheapest IPOPT iterates whose transcribed rows hold to ``screen``."""
 
-    def __init__(self, keep: int = 16, screen: float = 1e-4) -> None:
+    def __init__(self, keep: int = 64, screen: float = 1e-4) -> None:
         self.keep, self.screen = keep, screen
         self._heap: list[tuple[float, int, Array, str]] = []
         self._seq = 0
@@ -730,8 +733,12 @@ def plan_horizon_drones(
     candidates: list[tuple[str, Array, str]] = []
     if stop == "converged":
         candidates.append(("optimal", model.positions(xv), "the optimum"))
-    for f, x, w in pool.sorted()[: opts.pool_checks]:
-        if f < 1.0:
+    screened = 0
+    for f, x, w in pool.sorted():  # the cheapest first; every row of every group must hold (not only those kept)
+        if f >= 1.0 or len(candidates) >= opts.pool_checks + (stop == "converged") or screened >= opts.pool_screen:
+            break
+        screened += 1
+        if model.worst(model.values(x))[0] <= 1e-5:
             candidates.append(("best_feasible_iterate", model.positions(x), f"its best feasible iterate ({w})"))
     chosen: tuple[str, DronePlan, Any, str] | None = None
     rejected: list[str] = []
@@ -774,6 +781,8 @@ def plan_horizon_drones(
     note = f"{model.leader_note}; {what}; returned {detail} (objective {J:.6g} vs qp {J_warm:.6g}); vs qp: {change}"
     if rejected:
         note += "; not returned: " + "; ".join(rejected)
+    if stop != "converged":
+        note += f"; {len(pool)} iterates kept, {screened} screened, {len(candidates)} satisfied every row"
     diag = dict(plan.diagnostics) if plan is warm_start else {}
     diag.update(
         horizon_result=result,
