@@ -30,14 +30,18 @@ box = [2.0, 2.6, 0.0, 2.8, 3.4, 1.6]
 """
 
 
-@pytest.fixture(scope="module")
-def small(tmp_path_factory):
-    """Two drones past a box in a 5 m x 4 m x 3 m room: the problem, its qp plan and that plan's metrics."""
+#: the same room with a low box across the route: the drones climb over it and their tethers hang near it (the qp
+#: leader is slowed there, so the NLP's leader is on the qp plan's path)
+LOW = SMALL.replace("box = [2.0, 2.6, 0.0, 2.8, 3.4, 1.6]", "box = [2.0, 1.4, 0.0, 2.8, 2.6, 0.9]")
+
+
+def _problem(tmp_path_factory, text):
+    """The problem of a scenario text, its qp plan and that plan's metrics."""
     from tmr.planner3d import build_drone_problem, drone_parameters, route_drones, solve_drones
     from tmr.world.drones import load_drone_scenario
 
     path = tmp_path_factory.mktemp("h3d") / "small.toml"
-    path.write_text(SMALL)
+    path.write_text(text)
     sc = load_drone_scenario(str(path))
     params, tether = drone_parameters(sc)
     route, n = route_drones(sc, params, tether, None)
@@ -45,6 +49,18 @@ def small(tmp_path_factory):
     warm, warm_metrics = solve_drones(problem, "qp")
     assert warm_metrics.success, warm_metrics.failure
     return problem, warm, warm_metrics
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    """Two drones past a box in a 5 m x 4 m x 3 m room."""
+    return _problem(tmp_path_factory, SMALL)
+
+
+@pytest.fixture(scope="module")
+def low(tmp_path_factory):
+    """Two drones over a low box: tether clearance rows in the NLP."""
+    return _problem(tmp_path_factory, LOW)
 
 
 def _copy(plan):
@@ -57,8 +73,9 @@ def _weighted(f):
     return f[0] + f[1] + f[3]
 
 
-def test_optimum_is_strictly_better_than_qp_no_worse_in_each_term_and_checked(small):
-    problem, warm, wm = small
+@pytest.mark.parametrize("case", ["small", "low"])
+def test_optimum_is_strictly_better_than_qp_no_worse_in_each_term_and_checked(request, case):
+    problem, warm, wm = request.getfixturevalue(case)
     plan, metrics = plan_horizon_drones(problem, _copy(warm), wm, time_limit=60.0)
     d = plan.diagnostics
     assert d["horizon_result"] == "optimal", d["horizon_note"]
@@ -67,10 +84,16 @@ def test_optimum_is_strictly_better_than_qp_no_worse_in_each_term_and_checked(sm
     assert again.success and again.n_violation_steps == 0
     new, old = again.fitness_raw, wm.fitness_raw
     assert all(n <= o for n, o in zip(new, old, strict=True)), (new, old)
-    assert _weighted(new) < 0.95 * _weighted(old)  # measured: 136.3 vs 154.1
-    assert new[2] == 0.0  # the leader is on its reference at every knot
-    np.testing.assert_allclose(plan.robots[:, -1], warm.reference, atol=0)
+    # measured: small 136.3 vs 154.1, low 340.6 vs 622.1
+    assert _weighted(new) < (0.95 if case == "small" else 0.7) * _weighted(old)
     np.testing.assert_array_equal(plan.robots[0], warm.robots[0])
+    if case == "small":  # the leader is on its reference at every knot
+        assert d["horizon_leader"] == "the leader on its reference" and new[2] == 0.0
+        np.testing.assert_allclose(plan.robots[:, -1], warm.reference, atol=0)
+    else:  # the slowed reference accelerates beyond a_max: the leader stays on the qp plan's path
+        assert "accelerates at" in d["horizon_leader"] and new[2] == old[2]
+        np.testing.assert_array_equal(plan.robots[:, -1], warm.robots[:, -1])
+        assert sum(r["tether_clearance_rows"] for r in d["horizon_rounds"]) > 500  # measured 1,090
 
 
 @pytest.mark.parametrize("kind", ["max_iter", "time_limit"])
