@@ -207,3 +207,14 @@ def test_cli_f_horizon_is_optimal_and_better_than_qp(tmp_path, capsys):
     assert m["success"] and m["horizon_result"] == "optimal", m["horizon_note"]
     t, w = m["horizon"]["terms"], m["horizon"]["warm_start_terms"]
     assert all(t[k] <= w[k] for k in w) and t["f1"] + t["f2"] + t["f4"] < w["f1"] + w["f2"] + w["f4"]
+
+
+def test_ctrl_c_stops_the_drone_nlp_promptly(tmp_path):
+    """SIGINT 1 s into IPOPT on F (its NLP runs ~7 s): exit 130, one line, nothing written, stopped within 10 s."""
+    from tests.test_interrupt import STOPPED, _interrupt
+
+    out = tmp_path / "out"
+    argv = ["--scenario", "F", "--method", "horizon", "--no-plots", "--out", str(out)]
+    code, err, latency = _interrupt(argv, r"^horizon NLP round", 1.0)
+    assert (code, err.strip()) == (130, "interrupted"), f"exit {code}, stderr {err[-800:]!r}"
+    assert latency < STOPPED and not out.exists()

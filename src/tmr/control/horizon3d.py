@@ -688,6 +688,7 @@ def plan_horizon_drones(
             if prev is not None and lam is not None:
                 kwargs.update(lam_x0=lam[0], lam_g0=tr.carry(prev, lam[1]))
             t3 = time.perf_counter()
+            _LOG.debug("horizon NLP round %d (drones): IPOPT on %d rows", rnd, tr.size)
             with _ctrl_c_stops_ipopt():
                 sol = solver(**kwargs)
             t4 = time.perf_counter()
