@@ -10,6 +10,7 @@ make_drone_qp`, as rows)::
     s.t.  p_{·,0} = start, p_{N,k} = x_d(t_k)                 start fixed, leader on its reference (variable bounds)
           room shrunk by r + d_safe ∋ p_{i,k}                  (variable bounds, exact)
           R(θ_jk; ends) = 0                                    catenary of tether j at knot k (aux. variable θ_A)
+          ∂span/∂θ_A ≤ 0                                       on its shallow (stable) branch, as catenary3d
           s_jk (z_q − z_p) ≥ 0                                 the lower end stays the lower end (s from the warm start)
           D̃(p_{i,k}) ≥ r + max(d_safe, e_D)                   drone clearance (spline field of the obstacles)
           D̃(X_{j,k}(σ_i)) ≥ sqrt((c_t + ε_jk)² + δ_jk²/4) + max(d_safe, e_D)   tether curve samples, σ_i = i/(S_j+1)
@@ -83,6 +84,7 @@ _ACCEPTABLE = ("Solved_To_Acceptable_Level",)
 DRONE_GROUPS: tuple[str, ...] = (
     "fitness",
     "catenary",
+    "shallow",
     "lower_end",
     "tether_floor",
     "drone_clearance",
@@ -302,6 +304,11 @@ class _Model:
         dh = B[2] - A[2]
         m = self.tw / self.w - dh if self.upper_winch else ca.DM.ones(N, K + 1) * (self.tw / self.w)
         _, Rc, L, a, sb = catenary_samples(A, B, Th, 0.0, m)
+        # the shallow (stable) branch: the span a (θ_B − θ_A) falls as θ_A grows (catenary3d._newton_theta);
+        # cosh θ_A d(span/m)/dθ_A = (dθ_B/dθ_A − 1) − (θ_B − θ_A) tanh θ_A ≤ 0
+        kk = (1.0 + dh / m) ** 2
+        dthb = kk * ca.sinh(Th) * ca.cosh(Th) / (sb * ca.sqrt(1.0 + sb * sb))
+        shallow = (dthb - 1.0) - (ca.asinh(sb) - Th) * ca.tanh(Th)
         self._tether = dict(A=A, B=B, Th=Th, m=m, sb=sb, a=a)
         Sdiv = ca.DM((self.S + 1).astype(float)) @ ones
         delta = L / Sdiv
@@ -345,6 +352,7 @@ class _Model:
         self.fitness_names = names
         g["catenary"] = _Group(Rc, np.zeros(N), np.zeros(N))
         g["lower_end"] = _Group(dh, np.zeros(N), np.full(N, np.inf))
+        g["shallow"] = _Group(shallow, np.full(N, -np.inf), np.zeros(N))
         floor = np.full(N, float(b[2] + self.c_t + params.d_safe) if not self.walls_in_field else -np.inf)
         base_room = float(np.min(np.r_[self.base - b[:3], b[3:] - self.base]))
         floor[0] = min(floor[0], float(b[2]) + base_room - 0.002)  # tether 1: no closer than its winch (checker)
@@ -464,6 +472,8 @@ class _Model:
             m = v < self.groups[name].lo[:, None] + o.activation
         elif name == "separation":
             m = v < (math.sqrt(self.groups[name].lo[0]) + o.activation) ** 2
+        elif name == "shallow":  # a row only where an iterate has left the shallow branch (it makes IPOPT slow)
+            m = np.zeros(v.shape, dtype=bool)
         elif name == "lower_end":
             m = v < o.activation
         elif name == "tether_floor":
