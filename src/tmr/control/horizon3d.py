@@ -28,8 +28,11 @@ at ≥ sqrt((c + ε)² + δ²/4) keep the whole curve ≥ c; e_D is the spline's
 (:func:`tmr.control.horizon3d_field.distance_field3d`).
 
 Rows are generated lazily as in 2-D (rows near their bounds along the warm start; after each solve every row is
-evaluated and the violated or near ones are added). The catenary equalities, the fitness rows and the lower-end rows
-are always complete. The returned plan is verified by :func:`tmr.checks.drones.check_drone_plan` (exact distances
+evaluated and the violated or near ones are added). The catenary equalities and the fitness rows are always
+complete; the shallow-branch rows enter only where an iterate has left the branch. The leader is on its reference
+unless that reference breaks the leader's own speed or acceleration bound or the qp leader lags it by more than
+``leader_lag_max``: then it is on the qp plan's leader path (``DroneHorizonOptions.leader``). The returned plan is
+verified by :func:`tmr.checks.drones.check_drone_plan` (exact distances
 along the whole curve) and compared term by term with the warm start's checked fitness: the optimum if it passes and
 is no worse in f1–f4, else the cheapest kept IPOPT iterate that does, else the warm start (the very qp plan).
 
