@@ -125,7 +125,7 @@ class DroneHorizonOptions:
         accept_acceptable: also accept ``Solved_To_Acceptable_Level``.
         pool_checks: IPOPT iterates checked at most by the checker (the cheapest first) when the optimum is not
             returned; pool_screen: kept iterates (the cheapest first) whose every row is evaluated at most (0.3 s each
-            on H) to find those.
+            on H) to find those; after them, the cheapest iterate verified on every row during the solve.
         leader: the leader's fixed path: ``"reference"`` (x_d(t_k) at every knot: f3 = 0), ``"warm_start"`` (the qp
             plan's leader: f3 equal to the qp plan's) or ``"auto"`` (default): the reference unless it breaks the
             leader's speed or acceleration bound itself (no plan on it can pass the checker) or the qp leader lags it
@@ -160,7 +160,7 @@ class DroneHorizonOptions:
     expand: bool = False
     accept_acceptable: bool = True
     pool_checks: int = 3
-    pool_screen: int = 8
+    pool_screen: int = 4
     leader: str = "auto"
     leader_lag_max: float = 0.25
     ipopt: dict[str, Any] = field(default_factory=dict)
@@ -564,16 +564,29 @@ class _Transcription:
 
 
 class _Pool:
-    """The cheapest IPOPT iterates whose transcribed rows hold to ``screen``."""
+    """The cheapest IPOPT iterates whose transcribed rows hold to ``screen``; and, every ``verify_every``-th such
+    iterate cheaper than the warm start and than the last one verified, every row of every group evaluated
+    (``model``): the cheapest that satisfies them all is kept as ``verified`` (the cheapest iterates of a round whose
+    optimum violates rows left out of it usually violate them too)."""
 
-    def __init__(self, keep: int = 64, screen: float = 1e-4) -> None:
-        self.keep, self.screen = keep, screen
+    def __init__(self, model: _Model, keep: int = 64, screen: float = 1e-4, verify_every: int = 10) -> None:
+        self.model, self.keep, self.screen, self.verify_every = model, keep, screen, verify_every
         self._heap: list[tuple[float, int, Array, str]] = []
         self._seq = 0
+        self._offered = 0
+        self.verified: tuple[float, Array, str] | None = None
+        self.verify_time = 0.0
 
     def offer(self, f: float, viol: float, x: Array, where: str) -> None:
         if not viol <= self.screen:
             return
+        self._offered += 1
+        best = self.verified[0] if self.verified else 1.0
+        if self._offered % self.verify_every == 0 and f < best:
+            t0 = time.perf_counter()
+            if self.model.worst(self.model.values(np.asarray(x, dtype=float)))[0] <= 1e-5:
+                self.verified = (f, np.array(x, dtype=float), where)
+            self.verify_time += time.perf_counter() - t0
         if len(self._heap) >= self.keep and -self._heap[0][0] <= f:
             return
         item = (-f, self._seq, np.array(x, dtype=float), where)
@@ -671,7 +684,7 @@ def plan_horizon_drones(
     xv = model.x0
     vals = model.values(xv)
     masks = {name: model.near(name, vals[name]) for name in DRONE_GROUPS if name in vals}
-    pool = _Pool()
+    pool = _Pool(model)
     rounds: list[dict[str, Any]] = []
     tr: _Transcription | None = None
     lam: tuple[Array, Array] | None = None
@@ -754,6 +767,9 @@ def plan_horizon_drones(
         screened += 1
         if model.worst(model.values(x))[0] <= 1e-5:
             candidates.append(("best_feasible_iterate", model.positions(x), f"its best feasible iterate ({w})"))
+    if pool.verified is not None and not any(c[0] == "best_feasible_iterate" for c in candidates):
+        f, x, w = pool.verified
+        candidates.append(("best_feasible_iterate", model.positions(x), f"its best verified iterate ({w})"))
     chosen: tuple[str, DronePlan, Any, str] | None = None
     rejected: list[str] = []
     for result, robots, detail in candidates:
@@ -822,6 +838,7 @@ def plan_horizon_drones(
         model_time=float(model_time),
         nlp_solve_time=float(solve_done - start_time - model_time),
         check_time=float(time.perf_counter() - solve_done),
+        verify_time=float(pool.verify_time),
     )  # fmt: skip
     plan.diagnostics = diag
     plan.wall_time = time.perf_counter() - start_time
