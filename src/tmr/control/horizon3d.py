@@ -566,11 +566,15 @@ class _Transcription:
 class _Pool:
     """The cheapest IPOPT iterates whose transcribed rows hold to ``screen``; and, every ``verify_every``-th such
     iterate cheaper than the warm start and than the last one verified, every row of every group evaluated
-    (``model``): the cheapest that satisfies them all is kept as ``verified`` (the cheapest iterates of a round whose
+    (``model``; at most ``verify_share`` of the time since the pool was made): the cheapest that satisfies them all
+    is kept as ``verified`` (the cheapest iterates of a round whose
     optimum violates rows left out of it usually violate them too)."""
 
-    def __init__(self, model: _Model, keep: int = 64, screen: float = 1e-4, verify_every: int = 10) -> None:
+    def __init__(
+        self, model: _Model, keep: int = 64, screen: float = 1e-4, verify_every: int = 10, verify_share: float = 0.05
+    ) -> None:
         self.model, self.keep, self.screen, self.verify_every = model, keep, screen, verify_every
+        self.verify_share, self.t_start = verify_share, time.perf_counter()
         self._heap: list[tuple[float, int, Array, str]] = []
         self._seq = 0
         self._offered = 0
@@ -582,7 +586,8 @@ class _Pool:
             return
         self._offered += 1
         best = self.verified[0] if self.verified else 1.0
-        if self._offered % self.verify_every == 0 and f < best:
+        budget = self.verify_share * (time.perf_counter() - self.t_start)  # at most this share of the solve
+        if self._offered % self.verify_every == 0 and f < best and self.verify_time <= budget:
             t0 = time.perf_counter()
             if self.model.worst(self.model.values(np.asarray(x, dtype=float)))[0] <= 1e-5:
                 self.verified = (f, np.array(x, dtype=float), where)
