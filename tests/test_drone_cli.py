@@ -86,7 +86,7 @@ def test_no_free_route_refused_up_front(tmp_path, capsys):
 @pytest.mark.parametrize(
     ("extra", "words"),
     [
-        (["--method", "horizon"], "--method horizon plans ground chains"),
+        (["--iterations", "5"], "--iterations: not taken by a drone scenario"),
         (["--base", "1,2"], "--base: not taken by a drone scenario"),
         (["--route", "rrt"], "--route rrt"),
         (["--set", "d_min=0.6"], "unknown drone parameter"),

@@ -34,7 +34,6 @@ def _refuse_ground_options(args: argparse.Namespace) -> None:
             ("--start", args.start),
             ("--bounds", args.bounds),
             ("--iterations", args.iterations),
-            ("--time-limit", args.time_limit),
         )
         if value is not None
     ]
@@ -49,8 +48,6 @@ def _refuse_ground_options(args: argparse.Namespace) -> None:
         raise TmrError("--filter-cutoff: a drone plan is written as checked, without a trajectory filter")
     if args.route != "shortest":
         raise TmrError(f"--route {args.route}: a drone chain follows its 3-D shortest route (--route shortest)")
-    if args.method == "horizon":
-        raise TmrError("--method horizon plans ground chains; for a drone chain use --method qp (default) or pinv")
 
 
 def load_drone_inputs(args: argparse.Namespace) -> Any:
@@ -136,16 +133,20 @@ def main_drones(args: argparse.Namespace, owned: tuple[str, ...], volatile: tupl
     details: dict[str, Any] = {}
     try:
         plan, metrics = plan_drones(
-            scenario, args.robots, args.method, overrides=_overrides(args), progress=progress_enabled(), details=details
-        )
+            scenario, args.robots, args.method, overrides=_overrides(args), progress=progress_enabled(),
+            details=details, time_limit=args.time_limit,
+        )  # fmt: skip
     except StartError as exc:  # a verdict of the start search along the route, not a proof: no plan found
         LOG.error("no plan found: %s", exc)
         return 1
     route = details.get("route")
     extra: dict[str, Any] = {"n_robots": plan.n_robots}
-    for key in ("route_length", "route_lower_bound", "n_min", "robots_auto", "slowed_down"):
+    for key in ("route_length", "route_lower_bound", "n_min", "robots_auto", "slowed_down", "horizon_result",
+                "horizon_note"):  # fmt: skip
         if key in plan.diagnostics:
             extra[key] = plan.diagnostics[key]
+    if isinstance(plan.diagnostics.get("horizon_summary"), dict):
+        extra["horizon"] = plan.diagnostics["horizon_summary"]
     timings = {k: float(v) for k, v in plan.diagnostics.get("timings", {}).items()}
     extra |= {k: v for k, v in timings.items() if k.endswith("_time")}
     from tmr.io.drones import write_drone_outputs
@@ -173,6 +174,9 @@ def main_drones(args: argparse.Namespace, owned: tuple[str, ...], volatile: tupl
             "back 1 s and took the next 3 s of the route at half speed)",
             ", ".join(extra["slowed_down"]),
         )
+    if "horizon_note" in extra:
+        nlp = plan.diagnostics.get("timings", {}).get("nlp_time", float("nan"))
+        LOG.info("  horizon: %s (the NLP ran %.1f s): %s", extra["horizon_result"], nlp, extra["horizon_note"])
     LOG.info("  wrote %s to %s", ", ".join(published), Path(args.out))
     if not plan.success:
         LOG.error("plan FAILED: %s", plan.failure)

@@ -34,8 +34,9 @@ if TYPE_CHECKING:
 __all__ = ["DRONE_METHODS", "DroneProblem", "drone_parameters", "route_drones", "build_drone_problem", "solve_drones",
            "plan_drones"]  # fmt: skip
 
-#: Per-step formulations of a drone chain: the lexicographic QP with hard limits, the paper's CLIK baseline.
-DRONE_METHODS = ("qp", "pinv")
+#: Formulations of a drone chain: the lexicographic QP with hard limits, the paper's CLIK baseline, and the
+#: whole-horizon NLP warm-started from the qp plan (:mod:`tmr.control.horizon3d`).
+DRONE_METHODS = ("qp", "pinv", "horizon")
 #: ``robots="auto"`` tries N_min, N_min + 1, … up to this many drones more.
 AUTO_EXTRA = 3
 
@@ -143,17 +144,33 @@ def build_drone_problem(
 
 
 def solve_drones(
-    problem: DroneProblem, method: str = "qp", *, progress: bool = False
+    problem: DroneProblem,
+    method: str = "qp",
+    *,
+    progress: bool = False,
+    time_limit: float | None = None,
+    horizon_options: dict[str, Any] | None = None,
 ) -> tuple[DronePlan, DroneMetrics]:
-    """Plan with ``method`` (``"qp"`` or ``"pinv"``) and check every hard limit with the independent checker.
+    """Plan with ``method`` (``"qp"``, ``"pinv"`` or ``"horizon"``) and check every hard limit with the independent
+    checker.
 
-    The plan's ``wall_time`` is the whole of this call [s]; ``diagnostics["timings"]`` its parts."""
+    ``"horizon"``: the whole-horizon NLP (:func:`tmr.control.horizon3d.plan_horizon_drones`,
+    ``formulations/horizon3d.md``) warm-started from the very plan ``solve_drones(problem, "qp")`` returns, never
+    worse than it in any of f1–f4 of the checker (else that qp plan itself is returned, ``method="horizon"``,
+    ``diagnostics["horizon_result"] = "warm_start"``); ``time_limit`` [s] bounds the NLP (None: its default,
+    :data:`tmr.control.horizon.DEFAULT_TIME_LIMIT` = 60 s), ``horizon_options`` are fields of
+    :class:`tmr.control.horizon3d.DroneHorizonOptions`.
+
+    The plan's ``wall_time`` is the whole of this call [s]; ``diagnostics["timings"]`` its parts (``qp_time``, and
+    for ``horizon`` its ``nlp_time``)."""
     from tmr.checks.drones import check_drone_plan
     from tmr.control.drones import make_drone_pinv, make_drone_qp
     from tmr.control.run3d import run_drones
 
     if method not in DRONE_METHODS:
         raise ParameterError(f"unknown method {method!r} for a drone chain; available: {', '.join(DRONE_METHODS)}")
+    if method == "horizon":
+        return _solve_horizon(problem, progress=progress, time_limit=time_limit, options=horizon_options or {})
     start = time.perf_counter()
     make = make_drone_qp if method == "qp" else make_drone_pinv
     formulation = make(
@@ -170,6 +187,23 @@ def solve_drones(
     return plan, metrics
 
 
+def _solve_horizon(
+    problem: DroneProblem, *, progress: bool, time_limit: float | None, options: dict[str, Any]
+) -> tuple[DronePlan, DroneMetrics]:
+    """``solve_drones(problem, "horizon")``: the qp plan, then the NLP from it (casadi imported only here)."""
+    from tmr.control.horizon import DEFAULT_TIME_LIMIT
+    from tmr.control.horizon3d import plan_horizon_drones
+
+    start = time.perf_counter()
+    warm, warm_metrics = solve_drones(problem, "qp", progress=progress)
+    qp_time = time.perf_counter() - start
+    limit = DEFAULT_TIME_LIMIT if time_limit is None else time_limit
+    plan, metrics = plan_horizon_drones(problem, warm, warm_metrics, time_limit=limit, progress=progress, **options)
+    plan.wall_time = time.perf_counter() - start
+    plan.diagnostics["timings"] = {"qp_time": qp_time, "nlp_time": plan.wall_time - qp_time}
+    return plan, metrics
+
+
 def plan_drones(
     scenario: DroneScenario,
     robots: int | Literal["auto"] | None = None,
@@ -178,6 +212,7 @@ def plan_drones(
     overrides: dict[str, Any] | None = None,
     progress: bool = False,
     details: dict[str, Any] | None = None,
+    time_limit: float | None = None,
 ) -> tuple[DronePlan, DroneMetrics]:
     """Route, refuse or plan, and check: the whole of ``tmr plan`` for a drone scenario, as a library call.
 
@@ -186,7 +221,7 @@ def plan_drones(
     2) before planning; returns the last plan tried with its metrics (``plan.success`` says whether it passed).
     ``details``, if given, receives the ``route`` (:class:`Route3D`) and the ``problem`` of the plan returned; the
     plan's ``diagnostics`` get ``route_length``, ``route_lower_bound``, ``n_min`` [m, m, -] and, for ``auto``,
-    ``robots_auto`` (every count tried and why it failed)."""
+    ``robots_auto`` (every count tried and why it failed). ``time_limit`` [s]: of the ``horizon`` NLP (None: 60 s)."""
     from tmr.route.route3d import StartError
 
     start = time.perf_counter()
@@ -207,7 +242,7 @@ def plan_drones(
                 raise
             tried.append(f"{n}: {str(exc).split(';')[0]}")
             continue
-        result = solve_drones(problem, method, progress=progress)
+        result = solve_drones(problem, method, progress=progress, time_limit=time_limit)
         if details is not None:
             details.update(route=route, problem=problem)
         tried.append(f"{n}: {'planned' if result[0].success else str(result[0].failure).split(';')[0]}")
