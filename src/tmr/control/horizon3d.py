@@ -65,6 +65,7 @@ from tmr.control.horizon import (
     _time_limit,
 )
 from tmr.control.horizon3d_field import EPS_SPAN, catenary_samples, distance_field3d, theta_warm
+from tmr.control.horizon_model import _solver_opts
 from tmr.control.plan3d import DronePlan
 from tmr.errors import ParameterError
 
@@ -120,7 +121,10 @@ class DroneHorizonOptions:
         max_rounds: transcriptions at most.
         max_iter, tol, acceptable_tol, acceptable_iter, constr_viol_tol, mu_strategy, mu_init, hessian, linear_solver,
             nlp_scaling, min_hessian_perturbation, expand, ipopt: IPOPT options (as
-            :class:`tmr.control.horizon_model.HorizonOptions`; :func:`_solver_opts`).
+            :class:`tmr.control.horizon_model.HorizonOptions`, through the same
+            :func:`tmr.control.horizon_model._solver_opts`).
+        mumps_pivot_order: MUMPS's ordering, 7 = automatic here (F: 7.3 s against 9.0 s with AMD, 0, the ground
+            chain's choice: the drone NLP's catenary rows couple a tether's ends and θ, not a band).
         accept_acceptable: also accept ``Solved_To_Acceptable_Level``.
         pool_checks: IPOPT iterates checked at most by the checker (the cheapest first) when the optimum is not
             returned; pool_screen: kept iterates (the cheapest first) whose every row is evaluated at most (0.3 s each
@@ -154,6 +158,7 @@ class DroneHorizonOptions:
     mu_init: float = 1e-3
     hessian: str = "exact"
     linear_solver: str = "mumps"
+    mumps_pivot_order: int = 7
     nlp_scaling: str = "none"
     min_hessian_perturbation: float = 1e-3
     expand: bool = False
@@ -560,38 +565,6 @@ class _Transcription:
             same = oidx[pos] == idx
             out[self.offset[name] + np.flatnonzero(same)] = lam_g[old.offset[name] + pos[same]]
         return out
-
-
-def _solver_opts(opts: DroneHorizonOptions, extra: dict[str, Any] | None = None) -> dict[str, Any]:
-    """casadi/IPOPT options: those of :func:`tmr.control.horizon_model._solver_opts` (the ground chain's NLP, as it
-    was when this module was written; kept here so that the two NLPs' options can move apart), ``extra`` and
-    ``opts.ipopt`` merged last."""
-    ip: dict[str, Any] = {
-        "print_level": 0,
-        "sb": "yes",
-        "print_timing_statistics": "no",
-        "max_iter": int(opts.max_iter),
-        "tol": float(opts.tol),
-        "acceptable_tol": float(opts.acceptable_tol),
-        "acceptable_iter": int(opts.acceptable_iter),
-        "constr_viol_tol": float(opts.constr_viol_tol),
-        "mu_strategy": opts.mu_strategy,
-        "mu_init": float(opts.mu_init),
-        "linear_solver": opts.linear_solver,
-        "hessian_approximation": opts.hessian,
-        "nlp_scaling_method": opts.nlp_scaling,
-        "min_hessian_perturbation": float(opts.min_hessian_perturbation),
-        "acceptable_constr_viol_tol": float(opts.constr_viol_tol),
-        "warm_start_init_point": "yes",
-        "warm_start_bound_push": 1e-6,
-        "warm_start_bound_frac": 1e-6,
-        "warm_start_slack_bound_push": 1e-6,
-        "warm_start_slack_bound_frac": 1e-6,
-        "warm_start_mult_bound_push": 1e-6,
-    }
-    ip.update(extra or {})
-    ip.update(opts.ipopt)
-    return {"ipopt": ip, "print_time": False, "expand": bool(opts.expand), "error_on_fail": False}
 
 
 class _Pool:
