@@ -3,6 +3,7 @@ and at scale, on generated rooms and robot counts.
 
     python benchmarks/horizon.py [--scenarios A B C D] [--repeats 3] [--seed 0]
     python benchmarks/horizon.py --rooms 16 [--robots 2,3,5,8,auto] [--time-limit 60] [--jobs 2] [--scenario-e 6]
+    python benchmarks/horizon.py --drones F G H [--repeats 3] [--time-limit 60]
 
 ``--rooms K``: the first K rooms of :func:`tmr.sweep.rooms.room_set` (every density and goal class), each with every
 robot count of ``--robots``, and scenario E with ``--scenario-e`` robots: the whole command line ``python -m tmr.plan
@@ -11,6 +12,10 @@ from the very plan ``--method qp`` returns, and ``metrics.json`` records that pl
 no second run is needed. Per room class and N: optimal / best feasible iterate / warm start, whole-process time,
 f1–f4 against ``qp``, knots; a scaling plot of the whole-process time against knots × N with the exponent fitted on
 the optimal runs (target ≤ 1.3). Writes ``benchmarks/results/horizon_rooms.md``, ``.csv`` and ``.png``.
+
+``--drones F G H``: the drone chain's ``horizon`` against its ``qp`` plan, each the whole command line in its own
+process, one at a time (:func:`drones_main`): exit, result, f1–f4 of the checker and their ratios to ``qp``, times.
+Writes ``benchmarks/results/horizon_drones.md`` and ``.csv``.
 
 A benchmark, not a test. Every repeat of every scenario runs in a **new Python process** (cold: imports, the lazy
 distance field of the map, the casadi transcription and IPOPT's first call all count), which
@@ -233,6 +238,93 @@ def _scenario_e(robots: int, time_limit: float) -> dict:
         return out
 
 
+def _drone_run(scenario: str, method: str, time_limit: float) -> dict:
+    """``python -m tmr.plan --scenario S --method M --no-plots`` of a drone scenario in its own process: exit code,
+    whole-process time [s], the checker's f1–f4 and, for ``horizon``, its summary (``metrics.json``) and NLP time."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix=f"tmr-horizon-{scenario}-") as tmp:
+        cmd = [sys.executable, "-m", "tmr.plan", "--scenario", scenario, "--method", method, "--no-plots",
+               "--time-limit", str(time_limit), "--out", str(Path(tmp) / "out")]  # fmt: skip
+        if method != "horizon":
+            cmd = cmd[: cmd.index("--time-limit")] + cmd[cmd.index("--time-limit") + 2 :]
+        t0 = time.perf_counter()
+        proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        out: dict = {"scenario": scenario, "method": method, "exit_code": proc.returncode}
+        out["process_s"] = time.perf_counter() - t0
+        metrics_path, timings_path = Path(tmp) / "out" / "metrics.json", Path(tmp) / "out" / "timings.json"
+        m = json.loads(metrics_path.read_text()) if metrics_path.is_file() else {}
+        t = json.loads(timings_path.read_text()) if timings_path.is_file() else {}
+        out["n_robots"] = m.get("n_robots")
+        out.update({k: m.get(k) for k in ("f1", "f2", "f3", "f4")})
+        hz = m.get("horizon", {})
+        out.update(result=hz.get("result", ""), stop=hz.get("stop", ""), iterations=hz.get("iterations"))
+        out.update(nlp_s=t.get("nlp_time"), qp_s=t.get("qp_time"))
+        lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+        out["stderr_last"] = lines[-1].strip() if lines else ""
+        return out
+
+
+def drones_main(args: argparse.Namespace) -> None:
+    """``--drones F G H``: the drone chain's ``horizon`` (``formulations/horizon3d.md``) against its ``qp`` plan,
+    whole processes run one at a time, ``--repeats`` each (times: median; metrics from the first run, both planners
+    being deterministic). Writes ``benchmarks/results/horizon_drones.md`` and ``.csv``."""
+    rows: list[dict] = []
+    for s in args.drones:
+        for method in ("qp", "horizon"):
+            runs = [_drone_run(s, method, args.time_limit) for _ in range(args.repeats)]
+            row = dict(runs[0])
+            row["process_s"] = statistics.median(r["process_s"] for r in runs)
+            row["process_runs"] = " ".join(f"{r['process_s']:.1f}" for r in runs)
+            rows.append(row)
+            print(f"{s} {method}: exit {row['exit_code']}, {row['process_s']:.1f} s {row['result']}", file=sys.stderr)
+    keys = ["scenario", "method", "exit_code", "n_robots", "result", "stop", "iterations", "f1", "f2", "f3", "f4",
+            "process_s", "process_runs", "qp_s", "nlp_s", "stderr_last"]  # fmt: skip
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    with open(RESULTS / "horizon_drones.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    lines = [
+        "# horizon vs qp, drone chains F, G, H",
+        "",
+        f"`python benchmarks/horizon.py --drones {' '.join(args.drones)} --repeats {args.repeats} --time-limit "
+        f"{args.time_limit:g}` — {datetime_now()}, {platform.machine()}, {os.cpu_count()} cores, one run at a time. "
+        "Every run is the whole command line `python -m tmr.plan --scenario S --method M --no-plots` in its own "
+        "process (*process*: start to exit, median of the repeats); f1–f4 are the independent checker's "
+        "(`tmr.checks.drones.check_drone_plan`, Caruso 2021 eq. 24–27 in robot coordinates) of the plan written; "
+        "exit 0: the plan passed every check. The formulation: "
+        "[formulations/horizon3d.md](../../formulations/horizon3d.md).",
+        "",
+        "| scenario | method | exit | N | result | IPOPT iter. | f1 | f2 | f3 | f4 | f1/qp | f2/qp | f4/qp "
+        "| process [s] | runs [s] |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    qp = {r["scenario"]: r for r in rows if r["method"] == "qp"}
+    worse = 0
+    for r in rows:
+        base = qp[r["scenario"]]
+
+        def ratio(k: str, r: dict = r, base: dict = base) -> str:
+            a, b = r.get(k), base.get(k)
+            return f"{a / b:.3f}" if a is not None and b else "-"
+
+        if r["method"] == "horizon" and any(
+            r.get(k) is not None and base.get(k) is not None and r[k] > base[k] for k in ("f1", "f2", "f3", "f4")
+        ):
+            worse += 1
+        terms = " | ".join(fmt(r.get(k), ".4g") if r.get(k) is not None else "-" for k in ("f1", "f2", "f3", "f4"))
+        lines.append(
+            f"| {r['scenario']} | {r['method']} | {r['exit_code']} | {r['n_robots']} | {r['result'] or '-'} | "
+            f"{r['iterations'] if r['iterations'] is not None else '-'} | {terms} | {ratio('f1')} | {ratio('f2')} | "
+            f"{ratio('f4')} | {r['process_s']:.1f} | {r['process_runs']} |"
+        )
+    n_h = sum(r["method"] == "horizon" for r in rows)
+    lines += ["", f"Never worse than `qp`: {n_h - worse}/{n_h} horizon plans have every one of f1–f4 ≤ the qp plan's."]
+    (RESULTS / "horizon_drones.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
 def rooms_main(args: argparse.Namespace) -> None:
     """The ``--rooms`` mode (module docstring)."""
     import numpy as np
@@ -362,6 +454,7 @@ def main() -> None:
     ap.add_argument("--timeout", type=float, default=300.0, help="a run taking longer is killed [s]")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--scenario-e", type=int, default=6, help="also scenario E with this many robots (0: not)")
+    ap.add_argument("--drones", nargs="*", help="the drone mode: these drone scenarios (e.g. F G H), qp vs horizon")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
@@ -369,6 +462,9 @@ def main() -> None:
         return
     if args.rooms:
         rooms_main(args)
+        return
+    if args.drones:
+        drones_main(args)
         return
     rows: dict[str, list[dict]] = {s: [] for s in args.scenarios}
     for rep in range(args.repeats):  # interleaved: repeat r of every scenario before repeat r + 1

@@ -478,10 +478,23 @@ QUOTES = [
     ),
     Quote(r"`import tmr` \((\d+) ms\)", lambda: md("end_to_end.md", r"`tmr` ([\d.]+) ms cumulative")[0]),
     Quote(
+        r"default 60 s\): F −(\d+) % f4, G −(\d+) % f4, H −(\d+) % f4",
+        lambda: tuple(drone_horizon_f4_cut(s) for s in "FGH"),
+    ),
+    Quote(
         r"What is left in `horizon` is IPOPT's (\d+)–(\d+) iterations",
         lambda: (min(horizon_iterations()), max(horizon_iterations())),
     ),
 ]
+
+
+def drone_horizon_f4_cut(scenario: str) -> float:
+    """How much lower f4 of the drone ``horizon`` plan is than the ``qp`` plan's [%] (horizon_drones.csv)."""
+    return 100 * (
+        1
+        - cell("horizon_drones.csv", "f4", scenario=scenario, method="horizon")
+        / cell("horizon_drones.csv", "f4", scenario=scenario, method="qp")
+    )
 
 
 def horizon_iterations() -> list[float]:

@@ -113,10 +113,20 @@ __all__ = [
 
 
 #: Seconds casadi takes to build IPOPT's solver per NLP row (the derivatives of the rows other than clearance, the
-#: structured clearance derivatives, the solver), measured on the 2-core reference machine: 1.87 s for the 32,522 rows
-#: of scenario E's first round with 6 robots (0.057 ms; 7.5 s for 31,308 rows with casadi's automatic derivatives).
-#: A first round whose build would overrun the time limit is not started.
+#: structured clearance derivatives, the solver) up to :data:`BUILD_REFERENCE_ROWS` rows, measured on the 2-core
+#: reference machine: 1.87 s for the 32,522 rows of scenario E's first round with 6 robots (0.057 ms; 7.5 s for
+#: 31,308 rows with casadi's automatic derivatives). Beyond, the time per row grows as (rows / reference) ^
+#: :data:`BUILD_GROWTH`: 57 s for the 382,944 rows of a generated narrow room with 8 robots and 9,533 knots (0.15 ms).
+#: A round whose build would overrun the time limit is not started (:func:`_expected_build`).
 BUILD_SECONDS_PER_ROW: float = 6.0e-5
+BUILD_REFERENCE_ROWS: int = 32_522
+BUILD_GROWTH: float = 0.4
+
+
+def _expected_build(rows: int) -> float:
+    """Expected seconds to build the solver of an NLP with ``rows`` rows (see :data:`BUILD_SECONDS_PER_ROW`)."""
+    return rows * BUILD_SECONDS_PER_ROW * max(1.0, rows / BUILD_REFERENCE_ROWS) ** BUILD_GROWTH
+
 
 #: Wall-clock limit [s] of a whole :func:`plan_horizon` call used by the command line (``--time-limit``); the library
 #: default is no limit (``time_limit=None``). Successful runs on A–D take 2.5–4.5 s.
@@ -243,9 +253,9 @@ def plan_horizon(
         time_limit: wall-clock limit [s] for the whole call (``None``: none; the CLI uses
             :data:`DEFAULT_TIME_LIMIT` = 60 s): IPOPT is stopped at the first iteration past it (the iteration
             callback; ``max_wall_time`` as a backstop), and no solver is built (round or retry) unless the remaining
-            budget exceeds its expected build time — the last build scaled by the rows, at least the rows times
-            :data:`BUILD_SECONDS_PER_ROW`; the overrun is at most one IPOPT iteration, a build whose estimate was too
-            low, and the fallback check. A run that does not reach it gives the same plan as without.
+            budget exceeds its expected build time — the last build scaled by the rows, at least
+            :func:`_expected_build` of the rows; the overrun is at most one IPOPT iteration, a build whose estimate
+            was too low, and the fallback check. A run that does not reach it gives the same plan as without.
         progress: show a tqdm bar of the IPOPT iterations on stderr (only if stderr is a terminal).
         **options: fields of :class:`HorizonOptions` (weights, leader tolerance, samples, IPOPT options, …).
 
@@ -348,7 +358,7 @@ def plan_horizon(
                 remaining = deadline - time.perf_counter()
                 # building the solver (casadi: the NLP's derivatives) cannot be interrupted: do not start one that
                 # would overrun the limit — as long as the last one took, or its size times the measured rate
-                expected = max(build_time * tr.size / max(built_rows, 1), tr.size * BUILD_SECONDS_PER_ROW)
+                expected = max(build_time * tr.size / max(built_rows, 1), _expected_build(tr.size))
                 if math.isfinite(limit) and remaining <= expected:
                     stop = "time_limit"
                     too_big = (tr.size, expected) if not rounds else None
