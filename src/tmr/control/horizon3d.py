@@ -41,7 +41,6 @@ Public API: :func:`plan_horizon_drones`, :class:`DroneHorizonOptions`, :data:`DE
 
 from __future__ import annotations
 
-import heapq
 import logging
 import math
 import sys
@@ -66,6 +65,7 @@ from tmr.control.horizon import (
 )
 from tmr.control.horizon3d_field import EPS_SPAN, catenary_samples, distance_field3d, theta_warm
 from tmr.control.horizon_model import _solver_opts
+from tmr.control.horizon_pool import _Pool as _IteratePool
 from tmr.control.plan3d import DronePlan
 from tmr.errors import ParameterError
 
@@ -567,8 +567,9 @@ class _Transcription:
         return out
 
 
-class _Pool:
-    """The cheapest IPOPT iterates whose transcribed rows hold to ``screen``; and, every ``verify_every``-th such
+class _Pool(_IteratePool):
+    """The cheapest IPOPT iterates whose transcribed rows hold to ``screen`` (the ground chain's pool,
+    :class:`tmr.control.horizon_pool._Pool`, with no cost limit); and, every ``verify_every``-th such
     iterate cheaper than the warm start and than the last one verified, every row of every group evaluated
     (``model``; at most ``verify_share`` of the time since the pool was made): the cheapest that satisfies them all
     is kept as ``verified`` (the cheapest iterates of a round whose
@@ -577,10 +578,9 @@ class _Pool:
     def __init__(
         self, model: _Model, keep: int = 64, screen: float = 1e-4, verify_every: int = 10, verify_share: float = 0.05
     ) -> None:
-        self.model, self.keep, self.screen, self.verify_every = model, keep, screen, verify_every
+        super().__init__(keep, screen, math.inf)
+        self.model, self.verify_every = model, verify_every
         self.verify_share, self.t_start = verify_share, time.perf_counter()
-        self._heap: list[tuple[float, int, Array, str]] = []
-        self._seq = 0
         self._offered = 0
         self.verified: tuple[float, Array, str] | None = None
         self.verify_time = 0.0
@@ -596,20 +596,7 @@ class _Pool:
             if self.model.worst(self.model.values(np.asarray(x, dtype=float)))[0] <= 1e-5:
                 self.verified = (f, np.array(x, dtype=float), where)
             self.verify_time += time.perf_counter() - t0
-        if len(self._heap) >= self.keep and -self._heap[0][0] <= f:
-            return
-        item = (-f, self._seq, np.array(x, dtype=float), where)
-        self._seq += 1
-        if len(self._heap) < self.keep:
-            heapq.heappush(self._heap, item)
-        else:
-            heapq.heapreplace(self._heap, item)
-
-    def sorted(self) -> list[tuple[float, Array, str]]:
-        return [(-f, x, w) for f, _, x, w in sorted(self._heap, key=lambda it: (-it[0], it[1]))]
-
-    def __len__(self) -> int:
-        return len(self._heap)
+        self._keep(f, x, where)
 
 
 def _weighted(terms: dict[str, float], opts: DroneHorizonOptions) -> float:

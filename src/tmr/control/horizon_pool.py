@@ -223,6 +223,10 @@ class _Pool:
     def offer(self, f: float, viol: float, x: Array, where: str) -> None:
         if not (f < self.f_limit and viol <= self.screen):
             return
+        self._keep(f, x, where)
+
+    def _keep(self, f: float, x: Array, where: str) -> None:
+        """Keep a copy of ``x`` if it is among the ``keep`` cheapest so far."""
         if len(self._heap) >= self.keep and -self._heap[0][0] <= f:
             return
         item = (-f, self._seq, np.array(x, dtype=float), where)
@@ -235,12 +239,16 @@ class _Pool:
     def __len__(self) -> int:
         return len(self._heap)
 
+    def sorted(self) -> list[tuple[float, Array, str]]:
+        """The kept iterates (f, x, where), the cheapest first (ties: the earliest)."""
+        return [(-f, x, w) for f, _, x, w in sorted(self._heap, key=lambda it: (-it[0], it[1]))]
+
     def best(self, model: _Model, tol: float, J_limit: float) -> _Candidate | None:
         """The lowest-cost kept iterate that satisfies every row at ``tol`` (its fixed variables projected: the start,
         the equality leader on its reference) and costs less than ``J_limit``; ``None`` if there is none."""
         su = model.su
         best: _Candidate | None = None
-        for _, _, x, where in sorted(self._heap, key=lambda item: (-item[0], item[1])):
+        for _, x, where in self.sorted():
             x = model.project(x)
             if _violations(model, model.values(x), x, tol):
                 continue
