@@ -454,7 +454,7 @@ def main() -> None:
     ap.add_argument("--timeout", type=float, default=300.0, help="a run taking longer is killed [s]")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--scenario-e", type=int, default=6, help="also scenario E with this many robots (0: not)")
-    ap.add_argument("--drones", nargs="*", help="the drone mode: these drone scenarios (e.g. F G H), qp vs horizon")
+    ap.add_argument("--drones", nargs="*", help="the drone mode: these drone scenarios (default F G H), qp vs horizon")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
@@ -463,7 +463,8 @@ def main() -> None:
     if args.rooms:
         rooms_main(args)
         return
-    if args.drones:
+    if args.drones is not None:  # --drones alone: F G H
+        args.drones = args.drones or ["F", "G", "H"]
         drones_main(args)
         return
     rows: dict[str, list[dict]] = {s: [] for s in args.scenarios}

@@ -579,3 +579,20 @@ def test_structured_jacobian_and_hessian_equal_casadis_automatic_ones():
     np.testing.assert_allclose(
         horizon_model.distance_bspline(env)(pts), np.asarray(distance_spline(env).map(500)(pts.T)).ravel(), atol=1e-12
     )
+    # the sparse point maps are the model's own sample points (Px, Py) at every sample
+    idx = np.arange(int(model.Px.numel()))
+    Ax, Ay, b = model.point_maps(idx)
+    P = np.asarray(ca.Function("P", [model.x], [ca.horzcat(model.Px, model.Py)])(x))
+    np.testing.assert_allclose((Ax @ x).full().ravel() + b[:, 0], P[:, 0], atol=1e-12)
+    np.testing.assert_allclose((Ay @ x).full().ravel() + b[:, 1], P[:, 1], atol=1e-12)
+    # outside its knot box casadi's spline is 0: so are the derivatives the NLP is given (scipy would extrapolate)
+    bs = horizon_model.distance_bspline(env)
+    lo, hi = bs.t[0][0], bs.t[0][-1]
+    far = np.array([[lo - 0.5, hi + 0.5, 0.5 * (lo + hi)], [2.0, 2.0, 2.0]])
+    d1 = horizon_model._SplineDerivatives(bs, 3, 1)(far)
+    d2 = horizon_model._SplineDerivatives(bs, 3, 2)(far)
+    sym = ca.MX.sym("p", 2)
+    grad = ca.Function("g", [sym], [ca.gradient(distance_spline(env)(sym), sym)])
+    for i in range(3):
+        np.testing.assert_allclose([float(d1[0][i]), float(d1[1][i])], np.asarray(grad(far[:, i])).ravel(), atol=1e-9)
+    assert all(float(d[0]) == 0.0 and float(d[1]) == 0.0 for d in d2) and float(d2[1][2]) != 0.0

@@ -6,6 +6,7 @@ curve; the spline field is within its stated error of the exact (coal) distance.
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -109,6 +110,53 @@ def test_a_stopped_nlp_still_returns_a_checked_plan_never_worse_than_qp(small, k
     again = check_drone_plan(plan, problem.scenario, params=problem.params, update_plan=False)
     assert again.success
     assert all(n <= o for n, o in zip(again.fitness_raw, wm.fitness_raw, strict=True))
+
+
+def test_a_time_limit_inside_ipopt_stops_it_and_returns_a_checked_plan(small, monkeypatch):
+    """The deadline passes while IPOPT iterates (forced after its 3rd iteration, so the test does not depend on this
+    machine's speed): IPOPT stops with the wall-time status, the plan is checked and no worse than qp."""
+    from tmr.control import horizon3d
+
+    class Stopping(horizon3d._IterationCallback):
+        def eval(self, arg):
+            if self.iteration >= 3:
+                self.deadline = -math.inf
+            return super().eval(arg)
+
+    monkeypatch.setattr(horizon3d, "_IterationCallback", Stopping)
+    problem, warm, wm = small
+    plan, metrics = plan_horizon_drones(problem, _copy(warm), wm, time_limit=60.0)
+    d = plan.diagnostics
+    assert d["horizon_stop"] == "time_limit" and d["ipopt_status"] == "Maximum_WallTime_Exceeded"
+    assert d["horizon_rounds"][0]["iterations"] in (3, 4), d["horizon_rounds"]
+    assert "in round 1" in d["horizon_note"] and d["horizon_result"] in ("best_feasible_iterate", "warm_start")
+    again = check_drone_plan(plan, problem.scenario, params=problem.params, update_plan=False)
+    assert again.success and metrics.success
+    assert all(n <= o for n, o in zip(again.fitness_raw, wm.fitness_raw, strict=True))
+
+
+def test_the_callers_warm_start_is_left_as_it_was(small):
+    problem, warm, wm = small
+    mine = _copy(warm)
+    before = (mine.method, dict(mine.diagnostics))
+    plan_horizon_drones(problem, mine, wm, time_limit=0.05)  # stops before IPOPT: returns the qp plan
+    assert (mine.method, set(mine.diagnostics)) == (before[0], set(before[1]))
+
+
+def test_a_failed_qp_plan_is_not_a_warm_start_and_auto_goes_on():
+    """F with 1 drone: the qp leader stalls (a plan of its first steps only); the NLP is not started on it and the
+    verdict says why; with ``auto`` the next count is tried as with ``qp``."""
+    from tmr.planner3d import plan_drones
+    from tmr.world.drones import load_drone_scenario
+
+    sc = load_drone_scenario("F")
+    plan, metrics = plan_drones(sc, 1, "horizon", time_limit=60.0)
+    assert not plan.success and not metrics.success and plan.method == "horizon"
+    assert plan.failure.startswith("horizon: not started, its qp warm start failed (the leader stalled")
+    assert plan.diagnostics["horizon_result"] == "warm_start" and plan.diagnostics["timings"]["nlp_time"] == 0.0
+    plan, metrics = plan_drones(sc, "auto", "horizon", time_limit=0.05)
+    assert plan.success and plan.robots.shape[1] == 2, plan.failure
+    assert plan.diagnostics["robots_auto"].startswith("N_min = 1; 1: horizon: not started")
 
 
 def test_nlp_catenary_samples_are_catenary3d_curve(small):

@@ -408,6 +408,11 @@ def test_unknown_parameter_refused_before_planning(tmp_path, capsys):
     assert code == 2 and "nosuch" in err and not out.exists()
     code, _, err = run_cli(["--scenario", "A", "--time-limit", "-1", "--out", str(out)], capsys)
     assert code == 2 and "--time-limit: must be a finite number > 0, got '-1'" in err
+    for scenario, method in (("A", "qp"), ("F", "pinv")):  # a limit no method but horizon has: refused, not ignored
+        code, _, err = run_cli(
+            ["--scenario", scenario, "--method", method, "--time-limit", "5", "--out", str(out)], capsys
+        )
+        assert code == 2 and f"--method {method} has none (add --method horizon)" in err and not out.exists()
 
 
 def test_negative_coordinates_are_values_not_flags(tmp_path, capsys):

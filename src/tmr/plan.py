@@ -532,6 +532,10 @@ def _main(args: argparse.Namespace) -> int:
     try:
         if args.robots == "auto" and args.start is not None:
             raise TmrError("--robots auto chooses the number of robots, so it cannot take --start; give --robots N")
+        if args.time_limit is not None and args.method != "horizon":
+            raise TmrError(
+                f"--time-limit is the horizon NLP's limit: --method {args.method} has none (add --method horizon)"
+            )
         check_out(Path(args.out))
         if args.scenario and not args.map:
             from tmr.world.scenario import scenario_kind  # reads the file only: no 3-D import for ground

@@ -197,6 +197,13 @@ def _solve_horizon(
     start = time.perf_counter()
     warm, warm_metrics = solve_drones(problem, "qp", progress=progress)
     qp_time = time.perf_counter() - start
+    if not warm.success:  # no start for the NLP (a stalled qp plan may hold only its first steps): not run
+        reason = f"horizon: not started, its qp warm start failed ({str(warm.failure).split(';')[0]})"
+        warm.method, warm.failure = "horizon", reason
+        warm.diagnostics = dict(warm.diagnostics, horizon_result="warm_start", horizon_note=reason)
+        warm.wall_time = time.perf_counter() - start
+        warm.diagnostics["timings"] = {"qp_time": qp_time, "nlp_time": 0.0}
+        return warm, replace(warm_metrics, method="horizon", failure=reason)
     limit = DEFAULT_TIME_LIMIT if time_limit is None else time_limit
     plan, metrics = plan_horizon_drones(problem, warm, warm_metrics, time_limit=limit, progress=progress, **options)
     plan.wall_time = time.perf_counter() - start

@@ -75,10 +75,13 @@ __all__ = ["DEFAULT_TIME_LIMIT", "DroneHorizonOptions", "plan_horizon_drones", "
 
 _LOG = logging.getLogger("tmr")
 
-#: Seconds casadi takes to build IPOPT's solver per row of the drone NLP, measured on the 2-core machine: 0.17 ms on
-#: G (24,433 rows, 4.2 s), 0.68 ms on H (220,492 rows, 150 s: it grows with the size). A round whose build would
-#: overrun the time limit is not started.
-BUILD_SECONDS_PER_ROW: float = 7e-4
+#: Seconds casadi takes to build IPOPT's solver per row of the drone NLP up to :data:`BUILD_REFERENCE_ROWS` rows,
+#: growing as (rows / BUILD_REFERENCE_ROWS)^:data:`BUILD_GROWTH` beyond (measured on the 2-core machine, first rounds:
+#: F 1,902 rows 0.44 s, G 8,621 rows 1.2 s, H 21,039 rows 7.2 s; H's last round, 220,492 rows, 150 s). A round whose
+#: expected build would overrun the time limit is not started.
+BUILD_SECONDS_PER_ROW: float = 3.5e-4
+BUILD_REFERENCE_ROWS: int = 21_000
+BUILD_GROWTH: float = 0.3
 _NO_WORSE_MARGIN = 1e-6
 _SUCCESS = ("Solve_Succeeded",)
 _ACCEPTABLE = ("Solved_To_Acceptable_Level",)
@@ -98,6 +101,11 @@ DRONE_GROUPS: tuple[str, ...] = (
     "speed",
     "acceleration",
 )
+
+
+def _expected_build(rows: int) -> float:
+    """Expected seconds to build the drone NLP's solver with ``rows`` rows (see :data:`BUILD_SECONDS_PER_ROW`)."""
+    return rows * BUILD_SECONDS_PER_ROW * max(1.0, rows / BUILD_REFERENCE_ROWS) ** BUILD_GROWTH
 
 
 @dataclass(frozen=True)
@@ -653,8 +661,10 @@ def plan_horizon_drones(
             ``params``); this module does not import the planner.
         warm_start: the ``qp`` plan of the same problem (IPOPT's initial point, the leader projected on its
             reference, and the last fallback). warm_metrics: its :class:`tmr.checks.drones.DroneMetrics`.
-        time_limit: wall-clock limit [s] of the whole call (None: none); IPOPT is stopped at the first iteration past
-            it and no solver is built whose expected build time would overrun it.
+        time_limit: wall-clock limit [s] of the whole call (None: none), the final checks included: IPOPT is
+            stopped at the first iteration past it less the time the checks of the candidates are expected to take
+            (``pool_checks`` + 1 times the qp plan's ``diagnostics["timings"]["check_time"]``), and no solver is
+            built whose expected build time would overrun it.
         progress: a tqdm bar of IPOPT's iterations on a terminal.
         **options: fields of :class:`DroneHorizonOptions`.
 
@@ -668,8 +678,10 @@ def plan_horizon_drones(
 
     start_time = time.perf_counter()
     limit = _time_limit(time_limit)
-    deadline = start_time + limit
     opts = _options(options)
+    # the limit covers the final checks too: each candidate costs about what the qp plan's own check did
+    check_each = float(warm_start.diagnostics.get("timings", {}).get("check_time", 0.0))
+    deadline = start_time + limit - check_each * (opts.pool_checks + 1)
     if warm_start.robots.shape[0] < 3:
         raise ParameterError("the horizon needs at least 2 steps (K ≥ 2)")
     t0 = time.perf_counter()
@@ -695,7 +707,7 @@ def plan_horizon_drones(
         for rnd in range(1, opts.max_rounds + 1):
             prev, tr = tr, _Transcription(model, masks)
             remaining = deadline - time.perf_counter()
-            expected = max(build_time * tr.size / max(built_rows, 1), tr.size * BUILD_SECONDS_PER_ROW)
+            expected = max(build_time * tr.size / max(built_rows, 1), _expected_build(tr.size))
             if math.isfinite(limit) and remaining <= expected:
                 stop = "time_limit"
                 break
@@ -795,8 +807,7 @@ def plan_horizon_drones(
         "rows_left_out": f"rows left out were still violated after {opts.max_rounds} rounds",
     }[stop]  # fmt: skip
     if chosen is None:
-        result, plan, detail = "warm_start", warm_start, "the qp plan itself"
-        plan.method = "horizon"
+        result, plan, detail = "warm_start", replace(warm_start, method="horizon"), "the qp plan itself"
         metrics = replace(warm_metrics, method="horizon")
     else:
         result, plan, metrics, detail = chosen
@@ -809,7 +820,7 @@ def plan_horizon_drones(
         note += "; not returned: " + "; ".join(rejected)
     if stop != "converged":
         note += f"; {len(pool)} iterates kept, {screened} screened, {len(candidates)} satisfied every row"
-    diag = dict(plan.diagnostics) if plan is warm_start else {}
+    diag = dict(warm_start.diagnostics) if chosen is None else {}
     diag.update(
         horizon_result=result,
         horizon_note=note,

@@ -232,11 +232,14 @@ def distance_bspline(env: Any) -> Any:
 class _SplineDerivatives(ca.Callback):
     """Derivatives of the clearance spline at n points, ``P (2, n) -> (a, b, c)`` each (1, n): order 1 gives
     (∂c/∂x, ∂c/∂y, 0), order 2 (∂²c/∂x², ∂²c/∂x∂y, ∂²c/∂y²) [1, 1/m]. Evaluated by scipy (:func:`distance_bspline`);
-    never differentiated itself: the NLP's Jacobian and Hessian are assembled from them (:class:`_Transcription`)."""
+    never differentiated itself: the NLP's Jacobian and Hessian are assembled from them (:class:`_Transcription`).
+    Outside the knot box [t_0, t_last]² casadi's B-spline is 0 (scipy's extrapolates): the derivatives are 0 there
+    too, so they stay those of the function the NLP evaluates."""
 
     def __init__(self, bspline: Any, n: int, order: int) -> None:
         ca.Callback.__init__(self)
         self.bspline, self.n = bspline, int(n)
+        self.box = np.array([[t[0], t[-1]] for t in bspline.t])  # (2, 2): casadi's spline is 0 outside
         self.nus = ((1, 0), (0, 1)) if order == 1 else ((2, 0), (1, 1), (0, 2))
         self.construct(f"clearance_d{order}_{n}", {})
 
@@ -254,7 +257,12 @@ class _SplineDerivatives(ca.Callback):
 
     def eval(self, arg: list[Any]) -> list[Any]:
         pts = np.asarray(arg[0], dtype=float).T
-        return [self.bspline(pts, nu=nu).reshape(1, -1) for nu in self.nus]
+        out = [self.bspline(pts, nu=nu).reshape(1, -1) for nu in self.nus]
+        outside = ((pts < self.box[:, 0]) | (pts > self.box[:, 1])).any(axis=1)
+        if outside.any():
+            for o in out:
+                o[0, outside] = 0.0
+        return out
 
 
 def samples_needed(span_max: float, r: float, d_safe: float, field_error: float) -> int:
@@ -673,7 +681,7 @@ class _Transcription:
     def derivatives(self, obj_scale: float) -> dict[str, ca.Function]:
         """casadi ``nlpsol`` options ``jac_g`` and ``hess_lag`` with the structured clearance derivatives (see the
         class docstring) for the cost divided by ``obj_scale``; empty (casadi's own) without the scipy spline or
-        clearance rows."""
+        clearance rows; no ``hess_lag`` with ``hessian="limited-memory"``."""
         if self.model.bspline is None or self._clr is None:
             return {}
         if obj_scale in self._derivatives:
@@ -692,6 +700,9 @@ class _Transcription:
         J_clr = ca.mtimes(ca.diag(cx), Ax) + ca.mtimes(ca.diag(cy), Ay)
         jac = ca.vertcat(J_rest[:nb, :], J_clr, J_rest[nb:, :])
         jac_g = ca.Function("nlp_jac_g", [x, p], [self.g, jac], ["x", "p"], ["g", "jac_g_x"])
+        if self.opts.hessian != "exact":  # IPOPT's quasi-Newton approximation: no Hessian to build
+            self._derivatives[obj_scale] = {"jac_g": jac_g}
+            return self._derivatives[obj_scale]
         lam_f = ca.MX.sym("lam_f")
         lam_g = ca.MX.sym("lam_g", self.size)
         lam_c = lam_g[nb : nb + n]
