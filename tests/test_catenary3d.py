@@ -234,6 +234,69 @@ def test_sensitivities_match_central_differences_of_solve3d(p, q, winch_end):
     np.testing.assert_allclose(S.dpoints_dp + S.dpoints_dq, np.broadcast_to(np.eye(3), S.dpoints_dp.shape), atol=1e-12)
 
 
+@pytest.mark.parametrize("winch_end", ["lower", "upper"])
+@pytest.mark.parametrize("p,q", SENS_CASES)
+def test_winch_tension_sensitivities_match_central_differences(p, q, winch_end):
+    """An active winch (issue 34): the samples, length and end tensions w.r.t. T_w, against central differences of
+    solve3d at T_w ± 1e-6 N; the end-point Jacobians are unchanged by asking for them."""
+    from tmr.model.catenary3d import sensitivities
+
+    prm = DroneTetherParams(winch_end=winch_end, winch_tension=3.0)
+    sig = np.array([0.0, 0.1, 0.37, 0.5, 0.81, 1.0])
+    cat = solve3d(p, q, prm)
+    S, plain = sensitivities(cat, sig, prm, winch=True), sensitivities(cat, sig, prm)
+    assert plain.dpoints_dtw is None and plain.dlength_dtw is None
+    np.testing.assert_allclose(S.dpoints_dq, plain.dpoints_dq, rtol=1e-12, atol=1e-12)
+    eps = 1e-6
+    hi, lo = solve3d(p, q, prm, winch_tension=3.0 + eps), solve3d(p, q, prm, winch_tension=3.0 - eps)
+    fd_points = (sensitivities(hi, sig, prm).points - sensitivities(lo, sig, prm).points) / (2 * eps)
+    np.testing.assert_allclose(S.dpoints_dtw, fd_points, atol=2e-7)
+    assert S.dlength_dtw == pytest.approx((hi.length - lo.length) / (2 * eps), abs=2e-7)
+    assert S.dtension_dtw == 1.0 == pytest.approx((hi.tension_q - lo.tension_q) / (2 * eps), abs=1e-6)
+    assert S.dpoints_dtw[1:-1, 2].min() > 5e-5  # a pull raises every inner sample (steep: 9e-5 m/N): not vacuous
+    assert S.dlength_dtw < 0  # and shortens the cable
+
+
+def test_level_sag_against_the_closed_form_and_its_tension_derivative():
+    """Level ends d apart, the winch holding T_w: sag = a (cosh(d/2a) − 1) with a cosh(d/2a) = T_w/(ρg) (Caruso 2021
+    eq. 22); its derivative w.r.t. T_w by implicit differentiation of that closed form, against the sensitivities."""
+    from tmr.model.catenary3d import sensitivities
+
+    for d, tw in ((5.0, 2.0), (12.0, 3.0), (1.0, 0.5)):
+        prm = DroneTetherParams(winch_tension=tw)
+        cat = solve3d((0.0, 0.0, 3.0), (d, 0.0, 3.0), prm)
+        m = tw / W
+        a = brentq(lambda t, d=d, m=m: t * math.cosh(d / (2 * t)) - m, d / (2 * 1.1996786402577337), 1e6)
+        assert 3.0 - cat.lowest[2] == pytest.approx(a * (math.cosh(d / (2 * a)) - 1), abs=1e-9)
+        # sag = m − a, so d sag / d T_w = (1 − da/dm) / (ρ g); da/dm from F(a, m) = a cosh(d/2a) − m = 0
+        u = d / (2 * a)
+        da_dm = 1.0 / (math.cosh(u) - u * math.sinh(u))
+        S = sensitivities(cat, [0.5], prm, winch=True)  # mid-span: the lowest point of level ends
+        assert -S.dpoints_dtw[0, 2] == pytest.approx((1.0 - da_dm) / W, rel=1e-7)
+
+
+def test_solve3d_batch_takes_a_winch_tension_per_tether():
+    from tmr.model.catenary3d import sensitivities_batch, solve3d_batch
+
+    P = np.array([[0.0, 0.0, 0.5], [3.0, 1.0, 2.0], [7.0, 1.0, 2.5], [9.0, 4.0, 1.5]])
+    T = np.array([1.5, 2.5, 4.0])
+    for winch_end in ("lower", "upper"):
+        prm = DroneTetherParams(winch_end=winch_end)
+        b = solve3d_batch(P, prm, winch_tension=T)
+        for j in range(3):
+            _assert_same_catenary(b[j], solve3d(P[j], P[j + 1], prm, winch_tension=T[j]))
+        S = sensitivities_batch(b, [0.3, 0.6], prm, winch=True)
+        for j in range(3):
+            one = solve3d(P[j], P[j + 1], prm, winch_tension=T[j])
+            from tmr.model.catenary3d import sensitivities
+
+            np.testing.assert_allclose(S[j].dpoints_dtw, sensitivities(one, [0.3, 0.6], prm, winch=True).dpoints_dtw,
+                                       atol=1e-12)  # fmt: skip
+    for bad in ([1.0, 2.0], [1.0, -2.0, 3.0], [1.0, math.nan, 2.0], "x"):
+        with pytest.raises(ParameterError, match="winch tensions"):
+            solve3d_batch(P, winch_tension=bad)
+
+
 def test_sensitivities_of_a_vertical_tether_and_the_batch():
     from tmr.model.catenary3d import sensitivities, sensitivities_batch
 
@@ -344,7 +407,7 @@ def test_solve3d_batch_equals_solve3d_per_tether(winch_end):
                     and b.tension_p[j] == cat.tension_p
                     and bool(b.vertical[j]) == (cat.a is None)
                 )
-            S, R = sensitivities_batch(b, sig, prm), sensitivities_batch(objs, sig, prm)
+            S, R = sensitivities_batch(b, sig, prm, winch=True), sensitivities_batch(objs, sig, prm, winch=True)
             for f in dataclasses.fields(S):
                 np.testing.assert_allclose(getattr(S, f.name), getattr(R, f.name), rtol=1e-12, atol=1e-12)
     assert special[1, 2] == special[0, 2] and solve3d_batch(special, prm).vertical.tolist() == [

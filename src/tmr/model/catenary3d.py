@@ -448,11 +448,30 @@ class TetherCatenaries:
         return (self[j] for j in range(len(self)))
 
 
+def _winch_tensions(winch_tension: ArrayLike | None, n: int, prm: DroneTetherParams) -> list[float]:
+    """The n tethers' winch tensions [N]: ``params.winch_tension`` each (None) or an (n,) array of finite values
+    > 0 (ParameterError otherwise)."""
+    if winch_tension is None:
+        return [float(prm.winch_tension)] * n
+    try:
+        tw = np.asarray(winch_tension, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"the winch tensions must be {n} numbers > 0 N, got {winch_tension!r}") from exc
+    if tw.shape != (n,) or not (np.isfinite(tw).all() and (tw > 0).all()):
+        raise ParameterError(f"the winch tensions must be {n} finite numbers > 0 N, got {winch_tension!r}")
+    return tw.tolist()
+
+
 def solve3d_batch(
-    points: ArrayLike, params: DroneTetherParams | None = None, warm: ArrayLike | None = None
+    points: ArrayLike,
+    params: DroneTetherParams | None = None,
+    warm: ArrayLike | None = None,
+    *,
+    winch_tension: ArrayLike | None = None,
 ) -> TetherCatenaries:
     """The N tethers between consecutive ``points`` (N+1, 3) [m] at once: tether j is ``solve3d(points[j],
-    points[j + 1], params)`` (the winch tension ``params.winch_tension`` [N] at ``params.winch_end``).
+    points[j + 1], params, winch_tension=T_j)`` (the winch tension T_j [N] at ``params.winch_end``:
+    ``winch_tension[j]`` of an (N,) array, an active winch's, or ``params.winch_tension`` for every tether).
 
     ``warm``: (N,) theta_A of the same tethers a moment ago (the previous result's ``theta``; NaN: none), each the
     warm start :func:`solve3d` takes from ``warm=``. The spans and heights are computed for all tethers in one numpy
@@ -479,18 +498,19 @@ def solve3d_batch(
     D = P[1:] - P[:-1]
     d_all, h_all = np.hypot(D[:, 0], D[:, 1]), D[:, 2]
     guesses = [None] * N if warm is None else np.asarray(warm, dtype=float).reshape(N).tolist()
-    tw, w, lower = prm.winch_tension, prm.weight_per_length, prm.winch_end == "lower"
+    tws = _winch_tensions(winch_tension, N, prm)
+    w, lower = prm.weight_per_length, prm.winch_end == "lower"
     nan = math.nan
     rows: list[tuple[float, ...]] = []
     cats: list[Catenary3D | tuple[float, ...]] = []
     z = P[:, 2].tolist()
-    for j, (d, h, dx, dy, guess) in enumerate(
-        zip(d_all.tolist(), h_all.tolist(), *D[:, :2].T.tolist(), guesses, strict=True)
+    for j, (d, h, dx, dy, guess, tw) in enumerate(
+        zip(d_all.tolist(), h_all.tolist(), *D[:, :2].T.tolist(), guesses, tws, strict=True)
     ):
         dh = abs(h)
         t_a = tw if lower else tw - w * dh  # tension at the lower end A, as in solve3d
         if d < VERTICAL_SPAN or t_a <= 0.0:
-            cat = solve3d(P[j], P[j + 1], prm)  # vertical: a straight line; else its error
+            cat = solve3d(P[j], P[j + 1], prm, winch_tension=tw)  # vertical: a straight line; else its error
             cats.append(cat)
             rows.append((cat.d, cat.h, nan, nan, nan, nan, cat.length, cat.tension_p, cat.tension_q, 1.0, 0.0))
             continue
@@ -518,6 +538,9 @@ class CatenarySensitivity:
         length: arc length L [m]; dlength_dp, dlength_dq: its gradients (3,) [m/m].
         tension_p, tension_q: end tensions [N]; dtension_p_dp, dtension_p_dq, dtension_q_dp, dtension_q_dq: their
             gradients (3,) [N/m].
+        dpoints_dtw, dlength_dtw, dtension_dtw: (``winch=True`` only, else None) the derivatives of the samples
+            (k, 3) [m/N], of L [m/N] and of both end tensions [N/N = 1: T_B = T_A + rho g h] w.r.t. the winch
+            tension T_w (an active winch, issue 34).
     """
 
     fractions: np.ndarray
@@ -533,10 +556,13 @@ class CatenarySensitivity:
     dtension_p_dq: np.ndarray
     dtension_q_dp: np.ndarray
     dtension_q_dq: np.ndarray
+    dpoints_dtw: np.ndarray | None = None
+    dlength_dtw: float | None = None
+    dtension_dtw: float | None = None
 
 
 _CSTEP = 1e-30  # complex-step size: derivatives of the closed-form parts exact to rounding (Squire & Trapp 1998)
-_CSTEP3 = 1j * _CSTEP * np.eye(3)  # row i: the complex step along the i-th of (theta_A, d, h)
+_CSTEP4 = 1j * _CSTEP * np.eye(4)  # row i: the complex step along the i-th of (theta_A, d, h, T_w)
 _EYE2, _EYE3, _EZ = np.eye(2), np.eye(3), np.array([0.0, 0.0, 1.0])
 
 
@@ -576,16 +602,20 @@ class TetherSensitivities:
     dtension_p_dq: np.ndarray
     dtension_q_dp: np.ndarray
     dtension_q_dq: np.ndarray
+    dpoints_dtw: np.ndarray | None = None
+    dlength_dtw: np.ndarray | None = None
+    dtension_dtw: np.ndarray | None = None
 
     def __getitem__(self, i: int) -> CatenarySensitivity:
         """Tether i's :class:`CatenarySensitivity`."""
         return CatenarySensitivity(
-            self.fractions, *(getattr(self, f.name)[i] for f in fields(self) if f.name != "fractions")
+            self.fractions,
+            *(None if (v := getattr(self, f.name)) is None else v[i] for f in fields(self) if f.name != "fractions"),
         )
 
 
 def sensitivities(
-    cat: Catenary3D, fractions: ArrayLike, params: DroneTetherParams | None = None
+    cat: Catenary3D, fractions: ArrayLike, params: DroneTetherParams | None = None, *, winch: bool = False
 ) -> CatenarySensitivity:
     """Sample points of ``cat`` at fixed arc fractions, its arc length and end tensions, with their Jacobians w.r.t.
     both ends (3x3 per point, 3-vectors for L and the tensions).
@@ -598,9 +628,10 @@ def sensitivities(
     X = A + x u + z e_z with u the horizontal unit vector A -> B; d d = u.(dB - dA)_xy, d h = dB_z - dA_z and
     d u = (I - u u^T)(dB - dA)_xy / d, so dX/dB is the 3x3 block below and dX/dA = I - dX/dB (translation).
     A vertical tether (straight) moves as X = p + sigma (q - p). At level ends (h = 0) the lower end swaps and the
-    Jacobians are one-sided (the tension at each end has a kink there).
+    Jacobians are one-sided (the tension at each end has a kink there). ``winch``: also w.r.t. the winch tension
+    (:class:`CatenarySensitivity`'s ``*_dtw``).
     """
-    return sensitivities_batch([cat], fractions, params)[0]
+    return sensitivities_batch([cat], fractions, params, winch=winch)[0]
 
 
 def _stack(cats: Sequence[Catenary3D]) -> TetherCatenaries:
@@ -621,12 +652,19 @@ def _stack(cats: Sequence[Catenary3D]) -> TetherCatenaries:
 
 
 def sensitivities_batch(
-    cats: Sequence[Catenary3D] | TetherCatenaries, fractions: ArrayLike, params: DroneTetherParams | None = None
+    cats: Sequence[Catenary3D] | TetherCatenaries,
+    fractions: ArrayLike,
+    params: DroneTetherParams | None = None,
+    *,
+    winch: bool = False,
 ) -> TetherSensitivities:
     """:func:`sensitivities` of several tethers at once (vectorised over the tethers: one numpy pass for a chain).
 
     ``cats``: the tethers, as :class:`Catenary3D` objects or as the arrays :func:`solve3d_batch` returns (read as
-    they are: no per-tether gathering)."""
+    they are: no per-tether gathering); each tether's own winch tension is read from its end tensions, so tethers
+    solved with different tensions (an active winch each) are differentiated at their own. ``winch``: also the
+    derivatives w.r.t. the winch tension T_w (``dpoints_dtw``, ``dlength_dtw``, ``dtension_dtw``; the same implicit
+    differentiation with T_w as a fourth argument of the span equation: d theta_A / d T_w = -R_T / R_theta)."""
     prm = params if params is not None else DroneTetherParams()
     sig = np.asarray(fractions, dtype=float).reshape(-1)
     C = cats if isinstance(cats, TetherCatenaries) else _stack(cats)
@@ -640,6 +678,8 @@ def sensitivities_batch(
     lw = p_lower | vertical  # p is the end A (a vertical tether: p, whatever its height)
     straight = bool(vertical.any())  # vertical tethers: X = p + sigma (q - p), dX/dq = sigma I (the JB below)
     cv = np.flatnonzero(~vertical) if straight else None
+    if winch:  # a vertical tether: straight whatever T_w (zeros)
+        dX_dT, dL_dT = np.zeros((M, k, 3)), np.zeros(M)
     if straight:
         X = p[:, None, :] + sig[None, :, None] * (q - p)[:, None, :]
         JB = np.zeros((M, k, 3, 3))
@@ -653,16 +693,23 @@ def sensitivities_batch(
         sig_a = np.where(low[:, None], sig, 1.0 - sig)  # fractions from A
         # axis 1: perturbation of theta_A, d, h (imaginary parts, Z[:, i, j] = (theta_A, d, h)_j + i eps delta_ij);
         # axis 2: the samples
-        Z = np.array((theta, d, hv)).T[:, None, :] + _CSTEP3
-        R, L, xs, zs = _plane(Z[..., 0:1], Z[..., 1:2], Z[..., 2:3], tw[:, None, None], wv[:, None, None], up,
+        # with ``winch``, a 4th row perturbs T_w (the active winch's tension, an unknown of its own)
+        if winch:
+            Z = np.array((theta, d, hv, tw)).T[:, None, :] + _CSTEP4
+            T = Z[..., 3:4]
+        else:  # T_w real: the common per-step case stays as cheap as it was
+            Z, T = np.array((theta, d, hv)).T[:, None, :] + _CSTEP4[:3, :3], tw[:, None, None]
+        R, L, xs, zs = _plane(Z[..., 0:1], Z[..., 1:2], Z[..., 2:3], T, wv[:, None, None], up,
                               sig_a[:, None, :])  # fmt: skip
-        Ri = R.imag[:, :, 0] / _CSTEP  # (C, 3): dR/d(theta_A, d, h)
-        dt = -Ri[:, 1:] / Ri[:, :1]  # (C, 2): d theta_A / d(d, h), implicit function theorem
+        Ri = R.imag[:, :, 0] / _CSTEP  # (C, 3 or 4): dR/d(theta_A, d, h[, T_w])
+        dt = -Ri[:, 1:] / Ri[:, :1]  # (C, 2 or 3): d theta_A / d(d, h[, T_w]), implicit function theorem
         # the samples' x (k), z (k) and L (1) with their partials (imaginary parts, axis 1) and their total
-        # derivatives along d and h (axis 1 of G)
-        Y = np.concatenate((xs, zs, L), axis=2)  # (C, 3, 2k+1)
+        # derivatives along d and h [and T_w] (axis 1 of G)
+        Y = np.concatenate((xs, zs, L), axis=2)  # (C, 3 or 4, 2k+1)
         Yi = Y.imag / _CSTEP
-        G = Yi[:, 1:] + Yi[:, :1] * dt[:, :, None]  # (C, 2, 2k+1)
+        G = Yi[:, 1:] + Yi[:, :1] * dt[:, :, None]  # (C, 2 or 3, 2k+1)
+        if winch:  # T_w moves the curve in its plane only: dX/dT_w = x_T u + z_T e_z (A and u stay)
+            x_dt, z_dt, L_dt = G[:, 2, :k], G[:, 2, k:-1], G[:, 2, -1]
         x, z = xs[:, 0].real, zs[:, 0].real  # (C, k)
         x_dd, z_dd, L_dd = G[:, 0, :k], G[:, 0, k:-1], G[:, 0, -1]
         x_dh, z_dh, L_dh = G[:, 1, :k], G[:, 1, k:-1], G[:, 1, -1]
@@ -683,6 +730,9 @@ def sensitivities_batch(
             X[cv], JB[cv], dL_dB[cv] = Xc, J, dLc
         else:
             X, JB, dL_dB = Xc, J, dLc
+        if winch:
+            dX_dT[sel] = x_dt[..., None] * u[:, None, :] + z_dt[..., None] * ez
+            dL_dT[sel] = L_dt
     # vertical tethers: B is q when p is lower (X = p + sigma (q - p) has dX/dq = sigma I = the JB set above)
     JA = _EYE3 - JB
     lowv = lw[:, None, None, None]
@@ -701,6 +751,7 @@ def sensitivities_batch(
         fractions=sig, points=X, dpoints_dp=Jp, dpoints_dq=Jq, length=C.length.copy(),
         dlength_dp=dL_dp, dlength_dq=-dL_dp, tension_p=C.tension_p.copy(), tension_q=C.tension_q.copy(),
         dtension_p_dp=tp_p, dtension_p_dq=-tp_p, dtension_q_dp=-tq_q, dtension_q_dq=tq_q,
+        **({} if not winch else dict(dpoints_dtw=dX_dT, dlength_dtw=dL_dT, dtension_dtw=np.ones(M))),
     )  # fmt: skip
 
 
