@@ -47,17 +47,22 @@ def test_tether_between_hovering_drones_matches_the_catenary(
     p1: tuple[float, float, float], p2: tuple[float, float, float]
 ) -> None:
     """After settling, the simulated cable's lowest point and both end tensions are within 1 % of
-    tmr.model.catenary3d's catenary of the same ends (the winch at the lower end holding T_w = 2 N)."""
-    rp = replay_drones(hover(p1, p2), DroneReplayConfig())
+    tmr.model.catenary3d's catenary of the same ends (the winch at the lower end holding T_w = 2 N). The light cable
+    keeps a small swing (the lowest point of the 8 m one moves between -0.2 % and +0.9 % of its sag with a period
+    of about 1.5 s), so the static values are the means over the last 2 s."""
+    rp = replay_drones(hover(p1, p2, seconds=5.0), DroneReplayConfig())
     assert drone_verdict(rp).ok
+    last = rp.t >= rp.t[-1] - 2.0
     cat = solve3d(p1, p2, DroneTetherParams())
     z_low_end = min(p1[2], p2[2])
     sag = z_low_end - float(cat.lowest[2])  # 0 when the vertex lies beyond the lower end
-    assert abs(rp.lowest[-1, 0] - float(cat.lowest[2])) <= 0.01 * max(sag, 0.0) + 1e-3
-    if sag > 0:  # a cable with an inner lowest point: within 1 % of its sag (measured 0.3 %)
-        assert abs(rp.lowest[-1, 0] - float(cat.lowest[2])) <= 0.01 * sag
-    assert rp.tension_from[-1, 0] == pytest.approx(cat.tension_p, rel=0.01)
-    assert rp.tension_to[-1, 0] == pytest.approx(cat.tension_q, rel=0.01)
+    lowest = float(rp.lowest[last, 0].mean())
+    assert abs(lowest - float(cat.lowest[2])) <= 0.01 * max(sag, 0.0) + 1e-3
+    if sag > 0:  # a cable with an inner lowest point: within 1 % of its sag (measured 0.4 %)
+        assert abs(lowest - float(cat.lowest[2])) <= 0.01 * sag
+        assert np.abs(rp.lowest[last, 0] - float(cat.lowest[2])).max() <= 0.015 * sag  # the swing
+    assert rp.tension_from[last, 0] == pytest.approx(np.full(last.sum(), cat.tension_p), rel=0.01)
+    assert rp.tension_to[last, 0] == pytest.approx(np.full(last.sum(), cat.tension_q), rel=0.01)
     assert min(cat.tension_p, cat.tension_q) == pytest.approx(2.0)  # the winch end holds T_w
     assert rp.tracking_error[-1].max() < 0.01  # the drones hold station with the cable on them
     assert rp.saturation_fraction.max() == 0.0
