@@ -510,11 +510,14 @@ def replay_drones(chain: DroneChain, cfg: DroneReplayConfig | None = None, progr
     qpos, qvel, xmat, ctrl = d.qpos, d.qvel, d.xmat, d.ctrl
     zero3 = np.zeros((n, 3))
 
+    R9 = np.zeros((n, 9))
+    R = R9.reshape(n, 3, 3)  # a view: filled in place every step
+
     def control(p_r: Array, v_r: Array, a_r: Array, ff: Array) -> tuple[Array, NDArray[np.bool_]]:
         np.take(qpos, pq, out=P)
         np.take(qvel, lv, out=V)
         np.take(qvel, av, out=W)
-        R = xmat[body].reshape(n, 3, 3)
+        np.take(xmat, body, axis=0, out=R9)
         rot, sat = ctl.rotor_thrusts(P, V, R, W, p_r, v_r, a_r, ff)
         ctrl[rot_ids] = rot
         return rot, sat

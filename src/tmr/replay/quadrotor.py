@@ -154,11 +154,21 @@ class QuadrotorControl:
         self.J = np.asarray(spec.inertia, dtype=float)
         self.minv = np.linalg.inv(spec.mixer())
         self.fmax = spec.rotor_max
+        # work arrays, reused every call (no allocation of (N, 3) or (N, 3, 3) arrays per physics step)
         self._f = np.zeros((n, 3))
+        self._b1 = np.zeros((n, 3))
+        self._b2 = np.zeros((n, 3))
+        self._b3 = np.zeros((n, 3))
+        self._Rd = np.zeros((n, 3, 3))
+        self._E = np.zeros((n, 3, 3))
+        self._eR = np.zeros((n, 3))
+        self._tau = np.zeros((n, 3))
+        self._Jw = np.zeros((n, 3))
+        self._norm = np.zeros((n, 1))
+        self._thrust = np.zeros(n)
         self._u0 = np.zeros((n, 4))
         self._du = np.zeros((n, 4))
         self._rotors = np.zeros((n, 4))
-        self._ex = np.array([1.0, 0.0, 0.0])
 
     def gains(self) -> dict[str, float]:
         """The gains, for replay.json: k_p [s⁻²], k_v, k_att, k_rate [s⁻¹], rate_max [rad/s]."""
@@ -179,25 +189,42 @@ class QuadrotorControl:
             f_ff: feed-forward force to cancel [N] (the planned tether pull on each drone), (N, 3).
         """
         s = self.spec
-        f = self._f
+        f, b1, b2, b3, Rd, E, eR, tau, Jw, nrm = (
+            self._f, self._b1, self._b2, self._b3, self._Rd, self._E, self._eR, self._tau, self._Jw, self._norm
+        )  # fmt: skip
         np.subtract(p_ref, p, out=f)
         f *= self.kp
-        f += self.kv * (v_ref - v)
+        np.subtract(v_ref, v, out=b1)  # b1 as scratch
+        b1 *= self.kv
+        f += b1
         f += a_ref
         f[:, 2] += s.g
         f *= s.mass
         f -= f_ff
-        b3 = f / np.linalg.norm(f, axis=1, keepdims=True)
-        b2 = np.cross(b3, self._ex)
-        b2 /= np.linalg.norm(b2, axis=1, keepdims=True)
-        b1 = np.cross(b2, b3)
-        Rd = np.stack([b1, b2, b3], axis=2)
-        E = np.matmul(Rd.transpose(0, 2, 1), R)
-        E -= E.transpose(0, 2, 1)  # R_dᵀR − RᵀR_d (skew)
-        eR = 0.5 * np.stack([E[:, 2, 1], E[:, 0, 2], E[:, 1, 0]], axis=1)
-        w_d = np.clip(-s.att_gain * eR, -s.rate_max, s.rate_max)
-        tau = self.J * (s.rate_gain * (w_d - w)) + np.cross(w, self.J * w)
-        thrust = np.einsum("ij,ij->i", f, R[:, :, 2])
+        np.sqrt(np.einsum("ij,ij->i", f, f)[:, None], out=nrm)
+        np.divide(f, nrm, out=b3)
+        # b2 = b3 × e_x / |.| (yaw 0), b1 = b2 × b3
+        b2[:, 0] = 0.0
+        b2[:, 1] = b3[:, 2]
+        np.negative(b3[:, 1], out=b2[:, 2])
+        np.sqrt(np.einsum("ij,ij->i", b2, b2)[:, None], out=nrm)
+        b2 /= nrm
+        _cross(b2, b3, b1)
+        Rd[:, :, 0], Rd[:, :, 1], Rd[:, :, 2] = b1, b2, b3
+        np.matmul(Rd.transpose(0, 2, 1), R, out=E)  # e_R = ½ vee(E − Eᵀ), E = R_dᵀR
+        np.subtract(E[:, 2, 1], E[:, 1, 2], out=eR[:, 0])
+        np.subtract(E[:, 0, 2], E[:, 2, 0], out=eR[:, 1])
+        np.subtract(E[:, 1, 0], E[:, 0, 1], out=eR[:, 2])
+        eR *= -0.5 * s.att_gain  # ω_d = −k_att e_R, clipped
+        np.clip(eR, -s.rate_max, s.rate_max, out=eR)
+        eR -= w
+        eR *= s.rate_gain
+        np.multiply(eR, self.J, out=tau)
+        np.multiply(w, self.J, out=Jw)
+        _cross(w, Jw, b1)
+        tau += b1  # τ = J k_rate (ω_d − ω) + ω × Jω
+        thrust = self._thrust
+        np.einsum("ij,ij->i", f, R[:, :, 2], out=thrust)
         sat = (thrust < 0.0) | (thrust > 4.0 * self.fmax)
         np.clip(thrust, 0.0, 4.0 * self.fmax, out=thrust)
         u0, du, rot = self._u0, self._du, self._rotors
@@ -215,6 +242,13 @@ class QuadrotorControl:
         rot += u0
         np.clip(rot, 0.0, self.fmax, out=rot)
         return rot, sat
+
+
+def _cross(a: Array, b: Array, out: Array) -> None:
+    """out = a × b row by row, (N, 3) (numpy's cross costs more in its axis handling than in the arithmetic)."""
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
 
 
 def _fit(u0: Array, du: Array, fmax: float) -> Array:

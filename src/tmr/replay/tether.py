@@ -298,7 +298,8 @@ class TetherState:
         if self.winch in ("lower", "upper"):  # constant tension magnitude T_w at that end (drone model)
             z = nodes[:, 2]
             zw = min(z[0], z[-1]) if self.winch == "lower" else max(z[0], z[-1])
-            return -(self.t0 + self.weight * (0.5 * float(z[:-1].mean() + z[1:].mean()) - zw))
+            zbar = (2.0 * float(z.sum()) - z[0] - z[-1]) / (2.0 * (len(z) - 1))  # mean segment midpoint
+            return -(self.t0 + self.weight * (zbar - zw))
         seg = np.diff(nodes, axis=0)
         h2 = seg[:, 0] * seg[:, 0] + seg[:, 1] * seg[:, 1]
         s2 = h2 + seg[:, 2] * seg[:, 2]
