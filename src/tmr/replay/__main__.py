@@ -56,8 +56,8 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     p.add_argument(
         "--track",
         choices=["filtered", "raw"],
-        default="filtered",
-        help="trajectory the robots track: the filtered one a robot is given (default) or the planner's raw one",
+        help="ground chains: trajectory the robots track: the filtered one a robot is given (default) or the "
+        "planner's raw one",
     )
     p.add_argument(
         "--tolerance", type=positive_float, help="tracking error that fails the replay [m] (0.05; drones 0.1)"
@@ -72,8 +72,8 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     p.add_argument(
         "--winch",
         choices=["horizontal", "torque"],
-        default="horizontal",
-        help="winch law: hold the horizontal tension T0 (the planner's model, default) or the winch-end tension",
+        help="ground chains: winch law: hold the horizontal tension T0 (the planner's model, default) or the "
+        "winch-end tension (drone chains always hold the planner's: T_w at its winch_end)",
     )
     # no --seed (nothing random), no --html/--export: the replay's --gif is its own (rendered from the simulation)
     add_common(p, out=None, out_help="where to write the replay (default RUN/replay)", views=False)
@@ -116,7 +116,7 @@ def _chain(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str
     from tmr.replay.chain import ReplayConfig, replay_chain
     from tmr.replay.report import chain_verdict, write_chain_outputs
 
-    cfg = ReplayConfig(track=args.track, winch=args.winch)
+    cfg = ReplayConfig(track=args.track or "filtered", winch=args.winch or "horizontal")
     for name, value in (("n_links", args.links), ("timestep", args.timestep), ("tolerance", args.tolerance)):
         if value is not None:
             cfg = replace(cfg, **{name: value})
@@ -246,6 +246,9 @@ def _main(args: argparse.Namespace) -> int:
         raise
     if args.tether_density is not None and run.kind != "drone":
         raise TmrError(f"--tether-density applies to drone-chain runs; {args.run} is a {run.kind} run")
+    for flag, value in (("--track", args.track), ("--winch", args.winch)):
+        if value is not None and run.kind != "chain":
+            raise TmrError(f"{flag} applies to ground-chain runs; {args.run} is a {run.kind} run")
     if args.gif:
         from tmr.replay.gif import select_backend
 

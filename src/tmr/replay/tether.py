@@ -244,6 +244,8 @@ class TetherState:
 
         if winch not in WINCH_MODES:
             raise ValueError(f"winch must be one of {WINCH_MODES}, got {winch!r}")
+        if isinstance(spec.params, DroneTetherParams) != (winch in ("lower", "upper")):
+            raise ValueError(f"winch {winch!r} does not go with {type(spec.params).__name__} (see WINCH_MODES)")
         self.spec = spec
         self.winch = winch
         m = model
@@ -375,11 +377,14 @@ def hang(
     n_links: int = 16,
     timestep: float = 0.005,
     duration: float = 2.0,
-    winch: str = "horizontal",
+    winch: str | None = None,
     floor: bool = False,
 ) -> HangResult:
     """Hang one winched tether between a fixed winch at ``p1`` and a fixed point ``p2`` (world [m]), start it on
-    its static catenary, simulate ``duration`` seconds and measure it (the static check of ``replay.md``)."""
+    its static catenary, simulate ``duration`` seconds and measure it (the static check of ``replay.md``).
+    ``winch``: the winch law (default: "horizontal" for ground tethers, ``params.winch_end`` for drone tethers)."""
+    if winch is None:
+        winch = params.winch_end if isinstance(params, DroneTetherParams) else "horizontal"
     import mujoco
 
     spec = TetherSpec("t1", n_links, "winch", (0.0, 0.0, 0.0), p1, "world", p2, params)
