@@ -664,10 +664,11 @@ def drone_verdict(rp: DroneReplay) -> Any:
     frac = rp.saturation_fraction
     for i in np.flatnonzero(frac > cfg.saturation_limit):
         t0 = float(rp.first_saturation[i] or 0.0)
+        k = int(np.argmin(np.abs(rp.t - t0)))
         msg = (
             f"drone {int(i) + 1} rotor thrust saturated in {100 * frac[i]:.1f} % of the physics steps "
-            f"(> {100 * cfg.saturation_limit:g} %), first at t = {t0:.2f} s; peak rotor thrust "
-            f"{rp.rotor_peak[i]:.2f} N of {rp.rotor_limit:.2f} N"
+            f"(> {100 * cfg.saturation_limit:g} %), first at t = {t0:.2f} s at {_xyz(rp.actual[k, i])}; peak rotor "
+            f"thrust {rp.rotor_peak[i]:.2f} N of {rp.rotor_limit:.2f} N"
         )
         fails.append((t0, "thrust saturation", msg))
     tilted = rp.tilt > cfg.max_tilt
