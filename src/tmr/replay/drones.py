@@ -40,6 +40,7 @@ __all__ = [
     "build_drone_model",
     "chain_of_run",
     "drone_verdict",
+    "quad_spec",
     "replay_drones",
 ]
 
