@@ -1,6 +1,11 @@
-"""Physics replay (MuJoCo) of the built-in plans: static tether accuracy, A–D (qp, horizon), the 15 s rrt plan, MoPICK.
+"""Physics replay (MuJoCo) of the built-in plans: static tether accuracy, A–D (qp, horizon), the 15 s rrt plan, MoPICK,
+and the drone chains F, G, H.
 
-    python benchmarks/replay.py [--repeats 3] [--skip-mcdpr]
+    python benchmarks/replay.py [--repeats 3] [--skip-mcdpr] [--drones-only]
+
+The drone rows (a tether between two hovering drones against ``tmr.model.catenary3d``, F, G, H, and plans made for a
+tether 3× too light replayed with the true density) go to ``benchmarks/results/replay_drones.md`` and
+``replay_drones.csv``; ``--drones-only`` runs only those.
 
 Writes ``benchmarks/results/replay.md`` and ``replay.csv`` and the tether-height figures of scenarios A and D (qp),
 ``replay_A_qp_heights.png`` and ``replay_D_qp_heights.png`` (the README shows D's and quotes its numbers).
@@ -136,12 +141,177 @@ def mcdpr_row(tmp: Path) -> dict:
     }
 
 
+def _e(x: float, sign: str) -> str:
+    """x in 1.0e-03 form, or "–" when there is none (NaN)."""
+    return "–" if x != x else format(x, sign + ".1e")
+
+
+def drone_static_rows() -> list[dict]:
+    """Two drones holding station, one tether between them (3 s), against tmr.model.catenary3d's catenary."""
+    from tmr.model.catenary3d import DroneTetherParams, solve3d
+    from tmr.replay.drones import DroneChain, DroneReplayConfig, drone_verdict, replay_drones
+
+    rows = []
+    ends = (((0, 0, 2), (3, 0, 3)), ((0, 0, 2), (8, 0, 2.5)), ((0, 0, 2), (0.3, 0, 5)), ((0, 0, 3), (10, 0, 3.5)))
+    for p1, p2 in ends:
+        k = 101
+        pos = np.broadcast_to(np.array([p1, p2], dtype=float), (k, 2, 3)).copy()
+        chain = DroneChain(
+            np.arange(k) * 0.05, pos, np.zeros_like(pos), None, DroneTetherParams(), None, Path("."),
+            np.array([-5.0, -5.0, 0.0, 20.0, 5.0, 6.0]), "hover",
+        )  # fmt: skip
+        rp = replay_drones(chain, DroneReplayConfig())
+        c = solve3d(p1, p2, DroneTetherParams())
+        sag = min(p1[2], p2[2]) - float(c.lowest[2])
+        last = rp.t >= rp.t[-1] - 2.0  # means over the last 2 s (the light cable keeps a small swing)
+        low = rp.lowest[last, 0]
+        rows.append(
+            {
+                "ends": f"{p1} – {p2}",
+                "lowest_m": float(low.mean()),
+                "lowest_cat_m": float(c.lowest[2]),
+                "lowest_err_sag": (low.mean() - c.lowest[2]) / sag if sag > 1e-9 else float("nan"),
+                "lowest_swing_sag": (low.max() - low.min()) / sag if sag > 1e-9 else float("nan"),
+                "t_from_err": (rp.tension_from[last, 0].mean() - c.tension_p) / c.tension_p,
+                "t_to_err": (rp.tension_to[last, 0].mean() - c.tension_q) / c.tension_q,
+                "track_mm": 1000 * float(rp.tracking_error[-1].max()),
+                "verdict": "OK" if drone_verdict(rp).ok else "FAIL",
+                "rtf": rp.real_time_factor,
+            }
+        )
+    return rows
+
+
+def drone_row(run_dir: Path, repeats: int, density: float | None = None) -> dict:
+    from tmr.io.rundir import load_run
+    from tmr.replay.drones import DroneReplayConfig, chain_of_run, drone_verdict, replay_drones
+
+    run = load_run(run_dir)
+    chain = chain_of_run(run)
+    reps = [replay_drones(chain, DroneReplayConfig(tether_density=density)) for _ in range(repeats)]
+    rp = reps[0]
+    v = drone_verdict(rp)
+    return {
+        "run": run.label + (f", rho {chain.params.mass_per_length:g} replayed at {density:g}" if density else ""),
+        "drones": run.n_robots,
+        "plan_s": float(run.t[-1]),
+        "plan_ok": run.record["success"],
+        "verdict": "OK" if v.ok else "FAIL",
+        "reason": v.reason or "",
+        "track_max_mm": 1000 * float(rp.tracking_error.max()),
+        "track_rms_mm": 1000 * float(np.sqrt(np.mean(rp.tracking_error**2))),
+        "tilt_deg": float(np.degrees(rp.tilt.max())),
+        "rotor_peak": float(rp.rotor_peak.max()),
+        "rotor_mean": float(rp.rotor_mean.mean()),
+        "rotor_limit": rp.rotor_limit,
+        "saturation_pct": 100 * float(rp.saturation_fraction.max()),
+        "min_tether_m": float(rp.lowest.min()),
+        "plan_then_m": float(rp.lowest_plan.flat[int(np.argmin(rp.lowest))]),
+        "low_vs_plan_mm": 1000 * float(np.nanmax(np.abs(rp.lowest - rp.lowest_plan))),
+        "t_vs_plan_n": float(
+            max(
+                np.nanmax(np.abs(rp.tension_from - rp.tension_from_plan)),
+                np.nanmax(np.abs(rp.tension_to - rp.tension_to_plan)),
+            )
+        ),
+        "contacts": ", ".join(f"{k} {c['count']}" for k, c in rp.contacts.items() if c["count"]) or "none",
+        "sim_s": rp.sim_time,
+        "rtf": statistics.median(r.real_time_factor for r in reps),
+        "rtf_cpu": statistics.median(r.cpu_real_time_factor for r in reps),
+    }
+
+
+def drone_section(repeats: int) -> tuple[list[str], list[dict]]:
+    lines = [
+        "## Drone chains: a tether between two hovering drones vs `tmr.model.catenary3d`",
+        "",
+        "Two drones of the planner's defaults hold station under the cascaded controller (5 s), one tether between"
+        " them (16 links, winch at the lower end holding T_w = 2 N); relative errors of the simulated cable against"
+        " `solve3d` of the same planned ends, means over the last 2 s: lowest point / sag (none when the vertex lies"
+        " beyond the lower end) and its swing (max − min) / sag, tension at the lower and the upper end.",
+        "",
+        "| ends [m] | lowest [m] (catenary) | lowest / sag | swing / sag | T lower | T upper | tracking [mm] | verdict "
+        "| RTF |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in drone_static_rows():
+        lines.append(
+            f"| {r['ends']} | {r['lowest_m']:.4f} ({r['lowest_cat_m']:.4f}) | {_e(r['lowest_err_sag'], '+')} | "
+            f"{_e(r['lowest_swing_sag'], '')} | {r['t_from_err']:+.1e} | {r['t_to_err']:+.1e} | {r['track_mm']:.2f} | "
+            f"{r['verdict']} | {r['rtf']:.0f}× |"
+        )
+    rows = []
+    with tempfile.TemporaryDirectory() as td:
+        tmp = Path(td)
+        for s in "FGH":
+            run_dir, code = plan(tmp, s, "qp")
+            rows.append(drone_row(run_dir, repeats) if code == 0 else {"run": s, "verdict": f"no plan ({code})"})
+            print(rows[-1], flush=True)
+        for s in "FGH":  # planned for a tether 3x too light, replayed with the true density
+            out = tmp / f"{s}_light"
+            cmd = [sys.executable, "-m", "tmr.plan", "--scenario", s, "--set", "mass_per_length=0.005"]
+            code = subprocess.run([*cmd, "--out", str(out), "--no-plots"], capture_output=True).returncode
+            rows.append(drone_row(out, 1, 0.015) if code == 0 else {"run": s, "verdict": f"no plan ({code})"})
+            print(rows[-1], flush=True)
+    lines += [
+        "",
+        "## Drone chains: F, G, H (qp)",
+        "",
+        "Tracking: distance of each drone to the plan's positions (the drones fly a reference smoothed with σ = 0.15"
+        " s). Rotor thrust: the largest of any rotor, the mean of all, against f_max; saturation: the largest share"
+        " of physics steps a drone had a rotor at 0 or f_max. Lowest tether point over the run and the planner's"
+        " catenary at that moment; |Δ| columns: the largest gap to the planner's catenary of the planned ends.",
+        "",
+        "| run | N | plan [s] | replay | tracking max / rms [mm] | tilt max [°] | rotor peak / mean / f_max [N] | "
+        "saturation [%] | lowest tether [m] (plan) | max abs lowest vs plan [mm] | max abs tension vs plan [N] | "
+        "contacts | RTF wall / CPU | first reason |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        if "track_max_mm" not in r:
+            lines.append(f"| {r['run']} | | | {r['verdict']} | | | | | | | | | | |")
+            continue
+        lines.append(
+            f"| {r['run']} | {r['drones']} | {r['plan_s']:.1f} | {r['verdict']} | {r['track_max_mm']:.1f} / "
+            f"{r['track_rms_mm']:.1f} | {r['tilt_deg']:.1f} | {r['rotor_peak']:.2f} / {r['rotor_mean']:.2f} / "
+            f"{r['rotor_limit']:.2f} | {r['saturation_pct']:.2f} | {r['min_tether_m']:.3f} ({r['plan_then_m']:.3f}) | "
+            f"{r['low_vs_plan_mm']:.1f} | {r['t_vs_plan_n']:.3f} | {r['contacts']} | {r['rtf']:.1f}× / "
+            f"{r['rtf_cpu']:.1f}× | {r['reason']} |"
+        )
+    return lines, rows
+
+
+def write_drones(repeats: int) -> list[str]:
+    lines, rows = drone_section(repeats)
+    head = [
+        "# Physics replay (MuJoCo): drone chains",
+        "",
+        "`python benchmarks/replay.py --drones-only` — " + versions(["mujoco", "numpy", "scipy"])
+        + f"; tmr {source_version()}. Model: [`formulations/replay.md`](../../formulations/replay.md), \"Drone"
+        f" chains\". RTF = simulated time / wall time (CPU time) of the simulation loop, median of {repeats} replays"
+        " (1 for the light-tether rows); the machine's 2 cores are shared with other jobs.",
+        "",
+    ]  # fmt: skip
+    (RESULTS / "replay_drones.md").write_text("\n".join(head + lines) + "\n")
+    with (RESULTS / "replay_drones.csv").open("w", newline="") as fh:
+        keys = sorted({k for r in rows for k in r})
+        w = csv.DictWriter(fh, fieldnames=keys)
+        w.writeheader()
+        w.writerows(rows)
+    print("\n".join(lines))
+    return lines
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--skip-mcdpr", action="store_true")
+    ap.add_argument("--drones-only", action="store_true", help="only the drone rows (replay_drones.md)")
     args = ap.parse_args()
     RESULTS.mkdir(exist_ok=True)
+    if args.drones_only:
+        write_drones(args.repeats)
+        return
     lines = [
         "# Physics replay (MuJoCo)",
         "",
@@ -217,6 +387,7 @@ def main() -> None:
             f"{mrow['contacts']} | {mrow['sim_s']:.0f} | {mrow['rtf']:.1f}× / {mrow['rtf_cpu']:.1f}× | "
             f"{mrow['reason']} |",
         ]
+    lines += ["", *write_drones(args.repeats)]
     (RESULTS / "replay.md").write_text("\n".join(lines) + "\n")
     with (RESULTS / "replay.csv").open("w", newline="") as fh:
         keys = sorted({k for r in rows for k in r})

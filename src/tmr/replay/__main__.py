@@ -1,6 +1,7 @@
 """Command line: ``python -m tmr.replay RUN_DIR [--gif]``.
 
-Replays the plan of a ``tmr.plan`` (tethered chain) or ``tmr.mcdpr plan`` (MoPICK) output directory in MuJoCo,
+Replays the plan of a ``tmr.plan`` output directory (a tethered ground chain or a drone chain) or of ``tmr.mcdpr
+plan`` (MoPICK) in MuJoCo,
 writes ``RUN_DIR/replay/`` (``replay.json``, ``timing.json``, figures, optionally ``replay.gif``) and prints the
 verdict.
 
@@ -24,7 +25,7 @@ from tmr.io.cli_args import ArgumentParser, add_common, count, path_arg, positiv
 from tmr.io.console import LOG, progress_enabled
 from tmr.io.console import run as run_command
 
-#: Every file ``tmr replay`` may write into its ``--out`` (chain and MoPICK replays).
+#: Every file ``tmr replay`` may write into its ``--out`` (chain, drone-chain and MoPICK replays).
 OWNED_NAMES = (
     "replay.json",
     "timing.json",
@@ -32,6 +33,7 @@ OWNED_NAMES = (
     "tensions.png",
     "tracking.png",
     "topview.png",
+    "rotor_thrust.png",
     "mcdpr_replay.png",
     "replay.gif",
 )
@@ -44,8 +46,8 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     p = ArgumentParser(
         prog=prog or "python -m tmr.replay",
         description="Replay a plan in the MuJoCo physics engine and check that it holds up: tethers off the floor "
-        "and the obstacles, robots on their trajectories (tmr.plan), or the MoPICK platform held with its bases "
-        "on the ground (tmr.mcdpr plan).",
+        "and the obstacles, robots on their trajectories (tmr.plan: ground chains; drone chains flown by quadrotors "
+        "within their thrust), or the MoPICK platform held with its bases on the ground (tmr.mcdpr plan).",
     )
     p.add_argument("run", type=path_arg, help="output directory of tmr.plan or tmr.mcdpr plan")
     p.add_argument("--gif", action="store_true", help="also write replay.gif, rendered offscreen from the simulation")
@@ -54,15 +56,24 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     p.add_argument(
         "--track",
         choices=["filtered", "raw"],
-        default="filtered",
-        help="trajectory the robots track: the filtered one a robot is given (default) or the planner's raw one",
+        help="ground chains: trajectory the robots track: the filtered one a robot is given (default) or the "
+        "planner's raw one",
     )
-    p.add_argument("--tolerance", type=positive_float, help="tracking error that fails the replay [m] (0.05)")
+    p.add_argument(
+        "--tolerance", type=positive_float, help="tracking error that fails the replay [m] (0.05; drones 0.1)"
+    )
+    p.add_argument(
+        "--tether-density",
+        type=positive_float,
+        metavar="RHO",
+        help="drone chains: simulate tethers of this mass per length [kg/m] instead of the plan's (the drones' "
+        "feed-forward keeps the plan's): does the plan survive a heavier cable?",
+    )
     p.add_argument(
         "--winch",
         choices=["horizontal", "torque"],
-        default="horizontal",
-        help="winch law: hold the horizontal tension T0 (the planner's model, default) or the winch-end tension",
+        help="ground chains: winch law: hold the horizontal tension T0 (the planner's model, default) or the "
+        "winch-end tension (drone chains always hold the planner's: T_w at its winch_end)",
     )
     # no --seed (nothing random), no --html/--export: the replay's --gif is its own (rendered from the simulation)
     add_common(p, out=None, out_help="where to write the replay (default RUN/replay)", views=False)
@@ -105,7 +116,7 @@ def _chain(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str
     from tmr.replay.chain import ReplayConfig, replay_chain
     from tmr.replay.report import chain_verdict, write_chain_outputs
 
-    cfg = ReplayConfig(track=args.track, winch=args.winch)
+    cfg = ReplayConfig(track=args.track or "filtered", winch=args.winch or "horizontal")
     for name, value in (("n_links", args.links), ("timestep", args.timestep), ("tolerance", args.tolerance)):
         if value is not None:
             cfg = replace(cfg, **{name: value})
@@ -132,6 +143,62 @@ def _chain(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str
         lines.append(
             f"  tether{j + 1}  lowest point {rp.lowest[k, j]:.4f} m at t = {rp.t[k]:.2f} s (catenary "
             f"{rp.lowest_catenary[k, j]:.4f} m), winch tension max {rp.tension_winch[:, j].max():.2f} N"
+        )
+    counts = ", ".join(f"{kind} {c['count']}" for kind, c in rp.contacts.items())
+    lines.append(f"  contacts  {counts} (physics steps in contact)")
+    lines.append(
+        f"  real-time factor {rp.real_time_factor:.1f}x ({rp.wall_time:.2f} s wall; "
+        f"{rp.cpu_real_time_factor:.1f}x of this process's CPU time)"
+    )
+    return (0 if verdict.ok else 1), names, "\n".join(lines) + ("" if verdict.ok else f"\nFAILED: {verdict.reason}")
+
+
+def _drones(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str], str]:
+    import math
+    from dataclasses import replace
+
+    import numpy as np
+
+    from tmr.replay.drones import DroneReplayConfig, chain_of_run, drone_verdict, replay_drones
+    from tmr.replay.report import write_drone_outputs
+
+    cfg = DroneReplayConfig(tether_density=args.tether_density)
+    for name, value in (("n_links", args.links), ("timestep", args.timestep), ("tolerance", args.tolerance)):
+        if value is not None:
+            cfg = replace(cfg, **{name: value})
+    chain = chain_of_run(run)
+    LOG.debug("MuJoCo replay of %s", run.label)
+    with _bar("replay") as progress:
+        rp = replay_drones(chain, cfg, progress=progress)
+    verdict = drone_verdict(rp)
+    names = write_drone_outputs(out, rp, run, verdict, plots=not args.no_plots)
+    lines = [f"tmr replay: {run.label}, {run.n_robots} drones, {rp.sim_time:.2f} s simulated, {rp.steps} steps"]
+    if args.gif:
+        from tmr.replay.gif import render_drone_gif
+
+        used = render_drone_gif(rp, run, out / "replay.gif")
+        names = sorted([*names, "replay.gif"])
+        lines.append(f"  replay.gif rendered with {used}")
+    if cfg.tether_density is not None:
+        lines.append(
+            f"  tethers simulated with rho = {cfg.tether_density:g} kg/m (the plan's: {chain.params.mass_per_length:g})"
+        )
+    for i in range(rp.actual.shape[1]):
+        e = rp.tracking_error[:, i]
+        rms = 1000 * float((e**2).mean()) ** 0.5
+        lines.append(
+            f"  drone{i + 1}   tracking error max {1000 * e.max():.1f} mm, rms {rms:.1f} mm; rotor thrust peak "
+            f"{rp.rotor_peak[i]:.2f} N, mean {rp.rotor_mean[i]:.2f} N of {rp.rotor_limit:.2f} N, saturated "
+            f"{100 * rp.saturation_fraction[i]:.2f} % of steps; tilt max {math.degrees(rp.tilt[:, i].max()):.1f} deg"
+        )
+    for j in range(rp.lowest.shape[1]):
+        k = int(rp.lowest[:, j].argmin())
+        dt = np.abs(rp.tension_to[:, j] - rp.tension_to_plan[:, j])
+        lines.append(
+            f"  tether{j + 1}  lowest point {rp.lowest[k, j]:.3f} m at t = {rp.t[k]:.2f} s (plan "
+            f"{rp.lowest_plan[k, j]:.3f} m), drone-end tension max {rp.tension_to[:, j].max():.2f} N "
+            f"(plan {np.nanmax(rp.tension_to_plan[:, j]):.2f} N, largest gap {np.nanmax(dt):.3f} N), "
+            f"{int(rp.tether_contact_steps[j])} contact steps"
         )
     counts = ", ".join(f"{kind} {c['count']}" for kind, c in rp.contacts.items())
     lines.append(f"  contacts  {counts} (physics steps in contact)")
@@ -177,11 +244,11 @@ def _main(args: argparse.Namespace) -> int:
                 f"{args.run} is a tmr.ccma run: the physics replay covers tmr.plan and tmr.mcdpr runs"
             ) from exc
         raise
-    if run.kind == "drone":
-        raise TmrError(
-            f"{args.run} is a drone-chain run: the physics replay covers ground chains (tmr plan) and MoPICK runs "
-            "(tmr mcdpr plan); drone chains are not replayed yet"
-        )
+    if args.tether_density is not None and run.kind != "drone":
+        raise TmrError(f"--tether-density applies to drone-chain runs; {args.run} is a {run.kind} run")
+    for flag, value in (("--track", args.track), ("--winch", args.winch)):
+        if value is not None and run.kind != "chain":
+            raise TmrError(f"{flag} applies to ground-chain runs; {args.run} is a {run.kind} run")
     if args.gif:
         from tmr.replay.gif import select_backend
 
@@ -191,7 +258,8 @@ def _main(args: argparse.Namespace) -> int:
     except ImportError as exc:
         raise TmrError(f"the replay needs MuJoCo: pip install 'mujoco>=4.0' ({exc})") from None
     with Stage(out, OWNED_NAMES, VOLATILE_NAMES, kind="replay") as stage:  # staged, then published in one step
-        code, names, text = (_chain if run.kind == "chain" else _mcdpr)(args, run, stage.path)
+        replay = {"chain": _chain, "drone": _drones}.get(run.kind, _mcdpr)
+        code, names, text = replay(args, run, stage.path)
         names = stage.publish()
     LOG.info(text.split("\nFAILED: ")[0])
     LOG.info(f"  wrote {', '.join(names)} to {out}")

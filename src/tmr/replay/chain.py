@@ -421,11 +421,23 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
     )
 
 
-def _log_contacts(d: Any, cm: ChainModel, contacts: dict[str, dict[str, Any]], now: float) -> None:
+def _log_contacts(
+    d: Any,
+    cm: Any,
+    contacts: dict[str, dict[str, Any]],
+    now: float,
+    kind_of: Any = None,
+    label: Any = None,
+) -> None:
+    """Log the penetrating contacts of this physics step by kind (``kind_of(kind1, kind2)`` of two geom kinds, the
+    chain's by default; ``label(model, geom)`` names a geom); ``cm`` has ``geom_kind``, ``geom_owner``,
+    ``geom_names`` (a :class:`ChainModel` or the drone replay's model)."""
+    kind_of = kind_of or _contact_kind
+    label = label or _label
     seen: set[str] = set()
     for c in _iter_contacts(d):
         g1, g2, dist, pos = c
-        kind = _contact_kind(int(cm.geom_kind[g1]), int(cm.geom_kind[g2]))
+        kind = kind_of(int(cm.geom_kind[g1]), int(cm.geom_kind[g2]))
         if kind is None or dist > 0:
             continue
         entry = contacts[kind]
@@ -438,7 +450,7 @@ def _log_contacts(d: Any, cm: ChainModel, contacts: dict[str, dict[str, Any]], n
             entry["first_time"] = float(now)
             entry["where"] = [float(v) for v in pos]
             first, second = (g1, g2) if cm.geom_kind[g1] >= cm.geom_kind[g2] else (g2, g1)  # the mover first
-            entry["between"] = [_label(cm, first), _label(cm, second)]
+            entry["between"] = [label(cm, first), label(cm, second)]
 
 
 def _iter_contacts(d: Any) -> Any:

@@ -12,7 +12,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-__all__ = ["render_gif", "select_backend"]
+__all__ = ["render_drone_gif", "render_gif", "select_backend"]
 
 #: frames per second of the GIF, and its size [px]
 FPS = 10
@@ -123,5 +123,67 @@ def render_gif(rp: Any, run: Any, path: Path) -> str:
         used = f"mujoco-{os.environ.get('MUJOCO_GL', 'default')}"
     except Exception:  # noqa: BLE001 - no OpenGL context on this machine: draw the same states with matplotlib
         frames = _frames_matplotlib(rp, run, every)
+    write_gif(frames, path)
+    return used
+
+
+def _drone_frames_matplotlib(rp: Any, run: Any, every: int) -> list[Any]:
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from PIL import Image
+
+    from tmr.replay.figures import _boxes
+
+    frames = []
+    b = [float(v) for v in run.bounds]
+    for k in range(0, len(rp.nodes), every):
+        fig, axes = plt.subplots(1, 2, figsize=(WIDTH / 100, HEIGHT / 100), dpi=100)
+        for ax, (u, w) in zip(axes, ((0, 1), (0, 2)), strict=True):
+            for lo, hi in _boxes(run.world_table):
+                ax.fill([lo[u], hi[u], hi[u], lo[u]], [lo[w], lo[w], hi[w], hi[w]], color="0.6")
+            for nd in rp.nodes[k]:
+                ax.plot(nd[:, u], nd[:, w], color="tab:orange", lw=1.5)
+            ax.plot(rp.actual[k, :, u], rp.actual[k, :, w], "o", color="tab:blue")
+            ax.set_xlim(b[u], b[u + 3])
+            ax.set_ylim(b[w], b[w + 3])
+            ax.set_aspect("equal")
+        fig.suptitle(f"t = {rp.t[k]:.2f} s (top and side views of the simulated states)", fontsize=9)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png")
+        plt.close(fig)
+        frames.append(Image.open(io.BytesIO(buf.getvalue())).convert("RGB"))
+    return frames
+
+
+def render_drone_gif(rp: Any, run: Any, path: Path) -> str:
+    """Write ``path`` for a drone replay (:class:`tmr.replay.drones.DroneReplay`), :data:`FPS` frames per second of
+    simulated time, rendered by MuJoCo offscreen (matplotlib top and side views when no OpenGL context can be made);
+    return the renderer used."""
+    Ts = float(rp.t[1] - rp.t[0]) if rp.t.size > 1 else 0.1
+    every = max(1, int(round(1.0 / (FPS * Ts))))
+    b = [float(v) for v in run.bounds]
+    used = "matplotlib"
+    try:
+        dm = rp.built
+        m = dm.model
+        radius = m.geom_size[:, 0].copy()
+        for ts in dm.tethers:
+            m.geom_size[ts.geom, 0] = VISUAL_TETHER_RADIUS
+
+        def prepare(model: Any, data: Any) -> None:
+            for ts in dm.tethers:
+                ts.update(model, data)
+
+        try:
+            frames = frames_mujoco(m, rp.qpos, (b[0], b[1], b[3], b[4]), every, prepare)
+        finally:
+            m.geom_size[:, 0] = radius
+        used = f"mujoco-{os.environ.get('MUJOCO_GL', 'default')}"
+    except Exception:  # noqa: BLE001 - no OpenGL context on this machine: draw the same states with matplotlib
+        frames = _drone_frames_matplotlib(rp, run, every)
     write_gif(frames, path)
     return used

@@ -223,3 +223,133 @@ def write_chain_outputs(out: Path, rp: ChainReplay, run: Any, verdict: Verdict, 
 
         names += figures.chain_figures(out, rp, run)
     return sorted(names)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# drone chains (tmr.replay.drones)
+# ----------------------------------------------------------------------------------------------------------
+def drone_document(rp: Any, run: Any, verdict: Verdict) -> dict[str, Any]:
+    """The ``replay.json`` document of a drone-chain replay (:class:`tmr.replay.drones.DroneReplay`; format
+    :data:`REPLAY_FORMAT`, ``kind = "drone"``; no timings). Units: m, N, s; angles in degrees."""
+    from tmr.replay.drones import WARMUP
+
+    cfg = rp.config
+    built = rp.built
+    quad = built.quad if built is not None else None
+    drones = []
+    for i in range(rp.actual.shape[1]):
+        e = rp.tracking_error[:, i]
+        k = int(np.argmax(e))
+        drones.append(
+            {
+                "name": f"robot{i + 1}",
+                "tracking_error_max": float(e.max()),
+                "tracking_error_rms": float(np.sqrt(np.mean(e**2))),
+                "max_at": float(rp.t[k]),
+                "tilt_max_deg": math.degrees(float(rp.tilt[:, i].max())),
+                "rotor_thrust_peak": float(rp.rotor_peak[i]),
+                "rotor_thrust_mean": float(rp.rotor_mean[i]),
+                "rotor_thrust_limit": float(rp.rotor_limit),
+                "saturated_fraction": float(rp.saturation_fraction[i]),
+                "first_saturation": rp.first_saturation[i],
+                "reference_deviation_max": float(rp.reference_deviation[i]),
+            }
+        )
+    tethers = []
+    for j, (a, b) in enumerate(rp.ends):
+        k = int(np.argmin(rp.lowest[:, j]))
+
+        def err(x: np.ndarray, y: np.ndarray) -> float | None:
+            d = np.abs(x - y)
+            return float(np.nanmax(d)) if np.isfinite(d).any() else None
+
+        tethers.append(
+            {
+                "name": f"tether{j + 1}",
+                "from": "base" if a < 0 else f"robot{a + 1}",
+                "to": f"robot{b + 1}",
+                "lowest_min": float(rp.lowest[k, j]),
+                "lowest_min_at": float(rp.t[k]),
+                "lowest_plan_then": float(rp.lowest_plan[k, j]),
+                "lowest_catenary_then": float(rp.lowest_catenary[k, j]),
+                "lowest_error_max": err(rp.lowest[:, j], rp.lowest_catenary[:, j]),
+                "lowest_plan_error_max": err(rp.lowest[:, j], rp.lowest_plan[:, j]),
+                "length_max": float(rp.length[:, j].max()),
+                "length_error_max": err(rp.length[:, j], rp.length_catenary[:, j]),
+                "tension_from_max": float(rp.tension_from[:, j].max()),
+                "tension_from_error_max": err(rp.tension_from[:, j], rp.tension_from_catenary[:, j]),
+                "tension_from_plan_error_max": err(rp.tension_from[:, j], rp.tension_from_plan[:, j]),
+                "tension_to_max": float(rp.tension_to[:, j].max()),
+                "tension_to_error_max": err(rp.tension_to[:, j], rp.tension_to_catenary[:, j]),
+                "tension_to_plan_error_max": err(rp.tension_to[:, j], rp.tension_to_plan[:, j]),
+                "contact_steps": int(rp.tether_contact_steps[j]),
+            }
+        )
+    params = run.tether_params() if hasattr(run, "tether_params") else None
+    model = asdict(cfg) | {
+        "max_tilt_deg": math.degrees(cfg.max_tilt),
+        "tether_radius": TETHER_RADIUS,
+        "warmup": WARMUP,
+        "integrator": "implicitfast",
+        "quadrotor": asdict(quad) if quad is not None else None,
+        "rotor_thrust_limit": float(rp.rotor_limit),
+        "gains": rp.gains,
+        "tether_density_plan": None if params is None else params.mass_per_length,
+        "winch_tension": None if params is None else params.winch_tension,
+        "winch_end": None if params is None else params.winch_end,
+    }
+    return {
+        "format": REPLAY_FORMAT,
+        "kind": "drone",
+        "run": {
+            "path": run.path.name,
+            "scenario": run.record["scenario"],
+            "method": run.record["method"],
+            "plan_success": run.record["success"],
+        },
+        "verdict": {
+            "ok": verdict.ok,
+            "reason": verdict.reason,
+            "failures": [{"t": t, "check": k, "message": m} for t, k, m in verdict.failures],
+        },
+        "model": model,
+        "sim_time": rp.sim_time,
+        "steps": rp.steps,
+        "robots": drones,
+        "tethers": tethers,
+        "contacts": rp.contacts,
+        "series": {
+            "t": rp.t,
+            "actual": rp.actual,
+            "reference": rp.reference,
+            "tracking_error": rp.tracking_error,
+            "tilt": rp.tilt,
+            "rotor_max": rp.rotor_max,
+            "lowest": rp.lowest,
+            "lowest_catenary": rp.lowest_catenary,
+            "lowest_plan": rp.lowest_plan,
+            "length": rp.length,
+            "length_catenary": rp.length_catenary,
+            "tension_from": rp.tension_from,
+            "tension_from_catenary": rp.tension_from_catenary,
+            "tension_from_plan": rp.tension_from_plan,
+            "tension_to": rp.tension_to,
+            "tension_to_catenary": rp.tension_to_catenary,
+            "tension_to_plan": rp.tension_to_plan,
+        },
+    }
+
+
+def write_drone_outputs(out: Path, rp: Any, run: Any, verdict: Verdict, plots: bool = True) -> list[str]:
+    """Write ``replay.json``, ``timing.json`` and the figures of a drone replay into ``out``; return the names."""
+    from tmr.io.outputs import atomic_write_text
+
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "replay.json", _dump(drone_document(rp, run, verdict)))
+    write_timing(out, rp)
+    names = ["replay.json", "timing.json"]
+    if plots:
+        from tmr.replay import figures
+
+        names += figures.drone_figures(out, rp, run)
+    return sorted(names)

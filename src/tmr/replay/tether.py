@@ -13,6 +13,13 @@ The winch law holds the cable's horizontal tension at T0 = torque / radius, the 
 the motor force is F = T0 · mean_k(1 / cos φ_k) (``winch="horizontal"``). ``winch="torque"`` instead holds the
 tension at the winch end at T0 (a constant-torque pulley taken literally): F = T0 · mean_k(1/cos φ_k) / (1/cos φ_1).
 
+Drone tethers (``params`` a :class:`tmr.model.catenary3d.DroneTetherParams`, ``formulations/drones.md``): the winch
+keeps the tension *magnitude* T_w at the tether's lower end (``winch="lower"``, the planner's default) or upper end
+(``winch="upper"``), whichever end that is at this instant, as the planner's model does. A hanging cable's tension
+grows with height, T(z) = T_A + ρ g (z − z_A) (Irvine 1981), whatever its orientation (vertical included), so the
+motor force is F = mean_k T_k = T_w + ρ g (mean_k z̄_k − z_w), z̄_k the segment midpoints, z_w the winch end's height.
+The initial shape is :func:`tmr.model.catenary3d.solve3d`'s curve at equal arc length.
+
 Units: m, kg, N, s.
 """
 
@@ -25,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tmr.model.catenary import CatenaryParams, solve
+from tmr.model.catenary3d import DroneTetherParams
 
 Array = NDArray[np.float64]
 
@@ -38,19 +46,36 @@ NODE_INERTIA = 1e-4
 SOLREF = "0.004 1"
 SOLIMP = "0.99 0.9999 0.0005 0.5 2"
 
-WINCH_MODES = ("horizontal", "torque")
+#: winch laws: "horizontal" and "torque" for ground tethers (CatenaryParams), "lower" and "upper" (constant tension
+#: magnitude T_w at that end) for drone tethers (DroneTetherParams).
+WINCH_MODES = ("horizontal", "torque", "lower", "upper")
+TetherParams = CatenaryParams | DroneTetherParams
 #: node masses and capsules are resized when a segment's length changed by more than this [m] (0.2 mm: ≤ 0.2 % of a
 #: 0.1 m segment's mass, below the cable's 2 mm radius for contacts).
 RESIZE_STEP = 2e-4
 
 
-def catenary_nodes(p1: Array, p2: Array, n: int, params: CatenaryParams) -> tuple[Array, float]:
+def winch_tension(params: TetherParams) -> float:
+    """The tension the winch law holds [N]: T0 (ground, horizontal or at the winch end) or T_w (drones)."""
+    if isinstance(params, DroneTetherParams):
+        return params.winch_tension
+    return params.horizontal_tension
+
+
+def catenary_nodes(p1: Array, p2: Array, n: int, params: TetherParams) -> tuple[Array, float]:
     """Nodes 0..n of the static catenary from p1 to p2 (world, [m]) at equal arc length, and its length [m].
 
     The cable hangs in the vertical plane through the two points (Caruso 2021 eq. 22; arc length from end 1
     S(x) = c (sinh((x - x_low)/c) - sinh(-x_low/c)), inverted in closed form).
     """
     p1, p2 = np.asarray(p1, float), np.asarray(p2, float)
+    if isinstance(params, DroneTetherParams):  # the drone model: T_w at the winch end (tmr.model.catenary3d)
+        from tmr.model.catenary3d import solve3d
+
+        cat = solve3d(p1, p2, params)
+        nodes = cat.points(n + 1)
+        nodes[0], nodes[-1] = p1, p2
+        return nodes, float(cat.length)
     d = p2[:2] - p1[:2]
     span = float(np.hypot(*d))
     if span < 1e-9:  # ends on one vertical: a straight segment
@@ -105,8 +130,12 @@ class TetherSpec:
         root_world: the exit point in world coordinates at qpos0 [m].
         end_body: body holding the other end ("world" for a fixed anchor).
         end_world: the other end in world coordinates at qpos0 [m].
-        params: cable parameters (T0, ρ, g).
+        params: cable parameters (ground: T0, ρ, g; drones: T_w, ρ, g, winch end).
         contype, conaffinity: collision bits of the capsules.
+        max_length: the longest the tether may be paid out [m] (0: 50 times the chord at qpos0, the slides' range).
+        armature: added inertia of each hinge [kg m²] and slide [kg] (0 for the ground tethers; the light drone
+            tethers need it: a 1.25 cm segment of a 15 g/m cable weighs 0.2 g next to a 1.5 kg drone, and MuJoCo's
+            inertia matrix becomes singular; statics are unchanged).
     """
 
     name: str
@@ -116,9 +145,11 @@ class TetherSpec:
     root_world: tuple[float, float, float]
     end_body: str
     end_world: tuple[float, float, float]
-    params: CatenaryParams
+    params: TetherParams
     contype: int = 0
     conaffinity: int = 3
+    max_length: float = 0.0
+    armature: float = 0.0
 
     @property
     def chord(self) -> float:
@@ -139,6 +170,7 @@ def tether_body_xml(spec: TetherSpec) -> str:
     r = TETHER_RADIUS
     geom_q = "0.7071067811865476 0 0.7071067811865476 0"
     damping = HINGE_DAMPING
+    arm = f' armature="{_f(spec.armature)}"' if spec.armature > 0 else ""
     parts = []
     for k in range(1, n + 1):
         mk = m if k < n else 0.5 * m
@@ -149,10 +181,10 @@ def tether_body_xml(spec: TetherSpec) -> str:
             head = f'<body name="{spec.name}_l{k}" pos="{_f(s0)} 0 0">'
         parts.append(
             head
-            + f'<joint name="{spec.name}_z{k}" type="hinge" axis="0 0 1" pos="{_f(-s0)} 0 0" damping="{damping}"/>'
-            + f'<joint name="{spec.name}_y{k}" type="hinge" axis="0 1 0" pos="{_f(-s0)} 0 0" damping="{damping}"/>'
+            + f'<joint name="{spec.name}_z{k}" type="hinge" axis="0 0 1" pos="{_f(-s0)} 0 0" damping="{damping}"{arm}/>'
+            + f'<joint name="{spec.name}_y{k}" type="hinge" axis="0 1 0" pos="{_f(-s0)} 0 0" damping="{damping}"{arm}/>'
             + f'<joint name="{spec.name}_s{k}" type="slide" axis="1 0 0" limited="true" '
-            f'range="{_f(-0.95 * s0)} {_f(50.0 * s0)}"/>'
+            f'range="{_f(-0.95 * s0)} {_f(max(50.0 * s0, spec.max_length / n - s0))}"{arm}/>'
             + f'<inertial pos="0 0 0" mass="{_f(mk)}" diaginertia="{_v([NODE_INERTIA * mk] * 3)}"/>'
             + f'<geom name="{spec.name}_g{k}" type="capsule" size="{_f(r)} {_f(s0 / 2)}" pos="{_f(-s0 / 2)} 0 0" '
             f'quat="{geom_q}" contype="{spec.contype}" conaffinity="{spec.conaffinity}" rgba="0.95 0.6 0.1 1" '
@@ -212,6 +244,8 @@ class TetherState:
 
         if winch not in WINCH_MODES:
             raise ValueError(f"winch must be one of {WINCH_MODES}, got {winch!r}")
+        if isinstance(spec.params, DroneTetherParams) != (winch in ("lower", "upper")):
+            raise ValueError(f"winch {winch!r} does not go with {type(spec.params).__name__} (see WINCH_MODES)")
         self.spec = spec
         self.winch = winch
         m = model
@@ -238,7 +272,8 @@ class TetherState:
         self.end_body = 0 if spec.end_body == "world" else mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, spec.end_body)
         self.s0 = spec.s0
         self.rho = spec.params.mass_per_length
-        self.t0 = spec.params.horizontal_tension
+        self.t0 = winch_tension(spec.params)
+        self.weight = self.rho * spec.params.g  # ρ g [N/m]
         self._resized = -1.0  # segment length of the last resize [m]
 
     def set_initial(self, data: object, root_world: Array, end_world: Array) -> None:
@@ -261,7 +296,13 @@ class TetherState:
 
     def winch_force(self, data: object) -> float:
         """Motor force on the tendon [N], negative = reeling in (see the module docstring)."""
-        seg = np.diff(self.nodes(data), axis=0)
+        nodes = self.nodes(data)
+        if self.winch in ("lower", "upper"):  # constant tension magnitude T_w at that end (drone model)
+            z = nodes[:, 2]
+            zw = min(z[0], z[-1]) if self.winch == "lower" else max(z[0], z[-1])
+            zbar = (2.0 * float(z.sum()) - z[0] - z[-1]) / (2.0 * (len(z) - 1))  # mean segment midpoint
+            return -(self.t0 + self.weight * (zbar - zw))
+        seg = np.diff(nodes, axis=0)
         h2 = seg[:, 0] * seg[:, 0] + seg[:, 1] * seg[:, 1]
         s2 = h2 + seg[:, 2] * seg[:, 2]
         sec = np.sqrt(s2 / np.maximum(h2, 0.0025 * s2 + 1e-18))  # 1 / cos φ_k, capped at 20 (a near-vertical link)
@@ -332,15 +373,18 @@ class HangResult:
 def hang(
     p1: tuple[float, float, float],
     p2: tuple[float, float, float],
-    params: CatenaryParams,
+    params: TetherParams,
     n_links: int = 16,
     timestep: float = 0.005,
     duration: float = 2.0,
-    winch: str = "horizontal",
+    winch: str | None = None,
     floor: bool = False,
 ) -> HangResult:
     """Hang one winched tether between a fixed winch at ``p1`` and a fixed point ``p2`` (world [m]), start it on
-    its static catenary, simulate ``duration`` seconds and measure it (the static check of ``replay.md``)."""
+    its static catenary, simulate ``duration`` seconds and measure it (the static check of ``replay.md``).
+    ``winch``: the winch law (default: "horizontal" for ground tethers, ``params.winch_end`` for drone tethers)."""
+    if winch is None:
+        winch = params.winch_end if isinstance(params, DroneTetherParams) else "horizontal"
     import mujoco
 
     spec = TetherSpec("t1", n_links, "winch", (0.0, 0.0, 0.0), p1, "world", p2, params)
