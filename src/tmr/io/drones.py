@@ -252,7 +252,7 @@ def drone_run_dict(plan: Any, metrics: Any = None, scenario_info: Any = None) ->
             "tether_length_max": teth.tether_length,
             "winch_end": teth.winch_end,
             "winch_tension": teth.winch_tension,
-            "tether": asdict(teth),
+            "tether": teth.as_dict() if hasattr(teth, "as_dict") else asdict(teth),
             "world": world,
             "scenario_file": None if source is None else Path(source).name,
             "scenario_text": _info(scenario_info, "text"),
