@@ -282,7 +282,7 @@ def run_drones(
             v, T_rate = out[: 3 * N], out[3 * N :]
             tw_rate[k] = T_rate
             P_next = P + Ts * v.reshape(N, 3)
-            T_w = T_w + Ts * T_rate
+            T_w = np.clip(T_w + Ts * T_rate, tether.winch_tension_min, tether.winch_tension_max)  # rounding only
         else:
             v = out
             P_next = P + Ts * v.reshape(N, 3)
