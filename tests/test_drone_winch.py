@@ -188,8 +188,8 @@ def test_other_methods_refused_with_an_active_winch():
 
 
 def test_scenario_i_active_reaches_the_goal_constant_does_not():
-    """Scenario I (G under a 2.6 m ceiling, 2 drones): with active winches the plan passes every check; at the
-    constant 2 N the tether over the wall holds the leader back (the chain does not reach the goal)."""
+    """Scenario I (G under a 2.6 m ceiling, 6.3 m tethers, 2 drones): with active winches the plan passes every
+    check; at the constant 2 N the tethers over the wall hold the leader back (the chain does not reach the goal)."""
     scenario = load_drone_scenario("I")
     assert scenario.tether.active and scenario.n_robots == 2
     plan, metrics = plan_drones(scenario)
@@ -197,5 +197,5 @@ def test_scenario_i_active_reaches_the_goal_constant_does_not():
     assert metrics.winch["max_tension_used"] > 4.0
     plan_c, metrics_c = plan_drones(scenario, overrides={"winch": "constant"})
     assert not plan_c.success and not metrics_c.success
-    assert "from the goal" in plan_c.failure and metrics_c.final_leader_error > 0.5
+    assert "from the goal" in plan_c.failure and metrics_c.final_leader_error > 0.15
     assert dataclasses.asdict(plan_c.tether)["winch"] == "constant" and plan_c.winch_tension is None
