@@ -4,8 +4,9 @@ Scenario I (G's room and 1.8 m wall under a 2.6 m ceiling, 6.3 m tethers, ``[tet
 each planned with ``--method qp`` with the active winch and with ``winch = "constant"`` (T_w = 2 N): the drones
 needed (``--robots auto``: the fewest from the route's minimum that pass every check), the verdict and exit code of
 the whole ``tmr plan`` process for the scenario's own count, and, per plan, the tensions used, the least tether
-clearance, the largest pull on a drone, f1–f4 of the checker and the planning time (``plan.wall_time``: route,
-loop and check, in this process; median of ``--repeat`` runs). Writes ``benchmarks/results/active_winch.md``.
+clearance, the largest pull on a drone, f1–f4 of the checker, the planning time (``plan.wall_time``: route,
+loop and check, in this process) and the median time of a step of the loop (``diagnostics["step_time"]``), each the
+median of ``--repeat`` runs. Writes ``benchmarks/results/active_winch.md``.
 
     PYTHONPATH=src python benchmarks/active_winch.py [--repeat 3]
 """
@@ -18,6 +19,8 @@ import statistics
 import subprocess
 import sys
 from pathlib import Path
+
+import numpy as np
 
 from tmr.planner3d import plan_drones
 from tmr.world.drones import load_drone_scenario
@@ -41,18 +44,20 @@ def _cli(scenario: str, robots: str, winch: str, *extra: str) -> tuple[int, str]
 
 def _row(scenario: str, robots: int, winch: str, repeat: int, settle: float | None = None) -> list[str]:
     sc = load_drone_scenario(scenario)
-    times = []
+    times, steps = [], []
     over: dict[str, object] = {"winch": winch} | ({} if settle is None else {"settle": settle})
     for _ in range(repeat):
         plan, m = plan_drones(sc, robots, overrides=over)
         times.append(plan.wall_time)
+        steps.append(float(np.nanmedian(plan.diagnostics["step_time"])))
     w = m.winch or {}
     used = f"{w['min_tension_used']:.2f}–{w['max_tension_used']:.2f}" if w else f"{plan.tether.winch_tension:.2f}"
     verdict = "passed" if m.success else "FAILED: " + str(m.failure).split(";")[0][:110]
     f = " / ".join(f"{v:.4g}" for v in (m.f1, m.f2, m.f3, m.f4))
     label = winch + ("" if settle is None else f", settle {settle:g} s")
     return [scenario, str(robots), label, verdict, used, f"{m.max_drone_tension:.2f}", f"{m.min_tether_clearance:.3f}",
-            f"{m.final_leader_error:.3f}", f, f"{m.duration:.2f}", f"{statistics.median(times):.2f}"]  # fmt: skip
+            f"{m.final_leader_error:.3f}", f, f"{m.duration:.2f}", f"{statistics.median(times):.2f}",
+            f"{1e3 * statistics.median(steps):.2f}"]  # fmt: skip
 
 
 def main() -> None:
@@ -70,16 +75,18 @@ def main() -> None:
             out.append(f"| {scenario} | {winch} | {code} | {line.split('auto: ', 1)[-1]} |")
     out += ["", "## Verdicts of the whole process (`tmr plan --scenario S --robots N --no-plots --set winch=W`)", "",
             "| scenario | N | winch | exit | last line |", "|---|---|---|---|---|"]  # fmt: skip
-    for scenario, n, extra in (("I", "2", ()), ("I", "2", ("--set", "settle=30")), ("I", "3", ()), ("G", "3", ())):
+    slow = ("--set", "settle=30")
+    for scenario, n, extra in (("I", "2", ()), ("I", "2", slow), ("I", "3", ()), ("I", "3", slow), ("G", "3", ())):
         for winch in ("active", "constant"):
             code, line = _cli(scenario, n, winch, *extra)
             out.append(f"| {scenario} | {n} | {winch} {' '.join(extra)} | {code} | {line[:200]} |")
     out += ["", "## Plans side by side", "",
             "| scenario | N | winch | verdict | T_w used [N] | max pull on a drone [N] | min tether clearance [m] | "
-            "leader to goal [m] | f1 / f2 / f3 / f4 | plan duration [s] | planning time [s] |",
-            "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+            "leader to goal [m] | f1 / f2 / f3 / f4 | plan duration [s] | planning time [s] | median step [ms] |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for scenario, n, winch, settle in (("I", 2, "active", None), ("I", 2, "constant", None),
                                        ("I", 2, "constant", 30.0), ("I", 3, "constant", None),
+                                       ("I", 3, "constant", 30.0),
                                        ("I", 4, "constant", None), ("G", 3, "active", None),
                                        ("G", 3, "constant", None)):  # fmt: skip
         out.append("| " + " | ".join(_row(scenario, n, winch, args.repeat, settle)) + " |")

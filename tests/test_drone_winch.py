@@ -199,3 +199,14 @@ def test_scenario_i_active_reaches_the_goal_constant_does_not():
     assert not plan_c.success and not metrics_c.success
     assert "from the goal" in plan_c.failure and metrics_c.final_leader_error > 0.15
     assert dataclasses.asdict(plan_c.tether)["winch"] == "constant" and plan_c.winch_tension is None
+
+
+@pytest.mark.parametrize("method", ["pinv", "horizon"])
+def test_cli_refuses_other_methods_with_an_active_winch_in_one_line(tmp_path, capsys, method):
+    from tmr.plan import main
+
+    out = tmp_path / "x"
+    code = main(["--scenario", "I", "--method", method, "--no-plots", "--out", str(out)])
+    stdout, stderr = capsys.readouterr()
+    assert code == 2 and "--method qp only" in stdout + stderr and not out.exists()
+    assert len((stdout + stderr).strip().splitlines()) == 1
