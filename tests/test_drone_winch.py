@@ -210,3 +210,34 @@ def test_cli_refuses_other_methods_with_an_active_winch_in_one_line(tmp_path, ca
     stdout, stderr = capsys.readouterr()
     assert code == 2 and "--method qp only" in stdout + stderr and not out.exists()
     assert len((stdout + stderr).strip().splitlines()) == 1
+
+
+def test_slowing_down_goes_back_to_the_recorded_tensions():
+    """A step without a solution (forced here once, at t = 5.5 s, while a winch is raising its tension) makes the
+    loop go back 1 s and re-time the references: the tensions go back with the positions (else T_w would jump at the
+    seam: a rate violation the checker reports), and the plan still passes every check."""
+    from tmr.control.run3d import run_drones
+    from tmr.errors import InfeasibleStep
+    from tmr.planner3d import build_drone_problem, drone_parameters
+
+    scenario = load_drone_scenario("G")
+    params, tether = drone_parameters(scenario, {"winch": "active"})
+    problem = build_drone_problem(scenario, 3, params=params, tether=tether)
+    f = make_drone_qp(problem.world, tether, params, 3, problem.references, base=scenario.base)
+    real, raised = f.step, []
+
+    def step(ctx):
+        if not raised and ctx.k == 110:
+            raised.append(float(ctx.winch_tension.max()))
+            raise InfeasibleStep("forced by the test")
+        return real(ctx)
+
+    f.step = step
+    plan = run_drones(problem.world, problem.references, f, problem.references.start_positions, tether=tether,
+                      params=params, goal=scenario.goal, scenario="G")  # fmt: skip
+    assert raised and raised[0] > 3.0  # the winch was working when the step failed
+    assert plan.diagnostics["slowed_down"] == ["t = 5.50 s"]
+    T = plan.winch_tension
+    assert np.abs(np.diff(T, axis=0)).max() / plan.Ts <= tether.winch_tension_rate * (1 + 1e-9)
+    m = check_drone_plan(plan, scenario, params=params)
+    assert m.success, m.failures
