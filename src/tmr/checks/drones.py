@@ -9,7 +9,9 @@ formula of this module. At every step of the plan it checks:
 * each tether's model: the rebuilt catenary passes through both ends, holds the winch tension T_w at the winch end
   (the recorded ``a`` is the equilibrium) and is the stable (shallow) equilibrium. The through-the-ends test holds
   for every a > 0 (the closed form solves z(d) = z_Q for the vertex), so it only measures rounding; it is the winch
-  tension test that pins a;
+  tension test that pins a; with an active winch (``tether.winch = "active"``) T_w is the plan's recorded tension of
+  that tether at that step (``plan.winch_tension``), and the ``winch`` kind checks it: recorded, finite, within
+  [T_min, T_max] and changing by at most ``winch_tension_rate`` per second;
 * drone clearance >= r from every obstacle and the side walls; altitude within [zmin + r, zmax - r];
 * drones >= 2 r apart;
 * every tether's whole curve >= c_t from every obstacle, the floor, the ceiling and the walls (tether 1 no closer
