@@ -1106,7 +1106,8 @@ def _anchor(references: Any, base: Any | None) -> Array:
 
 
 class DroneQP:
-    """The lexicographic QP on the drones' velocities (:func:`make_drone_qp`); ``step`` returns v (3N,) [m/s]."""
+    """The lexicographic QP on the drones' velocities (:func:`make_drone_qp`); ``step`` returns v (3N,) [m/s], or
+    with an active winch [v, Ṫ] (3N + N,) [m/s, N/s]."""
 
     name = "qp"
     integrates = "robots"
