@@ -225,6 +225,14 @@ QUOTES = [
         r"settle on their stations \((\S+) s, shown in real time\)",
         lambda: cell("views.csv", "plan_s", scenario="A", output="gif"),
     ),
+    # active winches (benchmarks/results/active_winch.md)
+    Quote(
+        r"at the constant 2 N two are held back (\S+) m short",
+        lambda: md(
+            "active_winch.md",
+            r"\| I \| 2 \| constant --set settle=30 \| 1 \| plan FAILED: the leader stalled ([\d.]+) m",
+        ),
+    ),
     # tethered drone chains in 3-D (benchmarks/results/drones.md, its targets table)
     Quote(
         r"`--robots auto` planned (\d+) of the (\d+) reachable goals",

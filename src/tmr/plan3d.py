@@ -119,6 +119,13 @@ def summary(plan: Any, metrics: Any) -> str:
             f"  {'tether curve closest':24s} {tc['what']} at t = {tc['t']:.2f} s: curve {tc['curve_clearance']:.3f} m, "
             f"chord {tc['chord_clearance']:.3f} m (c_t {metrics.tether_clearance_limit:g} m)"
         )
+    wm = getattr(metrics, "winch", None)
+    if wm:
+        lines.append(
+            f"  {'winch (active)':24s} T_w {wm['min_tension_used']:.3f} .. {wm['max_tension_used']:.3f} N used, "
+            f"|dT_w/dt| <= {wm['max_rate_used']:.3f} N/s (range [{wm['tension_min']:g}, {wm['tension_max']:g}] N, "
+            f"rate {wm['tension_rate']:g} N/s)"
+        )
     return "\n".join(lines)
 
 

@@ -169,6 +169,7 @@ def solve_drones(
 
     if method not in DRONE_METHODS:
         raise ParameterError(f"unknown method {method!r} for a drone chain; available: {', '.join(DRONE_METHODS)}")
+    check_winch_method(problem.tether, method)
     if method == "horizon":
         return _solve_horizon(problem, progress=progress, time_limit=time_limit, options=horizon_options or {})
     start = time.perf_counter()
@@ -234,6 +235,7 @@ def plan_drones(
     start = time.perf_counter()
     params, tether = drone_parameters(scenario, overrides)
     check_thrust(tether)
+    check_winch_method(tether, method)
     wanted = scenario.n_robots if robots is None else robots  # the file may say "auto" too
     route, n_first = route_drones(scenario, params, tether, wanted)
     route_time = time.perf_counter() - start
@@ -268,6 +270,16 @@ def plan_drones(
     return plan, metrics
 
 
+def check_winch_method(tether: DroneTetherParams, method: str) -> None:
+    """Refuse (ParameterError, exit 2) an active winch with a formulation that does not choose the winch tension:
+    only ``qp`` has it as a decision variable (``formulations/drones.md``, "Active winch")."""
+    if tether.active and method != "qp":
+        raise ParameterError(
+            f"winch = 'active' is planned by --method qp only (the winch tension is a variable of the per-step QP; "
+            f"{method} keeps it constant): use --method qp, or winch = 'constant'"
+        )
+
+
 def check_thrust(tether: DroneTetherParams) -> None:
     """Refuse (ParameterError, exit 2) a tether no drone can hold: with the winch at the lower end of each tether the
     tension is T_w there and grows with height (T_B = T_w + ρ g h), so every drone end of every tether pulls with at
@@ -278,4 +290,9 @@ def check_thrust(tether: DroneTetherParams) -> None:
             f"{tether.spare_thrust:.3f} N (mass {tether.drone_mass:g} kg, thrust/weight {tether.thrust_to_weight:g}, "
             f"reserve {tether.control_reserve:g}): every drone end of a tether pulls with at least the winch tension, "
             "so no drone can hold one; lower winch_tension or give the drones more thrust"
+        )
+    if tether.active and tether.winch_end == "lower" and tether.winch_tension_min >= tether.spare_thrust:
+        raise ParameterError(
+            f"the active winch's least tension winch_tension_min {tether.winch_tension_min:.3f} N is at least the "
+            f"drones' spare thrust {tether.spare_thrust:.3f} N: no drone can hold a tether at any tension of the range"
         )

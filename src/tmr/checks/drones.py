@@ -9,7 +9,9 @@ formula of this module. At every step of the plan it checks:
 * each tether's model: the rebuilt catenary passes through both ends, holds the winch tension T_w at the winch end
   (the recorded ``a`` is the equilibrium) and is the stable (shallow) equilibrium. The through-the-ends test holds
   for every a > 0 (the closed form solves z(d) = z_Q for the vertex), so it only measures rounding; it is the winch
-  tension test that pins a;
+  tension test that pins a; with an active winch (``tether.winch = "active"``) T_w is the plan's recorded tension of
+  that tether at that step (``plan.winch_tension``), and the ``winch`` kind checks it: recorded, finite, within
+  [T_min, T_max] and changing by at most ``winch_tension_rate`` per second;
 * drone clearance >= r from every obstacle and the side walls; altitude within [zmin + r, zmax - r];
 * drones >= 2 r apart;
 * every tether's whole curve >= c_t from every obstacle, the floor, the ceiling and the walls (tether 1 no closer
@@ -85,6 +87,9 @@ DRONE_VIOLATION_KINDS: tuple[str, ...] = (
     "acceleration",
     "goal",
 )
+#: With an active winch (``tether.winch = "active"``) one kind more: the recorded tensions within the pulley's range
+#: [T_min, T_max] and their rate within ``winch_tension_rate`` (a constant-tension plan's metrics keep their keys).
+WINCH_KIND = "winch"
 #: The limits whose margins are compared to name the binding one (each as a fraction of its limit).
 LIMIT_KINDS: tuple[str, ...] = (
     "drone_clearance",
@@ -405,10 +410,13 @@ def _thetas(a: Array, d: Array, h: Array) -> tuple[Array, Array]:
     return v - u, v + u
 
 
-def tether_curves(base: Array, robots: Array, tether_a: Array, tether: Any) -> TetherCurves:
+def tether_curves(
+    base: Array, robots: Array, tether_a: Array, tether: Any, winch_tension: Array | None = None
+) -> TetherCurves:
     """Rebuild every tether (closed form, :class:`TetherCurves`) from the anchor ``base`` (3,), the drones ``robots``
     (K+1, N, 3) [m], the recorded ``tether_a`` (K+1, N) [m] (NaN: vertical) and the tether's physics ``tether``
-    (``mass_per_length``, ``g``, ``winch_tension``, ``winch_end``; a DroneTetherParams)."""
+    (``mass_per_length``, ``g``, ``winch_tension``, ``winch_end``; a DroneTetherParams). ``winch_tension``: an
+    active winch's recorded tension of every tether at every step (K+1, N) [N], in place of the constant one."""
     robots = np.asarray(robots, dtype=float)
     n_k, n = robots.shape[:2]
     pts = np.concatenate([np.broadcast_to(np.asarray(base, dtype=float), (n_k, 1, 3)), robots], axis=1)
@@ -418,7 +426,7 @@ def tether_curves(base: Array, robots: Array, tether_a: Array, tether: Any) -> T
     h = q[..., 2] - p[..., 2]
     a = np.asarray(tether_a, dtype=float).reshape(n_k, n)
     w = float(tether.mass_per_length) * float(tether.g)
-    tw = float(tether.winch_tension)
+    tw = float(tether.winch_tension) if winch_tension is None else np.asarray(winch_tension, float).reshape(n_k, n)
     vertical = np.isnan(a)
     valid = np.where(vertical, d <= MODEL_TOL, np.isfinite(a) & (a > 0.0))
     curved = ~vertical & valid & (d > 0.0)
@@ -676,6 +684,9 @@ class DroneMetrics:
       ``max_tracking_error`` [m]: largest |leader − its reference| (Euclidean), not a limit.
     * ``max_end_residual`` [m]: largest miss of a rebuilt catenary at its ends — rounding only, it holds for every
       a > 0; ``max_winch_tension_error`` [N]: largest |tension at the winch end − T_w|, what pins the recorded a.
+    * ``winch`` (an active winch only, else None and left out of ``to_dict``): the range ``tension_min``,
+      ``tension_max`` [N] and ``tension_rate`` [N/s], and the ``min_tension_used``, ``max_tension_used`` [N] and
+      ``max_rate_used`` [N/s] of the recorded tensions (what the ``winch`` kind checks against them).
     """
 
     scenario: str
@@ -721,12 +732,15 @@ class DroneMetrics:
     curve_samples: int = 0
     check_time: float = math.nan
     per_step: dict[str, Any] = field(default_factory=dict)
+    winch: dict[str, Any] | None = None
 
     def to_dict(self, per_step: bool = True) -> dict[str, Any]:
         """JSON-safe dict in field order (non-finite floats as ``"inf"``/``"nan"`` strings); ``check_time`` left out
-        (timings are not reproducible), ``per_step`` only if asked."""
+        (timings are not reproducible), ``per_step`` only if asked; ``winch`` only with an active winch."""
         d = asdict(self)
         d.pop("check_time")
+        if d["winch"] is None:
+            d.pop("winch")
         if not per_step:
             d.pop("per_step")
         return json_safe(d)
@@ -859,11 +873,26 @@ def check_drone_plan(
     robots = np.where(np.isfinite(robots), robots, 0.0)
 
     # -- tethers rebuilt --------------------------------------------------------------------------------------
-    cur = tether_curves(base, robots, plan.tether_a, teth)
-    tw = float(teth.winch_tension)
-    bad_model = (
-        ~cur.valid | (cur.end_residual > MODEL_TOL) | (np.abs(cur.winch_error) > MODEL_TOL * max(tw, 1.0)) | ~cur.stable
-    )
+    active = bool(getattr(teth, "active", False))
+    kinds = DRONE_VIOLATION_KINDS + ((WINCH_KIND,) if active else ())
+    if active:
+        steps[WINCH_KIND] = np.zeros(n_k, dtype=bool)
+        tw_rec = getattr(plan, "winch_tension", None)
+        tw_arr = None if tw_rec is None else np.asarray(tw_rec, dtype=float)
+        if tw_arr is None or tw_arr.shape != (n_k, n) or not np.isfinite(tw_arr).all():
+            steps[WINCH_KIND][0] = True
+            reasons[WINCH_KIND] = (
+                "the plan has an active winch but records no finite winch tension of every tether at every step "
+                f"({n_k} x {n}; got {None if tw_arr is None else tw_arr.shape})"
+            )
+            tw_arr = np.full((n_k, n), float(teth.winch_tension))
+        tw: Any = tw_arr
+        cur = tether_curves(base, robots, plan.tether_a, teth, winch_tension=tw_arr)
+    else:
+        tw = float(teth.winch_tension)
+        cur = tether_curves(base, robots, plan.tether_a, teth)
+    tw_tol = MODEL_TOL * np.maximum(tw, 1.0)
+    bad_model = ~cur.valid | (cur.end_residual > MODEL_TOL) | (np.abs(cur.winch_error) > tw_tol) | ~cur.stable
 
     def model_msg(k: int) -> str:
         j = int(np.argmax(bad_model[k]))
@@ -875,12 +904,39 @@ def check_drone_plan(
             return f"{head} has a = {a!r}, not a positive number"
         if cur.end_residual[k, j] > MODEL_TOL:
             return f"{head}: the catenary of a = {a:.6g} m misses its ends by {cur.end_residual[k, j]:.2e} m"
-        if abs(cur.winch_error[k, j]) > MODEL_TOL * max(tw, 1.0):
-            t_w = tw + cur.winch_error[k, j]
-            return f"{head}: a = {a:.6g} m gives {t_w:.4f} N at the winch end, not the winch tension {tw:.4f} N"
+        tw_kj = float(tw[k, j]) if active else tw
+        if abs(cur.winch_error[k, j]) > MODEL_TOL * max(tw_kj, 1.0):
+            t_w = tw_kj + cur.winch_error[k, j]
+            return f"{head}: a = {a:.6g} m gives {t_w:.4f} N at the winch end, not the winch tension {tw_kj:.4f} N"
         return f"{head}: a = {a:.6g} m is the unstable (deep-sag) equilibrium"
 
     violate("tether_model", bad_model.any(axis=1), model_msg)
+
+    # -- active winch: the recorded tensions within the pulley's range, their rate bounded --------------------------
+    winch_summary: dict[str, Any] | None = None
+    if active:
+        t_lo, t_hi = float(teth.winch_tension_min), float(teth.winch_tension_max)
+        rate_max = float(teth.winch_tension_rate)
+        slack = MODEL_TOL * max(t_hi, 1.0)
+        out_lo, out_hi = tw_arr < t_lo - slack, tw_arr > t_hi + slack
+        rate = np.abs(np.diff(tw_arr, axis=0)) / Ts if n_k > 1 else np.zeros((0, n))
+        fast = np.zeros((n_k, n), dtype=bool)
+        fast[:-1] = rate > rate_max + 2.0 * slack / Ts
+
+        def winch_msg(k: int) -> str:
+            j = int(np.argmax(out_lo[k] | out_hi[k] | fast[k]))
+            if out_lo[k, j] or out_hi[k, j]:
+                return (f"winch of tether {j + 1} at {tw_arr[k, j]:.4f} N at {_t(t, k)}, outside its range "
+                        f"[{t_lo:g}, {t_hi:g}] N")  # fmt: skip
+            return (f"winch of tether {j + 1} changes by {rate[k, j]:.4f} N/s at {_t(t, k)}, faster than its "
+                    f"{rate_max:g} N/s")  # fmt: skip
+
+        violate(WINCH_KIND, (out_lo | out_hi | fast).any(axis=1), winch_msg)
+        winch_summary = {
+            "mode": "active", "tension_min": t_lo, "tension_max": t_hi, "tension_rate": rate_max,
+            "min_tension_used": float(tw_arr.min()), "max_tension_used": float(tw_arr.max()),
+            "max_rate_used": float(rate.max()) if rate.size else 0.0,
+        }  # fmt: skip
 
     # -- drones -----------------------------------------------------------------------------------------------
     flat = robots.reshape(-1, 3)
@@ -1042,10 +1098,10 @@ def check_drone_plan(
         float(np.sum(track[1:] ** 2)),
         float(np.sum(acc * acc)),
     ]
-    failures = [reasons[k] for k in DRONE_VIOLATION_KINDS if k in reasons]
+    failures = [reasons[k] for k in kinds if k in reasons]
     success = not failures
     fit = raw if success else [math.inf] * 4
-    any_step = np.logical_or.reduce([steps[k] for k in DRONE_VIOLATION_KINDS])
+    any_step = np.logical_or.reduce([steps[k] for k in kinds])
     fractions = {k: binding[k]["fraction"] for k in LIMIT_KINDS if k in binding}
     binding_limit = min(fractions, key=lambda k: fractions[k]) if fractions else None
     metrics = DroneMetrics(
@@ -1085,8 +1141,8 @@ def check_drone_plan(
         max_winch_tension_error=float(np.abs(cur.winch_error).max()),
         binding_limit=binding_limit,
         binding=binding,
-        violation_steps={k: np.flatnonzero(steps[k]).tolist() for k in DRONE_VIOLATION_KINDS},
-        first_violation={k: (int(np.argmax(steps[k])) if steps[k].any() else None) for k in DRONE_VIOLATION_KINDS},
+        violation_steps={k: np.flatnonzero(steps[k]).tolist() for k in kinds},
+        first_violation={k: (int(np.argmax(steps[k])) if steps[k].any() else None) for k in kinds},
         n_violation_steps=int(np.count_nonzero(any_step)),
         tolerance=tol,
         per_step={
@@ -1098,6 +1154,7 @@ def check_drone_plan(
             "tension_p": cur.tension_p,
             "tension_q": cur.tension_q,
         },
+        winch=winch_summary,
     )
     metrics.curve_samples = n_samples
     metrics.check_time = time.perf_counter() - start

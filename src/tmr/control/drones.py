@@ -67,6 +67,13 @@ __all__ = [
     "DronePinv",
     "make_drone_qp",
     "make_drone_pinv",
+    "WinchVelocityMap",
+    "WinchChain",
+    "WinchPadded",
+    "WinchPaddedTask",
+    "WinchTensionRange",
+    "WinchRate",
+    "WinchReturn",
 ]
 
 
@@ -368,6 +375,58 @@ def segment_nearest(world: World3D, a: Array, b: Array, cap: float = np.inf) -> 
     return c[:, 0], g[:, 0], t[:, 0]
 
 
+class WinchVelocityMap:
+    """The coupling of the QP's unknowns with an active winch: x = [v (3N), Ṫ (N)] (m/s, N/s) and the "joint" rates
+    [link rates (3N), Ṫ (N)] = T x with T = diag(T_links, I_N): the link coordinates of :class:`VelocityMap3D` for
+    the drones, the tension rates themselves for the winches. Every other attribute is the drones' map's
+    (``u``, ``d``, ``n_robots``, …)."""
+
+    def __init__(self, links: VelocityMap3D) -> None:
+        self.links = links
+        n3 = links.T.shape[0]
+        N = n3 // 3
+        T = np.zeros((n3 + N, n3 + N))
+        T[:n3, :n3] = links.T
+        T[n3:, n3:] = np.eye(N)
+        self.T = T
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.links, name)
+
+    def robot_velocities(self, qdot: Array) -> Array:
+        """x = [v, Ṫ] from the rates [link rates, Ṫ]."""
+        n3 = self.links.T.shape[0]
+        return np.concatenate([self.links.robot_velocities(qdot[:n3]), qdot[n3:]])
+
+
+class WinchChain:
+    """The spatial chain seen by the lexicographic QP with an active winch: N more unknowns (the tension rates Ṫ,
+    after the 3N drone velocities), ``dof`` = 4N; the rest is the chain's. ``coupling_pattern`` is the sparsity of
+    :class:`WinchVelocityMap`'s T (the QP's declared pattern of the coupling rows)."""
+
+    def __init__(self, chain: Chain) -> None:
+        self.chain = chain
+        self.dof = chain.dof + chain.n_robots
+        self.spatial = True
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.chain, name)
+
+    def coupling_pattern(self, mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        from tmr.model.velocity import robot_pattern3d
+
+        n3 = self.chain.dof
+        out = np.zeros_like(mask)
+        out[:, :n3] = robot_pattern3d(mask[:, :n3])
+        out[:, n3:] = mask[:, n3:]
+        return out
+
+
+def _real_chain(chain: Any) -> Chain:
+    """The drones' chain behind a :class:`WinchChain` (or the chain itself)."""
+    return chain.chain if isinstance(chain, WinchChain) else chain
+
+
 class DroneStepContext:
     """Per-step state of the drone chain shared by tasks and limits (computed once per step by :meth:`update`).
 
@@ -428,9 +487,26 @@ class DroneStepContext:
         self.k = 0
         self.q: Array | None = None
         self.tethers: TetherCatenaries | None = None
+        #: an active winch (``tether.winch = "active"``, the QP only): the tensions are unknowns of the step
+        self.winch_active = bool(getattr(tether, "active", False))
+        self.winch_tension: Array | None = None
+        self.winch_rate_prev: Array | None = None
 
-    def update(self, k: int, positions: Array, v_prev: Array, q: Array | None = None) -> None:
+    def update(
+        self,
+        k: int,
+        positions: Array,
+        v_prev: Array,
+        q: Array | None = None,
+        winch_tension: Array | None = None,
+        winch_rate_prev: Array | None = None,
+    ) -> None:
         """The quantities of step ``k`` with the drones at ``positions`` (N, 3) [m] after velocities ``v_prev`` (3N,).
+
+        With an active winch, ``winch_tension`` (N,) [N] is every tether's tension now (default: the tether's
+        ``winch_tension``) and ``winch_rate_prev`` (N,) [N/s] its previous rate: the tethers are solved at those
+        tensions, their sensitivities include d/dT_w, and ``velocity_map`` is the coupling of the QP's unknowns
+        [v, Ṫ] (:class:`WinchVelocityMap`).
 
         Raises:
             TetherSpanError: a tether has no catenary (its span is too long for the winch tension).
@@ -441,11 +517,21 @@ class DroneStepContext:
         P = np.vstack([self.chain.base[None, :], np.asarray(positions, dtype=float).reshape(N, 3)])
         self.points = P
         self.v_prev = np.asarray(v_prev, dtype=float).reshape(-1)
-        self.velocity_map = VelocityMap3D(P)
-        self.qdot_prev = self.velocity_map.T @ self.v_prev
         warm = self.tethers.theta if self.tethers is not None and len(self.tethers) == N else None
-        self.tethers = solve3d_batch(P, self.tether, warm)
-        self.sens: TetherSensitivities = sensitivities_batch(self.tethers, self.fractions, self.tether)
+        if self.winch_active:
+            tw = np.full(N, self.tether.winch_tension) if winch_tension is None else winch_tension
+            self.winch_tension = np.asarray(tw, dtype=float).reshape(N).copy()
+            rate = np.zeros(N) if winch_rate_prev is None else winch_rate_prev
+            self.winch_rate_prev = np.asarray(rate, dtype=float).reshape(N).copy()
+            self.velocity_map = WinchVelocityMap(VelocityMap3D(P))
+            self.qdot_prev = self.velocity_map.T @ np.concatenate([self.v_prev, self.winch_rate_prev])
+            self.tethers = solve3d_batch(P, self.tether, warm, winch_tension=self.winch_tension)
+            self.sens = sensitivities_batch(self.tethers, self.fractions, self.tether, winch=True)
+        else:
+            self.velocity_map = VelocityMap3D(P)
+            self.qdot_prev = self.velocity_map.T @ self.v_prev
+            self.tethers = solve3d_batch(P, self.tether, warm)
+            self.sens: TetherSensitivities = sensitivities_batch(self.tethers, self.fractions, self.tether)
         samples = self.sens.points  # (N, m, 3)
         m = self.fractions.size
         self._drone_nearest_obstacle: tuple[Array, Array] | None = None  # pinv's, on first use this step
@@ -697,7 +783,27 @@ class DroneSeparation(RobotSeparation):
 
 
 class _TetherRows(_DroneLimit):
-    """Rows on tether j's two ends: point j−1 (a drone for j ≥ 2, the fixed anchor for j = 1) and drone j."""
+    """Rows on tether j's two ends: point j−1 (a drone for j ≥ 2, the fixed anchor for j = 1) and drone j; with an
+    active winch (``winch = True``) also on tether j's tension rate Ṫ_j (column 3N + j)."""
+
+    winch: bool = False
+
+    def _with_winch(self, N: int, per: int, A: Array, DT: Array) -> Array:
+        """A (N·per, 3N) with the winch columns appended: tether j's rows get DT[j] (per,) in column 3N + j (the
+        row's derivative w.r.t. T_w, times Ts); A itself without an active winch."""
+        if not self.winch:
+            return A
+        out = np.zeros((N * per, 4 * N))
+        out[:, : 3 * N] = A
+        out[np.arange(N * per), 3 * N + np.repeat(np.arange(N), per)] = DT.reshape(-1)
+        return out
+
+    def _winch_mask(self, N: int, per: int, mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        if not self.winch:
+            return mask
+        extra = np.zeros((N * per, N), dtype=bool)
+        extra[np.arange(N * per), np.repeat(np.arange(N), per)] = True
+        return np.hstack([mask, extra])
 
     @staticmethod
     def _scatter(N: int, per: int, D: Array) -> Array:
@@ -748,7 +854,8 @@ class TetherClearance(_TetherRows):
         self._J[:, -1, :, 3:] = np.eye(3)
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
-        return self._mask(self.N, (self.m + 1) * self.nearest)
+        per = (self.m + 1) * self.nearest
+        return self._winch_mask(self.N, per, self._mask(self.N, per))
 
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
         N, m, k = self.N, self.m, self.nearest
@@ -764,6 +871,11 @@ class TetherClearance(_TetherRows):
         need = self.c_min + ctx.chord_deviation[:, None]  # (N, 1): c_t + margin + the arc's departure from its chord
         lower = -np.minimum(self.rate * ctx.Ts, 1.0) * np.maximum(c - need, 0.0)
         lower[~(c <= self.activation + ctx.chord_deviation[:, None])] = -np.inf
+        if self.winch:  # nᵀ dX/dT_w, X = (1 − t) X_i + t X_{i+1}; the ends do not move with T_w
+            dXT = np.zeros((N, m + 2, 3))
+            dXT[:, 1:-1] = ctx.sens.dpoints_dtw
+            DT = np.einsum("jpkc,jpc->jpk", g0, dXT[:, :-1]) + np.einsum("jpkc,jpc->jpk", g1, dXT[:, 1:])
+            A = self._with_winch(N, (m + 1) * k, A, ctx.Ts * DT)
         return LimitRows(A, lower.reshape(-1), _infinite(c.size))
 
 
@@ -781,7 +893,7 @@ class TetherLength(_TetherRows):
         self.N, self.L_max, self.rate, self.a_max = n_robots, float(L_max), float(rate), float(a_max)
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
-        return self._mask(self.N, 1)
+        return self._winch_mask(self.N, 1, self._mask(self.N, 1))
 
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
         S = ctx.sens
@@ -794,7 +906,10 @@ class TetherLength(_TetherRows):
         growth = _row_norms(S.dlength_dq) * step**2 / (2.0 * chord)
         upper = -approach_bound(self.L_max - S.length, 0.0, self.rate, ctx.Ts) - growth
         D = np.concatenate([S.dlength_dp, S.dlength_dq], axis=1)  # (N, 6)
-        return LimitRows(self._scatter(self.N, 1, ctx.Ts * D), _minus_infinite(self.N), upper)
+        A = self._scatter(self.N, 1, ctx.Ts * D)
+        if self.winch:
+            A = self._with_winch(self.N, 1, A, ctx.Ts * S.dlength_dtw)
+        return LimitRows(A, _minus_infinite(self.N), upper)
 
 
 class TetherTension(_TetherRows):
@@ -808,7 +923,7 @@ class TetherTension(_TetherRows):
         self.N, self.T_max, self.rate = n_robots, float(T_max), float(rate)
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
-        return self._mask(self.N, 2)
+        return self._winch_mask(self.N, 2, self._mask(self.N, 2))
 
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
         S = ctx.sens
@@ -819,7 +934,12 @@ class TetherTension(_TetherRows):
         T = np.column_stack([S.tension_p, S.tension_q])
         upper = -approach_bound(self.T_max - T, 0.0, self.rate, ctx.Ts).reshape(-1)
         upper[0] = np.inf
-        return LimitRows(self._scatter(self.N, 2, D), _minus_infinite(2 * self.N), upper)
+        A = self._scatter(self.N, 2, D)
+        if self.winch:  # both end tensions move by dT/dT_w (= 1: T_B = T_A + ρ g h); no row at the ground winch
+            DT = ctx.Ts * np.repeat(S.dtension_dtw, 2).reshape(self.N, 2)
+            DT[0, 0] = 0.0
+            A = self._with_winch(self.N, 2, A, DT)
+        return LimitRows(A, _minus_infinite(2 * self.N), upper)
 
 
 class DroneSpeed(_DroneLimit):
@@ -856,6 +976,126 @@ class DroneAcceleration(DroneSpeed):
         return LimitRows(self.rows.A, ctx.v_prev - dv, ctx.v_prev + dv)
 
 
+# ---------------------------------------------------------------------------------------------------- active winch
+class WinchPadded(_DroneLimit):
+    """A drone-only limit (its rows on v, 3N columns) in the QP of an active winch: the same rows with N zero columns
+    for the tension rates Ṫ (the drone's clearance, the room, the separation, speed and acceleration do not depend on
+    the tethers' tension)."""
+
+    def __init__(self, inner: Limit) -> None:
+        self.inner = inner
+        self.name, self.relaxable = inner.name, inner.relaxable
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        real = _real_chain(chain)
+        d = self.inner.pattern(real)
+        return np.hstack([d, np.zeros((d.shape[0], real.n_robots), dtype=bool)])
+
+    def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
+        r = self.inner.compute(ctx)
+        N = ctx.chain.n_robots
+        A = np.zeros((r.A.shape[0], r.A.shape[1] + N))
+        A[:, : r.A.shape[1]] = r.A
+        return LimitRows(A, r.lower, r.upper)
+
+    def reset(self) -> None:
+        self.inner.reset()
+
+
+class WinchPaddedTask(_DroneTask):
+    """A drone task (rows on v) in the QP of an active winch: N zero columns for Ṫ appended (a constant, read-only
+    matrix stays one, so the QP keeps reusing its stacked rows)."""
+
+    def __init__(self, inner: Task) -> None:
+        self.inner = inner
+        self.name, self.full_rank = inner.name, getattr(inner, "full_rank", False)
+        self._last: tuple[Array, Array] | None = None
+
+    def compute(self, ctx: DroneStepContext) -> TaskRows:  # type: ignore[override]
+        J, t = self.inner.compute(ctx)  # type: ignore[arg-type]
+        if self._last is not None and self._last[0] is J and not J.flags.writeable:
+            return TaskRows(self._last[1], t)
+        out = np.zeros((J.shape[0], J.shape[1] + ctx.chain.n_robots))
+        out[:, : J.shape[1]] = J
+        if not J.flags.writeable:
+            out.flags.writeable = False
+            self._last = (J, out)
+        return TaskRows(out, t)
+
+    def reset(self) -> None:
+        self._last = None
+        self.inner.reset()
+
+
+class WinchTensionRange(_DroneLimit):
+    """Every winch's tension within the pulley's torque range after the step: T_min ≤ T + Ts Ṫ ≤ T_max (N rows on
+    Ṫ, exact: T integrates linearly). A tension outside the range (never, from a valid start) may not move further
+    out: the bounds are widened to include Ṫ = 0."""
+
+    name = "winch_tension"
+
+    def __init__(self, n_robots: int, t_min: float, t_max: float) -> None:
+        self.N, self.t_min, self.t_max = n_robots, float(t_min), float(t_max)
+        self._A: tuple[float, Array] | None = None
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        return np.hstack([np.zeros((self.N, 3 * self.N), dtype=bool), np.eye(self.N, dtype=bool)])
+
+    def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
+        if self._A is None or self._A[0] != ctx.Ts:
+            A = np.hstack([np.zeros((self.N, 3 * self.N)), ctx.Ts * np.eye(self.N)])
+            A.flags.writeable = False
+            self._A = (ctx.Ts, A)
+        T = ctx.winch_tension
+        assert T is not None
+        return LimitRows(self._A[1], np.minimum(self.t_min - T, 0.0), np.maximum(self.t_max - T, 0.0))
+
+
+class WinchRate(_DroneLimit):
+    """Every winch's tension rate |Ṫ_j| ≤ ``rate`` [N/s] (N rows on Ṫ): how fast the pulley's torque can change."""
+
+    name = "winch_rate"
+
+    def __init__(self, n_robots: int, rate: float) -> None:
+        N = n_robots
+        A = np.hstack([np.zeros((N, 3 * N)), np.eye(N)])
+        A.flags.writeable = False
+        r = np.full(N, float(rate))
+        self.N, self.rows = N, LimitRows(A, -r, r)
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        return self.rows.A != 0.0
+
+    def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
+        return self.rows
+
+
+class WinchReturn(_DroneTask):
+    """The winches back towards their nominal tension: ``Ṫ_j = K_w (T_ref − T_j)`` (N rows on Ṫ) [N/s], in the
+    lowest level with a small weight. The tension leaves T_ref only where a higher level or a hard limit needs it
+    (the sag over an obstacle, a tether's length) and comes back when they let it: a higher tension lifts the sag
+    but pulls the drones harder (the tension rows bound that), a lower one spares thrust."""
+
+    name = "winch"
+
+    def __init__(self, n_robots: int, t_ref: float, gain: float) -> None:
+        N = n_robots
+        J = np.hstack([np.zeros((N, 3 * N)), np.eye(N)])
+        J.flags.writeable = False
+        self.J, self.t_ref, self.gain = J, float(t_ref), float(gain)
+
+    def compute(self, ctx: DroneStepContext) -> TaskRows:  # type: ignore[override]
+        T = ctx.winch_tension
+        assert T is not None
+        return TaskRows(self.J, self.gain * (self.t_ref - T))
+
+
+#: The active winch's task in the lowest level: weight (against energy_weight and smoothness_weight, on m/s vs N/s)
+#: and gain K_w [1/s] of :class:`WinchReturn`.
+WINCH_WEIGHT = 0.01
+WINCH_GAIN = 0.5
+
+
 # --------------------------------------------------------------------------------------------------- formulations
 def _anchor(references: Any, base: Any | None) -> Array:
     """The anchor: ``base`` if given, else ``references.base``."""
@@ -866,7 +1106,8 @@ def _anchor(references: Any, base: Any | None) -> Array:
 
 
 class DroneQP:
-    """The lexicographic QP on the drones' velocities (:func:`make_drone_qp`); ``step`` returns v (3N,) [m/s]."""
+    """The lexicographic QP on the drones' velocities (:func:`make_drone_qp`); ``step`` returns v (3N,) [m/s], or
+    with an active winch [v, Ṫ] (3N + N,) [m/s, N/s]."""
 
     name = "qp"
     integrates = "robots"
@@ -953,7 +1194,40 @@ def make_drone_qp(
                 chain, r, p.separation_margin, neighbours=N - 1, activation=2 * r + 3.0, approach_rate=p.approach_rate
             )  # fmt: skip
         )
+    if ctx.winch_active:  # x = [v, Ṫ]: every row gets the winch columns ("Active winch" in formulations/drones.md)
+        return _winch_qp(chain, levels, limits, tether, p, ctx)
     qp = LexicographicQP(chain, levels, limits, _FreeBox(chain.dof), solver=p.solver)  # type: ignore[arg-type]
+    return DroneQP(qp, ctx)
+
+
+def _winch_qp(
+    chain: Chain, levels: list[Level], limits: list[Limit], tether: DroneTetherParams, p: DroneParams,
+    ctx: DroneStepContext,
+) -> DroneQP:  # fmt: skip
+    """:func:`make_drone_qp`'s QP with an active winch: the same levels and limits on x = [v, Ṫ] (drone-only rows
+    padded with zero Ṫ columns, the tether rows with their d/dT_w columns), the winch's range and rate as hard rows,
+    and :class:`WinchReturn` in the lowest level."""
+    N = chain.n_robots
+    t_ref = min(max(tether.winch_tension, tether.winch_tension_min), tether.winch_tension_max)
+    new_levels = []
+    for i, level in enumerate(levels):
+        tasks: list[tuple[Task, float]] = [(WinchPaddedTask(t), w) for t, w in level.tasks]
+        if i == len(levels) - 1:
+            tasks.append((WinchReturn(N, t_ref, WINCH_GAIN), WINCH_WEIGHT))
+        new_levels.append(Level(tasks, level.name))
+    new_limits: list[Limit] = []
+    for lim in limits:
+        if isinstance(lim, _TetherRows):
+            lim.winch = True
+            new_limits.append(lim)
+        else:
+            new_limits.append(WinchPadded(lim))
+    new_limits += [
+        WinchTensionRange(N, tether.winch_tension_min, tether.winch_tension_max),
+        WinchRate(N, tether.winch_tension_rate),
+    ]
+    wchain = WinchChain(chain)
+    qp = LexicographicQP(wchain, new_levels, new_limits, _FreeBox(wchain.dof), solver=p.solver)  # type: ignore[arg-type]
     return DroneQP(qp, ctx)
 
 

@@ -50,6 +50,9 @@ class DronePlan:
         params: the parameters used (JSON-able).
         q: the 3N joints of the chain seen as a manipulator (``Chain(spatial=True)``), (K+1, 3N), when the
             formulation integrates joints (``pinv``); None otherwise.
+        winch_tension: with an active winch (``tether.winch = "active"``), every tether's winch tension T_w at
+            every step, (K+1, N) [N] (``tether_a`` is the catenary at that tension); None: every winch at the
+            constant ``tether.winch_tension``.
     """
 
     method: str
@@ -70,6 +73,7 @@ class DronePlan:
     wall_time: float = 0.0
     params: dict[str, Any] = field(default_factory=dict)
     q: Array | None = None
+    winch_tension: Array | None = None
 
     @property
     def Ts(self) -> float:

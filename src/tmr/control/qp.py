@@ -353,7 +353,10 @@ class LexicographicQP:
         self._buffer[:n, n:] = -np.eye(n)
         self._buffer[n : 2 * n, n:] = np.eye(n)
         declared = np.zeros((start, 2 * n), dtype=bool)
-        declared[:n, :n] = (robot_pattern3d if self.chain.spatial else robot_pattern)(np.eye(n, dtype=bool))
+        coupling = getattr(self.chain, "coupling_pattern", None)  # a chain with unknowns of its own (active winch)
+        if coupling is None:
+            coupling = robot_pattern3d if self.chain.spatial else robot_pattern
+        declared[:n, :n] = coupling(np.eye(n, dtype=bool))
         declared[:n, n:] = np.eye(n, dtype=bool)
         declared[n : 2 * n, n:] = np.eye(n, dtype=bool)
         for (r, c, _, _), d in zip(self._spans, patterns, strict=True):

@@ -188,6 +188,11 @@ def run_drones(
     vel = np.zeros((K + 1, N, 3))
     qs = np.zeros((K + 1, chain.dof)) if joints else None
     a = np.full((K + 1, N), np.nan)
+    winch = bool(getattr(ctx, "winch_active", False))  # an active winch: the tensions integrate too
+    tw = np.full((K + 1, N), np.nan)
+    tw_rate = np.zeros((K + 1, N))
+    T_w = np.full(N, float(tether.winch_tension))
+    T_rate = np.zeros(N)
     diag: dict[str, Any] = {}
     failure: str | None = None
     formulation.reset()
@@ -214,7 +219,11 @@ def run_drones(
         t0 = time.perf_counter()
         robots[k] = P
         try:
-            ctx.update(k, P, v_prev, q)
+            if winch:
+                tw[k] = T_w
+                ctx.update(k, P, v_prev, q, winch_tension=T_w, winch_rate_prev=T_rate)
+            else:
+                ctx.update(k, P, v_prev, q)
         except TetherSpanError as exc:
             failure = f"step {k} (t = {k * Ts:.2f} s): {exc}"
             last = k - 1
@@ -253,6 +262,9 @@ def run_drones(
                 ctx.references = ref
                 K, k_end = len(ref.t) - 1, end_of_motion(ref)
                 robots, vel, a = _grow(robots, K + 1), _grow(vel, K + 1), _grow(a, K + 1, np.nan)
+                tw, tw_rate = _grow(tw, K + 1, np.nan), _grow(tw_rate, K + 1)
+                T_w = tw[k0].copy()
+                T_rate = tw_rate[k0 - 1].copy() if k0 > 0 else np.zeros(N)
                 diag = {key: _grow(val, K + 1, np.nan) for key, val in diag.items()}
                 k, P = k0, robots[k0].copy()
                 v_prev = vel[k0 - 1].reshape(-1).copy() if k0 > 0 else np.zeros(3 * N)
@@ -266,6 +278,11 @@ def run_drones(
             q = q + Ts * out
             P_next = chain.robots(q)
             v = ((P_next - P) / Ts).reshape(-1)
+        elif winch:  # x = [v, Ṫ]
+            v, T_rate = out[: 3 * N], out[3 * N :]
+            tw_rate[k] = T_rate
+            P_next = P + Ts * v.reshape(N, 3)
+            T_w = np.clip(T_w + Ts * T_rate, tether.winch_tension_min, tether.winch_tension_max)  # rounding only
         else:
             v = out
             P_next = P + Ts * v.reshape(N, 3)
@@ -308,7 +325,7 @@ def run_drones(
     diagnostics["timings"] = {"loop": wall}
     if slowed:
         diagnostics["slowed_down"] = slowed
-    plan_params = {"planner": asdict(params), "tether": asdict(tether)}
+    plan_params = {"planner": asdict(params), "tether": tether.as_dict()}
     return DronePlan(
         method=formulation.name,
         scenario=scenario,
@@ -328,4 +345,5 @@ def run_drones(
         wall_time=wall,
         params=plan_params,
         q=None if qs is None else qs[:n],
+        winch_tension=tw[:n] if winch else None,
     )

@@ -92,6 +92,8 @@ def drone_trajectories_dict(plan: Any) -> dict[str, Any]:
          "tethers": [{"name": "tether1", "from": "base", "to": "robot1", "t": [s], "a": [m or null]}, ...]}
 
     Tether j joins ``from`` (the anchor for j = 1, else robot j-1) to robot j; ``a`` is null for a vertical tether.
+    With an active winch (``plan.winch_tension`` recorded) each tether also has ``"T_w"`` [N], its winch tension at
+    every step (``a`` is the catenary at that tension).
     """
     t = np.asarray(plan.t, dtype=float)
     robots = np.asarray(plan.robots, dtype=float)
@@ -100,6 +102,8 @@ def drone_trajectories_dict(plan: Any) -> dict[str, Any]:
     a = np.asarray(plan.tether_a, dtype=float)
     n = robots.shape[1]
     tl = _list(t)
+    tw = getattr(plan, "winch_tension", None)
+    tw = None if tw is None else np.asarray(tw, dtype=float).reshape(t.size, n)
     return {
         "format": DRONE_TRAJECTORY_FORMAT,
         "scenario": str(plan.scenario),
@@ -128,6 +132,7 @@ def drone_trajectories_dict(plan: Any) -> dict[str, Any]:
                 "to": f"robot{j + 1}",
                 "t": tl,
                 "a": _list(a[:, j]),
+                **({} if tw is None else {"T_w": _list(tw[:, j])}),
             }
             for j in range(n)
         ],  # fmt: skip
@@ -143,7 +148,8 @@ def write_drone_trajectories_json(plan: Any, path: str | os.PathLike[str]) -> Pa
 
 def write_drone_trajectories_csv(plan: Any, path: str | os.PathLike[str]) -> Path:
     """Write the trajectories as CSV (atomic, deterministic): ``t`` [s], ``robot<i>_x, _y, _z`` [m] for i = 1..N, then
-    ``tether<j>_a`` [m] (empty for a vertical tether); floats in shortest round-trip form, ``\\n`` line ends."""
+    ``tether<j>_a`` [m] (empty for a vertical tether), then with an active winch ``tether<j>_T_w`` [N]; floats in
+    shortest round-trip form, ``\\n`` line ends."""
     from tmr.io.outputs import atomic_write_text
 
     t = np.asarray(plan.t, dtype=float)
@@ -152,6 +158,10 @@ def write_drone_trajectories_csv(plan: Any, path: str | os.PathLike[str]) -> Pat
     n = robots.shape[1]
     header = ["t"] + [f"robot{i + 1}_{c}" for i in range(n) for c in "xyz"] + [f"tether{j + 1}_a" for j in range(n)]
     table = np.concatenate([t[:, None], robots.reshape(t.size, 3 * n), a.reshape(t.size, n)], axis=1)
+    tw = getattr(plan, "winch_tension", None)
+    if tw is not None:  # an active winch: every tether's tension [N]
+        header += [f"tether{j + 1}_T_w" for j in range(n)]
+        table = np.concatenate([table, np.asarray(tw, dtype=float).reshape(t.size, n)], axis=1)
     buf = _io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(header)
@@ -252,7 +262,8 @@ def drone_run_dict(plan: Any, metrics: Any = None, scenario_info: Any = None) ->
             "tether_length_max": teth.tether_length,
             "winch_end": teth.winch_end,
             "winch_tension": teth.winch_tension,
-            "tether": asdict(teth),
+            "tether": teth.as_dict() if hasattr(teth, "as_dict") else asdict(teth),
+            **_winch_record(teth),
             "world": world,
             "scenario_file": None if source is None else Path(source).name,
             "scenario_text": _info(scenario_info, "text"),
@@ -317,6 +328,18 @@ def write_drone_outputs(
 # ----------------------------------------------------------------------------------------------------------
 # reader
 # ----------------------------------------------------------------------------------------------------------
+def _winch_record(teth: Any) -> dict[str, Any]:
+    """run.json's active-winch fields: ``winch`` ("active"), ``winch_tension_range`` [T_min, T_max] [N],
+    ``winch_tension_rate`` [N/s]; none for a constant-tension winch (its run.json keeps its bytes)."""
+    if not getattr(teth, "active", False):
+        return {}
+    return {
+        "winch": teth.winch,
+        "winch_tension_range": [teth.winch_tension_min, teth.winch_tension_max],
+        "winch_tension_rate": teth.winch_tension_rate,
+    }
+
+
 @dataclass(frozen=True)
 class DroneRun:
     """A drone-chain run directory, read back (units: m, s, N).
@@ -325,6 +348,7 @@ class DroneRun:
         path: the directory; record: ``run.json``; metrics: ``metrics.json`` (None if absent).
         t: (K+1,) [s]; robots, velocities: (K+1, N, 3) [m], [m/s]; reference: (K+1, 3) [m];
         tether_a: (K+1, N) [m], NaN for a vertical tether; base, goal: (3,) [m]; bounds: (6,) [m].
+        winch_tension: (K+1, N) [N], an active winch's recorded tensions (None: constant).
     """
 
     path: Path
@@ -338,6 +362,7 @@ class DroneRun:
     goal: Array
     bounds: Array
     metrics: dict[str, Any] | None = field(default=None)
+    winch_tension: Array | None = field(default=None)
 
     kind = "drone"
 
@@ -405,6 +430,7 @@ class DroneRun:
             goal=self.goal.copy(),
             reference=self.reference.copy(),
             tether_a=self.tether_a.copy(),
+            winch_tension=None if self.winch_tension is None else self.winch_tension.copy(),
             tether=self.tether_params(),
             safety_radius=self.safety_radius,
             bounds=self.bounds.copy(),
@@ -515,11 +541,15 @@ def load_drone_run(path: Path, rec: dict[str, Any], where: str) -> DroneRun:
         vel = np.stack([np.column_stack([_array(e[f"v{c}"], where, c) for c in "xyz"]) for e in entries], axis=1)
         reference = np.column_stack([_array(ref[c], where, "reference") for c in "xyz"])
         a = np.column_stack([_array(e["a"], where, "tether a") for e in tethers])
+        has_tw = any("T_w" in e for e in tethers)
+        tw = np.column_stack([_array(e["T_w"], where, "tether T_w") for e in tethers]) if has_tw else None
     except (KeyError, IndexError, TypeError, ValueError):
         raise RunDirError(f"{where}: trajectories.json is malformed; re-run the planner") from None
     k = t.size
     if robots.shape != (k, n, 3) or vel.shape != (k, n, 3) or reference.shape != (k, 3) or a.shape != (k, n):
         raise RunDirError(f"{where}: trajectories.json arrays do not match {n} drones x {k} samples; re-run it")
+    if tw is not None and tw.shape != (k, n):
+        raise RunDirError(f"{where}: trajectories.json winch tensions do not match {n} drones x {k} samples")
     metrics_path = Path(path) / "metrics.json"
     metrics = _read_json(metrics_path, where) if metrics_path.is_file() else None
     run = DroneRun(
@@ -534,6 +564,7 @@ def load_drone_run(path: Path, rec: dict[str, Any], where: str) -> DroneRun:
         goal=_array(rec["goal"], where, "goal"),
         bounds=_array(rec["bounds"], where, "bounds"),
         metrics=metrics,
+        winch_tension=tw,
     )
     run.tether_params()  # RunDirError now, not when a view asks for it
     return run

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -58,7 +58,14 @@ __all__ = [
     "theta_lower",
     "tether_limits",
     "VERTICAL_SPAN",
+    "WINCH_MODES",
+    "WINCH_FIELDS",
 ]
+
+#: ``DroneTetherParams.winch``: every winch at the constant tension ``winch_tension``, or its tension a decision
+WINCH_MODES = ("constant", "active")
+#: the active winch's fields (left out of the records of a constant-tension plan: :meth:`DroneTetherParams.as_dict`)
+WINCH_FIELDS = ("winch", "winch_tension_min", "winch_tension_max", "winch_tension_rate")
 
 VERTICAL_SPAN = 1e-9  # horizontal spans below this [m] are a vertical tether (no catenary, a = None)
 
@@ -85,6 +92,15 @@ class DroneTetherParams:
             multirotor).
         control_reserve: fraction of the maximal thrust kept for attitude control and gusts [-], default 0.25.
         drone_radius: radius of the sphere enclosing the drone with its propellers [m], default 0.3 m.
+        winch: ``"constant"`` (default: every winch keeps ``winch_tension``, Caruso 2021) or ``"active"``: each
+            winch's pulley torque is controlled, so its tension T_w is a decision of the per-step QP within
+            [``winch_tension_min``, ``winch_tension_max``], changing by at most ``winch_tension_rate`` per second,
+            starting at ``winch_tension`` (``formulations/drones.md``, "Active winch"). Caruso 2021 §6 proposes it
+            "to increase or decrease the tension acting on the cable … to overcome low height obstacles".
+        winch_tension_min: T_min [N], default 0.5 N (an active winch; a quarter of the default T_w).
+        winch_tension_max: T_max [N], default 6.0 N (an active winch; below the default spare thrust 7.36 N, so
+            a drone holds the upper end of a tether rising ~9 m at T_max).
+        winch_tension_rate: largest |dT_w/dt| [N/s], default 2.0 N/s (an active winch).
 
     Raises:
         ParameterError: a value is not a finite real number or is out of range.
@@ -100,12 +116,18 @@ class DroneTetherParams:
     thrust_to_weight: float = 2.0
     control_reserve: float = 0.25
     drone_radius: float = 0.3
+    winch: str = "constant"
+    winch_tension_min: float = 0.5
+    winch_tension_max: float = 6.0
+    winch_tension_rate: float = 2.0
 
     def __post_init__(self) -> None:
         if self.winch_end not in ("lower", "upper"):
             raise ParameterError(f"DroneTetherParams.winch_end must be 'lower' or 'upper', got {self.winch_end!r}")
+        if self.winch not in WINCH_MODES:
+            raise ParameterError(f"DroneTetherParams.winch must be 'constant' or 'active', got {self.winch!r}")
         for f in fields(self):
-            if f.name == "winch_end":
+            if f.name in ("winch_end", "winch"):
                 continue
             value = getattr(self, f.name)
             if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
@@ -113,11 +135,31 @@ class DroneTetherParams:
             object.__setattr__(self, f.name, float(value))
         _validate(  # finite, and the ranges: the parameter classes' one check (tmr.model.params)
             self,
-            positive=("mass_per_length", "g", "winch_tension", "tether_length", "drone_mass", "thrust_to_weight"),
+            positive=("mass_per_length", "g", "winch_tension", "tether_length", "drone_mass", "thrust_to_weight",
+                      "winch_tension_min", "winch_tension_max", "winch_tension_rate"),
             nonnegative=("clearance", "drone_radius"),
-        )
+        )  # fmt: skip
         if not 0.0 <= self.control_reserve < 1.0:
             raise ParameterError(f"DroneTetherParams.control_reserve must be in [0, 1), got {self.control_reserve!r}")
+        if self.active and not self.winch_tension_min <= self.winch_tension <= self.winch_tension_max:
+            raise ParameterError(
+                "an active winch needs winch_tension_min <= winch_tension <= winch_tension_max, got "
+                f"{self.winch_tension_min:g} <= {self.winch_tension:g} <= {self.winch_tension_max:g} N"
+            )
+
+    @property
+    def active(self) -> bool:
+        """Whether the winch tension is a decision of the planner (``winch = "active"``)."""
+        return self.winch == "active"
+
+    def as_dict(self) -> dict[str, object]:
+        """The fields as a dict (``dataclasses.asdict``), without the active winch's four when ``winch`` is
+        ``"constant"``: a constant-tension plan's records keep the bytes they had before the active winch."""
+        out = asdict(self)
+        if not self.active:
+            for name in WINCH_FIELDS:
+                out.pop(name)
+        return out
 
     @property
     def weight_per_length(self) -> float:

@@ -178,12 +178,13 @@ def tether_curves(plan: Any, samples: int = CURVE_POINTS, steps: Any = None) -> 
 def end_tensions(plan: Any) -> tuple[Array, Array]:
     """Tension magnitude [N] at the p end (lower index) and q end of every tether, each (K+1, N):
     T = rho g a cosh(theta) at the end (= rho g (a + z - z0)); a vertical tether from the winch: T_w at the winch
-    end and T_w ± rho g |h| at the other."""
+    end and T_w ± rho g |h| at the other (an active winch: its recorded T_w of that step)."""
     p, q = _ends(plan)
     a = np.asarray(plan.tether_a, dtype=float)
     c = _catenary_frame(p, q, a)
     w = float(plan.tether.mass_per_length * plan.tether.g)
-    tw = float(plan.tether.winch_tension)
+    recorded = getattr(plan, "winch_tension", None)
+    tw: Any = float(plan.tether.winch_tension) if recorded is None else np.asarray(recorded, dtype=float)
     with np.errstate(over="ignore", invalid="ignore"):
         tp = w * c["a"] * np.cosh(c["th_p"])
         tq = w * c["a"] * np.cosh(c["th_q"])
@@ -387,6 +388,11 @@ def tensions(plan: Any) -> Any:
         ax.plot(t, tq[:, i], color=color, lw=1.2, label=f"drone {i + 1}: tether {i + 1}")
         if i + 1 < n:
             ax.plot(t, tp[:, i + 1], color=color, lw=1.0, ls="--", label=f"drone {i + 1}: tether {i + 2}")
+    recorded = getattr(plan, "winch_tension", None)
+    if recorded is not None:  # an active winch: each tether's commanded tension
+        for j in range(n):
+            ax.plot(t, np.asarray(recorded)[:, j], color=colormaps["tab10"](j % 10), lw=0.9, ls=":",
+                    label=f"winch {j + 1} T_w (active)")  # fmt: skip
     ax.axhline(spare, color="#d62728", ls="--", lw=1.3, label=f"spare thrust {spare:.3g} N")
     ax.set_xlabel("time [s]")
     ax.set_ylabel("tension at the drone [N]")

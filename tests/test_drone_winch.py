@@ -1,0 +1,243 @@
+"""Active winches for drone chains (issue 34, ``formulations/drones.md``, "Active winch"): the winch tension T_w of
+every tether a decision of the per-step QP within [T_min, T_max] at a bounded rate; the QP's d/dT_w columns against
+finite differences, constant mode unchanged, the range and rate held and checked, tampering caught, scenario I's
+two verdicts."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from tmr.checks.drones import check_drone_plan
+from tmr.control.drones import TetherClearance, TetherLength, TetherTension, WinchRate, WinchTensionRange, make_drone_qp
+from tmr.control.run3d import line_references, run_drones
+from tmr.errors import ParameterError
+from tmr.io.drones import drone_trajectories_dict, write_drone_outputs
+from tmr.io.rundir import load_run
+from tmr.model.catenary3d import WINCH_FIELDS, DroneTetherParams
+from tmr.model.params import DroneParams
+from tmr.planner3d import plan_drones
+from tmr.world.drones import load_drone_scenario
+from tmr.world.world3d import World3D, box_obstacle
+
+PRM = DroneParams()
+ACTIVE = DroneTetherParams(winch="active")
+
+
+def _low_box():
+    world = World3D([box_obstacle([4.0, 3.0, 0.0], [6.0, 7.0, 1.0])], [0, 0, 0, 10, 10, 5], 0.3)
+    ref = line_references([1.0, 5.0, 0.5], [3.0, 5.0, 1.6], [9.0, 5.0, 2.0], 2, Ts=PRM.Ts)
+    return world, ref
+
+
+@pytest.fixture(scope="module")
+def g_active():
+    """Scenario G planned with active winches (≈ 1 s)."""
+    scenario = load_drone_scenario("G")
+    plan, metrics = plan_drones(scenario, overrides={"winch": "active"})
+    return scenario, plan, metrics
+
+
+def test_parameters_validated_and_left_out_in_constant_mode():
+    with pytest.raises(ParameterError, match="winch must be"):
+        DroneTetherParams(winch="passive")
+    with pytest.raises(ParameterError, match="winch_tension_min <= winch_tension <= winch_tension_max"):
+        DroneTetherParams(winch="active", winch_tension=7.0)
+    with pytest.raises(ParameterError):
+        DroneTetherParams(winch="active", winch_tension_rate=0.0)
+    DroneTetherParams(winch_tension=7.0)  # constant: the active range is not consulted
+    assert not set(WINCH_FIELDS) & set(DroneTetherParams().as_dict())
+    assert set(WINCH_FIELDS) <= set(ACTIVE.as_dict())
+
+
+def test_tether_rows_winch_columns_against_finite_differences():
+    """Every tether row's T_w column (tether j's rows in column 3N + j, the others 0) equals Ts × the central
+    difference of the row's value (the piece point's n·X, the arc length, the end tensions) at T_w ± 1e-6 N."""
+    world, ref = _low_box()
+    N = 2
+    f = make_drone_qp(world, ACTIVE, PRM, N, ref)
+    ctx = f.context
+    P = np.array([[3.2, 5.1, 1.5], [7.4, 4.8, 1.7]])  # tether 2 spans the box, its sag near it
+    T = np.array([2.5, 3.0])
+    lims = {type(lim).__name__: lim for lim in f.qp.limits}
+    Ts, h = PRM.Ts, 1e-6
+
+    def at(Tw):
+        ctx.update(3, P, np.zeros(3 * N), winch_tension=Tw)
+        return ctx.sens
+
+    at(T)
+    rows = {name: lims[name].compute(ctx) for name in ("TetherClearance", "TetherLength", "TetherTension")}
+    pt, pg = ctx.piece_t.copy(), ctx.piece_gradient.copy()
+    ends = ctx.points.copy()
+    m = ctx.fractions.size
+    k = pt.shape[2]
+    for A in (r.A for r in rows.values()):
+        assert A.shape[1] == 4 * N
+        rows_of = np.repeat(np.arange(N), A.shape[0] // N)
+        assert np.all(A[np.arange(A.shape[0]), 3 * N + (1 - rows_of)] == 0)  # no row on the other tether's T_w
+    for j in range(N):
+        Tp, Tm = T.copy(), T.copy()
+        Tp[j] += h
+        Tm[j] -= h
+        sp, sm = at(Tp), at(Tm)
+        # arc length and tensions
+        dL = (sp.length - sm.length) / (2 * h)
+        A = rows["TetherLength"].A
+        assert A[:, 3 * N + j] == pytest.approx(Ts * dL, abs=1e-9)
+        dTq = (sp.tension_q - sm.tension_q) / (2 * h)
+        dTp = (sp.tension_p - sm.tension_p) / (2 * h)
+        A = rows["TetherTension"].A.reshape(N, 2, 4 * N)
+        assert A[:, 1, 3 * N + j] == pytest.approx(Ts * dTq, abs=1e-8)
+        expect_p = Ts * dTp
+        expect_p[0] = 0.0  # tether 1's p end is the ground winch: no row
+        assert A[:, 0, 3 * N + j] == pytest.approx(expect_p, abs=1e-8)
+        # clearance: n·X of each piece's nearest point X = (1 − t) X_i + t X_{i+1}, n and t held
+        Xp = np.concatenate([ends[:-1, None], sp.points, ends[1:, None]], axis=1)
+        Xm = np.concatenate([ends[:-1, None], sm.points, ends[1:, None]], axis=1)
+        dX = (Xp - Xm) / (2 * h)  # (N, m+2, 3)
+        piece = (1 - pt[..., None]) * dX[:, :-1, None, :] + pt[..., None] * dX[:, 1:, None, :]  # (N, m+1, k, 3)
+        expect = Ts * np.einsum("jpkc,jpkc->jpk", pg, piece).reshape(N, (m + 1) * k)
+        A = rows["TetherClearance"].A.reshape(N, (m + 1) * k, 4 * N)
+        assert np.abs(expect).max() > 1e-4  # the sag does move with T_w
+        assert A[:, :, 3 * N + j] == pytest.approx(expect, abs=1e-7)
+    # the winch rows: range and rate on Ṫ only
+    at(T)
+    r = lims["WinchTensionRange"].compute(ctx)
+    assert np.all(r.A[:, : 3 * N] == 0) and np.allclose(r.A[:, 3 * N :], Ts * np.eye(N))
+    assert r.lower == pytest.approx(ACTIVE.winch_tension_min - T) and r.upper == pytest.approx(
+        ACTIVE.winch_tension_max - T
+    )
+    r = lims["WinchRate"].compute(ctx)
+    assert np.all(r.upper == ACTIVE.winch_tension_rate) and np.all(r.lower == -ACTIVE.winch_tension_rate)
+    assert isinstance(lims["WinchTensionRange"], WinchTensionRange) and isinstance(lims["WinchRate"], WinchRate)
+    pairs = (("TetherClearance", TetherClearance), ("TetherLength", TetherLength), ("TetherTension", TetherTension))
+    assert all(isinstance(lims[n], c) for n, c in pairs)
+
+
+def test_constant_mode_is_the_plan_without_winch_parameters():
+    """The constant winch with other (ignored) active-winch fields plans exactly what the default does: same arrays,
+    same trajectories document, no tensions recorded, no winch keys in the plan's parameters."""
+    world, ref = _low_box()
+    plans = []
+    for teth in (DroneTetherParams(), DroneTetherParams(winch_tension_min=1.0, winch_tension_max=3.0)):
+        f = make_drone_qp(world, teth, PRM, 2, ref)
+        plans.append(run_drones(world, ref, f, ref.start_positions, tether=teth, params=PRM))
+    a, b = plans
+    assert a.winch_tension is None and b.winch_tension is None
+    assert np.array_equal(a.robots, b.robots) and np.array_equal(a.tether_a, b.tether_a, equal_nan=True)
+    assert json.dumps(drone_trajectories_dict(a)) == json.dumps(drone_trajectories_dict(b))
+    assert "winch" not in a.params["tether"] and a.params["tether"] == b.params["tether"]
+
+
+def test_active_plan_holds_range_and_rate_and_passes_the_check(g_active, tmp_path):
+    scenario, plan, metrics = g_active
+    assert plan.success and metrics.success, plan.failure
+    T = plan.winch_tension
+    assert T.shape == (plan.t.size, plan.n_robots)
+    teth = plan.tether
+    assert T.min() >= teth.winch_tension_min and T.max() <= teth.winch_tension_max
+    rate = np.abs(np.diff(T, axis=0)) / plan.Ts
+    assert rate.max() <= teth.winch_tension_rate * (1 + 1e-9)
+    assert T.max() > teth.winch_tension + 1.0  # the winch did work: the sag over the wall asked for more tension
+    assert metrics.winch["max_tension_used"] == pytest.approx(T.max())
+    assert metrics.max_winch_tension_error < 1e-6  # a is the catenary at the recorded tension
+    # written, read back, re-checked to the same verdict
+    write_drone_outputs(tmp_path, plan, metrics, scenario)
+    run = load_run(tmp_path)
+    assert np.array_equal(run.winch_tension, T)
+    assert run.record["winch"] == "active" and run.record["winch_tension_range"] == [0.5, 6.0]
+    again = run.check()
+    assert again.success and again.winch == metrics.winch
+    header = (tmp_path / "trajectories.csv").read_text().splitlines()[0].split(",")
+    assert header[-plan.n_robots :] == [f"tether{j + 1}_T_w" for j in range(plan.n_robots)]
+
+
+@pytest.mark.parametrize("how", ["range", "rate", "missing"])
+def test_checker_rejects_tampered_tensions(g_active, how):
+    scenario, plan, _ = g_active
+    bad = copy.copy(plan)
+    bad.diagnostics = {}
+    T = plan.winch_tension.copy()
+    k = T.shape[0] // 2
+    if how == "range":
+        T[:, 1] = 6.5  # above T_max = 6 N at every step (no jump)
+    elif how == "rate":
+        T[k:, 0] += 0.2  # within the range, but a jump of 0.2 N in one step: 4 N/s > 2 N/s
+    bad.winch_tension = None if how == "missing" else T
+    m = check_drone_plan(bad, scenario, params=PRM)
+    assert not m.success
+    first, text = {"range": (0, "outside its range"), "rate": (k - 1, "faster than"), "missing": (0, "records no")}[how]
+    assert m.first_violation["winch"] == first
+    assert any(text in f for f in m.failures), m.failures
+    assert check_drone_plan(copy.copy(plan), scenario, params=PRM, update_plan=False).success  # the original passes
+
+
+def test_other_methods_refused_with_an_active_winch():
+    scenario = load_drone_scenario("G")
+    for method in ("pinv", "horizon"):
+        with pytest.raises(ParameterError, match="--method qp only"):
+            plan_drones(scenario, method=method, overrides={"winch": "active"})
+    with pytest.raises(ParameterError, match="spare thrust"):
+        plan_drones(scenario, overrides={"winch": "active", "winch_tension_min": 8.0, "winch_tension": 8.0,
+                                         "winch_tension_max": 9.0})  # fmt: skip
+
+
+def test_scenario_i_active_reaches_the_goal_constant_does_not():
+    """Scenario I (G under a 2.6 m ceiling, 6.3 m tethers, 2 drones): with active winches the plan passes every
+    check; at the constant 2 N the tethers over the wall hold the leader back (the chain does not reach the goal)."""
+    scenario = load_drone_scenario("I")
+    assert scenario.tether.active and scenario.n_robots == 2
+    plan, metrics = plan_drones(scenario)
+    assert plan.success and metrics.success, plan.failure
+    assert metrics.winch["max_tension_used"] > 4.0
+    plan_c, metrics_c = plan_drones(scenario, overrides={"winch": "constant"})
+    assert not plan_c.success and not metrics_c.success
+    assert "from the goal" in plan_c.failure and metrics_c.final_leader_error > 0.15
+    assert dataclasses.asdict(plan_c.tether)["winch"] == "constant" and plan_c.winch_tension is None
+
+
+@pytest.mark.parametrize("method", ["pinv", "horizon"])
+def test_cli_refuses_other_methods_with_an_active_winch_in_one_line(tmp_path, capsys, method):
+    from tmr.plan import main
+
+    out = tmp_path / "x"
+    code = main(["--scenario", "I", "--method", method, "--no-plots", "--out", str(out)])
+    stdout, stderr = capsys.readouterr()
+    assert code == 2 and "--method qp only" in stdout + stderr and not out.exists()
+    assert len((stdout + stderr).strip().splitlines()) == 1
+
+
+def test_slowing_down_goes_back_to_the_recorded_tensions():
+    """A step without a solution (forced here once, at t = 5.5 s, while a winch is raising its tension) makes the
+    loop go back 1 s and re-time the references: the tensions go back with the positions (else T_w would jump at the
+    seam: a rate violation the checker reports), and the plan still passes every check."""
+    from tmr.control.run3d import run_drones
+    from tmr.errors import InfeasibleStep
+    from tmr.planner3d import build_drone_problem, drone_parameters
+
+    scenario = load_drone_scenario("G")
+    params, tether = drone_parameters(scenario, {"winch": "active"})
+    problem = build_drone_problem(scenario, 3, params=params, tether=tether)
+    f = make_drone_qp(problem.world, tether, params, 3, problem.references, base=scenario.base)
+    real, raised = f.step, []
+
+    def step(ctx):
+        if not raised and ctx.k == 110:
+            raised.append(float(ctx.winch_tension.max()))
+            raise InfeasibleStep("forced by the test")
+        return real(ctx)
+
+    f.step = step
+    plan = run_drones(problem.world, problem.references, f, problem.references.start_positions, tether=tether,
+                      params=params, goal=scenario.goal, scenario="G")  # fmt: skip
+    assert raised and raised[0] > 3.0  # the winch was working when the step failed
+    assert plan.diagnostics["slowed_down"] == ["t = 5.50 s"]
+    T = plan.winch_tension
+    assert np.abs(np.diff(T, axis=0)).max() / plan.Ts <= tether.winch_tension_rate * (1 + 1e-9)
+    m = check_drone_plan(plan, scenario, params=params)
+    assert m.success, m.failures
