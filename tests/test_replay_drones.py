@@ -180,6 +180,27 @@ def test_scenarios_g_and_h_are_confirmed(scenario: str, tmp_path: Path) -> None:
     assert all(r["saturated_fraction"] <= 0.01 and r["tracking_error_max"] < 0.1 for r in doc["robots"])
 
 
+def test_active_winch_is_driven_as_planned_and_keeps_the_tether_off_the_wall(tmp_path: Path) -> None:
+    """Scenario I (active winch, 2 drones under a low ceiling): the winches follow the planned tensions (up to 6 N)
+    and the replay confirms the plan; the same flight with the winches held at the constant 2 N puts tether 2 on the
+    wall's top edge (issue 34: the replay drives the winch torque as planned)."""
+    from dataclasses import replace
+
+    from tmr.io.rundir import load_run
+    from tmr.replay.drones import chain_of_run
+
+    run = plan("I", tmp_path / "I")
+    chain = chain_of_run(load_run(run))
+    assert chain.winch_tension is not None and chain.winch_tension.max() > 5.0
+    planned = replay_drones(chain)
+    assert drone_verdict(planned).ok
+    # the simulated winch-end tension follows the plan's (the drone end of tether 2: its winch is below)
+    assert np.nanmax(np.abs(planned.tension_to - planned.tension_to_plan)) < 0.25
+    constant = replace(chain, winch_tension=None)
+    verdict = drone_verdict(replay_drones(constant))
+    assert not verdict.ok and verdict.reason.startswith("tether 2 touches obstacle"), verdict.reason
+
+
 @pytest.mark.slow
 def test_scenario_h_planned_for_a_tether_three_times_too_light_is_caught(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]

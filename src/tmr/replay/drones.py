@@ -103,6 +103,8 @@ class DroneChain:
         world: the ``[world]`` table (None: an empty room of ``bounds``); world_dir: its mesh paths' folder.
         bounds: (6,) the room [m].
         label: how messages name the run.
+        winch_tension: (K, J) an active winch's planned tension of every tether at every sample [N] (None: the
+            constant ``params.winch_tension``); the replay's winches follow it, linear between samples.
     """
 
     t: Array
@@ -114,6 +116,7 @@ class DroneChain:
     world_dir: Path
     bounds: Array
     label: str = "drone chain"
+    winch_tension: Array | None = None
 
     @property
     def n(self) -> int:
@@ -138,6 +141,7 @@ def chain_of_run(run: Any) -> DroneChain:
         world_dir=run.world_dir,
         bounds=np.asarray(run.bounds, dtype=float),
         label=run.label,
+        winch_tension=None if run.winch_tension is None else np.asarray(run.winch_tension, dtype=float),
     )
 
 
@@ -376,8 +380,9 @@ def _planned_catenaries(chain: DroneChain, ends: list[tuple[int, int]]) -> tuple
         P = chain.positions[k]
         for j, (a, b) in enumerate(ends):
             p = chain.base if a < 0 else P[a]
+            tw = None if chain.winch_tension is None else float(chain.winch_tension[k, j])
             try:
-                cat = solve3d(p, P[b], chain.params, warm=warm[j])
+                cat = solve3d(p, P[b], chain.params, winch_tension=tw, warm=warm[j])
             except TetherSpanError:
                 cat = warm[j]
                 if cat is None:
@@ -485,6 +490,11 @@ def replay_drones(chain: DroneChain, cfg: DroneReplayConfig | None = None, progr
     frac = ((np.arange(times.size) % sub) / sub)[:, None, None]
     nxt = np.minimum(s_idx + 1, t.size - 1)
     f_ff = (1.0 - frac) * f_plan[s_idx] + frac * f_plan[nxt]
+    tw_step = None  # an active winch: each winch's tension at every physics step, planned, linear between samples
+    if chain.winch_tension is not None and J:
+        tw_step = (1.0 - frac[:, :, 0]) * chain.winch_tension[s_idx] + frac[:, :, 0] * chain.winch_tension[nxt]
+        for j, ts in enumerate(dm.tethers):
+            ts.t0 = float(tw_step[0, j])
     ctl = QuadrotorControl(dm.quad, n)
 
     contacts: dict[str, dict[str, Any]] = {
@@ -557,6 +567,9 @@ def replay_drones(chain: DroneChain, cfg: DroneReplayConfig | None = None, progr
                 for i in np.flatnonzero(sat):
                     if first_sat[i] is None:
                         first_sat[i] = float(times[step])
+            if tw_step is not None:
+                for j, ts in enumerate(dm.tethers):
+                    ts.t0 = tw_step[step, j]
             for ts in dm.tethers:
                 ts.update(m, d)
             mujoco.mj_step(m, d)
@@ -580,8 +593,9 @@ def replay_drones(chain: DroneChain, cfg: DroneReplayConfig | None = None, progr
     warm: list[Any] = [None] * J
     for k, nd in enumerate(nodes):
         for j, tn in enumerate(nd):
+            tw = None if chain.winch_tension is None else float(chain.winch_tension[ext[k], j])
             try:
-                cat = solve3d(tn[0], tn[-1], sim_params, warm=warm[j])
+                cat = solve3d(tn[0], tn[-1], sim_params, winch_tension=tw, warm=warm[j])
             except (TetherSpanError, ValueError):
                 continue
             warm[j] = cat
