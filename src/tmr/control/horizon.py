@@ -512,12 +512,15 @@ def plan_horizon(
         warm_start_fallback=warm_c.detail if warm_c else f"none: {warm_why}",
         iterates_kept=len(pool),
     )
+    qdot = np.vstack([np.diff(Q, axis=0) / su.Ts, np.zeros((1, su.n))])
+    if warm_start.q.shape == Q.shape and np.array_equal(warm_start.q, Q) and warm_start.qdot.shape == qdot.shape:
+        qdot = warm_start.qdot.copy()  # the warm start itself: its own rates (a difference quotient rounds apart)
     return Plan(
         method="horizon",
         scenario=problem.scenario.name,
         t=su.t.copy(),
         q=Q,
-        qdot=np.vstack([np.diff(Q, axis=0) / su.Ts, np.zeros((1, su.n))]),
+        qdot=qdot,
         robots=su.robots(Q),
         base=problem.chain.base.copy(),
         reference=su.ref.copy(),
