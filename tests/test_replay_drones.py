@@ -345,8 +345,9 @@ def test_scenario_g_is_confirmed(tmp_path: Path) -> None:
 
 def test_scenario_h_saturates_drone_4_for_longer_than_50_ms(tmp_path: Path) -> None:
     """H (5 drones): drone 4 has a rotor clipped for about 85 ms on end at t ≈ 5.2 s (an attitude transient: its
-    collective thrust stays within the planner's reserve, only the roll/pitch torque saturates) — a planner finding
-    (the plan bounds acceleration, not jerk), recorded in benchmarks/results/replay_drones.md."""
+    collective thrust stays within the planner's reserve, only the roll/pitch torque saturates: the plan holds -4, +4,
+    -4 m/s² from t = 5.0 to 5.2 s and stops accelerating within one step) — a planner finding (the plan bounds
+    acceleration per axis, not its norm nor jerk), recorded in benchmarks/results/replay_drones.md."""
     run = plan("H", tmp_path / "H")
     assert replay_main([str(run), "--no-plots", "-q"]) == 1
     doc = json.loads((run / "replay" / "replay.json").read_text())
