@@ -147,27 +147,30 @@ def _e(x: float, sign: str) -> str:
 
 
 def drone_static_rows() -> list[dict]:
-    """Two drones holding station, one tether between them (3 s), against tmr.model.catenary3d's catenary."""
+    """Two drones holding station, one tether between them (5 s), against tmr.model.catenary3d's catenary (the winch
+    at the lower end, and one case at the upper end)."""
     from tmr.model.catenary3d import DroneTetherParams, solve3d
     from tmr.replay.drones import DroneChain, DroneReplayConfig, drone_verdict, replay_drones
 
     rows = []
-    ends = (((0, 0, 2), (3, 0, 3)), ((0, 0, 2), (8, 0, 2.5)), ((0, 0, 2), (0.3, 0, 5)), ((0, 0, 3), (10, 0, 3.5)))
-    for p1, p2 in ends:
+    lower = (((0, 0, 2), (3, 0, 3)), ((0, 0, 2), (8, 0, 2.5)), ((0, 0, 2), (0.3, 0, 5)), ((0, 0, 3), (10, 0, 3.5)))
+    cases = [(p1, p2, "lower") for p1, p2 in lower] + [((0, 0, 2), (8, 0, 2.5), "upper")]
+    for p1, p2, winch_end in cases:
+        params = DroneTetherParams(winch_end=winch_end)
         k = 101
         pos = np.broadcast_to(np.array([p1, p2], dtype=float), (k, 2, 3)).copy()
         chain = DroneChain(
-            np.arange(k) * 0.05, pos, np.zeros_like(pos), None, DroneTetherParams(), None, Path("."),
+            np.arange(k) * 0.05, pos, np.zeros_like(pos), None, params, None, Path("."),
             np.array([-5.0, -5.0, 0.0, 20.0, 5.0, 6.0]), "hover",
         )  # fmt: skip
         rp = replay_drones(chain, DroneReplayConfig())
-        c = solve3d(p1, p2, DroneTetherParams())
+        c = solve3d(p1, p2, params)
         sag = min(p1[2], p2[2]) - float(c.lowest[2])
         last = rp.t >= rp.t[-1] - 2.0  # means over the last 2 s (the light cable keeps a small swing)
         low = rp.lowest[last, 0]
         rows.append(
             {
-                "ends": f"{p1} – {p2}",
+                "ends": f"{p1} – {p2}" + (", winch upper" if winch_end == "upper" else ""),
                 "lowest_m": float(low.mean()),
                 "lowest_cat_m": float(c.lowest[2]),
                 "lowest_err_sag": (low.mean() - c.lowest[2]) / sag if sag > 1e-9 else float("nan"),
@@ -205,6 +208,14 @@ def drone_row(run_dir: Path, repeats: int, density: float | None = None) -> dict
         "rotor_mean": float(rp.rotor_mean.mean()),
         "rotor_limit": rp.rotor_limit,
         "saturation_pct": 100 * float(rp.saturation_fraction.max()),
+        "saturation_run_ms": 1000 * float(rp.saturation_run.max()),
+        "pull_max_n": float(np.nanmax(rp.pull)),
+        "spare_thrust_n": rp.spare_thrust,
+        "demand_max_n": float(np.nanmax(rp.thrust_demand)),
+        "reserve_thrust_n": rp.reserve_thrust,
+        "clearance_min_m": float(np.nanmin(rp.clearance)),
+        "clearance_plan_m": rp.tether_clearance,
+        "accel_removed_max": float(np.nanmax(rp.accel_removed)),
         "min_tether_m": float(rp.lowest.min()),
         "plan_then_m": float(rp.lowest_plan.flat[int(np.argmin(rp.lowest))]),
         "low_vs_plan_mm": 1000 * float(np.nanmax(np.abs(rp.lowest - rp.lowest_plan))),
@@ -243,7 +254,7 @@ def drone_section(repeats: int) -> tuple[list[str], list[dict]]:
     rows = []
     with tempfile.TemporaryDirectory() as td:
         tmp = Path(td)
-        for s in "FGH":
+        for s in "FGHI":
             run_dir, code = plan(tmp, s, "qp")
             rows.append(drone_row(run_dir, repeats) if code == 0 else {"run": s, "verdict": f"no plan ({code})"})
             print(rows[-1], flush=True)
@@ -255,27 +266,36 @@ def drone_section(repeats: int) -> tuple[list[str], list[dict]]:
             print(rows[-1], flush=True)
     lines += [
         "",
-        "## Drone chains: F, G, H (qp)",
+        "## Drone chains: F, G, H, I (qp)",
         "",
         "Tracking: distance of each drone to the plan's positions (the drones fly a reference smoothed with σ = 0.15"
         " s). Rotor thrust: the largest of any rotor, the mean of all, against f_max; saturation: the largest share"
-        " of physics steps a drone had a rotor at 0 or f_max. Lowest tether point over the run and the planner's"
-        " catenary at that moment; |Δ| columns: the largest gap to the planner's catenary of the planned ends.",
+        " of physics steps a drone had a rotor at 0 or f_max, and the longest unbroken run (fails > 50 ms). Pull: the"
+        " largest tether tension on a drone against the planner's spare thrust; thrust asked: the largest collective"
+        " thrust the controller asked for against (1 − reserve) 4 f_max. Smoothing: the largest acceleration the"
+        " reference's smoothing removed from the plan's (fails > 15 m/s²). Lowest tether point over the run and the"
+        " planner's catenary at that moment; least tether distance to the world against c_t (fails < c_t / 2); |Δ|"
+        " columns: the largest gap to the planner's catenary of the planned ends.",
         "",
         "| run | N | plan [s] | replay | tracking max / rms [mm] | tilt max [°] | rotor peak / mean / f_max [N] | "
-        "saturation [%] | lowest tether [m] (plan) | max abs lowest vs plan [mm] | max abs tension vs plan [N] | "
-        "contacts | RTF wall / CPU | first reason |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "saturation [%] / longest [ms] | pull / spare [N] | thrust asked / reserve [N] | smoothing [m/s²] | "
+        "lowest tether [m] (plan) | least tether distance / c_t [m] | max abs lowest vs plan [mm] | "
+        "max abs tension vs plan [N] | contacts | RTF wall / CPU | first reason |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         if "track_max_mm" not in r:
-            lines.append(f"| {r['run']} | | | {r['verdict']} | | | | | | | | | | |")
+            lines.append(f"| {r['run']} | | | {r['verdict']} |" + " |" * 14)
             continue
         lines.append(
             f"| {r['run']} | {r['drones']} | {r['plan_s']:.1f} | {r['verdict']} | {r['track_max_mm']:.1f} / "
             f"{r['track_rms_mm']:.1f} | {r['tilt_deg']:.1f} | {r['rotor_peak']:.2f} / {r['rotor_mean']:.2f} / "
-            f"{r['rotor_limit']:.2f} | {r['saturation_pct']:.2f} | {r['min_tether_m']:.3f} ({r['plan_then_m']:.3f}) | "
-            f"{r['low_vs_plan_mm']:.1f} | {r['t_vs_plan_n']:.3f} | {r['contacts']} | {r['rtf']:.1f}× / "
+            f"{r['rotor_limit']:.2f} | {r['saturation_pct']:.2f} / {r['saturation_run_ms']:.0f} | "
+            f"{r['pull_max_n']:.2f} / {r['spare_thrust_n']:.2f} | "
+            f"{r['demand_max_n']:.1f} / {r['reserve_thrust_n']:.1f} | "
+            f"{r['accel_removed_max']:.1f} | {r['min_tether_m']:.3f} ({r['plan_then_m']:.3f}) | "
+            f"{r['clearance_min_m']:.3f} / {r['clearance_plan_m']:.2f} | {r['low_vs_plan_mm']:.1f} | "
+            f"{r['t_vs_plan_n']:.3f} | {r['contacts']} | {r['rtf']:.1f}× / "
             f"{r['rtf_cpu']:.1f}× | {r['reason']} |"
         )
     return lines, rows
@@ -287,7 +307,7 @@ def write_drones(repeats: int) -> list[str]:
         "# Physics replay (MuJoCo): drone chains",
         "",
         "`python benchmarks/replay.py --drones-only` — " + versions(["mujoco", "numpy", "scipy"])
-        + f"; tmr {source_version()}. Model: [`formulations/replay.md`](../../formulations/replay.md), \"Drone"
+        + f"; {source_version()}. Model: [`formulations/replay.md`](../../formulations/replay.md), \"Drone"
         f" chains\". RTF = simulated time / wall time (CPU time) of the simulation loop, median of {repeats} replays"
         " (1 for the light-tether rows); the machine's 2 cores are shared with other jobs.",
         "",

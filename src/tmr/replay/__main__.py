@@ -171,6 +171,10 @@ def _drones(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[st
     with _bar("replay") as progress:
         rp = replay_drones(chain, cfg, progress=progress)
     verdict = drone_verdict(rp)
+    if run.record.get("success") is False:  # the replay cannot confirm a plan that failed its own checks
+        why = run.record.get("failure") or "no reason recorded"
+        msg = f"the plan itself failed its checks (run.json success false): {why}"
+        verdict = replace(verdict, ok=False, reason=msg, failures=((-math.inf, "plan", msg), *verdict.failures))
     names = write_drone_outputs(out, rp, run, verdict, plots=not args.no_plots)
     lines = [f"tmr replay: {run.label}, {run.n_robots} drones, {rp.sim_time:.2f} s simulated, {rp.steps} steps"]
     if args.gif:
@@ -189,7 +193,9 @@ def _drones(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[st
         lines.append(
             f"  drone{i + 1}   tracking error max {1000 * e.max():.1f} mm, rms {rms:.1f} mm; rotor thrust peak "
             f"{rp.rotor_peak[i]:.2f} N, mean {rp.rotor_mean[i]:.2f} N of {rp.rotor_limit:.2f} N, saturated "
-            f"{100 * rp.saturation_fraction[i]:.2f} % of steps; tilt max {math.degrees(rp.tilt[:, i].max()):.1f} deg"
+            f"{100 * rp.saturation_fraction[i]:.2f} % of steps (longest {1000 * rp.saturation_run[i]:.0f} ms); "
+            f"tether pull max {np.nanmax(rp.pull[:, i]):.2f} N of {rp.spare_thrust:.2f} N spare; "
+            f"tilt max {math.degrees(np.nanmax(rp.tilt[:, i])):.1f} deg"
         )
     for j in range(rp.lowest.shape[1]):
         k = int(rp.lowest[:, j].argmin())
@@ -198,10 +204,16 @@ def _drones(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[st
             f"  tether{j + 1}  lowest point {rp.lowest[k, j]:.3f} m at t = {rp.t[k]:.2f} s (plan "
             f"{rp.lowest_plan[k, j]:.3f} m), drone-end tension max {rp.tension_to[:, j].max():.2f} N "
             f"(plan {np.nanmax(rp.tension_to_plan[:, j]):.2f} N, largest gap {np.nanmax(dt):.3f} N), "
-            f"{int(rp.tether_contact_steps[j])} contact steps"
+            f"sag below the chord max {np.nanmax(rp.sag[:, j]):.3f} m (plan {np.nanmax(rp.sag_plan[:, j]):.3f} m), "
+            f"least distance to the world "
+            f"{np.nanmin(rp.clearance[:, j]):.3f} m "
+            f"(c_t {rp.tether_clearance:g} m), {int(rp.tether_contact_steps[j])} contact steps"
         )
     counts = ", ".join(f"{kind} {c['count']}" for kind, c in rp.contacts.items())
     lines.append(f"  contacts  {counts} (physics steps in contact)")
+    if rp.warnings:
+        listed = ", ".join(f"{k} {v}" for k, v in rp.warnings.items())
+        lines.append(f"  MuJoCo warnings  {listed} (in replay.json)")
     lines.append(
         f"  real-time factor {rp.real_time_factor:.1f}x ({rp.wall_time:.2f} s wall; "
         f"{rp.cpu_real_time_factor:.1f}x of this process's CPU time)"

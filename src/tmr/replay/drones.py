@@ -48,6 +48,10 @@ __all__ = [
 #: of the cables and the controller settle).
 WARMUP = 0.5
 DRONE_CONTACT_KINDS = ("drone-obstacle", "drone-floor", "drone-drone", "tether-obstacle", "tether-floor")
+#: fewest links of a drone tether (fewer: a rigid rod, not a cable)
+MIN_LINKS = 4
+#: largest k_rate dt of the body-rate loop (explicit in the controller: beyond it the loop rings and diverges)
+MAX_RATE_STEP = 0.5
 #: geom kinds
 _FLOOR, _OBSTACLE, _TETHER, _DRONE = 0, 1, 2, 3
 
@@ -69,6 +73,17 @@ class DroneReplayConfig:
         armature: added inertia of the tether joints [kg m² on hinges, kg on slides] (:class:`TetherSpec`).
         smoothing: σ [s] of the Gaussian the drones' reference is smoothed with (:func:`_reference`); the tracking
             error is measured against the plan's own positions.
+        saturation_run: longest unbroken run of physics steps with a rotor clipped a drone may have [s] (0.05).
+        pull_tolerance: the measured tether pull on a drone may exceed the planner's spare thrust by this fraction
+            [-] (0.05: the simulated tension's ripple; replay.md).
+        reserve_window: longest unbroken time the collective thrust a drone needs may exceed the planner's
+            (1 − reserve) 4 f_max [s] (0.1).
+        accel_budget: largest acceleration the smoothing may remove from the plan's, |a_plan − a_ref| at a plan
+            sample [m/s²] (15: above 2·4√3 ≈ 13.9, the most a plan within the planner's 4 m/s² per axis can lose, so
+            only a plan the drones cannot follow as planned fails it; replay.md).
+        clearance_fraction: a simulated tether nearer the floor or an obstacle than this fraction of the planner's
+            tether clearance c_t fails [-] (0.5).
+        length_tolerance: paid-out length beyond the planner's ``tether_length`` that fails [-] (0.01).
     """
 
     n_links: int = 16
@@ -80,12 +95,27 @@ class DroneReplayConfig:
     settle: float = 0.0
     armature: float = 1e-4
     smoothing: float = 0.15
+    saturation_run: float = 0.05
+    pull_tolerance: float = 0.05
+    reserve_window: float = 0.1
+    accel_budget: float = 15.0
+    clearance_fraction: float = 0.5
+    length_tolerance: float = 0.01
 
     def __post_init__(self) -> None:
         from tmr.replay.chain import MAX_LINKS
 
-        if not 1 <= self.n_links <= MAX_LINKS:
-            raise ReplayError(f"--links must be 1 … {MAX_LINKS} links per tether, got {self.n_links}")
+        if not MIN_LINKS <= self.n_links <= MAX_LINKS:
+            raise ReplayError(
+                f"--links must be {MIN_LINKS} … {MAX_LINKS} links per drone tether (fewer make a rigid rod), "
+                f"got {self.n_links}"
+            )
+        k_rate = QuadrotorSpec().rate_gain
+        if k_rate * self.timestep > MAX_RATE_STEP:
+            raise ReplayError(
+                f"--timestep {self.timestep:g} s is too large for the drones' rate loop (k_rate dt = "
+                f"{k_rate * self.timestep:g} > {MAX_RATE_STEP:g}): use at most {MAX_RATE_STEP / k_rate:g} s"
+            )
         if self.tether_density is not None and not (math.isfinite(self.tether_density) and self.tether_density > 0):
             raise ReplayError(f"--tether-density must be a finite number > 0 kg/m, got {self.tether_density!r}")
 
@@ -180,7 +210,7 @@ class DroneReplay:
     first_saturation: list[float | None]  # (N,) time of the first clipped step
     rotor_limit: float  # f_max [N]
     ends: list[tuple[int, int]]
-    lowest: Array  # (K, J) lowest node height
+    lowest: Array  # (K, J) lowest node height (the ends included: see sag)
     lowest_catenary: Array  # (K, J) the static catenary's lowest point, same ends and ρ as simulated
     lowest_plan: Array  # (K, J) the planner's catenary at the planned ends (plan's ρ)
     length: Array  # (K, J) paid-out length
@@ -204,6 +234,22 @@ class DroneReplay:
     gains: dict[str, Any] = field(default_factory=dict)
     qpos: list[Array] = field(default_factory=list)
     built: DroneModel | None = None
+    saturation_run: Array = field(default_factory=lambda: np.zeros(0))  # (N,) longest unbroken clipped run [s]
+    saturation_run_at: Array = field(default_factory=lambda: np.zeros(0))  # (N,) its start [s]
+    reserve_run: Array = field(default_factory=lambda: np.zeros(0))  # (N,) longest run beyond the reserve [s]
+    reserve_run_at: Array = field(default_factory=lambda: np.zeros(0))
+    reserve_thrust: float = math.inf  # (1 − r_c) 4 f_max [N]
+    spare_thrust: float = math.inf  # the planner's spare thrust [N]
+    thrust_demand: Array = field(default_factory=lambda: np.zeros((0, 0)))  # (K, N) largest collective thrust asked
+    pull: Array = field(default_factory=lambda: np.zeros((0, 0)))  # (K, N) largest tether tension at the drone
+    accel_removed: Array = field(default_factory=lambda: np.zeros((0, 0)))  # (K_plan, N) |a_plan − a_ref| [m/s²]
+    sag: Array = field(default_factory=lambda: np.zeros((0, 0)))  # (K, J) inner nodes' depth below the chord
+    sag_plan: Array = field(default_factory=lambda: np.zeros((0, 0)))  # (K, J) the planner's catenary's, same way
+    clearance: Array = field(default_factory=lambda: np.zeros((0, 0)))  # (K, J) distance to the world [m]
+    tether_clearance: float = 0.0  # c_t [m]
+    tether_length: float = math.inf  # the planner's tether_length [m]
+    warnings: dict[str, int] = field(default_factory=dict)  # MuJoCo's warnings (name: count)
+    warning_messages: list[str] = field(default_factory=list)  # their text (first 20), not printed
 
     @property
     def real_time_factor(self) -> float:
@@ -345,29 +391,43 @@ def build_drone_model(chain: DroneChain, cfg: DroneReplayConfig) -> DroneModel:
 
 def _reference(chain: DroneChain, times: Array, smoothing: float) -> tuple[Array, Array, Array]:
     """Position, velocity, acceleration the drones are given at ``times`` (uniform steps): the cubic Hermite curve
-    through the planned positions with, at each sample, the mean of the plan's velocities on the steps before and
-    after it (the plan starts and ends at rest), its derivatives (the acceleration ≈ the plan's velocity difference
-    / Ts), all three convolved with the same Gaussian of standard deviation ``smoothing`` [s] (zero phase, before
-    the flight; the derivative of the smoothed position is the smoothed velocity)."""
+    through the planned positions with, at each inner sample, the mean of the plan's velocities on the steps before
+    and after it and zero velocity at both ends (the plan starts and ends at rest), convolved with a Gaussian of
+    standard deviation ``smoothing`` [s] (zero phase, before the flight); the velocity is the curve's derivative
+    convolved with the same Gaussian, padded consistently (the position held at its end values, the velocity zero,
+    beyond both ends), so it is the derivative of the smoothed position; the acceleration is its derivative."""
     from scipy.interpolate import CubicHermiteSpline
     from scipy.ndimage import gaussian_filter1d
 
     v = chain.velocities
     knot_v = 0.5 * (np.concatenate([np.zeros_like(v[:1]), v[:-1]]) + v)
+    knot_v[0] = 0.0
     knot_v[-1] = 0.0
     sp = CubicHermiteSpline(chain.t, chain.positions, knot_v, axis=0)
     tt = np.clip(times, chain.t[0], chain.t[-1])
-    out = [sp(tt), sp(tt, 1), sp(tt, 2)]
-    if smoothing > 0 and times.size > 1:
-        sigma = smoothing / float(times[1] - times[0])
-        out = [gaussian_filter1d(x, sigma, axis=0, mode="nearest", truncate=4.0) for x in out]
-    return out[0], out[1], out[2]
+    if smoothing <= 0 or times.size < 2:
+        return sp(tt), sp(tt, 1), sp(tt, 2)
+    dt = float(times[1] - times[0])
+    sigma = smoothing / dt
+    # the position padded with its end values (at rest before and after), so its velocity padded with zeros: the
+    # convolutions then commute with the derivative (scipy's truncated derivative-of-Gaussian kernels do not sum
+    # to zero, which would turn a position of 3 m into an acceleration of 0.13 m/s²). The acceleration is the
+    # derivative of that velocity (second-order differences: the curve's own acceleration jumps at the samples,
+    # which sampled and convolved would be off by ~1 %).
+    p = gaussian_filter1d(sp(tt), sigma, axis=0, mode="nearest", truncate=4.0)
+    v = gaussian_filter1d(np.where(times[:, None, None] > chain.t[-1], 0.0, sp(tt, 1)), sigma, axis=0,
+                          mode="constant", truncate=4.0)  # fmt: skip
+    a = np.gradient(v, dt, axis=0, edge_order=2) if times.size > 2 else np.zeros_like(v)
+    return p, v, a
 
 
-def _planned_catenaries(chain: DroneChain, ends: list[tuple[int, int]]) -> tuple[Array, Array, Array, Array]:
+def _planned_catenaries(
+    chain: DroneChain, ends: list[tuple[int, int]], n_sag: int = 65
+) -> tuple[Array, Array, Array, Array, Array]:
     """Per plan sample, the planner's catenaries (plan's parameters, planned ends): the force they put on every
-    drone (K, N, 3) [N], each tether's lowest point (K, J) [m] and end tensions at its start and at its drone (K, J)
-    [N]. A sample where no catenary exists (not in a checked plan) keeps the previous sample's values."""
+    drone (K, N, 3) [N], each tether's lowest point (K, J) [m], end tensions at its start and at its drone (K, J)
+    [N] and its sag below the chord (:func:`_sag` of ``n_sag`` points) (K, J) [m]. A sample where no catenary
+    exists (not in a checked plan) keeps the previous sample's values."""
     from tmr.errors import TetherSpanError
     from tmr.model.catenary3d import solve3d
 
@@ -375,6 +435,7 @@ def _planned_catenaries(chain: DroneChain, ends: list[tuple[int, int]]) -> tuple
     J = len(ends)
     force = np.zeros((K, n, 3))
     lowest, t_from, t_to = np.full((K, J), np.nan), np.full((K, J), np.nan), np.full((K, J), np.nan)
+    sag = np.full((K, J), np.nan)
     warm: list[Any] = [None] * J
     for k in range(K):
         P = chain.positions[k]
@@ -392,7 +453,8 @@ def _planned_catenaries(chain: DroneChain, ends: list[tuple[int, int]]) -> tuple
             if a >= 0:
                 force[k, a] += cat.force_p
             lowest[k, j], t_from[k, j], t_to[k, j] = float(cat.lowest[2]), cat.tension_p, cat.tension_q
-    return force, lowest, t_from, t_to
+            sag[k, j] = float(_sag(cat.points(n_sag)[None, None])[0, 0])
+    return force, lowest, t_from, t_to, sag
 
 
 def _contact_kind(k1: int, k2: int) -> str | None:
@@ -484,7 +546,7 @@ def replay_drones(chain: DroneChain, cfg: DroneReplayConfig | None = None, progr
     K = t.size + n_settle
     times = t[0] + np.arange((K - 1) * sub + 1) * cfg.timestep
     p_ref, v_ref, a_ref = _reference(chain, times, cfg.smoothing)
-    f_plan, low_plan, tf_plan, tt_plan = _planned_catenaries(chain, ends)
+    f_plan, low_plan, tf_plan, tt_plan, sag_plan = _planned_catenaries(chain, ends)
     # the feed-forward of every physics step: the planned catenary forces, linear between samples
     s_idx = np.minimum(np.arange(times.size) // sub, t.size - 1)
     frac = ((np.arange(times.size) % sub) / sub)[:, None, None]
@@ -496,6 +558,7 @@ def replay_drones(chain: DroneChain, cfg: DroneReplayConfig | None = None, progr
         for j, ts in enumerate(dm.tethers):
             ts.t0 = float(tw_step[0, j])
     ctl = QuadrotorControl(dm.quad, n)
+    reserve_thrust = (1.0 - float(chain.params.control_reserve)) * 4.0 * dm.quad.rotor_max
 
     contacts: dict[str, dict[str, Any]] = {
         kind: {"count": 0, "first_time": None, "where": None, "between": None, "max_depth": 0.0}
@@ -504,6 +567,7 @@ def replay_drones(chain: DroneChain, cfg: DroneReplayConfig | None = None, progr
     rec_actual = np.zeros((K, n, 3))
     rec_tilt = np.zeros((K, n))
     rec_rotor = np.zeros((K, n))
+    rec_demand = np.zeros((K, n))
     rec_len = np.zeros((K, J))
     rec_tf = np.zeros((K, J))
     rec_tt = np.zeros((K, J))
@@ -512,12 +576,16 @@ def replay_drones(chain: DroneChain, cfg: DroneReplayConfig | None = None, progr
     sat_steps = np.zeros(n, dtype=np.int64)
     teth_steps = np.zeros(J, dtype=np.int64)
     first_sat: list[float | None] = [None] * n
+    # unbroken runs of physics steps: rotor clipped (saturation) and collective thrust beyond the reserve
+    runs = {name: (np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64), np.full(n, np.nan)) for name in
+            ("sat", "reserve")}  # fmt: skip
     rotor_sum = np.zeros(n)
     rotor_peak = np.zeros(n)
     P = np.zeros((n, 3))
     V = np.zeros((n, 3))
     W = np.zeros((n, 3))
     pq, lv, av, body, rot_ids = dm.pos_q, dm.lin_v, dm.ang_v, dm.body, dm.rotors
+    rot_flat = rot_ids.reshape(-1)
     qpos, qvel, xmat, ctrl = d.qpos, d.qvel, d.xmat, d.ctrl
     zero3 = np.zeros((n, 3))
 
@@ -530,8 +598,17 @@ def replay_drones(chain: DroneChain, cfg: DroneReplayConfig | None = None, progr
         np.take(qvel, av, out=W)
         np.take(xmat, body, axis=0, out=R9)
         rot, sat = ctl.rotor_thrusts(P, V, R, W, p_r, v_r, a_r, ff)
-        ctrl[rot_ids] = rot
+        ctrl[rot_flat] = rot.reshape(-1)
         return rot, sat
+
+    def track_run(name: str, flag: NDArray[np.bool_], now: float) -> None:
+        cur, longest, at = runs[name]
+        cur += flag
+        cur[~flag] = 0
+        better = cur > longest
+        if better.any():
+            longest[better] = cur[better]
+            at[better] = now - (cur[better] - 1) * cfg.timestep  # the run's first step
 
     def record(k: int) -> None:
         np.take(qpos, pq, out=rec_actual[k])
@@ -543,56 +620,89 @@ def replay_drones(chain: DroneChain, cfg: DroneReplayConfig | None = None, progr
             rec_tf[k, j] = ts.root_tension(d)
             rec_tt[k, j] = ts.end_tension(d)
 
-    # warm-up at the start pose (not recorded): the cables' constraint forces and the controller settle
-    for _ in range(int(round(WARMUP / cfg.timestep))):
-        control(p_ref[0], zero3, zero3, f_ff[0])
-        for ts in dm.tethers:
-            ts.update(m, d)
-        mujoco.mj_step(m, d)
-    d.time = 0.0
-    diverged = None
-    wall0, cpu0 = time.perf_counter(), time.process_time()
-    record(0)
-    step = 0
-    for k in range(1, K):
-        row = rec_rotor[k]
-        for _ in range(sub):
-            rot, sat = control(p_ref[step], v_ref[step], a_ref[step], f_ff[step])
-            rmax = rot.max(axis=1)
-            np.maximum(row, rmax, out=row)
-            np.maximum(rotor_peak, rmax, out=rotor_peak)
-            rotor_sum += rot.sum(axis=1)
-            if sat.any():
-                sat_steps += sat
-                for i in np.flatnonzero(sat):
-                    if first_sat[i] is None:
-                        first_sat[i] = float(times[step])
-            if tw_step is not None:
-                for j, ts in enumerate(dm.tethers):
-                    ts.t0 = tw_step[step, j]
+    def unstable() -> bool:
+        return not np.all(np.isfinite(qpos)) or bool(d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number)
+
+    messages: list[str] = []
+    old_warning = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda msg: messages.append(str(msg).strip()) if len(messages) < 20 else None)
+    errstate = np.errstate(invalid="ignore", divide="ignore", over="ignore")  # a diverging model: the verdict tells
+    errstate.__enter__()
+    try:
+        # warm-up at the start pose (t < 0, not recorded but checked: contacts logged, divergence caught): the
+        # cables' constraint forces and the controller settle
+        diverged = None
+        n_warm = int(round(WARMUP / cfg.timestep))
+        for i in range(n_warm):
+            control(p_ref[0], zero3, zero3, f_ff[0])
             for ts in dm.tethers:
                 ts.update(m, d)
             mujoco.mj_step(m, d)
-            step += 1
+            now = (i + 1 - n_warm) * cfg.timestep  # -WARMUP … 0
             if d.ncon:
-                _log_contacts(d, dm, contacts, times[step], kind_of=_contact_kind, label=_label)
-                _count_tether_contacts(d, dm, teth_steps)
-        if not np.all(np.isfinite(qpos)) or d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number:
-            diverged = f"the simulation diverged at t = {times[step]:.3f} s (non-finite accelerations)"
-            break
-        record(k)
-        if progress is not None:
-            progress(k / (K - 1))
-    wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+                _log_contacts(d, dm, contacts, t[0] + now, kind_of=_contact_kind, label=_label)
+            if unstable():
+                diverged = f"the simulation diverged at t = {t[0] + now:.3f} s (warm-up)"
+                break
+        d.time = 0.0
+        wall0, cpu0 = time.perf_counter(), time.process_time()
+        record(0)
+        step = 0
+        for k in range(1 if diverged is None else K, K):
+            row = rec_rotor[k]
+            drow = rec_demand[k]
+            for _ in range(sub):
+                rot, sat = control(p_ref[step], v_ref[step], a_ref[step], f_ff[step])
+                rmax = rot.max(axis=1)
+                np.maximum(row, rmax, out=row)
+                np.maximum(rotor_peak, rmax, out=rotor_peak)
+                np.maximum(drow, ctl.demand, out=drow)
+                rotor_sum += rot.sum(axis=1)
+                now = float(times[step])
+                track_run("sat", sat, now)
+                track_run("reserve", ctl.demand > reserve_thrust, now)
+                if sat.any():
+                    sat_steps += sat
+                    for i in np.flatnonzero(sat):
+                        if first_sat[i] is None:
+                            first_sat[i] = now
+                if tw_step is not None:
+                    for j, ts in enumerate(dm.tethers):
+                        ts.t0 = tw_step[step, j]
+                for ts in dm.tethers:
+                    ts.update(m, d)
+                mujoco.mj_step(m, d)
+                step += 1
+                if d.ncon:
+                    _log_contacts(d, dm, contacts, times[step], kind_of=_contact_kind, label=_label)
+                    _count_tether_contacts(d, dm, teth_steps)
+            if unstable():
+                diverged = f"the simulation diverged at t = {times[step]:.3f} s (non-finite accelerations)"
+                break
+            record(k)
+            if progress is not None:
+                progress(k / (K - 1))
+        wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+    finally:
+        mujoco.set_mju_user_warning(old_warning)
+        errstate.__exit__(None, None, None)
+    warnings = {
+        name: int(d.warning[int(w)].number)
+        for name, w in mujoco.mjtWarning.__members__.items()
+        if int(w) < len(d.warning) and d.warning[int(w)].number
+    }
     K = len(rec_nodes)
     ext = np.minimum(np.arange(K), t.size - 1)  # the settle samples hold the last planned one
     ref_k = chain.positions[ext]  # the plan's own positions (not the smoothed reference)
     nodes = rec_nodes[:K]
-    low = np.array([[float(tn[:, 2].min()) for tn in nd] for nd in nodes]).reshape(K, J)
+    node_arr = np.stack(nodes) if K else np.zeros((0, J, cfg.n_links + 1, 3))  # (K, J, n+1, 3)
+    low = node_arr[:, :, :, 2].min(axis=2) if J else np.zeros((K, 0))  # ends included (as the catenary's lowest)
     low_c, len_c, tf_c, tt_c = (np.full((K, J), np.nan) for _ in range(4))
     warm: list[Any] = [None] * J
     for k, nd in enumerate(nodes):
         for j, tn in enumerate(nd):
+            if not np.all(np.isfinite(tn)):
+                continue
             tw = None if chain.winch_tension is None else float(chain.winch_tension[ext[k], j])
             try:
                 cat = solve3d(tn[0], tn[-1], sim_params, winch_tension=tw, warm=warm[j])
@@ -601,6 +711,16 @@ def replay_drones(chain: DroneChain, cfg: DroneReplayConfig | None = None, progr
             warm[j] = cat
             low_c[k, j], len_c[k, j] = float(cat.lowest[2]), cat.length
             tf_c[k, j], tt_c[k, j] = cat.tension_p, cat.tension_q
+    # the tether pull on each drone: the largest tension at a drone end of its tethers
+    pull = np.zeros((K, n))
+    for j, (a, b) in enumerate(ends):
+        pull[:, b] = np.fmax(pull[:, b], rec_tt[:K, j])
+        if a >= 0:
+            pull[:, a] = np.fmax(pull[:, a], rec_tf[:K, j])
+    # the acceleration the smoothing removes from the plan's at its samples: (v_k − v_{k−1}) / Ts against a_ref
+    v_pl = np.concatenate([np.zeros_like(chain.velocities[:1]), chain.velocities])
+    a_plan = np.diff(v_pl, axis=0) / Ts if t.size > 1 else np.zeros_like(chain.positions)
+    removed = np.linalg.norm(a_plan - a_ref[::sub][: t.size], axis=2)
     return DroneReplay(
         t=t[0] + np.arange(K) * Ts,
         reference=ref_k,
@@ -638,13 +758,67 @@ def replay_drones(chain: DroneChain, cfg: DroneReplayConfig | None = None, progr
         gains=ctl.gains(),
         qpos=rec_qpos[:K],
         built=dm,
+        saturation_run=runs["sat"][1] * cfg.timestep,
+        saturation_run_at=runs["sat"][2],
+        reserve_run=runs["reserve"][1] * cfg.timestep,
+        reserve_run_at=runs["reserve"][2],
+        reserve_thrust=reserve_thrust,
+        spare_thrust=float(chain.params.spare_thrust),
+        thrust_demand=rec_demand[:K],
+        pull=pull,
+        accel_removed=removed,
+        sag=_sag(node_arr),
+        sag_plan=sag_plan[ext],
+        clearance=_tether_clearance(chain, node_arr),
+        tether_clearance=float(chain.params.clearance),
+        tether_length=float(chain.params.tether_length),
+        warnings=warnings,
+        warning_messages=messages,
     )
 
 
+def _sag(nodes: Array) -> Array:
+    """(K, J) the largest depth of a tether's inner nodes below its chord (the straight line between its ends) [m]:
+    the sag, 0 for a taut cable (``nodes`` (K, J, n+1, 3))."""
+    if nodes.shape[0] == 0 or nodes.shape[1] == 0:
+        return np.zeros(nodes.shape[:2])
+    p0, p1 = nodes[:, :, :1], nodes[:, :, -1:]
+    c = p1 - p0
+    cc = np.maximum(np.einsum("kjai,kjai->kja", c, c), 1e-12)[..., None]
+    s = np.clip(np.einsum("kjni,kjai->kjn", nodes - p0, c)[..., None] / cc, 0.0, 1.0)
+    chord_z = p0[..., 2] + s[..., 0] * c[..., 2]
+    return (chord_z - nodes[..., 2])[:, :, 1:-1].max(axis=2)
+
+
+def _tether_clearance(chain: DroneChain, nodes: Array) -> Array:
+    """(K, J) each simulated tether's least distance to the floor, walls, ceiling and obstacles [m] (its segments
+    between recorded nodes against :class:`tmr.world.world3d.World3D` without the drones' safety radius, less the
+    cable's radius); NaN for a sample with non-finite nodes."""
+    from tmr.replay.tether import TETHER_RADIUS
+    from tmr.world.world3d import world3d_from_table
+
+    K, J = nodes.shape[:2]
+    out = np.full((K, J), np.nan)
+    if K == 0 or J == 0:
+        return out
+    table = dict(chain.world) if chain.world is not None else {"bounds": chain.bounds.tolist()}
+    table["safety_radius"] = 0.0
+    world = world3d_from_table(table, chain.world_dir)
+    ok = np.all(np.isfinite(nodes), axis=(1, 2, 3))
+    if ok.any():
+        seg = world.segment_clearance(nodes[ok, :, :-1], nodes[ok, :, 1:])  # (k, J, n)
+        out[ok] = seg.min(axis=2) - TETHER_RADIUS
+    return out
+
+
 def drone_verdict(rp: DroneReplay) -> Any:
-    """The replay's :class:`tmr.replay.report.Verdict`: it fails at the earliest of a contact (any kind), a tracking
-    error beyond the tolerance, a drone whose rotors saturate in more than ``saturation_limit`` of the physics steps,
-    a drone tilted beyond ``max_tilt`` (a crash) or a diverged simulation."""
+    """The replay's :class:`tmr.replay.report.Verdict`: it fails at the earliest of a contact (any kind, the warm-up
+    at the start pose included), a tracking error beyond the tolerance, a tether pulling a drone harder than the
+    planner's spare thrust (+ ``pull_tolerance``), a drone asking for more collective thrust than the planner's
+    (1 − reserve) 4 f_max for longer than ``reserve_window``, rotors clipped for an unbroken run longer than
+    ``saturation_run`` or in more than ``saturation_limit`` of the physics steps, a plan the smoothing has to change
+    by more than ``accel_budget``, a tether nearer the world than ``clearance_fraction`` c_t or paid out beyond
+    ``tether_length``, a drone tilted beyond ``max_tilt`` (a crash) or a diverged simulation."""
     from tmr.replay.report import Verdict, _xyz
 
     cfg = rp.config
@@ -655,8 +829,9 @@ def drone_verdict(rp: DroneReplay) -> Any:
             continue
         t0 = float(c["first_time"])
         a, b = c["between"]
+        when = f"t = {t0:.2f} s" + (" (warm-up, at the start pose)" if t0 < float(rp.t[0]) else "")
         msg = (
-            f"{a} touches {b} at t = {t0:.2f} s at {_xyz(c['where'])} ({c['count']} physics steps in contact, "
+            f"{a} touches {b} at {when} at {_xyz(c['where'])} ({c['count']} physics steps in contact, "
             f"deepest {1000 * c['max_depth']:.1f} mm)"
         )
         if kind.startswith("tether"):
@@ -673,19 +848,76 @@ def drone_verdict(rp: DroneReplay) -> Any:
         i = int(np.argmax(rp.tracking_error[k]))
         msg = (
             f"drone {i + 1} tracking error {rp.tracking_error[k, i]:.3f} m > tolerance {cfg.tolerance:g} m at "
-            f"t = {rp.t[k]:.2f} s at {_xyz(rp.actual[k, i])} (largest {float(rp.tracking_error.max()):.3f} m)"
+            f"t = {rp.t[k]:.2f} s at {_xyz(rp.actual[k, i])} (largest {float(np.nanmax(rp.tracking_error)):.3f} m)"
         )
         fails.append((float(rp.t[k]), "tracking", msg))
-    frac = rp.saturation_fraction
-    for i in np.flatnonzero(frac > cfg.saturation_limit):
-        t0 = float(rp.first_saturation[i] or 0.0)
+    if rp.pull.size:
+        limit = rp.spare_thrust * (1.0 + cfg.pull_tolerance)
+        hard = rp.pull > limit
+        if hard.any():
+            k = int(np.argmax(hard.any(axis=1)))
+            i = int(np.argmax(rp.pull[k]))
+            msg = (
+                f"a tether pulls drone {i + 1} with {rp.pull[k, i]:.2f} N at t = {rp.t[k]:.2f} s at "
+                f"{_xyz(rp.actual[k, i])}, more than the planner's spare thrust {rp.spare_thrust:.2f} N "
+                f"(+ {100 * cfg.pull_tolerance:g} %; largest {float(np.nanmax(rp.pull[:, i])):.2f} N)"
+            )
+            fails.append((float(rp.t[k]), "tether pull", msg))
+    for i in np.flatnonzero(rp.reserve_run > cfg.reserve_window + 1e-9):
+        t0 = float(rp.reserve_run_at[i])
         k = int(np.argmin(np.abs(rp.t - t0)))
         msg = (
-            f"drone {int(i) + 1} rotor thrust saturated in {100 * frac[i]:.1f} % of the physics steps "
-            f"(> {100 * cfg.saturation_limit:g} %), first at t = {t0:.2f} s at {_xyz(rp.actual[k, i])}; peak rotor "
-            f"thrust {rp.rotor_peak[i]:.2f} N of {rp.rotor_limit:.2f} N"
+            f"drone {int(i) + 1} needs more than the planner's (1 − reserve) thrust {rp.reserve_thrust:.2f} N for "
+            f"{rp.reserve_run[i]:.3f} s (> {cfg.reserve_window:g} s) from t = {t0:.2f} s at {_xyz(rp.actual[k, i])} "
+            f"(largest {float(np.nanmax(rp.thrust_demand[:, i])):.2f} N)"
+        )
+        fails.append((t0, "thrust reserve", msg))
+    frac = rp.saturation_fraction
+    long_run = rp.saturation_run > cfg.saturation_run + 1e-9
+    for i in np.flatnonzero((frac > cfg.saturation_limit) | long_run):
+        t0 = float(rp.saturation_run_at[i]) if long_run[i] else float(rp.first_saturation[i] or 0.0)
+        k = int(np.argmin(np.abs(rp.t - t0)))
+        msg = (
+            f"drone {int(i) + 1} rotor thrust saturated for {1000 * rp.saturation_run[i]:.0f} ms on end from "
+            f"t = {float(rp.saturation_run_at[i]):.2f} s (> {1000 * cfg.saturation_run:g} ms) and in "
+            f"{100 * frac[i]:.1f} % of the physics steps (limit {100 * cfg.saturation_limit:g} %), first at "
+            f"t = {float(rp.first_saturation[i] or 0.0):.2f} s at {_xyz(rp.actual[k, i])}; peak rotor thrust "
+            f"{rp.rotor_peak[i]:.2f} N of {rp.rotor_limit:.2f} N"
         )
         fails.append((t0, "thrust saturation", msg))
+    if rp.accel_removed.size:
+        big = rp.accel_removed > cfg.accel_budget
+        if big.any():
+            k = int(np.argmax(big.any(axis=1)))
+            i = int(np.argmax(rp.accel_removed[k]))
+            msg = (
+                f"drone {i + 1}'s plan cannot be flown as planned: the smoothing (σ = {cfg.smoothing:g} s) removes "
+                f"{rp.accel_removed[k, i]:.1f} m/s² of its acceleration at t = {rp.t[k]:.2f} s at "
+                f"{_xyz(rp.reference[k, i])} (budget {cfg.accel_budget:g} m/s²; largest "
+                f"{float(rp.accel_removed[:, i].max()):.1f} m/s²)"
+            )
+            fails.append((float(rp.t[k]), "reference", msg))
+    if rp.clearance.size:
+        near = rp.clearance < cfg.clearance_fraction * rp.tether_clearance
+        if near.any():
+            k = int(np.argmax(near.any(axis=1)))
+            j = int(np.argmax(near[k]))
+            msg = (
+                f"tether {j + 1} passes {rp.clearance[k, j]:.3f} m from the floor or an obstacle at t = "
+                f"{rp.t[k]:.2f} s, less than {cfg.clearance_fraction:g} of the planner's tether clearance "
+                f"{rp.tether_clearance:.3f} m (least {float(np.nanmin(rp.clearance[:, j])):.3f} m)"
+            )
+            fails.append((float(rp.t[k]), "tether clearance", msg))
+    if rp.length.size:
+        long_t = rp.length > rp.tether_length * (1.0 + cfg.length_tolerance)
+        if long_t.any():
+            k = int(np.argmax(long_t.any(axis=1)))
+            j = int(np.argmax(rp.length[k]))
+            msg = (
+                f"tether {j + 1} is paid out to {rp.length[k, j]:.3f} m at t = {rp.t[k]:.2f} s, more than the "
+                f"{rp.tether_length:.3f} m the winch holds (+ {100 * cfg.length_tolerance:g} %)"
+            )
+            fails.append((float(rp.t[k]), "tether length", msg))
     tilted = rp.tilt > cfg.max_tilt
     if tilted.any():
         k = int(np.argmax(tilted.any(axis=1)))
@@ -696,9 +928,11 @@ def drone_verdict(rp: DroneReplay) -> Any:
         )
         fails.append((float(rp.t[k]), "crash", msg))
     if rp.diverged:
-        fails.append((float(rp.t[-1]), "crash", f"crash: {rp.diverged}"))
-    # the earliest first; at the same time a cause before its symptom (saturation, then a crash or contact, then the
-    # tracking error they make)
-    order = {"thrust saturation": 0, "crash": 1, "tracking": 3}
+        t_div = float(rp.t[0]) - WARMUP if "(warm-up)" in rp.diverged else float(rp.t[-1])
+        fails.append((t_div, "crash", f"crash: {rp.diverged}"))
+    # the earliest first; at the same time a cause before its symptom (pull, then thrust, then a crash or contact,
+    # then the tracking error they make)
+    order = {"reference": -1, "tether pull": 0, "thrust reserve": 0.5, "thrust saturation": 1, "crash": 1.5,
+             "tracking": 3}  # fmt: skip
     fails.sort(key=lambda f: (f[0], order.get(f[1], 2)))
     return Verdict(ok=not fails, reason=fails[0][2] if fails else None, failures=tuple(fails))

@@ -174,7 +174,8 @@ def plot_drone_tensions(rp: Any, title: str) -> Any:
 
 
 def plot_rotor_thrust(rp: Any, title: str) -> Any:
-    """Largest rotor thrust of each drone per plan sample with the rotor limit [N], and each drone's tilt [deg]."""
+    """Largest rotor thrust of each drone per plan sample with the rotor limit f_max and the planner's budget
+    (1 − reserve) f_max [N], and each drone's tilt [deg]."""
     import numpy as np
 
     fig, axes = _fig(2, 3.0)
@@ -182,7 +183,10 @@ def plot_rotor_thrust(rp: Any, title: str) -> Any:
         c = _COLORS[i % len(_COLORS)]
         axes[0].plot(rp.t[1:], rp.rotor_max[1:, i], color=c, lw=1.3, label=f"drone {i + 1}")
         axes[1].plot(rp.t, np.degrees(rp.tilt[:, i]), color=c, lw=1.3, label=f"drone {i + 1}")
-    axes[0].axhline(rp.rotor_limit, color="r", ls=":", label="rotor limit")
+    axes[0].axhline(rp.rotor_limit, color="r", ls=":", label="rotor limit f_max")
+    reserve = rp.reserve_thrust / 4.0  # (1 − r_c) f_max: the planner's budget per rotor
+    if np.isfinite(reserve):
+        axes[0].axhline(reserve, color="darkorange", ls="--", label="(1 − reserve) f_max (planner)")
     axes[1].axhline(np.degrees(rp.config.max_tilt), color="r", ls=":", label="crash")
     axes[0].set_ylabel("largest rotor thrust [N]")
     axes[1].set_ylabel("tilt [deg]")

@@ -159,6 +159,11 @@ def _drone_frames_matplotlib(rp: Any, run: Any, every: int) -> list[Any]:
     return frames
 
 
+#: the model arrays a tether's update() writes (:meth:`tmr.replay.tether.TetherState.update`) and the GIF's visual
+#: radius changes
+_TETHER_MODEL_FIELDS = ("geom_size", "geom_pos", "geom_rbound", "geom_aabb", "body_mass", "body_inertia")
+
+
 def render_drone_gif(rp: Any, run: Any, path: Path) -> str:
     """Write ``path`` for a drone replay (:class:`tmr.replay.drones.DroneReplay`), :data:`FPS` frames per second of
     simulated time, rendered by MuJoCo offscreen (matplotlib top and side views when no OpenGL context can be made);
@@ -170,7 +175,9 @@ def render_drone_gif(rp: Any, run: Any, path: Path) -> str:
     try:
         dm = rp.built
         m = dm.model
-        radius = m.geom_size[:, 0].copy()
+        # everything the rendering changes (the visual radius here, the tethers' update() per frame), restored after
+        saved = {name: getattr(m, name).copy() for name in _TETHER_MODEL_FIELDS}
+        resized = [ts._resized for ts in dm.tethers]
         for ts in dm.tethers:
             m.geom_size[ts.geom, 0] = VISUAL_TETHER_RADIUS
 
@@ -181,7 +188,10 @@ def render_drone_gif(rp: Any, run: Any, path: Path) -> str:
         try:
             frames = frames_mujoco(m, rp.qpos, (b[0], b[1], b[3], b[4]), every, prepare)
         finally:
-            m.geom_size[:, 0] = radius
+            for name, value in saved.items():
+                getattr(m, name)[...] = value
+            for ts, r in zip(dm.tethers, resized, strict=True):
+                ts._resized = r
         used = f"mujoco-{os.environ.get('MUJOCO_GL', 'default')}"
     except Exception:  # noqa: BLE001 - no OpenGL context on this machine: draw the same states with matplotlib
         frames = _drone_frames_matplotlib(rp, run, every)

@@ -4,8 +4,11 @@ The model (``formulations/replay.md``, "Drone chains"): a free rigid body of the
 (``DroneTetherParams.drone_mass``) with 4 rotors in an X at ``arm`` from the centre. Each rotor is a MuJoCo
 ``motor`` on a site, ``gear = 0 0 1 0 0 ±c``: its control f [N] pushes along the body's z axis and twists the body
 about z by ±c f (the drag torque; c = 0.0201 m as in the mujoco_menagerie Skydio X2, used as a reference for the form
-only). Each rotor's thrust is limited to [0, f_max] with 4 f_max = τ m_d g (``thrust_to_weight``), so the thrust
-left over the drone's weight is the planner's: (1 − r_c) 4 f_max − m_d g = ``DroneTetherParams.spare_thrust``.
+only). Each rotor's thrust is limited to [0, f_max] with 4 f_max = τ m_d g (``thrust_to_weight``): the full thrust,
+**not** the planner's budget. The planner keeps a control reserve r_c (``control_reserve``, 25 %) and lets a tether
+pull a drone with at most (1 − r_c) 4 f_max − m_d g = ``DroneTetherParams.spare_thrust``; the replay checks that
+budget on its own (:func:`tmr.replay.drones.drone_verdict`: the measured tether pull and the collective thrust the
+controller asks for against (1 − r_c) 4 f_max), and the clipping at f_max is the saturation check.
 
 Controller, vectorised over the drones and run every physics step — position → attitude → body rate → mixer, the
 usual cascade of multirotor autopilots (PX4's, on the attitude of Lee, Leok & McClamroch 2010):
@@ -166,6 +169,8 @@ class QuadrotorControl:
         self._Jw = np.zeros((n, 3))
         self._norm = np.zeros((n, 1))
         self._thrust = np.zeros(n)
+        #: (N,) the collective thrust the last call asked for, before clipping [N]
+        self.demand = np.zeros(n)
         self._u0 = np.zeros((n, 4))
         self._du = np.zeros((n, 4))
         self._rotors = np.zeros((n, 4))
@@ -225,6 +230,7 @@ class QuadrotorControl:
         tau += b1  # τ = J k_rate (ω_d − ω) + ω × Jω
         thrust = self._thrust
         np.einsum("ij,ij->i", f, R[:, :, 2], out=thrust)
+        self.demand[:] = thrust
         sat = (thrust < 0.0) | (thrust > 4.0 * self.fmax)
         np.clip(thrust, 0.0, 4.0 * self.fmax, out=thrust)
         u0, du, rot = self._u0, self._du, self._rotors

@@ -190,8 +190,11 @@ def _dump(doc: dict[str, Any]) -> str:
 
 
 def _f_tree(x: Any) -> Any:
+    """JSON-ready: dicts and lists (and the dicts inside lists) walked, arrays to lists, non-finite floats to null."""
     if isinstance(x, dict):
         return {str(k): _f_tree(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_f_tree(v) for v in x]
     return _f(x) if not isinstance(x, (str, bool, type(None), int)) else x
 
 
@@ -228,6 +231,14 @@ def write_chain_outputs(out: Path, rp: ChainReplay, run: Any, verdict: Verdict, 
 # ----------------------------------------------------------------------------------------------------------
 # drone chains (tmr.replay.drones)
 # ----------------------------------------------------------------------------------------------------------
+def _nanmax(x: np.ndarray) -> float | None:
+    return float(np.nanmax(x)) if x.size and np.isfinite(x).any() else None
+
+
+def _nanmin(x: np.ndarray) -> float | None:
+    return float(np.nanmin(x)) if x.size and np.isfinite(x).any() else None
+
+
 def drone_document(rp: Any, run: Any, verdict: Verdict) -> dict[str, Any]:
     """The ``replay.json`` document of a drone-chain replay (:class:`tmr.replay.drones.DroneReplay`; format
     :data:`REPLAY_FORMAT`, ``kind = "drone"``; no timings). Units: m, N, s; angles in degrees."""
@@ -242,7 +253,7 @@ def drone_document(rp: Any, run: Any, verdict: Verdict) -> dict[str, Any]:
         k = int(np.argmax(e))
         drones.append(
             {
-                "name": f"robot{i + 1}",
+                "name": f"drone{i + 1}",
                 "tracking_error_max": float(e.max()),
                 "tracking_error_rms": float(np.sqrt(np.mean(e**2))),
                 "max_at": float(rp.t[k]),
@@ -253,6 +264,15 @@ def drone_document(rp: Any, run: Any, verdict: Verdict) -> dict[str, Any]:
                 "saturated_fraction": float(rp.saturation_fraction[i]),
                 "first_saturation": rp.first_saturation[i],
                 "reference_deviation_max": float(rp.reference_deviation[i]),
+                "accel_removed_max": _nanmax(rp.accel_removed[:, i]) if rp.accel_removed.size else None,
+                "saturation_run_max": float(rp.saturation_run[i]),
+                "saturation_run_at": float(rp.saturation_run_at[i]),
+                "thrust_demand_max": _nanmax(rp.thrust_demand[:, i]),
+                "reserve_thrust": float(rp.reserve_thrust),
+                "reserve_run_max": float(rp.reserve_run[i]),
+                "reserve_run_at": float(rp.reserve_run_at[i]),
+                "tether_pull_max": _nanmax(rp.pull[:, i]),
+                "spare_thrust": float(rp.spare_thrust),
             }
         )
     tethers = []
@@ -266,8 +286,8 @@ def drone_document(rp: Any, run: Any, verdict: Verdict) -> dict[str, Any]:
         tethers.append(
             {
                 "name": f"tether{j + 1}",
-                "from": "base" if a < 0 else f"robot{a + 1}",
-                "to": f"robot{b + 1}",
+                "from": "base" if a < 0 else f"drone{a + 1}",
+                "to": f"drone{b + 1}",
                 "lowest_min": float(rp.lowest[k, j]),
                 "lowest_min_at": float(rp.t[k]),
                 "lowest_plan_then": float(rp.lowest_plan[k, j]),
@@ -283,6 +303,12 @@ def drone_document(rp: Any, run: Any, verdict: Verdict) -> dict[str, Any]:
                 "tension_to_error_max": err(rp.tension_to[:, j], rp.tension_to_catenary[:, j]),
                 "tension_to_plan_error_max": err(rp.tension_to[:, j], rp.tension_to_plan[:, j]),
                 "contact_steps": int(rp.tether_contact_steps[j]),
+                "sag_max": _nanmax(rp.sag[:, j]),
+                "sag_plan_max": _nanmax(rp.sag_plan[:, j]),
+                "sag_plan_error_max": err(rp.sag[:, j], rp.sag_plan[:, j]),
+                "clearance_min": _nanmin(rp.clearance[:, j]),
+                "clearance_plan": float(rp.tether_clearance),
+                "tether_length": float(rp.tether_length),
             }
         )
     params = run.tether_params() if hasattr(run, "tether_params") else None
@@ -315,9 +341,10 @@ def drone_document(rp: Any, run: Any, verdict: Verdict) -> dict[str, Any]:
         "model": model,
         "sim_time": rp.sim_time,
         "steps": rp.steps,
-        "robots": drones,
+        "drones": drones,
         "tethers": tethers,
         "contacts": rp.contacts,
+        "mujoco_warnings": {"counts": rp.warnings, "messages": rp.warning_messages},
         "series": {
             "t": rp.t,
             "actual": rp.actual,
@@ -336,6 +363,11 @@ def drone_document(rp: Any, run: Any, verdict: Verdict) -> dict[str, Any]:
             "tension_to": rp.tension_to,
             "tension_to_catenary": rp.tension_to_catenary,
             "tension_to_plan": rp.tension_to_plan,
+            "sag": rp.sag,
+            "sag_plan": rp.sag_plan,
+            "clearance": rp.clearance,
+            "tether_pull": rp.pull,
+            "thrust_demand": rp.thrust_demand,
         },
     }
 

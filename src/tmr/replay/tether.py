@@ -275,6 +275,9 @@ class TetherState:
         self.t0 = winch_tension(spec.params)
         self.weight = self.rho * spec.params.g  # ρ g [N/m]
         self._resized = -1.0  # segment length of the last resize [m]
+        self._z = np.zeros(n + 1)  # node heights, reused every step (the drone winch law)
+        self._n = float(n)
+        self._xanchor_z = 3 * self.root_joint + 2  # flat index of the exit point's z in data.xanchor
 
     def set_initial(self, data: object, root_world: Array, end_world: Array) -> None:
         az, ay, sl = initial_qpos(self.spec, root_world, end_world)
@@ -288,7 +291,8 @@ class TetherState:
         return np.vstack([root[None, :], np.asarray(data.xpos[self.body])])  # type: ignore[attr-defined]
 
     def segment_length(self, data: object) -> float:
-        return float(self.s0 + np.mean(data.qpos[self.s_q]))  # type: ignore[attr-defined]
+        # the mean of the slides (the same sum and division as np.mean, without its Python overhead)
+        return float(self.s0 + data.qpos[self.s_q].sum() / self._n)  # type: ignore[attr-defined]
 
     def length(self, data: object) -> float:
         """Paid-out length N s [m]."""
@@ -296,13 +300,14 @@ class TetherState:
 
     def winch_force(self, data: object) -> float:
         """Motor force on the tendon [N], negative = reeling in (see the module docstring)."""
-        nodes = self.nodes(data)
         if self.winch in ("lower", "upper"):  # constant tension magnitude T_w at that end (drone model)
-            z = nodes[:, 2]
+            z = self._z  # the nodes' heights, without building the (N+1, 3) nodes
+            z[0] = data.xanchor.flat[self._xanchor_z]  # type: ignore[attr-defined]
+            np.take(data.xpos[:, 2], self.body, out=z[1:])  # type: ignore[attr-defined]
             zw = min(z[0], z[-1]) if self.winch == "lower" else max(z[0], z[-1])
             zbar = (2.0 * float(z.sum()) - z[0] - z[-1]) / (2.0 * (len(z) - 1))  # mean segment midpoint
             return -(self.t0 + self.weight * (zbar - zw))
-        seg = np.diff(nodes, axis=0)
+        seg = np.diff(self.nodes(data), axis=0)
         h2 = seg[:, 0] * seg[:, 0] + seg[:, 1] * seg[:, 1]
         s2 = h2 + seg[:, 2] * seg[:, 2]
         sec = np.sqrt(s2 / np.maximum(h2, 0.0025 * s2 + 1e-18))  # 1 / cos φ_k, capped at 20 (a near-vertical link)
