@@ -630,3 +630,23 @@ def test_window_options_are_checked(solved):
     for bad in ({"window": 1}, {"window": 10, "window_overlap": 10}, {"window": 10, "window_mode": "parallel"}):
         with pytest.raises(ParameterError, match="window"):
             plan_horizon(problem, warm, **bad)
+
+
+def test_windows_stop_at_the_time_limit_and_the_plan_is_never_worse(feasible_warm, monkeypatch):
+    """A deadline already passed stops the first window after its initial point and no further window is solved; the
+    whole NLP is stopped the same way and the fallbacks apply as without windows."""
+    from tmr.control import horizon
+
+    problem, warm, J_warm = feasible_warm
+
+    class Late(horizon._IterationCallback):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            self.deadline = -math.inf  # already passed
+
+    monkeypatch.setattr(horizon, "_IterationCallback", Late)
+    plan = plan_horizon(problem, warm, **WEIGHTED, window=12, time_limit=DEFAULT_TIME_LIMIT)
+    d = plan.diagnostics
+    assert len(d["window_log"]) == 1 and d["window_log"][0]["iterations"] <= 1
+    assert d["horizon_stop"] == "time_limit" and d["horizon_result"] in ("warm_start", "best_feasible_iterate")
+    assert plan.success and objective(plan.q, problem) <= J_warm and d["constraint_violation"] <= 1e-5

@@ -26,6 +26,10 @@ primal–dual warm. The final point is a KKT point of the relaxed problem
 that satisfies every row of the full one, hence a KKT point of the full problem (the rows left out are inactive, with
 zero multipliers).
 
+**Windowed solves** (``window=W``, off by default): windows of W knots along the route are solved first, one after
+the other with the knots outside them fixed, then the whole NLP from the stitched trajectory and multipliers, as
+above; measured against the monolithic solve (not faster, often another KKT point) in ``formulations/horizon.md``.
+
 **Never worse than the warm start.** The warm start (a plan of the same problem, required: the planner passes its
 ``qp`` plan; this module never imports :mod:`tmr.planner`) is IPOPT's initial point and the last fallback. If IPOPT
 stops without a solution (both attempts of a round), the time limit is reached, rows left out stay violated after
@@ -613,7 +617,8 @@ def _windowed(
     trajectory, the knots outside it fixed by their bounds; a window's solution replaces the trajectory only if
     IPOPT solved it (its rows: those of ``masks``). Returns the stitched variables, a log per window and the row
     multipliers of the windows (group → flat entries in column-major order, the last window that held a row wins).
-    Stops at the deadline (the iterates went to ``pool``)."""
+    Stops at the deadline (the iterates went to ``pool``), and before a solver whose expected build
+    (:func:`_expected_build`) would overrun it."""
     su, opts = model.su, model.su.opts
     W = int(opts.window)  # type: ignore[arg-type]
     overlap = W // 4 if opts.window_overlap is None else int(opts.window_overlap)
@@ -633,6 +638,8 @@ def _windowed(
             tr = _Transcription(model, sub if opts.window_mode == "sub" else masks)
             solver = None
         if solver is None:  # "fixed": one solver (and its callback) for every window
+            if math.isfinite(limit) and remaining <= _expected_build(tr.size):  # as the rounds: no build past it
+                break
             extra: dict[str, Any] = {"max_wall_time": float(remaining)} if math.isfinite(limit) else {}
             callback = _IterationCallback(tr, pool, bar, "", deadline)
             solver = tr.solver(obj_scale, extra, callback)
