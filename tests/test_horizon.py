@@ -596,3 +596,57 @@ def test_structured_jacobian_and_hessian_equal_casadis_automatic_ones():
     for i in range(3):
         np.testing.assert_allclose([float(d1[0][i]), float(d1[1][i])], np.asarray(grad(far[:, i])).ravel(), atol=1e-9)
     assert all(float(d[0]) == 0.0 and float(d[1]) == 0.0 for d in d2) and float(d2[1][2]) != 0.0
+
+
+# windowed solves along the route, then the whole NLP (HorizonOptions.window)
+def test_window_spans_cover_the_free_knots_with_the_overlap():
+    spans = horizon_module._window_spans(30, 12, 4)
+    assert spans == [(1, 12), (9, 20), (17, 28), (25, 30)]
+    assert horizon_module._window_spans(30, 40, 10) == [(1, 30)]
+
+
+@pytest.mark.parametrize("mode", ["fixed", "sub"])
+def test_windowed_and_polished_equals_the_monolithic_optimum(solved, mode):
+    """On the short route (K = 30) windows of 12 knots, 4 shared, then the polishing pass of the whole NLP reach the
+    monolithic NLP's optimum to IPOPT's tolerance: the same joints to 5e-4 (rad | m) and the same objective to 1e-5
+    relative (on long routes they do not: formulations/horizon.md, "Windowed solves")."""
+    problem, warm, _, plan = solved
+    windowed = plan_horizon(problem, warm, window=12, window_overlap=4, window_mode=mode)
+    d = windowed.diagnostics
+    assert d["horizon_result"] == "optimal" and len(d["window_log"]) == 4
+    assert all(w["kept"] for w in d["window_log"])  # every window was solved and moved the trajectory
+    assert d["ipopt_iterations"] == sum(w["iterations"] for w in d["window_log"]) + sum(
+        r["iterations"] for r in d["round_log"]
+    )
+    assert "after 4 windows of 12 knots" in d["horizon_note"]
+    np.testing.assert_allclose(windowed.q, plan.q, atol=5e-4)  # measured 1.4e-4 (fixed), 1.7e-4 (sub)
+    J = plan.diagnostics["horizon_summary"]["objective"]
+    assert d["horizon_summary"]["objective"] == pytest.approx(J, rel=1e-5)  # measured 3.5e-7
+    assert windowed.params["horizon_window"] == 12 and "horizon_window" not in plan.params  # runs without: unchanged
+
+
+def test_window_options_are_checked(solved):
+    problem, warm, _, _ = solved
+    for bad in ({"window": 1}, {"window": 10, "window_overlap": 10}, {"window": 10, "window_mode": "parallel"}):
+        with pytest.raises(ParameterError, match="window"):
+            plan_horizon(problem, warm, **bad)
+
+
+def test_windows_stop_at_the_time_limit_and_the_plan_is_never_worse(feasible_warm, monkeypatch):
+    """A deadline already passed stops the first window after its initial point and no further window is solved; the
+    whole NLP is stopped the same way and the fallbacks apply as without windows."""
+    from tmr.control import horizon
+
+    problem, warm, J_warm = feasible_warm
+
+    class Late(horizon._IterationCallback):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            self.deadline = -math.inf  # already passed
+
+    monkeypatch.setattr(horizon, "_IterationCallback", Late)
+    plan = plan_horizon(problem, warm, **WEIGHTED, window=12, time_limit=DEFAULT_TIME_LIMIT)
+    d = plan.diagnostics
+    assert len(d["window_log"]) == 1 and d["window_log"][0]["iterations"] <= 1
+    assert d["horizon_stop"] == "time_limit" and d["horizon_result"] in ("warm_start", "best_feasible_iterate")
+    assert plan.success and objective(plan.q, problem) <= J_warm and d["constraint_violation"] <= 1e-5

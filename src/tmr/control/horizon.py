@@ -26,6 +26,10 @@ primal–dual warm. The final point is a KKT point of the relaxed problem
 that satisfies every row of the full one, hence a KKT point of the full problem (the rows left out are inactive, with
 zero multipliers).
 
+**Windowed solves** (``window=W``, off by default): windows of W knots along the route are solved first, one after
+the other with the knots outside them fixed, then the whole NLP from the stitched trajectory and multipliers, as
+above; measured against the monolithic solve (not faster, often another KKT point) in ``formulations/horizon.md``.
+
 **Never worse than the warm start.** The warm start (a plan of the same problem, required: the planner passes its
 ``qp`` plan; this module never imports :mod:`tmr.planner`) is IPOPT's initial point and the last fallback. If IPOPT
 stops without a solution (both attempts of a round), the time limit is reached, rows left out stay violated after
@@ -342,6 +346,16 @@ def plan_horizon(
     )
     build_time, built_rows = 0.0, 0  # the last solver's build [s] (outside IPOPT's clock) and its rows
     too_big: tuple[int, float] | None = None  # (rows, expected build [s]) if IPOPT never started for that reason
+    windows: list[dict[str, Any]] = []
+    window_lam: dict[str, Array] | None = None  # the windows' row multipliers (stitched), by group and entry
+    if opts.window is not None and int(opts.window) < su.K:
+        t1 = time.perf_counter()
+        xv, windows, window_lam = _windowed(model, masks, xv, obj_scale, pool, bar, deadline, limit)
+        vals = model.values(xv)
+        masks = {name: masks[name] | model.near(name, vals[name]) for name in model.rows}
+        window_time = time.perf_counter() - t1
+        solve_time += sum(w["solve_time"] for w in windows)
+        trans_time += window_time - sum(w["solve_time"] for w in windows)
     try:
         for rnd in range(1, opts.max_rounds + 1):
             if time.perf_counter() >= deadline:
@@ -373,6 +387,8 @@ def plan_horizon(
                 kwargs: dict[str, Any] = dict(x0=x_start, lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg)
                 if prev is not None and lam_start is not None:  # primal–dual warm start from the previous round
                     kwargs.update(lam_x0=lam_start[0], lam_g0=tr.carry_multipliers(prev, lam_start[1]))
+                elif rnd == 1 and window_lam is not None:  # the polishing pass: the windows' multipliers
+                    kwargs.update(lam_g0=_stitched_multipliers(tr, window_lam))
                 t3 = time.perf_counter()
                 _LOG.debug("horizon NLP round %d %s: IPOPT on %d rows", rnd, label, tr.size)
                 with _ctrl_c_stops_ipopt():
@@ -426,9 +442,11 @@ def plan_horizon(
     last = rounds[-1]["round"] if rounds else 0
     tried = " and ".join(f"{r['attempt']}: {r['status']!r} after {r['iterations']} iterations"
                          for r in rounds if r["round"] == last)  # fmt: skip
-    iterations = int(sum(r["iterations"] for r in rounds))
+    iterations = int(sum(r["iterations"] for r in rounds)) + int(sum(w["iterations"] for w in windows))
     if stop == "converged":
         what = f"IPOPT solved the NLP ({status}, {iterations} iterations in {last} round(s))"
+        if windows:
+            what += f" after {len(windows)} windows of {opts.window} knots"
     elif stop == "ipopt_failed":
         what = f"IPOPT stopped without a solution in round {last} ({tried})"
     elif stop == "time_limit":
@@ -512,6 +530,8 @@ def plan_horizon(
         warm_start_fallback=warm_c.detail if warm_c else f"none: {warm_why}",
         iterates_kept=len(pool),
     )
+    if opts.window is not None:
+        diag.update(window_log=windows, ipopt_iterations=iterations)
     qdot = np.vstack([np.diff(Q, axis=0) / su.Ts, np.zeros((1, su.n))])
     if warm_start.q.shape == Q.shape and np.array_equal(warm_start.q, Q) and warm_start.qdot.shape == qdot.shape:
         qdot = warm_start.qdot.copy()  # the warm start itself: its own rates (a difference quotient rounds apart)
@@ -531,9 +551,146 @@ def plan_horizon(
         failure=None,
         diagnostics=diag,
         wall_time=time.perf_counter() - start_time,
-        params=dict(problem.params_dict(), **{f"horizon_{k}": v for k, v in asdict(opts).items()}),
+        params=dict(problem.params_dict(), **_params(opts)),
         goal=np.asarray(problem.scenario.goal, float).copy(),
     )
+
+
+def _params(opts: HorizonOptions) -> dict[str, Any]:
+    """The options as plan parameters ``horizon_<name>``; the window options only when windows are on (the records
+    of runs without them are unchanged)."""
+    out = asdict(opts)
+    if opts.window is None:
+        for k in ("window", "window_overlap", "window_mode"):
+            out.pop(k)
+    return {f"horizon_{k}": v for k, v in out.items()}
+
+
+def _window_spans(K: int, window: int, overlap: int) -> list[tuple[int, int]]:
+    """Knot ranges [a, b] (inclusive) of the windows over the free knots 1..K: ``window`` knots each, consecutive
+    ones sharing ``overlap`` knots, the last one ending at K."""
+    spans: list[tuple[int, int]] = []
+    a = 1
+    while True:
+        b = min(a + window - 1, K)
+        spans.append((a, b))
+        if b >= K:
+            return spans
+        a = b - overlap + 1
+
+
+def _window_columns(model: _Model, name: str, a: int, b: int) -> NDArray[np.bool_]:
+    """The columns of group ``name`` that depend on a knot of [a, b]: the point rows (clearance, span, separation) of
+    knots a..b, speeds of a−1..b (they join k and k+1), accelerations of a−1..b+1; the leader rows of a..b; never the
+    fitness rows (whole-horizon sums: left to the polishing pass)."""
+    knots = model.rows[name].knots
+    if name == "fitness":
+        return np.zeros(knots.size, dtype=bool)
+    if name in ("joint_speed", "robot_speed"):
+        return (knots >= a - 1) & (knots <= b)
+    if name in ("joint_accel", "robot_accel"):
+        return (knots >= a - 1) & (knots <= b + 1)
+    return (knots >= a) & (knots <= b)
+
+
+def _window_bounds(model: _Model, tr: _Transcription, a: int, b: int) -> tuple[Array, Array]:
+    """lbg, ubg of ``tr`` with every row that does not depend on a knot of [a, b] free (±inf): a row of fixed knots
+    that the current point violates would make the window infeasible."""
+    lbg, ubg = tr.lbg.copy(), tr.ubg.copy()
+    for name, idx in tr.index.items():
+        if idx.size == 0:
+            continue
+        rows = model.rows[name].lo.size
+        off = np.arange(tr.offset[name], tr.offset[name] + idx.size)[~_window_columns(model, name, a, b)[idx // rows]]
+        lbg[off], ubg[off] = -np.inf, np.inf
+    return lbg, ubg
+
+
+def _windowed(
+    model: _Model,
+    masks: dict[str, NDArray[np.bool_]],
+    xv: Array,
+    obj_scale: float,
+    pool: _Pool,
+    bar: Any,
+    deadline: float,
+    limit: float,
+) -> tuple[Array, list[dict[str, Any]], dict[str, Array]]:
+    """Windowed solves along the route (``HorizonOptions.window``): each window of knots from the current
+    trajectory, the knots outside it fixed by their bounds; a window's solution replaces the trajectory only if
+    IPOPT solved it (its rows: those of ``masks``). Returns the stitched variables, a log per window and the row
+    multipliers of the windows (group → flat entries in column-major order, the last window that held a row wins).
+    Stops at the deadline (the iterates went to ``pool``), and before a solver whose expected build
+    (:func:`_expected_build`) would overrun it."""
+    su, opts = model.su, model.su.opts
+    W = int(opts.window)  # type: ignore[arg-type]
+    overlap = W // 4 if opts.window_overlap is None else int(opts.window_overlap)
+    width = 2 * su.N
+    log: list[dict[str, Any]] = []
+    tr: _Transcription | None = None
+    solver: Any = None
+    callback: _IterationCallback | None = None
+    lam = {name: np.zeros(m.size) for name, m in masks.items()}
+    for i, (a, b) in enumerate(_window_spans(su.K, W, overlap)):
+        remaining = deadline - time.perf_counter()
+        if remaining <= 0:
+            break
+        t1 = time.perf_counter()
+        if opts.window_mode == "sub" or tr is None:
+            sub = {n: m & _window_columns(model, n, a, b)[None, :] for n, m in masks.items()}
+            tr = _Transcription(model, sub if opts.window_mode == "sub" else masks)
+            solver = None
+        if solver is None:  # "fixed": one solver (and its callback) for every window
+            if math.isfinite(limit) and remaining <= _expected_build(tr.size):  # as the rounds: no build past it
+                break
+            extra: dict[str, Any] = {"max_wall_time": float(remaining)} if math.isfinite(limit) else {}
+            callback = _IterationCallback(tr, pool, bar, "", deadline)
+            solver = tr.solver(obj_scale, extra, callback)
+        callback.label, callback.iteration = f"window {i + 1} [{a}, {b}]", 0
+        bar.set_description_str(f"horizon NLP, window {i + 1} (knots {a}–{b})")
+        lbx, ubx = model.lbx.copy(), model.ubx.copy()
+        out = np.ones(lbx.size, dtype=bool)
+        out[a * width : (b + 1) * width] = False
+        lbx[out] = ubx[out] = xv[out]
+        t2 = time.perf_counter()
+        with _ctrl_c_stops_ipopt():
+            lbg, ubg = _window_bounds(model, tr, a, b)
+            sol = solver(x0=xv, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+        t3 = time.perf_counter()
+        stats = solver.stats()
+        status = str(stats.get("return_status", ""))
+        ok = status in _SUCCESS or (opts.accept_acceptable and status in _ACCEPTABLE)
+        if ok:
+            xv = np.asarray(sol["x"], dtype=float).ravel()
+            lam_g = np.asarray(sol["lam_g"], dtype=float).ravel()
+            for name, idx in tr.index.items():
+                rows = model.rows[name].lo.size
+                on = _window_columns(model, name, a, b)[idx // rows]
+                lam[name][idx[on]] = lam_g[tr.offset[name] + np.flatnonzero(on)]
+        log.append(
+            dict(
+                window=i + 1,
+                knots=(a, b),
+                status=status,
+                iterations=int(stats.get("iter_count", -1)),
+                rows=int(tr.size),
+                kept=ok,
+                build_time=round(t2 - t1, 3),
+                solve_time=t3 - t2,
+            )
+        )
+        _LOG.debug("horizon window %s", log[-1])
+        if callback.timed_out or _INTERRUPT.is_set():
+            break
+    return xv, log, lam
+
+
+def _stitched_multipliers(tr: _Transcription, lam: dict[str, Array]) -> Array:
+    """The windows' row multipliers (:func:`_windowed`) on the rows of ``tr`` (rows no window held: 0)."""
+    out = np.zeros(tr.size)
+    for name, idx in tr.index.items():
+        out[tr.offset[name] : tr.offset[name] + idx.size] = lam[name][idx]
+    return out
 
 
 def _percent(value: float, reference: float) -> str:

@@ -87,6 +87,15 @@ class HorizonOptions:
         expand: expand the MX graph to SX (default False: measured 3× slower, the B-spline is one call node per point).
         scale_objective: divide the cost by its warm-start value, so IPOPT sees O(1) (without: 35–80 % more
             iterations on A–D).
+        window: windowed solves along the route before the whole NLP (``None``: off, the default): windows of this
+            many knots, solved one after the other from the current trajectory with the knots outside the window
+            held fixed, then the whole NLP from the stitched trajectory (the polishing pass: its constraint
+            generation rounds as without windows), so the plan is still a KKT point of the whole NLP
+            (``formulations/horizon.md``, "Windowed solves").
+        window_overlap: knots shared by consecutive windows (``None``: a quarter of ``window``).
+        window_mode: ``"fixed"``: one solver built for the whole horizon's rows, the knots outside the window fixed
+            by their bounds (IPOPT drops fixed variables: ``fixed_variable_treatment`` ``make_parameter``);
+            ``"sub"``: a solver per window with only the rows that depend on the window's knots.
         ipopt: extra IPOPT options, merged last.
     """
 
@@ -121,6 +130,9 @@ class HorizonOptions:
     warm_start_leader_error: float = 0.01
     expand: bool = False
     scale_objective: bool = True
+    window: int | None = None
+    window_overlap: int | None = None
+    window_mode: str = "fixed"
     ipopt: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -144,6 +156,12 @@ class HorizonOptions:
             raise ParameterError(f"rate_activation must be in [0, 1), got {self.rate_activation}")
         if self.max_rounds < 1 or self.max_iter < 1:
             raise ParameterError("max_rounds and max_iter must be ≥ 1")
+        if self.window is not None and (isinstance(self.window, bool) or int(self.window) < 2):
+            raise ParameterError(f"window must be ≥ 2 knots (or None: no windows), got {self.window!r}")
+        if self.window_overlap is not None and not 0 <= int(self.window_overlap) < int(self.window or 2):
+            raise ParameterError(f"window_overlap must be in [0, window), got {self.window_overlap!r}")
+        if self.window_mode not in ("fixed", "sub"):
+            raise ParameterError(f"window_mode must be 'fixed' or 'sub', got {self.window_mode!r}")
         if self.hessian not in ("exact", "limited-memory"):
             raise ParameterError(f"hessian must be 'exact' or 'limited-memory', got {self.hessian!r}")
 
