@@ -358,6 +358,16 @@ def test_scenario_h_saturates_drone_4_for_longer_than_50_ms(tmp_path: Path) -> N
     assert d4["thrust_demand_max"] < d4["reserve_thrust"] and d4["tracking_error_max"] < 0.1
 
 
+def test_scenario_h_with_a_jerk_bound_is_confirmed(tmp_path: Path) -> None:
+    """The same H planned with the jerk bound (``--set drone_jerk_max=50``, formulations/drones.md "Jerk"): the
+    acceleration no longer flips within a step and the replay confirms the plan, no rotor clipped."""
+    run = plan("H", tmp_path / "Hj", "--set", "drone_jerk_max=50")
+    assert replay_main([str(run), "--no-plots", "-q"]) == 0
+    doc = json.loads((run / "replay" / "replay.json").read_text())
+    assert doc["verdict"]["ok"] is True
+    assert all(d["saturation_run_max"] == 0.0 and d["tracking_error_max"] < 0.05 for d in doc["drones"])
+
+
 def test_active_winch_is_driven_as_planned_and_keeps_the_tether_off_the_wall(tmp_path: Path) -> None:
     """Scenario I (active winch, 2 drones under a low ceiling): the winches follow the planned tensions (up to 6 N)
     and the replay confirms the plan; the same flight with the winches held at the constant 2 N puts tether 2 on the

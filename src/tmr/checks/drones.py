@@ -18,7 +18,7 @@ formula of this module. At every step of the plan it checks:
   than the winch itself when the winch is nearer than c_t, e.g. on the floor), by sampling the curve with certified
   bounds between samples (below);
 * arc length <= L_max; the tension at every drone end <= the drone's spare thrust;
-* speed and acceleration per axis (finite differences of the positions) within the planner's bounds;
+* speed, acceleration and jerk per axis (finite differences of the positions) within the planner's bounds;
 * the leader ends at the goal within the tolerance.
 
 Curve sampling. The signed distance D to a union of closed sets is 1-Lipschitz, so on a piece of curve of arc length
@@ -85,6 +85,7 @@ DRONE_VIOLATION_KINDS: tuple[str, ...] = (
     "tension",
     "speed",
     "acceleration",
+    "jerk",
     "goal",
 )
 #: With an active winch (``tether.winch = "active"``) one kind more: the recorded tensions within the pulley's range
@@ -100,6 +101,7 @@ LIMIT_KINDS: tuple[str, ...] = (
     "tension",
     "speed",
     "acceleration",
+    "jerk",
 )
 
 COARSE = 0.5  # first arc spacing of the curve samples [m]
@@ -679,7 +681,8 @@ class DroneMetrics:
       and the end P of tethers 2..N; not the anchor's end); passes if ≤ ``tension_max`` (the spare thrust).
     * ``peak_speed`` [m/s], ``peak_acceleration`` [m/s²]: PER AXIS — the largest |component| of the finite-difference
       velocity (p_{k+1} − p_k)/Ts and acceleration (p_{k+1} − 2p_k + p_{k−1})/Ts² over x, y, z (not the norm),
-      as the per-axis limits ``speed_max``, ``accel_max`` are; 0 for a plan too short to difference.
+      as the per-axis limits ``speed_max``, ``accel_max`` are; 0 for a plan too short to difference. ``peak_jerk``
+      [m/s³] likewise, the third difference (p_{k+1} − 3p_k + 3p_{k−1} − p_{k−2})/Ts³ against ``jerk_max``.
     * ``final_leader_error`` [m]: |leader's last position − goal| (Euclidean); passes if ≤ ``goal_tolerance``.
       ``max_tracking_error`` [m]: largest |leader − its reference| (Euclidean), not a limit.
     * ``max_end_residual`` [m]: largest miss of a rebuilt catenary at its ends — rounding only, it holds for every
@@ -713,6 +716,7 @@ class DroneMetrics:
     tension_max: float
     speed_max: float
     accel_max: float
+    jerk_max: float | None
     min_drone_clearance: float
     min_altitude_margin: float
     min_separation: float
@@ -721,6 +725,7 @@ class DroneMetrics:
     max_drone_tension: float
     peak_speed: float
     peak_acceleration: float
+    peak_jerk: float
     max_end_residual: float
     max_winch_tension_error: float
     binding_limit: str | None
@@ -799,13 +804,14 @@ def check_drone_plan(
             :class:`CheckWorld` (:func:`check_world`).
         base_dir: folder the table's mesh files are relative to (the scenario file's folder).
         params: the planner parameters (a ``DroneParams`` or a dict) for ``drone_speed_max``, ``drone_accel_max``,
-            ``goal_tolerance``; default: ``plan.params`` (flat, or the planner's record ``{"planner": {...}}``),
-            then 2 m/s, 4 m/s², 0.1 m.
-        tolerance: slack [m] before a length limit counts as broken; speeds get 2 tol / Ts, accelerations 4 tol / Ts².
+            ``drone_jerk_max``, ``goal_tolerance``; default: ``plan.params`` (flat, or the planner's record
+            ``{"planner": {...}}``), then 2 m/s, 4 m/s², no jerk limit, 0.1 m.
+        tolerance: slack [m] before a length limit counts as broken; speeds get 2 tol / Ts, accelerations 4 tol / Ts²,
+            jerks 8 tol / Ts³.
         update_plan: set ``plan.success`` / ``plan.failure`` from the check (the planner's own failure, kept in
             ``plan.diagnostics["planner_failure"]``, stays first).
-        rest_ends: the plan starts and ends at rest, as tmr's do: the acceleration from rest to the first step's
-            velocity and from the last step's velocity to rest are checked too (False: only between steps, for
+        rest_ends: the plan starts and ends at rest, as tmr's do: the acceleration (and jerk) from rest to the first
+            step's velocity and from the last step's velocity to rest are checked too (False: only between steps, for
             trajectories cut out of a longer motion). The final stop is not checked on a plan the planner failed
             (``plan.failure`` / ``planner_failure``): it was cut off where the planner stopped.
 
@@ -822,6 +828,7 @@ def check_drone_plan(
     f_max = float(teth.spare_thrust)
     v_max = _param(plan, params, "drone_speed_max", 2.0)
     a_max = _param(plan, params, "drone_accel_max", 4.0)
+    j_max = _param(plan, params, "drone_jerk_max", math.inf)  # None / absent: no jerk limit (the default)
     goal_tol = _param(plan, params, "goal_tolerance", 0.1)
     t = np.asarray(plan.t, dtype=float)
     robots = np.asarray(plan.robots, dtype=float)
@@ -1073,11 +1080,44 @@ def check_drone_plan(
         violate("acceleration", mask_a, acc_msg)
         bind("acceleration", -over_a, a_max,
              lambda i: (i // (3 * n), f"drone {(i // 3) % n + 1} along {axes[i % 3]}", None))  # fmt: skip
+        # jerk: the change of that acceleration per step; at rest ends the acceleration is 0 before the start and
+        # after the stop too (hovering), so the start's and the stop's jerks count (the last two at step K)
+        # (K+2, N, 3): steps 0..K, then K again; a jerk next to an end that is no rest (acc[0] or acc[K] then 0 by
+        # construction, not a real acceleration) is 0
+        jerk = np.zeros((n_k + 1, n, 3))
+        jerk[1:n_k] = np.diff(acc, axis=0) / Ts
+        if rest_ends:
+            jerk[0] = acc[0] / Ts
+        else:
+            jerk[1] = 0.0
+        if rest_end:
+            jerk[n_k] = -acc[-1] / Ts
+        else:
+            jerk[n_k - 1] = 0.0
+        over_j = np.abs(jerk) - j_max
+        mask_j = np.zeros(n_k, dtype=bool)
+        bad_j = (over_j > 8 * tol / Ts**3).any(axis=(1, 2))
+        mask_j |= bad_j[:n_k]
+        mask_j[-1] |= bool(bad_j[n_k:].any())
+
+        def jerk_msg(k: int) -> str:
+            kk = k if k < n_k - 1 or over_j[k].max() >= over_j[k + 1].max() else k + 1
+            i, ax = np.unravel_index(int(np.argmax(over_j[kk])), over_j[kk].shape)
+            what = " (stopping: the plan ends there, at rest)" if k == n_k - 1 else ""
+            return (f"drone {i + 1}'s acceleration changes at {abs(jerk[kk, i, ax]):.3f} m/s³ along {axes[ax]} at "
+                    f"{_t(t, k)}{what}, more than {j_max:.3f} m/s³")  # fmt: skip
+
+        if math.isfinite(j_max):  # a jerk limit was planned with (DroneParams.drone_jerk_max)
+            violate("jerk", mask_j, jerk_msg)
+            bind("jerk", -over_j, j_max,
+                 lambda i: (min(i // (3 * n), n_k - 1), f"drone {(i // 3) % n + 1} along {axes[i % 3]}",
+                            None))  # fmt: skip
     else:
         vel = np.zeros((0, n, 3))
         over_v = np.zeros((0, n, 3))
         acc = np.zeros((0, n, 3))
         over_a = np.zeros((0, n, 3))
+        jerk = np.zeros((0, n, 3))
 
     # -- goal -----------------------------------------------------------------------------------------------------
     final_err = float(np.linalg.norm(robots[-1, -1] - goal))
@@ -1129,6 +1169,7 @@ def check_drone_plan(
         tension_max=f_max,
         speed_max=v_max,
         accel_max=a_max,
+        jerk_max=j_max if math.isfinite(j_max) else None,
         min_drone_clearance=float(clear.min()),
         min_altitude_margin=float(alt.min()),
         min_separation=float(sep.min()) if sep.size else math.inf,
@@ -1137,6 +1178,7 @@ def check_drone_plan(
         max_drone_tension=float(np.max(tens)),
         peak_speed=float(np.abs(vel).max()) if vel.size else 0.0,
         peak_acceleration=float(np.abs(acc).max()) if acc.size else 0.0,
+        peak_jerk=float(np.abs(jerk).max()) if jerk.size else 0.0,
         max_end_residual=float(cur.end_residual.max()),
         max_winch_tension_error=float(np.abs(cur.winch_error).max()),
         binding_limit=binding_limit,

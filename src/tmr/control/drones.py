@@ -13,7 +13,7 @@ the ground chain (:func:`tmr.control.limits.approach_bound`): a margin g ≥ 0 m
 :func:`make_drone_qp` stacks, as the ground planner does (``tmr.planner.make_qp``): level 1 the leader's reference,
 level 2 the tethers' regulation with the followers' route references (and a little smoothness), level 3 energy and
 smoothness; hard limits every level keeps: drone clearance, the room (floor, ceiling, walls), separation, tether
-curve clearance, arc length, drone-end tension, speed and acceleration (the last one a comfort limit).
+curve clearance, arc length, drone-end tension, speed, acceleration and jerk.
 :func:`make_drone_pinv` is Caruso 2021's CLIK (eq. 5) on the 3N-joint ``Chain(spatial=True)``: leader task, then a
 soft obstacle task at the critical point, tether regulation in the null space (gradient projection, eq. 7).
 """
@@ -63,6 +63,7 @@ __all__ = [
     "TetherTension",
     "DroneSpeed",
     "DroneAcceleration",
+    "DroneJerk",
     "DroneQP",
     "DronePinv",
     "make_drone_qp",
@@ -431,9 +432,10 @@ class DroneStepContext:
     """Per-step state of the drone chain shared by tasks and limits (computed once per step by :meth:`update`).
 
     Attributes (after ``update``): k, points (N+1, 3) (anchor then drones) [m], v_prev (3N,) the previous step's
-    velocities [m/s], velocity_map (:class:`VelocityMap3D`), qdot_prev = T v_prev (link rates), tethers (the N
-    tethers' catenaries as arrays, :class:`~tmr.model.catenary3d.TetherCatenaries`, tether j from point j−1 to point
-    j), catenaries (the same as one :class:`Catenary3D` per tether, built on first use), sens (their stacked
+    velocities [m/s], v_prev2 (3N,) the ones of the step before it [m/s] (the jerk rows), velocity_map
+    (:class:`VelocityMap3D`), qdot_prev = T v_prev (link rates), tethers (the N tethers' catenaries as arrays,
+    :class:`~tmr.model.catenary3d.TetherCatenaries`, tether j from point j−1 to point j), catenaries (the same
+    as one :class:`Catenary3D` per tether, built on first use), sens (their stacked
     :class:`~tmr.model.catenary3d.TetherSensitivities` at the interior fractions i/(m+1), i = 1..m),
     drone_clearance (N,) [m] and drone_gradient (N, 3) (the world grown by the drone radius), sample_points
     (N, m, 3); each tether as the polyline through its ends and samples, per piece (N, m+1): segment_clearance [m],
@@ -500,8 +502,11 @@ class DroneStepContext:
         q: Array | None = None,
         winch_tension: Array | None = None,
         winch_rate_prev: Array | None = None,
+        v_prev2: Array | None = None,
     ) -> None:
-        """The quantities of step ``k`` with the drones at ``positions`` (N, 3) [m] after velocities ``v_prev`` (3N,).
+        """The quantities of step ``k`` with the drones at ``positions`` (N, 3) [m] after velocities ``v_prev`` (3N,),
+        and before them ``v_prev2`` (3N,) [m/s] (default ``v_prev``: no acceleration in the previous step; the loop
+        passes 0 at the start, from rest).
 
         With an active winch, ``winch_tension`` (N,) [N] is every tether's tension now (default: the tether's
         ``winch_tension``) and ``winch_rate_prev`` (N,) [N/s] its previous rate: the tethers are solved at those
@@ -517,6 +522,7 @@ class DroneStepContext:
         P = np.vstack([self.chain.base[None, :], np.asarray(positions, dtype=float).reshape(N, 3)])
         self.points = P
         self.v_prev = np.asarray(v_prev, dtype=float).reshape(-1)
+        self.v_prev2 = self.v_prev if v_prev2 is None else np.asarray(v_prev2, dtype=float).reshape(-1)
         warm = self.tethers.theta if self.tethers is not None and len(self.tethers) == N else None
         if self.winch_active:
             tw = np.full(N, self.tether.winch_tension) if winch_tension is None else winch_tension
@@ -943,19 +949,44 @@ class TetherTension(_TetherRows):
 
 
 class DroneSpeed(_DroneLimit):
-    """|ṗ_i,axis| ≤ v_max per axis [m/s] (3N rows)."""
+    """|ṗ_i,axis| ≤ v_max per axis [m/s] (3N rows). With a jerk bound ``j_max`` [m/s³] the bound looks ahead: an
+    axis accelerating by Δ = ṗ_k − ṗ_{k−1} keeps gaining speed while its acceleration is brought back to 0 at most
+    J = j_max Ts² a step, by S(Δ) = Σ_{i≥1} max(Δ − iJ, 0); the row is ṗ_k + S(ṗ_k − ṗ_{k−1}) ≤ v_max (and its mirror
+    below), which, being increasing in ṗ_k, is the box ṗ_k ≤ ṗ_{k−1} + Δ*(v_max − ṗ_{k−1}) with Δ* the largest Δ
+    with Δ + S(Δ) ≤ v_max − ṗ_{k−1} (:func:`_jerk_reach`). Without it a drone reaching v_max at full acceleration
+    could not stop accelerating within one step of jerk: the next step would have no solution. From a state inside
+    it, reducing Δ by J keeps it inside (recursively feasible)."""
 
     name = "drone_speed"
 
-    def __init__(self, n_robots: int, v_max: float) -> None:
+    def __init__(self, n_robots: int, v_max: float, j_max: float = math.inf) -> None:
         v = np.full(3 * n_robots, float(v_max))
         self.N, self.rows = n_robots, LimitRows(np.eye(3 * n_robots), -v, v)
+        self.v_max, self.j_max = float(v_max), float(j_max)
 
     def pattern(self, chain: Chain) -> NDArray[np.bool_]:
         return np.eye(3 * self.N, dtype=bool)
 
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
-        return self.rows
+        if not math.isfinite(self.j_max):
+            return self.rows
+        J = self.j_max * ctx.Ts**2
+        v = ctx.v_prev
+        hi = np.minimum(v + _jerk_reach(self.v_max - v, J), self.v_max)
+        lo = np.maximum(v - _jerk_reach(self.v_max + v, J), -self.v_max)
+        return LimitRows(self.rows.A, np.minimum(lo, v), np.maximum(hi, v))
+
+
+def _jerk_reach(room: Array, J: float) -> Array:
+    """The largest velocity step Δ [m/s] with Δ + S(Δ) ≤ ``room`` [m/s] (:class:`DroneSpeed`): S grows by (Δ − iJ)
+    for every i ≥ 1 with iJ < Δ, so on [nJ, (n+1)J] Δ + S(Δ) = (n+1)Δ − J n(n+1)/2, which is J n(n+1)/2 at Δ = nJ;
+    with n the largest such that J n(n+1)/2 ≤ room, Δ = (room + J n(n+1)/2)/(n+1). ``room`` < 0 (never, inside the
+    speed bound): Δ = room."""
+    r = np.maximum(room, 0.0)
+    n = np.floor(0.5 * (np.sqrt(1.0 + 8.0 * r / J) - 1.0))
+    n = np.where(J * (n + 1.0) * (n + 2.0) / 2.0 <= r, n + 1.0, n)  # rounding of the square root
+    n = np.where(J * n * (n + 1.0) / 2.0 > r, n - 1.0, n)
+    return np.where(room < 0.0, room, (r + J * n * (n + 1.0) / 2.0) / (n + 1.0))
 
 
 class DroneAcceleration(DroneSpeed):
@@ -974,6 +1005,26 @@ class DroneAcceleration(DroneSpeed):
     def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
         dv = self.a_max * ctx.Ts
         return LimitRows(self.rows.A, ctx.v_prev - dv, ctx.v_prev + dv)
+
+
+class DroneJerk(DroneSpeed):
+    """|(ṗ_i − ṗ_i,k−1) − (ṗ_i,k−1 − ṗ_i,k−2)| ≤ j_max Ts² per axis (3N rows): the acceleration changes by at most
+    j_max Ts [m/s²] a step. A hard limit as :class:`DroneAcceleration` (slow down and retry where it conflicts). A
+    quadrotor accelerates sideways by tilting its thrust and turns it at a finite body rate: an acceleration that
+    flips in one step it cannot follow (``formulations/drones.md``, "Jerk"). Always compatible with the acceleration
+    rows (the previous step's acceleration is within them) and with the jerk-aware speed rows (:class:`DroneSpeed`)."""
+
+    name = "drone_jerk"
+    relaxable = False
+
+    def __init__(self, n_robots: int, j_max: float) -> None:
+        super().__init__(n_robots, 1.0)
+        self.j_max = float(j_max)
+
+    def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
+        dj = self.j_max * ctx.Ts**2
+        centre = 2.0 * ctx.v_prev - ctx.v_prev2
+        return LimitRows(self.rows.A, centre - dj, centre + dj)
 
 
 # ---------------------------------------------------------------------------------------------------- active winch
@@ -1185,9 +1236,11 @@ def make_drone_qp(
         ),
         TetherLength(N, tether.tether_length - p.length_margin, p.approach_rate, p.drone_accel_max),
         TetherTension(N, tether.spare_thrust - p.tension_margin, p.approach_rate),
-        DroneSpeed(N, p.drone_speed_max),
+        DroneSpeed(N, p.drone_speed_max, math.inf if p.drone_jerk_max is None else p.drone_jerk_max),
         DroneAcceleration(N, p.drone_accel_max),
     ]
+    if p.drone_jerk_max is not None:  # off by default (DroneParams.drone_jerk_max)
+        limits.append(DroneJerk(N, p.drone_jerk_max))
     if N > 1:
         limits.append(
             DroneSeparation(

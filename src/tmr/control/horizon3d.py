@@ -100,6 +100,7 @@ DRONE_GROUPS: tuple[str, ...] = (
     "separation",
     "speed",
     "acceleration",
+    "jerk",
 )
 
 
@@ -125,7 +126,7 @@ class DroneHorizonOptions:
         activation: clearance / separation rows only within this of their bound along the current point [m];
             lower-end rows within this of level, length rows within this of their bound.
         tension_activation: tension rows within this of their bound [N].
-        rate_activation: speed and acceleration rows beyond this fraction of their bound.
+        rate_activation: speed, acceleration and jerk rows beyond this fraction of their bound.
         max_rounds: transcriptions at most.
         max_iter, tol, acceptable_tol, acceptable_iter, constr_viol_tol, mu_strategy, mu_init, hessian, linear_solver,
             nlp_scaling, min_hessian_perturbation, expand, ipopt: IPOPT options (as
@@ -234,7 +235,8 @@ class _Model:
         # acceleration bound (then no plan on it passes the checker) or the qp leader lags it by more than
         # leader_lag_max (then the qp plan is far from any plan on it): then the qp plan's own leader (f3 unchanged)
         vmax, amax = float(params.drone_speed_max), float(params.drone_accel_max)
-        self.lead, self.leader_note = self._leader(R0[:, -1], vmax, amax, opts)
+        jmax = math.inf if params.drone_jerk_max is None else float(params.drone_jerk_max)
+        self.lead, self.leader_note = self._leader(R0[:, -1], vmax, amax, opts, jmax)
         R = R0.copy()
         R[:, -1] = self.lead
         pts = np.concatenate([np.broadcast_to(self.base, (K + 1, 1, 3)), R], axis=1)
@@ -344,6 +346,7 @@ class _Model:
         V = (P[:, 1:] - P[:, :-1]) / Ts
         z = ca.DM.zeros(3 * N, 1)
         Acc = (ca.horzcat(V, z) - ca.horzcat(z, V)) / Ts
+        Jerk = (ca.horzcat(Acc, z) - ca.horzcat(z, Acc)) / Ts  # at rest before and after, as the checker
         dP = [qmat[a] - pmat[a] for a in range(3)]
         C = ca.sqrt(dP[0] ** 2 + dP[1] ** 2 + dP[2] ** 2)  # chords (N, K+1)
         f1 = ca.sumsqr(V)
@@ -388,6 +391,8 @@ class _Model:
             g["separation"] = _Group(sep, np.full(len(self.pairs), smin), np.full(len(self.pairs), np.inf))
         g["speed"] = _Group(V, np.full(3 * N, -vmax), np.full(3 * N, vmax))
         g["acceleration"] = _Group(Acc, np.full(3 * N, -amax), np.full(3 * N, amax))
+        if math.isfinite(jmax):  # DroneParams.drone_jerk_max set
+            g["jerk"] = _Group(Jerk, np.full(3 * N, -jmax), np.full(3 * N, jmax))
         self.groups = g
         # tether clearance samples: entries (tether j, sample i, knot k), flattened; all evaluated numerically
         jj, ii, kk = [], [], []
@@ -419,7 +424,9 @@ class _Model:
         self.n_samples = int(self.samp[0].size)
         _LOG.debug("horizon3d: warm terms %s (NLP %s)", self.warm_terms, wterms)
 
-    def _leader(self, qp_leader: Array, vmax: float, amax: float, opts: DroneHorizonOptions) -> tuple[Array, str]:
+    def _leader(
+        self, qp_leader: Array, vmax: float, amax: float, opts: DroneHorizonOptions, jmax: float = math.inf
+    ) -> tuple[Array, str]:
         """The leader's path (K+1, 3) [m] and a note on the choice (``opts.leader``)."""
         ref, Ts = self.ref, self.Ts
         if opts.leader == "warm_start":
@@ -434,6 +441,10 @@ class _Model:
             k = int(np.argmax(np.abs(acc).max(axis=1)))
             peak = float(np.abs(acc).max())
             why.append(f"its reference accelerates at {peak:.3f} m/s² > {amax:g} m/s² (t = {k * Ts:.2f} s)")
+        jerk = np.diff(np.concatenate([np.zeros((1, 3)), acc, np.zeros((1, 3))]), axis=0) / Ts
+        if np.abs(jerk).max() > jmax + 1e-9:
+            k = min(int(np.argmax(np.abs(jerk).max(axis=1))), len(ref) - 1)
+            why.append(f"its reference's jerk is {np.abs(jerk).max():.3f} m/s³ > {jmax:g} m/s³ (t = {k * Ts:.2f} s)")
         if lag > opts.leader_lag_max:
             why.append(f"the qp leader lags its reference by up to {lag:.3f} m > {opts.leader_lag_max:g} m")
         if opts.leader == "reference" or not why:

@@ -30,8 +30,9 @@ Array = NDArray[np.float64]
 
 __all__ = ["run_drones", "LineReferences", "line_references", "slowed_references", "REST_SPEED"]
 
-#: A drone is at rest when no velocity component exceeds this [m/s], or a_max Ts / 2 if less (the plan's end: see
-#: :func:`run_drones`): stopping from it within one step stays within half the acceleration bound.
+#: A drone is at rest when no velocity component exceeds this [m/s], or a_max Ts / 2 or j_max Ts² / 2 if less (the
+#: plan's end: see :func:`run_drones`): stopping from it within one step stays within half the acceleration and jerk
+#: bounds.
 REST_SPEED = 0.05
 #: A step where the hard limits have no common solution: go back this long [s], ...
 BACK_S = 1.0
@@ -197,6 +198,7 @@ def run_drones(
     failure: str | None = None
     formulation.reset()
     v_prev = np.zeros(3 * N)
+    v_prev2 = np.zeros(3 * N)  # from rest: no acceleration before the start either (the jerk rows)
     t_start = time.perf_counter()
     last = K
     slowed: list[str] = []
@@ -210,8 +212,10 @@ def run_drones(
     g_end = np.asarray(ref.x[-1] if goal is None else goal, dtype=float)
     near = 0.5 * params.goal_tolerance
     stall = int(round(STALL_S / Ts))
-    # at rest: stopping from it within one step stays within half the acceleration bound
-    rest_speed = min(REST_SPEED, 0.5 * params.drone_accel_max * Ts)
+    # at rest: stopping from it within one step stays within half the acceleration and jerk bounds (the stop's jerk
+    # is v_{k−2} − 2 v_{k−1} per Ts², then v_{k−1} per Ts² as the acceleration returns to 0)
+    jerk_step = math.inf if params.drone_jerk_max is None else params.drone_jerk_max * Ts**2
+    rest_speed = min(REST_SPEED, 0.5 * params.drone_accel_max * Ts, 0.5 * jerk_step)
     failed_at: list[int] = []
     ended = ""
     k = 0
@@ -221,9 +225,9 @@ def run_drones(
         try:
             if winch:
                 tw[k] = T_w
-                ctx.update(k, P, v_prev, q, winch_tension=T_w, winch_rate_prev=T_rate)
+                ctx.update(k, P, v_prev, q, winch_tension=T_w, winch_rate_prev=T_rate, v_prev2=v_prev2)
             else:
-                ctx.update(k, P, v_prev, q)
+                ctx.update(k, P, v_prev, q, v_prev2=v_prev2)
         except TetherSpanError as exc:
             failure = f"step {k} (t = {k * Ts:.2f} s): {exc}"
             last = k - 1
@@ -233,7 +237,11 @@ def run_drones(
         a[k] = ctx.tethers.a  # NaN: vertical
         if k >= k_end:  # the references are at rest: the plan ends once the chain rests at the goal, or stalls
             gap = float(np.linalg.norm(P[-1] - g_end))
-            if gap <= near and float(np.max(np.abs(v_prev), initial=0.0)) <= rest_speed:
+            if (
+                gap <= near
+                and float(np.max(np.abs(v_prev), initial=0.0)) <= rest_speed
+                and float(np.max(np.abs(v_prev2 - 2.0 * v_prev), initial=0.0)) <= 0.5 * jerk_step
+            ):
                 last, ended = k, "rest"
                 break
             kb = k - stall
@@ -268,6 +276,7 @@ def run_drones(
                 diag = {key: _grow(val, K + 1, np.nan) for key, val in diag.items()}
                 k, P = k0, robots[k0].copy()
                 v_prev = vel[k0 - 1].reshape(-1).copy() if k0 > 0 else np.zeros(3 * N)
+                v_prev2 = vel[k0 - 2].reshape(-1).copy() if k0 > 1 else np.zeros(3 * N)
                 formulation.reset()
                 continue
             failure = str(exc) + (f" (after slowing down at {', '.join(slowed)})" if slowed else "")
@@ -294,11 +303,12 @@ def run_drones(
         d.setdefault("leader_residual", float(np.linalg.norm(v[-3:] - lead)))
         for key, val in d.items():
             diag.setdefault(key, np.full(K + 1, np.nan))[k] = val
-        P, v_prev = P_next, v
+        P, v_prev, v_prev2 = P_next, v, v_prev
         k += 1
     n = max(last, 0) + 1
     short = float(np.linalg.norm(robots[n - 1, -1] - g_end))
     moving = np.abs(vel[n - 2]).max(axis=1) if n > 1 else np.zeros(N)  # each drone's largest velocity component
+    stop = min(params.drone_accel_max * Ts, jerk_step)  # the most a stop within one step may shed
     if failure is None and ended == "stall":
         failure = (
             f"the leader stalled {short:.3f} m from the goal {fmt_point(g_end)} (tolerance {params.goal_tolerance:g} m)"
@@ -306,9 +316,7 @@ def run_drones(
             f"less than {STALL_GAIN * 100:g} cm closer in the last {STALL_S:g} s)"
         )
     elif (
-        failure is None
-        and ended == "time"
-        and (short > params.goal_tolerance or moving.max(initial=0.0) > params.drone_accel_max * Ts)
+        failure is None and ended == "time" and (short > params.goal_tolerance or moving.max(initial=0.0) > stop)
     ):  # off the goal, or too fast to stop within one step (the checker counts the stop)
         i = int(np.argmax(moving))
         where = (

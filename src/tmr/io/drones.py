@@ -467,7 +467,7 @@ def _is_number(value: Any) -> bool:
 
 
 #: Planner limits the checker reads from run.json's ``params`` (flat or under ``"planner"``).
-_CHECKED_PARAMS = ("drone_speed_max", "drone_accel_max", "goal_tolerance")
+_CHECKED_PARAMS = ("drone_speed_max", "drone_accel_max", "drone_jerk_max", "goal_tolerance")
 
 
 def _validate_record(rec: dict[str, Any], where: str) -> None:

@@ -273,6 +273,14 @@ class DroneParams:
         drone_accel_max: acceleration bound of every drone, per axis [m/s²] (a hard limit: never dropped; where it
             and the safety limits have no common solution the plan slows down, then fails:
             :func:`tmr.control.run3d.run_drones`).
+        drone_jerk_max: jerk bound of every drone, per axis [m/s³], or None (default): no jerk limit. Set:
+            |(ṗ_k − ṗ_{k−1}) − (ṗ_{k−1} − ṗ_{k−2})| ≤ drone_jerk_max Ts² (a hard limit as the acceleration's). A
+            quadrotor tilts its thrust to accelerate sideways (a_lat = g tan(tilt)) and turns it at most at its
+            body-rate cap ω_max, so its acceleration changes at most at ≈ g ω_max near hover (≈ 59 m/s³ for the
+            replay's 6 rad/s). Off by default: at 50 m/s³ F, G, H, I plan and the MuJoCo replay confirms H (which it
+            does not without), but ``--robots auto`` plans 78 of the 90 reachable seeded worlds instead of 89; at
+            25 and 40 the per-step dampers, met at full approach, ask for an acceleration change the jerk rows cannot
+            give in one step and F, G, I (I at 40) no longer plan (``formulations/drones.md``, "Jerk").
         d_safe: clearance every drone keeps beyond its radius r from the obstacles, walls, floor and ceiling [m].
         separation_margin: drones keep 2r + this from each other [m].
         approach_rate: a distance to its limit may shrink at most at this rate times the remaining margin [1/s]
@@ -297,6 +305,7 @@ class DroneParams:
     leader_accel: float = 1.0
     drone_speed_max: float = 2.0
     drone_accel_max: float = 4.0
+    drone_jerk_max: float | None = None
     d_safe: float = 0.02
     separation_margin: float = 0.05
     approach_rate: float = 2.0
@@ -343,6 +352,9 @@ class DroneParams:
         )
         if self.tether_samples < 1:
             raise ParameterError(f"DroneParams.tether_samples must be ≥ 1, got {self.tether_samples!r}")
+        j = self.drone_jerk_max
+        if j is not None and (isinstance(j, bool) or not isinstance(j, (int, float)) or not 0 < j < math.inf):
+            raise ParameterError(f"DroneParams.drone_jerk_max must be a finite number > 0 or None, got {j!r}")
         if self.settle > MAX_SETTLE:
             raise ParameterError(f"DroneParams.settle must be ≤ {MAX_SETTLE:g} s, got {self.settle!r}")
         if self.leader_speed > self.drone_speed_max:
