@@ -448,3 +448,26 @@ def test_a_plan_that_ends_or_starts_moving_breaks_the_acceleration_limit():
     # a plan the planner failed was cut off where it stopped: its last state is not a stop, only its reason counts
     k_bad, msg = _only(_check_drone_plan(make_plan(moving, failure="the leader stalled"), table()), "planner")
     assert msg == "the leader stalled"
+
+
+def test_a_middle_drone_is_checked_against_the_pull_of_both_its_tethers():
+    """Drone 1 between the winch and drone 2, both below it, tethers at 6 N: each end's tension is within the spare
+    thrust (the per-end rule), but the two pulls together need more thrust than the drone has beyond its control
+    reserve (the resultant |m g e_z − F_1 − F_2|, here from the model's own end forces, Catenary3D.force_p/q)."""
+    prm = DroneTetherParams(winch_tension=6.0)
+    base = np.array([1.0, 3.0, 0.3])
+    robots = np.tile(np.array([[3.0, 3.0, 3.0], [5.0, 3.0, 0.6]]), (5, 1, 1))
+    plan = make_plan(robots=robots, prm=prm, base=base)
+    c1, c2 = solve3d(base, robots[0, 0], prm), solve3d(robots[0, 0], robots[0, 1], prm)
+    assert max(c1.tension_q, c2.tension_p, c2.tension_q) < prm.spare_thrust  # each end alone is fine
+    weight = prm.drone_mass * prm.g
+    need = float(np.linalg.norm(weight * np.array([0, 0, 1.0]) - c1.force_q - c2.force_p))
+    available = (1 - prm.control_reserve) * prm.thrust_to_weight * weight
+    assert need > available + 0.3  # 22.6 N against 22.1 N
+    m = check_drone_plan(plan, table())
+    step, message = _only(m, "tension")
+    assert step == 0 and message.startswith("drone 1 needs ") and f"{need:.3f} N of thrust" in message
+    # the same drones 1 m apart less vertically: within the thrust, passes
+    easy = robots.copy()
+    easy[:, 0, 2] = 1.2
+    assert check_drone_plan(make_plan(robots=easy, prm=prm, base=base), table()).first_violation["tension"] is None

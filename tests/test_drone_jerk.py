@@ -98,3 +98,36 @@ def test_without_the_bound_the_rows_are_absent_and_nothing_is_checked():
     assert metrics.peak_jerk == pytest.approx(160.0, rel=1e-6)
     with pytest.raises(Exception, match="drone_jerk_max must be a finite number > 0 or None"):
         DroneParams(drone_jerk_max=0.0)
+
+
+def test_jerk_reach_is_the_largest_step_within_the_room():
+    """``_jerk_reach`` (the jerk-aware speed rows' closed form) against its definition: Δ + S(Δ) ≤ room with
+    S(Δ) = Σ_{i≥1} max(Δ − iJ, 0), and Δ + 1e-6 breaks it; a negative room is returned as it is."""
+    from tmr.control.drones import _jerk_reach
+
+    rng = np.random.default_rng(5)
+    J = 10.0 ** rng.uniform(-4, 0, 400)
+    room = rng.uniform(0, 40, 400) * rng.uniform(0, 1, 400) ** 2
+
+    def total(d, j):
+        i = np.arange(1, int(d / j) + 2)
+        return d + np.maximum(d - i * j, 0.0).sum()
+
+    for j, r in zip(J, room, strict=True):
+        d = float(_jerk_reach(np.array([r]), j)[0])
+        assert total(d, j) <= r + 1e-9 * max(1.0, r)
+        assert total(d + 1e-6, j) > r
+    assert float(_jerk_reach(np.array([-0.3]), 0.1)[0]) == -0.3
+
+
+def test_the_bound_is_switched_off_by_none_and_refused_when_meaningless():
+    from tmr.errors import ParameterError
+    from tmr.model.params import apply_overrides
+
+    params, _ = apply_overrides(DroneParams(), {"drone_jerk_max": "50"})
+    assert params.drone_jerk_max == 50.0
+    for off in ("none", "off", None):
+        assert apply_overrides(params, {"drone_jerk_max": off})[0].drone_jerk_max is None
+    for bad in ("0", "-1", "abc", "inf"):
+        with pytest.raises(ParameterError):
+            apply_overrides(DroneParams(), {"drone_jerk_max": bad})

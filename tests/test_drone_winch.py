@@ -241,3 +241,15 @@ def test_slowing_down_goes_back_to_the_recorded_tensions():
     assert np.abs(np.diff(T, axis=0)).max() / plan.Ts <= tether.winch_tension_rate * (1 + 1e-9)
     m = check_drone_plan(plan, scenario, params=params)
     assert m.success, m.failures
+
+
+def test_winch_range_without_an_active_winch_is_refused():
+    """``--set winch_tension_min=9`` on a constant winch would be dropped from every record: refused, one line."""
+    from tmr.planner3d import drone_parameters
+    from tmr.world.drones import load_drone_scenario
+
+    scenario = load_drone_scenario("G")
+    with pytest.raises(ParameterError, match="winch_tension_min is an active winch's: add winch=active"):
+        drone_parameters(scenario, {"winch_tension_min": 9.0})
+    params, tether = drone_parameters(scenario, {"winch": "active", "winch_tension_min": 1.0})
+    assert tether.active and tether.winch_tension_min == 1.0

@@ -74,6 +74,14 @@ def drone_parameters(
         tether = replace(scenario.tether, **tether_values)
     except TypeError as exc:  # pragma: no cover - names filtered above
         raise ParameterError(str(exc)) from None
+    from tmr.model.catenary3d import WINCH_FIELDS
+
+    given = sorted(k for k in tether_values if k in WINCH_FIELDS and k != "winch")
+    if given and not tether.active:  # a constant winch has no range or rate: refused, not silently dropped
+        raise ParameterError(
+            f"{', '.join(given)} {'is' if len(given) == 1 else 'are'} an active winch's: add winch=active "
+            '(--set winch=active or [tether] winch = "active")'
+        )
     return params, tether
 
 

@@ -1042,7 +1042,32 @@ def check_drone_plan(
         return (f"tether {j + 1} pulls drone {drone} with {tens[k, j, e]:.3f} N at {_t(t, k)}, more than its spare "
                 f"thrust {f_max:.3f} N")  # fmt: skip
 
-    violate("tension", (over_t > tol).any(axis=(1, 2)), tension_msg)
+    # the thrust a drone needs against ALL its tethers (a middle drone carries two): |m g e_z - F_q(j) - F_p(j+1)|
+    # <= (1 - reserve) T/W m g, with the end forces of the rebuilt curves (H = rho g a along the tangent: on P
+    # +H (u + sinh(theta_P) e_z), on Q -H (u + sinh(theta_Q) e_z); a vertical tether pulls its ends towards each other)
+    ez = np.array([0.0, 0.0, 1.0])
+    curved = ~cur.vertical & cur.valid
+    H = np.where(curved, float(teth.mass_per_length) * float(teth.g) * np.where(curved, cur.a, 0.0), 0.0)
+    up = np.where(cur.h >= 0.0, 1.0, -1.0)  # +1: P is the lower end
+    f_p = np.where(curved[..., None], H[..., None] * (cur.u + cur.sinh_p[..., None] * ez),
+                   (up * cur.tension_p)[..., None] * ez)  # fmt: skip
+    f_q = np.where(curved[..., None], -H[..., None] * (cur.u + cur.sinh_q[..., None] * ez),
+                   (-up * cur.tension_q)[..., None] * ez)  # fmt: skip
+    pull = f_q.copy()  # (K+1, N, 3): on drone j, tether j's Q end plus tether j+1's P end
+    pull[:, :-1] += f_p[:, 1:]
+    weight = float(teth.drone_mass) * float(teth.g)
+    available = (1.0 - float(teth.control_reserve)) * float(teth.thrust_to_weight) * weight
+    need = np.linalg.norm(weight * ez - pull, axis=-1)  # (K+1, N) [N]
+    over_need = np.where(np.isfinite(need), need - available, -np.inf)
+
+    def thrust_msg(k: int) -> str:
+        if (over_t[k] > tol).any():
+            return tension_msg(k)
+        i = int(np.argmax(over_need[k]))
+        return (f"drone {i + 1} needs {need[k, i]:.3f} N of thrust against its tethers and its weight at {_t(t, k)}, "
+                f"more than the {available:.3f} N it has beyond its control reserve")  # fmt: skip
+
+    violate("tension", (over_t > tol).any(axis=(1, 2)) | (over_need > tol).any(axis=1), thrust_msg)
     bind("tension", -over_t, f_max,
          lambda i: (i // (2 * n), f"tether {(i // 2) % n + 1} at drone {(i // 2) % n + i % 2}", None))  # fmt: skip
 

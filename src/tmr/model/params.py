@@ -376,10 +376,13 @@ PARAM_CLASSES: tuple[type, ...] = (ChainParams, TimeParams, PathParams, TaskPara
 def convert_field(cls: type, name: str, value: Any) -> Any:
     """``value`` (a number, or its text from a command line or a file) as the type of field ``name`` of ``cls``:
     an int field takes only whole numbers (``2.5`` is refused, not truncated), a float field only finite numbers, a
-    str field text. ParameterError naming the field otherwise."""
+    str field text; a field whose default is None also ``none``/``off`` (None). ParameterError naming the field
+    otherwise."""
     default = getattr(cls(), name)
     kind = type(default)
     label = f"{cls.__name__}.{name}"
+    if default is None and (value is None or (isinstance(value, str) and value.strip().lower() in ("none", "off"))):
+        return None  # an optional limit (e.g. DroneParams.drone_jerk_max) switched off
     if kind is str:
         if not isinstance(value, str):
             raise ParameterError(f"{label} takes text, got {value!r}")
