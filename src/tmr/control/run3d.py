@@ -308,9 +308,10 @@ def run_drones(
     n = max(last, 0) + 1
     short = float(np.linalg.norm(robots[n - 1, -1] - g_end))
     moving = np.abs(vel[n - 2]).max(axis=1) if n > 1 else np.zeros(N)  # each drone's largest velocity component
-    if n > 2 and math.isfinite(jerk_step):  # with a jerk bound the stop's jerk counts too: v_{n-3} - 2 v_{n-2}
-        moving = np.maximum(moving, 0.5 * np.abs(vel[n - 3] - 2.0 * vel[n - 2]).max(axis=1))
     stop = min(params.drone_accel_max * Ts, jerk_step)  # the most a stop within one step may shed
+    if n > 2 and math.isfinite(jerk_step):  # with a jerk bound the stop's jerk counts too: |v_{n-3} - 2 v_{n-2}| is
+        # at most j_max Ts² (the checker's), scaled here so that "moving > stop" says exactly that
+        moving = np.maximum(moving, np.abs(vel[n - 3] - 2.0 * vel[n - 2]).max(axis=1) * (stop / jerk_step))
     if failure is None and ended == "stall":
         failure = (
             f"the leader stalled {short:.3f} m from the goal {fmt_point(g_end)} (tolerance {params.goal_tolerance:g} m)"
