@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from tmr.replay.errors import ReplayError
 from tmr.replay.tether import TetherSpec, TetherState, tether_body_xml, tether_extra_xml
+from tmr.replay.timing import RealTimeFactors
 from tmr.replay.world import OBSTACLE_HEIGHT, ROBOT_BITS, TETHER_BITS, world_xml
 
 Array = NDArray[np.float64]
@@ -100,7 +101,7 @@ class ChainModel:
 
 
 @dataclass
-class ChainReplay:
+class ChainReplay(RealTimeFactors):
     """What a replay measured (arrays per plan sample k; tethers j = 0..N-1, robots i = 0..N-1). Units: m, N, s."""
 
     t: Array
@@ -126,16 +127,6 @@ class ChainReplay:
     config: ReplayConfig = field(default_factory=ReplayConfig)
     qpos: list[Array] = field(default_factory=list)  # per sample, the full MuJoCo state (for the GIF)
     built: ChainModel | None = None
-
-    @property
-    def real_time_factor(self) -> float:
-        """Simulated time / wall time of the simulation loop."""
-        return self.sim_time / self.wall_time if self.wall_time > 0 else math.inf
-
-    @property
-    def cpu_real_time_factor(self) -> float:
-        """Simulated time / CPU time of this process in the loop (what the machine's load does not change)."""
-        return self.sim_time / self.cpu_time if self.cpu_time > 0 else math.inf
 
 
 #: simulated time at the start pose before the plan's first sample [s] (lets the constraint forces settle).

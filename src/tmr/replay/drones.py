@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 from tmr.replay.errors import ReplayError
 from tmr.replay.quadrotor import QuadrotorControl, QuadrotorSpec, quadrotor_actuator_xml, quadrotor_body_xml
 from tmr.replay.tether import TetherSpec, TetherState, tether_body_xml, tether_extra_xml
+from tmr.replay.timing import RealTimeFactors
 from tmr.replay.world import DRONE_BITS, TETHER_BITS, world3d_xml
 
 Array = NDArray[np.float64]
@@ -195,7 +196,7 @@ class DroneModel:
 
 
 @dataclass
-class DroneReplay:
+class DroneReplay(RealTimeFactors):
     """What a drone replay measured (per plan sample k; drones i, tethers j). Units: m, N, s, rad."""
 
     t: Array
@@ -250,16 +251,6 @@ class DroneReplay:
     tether_length: float = math.inf  # the planner's tether_length [m]
     warnings: dict[str, int] = field(default_factory=dict)  # MuJoCo's warnings (name: count)
     warning_messages: list[str] = field(default_factory=list)  # their text (first 20), not printed
-
-    @property
-    def real_time_factor(self) -> float:
-        """Simulated time / wall time of the simulation loop."""
-        return self.sim_time / self.wall_time if self.wall_time > 0 else math.inf
-
-    @property
-    def cpu_real_time_factor(self) -> float:
-        """Simulated time / CPU time of this process in the loop."""
-        return self.sim_time / self.cpu_time if self.cpu_time > 0 else math.inf
 
     @property
     def saturation_fraction(self) -> Array:
@@ -819,7 +810,7 @@ def drone_verdict(rp: DroneReplay) -> Any:
     ``saturation_run`` or in more than ``saturation_limit`` of the physics steps, a plan the smoothing has to change
     by more than ``accel_budget``, a tether nearer the world than ``clearance_fraction`` c_t or paid out beyond
     ``tether_length``, a drone tilted beyond ``max_tilt`` (a crash) or a diverged simulation."""
-    from tmr.replay.report import Verdict, _xyz
+    from tmr.replay.report import Verdict, _xyz, first_over
 
     cfg = rp.config
     fails: list[tuple[float, str, str]] = []
@@ -842,21 +833,16 @@ def drone_verdict(rp: DroneReplay) -> Any:
                 f"{rp.lowest[k, j]:.3f} m"
             )
         fails.append((t0, kind, msg))
-    over = rp.tracking_error > cfg.tolerance
-    if over.any():
-        k = int(np.argmax(over.any(axis=1)))
-        i = int(np.argmax(rp.tracking_error[k]))
+    if (at := first_over(rp.tracking_error > cfg.tolerance, rp.tracking_error)) is not None:
+        k, i = at
         msg = (
             f"drone {i + 1} tracking error {rp.tracking_error[k, i]:.3f} m > tolerance {cfg.tolerance:g} m at "
             f"t = {rp.t[k]:.2f} s at {_xyz(rp.actual[k, i])} (largest {float(np.nanmax(rp.tracking_error)):.3f} m)"
         )
         fails.append((float(rp.t[k]), "tracking", msg))
     if rp.pull.size:
-        limit = rp.spare_thrust * (1.0 + cfg.pull_tolerance)
-        hard = rp.pull > limit
-        if hard.any():
-            k = int(np.argmax(hard.any(axis=1)))
-            i = int(np.argmax(rp.pull[k]))
+        if (at := first_over(rp.pull > rp.spare_thrust * (1.0 + cfg.pull_tolerance), rp.pull)) is not None:
+            k, i = at
             msg = (
                 f"a tether pulls drone {i + 1} with {rp.pull[k, i]:.2f} N at t = {rp.t[k]:.2f} s at "
                 f"{_xyz(rp.actual[k, i])}, more than the planner's spare thrust {rp.spare_thrust:.2f} N "
@@ -886,10 +872,8 @@ def drone_verdict(rp: DroneReplay) -> Any:
         )
         fails.append((t0, "thrust saturation", msg))
     if rp.accel_removed.size:
-        big = rp.accel_removed > cfg.accel_budget
-        if big.any():
-            k = int(np.argmax(big.any(axis=1)))
-            i = int(np.argmax(rp.accel_removed[k]))
+        if (at := first_over(rp.accel_removed > cfg.accel_budget, rp.accel_removed)) is not None:
+            k, i = at
             msg = (
                 f"drone {i + 1}'s plan cannot be flown as planned: the smoothing (σ = {cfg.smoothing:g} s) removes "
                 f"{rp.accel_removed[k, i]:.1f} m/s² of its acceleration at t = {rp.t[k]:.2f} s at "
@@ -899,9 +883,8 @@ def drone_verdict(rp: DroneReplay) -> Any:
             fails.append((float(rp.t[k]), "reference", msg))
     if rp.clearance.size:
         near = rp.clearance < cfg.clearance_fraction * rp.tether_clearance
-        if near.any():
-            k = int(np.argmax(near.any(axis=1)))
-            j = int(np.argmax(near[k]))
+        if (at := first_over(near, near)) is not None:  # the first tether too near at that sample
+            k, j = at
             msg = (
                 f"tether {j + 1} passes {rp.clearance[k, j]:.3f} m from the floor or an obstacle at t = "
                 f"{rp.t[k]:.2f} s, less than {cfg.clearance_fraction:g} of the planner's tether clearance "
@@ -909,19 +892,15 @@ def drone_verdict(rp: DroneReplay) -> Any:
             )
             fails.append((float(rp.t[k]), "tether clearance", msg))
     if rp.length.size:
-        long_t = rp.length > rp.tether_length * (1.0 + cfg.length_tolerance)
-        if long_t.any():
-            k = int(np.argmax(long_t.any(axis=1)))
-            j = int(np.argmax(rp.length[k]))
+        if (at := first_over(rp.length > rp.tether_length * (1.0 + cfg.length_tolerance), rp.length)) is not None:
+            k, j = at
             msg = (
                 f"tether {j + 1} is paid out to {rp.length[k, j]:.3f} m at t = {rp.t[k]:.2f} s, more than the "
                 f"{rp.tether_length:.3f} m the winch holds (+ {100 * cfg.length_tolerance:g} %)"
             )
             fails.append((float(rp.t[k]), "tether length", msg))
-    tilted = rp.tilt > cfg.max_tilt
-    if tilted.any():
-        k = int(np.argmax(tilted.any(axis=1)))
-        i = int(np.argmax(rp.tilt[k]))
+    if (at := first_over(rp.tilt > cfg.max_tilt, rp.tilt)) is not None:
+        k, i = at
         msg = (
             f"drone {i + 1} crashed: tilted {math.degrees(rp.tilt[k, i]):.0f}° > {math.degrees(cfg.max_tilt):.0f}° "
             f"at t = {rp.t[k]:.2f} s at {_xyz(rp.actual[k, i])}"

@@ -130,12 +130,20 @@ def plot_topview(rp: Any, run: Any, title: str) -> Any:
     return fig
 
 
-def chain_figures(out: Path, rp: Any, run: Any) -> list[str]:
-    """Write the four PNG figures of a chain replay into ``out``; return their names."""
+def _save(out: Path, figs: dict[str, Any]) -> list[str]:
+    """Write every figure of ``figs`` (name: figure) into ``out`` and close it; return the names."""
     import matplotlib.pyplot as plt
 
     from tmr.views.plot import save_figure
 
+    for name, fig in figs.items():
+        save_figure(fig, out / name)
+        plt.close(fig)
+    return list(figs)
+
+
+def chain_figures(out: Path, rp: Any, run: Any) -> list[str]:
+    """Write the four PNG figures of a chain replay into ``out``; return their names."""
     label = f"MuJoCo replay: {run.label}"
     figs = {
         "tether_heights.png": plot_heights(rp, label),
@@ -143,10 +151,7 @@ def chain_figures(out: Path, rp: Any, run: Any) -> list[str]:
         "tracking.png": plot_tracking(rp, label),
         "topview.png": plot_topview(rp, run, label),
     }
-    for name, fig in figs.items():
-        save_figure(fig, out / name)
-        plt.close(fig)
-    return list(figs)
+    return _save(out, figs)
 
 
 def plot_drone_tensions(rp: Any, title: str) -> Any:
@@ -257,10 +262,6 @@ def plot_drone_paths(rp: Any, run: Any, title: str) -> Any:
 
 def drone_figures(out: Path, rp: Any, run: Any) -> list[str]:
     """Write the five PNG figures of a drone replay into ``out``; return their names."""
-    import matplotlib.pyplot as plt
-
-    from tmr.views.plot import save_figure
-
     label = f"MuJoCo replay: {run.label}"
     figs = {
         "tether_heights.png": plot_heights(rp, label),
@@ -269,7 +270,4 @@ def drone_figures(out: Path, rp: Any, run: Any) -> list[str]:
         "rotor_thrust.png": plot_rotor_thrust(rp, label),
         "topview.png": plot_drone_paths(rp, run, label),
     }
-    for name, fig in figs.items():
-        save_figure(fig, out / name)
-        plt.close(fig)
-    return list(figs)
+    return _save(out, figs)

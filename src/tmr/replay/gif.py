@@ -80,14 +80,24 @@ def write_gif(frames: list[Any], path: Path) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
-def _frames_matplotlib(rp: Any, run: Any, every: int) -> list[Any]:
+def _frame(fig: Any) -> Any:
+    """A matplotlib figure as an RGB PIL image (rendered to PNG in memory); the figure is closed."""
     import io
 
+    import matplotlib.pyplot as plt
+    from PIL import Image
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    plt.close(fig)
+    return Image.open(io.BytesIO(buf.getvalue())).convert("RGB")
+
+
+def _frames_matplotlib(rp: Any, run: Any, every: int) -> list[Any]:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from PIL import Image
 
     frames = []
     xmin, ymin, xmax, ymax = run.bounds
@@ -105,10 +115,7 @@ def _frames_matplotlib(rp: Any, run: Any, every: int) -> list[Any]:
         ax.set_ylim(ymin, ymax)
         ax.set_aspect("equal")
         ax.set_title(f"t = {rp.t[k]:.2f} s (top view of the simulated states)", fontsize=9)
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png")
-        plt.close(fig)
-        frames.append(Image.open(io.BytesIO(buf.getvalue())).convert("RGB"))
+        frames.append(_frame(fig))
     return frames
 
 
@@ -128,13 +135,10 @@ def render_gif(rp: Any, run: Any, path: Path) -> str:
 
 
 def _drone_frames_matplotlib(rp: Any, run: Any, every: int) -> list[Any]:
-    import io
-
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from PIL import Image
 
     from tmr.replay.figures import _boxes
 
@@ -152,10 +156,7 @@ def _drone_frames_matplotlib(rp: Any, run: Any, every: int) -> list[Any]:
             ax.set_ylim(b[w], b[w + 3])
             ax.set_aspect("equal")
         fig.suptitle(f"t = {rp.t[k]:.2f} s (top and side views of the simulated states)", fontsize=9)
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png")
-        plt.close(fig)
-        frames.append(Image.open(io.BytesIO(buf.getvalue())).convert("RGB"))
+        frames.append(_frame(fig))
     return frames
 
 

@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tmr.replay.errors import ReplayError
+from tmr.replay.timing import RealTimeFactors
 from tmr.replay.world import world_xml
 
 Array = NDArray[np.float64]
@@ -68,7 +69,7 @@ class McdprConfig:
 
 
 @dataclass
-class McdprReplay:
+class McdprReplay(RealTimeFactors):
     """What a MoPICK replay measured, per recorded sample (every ``config.sample`` s)."""
 
     t: Array
@@ -93,16 +94,6 @@ class McdprReplay:
     qpos: list[Array] = field(default_factory=list)
     model: Any = None
     diverged: str | None = None
-
-    @property
-    def real_time_factor(self) -> float:
-        """Simulated time / wall time of the simulation loop."""
-        return self.sim_time / self.wall_time if self.wall_time > 0 else math.inf
-
-    @property
-    def cpu_real_time_factor(self) -> float:
-        """Simulated time / CPU time of this process in the loop (what the machine's load does not change)."""
-        return self.sim_time / self.cpu_time if self.cpu_time > 0 else math.inf
 
 
 class _Reference:

@@ -37,6 +37,15 @@ def _xyz(p: Any) -> str:
     return "(" + ", ".join(f"{float(v):.2f}" for v in p) + ") m"
 
 
+def first_over(mask: Any, score: Any) -> tuple[int, int] | None:
+    """Where a check first fails: the first sample k with any entry of ``mask`` (K, M) set, and the entry i of the
+    largest ``score[k]`` (the one the message names); None if none is set."""
+    if not mask.any():
+        return None
+    k = int(np.argmax(mask.any(axis=1)))
+    return k, int(np.argmax(score[k]))
+
+
 def chain_verdict(rp: ChainReplay, run: Any) -> Verdict:
     """Check the replay against the plan's promises (no contact, no floor touch, tracking within tolerance)."""
     fails: list[tuple[float, str, str]] = []
@@ -65,10 +74,8 @@ def chain_verdict(rp: ChainReplay, run: Any) -> Verdict:
             msg += f"deepest {1000 * c['max_depth']:.1f} mm)"
         fails.append((t0, kind, msg))
     tol = rp.config.tolerance
-    over = rp.tracking_error > tol
-    if over.any():
-        k = int(np.argmax(over.any(axis=1)))
-        i = int(np.argmax(rp.tracking_error[k]))
+    if (at := first_over(rp.tracking_error > tol, rp.tracking_error)) is not None:
+        k, i = at
         e = float(rp.tracking_error.max())
         msg = (
             f"robot {i + 1} tracking error {rp.tracking_error[k, i]:.3f} m > tolerance {tol:g} m at "
@@ -99,6 +106,25 @@ def _f(x: Any) -> Any:
     if isinstance(x, (np.integer,)):
         return int(x)
     return x
+
+
+def _head(kind: str, run: Any, verdict: Verdict) -> dict[str, Any]:
+    """The first keys of a ``replay.json`` (chain and drone replays): format, kind, the run replayed, the verdict."""
+    return {
+        "format": REPLAY_FORMAT,
+        "kind": kind,
+        "run": {
+            "path": run.path.name,
+            "scenario": run.record["scenario"],
+            "method": run.record["method"],
+            "plan_success": run.record["success"],
+        },
+        "verdict": {
+            "ok": verdict.ok,
+            "reason": verdict.reason,
+            "failures": [{"t": t, "check": k, "message": m} for t, k, m in verdict.failures],
+        },
+    }
 
 
 def chain_document(rp: ChainReplay, run: Any, verdict: Verdict) -> dict[str, Any]:
@@ -146,20 +172,7 @@ def chain_document(rp: ChainReplay, run: Any, verdict: Verdict) -> dict[str, Any
         "warmup": WARMUP,
         "integrator": "implicitfast",
     }
-    return {
-        "format": REPLAY_FORMAT,
-        "kind": "chain",
-        "run": {
-            "path": run.path.name,
-            "scenario": run.record["scenario"],
-            "method": run.record["method"],
-            "plan_success": run.record["success"],
-        },
-        "verdict": {
-            "ok": verdict.ok,
-            "reason": verdict.reason,
-            "failures": [{"t": t, "check": k, "message": m} for t, k, m in verdict.failures],
-        },
+    return _head("chain", run, verdict) | {
         "model": model,
         "sim_time": rp.sim_time,
         "steps": rp.steps,
@@ -324,20 +337,7 @@ def drone_document(rp: Any, run: Any, verdict: Verdict) -> dict[str, Any]:
         "winch_tension": None if params is None else params.winch_tension,
         "winch_end": None if params is None else params.winch_end,
     }
-    return {
-        "format": REPLAY_FORMAT,
-        "kind": "drone",
-        "run": {
-            "path": run.path.name,
-            "scenario": run.record["scenario"],
-            "method": run.record["method"],
-            "plan_success": run.record["success"],
-        },
-        "verdict": {
-            "ok": verdict.ok,
-            "reason": verdict.reason,
-            "failures": [{"t": t, "check": k, "message": m} for t, k, m in verdict.failures],
-        },
+    return _head("drone", run, verdict) | {
         "model": model,
         "sim_time": rp.sim_time,
         "steps": rp.steps,
