@@ -285,6 +285,8 @@ def write_outputs(
             "distance_errors.png": ("plot_distance_errors", (plan,), {}),
             "speeds.png": ("plot_speeds", (plan, filtered), {}),
         }
+        if getattr(plan, "winch_tension", None) is not None:
+            figures["winch_tension.png"] = ("plot_winch", (plan,), {})
         rendered = _pooled(pool, figures)
         if rendered is not None:
             for name, data in rendered.items():

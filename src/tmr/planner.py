@@ -37,6 +37,7 @@ from tmr.control.tasks import (
 from tmr.errors import ParameterError, PathError, ScenarioError, fmt_point
 from tmr.model.chain import Chain
 from tmr.model.params import (
+    WINCH_FIELDS,
     ChainParams,
     PathParams,
     PinvParams,
@@ -218,6 +219,9 @@ def build_problem(
             "use one robot radius (e.g. Environment.with_safety_radius, or load the scenario with it)"
         )
     chain_params, rest = apply_overrides(ChainParams(), values)
+    idle = sorted(k for k in WINCH_FIELDS[1:] if k in values and not chain_params.active_winch)
+    if idle:  # a range or rate of a winch that does not use them: refused, not silently dropped
+        raise ParameterError(f"{', '.join(idle)} set but winch = {chain_params.winch!r}: add winch = 'active'")
     time_params, rest = apply_overrides(TimeParams(), rest)
     path_params, rest = apply_overrides(PathParams(), rest)
     task_params, rest = apply_overrides(TaskParams(), rest)
@@ -480,12 +484,21 @@ def make_qp(
         )
     limits.extend(extra_limits)
     box = JointBox(chain, problem.span_limits, p.joint_speed_max, p.span_speed_max, p.accel_max, p.span_margin)
+    if problem.chain_params.active_winch:  # x = [v, Ṫ] (tmr.control.winch)
+        from tmr.control.winch import make_winch_qp
+
+        return make_winch_qp(chain, levels, limits, box, problem.chain_params, p.span_margin, p.solver)  # type: ignore[return-value]
     return LexicographicQP(chain, levels, limits, box, solver=p.solver)
 
 
 def formulation(problem: Problem, method: str | Formulation) -> Formulation:
     """The formulation object for ``method``: ``"pinv"``, ``"qp"``, or a formulation object (returned as is)."""
     if method == "pinv":
+        if problem.chain_params.active_winch:
+            raise ParameterError(
+                "an active winch (winch = 'active') is planned by --method qp only: the pinv baseline keeps the "
+                "paper's constant tension"
+            )
         return make_pinv(problem)
     if method == "qp":
         return make_qp(problem)
@@ -496,12 +509,14 @@ def formulation(problem: Problem, method: str | Formulation) -> Formulation:
 
 def plan(problem: Problem, method: str | Formulation = "pinv", *, progress: bool = False) -> Plan:
     """Run ``method`` along the problem's leader trajectory (:func:`tmr.control.clik.run`); the plan is not checked yet.
-    ``progress``: a bar of the steps on stderr once the run takes 2 s."""
-    return run(
+    ``progress``: a bar of the steps on stderr once the run takes 2 s. With an active winch the plan's
+    ``winch_tension`` holds every tether's planned horizontal tension per state."""
+    form = formulation(problem, method)
+    result = run(
         problem.chain,
         problem.env,
         problem.trajectory,
-        formulation(problem, method),
+        form,
         problem.q0,
         span_limits=problem.span_limits,
         safety_radius=problem.chain_params.safety_radius,
@@ -511,6 +526,10 @@ def plan(problem: Problem, method: str | Formulation = "pinv", *, progress: bool
         goal=np.asarray(problem.scenario.goal, float),
         progress=progress,
     )
+    tensions = getattr(form, "tensions", None)
+    if tensions is not None:
+        result.winch_tension = tensions(result.t.size)
+    return result
 
 
 def solve(
@@ -545,6 +564,11 @@ def solve(
         result, metrics = _checked(problem, method, progress)
         return _whole(result, metrics, start)
     # a whole-trajectory NLP, not a per-step formulation
+    if problem.chain_params.active_winch:
+        raise ParameterError(
+            "an active winch (winch = 'active') is planned by --method qp only: the horizon NLP keeps the "
+            "paper's constant tension"
+        )
     from tmr.control.horizon import DEFAULT_TIME_LIMIT, HorizonInfeasible, plan_horizon  # casadi: when used
 
     problem, warm, warm_metrics = _solve_qp(problem, progress)  # the very plan ``--method qp`` returns

@@ -42,6 +42,8 @@ class Plan:
         wall_time: planning time of the loop [s].
         params: parameters used.
         goal: leader goal (2,) [m].
+        winch_tension: with an active winch, every tether's planned horizontal tension T0 per state (K+1, N) [N];
+            None for the paper's constant-tension winch.
     """
 
     method: str
@@ -61,6 +63,7 @@ class Plan:
     wall_time: float = 0.0
     params: dict[str, Any] = field(default_factory=dict)
     goal: Array | None = None
+    winch_tension: Array | None = None
 
     @property
     def Ts(self) -> float:

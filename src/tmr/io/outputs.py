@@ -125,8 +125,13 @@ def trajectories_dict(plan: Any, filtered: np.ndarray | None = None) -> dict[str
             {"name": "robot1", "t": [s...], "x": [m...], "y": [m...]},
             ...
           ],
-          "filtered": [ ...same as "robots"... ]   # only if `filtered` is given: zero-phase low-pass
-        }                                          # (tmr.checks.metrics.filter_trajectories); robots track these
+          "filtered": [ ...same as "robots"... ],  # only if `filtered` is given: zero-phase low-pass
+                                                   # (tmr.checks.metrics.filter_trajectories); robots track these
+          "tethers": [                     # only with an active winch: the planned horizontal tension T0 [N]
+            {"name": "tether1", "t": [s...], "horizontal_tension": [N...]},
+            ...
+          ]
+        }
 
     All lists of one robot have K+1 entries; ``t`` starts at the plan's first sample (0 s normally). A robot
     node reads ``doc["filtered"]`` if present, else ``doc["robots"]``, and picks its entry by ``name``.
@@ -157,7 +162,19 @@ def trajectories_dict(plan: Any, filtered: np.ndarray | None = None) -> dict[str
     }
     if filtered is not None:
         doc["filtered"] = _robot_entries(t, _positions(filtered, "filtered", n_samples, n_robots))
+    tension = getattr(plan, "winch_tension", None)
+    if tension is not None:  # an active winch: every tether's planned horizontal tension
+        doc["tethers"] = _tether_entries(t, tension, n_samples, n_robots)
     return doc
+
+
+def _tether_entries(t: list[float], tension: Any, n_samples: int, n_robots: int) -> list[dict[str, Any]]:
+    """``[{"name": "tether1", "t": [...], "horizontal_tension": [N...]}, ...]``: tether j from robot j−1 (the anchor
+    for j = 1) to robot j."""
+    T = np.asarray(tension, dtype=float)
+    if T.shape != (n_samples, n_robots) or not np.all(np.isfinite(T)):
+        raise ParameterError(f"plan.winch_tension must be finite, of shape ({n_samples}, {n_robots}); got {T.shape}")
+    return [{"name": f"tether{j + 1}", "t": t, "horizontal_tension": T[:, j].tolist()} for j in range(n_robots)]
 
 
 def _dumps(doc: Any, indent: int | None) -> str:
@@ -188,7 +205,8 @@ def write_trajectories_csv(plan: Any, path: str | os.PathLike[str], filtered: np
     """Write the trajectories as CSV (atomic, deterministic).
 
     Columns: ``t`` [s], then ``robot1_x, robot1_y, ..., robotN_x, robotN_y`` [m] (raw), then if ``filtered``
-    is given ``robot1_x_filtered, robot1_y_filtered, ...``. One row per sample (K+1 rows after the header);
+    is given ``robot1_x_filtered, robot1_y_filtered, ...``, then with an active winch ``tether1_T0, ...`` [N] (the
+    planned horizontal tension). One row per sample (K+1 rows after the header);
     floats are written with ``repr`` (shortest round-trip form); ``\\n`` line endings.
     """
     doc = trajectories_dict(plan, filtered)  # validates shapes and finiteness
@@ -199,6 +217,9 @@ def write_trajectories_csv(plan: Any, path: str | os.PathLike[str], filtered: np
     if filtered is not None:
         blocks.append(np.asarray(filtered, dtype=float).reshape(t.size, 2 * n))
         header += [f"robot{i + 1}_{c}_filtered" for i in range(n) for c in ("x", "y")]
+    if "tethers" in doc:
+        blocks.append(np.asarray(plan.winch_tension, dtype=float).reshape(t.size, n))
+        header += [f"tether{j + 1}_T0" for j in range(n)]
     table = np.concatenate([t[:, None], *blocks], axis=1)
     buf = _io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")

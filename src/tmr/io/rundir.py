@@ -173,6 +173,8 @@ def chain_run_dict(plan: Any, env: Any, extra: dict[str, Any] | None = None) -> 
         "d_lo": limits[:, 0].tolist(),
         "d_max": limits[:, 1].tolist(),
     }
+    if p.get("winch") == "active":  # the tension is planned (trajectories.json "tethers"); d_max is T_max's reach
+        tether.update({k: p[k] for k in ("winch", "winch_tension_min", "winch_tension_max", "winch_tension_rate")})
     ex = dict(extra or {})
     return {
         "format": RUN_FORMAT,
@@ -242,6 +244,8 @@ class ChainRun:
     goal: Array | None
     obstacles: list[Any] = field(default_factory=list)
     grown: list[Any] = field(default_factory=list)
+    #: with an active winch, every tether's planned horizontal tension per sample (K+1, N) [N]; None: constant T0
+    winch_tension: Array | None = None
 
     kind = "chain"
 
@@ -366,6 +370,14 @@ def _load_chain(path: Path, rec: dict[str, Any], where: str) -> ChainRun:
     filtered = _positions(traj["filtered"], n, t.size, where, "filtered") if "filtered" in traj else robots
     m = rec["map"]
     goal = rec.get("goal")
+    tension = None
+    if "tethers" in traj:
+        try:
+            tension = np.array([np.asarray(e["horizontal_tension"], dtype=float) for e in traj["tethers"]]).T
+        except (KeyError, TypeError, ValueError):
+            raise RunDirError(f"{where}: trajectories.json has unreadable tether tensions; re-run tmr.plan") from None
+        if tension.shape != (t.size, n) or not np.all(np.isfinite(tension)) or np.any(tension <= 0):
+            raise RunDirError(f"{where}: trajectories.json's tether tensions are not ({t.size}, {n}) finite > 0 N")
     return ChainRun(
         path=path,
         record=rec,
@@ -376,6 +388,7 @@ def _load_chain(path: Path, rec: dict[str, Any], where: str) -> ChainRun:
         goal=None if goal is None else _floats(goal, where, "goal"),
         obstacles=polygons_from_json(m.get("obstacles", []), where),
         grown=polygons_from_json(m.get("grown", []), where),
+        winch_tension=tension,
     )
 
 

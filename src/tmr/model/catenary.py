@@ -22,7 +22,7 @@ arrays.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -39,6 +39,7 @@ __all__ = [
     "lowest_height",
     "max_span",
     "max_span_level",
+    "max_span_slope",
     "tether_max_spans",
 ]
 
@@ -400,6 +401,58 @@ def max_span(
     from scipy.optimize import brentq  # imported here: scipy.optimize costs ~0.1 s to import
 
     return float(brentq(f, 0.0, hi, xtol=xtol, rtol=4.0 * np.finfo(float).eps))
+
+
+def max_span_slope(
+    h1: float | None = None, h2: float | None = None, params: CatenaryParams = _DEFAULT_PARAMS
+) -> tuple[float, float]:
+    """d_max [m] (:func:`max_span`) and its derivative with respect to the horizontal tension, ∂d_max/∂T0 [m/N].
+
+    The active winch's span limit ``d ≤ d_max(T0)`` is linearised with it (``formulations/catenary.md``, "Active
+    winch"). For level ends d_max = 2c acosh(1 + δ/c) with c = T0/w, δ = h − clearance, so
+
+        ∂d_max/∂T0 = (2 acosh(1 + δ/c) − 2δ / (c √((1 + δ/c)² − 1))) / w,
+
+    positive: a taut cable spans farther. For ends at different heights d_max has no closed form: the slope is a
+    central difference of :func:`max_span` (solved to 1e-12 m) with a step of 1e-4 T0 (relative error ~1e-7).
+    """
+    a = _height_or_default("h1", h1, params.end_height)
+    b = _height_or_default("h2", h2, params.end_height)
+    d = max_span(a, b, params)
+    w = params.weight_per_length
+    c = params.c
+    if a == b:
+        r = 1.0 + (a - params.ground_clearance) / c
+        root = math.sqrt(r * r - 1.0)
+        if root == 0.0:  # an end on the clearance: no span at any tension
+            return d, 0.0
+        return d, (2.0 * math.acosh(r) - 2.0 * (r - 1.0) / root) / w
+    h = 1e-4 * params.horizontal_tension
+    up = max_span(a, b, replace(params, horizontal_tension=params.horizontal_tension + h))
+    down = max_span(a, b, replace(params, horizontal_tension=params.horizontal_tension - h))
+    return d, (up - down) / (2.0 * h)
+
+
+def tension_for_span(
+    span: float, h1: float | None, h2: float | None, params: CatenaryParams, t_min: float, t_max: float
+) -> float | None:
+    """The least horizontal tension T0 in [t_min, t_max] [N] whose d_max is ≥ ``span`` [m] (the other fields from
+    ``params``), or None if even t_max is too slack. d_max grows with T0, so it is a bracketed root
+    (``scipy.optimize.brentq``, 1e-9 N)."""
+    a = _height_or_default("h1", h1, params.end_height)
+    b = _height_or_default("h2", h2, params.end_height)
+
+    def reach(t: float) -> float:
+        return max_span(a, b, replace(params, horizontal_tension=t)) - span
+
+    if reach(t_min) >= 0.0:
+        return float(t_min)
+    if reach(t_max) < 0.0:
+        return None
+    from scipy.optimize import brentq
+
+    t = float(brentq(reach, t_min, t_max, xtol=1e-9))
+    return t if reach(t) >= 0.0 else min(t + 1e-9, t_max)
 
 
 def tether_max_spans(n_tethers: int, params: CatenaryParams = _DEFAULT_PARAMS) -> np.ndarray:

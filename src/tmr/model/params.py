@@ -32,6 +32,11 @@ def _validate(obj: Any, positive: tuple[str, ...] = (), nonnegative: tuple[str, 
             raise ParameterError(f"{cls}.{name} must be ≥ 0, got {getattr(obj, name)!r}")
 
 
+#: the ground winch's kinds (:attr:`ChainParams.winch`) and the fields an active one adds to the records
+WINCHES = ("passive", "active")
+WINCH_FIELDS = ("winch", "winch_tension_min", "winch_tension_max", "winch_tension_rate")
+
+
 @dataclass(frozen=True)
 class ChainParams:
     """Physical chain parameters (Caruso 2021 §4 and §4.2.1).
@@ -44,6 +49,13 @@ class ChainParams:
         pulley_radius: winch pulley radius [m]; horizontal tension T0 = torque / radius.
         cable_mass_per_length: ρ [kg/m].
         ground_clearance: lowest allowed height of the cable [m].
+        winch: ``"passive"`` (the paper's winch: a constant horizontal tension T0) or ``"active"`` (Caruso 2021's
+            future work: the pulley's torque, hence every tether's T0, is a decision of the per-step QP, within
+            [winch_tension_min, winch_tension_max] and changing at most ``winch_tension_rate``; its nominal value,
+            the one it returns to, is torque / radius). ``formulations/catenary.md``, "Active winch".
+        winch_tension_min, winch_tension_max: the active winch's range of T0 [N] (pulley torque range / radius;
+            documented choice: 5–40 N, i.e. 0.5–4 N m on the 0.1 m pulley).
+        winch_tension_rate: how fast the active winch's T0 may change [N/s] (documented choice: 20 N/s).
     """
 
     safety_radius: float = 0.5
@@ -53,12 +65,48 @@ class ChainParams:
     pulley_radius: float = 0.1
     cable_mass_per_length: float = 0.15
     ground_clearance: float = 0.0
+    winch: str = "passive"
+    winch_tension_min: float = 5.0
+    winch_tension_max: float = 40.0
+    winch_tension_rate: float = 20.0
 
     def __post_init__(self) -> None:
         _validate(
             self,
-            positive=("safety_radius", "exit_height", "pulley_torque", "pulley_radius", "cable_mass_per_length"),
-        )
+            positive=(
+                "safety_radius", "exit_height", "pulley_torque", "pulley_radius", "cable_mass_per_length",
+                "winch_tension_min", "winch_tension_max", "winch_tension_rate",
+            ),
+        )  # fmt: skip
+        if self.winch not in WINCHES:
+            raise ParameterError(f"ChainParams.winch must be one of {', '.join(WINCHES)}, got {self.winch!r}")
+        if self.winch_tension_min > self.winch_tension_max:
+            raise ParameterError(
+                f"ChainParams.winch_tension_min ({self.winch_tension_min} N) is above winch_tension_max "
+                f"({self.winch_tension_max} N)"
+            )
+
+    @property
+    def active_winch(self) -> bool:
+        """Whether the winches' tension is planned (``winch = "active"``)."""
+        return self.winch == "active"
+
+    @property
+    def nominal_tension(self) -> float:
+        """The tension an active winch returns to [N]: torque / radius, clipped to its range (T0 when passive)."""
+        t0 = self.horizontal_tension
+        if not self.active_winch:
+            return t0
+        return min(max(t0, self.winch_tension_min), self.winch_tension_max)
+
+    def record(self) -> dict[str, Any]:
+        """The fields as a dict, without the active winch's four when the winch is passive (a passive plan's
+        records keep the bytes they had before the active winch existed)."""
+        out = asdict(self)
+        if not self.active_winch:
+            for name in WINCH_FIELDS:
+                out.pop(name)
+        return out
 
     @property
     def horizontal_tension(self) -> float:
@@ -430,5 +478,5 @@ def as_dict(*objs: Any) -> dict[str, Any]:
     """Flatten parameter dataclasses into one JSON-ready dict (for metrics.json)."""
     out: dict[str, Any] = {}
     for o in objs:
-        out.update(asdict(o))
+        out.update(o.record() if hasattr(o, "record") else asdict(o))
     return out

@@ -11,19 +11,29 @@ from tmr.model.params import ChainParams
 
 Array = NDArray[np.float64]
 
-__all__ = ["span_limits"]
+__all__ = ["catenary_params", "span_limits"]
 
 
-def span_limits(n_robots: int, params: ChainParams) -> Array:
-    """Per-tether [d_lo, d_max] [m]: d_lo from the safety bubbles (r for the anchor link, 2r between robots),
-    d_max the catenary limit of Caruso 2021 §4.2.1 (lowest point of the cable above the floor)."""
-    cat = catenary.CatenaryParams(
-        horizontal_tension=params.horizontal_tension,
+def catenary_params(params: ChainParams, tension: float | None = None) -> catenary.CatenaryParams:
+    """The tethers' :class:`~tmr.model.catenary.CatenaryParams` at horizontal tension ``tension`` [N] (default: the
+    winch's T0 = torque / radius)."""
+    return catenary.CatenaryParams(
+        horizontal_tension=params.horizontal_tension if tension is None else float(tension),
         mass_per_length=params.cable_mass_per_length,
         end_height=params.exit_height,
         base_height=params.base_height,
         ground_clearance=params.ground_clearance,
     )
+
+
+def span_limits(n_robots: int, params: ChainParams) -> Array:
+    """Per-tether [d_lo, d_max] [m]: d_lo from the safety bubbles (r for the anchor link, 2r between robots),
+    d_max the catenary limit of Caruso 2021 §4.2.1 (lowest point of the cable above the floor).
+
+    With an active winch d_max is the reach at the winch's highest tension (``winch_tension_max``): the route and the
+    joint box get the farthest a tether can span, and the per-step QP keeps each span within d_max of its planned
+    tension (:class:`tmr.control.winch.WinchSpan`)."""
+    cat = catenary_params(params, params.winch_tension_max if params.active_winch else None)
     lim = np.empty((n_robots, 2))
     lim[:, 0] = 2 * params.safety_radius
     lim[0, 0] = params.safety_radius

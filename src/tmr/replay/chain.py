@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -281,7 +282,6 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
     """
     import mujoco
 
-    from tmr.model.catenary import solve
 
     cfg = cfg or ReplayConfig()
     if cfg.track not in ("filtered", "raw"):
@@ -313,6 +313,14 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
     times = t[0] + np.arange((K - 1) * sub + 1) * cfg.timestep
     p_ref, v_ref, a_ref = _reference(t, traj, times)
     T0 = float(run.record["tether"]["horizontal_tension"])
+    # the tension each winch holds at every physics step: T0, or an active winch's plan (linear between its samples,
+    # its last value while the chain settles)
+    planned = getattr(run, "winch_tension", None)
+    if planned is None:
+        tension = np.full((len(times), n), T0)
+    else:
+        tt = np.clip(times, t[0], t[-1])
+        tension = np.column_stack([np.interp(tt, t, planned[:, j]) for j in range(n)])
     kp, kv, mass = cfg.kp, cfg.kv, cfg.robot_mass
 
     contacts: dict[str, dict[str, Any]] = {
@@ -340,14 +348,17 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
             rec_tf[k, j] = ts.end_tension(d)
 
     # actuator commands of every physics step: reference + feed-forward (mass × acceleration, minus the planned pull
-    # of the tethers: T0 along each tether's chord)
+    # of the tethers: the held tension along each tether's chord)
     prev = np.concatenate([np.broadcast_to(run.anchor, (len(times), 1, 2)), p_ref[:, :-1]], axis=1)
     chord = prev - p_ref  # tether j pulls robot j towards robot j-1 (or the anchor) ...
     unit = chord / np.maximum(np.linalg.norm(chord, axis=2, keepdims=True), 1e-9)
-    pull = T0 * unit
-    pull[:, :-1] -= T0 * unit[:, 1:]  # ... and robot j-1 towards robot j
+    pull = tension[:, :, None] * unit
+    pull[:, :-1] -= tension[:, 1:, None] * unit[:, 1:]  # ... and robot j-1 towards robot j
     u_ref = (p_ref - cm.start) + (kv * v_ref + mass * a_ref - pull) / kp
     u_hold = (p_ref[0] - cm.start) - pull[0] / kp  # at rest at the start pose
+    if planned is not None:  # the winches start at the plan's first tension
+        for j, ts in enumerate(cm.tethers):
+            ts.t0 = float(tension[0, j])
     # warm-up at the start pose (not recorded): the soft constraints build up the cable's static forces
     for _ in range(int(round(WARMUP / cfg.timestep))):
         d.ctrl[ax_ids] = u_hold
@@ -363,6 +374,9 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
         for _ in range(sub):
             d.ctrl[ax_ids] = u_ref[step]
             d.ctrl[yaw_ids] = 0.0
+            if planned is not None:
+                for j, ts in enumerate(cm.tethers):
+                    ts.t0 = float(tension[step, j])
             for ts in cm.tethers:
                 ts.update(m, d)
             mujoco.mj_step(m, d)
@@ -384,7 +398,7 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
     root = np.array([[tn[0] for tn in nd] for nd in nodes])  # (K, N, 3) winch exits
     far = np.array([[tn[-1] for tn in nd] for nd in nodes])
     span = np.hypot(*(far - root)[..., :2].transpose(2, 0, 1))
-    cat = solve(root[..., 2], far[..., 2], np.maximum(span, 1e-6), run.catenary_params())
+    cat = _static_catenary(root[..., 2], far[..., 2], np.maximum(span, 1e-6), run.catenary_params(), tension[::sub][:K])
     return ChainReplay(
         t=t[0] + np.arange(K) * Ts,
         reference=ref_k,
@@ -410,6 +424,25 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
         qpos=rec_qpos[:K],
         built=cm,
     )
+
+
+def _static_catenary(h1: Array, h2: Array, span: Array, params: Any, tension: Array) -> Any:
+    """The planner's static catenary of every sample and tether (K, N), at the tension the winch held then (T0, or an
+    active winch's planned tension: one closed-form solve per distinct tension)."""
+    from tmr.model.catenary import solve
+
+    if np.all(tension == params.horizontal_tension):
+        return solve(h1, h2, span, params)
+    from dataclasses import replace as _replace
+
+    fields = ("z_min", "length", "tension_1", "tension_2")
+    out = {f: np.empty(span.shape) for f in fields}
+    for value in np.unique(tension):
+        at = tension == value
+        c = solve(h1[at], h2[at], span[at], _replace(params, horizontal_tension=float(value)))
+        for f in fields:
+            out[f][at] = getattr(c, f)
+    return SimpleNamespace(**out)
 
 
 def _log_contacts(

@@ -455,6 +455,50 @@ def plot_speeds(plan: Any, filtered: np.ndarray | None = None) -> Figure:
     return fig
 
 
+def plot_winch(plan: Any) -> Figure:
+    """An active winch's plan: every tether's planned horizontal tension T0(t) [N] within the pulley's range (top),
+    and how much of its reach each span uses, d / d_max(T0) (bottom; 1 = the cable's lowest point on the ground
+    clearance), d_max from the closed-form catenary at that tension (:func:`tmr.model.catenary.max_span`)."""
+    from dataclasses import replace as _replace
+
+    from tmr.model import catenary
+
+    T = np.asarray(plan.winch_tension, dtype=float)
+    t = np.asarray(plan.t, dtype=float)
+    p = dict(plan.params or {})
+    cat = catenary.CatenaryParams(
+        mass_per_length=p["cable_mass_per_length"], end_height=p["exit_height"], base_height=p["base_height"],
+        ground_clearance=p.get("ground_clearance", 0.0),
+    )  # fmt: skip
+    spans = np.abs(np.asarray(plan.spans, dtype=float))
+    n = T.shape[1]
+    ratio = np.empty_like(T)
+    for j in range(n):
+        h1 = cat.base_height if j == 0 else cat.end_height
+        reach = {v: catenary.max_span(h1, cat.end_height, _replace(cat, horizontal_tension=v)) for v in set(T[:, j])}
+        ratio[:, j] = spans[:, j] / np.array([reach[v] for v in T[:, j]])
+    fig = _new_figure(8.5, 6.0)
+    top, bottom = _grid(fig, 2, 1)[:, 0]
+    colors = [f"C{j % 10}" for j in range(n)]
+    for j in range(n):
+        top.plot(t, T[:, j], color=colors[j], lw=1.3, label=f"tether {j + 1}")
+        bottom.plot(t, ratio[:, j], color=colors[j], lw=1.3, label=f"tether {j + 1}")
+    for key, label in (("winch_tension_min", "range"), ("winch_tension_max", None)):
+        if key in p:
+            top.axhline(p[key], color="0.4", ls="--", lw=0.9, label=label)
+    if "pulley_torque" in p:
+        top.axhline(p["pulley_torque"] / p["pulley_radius"], color="0.4", ls=":", lw=0.9, label="nominal")
+    bottom.axhline(1.0, color="tab:red", ls="--", lw=0.9, label="cable on the ground clearance")
+    top.set_ylabel("horizontal tension $T_0$ [N]")
+    bottom.set_ylabel("$d / d_{max}(T_0)$ [-]")
+    bottom.set_xlabel("time [s]")
+    for ax in (top, bottom):
+        ax.grid(True, lw=0.3, alpha=0.5)
+        ax.legend(loc="best", fontsize=8, ncol=2)
+    _suptitle(fig, _title(plan, "active winch: planned tension and the span it allows"))
+    return fig
+
+
 # ----------------------------------------------------------------------------------------------------------
 # saving
 # ----------------------------------------------------------------------------------------------------------

@@ -1,0 +1,353 @@
+"""The active winch of a ground chain (Caruso 2021's future work): every tether's horizontal tension is planned.
+
+The paper's winch holds a constant horizontal tension T0 = torque / radius, and the span limit d ≤ d_max(T0) keeps the
+cable's lowest point above the floor (§4.2.1). An active winch controls the pulley's torque: the per-step QP gets the
+N tension rates Ṫ as unknowns besides the robots' velocities, and trades sag against the pull on the robots
+(``formulations/catenary.md``, "Active winch"):
+
+    x = [v (2N), Ṫ (N)],   q̇ = [joint rates (2N), Ṫ (N)] = diag(T, I) x
+
+- every task and limit of the passive QP, unchanged, with zero Ṫ columns (:class:`PaddedLimit`, :class:`PaddedTask`);
+- the span limit, now depending on the tension (:class:`WinchSpan`, hard):
+  ``d_j + Ts (ḋ_j − σ_j Ṫ_j) ≤ d_max(T_j) − margin`` with σ_j the secants of the concave d_max(T0) over one
+  step (two rows per tether: exact after the step), the box keeping only the reach of ``T_max``;
+- the pulley's range and rate in the box: ``T_min ≤ T_j + Ts Ṫ_j ≤ T_max``, ``|Ṫ_j| ≤ rate``;
+- the winches back towards their nominal tension in the lowest level (:class:`WinchReturn`): the tension rises
+  only where a span needs it.
+
+:class:`GroundWinchQP` runs the lexicographic QP on this extended problem and integrates the tensions itself, so the
+plan loop (:func:`tmr.control.clik.run`) is the passive one; :meth:`GroundWinchQP.tensions` gives T at every state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tmr.control.limits import JointBox, Limit, LimitRows
+from tmr.control.tasks import StepContext, Task, TaskRows
+from tmr.errors import ParameterError
+from tmr.model import catenary
+from tmr.model.chain import Chain
+from tmr.model.params import ChainParams
+from tmr.model.spans import catenary_params
+from tmr.model.velocity import VelocityMap, robot_pattern
+
+Array = NDArray[np.float64]
+
+__all__ = [
+    "GroundWinchQP",
+    "PaddedLimit",
+    "PaddedTask",
+    "WinchChain",
+    "WinchContext",
+    "WinchReturn",
+    "WinchSpan",
+    "WINCH_GAIN",
+    "WINCH_WEIGHT",
+]
+
+#: :class:`WinchReturn`'s weight in the lowest level (against the energy and smoothness tasks, on N/s vs m/s) and
+#: its gain K_w [1/s]: the values of the drones' active winch (:mod:`tmr.control.drones`).
+WINCH_WEIGHT = 0.01
+WINCH_GAIN = 0.5
+
+
+class WinchChain:
+    """The planar chain seen by the QP with an active winch: ``dof`` = 2N + N (the tension rates after the joint
+    rates); everything else is the chain's. ``coupling_pattern`` is the sparsity of diag(T, I)."""
+
+    def __init__(self, chain: Chain) -> None:
+        self.chain = chain
+        self.dof = chain.dof + chain.n_robots
+        self.spatial = False
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.chain, name)
+
+    def coupling_pattern(self, mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        n = self.chain.dof
+        out = np.zeros_like(mask)
+        out[:, :n] = robot_pattern(mask[:, :n])
+        out[:, n:] = mask[:, n:]
+        return out
+
+
+class WinchVelocityMap:
+    """diag(T, I): the planar chain's map for the robots, the tension rates as they are (``T``, 2N + N square)."""
+
+    def __init__(self, links: VelocityMap, n_robots: int) -> None:
+        self.links = links
+        n = 2 * n_robots
+        T = np.zeros((n + n_robots, n + n_robots))
+        T[:n, :n] = links.T
+        T[n:, n:] = np.eye(n_robots)
+        self.T = T
+        self._n = n
+
+    def robot_velocities(self, qdot: Array) -> Array:
+        """x = [v, Ṫ] from [joint rates, Ṫ]."""
+        return np.concatenate([self.links.robot_velocities(qdot[: self._n]), qdot[self._n :]])
+
+
+class WinchContext:
+    """The step seen by the QP with an active winch: ``base`` is the passive :class:`StepContext` (the padded tasks
+    and limits read it), ``winch_tension`` (N,) [N] every tether's T0 now, ``velocity_map`` and ``qdot_prev``
+    extended by the tension rates; every other attribute is the base's."""
+
+    def __init__(self, base: StepContext, tension: Array, rate_prev: Array) -> None:
+        self.base = base
+        self.winch_tension = tension
+        self.qdot_prev = np.concatenate([base.qdot_prev, rate_prev])
+        self.velocity_map = WinchVelocityMap(base.velocity_map, base.chain.n_robots)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.base, name)
+
+
+class PaddedLimit(Limit):
+    """A limit of the passive QP with zero Ṫ columns (clearance, separation, robot speed and acceleration do not
+    depend on the tension)."""
+
+    def __init__(self, inner: Limit) -> None:
+        self.inner = inner
+        self.name, self.relaxable, self.space = inner.name, inner.relaxable, inner.space
+        self._A: Array | None = None
+
+    def pattern(self, chain: Any) -> NDArray[np.bool_]:
+        real = chain.chain if isinstance(chain, WinchChain) else chain
+        d = self.inner.pattern(real)
+        return np.hstack([d, np.zeros((d.shape[0], real.n_robots), dtype=bool)])
+
+    def compute(self, ctx: Any) -> LimitRows:
+        r = self.inner.compute(ctx.base)
+        m, n = r.A.shape
+        A = self._A
+        if A is None or A.shape != (m, n + ctx.base.chain.n_robots):
+            A = self._A = np.zeros((m, n + ctx.base.chain.n_robots))
+        A[:, :n] = r.A
+        return LimitRows(A, r.lower, r.upper)
+
+    def reset(self) -> None:
+        self._A = None
+        self.inner.reset()
+
+
+class PaddedTask(Task):
+    """A task of the passive QP with zero Ṫ columns. Never full rank: the tension rates are left free by it."""
+
+    def __init__(self, inner: Task) -> None:
+        self.inner = inner
+        self.name, self.space = inner.name, getattr(inner, "space", "joint")
+        self.full_rank = False
+        self._last: tuple[Array, Array] | None = None
+
+    def compute(self, ctx: Any) -> TaskRows:
+        J, t = self.inner.compute(ctx.base)
+        if self._last is not None and self._last[0] is J and not J.flags.writeable:
+            return TaskRows(self._last[1], t)
+        out = np.zeros((J.shape[0], J.shape[1] + ctx.base.chain.n_robots))
+        out[:, : J.shape[1]] = J
+        if not J.flags.writeable:  # constant rows stay one read-only array: the QP reuses what it built from them
+            out.flags.writeable = False
+            self._last = (J, out)
+        return TaskRows(out, t)
+
+    def reset(self) -> None:
+        self._last = None
+        self.inner.reset()
+
+
+class WinchReturn(Task):
+    """The winches back towards their nominal tension: ``Ṫ_j = K_w (T_ref − T_j)`` [N/s] (N rows on Ṫ, joint
+    coordinates), in the lowest level with a small weight: the tension leaves T_ref only where a higher level or a
+    hard limit (a span) needs it."""
+
+    name = "winch"
+    space = "joint"
+    full_rank = False
+
+    def __init__(self, chain: Chain, t_ref: float, gain: float = WINCH_GAIN) -> None:
+        N, n = chain.n_robots, chain.dof
+        J = np.zeros((N, n + N))
+        J[:, n:] = np.eye(N)
+        J.flags.writeable = False
+        self.J, self.t_ref, self.gain = J, float(t_ref), float(gain)
+
+    def compute(self, ctx: Any) -> TaskRows:
+        return TaskRows(self.J, self.gain * (self.t_ref - ctx.winch_tension))
+
+
+class WinchSpan(Limit):
+    """Every span within the reach of its tether's planned tension (hard, joint coordinates): 2 rows per tether,
+
+        d_j + Ts (ḋ_j − σ⁺_j Ṫ_j) ≤ d_max(T_j) − margin,   d_j + Ts (ḋ_j − σ⁻_j Ṫ_j) ≤ d_max(T_j) − margin,
+
+    σ± the secant slopes of d_max over one step's tension change, (d_max(T ± Δ) − d_max(T)) / ±Δ with Δ = rate Ts
+    (the most the box lets T move). d_max is concave in T0 (:func:`tmr.model.catenary.max_span`), so σ⁺ ≤ σ⁻ and
+    the two rows together are the lower of the two secants: below d_max(T + Ts Ṫ) for every allowed Ṫ, the limit
+    holds after the step exactly, not to first order (the tangent alone over-estimates the reach by ½|d″|(Ts Ṫ)²:
+    1.6 mm at 9 N over 0.5 N). Near the range's ends Δ is cut to it. A span already beyond it only must not get worse.
+    """
+
+    name = "winch_span"
+    space = "joint"
+
+    def __init__(self, chain: Chain, params: ChainParams, margin: float) -> None:
+        N, self.n = chain.n_robots, chain.dof
+        self.N, self.params, self.margin = N, params, float(margin)
+        self.prismatic = np.asarray(chain.prismatic_index, dtype=int)
+        self._cat = catenary_params(params)
+        rows = np.arange(2 * N)
+        self._tether = rows // 2
+        self._A = np.zeros((2 * N, self.n + N))
+        self._A[rows, self.prismatic[self._tether]] = 1.0
+        self._lower = np.full(2 * N, -np.inf)
+        self._rows = rows
+
+    def pattern(self, chain: Any) -> NDArray[np.bool_]:
+        mask = np.zeros((2 * self.N, self.n + self.N), dtype=bool)
+        mask[self._rows, self.prismatic[self._tether]] = True
+        mask[self._rows, self.n + self._tether] = True
+        return mask
+
+    def _reach(self, j: int, tension: float) -> float:
+        p = self.params
+        h1 = p.base_height if j == 0 else p.exit_height
+        return catenary.max_span(h1, p.exit_height, replace(self._cat, horizontal_tension=tension))
+
+    def reach(self, tension: Array, step: float) -> tuple[Array, Array]:
+        """d_max(T_j) [m] (N,) and the secant slopes (N, 2) [m/N] of d_max to T_j + Δ and T_j − Δ, Δ = ``step`` [N]
+        (cut to the winch's range; the tangent where it leaves no room)."""
+        p = self.params
+        d = np.empty(self.N)
+        sec = np.empty((self.N, 2))
+        for j in range(self.N):
+            t = float(tension[j])
+            d[j] = self._reach(j, t)
+            for side, sign in enumerate((1.0, -1.0)):
+                edge = p.winch_tension_max if sign > 0 else p.winch_tension_min
+                delta = min(step, abs(edge - t))
+                if delta > 1e-9 * max(t, 1.0):
+                    sec[j, side] = (self._reach(j, t + sign * delta) - d[j]) / (sign * delta)
+                else:
+                    h1 = p.base_height if j == 0 else p.exit_height
+                    sec[j, side] = catenary.max_span_slope(h1, p.exit_height, replace(self._cat, horizontal_tension=t))[
+                        1
+                    ]
+        return d, sec
+
+    def compute(self, ctx: Any) -> LimitRows:
+        d_max, sec = self.reach(ctx.winch_tension, self.params.winch_tension_rate * ctx.Ts)
+        self._A[self._rows, self.n + self._tether] = -sec.reshape(-1)
+        spans = ctx.base.spans
+        upper = np.maximum(d_max - self.margin - spans, 0.0) / ctx.Ts
+        return LimitRows(self._A, self._lower, np.repeat(upper, 2))
+
+
+class WinchBox:
+    """The passive joint box for the joint rates, then the pulley's range and rate for the tension rates:
+    ``max(−rate, (T_min − T)/Ts) ≤ Ṫ ≤ min(rate, (T_max − T)/Ts)`` (widened to hold Ṫ = 0 if T is outside)."""
+
+    def __init__(self, box: JointBox, params: ChainParams) -> None:
+        self.box = box
+        self.t_min, self.t_max = params.winch_tension_min, params.winch_tension_max
+        self.rate = params.winch_tension_rate
+
+    def compute(self, ctx: Any, relax: bool = False) -> tuple[Array, Array]:
+        lb, ub = self.box.compute(ctx.base, relax=relax)
+        T = ctx.winch_tension
+        lo = np.minimum(np.maximum(-self.rate, (self.t_min - T) / ctx.Ts), 0.0)
+        hi = np.maximum(np.minimum(self.rate, (self.t_max - T) / ctx.Ts), 0.0)
+        return np.concatenate([lb, lo]), np.concatenate([ub, hi])
+
+
+class GroundWinchQP:
+    """The lexicographic QP of a ground chain with an active winch (see the module docstring). ``step`` returns the
+    joint rates q̇ (2N,) for the plan loop and advances the tensions by Ts Ṫ; :meth:`tensions` gives them per state.
+
+    The first step's tension is the least in the winch's range whose reach holds every start span (the nominal one
+    where it does): a start spanning farther than the nominal tension allows is held, not refused.
+    """
+
+    name = "qp"
+
+    def __init__(self, qp: Any, chain: Chain, params: ChainParams, span: WinchSpan) -> None:
+        self.qp, self.chain, self.params, self.span = qp, chain, params, span
+        self.t_ref = params.nominal_tension
+        self._T: Array | None = None
+        self._rate = np.zeros(chain.n_robots)
+        self._history: list[Array] = []
+
+    @property
+    def level_keys(self) -> list[str]:
+        return self.qp.level_keys
+
+    def reset(self) -> None:
+        self.qp.reset()
+        self._T = None
+        self._rate = np.zeros(self.chain.n_robots)
+        self._history = []
+
+    def start_tension(self, spans: Array) -> Array:
+        """Per tether, the least tension in [T_min, T_max] ≥ … whose reach holds ``spans`` + margin [N]: T_ref where
+        it is enough, else the root of d_max(T) = span + margin (``catenary.tension_for_span``), else T_max."""
+        p = self.params
+        cat = catenary_params(p)
+        out = np.full(self.chain.n_robots, self.t_ref)
+        d_ref = np.array([self.span._reach(j, self.t_ref) for j in range(self.chain.n_robots)])
+        for j in np.flatnonzero(np.abs(spans) + self.span.margin > d_ref):
+            h1 = p.base_height if j == 0 else p.exit_height
+            t = catenary.tension_for_span(
+                abs(spans[j]) + self.span.margin, h1, p.exit_height, cat, self.t_ref, p.winch_tension_max
+            )
+            out[j] = p.winch_tension_max if t is None else t
+        return out
+
+    def step(self, ctx: StepContext) -> tuple[Array, dict[str, float]]:
+        if self._T is None:
+            self._T = self.start_tension(ctx.spans)
+        wctx = WinchContext(ctx, self._T, self._rate)
+        qdot, diag = self.qp.step(wctx)
+        n = self.chain.dof
+        rate = qdot[n:]
+        self._history.append(self._T)
+        self._T = self._T + ctx.Ts * rate
+        self._rate = rate
+        return qdot[:n].copy(), diag
+
+    def tensions(self, n_states: int) -> Array:
+        """T0 of every tether at states 0..n_states−1 (n_states, N) [N]: the tension each step was planned at, then
+        the one after the last step."""
+        if self._T is None:
+            raise ParameterError("no step was planned: the tensions are not known")
+        rows = [*self._history, self._T]
+        if len(rows) < n_states:
+            raise ParameterError(f"{len(rows)} tension states recorded, {n_states} asked")
+        return np.array(rows[:n_states])
+
+
+def make_winch_qp(
+    chain: Chain, levels: list[Any], limits: list[Limit], box: JointBox, params: ChainParams, margin: float,
+    solver: str,
+) -> GroundWinchQP:  # fmt: skip
+    """The passive QP's levels and limits on x = [v, Ṫ]: every task and limit padded, :class:`WinchReturn` added to
+    the lowest level, :class:`WinchSpan` to the hard limits and the pulley's range and rate to the box."""
+    from tmr.control.qp import Level, LexicographicQP
+
+    if not params.active_winch:
+        raise ParameterError("make_winch_qp needs ChainParams.winch = 'active'")
+    new_levels = []
+    for i, level in enumerate(levels):
+        tasks: list[tuple[Task, float]] = [(PaddedTask(t), w) for t, w in level.tasks]
+        if i == len(levels) - 1:
+            tasks.append((WinchReturn(chain, params.nominal_tension), WINCH_WEIGHT))
+        new_levels.append(Level(tasks, level.name))
+    span = WinchSpan(chain, params, margin)
+    new_limits: list[Limit] = [PaddedLimit(lim) for lim in limits]
+    new_limits.append(span)
+    qp = LexicographicQP(WinchChain(chain), new_levels, new_limits, WinchBox(box, params), solver=solver)  # type: ignore[arg-type]
+    return GroundWinchQP(qp, chain, params, span)

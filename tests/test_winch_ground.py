@@ -1,0 +1,212 @@
+"""The active winch of a ground chain (tmr.control.winch): the tension-dependent span limit, the plan, its outputs."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from tmr.errors import ParameterError
+from tmr.model import catenary
+from tmr.model.params import ChainParams, as_dict
+from tmr.model.spans import catenary_params, span_limits
+
+ACTIVE = {"winch": "active"}
+
+
+def _fd_slope(h1: float, h2: float, p: catenary.CatenaryParams, h: float = 1e-4) -> float:
+    up = catenary.max_span(h1, h2, replace(p, horizontal_tension=p.horizontal_tension + h))
+    down = catenary.max_span(h1, h2, replace(p, horizontal_tension=p.horizontal_tension - h))
+    return (up - down) / (2 * h)
+
+
+@pytest.mark.parametrize("tension", [5.0, 13.5, 40.0])
+@pytest.mark.parametrize("heights", [(0.43, 0.43), (0.3, 0.43), (0.43, 0.2)])
+def test_max_span_slope_against_finite_differences(tension: float, heights: tuple[float, float]) -> None:
+    p = catenary.CatenaryParams(horizontal_tension=tension, ground_clearance=0.05)
+    d, s = catenary.max_span_slope(*heights, p)
+    assert d == pytest.approx(catenary.max_span(*heights, p), rel=1e-12)
+    assert s > 0
+    assert s == pytest.approx(_fd_slope(*heights, p), rel=1e-5)
+
+
+def test_tension_for_span_is_the_least_tension_that_reaches() -> None:
+    p = catenary.CatenaryParams()
+    t = catenary.tension_for_span(7.0, None, None, p, 5.0, 40.0)
+    assert t is not None and 13.5 < t < 40.0
+    assert catenary.max_span(None, None, replace(p, horizontal_tension=t)) >= 7.0
+    assert catenary.max_span(None, None, replace(p, horizontal_tension=t - 1e-6)) < 7.0
+    assert catenary.tension_for_span(3.0, None, None, p, 5.0, 40.0) == 5.0  # the range's least reaches already
+    assert catenary.tension_for_span(12.0, None, None, p, 5.0, 40.0) is None  # beyond T_max's reach
+
+
+def test_params_validate_and_a_passive_record_has_no_winch_fields() -> None:
+    with pytest.raises(ParameterError, match="winch must be one of"):
+        ChainParams(winch="motor")
+    with pytest.raises(ParameterError, match="above winch_tension_max"):
+        ChainParams(winch_tension_min=50.0)
+    with pytest.raises(ParameterError, match="winch_tension_rate"):
+        ChainParams(winch_tension_rate=0.0)
+    assert "winch" not in as_dict(ChainParams())  # passive plans keep their metrics.json bytes
+    rec = as_dict(ChainParams(winch="active"))
+    assert rec["winch"] == "active" and rec["winch_tension_max"] == 40.0
+    assert ChainParams(winch="active", pulley_torque=5.0).nominal_tension == 40.0  # clipped to the range
+    assert ChainParams(pulley_torque=5.0).nominal_tension == 50.0  # passive: T0 itself
+
+
+def test_active_span_limits_reach_of_the_highest_tension() -> None:
+    p = ChainParams(winch="active")
+    lim = span_limits(3, p)
+    want = catenary.max_span(None, None, catenary_params(p, 40.0))
+    assert lim[1:, 1] == pytest.approx(want)
+    assert lim[1, 1] > span_limits(3, ChainParams())[1, 1]
+
+
+def test_winch_span_rows_keep_the_reach_after_the_step() -> None:
+    """For every tension rate the box allows, the rows' bound on the span after the step is ≤ the exact reach at the
+    tension after the step (the secants of the concave d_max), and equal to it at ±rate."""
+    from tmr.control.winch import WinchSpan
+    from tmr.model.chain import Chain
+
+    chain = Chain(3)
+    p = ChainParams(winch="active", ground_clearance=0.05)
+    row = WinchSpan(chain, p, 0.01)
+    mask = row.pattern(chain)
+    assert mask.shape == (6, 9) and mask.sum() == 12
+    Ts = 0.05
+    step = p.winch_tension_rate * Ts
+    for T in (np.array([5.0, 9.0, 20.0]), np.array([39.5, 13.5, 5.4])):
+        d, sec = row.reach(T, step)
+        for j, tj in enumerate(T):
+            h1 = p.base_height if j == 0 else p.exit_height
+            for rate in np.linspace(-p.winch_tension_rate, p.winch_tension_rate, 21):
+                after = min(max(tj + Ts * rate, p.winch_tension_min), p.winch_tension_max)
+                dT = after - tj
+                bound = d[j] + min(sec[j, 0] * dT, sec[j, 1] * dT)  # the tighter of the two rows
+                exact = catenary.max_span(h1, p.exit_height, catenary_params(p, after))
+                assert bound <= exact + 1e-9
+                assert bound >= exact - 5e-3  # not needlessly tight either (2.4 mm at 5 N over 1 N)
+            tangent = catenary.max_span_slope(h1, p.exit_height, catenary_params(p, tj))[1]
+            assert sec[j, 0] <= tangent + 1e-9 <= sec[j, 1] + 2e-9  # concave: σ⁺ ≤ d_max' ≤ σ⁻
+
+
+@pytest.fixture(scope="module")
+def e4_active():
+    from tmr.planner import build_problem, solve
+    from tmr.world.scenario import load_scenario
+
+    problem = build_problem(load_scenario("E"), n_robots=4, overrides=ACTIVE | {"ground_clearance": 0.05})
+    plan, metrics = solve(problem, "qp")
+    return problem, plan, metrics
+
+
+def test_e_with_four_robots_needs_the_active_winch(e4_active) -> None:
+    from tmr.planner import build_problem
+    from tmr.route.route import TooFewRobotsError
+    from tmr.world.scenario import load_scenario
+
+    with pytest.raises(TooFewRobotsError, match="at least 6 robots"):
+        build_problem(load_scenario("E"), n_robots=4, overrides={"ground_clearance": 0.05})
+    problem, plan, metrics = e4_active
+    assert plan.success, plan.failure
+    T = plan.winch_tension
+    p = problem.chain_params
+    assert T.shape == (plan.t.size, 4)
+    assert np.all(T >= p.winch_tension_min - 1e-9) and np.all(T <= p.winch_tension_max + 1e-9)
+    assert np.max(np.abs(np.diff(T, axis=0))) / plan.Ts <= p.winch_tension_rate + 1e-6
+    assert T.max() > 30.0  # the tension did rise: spans beyond the passive reach
+    assert np.abs(plan.spans).max() > span_limits(4, replace(p, winch="passive"))[1, 1] + 1.0
+
+
+def test_every_span_within_the_reach_of_its_planned_tension(e4_active) -> None:
+    """Independent of the planner's rows: the closed-form lowest point of every tether at every state, at the
+    tension planned for that state, stays on or above the ground clearance."""
+    problem, plan, _ = e4_active
+    p = problem.chain_params
+    cat = catenary_params(p)
+    spans = np.abs(plan.spans)
+    worst = np.inf
+    for j in range(spans.shape[1]):
+        h1 = p.base_height if j == 0 else p.exit_height
+        for k in range(0, spans.shape[0]):
+            z = catenary.lowest_height(
+                h1, p.exit_height, spans[k, j], replace(cat, horizontal_tension=plan.winch_tension[k, j])
+            )
+            worst = min(worst, float(z) - p.ground_clearance)
+    assert worst >= -1e-6
+
+
+def test_the_tension_returns_to_nominal_where_the_spans_allow(e4_active) -> None:
+    _, plan, _ = e4_active
+    T = plan.winch_tension
+    assert np.allclose(T[0], 13.5)  # the start spans are short: the nominal tension holds them
+    assert np.all(T[: int(5.0 / plan.Ts)] == pytest.approx(13.5))
+
+
+def test_outputs_carry_the_planned_tension(e4_active, tmp_path) -> None:
+    from tmr.io.outputs import write_trajectories_csv, write_trajectories_json
+    from tmr.io.rundir import load_run, write_chain_run
+
+    problem, plan, _ = e4_active
+    write_trajectories_json(plan, tmp_path / "trajectories.json")
+    write_trajectories_csv(plan, tmp_path / "trajectories.csv")
+    write_chain_run(tmp_path / "run.json", plan, problem.env)
+    doc = json.loads((tmp_path / "trajectories.json").read_text())
+    assert [e["name"] for e in doc["tethers"]] == ["tether1", "tether2", "tether3", "tether4"]
+    assert doc["tethers"][2]["horizontal_tension"] == plan.winch_tension[:, 2].tolist()
+    header = (tmp_path / "trajectories.csv").read_text().splitlines()[0].split(",")
+    assert header[-4:] == ["tether1_T0", "tether2_T0", "tether3_T0", "tether4_T0"]
+    run = load_run(tmp_path)
+    assert np.array_equal(run.winch_tension, plan.winch_tension)
+    assert run.record["tether"]["winch"] == "active"
+
+
+def test_passive_plan_has_no_tension_outputs(tmp_path) -> None:
+    from tmr.io.outputs import trajectories_dict
+    from tmr.planner import build_problem, solve
+    from tmr.world.scenario import load_scenario
+
+    plan, _ = solve(build_problem(load_scenario("A")), "qp")
+    assert plan.winch_tension is None
+    assert "tethers" not in trajectories_dict(plan)
+    assert "winch" not in plan.params
+
+
+@pytest.mark.parametrize("method", ["pinv", "horizon"])
+def test_other_methods_refuse_the_active_winch(method: str) -> None:
+    from tmr.planner import build_problem, solve
+    from tmr.world.scenario import load_scenario
+
+    problem = build_problem(load_scenario("A"), overrides=ACTIVE)
+    with pytest.raises(ParameterError, match="--method qp only"):
+        solve(problem, method)
+
+
+def test_a_winch_range_without_the_active_winch_is_refused() -> None:
+    from tmr.planner import build_problem
+    from tmr.world.scenario import load_scenario
+
+    with pytest.raises(ParameterError, match="winch_tension_max set but winch = 'passive'"):
+        build_problem(load_scenario("A"), overrides={"winch_tension_max": 30.0})
+
+
+def test_cli_writes_the_tension_figure_and_the_replay_follows_the_plan(tmp_path) -> None:
+    from tmr.cli import main
+
+    out = tmp_path / "E4"
+    argv = ["plan", "--scenario", "E", "--robots", "4", "--set", "winch=active", "--set", "ground_clearance=0.05"]
+    assert main([*argv, "--out", str(out)]) == 0
+    assert (out / "winch_tension.png").stat().st_size > 10_000
+    from tmr.io.rundir import load_run
+    from tmr.replay.chain import replay_chain
+
+    run = load_run(out)
+    rep = replay_chain(run)
+    # the winch held the planned tension: the static catenary at that tension predicts the measured winch tension
+    k = np.argmax(run.winch_tension[:, 0])
+    assert rep.tension_winch[k, 0] == pytest.approx(rep.tension_winch_catenary[k, 0], rel=0.05)
+    assert rep.tension_winch[k, 0] > 30.0
+    assert rep.contacts["tether-floor"]["count"] == 0
+    assert rep.lowest.min() > 0.02
