@@ -482,12 +482,24 @@ def make_qp(
                 approach_rate=p.approach_rate,
             )
         )
+    low = tuple(getattr(problem.env, "low_obstacles", ()))
+    if low:  # tethers may pass over a low obstacle, high enough (tmr.control.cable)
+        from tmr.control.cable import CableOverLowObstacles
+
+        cp = problem.chain_params
+        clearance = float(getattr(cp, "low_obstacle_clearance", 0.05))
+        limits.append(CableOverLowObstacles(chain, low, cp, clearance, p.approach_rate))
     limits.extend(extra_limits)
-    box = JointBox(chain, problem.span_limits, p.joint_speed_max, p.span_speed_max, p.accel_max, p.span_margin)
+    box = JointBox(
+        chain, problem.span_limits, p.joint_speed_max, p.span_speed_max, p.accel_max, p.span_margin,
+        p.span_approach_rate,
+    )  # fmt: skip
     if problem.chain_params.active_winch:  # x = [v, Ṫ] (tmr.control.winch)
         from tmr.control.winch import make_winch_qp
 
-        return make_winch_qp(chain, levels, limits, box, problem.chain_params, p.span_margin, p.solver)  # type: ignore[return-value]
+        return make_winch_qp(
+            chain, levels, limits, box, problem.chain_params, p.span_margin, p.solver, p.span_approach_rate
+        )  # type: ignore[return-value]
     return LexicographicQP(chain, levels, limits, box, solver=p.solver)
 
 

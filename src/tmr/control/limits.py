@@ -341,7 +341,8 @@ class JointBox:
     ``lb ≤ q̇ ≤ ub`` with, per joint, the tightest of
       - speed: ``|θ̇| ≤ omega_max`` [rad/s], ``|ḋ| ≤ v_span_max`` [m/s];
       - acceleration: ``|q̇ − q̇_{k−1}| ≤ a_max Ts`` (a_max in rad/s² and m/s²);
-      - span (hard, catenary): ``d_lo + margin ≤ d + Ts ḋ ≤ d_max − margin``.
+      - span (hard, catenary): ``d_lo + margin ≤ d + Ts ḋ ≤ d_max − margin``; with ``span_rate`` ρ_d [1/s] also
+        ``ḋ ≤ ρ_d (d_max − margin − d)`` (a tether slows down as it is paid out towards its limit).
     A span already outside its band is only asked not to get worse; where the acceleration bound cannot reach the span
     band, the span band wins (the box is never empty).
     """
@@ -354,8 +355,10 @@ class JointBox:
         v_span_max: float,
         a_max: float,
         span_margin: float = 0.01,
+        span_rate: float | None = None,
     ) -> None:
         self.chain = chain
+        self.span_rate = None if span_rate is None else float(span_rate)
         self.limits = np.broadcast_to(np.asarray(span_limits, float), (chain.n_robots, 2)).copy()
         self.vmax = np.where(chain.is_prismatic, v_span_max, omega_max).astype(float)
         self.a_max = float(a_max)
@@ -379,6 +382,8 @@ class JointBox:
         q = ctx.q
         band_lo = (np.minimum(self._q_lo, q) - q) / Ts
         band_hi = (np.maximum(self._q_hi, q) - q) / Ts
+        if self.span_rate is not None:  # paid out towards d_max at most at ρ_d (d_max − m − d)
+            band_hi = np.minimum(band_hi, self.span_rate * (np.maximum(self._q_hi, q) - q))
         lo, hi = np.maximum(lb, band_lo), np.minimum(ub, band_hi)
         empty = lo > hi
         if empty.any():  # speed/acceleration and the span band do not meet: the span band (the safety limit) wins

@@ -196,7 +196,8 @@ class WinchSpan(Limit):
     name = "winch_span"
     space = "joint"
 
-    def __init__(self, chain: Chain, params: ChainParams, margin: float) -> None:
+    def __init__(self, chain: Chain, params: ChainParams, margin: float, rate: float | None = None) -> None:
+        self.rate = None if rate is None else float(rate)
         N, self.n = chain.n_robots, chain.dof
         self.N, self.params, self.margin = N, params, float(margin)
         self.prismatic = np.asarray(chain.prismatic_index, dtype=int)
@@ -244,7 +245,8 @@ class WinchSpan(Limit):
         d_max, sec = self.reach(ctx.winch_tension, self.params.winch_tension_rate * ctx.Ts)
         self._A[self._rows, self.n + self._tether] = -sec.reshape(-1)
         spans = ctx.base.spans
-        upper = np.maximum(d_max - self.margin - spans, 0.0) / ctx.Ts
+        room = np.maximum(d_max - self.margin - spans, 0.0)
+        upper = room / ctx.Ts if self.rate is None else np.minimum(room / ctx.Ts, self.rate * room)
         return LimitRows(self._A, self._lower, np.repeat(upper, 2))
 
 
@@ -332,7 +334,7 @@ class GroundWinchQP:
 
 def make_winch_qp(
     chain: Chain, levels: list[Any], limits: list[Limit], box: JointBox, params: ChainParams, margin: float,
-    solver: str,
+    solver: str, span_rate: float | None = None,
 ) -> GroundWinchQP:  # fmt: skip
     """The passive QP's levels and limits on x = [v, Ṫ]: every task and limit padded, :class:`WinchReturn` added to
     the lowest level, :class:`WinchSpan` to the hard limits and the pulley's range and rate to the box."""
@@ -346,8 +348,14 @@ def make_winch_qp(
         if i == len(levels) - 1:
             tasks.append((WinchReturn(chain, params.nominal_tension), WINCH_WEIGHT))
         new_levels.append(Level(tasks, level.name))
-    span = WinchSpan(chain, params, margin)
-    new_limits: list[Limit] = [PaddedLimit(lim) for lim in limits]
+    span = WinchSpan(chain, params, margin, span_rate)
+    new_limits: list[Limit] = []
+    for lim in limits:
+        if hasattr(lim, "winch"):  # a limit with rows on the tension rates of its own (the cable's height)
+            lim.winch = True  # type: ignore[attr-defined]
+            new_limits.append(lim)
+        else:
+            new_limits.append(PaddedLimit(lim))
     new_limits.append(span)
     qp = LexicographicQP(WinchChain(chain), new_levels, new_limits, WinchBox(box, params), solver=solver)  # type: ignore[arg-type]
     return GroundWinchQP(qp, chain, params, span)

@@ -40,6 +40,8 @@ __all__ = [
     "max_span",
     "max_span_level",
     "max_span_slope",
+    "height_at",
+    "height_sensitivities",
     "tether_max_spans",
 ]
 
@@ -453,6 +455,35 @@ def tension_for_span(
 
     t = float(brentq(reach, t_min, t_max, xtol=1e-9))
     return t if reach(t) >= 0.0 else min(t + 1e-9, t_max)
+
+
+def height_at(s: ArrayLike, h1: ArrayLike, h2: ArrayLike, span: ArrayLike, c: ArrayLike) -> np.ndarray:
+    """Height [m] of the cable at the fraction ``s`` of its span (x = s · span from end 1), for catenary parameter
+    ``c`` = T0 / (ρ g) [m]: z(x) = h1 + c (cosh((x − x_low)/c) − cosh(x_low/c)), written as
+    h1 + 2c sinh(x / 2c) sinh((x − 2 x_low) / 2c) (no cancellation). Broadcasts, and takes complex inputs: the
+    complex-step derivatives of :func:`height_sensitivities` evaluate it off the real axis."""
+    s, h1, h2, span, c = (np.asarray(v) for v in (s, h1, h2, span, c))
+    x = s * span
+    x_low = 0.5 * span - c * np.arcsinh((h2 - h1) / (2.0 * c * np.sinh(span / (2.0 * c))))
+    return h1 + 2.0 * c * np.sinh(x / (2.0 * c)) * np.sinh((x - 2.0 * x_low) / (2.0 * c))
+
+
+def height_sensitivities(
+    s: ArrayLike, h1: ArrayLike, h2: ArrayLike, span: ArrayLike, tension: ArrayLike, weight: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The cable's height z [m] at fraction ``s`` of its span (:func:`height_at`), ∂z/∂span [m/m] (the fraction
+    held) and ∂z/∂T0 [m/N], for horizontal tension ``tension`` [N] and weight per length ``weight`` = ρ g [N/m].
+
+    The derivatives are complex-step derivatives of the closed form (Im f(x + i h) / h, h = 1e-30: exact to rounding,
+    no difference of two values); ∂z/∂T0 = ∂z/∂c / (ρ g).
+    """
+    h = 1e-30
+    c = np.asarray(tension, dtype=float) / weight
+    span = np.asarray(span, dtype=float)
+    z = height_at(s, h1, h2, span, c)
+    dz_dspan = height_at(s, h1, h2, span + 1j * h, c).imag / h
+    dz_dc = height_at(s, h1, h2, span, c + 1j * h).imag / h
+    return np.real(z), dz_dspan, dz_dc / weight
 
 
 def tether_max_spans(n_tethers: int, params: CatenaryParams = _DEFAULT_PARAMS) -> np.ndarray:

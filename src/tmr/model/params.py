@@ -252,6 +252,10 @@ class QPParams:
         accel_max: |q̇_k − q̇_{k−1}| ≤ accel_max · Ts [rad/s², m/s²].
         robot_accel_max: Cartesian acceleration bound of every robot, per axis [m/s²].
         span_margin: spans stay in [d_lo + margin, d_max − margin] [m].
+        span_approach_rate: None (default: the span may reach d_max − margin in one step) or a rate ρ_d [1/s]: a
+            tether is paid out towards its limit at most at ρ_d (d_max − margin − d) (a velocity damper, like
+            ``approach_rate``): the cable slows down before it hangs at its limit, so it does not dip below its
+            static catenary (the dynamic sag measured by ``tmr replay``; ``formulations/catenary.md``).
         uniformity_gain: rate at which adjacent span differences decay (level 2) [1/s].
         tether_smoothness: weight of ‖q̇ − q̇_{k−1}‖² inside level 2 (next to the tether regulation, weight 1): the
             tether level fixes N of the 2N − 2 joint velocities left by the leader, so smoothness must act there too.
@@ -271,6 +275,7 @@ class QPParams:
     accel_max: float = 20.0
     robot_accel_max: float = 6.0
     span_margin: float = 0.01
+    span_approach_rate: float | None = None
     uniformity_gain: float = 1.0
     tether_smoothness: float = 100.0
     energy_weight: float = 1.0
@@ -301,6 +306,17 @@ class QPParams:
         )
         if self.clearance_rows_per_link < 0 or self.separation_neighbours < 1:
             raise ParameterError("need clearance_rows_per_link ≥ 0 and separation_neighbours ≥ 1")
+        if self.span_approach_rate is not None and not self.span_approach_rate > 0:
+            raise ParameterError(
+                f"QPParams.span_approach_rate must be > 0 1/s or None, got {self.span_approach_rate!r}"
+            )
+
+    def record(self) -> dict[str, Any]:
+        """The fields as a dict, without ``span_approach_rate`` while it is off (the records keep their bytes)."""
+        out = asdict(self)
+        if self.span_approach_rate is None:
+            out.pop("span_approach_rate")
+        return out
 
 
 #: The longest a drone plan waits after its references stop [s] (``DroneParams.settle``).

@@ -282,7 +282,6 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
     """
     import mujoco
 
-
     cfg = cfg or ReplayConfig()
     if cfg.track not in ("filtered", "raw"):
         raise ReplayError(f"track must be 'filtered' or 'raw', got {cfg.track!r}")

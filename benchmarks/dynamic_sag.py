@@ -1,0 +1,112 @@
+"""Dynamic sag: how low the replayed tethers of A–E (``qp``) hang, with the paper's floor limit and with a floor
+clearance kept by the span's pay-out rate.
+
+    python benchmarks/dynamic_sag.py
+
+Each scenario is planned with its default robots (``python -m tmr.plan --method qp --no-plots``, plus ``--robots 7``
+for E under a 5 cm clearance: its d_max drops from 5.60 to 5.26 m) under three settings:
+
+- ``paper``: ``ground_clearance = 0`` (the cable may touch the floor at d_max), the span reaches its limit in one step;
+- ``clearance``: ``ground_clearance = 0.05`` m, pay-out unbounded;
+- ``clearance+rate``: ``ground_clearance = 0.05`` m and ``span_approach_rate = 0.5`` 1/s (a tether slows down as it is
+  paid out towards d_max: ``QPParams.span_approach_rate``).
+
+and replayed in MuJoCo (``python -m tmr.replay``). Per plan: the verdict, f1 and f4, and the lowest point of any tether
+over the replay next to the static catenary's at the same instant. Writes ``benchmarks/results/dynamic_sag.md`` and
+``dynamic_sag.csv``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import source_version, versions  # noqa: E402
+
+RESULTS = Path(__file__).resolve().parent / "results"
+SETTINGS = {
+    "paper": [],
+    "clearance": ["--set", "ground_clearance=0.05"],
+    "clearance+rate": ["--set", "ground_clearance=0.05", "--set", "span_approach_rate=0.5"],
+}
+
+
+def run(scenario: str, setting: str, tmp: Path) -> dict:
+    out = tmp / f"{scenario}_{setting.replace('+', '_')}"
+    robots = ["--robots", "7"] if scenario == "E" and setting != "paper" else []
+    cmd = [sys.executable, "-m", "tmr.plan", "--scenario", scenario, "--method", "qp", "--no-plots", "-q"]
+    p = subprocess.run([*cmd, *robots, *SETTINGS[setting], "--out", str(out)], capture_output=True, text=True)
+    if p.returncode != 0:
+        return {"scenario": scenario, "setting": setting, "plan": f"exit {p.returncode}: {p.stderr.strip()[-120:]}"}
+    metrics = json.loads((out / "metrics.json").read_text())
+    r = subprocess.run(
+        [sys.executable, "-m", "tmr.replay", str(out), "--no-plots", "-q"], capture_output=True, text=True
+    )
+    rep = json.loads((out / "replay" / "replay.json").read_text())
+    worst = min(rep["tethers"], key=lambda e: e["lowest_min"])
+    return {
+        "scenario": scenario,
+        "setting": setting,
+        "plan": "ok",
+        "robots": metrics.get("n_robots", ""),
+        "f1": round(float(metrics["f1"]), 2),
+        "f4": round(float(metrics["f4"]), 2),
+        "replay_exit": r.returncode,
+        "lowest_m": round(float(worst["lowest_min"]), 4),
+        "at_s": round(float(worst["lowest_min_at"]), 2),
+        "catenary_m": round(float(worst["lowest_catenary_then"]), 4),
+    }
+
+
+def main() -> None:
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for scenario in "ABCDE":
+            for setting in SETTINGS:
+                rows.append(run(scenario, setting, Path(tmp)))
+                print(rows[-1], flush=True)
+    keys = ["scenario", "setting", "plan", "robots", "f1", "f4", "replay_exit", "lowest_m", "at_s", "catenary_m"]
+    with (RESULTS / "dynamic_sag.csv").open("w", newline="", encoding="utf-8") as fh:
+        w = csv.DictWriter(fh, keys, lineterminator="\n")
+        w.writeheader()
+        w.writerows([{k: r.get(k, "") for k in keys} for r in rows])
+    lines = [
+        "# Dynamic sag: replayed tether heights of A–E (qp)",
+        "",
+        "`python benchmarks/dynamic_sag.py` — "
+        + versions(["mujoco", "numpy", "scipy", "osqp"])
+        + f"; tmr {source_version()}.",
+        "",
+        "Lowest point of any tether over the MuJoCo replay (`tmr replay`), next to the planner's static catenary at",
+        "the same instant. `paper`: ground_clearance 0 (the cable may reach the floor at d_max); `clearance`: 0.05 m;",
+        "`clearance+rate`: 0.05 m and `span_approach_rate = 0.5` 1/s (pay-out slowed near d_max). E needs 7 robots",
+        "under a 5 cm clearance (d_max 5.26 m instead of 5.60 m).",
+        "",
+        "| scenario | setting | robots | f1 | f4 | replay exit | lowest [m] | at [s] | static catenary there [m] |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        if r["plan"] != "ok":
+            lines.append(f"| {r['scenario']} | {r['setting']} | {r['plan']} | | | | | | |")
+            continue
+        lines.append(
+            f"| {r['scenario']} | {r['setting']} | {r['robots']} | {r['f1']} | {r['f4']} | {r['replay_exit']} | "
+            f"{r['lowest_m']:.4f} | {r['at_s']} | {r['catenary_m']:.4f} |"
+        )
+    low = {s: min(r["lowest_m"] for r in rows if r["setting"] == s and r["plan"] == "ok") for s in SETTINGS}
+    lines += [
+        "",
+        "Lowest over A–E: " + ", ".join(f"{s} {v:.4f} m" for s, v in low.items()) + ".",
+        "",
+    ]
+    (RESULTS / "dynamic_sag.md").write_text("\n".join(lines), encoding="utf-8")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
