@@ -210,3 +210,21 @@ def test_cli_writes_the_tension_figure_and_the_replay_follows_the_plan(tmp_path)
     assert rep.tension_winch[k, 0] > 30.0
     assert rep.contacts["tether-floor"]["count"] == 0
     assert rep.lowest.min() > 0.02
+
+
+def test_span_approach_rate_slows_the_pay_out_near_the_limit() -> None:
+    from types import SimpleNamespace
+
+    from tmr.control.limits import JointBox
+    from tmr.model.chain import Chain
+
+    chain = Chain(2)
+    limits = np.array([[0.5, 5.0], [1.0, 5.0]])
+    q = np.array([0.0, 4.0, 0.0, 4.9])  # spans 4.0 and 4.9 m, the band ends at 4.99 m
+    ctx = SimpleNamespace(Ts=0.05, q=q, qdot_prev=np.zeros(4))
+    free = JointBox(chain, limits, 3.0, 3.0, 1e3, 0.01).compute(ctx)[1]
+    damped = JointBox(chain, limits, 3.0, 3.0, 1e3, 0.01, span_rate=0.5).compute(ctx)[1]
+    assert free[1] == pytest.approx(3.0) and free[3] == pytest.approx(0.09 / 0.05)  # speed bound; one-step band
+    assert damped[1] == pytest.approx(0.5 * 0.99) and damped[3] == pytest.approx(0.5 * 0.09)
+    assert damped[0] == free[0] and damped[2] == free[2]  # revolute joints untouched
+    assert "span_approach_rate" not in as_dict(__import__("tmr.model.params", fromlist=["QPParams"]).QPParams())
