@@ -44,6 +44,11 @@ class ChainParams:
         pulley_radius: winch pulley radius [m]; horizontal tension T0 = torque / radius.
         cable_mass_per_length: ρ [kg/m].
         ground_clearance: lowest allowed height of the cable [m].
+        low_obstacle_clearance: height [m] a cable keeps above a low obstacle it passes over (a GeoJSON feature
+            with a ``"height"``, :class:`tmr.world.environment.LowObstacle`): the catenary's height over the
+            obstacle's footprint must be at least the obstacle's height plus this (checked by
+            :func:`tmr.checks.metrics.evaluate`, kind ``low_obstacle``). Default 0.05 m. Left out of a plan's
+            recorded parameters when the world has no low obstacle (their bytes unchanged).
     """
 
     safety_radius: float = 0.5
@@ -53,11 +58,13 @@ class ChainParams:
     pulley_radius: float = 0.1
     cable_mass_per_length: float = 0.15
     ground_clearance: float = 0.0
+    low_obstacle_clearance: float = 0.05
 
     def __post_init__(self) -> None:
         _validate(
             self,
             positive=("safety_radius", "exit_height", "pulley_torque", "pulley_radius", "cable_mass_per_length"),
+            nonnegative=("low_obstacle_clearance",),
         )
 
     @property

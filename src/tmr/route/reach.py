@@ -720,7 +720,8 @@ def _search(
     xs, ys = np.meshgrid(np.arange(xmin + step / 2, xmax, step), np.arange(ymin + step / 2, ymax, step))
     P = np.stack([xs.ravel(), ys.ravel()], axis=1)
     P = P[np.linalg.norm(P - g, axis=1) <= rest[1] + 1e-9]
-    P = np.vstack([P[env.is_free(P, clearance)], g, a])
+    P = np.vstack([P[env.is_free(P, clearance)], g, a])  # robots: in env
+    tenv = getattr(env, "tether_environment", env)  # chords: over the low obstacles
     goal_i, anchor_i = len(P) - 2, len(P) - 1
     if geodesic is not None:  # candidates in order of the geodesic distance: index order is search order
         geo = geodesic(P)
@@ -752,7 +753,7 @@ def _search(
             for c in batches:
                 if not len(c):
                     continue
-                ok = c[env.segment_is_free(np.broadcast_to(P[s], (len(c), 2)), P[c], margin)]
+                ok = c[tenv.segment_is_free(np.broadcast_to(P[s], (len(c), 2)), P[c], margin)]
                 level[ok], parent[ok] = k + 1, s
                 reached.extend(ok.tolist())
                 got += len(ok)
