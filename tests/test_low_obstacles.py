@@ -390,3 +390,17 @@ def test_a_plan_lays_its_tethers_over_the_tray() -> None:
     chords = shapely.linestrings(np.stack([pts[:, :-1], pts[:, 1:]], axis=2).reshape(-1, 2, 2))
     assert shapely.intersects(chords, tray).sum() > 50  # many steps with a tether over the tray
     assert np.all(env.exact_clearance(plan.robots) > 0)  # no robot on it
+
+
+def test_plan_horizon_itself_refuses_low_obstacles() -> None:
+    pytest.importorskip("casadi")
+    from types import SimpleNamespace
+
+    from tmr.control.horizon import plan_horizon
+    from tmr.planner import solve
+
+    problem = SimpleNamespace(env=tray_env(0.15))
+    with pytest.raises(ParameterError, match=r"--method horizon cannot plan over low obstacles .*tray \(0\.15 m\)"):
+        plan_horizon(problem, None)
+    with pytest.raises(ParameterError, match="low obstacles"):
+        solve(problem, "horizon")  # before its qp warm start
