@@ -5,6 +5,10 @@ chain of
 two 5.6 m tethers may be long enough and still unable to wrap it, because no point sees both the anchor and the goal
 within 5.6 m. This module proves such cases (``formulations/route.md`` §2).
 
+Low obstacles: :func:`tmr.route.witness.proven_too_few` hands :func:`chain_is_impossible` the tethers' world
+(``env.tether_environment``, without them: a relaxation, so a proof there is a proof); :func:`find_chain` places its
+robots in ``env`` and tests its chords in the tethers' world.
+
 A chain of N robots is the polyline p_0 = anchor, p_1, …, p_N = goal with every chord p_{k-1} p_k in the free space F
 (the room minus the obstacles grown by r) and no longer than d_k. Let R_k be the set of points that can be p_k. On a
 grid of square cells of side h (half-diagonal e = h/√2), :func:`chain_is_impossible` builds cell sets R̂_k ⊇ R_k:

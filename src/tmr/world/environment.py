@@ -160,7 +160,9 @@ class LowObstacle:
     ``name``: a label (the GeoJSON feature's ``name``); ``footprint``: its bare plan-view footprint (shapely Polygon or
     MultiPolygon, not grown by the robot radius) [m]; ``height``: its top above the floor [m] (> 0; heights below the
     tethers' exit height 0.43 m are the interesting case). A map gives one with a GeoJSON feature carrying a numeric
-    ``"height"`` property (:mod:`tmr.world.maps`).
+    ``"height"`` property (:mod:`tmr.world.maps`). A cable is never higher than its higher end, so a low obstacle at
+    or above the exit height minus ``low_obstacle_clearance`` can never be passed over: every crossing fails the
+    checker (make it tall instead).
     """
 
     name: str
