@@ -31,6 +31,7 @@ _LAZY = {
     "Plan": "tmr.control.clik",
     "run": "tmr.control.clik",
     "Environment": "tmr.world.environment",
+    "LowObstacle": "tmr.world.environment",
     "Level": "tmr.control.qp",
     "LexicographicQP": "tmr.control.qp",
     "KeepInPolygon": "tmr.control.limits",
@@ -81,7 +82,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
     from tmr.model.chain import Chain
     from tmr.planner import Problem, build_problem, check, make_pinv, make_qp, solve
     from tmr.route.route import Route, plan_route
-    from tmr.world.environment import Environment
+    from tmr.world.environment import Environment, LowObstacle
     from tmr.world.scenario import Scenario, builtin_scenarios, load_scenario
 
 __version__ = "0.1.0"
@@ -102,6 +103,7 @@ __all__ = [
     "LimitRows",
     "link_pattern",
     "load_scenario",
+    "LowObstacle",
     "make_pinv",
     "make_qp",
     "MapError",

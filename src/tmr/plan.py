@@ -435,6 +435,12 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
     chain_params = made[ChainParams]
     if rest:
         raise TmrError(f"unknown parameter(s) {sorted(rest)}; the names are the fields of tmr.model.params")
+    if args.method == "horizon":  # before the route: exit 2
+        from tmr.world.environment import refuse_low_obstacles
+
+        refuse_low_obstacles(
+            scenario.environment, "--method horizon", "its NLP keeps no cable height above them; use --method qp"
+        )
     nyquist = 0.5 / made[TimeParams].Ts
     if not args.filter_cutoff < nyquist:  # refused before the route and the plan, not after them
         raise TmrError(

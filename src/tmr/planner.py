@@ -51,6 +51,7 @@ from tmr.model.spans import span_limits
 from tmr.route.path import Trajectory, leader_trajectory, path_length, plan_leader_path, time_law
 from tmr.route.references import ChainReference, chain_reference, start_placement
 from tmr.route.route import Route, TooFewRobotsError, check_fit, plan_route
+from tmr.world.environment import refuse_low_obstacles
 from tmr.world.scenario import Scenario
 
 if TYPE_CHECKING:  # the formulations import their solvers (osqp, qpsolvers): loaded by the method that runs
@@ -94,6 +95,8 @@ class Problem:
         out = as_dict(
             self.chain_params, self.time_params, self.path_params, self.task_params, self.pinv_params, self.qp_params
         )
+        if not getattr(self.env, "low_obstacles", ()):  # only a world with low obstacles uses it: other plans' bytes
+            out.pop("low_obstacle_clearance", None)
         out.update(seed=self.seed, n_robots=self.chain.n_robots, d_max=float(self.span_limits[0, 1]))
         out.update(route=self.route_mode, T_end=float(self.trajectory.t[-1]))
         if self.route is not None:
@@ -146,7 +149,8 @@ def _start_from_path(
 
     def free(P: Array) -> bool:
         starts = np.vstack([chain.base, P[:-1]])
-        return bool(np.all(env.exact_clearance(P) > clear) and np.all(env.segment_clearance(starts, P) > clear))
+        chords = getattr(env, "tether_environment", env).segment_clearance(starts, P)  # over low obstacles too
+        return bool(np.all(env.exact_clearance(P) > clear) and np.all(chords > clear))
 
     if W is not None:
         arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(W, axis=0), axis=1))]
@@ -576,6 +580,7 @@ def solve(
         result, metrics = _checked(problem, method, progress)
         return _whole(result, metrics, start)
     # a whole-trajectory NLP, not a per-step formulation
+    refuse_low_obstacles(problem.env, "--method horizon", "its NLP keeps no cable height above them; use --method qp")
     if problem.chain_params.active_winch:
         raise ParameterError(
             "an active winch (winch = 'active') is planned by --method qp only: the horizon NLP keeps the "

@@ -9,6 +9,16 @@ The environment is read through ``exact_clearance(points (..., 2))`` and ``segme
 distances to the inflated obstacles, metres: > 0 free, < 0 inside), as :class:`tmr.world.environment.Environment`
 provides.
 
+**Low obstacles** (``env.low_obstacles``, :class:`tmr.world.environment.LowObstacle`): the robots are checked against
+the whole environment, the tethers' plan-view chords against ``env.tether_environment`` (the room without the low
+obstacles), and every chord that crosses a low obstacle's bare footprint is checked in the vertical plane
+(:func:`low_obstacle_margins`): the closed-form catenary (:func:`tmr.model.catenary.solve`) at that step's
+horizontal tension must stay ``low_obstacle_clearance`` above the obstacle's height over the whole crossing (kind
+``low_obstacle``; none of the planner's rows is reused). A plan with an active winch records its tensions
+``winch_tension`` (K+1, N) [N]; then the span check ``span_max`` asks the catenary of that step's tension for its
+lowest point (≥ ``ground_clearance``) instead of the constant d_max. Without low obstacles and winch tensions
+nothing of the above runs and metrics.json keeps its keys.
+
 Indexing: step ``k`` is the sample at ``t[k]``; a plan with K+1 samples has K steps. Robot N (last) is the
 leader (the manipulator's end-effector x_e); tether j joins point j-1 to robot j, point 0 being the base.
 """
@@ -38,6 +48,7 @@ __all__ = [
     "fitness",
     "json_safe",
     "limit_breaks",
+    "low_obstacle_margins",
     "plan_goal",
     "qp_level_counts",
     "robot_separations",
@@ -60,6 +71,14 @@ VIOLATION_KINDS: tuple[str, ...] = (
     "span_min",
     "separation",
 )
+#: Violation kind of a cable lower than a low obstacle's height plus ``low_obstacle_clearance`` over its footprint;
+#: reported after :data:`VIOLATION_KINDS` only for a world with low obstacles.
+LOW_OBSTACLE_KIND = "low_obstacle"
+#: Largest spacing [m] of the catenary samples over a low obstacle's footprint (the crossing's ends are samples too).
+LOW_OBSTACLE_STEP = 0.01
+#: Default height [m] a cable keeps above a low obstacle (``ChainParams.low_obstacle_clearance``; not imported here:
+#: metrics read plans).
+LOW_OBSTACLE_CLEARANCE = 0.05
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -221,25 +240,148 @@ def clearances(plan: Any, env: Any) -> Clearances:
 
 
 def _chain_clearances(pts: np.ndarray, env: Any) -> Clearances:
-    """:class:`Clearances` of chain polylines ``pts`` (K+1, N+1, 2) [m] (base first)."""
+    """:class:`Clearances` of chain polylines ``pts`` (K+1, N+1, 2) [m] (base first): robots against ``env``, tether
+    chords against ``env.tether_environment`` (without the low obstacles a tether may pass over; ``env`` itself when
+    it has none or no such attribute)."""
     robot_c = np.asarray(env.exact_clearance(pts[:, 1:, :]), dtype=float).reshape(pts.shape[0], -1)
-    tether_c = np.asarray(env.segment_clearance(pts[:, :-1, :], pts[:, 1:, :]), dtype=float).reshape(pts.shape[0], -1)
+    tenv = getattr(env, "tether_environment", env)
+    tether_c = np.asarray(tenv.segment_clearance(pts[:, :-1, :], pts[:, 1:, :]), dtype=float).reshape(pts.shape[0], -1)
     return Clearances(robots=robot_c, tethers=tether_c)
 
 
 def _violation_masks(
-    clr: Clearances, spans: np.ndarray, sep: np.ndarray, limits: tuple[np.ndarray, np.ndarray], r: float, tol: float
+    clr: Clearances,
+    spans: np.ndarray,
+    sep: np.ndarray,
+    limits: tuple[np.ndarray, np.ndarray],
+    r: float,
+    tol: float,
+    span_high: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
     """Per sample (K+1,) bool, for each of :data:`VIOLATION_KINDS`: whether that hard limit is broken beyond ``tol``
-    [m] (clearances < −tol, spans outside [d_lo − tol, d_max + tol], separations < 2 r − tol)."""
+    [m] (clearances < −tol, spans outside [d_lo − tol, d_max + tol], separations < 2 r − tol). ``span_high`` (K+1, N)
+    bool, if given, replaces the d_max test (:func:`_winch_span_high`)."""
     d_lo, d_max = limits
+    high = (spans > d_max + tol) if span_high is None else span_high
     return {
         "robot_clearance": (clr.robots < -tol).any(axis=1),
         "tether_clearance": (clr.tethers < -tol).any(axis=1),
-        "span_max": (spans > d_max + tol).any(axis=1),
+        "span_max": high.any(axis=1),
         "span_min": (spans < d_lo - tol).any(axis=1),
         "separation": (sep < 2.0 * r - tol).any(axis=1) if sep.size else np.zeros(spans.shape[0], dtype=bool),
     }
+
+
+# ----------------------------------------------------------------------------------------------------------
+# the cable in the vertical plane: active winch tensions, low obstacles
+# ----------------------------------------------------------------------------------------------------------
+def _winch_tension(plan: Any, shape: tuple[int, int]) -> np.ndarray | None:
+    """``plan.winch_tension`` (K+1, N) [N] of an active-winch plan, or None (constant tension T0)."""
+    wt = getattr(plan, "winch_tension", None)
+    if wt is None:
+        return None
+    wt = np.asarray(wt, dtype=float)
+    if wt.shape != shape or not np.all(np.isfinite(wt)) or np.any(wt <= 0.0):
+        raise ParameterError(
+            f"plan.winch_tension must be positive finite horizontal tensions [N] of shape {shape}, got shape {wt.shape}"
+        )
+    return wt
+
+
+def _tether_params(plan: Any) -> dict[str, float]:
+    """Tether parameters from the plan's recorded ``params`` (defaults: Caruso 2021 §4.2.1, ChainParams'):
+    ``T0`` [N], ``rho`` [kg/m], ``H`` exit height, ``Hb`` anchor height, ``ground`` clearance, ``low`` clearance [m]."""
+    p = getattr(plan, "params", None) or {}
+    return {
+        "T0": float(p.get("pulley_torque", 1.35)) / float(p.get("pulley_radius", 0.1)),
+        "rho": float(p.get("cable_mass_per_length", 0.15)),
+        "H": float(p.get("exit_height", 0.43)),
+        "Hb": float(p.get("base_height", 0.43)),
+        "ground": float(p.get("ground_clearance", 0.0)),
+        "low": float(p.get("low_obstacle_clearance", LOW_OBSTACLE_CLEARANCE)),
+    }
+
+
+def _catenary_params(tp: dict[str, float], tension: float) -> Any:
+    from tmr.model.catenary import CatenaryParams
+
+    return CatenaryParams(
+        horizontal_tension=float(tension),
+        mass_per_length=tp["rho"],
+        end_height=tp["H"],
+        base_height=tp["Hb"],
+        ground_clearance=tp["ground"],
+    )
+
+
+def _winch_span_high(plan: Any, spans: np.ndarray, tension: np.ndarray, tol: float) -> np.ndarray:
+    """(K+1, N) bool: the span of tether j at step k is too long for that step's winch tension ``tension[k, j]`` [N]:
+    the catenary's lowest point (:func:`tmr.model.catenary.lowest_height`, h1 = anchor height for tether 1, else the
+    exit height; h2 = the exit height) lies below ``ground_clearance`` − ``tol``. Replaces span ≤ d_max (d_max is the
+    span where that happens at the constant tension T0)."""
+    from tmr.model.catenary import lowest_height
+
+    tp = _tether_params(plan)
+    h1 = np.where(np.arange(spans.shape[1]) == 0, tp["Hb"], tp["H"])
+    h1 = np.broadcast_to(h1, spans.shape)
+    out = np.zeros(spans.shape, dtype=bool)
+    for T in np.unique(tension):
+        at = tension == T
+        low = np.asarray(lowest_height(h1[at], tp["H"], np.maximum(spans[at], 0.0), _catenary_params(tp, T)))
+        out[at] = low < tp["ground"] - tol
+    return out
+
+
+def low_obstacle_margins(plan: Any, env: Any, robots: np.ndarray | None = None) -> np.ndarray:
+    """Height margin [m] of every tether over the low obstacles it crosses, shape (K+1, N): min over the obstacles
+    o whose bare footprint the plan-view chord of tether j at step k meets of min_s (z(s) − height_o −
+    ``low_obstacle_clearance``), +inf where the chord crosses none.
+
+    z(s) is the closed-form catenary (:func:`tmr.model.catenary.solve`; end 1 at point j−1 at the anchor height for
+    tether 1, else the exit height; end 2 at robot j at the exit height) with that step's horizontal tension:
+    ``plan.winch_tension[k, j]`` for an active-winch plan, else T0 = pulley torque / pulley radius (the plan's
+    ``params``). s runs over the crossing (shapely intersection of the chord with the footprint), sampled at most
+    :data:`LOW_OBSTACLE_STEP` apart, both ends of every crossing piece included. ``robots`` (K+1, N, 2) [m]
+    replaces ``plan.robots`` (e.g. filtered positions).
+    """
+    import shapely
+
+    from tmr.model.catenary import solve
+
+    pts = chain_points(plan, robots)
+    n_s, n = pts.shape[0], pts.shape[1] - 1
+    out = np.full((n_s, n), np.inf)
+    lows = getattr(env, "low_obstacles", ())
+    if not lows:
+        return out
+    tp = _tether_params(plan)
+    tension = _winch_tension(plan, (n_s, n))
+    A = pts[:, :-1].reshape(-1, 2)
+    B = pts[:, 1:].reshape(-1, 2)
+    span = np.hypot(*(B - A).T)
+    lines = shapely.linestrings(np.stack([A, B], axis=1))
+    for low in lows:
+        fp = low.footprint
+        hit = np.flatnonzero(shapely.intersects(lines, fp))
+        for m, cross in zip(hit.tolist(), shapely.intersection(lines[hit], fp), strict=True):
+            k, j = divmod(m, n)
+            d = span[m]
+            u = (B[m] - A[m]) / d if d > 0 else np.zeros(2)
+            s_all: list[np.ndarray] = []
+            for part in shapely.get_parts(cross):
+                s_part = (shapely.get_coordinates(part) - A[m]) @ u
+                lo, hi = float(s_part.min()), float(s_part.max())
+                s_all.append(np.linspace(lo, hi, max(2, math.ceil((hi - lo) / LOW_OBSTACLE_STEP) + 1)))
+            s = np.clip(np.concatenate(s_all), 0.0, d)
+            h1 = tp["Hb"] if j == 0 else tp["H"]
+            if d <= 0.0:  # robot on the anchor/its neighbour: the cable hangs at its ends
+                z = np.array([min(h1, tp["H"])])
+            else:
+                T = tp["T0"] if tension is None else tension[k, j]
+                cat = solve(h1, tp["H"], d, _catenary_params(tp, T))
+                z = cat.z_low + cat.c * 2.0 * np.sinh(0.5 * (s - cat.x_low) / cat.c) ** 2
+            out[k, j] = min(out[k, j], float(z.min()) - low.height - tp["low"])
+    return out
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -331,6 +473,11 @@ class Metrics:
     #: per level name, the number of steps at which it was solved / relaxed / implied / failed / skipped / empty
     qp_levels: dict[str, dict[str, int]] = field(default_factory=dict)
     qp_fallback_solves: int = 0  #: level solves done by a fallback backend (the primary failed or was not verified)
+    #: low obstacles only (None otherwise, and then not written): the worst height margin [m] of a cable over a low
+    #: obstacle, min over steps, tethers and obstacles of z − height − low_obstacle_clearance (+inf: no chord
+    #: crosses one), see :func:`low_obstacle_margins`; and its sample k
+    low_obstacle_margin: float | None = None
+    low_obstacle_margin_step: int | None = None
 
     @property
     def fitness(self) -> tuple[float, float, float, float]:
@@ -346,7 +493,15 @@ class Metrics:
         """JSON-safe dict in field order. Non-finite floats are written as the strings ``"inf"``, ``"-inf"``,
         ``"nan"`` (see :func:`json_safe`); ``None`` (e.g. no failure, no violation of a kind) becomes
         ``null``."""
-        return json_safe(asdict(self))
+        out = asdict(self)
+        for key in _OPTIONAL_FIELDS:  # features a plan does not use leave its metrics.json unchanged
+            if out[key] is None:
+                del out[key]
+        return json_safe(out)
+
+
+#: Metrics fields left out of :meth:`Metrics.to_dict` when None (the world has no low obstacle).
+_OPTIONAL_FIELDS = ("low_obstacle_margin", "low_obstacle_margin_step")
 
 
 def qp_level_counts(diagnostics: dict[str, Any]) -> dict[str, dict[str, int]]:
@@ -399,7 +554,11 @@ def evaluate(
     Violation kinds (:data:`VIOLATION_KINDS`): ``robot_clearance`` (a robot centre inside the inflated
     obstacles), ``tether_clearance`` (a tether segment crosses them), ``span_max`` (span above d_max: the
     catenary would touch the ground), ``span_min`` (span below d_lo), ``separation`` (two robots closer than
-    twice the safety radius).
+    twice the safety radius). With low obstacles (``env.low_obstacles``) the tether chords are checked against
+    ``env.tether_environment`` and kind ``low_obstacle`` (:data:`LOW_OBSTACLE_KIND`) is added: a cable crossing a
+    low obstacle's footprint lower than its height plus ``low_obstacle_clearance`` (:func:`low_obstacle_margins`,
+    beyond ``tolerance``). With ``plan.winch_tension`` (K+1, N) [N] set, ``span_max`` is the catenary's lowest point
+    at that step's tension below ``ground_clearance`` (:func:`_winch_span_high`).
     """
     t = np.asarray(plan.t, dtype=float)
     if Ts is None and t.size < 2 and "Ts" not in (getattr(plan, "params", None) or {}):
@@ -444,10 +603,22 @@ def evaluate(
     final_err = float(np.linalg.norm(robots[-1, -1, :] - goal_xy))
 
     # violations, per sample
-    masks = _violation_masks(clr, spans, sep, (d_lo, d_max), r, tol)
-    steps = {kind: np.flatnonzero(masks[kind]).tolist() for kind in VIOLATION_KINDS}
-    first = {kind: (steps[kind][0] if steps[kind] else None) for kind in VIOLATION_KINDS}
-    any_violation = np.logical_or.reduce([masks[kind] for kind in VIOLATION_KINDS])
+    tension = _winch_tension(plan, spans.shape)
+    high = None if tension is None else _winch_span_high(plan, spans, tension, tol)
+    masks = _violation_masks(clr, spans, sep, (d_lo, d_max), r, tol, high)
+    kinds = VIOLATION_KINDS
+    low_margin: float | None = None
+    low_step: int | None = None
+    if getattr(env, "low_obstacles", ()):
+        margins = low_obstacle_margins(plan, env)
+        low_margin, low_step = _argmin_step(margins)
+        if not math.isfinite(low_margin):
+            low_step = None
+        masks[LOW_OBSTACLE_KIND] = (margins < -tol).any(axis=1)
+        kinds = (*VIOLATION_KINDS, LOW_OBSTACLE_KIND)
+    steps = {kind: np.flatnonzero(masks[kind]).tolist() for kind in kinds}
+    first = {kind: (steps[kind][0] if steps[kind] else None) for kind in kinds}
+    any_violation = np.logical_or.reduce([masks[kind] for kind in kinds])
 
     wall = float(getattr(plan, "wall_time", math.nan))
     diagnostics = getattr(plan, "diagnostics", None) or {}
@@ -495,6 +666,8 @@ def evaluate(
         ms_per_step=1000.0 * wall / n_steps if n_steps > 0 else math.nan,
         qp_levels=qp_level_counts(diagnostics),
         qp_fallback_solves=int(np.nansum(fallbacks)) if fallbacks.size else 0,
+        low_obstacle_margin=low_margin,
+        low_obstacle_margin_step=low_step,
     )
 
 
@@ -542,10 +715,11 @@ def filter_trajectories(robots: np.ndarray, Ts: float, cutoff_hz: float = 1.0, o
 
 def limit_breaks(plan: Any, robots: np.ndarray, env: Any, tolerance: float = 1e-6) -> np.ndarray:
     """Samples (K+1,) bool at which positions ``robots`` (K+1, N, 2) [m] of ``plan``'s chain break a hard limit:
-    a robot or tether inside the inflated obstacles, a span outside [d_lo, d_max], two robots closer than 2 r —
-    the violation kinds of :func:`evaluate`, with its ``tolerance`` [m]."""
+    a robot or tether inside the inflated obstacles, a span outside [d_lo, d_max], two robots closer than 2 r, a
+    cable too low over a low obstacle — the violation kinds of :func:`evaluate`, with its ``tolerance`` [m]."""
     pts = chain_points(plan, robots)
     spans = np.linalg.norm(np.diff(pts, axis=1), axis=-1)
+    tension = _winch_tension(plan, spans.shape)
     masks = _violation_masks(
         _chain_clearances(pts, env),
         spans,
@@ -553,7 +727,10 @@ def limit_breaks(plan: Any, robots: np.ndarray, env: Any, tolerance: float = 1e-
         span_limits(plan),
         float(plan.safety_radius),
         tolerance,
+        None if tension is None else _winch_span_high(plan, spans, tension, tolerance),
     )
+    if getattr(env, "low_obstacles", ()):
+        masks[LOW_OBSTACLE_KIND] = (low_obstacle_margins(plan, env, pts[:, 1:]) < -tolerance).any(axis=1)
     return np.logical_or.reduce(list(masks.values()))
 
 

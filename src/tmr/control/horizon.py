@@ -99,6 +99,7 @@ from tmr.control.horizon_pool import (
     _warm_candidate,
 )
 from tmr.errors import ParameterError
+from tmr.world.environment import refuse_low_obstacles
 
 Array = NDArray[np.float64]
 
@@ -273,12 +274,15 @@ def plan_horizon(
         solve); ``wall_time`` is the total. Run :func:`tmr.planner.check` on it for the exact (shapely) verification.
 
     Raises:
-        ParameterError: no warm start, a warm start of the wrong shape, a bad option or time limit.
+        ParameterError: no warm start, a warm start of the wrong shape, a bad option or time limit; a world with low
+            obstacles (``problem.env.low_obstacles``: the NLP has no row for a cable's height over one).
         HorizonInfeasible: the start violates a hard constraint, or neither IPOPT's optimum, nor an iterate, nor the
             warm start satisfies them; the message names the violated constraint groups with knots, times and
             amounts (also in ``.violations``).
     """
     start_time = time.perf_counter()
+    no_height_row = "its NLP keeps no cable height above them; use --method qp"
+    refuse_low_obstacles(getattr(problem, "env", None), "--method horizon", no_height_row)
     if warm_start is None:
         raise ParameterError(
             "plan_horizon needs a warm start: a Plan of the same problem, e.g. the qp plan "

@@ -45,6 +45,13 @@ class StepContext:
         Ts: sampling period [s].
         samples_per_link: points per tether where clearance is sampled (fractions k/m, k = 1..m; s = 1 is the robot).
         span_limits: ``(N, 2)`` array of [d_lo, d_max] per tether [m].
+
+    With low obstacles (``env.low_obstacles``, :class:`tmr.world.environment.LowObstacle`), the samples inside a
+    tether (fraction < 1) read the field of ``env.tether_environment`` (a tether may pass over a low obstacle; its
+    height there is a row of the active-winch QP), the samples at s = 1 (the robots) the field of ``env``.
+    ``sample_clearance_all``/``sample_gradient_all`` are every sample against ``env`` itself, the low obstacles
+    included (the pinv baseline's obstacle task reads them: it treats a low obstacle as tall for the tethers too,
+    conservative); without low obstacles they are the same arrays as ``sample_clearance``/``sample_gradient``.
     """
 
     def __init__(
@@ -66,6 +73,9 @@ class StepContext:
         n_links = chain.n_robots
         self.sample_links = np.repeat(np.arange(1, n_links + 1), m)
         self.sample_fractions = np.tile(np.arange(1, m + 1) / m, n_links)
+        # low obstacles: tether interiors see the world without them, robots (s = 1) the whole world
+        self._tether_env = env.tether_environment if getattr(env, "low_obstacles", ()) else None  # type: ignore[attr-defined]
+        self._robot_samples = self.sample_fractions >= 1.0
         self.span_limits = np.broadcast_to(np.asarray(span_limits, dtype=float), (n_links, 2)).copy()
         self.k = 0
         self.q = np.zeros(chain.dof)
@@ -86,7 +96,16 @@ class StepContext:
         P = self.points
         li = self.sample_links
         self.sample_points = P[li - 1] + self.sample_fractions[:, None] * (P[li] - P[li - 1])
-        self.sample_clearance, self.sample_gradient = self.env.clearance_and_gradient(self.sample_points)
+        if self._tether_env is None:
+            self.sample_clearance, self.sample_gradient = self.env.clearance_and_gradient(self.sample_points)
+            self.sample_clearance_all, self.sample_gradient_all = self.sample_clearance, self.sample_gradient
+        else:
+            rob = self._robot_samples
+            d_all, g_all = self.env.clearance_and_gradient(self.sample_points)  # type: ignore[attr-defined]
+            d, g = self._tether_env.clearance_and_gradient(self.sample_points)
+            d[rob], g[rob] = d_all[rob], g_all[rob]
+            self.sample_clearance, self.sample_gradient = d, g
+            self.sample_clearance_all, self.sample_gradient_all = d_all, g_all
         self._J_e: Array | None = None
         self._J_r: Array | None = None
         self._vmap: VelocityMap | None = None
@@ -304,8 +323,11 @@ class ObstacleEvasion(Task):
         self.critical_clearance = np.inf
 
     def update(self, ctx: StepContext) -> bool:
-        """Find the critical point and update the two-state activation (eq. 17). Returns whether active."""
-        d = ctx.sample_clearance.copy()
+        """Find the critical point and update the two-state activation (eq. 17). Returns whether active.
+
+        Reads ``ctx.sample_clearance_all``: a low obstacle counts as tall for the tethers too (the pinv baseline has
+        no cable-height row; conservative)."""
+        d = ctx.sample_clearance_all.copy()
         # samples within one safety radius of the fixed anchor or of the leader are not candidates: no joint can move
         # them away from the anchor, and the leader's clearance is its path's (the primary task)
         along = ctx.sample_fractions * np.abs(ctx.spans)[ctx.sample_links - 1]
@@ -323,7 +345,7 @@ class ObstacleEvasion(Task):
 
     def compute(self, ctx: StepContext) -> TaskRows:
         i = self.critical_index
-        g = ctx.sample_gradient[i]
+        g = ctx.sample_gradient_all[i]
         norm = float(np.hypot(g[0], g[1]))
         n_c = g / norm if norm > 1e-12 else np.zeros(2)
         J_c = ctx.chain.point_jacobians(

@@ -70,6 +70,38 @@ def _known_free(env: Any) -> dict[str, list[float]]:
     return {} if known is None else {"known_free": [float(v) for v in known]}
 
 
+def _low_obstacles(env: Any) -> dict[str, list[dict[str, Any]]]:
+    """``{"low_obstacles": [{"name", "height" [m], "polygons"}, ...]}`` for a world with low obstacles
+    (:class:`tmr.world.environment.LowObstacle`; ``obstacles`` then holds the tall ones only), else {} (other runs'
+    bytes unchanged)."""
+    lows = getattr(env, "low_obstacles", ())
+    if not lows:
+        return {}
+    return {
+        "low_obstacles": [
+            {"name": str(o.name), "height": float(o.height), "polygons": polygons_to_json(o.footprint)} for o in lows
+        ]
+    }
+
+
+def low_obstacles_from_json(items: Any, where: str = "run.json") -> list[Any]:
+    """:class:`tmr.world.environment.LowObstacle` s from run.json's ``map.low_obstacles``; RunDirError if malformed."""
+    import shapely
+
+    from tmr.errors import TmrError
+    from tmr.world.environment import LowObstacle
+
+    out = []
+    try:
+        for it in items:
+            polys = polygons_from_json(it["polygons"], where)
+            fp = polys[0] if len(polys) == 1 else shapely.MultiPolygon(polys)
+            out.append(LowObstacle(str(it["name"]), fp, float(it["height"])))
+    except (TypeError, KeyError, ValueError, TmrError) as exc:
+        raise RunDirError(f"{where}: malformed low obstacles ({exc}); re-run the planner") from None
+    return out
+
+
 def polygons_to_json(geom: Any) -> list[dict[str, Any]]:
     """Polygons of a shapely geometry as ``[{"exterior": [[x, y], ...], "holes": [[[x, y], ...], ...]}, ...]``.
 
@@ -196,9 +228,10 @@ def chain_run_dict(plan: Any, env: Any, extra: dict[str, Any] | None = None) -> 
             "safety_radius": float(env.safety_radius),
             "resolution": float(env.resolution),
             "source": None if env.source is None else Path(env.source).name,
-            "obstacles": polygons_to_json(env.obstacles),
+            "obstacles": polygons_to_json(getattr(env, "tall_obstacles", env.obstacles)),
             "grown": polygons_to_json(env.inflated),
             **_known_free(env),
+            **_low_obstacles(env),
         },
         "tether": tether,
         "route": {
@@ -232,7 +265,9 @@ class ChainRun:
         robots: (K+1, N, 2) raw planned positions [m], robot 1 next to the anchor, robot N the leader.
         filtered: (K+1, N, 2) low-passed positions the robots track [m] (= ``robots`` if the file has none).
         anchor: (2,) tether anchor [m]; goal: (2,) or None.
-        obstacles, grown: raw obstacle polygons and obstacles grown by the robot radius (shapely Polygons).
+        obstacles, grown: raw obstacle polygons and obstacles grown by the robot radius (shapely Polygons); the
+            raw ones are the tall obstacles, the grown ones include the low obstacles (the robots avoid them).
+        low_obstacles: :class:`tmr.world.environment.LowObstacle` s (bare footprint, height [m]); empty for most maps.
     """
 
     path: Path
@@ -246,6 +281,7 @@ class ChainRun:
     grown: list[Any] = field(default_factory=list)
     #: with an active winch, every tether's planned horizontal tension per sample (K+1, N) [N]; None: constant T0
     winch_tension: Array | None = None
+    low_obstacles: list[Any] = field(default_factory=list)
 
     kind = "chain"
 
@@ -282,7 +318,9 @@ class ChainRun:
         from tmr.world.environment import Environment
 
         m = self.record["map"]
-        return Environment(self.obstacles, m["bounds"], m["safety_radius"], m["resolution"])
+        return Environment(
+            self.obstacles, m["bounds"], m["safety_radius"], m["resolution"], low_obstacles=self.low_obstacles
+        )
 
     def catenary_params(self) -> Any:
         """:class:`tmr.model.catenary.CatenaryParams` of the plan's tethers."""
@@ -319,6 +357,7 @@ class ChainRun:
             bounds=self.bounds,
             title=f"Scenario {rec['scenario']}, {rec['method']}: {what}{verdict}",
             view=self.known_free,
+            low_obstacles=tuple(self.low_obstacles),
         )
 
 
@@ -389,6 +428,7 @@ def _load_chain(path: Path, rec: dict[str, Any], where: str) -> ChainRun:
         obstacles=polygons_from_json(m.get("obstacles", []), where),
         grown=polygons_from_json(m.get("grown", []), where),
         winch_tension=tension,
+        low_obstacles=low_obstacles_from_json(m.get("low_obstacles", []), where),
     )
 
 

@@ -56,6 +56,11 @@ class ChainParams:
         winch_tension_min, winch_tension_max: the active winch's range of T0 [N] (pulley torque range / radius;
             documented choice: 5–40 N, i.e. 0.5–4 N m on the 0.1 m pulley).
         winch_tension_rate: how fast the active winch's T0 may change [N/s] (documented choice: 20 N/s).
+        low_obstacle_clearance: height [m] a cable keeps above a low obstacle it passes over (a GeoJSON feature
+            with a ``"height"``, :class:`tmr.world.environment.LowObstacle`): the catenary's height over the
+            obstacle's footprint must be at least the obstacle's height plus this (checked by
+            :func:`tmr.checks.metrics.evaluate`, kind ``low_obstacle``). Default 0.05 m. Left out of a plan's
+            recorded parameters when the world has no low obstacle (their bytes unchanged).
     """
 
     safety_radius: float = 0.5
@@ -69,6 +74,7 @@ class ChainParams:
     winch_tension_min: float = 5.0
     winch_tension_max: float = 40.0
     winch_tension_rate: float = 20.0
+    low_obstacle_clearance: float = 0.05
 
     def __post_init__(self) -> None:
         _validate(
@@ -77,6 +83,7 @@ class ChainParams:
                 "safety_radius", "exit_height", "pulley_torque", "pulley_radius", "cable_mass_per_length",
                 "winch_tension_min", "winch_tension_max", "winch_tension_rate",
             ),
+            nonnegative=("low_obstacle_clearance",),
         )  # fmt: skip
         if self.winch not in WINCHES:
             raise ParameterError(f"ChainParams.winch must be one of {', '.join(WINCHES)}, got {self.winch!r}")

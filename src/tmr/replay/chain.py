@@ -22,6 +22,7 @@ from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
+import shapely
 from numpy.typing import NDArray
 
 from tmr.replay.errors import ReplayError
@@ -152,6 +153,10 @@ def build_chain_model(run: Any, cfg: ReplayConfig, track: Array | None = None) -
     anchor = [float(run.anchor[0]), float(run.anchor[1]), Hb]
     sl = start.tolist()
     assets, world, _ = world_xml(run.obstacles, run.bounds, cfg.obstacle_height)
+    for o, low in enumerate(getattr(run, "low_obstacles", ())):  # extruded to their own height: a tether may pass over
+        pieces = list(shapely.get_parts(low.footprint))
+        a_low, w_low, _ = world_xml(pieces, run.bounds, low.height, prefix=f"obs_low{o}_", floor_and_walls=False)
+        assets, world = assets + a_low, world + w_low
     rt, ra = ROBOT_BITS
     specs = []
     for j in range(n):

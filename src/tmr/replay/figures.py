@@ -99,6 +99,10 @@ def plot_topview(rp: Any, run: Any, title: str) -> Any:
     for poly in run.obstacles:
         x, y = poly.exterior.xy
         ax.fill(x, y, color="0.55", zorder=1)
+    if getattr(run, "low_obstacles", ()):  # a tether may pass over them: lighter, hatched, with their height
+        from tmr.views.plot import draw_low_obstacles
+
+        draw_low_obstacles(ax, run.low_obstacles, zorder=1.2)
     for poly in run.grown:
         x, y = poly.exterior.xy
         ax.plot(x, y, color="0.5", ls="--", lw=0.7, zorder=1)

@@ -105,6 +105,10 @@ def _frames_matplotlib(rp: Any, run: Any, every: int) -> list[Any]:
         fig, ax = plt.subplots(figsize=(WIDTH / 100, HEIGHT / 100), dpi=100)
         for poly in run.obstacles:
             ax.fill(*poly.exterior.xy, color="0.55")
+        if getattr(run, "low_obstacles", ()):  # a tether may pass over them: lighter, hatched, with their height
+            from tmr.views.plot import draw_low_obstacles
+
+            draw_low_obstacles(ax, run.low_obstacles)
         for nd in rp.nodes[k]:
             ax.plot(nd[:, 0], nd[:, 1], color="tab:orange", lw=1.5)
         for i, p in enumerate(rp.actual[k]):

@@ -4,7 +4,10 @@ MuJoCo collides meshes through their convex hulls, so every obstacle polygon is 
 a convex polygon (its area equals its hull's to 1e-9 relative) is one piece; any other polygon is cut into the
 triangles of its constrained Delaunay triangulation (``shapely.constrained_delaunay_triangles``), each a convex
 prism. Grid maps arrive here as the polygons of their occupied cells (``tmr.world.environment``). Prisms reach from the
-floor to :data:`OBSTACLE_HEIGHT`, above every tether exit, so a tether can only pass round them.
+floor to :data:`OBSTACLE_HEIGHT`, above every tether exit, so a tether can only pass round them. A low obstacle
+(run.json's ``map.low_obstacles``, :class:`tmr.world.environment.LowObstacle`) is extruded to its own height, geoms
+named ``obs_low{o}_{k}`` (obstacles for the contact report), so a tether passing over it touches it only if it sags
+that low (:func:`tmr.replay.chain.build_chain_model`).
 
 Collision bits (``contype``/``conaffinity``, a pair collides if either's type meets the other's affinity):
 floor 1/0, obstacles and walls 2/0, tether links 0/3 (floor and obstacles), robots 8/10 (obstacles and robots),

@@ -23,6 +23,9 @@ against the environment's own exact clearance anyway (:func:`widen_chain` return
 The obstacle parts near each tether are fixed for one solve (within r + c_k + :data:`NEAR` of the starting chord);
 the solve is repeated from its result with the parts near it, at most :data:`ROUNDS` times, while it improves.
 A local method: it widens the chain it is given, in that chain's homotopy, and proves nothing when it fails.
+
+Low obstacles: the distances are to ``env.obstacles``, the low obstacles included (the chords are kept off them too,
+and so are the robots at their ends): conservative for the tethers, which may pass over them elsewhere.
 """
 
 from __future__ import annotations

@@ -2,6 +2,12 @@
 polylines, the visibility graph of the free space's reflex corners and its shortest-path tree, the holes a tether
 may wrap, and the stations (candidate robot places) along a route. Used by :func:`tmr.route.route.plan_route`
 (``formulations/route.md``), which re-exports the parameters and verdicts.
+
+**Low obstacles** (``env.low_obstacles``): obstacles for the robots, not for the tethers. Every query about where a
+robot or the leader may be or drive reads ``env`` (the route polyline, station and offset positions); every query
+about a tether's plan-view chord (free, clearance, the holes it may wrap, the anchor tether's clearance) reads
+:func:`tether_env` (``env.tether_environment``, the room without them). Relaxing the tethers' obstacles keeps every
+lower bound of the route a proven lower bound; the per-step QP enforces the cable's height over a low obstacle.
 """
 
 from __future__ import annotations
@@ -335,7 +341,7 @@ class _Samples:
         n = max(2, math.ceil((L - start_arc) / step) + 1)
         s = np.union1d(np.linspace(start_arc, L, n), arcs[(arcs > start_arc) & (arcs < L)])
         R = point_at(guide, arcs, s)
-        self.holes = hole_points(env)
+        self.holes = hole_points(tether_env(env))  # the holes a chord may wrap: the tethers' world's
         H = len(self.holes)
         # parity of the crossings of the +x ray from every hole with the guide up to each guide sample
         if H:
@@ -385,10 +391,17 @@ class _Samples:
         return ~np.any(loop % 2 == 1, axis=1)
 
 
+def tether_env(env: Any) -> Any:
+    """The world of the tethers' plan-view chords: ``env.tether_environment`` (without the low obstacles a tether may
+    pass over, :class:`tmr.world.environment.LowObstacle`), or ``env`` itself for a world that has none or no such
+    attribute."""
+    return getattr(env, "tether_environment", env)
+
+
 def anchor_tether_clearance(env: Any, anchor: Array, clearance: float) -> float:
-    """Clearance [m] the anchor's own tether must keep: ``clearance``, or half the anchor's own clearance if that is
-    less (an anchor next to a wall)."""
-    return min(clearance, 0.5 * float(np.asarray(env.exact_clearance(anchor))))
+    """Clearance [m] the anchor's own tether must keep: ``clearance``, or half the anchor's own clearance (in the
+    tethers' world, :func:`tether_env`) if that is less (an anchor next to a wall)."""
+    return min(clearance, 0.5 * float(np.asarray(tether_env(env).exact_clearance(anchor))))
 
 
 def stations(
@@ -405,7 +418,8 @@ def stations(
 
     Breadth-first search over candidate stations (every ``step`` [m] and every guide vertex): a tether k joins two
     candidates if its straight chord is between ``span_min[k]`` and ``span_max[k]`` long (the last value repeats),
-    keeps clearance > ``clearance`` [m] from the obstacles grown by r (exact: ``env.segment_is_free``; the anchor's
+    keeps clearance > ``clearance`` [m] from the obstacles grown by r (exact: ``segment_is_free`` of
+    :func:`tether_env`, which may pass over low obstacles; the anchor's
     own tether: half the anchor's clearance if that is less) and is homotopic to the guide (the chord and the
     guide between its ends enclose no obstacle: parity of the crossings of a ray from every hole). Returns the
     arcs (n,) and positions (n, 2) of the stations after the start, the last one the goal: the fewest hops at this
@@ -414,6 +428,7 @@ def stations(
     smax = np.atleast_1d(np.asarray(span_max, float))
     smin = np.atleast_1d(np.asarray(span_min, float)) if span_min is not None else np.zeros(1)
     sm = _Samples(env, guide, step, start_arc)
+    tenv = tether_env(env)  # chords: over the low obstacles; stations (robots): in env
     P, n = sm.P, len(sm.s)
     first = anchor_tether_clearance(env, P[0], clearance)
     parent = np.full(n, -1)
@@ -435,7 +450,7 @@ def stations(
             js = js[(d <= dmax) & (d >= dmin)]
             if not len(js):
                 continue
-            js = js[env.segment_is_free(np.repeat(P[i : i + 1], len(js), 0), P[js], clearance if i else first)]
+            js = js[tenv.segment_is_free(np.repeat(P[i : i + 1], len(js), 0), P[js], clearance if i else first)]
             js = js[sm.homotopic(i, js)] if len(js) else js
             if len(js):
                 parent[js] = i

@@ -12,7 +12,8 @@
 The environment is duck-typed: only ``env.bounds``, ``env.is_free(points, margin)``,
 ``env.exact_clearance(points)``, ``env.segment_clearance(a, b)`` and ``env.segment_is_free(a, b, margin)`` are used (see
 :class:`tmr.world.environment.Environment`). Clearances are signed distances [m] to the obstacles inflated by the
-robot safety radius.
+robot safety radius. The leader is a robot: low obstacles (:class:`tmr.world.environment.LowObstacle`) are
+obstacles here like any other (the whole ``env``, never its ``tether_environment``).
 """
 
 from __future__ import annotations

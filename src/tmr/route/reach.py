@@ -5,6 +5,10 @@ chain of
 two 5.6 m tethers may be long enough and still unable to wrap it, because no point sees both the anchor and the goal
 within 5.6 m. This module proves such cases (``formulations/route.md`` §2).
 
+Low obstacles: :func:`tmr.route.witness.proven_too_few` hands :func:`chain_is_impossible` the tethers' world
+(``env.tether_environment``, without them: a relaxation, so a proof there is a proof); :func:`find_chain` places its
+robots in ``env`` and tests its chords in the tethers' world.
+
 A chain of N robots is the polyline p_0 = anchor, p_1, …, p_N = goal with every chord p_{k-1} p_k in the free space F
 (the room minus the obstacles grown by r) and no longer than d_k. Let R_k be the set of points that can be p_k. On a
 grid of square cells of side h (half-diagonal e = h/√2), :func:`chain_is_impossible` builds cell sets R̂_k ⊇ R_k:
@@ -720,7 +724,8 @@ def _search(
     xs, ys = np.meshgrid(np.arange(xmin + step / 2, xmax, step), np.arange(ymin + step / 2, ymax, step))
     P = np.stack([xs.ravel(), ys.ravel()], axis=1)
     P = P[np.linalg.norm(P - g, axis=1) <= rest[1] + 1e-9]
-    P = np.vstack([P[env.is_free(P, clearance)], g, a])
+    P = np.vstack([P[env.is_free(P, clearance)], g, a])  # robots: in env
+    tenv = getattr(env, "tether_environment", env)  # chords: over the low obstacles
     goal_i, anchor_i = len(P) - 2, len(P) - 1
     if geodesic is not None:  # candidates in order of the geodesic distance: index order is search order
         geo = geodesic(P)
@@ -752,7 +757,7 @@ def _search(
             for c in batches:
                 if not len(c):
                     continue
-                ok = c[env.segment_is_free(np.broadcast_to(P[s], (len(c), 2)), P[c], margin)]
+                ok = c[tenv.segment_is_free(np.broadcast_to(P[s], (len(c), 2)), P[c], margin)]
                 level[ok], parent[ok] = k + 1, s
                 reached.extend(ok.tolist())
                 got += len(ok)

@@ -15,6 +15,10 @@ From a :class:`tmr.route.route.Route` (the shortest free route and its stations)
   (peak speed 15 L / (8 T), peak acceleration 10 L / (√3 T²)) unless T_end is given;
 * **follower references**: robot i trails the leader along the guide by (N − i) spacings and stops at its station,
   so robots fill the stations from the back as the leader advances.
+
+Low obstacles (:class:`tmr.world.environment.LowObstacle`): a robot's position and motion are tested in ``env``, a
+tether's chord in ``env.tether_environment`` (:func:`tmr.route.geodesic.tether_env`): a chord may pass over a low
+obstacle, whose cable height the per-step QP keeps.
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tmr.route.geodesic import SPACING_MARGIN, anchor_tether_clearance, bend_offsets
+from tmr.route.geodesic import SPACING_MARGIN, anchor_tether_clearance, bend_offsets, tether_env
 from tmr.route.path import Trajectory, time_law
 from tmr.route.route import (
     CHORD_CLEARANCE,
@@ -103,10 +107,11 @@ def _free_chain(env: Any, base: Array, P: Array, clear: float) -> bool:
     anchor's own clearance if that is less: an anchor placed next to a wall)."""
     starts = np.vstack([base, P[:-1]])
     need = np.full(len(P), min(clear, CHORD_START_CLEARANCE))
-    need[0] = min(need[0], 0.5 * float(np.asarray(env.exact_clearance(base))))
+    tenv = tether_env(env)
+    need[0] = min(need[0], 0.5 * float(np.asarray(tenv.exact_clearance(base))))
     return bool(
         np.all(np.asarray(env.exact_clearance(P), float) > clear)
-        and np.all(np.asarray(env.segment_clearance(starts, P), float) > need)
+        and np.all(np.asarray(tenv.segment_clearance(starts, P), float) > need)
     )
 
 
@@ -236,7 +241,7 @@ def _along(
         if not len(cand):
             return []
         need = first if j == 0 else CHORD_START_CLEARANCE
-        ok = env.segment_is_free(np.repeat(cur[None], len(cand), 0), S[cand], need)
+        ok = tether_env(env).segment_is_free(np.repeat(cur[None], len(cand), 0), S[cand], need)
         ok &= np.asarray(env.exact_clearance(S[cand]), float) > clear
         wide = ok & (np.linalg.norm(S[cand] - cur, axis=1) >= spacing)
         # the first free point one spacing away, then the free ones nearer (a hairpin's apex), then farther ones
@@ -318,7 +323,8 @@ def _snakes(
         idx = np.flatnonzero(ok)
         if not len(idx):
             return
-        free = np.asarray(env.segment_clearance(np.repeat(pts[-1][None], len(idx), 0), C[idx]), float) > clear + 0.05
+        chords = tether_env(env).segment_clearance(np.repeat(pts[-1][None], len(idx), 0), C[idx])
+        free = np.asarray(chords, float) > clear + 0.05
         idx = idx[free]
         far = (
             -np.linalg.norm(C[idx] - pts[0], axis=1)
@@ -350,6 +356,7 @@ def _visible_back(env: Any, guide: Array, arcs: Array, step: float = 0.1) -> tup
     s = np.linspace(0.0, L, max(2, math.ceil(L / step) + 1))
     S = point_at(guide, arcs, s)
     own = np.asarray(env.segment_clearance(S[:-1], S[1:]), dtype=float)  # guide's clearance per sample interval
+    tenv = tether_env(env)  # the follower's tether to the robot ahead may pass over a low obstacle
     back = np.zeros(len(s), dtype=np.intp)
     window = 80
     for j in range(1, len(s)):
@@ -357,7 +364,7 @@ def _visible_back(env: Any, guide: Array, arcs: Array, step: float = 0.1) -> tup
         idx = np.arange(lo, j)
         least = np.minimum.accumulate(own[lo:j][::-1])[::-1]  # guide's clearance from sample idx to sample j
         margin = np.clip(least - 0.01, 0.0, VISIBLE_CLEARANCE)
-        ok = env.segment_is_free(S[idx], np.repeat(S[j : j + 1], len(idx), 0), margin)
+        ok = tenv.segment_is_free(S[idx], np.repeat(S[j : j + 1], len(idx), 0), margin)
         bad = np.flatnonzero(~ok)
         back[j] = idx[bad[-1]] + 1 if len(bad) else lo
     return s, back
@@ -472,10 +479,11 @@ def _walk_in_view(env: Any, pos: Array, final: Array, i: int, step: float = 0.05
     k0, k1 = int(rest[0]), int(arrive[0])
     if np.linalg.norm(final[i + 1] - final[i]) < 1e-9:
         return
-    chord = float(env.segment_clearance(final[i], final[i + 1]))
+    tenv = tether_env(env)  # chords in the tethers' world, robot i+1's walk in env
+    chord = float(tenv.segment_clearance(final[i], final[i + 1]))
     margin = min(VISIBLE_CLEARANCE, 0.5 * chord) if chord > 0 else 0.0
     seg = pos[k0 : k1 + 1, i + 1]
-    seen = env.segment_is_free(np.broadcast_to(final[i], seg.shape), seg, margin)
+    seen = tenv.segment_is_free(np.broadcast_to(final[i], seg.shape), seg, margin)
     if seen.all():
         return
     F = final[i + 1]
@@ -483,7 +491,7 @@ def _walk_in_view(env: Any, pos: Array, final: Array, i: int, step: float = 0.05
         P = pos[kp, i + 1].copy()
         m = max(2, math.ceil(float(np.linalg.norm(F - P)) / step) + 1)
         line = P + np.linspace(0.0, 1.0, m)[:, None] * (F - P)
-        fan = env.segment_is_free(np.broadcast_to(final[i], line.shape), line, margin)
+        fan = tenv.segment_is_free(np.broadcast_to(final[i], line.shape), line, margin)
         if env.segment_is_free(P, F, margin) and fan.all():
             break
     else:
@@ -508,7 +516,7 @@ def _stays_joined(env: Any, P: Array, start_arcs: Array, f_arcs: Array, f_pts: A
     return bool(
         lo + 0.02 <= d <= hi
         and gaps.min() >= 2 * float(env.safety_radius) + 0.02
-        and env.segment_is_free(P[k - 1], f_pts[0], CHORD_CLEARANCE)
+        and tether_env(env).segment_is_free(P[k - 1], f_pts[0], CHORD_CLEARANCE)
     )
 
 

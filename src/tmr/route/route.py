@@ -25,6 +25,13 @@ The single source of "is this possible, and how many robots" (``formulations/rou
      (``n_route`` keeps the route chain's) and, for N below ``n_route``, that chain's polyline is the guide.
 
 A goal in another connected piece of free space raises :class:`NoRouteError`. Nothing here plans motion.
+
+**Low obstacles** (``env.low_obstacles``, a step or a cable tray): obstacles for the robots, not for the tethers. The
+route (where the leader drives), the anchor and goal checks, the free-space pieces and the packing bound read
+``env``; L_lower and the corner proof read ``env.tether_environment`` (the room without them: a chain is a polyline
+in the tethers' free space, so the bounds stay proven lower bounds); the stations' chords and every chain searched
+test their chords there too, their robots in ``env``. The per-step QP then keeps the cable's actual height above a
+low obstacle. Without low obstacles the two worlds are the same object and nothing changes.
 """
 
 from __future__ import annotations
@@ -57,6 +64,7 @@ from tmr.route.geodesic import (
     guide_arcs,
     point_at,
     stations,
+    tether_env,
 )
 from tmr.route.witness import (
     TightChain,
@@ -348,7 +356,7 @@ def plan_route(
     if robots is not None:  # before any search: more robots than fit in the room at once (a proof, milliseconds)
         check_fit(env, base, robots)
     # lower bound: the shortest path in a region that contains the free space (grown by t, then simplified)
-    lower = _Graph(env, 0.0, outward=True).shortest(base, goal)
+    lower = _Graph(tether_env(env), 0.0, outward=True).shortest(base, goal)  # chains live in the tethers' world
     L_lower = float(guide_arcs(lower)[-1]) if lower is not None else 0.0
     d_max = float(lim[:, 1].max())
     ladder = [m for m in dict.fromkeys((margin, margin / 2, NARROW_MARGIN)) if m >= min(margin, NARROW_MARGIN)]

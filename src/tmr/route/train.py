@@ -26,6 +26,9 @@ longer plan (``formulations/route.md``, "Train references"):
 The result is a :class:`tmr.route.references.ChainReference` (the leader's trajectory and every robot's reference), so
 the
 QP tracks it exactly as it tracks the trailing references.
+
+Low obstacles: the robots' positions and moves are tested in ``env``, the tethers' chords in
+``env.tether_environment`` (:func:`tmr.route.geodesic.tether_env`; a chord may pass over a low obstacle).
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
+from tmr.route.geodesic import tether_env
 from tmr.route.path import Trajectory, min_jerk
 from tmr.route.references import ChainReference, leader_duration
 from tmr.route.route import RouteVerdict, guide_arcs, point_at
@@ -357,8 +361,17 @@ def _behind(paths: _Paths, i: int, pts: Array) -> NDArray[np.bool_]:
 class _State:
     """The train's current positions and the tests of a move of one robot."""
 
-    def __init__(self, env: Any, base: Array, X: Array, limits: TrainLimits, paths: _Paths | None = None) -> None:
+    def __init__(
+        self,
+        env: Any,
+        base: Array,
+        X: Array,
+        limits: TrainLimits,
+        paths: _Paths | None = None,
+        tenv: Any = None,
+    ) -> None:
         self.env, self.base, self.X, self.lim, self.paths = env, base, X, limits, paths
+        self.tenv = env if tenv is None else tenv  # the tethers' world (without the low obstacles)
         self.compact = True  # the SLACK rule (advances along the paths; repairs may stretch a tether)
 
     def _tethers(self, i: int) -> list[tuple[Array, int, str]]:
@@ -375,9 +388,9 @@ class _State:
         now = float(env.exact_clearance(here))
         out = [("clearance", 1, partial(_clear, env, min(c, now) - 1e-9))]
         for end, row, name in self._tethers(i):
-            now = float(env.segment_clearance(end, here))
+            now = float(self.tenv.segment_clearance(end, here))
             margin = c if now > c else max(0.0, now - 1e-9)
-            out.append((f"clearance of the tether to {name}", 2, partial(_tether_clear, env, end, margin)))
+            out.append((f"clearance of the tether to {name}", 2, partial(_tether_clear, self.tenv, end, margin)))
             d = float(np.linalg.norm(here - end))
             lo, hi = self.lim.spans[row]
             out.append(
@@ -431,7 +444,7 @@ def _repair(state: _State, paths: _Paths, mover: int, other: int, step: float) -
     """A free position Q within ``REPAIR_RADIUS`` of robot ``mover``, reachable by a straight move keeping every
     limit, that lets robot ``other`` advance farthest along its path — far enough from it and, for a neighbour,
     joined to it by a free tether of allowed length (ties: the nearest Q); None if no Q lets ``other`` advance."""
-    env, lim, X = state.env, state.lim, state.X
+    lim, X, tenv = state.lim, state.X, state.tenv
     r = np.arange(-REPAIR_RADIUS, REPAIR_RADIUS + 1e-9, REPAIR_GRID)
     G = X[mover] + np.stack(np.meshgrid(r, r, indexing="ij"), axis=-1).reshape(-1, 2)
     G = G[np.linalg.norm(G - X[mover], axis=1) <= REPAIR_RADIUS]
@@ -441,7 +454,7 @@ def _repair(state: _State, paths: _Paths, mover: int, other: int, step: float) -
     ahead = paths.at(other, u)
     neighbours = abs(mover - other) == 1
     if neighbours:  # ``other``'s first step at least
-        G = G[env.segment_is_free(G, ahead[0], lim.clearance)]
+        G = G[tenv.segment_is_free(G, ahead[0], lim.clearance)]
     G = G[state.valid(mover, G)] if len(G) else G
     if not len(G):
         return None
@@ -455,7 +468,7 @@ def _repair(state: _State, paths: _Paths, mover: int, other: int, step: float) -
     for col in range(len(u)):  # the prefix of ``other``'s steps each Q allows, column by column
         alive = alive[ok[alive, col]]
         if neighbours and len(alive):
-            alive = alive[env.segment_is_free(G[alive], ahead[col], lim.clearance)]
+            alive = alive[tenv.segment_is_free(G[alive], ahead[col], lim.clearance)]
         if not len(alive):
             break
         gain[alive] += 1
@@ -474,7 +487,9 @@ def _search(env: Any, base: Array, paths: _Paths, limits: TrainLimits, step: flo
     """Moves (robot, polyline travelled), grouped by sweep (module docstring)."""
     N = len(paths.length)
     X = np.array([paths.at(i, 0.0) for i in range(N)])
-    state = _State(_Fast(env, limits.clearance), base, X, limits, paths)
+    fast = _Fast(env, limits.clearance)
+    tenv = tether_env(env)
+    state = _State(fast, base, X, limits, paths, fast if tenv is env else _Fast(tenv, limits.clearance))
     sweeps: list[list[tuple[int, Array]]] = []
     count = 0
     stuck, best = 0, float(paths.garc.sum() + np.sum(paths.u >= paths.length - 1e-9))
@@ -713,7 +728,7 @@ def _states_valid(env: Any, base: Array, X: Array, limits: TrainLimits) -> bool:
     if np.any(np.asarray(env.exact_clearance(X), float) <= c):
         return False
     starts = np.concatenate([np.broadcast_to(base, (k, 1, 2)), X[:, :-1]], axis=1)
-    if not np.all(env.segment_is_free(starts, X, c)):
+    if not np.all(tether_env(env).segment_is_free(starts, X, c)):
         return False
     length = np.linalg.norm(X - starts, axis=2)
     if np.any(length < limits.spans[:, 0] - 1e-9) or np.any(length > limits.spans[:, 1] + 1e-9):

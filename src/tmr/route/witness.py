@@ -1,6 +1,12 @@
 """Proofs and witnesses for the route's verdict on N robots: the length bound, the proof that N are too few, and
 the chains that show N can do it (a witness along the route, a clear chain found anywhere, a chain only tight
 against the obstacles). Used by :func:`tmr.route.route.plan_route` (``formulations/route.md``).
+
+Low obstacles (``env.low_obstacles``): the proof :func:`proven_too_few` runs in ``env.tether_environment`` (the
+robots relaxed onto the low obstacles too: a relaxation, so still a proof); the chains found keep their robots in
+``env`` and test their chords in the tethers' world (:func:`tmr.route.geodesic.tether_env`), except the widening
+(:func:`tmr.route.chain_clearance.widen_chain`), which keeps chords off the low obstacles too (conservative: it may
+find fewer chains, never a wrong one).
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from tmr.route.geodesic import (
     anchor_tether_clearance,
     guide_arcs,
     stations,
+    tether_env,
 )
 
 Array = NDArray[np.float64]
@@ -35,11 +42,18 @@ def proven_too_few(env: Any, base: ArrayLike, goal: ArrayLike, lim: ArrayLike, r
     """Whether ``robots`` robots are proven too few to chain from ``base`` to ``goal`` with the tethers' upper limits
     of ``lim`` (N, 2) [m]: :func:`tmr.route.reach.chain_is_impossible` with the refinement and narrowing budgets the
     route
-    uses (``REFINE_WORK``, ``NARROW_WORK``)."""
+    uses (``REFINE_WORK``, ``NARROW_WORK``), in the tethers' world (:func:`tether_env`: a relaxation of the low
+    obstacles, so still a proof)."""
     from tmr.route.reach import NARROW_WORK, REFINE_WORK, chain_is_impossible
 
     return robots >= 1 and chain_is_impossible(
-        env, base, goal, np.asarray(lim, float)[:, 1], robots, refine_work=REFINE_WORK, narrow_work=NARROW_WORK
+        tether_env(env),
+        base,
+        goal,
+        np.asarray(lim, float)[:, 1],
+        robots,
+        refine_work=REFINE_WORK,
+        narrow_work=NARROW_WORK,
     )
 
 
@@ -131,7 +145,10 @@ def best_pair(
     better.
     """
     lo, hi = spans[0], spans[min(1, len(spans) - 1)]
-    both = env.visible_region(base, lo[1]).intersection(env.visible_region(goal, hi[1]))
+    tenv = tether_env(env)  # chords over the low obstacles; robot 1 in env's free space
+    both = tenv.visible_region(base, lo[1]).intersection(tenv.visible_region(goal, hi[1]))
+    if tenv is not env:
+        both = both.intersection(env.free)
     if both.is_empty:
         return None
     x0, y0, x1, y1 = both.bounds
@@ -143,7 +160,7 @@ def best_pair(
     P = P[(da >= lo[0]) & (da <= lo[1]) & (dg >= max(hi[0], spacing)) & (dg <= hi[1])]
     if not len(P):
         return None
-    score = np.minimum(env.segment_clearance(base, P) - keep[0], env.segment_clearance(P, goal) - keep[1])
+    score = np.minimum(tenv.segment_clearance(base, P) - keep[0], tenv.segment_clearance(P, goal) - keep[1])
     i = int(np.argmax(score))
     return P[i], float(score[i]), step
 
@@ -181,7 +198,7 @@ def tight_chain(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> 
 def _shortfall(env: Any, base: Array, lim: Array, chain: Array, searched: str) -> TightChain | None:
     """The tether of ``chain`` that falls shortest of what the stations need of it, or None if none falls short."""
     first = _witness_requirements(env, base, lim)[0]
-    c = np.asarray(env.segment_clearance(chain[:-1], chain[1:]), float)
+    c = np.asarray(tether_env(env).segment_clearance(chain[:-1], chain[1:]), float)
     need = _needs(first, len(c))
     k = int(np.argmin(c - need))
     if c[k] > need[k]:  # no shortfall: a witness, no explanation
@@ -229,8 +246,12 @@ def clear_chain(env: Any, base: Array, goal: Array, lim: Array, robots: int) -> 
 
 
 def _all_clear(env: Any, chain: Array) -> bool:
-    """Whether every tether of ``chain`` (n + 1, 2) is clear of the grown obstacles (exact clearance > 0)."""
-    return bool(np.all(np.asarray(env.segment_clearance(chain[:-1], chain[1:])) > 0))
+    """Whether every tether of ``chain`` (n + 1, 2) is clear of the grown obstacles (exact clearance > 0; the
+    tethers' world, :func:`tether_env`) and, with low obstacles, every robot of it in ``env``'s free space."""
+    tenv = tether_env(env)
+    if tenv is not env and not np.all(np.asarray(env.exact_clearance(chain[1:-1])) > 0):
+        return False
+    return bool(np.all(np.asarray(tenv.segment_clearance(chain[:-1], chain[1:])) > 0))
 
 
 def _witness_along(chain: Array, route: _Along) -> _Along:

@@ -99,6 +99,9 @@ class _Scene:
             path = MplPath.make_compound_path(*[_polygon_path(p) for p in motion.obstacles])
             ax.add_patch(PathPatch(path, facecolor="#9e9e9e", edgecolor="#424242", lw=0.8, zorder=1))
             handles.append(Rectangle((0, 0), 1, 1, facecolor="#9e9e9e", edgecolor="#424242", label="obstacle"))
+        from tmr.views.plot import draw_low_obstacles
+
+        handles += draw_low_obstacles(ax, motion.low_obstacles)
         if motion.inflated_in_room():
             segs = [s for p in motion.inflated_in_room() for s in _boundary_segments(p)]
             ax.add_collection(LineCollection(segs, colors="#555555", linestyles=(0, (4, 3)), linewidths=0.8, zorder=2))

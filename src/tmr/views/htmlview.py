@@ -135,6 +135,27 @@ def build_figure(motion: Motion, max_frames: int = 200) -> Any:
                 hoverinfo="skip",
             )
         )
+    from tmr.views.motion import _polygons
+
+    low_polys = [(low, poly) for low in motion.low_obstacles for poly in _polygons(low.footprint)]
+    for i, (low, poly) in enumerate(low_polys):  # a tether may pass over them: lighter, hatched, with the height
+        xs, ys = _ring_xy(poly)
+        fig.add_trace(
+            go.Scatter(
+                x=xs,
+                y=ys,
+                fill="toself",
+                mode="lines",
+                fillcolor="#e0d5b8",
+                fillpattern={"shape": "/", "fgcolor": "#8d6e63"},
+                line={"color": "#8d6e63", "width": 1},
+                name="low obstacle",
+                legendgroup="low obstacle",
+                showlegend=i == 0,
+                text=f"{low.name}: {low.height:.2f} m",
+                hoverinfo="text",
+            )
+        )
     for i, poly in enumerate(motion.inflated_in_room()):
         xs, ys = _ring_xy(poly)
         fig.add_trace(

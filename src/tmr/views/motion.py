@@ -77,7 +77,9 @@ class Motion:
         t: (K,) stamps [s], increasing.
         tracks: moving bodies, each sampled at ``t``.
         lines: moving polylines, each sampled at ``t``.
-        obstacles: raw obstacle polygons (shapely) in the room.
+        obstacles: raw obstacle polygons (shapely) in the room (the tall ones).
+        low_obstacles: :class:`tmr.world.environment.LowObstacle` s (``name``, ``footprint``, ``height`` [m]): the
+            robots avoid them, a tether may pass over them; drawn lighter and hatched with their height.
         inflated: obstacles grown by the safety radius (shapely polygons), drawn as outlines; may be empty.
         bounds: room (xmin, ymin, xmax, ymax) [m].
         view: the part of the room the views frame (xmin, ymin, xmax, ymax) [m], or None for the whole room: the
@@ -102,6 +104,7 @@ class Motion:
     timed: bool = True
     trail: str | None = None
     notes: tuple[str, ...] = ()
+    low_obstacles: tuple[Any, ...] = ()
 
     def __post_init__(self) -> None:
         t = np.asarray(self.t, dtype=float)
@@ -165,7 +168,7 @@ def _room_parts(env: Any) -> tuple[tuple[Any, ...], tuple[Any, ...], tuple[float
 
     bounds = tuple(float(v) for v in env.bounds)
     parts = []
-    for geom in (getattr(env, "obstacles", None), getattr(env, "inflated", None)):
+    for geom in (getattr(env, "tall_obstacles", getattr(env, "obstacles", None)), getattr(env, "inflated", None)):
         polys: list[Any] = []
         if geom is not None and not geom.is_empty:
             for part in shapely.get_parts(geom):
@@ -236,6 +239,7 @@ def chain_motion(plan: Any, env: Any, chain_params: Any = None, title: str | Non
         bounds=bounds,
         title=title or f"Scenario {plan.scenario}, {plan.method}: {n} tethered robots{verdict}",
         view=_known_view(env),
+        low_obstacles=tuple(getattr(env, "low_obstacles", ())),
     )
 
 
@@ -257,6 +261,7 @@ def tethered_chain(
     bounds: tuple[float, float, float, float],
     title: str,
     view: tuple[float, float, float, float] | None = None,
+    low_obstacles: tuple[Any, ...] = (),
 ) -> Motion:
     """Motion of a tethered chain: ``robots`` (K, N, 2) [m] at stamps ``t`` (K,) [s], robot N the leader.
 
@@ -298,6 +303,7 @@ def tethered_chain(
             f"robot disc = safety radius {radius:g} m; tethers hang as catenaries (T0 = {cat.horizontal_tension:g} N, "
             f"rho = {cat.mass_per_length:g} kg/m)",
         ),
+        low_obstacles=tuple(low_obstacles),
     )
 
 

@@ -39,6 +39,10 @@ RAW_COLOR = "#1f77b4"  # blue: planner output
 FILTERED_COLOR = "#d62728"  # red: filtered (as in Caruso 2021 Figs. 6 and 8)
 OBSTACLE_FACE = "#9e9e9e"
 INFLATED_EDGE = "#555555"
+#: Low obstacles (a tether may pass over them): a lighter hatched fill, labelled with their height.
+LOW_OBSTACLE_FACE = "#e0d5b8"
+LOW_OBSTACLE_EDGE = "#8d6e63"
+LOW_OBSTACLE_HATCH = "////"
 TIME_CMAP = "viridis"
 #: Height [in] of one legend row at font size 8.
 LEGEND_ROW = 0.19
@@ -123,14 +127,61 @@ def _boundary_segments(geom: Any) -> list[np.ndarray]:
     return out
 
 
+def draw_low_obstacles(ax: Any, low_obstacles: Any, zorder: float = 1.5) -> list[Any]:
+    """Low obstacles (:class:`tmr.world.environment.LowObstacle`: ``footprint``, ``height`` [m]) as a lighter hatched
+    fill, each labelled with its height ("0.2 m") at a point inside it; returns the legend handle ("low obstacle"),
+    none if there are none."""
+    lows = list(low_obstacles or ())
+    if not lows:
+        return []
+    for low in lows:
+        polys = _polygons(low.footprint)
+        if not polys:
+            continue
+        ax.add_patch(
+            PathPatch(
+                MplPath.make_compound_path(*[_polygon_path(p) for p in polys]),
+                facecolor=LOW_OBSTACLE_FACE,
+                edgecolor=LOW_OBSTACLE_EDGE,
+                hatch=LOW_OBSTACLE_HATCH,
+                lw=0.8,
+                zorder=zorder,
+            )
+        )
+        at = low.footprint.representative_point()
+        ax.annotate(
+            f"{low.height:.2f} m",
+            (at.x, at.y),
+            ha="center",
+            va="center",
+            fontsize=7,
+            color="#4e342e",
+            zorder=zorder + 0.1,
+            bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8},
+        )
+    label = "low obstacle (tethers may pass over)"
+    return [
+        Rectangle(
+            (0, 0),
+            1,
+            1,
+            facecolor=LOW_OBSTACLE_FACE,
+            edgecolor=LOW_OBSTACLE_EDGE,
+            hatch=LOW_OBSTACLE_HATCH,
+            label=label,
+        )
+    ]
+
+
 def _draw_environment(ax: Any, env: Any) -> list[Any]:
-    """Raw obstacles filled, inflated obstacles dashed outline, room bounds; returns legend handles."""
+    """Raw obstacles filled (the tall ones; low obstacles lighter and hatched, :func:`draw_low_obstacles`), inflated
+    obstacles dashed outline, room bounds; returns legend handles."""
     from shapely.geometry import box  # local: shapely is only needed when an environment is drawn
 
     handles: list[Any] = []
     bounds = tuple(float(v) for v in env.bounds)
     room = box(*bounds)
-    obstacles = getattr(env, "obstacles", None)
+    obstacles = getattr(env, "tall_obstacles", getattr(env, "obstacles", None))
     polys = _polygons(obstacles.intersection(room)) if obstacles is not None else []
     if polys:
         patch = PathPatch(
@@ -142,6 +193,7 @@ def _draw_environment(ax: Any, env: Any) -> list[Any]:
         )
         ax.add_patch(patch)
         handles.append(Rectangle((0, 0), 1, 1, facecolor=OBSTACLE_FACE, edgecolor="#424242", label="obstacle"))
+    handles += draw_low_obstacles(ax, getattr(env, "low_obstacles", ()))
     inflated = getattr(env, "inflated", None)
     if inflated is not None:
         segs = _boundary_segments(inflated.intersection(room))

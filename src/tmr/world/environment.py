@@ -18,6 +18,13 @@ Two kinds of query:
 * exact queries (shapely/GEOS): :meth:`Environment.exact_clearance`, :meth:`Environment.segment_clearance` and
   :meth:`Environment.is_free`, used for validity checks (path planner, metrics).
 
+**Low obstacles** (a step, a cable tray: :class:`LowObstacle`, a footprint and a height [m]) are obstacles for the
+robots -- every query above includes them exactly like the tall ones, a robot cannot drive over them -- but a tether
+may pass over them. :attr:`Environment.tether_environment` is the same room without them (the world of the tethers'
+plan-view chords); :meth:`Environment.low_obstacle_distance` measures the plan-view distance to each bare footprint.
+Whether a cable actually clears a low obstacle is a question of its height there (the per-step QP and the checker
+of :mod:`tmr.checks.metrics` answer it with the catenary).
+
 Map files (ROS ``map_server``/Nav2, GeoJSON, WKT) are turned into geometry by :mod:`tmr.world.maps`
 (:func:`tmr.world.maps.load_environment`); occupancy-grid maps are **polygonised** there (occupied and unknown cells
 become unions of boxes), so every query works the same for every map source.
@@ -27,6 +34,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -44,9 +52,11 @@ __all__ = [
     "DEFAULT_SAFETY_RADIUS",
     "Bounds",
     "Environment",
+    "LowObstacle",
     "bilinear_interpolate",
     "check_bounds",
     "check_geometry",
+    "refuse_low_obstacles",
 ]
 
 Bounds = tuple[float, float, float, float]
@@ -143,6 +153,36 @@ def bilinear_interpolate(
 # ------------------------------------------------------------------------------------------------------------
 # Environment
 # ------------------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class LowObstacle:
+    """An obstacle the robots must avoid but a tether may pass over (a step, a cable tray).
+
+    ``name``: a label (the GeoJSON feature's ``name``); ``footprint``: its bare plan-view footprint (shapely Polygon or
+    MultiPolygon, not grown by the robot radius) [m]; ``height``: its top above the floor [m] (> 0; heights below the
+    tethers' exit height 0.43 m are the interesting case). A map gives one with a GeoJSON feature carrying a numeric
+    ``"height"`` property (:mod:`tmr.world.maps`). A cable is never higher than its higher end, so a low obstacle at
+    or above the exit height minus ``low_obstacle_clearance`` can never be passed over: every crossing fails the
+    checker (make it tall instead).
+    """
+
+    name: str
+    footprint: BaseGeometry
+    height: float
+
+    def __post_init__(self) -> None:
+        h = self.height
+        if isinstance(h, bool) or not isinstance(h, int | float | np.floating) or not math.isfinite(h) or h <= 0:
+            raise ParameterError(f"low obstacle {self.name!r}: height must be a positive number of metres, got {h!r}")
+        object.__setattr__(self, "height", float(h))
+        g = self.footprint
+        if not isinstance(g, shapely.Polygon | shapely.MultiPolygon) or g.is_empty or g.area <= 0.0:
+            raise MapError(
+                f"low obstacle {self.name!r}: the footprint must be a polygon with an area (a polygon, a point with a "
+                f"'radius' or a line with a 'width'), got {getattr(g, 'geom_type', type(g).__name__)}"
+            )
+        check_geometry(g, f"low obstacle {self.name!r}")
+
+
 class Environment:
     """A rectangular room with obstacles, inflated by the robot safety radius, with clearance queries.
 
@@ -152,7 +192,11 @@ class Environment:
     * ``bounds`` (xmin, ymin, xmax, ymax) [m] -- the room; outside is wall.
     * ``safety_radius`` r [m] -- robot radius; obstacles are grown by r and the walls inward by r.
     * ``resolution`` [m] -- cell size of the signed distance field.
-    * ``obstacles`` -- raw obstacles (shapely, union, clipped to the room), for plotting.
+    * ``obstacles`` -- raw obstacles (shapely, union, clipped to the room), the low obstacles' footprints included.
+    * ``tall_obstacles`` -- the raw obstacles without the low ones (``obstacles`` when there are none).
+    * ``low_obstacles`` -- the :class:`LowObstacle` s (bare footprints and heights): obstacles for the robots (in
+      ``obstacles``, ``inflated``, ``free`` and every clearance query), not for the tethers
+      (:attr:`tether_environment`, :meth:`low_obstacle_distance`).
     * ``inflated`` -- obstacles grown by r plus the walls grown by r (a frame covering the room box grown by
       r); everything outside the room is an obstacle too.
     * ``free`` -- the free space (Polygon or MultiPolygon), the complement of ``inflated`` in the room;
@@ -173,6 +217,7 @@ class Environment:
         resolution: float = DEFAULT_RESOLUTION,
         *,
         source: str | Path | None = None,
+        low_obstacles: Iterable[LowObstacle] = (),
     ) -> None:
         where = str(source) if source is not None else "environment"
         self.source: Path | None = Path(source) if source is not None else None
@@ -194,7 +239,17 @@ class Environment:
 
         self.room = box(xmin, ymin, xmax, ymax)
         raw = _union_obstacles(obstacles, where)
-        self.obstacles: BaseGeometry = raw.intersection(self.room) if not raw.is_empty else raw
+        self.low_obstacles: tuple[LowObstacle, ...] = tuple(low_obstacles)
+        for k, low in enumerate(self.low_obstacles):
+            if not isinstance(low, LowObstacle):
+                raise MapError(f"{where}: low obstacle #{k} is not a LowObstacle: {type(low).__name__}")
+        tall = raw.intersection(self.room) if not raw.is_empty else raw
+        self.tall_obstacles: BaseGeometry = tall
+        if self.low_obstacles:
+            both = shapely.union_all([raw, *(low.footprint for low in self.low_obstacles)])
+            self.obstacles: BaseGeometry = both.intersection(self.room)
+        else:
+            self.obstacles = tall
 
         if xmax - xmin <= 2 * r or ymax - ymin <= 2 * r:
             width = f"{2 * r:g} m" if math.isfinite(2 * r) else f"2 × {r:g} m"  # 2r overflows for r ≥ 9e307
@@ -223,41 +278,103 @@ class Environment:
         bounds: Sequence[float],
         safety_radius: float = DEFAULT_SAFETY_RADIUS,
         resolution: float = DEFAULT_RESOLUTION,
+        *,
+        low_obstacles: Iterable[LowObstacle] = (),
     ) -> Environment:
         """Environment from shapely obstacles (one geometry, a list of them, or None for an empty room).
 
         Polygons are solid obstacles; lines and points are zero-thickness obstacles (they still block a band
         of width 2 r once inflated). ``bounds`` = (xmin, ymin, xmax, ymax) [m]; ``safety_radius`` [m];
-        ``resolution`` [m] cell of the distance field. Invalid geometry raises MapError.
+        ``resolution`` [m] cell of the distance field; ``low_obstacles``: :class:`LowObstacle` s (obstacles for the
+        robots, not for the tethers). Invalid geometry raises MapError.
         """
-        return cls(obstacles, bounds, safety_radius, resolution)
+        return cls(obstacles, bounds, safety_radius, resolution, low_obstacles=low_obstacles)
 
     def with_safety_radius(self, safety_radius: float) -> Environment:
         """The same room and obstacles with the obstacles grown by another robot radius ``safety_radius`` [m]
         (``self`` when it is already that radius)."""
         if float(safety_radius) == self.safety_radius:
             return self
-        env = Environment(self.obstacles, self.bounds, safety_radius, self.resolution, source=self.source)
+        env = Environment(
+            self.tall_obstacles,
+            self.bounds,
+            safety_radius,
+            self.resolution,
+            source=self.source,
+            low_obstacles=self.low_obstacles,
+        )
         env.known_free = self.known_free
         return env
+
+    # --------------------------------------------------------------------------------------------------------
+    # low obstacles
+    @cached_property
+    def tether_environment(self) -> Environment:
+        """The world of the tethers' plan-view chords: the same room, safety radius and resolution without the low
+        obstacles (a tether may pass over them; whether the cable's height clears one is checked on the catenary).
+        ``self`` when there are no low obstacles, so nothing changes for a world without them. Cached."""
+        if not self.low_obstacles:
+            return self
+        env = Environment(self.tall_obstacles, self.bounds, self.safety_radius, self.resolution, source=self.source)
+        env.known_free = self.known_free
+        return env
+
+    def low_obstacle_distance(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Exact plan-view signed distance [m] of points (M, 2) to each low obstacle's bare footprint, and its gradient.
+
+        Returns ``dist`` (M, n_low): > 0 outside footprint o, the distance to it; < 0 inside, minus the distance to
+        its boundary (shapely/GEOS, exact on the polygon); and ``grad`` (M, n_low, 2), dimensionless: the unit vector
+        away from the footprint (outside: from the nearest footprint point to the point; inside: from the point to
+        the nearest boundary point, the way out), the gradient of ``dist`` wherever it is differentiable. On the
+        boundary itself (distance 0) the direction from the footprint's centroid. ``n_low`` may be 0.
+        """
+        pts = _as_points(points).reshape(-1, 2)
+        m, n = len(pts), len(self.low_obstacles)
+        dist = np.zeros((m, n))
+        grad = np.zeros((m, n, 2))
+        if m == 0 or n == 0:
+            return dist, grad
+        geoms = shapely.points(pts)
+        for o, low in enumerate(self.low_obstacles):
+            fp = low.footprint
+            inside = shapely.contains_xy(fp, pts[:, 0], pts[:, 1])
+            target = np.where(inside, shapely.boundary(fp), fp)
+            line = shapely.shortest_line(geoms, target)
+            ends = shapely.get_coordinates(line).reshape(m, 2, 2)  # [point, nearest point of the target]
+            vec = ends[:, 0] - ends[:, 1]
+            d = np.hypot(vec[:, 0], vec[:, 1])
+            vec = np.where(inside[:, None], -vec, vec)
+            flat = d <= 1e-12
+            if flat.any():  # on the boundary: away from the centroid
+                c = np.asarray(fp.centroid.coords[0])
+                vec[flat] = pts[flat] - c
+            norm = np.hypot(vec[:, 0], vec[:, 1])
+            grad[:, o] = vec / np.where(norm > 0, norm, 1.0)[:, None]
+            grad[norm <= 0, o] = (1.0, 0.0)
+            dist[:, o] = np.where(inside, -d, d)
+        return dist, grad
 
     # --------------------------------------------------------------------------------------------------------
     # pickling
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
-        for key in ("_grid", "_tree"):  # cached heavy objects; rebuilt on demand
+        for key in ("_grid", "_tree", "tether_environment"):  # cached heavy objects; rebuilt on demand
             state.pop(key, None)
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
+        state.setdefault("low_obstacles", ())  # pickled before low obstacles existed
+        state.setdefault("tall_obstacles", state["obstacles"])
         self.__dict__.update(state)
         shapely.prepare(self.free)
 
     def __repr__(self) -> str:
         src = f", source={str(self.source)!r}" if self.source is not None else ""
+        low = self.low_obstacles
+        lows = f", low_obstacles={len(low)} (heights {', '.join(f'{o.height:g}' for o in low)} m)" if low else ""
         return (
             f"Environment(bounds={self.bounds}, safety_radius={self.safety_radius:g}, "
-            f"resolution={self.resolution:g}, obstacle_area={self.obstacles.area:.3f} m^2{src})"
+            f"resolution={self.resolution:g}, obstacle_area={self.obstacles.area:.3f} m^2{lows}{src})"
         )
 
     # --------------------------------------------------------------------------------------------------------
@@ -573,6 +690,15 @@ class Environment:
             hits = tree.query(shapely.points(flat[idx]), predicate="dwithin", distance=margin)
             inside[idx[np.unique(hits[0])]] = False
         return inside.reshape(pts.shape[:-1])
+
+
+def refuse_low_obstacles(env: Any, what: str, why: str) -> None:
+    """ParameterError (the command line: one line, exit 2) when ``env`` has low obstacles and ``what`` (e.g.
+    ``"--method horizon"``) cannot plan over them; ``why`` says why and what to use instead."""
+    lows = getattr(env, "low_obstacles", ())
+    if lows:
+        names = ", ".join(f"{o.name} ({o.height:g} m)" for o in lows)
+        raise ParameterError(f"{what} cannot plan over low obstacles (the map has {len(lows)}: {names}): {why}")
 
 
 # ------------------------------------------------------------------------------------------------------------

@@ -44,6 +44,7 @@ from tmr.world.environment import (
     QUAD_SEGS,
     Bounds,
     Environment,
+    LowObstacle,
     check_bounds,
     check_geometry,
 )
@@ -70,12 +71,13 @@ MODES = ("trinary", "scale", "raw")
 @dataclass(frozen=True)
 class MapGeometry:
     """What a map file holds: ``obstacles`` (shapely, raw, not grown), the room ``bounds`` (xmin, ymin, xmax, ymax)
-    [m] (None when the file does not say), and for an occupancy map ``known_free``, the bounding box [m] of its
-    known free cells (None otherwise)."""
+    [m] (None when the file does not say), for an occupancy map ``known_free``, the bounding box [m] of its
+    known free cells (None otherwise), and the ``low_obstacles`` (GeoJSON features with a ``"height"``)."""
 
     obstacles: BaseGeometry | list[BaseGeometry]
     bounds: Bounds | None
     known_free: Bounds | None = None
+    low_obstacles: tuple[LowObstacle, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -109,7 +111,7 @@ def load_environment(
             f"bounds = [xmin, ymin, xmax, ymax], Python's bounds=) or put them in the file (GeoJSON: top-level "
             f"\"bounds\" member; WKT: a '# bounds: xmin ymin xmax ymax' comment)"
         )
-    env = Environment(geo.obstacles, room, safety_radius, resolution, source=p)
+    env = Environment(geo.obstacles, room, safety_radius, resolution, source=p, low_obstacles=geo.low_obstacles)
     env.known_free = geo.known_free
     return env
 
@@ -124,7 +126,10 @@ def load_map(path: str | Path) -> MapGeometry:
       and multipolygons are obstacles; a Point (or MultiPoint) with a ``radius`` property [m] is a disc; a
       LineString with a ``width`` property [m] is a wall of that thickness (flat ends); points/lines
       without them are zero-thickness obstacles. The room is a top-level ``"bounds": [xmin, ymin, xmax, ymax]``
-      member of the document, if any.
+      member of the document, if any. A feature with a numeric ``"height"`` property [m] (> 0) is a **low
+      obstacle** of that height (:class:`~tmr.world.environment.LowObstacle`: the robots avoid it, a tether may pass
+      over it); it needs an area (a polygon, a point with a radius or a line with a width). Features without it are
+      tall obstacles.
     * ``.wkt``: one WKT geometry (e.g. a GEOMETRYCOLLECTION or MULTIPOLYGON), or one per line; ``#``
       starts a comment line; a comment ``# bounds: xmin ymin xmax ymax`` gives the room.
     """
@@ -137,7 +142,7 @@ def load_map(path: str | Path) -> MapGeometry:
     if suffix in (".yaml", ".yml"):
         return _load_ros_map(p)
     if suffix in (".geojson", ".json"):
-        return MapGeometry(*_load_geojson(p))
+        return _load_geojson(p)
     if suffix == ".wkt":
         return MapGeometry(*_load_wkt(p))
     if suffix in IMAGE_SUFFIXES:
@@ -436,14 +441,26 @@ def _geojson_geometry(obj: Any, props: dict[str, Any], what: str) -> list[BaseGe
     return [geom]
 
 
-def _load_geojson(path: Path) -> tuple[list[BaseGeometry], Bounds | None]:
+def _load_geojson(path: Path) -> MapGeometry:
     try:
         return _read_geojson(path)
     except RecursionError:  # [[[[... or GeometryCollections nested deeper than the parser's stack
         raise MapError(f"{path}: nested too deeply to be a map (GeoJSON expected)") from None
 
 
-def _read_geojson(path: Path) -> tuple[list[BaseGeometry], Bounds | None]:
+def _low_height(props: dict[str, Any], what: str) -> float | None:
+    """The ``"height"`` property [m] of a low obstacle, None when absent; MapError unless a finite number > 0."""
+    if "height" not in props or props["height"] is None:
+        return None
+    v = props["height"]
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or v <= 0:
+        raise MapError(
+            f"{what}: property 'height' (a low obstacle's height) must be a positive number of metres, got {v!r}"
+        )
+    return float(v)
+
+
+def _read_geojson(path: Path) -> MapGeometry:
     from tmr.files import read_text
 
     try:
@@ -464,7 +481,8 @@ def _read_geojson(path: Path) -> tuple[list[BaseGeometry], Bounds | None]:
     elif kind == "Feature":
         features = [doc]
     else:
-        return _geojson_geometry(doc, {}, str(path)), bounds
+        return MapGeometry(_geojson_geometry(doc, {}, str(path)), bounds)
+    lows: list[LowObstacle] = []
     for k, feat in enumerate(features):
         what = f"{path}: feature #{k}"
         if not isinstance(feat, dict) or feat.get("type") != "Feature":
@@ -474,10 +492,30 @@ def _read_geojson(path: Path) -> tuple[list[BaseGeometry], Bounds | None]:
             raise MapError(f"{what}: 'properties' must be an object")
         if props.get("name"):
             what += f" ({props['name']})"
+        height = _low_height(props, what)
         if feat.get("geometry") is None:
             continue  # GeoJSON allows unlocated features
-        geoms += _geojson_geometry(feat["geometry"], props, what)
-    return geoms, bounds
+        parts = _geojson_geometry(feat["geometry"], props, what)
+        if height is None:
+            geoms += parts
+            continue
+        footprint = _polygonal(shapely.union_all(parts))
+        if footprint.is_empty or footprint.area <= 0.0:
+            raise MapError(
+                f"{what}: a low obstacle (property 'height') needs an area: a polygon, a point with a 'radius' or a "
+                f"line with a 'width'"
+            )
+        name = props.get("name")
+        lows.append(LowObstacle(str(name) if name else f"low obstacle {len(lows) + 1}", footprint, height))
+    return MapGeometry(geoms, bounds, None, tuple(lows))
+
+
+def _polygonal(geom: BaseGeometry) -> BaseGeometry:
+    """The polygons of ``geom`` (a union may leave stray lines or points next to them)."""
+    parts = [g for g in shapely.get_parts(geom) if isinstance(g, shapely.Polygon) and not g.is_empty]
+    if not parts:
+        return shapely.Polygon()
+    return parts[0] if len(parts) == 1 else shapely.MultiPolygon(parts)
 
 
 _WKT_BOUNDS = re.compile(r"^#\s*bounds\s*[:=]\s*(.*)$", re.IGNORECASE)
