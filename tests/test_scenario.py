@@ -38,7 +38,7 @@ def scenarios() -> dict[str, Scenario]:
 
 
 def test_builtin_names() -> None:
-    assert builtin_scenarios() == ["A", "B", "C", "D", "E"]
+    assert builtin_scenarios() == ["A", "B", "C", "D", "E", "J"]
 
 
 def test_scenario_e_needs_more_than_three_robots(scenarios: dict[str, Scenario]) -> None:

@@ -491,8 +491,8 @@ def make_qp(
         from tmr.control.cable import CableOverLowObstacles
 
         cp = problem.chain_params
-        clearance = float(getattr(cp, "low_obstacle_clearance", 0.05))
-        limits.append(CableOverLowObstacles(chain, low, cp, clearance, p.approach_rate))
+        reach = float(np.max(problem.span_limits[:, 1]))
+        limits.append(CableOverLowObstacles(chain, problem.env, cp, cp.low_obstacle_clearance, p.approach_rate, reach))
     limits.extend(extra_limits)
     box = JointBox(
         chain, problem.span_limits, p.joint_speed_max, p.span_speed_max, p.accel_max, p.span_margin,
@@ -545,6 +545,10 @@ def plan(problem: Problem, method: str | Formulation = "pinv", *, progress: bool
     tensions = getattr(form, "tensions", None)
     if tensions is not None:
         result.winch_tension = tensions(result.t.size)
+    for lim in getattr(getattr(form, "qp", form), "limits", ()):
+        note = lim.note() if hasattr(lim, "note") else None
+        if note:  # what held the chain at the end (a leader that stops short says why)
+            result.diagnostics["held_by"] = note
     return result
 
 
@@ -718,7 +722,11 @@ def check(plan: Plan, env: Any, goal_tolerance: float = 0.1) -> Metrics:
         if steps
     ]
     if metrics.final_leader_error > goal_tolerance:
-        reasons.append(f"leader ends {metrics.final_leader_error:.3f} m from the goal (tolerance {goal_tolerance} m)")
+        held = plan.diagnostics.get("held_by")
+        reasons.append(
+            f"leader ends {metrics.final_leader_error:.3f} m from the goal (tolerance {goal_tolerance} m)"
+            + (f", held back: {held}" if held else "")
+        )
     if reasons:
         plan.success = False
         plan.failure = "; ".join(reasons)

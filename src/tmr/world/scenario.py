@@ -174,7 +174,7 @@ def _check_param_value(val: Any, name: str, label: str) -> None:
 
 
 def builtin_scenarios() -> list[str]:
-    """Names of the built-in ground scenarios (``["A", "B", "C", "D", "E"]``): the TOML files in ``scenarios/``
+    """Names of the built-in ground scenarios (``["A", "B", "C", "D", "E", "J"]``): the TOML files in ``scenarios/``
     without ``kind = "drone"`` (those are :func:`tmr.world.drones.builtin_drone_scenarios`)."""
     return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml") if file_kind(p) == "ground")
 
