@@ -117,6 +117,8 @@ def test_e_with_four_robots_needs_the_active_winch(e4_active) -> None:
     assert np.all(T >= p.winch_tension_min - 1e-9) and np.all(T <= p.winch_tension_max + 1e-9)
     assert np.max(np.abs(np.diff(T, axis=0))) / plan.Ts <= p.winch_tension_rate + 1e-6
     assert T.max() > 30.0  # the tension did rise: spans beyond the passive reach
+    assert 0.99 < metrics.max_span_ratio <= 1.0  # against the reach of each step's tension, not of T_max
+    assert metrics.d_max < span_limits(4, p)[1, 1]
     assert np.abs(plan.spans).max() > span_limits(4, replace(p, winch="passive"))[1, 1] + 1.0
 
 

@@ -332,6 +332,20 @@ def _winch_span_high(plan: Any, spans: np.ndarray, tension: np.ndarray, tol: flo
     return out
 
 
+def _winch_reach(plan: Any, tension: np.ndarray) -> np.ndarray:
+    """(K+1, N) d_max [m] of every tether at every step's winch tension ``tension`` [N]
+    (:func:`tmr.model.catenary.max_span`, one solve per distinct tension and end height)."""
+    from tmr.model.catenary import max_span
+
+    tp = _tether_params(plan)
+    out = np.empty(tension.shape)
+    for j in range(tension.shape[1]):
+        h1 = tp["Hb"] if j == 0 else tp["H"]
+        values, where = np.unique(tension[:, j], return_inverse=True)
+        out[:, j] = np.array([max_span(h1, tp["H"], _catenary_params(tp, T)) for T in values])[where]
+    return out
+
+
 def low_obstacle_margins(plan: Any, env: Any, robots: np.ndarray | None = None) -> np.ndarray:
     """Height margin [m] of every tether over the low obstacles it crosses, shape (K+1, N): min over the obstacles
     o whose bare footprint the plan-view chord of tether j at step k meets of min_s (z(s) − height_o −
@@ -443,7 +457,7 @@ class Metrics:
     # tether spans [m]
     max_span: float
     d_max: float  #: limit of the tether that reaches the largest span / d_max (all equal for a shared limit)
-    max_span_ratio: float  #: max over k, i of span_i / d_max_i
+    max_span_ratio: float  #: max over k, i of span_i / d_max_i (an active winch: d_max of step k's tension)
     min_span: float
     d_lo: float  #: limit of the tether that comes closest to (or furthest below) its d_lo
     # robots
@@ -583,7 +597,11 @@ def evaluate(
 
     # spans
     d_lo, d_max = span_limits(plan)
-    ratio = spans / d_max
+    reach = d_max  # an active winch: the reach of each step's tension, d_max(T_k) (max_span_ratio and d_max)
+    tension_now = _winch_tension(plan, spans.shape)
+    if tension_now is not None:
+        reach = _winch_reach(plan, tension_now)
+    ratio = spans / reach
     k_hi, i_hi = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
     k_lo, i_lo = np.unravel_index(int(np.argmin(spans - d_lo)), spans.shape)
 
@@ -642,7 +660,7 @@ def evaluate(
         min_tether_clearance=min_tc,
         min_tether_clearance_step=min_tc_k,
         max_span=float(spans.max()),
-        d_max=float(d_max[i_hi]),
+        d_max=float(np.broadcast_to(reach, spans.shape)[k_hi, i_hi]),
         max_span_ratio=float(ratio[k_hi, i_hi]),
         min_span=float(spans.min()),
         d_lo=float(d_lo[i_lo]),
