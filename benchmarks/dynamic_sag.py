@@ -80,7 +80,7 @@ def main() -> None:
         "",
         "`python benchmarks/dynamic_sag.py` — "
         + versions(["mujoco", "numpy", "scipy", "osqp"])
-        + f"; tmr {source_version()}.",
+        + f"; {source_version()}.",
         "",
         "Lowest point of any tether over the MuJoCo replay (`tmr replay`), next to the planner's static catenary at",
         "the same instant. `paper`: ground_clearance 0 (the cable may reach the floor at d_max); `clearance`: 0.05 m;",

@@ -46,14 +46,16 @@ def test_params_validate_and_a_passive_record_has_no_winch_fields() -> None:
     with pytest.raises(ParameterError, match="winch must be one of"):
         ChainParams(winch="motor")
     with pytest.raises(ParameterError, match="above winch_tension_max"):
-        ChainParams(winch_tension_min=50.0)
+        ChainParams(winch="active", winch_tension_min=50.0)
+    ChainParams(winch_tension_min=50.0)  # a passive winch's range is not used: a --set checks one field at a time
     with pytest.raises(ParameterError, match="winch_tension_rate"):
         ChainParams(winch_tension_rate=0.0)
     assert "winch" not in as_dict(ChainParams())  # passive plans keep their metrics.json bytes
     rec = as_dict(ChainParams(winch="active"))
     assert rec["winch"] == "active" and rec["winch_tension_max"] == 40.0
-    assert ChainParams(winch="active", pulley_torque=5.0).nominal_tension == 40.0  # clipped to the range
-    assert ChainParams(pulley_torque=5.0).nominal_tension == 50.0  # passive: T0 itself
+    with pytest.raises(ParameterError, match="nominal tension .* 50 N is outside its range"):
+        ChainParams(winch="active", pulley_torque=5.0)
+    assert ChainParams(winch="active", pulley_torque=2.0).nominal_tension == 20.0
 
 
 def test_active_span_limits_reach_of_the_highest_tension() -> None:
@@ -186,6 +188,28 @@ def test_other_methods_refuse_the_active_winch(method: str) -> None:
         solve(problem, method)
 
 
+@pytest.mark.parametrize(
+    "argv, code",
+    [
+        (["--scenario", "A", "--set", "winch=active", "--set", "winch_tension_min=2", "--set", "winch_tension_max=4",
+          "--set", "pulley_torque=0.3"], 0),  # a whole range below the default one, set one field at a time
+        (["--scenario", "A", "--set", "winch=active", "--set", "winch_tension_min=9", "--set", "winch_tension_max=4"],
+         2),
+        (["--scenario", "F", "--set", "winch=constant"], 0),  # the drones' winch names still reach the drone planner
+        (["--scenario", "F", "--set", "winch=active", "--set", "winch_tension_max=3"], 0),
+        (["--scenario", "A", "--set", "winch=constant"], 2),  # a drone value for a ground scenario
+    ],
+)  # fmt: skip
+def test_cli_winch_settings(argv: list[str], code: int, tmp_path, capsys) -> None:
+    from tmr.cli import main
+
+    assert main(["plan", *argv, "--no-plots", "--out", str(tmp_path / "o")]) == code
+    if code == 2:
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "winch" in err[0]
+        assert not (tmp_path / "o").exists()
+
+
 def test_a_winch_range_without_the_active_winch_is_refused() -> None:
     from tmr.planner import build_problem
     from tmr.world.scenario import load_scenario
@@ -205,6 +229,16 @@ def test_cli_writes_the_tension_figure_and_the_replay_follows_the_plan(tmp_path)
     from tmr.replay.chain import replay_chain
 
     run = load_run(out)
+    motion = run.motion(rate=2.0)  # the views draw each tether at its planned tension (not at 13.5 N: below the floor)
+    assert min(float(line.points[..., 2].min()) for line in motion.lines) > 0.04
+    assert "planned by the active winch" in motion.notes[0]
+    doc = json.loads((out / "trajectories.json").read_text())
+    del doc["tethers"]
+    (out / "trajectories.json").write_text(json.dumps(doc))
+    from tmr.io.rundir import RunDirError
+
+    with pytest.raises(RunDirError, match="without its planned tensions"):
+        load_run(out)
     rep = replay_chain(run)
     # the winch held the planned tension: the static catenary at that tension predicts the measured winch tension
     k = np.argmax(run.winch_tension[:, 0])
@@ -230,3 +264,66 @@ def test_span_approach_rate_slows_the_pay_out_near_the_limit() -> None:
     assert damped[1] == pytest.approx(0.5 * 0.99) and damped[3] == pytest.approx(0.5 * 0.09)
     assert damped[0] == free[0] and damped[2] == free[2]  # revolute joints untouched
     assert "span_approach_rate" not in as_dict(__import__("tmr.model.params", fromlist=["QPParams"]).QPParams())
+
+
+def test_tension_states_line_up_with_the_spans(e4_active) -> None:
+    """T[k] is the tension step k was planned at: the tightest span of the plan sits at its reach d_max(T[k]) minus
+    the QP's span margin (a tension record shifted by one step would miss it), and T[k+1] − T[k] ≤ rate Ts."""
+    problem, plan, _ = e4_active
+    p = problem.chain_params
+    cat = catenary_params(p)
+    spans = np.abs(plan.spans)
+    room = np.empty_like(spans)
+    for j in range(spans.shape[1]):
+        h1 = p.base_height if j == 0 else p.exit_height
+        for k in range(spans.shape[0]):
+            reach = catenary.max_span(h1, p.exit_height, replace(cat, horizontal_tension=plan.winch_tension[k, j]))
+            room[k, j] = reach - spans[k, j]
+    margin = problem.qp_params.span_margin
+    assert room.min() == pytest.approx(margin, abs=1e-6)
+    assert room.min() >= margin - 1e-9
+
+
+def test_winch_span_compute_rows() -> None:
+    from types import SimpleNamespace
+
+    from tmr.control.winch import WinchSpan
+    from tmr.model.chain import Chain
+
+    chain = Chain(2)
+    p = ChainParams(winch="active")
+    T = np.array([13.5, 30.0])
+    spans = np.array([3.0, 8.0])
+    base = SimpleNamespace(spans=spans)
+    ctx = SimpleNamespace(base=base, winch_tension=T, Ts=0.05)
+    for rate in (None, 0.5):
+        row = WinchSpan(chain, p, 0.01, rate)
+        r = row.compute(ctx)
+        d, sec = row.reach(T, p.winch_tension_rate * 0.05)
+        room = d - 0.01 - spans
+        want = room / 0.05 if rate is None else np.minimum(room / 0.05, rate * room)
+        assert np.allclose(r.upper, np.repeat(want, 2))
+        assert np.all(r.lower == -np.inf)
+        # rows: +1 on the span joint (q̇ index 2j+1), −σ on Ṫ_j (column 4 + j)
+        assert np.array_equal(r.A[:, [1, 3]], np.array([[1, 0], [1, 0], [0, 1], [0, 1]], dtype=float))
+        assert np.allclose(r.A[:, 4:], -np.array([[sec[0, 0], 0], [sec[0, 1], 0], [0, sec[1, 0]], [0, sec[1, 1]]]))
+        assert np.all(r.A[:, [0, 2]] == 0)
+
+
+def test_the_pay_out_damper_reaches_the_plan() -> None:
+    """span_approach_rate set through the parameters slows every span's growth near d_max: ḋ ≤ ρ_d (d_max − m − d)."""
+    from tmr.planner import build_problem, solve
+    from tmr.world.scenario import load_scenario
+
+    problem = build_problem(
+        load_scenario("E"), n_robots=7, overrides={"ground_clearance": 0.05, "span_approach_rate": 0.5}
+    )
+    plan, _ = solve(problem, "qp")
+    assert plan.success, plan.failure
+    d_max = problem.span_limits[:, 1] - problem.qp_params.span_margin
+    d = plan.spans
+    growth = np.diff(d, axis=0) / plan.Ts
+    assert np.all(growth <= 0.5 * (d_max - d[:-1]) + 1e-9)
+    assert np.any(growth > 0.5 * 0.5 * (d_max - d[:-1]))  # it binds somewhere (the test can fail)
+    with pytest.raises(ParameterError, match="span_approach_rate is a limit of --method qp"):
+        solve(problem, "pinv")

@@ -510,6 +510,7 @@ def make_qp(
 def formulation(problem: Problem, method: str | Formulation) -> Formulation:
     """The formulation object for ``method``: ``"pinv"``, ``"qp"``, or a formulation object (returned as is)."""
     if method == "pinv":
+        _qp_only(problem, "the pinv baseline")
         if problem.chain_params.active_winch:
             raise ParameterError(
                 "an active winch (winch = 'active') is planned by --method qp only: the pinv baseline keeps the "
@@ -521,6 +522,14 @@ def formulation(problem: Problem, method: str | Formulation) -> Formulation:
     if isinstance(method, str):
         raise ParameterError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
     return method
+
+
+def _qp_only(problem: Problem, who: str) -> None:
+    """Refuse the per-step QP's pay-out damper for a method that would not keep it (ParameterError)."""
+    if problem.qp_params.span_approach_rate is not None:
+        raise ParameterError(
+            f"span_approach_rate is a limit of --method qp's per-step QP: {who} does not keep it (leave it unset)"
+        )
 
 
 def plan(problem: Problem, method: str | Formulation = "pinv", *, progress: bool = False) -> Plan:
@@ -585,6 +594,7 @@ def solve(
         return _whole(result, metrics, start)
     # a whole-trajectory NLP, not a per-step formulation
     refuse_low_obstacles(problem.env, "--method horizon", "its NLP keeps no cable height above them; use --method qp")
+    _qp_only(problem, "the horizon NLP")
     if problem.chain_params.active_winch:
         raise ParameterError(
             "an active winch (winch = 'active') is planned by --method qp only: the horizon NLP keeps the "

@@ -47,13 +47,18 @@ __all__ = [
     "WinchReturn",
     "WinchSpan",
     "WINCH_GAIN",
+    "WINCH_SMOOTHNESS_WEIGHT",
     "WINCH_WEIGHT",
+    "WinchSmoothness",
 ]
 
 #: :class:`WinchReturn`'s weight in the lowest level (against the energy and smoothness tasks, on N/s vs m/s) and
 #: its gain K_w [1/s]: the values of the drones' active winch (:mod:`tmr.control.drones`).
 WINCH_WEIGHT = 0.01
 WINCH_GAIN = 0.5
+#: :class:`WinchSmoothness`'s weight in the lowest level (on N/s; measured on E with 4 robots: see
+#: ``formulations/catenary.md``, "Active winch").
+WINCH_SMOOTHNESS_WEIGHT = 0.05
 
 
 class WinchChain:
@@ -179,6 +184,26 @@ class WinchReturn(Task):
 
     def compute(self, ctx: Any) -> TaskRows:
         return TaskRows(self.J, self.gain * (self.t_ref - ctx.winch_tension))
+
+
+class WinchSmoothness(Task):
+    """The tension rates change smoothly: ``Ṫ_j = Ṫ_j,k−1`` (N rows on Ṫ, joint coordinates), in the lowest level next
+    to :class:`WinchReturn` (the pulley's torque should not chatter: without it the tether level's indifference to
+    Ṫ let E's tension rates flip sign within a few steps)."""
+
+    name = "winch_smoothness"
+    space = "joint"
+    full_rank = False
+
+    def __init__(self, chain: Chain) -> None:
+        N, n = chain.n_robots, chain.dof
+        J = np.zeros((N, n + N))
+        J[:, n:] = np.eye(N)
+        J.flags.writeable = False
+        self.J, self.n = J, n
+
+    def compute(self, ctx: Any) -> TaskRows:
+        return TaskRows(self.J, ctx.qdot_prev[self.n :])
 
 
 class WinchSpan(Limit):
@@ -347,6 +372,7 @@ def make_winch_qp(
         tasks: list[tuple[Task, float]] = [(PaddedTask(t), w) for t, w in level.tasks]
         if i == len(levels) - 1:
             tasks.append((WinchReturn(chain, params.nominal_tension), WINCH_WEIGHT))
+            tasks.append((WinchSmoothness(chain), WINCH_SMOOTHNESS_WEIGHT))
         new_levels.append(Level(tasks, level.name))
     span = WinchSpan(chain, params, margin, span_rate)
     new_limits: list[Limit] = []

@@ -175,27 +175,31 @@ def param(text: str) -> tuple[str, Any]:
     key, sep, value = (part.strip() for part in text.partition("="))
     if not sep or not key or not value:
         raise argparse.ArgumentTypeError(f"expected NAME=VALUE, e.g. d_min=0.6, got {text!r}")
-    known = {f.name: cls for cls in PARAM_CLASSES for f in fields(cls)}
-    drone_classes: tuple[type, ...] = (DroneParams,)
-    if key not in known:  # a drone chain's parameter (tmr.planner3d refuses the ground ones for drones, and back)
-        from tmr.model.catenary3d import DroneTetherParams
+    from tmr.model.catenary3d import DroneTetherParams
 
-        drone_classes += (DroneTetherParams,)
-        known |= {f.name: cls for cls in drone_classes for f in fields(cls) if f.name not in known}
-    cls = known.get(key)
-    if cls is None:
-        close = difflib.get_close_matches(key, list(known), n=3)
+    drone_classes: tuple[type, ...] = (DroneParams, DroneTetherParams)
+    # every class with that field: a name both systems use (the winch's ``winch``, ``winch_tension_min``, …) is taken
+    # if either accepts the value; the planner of the scenario's kind then checks it with its own (tmr.planner,
+    # tmr.planner3d refuse the other system's names)
+    owners = [cls for cls in PARAM_CLASSES + drone_classes if key in {f.name for f in fields(cls)}]
+    if not owners:
+        known = {f.name for cls in PARAM_CLASSES + drone_classes for f in fields(cls)}
+        close = difflib.get_close_matches(key, sorted(known), n=3)
         hint = f"; did you mean {' or '.join(close)}?" if close else ""
         names = ", ".join(c.__name__ for c in PARAM_CLASSES + drone_classes)
         raise argparse.ArgumentTypeError(
             f"{key}={value}: unknown parameter {key!r}{hint} (the names are the fields of {names} in tmr.model.params)"
         )
-    try:
-        typed = convert_field(cls, key, value)
-        cls(**{key: typed})  # the field's own range (e.g. d_min > 0), the other fields at their defaults
-    except ParameterError as exc:
-        raise argparse.ArgumentTypeError(f"{key}={value}: {exc}") from None
-    return key, typed
+    first: ParameterError | None = None
+    for cls in owners:
+        try:
+            typed = convert_field(cls, key, value)
+            cls(**{key: typed})  # the field's own range (e.g. d_min > 0), the other fields at their defaults
+        except ParameterError as exc:
+            first = first or exc
+            continue
+        return key, typed
+    raise argparse.ArgumentTypeError(f"{key}={value}: {first}") from None
 
 
 def path_arg(text: str) -> str:

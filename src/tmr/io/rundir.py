@@ -358,6 +358,7 @@ class ChainRun:
             title=f"Scenario {rec['scenario']}, {rec['method']}: {what}{verdict}",
             view=self.known_free,
             low_obstacles=tuple(self.low_obstacles),
+            tension=self.winch_tension,  # the planned tension per sample (filtered positions too: same stamps)
         )
 
 
@@ -410,6 +411,8 @@ def _load_chain(path: Path, rec: dict[str, Any], where: str) -> ChainRun:
     m = rec["map"]
     goal = rec.get("goal")
     tension = None
+    if rec["tether"].get("winch") == "active" and "tethers" not in traj:
+        raise RunDirError(f"{where}: an active winch's run without its planned tensions (trajectories.json 'tethers')")
     if "tethers" in traj:
         try:
             tension = np.array([np.asarray(e["horizontal_tension"], dtype=float) for e in traj["tethers"]]).T

@@ -87,11 +87,18 @@ class ChainParams:
         )  # fmt: skip
         if self.winch not in WINCHES:
             raise ParameterError(f"ChainParams.winch must be one of {', '.join(WINCHES)}, got {self.winch!r}")
-        if self.winch_tension_min > self.winch_tension_max:
-            raise ParameterError(
-                f"ChainParams.winch_tension_min ({self.winch_tension_min} N) is above winch_tension_max "
-                f"({self.winch_tension_max} N)"
-            )
+        if self.active_winch:  # the range as a whole (a command line's --set checks each field on its own)
+            if self.winch_tension_min > self.winch_tension_max:
+                raise ParameterError(
+                    f"ChainParams.winch_tension_min ({self.winch_tension_min} N) is above winch_tension_max "
+                    f"({self.winch_tension_max} N)"
+                )
+            t0 = self.horizontal_tension
+            if not self.winch_tension_min <= t0 <= self.winch_tension_max:
+                raise ParameterError(
+                    f"the active winch's nominal tension pulley_torque / pulley_radius = {t0:g} N is outside its range "
+                    f"[{self.winch_tension_min:g}, {self.winch_tension_max:g}] N: widen the range or change the torque"
+                )
 
     @property
     def active_winch(self) -> bool:
@@ -100,11 +107,8 @@ class ChainParams:
 
     @property
     def nominal_tension(self) -> float:
-        """The tension an active winch returns to [N]: torque / radius, clipped to its range (T0 when passive)."""
-        t0 = self.horizontal_tension
-        if not self.active_winch:
-            return t0
-        return min(max(t0, self.winch_tension_min), self.winch_tension_max)
+        """The tension an active winch returns to [N]: torque / radius (within its range, checked), T0 itself."""
+        return self.horizontal_tension
 
     def record(self) -> dict[str, Any]:
         """The fields as a dict, without the active winch's four when the winch is passive (a passive plan's

@@ -178,12 +178,29 @@ def _room_parts(env: Any) -> tuple[tuple[Any, ...], tuple[Any, ...], tuple[float
 
 
 def catenary_polylines(
-    start: Array, end: Array, h_start: float, h_end: float, params: Any, n: int = CATENARY_POINTS
+    start: Array,
+    end: Array,
+    h_start: float,
+    h_end: float,
+    params: Any,
+    n: int = CATENARY_POINTS,
+    tension: Array | None = None,
 ) -> tuple[Array, Array]:
     """Tethers hanging between ``start`` and ``end`` (K, 2) [m] at heights ``h_start``, ``h_end`` [m]: points
     (K, n, 3) along the catenary of Caruso 2021 eq. 22 (:func:`tmr.model.catenary.solve` with ``params``, a
     :class:`tmr.model.catenary.CatenaryParams`) and the sag (K,) [m]. A span below 1 µm is drawn as a straight line
-    (sag 0)."""
+    (sag 0). ``tension`` (K,) [N]: an active winch's horizontal tension per sample, in place of ``params``' T0."""
+    if tension is not None:
+        from dataclasses import replace
+
+        tension = np.asarray(tension, dtype=float)
+        pts = np.empty((len(tension), n, 3))
+        sag = np.empty(len(tension))
+        for value in np.unique(tension):
+            at = tension == value
+            p = replace(params, horizontal_tension=float(value))
+            pts[at], sag[at] = catenary_polylines(np.asarray(start)[at], np.asarray(end)[at], h_start, h_end, p, n)
+        return pts, sag
     from tmr.model import catenary
 
     start = np.asarray(start, dtype=float)
@@ -240,6 +257,7 @@ def chain_motion(plan: Any, env: Any, chain_params: Any = None, title: str | Non
         title=title or f"Scenario {plan.scenario}, {plan.method}: {n} tethered robots{verdict}",
         view=_known_view(env),
         low_obstacles=tuple(getattr(env, "low_obstacles", ())),
+        tension=getattr(plan, "winch_tension", None),
     )
 
 
@@ -262,12 +280,14 @@ def tethered_chain(
     title: str,
     view: tuple[float, float, float, float] | None = None,
     low_obstacles: tuple[Any, ...] = (),
+    tension: Array | None = None,
 ) -> Motion:
     """Motion of a tethered chain: ``robots`` (K, N, 2) [m] at stamps ``t`` (K,) [s], robot N the leader.
 
     Robots stand at the tether exit height H (``cat.end_height``), the anchor at ``cat.base_height``; tether i hangs
     from robot i−1 (the anchor for i = 1) to robot i as the catenary of ``cat`` (a
-    :class:`tmr.model.catenary.CatenaryParams`: T0, ρ, g; Caruso 2021 §4.2.1, eq. 22). Robot disc radius ``radius`` [m].
+    :class:`tmr.model.catenary.CatenaryParams`: T0, ρ, g; Caruso 2021 §4.2.1, eq. 22), or with an active winch at
+    its planned horizontal tension ``tension`` (K, N) [N]. Robot disc radius ``radius`` [m].
     """
     t = np.asarray(t, dtype=float)
     robots = np.asarray(robots, dtype=float)
@@ -280,8 +300,9 @@ def tethered_chain(
         tracks.append(Track(f"robot{i + 1}", xyz, "leader" if i == n - 1 else "robot", radius=radius))
     lines = []
     prev, h_prev = np.broadcast_to(base, (k, 2)), float(cat.base_height)
+    T = None if tension is None else np.asarray(tension, dtype=float).reshape(k, n)
     for i in range(n):
-        pts, sag = catenary_polylines(prev, robots[:, i], h_prev, h, cat)
+        pts, sag = catenary_polylines(prev, robots[:, i], h_prev, h, cat, tension=None if T is None else T[:, i])
         lines.append(Lines(f"tether{i + 1}", pts, "tether", sag=sag))
         prev, h_prev = robots[:, i], h
     points = {"anchor": np.array([base[0], base[1], float(cat.base_height)])}
@@ -300,8 +321,13 @@ def tethered_chain(
         view=view,
         trail=f"robot{n}",
         notes=(
-            f"robot disc = safety radius {radius:g} m; tethers hang as catenaries (T0 = {cat.horizontal_tension:g} N, "
-            f"rho = {cat.mass_per_length:g} kg/m)",
+            f"robot disc = safety radius {radius:g} m; tethers hang as catenaries ("
+            + (
+                f"T0 = {cat.horizontal_tension:g} N"
+                if T is None
+                else f"T0 = {T.min():.3g}–{T.max():.3g} N planned by the active winch"
+            )
+            + f", rho = {cat.mass_per_length:g} kg/m)",
         ),
         low_obstacles=tuple(low_obstacles),
     )
