@@ -23,7 +23,7 @@ def _write(tmp_path, text: str, name: str = "s.toml"):
 
 def test_builtin_lists_are_split_by_kind():
     assert builtin_drone_scenarios() == ["F", "G", "H", "I"]
-    assert builtin_scenarios() == ["A", "B", "C", "D", "E"]
+    assert builtin_scenarios() == ["A", "B", "C", "D", "E", "J"]
     assert [scenario_kind(n) for n in ("A", "f", "H")] == ["ground", "drone", "drone"]
 
 
