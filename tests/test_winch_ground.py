@@ -178,14 +178,54 @@ def test_passive_plan_has_no_tension_outputs(tmp_path) -> None:
     assert "winch" not in plan.params
 
 
-@pytest.mark.parametrize("method", ["pinv", "horizon"])
-def test_other_methods_refuse_the_active_winch(method: str) -> None:
+def test_pinv_refuses_the_active_winch() -> None:
     from tmr.planner import build_problem, solve
     from tmr.world.scenario import load_scenario
 
     problem = build_problem(load_scenario("A"), overrides=ACTIVE)
-    with pytest.raises(ParameterError, match="--method qp only"):
-        solve(problem, method)
+    with pytest.raises(ParameterError, match="--method qp and horizon only"):
+        solve(problem, "pinv")
+
+
+def test_least_tension_schedule_is_the_least_rate_bounded_cover() -> None:
+    from tmr.control.winch import least_tension_schedule
+
+    p = ChainParams(winch="active")
+    Ts, m = 0.05, 0.01
+    k = np.arange(400)
+    spans = np.column_stack([4.0 + 4.5 * np.exp(-(((k - 200) / 30.0) ** 2)), np.full(k.size, 3.0)])
+    T = least_tension_schedule(spans, p, Ts, m)
+    cat = catenary_params(p)
+    need = np.array([
+        catenary.tension_for_span(d + m, p.base_height, p.exit_height, cat, 13.5, 40.0) for d in spans[:, 0]
+    ])  # fmt: skip
+    assert np.all(T[:, 0] >= need - 1e-9) and np.all(T >= 13.5)
+    assert np.max(np.abs(np.diff(T, axis=0))) <= p.winch_tension_rate * Ts + 1e-9
+    assert np.all(T[:, 1] == 13.5)  # a short tether stays at its nominal tension
+    peak = int(np.argmax(need))
+    assert T[peak, 0] == pytest.approx(need[peak])  # least: it touches the need where the need peaks ...
+    assert T[0, 0] == 13.5 and T[-1, 0] == 13.5  # ... and rests at nominal far from it
+    lower = T.copy()
+    lower[peak - 40, 0] -= 0.5  # any lower value breaks the need or the rate bound
+    assert lower[peak - 40, 0] < need[peak - 40] or np.max(np.abs(np.diff(lower[:, 0]))) > p.winch_tension_rate * Ts
+    with pytest.raises(ParameterError, match="beyond the reach"):
+        least_tension_schedule(np.full((3, 1), 9.7), p, Ts, m)
+
+
+def test_horizon_with_the_active_winch_is_never_worse_than_qp(e4_active) -> None:
+    """The NLP optimises the positions within T_max's reach and the least rate-bounded tension follows; stopped
+    early (time limit) it returns the qp plan or a better iterate, with a tension every span is within."""
+    from tmr.planner import solve
+
+    problem, qp_plan, qp_metrics = e4_active
+    plan, metrics = solve(problem, "horizon", time_limit=6.0)
+    assert plan.success, plan.failure
+    for f in ("f1", "f2", "f4"):
+        assert getattr(metrics, f) <= getattr(qp_metrics, f) * (1 + 1e-9)
+    T = plan.winch_tension
+    assert T is not None and T.shape == (plan.t.size, 4)
+    assert np.max(np.abs(np.diff(T, axis=0))) / plan.Ts <= problem.chain_params.winch_tension_rate + 1e-6
+    assert metrics.max_span_ratio <= 1.0
 
 
 @pytest.mark.parametrize(

@@ -513,8 +513,8 @@ def formulation(problem: Problem, method: str | Formulation) -> Formulation:
         _qp_only(problem, "the pinv baseline")
         if problem.chain_params.active_winch:
             raise ParameterError(
-                "an active winch (winch = 'active') is planned by --method qp only: the pinv baseline keeps the "
-                "paper's constant tension"
+                "an active winch (winch = 'active') is planned by --method qp and horizon only: the pinv baseline "
+                "keeps the paper's constant tension"
             )
         return make_pinv(problem)
     if method == "qp":
@@ -595,11 +595,6 @@ def solve(
     # a whole-trajectory NLP, not a per-step formulation
     refuse_low_obstacles(problem.env, "--method horizon", "its NLP keeps no cable height above them; use --method qp")
     _qp_only(problem, "the horizon NLP")
-    if problem.chain_params.active_winch:
-        raise ParameterError(
-            "an active winch (winch = 'active') is planned by --method qp only: the horizon NLP keeps the "
-            "paper's constant tension"
-        )
     from tmr.control.horizon import DEFAULT_TIME_LIMIT, HorizonInfeasible, plan_horizon  # casadi: when used
 
     problem, warm, warm_metrics = _solve_qp(problem, progress)  # the very plan ``--method qp`` returns
@@ -630,6 +625,12 @@ def solve(
         warm.failure = reason if warm.failure is None else f"{reason}; its qp warm start: {warm.failure}"
         return _whole(warm, evaluate(warm, problem.env), start, **parts)
     parts = dict(qp_time=qp_done - start, nlp_time=time.perf_counter() - qp_done)
+    if problem.chain_params.active_winch:  # the NLP chose the positions within T_max's reach; the least tension here
+        from tmr.control.winch import least_tension_schedule
+
+        result.winch_tension = least_tension_schedule(
+            result.spans, problem.chain_params, result.Ts, problem.qp_params.span_margin
+        )
     metrics = check(result, problem.env, goal_tolerance=problem.path_params.goal_tolerance)
     return _whole(result, metrics, start, **parts)
 

@@ -46,6 +46,7 @@ __all__ = [
     "WinchContext",
     "WinchReturn",
     "WinchSpan",
+    "least_tension_schedule",
     "WINCH_GAIN",
     "WINCH_SMOOTHNESS_WEIGHT",
     "WINCH_WEIGHT",
@@ -385,3 +386,44 @@ def make_winch_qp(
     new_limits.append(span)
     qp = LexicographicQP(WinchChain(chain), new_levels, new_limits, WinchBox(box, params), solver=solver)  # type: ignore[arg-type]
     return GroundWinchQP(qp, chain, params, span)
+
+
+def least_tension_schedule(spans: Array, params: ChainParams, Ts: float, margin: float) -> Array:
+    """The least horizontal tensions (K+1, N) [N] an active winch can follow that hold every span of a plan whose
+    positions are already chosen (``--method horizon``: its NLP keeps every span within the reach of T_max, and the
+    tension, absent from f1–f4, is then chosen here).
+
+    Per tether, T*_k is the least tension whose reach holds the span plus ``margin`` (:func:`tmr.model.catenary.
+    tension_for_span`; the nominal tension where that is enough), and the schedule is the upper envelope
+
+        T_k = max(T_ref, max_i (T*_i − rate Ts |k − i|)),
+
+    the least sequence with T_k ≥ T*_k, T_k ≥ T_ref (the winch rests at its nominal tension) and |T_{k+1} − T_k| ≤
+    rate Ts (a maximum of functions with that slope has it too): the tension rises just early enough for a long span
+    and returns to nominal after it. Computed by a forward and a backward pass. Raises ParameterError if a span is
+    beyond the reach of T_max (not a plan of this winch).
+    """
+    p = params
+    spans = np.abs(np.asarray(spans, dtype=float))
+    K1, N = spans.shape
+    cat = catenary_params(p)
+    t_ref = p.nominal_tension
+    need = np.full((K1, N), t_ref)
+    for j in range(N):
+        h1 = p.base_height if j == 0 else p.exit_height
+        reach_ref = catenary.max_span(h1, p.exit_height, replace(cat, horizontal_tension=t_ref))
+        for k in np.flatnonzero(spans[:, j] + margin > reach_ref):
+            t = catenary.tension_for_span(spans[k, j] + margin, h1, p.exit_height, cat, t_ref, p.winch_tension_max)
+            if t is None:
+                raise ParameterError(
+                    f"tether {j + 1} spans {spans[k, j]:.3f} m at step {k}: beyond the reach of the winch's "
+                    f"{p.winch_tension_max:g} N"
+                )
+            need[k, j] = t
+    step = p.winch_tension_rate * float(Ts)
+    out = need.copy()
+    for k in range(1, K1):  # forward: T_k ≥ T_{k−1} − step
+        np.maximum(out[k], out[k - 1] - step, out=out[k])
+    for k in range(K1 - 2, -1, -1):  # backward: T_k ≥ T_{k+1} − step
+        np.maximum(out[k], out[k + 1] - step, out=out[k])
+    return out
