@@ -177,11 +177,10 @@ def test_checker_rejects_tampered_tensions(g_active, how):
     assert check_drone_plan(copy.copy(plan), scenario, params=PRM, update_plan=False).success  # the original passes
 
 
-def test_other_methods_refused_with_an_active_winch():
+def test_pinv_refused_with_an_active_winch():
     scenario = load_drone_scenario("G")
-    for method in ("pinv", "horizon"):
-        with pytest.raises(ParameterError, match="--method qp only"):
-            plan_drones(scenario, method=method, overrides={"winch": "active"})
+    with pytest.raises(ParameterError, match="--method qp and horizon only"):
+        plan_drones(scenario, method="pinv", overrides={"winch": "active"})
     with pytest.raises(ParameterError, match="spare thrust"):
         plan_drones(scenario, overrides={"winch": "active", "winch_tension_min": 8.0, "winch_tension": 8.0,
                                          "winch_tension_max": 9.0})  # fmt: skip
@@ -201,15 +200,28 @@ def test_scenario_i_active_reaches_the_goal_constant_does_not():
     assert dataclasses.asdict(plan_c.tether)["winch"] == "constant" and plan_c.winch_tension is None
 
 
-@pytest.mark.parametrize("method", ["pinv", "horizon"])
-def test_cli_refuses_other_methods_with_an_active_winch_in_one_line(tmp_path, capsys, method):
+def test_cli_refuses_pinv_with_an_active_winch_in_one_line(tmp_path, capsys):
     from tmr.plan import main
 
     out = tmp_path / "x"
-    code = main(["--scenario", "I", "--method", method, "--no-plots", "--out", str(out)])
+    code = main(["--scenario", "I", "--method", "pinv", "--no-plots", "--out", str(out)])
     stdout, stderr = capsys.readouterr()
-    assert code == 2 and "--method qp only" in stdout + stderr and not out.exists()
+    assert code == 2 and "--method qp and horizon only" in stdout + stderr and not out.exists()
     assert len((stdout + stderr).strip().splitlines()) == 1
+
+
+def test_horizon_keeps_the_qp_tension_schedule_and_is_never_worse():
+    """Scenario I with its active winches: the horizon NLP optimises the drones' paths under the qp plan's tension
+    schedule (its catenaries, clearance and pull rows at those tensions); the plan passes the checker's winch rows
+    and is no worse than the qp plan in f1, f2, f4."""
+    scenario = load_drone_scenario("I")
+    qp, mq = plan_drones(scenario, method="qp")
+    plan, metrics = plan_drones(scenario, method="horizon", time_limit=40)
+    assert plan.success and metrics.success, plan.failure
+    assert np.array_equal(plan.winch_tension, qp.winch_tension)
+    for f in ("f1", "f2", "f4"):
+        assert getattr(metrics, f) <= getattr(mq, f) * (1 + 1e-9)
+    assert plan.diagnostics["horizon_result"] in ("optimal", "best_feasible_iterate", "warm_start")
 
 
 def test_slowing_down_goes_back_to_the_recorded_tensions():

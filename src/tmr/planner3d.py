@@ -279,12 +279,13 @@ def plan_drones(
 
 
 def check_winch_method(tether: DroneTetherParams, method: str) -> None:
-    """Refuse (ParameterError, exit 2) an active winch with a formulation that does not choose the winch tension:
-    only ``qp`` has it as a decision variable (``formulations/drones.md``, "Active winch")."""
-    if tether.active and method != "qp":
+    """Refuse (ParameterError, exit 2) an active winch with a formulation that does not plan with it: ``qp`` has the
+    tension as a decision variable, ``horizon`` optimises the drones' paths under the qp plan's tension schedule
+    (``formulations/drones.md``, "Active winch"); ``pinv`` keeps it constant."""
+    if tether.active and method not in ("qp", "horizon"):
         raise ParameterError(
-            f"winch = 'active' is planned by --method qp only (the winch tension is a variable of the per-step QP; "
-            f"{method} keeps it constant): use --method qp, or winch = 'constant'"
+            f"winch = 'active' is planned by --method qp and horizon only (the winch tension is a variable of the "
+            f"per-step QP; {method} keeps it constant): use --method qp or horizon, or winch = 'constant'"
         )
 
 

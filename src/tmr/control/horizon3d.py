@@ -231,6 +231,10 @@ class _Model:
         w = tether.weight_per_length
         self.upper_winch = tether.winch_end == "upper"
         self.tw, self.w = float(tether.winch_tension), float(w)
+        # an active winch: the qp plan's tension schedule (K+1, N) [N], held (formulations/horizon3d.md, "Active
+        # winch"); None: the constant T_w
+        wt = getattr(warm, "winch_tension", None)
+        self.tw_sched = None if wt is None else np.asarray(wt, dtype=float)
         # the leader's fixed path: its reference, unless the reference itself breaks the leader's speed or
         # acceleration bound (then no plan on it passes the checker) or the qp leader lags it by more than
         # leader_lag_max (then the qp plan is far from any plan on it): then the qp plan's own leader (f3 unchanged)
@@ -245,7 +249,13 @@ class _Model:
         # samples per tether from its longest arc along the warm start
         from tmr.model.catenary3d import solve3d_batch
 
-        L_warm = np.array([solve3d_batch(pts[k], tether).length for k in range(K + 1)])
+        sched = self.tw_sched
+        L_warm = np.array(
+            [
+                solve3d_batch(pts[k], tether, winch_tension=None if sched is None else sched[k]).length
+                for k in range(K + 1)
+            ]
+        )
         self.delta_max = float(opts.sample_spacing)
         self.L_cap_len = float(tether.tether_length - params.length_margin)
         self.S = np.maximum(np.ceil(np.minimum(1.25 * L_warm.max(axis=0), self.L_cap_len) / self.delta_max), 2)
@@ -319,7 +329,8 @@ class _Model:
         A = [WA * pmat[a] + WB * qmat[a] for a in range(3)]
         B = [WB * pmat[a] + WA * qmat[a] for a in range(3)]
         dh = B[2] - A[2]
-        m = self.tw / self.w - dh if self.upper_winch else ca.DM.ones(N, K + 1) * (self.tw / self.w)
+        TW = ca.DM.ones(N, K + 1) * self.tw if self.tw_sched is None else ca.DM(self.tw_sched.T)  # (N, K+1) [N]
+        m = TW / self.w - dh if self.upper_winch else TW / self.w
         _, Rc, L, a, sb = catenary_samples(A, B, Th, 0.0, m)
         # the shallow (stable) branch: the span a (θ_B − θ_A) falls as θ_A grows (catenary3d._newton_theta);
         # cosh θ_A d(span/m)/dθ_A = (dθ_B/dθ_A − 1) − (θ_B − θ_A) tanh θ_A ≤ 0
@@ -337,7 +348,7 @@ class _Model:
         base_clear = float(self.field(self.base[None])[0])
         climit[0] = min(self.c_t, base_clear - 0.002)  # tether 1: no closer than its winch (as the checker)
         self.rho = ca.sqrt((ca.DM(climit) @ ones + eps_c) ** 2 + delta * delta / 4.0) + margin + EPS_SPAN
-        tA = self.tw - self.w * dh if self.upper_winch else self.tw * ca.DM.ones(N, K + 1)
+        tA = TW - self.w * dh if self.upper_winch else TW
         tB = tA + self.w * dh
         Tp, Tq = WA * tA + WB * tB, WB * tA + WA * tB  # tension at p, at q
         T_max = float(tether.spare_thrust - params.tension_margin)
@@ -452,8 +463,9 @@ class _Model:
         return qp_leader.copy(), "the leader on the qp plan's path (" + "; ".join(why) + ")"
 
     def _m_numeric(self, dh: Array) -> Array:
-        base = self.tw / self.w
-        return base - dh if self.upper_winch else np.full_like(dh, base)
+        """m = T_A / (ρ g) [m] of every knot and tether (K+1, N) for the height differences ``dh`` (K+1, N)."""
+        base = (self.tw if self.tw_sched is None else self.tw_sched) / self.w
+        return base - dh if self.upper_winch else np.broadcast_to(base, dh.shape).astype(float)
 
     def sample_rows(self, idx: NDArray[np.int_]) -> tuple[Any, Any]:
         """The selected tether samples (3, M) and their bound ρ (M,) as expressions."""
@@ -643,9 +655,10 @@ def _plan_of(robots: Array, warm: DronePlan, diagnostics: dict[str, Any], params
     K1, N = robots.shape[:2]
     a = np.full((K1, N), np.nan)
     theta = None
+    wt = getattr(warm, "winch_tension", None)  # an active winch: its tensions, held from the qp plan
     for k in range(K1):
         pts = np.vstack([warm.base[None], robots[k]])
-        cats = solve3d_batch(pts, warm.tether, warm=theta)
+        cats = solve3d_batch(pts, warm.tether, warm=theta, winch_tension=None if wt is None else wt[k])
         a[k], theta = cats.a, cats.theta
     vel = np.vstack([np.diff(robots, axis=0) / warm.Ts, np.zeros((1, N, 3))])
     return DronePlan(
@@ -653,6 +666,7 @@ def _plan_of(robots: Array, warm: DronePlan, diagnostics: dict[str, Any], params
         base=warm.base.copy(), goal=warm.goal.copy(), reference=warm.reference.copy(), tether_a=a,
         tether=warm.tether, safety_radius=warm.safety_radius, bounds=warm.bounds.copy(), success=False,
         failure=None, diagnostics=diagnostics, wall_time=0.0, params=params,
+        winch_tension=None if wt is None else np.array(wt, dtype=float),
     )  # fmt: skip
 
 
