@@ -265,3 +265,34 @@ def test_winch_range_without_an_active_winch_is_refused():
         drone_parameters(scenario, {"winch_tension_min": 9.0})
     params, tether = drone_parameters(scenario, {"winch": "active", "winch_tension_min": 1.0})
     assert tether.active and tether.winch_tension_min == 1.0
+
+
+def test_upper_winch_rows_keep_the_lower_end_tension_positive():
+    """WinchUpperEnd's rows are the change over a step of T_w − ρ g |z_q − z_p| (the lower end's tension), written
+    here from the definition and differentiated by finite differences; a tension already too low may not fall."""
+    from types import SimpleNamespace
+
+    from tmr.control.drones import WinchUpperEnd
+
+    N, w, Ts = 3, 0.147, 0.05
+    lim = WinchUpperEnd(N, w, margin=0.05)
+    P = np.array([[0.0, 0.0, 0.3], [2.0, 0.0, 1.5], [4.0, 0.5, 1.0], [6.0, 0.0, 2.2]])
+    T = np.array([0.2, 0.3, 0.5])
+    ctx = SimpleNamespace(points=P, Ts=Ts, winch_tension=T)
+    rows = lim.compute(ctx)
+    assert not np.any((rows.A != 0) & ~lim.pattern(None))
+
+    def lower_end(P: np.ndarray, T: np.ndarray) -> np.ndarray:
+        return T - w * np.abs(np.diff(P[:, 2]))
+
+    rng = np.random.default_rng(1)
+    for _ in range(3):
+        v, Td = rng.normal(size=(N, 3)), rng.normal(size=N)
+        eps = 1e-7
+        P1 = P.copy()
+        P1[1:] += eps * v
+        fd = (lower_end(P1, T + eps * Td) - lower_end(P, T)) / eps
+        assert np.allclose(rows.A @ np.concatenate([v.ravel(), Td]) / Ts, fd, atol=1e-6)
+    slack = lower_end(P, T) - 0.05
+    assert np.allclose(rows.lower, np.minimum(-slack, 0.0))
+    assert slack[0] < 0 and rows.lower[0] == 0.0  # tether 1: 0.2 − 0.147·1.2 − 0.05 < 0: it may not fall further

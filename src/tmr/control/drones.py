@@ -1121,6 +1121,48 @@ class WinchRate(_DroneLimit):
         return self.rows
 
 
+class WinchUpperEnd(_DroneLimit):
+    """With the winch at the upper end of each tether (``winch_end = "upper"``), the lower end's tension T_A = T_w −
+    ρ g dh must stay positive, or no catenary hangs there (``catenary3d.solve3d`` refuses it): per tether
+
+        T_w + Ts Ṫ − ρ g (dh + Ts ḋh) ≥ margin,   dh = |z_q − z_p|, ḋh = sgn(z_q − z_p) (ż_q − ż_p)
+
+    (N rows on [v, Ṫ]; the anchor of tether 1 does not move). ``margin`` [N]: 0.05 N. A tension already below it only
+    must not fall further."""
+
+    name = "winch_upper_end"
+
+    def __init__(self, n_robots: int, weight_per_length: float, margin: float = 0.05) -> None:
+        self.N, self.w, self.margin = n_robots, float(weight_per_length), float(margin)
+        self._A = np.zeros((n_robots, 4 * n_robots))
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        N = self.N
+        mask = np.zeros((N, 4 * N), dtype=bool)
+        for j in range(N):
+            mask[j, 3 * j + 2] = True
+            if j:
+                mask[j, 3 * (j - 1) + 2] = True
+            mask[j, 3 * N + j] = True
+        return mask
+
+    def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
+        N, Ts, w = self.N, ctx.Ts, self.w
+        z = ctx.points[:, 2]
+        dz = z[1:] - z[:-1]  # z_q − z_p per tether
+        sgn = np.where(dz >= 0.0, 1.0, -1.0)
+        A = self._A
+        A[:] = 0.0
+        rows = np.arange(N)
+        A[rows, 3 * rows + 2] = -Ts * w * sgn  # q end: drone j
+        A[rows[1:], 3 * (rows[1:] - 1) + 2] = Ts * w * sgn[1:]  # p end: drone j−1 (tether 1's is the anchor)
+        A[rows, 3 * N + rows] = Ts
+        T = ctx.winch_tension
+        assert T is not None
+        slack = T - w * np.abs(dz) - self.margin
+        return LimitRows(A, np.minimum(-slack, 0.0), np.full(N, np.inf))
+
+
 class WinchReturn(_DroneTask):
     """The winches back towards their nominal tension: ``Ṫ_j = K_w (T_ref − T_j)`` (N rows on Ṫ) [N/s], in the
     lowest level with a small weight. The tension leaves T_ref only where a higher level or a hard limit needs it
@@ -1279,6 +1321,8 @@ def _winch_qp(
         WinchTensionRange(N, tether.winch_tension_min, tether.winch_tension_max),
         WinchRate(N, tether.winch_tension_rate),
     ]
+    if tether.winch_end == "upper":  # the lower end keeps a positive tension (a catenary exists)
+        new_limits.append(WinchUpperEnd(N, tether.weight_per_length))
     wchain = WinchChain(chain)
     qp = LexicographicQP(wchain, new_levels, new_limits, _FreeBox(wchain.dof), solver=p.solver)  # type: ignore[arg-type]
     return DroneQP(qp, ctx)
