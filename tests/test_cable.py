@@ -149,3 +149,21 @@ def test_j_auto_picks_two_robots_with_the_active_winch_three_without(tmp_path) -
 
     assert json.loads((tmp_path / "a" / "metrics.json").read_text())["n_robots"] == 2
     assert json.loads((tmp_path / "p" / "metrics.json").read_text())["n_robots"] == 3
+
+
+def test_j_bag_carries_the_dock_at_its_height(j_plans, tmp_path) -> None:
+    from shapely.geometry import Polygon
+
+    from tests.test_export_rosbag import read_bag
+    from tmr.export.rosbag import write_bag
+    from tmr.views.motion import chain_motion
+
+    problem, plan, _ = j_plans["active"]
+    msgs, _ = read_bag(write_bag(chain_motion(plan, problem.env), tmp_path / "bag"))
+    ((_, arr),) = msgs["/tmr/scene"]
+    low = [mk for mk in arr.markers if mk.ns == "low_obstacles"]
+    strips = [np.array([[p.x, p.y, p.z] for p in mk.points]) for mk in low if mk.type == mk.LINE_STRIP]
+    assert sorted({float(s[0, 2]) for s in strips}) == [0.0, 0.25]  # floor and top of the 0.25 m dock
+    dock = problem.env.low_obstacles[0].footprint
+    assert all(Polygon(s[:, :2]).symmetric_difference(dock).area < 1e-12 for s in strips)
+    assert not any(mk.ns == "obstacles" for mk in arr.markers)  # J has no tall obstacle

@@ -404,3 +404,69 @@ def test_plan_horizon_itself_refuses_low_obstacles() -> None:
         plan_horizon(problem, None)
     with pytest.raises(ParameterError, match="low obstacles"):
         solve(problem, "horizon")  # before its qp warm start
+
+
+def test_a_robot_on_the_tray_is_a_robot_clearance_violation() -> None:
+    """The checker measures robots in the robots' world (the tray included), not in the tethers'."""
+    from tmr.checks.metrics import evaluate
+
+    env = tray_env()
+    plan = chord_plan([[5.0, 2.0]], [2.0, 2.0], tension=60.0)  # the robot stands on the tray
+    m = evaluate(plan, env)
+    assert m.violation_steps["robot_clearance"] == [0, 1, 2]
+    assert m.violation_steps["tether_clearance"] == []  # its tether: nothing tall in the way
+
+
+def test_every_part_of_a_crossing_is_sampled() -> None:
+    """A U-shaped low obstacle crossed twice by one chord: the cable clears the first arm (near the high end) and
+    not the second (mid-span, where it sags): the second crossing fails the check."""
+    from tmr.checks.metrics import low_obstacle_margins
+
+    arms = [shapely.box(2.1, 1.0, 2.3, 3.0), shapely.box(2.1, 1.0, 5.2, 1.2), shapely.box(5.0, 1.0, 5.2, 3.0)]
+    env = Environment(None, BOUNDS, low_obstacles=[LowObstacle("U", shapely.union_all(arms), 0.2)])
+    plan = chord_plan([[7.6, 2.0]], [2.0, 2.0], tension=13.5)  # 5.6 m: high near x = 2, lowest at x = 4.8
+    m = low_obstacle_margins(plan, env)
+    c = 13.5 / (RHO * G)
+    z = lambda x: H + c * (math.cosh((x - 4.8) / c) - math.cosh(2.8 / c))  # noqa: E731 - the level catenary
+    want = min(z(5.0), z(5.2)) - 0.25  # the second arm's crossing: the cable's lowest point over it, 5 cm short
+    assert m[0, 0] == pytest.approx(want, abs=2e-3) and want < 0
+    assert min(z(2.1), z(2.3)) - 0.25 > 0  # the first arm alone would pass
+
+
+def test_anchor_tether_with_a_lower_anchor_rows_and_check_agree(tmp_path: Path) -> None:
+    """base_height 0.2 m: the anchor tether hangs from 0.2 m to 0.43 m; the checker and the QP's rows use those end
+    heights (the rows' height at a sample equals the checker's closed form there)."""
+    from types import SimpleNamespace
+
+    from tmr.checks.metrics import low_obstacle_margins
+    from tmr.control.cable import ROW_MARGIN, CableOverLowObstacles
+    from tmr.model.chain import Chain
+    from tmr.model.params import ChainParams
+
+    env = tray_env(0.1)
+    p = ChainParams(base_height=0.2)
+    plan = chord_plan([[6.0, 2.0]], [3.0, 2.0], tension=13.5)
+    plan.params = {"base_height": 0.2}
+    margins = low_obstacle_margins(plan, env)
+    c = 13.5 / (RHO * G)
+    from tmr.model import catenary
+
+    cat = catenary.solve(0.2, H, 3.0, catenary.CatenaryParams(base_height=0.2))
+    zx = lambda x: cat.z_low + c * (math.cosh((x - cat.x_low) / c) - 1.0)  # noqa: E731
+    assert margins[0, 0] == pytest.approx(min(zx(1.9), zx(2.1)) - 0.15, abs=1e-3)
+    lim = CableOverLowObstacles(Chain(1, base=(3.0, 2.0)), env, p, 0.05, 2.0, reach=3.2)
+    P = np.array([[3.0, 2.0], [6.0, 2.0]])
+    lim.compute(SimpleNamespace(points=P, Ts=0.05, base=None, chain=None))
+    x = lim.s * 3.0
+    assert np.allclose(lim.last["z"][0, :, 0], [zx(v) for v in x], atol=1e-9)
+    assert lim.last["need"].max() == pytest.approx(0.1 + 0.05 + ROW_MARGIN)
+
+
+def test_a_low_obstacle_no_cable_can_clear_is_refused_up_front(tmp_path: Path, capsys) -> None:
+    from tmr.cli import main
+
+    path = write_geojson(tmp_path / "tall.geojson", [tray_feature(0.4)])  # 0.4 + 0.05 ≥ 0.43: no cable passes
+    out = tmp_path / "o"
+    code = main(["plan", "--map", str(path), "--base", "2,2", "--goal", "8,2", "--robots", "auto", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "no tether" in err[0] and not out.exists()

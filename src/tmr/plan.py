@@ -435,6 +435,10 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
     chain_params = made[ChainParams]
     if rest:
         raise TmrError(f"unknown parameter(s) {sorted(rest)}; the names are the fields of tmr.model.params")
+    from tmr.world.environment import refuse_impassable_low_obstacles
+
+    top = max(chain_params.exit_height, chain_params.base_height)
+    refuse_impassable_low_obstacles(scenario.environment, top, chain_params.low_obstacle_clearance)
     if args.method == "horizon":  # before the route: exit 2
         from tmr.world.environment import refuse_low_obstacles
 

@@ -51,7 +51,7 @@ from tmr.model.spans import span_limits
 from tmr.route.path import Trajectory, leader_trajectory, path_length, plan_leader_path, time_law
 from tmr.route.references import ChainReference, chain_reference, start_placement
 from tmr.route.route import Route, TooFewRobotsError, check_fit, plan_route
-from tmr.world.environment import refuse_low_obstacles
+from tmr.world.environment import refuse_impassable_low_obstacles, refuse_low_obstacles
 from tmr.world.scenario import Scenario
 
 if TYPE_CHECKING:  # the formulations import their solvers (osqp, qpsolvers): loaded by the method that runs
@@ -223,6 +223,8 @@ def build_problem(
             "use one robot radius (e.g. Environment.with_safety_radius, or load the scenario with it)"
         )
     chain_params, rest = apply_overrides(ChainParams(), values)
+    top = max(chain_params.exit_height, chain_params.base_height)
+    refuse_impassable_low_obstacles(scenario.environment, top, chain_params.low_obstacle_clearance)
     idle = sorted(k for k in WINCH_FIELDS[1:] if k in values and not chain_params.active_winch)
     if idle:  # a range or rate of a winch that does not use them: refused, not silently dropped
         raise ParameterError(f"{', '.join(idle)} set but winch = {chain_params.winch!r}: add winch = 'active'")

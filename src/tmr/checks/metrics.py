@@ -508,8 +508,8 @@ class Metrics:
         ``"nan"`` (see :func:`json_safe`); ``None`` (e.g. no failure, no violation of a kind) becomes
         ``null``."""
         out = asdict(self)
-        for key in _OPTIONAL_FIELDS:  # features a plan does not use leave its metrics.json unchanged
-            if out[key] is None:
+        if out["low_obstacle_margin"] is None:  # no low obstacle: its metrics.json keeps the keys it always had
+            for key in _OPTIONAL_FIELDS:
                 del out[key]
         return json_safe(out)
 

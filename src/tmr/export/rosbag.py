@@ -185,20 +185,32 @@ def _line_width(ln: Any) -> float:
     return 0.03 if ln.kind == "tether" else 0.015
 
 
-def _scene_markers(m: _Msgs, motion: Motion, ns0: int) -> list[Any]:
+def _prism_markers(m: _Msgs, ns0: int, ns: str, polys: Any, height: float, start: int) -> list[Any]:
+    """Wireframe of polygons extruded from the floor to ``height`` [m]: each ring at z = 0 and at the top, and its
+    vertical edges (markers ``start``, ``start + 1``, … of namespace ``ns``)."""
     out: list[Any] = []
-    i = 0
-    for poly in motion.obstacles:
+    i = start
+    for poly in polys:
         for ring in [poly.exterior, *poly.interiors]:
             xy = np.asarray(ring.coords)[:, :2]
-            for z in (0.0, OBSTACLE_HEIGHT):
+            for z in (0.0, height):
                 pts = np.column_stack([xy, np.full(len(xy), z)])
-                out.append(m.marker(ns0, "obstacles", i, "LINE_STRIP", "obstacle", (0.03, 0, 0), pts))
+                out.append(m.marker(ns0, ns, i, "LINE_STRIP", "obstacle", (0.03, 0, 0), pts))
                 i += 1
             edges = np.repeat(np.column_stack([xy, np.zeros(len(xy))]), 2, axis=0)
-            edges[1::2, 2] = OBSTACLE_HEIGHT
-            out.append(m.marker(ns0, "obstacles", i, "LINE_LIST", "obstacle", (0.02, 0, 0), edges))
+            edges[1::2, 2] = height
+            out.append(m.marker(ns0, ns, i, "LINE_LIST", "obstacle", (0.02, 0, 0), edges))
             i += 1
+    return out
+
+
+def _scene_markers(m: _Msgs, motion: Motion, ns0: int) -> list[Any]:
+    out: list[Any] = _prism_markers(m, ns0, "obstacles", motion.obstacles, OBSTACLE_HEIGHT, 0)
+    # low obstacles (a step, a cable tray) at their own height: the tethers may pass over them
+    for low in getattr(motion, "low_obstacles", ()):
+        fp = low.footprint
+        parts = list(getattr(fp, "geoms", [fp]))
+        out += _prism_markers(m, ns0, "low_obstacles", parts, float(low.height), len(out))
     for j, poly in enumerate(motion.inflated_in_room()):
         for ring in [poly.exterior, *poly.interiors]:
             xy = np.asarray(ring.coords)[:, :2]

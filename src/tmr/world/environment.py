@@ -701,6 +701,20 @@ def refuse_low_obstacles(env: Any, what: str, why: str) -> None:
         raise ParameterError(f"{what} cannot plan over low obstacles (the map has {len(lows)}: {names}): {why}")
 
 
+def refuse_impassable_low_obstacles(env: Any, highest_end: float, clearance: float) -> None:
+    """ParameterError (the command line: one line, exit 2) when a low obstacle of ``env`` is too high for any cable:
+    a catenary is nowhere higher than its higher end, so a tether whose ends are at most ``highest_end`` [m] cannot
+    clear an obstacle of height h by ``clearance`` [m] if h + clearance ≥ highest_end. Without this refusal the route
+    would let tethers over it (``tether_environment``) and every plan would be held back in front of it."""
+    for o in getattr(env, "low_obstacles", ()):
+        if o.height + clearance >= highest_end:
+            raise ParameterError(
+                f"the low obstacle {o.name!r} is {o.height:g} m high: with the {clearance:g} m clearance no tether "
+                f"(its ends at most {highest_end:g} m high) can pass over it; give it no 'height' (a tall obstacle), "
+                "or raise exit_height / base_height"
+            )
+
+
 # ------------------------------------------------------------------------------------------------------------
 # geometry input
 # ------------------------------------------------------------------------------------------------------------
