@@ -296,3 +296,51 @@ def test_upper_winch_rows_keep_the_lower_end_tension_positive():
     slack = lower_end(P, T) - 0.05
     assert np.allclose(rows.lower, np.minimum(-slack, 0.0))
     assert slack[0] < 0 and rows.lower[0] == 0.0  # tether 1: 0.2 − 0.147·1.2 − 0.05 < 0: it may not fall further
+
+
+@pytest.mark.parametrize("winch", [False, True])
+def test_thrust_rows_are_the_derivative_of_the_needed_thrust(winch):
+    """DroneThrust's rows: Ts ∇‖m g e_z − F_q(i) − F_p(i+1)‖ of every drone, against finite differences of the same
+    quantity from the catenaries' own end forces (``solve3d``: ``force_p``, ``force_q``), not from the rows' algebra;
+    and the end forces of :func:`end_forces` equal solve3d's."""
+    from types import SimpleNamespace
+
+    from tmr.control.drones import DroneThrust, end_forces
+    from tmr.model.catenary3d import DroneTetherParams, sensitivities_batch, solve3d, solve3d_batch
+
+    tether = DroneTetherParams(winch="active") if winch else DroneTetherParams()
+    P = np.array([[0.0, 0.0, 0.3], [2.5, 0.4, 2.6], [4.8, -0.3, 1.2], [6.9, 0.2, 2.9]])  # drone 2 below both
+    N = 3
+    T = np.array([2.0, 3.5, 2.5]) if winch else None
+
+    def need(P: np.ndarray, T: np.ndarray | None) -> np.ndarray:
+        pull = np.zeros((N, 3))
+        for j in range(N):
+            c = solve3d(P[j], P[j + 1], tether, winch_tension=None if T is None else T[j])
+            pull[j] += c.force_q
+            if j:
+                pull[j - 1] += c.force_p
+        return np.linalg.norm(tether.drone_weight * np.array([0.0, 0.0, 1.0]) - pull, axis=1)
+
+    cats = solve3d_batch(P, tether, winch_tension=T)
+    sens = sensitivities_batch(cats, np.array([0.5]), tether, winch=winch)
+    F_p, F_q, _, _ = end_forces(cats, sens, winch)
+    for j in range(N):
+        c = solve3d(P[j], P[j + 1], tether, winch_tension=None if T is None else T[j])
+        assert np.allclose(F_p[j], c.force_p, atol=1e-9) and np.allclose(F_q[j], c.force_q, atol=1e-9)
+    lim = DroneThrust(N, tether.available_thrust, tether.drone_weight, 2.0)
+    lim.winch = winch
+    Ts = 0.05
+    rows = lim.compute(SimpleNamespace(tethers=cats, sens=sens, Ts=Ts))
+    assert not np.any((rows.A != 0) & ~lim.pattern(None))
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        v = rng.normal(size=(N, 3))
+        Td = rng.normal(size=N) if winch else np.zeros(N)
+        eps = 1e-6
+        P1 = P.copy()
+        P1[1:] += eps * v
+        fd = (need(P1, None if T is None else T + eps * Td) - need(P, T)) / eps
+        x = np.concatenate([v.ravel(), Td]) if winch else v.ravel()
+        assert np.allclose(rows.A @ x / Ts, fd, rtol=1e-4, atol=1e-5)
+    assert np.allclose(rows.upper, np.minimum(2.0 * Ts, 1.0) * np.maximum(tether.available_thrust - need(P, T), 0))

@@ -948,6 +948,119 @@ class TetherTension(_TetherRows):
         return LimitRows(A, _minus_infinite(2 * self.N), upper)
 
 
+def end_forces(tethers: Any, sens: Any, winch: bool = False) -> tuple[Array, Array, Array, Array]:
+    """The forces of every tether on its two ends and their Jacobians (no per-step object churn: arrays only).
+
+    With H the horizontal tension, u the horizontal unit vector p → q, V_P, V_Q the vertical pulls (the cable's
+    weight between them: V_Q − V_P = ρ g L) the cable pulls its p end with F_p = H u + V_P e_z and its q end with
+    F_q = −H u − V_Q e_z (the checker's forms, :func:`tmr.checks.drones.check_drone_plan`). From the end tensions
+    and the length, T_P² = H² + V_P², T_Q² = H² + V_Q²:
+
+        V_P = ((T_Q² − T_P²) / (ρ g L) − ρ g L) / 2,   V_Q = V_P + ρ g L,   H = √(T_P² − V_P²),
+
+    so their derivatives follow from the sensitivities of T_P, T_Q and L (:func:`tmr.model.catenary3d.
+    sensitivities_batch`), and du = (I − u uᵀ)(dq − dp)_xy / d.
+
+    Returns F_p, F_q (N, 3) [N] and their Jacobians (N, 3, 6) w.r.t. (p, q) [N/m], or (N, 3, 7) with the winch
+    tension T_w last [N/N] when ``winch``.
+    """
+    w = float(tethers.weight_per_length)
+    N = tethers.p.shape[0]
+    L, TP, TQ = sens.length, sens.tension_p, sens.tension_q
+    cols = 7 if winch else 6
+    dTP = np.zeros((N, cols))
+    dTQ = np.zeros((N, cols))
+    dL = np.zeros((N, cols))
+    dTP[:, :3], dTP[:, 3:6] = sens.dtension_p_dp, sens.dtension_p_dq
+    dTQ[:, :3], dTQ[:, 3:6] = sens.dtension_q_dp, sens.dtension_q_dq
+    dL[:, :3], dL[:, 3:6] = sens.dlength_dp, sens.dlength_dq
+    if winch:
+        dTP[:, 6] = dTQ[:, 6] = sens.dtension_dtw
+        dL[:, 6] = sens.dlength_dtw
+    wL = w * L
+    S = TQ * TQ - TP * TP
+    VP = 0.5 * (S / wL - wL)
+    VQ = VP + wL
+    H = np.sqrt(np.maximum(TP * TP - VP * VP, 0.0))
+    dS = 2.0 * (TQ[:, None] * dTQ - TP[:, None] * dTP)
+    dVP = 0.5 * (dS / wL[:, None] - (S / (wL * L))[:, None] * dL - w * dL)
+    dVQ = dVP + w * dL
+    curved = (H > 1e-9) & ~np.asarray(tethers.vertical, dtype=bool)
+    safe_H = np.where(curved, H, 1.0)
+    dH = np.where(curved[:, None], (TP[:, None] * dTP - VP[:, None] * dVP) / safe_H[:, None], 0.0)
+    u = np.zeros((N, 3))
+    u[:, :2] = (tethers.q - tethers.p)[:, :2]
+    d = np.hypot(u[:, 0], u[:, 1])
+    u[:, :2] /= np.where(d > 0, d, 1.0)[:, None]
+    # du/d(p, q): (I − u uᵀ)/d on the horizontal components, minus for p, plus for q
+    P = np.zeros((N, 3, 3))
+    P[:, :2, :2] = np.eye(2)[None] - u[:, :2, None] * u[:, None, :2]
+    P /= np.where(d > 0, d, np.inf)[:, None, None]
+    du = np.zeros((N, 3, cols))
+    du[:, :, :3], du[:, :, 3:6] = -P, P
+    ez = np.array([0.0, 0.0, 1.0])
+    Hc = np.where(curved, H, 0.0)
+    F_p = Hc[:, None] * u + VP[:, None] * ez
+    F_q = -Hc[:, None] * u - VQ[:, None] * ez
+    dHu = u[:, :, None] * dH[:, None, :] + Hc[:, None, None] * du
+    J_p = dHu + ez[None, :, None] * dVP[:, None, :]
+    J_q = -dHu - ez[None, :, None] * dVQ[:, None, :]
+    return F_p, F_q, J_p, J_q
+
+
+class DroneThrust(_TetherRows):
+    """The thrust each drone needs against all its tethers and its weight within what it has beyond its control
+    reserve (hard): drone i carries tether i's q end and, but the leader, tether i+1's p end, so with the pull
+    F_i = F_q(i) + F_p(i+1) (:func:`end_forces`) it needs ‖m g e_z − F_i‖ ≤ (1 − reserve) (T/W) m g − margin, the
+    checker's row (``tension`` kind). Linearised: ``Ts n̂ᵀ(−dF_i) ≤ min(rate Ts, 1)(available − margin − need)`` with
+    n̂ the unit needed thrust (N rows on the drones i−1, i, i+1, and with an active winch on Ṫ_i, Ṫ_{i+1}). The
+    per-end rows of :class:`TetherTension` bound one tether at a time; two tethers of a middle drone pulling
+    sideways and down can need more than either alone."""
+
+    name = "drone_thrust"
+
+    def __init__(self, n_robots: int, available: float, weight: float, rate: float) -> None:
+        self.N, self.available, self.weight, self.rate = n_robots, float(available), float(weight), float(rate)
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        N = self.N
+        mask = _robot_pattern(N, [[k for k in (i - 1, i, i + 1) if 0 <= k < N] for i in range(N)])
+        if not self.winch:
+            return mask
+        extra = np.zeros((N, N), dtype=bool)
+        for i in range(N):
+            extra[i, i] = True
+            if i + 1 < N:
+                extra[i, i + 1] = True
+        return np.hstack([mask, extra])
+
+    def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
+        N, Ts = self.N, ctx.Ts
+        F_p, F_q, J_p, J_q = end_forces(ctx.tethers, ctx.sens, self.winch)
+        pull = F_q.copy()
+        pull[:-1] += F_p[1:]
+        need_vec = self.weight * np.array([0.0, 0.0, 1.0]) - pull
+        need = np.linalg.norm(need_vec, axis=1)
+        nh = need_vec / np.maximum(need, 1e-12)[:, None]
+        A = np.zeros((N, 4 * N if self.winch else 3 * N))
+        # row i: −n̂_iᵀ dF_q(tether i) (p = drone i−1, the anchor for i = 0; q = drone i; T_i) and −n̂_iᵀ dF_p(tether
+        # i+1) (p = drone i, q = drone i+1; T_{i+1})
+        g_q = -Ts * np.einsum("ij,ijk->ik", nh, J_q)  # (N, 6|7)
+        rows, c3 = np.arange(N), 3 * np.arange(N)[:, None] + np.arange(3)
+        A[rows[1:, None], c3[:-1]] += g_q[1:, :3]
+        A[rows[:, None], c3] += g_q[:, 3:6]
+        if N > 1:
+            g_p = -Ts * np.einsum("ij,ijk->ik", nh[:-1], J_p[1:])  # (N−1, 6|7)
+            A[rows[:-1, None], c3[:-1]] += g_p[:, :3]
+            A[rows[:-1, None], c3[1:]] += g_p[:, 3:6]
+        if self.winch:
+            A[rows, 3 * N + rows] += g_q[:, 6]
+            if N > 1:
+                A[rows[:-1], 3 * N + rows[1:]] += g_p[:, 6]
+        upper = -approach_bound(self.available - need, 0.0, self.rate, Ts)
+        return LimitRows(A, _minus_infinite(N), upper)
+
+
 class DroneSpeed(_DroneLimit):
     """|ṗ_i,axis| ≤ v_max per axis [m/s] (3N rows). With a jerk bound ``j_max`` [m/s³] the bound looks ahead: an
     axis accelerating by Δ = ṗ_k − ṗ_{k−1} keeps gaining speed while its acceleration is brought back to 0 at most
@@ -1278,6 +1391,7 @@ def make_drone_qp(
         ),
         TetherLength(N, tether.tether_length - p.length_margin, p.approach_rate, p.drone_accel_max),
         TetherTension(N, tether.spare_thrust - p.tension_margin, p.approach_rate),
+        DroneThrust(N, tether.available_thrust - p.tension_margin, tether.drone_weight, p.approach_rate),
         DroneSpeed(N, p.drone_speed_max, math.inf if p.drone_jerk_max is None else p.drone_jerk_max),
         DroneAcceleration(N, p.drone_accel_max),
     ]

@@ -167,6 +167,17 @@ class DroneTetherParams:
         return self.mass_per_length * self.g
 
     @property
+    def drone_weight(self) -> float:
+        """m g of a drone [N]."""
+        return self.drone_mass * self.g
+
+    @property
+    def available_thrust(self) -> float:
+        """Thrust a drone may use beyond its control reserve [N]: (1 − reserve) T/W m g (defaults: 22.07 N); it must
+        hold |m g e_z − F| for the pull F of all its tethers (:class:`tmr.control.drones.DroneThrust`)."""
+        return (1.0 - self.control_reserve) * self.thrust_to_weight * self.drone_weight
+
+    @property
     def spare_thrust(self) -> float:
         """Thrust left to pull a tether while hovering [N]: (1 - reserve) * T/W * m g - m g (defaults: 7.36 N).
 
