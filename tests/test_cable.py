@@ -137,6 +137,14 @@ def test_j_replay_confirms_the_tethers_clear_the_dock(j_plans, tmp_path) -> None
     assert rep.contacts["tether-obstacle"]["count"] == 0
     assert rep.contacts["tether-floor"]["count"] == 0
     assert rep.tracking_error.max() < 0.05
+    gap = rep.low_gap  # the simulated cable over the dock: above its top (the plan keeps 5 cm on its catenary)
+    assert gap is not None and np.isfinite(gap).any() and 0.0 < gap[np.isfinite(gap)].min() < 0.06
+    from tmr.replay.report import chain_verdict
+
+    assert chain_verdict(rep, run).ok
+    rep.low_gap = np.where(np.isfinite(gap), gap - 0.1, gap)  # 10 cm lower: into the dock
+    verdict = chain_verdict(rep, run)
+    assert not verdict.ok and "into a low obstacle" in verdict.reason
 
 
 def test_j_auto_picks_two_robots_with_the_active_winch_three_without(tmp_path) -> None:

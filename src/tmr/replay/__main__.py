@@ -140,10 +140,15 @@ def _chain(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str
         lines.append(f"  robot{i + 1}   tracking error max {1000 * e.max():.2f} mm, rms {rms:.2f} mm")
     for j in range(rp.lowest.shape[1]):
         k = int(rp.lowest[:, j].argmin())
-        lines.append(
+        line = (
             f"  tether{j + 1}  lowest point {rp.lowest[k, j]:.4f} m at t = {rp.t[k]:.2f} s (catenary "
             f"{rp.lowest_catenary[k, j]:.4f} m), winch tension max {rp.tension_winch[:, j].max():.2f} N"
         )
+        gap = getattr(rp, "low_gap", None)
+        if gap is not None and (gap[:, j] < float("inf")).any():
+            kg = int(gap[:, j].argmin())
+            line += f"; over low obstacles ≥ {gap[kg, j]:.4f} m above their top (t = {rp.t[kg]:.2f} s)"
+        lines.append(line)
     counts = ", ".join(f"{kind} {c['count']}" for kind, c in rp.contacts.items())
     lines.append(f"  contacts  {counts} (physics steps in contact)")
     lines.append(

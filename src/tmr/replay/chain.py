@@ -129,6 +129,9 @@ class ChainReplay(RealTimeFactors):
     config: ReplayConfig = field(default_factory=ReplayConfig)
     qpos: list[Array] = field(default_factory=list)  # per sample, the full MuJoCo state (for the GIF)
     built: ChainModel | None = None
+    #: (K, N) the simulated cable's least height above the top of a low obstacle it hangs over [m] (+inf: over
+    #: none); None without low obstacles (:func:`low_obstacle_gaps`)
+    low_gap: Array | None = None
 
 
 #: simulated time at the start pose before the plan's first sample [s] (lets the constraint forces settle).
@@ -427,7 +430,28 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
         config=cfg,
         qpos=rec_qpos[:K],
         built=cm,
+        low_gap=low_obstacle_gaps(nodes, run.low_obstacles) if getattr(run, "low_obstacles", None) else None,
     )
+
+
+def low_obstacle_gaps(nodes: list[Array], low_obstacles: Any, per_link: int = 4) -> Array:
+    """(K, N) the least height [m] of each simulated tether above the top of a low obstacle it hangs over, per
+    sample (+inf where it hangs over none): the tether's node polyline, ``per_link`` points along each link, tested
+    against every footprint in plan view (shapely), its height minus the obstacle's. The planner keeps ≥ the
+    clearance (5 cm) on its static catenary; this is what the physics makes of it."""
+    import shapely
+
+    nd = np.asarray(nodes, dtype=float)  # (K, N, n+1, 3)
+    K, N, n1 = nd.shape[:3]
+    s = np.arange(per_link) / per_link
+    pts = nd[:, :, :-1, None, :] + s[None, None, None, :, None] * np.diff(nd, axis=2)[:, :, :, None, :]
+    pts = np.concatenate([pts.reshape(K, N, -1, 3), nd[:, :, -1:, :]], axis=2)  # (K, N, M, 3)
+    gap = np.full((K, N), np.inf)
+    for o in low_obstacles:
+        over = shapely.contains_xy(o.footprint, pts[..., 0], pts[..., 1])
+        z = np.where(over, pts[..., 2] - float(o.height), np.inf)
+        gap = np.minimum(gap, z.min(axis=2))
+    return gap
 
 
 def _static_catenary(h1: Array, h2: Array, span: Array, params: Any, tension: Array) -> Any:

@@ -73,6 +73,16 @@ def chain_verdict(rp: ChainReplay, run: Any) -> Verdict:
             msg = f"{who} at t = {t0:.2f} s at {_xyz(c['where'])} ({c['count']} physics steps in contact, "
             msg += f"deepest {1000 * c['max_depth']:.1f} mm)"
         fails.append((t0, kind, msg))
+    gap = getattr(rp, "low_gap", None)
+    if gap is not None and (at := first_over(gap < 0.0, -gap)) is not None:  # a cable into a low obstacle
+        k, j = at
+        fails.append(
+            (
+                float(rp.t[k]),
+                "tether-obstacle",
+                f"tether {j + 1} hangs {-gap[k, j]:.3f} m into a low obstacle at t = {rp.t[k]:.2f} s",
+            )
+        )
     tol = rp.config.tolerance
     if (at := first_over(rp.tracking_error > tol, rp.tracking_error)) is not None:
         k, i = at
@@ -165,6 +175,12 @@ def chain_document(rp: ChainReplay, run: Any, verdict: Verdict) -> dict[str, Any
                 "tension_far_error_max": float(np.abs(rp.tension_far[:, j] - rp.tension_far_catenary[:, j]).max()),
             }
         )
+        gap = getattr(rp, "low_gap", None)
+        if gap is not None:  # a world with low obstacles: the least height of the cable above one it hangs over
+            kg = int(np.argmin(gap[:, j]))
+            finite = bool(np.isfinite(gap[kg, j]))
+            tethers[-1]["low_obstacle_gap_min"] = float(gap[kg, j]) if finite else None
+            tethers[-1]["low_obstacle_gap_at"] = float(rp.t[kg]) if finite else None
     model = asdict(cfg) | {
         "kp": cfg.kp,
         "kv": cfg.kv,
