@@ -208,18 +208,31 @@ def test_least_tension_schedule_is_the_least_rate_bounded_cover() -> None:
     lower = T.copy()
     lower[peak - 40, 0] -= 0.5  # any lower value breaks the need or the rate bound
     assert lower[peak - 40, 0] < need[peak - 40] or np.max(np.abs(np.diff(lower[:, 0]))) > p.winch_tension_rate * Ts
-    with pytest.raises(ParameterError, match="beyond the reach"):
-        least_tension_schedule(np.full((3, 1), 9.7), p, Ts, m)
+    # beyond T_max's reach (the NLP's tolerance): T_max, and the checker judges the span
+    assert np.all(least_tension_schedule(np.full((3, 1), 9.7), p, Ts, m) == p.winch_tension_max)
+    # a slow winch (2 N/s): the envelope rises before a long span and falls after it, at exactly the rate
+    slow = replace(p, winch_tension_rate=2.0)
+    T2 = least_tension_schedule(spans, slow, Ts, m)
+    assert np.all(T2[:, 0] >= need - 1e-9)
+    assert np.max(np.abs(np.diff(T2[:, 0]))) == pytest.approx(2.0 * Ts)
+    rise = np.flatnonzero(T2[:, 0] > 13.5 + 1e-9)[0]
+    assert need[rise] == pytest.approx(13.5) and T2[rise, 0] > need[rise]  # it rises before the span needs it
+    fall = np.flatnonzero(T2[:, 0] > 13.5 + 1e-9)[-1]
+    assert T2[fall, 0] > need[fall]  # and comes down only after it
 
 
 def test_horizon_with_the_active_winch_is_never_worse_than_qp(e4_active) -> None:
-    """The NLP optimises the positions within T_max's reach and the least rate-bounded tension follows; stopped
-    early (time limit) it returns the qp plan or a better iterate, with a tension every span is within."""
+    """The NLP optimises the positions within T_max's reach (optimal on E with 4 robots, ~20 s) and the least
+    rate-bounded tension follows."""
+    from tmr.control.winch import least_tension_schedule
     from tmr.planner import solve
 
     problem, qp_plan, qp_metrics = e4_active
-    plan, metrics = solve(problem, "horizon", time_limit=6.0)
+    plan, metrics = solve(problem, "horizon", time_limit=90.0)
     assert plan.success, plan.failure
+    assert plan.diagnostics["horizon_result"] == "optimal"  # the NLP's own plan, its tension chosen after it
+    want = least_tension_schedule(plan.spans, problem.chain_params, plan.Ts, problem.qp_params.span_margin)
+    assert np.array_equal(plan.winch_tension, want)
     for f in ("f1", "f2", "f4"):
         assert getattr(metrics, f) <= getattr(qp_metrics, f) * (1 + 1e-9)
     T = plan.winch_tension
@@ -367,3 +380,19 @@ def test_the_pay_out_damper_reaches_the_plan() -> None:
     assert np.any(growth > 0.5 * 0.5 * (d_max - d[:-1]))  # it binds somewhere (the test can fail)
     with pytest.raises(ParameterError, match="span_approach_rate is a limit of --method qp"):
         solve(problem, "pinv")
+
+
+def test_the_checker_holds_the_winch_to_its_range_and_rate(e4_active) -> None:
+    """The independent checker reads the recorded range and rate (metrics.json params) and judges the tension
+    itself: a tension out of range or jumping faster than the pulley can follow fails the plan."""
+    import copy
+
+    from tmr.planner import check
+
+    problem, plan, _ = e4_active
+    assert check(copy.deepcopy(plan), problem.env).success
+    for k, value, kind in ((10, 41.0, "winch_range"), (10, 13.5 + 1.2, "winch_rate")):
+        bad = copy.deepcopy(plan)
+        bad.winch_tension[k, 1] = value  # one sample: out of [5, 40] N / a 1.2 N jump in 0.05 s (24 N/s > 20)
+        m = check(bad, problem.env)
+        assert not m.success and m.violation_steps[kind][0] == k and kind in m.failure

@@ -332,6 +332,29 @@ def _winch_span_high(plan: Any, spans: np.ndarray, tension: np.ndarray, tol: flo
     return out
 
 
+#: An active winch's checks: its tension within [winch_tension_min, winch_tension_max] at every sample, and changing
+#: by at most winch_tension_rate · Ts from one sample to the next (reported at the later sample).
+WINCH_KINDS = ("winch_range", "winch_rate")
+
+
+def _winch_masks(plan: Any, tension: np.ndarray, Ts: float, tol: float) -> dict[str, np.ndarray]:
+    """Per sample (K+1,), whether the winch tensions ``tension`` (K+1, N) [N] leave the recorded range or change
+    faster than the recorded rate (``plan.params``: ``winch_tension_min``, ``winch_tension_max`` [N],
+    ``winch_tension_rate`` [N/s]; ChainParams' defaults where missing), with ``tol`` [N] of slack."""
+    from tmr.model.params import ChainParams
+
+    p = getattr(plan, "params", None) or {}
+    d = ChainParams()
+    lo = float(p.get("winch_tension_min", d.winch_tension_min))
+    hi = float(p.get("winch_tension_max", d.winch_tension_max))
+    rate = float(p.get("winch_tension_rate", d.winch_tension_rate))
+    out_range = ((tension < lo - tol) | (tension > hi + tol)).any(axis=1)
+    jump = np.zeros(tension.shape[0], dtype=bool)
+    if tension.shape[0] > 1:
+        jump[1:] = (np.abs(np.diff(tension, axis=0)) > rate * Ts + tol).any(axis=1)
+    return {"winch_range": out_range, "winch_rate": jump}
+
+
 def _winch_reach(plan: Any, tension: np.ndarray) -> np.ndarray:
     """(K+1, N) d_max [m] of every tether at every step's winch tension ``tension`` [N]
     (:func:`tmr.model.catenary.max_span`, one solve per distinct tension and end height)."""
@@ -634,6 +657,9 @@ def evaluate(
             low_step = None
         masks[LOW_OBSTACLE_KIND] = (margins < -tol).any(axis=1)
         kinds = (*VIOLATION_KINDS, LOW_OBSTACLE_KIND)
+    if tension is not None:  # an active winch: its tension within the pulley's range, changing within its rate
+        masks.update(_winch_masks(plan, tension, Ts, tol))
+        kinds = (*kinds, *WINCH_KINDS)
     steps = {kind: np.flatnonzero(masks[kind]).tolist() for kind in kinds}
     first = {kind: (steps[kind][0] if steps[kind] else None) for kind in kinds}
     any_violation = np.logical_or.reduce([masks[kind] for kind in kinds])

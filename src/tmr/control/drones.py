@@ -1003,6 +1003,16 @@ def end_forces(tethers: Any, sens: Any, winch: bool = False) -> tuple[Array, Arr
     F_p = Hc[:, None] * u + VP[:, None] * ez
     F_q = -Hc[:, None] * u - VQ[:, None] * ez
     dHu = u[:, :, None] * dH[:, None, :] + Hc[:, None, None] * du
+    # a vertical tether (H = 0) still pulls sideways once its ends move apart: near vertical d = a (θ_Q − θ_P) with
+    # T_Q/T_P → e^(θ_Q − θ_P), so H u = ρ g (q − p)_xy / |ln(T_Q/T_P)| (a pendulum's stiffness)
+    flat = ~curved
+    if flat.any():
+        log = np.abs(np.log(np.maximum(TQ[flat], 1e-300) / np.maximum(TP[flat], 1e-300)))
+        k = np.where(log > 1e-12, w / np.where(log > 1e-12, log, 1.0), 0.0)
+        stiff = np.zeros((int(flat.sum()), 3, cols))
+        stiff[:, 0, 0] = stiff[:, 1, 1] = -k
+        stiff[:, 0, 3] = stiff[:, 1, 4] = k
+        dHu[flat] = stiff
     J_p = dHu + ez[None, :, None] * dVP[:, None, :]
     J_q = -dHu - ez[None, :, None] * dVQ[:, None, :]
     return F_p, F_q, J_p, J_q
@@ -1058,7 +1068,13 @@ class DroneThrust(_TetherRows):
             if N > 1:
                 A[rows[:-1], 3 * N + rows[1:]] += g_p[:, 6]
         upper = -approach_bound(self.available - need, 0.0, self.rate, Ts)
+        upper[need < self.available - THRUST_ACTIVATION] = np.inf  # far below the limit: an inactive row
         return LimitRows(A, _minus_infinite(N), upper)
+
+
+#: :class:`DroneThrust`'s rows are active only within this much [N] of the available thrust (a step of the drones
+#: changes the need by a few tenths of a newton at most: speed and acceleration bounds).
+THRUST_ACTIVATION = 2.0
 
 
 class DroneSpeed(_DroneLimit):

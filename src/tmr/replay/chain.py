@@ -26,7 +26,7 @@ import shapely
 from numpy.typing import NDArray
 
 from tmr.replay.errors import ReplayError
-from tmr.replay.tether import TetherSpec, TetherState, tether_body_xml, tether_extra_xml
+from tmr.replay.tether import TETHER_RADIUS, TetherSpec, TetherState, tether_body_xml, tether_extra_xml
 from tmr.replay.timing import RealTimeFactors
 from tmr.replay.world import OBSTACLE_HEIGHT, ROBOT_BITS, TETHER_BITS, world_xml
 
@@ -437,7 +437,8 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
 def low_obstacle_gaps(nodes: list[Array], low_obstacles: Any, per_link: int = 4) -> Array:
     """(K, N) the least height [m] of each simulated tether above the top of a low obstacle it hangs over, per
     sample (+inf where it hangs over none): the tether's node polyline, ``per_link`` points along each link, tested
-    against every footprint in plan view (shapely), its height minus the obstacle's. The planner keeps ≥ the
+    against every footprint in plan view (shapely), the underside of its capsules (height − ``TETHER_RADIUS``) minus
+    the obstacle's height. The planner keeps ≥ the
     clearance (5 cm) on its static catenary; this is what the physics makes of it."""
     import shapely
 
@@ -449,7 +450,7 @@ def low_obstacle_gaps(nodes: list[Array], low_obstacles: Any, per_link: int = 4)
     gap = np.full((K, N), np.inf)
     for o in low_obstacles:
         over = shapely.contains_xy(o.footprint, pts[..., 0], pts[..., 1])
-        z = np.where(over, pts[..., 2] - float(o.height), np.inf)
+        z = np.where(over, pts[..., 2] - TETHER_RADIUS - float(o.height), np.inf)  # the capsule's underside
         gap = np.minimum(gap, z.min(axis=2))
     return gap
 
