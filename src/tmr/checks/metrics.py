@@ -340,14 +340,12 @@ WINCH_KINDS = ("winch_range", "winch_rate")
 def _winch_masks(plan: Any, tension: np.ndarray, Ts: float, tol: float) -> dict[str, np.ndarray]:
     """Per sample (K+1,), whether the winch tensions ``tension`` (K+1, N) [N] leave the recorded range or change
     faster than the recorded rate (``plan.params``: ``winch_tension_min``, ``winch_tension_max`` [N],
-    ``winch_tension_rate`` [N/s]; ChainParams' defaults where missing), with ``tol`` [N] of slack."""
-    from tmr.model.params import ChainParams
-
+    ``winch_tension_rate`` [N/s], as every active-winch plan of tmr records them), with ``tol`` [N] of slack. A bound
+    the plan does not record is not judged."""
     p = getattr(plan, "params", None) or {}
-    d = ChainParams()
-    lo = float(p.get("winch_tension_min", d.winch_tension_min))
-    hi = float(p.get("winch_tension_max", d.winch_tension_max))
-    rate = float(p.get("winch_tension_rate", d.winch_tension_rate))
+    lo = float(p.get("winch_tension_min", -np.inf))
+    hi = float(p.get("winch_tension_max", np.inf))
+    rate = float(p.get("winch_tension_rate", np.inf))
     out_range = ((tension < lo - tol) | (tension > hi + tol)).any(axis=1)
     jump = np.zeros(tension.shape[0], dtype=bool)
     if tension.shape[0] > 1:
