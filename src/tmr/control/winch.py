@@ -12,8 +12,12 @@ N tension rates Ṫ as unknowns besides the robots' velocities, and trades sag a
   ``d_j + Ts (ḋ_j − σ_j Ṫ_j) ≤ d_max(T_j) − margin`` with σ_j the secants of the concave d_max(T0) over one
   step (two rows per tether: exact after the step), the box keeping only the reach of ``T_max``;
 - the pulley's range and rate in the box: ``T_min ≤ T_j + Ts Ṫ_j ≤ T_max``, ``|Ṫ_j| ≤ rate``;
-- the winches back towards their nominal tension in the lowest level (:class:`WinchReturn`): the tension rises
-  only where a span needs it.
+- the winches back towards their nominal tension, their rate smooth, in the lowest level (:class:`WinchReturn`,
+  :class:`WinchSmoothness`): the tension leaves nominal where a span row binds or a higher level gains from a longer
+  reach.
+
+``--method horizon`` optimises the positions within T_max's reach and then takes the least tension schedule the
+winch can follow (:func:`least_tension_schedule`).
 
 :class:`GroundWinchQP` runs the lexicographic QP on this extended problem and integrates the tensions itself, so the
 plan loop (:func:`tmr.control.clik.run`) is the passive one; :meth:`GroundWinchQP.tensions` gives T at every state.
