@@ -31,6 +31,15 @@ from tmr.control.limits import Limit, LimitRows, RobotSeparation, _infinite, app
 from tmr.control.pinv import dls_inverse, null_space_projector
 from tmr.control.qp import Level, LexicographicQP
 from tmr.control.tasks import Task, TaskRows
+from tmr.control.winch import (
+    WINCH_GAIN,
+    WINCH_WEIGHT,
+    PaddedLimit,
+    PaddedTask,
+    WinchChain,
+    WinchReturn,
+    WinchVelocityMap,
+)
 from tmr.errors import ParameterError
 from tmr.model.catenary3d import (
     Catenary3D,
@@ -70,8 +79,6 @@ __all__ = [
     "make_drone_pinv",
     "WinchVelocityMap",
     "WinchChain",
-    "WinchPadded",
-    "WinchPaddedTask",
     "WinchTensionRange",
     "WinchRate",
     "WinchReturn",
@@ -374,58 +381,6 @@ def segment_nearest(world: World3D, a: Array, b: Array, cap: float = np.inf) -> 
     slot of :func:`segment_nearest_k`. Obstacles farther than ``cap`` [m] are not queried (the walls always are)."""
     c, g, t, _ = segment_nearest_k(world, a, b, 1, cap)
     return c[:, 0], g[:, 0], t[:, 0]
-
-
-class WinchVelocityMap:
-    """The coupling of the QP's unknowns with an active winch: x = [v (3N), Ṫ (N)] (m/s, N/s) and the "joint" rates
-    [link rates (3N), Ṫ (N)] = T x with T = diag(T_links, I_N): the link coordinates of :class:`VelocityMap3D` for
-    the drones, the tension rates themselves for the winches. Every other attribute is the drones' map's
-    (``u``, ``d``, ``n_robots``, …)."""
-
-    def __init__(self, links: VelocityMap3D) -> None:
-        self.links = links
-        n3 = links.T.shape[0]
-        N = n3 // 3
-        T = np.zeros((n3 + N, n3 + N))
-        T[:n3, :n3] = links.T
-        T[n3:, n3:] = np.eye(N)
-        self.T = T
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.links, name)
-
-    def robot_velocities(self, qdot: Array) -> Array:
-        """x = [v, Ṫ] from the rates [link rates, Ṫ]."""
-        n3 = self.links.T.shape[0]
-        return np.concatenate([self.links.robot_velocities(qdot[:n3]), qdot[n3:]])
-
-
-class WinchChain:
-    """The spatial chain seen by the lexicographic QP with an active winch: N more unknowns (the tension rates Ṫ,
-    after the 3N drone velocities), ``dof`` = 4N; the rest is the chain's. ``coupling_pattern`` is the sparsity of
-    :class:`WinchVelocityMap`'s T (the QP's declared pattern of the coupling rows)."""
-
-    def __init__(self, chain: Chain) -> None:
-        self.chain = chain
-        self.dof = chain.dof + chain.n_robots
-        self.spatial = True
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.chain, name)
-
-    def coupling_pattern(self, mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
-        from tmr.model.velocity import robot_pattern3d
-
-        n3 = self.chain.dof
-        out = np.zeros_like(mask)
-        out[:, :n3] = robot_pattern3d(mask[:, :n3])
-        out[:, n3:] = mask[:, n3:]
-        return out
-
-
-def _real_chain(chain: Any) -> Chain:
-    """The drones' chain behind a :class:`WinchChain` (or the chain itself)."""
-    return chain.chain if isinstance(chain, WinchChain) else chain
 
 
 class DroneStepContext:
@@ -1157,56 +1112,6 @@ class DroneJerk(DroneSpeed):
 
 
 # ---------------------------------------------------------------------------------------------------- active winch
-class WinchPadded(_DroneLimit):
-    """A drone-only limit (its rows on v, 3N columns) in the QP of an active winch: the same rows with N zero columns
-    for the tension rates Ṫ (the drone's clearance, the room, the separation, speed and acceleration do not depend on
-    the tethers' tension)."""
-
-    def __init__(self, inner: Limit) -> None:
-        self.inner = inner
-        self.name, self.relaxable = inner.name, inner.relaxable
-
-    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
-        real = _real_chain(chain)
-        d = self.inner.pattern(real)
-        return np.hstack([d, np.zeros((d.shape[0], real.n_robots), dtype=bool)])
-
-    def compute(self, ctx: DroneStepContext) -> LimitRows:  # type: ignore[override]
-        r = self.inner.compute(ctx)
-        N = ctx.chain.n_robots
-        A = np.zeros((r.A.shape[0], r.A.shape[1] + N))
-        A[:, : r.A.shape[1]] = r.A
-        return LimitRows(A, r.lower, r.upper)
-
-    def reset(self) -> None:
-        self.inner.reset()
-
-
-class WinchPaddedTask(_DroneTask):
-    """A drone task (rows on v) in the QP of an active winch: N zero columns for Ṫ appended (a constant, read-only
-    matrix stays one, so the QP keeps reusing its stacked rows)."""
-
-    def __init__(self, inner: Task) -> None:
-        self.inner = inner
-        self.name, self.full_rank = inner.name, getattr(inner, "full_rank", False)
-        self._last: tuple[Array, Array] | None = None
-
-    def compute(self, ctx: DroneStepContext) -> TaskRows:  # type: ignore[override]
-        J, t = self.inner.compute(ctx)  # type: ignore[arg-type]
-        if self._last is not None and self._last[0] is J and not J.flags.writeable:
-            return TaskRows(self._last[1], t)
-        out = np.zeros((J.shape[0], J.shape[1] + ctx.chain.n_robots))
-        out[:, : J.shape[1]] = J
-        if not J.flags.writeable:
-            out.flags.writeable = False
-            self._last = (J, out)
-        return TaskRows(out, t)
-
-    def reset(self) -> None:
-        self._last = None
-        self.inner.reset()
-
-
 class WinchTensionRange(_DroneLimit):
     """Every winch's tension within the pulley's torque range after the step: T_min ≤ T + Ts Ṫ ≤ T_max (N rows on
     Ṫ, exact: T integrates linearly). A tension outside the range (never, from a valid start) may not move further
@@ -1290,32 +1195,6 @@ class WinchUpperEnd(_DroneLimit):
         assert T is not None
         slack = T - w * np.abs(dz) - self.margin
         return LimitRows(A, np.minimum(-slack, 0.0), np.full(N, np.inf))
-
-
-class WinchReturn(_DroneTask):
-    """The winches back towards their nominal tension: ``Ṫ_j = K_w (T_ref − T_j)`` (N rows on Ṫ) [N/s], in the
-    lowest level with a small weight. The tension leaves T_ref only where a higher level or a hard limit needs it
-    (the sag over an obstacle, a tether's length) and comes back when they let it: a higher tension lifts the sag
-    but pulls the drones harder (the tension rows bound that), a lower one spares thrust."""
-
-    name = "winch"
-
-    def __init__(self, n_robots: int, t_ref: float, gain: float) -> None:
-        N = n_robots
-        J = np.hstack([np.zeros((N, 3 * N)), np.eye(N)])
-        J.flags.writeable = False
-        self.J, self.t_ref, self.gain = J, float(t_ref), float(gain)
-
-    def compute(self, ctx: DroneStepContext) -> TaskRows:  # type: ignore[override]
-        T = ctx.winch_tension
-        assert T is not None
-        return TaskRows(self.J, self.gain * (self.t_ref - T))
-
-
-#: The active winch's task in the lowest level: weight (against energy_weight and smoothness_weight, on m/s vs N/s)
-#: and gain K_w [1/s] of :class:`WinchReturn`.
-WINCH_WEIGHT = 0.01
-WINCH_GAIN = 0.5
 
 
 # --------------------------------------------------------------------------------------------------- formulations
@@ -1436,9 +1315,9 @@ def _winch_qp(
     t_ref = min(max(tether.winch_tension, tether.winch_tension_min), tether.winch_tension_max)
     new_levels = []
     for i, level in enumerate(levels):
-        tasks: list[tuple[Task, float]] = [(WinchPaddedTask(t), w) for t, w in level.tasks]
+        tasks: list[tuple[Task, float]] = [(PaddedTask(t, of_base=False), w) for t, w in level.tasks]
         if i == len(levels) - 1:
-            tasks.append((WinchReturn(N, t_ref, WINCH_GAIN), WINCH_WEIGHT))
+            tasks.append((WinchReturn(chain, t_ref, WINCH_GAIN, space="robot"), WINCH_WEIGHT))
         new_levels.append(Level(tasks, level.name))
     new_limits: list[Limit] = []
     for lim in limits:
@@ -1446,7 +1325,7 @@ def _winch_qp(
             lim.winch = True
             new_limits.append(lim)
         else:
-            new_limits.append(WinchPadded(lim))
+            new_limits.append(PaddedLimit(lim, of_base=False))
     new_limits += [
         WinchTensionRange(N, tether.winch_tension_min, tether.winch_tension_max),
         WinchRate(N, tether.winch_tension_rate),

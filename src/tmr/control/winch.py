@@ -38,7 +38,7 @@ from tmr.model import catenary
 from tmr.model.chain import Chain
 from tmr.model.params import ChainParams
 from tmr.model.spans import catenary_params
-from tmr.model.velocity import VelocityMap, robot_pattern
+from tmr.model.velocity import robot_pattern, robot_pattern3d
 
 Array = NDArray[np.float64]
 
@@ -50,6 +50,8 @@ __all__ = [
     "WinchContext",
     "WinchReturn",
     "WinchSpan",
+    "WinchVelocityMap",
+    "real_chain",
     "least_tension_schedule",
     "WINCH_GAIN",
     "WINCH_SMOOTHNESS_WEIGHT",
@@ -58,7 +60,7 @@ __all__ = [
 ]
 
 #: :class:`WinchReturn`'s weight in the lowest level (against the energy and smoothness tasks, on N/s vs m/s) and
-#: its gain K_w [1/s]: the values of the drones' active winch (:mod:`tmr.control.drones`).
+#: its gain K_w [1/s], for ground chains and drones (:mod:`tmr.control.drones`).
 WINCH_WEIGHT = 0.01
 WINCH_GAIN = 0.5
 #: :class:`WinchSmoothness`'s weight in the lowest level (on N/s; measured on E with 4 robots: see
@@ -67,13 +69,15 @@ WINCH_SMOOTHNESS_WEIGHT = 0.05
 
 
 class WinchChain:
-    """The planar chain seen by the QP with an active winch: ``dof`` = 2N + N (the tension rates after the joint
-    rates); everything else is the chain's. ``coupling_pattern`` is the sparsity of diag(T, I)."""
+    """The chain seen by the lexicographic QP with an active winch, planar or spatial (the drones,
+    :mod:`tmr.control.drones`): N more unknowns, the tension rates Ṫ after the robots' (``dof`` = 2N + N or 3N + N);
+    everything else is the chain's. ``coupling_pattern`` is the sparsity of :class:`WinchVelocityMap`'s T (the QP's
+    declared pattern of the coupling rows)."""
 
     def __init__(self, chain: Chain) -> None:
         self.chain = chain
         self.dof = chain.dof + chain.n_robots
-        self.spatial = False
+        self.spatial = bool(chain.spatial)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.chain, name)
@@ -81,63 +85,79 @@ class WinchChain:
     def coupling_pattern(self, mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
         n = self.chain.dof
         out = np.zeros_like(mask)
-        out[:, :n] = robot_pattern(mask[:, :n])
+        out[:, :n] = (robot_pattern3d if self.spatial else robot_pattern)(mask[:, :n])
         out[:, n:] = mask[:, n:]
         return out
 
 
-class WinchVelocityMap:
-    """diag(T, I): the planar chain's map for the robots, the tension rates as they are (``T``, 2N + N square)."""
+def real_chain(chain: Any) -> Chain:
+    """The chain behind a :class:`WinchChain` (or the chain itself)."""
+    return chain.chain if isinstance(chain, WinchChain) else chain
 
-    def __init__(self, links: VelocityMap, n_robots: int) -> None:
+
+class WinchVelocityMap:
+    """The coupling of the QP's unknowns with an active winch: x = [v, Ṫ] (m/s, N/s) and the "joint" rates
+    [link rates, Ṫ] = T x with T = diag(T_links, I_N): the robots' map ``links`` (:class:`VelocityMap`, or
+    :class:`~tmr.model.velocity.VelocityMap3D` for drones) for the robots, the tension rates as they are. Every other
+    attribute is the robots' map's (``u``, ``d``, ``n_robots``, …)."""
+
+    def __init__(self, links: Any) -> None:
         self.links = links
-        n = 2 * n_robots
-        T = np.zeros((n + n_robots, n + n_robots))
+        n, N = links.T.shape[0], int(links.n_robots)
+        T = np.zeros((n + N, n + N))
         T[:n, :n] = links.T
-        T[n:, n:] = np.eye(n_robots)
+        T[n:, n:] = np.eye(N)
         self.T = T
         self._n = n
 
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.links, name)
+
     def robot_velocities(self, qdot: Array) -> Array:
-        """x = [v, Ṫ] from [joint rates, Ṫ]."""
+        """x = [v, Ṫ] from [link rates, Ṫ]."""
         return np.concatenate([self.links.robot_velocities(qdot[: self._n]), qdot[self._n :]])
 
 
 class WinchContext:
-    """The step seen by the QP with an active winch: ``base`` is the passive :class:`StepContext` (the padded tasks
-    and limits read it), ``winch_tension`` (N,) [N] every tether's T0 now, ``velocity_map`` and ``qdot_prev``
-    extended by the tension rates; every other attribute is the base's."""
+    """The step seen by the QP with an active winch (ground chains): ``base`` is the passive :class:`StepContext`
+    (the padded tasks and limits read it), ``winch_tension`` (N,) [N] every tether's T0 now, ``velocity_map`` and
+    ``qdot_prev`` extended by the tension rates; every other attribute is the base's. (The drones' step context
+    carries its winch itself: :class:`tmr.control.drones.DroneStepContext`.)"""
 
     def __init__(self, base: StepContext, tension: Array, rate_prev: Array) -> None:
         self.base = base
         self.winch_tension = tension
         self.qdot_prev = np.concatenate([base.qdot_prev, rate_prev])
-        self.velocity_map = WinchVelocityMap(base.velocity_map, base.chain.n_robots)
+        self.velocity_map = WinchVelocityMap(base.velocity_map)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.base, name)
 
 
 class PaddedLimit(Limit):
-    """A limit of the passive QP with zero Ṫ columns (clearance, separation, robot speed and acceleration do not
-    depend on the tension)."""
+    """A limit without tension columns in the QP of an active winch: the same rows with N zero columns for Ṫ
+    (clearance, separation, robot speed and acceleration do not depend on the tension). ``of_base``: the inner
+    limit reads the passive context ``ctx.base`` (:class:`WinchContext`, ground chains), else ``ctx`` itself (the
+    drones' context). The padded matrix is kept between steps."""
 
-    def __init__(self, inner: Limit) -> None:
-        self.inner = inner
+    def __init__(self, inner: Limit, of_base: bool = True) -> None:
+        self.inner, self.of_base = inner, of_base
         self.name, self.relaxable, self.space = inner.name, inner.relaxable, inner.space
         self._A: Array | None = None
 
     def pattern(self, chain: Any) -> NDArray[np.bool_]:
-        real = chain.chain if isinstance(chain, WinchChain) else chain
+        real = real_chain(chain)
         d = self.inner.pattern(real)
         return np.hstack([d, np.zeros((d.shape[0], real.n_robots), dtype=bool)])
 
     def compute(self, ctx: Any) -> LimitRows:
-        r = self.inner.compute(ctx.base)
+        inner_ctx = ctx.base if self.of_base else ctx
+        r = self.inner.compute(inner_ctx)
         m, n = r.A.shape
+        N = inner_ctx.chain.n_robots
         A = self._A
-        if A is None or A.shape != (m, n + ctx.base.chain.n_robots):
-            A = self._A = np.zeros((m, n + ctx.base.chain.n_robots))
+        if A is None or A.shape != (m, n + N):
+            A = self._A = np.zeros((m, n + N))
         A[:, :n] = r.A
         return LimitRows(A, r.lower, r.upper)
 
@@ -147,19 +167,22 @@ class PaddedLimit(Limit):
 
 
 class PaddedTask(Task):
-    """A task of the passive QP with zero Ṫ columns. Never full rank: the tension rates are left free by it."""
+    """A task without tension columns in the QP of an active winch: N zero columns for Ṫ appended (a constant,
+    read-only matrix stays one, so the QP keeps reusing its stacked rows). Never full rank: the tension rates are
+    left free by it. ``of_base`` as :class:`PaddedLimit`'s."""
 
-    def __init__(self, inner: Task) -> None:
-        self.inner = inner
+    def __init__(self, inner: Task, of_base: bool = True) -> None:
+        self.inner, self.of_base = inner, of_base
         self.name, self.space = inner.name, getattr(inner, "space", "joint")
         self.full_rank = False
         self._last: tuple[Array, Array] | None = None
 
     def compute(self, ctx: Any) -> TaskRows:
-        J, t = self.inner.compute(ctx.base)
+        inner_ctx = ctx.base if self.of_base else ctx
+        J, t = self.inner.compute(inner_ctx)
         if self._last is not None and self._last[0] is J and not J.flags.writeable:
             return TaskRows(self._last[1], t)
-        out = np.zeros((J.shape[0], J.shape[1] + ctx.base.chain.n_robots))
+        out = np.zeros((J.shape[0], J.shape[1] + inner_ctx.chain.n_robots))
         out[:, : J.shape[1]] = J
         if not J.flags.writeable:  # constant rows stay one read-only array: the QP reuses what it built from them
             out.flags.writeable = False
@@ -172,20 +195,20 @@ class PaddedTask(Task):
 
 
 class WinchReturn(Task):
-    """The winches back towards their nominal tension: ``Ṫ_j = K_w (T_ref − T_j)`` [N/s] (N rows on Ṫ, joint
-    coordinates), in the lowest level with a small weight: the tension leaves T_ref only where a higher level or a
-    hard limit (a span) needs it."""
+    """The winches back towards their nominal tension: ``Ṫ_j = K_w (T_ref − T_j)`` [N/s] (N rows on Ṫ), in the
+    lowest level with a small weight: the tension leaves T_ref only where a higher level or a hard limit needs it (a
+    span, the sag over an obstacle, a tether's length) and comes back when they let it. The rows are written in
+    ``space`` (the Ṫ columns come last in both; ground chains: "joint", drones: "robot")."""
 
     name = "winch"
-    space = "joint"
     full_rank = False
 
-    def __init__(self, chain: Chain, t_ref: float, gain: float = WINCH_GAIN) -> None:
+    def __init__(self, chain: Chain, t_ref: float, gain: float = WINCH_GAIN, space: str = "joint") -> None:
         N, n = chain.n_robots, chain.dof
         J = np.zeros((N, n + N))
         J[:, n:] = np.eye(N)
         J.flags.writeable = False
-        self.J, self.t_ref, self.gain = J, float(t_ref), float(gain)
+        self.J, self.t_ref, self.gain, self.space = J, float(t_ref), float(gain), space
 
     def compute(self, ctx: Any) -> TaskRows:
         return TaskRows(self.J, self.gain * (self.t_ref - ctx.winch_tension))
