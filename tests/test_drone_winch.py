@@ -298,6 +298,21 @@ def test_upper_winch_rows_keep_the_lower_end_tension_positive():
     assert slack[0] < 0 and rows.lower[0] == 0.0  # tether 1: 0.2 − 0.147·1.2 − 0.05 < 0: it may not fall further
 
 
+def _needed_thrust(P: np.ndarray, T: np.ndarray | None, tether) -> np.ndarray:
+    """‖m g e_z − F_q(i) − F_p(i+1)‖ of every drone of the chain P (N+1, 3) [m], the end forces from ``solve3d``'s
+    own catenaries (winch tensions T (N,) [N], or the constant one) — the rows' reference, not their algebra."""
+    from tmr.model.catenary3d import solve3d
+
+    N = P.shape[0] - 1
+    pull = np.zeros((N, 3))
+    for j in range(N):
+        c = solve3d(P[j], P[j + 1], tether, winch_tension=None if T is None else T[j])
+        pull[j] += c.force_q
+        if j:
+            pull[j - 1] += c.force_p
+    return np.linalg.norm(tether.drone_weight * np.array([0.0, 0.0, 1.0]) - pull, axis=1)
+
+
 @pytest.mark.parametrize("winch", [False, True])
 def test_thrust_rows_are_the_derivative_of_the_needed_thrust(winch):
     """DroneThrust's rows: Ts ∇‖m g e_z − F_q(i) − F_p(i+1)‖ of every drone, against finite differences of the same
@@ -314,13 +329,7 @@ def test_thrust_rows_are_the_derivative_of_the_needed_thrust(winch):
     T = np.array([2.0, 3.5, 2.5]) if winch else None
 
     def need(P: np.ndarray, T: np.ndarray | None) -> np.ndarray:
-        pull = np.zeros((N, 3))
-        for j in range(N):
-            c = solve3d(P[j], P[j + 1], tether, winch_tension=None if T is None else T[j])
-            pull[j] += c.force_q
-            if j:
-                pull[j - 1] += c.force_p
-        return np.linalg.norm(tether.drone_weight * np.array([0.0, 0.0, 1.0]) - pull, axis=1)
+        return _needed_thrust(P, T, tether)
 
     cats = solve3d_batch(P, tether, winch_tension=T)
     sens = sensitivities_batch(cats, np.array([0.5]), tether, winch=winch)
@@ -361,7 +370,7 @@ def test_thrust_rows_of_a_vertical_tether(winch):
     from types import SimpleNamespace
 
     from tmr.control.drones import DroneThrust
-    from tmr.model.catenary3d import DroneTetherParams, sensitivities_batch, solve3d, solve3d_batch
+    from tmr.model.catenary3d import DroneTetherParams, sensitivities_batch, solve3d_batch
 
     tether = DroneTetherParams(winch="active") if winch else DroneTetherParams()
     P = np.array([[0.0, 0.0, 0.3], [2.5, 0.4, 1.2], [2.5, 0.4, 2.8], [4.6, 0.0, 2.2]])  # tether 2 vertical
@@ -369,13 +378,7 @@ def test_thrust_rows_of_a_vertical_tether(winch):
     T = np.array([2.0, 3.0, 2.5]) if winch else None
 
     def need(P: np.ndarray, T: np.ndarray | None) -> np.ndarray:
-        pull = np.zeros((N, 3))
-        for j in range(N):
-            c = solve3d(P[j], P[j + 1], tether, winch_tension=None if T is None else T[j])
-            pull[j] += c.force_q
-            if j:
-                pull[j - 1] += c.force_p
-        return np.linalg.norm(tether.drone_weight * np.array([0.0, 0.0, 1.0]) - pull, axis=1)
+        return _needed_thrust(P, T, tether)
 
     cats = solve3d_batch(P, tether, winch_tension=T)
     assert cats.vertical[1]
