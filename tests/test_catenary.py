@@ -453,3 +453,27 @@ def test_max_span_monotone_in_tension_and_weight(h, t0, rho):
     assert max_span(h, h, tighter) > d
     assert max_span(h, h, heavier) < d
     assert d == pytest.approx(max_span_level(h, base), rel=1e-10)
+
+
+def test_a_tension_per_element_is_the_solve_at_each_tension() -> None:
+    """solve / lowest_height / shape with ``tension=`` (an active winch's plan) give, element by element, exactly
+    what the scalar solve gives at that horizontal tension."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from tmr.model.catenary import CatenaryParams, lowest_height, shape, solve
+
+    p = CatenaryParams()
+    T = np.array([[9.0, 13.5], [27.0, 40.0]])
+    h1, h2, span = 0.3, np.array([0.43, 0.5]), np.array([[3.0, 5.0], [6.0, 9.0]])
+    many = solve(h1, h2, span, p, tension=T)
+    _, z = shape(many, 7)
+    low = lowest_height(h1, h2, span, p, tension=T)
+    for i in range(2):
+        for j in range(2):
+            one = solve(h1, h2[j], span[i, j], replace(p, horizontal_tension=T[i, j]))
+            for field in ("z_min", "length", "tension_1", "tension_2", "sag", "c", "horizontal_tension"):
+                assert np.asarray(getattr(many, field))[i, j] == getattr(one, field)
+            assert np.array_equal(z[i, j], shape(one, 7)[1])
+            assert low[i, j] == lowest_height(h1, h2[j], span[i, j], replace(p, horizontal_tension=T[i, j]))

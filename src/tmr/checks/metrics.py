@@ -324,12 +324,8 @@ def _winch_span_high(plan: Any, spans: np.ndarray, tension: np.ndarray, tol: flo
     tp = _tether_params(plan)
     h1 = np.where(np.arange(spans.shape[1]) == 0, tp["Hb"], tp["H"])
     h1 = np.broadcast_to(h1, spans.shape)
-    out = np.zeros(spans.shape, dtype=bool)
-    for T in np.unique(tension):
-        at = tension == T
-        low = np.asarray(lowest_height(h1[at], tp["H"], np.maximum(spans[at], 0.0), _catenary_params(tp, T)))
-        out[at] = low < tp["ground"] - tol
-    return out
+    low = lowest_height(h1, tp["H"], np.maximum(spans, 0.0), _catenary_params(tp, tp["T0"]), tension=tension)
+    return np.asarray(low) < tp["ground"] - tol
 
 
 #: An active winch's checks: its tension within [winch_tension_min, winch_tension_max] at every sample, and changing

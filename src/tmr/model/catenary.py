@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields, replace
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -201,7 +201,25 @@ def _vertex(h1: np.ndarray, h2: np.ndarray, span: np.ndarray, c: float) -> np.nd
     return 0.5 * span - c * np.arcsinh((h2 - h1) / (2.0 * c * np.sinh(span / (2.0 * c))))
 
 
-def solve(h1: ArrayLike, h2: ArrayLike, span: ArrayLike, params: CatenaryParams = _DEFAULT_PARAMS) -> Catenary:
+def _tension_and_c(params: CatenaryParams, tension: ArrayLike | None) -> tuple[Any, Any]:
+    """(T0, c) of ``params``, or of a horizontal tension ``tension`` [N] per element (an active winch), c = T0/(ρ g)
+    elementwise by the same arithmetic as :attr:`CatenaryParams.c`."""
+    if tension is None:
+        return params.horizontal_tension, params.c
+    t0 = _as_finite("tension", tension)
+    if np.any(t0 <= 0.0):
+        raise ParameterError(f"tension must be > 0 N, got {tension!r}")
+    return t0, t0 / (params.mass_per_length * params.g)
+
+
+def solve(
+    h1: ArrayLike,
+    h2: ArrayLike,
+    span: ArrayLike,
+    params: CatenaryParams = _DEFAULT_PARAMS,
+    *,
+    tension: ArrayLike | None = None,
+) -> Catenary:
     """Closed-form catenary of an inextensible cable with known horizontal tension (Caruso 2021 eq. 22).
 
     Args:
@@ -209,9 +227,10 @@ def solve(h1: ArrayLike, h2: ArrayLike, span: ArrayLike, params: CatenaryParams 
         h2: height of end 2 above the floor [m].
         span: horizontal distance from end 1 to end 2 [m], > 0.
         params: cable parameters (T0, rho, g).
+        tension: a horizontal tension per element [N] in place of ``params``' T0 (an active winch's plan).
 
-    The three inputs broadcast with numpy rules; the fields of the result have the broadcast shape (floats for
-    scalar inputs).
+    The inputs broadcast with numpy rules; the fields of the result have the broadcast shape (floats for scalar
+    inputs; ``c`` and ``horizontal_tension`` are arrays only with an array ``tension``).
 
     Returns:
         Catenary: vertex, lowest point, sag, length, end tensions and their vertical components.
@@ -224,9 +243,10 @@ def solve(h1: ArrayLike, h2: ArrayLike, span: ArrayLike, params: CatenaryParams 
     sa = _as_finite("span", span)
     if np.any(sa <= 0.0):
         raise ParameterError(f"span must be > 0 m for a catenary, got {span!r}")
+    t0, c = _tension_and_c(params, tension)
     h1a, h2a, sa = np.broadcast_arrays(h1a, h2a, sa)
-    c = params.c
-    t0 = params.horizontal_tension
+    if tension is not None:
+        h1a, h2a, sa, t0, c = np.broadcast_arrays(h1a, h2a, sa, t0, c)
     dh = h2a - h1a
 
     x_low = _vertex(h1a, h2a, sa, c)
@@ -250,7 +270,7 @@ def solve(h1: ArrayLike, h2: ArrayLike, span: ArrayLike, params: CatenaryParams 
     slope_1 = np.sinh(u1)
     slope_2 = np.sinh(u2)
     return Catenary(
-        c=c,
+        c=c if tension is None else _out(c),
         span=_out(sa),
         h1=_out(h1a),
         h2=_out(h2a),
@@ -260,7 +280,7 @@ def solve(h1: ArrayLike, h2: ArrayLike, span: ArrayLike, params: CatenaryParams 
         z_min=_out(z_min),
         sag=_out(sag),
         length=_out(length),
-        horizontal_tension=t0,
+        horizontal_tension=t0 if tension is None else _out(t0),
         tension_1=_out(t0 * np.cosh(u1)),
         tension_2=_out(t0 * np.cosh(u2)),
         vertical_1=_out(-t0 * slope_1),
@@ -287,15 +307,22 @@ def shape(cat: Catenary, n: int = 100) -> tuple[np.ndarray, np.ndarray]:
     x_low = np.asarray(cat.x_low, dtype=float)[..., None]
     z_low = np.asarray(cat.z_low, dtype=float)[..., None]
     x = span * t
-    z = z_low + cat.c * _cosh_m1((x - x_low) / cat.c)
+    c = cat.c if np.ndim(cat.c) == 0 else np.asarray(cat.c, dtype=float)[..., None]  # a tension per element
+    z = z_low + c * _cosh_m1((x - x_low) / c)
     x, z = np.broadcast_arrays(x, z)
     return np.array(x), np.array(z)
 
 
 def lowest_height(
-    h1: ArrayLike, h2: ArrayLike, span: ArrayLike, params: CatenaryParams = _DEFAULT_PARAMS
+    h1: ArrayLike,
+    h2: ArrayLike,
+    span: ArrayLike,
+    params: CatenaryParams = _DEFAULT_PARAMS,
+    *,
+    tension: ArrayLike | None = None,
 ) -> float | np.ndarray:
-    """Height of the lowest point of the cable over [0, span] [m] (vectorised, broadcasts like ``solve``).
+    """Height of the lowest point of the cable over [0, span] [m] (vectorised, broadcasts like ``solve``, its
+    ``tension`` too).
 
     A span of 0 gives min(h1, h2). Non-increasing in the span: constant while the vertex lies beyond the lower
     end, strictly decreasing once it enters the span.
@@ -308,8 +335,10 @@ def lowest_height(
     sa = _as_finite("span", span)
     if np.any(sa < 0.0):
         raise ParameterError(f"span must be >= 0 m, got {span!r}")
+    _, c = _tension_and_c(params, tension)
     h1a, h2a, sa = np.broadcast_arrays(h1a, h2a, sa)
-    c = params.c
+    if tension is not None:
+        h1a, h2a, sa, c = np.broadcast_arrays(h1a, h2a, sa, c)
     zero = sa == 0.0
     s_safe = np.where(zero, 1.0, sa)
     x_low = _vertex(h1a, h2a, s_safe, c)

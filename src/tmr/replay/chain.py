@@ -18,7 +18,6 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -457,21 +456,11 @@ def low_obstacle_gaps(nodes: list[Array], low_obstacles: Any, per_link: int = 4)
 
 def _static_catenary(h1: Array, h2: Array, span: Array, params: Any, tension: Array) -> Any:
     """The planner's static catenary of every sample and tether (K, N), at the tension the winch held then (T0, or an
-    active winch's planned tension: one closed-form solve per distinct tension)."""
+    active winch's planned tension per sample)."""
     from tmr.model.catenary import solve
 
-    if np.all(tension == params.horizontal_tension):
-        return solve(h1, h2, span, params)
-    from dataclasses import replace as _replace
-
-    fields = ("z_min", "length", "tension_1", "tension_2")
-    out = {f: np.empty(span.shape) for f in fields}
-    for value in np.unique(tension):
-        at = tension == value
-        c = solve(h1[at], h2[at], span[at], _replace(params, horizontal_tension=float(value)))
-        for f in fields:
-            out[f][at] = getattr(c, f)
-    return SimpleNamespace(**out)
+    held = None if np.all(tension == params.horizontal_tension) else tension
+    return solve(h1, h2, span, params, tension=held)
 
 
 def _log_contacts(

@@ -190,17 +190,6 @@ def catenary_polylines(
     (K, n, 3) along the catenary of Caruso 2021 eq. 22 (:func:`tmr.model.catenary.solve` with ``params``, a
     :class:`tmr.model.catenary.CatenaryParams`) and the sag (K,) [m]. A span below 1 µm is drawn as a straight line
     (sag 0). ``tension`` (K,) [N]: an active winch's horizontal tension per sample, in place of ``params``' T0."""
-    if tension is not None:
-        from dataclasses import replace
-
-        tension = np.asarray(tension, dtype=float)
-        pts = np.empty((len(tension), n, 3))
-        sag = np.empty(len(tension))
-        for value in np.unique(tension):
-            at = tension == value
-            p = replace(params, horizontal_tension=float(value))
-            pts[at], sag[at] = catenary_polylines(np.asarray(start)[at], np.asarray(end)[at], h_start, h_end, p, n)
-        return pts, sag
     from tmr.model import catenary
 
     start = np.asarray(start, dtype=float)
@@ -211,8 +200,9 @@ def catenary_polylines(
     xy = start[:, None, :] + (end - start)[:, None, :] * s[None, :, None]
     z = np.broadcast_to(h_start + (h_end - h_start) * s, (span.size, n)).copy()
     sag = np.zeros(span.size)
+    tension = None if tension is None else np.asarray(tension, dtype=float)
     if np.any(ok):
-        cat = catenary.solve(h_start, h_end, span[ok], params)
+        cat = catenary.solve(h_start, h_end, span[ok], params, tension=None if tension is None else tension[ok])
         _, zc = catenary.shape(cat, n)
         z[ok] = zc
         sag[ok] = np.asarray(cat.sag, dtype=float)
