@@ -1,5 +1,5 @@
-"""Dynamic sag: how low the replayed tethers of A–E (``qp``) hang, with the paper's floor limit and with a floor
-clearance kept by the span's pay-out rate.
+"""Dynamic sag: how low the replayed tethers of A–E hang, with the paper's floor limit, with a floor clearance kept
+by the span's pay-out rate, and with the active winch's defaults.
 
     python benchmarks/dynamic_sag.py
 
@@ -9,7 +9,11 @@ for E under a 5 cm clearance: its d_max drops from 5.60 to 5.26 m) under three s
 - ``paper``: ``ground_clearance = 0`` (the cable may touch the floor at d_max), the span reaches its limit in one step;
 - ``clearance``: ``ground_clearance = 0.05`` m, pay-out unbounded;
 - ``clearance+rate``: ``ground_clearance = 0.05`` m and ``span_approach_rate = 0.5`` 1/s (a tether slows down as it is
-  paid out towards d_max: ``QPParams.span_approach_rate``).
+  paid out towards d_max: ``QPParams.span_approach_rate``);
+- ``active``: ``--set winch=active`` and nothing else: the active winch's defaults
+  (``tmr.model.params.ACTIVE_WINCH_DEFAULTS``: 5 cm clearance, damper 0.15 1/s), the scenario's own robots;
+- ``active horizon``: the same with ``--method horizon`` (its NLP keeps the clearance at T_max's reach, then the
+  least rate-bounded tension; its warm start is the ``active`` plan).
 
 and replayed in MuJoCo (``python -m tmr.replay``). Per plan: the verdict, f1 and f4, and the lowest point of any tether
 over the replay next to the static catenary's at the same instant. Writes ``benchmarks/results/dynamic_sag.md`` and
@@ -33,14 +37,17 @@ SETTINGS = {
     "paper": [],
     "clearance": ["--set", "ground_clearance=0.05"],
     "clearance+rate": ["--set", "ground_clearance=0.05", "--set", "span_approach_rate=0.5"],
+    "active": ["--set", "winch=active"],
+    "active horizon": ["--set", "winch=active", "--method", "horizon"],
 }
 
 
 def run(scenario: str, setting: str, tmp: Path) -> dict:
-    out = tmp / f"{scenario}_{setting.replace('+', '_')}"
-    robots = ["--robots", "7"] if scenario == "E" and setting != "paper" else []
-    cmd = [sys.executable, "-m", "tmr.plan", "--scenario", scenario, "--method", "qp", "--no-plots", "-q"]
-    p = subprocess.run([*cmd, *robots, *SETTINGS[setting], "--out", str(out)], capture_output=True, text=True)
+    out = tmp / f"{scenario}_{setting.replace('+', '_').replace(' ', '_')}"
+    robots = ["--robots", "7"] if scenario == "E" and setting.startswith("clearance") else []
+    cmd = [sys.executable, "-m", "tmr.plan", "--scenario", scenario, "--no-plots", "-q"]
+    method = [] if "--method" in SETTINGS[setting] else ["--method", "qp"]
+    p = subprocess.run([*cmd, *method, *robots, *SETTINGS[setting], "--out", str(out)], capture_output=True, text=True)
     if p.returncode != 0:
         return {"scenario": scenario, "setting": setting, "plan": f"exit {p.returncode}: {p.stderr.strip()[-120:]}"}
     metrics = json.loads((out / "metrics.json").read_text())
@@ -76,7 +83,7 @@ def main() -> None:
         w.writeheader()
         w.writerows([{k: r.get(k, "") for k in keys} for r in rows])
     lines = [
-        "# Dynamic sag: replayed tether heights of A–E (qp)",
+        "# Dynamic sag: replayed tether heights of A–E",
         "",
         "`python benchmarks/dynamic_sag.py` — "
         + versions(["mujoco", "numpy", "scipy", "osqp"])
@@ -84,8 +91,10 @@ def main() -> None:
         "",
         "Lowest point of any tether over the MuJoCo replay (`tmr replay`), next to the planner's static catenary at",
         "the same instant. `paper`: ground_clearance 0 (the cable may reach the floor at d_max); `clearance`: 0.05 m;",
-        "`clearance+rate`: 0.05 m and `span_approach_rate = 0.5` 1/s (pay-out slowed near d_max). E needs 7 robots",
-        "under a 5 cm clearance (d_max 5.26 m instead of 5.60 m).",
+        "`clearance+rate`: 0.05 m and `span_approach_rate = 0.5` 1/s (pay-out slowed near d_max), all `--method qp`",
+        "with the paper's constant tension; E needs 7 robots under a 5 cm clearance (d_max 5.26 m instead of 5.60 m).",
+        "`active`: `--set winch=active` with its defaults (5 cm clearance, damper 0.15 1/s), `--method qp`, the",
+        "scenario's robots; `active horizon`: the same with `--method horizon`.",
         "",
         "| scenario | setting | robots | f1 | f4 | replay exit | lowest [m] | at [s] | static catenary there [m] |",
         "|---|---|---|---|---|---|---|---|---|",

@@ -99,7 +99,9 @@ def e4_active():
     from tmr.planner import build_problem, solve
     from tmr.world.scenario import load_scenario
 
-    problem = build_problem(load_scenario("E"), n_robots=4, overrides=ACTIVE | {"ground_clearance": 0.05})
+    # the pay-out damper and the sag allowance off: the spans reach their limit (the defaults are tested below)
+    overrides = ACTIVE | {"ground_clearance": 0.05, "span_approach_rate": "off", "sag_allowance": 0.0}
+    problem = build_problem(load_scenario("E"), n_robots=4, overrides=overrides)
     plan, metrics = solve(problem, "qp")
     return problem, plan, metrics
 
@@ -219,6 +221,12 @@ def test_least_tension_schedule_is_the_least_rate_bounded_cover() -> None:
     assert need[rise] == pytest.approx(13.5) and T2[rise, 0] > need[rise]  # it rises before the span needs it
     fall = np.flatnonzero(T2[:, 0] > 13.5 + 1e-9)[-1]
     assert T2[fall, 0] > need[fall]  # and comes down only after it
+    # the sag allowance: the cable's lowest point at the chosen tension is ≥ ground_clearance + allowance
+    clear = replace(p, ground_clearance=0.05)
+    T3 = least_tension_schedule(spans, replace(clear, sag_allowance=0.01), Ts, m)
+    low = catenary.lowest_height(p.base_height, p.exit_height, spans[:, 0], catenary_params(clear), tension=T3[:, 0])
+    assert float(np.min(low)) >= 0.06 - 1e-6 and float(np.min(low)) < 0.061  # held, and no higher than needed
+    assert np.all(T3 >= least_tension_schedule(spans, clear, Ts, m) - 1e-12)
 
 
 def test_horizon_with_the_active_winch_is_never_worse_than_qp(e4_active) -> None:
@@ -396,3 +404,51 @@ def test_the_checker_holds_the_winch_to_its_range_and_rate(e4_active) -> None:
         bad.winch_tension[k, 1] = value  # one sample: out of [5, 40] N / a 1.2 N jump in 0.05 s (24 N/s > 20)
         m = check(bad, problem.env)
         assert not m.success and m.violation_steps[kind][0] == k and kind in m.failure
+
+
+def test_active_winch_defaults_fill_only_what_is_not_given() -> None:
+    from tmr.model.params import ACTIVE_WINCH_DEFAULTS, with_winch_defaults
+
+    assert with_winch_defaults({"ground_clearance": 0.0}) == ({"ground_clearance": 0.0}, ())  # passive: untouched
+    values, filled = with_winch_defaults(ACTIVE | {"span_approach_rate": "off"})
+    assert filled == ("ground_clearance", "sag_allowance")
+    assert values["ground_clearance"] == ACTIVE_WINCH_DEFAULTS["ground_clearance"] == 0.05
+    assert values["span_approach_rate"] == "off"  # a given value (here: the damper off) is kept
+
+
+def test_the_active_winch_plans_with_its_dynamic_sag_defaults_and_horizon_accepts_them() -> None:
+    from tmr.planner import _qp_only, build_problem
+    from tmr.world.scenario import load_scenario
+
+    passive = build_problem(load_scenario("A"))
+    assert passive.chain_params.ground_clearance == 0.0 and passive.qp_params.span_approach_rate is None
+    assert passive.defaulted == ()
+    problem = build_problem(load_scenario("A"), overrides=ACTIVE)
+    assert problem.chain_params.ground_clearance == 0.05 and problem.qp_params.span_approach_rate == 0.5
+    assert problem.chain_params.sag_allowance == 0.01 and problem.span_limits[0, 1] == pytest.approx(
+        span_limits(3, replace(problem.chain_params, ground_clearance=0.06, sag_allowance=0.0))[0, 1]
+    )  # the planner's reach is that of a cable 6 cm up
+    record = problem.params_dict()  # recorded, so the run says what it planned with
+    assert record["span_approach_rate"] == 0.5 and record["sag_allowance"] == 0.01
+    assert "sag_allowance" not in passive.params_dict()
+    _qp_only(problem, "the horizon NLP")  # a default the horizon's qp warm start keeps: not refused
+    given = build_problem(load_scenario("A"), overrides=ACTIVE | {"span_approach_rate": 0.5})
+    with pytest.raises(ParameterError, match="span_approach_rate is a limit of --method qp"):
+        _qp_only(given, "the horizon NLP")
+
+
+def test_replay_of_d_with_the_active_winch_defaults_keeps_the_floor_clearance(tmp_path) -> None:
+    """Issue 34's dynamic sag: D's tether 1 is paid out near its reach; with the active winch's defaults the MuJoCo
+    cable stays ≥ the 5 cm it is checked for (without the damper it dips to 4.1 cm: benchmarks/dynamic_sag.py)."""
+    from tmr.cli import main
+    from tmr.io.rundir import load_run
+    from tmr.replay.chain import replay_chain
+
+    out = tmp_path / "D"
+    assert main(["plan", "--scenario", "D", "--set", "winch=active", "--no-plots", "-q", "--out", str(out)]) == 0
+    run = load_run(out)
+    params = run.record["params"]
+    assert params["ground_clearance"] == 0.05 and params["span_approach_rate"] == 0.5
+    rep = replay_chain(run)
+    assert rep.contacts["tether-floor"]["count"] == 0
+    assert float(rep.lowest.min()) >= 0.05

@@ -340,6 +340,17 @@ def summary(plan: Any, metrics: Any) -> str:
     for k in keys:
         v = d[k]
         lines.append(f"  {k:24s} {v:.6g}" if isinstance(v, float) else f"  {k:24s} {v}")
+    tension = getattr(plan, "winch_tension", None)
+    if tension is not None:  # the active winch: the tensions it planned and the floor clearance they keep
+        p = getattr(plan, "params", None) or {}
+        rate = p.get("span_approach_rate")
+        lines.insert(
+            len(lines) - 2,
+            f"  {'winch':24s} active: T0 {float(np.min(tension)):.1f}–{float(np.max(tension)):.1f} N "
+            f"(range {p.get('winch_tension_min', 0):g}–{p.get('winch_tension_max', 0):g} N); tethers kept "
+            f"≥ {p.get('ground_clearance', 0.0):g} m above the floor"
+            + (f", pay-out damped at {rate:g} 1/s near the reach" if rate else ""),
+        )
     return "\n".join(lines)
 
 
@@ -423,11 +434,21 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
     (exit 2) for a task proven impossible: no free route, fewer robots than the route needs, or more than fit in
     the free space at once (before the route search).
     """
-    from tmr.model.params import ChainParams, PathParams, PinvParams, QPParams, TaskParams, TimeParams, apply_overrides
+    from tmr.model.params import (
+        ChainParams,
+        PathParams,
+        PinvParams,
+        QPParams,
+        TaskParams,
+        TimeParams,
+        apply_overrides,
+        with_winch_defaults,
+    )  # fmt: skip
     from tmr.model.spans import span_limits
     from tmr.route.route import TooFewRobotsError, check_fit, plan_route
 
     values = {"safety_radius": scenario.environment.safety_radius} | dict(scenario.params or {}) | dict(args.set)
+    values = with_winch_defaults(values)[0]  # the planner's own defaults (tmr.planner.build_problem)
     rest = dict(values)
     made = {}
     for cls in (ChainParams, TimeParams, PathParams, TaskParams, PinvParams, QPParams):  # bad values: exit 2 now

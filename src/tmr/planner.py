@@ -46,6 +46,7 @@ from tmr.model.params import (
     TimeParams,
     apply_overrides,
     as_dict,
+    with_winch_defaults,
 )
 from tmr.model.spans import span_limits
 from tmr.route.path import Trajectory, leader_trajectory, path_length, plan_leader_path, time_law
@@ -86,6 +87,7 @@ class Problem:
     references: ChainReference | None = None
     route_mode: str = "rrt"
     fixed_duration: bool = False  # T_end was set by the user (the train references cannot keep it)
+    defaulted: tuple[str, ...] = ()  # parameters the active winch filled in (tmr.model.params.with_winch_defaults)
 
     @property
     def env(self) -> Any:
@@ -222,6 +224,7 @@ def build_problem(
             f"safety_radius = {values['safety_radius']} m, but the environment's obstacles are grown by {r_env:g} m; "
             "use one robot radius (e.g. Environment.with_safety_radius, or load the scenario with it)"
         )
+    values, defaulted = with_winch_defaults(values)
     chain_params, rest = apply_overrides(ChainParams(), values)
     top = max(chain_params.exit_height, chain_params.base_height)
     refuse_impassable_low_obstacles(scenario.environment, top, chain_params.low_obstacle_clearance)
@@ -334,6 +337,7 @@ def build_problem(
         references=ref,
         route_mode=route,
         fixed_duration="T_end" in values,
+        defaulted=defaulted,
     )
 
 
@@ -528,7 +532,7 @@ def formulation(problem: Problem, method: str | Formulation) -> Formulation:
 
 def _qp_only(problem: Problem, who: str) -> None:
     """Refuse the per-step QP's pay-out damper for a method that would not keep it (ParameterError)."""
-    if problem.qp_params.span_approach_rate is not None:
+    if problem.qp_params.span_approach_rate is not None and "span_approach_rate" not in problem.defaulted:
         raise ParameterError(
             f"span_approach_rate is a limit of --method qp's per-step QP: {who} does not keep it (leave it unset)"
         )

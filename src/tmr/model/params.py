@@ -36,6 +36,24 @@ def _validate(obj: Any, positive: tuple[str, ...] = (), nonnegative: tuple[str, 
 WINCHES = ("passive", "active")
 WINCH_FIELDS = ("winch", "winch_tension_min", "winch_tension_max", "winch_tension_rate")
 
+#: What an active winch plans with unless given (issue 34's dynamic sag, ``formulations/catenary.md``, "Dynamic
+#: sag"): the tether's lowest point stays ≥ 5 cm above the floor (checked on the static catenary; planned 1 cm
+#: higher, the sag allowance), and a span approaches the reach of its tension at most at ρ_d (d_max(T) − margin − d)
+#: per second, so the moving cable (which hangs lower than the static one while it is paid out) keeps that 5 cm in
+#: the MuJoCo replay of A–E too (``benchmarks/dynamic_sag.py``). The passive winch keeps the paper's model (the
+#: cable may reach the floor at d_max, no damper): the paper's scenarios and numbers stay its own.
+ACTIVE_WINCH_DEFAULTS: dict[str, float] = {"ground_clearance": 0.05, "sag_allowance": 0.01, "span_approach_rate": 0.5}
+
+
+def with_winch_defaults(values: dict[str, Any]) -> tuple[dict[str, Any], tuple[str, ...]]:
+    """``values`` (parameter overrides by field name) with :data:`ACTIVE_WINCH_DEFAULTS` filled in where not given,
+    if they ask for ``winch = "active"``; and the names filled in (so a method that cannot keep one can tell a
+    default from a request)."""
+    if str(values.get("winch", "passive")) != "active":
+        return dict(values), ()
+    filled = tuple(k for k in ACTIVE_WINCH_DEFAULTS if k not in values)
+    return {**values, **{k: ACTIVE_WINCH_DEFAULTS[k] for k in filled}}, filled
+
 
 @dataclass(frozen=True)
 class ChainParams:
@@ -48,7 +66,11 @@ class ChainParams:
         pulley_torque: winch pulley resisting torque [N m].
         pulley_radius: winch pulley radius [m]; horizontal tension T0 = torque / radius.
         cable_mass_per_length: ρ [kg/m].
-        ground_clearance: lowest allowed height of the cable [m].
+        ground_clearance: lowest allowed height of the cable [m] (checked on the static catenary).
+        sag_allowance: how much higher than ``ground_clearance`` the planner keeps the static catenary [m] (the
+            checker holds it to ``ground_clearance``): room for the MuJoCo cable, which near a long span's reach
+            hangs up to 2 mm below the static catenary (``formulations/catenary.md``, "Dynamic sag"). Default 0;
+            0.01 m with the active winch (:data:`ACTIVE_WINCH_DEFAULTS`). Left out of the records while 0.
         winch: ``"passive"`` (the paper's winch: a constant horizontal tension T0) or ``"active"`` (Caruso 2021's
             future work: the pulley's torque, hence every tether's T0, is a decision of the per-step QP, within
             [winch_tension_min, winch_tension_max] and changing at most ``winch_tension_rate``; its nominal value,
@@ -70,6 +92,7 @@ class ChainParams:
     pulley_radius: float = 0.1
     cable_mass_per_length: float = 0.15
     ground_clearance: float = 0.0
+    sag_allowance: float = 0.0
     winch: str = "passive"
     winch_tension_min: float = 5.0
     winch_tension_max: float = 40.0
@@ -83,7 +106,7 @@ class ChainParams:
                 "safety_radius", "exit_height", "pulley_torque", "pulley_radius", "cable_mass_per_length",
                 "winch_tension_min", "winch_tension_max", "winch_tension_rate",
             ),
-            nonnegative=("low_obstacle_clearance",),
+            nonnegative=("low_obstacle_clearance", "sag_allowance"),
         )  # fmt: skip
         if self.winch not in WINCHES:
             raise ParameterError(f"ChainParams.winch must be one of {', '.join(WINCHES)}, got {self.winch!r}")
@@ -111,12 +134,14 @@ class ChainParams:
         return self.horizontal_tension
 
     def record(self) -> dict[str, Any]:
-        """The fields as a dict, without the active winch's four when the winch is passive (a passive plan's
-        records keep the bytes they had before the active winch existed)."""
+        """The fields as a dict, without the active winch's four when the winch is passive and without a zero
+        ``sag_allowance`` (a passive plan's records keep the bytes they had before the active winch existed)."""
         out = asdict(self)
         if not self.active_winch:
             for name in WINCH_FIELDS:
                 out.pop(name)
+        if not self.sag_allowance:
+            out.pop("sag_allowance")
         return out
 
     @property

@@ -15,14 +15,15 @@ __all__ = ["catenary_params", "span_limits"]
 
 
 def catenary_params(params: ChainParams, tension: float | None = None) -> catenary.CatenaryParams:
-    """The tethers' :class:`~tmr.model.catenary.CatenaryParams` at horizontal tension ``tension`` [N] (default: the
-    winch's T0 = torque / radius)."""
+    """The planner's :class:`~tmr.model.catenary.CatenaryParams` of the tethers at horizontal tension ``tension`` [N]
+    (default: the winch's T0 = torque / radius): the cable kept ``ground_clearance + sag_allowance`` above the floor
+    (the checker, :mod:`tmr.checks.metrics`, holds it to ``ground_clearance`` alone)."""
     return catenary.CatenaryParams(
         horizontal_tension=params.horizontal_tension if tension is None else float(tension),
         mass_per_length=params.cable_mass_per_length,
         end_height=params.exit_height,
         base_height=params.base_height,
-        ground_clearance=params.ground_clearance,
+        ground_clearance=params.ground_clearance + params.sag_allowance,
     )
 
 
