@@ -347,9 +347,6 @@ class _Model:
         climit = np.full((N, 1), self.c_t)
         base_clear = float(self.field(self.base[None])[0])
         climit[0] = min(self.c_t, base_clear - 0.002)  # tether 1: no closer than its winch (as the checker)
-        self.climit = climit.ravel()  # (N,) [m]
-        self.d_safe = float(params.d_safe)
-        self.length_max = self.L_cap_len
         self.rho = ca.sqrt((ca.DM(climit) @ ones + eps_c) ** 2 + delta * delta / 4.0) + margin + EPS_SPAN
         tA = TW - self.w * dh if self.upper_winch else TW
         tB = tA + self.w * dh
@@ -694,14 +691,17 @@ def _winch_stats(plan: DronePlan, metrics: Any) -> dict[str, Any]:
 
 
 def _choose_tensions(
-    problem: Any, model: _Model, warm: DronePlan, plan: DronePlan, metrics: Any, params: dict[str, Any], nlp: bool
+    problem: Any, walls: bool, warm: DronePlan, plan: DronePlan, metrics: Any, params: dict[str, Any], nlp: bool
 ) -> tuple[DronePlan, Any, dict[str, Any]]:
-    """An active winch: the least rate-bounded tension schedule for the returned positions
-    (:func:`tmr.control.horizon3d_winch.least_drone_tensions`, the NLP's tether rows as its rule), kept if the plan at
-    that schedule passes the independent checker and is no worse in f1–f4 than the plan at the held (qp) schedule,
-    else the held one. Returns (plan, metrics, summary): ``summary["schedule"]`` is ``"least"`` or ``"held"``,
-    ``summary["note"]`` one line for ``horizon_note``, ``held`` / ``returned`` the numbers of :func:`_winch_stats`.
-    The qp plan itself (``nlp`` False: no NLP plan passed) keeps its own schedule."""
+    """An active winch: the least rate-bounded tension schedule for the returned positions ``plan.robots``
+    (:func:`tmr.control.horizon3d_winch.least_drone_tensions`, the NLP's tether rows as its rule:
+    :meth:`~tmr.control.horizon3d_winch.TetherRule.of_problem`, the room's faces as obstacles if ``walls``), kept if
+    the plan at that schedule passes the independent checker and is no worse in f1–f4 than the plan at the held (qp)
+    schedule, else the held one. Returns (plan, metrics, summary): ``summary["schedule"]`` is ``"least"`` or
+    ``"held"``, ``summary["note"]`` one line for ``horizon_note``, ``summary["time"]`` the seconds this took (both
+    taken out by the caller), ``held`` / ``returned`` the numbers of :func:`_winch_stats`, ``passes``, ``raised``,
+    ``unverified`` those of :func:`~tmr.control.horizon3d_winch.least_drone_tensions`. The qp plan itself (``nlp``
+    False: no NLP plan passed) keeps its own schedule."""
     from tmr.checks.drones import check_drone_plan
     from tmr.control.horizon3d_winch import TetherRule, least_drone_tensions
 
@@ -709,14 +709,11 @@ def _choose_tensions(
     held_stats = _winch_stats(plan, metrics)
     out: dict[str, Any] = dict(schedule="held", held=held_stats, returned=held_stats)
     if not nlp:
-        out["note"] = "the qp plan's own tension schedule (the qp plan itself is returned)"
+        out.update(note="the qp plan's own tension schedule (the qp plan itself is returned)", time=0.0)
         return plan, metrics, out
     tether = warm.tether
     t_ref = min(max(float(tether.winch_tension), tether.winch_tension_min), tether.winch_tension_max)
-    rule = TetherRule(
-        problem.world, tether, model.length_max, model.groups["tether_floor"].lo, model.climit + model.d_safe,
-        walls=model.walls_in_field,
-    )  # fmt: skip
+    rule = TetherRule.of_problem(problem.world, tether, problem.params, warm.base, walls=walls)
     held = np.asarray(plan.winch_tension, dtype=float)
     sched, info = least_drone_tensions(rule, warm.base, plan.robots, held, t_ref, tether.winch_tension_rate, warm.Ts)
     out.update(passes=info["passes"], raised=info["raised"], unverified=info["unverified"])
@@ -724,10 +721,13 @@ def _choose_tensions(
     if np.array_equal(sched, held):
         why = "the least schedule equals it"
     else:
-        cand = _plan_of(plan.robots, warm, {}, params, tensions=sched)
-        met = check_drone_plan(cand, problem.scenario, params=problem.params)
-        worse = [f"f{i + 1}" for i in range(4) if float(met.fitness_raw[i]) > float(metrics.fitness_raw[i])]
-        if met.success and not worse:
+        try:
+            cand = _plan_of(plan.robots, warm, {}, params, tensions=sched)
+        except ParameterError as exc:  # a tether with no catenary at that schedule: not a plan
+            cand, why = None, f"the least schedule has no catenary ({str(exc).split(';')[0]})"
+        met = None if cand is None else check_drone_plan(cand, problem.scenario, params=problem.params)
+        worse = [] if met is None else [f"f{i + 1}" for i in range(4) if met.fitness_raw[i] > metrics.fitness_raw[i]]
+        if cand is not None and met is not None and met.success and not worse:
             stats = _winch_stats(cand, met)
             out.update(schedule="least", returned=stats, time=time.perf_counter() - t0)
             tw = lambda v: "/".join(f"{x:.3f}" for x in v)  # noqa: E731
@@ -740,8 +740,9 @@ def _choose_tensions(
                 f"{held_stats['mean_thrust_need']:.3f} N)"
             )  # fmt: skip
             return cand, met, out
-        why = (f"the least schedule fails the check ({met.failures[0]})" if not met.success
-               else f"the least schedule is worse in {', '.join(worse)}")  # fmt: skip
+        if met is not None:
+            why = (f"the least schedule fails the check ({met.failures[0]})" if not met.success
+                   else f"the least schedule is worse in {', '.join(worse)}")  # fmt: skip
     out["time"] = time.perf_counter() - t0
     out["note"] = f"the qp plan's tension schedule, held ({why})"
     return plan, metrics, out
@@ -916,7 +917,9 @@ def plan_horizon_drones(
     else:
         result, plan, metrics, detail = chosen
     if active:  # the winch's own schedule for the positions returned (formulations/horizon3d.md, "Active winch")
-        plan, metrics, winch = _choose_tensions(problem, model, warm_start, plan, metrics, params, chosen is not None)
+        plan, metrics, winch = _choose_tensions(
+            problem, model.walls_in_field, warm_start, plan, metrics, params, chosen is not None
+        )
     terms = {f"f{i + 1}": float(v) for i, v in enumerate(metrics.fitness_raw)}
     before = {f"f{i + 1}": v for i, v in enumerate(warm_fit)}
     J = _weighted(terms, opts)
@@ -924,8 +927,10 @@ def plan_horizon_drones(
     note = f"{model.leader_note}; {what}; returned {detail} (objective {J:.6g} vs qp {J_warm:.6g}); vs qp: {change}"
     if rejected:
         note += "; not returned: " + "; ".join(rejected)
+    winch_time = 0.0
     if winch is not None:
         note += "; winch: " + winch.pop("note")
+        winch_time = float(winch.pop("time"))
     if stop != "converged":
         note += f"; {len(pool)} iterates kept, {screened} screened, {len(candidates)} satisfied every row"
     diag = dict(warm_start.diagnostics) if chosen is None else {}
@@ -957,7 +962,7 @@ def plan_horizon_drones(
         verify_time=float(pool.verify_time),
     )  # fmt: skip
     if winch is not None:
-        diag["horizon_winch"] = winch["schedule"]
+        diag.update(horizon_winch=winch["schedule"], winch_time=winch_time)
     plan.diagnostics = diag
     plan.wall_time = time.perf_counter() - start_time
     return plan, metrics

@@ -59,9 +59,10 @@ class TetherRule:
         world: the room and obstacles (:class:`tmr.world.world3d.World3D`; its radius is not used).
         tether: the :class:`tmr.model.catenary3d.DroneTetherParams` (ρ g, which end holds the winch).
         length_max: arc length ≤ this [m] (L_max − length margin).
-        floor: (N,) the lowest point of tether j at or above this height [m] (−inf: none).
-        clearance: (N,) the whole curve of tether j at least this far from the obstacles [m] (c_t + d_safe; tether 1
-            no closer than its winch allows).
+        floor: (tether 1, every other tether): the lowest point of the curve at or above this height [m] (−inf:
+            none).
+        clearance: (tether 1, every other tether): the whole curve at least this far from the obstacles [m]
+            (c_t + d_safe; tether 1's no more than its winch's own clearance allows).
         walls: the room's six faces count as obstacles too (else the floor row and the drones' bounds keep them).
         spacing: arc spacing of the clearance samples [m].
     """
@@ -69,10 +70,30 @@ class TetherRule:
     world: Any
     tether: Any
     length_max: float
-    floor: Array
-    clearance: Array
+    floor: tuple[float, float]
+    clearance: tuple[float, float]
     walls: bool = False
     spacing: float = SAMPLE_SPACING
+
+    @classmethod
+    def of_problem(cls, world: Any, tether: Any, params: Any, base: Array, walls: bool = False) -> TetherRule:
+        """The horizon NLP's tether rows (:class:`tmr.control.horizon3d`) for ``world``, ``tether`` and the planner's
+        ``params`` (:class:`tmr.model.params.DroneParams`: ``d_safe``, ``length_margin``) with the ground winch at
+        ``base`` (3,) [m]: length ≤ L_max − length margin; lowest point ≥ floor + c_t + d_safe (none if ``walls``:
+        the faces are obstacles then); clearance c_t + d_safe, tether 1's no more than its winch's own clearance
+        − 2 mm (+ d_safe) and its floor no higher than the winch's height above the floor − 2 mm (as the NLP and the
+        checker)."""
+        b = np.asarray(world.bounds, dtype=float)
+        base = np.asarray(base, dtype=float)
+        c_t, d_safe = float(tether.clearance), float(params.d_safe)
+        base_clear = float(exact_distance(world, base[None], c_t + 1.0, walls=walls)[0])
+        base_room = float(np.min(np.r_[base - b[:3], b[3:] - base]))
+        floor0 = -math.inf if walls else float(b[2] + c_t + d_safe)
+        return cls(
+            world=world, tether=tether, length_max=float(tether.tether_length - params.length_margin),
+            floor=(min(floor0, float(b[2]) + base_room - 0.002), floor0),
+            clearance=(min(c_t, base_clear - 0.002) + d_safe, c_t + d_safe), walls=walls,
+        )  # fmt: skip
 
     def holds(self, p: Array, q: Array, j: Array, tension: Array) -> NDArray[np.bool_]:
         """Whether tether ``j[m]`` between ``p[m]`` and ``q[m]`` (M, 3) [m] keeps every limit at ``tension[m]`` [N],
@@ -87,7 +108,7 @@ class TetherRule:
         owner: list[Array] = []
         need = np.zeros(M)
         for m in range(M):
-            jj = int(j[m])
+            jj = min(int(j[m]), 1)  # tether 1, or any other
             if upper and float(tension[m]) - w * abs(float(q[m, 2] - p[m, 2])) < UPPER_END_MARGIN:
                 ok[m] = False
                 continue
