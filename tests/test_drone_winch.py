@@ -232,6 +232,7 @@ def test_horizon_chooses_its_tension_schedule_and_is_never_worse():
     w = plan.diagnostics["horizon_summary"]["winch"]
     assert w["schedule"] == "least"
     assert w["returned"]["mean_thrust_need"] < w["held"]["mean_thrust_need"]
+    assert w["returned"]["mean_pull"] < w["held"]["mean_pull"]
     assert w["returned"]["max_drone_tension"] <= w["held"]["max_drone_tension"] + 1e-9
 
 

@@ -89,9 +89,10 @@ def test_least_schedule_passes_the_checker_and_pulls_less(i_qp):
     met = check_drone_plan(cand, problem.scenario, params=problem.params)
     assert met.success, met.failures
     assert [float(v) for v in met.fitness_raw] == [float(v) for v in metrics.fitness_raw]
-    need_held = thrust_need(plan.base, plan.robots, teth, plan.winch_tension)
-    need_new = thrust_need(plan.base, plan.robots, teth, T)
+    need_held, pull_held = thrust_need(plan.base, plan.robots, teth, plan.winch_tension)
+    need_new, pull_new = thrust_need(plan.base, plan.robots, teth, T)
     assert need_new.max() <= need_held.max() and need_new.mean() < need_held.mean()
+    assert pull_new.max() <= pull_held.max() + 1e-9 and pull_new.mean() < pull_held.mean()
     assert met.max_drone_tension <= metrics.max_drone_tension + 1e-9
 
 
@@ -115,3 +116,4 @@ def test_the_held_schedule_is_kept_when_the_checker_rejects_the_least_one(i_qp, 
     out, met, info = _choose_tensions(problem, False, plan, horizon, metrics, {}, True)
     assert info["schedule"] == "least" and met.success and "least tension schedule" in info["note"]
     assert info["returned"]["mean_thrust_need"] < info["held"]["mean_thrust_need"]
+    assert info["returned"]["mean_pull"] < info["held"]["mean_pull"]

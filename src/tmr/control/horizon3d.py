@@ -676,17 +676,17 @@ def _plan_of(
 
 
 def _winch_stats(plan: DronePlan, metrics: Any) -> dict[str, Any]:
-    """The numbers of a plan's winch schedule: peak and mean tension per tether [N], the checker's largest pull at a
-    drone end [N], and the thrust every drone needs (peak, mean) [N] (:func:`tmr.control.horizon3d_winch.
-    thrust_need`)."""
+    """The numbers of a plan's winch schedule: peak and mean tension per tether [N], the checker's largest tension at a
+    drone end [N], the tethers' pull on the drones and the thrust they need (peak, mean over knots and drones) [N]
+    (:func:`tmr.control.horizon3d_winch.thrust_need`)."""
     from tmr.control.horizon3d_winch import thrust_need
 
     T = np.asarray(plan.winch_tension, dtype=float)
-    need = thrust_need(plan.base, plan.robots, plan.tether, T)
+    need, pull = thrust_need(plan.base, plan.robots, plan.tether, T)
     return dict(
         peak_tension=[float(v) for v in T.max(axis=0)], mean_tension=[float(v) for v in T.mean(axis=0)],
-        max_drone_tension=float(metrics.max_drone_tension), peak_thrust_need=float(need.max()),
-        mean_thrust_need=float(need.mean()),
+        max_drone_tension=float(metrics.max_drone_tension), peak_pull=float(pull.max()),
+        mean_pull=float(pull.mean()), peak_thrust_need=float(need.max()), mean_thrust_need=float(need.mean()),
     )  # fmt: skip
 
 
@@ -734,8 +734,9 @@ def _choose_tensions(
             out["note"] = (
                 f"returned the least tension schedule for the optimised positions (peak {tw(stats['peak_tension'])} N, "
                 f"mean {tw(stats['mean_tension'])} N per tether vs the qp plan's held {tw(held_stats['peak_tension'])}"
-                f", {tw(held_stats['mean_tension'])} N; largest pull on a drone {stats['max_drone_tension']:.3f} vs "
-                f"{held_stats['max_drone_tension']:.3f} N; peak thrust need {stats['peak_thrust_need']:.3f} vs "
+                f", {tw(held_stats['mean_tension'])} N; tethers' pull on the drones: peak {stats['peak_pull']:.3f} vs "
+                f"{held_stats['peak_pull']:.3f} N, mean {stats['mean_pull']:.3f} vs {held_stats['mean_pull']:.3f} N; "
+                f"thrust needed: peak {stats['peak_thrust_need']:.3f} vs "
                 f"{held_stats['peak_thrust_need']:.3f} N, mean {stats['mean_thrust_need']:.3f} vs "
                 f"{held_stats['mean_thrust_need']:.3f} N)"
             )  # fmt: skip

@@ -198,18 +198,18 @@ def least_drone_tensions(
     return sched, dict(need=need, passes=passes, raised=raised, unverified=int(fails.size))
 
 
-def thrust_need(base: Array, robots: Array, tether: Any, tensions: Array | None) -> Array:
-    """The thrust every drone needs against its weight and its tethers (K+1, N) [N]: |m g e_z − F_q(j) − F_p(j+1)|
-    with the end forces of each tether's catenary (:func:`tmr.model.catenary3d.solve3d_batch`) at the winch tensions
-    ``tensions`` (K+1, N) [N] (None: the constant ``tether.winch_tension``) — the quantity the checker bounds by the
-    drone's available thrust."""
+def thrust_need(base: Array, robots: Array, tether: Any, tensions: Array | None) -> tuple[Array, Array]:
+    """The thrust every drone needs against its weight and its tethers, |m g e_z − F_q(j) − F_p(j+1)| (the quantity the
+    checker bounds by the drone's available thrust), and the tethers' pull on it, |F_q(j) + F_p(j+1)|, each (K+1, N)
+    [N], with the end forces of each tether's catenary (:func:`tmr.model.catenary3d.solve3d_batch`) at the winch
+    tensions ``tensions`` (K+1, N) [N] (None: the constant ``tether.winch_tension``)."""
     from tmr.model.catenary3d import solve3d_batch
 
     robots = np.asarray(robots, float)
     K1, N = robots.shape[:2]
     ez = np.array([0.0, 0.0, 1.0])
     weight = float(tether.drone_mass) * float(tether.g)
-    out = np.empty((K1, N))
+    out, pulls = np.empty((K1, N)), np.empty((K1, N))
     theta = None
     for k in range(K1):
         pts = np.vstack([np.asarray(base, float)[None], robots[k]])
@@ -218,4 +218,5 @@ def thrust_need(base: Array, robots: Array, tether: Any, tensions: Array | None)
         pull = np.array([cats[j].force_q for j in range(N)])
         pull[:-1] += np.array([cats[j].force_p for j in range(1, N)])
         out[k] = np.linalg.norm(weight * ez - pull, axis=1)
-    return out
+        pulls[k] = np.linalg.norm(pull, axis=1)
+    return out, pulls
