@@ -101,7 +101,6 @@ DRONE_GROUPS: tuple[str, ...] = (
     "speed",
     "acceleration",
     "jerk",
-    "winch_rate",
 )
 
 
@@ -219,12 +218,7 @@ class _Model:
 
     Variables x = [vec P; vec Θ]: P (3N, K+1) the drones (row 3i + axis), Θ (N, K+1) θ_A of every tether."""
 
-    def __init__(
-        self, problem: Any, warm: DronePlan, opts: DroneHorizonOptions, tension_box: tuple[Array, Array] | None = None
-    ) -> None:
-        """``tension_box``: an active winch's tensions as variables too, each within (lo, hi) (K+1, N) [N] (knot 0
-        fixed by the caller's box), their rate a row group ``winch_rate`` (the measured trust-region try of
-        ``formulations/horizon3d.md``, "Active winch"); None: the qp plan's schedule held."""
+    def __init__(self, problem: Any, warm: DronePlan, opts: DroneHorizonOptions) -> None:
         tether, params, world = problem.tether, problem.params, problem.world
         self.opts = opts
         R0 = np.asarray(warm.robots, float)
@@ -301,10 +295,9 @@ class _Model:
 
         # ---- variables and bounds
         nP, nT = 3 * N * (K + 1), N * (K + 1)
-        nW = 0 if tension_box is None else N * (K + 1)
-        xs = ca.MX.sym("x", nP + nT + nW)
+        xs = ca.MX.sym("x", nP + nT)
         P = ca.reshape(xs[:nP], 3 * N, K + 1)
-        Th = ca.reshape(xs[nP:] if nW == 0 else xs[nP : nP + nT], N, K + 1)
+        Th = ca.reshape(xs[nP:], N, K + 1)
         lbx = np.full((K + 1, 3 * N), -np.inf)
         ubx = np.full((K + 1, 3 * N), np.inf)
         room_lo = b[:3] + r + params.d_safe
@@ -322,11 +315,6 @@ class _Model:
         self.lbx = np.concatenate([lbx.ravel(), lbt.ravel()])
         self.ubx = np.concatenate([ubx.ravel(), ubt.ravel()])
         self.x0 = np.concatenate([R.reshape(K + 1, -1).ravel(), theta0.T.ravel()])
-        if tension_box is not None:
-            assert self.tw_sched is not None, "tension variables need an active winch"
-            self.lbx = np.concatenate([self.lbx, np.asarray(tension_box[0], float).ravel()])
-            self.ubx = np.concatenate([self.ubx, np.asarray(tension_box[1], float).ravel()])
-            self.x0 = np.concatenate([self.x0, self.tw_sched.ravel()])
         self.x0 = np.clip(self.x0, self.lbx, self.ubx)
         self.x = xs
 
@@ -342,8 +330,6 @@ class _Model:
         B = [WB * pmat[a] + WA * qmat[a] for a in range(3)]
         dh = B[2] - A[2]
         TW = ca.DM.ones(N, K + 1) * self.tw if self.tw_sched is None else ca.DM(self.tw_sched.T)  # (N, K+1) [N]
-        if nW:
-            TW = ca.reshape(xs[nP + nT :], N, K + 1)
         m = TW / self.w - dh if self.upper_winch else TW / self.w
         _, Rc, L, a, sb = catenary_samples(A, B, Th, 0.0, m)
         # the shallow (stable) branch: the span a (θ_B − θ_A) falls as θ_A grows (catenary3d._newton_theta);
@@ -418,9 +404,6 @@ class _Model:
         g["acceleration"] = _Group(Acc, np.full(3 * N, -amax), np.full(3 * N, amax))
         if math.isfinite(jmax):  # DroneParams.drone_jerk_max set
             g["jerk"] = _Group(Jerk, np.full(3 * N, -jmax), np.full(3 * N, jmax))
-        if nW:
-            rate = float(tether.winch_tension_rate)
-            g["winch_rate"] = _Group((TW[:, 1:] - TW[:, :-1]) / Ts, np.full(N, -rate), np.full(N, rate))
         self.groups = g
         # tether clearance samples: entries (tether j, sample i, knot k), flattened; all evaluated numerically
         jj, ii, kk = [], [], []
@@ -521,7 +504,7 @@ class _Model:
         o = self.opts
         if name == "tether_clearance":
             return v < o.activation
-        if name in ("fitness", "catenary", "winch_rate"):  # winch_rate: the tension variables, every row
+        if name in ("fitness", "catenary"):
             m = np.ones(v.shape, dtype=bool)
         elif name == "drone_clearance":
             m = v < self.groups[name].lo[:, None] + o.activation
