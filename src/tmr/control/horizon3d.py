@@ -36,6 +36,11 @@ verified by :func:`tmr.checks.drones.check_drone_plan` (exact distances
 along the whole curve) and compared term by term with the warm start's checked fitness: the optimum if it passes and
 is no worse in f1–f4, else the cheapest kept IPOPT iterate that does, else the warm start (the very qp plan).
 
+With an active winch the NLP holds the qp plan's tension schedule (m = T_w,k / ρ g per knot); the plan's own schedule
+is then chosen for the positions returned: the least rate-bounded tensions they need, at most the qp schedule at
+every knot (:mod:`tmr.control.horizon3d_winch`, :func:`_choose_tensions`), kept if the checker passes the plan at
+them, else the held schedule (``horizon_note`` says which; ``formulations/horizon3d.md``, "Active winch").
+
 Public API: :func:`plan_horizon_drones`, :class:`DroneHorizonOptions`, :data:`DEFAULT_TIME_LIMIT`.
 """
 
