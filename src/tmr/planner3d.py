@@ -280,7 +280,8 @@ def plan_drones(
 
 def check_winch_method(tether: DroneTetherParams, method: str) -> None:
     """Refuse (ParameterError, exit 2) an active winch with a formulation that does not plan with it: ``qp`` has the
-    tension as a decision variable, ``horizon`` optimises the drones' paths under the qp plan's tension schedule
+    tension as a decision variable, ``horizon`` optimises the drones' paths under the qp plan's tension schedule and
+    then chooses the least rate-bounded schedule those paths need (:mod:`tmr.control.horizon3d_winch`)
     (``formulations/drones.md``, "Active winch"); ``pinv`` keeps it constant."""
     if tether.active and method not in ("qp", "horizon"):
         raise ParameterError(

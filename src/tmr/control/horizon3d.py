@@ -36,6 +36,11 @@ verified by :func:`tmr.checks.drones.check_drone_plan` (exact distances
 along the whole curve) and compared term by term with the warm start's checked fitness: the optimum if it passes and
 is no worse in f1–f4, else the cheapest kept IPOPT iterate that does, else the warm start (the very qp plan).
 
+With an active winch the NLP holds the qp plan's tension schedule (m = T_w,k / ρ g per knot); the plan's own schedule
+is then chosen for the positions returned: the least rate-bounded tensions they need, at most the qp schedule at
+every knot (:mod:`tmr.control.horizon3d_winch`, :func:`_choose_tensions`), kept if the checker passes the plan at
+them, else the held schedule (``horizon_note`` says which; ``formulations/horizon3d.md``, "Active winch").
+
 Public API: :func:`plan_horizon_drones`, :class:`DroneHorizonOptions`, :data:`DEFAULT_TIME_LIMIT`.
 """
 
@@ -647,15 +652,20 @@ def _checked_terms(robots: Array, Ts: float, base: Array) -> tuple[float, float,
     return float(np.sum(vel * vel)), float(np.sum((chords[:, ci] - chords[:, cj]) ** 2)), float(np.sum(acc * acc))
 
 
-def _plan_of(robots: Array, warm: DronePlan, diagnostics: dict[str, Any], params: dict[str, Any]) -> DronePlan:
+def _plan_of(
+    robots: Array, warm: DronePlan, diagnostics: dict[str, Any], params: dict[str, Any], tensions: Array | None = None
+) -> DronePlan:
     """A :class:`DronePlan` of drone positions ``robots`` on the warm start's times and reference, every tether's
-    catenary parameter solved exactly (:func:`tmr.model.catenary3d.solve3d_batch`)."""
+    catenary parameter solved exactly (:func:`tmr.model.catenary3d.solve3d_batch`). With an active winch the tethers
+    hang at ``tensions`` (K+1, N) [N] and the plan records them; None: the warm start's schedule, held."""
     from tmr.model.catenary3d import solve3d_batch
 
     K1, N = robots.shape[:2]
     a = np.full((K1, N), np.nan)
     theta = None
-    wt = getattr(warm, "winch_tension", None)  # an active winch: its tensions, held from the qp plan
+    wt = getattr(warm, "winch_tension", None)  # an active winch: the qp plan's tensions, or those chosen for robots
+    if wt is not None and tensions is not None:
+        wt = tensions
     for k in range(K1):
         pts = np.vstack([warm.base[None], robots[k]])
         cats = solve3d_batch(pts, warm.tether, warm=theta, winch_tension=None if wt is None else wt[k])
@@ -668,6 +678,80 @@ def _plan_of(robots: Array, warm: DronePlan, diagnostics: dict[str, Any], params
         failure=None, diagnostics=diagnostics, wall_time=0.0, params=params,
         winch_tension=None if wt is None else np.array(wt, dtype=float),
     )  # fmt: skip
+
+
+def _winch_stats(plan: DronePlan, metrics: Any) -> dict[str, Any]:
+    """The numbers of a plan's winch schedule: peak and mean tension per tether [N], the checker's largest tension at a
+    drone end [N], the tethers' pull on the drones and the thrust they need (peak, mean over knots and drones) [N]
+    (:func:`tmr.control.horizon3d_winch.thrust_need`)."""
+    from tmr.control.horizon3d_winch import thrust_need
+
+    T = np.asarray(plan.winch_tension, dtype=float)
+    need, pull = thrust_need(plan.base, plan.robots, plan.tether, T)
+    return dict(
+        peak_tension=[float(v) for v in T.max(axis=0)], mean_tension=[float(v) for v in T.mean(axis=0)],
+        max_drone_tension=float(metrics.max_drone_tension), peak_pull=float(pull.max()),
+        mean_pull=float(pull.mean()), peak_thrust_need=float(need.max()), mean_thrust_need=float(need.mean()),
+    )  # fmt: skip
+
+
+def _choose_tensions(
+    problem: Any, walls: bool, warm: DronePlan, plan: DronePlan, metrics: Any, params: dict[str, Any], nlp: bool
+) -> tuple[DronePlan, Any, dict[str, Any]]:
+    """An active winch: the least rate-bounded tension schedule for the returned positions ``plan.robots``
+    (:func:`tmr.control.horizon3d_winch.least_drone_tensions`, the NLP's tether rows as its rule:
+    :meth:`~tmr.control.horizon3d_winch.TetherRule.of_problem`, the room's faces as obstacles if ``walls``), kept if
+    the plan at that schedule passes the independent checker and is no worse in f1–f4 than the plan at the held (qp)
+    schedule, else the held one. Returns (plan, metrics, summary): ``summary["schedule"]`` is ``"least"`` or
+    ``"held"``, ``summary["note"]`` one line for ``horizon_note``, ``summary["time"]`` the seconds this took (both
+    taken out by the caller), ``held`` / ``returned`` the numbers of :func:`_winch_stats`, ``passes``, ``raised``,
+    ``unverified`` those of :func:`~tmr.control.horizon3d_winch.least_drone_tensions`. The qp plan itself (``nlp``
+    False: no NLP plan passed) keeps its own schedule."""
+    from tmr.checks.drones import check_drone_plan
+    from tmr.control.horizon3d_winch import TetherRule, least_drone_tensions
+
+    t0 = time.perf_counter()
+    held_stats = _winch_stats(plan, metrics)
+    out: dict[str, Any] = dict(schedule="held", held=held_stats, returned=held_stats)
+    if not nlp:
+        out.update(note="the qp plan's own tension schedule (the qp plan itself is returned)", time=0.0)
+        return plan, metrics, out
+    tether = warm.tether
+    t_ref = min(max(float(tether.winch_tension), tether.winch_tension_min), tether.winch_tension_max)
+    rule = TetherRule.of_problem(problem.world, tether, problem.params, warm.base, walls=walls)
+    held = np.asarray(plan.winch_tension, dtype=float)
+    sched, info = least_drone_tensions(rule, warm.base, plan.robots, held, t_ref, tether.winch_tension_rate, warm.Ts)
+    out.update(passes=info["passes"], raised=info["raised"], unverified=info["unverified"])
+    why = ""
+    if np.array_equal(sched, held):
+        why = "the least schedule equals it"
+    else:
+        try:
+            cand = _plan_of(plan.robots, warm, {}, params, tensions=sched)
+        except ParameterError as exc:  # a tether with no catenary at that schedule: not a plan
+            cand, why = None, f"the least schedule has no catenary ({str(exc).split(';')[0]})"
+        met = None if cand is None else check_drone_plan(cand, problem.scenario, params=problem.params)
+        worse = [] if met is None else [f"f{i + 1}" for i in range(4) if met.fitness_raw[i] > metrics.fitness_raw[i]]
+        if cand is not None and met is not None and met.success and not worse:
+            stats = _winch_stats(cand, met)
+            out.update(schedule="least", returned=stats, time=time.perf_counter() - t0)
+            tw = lambda v: "/".join(f"{x:.3f}" for x in v)  # noqa: E731
+            out["note"] = (
+                f"returned the least tension schedule for the optimised positions (peak {tw(stats['peak_tension'])} N, "
+                f"mean {tw(stats['mean_tension'])} N per tether vs the qp plan's held {tw(held_stats['peak_tension'])}"
+                f", {tw(held_stats['mean_tension'])} N; tethers' pull on the drones: peak {stats['peak_pull']:.3f} vs "
+                f"{held_stats['peak_pull']:.3f} N, mean {stats['mean_pull']:.3f} vs {held_stats['mean_pull']:.3f} N; "
+                f"thrust needed: peak {stats['peak_thrust_need']:.3f} vs "
+                f"{held_stats['peak_thrust_need']:.3f} N, mean {stats['mean_thrust_need']:.3f} vs "
+                f"{held_stats['mean_thrust_need']:.3f} N)"
+            )  # fmt: skip
+            return cand, met, out
+        if met is not None:
+            why = (f"the least schedule fails the check ({met.failures[0]})" if not met.success
+                   else f"the least schedule is worse in {', '.join(worse)}")  # fmt: skip
+    out["time"] = time.perf_counter() - t0
+    out["note"] = f"the qp plan's tension schedule, held ({why})"
+    return plan, metrics, out
 
 
 def plan_horizon_drones(
@@ -706,7 +790,8 @@ def plan_horizon_drones(
     opts = _options(options)
     # the limit covers the final checks too: each candidate costs about what the qp plan's own check did
     check_each = float(warm_start.diagnostics.get("timings", {}).get("check_time", 0.0))
-    deadline = start_time + limit - check_each * (opts.pool_checks + 1)
+    active = getattr(warm_start, "winch_tension", None) is not None  # an active winch: one check more (its schedule)
+    deadline = start_time + limit - check_each * (opts.pool_checks + 1 + active)
     if warm_start.robots.shape[0] < 3:
         raise ParameterError("the horizon needs at least 2 steps (K ≥ 2)")
     t0 = time.perf_counter()
@@ -831,11 +916,16 @@ def plan_horizon_drones(
            (f"after round {len(rounds)}" if rounds else "before IPOPT started")),
         "rows_left_out": f"rows left out were still violated after {opts.max_rounds} rounds",
     }[stop]  # fmt: skip
+    winch: dict[str, Any] | None = None
     if chosen is None:
         result, plan, detail = "warm_start", replace(warm_start, method="horizon"), "the qp plan itself"
         metrics = replace(warm_metrics, method="horizon")
     else:
         result, plan, metrics, detail = chosen
+    if active:  # the winch's own schedule for the positions returned (formulations/horizon3d.md, "Active winch")
+        plan, metrics, winch = _choose_tensions(
+            problem, model.walls_in_field, warm_start, plan, metrics, params, chosen is not None
+        )
     terms = {f"f{i + 1}": float(v) for i, v in enumerate(metrics.fitness_raw)}
     before = {f"f{i + 1}": v for i, v in enumerate(warm_fit)}
     J = _weighted(terms, opts)
@@ -843,6 +933,10 @@ def plan_horizon_drones(
     note = f"{model.leader_note}; {what}; returned {detail} (objective {J:.6g} vs qp {J_warm:.6g}); vs qp: {change}"
     if rejected:
         note += "; not returned: " + "; ".join(rejected)
+    winch_time = 0.0
+    if winch is not None:
+        note += "; winch: " + winch.pop("note")
+        winch_time = float(winch.pop("time"))
     if stop != "converged":
         note += f"; {len(pool)} iterates kept, {screened} screened, {len(candidates)} satisfied every row"
     diag = dict(warm_start.diagnostics) if chosen is None else {}
@@ -854,6 +948,7 @@ def plan_horizon_drones(
         horizon_summary=dict(
             result=result, stop=stop, iterations=iterations, rounds=len(rounds), objective=J,
             objective_warm_start=J_warm, terms=terms, warm_start_terms=before,
+            **({} if winch is None else {"winch": winch}),
         ),  # fmt: skip
         horizon_rounds=rounds,
         ipopt_status=status,
@@ -872,6 +967,8 @@ def plan_horizon_drones(
         check_time=float(time.perf_counter() - solve_done),
         verify_time=float(pool.verify_time),
     )  # fmt: skip
+    if winch is not None:
+        diag.update(horizon_winch=winch["schedule"], winch_time=winch_time)
     plan.diagnostics = diag
     plan.wall_time = time.perf_counter() - start_time
     return plan, metrics

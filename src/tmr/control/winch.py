@@ -53,6 +53,7 @@ __all__ = [
     "WinchVelocityMap",
     "real_chain",
     "least_tension_schedule",
+    "rate_bounded_envelope",
     "WINCH_GAIN",
     "WINCH_SMOOTHNESS_WEIGHT",
     "WINCH_WEIGHT",
@@ -442,10 +443,17 @@ def least_tension_schedule(spans: Array, params: ChainParams, Ts: float, margin:
         for k in np.flatnonzero(spans[:, j] + margin > reach_ref):
             t = catenary.tension_for_span(spans[k, j] + margin, h1, p.exit_height, cat, t_ref, p.winch_tension_max)
             need[k, j] = p.winch_tension_max if t is None else t
-    step = p.winch_tension_rate * float(Ts)
-    out = need.copy()
-    for k in range(1, K1):  # forward: T_k ≥ T_{k−1} − step
+    return rate_bounded_envelope(need, p.winch_tension_rate * float(Ts))
+
+
+def rate_bounded_envelope(need: Array, step: float) -> Array:
+    """The least sequence (K+1, N) [N] at or above ``need`` (K+1, N) [N] that changes by at most ``step`` [N] between
+    consecutive rows (``step`` = rate Ts): T_k = max_i (need_i − step |k − i|), per column, by a forward and a
+    backward pass. The core of :func:`least_tension_schedule` (ground chains) and of the drone horizon's
+    least schedule (:func:`tmr.control.horizon3d_winch.least_drone_tensions`)."""
+    out = np.array(need, dtype=float, copy=True)
+    for k in range(1, out.shape[0]):  # forward: T_k ≥ T_{k−1} − step
         np.maximum(out[k], out[k - 1] - step, out=out[k])
-    for k in range(K1 - 2, -1, -1):  # backward: T_k ≥ T_{k+1} − step
+    for k in range(out.shape[0] - 2, -1, -1):  # backward: T_k ≥ T_{k+1} − step
         np.maximum(out[k], out[k + 1] - step, out=out[k])
     return out
