@@ -227,6 +227,20 @@ def test_least_tension_schedule_is_the_least_rate_bounded_cover() -> None:
     low = catenary.lowest_height(p.base_height, p.exit_height, spans[:, 0], catenary_params(clear), tension=T3[:, 0])
     assert float(np.min(low)) >= 0.06 - 1e-6 and float(np.min(low)) < 0.061  # held, and no higher than needed
     assert np.all(T3 >= least_tension_schedule(spans, clear, Ts, m) - 1e-12)
+    # the pay-out damper kept through the tension: the room to the reach shrinks at most geometrically, so after a
+    # long span the tension comes down slowly (a fast fall pays cable out fast: the dynamic sag)
+    rate = 0.5
+    T4 = least_tension_schedule(spans, p, Ts, m, rate)
+    reach = np.array([
+        catenary.max_span(p.base_height, p.exit_height, replace(cat, horizontal_tension=t)) for t in T4[:, 0]
+    ])  # fmt: skip
+    room = reach - m - spans[:, 0]
+    assert np.all(room[1:] >= (1 - rate * Ts) * room[:-1] - 2e-4)  # exact reach vs the schedule's 0.03 N grid
+    assert np.all(T4 >= T - 1e-12) and np.max(np.abs(np.diff(T4, axis=0))) <= p.winch_tension_rate * Ts + 1e-9
+    after = peak + 20
+    assert T4[after, 0] > T[after, 0] + 1.0  # it does hold the tension up after the peak
+    shrink = room[1:] / np.maximum(room[:-1], 1e-12)
+    assert np.any(np.abs(shrink - (1 - rate * Ts)) < 1e-3)  # and the damper binds somewhere (a test that can fail)
 
 
 def test_horizon_with_the_active_winch_is_never_worse_than_qp(e4_active) -> None:

@@ -634,8 +634,9 @@ def solve(
     if problem.chain_params.active_winch:  # the NLP chose the positions within T_max's reach; the least tension here
         from tmr.control.winch import least_tension_schedule
 
+        q = problem.qp_params  # its pay-out damper kept through the tension
         result.winch_tension = least_tension_schedule(
-            result.spans, problem.chain_params, result.Ts, problem.qp_params.span_margin
+            result.spans, problem.chain_params, result.Ts, q.span_margin, q.span_approach_rate
         )
     metrics = check(result, problem.env, goal_tolerance=problem.path_params.goal_tolerance)
     return _whole(result, metrics, start, **parts)

@@ -416,7 +416,9 @@ def make_winch_qp(
     return GroundWinchQP(qp, chain, params, span)
 
 
-def least_tension_schedule(spans: Array, params: ChainParams, Ts: float, margin: float) -> Array:
+def least_tension_schedule(
+    spans: Array, params: ChainParams, Ts: float, margin: float, approach_rate: float | None = None
+) -> Array:
     """The least horizontal tensions (K+1, N) [N] an active winch can follow that hold every span of a plan whose
     positions are already chosen (``--method horizon``: its NLP keeps every span within the reach of T_max, and the
     tension, absent from f1–f4, is then chosen here).
@@ -430,6 +432,13 @@ def least_tension_schedule(spans: Array, params: ChainParams, Ts: float, margin:
     rate Ts (a maximum of functions with that slope has it too): the tension rises just early enough for a long span
     and returns to nominal after it. Computed by a forward and a backward pass. A span beyond the reach of T_max
     (the NLP keeps them within it only to IPOPT's tolerance) gets T_max: the checker judges the rest.
+
+    ``approach_rate`` ρ_d [1/s] (``QPParams.span_approach_rate``; None: none): the per-step QP's pay-out damper,
+    kept here through the tension (the spans are given): the room r_k = d_max(T_k) − margin − d_k may shrink at most
+    geometrically, r_{k+1} ≥ (1 − ρ_d Ts) r_k, so a tension never falls fast (paying cable out fast) where a span is
+    near its reach — the moving cable hangs lower than the static one (``formulations/catenary.md``, "Dynamic sag").
+    A forward pass raises T_{k+1} where r_{k+1} would shrink faster, then the envelope again, until neither changes
+    (both only raise; d_max(T) by interpolation on a 0.03 N grid, the exact T*_k kept underneath).
     """
     p = params
     spans = np.abs(np.asarray(spans, dtype=float))
@@ -443,7 +452,35 @@ def least_tension_schedule(spans: Array, params: ChainParams, Ts: float, margin:
         for k in np.flatnonzero(spans[:, j] + margin > reach_ref):
             t = catenary.tension_for_span(spans[k, j] + margin, h1, p.exit_height, cat, t_ref, p.winch_tension_max)
             need[k, j] = p.winch_tension_max if t is None else t
-    return rate_bounded_envelope(need, p.winch_tension_rate * float(Ts))
+    step = p.winch_tension_rate * float(Ts)
+    out = rate_bounded_envelope(need, step)
+    if approach_rate is None:
+        return out
+    shrink = max(0.0, 1.0 - float(approach_rate) * float(Ts))
+    grid = np.linspace(
+        p.winch_tension_min, p.winch_tension_max, 1 + int(np.ceil((p.winch_tension_max - p.winch_tension_min) / 0.03))
+    )
+    reach = {
+        h1: np.array([catenary.max_span(h1, p.exit_height, replace(cat, horizontal_tension=t)) for t in grid])
+        for h1 in {p.base_height, p.exit_height}
+    }
+    for _ in range(100):  # monotone: every pass only raises, bounded by T_max
+        before = out.copy()
+        for j in range(N):
+            rg = reach[p.base_height if j == 0 else p.exit_height]
+            col, d = out[:, j], spans[:, j]
+            room = float(np.interp(col[0], grid, rg)) - margin - d[0]
+            for k in range(K1 - 1):
+                want = d[k + 1] + margin + shrink * max(room, 0.0)
+                have = float(np.interp(col[k + 1], grid, rg))
+                if have < want:
+                    col[k + 1] = min(float(np.interp(want, rg, grid)), p.winch_tension_max)
+                    have = float(np.interp(col[k + 1], grid, rg))
+                room = have - margin - d[k + 1]
+        out = rate_bounded_envelope(out, step)
+        if np.array_equal(out, before):
+            break
+    return out
 
 
 def rate_bounded_envelope(need: Array, step: float) -> Array:
