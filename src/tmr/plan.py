@@ -165,6 +165,18 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     )
     p.add_argument("--iterations", type=count, help="RRT* iterations (default 1000)")
     p.add_argument(
+        "--drive",
+        choices=["omni", "diff"],
+        help="ground robots' kinematics: omni (omnidirectional, Caruso 2021; default) or diff (differential drive: "
+        "heading, no sideways motion, v/ω limits; --method qp only); same as --set drive=...",
+    )
+    p.add_argument(
+        "--robot-model",
+        metavar="NAME|FILE",
+        help="differential-drive robot: turtlebot3_burger (default), turtlebot3_waffle_pi, clearpath_jackal, or a "
+        "TOML file with radius, v_max, omega_max, a_max, alpha_max, exit_offset (SI units); implies --drive diff",
+    )
+    p.add_argument(
         "--set",
         type=param,
         action="append",
@@ -435,6 +447,14 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
     chain_params = made[ChainParams]
     if rest:
         raise TmrError(f"unknown parameter(s) {sorted(rest)}; the names are the fields of tmr.model.params")
+    if chain_params.diff_drive:  # exit 2 before the route: the model, its footprint, the methods that plan it
+        from tmr.model.diffdrive import model_for
+
+        model_for(chain_params.robot_model, chain_params.safety_radius)
+        if args.method != "qp":
+            raise TmrError(f"--drive diff is planned by --method qp only (--method {args.method} is not yet)")
+        if chain_params.active_winch:
+            raise TmrError("--drive diff is planned with the passive winch only (winch = 'active' is not yet)")
     from tmr.world.environment import refuse_impassable_low_obstacles
 
     top = max(chain_params.exit_height, chain_params.base_height)
@@ -538,6 +558,26 @@ def _pooled(pool: Any, figures: dict[str, Any]) -> dict[str, bytes] | None:
         return None
 
 
+def _drive_args(args: argparse.Namespace) -> None:
+    """``--drive`` and ``--robot-model`` as the parameters ``drive`` and ``robot_model`` (``--robot-model`` implies
+    ``--drive diff``); TmrError (exit 2) if ``--set`` gives them too."""
+    given = {k for k, _ in args.set}
+    extra: list[tuple[str, str]] = []
+    drive = getattr(args, "drive", None)
+    model = getattr(args, "robot_model", None)
+    if model is not None:
+        if drive == "omni":
+            raise TmrError("--robot-model is a differential-drive robot: it needs --drive diff (or no --drive)")
+        drive = drive or "diff"
+        extra.append(("robot_model", model))
+    if drive is not None:
+        extra.insert(0, ("drive", drive))
+    twice = sorted(given & {k for k, _ in extra})
+    if twice:
+        raise TmrError(f"{', '.join(twice)} given twice (--drive/--robot-model and --set): give one")
+    args.set = list(args.set) + extra
+
+
 def _main(args: argparse.Namespace) -> int:
     from tmr.route.route import RouteVerdict
 
@@ -549,10 +589,13 @@ def _main(args: argparse.Namespace) -> int:
                 f"--time-limit is the horizon NLP's limit: --method {args.method} has none (add --method horizon)"
             )
         check_out(Path(args.out))
+        _drive_args(args)
         if args.scenario and not args.map:
             from tmr.world.scenario import scenario_kind  # reads the file only: no 3-D import for ground
 
             if scenario_kind(args.scenario) == "drone":  # a tethered drone chain in 3-D (formulations/drones.md)
+                if any(k in ("drive", "robot_model") for k, _ in args.set):
+                    raise TmrError("--drive and --robot-model are ground robots' kinematics: not for a drone scenario")
                 from tmr.plan3d import main_drones
 
                 return main_drones(args, OWNED_NAMES, VOLATILE_NAMES)
