@@ -77,7 +77,7 @@ OWNED_NAMES = (
     OUTPUT_NAMES
     + ("chain_poses_3d.png", "altitude.png", "tether_clearance.png", "tensions.png", "world_meshes")
     + VIEW_NAMES
-    + ("replay",)
+    + ("replay", "cmd_vel")
 )  # the drone figures (tmr.plan3d.DRONE_FIGURES), meshes (tmr.io.drones)
 #: Outputs whose bytes change from run to run (listed in the manifest without a hash).
 VOLATILE_NAMES = ("timings.json",)
@@ -290,6 +290,9 @@ def write_outputs(
 
     write_chain_run(out / "run.json", plan, env, extra)  # scenario, map and tether parameters (tmr.replay)
     names = ["trajectories.json", "trajectories.csv", "metrics.json", "timings.json", "run.json"]
+    if getattr(plan, "heading", None) is not None:  # differential drive: one velocity command file per robot
+        io.write_cmd_vel(plan, out / io.CMD_VEL_DIR)
+        names.append(io.CMD_VEL_DIR)
     if plots:
         figures = {
             "chain_poses.png": ("plot_chain_poses", (plan, env), {"route": route}),
@@ -654,9 +657,13 @@ def _main(args: argparse.Namespace) -> int:
                 other_attempts_time = 0.0
             plan, metrics, timings = _whole_planning(plan, metrics, start, route_time, other_attempts_time)
             LOG.debug("writing the outputs")
-            filtered, filter_note = filter_within_limits(
-                plan, problem.env, problem.time_params.Ts, cutoff_hz=args.filter_cutoff
-            )
+            if getattr(plan, "heading", None) is None:
+                filtered, filter_note = filter_within_limits(
+                    plan, problem.env, problem.time_params.Ts, cutoff_hz=args.filter_cutoff
+                )
+            else:  # differential drive: the robots execute cmd_vel/ (a low-passed pose would slip sideways)
+                filtered = np.asarray(plan.robots, dtype=float).copy()
+                filter_note = "differential drive: not filtered, the robots execute cmd_vel/robotI.csv"
             extra = _extras(problem, plan, auto_note) | ({"filter_note": filter_note} if filter_note else {}) | timings
             from tmr.io.outdir import Stage
 

@@ -130,7 +130,9 @@ class DiffDriveQP:
         self.qp, self.chain, self.model = qp, chain, model
         self.heading0 = np.asarray(heading0, dtype=float).copy()
         if self.heading0.shape != (chain.n_robots,):
-            raise ParameterError(f"heading0 must have one heading per robot ({chain.n_robots}), got {self.heading0.shape}")
+            raise ParameterError(
+                f"heading0 must have one heading per robot ({chain.n_robots}), got {self.heading0.shape}"
+            )
         self.reset_state()
 
     @property
@@ -172,7 +174,9 @@ class DiffDriveQP:
             w_lo, w_hi = np.maximum(w_lo, self._w - m.alpha_max * Ts), np.minimum(w_hi, self._w + m.alpha_max * Ts)
         v_c, w_c = np.clip(v, v_lo, v_hi), np.clip(w, w_lo, w_hi)
         diag["diff_clip"] = float(max(np.max(np.abs(v_c - v)), b * np.max(np.abs(w_c - w))))
-        diag["turning_in_place"] = float(np.count_nonzero((np.abs(v_c) < TURN_IN_PLACE[0]) & (np.abs(w_c) > TURN_IN_PLACE[1])))
+        diag["turning_in_place"] = float(
+            np.count_nonzero((np.abs(v_c) < TURN_IN_PLACE[0]) & (np.abs(w_c) > TURN_IN_PLACE[1]))
+        )
         self._hist.append((self._axle, self._theta, v_c, w_c))
         axle, theta = unicycle_step(self._axle, self._theta, v_c, w_c, Ts)
         qdot_eff = self._joint_step(ctx, exit_point(axle, theta, b)) / Ts

@@ -23,7 +23,7 @@ lateral velocity from two poses alone (the checker, :mod:`tmr.checks.diffdrive`)
 from __future__ import annotations
 
 import math
-import tomllib
+import sys
 from dataclasses import asdict, dataclass
 from importlib import resources
 from pathlib import Path
@@ -33,6 +33,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tmr.errors import ParameterError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
 
 Array = NDArray[np.float64]
 
@@ -147,9 +152,10 @@ def model_for(robot_model: str, safety_radius: float) -> RobotModel:
     reach = model.exit_offset + model.radius
     if reach > safety_radius + 1e-12:
         raise ParameterError(
-            f"robot model {model.name!r}: its footprint (radius {model.radius:g} m round the axle, {model.exit_offset:g} "
-            f"m behind the tether's exit point) leaves the safety disc r = {safety_radius:g} m round the exit point that "
-            f"the planner keeps clear: use --robot-radius {reach:g} or more, or a smaller exit_offset"
+            f"robot model {model.name!r}: its footprint (radius {model.radius:g} m round the axle, "
+            f"{model.exit_offset:g} m behind the tether's exit point) leaves the safety disc r = {safety_radius:g} m "
+            f"round the exit point that the planner keeps clear: use --robot-radius {reach:g} or more, or a smaller "
+            "exit_offset"
         )
     return model
 

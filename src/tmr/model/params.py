@@ -102,7 +102,9 @@ class ChainParams:
         if self.drive not in DRIVES:
             raise ParameterError(f"ChainParams.drive must be one of {', '.join(DRIVES)}, got {self.drive!r}")
         if self.robot_model and self.drive != "diff":
-            raise ParameterError(f"robot_model = {self.robot_model!r} set but drive = {self.drive!r}: add drive = 'diff'")
+            raise ParameterError(
+                f"robot_model = {self.robot_model!r} set but drive = {self.drive!r}: add drive = 'diff'"
+            )
         if self.active_winch:  # the range as a whole (a command line's --set checks each field on its own)
             if self.winch_tension_min > self.winch_tension_max:
                 raise ParameterError(
