@@ -152,6 +152,19 @@ def test_diff_plan_of_A_passes_with_no_lateral_velocity():
     assert plan.params["drive"] == "diff" and plan.params["robot_model_params"]["name"] == "turtlebot3_burger"
 
 
+def test_diff_drive_with_an_active_winch():
+    """The v/ω rows padded with the tension columns: the winch's QP wraps them, the poses stay non-holonomic."""
+    from tmr.planner import build_problem, solve
+    from tmr.world.scenario import load_scenario
+
+    problem = build_problem(load_scenario("A"), overrides={"drive": "diff", "winch": "active"})
+    plan, metrics = solve(problem, "qp")
+    assert plan.success, plan.failure
+    assert plan.winch_tension is not None and plan.winch_tension.shape == (plan.t.size, 3)
+    assert np.max(np.abs(step_velocities(plan.axle, plan.heading, plan.Ts)[2])) <= 1e-9
+    assert {"winch_range", "lateral_velocity"} <= set(metrics.violation_steps)
+
+
 def test_cli_refusals_and_outputs(tmp_path, capsys):
     from tmr import cli
 

@@ -456,8 +456,6 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
         model_for(chain_params.robot_model, chain_params.safety_radius)
         if args.method != "qp":
             raise TmrError(f"--drive diff is planned by --method qp only (--method {args.method} is not yet)")
-        if chain_params.active_winch:
-            raise TmrError("--drive diff is planned with the passive winch only (winch = 'active' is not yet)")
     from tmr.world.environment import refuse_impassable_low_obstacles
 
     top = max(chain_params.exit_height, chain_params.base_height)

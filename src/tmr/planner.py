@@ -355,12 +355,10 @@ def _diff_drive_setup(chain_params: ChainParams, path_params: PathParams) -> tup
     """The robot model of ``drive = "diff"`` (:func:`tmr.model.diffdrive.load_robot_model`) and the path parameters
     with the leader's speed and acceleration within the robot's reach (:data:`DIFF_SPEED_FRACTION`,
     :data:`DIFF_ACCEL_FRACTION`). Refuses (ParameterError, exit 2) a footprint that the safety disc round the exit
-    point does not hold (b + r_f > r) and an active winch (not planned with differential drive yet)."""
+    point does not hold (b + r_f > r)."""
     from tmr.model.diffdrive import model_for
 
     model = model_for(chain_params.robot_model, chain_params.safety_radius)
-    if chain_params.active_winch:
-        raise ParameterError("drive = 'diff' is planned with the passive winch only (winch = 'active' is not yet)")
     path_params = replace(
         path_params,
         leader_speed=min(path_params.leader_speed, DIFF_SPEED_FRACTION * model.v_max),
@@ -557,12 +555,19 @@ def make_qp(
         chain, problem.span_limits, p.joint_speed_max, p.span_speed_max, p.accel_max, p.span_margin,
         p.span_approach_rate,
     )  # fmt: skip
-    if problem.robot_model is not None:  # differential drive: v, ω rows and the poses (tmr.control.diffdrive)
+    if getattr(problem, "robot_model", None) is not None:  # diff drive: v, ω rows, poses (tmr.control.diffdrive)
         from tmr.control.diffdrive import DiffDriveAcceleration, DiffDriveSpeed, make_diffdrive_qp
 
         limits += [DiffDriveSpeed(problem.robot_model), DiffDriveAcceleration(problem.robot_model)]
-        qp = LexicographicQP(chain, levels, limits, box, solver=p.solver)
-        return make_diffdrive_qp(qp, chain, problem.robot_model, initial_headings(problem))  # type: ignore[return-value]
+        if problem.chain_params.active_winch:  # x = [v, Ṫ], the v/ω rows padded like every limit
+            from tmr.control.winch import make_winch_qp
+
+            inner: Any = make_winch_qp(
+                chain, levels, limits, box, problem.chain_params, p.span_margin, p.solver, p.span_approach_rate
+            )
+        else:
+            inner = LexicographicQP(chain, levels, limits, box, solver=p.solver)
+        return make_diffdrive_qp(inner, chain, problem.robot_model, initial_headings(problem))  # type: ignore[return-value]
     if problem.chain_params.active_winch:  # x = [v, Ṫ] (tmr.control.winch)
         from tmr.control.winch import make_winch_qp
 
@@ -574,7 +579,7 @@ def make_qp(
 
 def formulation(problem: Problem, method: str | Formulation) -> Formulation:
     """The formulation object for ``method``: ``"pinv"``, ``"qp"``, or a formulation object (returned as is)."""
-    if problem.robot_model is not None and method in ("pinv", "horizon"):
+    if getattr(problem, "robot_model", None) is not None and method in ("pinv", "horizon"):
         raise ParameterError(f"drive = 'diff' is planned by --method qp only (not --method {method} yet)")
     if method == "pinv":
         _qp_only(problem, "the pinv baseline")
@@ -663,7 +668,7 @@ def solve(
         result, metrics = _checked(problem, method, progress)
         return _whole(result, metrics, start)
     # a whole-trajectory NLP, not a per-step formulation
-    if problem.robot_model is not None:
+    if getattr(problem, "robot_model", None) is not None:
         raise ParameterError("drive = 'diff' is planned by --method qp only (not --method horizon yet)")
     refuse_low_obstacles(problem.env, "--method horizon", "its NLP keeps no cable height above them; use --method qp")
     _qp_only(problem, "the horizon NLP")

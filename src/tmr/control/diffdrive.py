@@ -128,6 +128,8 @@ class DiffDriveQP:
         if chain.spatial:
             raise ParameterError("differential drive is a ground robot's kinematics: not for a spatial chain")
         self.qp, self.chain, self.model = qp, chain, model
+        if hasattr(qp, "tensions"):  # an active winch's QP (tmr.control.winch.GroundWinchQP): its tensions per state
+            self.tensions = qp.tensions
         self.heading0 = np.asarray(heading0, dtype=float).copy()
         if self.heading0.shape != (chain.n_robots,):
             raise ParameterError(
@@ -141,7 +143,7 @@ class DiffDriveQP:
 
     @property
     def limits(self) -> list[Limit]:
-        return self.qp.limits
+        return _limits(self.qp)
 
     def reset_state(self) -> None:
         N = self.chain.n_robots
@@ -211,10 +213,18 @@ class DiffDriveQP:
         return tuple(np.array([r[i] for r in rows]) for i in range(4))  # type: ignore[return-value]
 
 
+def _limits(qp: Any) -> list[Limit]:
+    """The limits of a :class:`~tmr.control.qp.LexicographicQP`, or of the one inside an active winch's QP."""
+    return list(getattr(qp, "limits", None) or getattr(qp.qp, "limits", []))
+
+
 def make_diffdrive_qp(qp: Any, chain: Chain, model: RobotModel, heading0: Array) -> DiffDriveQP:
-    """``qp`` (a :class:`~tmr.control.qp.LexicographicQP` whose limits already hold :class:`DiffDriveSpeed` and
-    :class:`DiffDriveAcceleration`) wrapped as the differential-drive formulation."""
-    names = {lim.name for lim in qp.limits}
+    """``qp`` (a :class:`~tmr.control.qp.LexicographicQP`, or an active winch's
+    :class:`~tmr.control.winch.GroundWinchQP`, whose limits already hold :class:`DiffDriveSpeed` and
+    :class:`DiffDriveAcceleration`, padded with the tension columns there) wrapped as the differential-drive
+    formulation. With an active winch the winch's QP receives the :class:`DiffDriveContext` as its step context, so
+    the padded v/ω rows read the headings from it."""
+    names = {lim.name for lim in _limits(qp)}
     if not {DiffDriveSpeed.name, DiffDriveAcceleration.name} <= names:
         raise ParameterError("the differential-drive QP needs the diff_speed and diff_acceleration limits")
     return DiffDriveQP(qp, chain, model, heading0)
