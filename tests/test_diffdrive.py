@@ -132,6 +132,27 @@ def test_robot_models(tmp_path):
         ChainParams(robot_model="turtlebot3_burger")
 
 
+def test_scenario_keys_drive_and_robot_model(tmp_path):
+    """A scenario's top-level ``drive``/``robot_model`` (or ``[params]``) select the robots; a model file is relative to
+    the scenario file, like its map."""
+    from tmr.errors import ScenarioError
+    from tmr.planner import build_problem
+    from tmr.world.scenario import all_builtins, load_scenario
+
+    a = all_builtins()["A"]
+    (tmp_path / "models").mkdir()
+    (tmp_path / "models" / "mybot.toml").write_text(
+        'name = "mybot"\nradius = 0.2\nv_max = 0.4\nomega_max = 2.0\na_max = 1.0\nalpha_max = 2.0\nexit_offset = 0.1\n'
+    )
+    body = a.read_text().replace('file = "A.geojson"', f'file = "{a.parent / "A.geojson"}"')
+    (tmp_path / "s.toml").write_text('drive = "diff"\nrobot_model = "models/mybot.toml"\n' + body)
+    problem = build_problem(load_scenario(tmp_path / "s.toml"))
+    assert problem.robot_model.name == "mybot" and problem.path_params.leader_speed == pytest.approx(0.32)
+    (tmp_path / "t.toml").write_text('drive = "diff"\n' + body + '\n[params]\ndrive = "omni"\n')
+    with pytest.raises(ScenarioError, match="given at the top and in"):
+        load_scenario(tmp_path / "t.toml")
+
+
 def test_diff_plan_of_A_passes_with_no_lateral_velocity():
     from tmr.planner import build_problem, solve
     from tmr.world.scenario import load_scenario
