@@ -77,7 +77,7 @@ OWNED_NAMES = (
     OUTPUT_NAMES
     + ("chain_poses_3d.png", "altitude.png", "tether_clearance.png", "tensions.png", "world_meshes")
     + VIEW_NAMES
-    + ("replay",)
+    + ("replay", "cmd_vel")
 )  # the drone figures (tmr.plan3d.DRONE_FIGURES), meshes (tmr.io.drones)
 #: Outputs whose bytes change from run to run (listed in the manifest without a hash).
 VOLATILE_NAMES = ("timings.json",)
@@ -164,6 +164,18 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
         "backend (daqp, proxqp, clarabel, qpsolvers-osqp, ...)",
     )
     p.add_argument("--iterations", type=count, help="RRT* iterations (default 1000)")
+    p.add_argument(
+        "--drive",
+        choices=["omni", "diff"],
+        help="ground robots' kinematics: omni (omnidirectional, Caruso 2021; default) or diff (differential drive: "
+        "heading, no sideways motion, v/ω limits; --method qp only); same as --set drive=...",
+    )
+    p.add_argument(
+        "--robot-model",
+        metavar="NAME|FILE",
+        help="differential-drive robot: turtlebot3_burger (default), turtlebot3_waffle_pi, clearpath_jackal, or a "
+        "TOML file with radius, v_max, omega_max, a_max, alpha_max, exit_offset (SI units); implies --drive diff",
+    )
     p.add_argument(
         "--set",
         type=param,
@@ -278,6 +290,9 @@ def write_outputs(
 
     write_chain_run(out / "run.json", plan, env, extra)  # scenario, map and tether parameters (tmr.replay)
     names = ["trajectories.json", "trajectories.csv", "metrics.json", "timings.json", "run.json"]
+    if getattr(plan, "heading", None) is not None:  # differential drive: one velocity command file per robot
+        io.write_cmd_vel(plan, out / io.CMD_VEL_DIR)
+        names.append(io.CMD_VEL_DIR)
     if plots:
         figures = {
             "chain_poses.png": ("plot_chain_poses", (plan, env), {"route": route}),
@@ -456,6 +471,12 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
     chain_params = made[ChainParams]
     if rest:
         raise TmrError(f"unknown parameter(s) {sorted(rest)}; the names are the fields of tmr.model.params")
+    if chain_params.diff_drive:  # exit 2 before the route: the model, its footprint, the methods that plan it
+        from tmr.model.diffdrive import model_for
+
+        model_for(chain_params.robot_model, chain_params.safety_radius)
+        if args.method != "qp":
+            raise TmrError(f"--drive diff is planned by --method qp only (--method {args.method} is not yet)")
     from tmr.world.environment import refuse_impassable_low_obstacles
 
     top = max(chain_params.exit_height, chain_params.base_height)
@@ -559,6 +580,26 @@ def _pooled(pool: Any, figures: dict[str, Any]) -> dict[str, bytes] | None:
         return None
 
 
+def _drive_args(args: argparse.Namespace) -> None:
+    """``--drive`` and ``--robot-model`` as the parameters ``drive`` and ``robot_model`` (``--robot-model`` implies
+    ``--drive diff``); TmrError (exit 2) if ``--set`` gives them too."""
+    given = {k for k, _ in args.set}
+    extra: list[tuple[str, str]] = []
+    drive = getattr(args, "drive", None)
+    model = getattr(args, "robot_model", None)
+    if model is not None:
+        if drive == "omni":
+            raise TmrError("--robot-model is a differential-drive robot: it needs --drive diff (or no --drive)")
+        drive = drive or "diff"
+        extra.append(("robot_model", model))
+    if drive is not None:
+        extra.insert(0, ("drive", drive))
+    twice = sorted(given & {k for k, _ in extra})
+    if twice:
+        raise TmrError(f"{', '.join(twice)} given twice (--drive/--robot-model and --set): give one")
+    args.set = list(args.set) + extra
+
+
 def _main(args: argparse.Namespace) -> int:
     from tmr.route.route import RouteVerdict
 
@@ -570,10 +611,13 @@ def _main(args: argparse.Namespace) -> int:
                 f"--time-limit is the horizon NLP's limit: --method {args.method} has none (add --method horizon)"
             )
         check_out(Path(args.out))
+        _drive_args(args)
         if args.scenario and not args.map:
             from tmr.world.scenario import scenario_kind  # reads the file only: no 3-D import for ground
 
             if scenario_kind(args.scenario) == "drone":  # a tethered drone chain in 3-D (formulations/drones.md)
+                if any(k in ("drive", "robot_model") for k, _ in args.set):
+                    raise TmrError("--drive and --robot-model are ground robots' kinematics: not for a drone scenario")
                 from tmr.plan3d import main_drones
 
                 return main_drones(args, OWNED_NAMES, VOLATILE_NAMES)
@@ -632,9 +676,13 @@ def _main(args: argparse.Namespace) -> int:
                 other_attempts_time = 0.0
             plan, metrics, timings = _whole_planning(plan, metrics, start, route_time, other_attempts_time)
             LOG.debug("writing the outputs")
-            filtered, filter_note = filter_within_limits(
-                plan, problem.env, problem.time_params.Ts, cutoff_hz=args.filter_cutoff
-            )
+            if getattr(plan, "heading", None) is None:
+                filtered, filter_note = filter_within_limits(
+                    plan, problem.env, problem.time_params.Ts, cutoff_hz=args.filter_cutoff
+                )
+            else:  # differential drive: the robots execute cmd_vel/ (a low-passed pose would slip sideways)
+                filtered = np.asarray(plan.robots, dtype=float).copy()
+                filter_note = "differential drive: not filtered, the robots execute cmd_vel/robotI.csv"
             extra = _extras(problem, plan, auto_note) | ({"filter_note": filter_note} if filter_note else {}) | timings
             from tmr.io.outdir import Stage
 

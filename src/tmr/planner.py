@@ -36,6 +36,7 @@ from tmr.control.tasks import (
 )
 from tmr.errors import ParameterError, PathError, ScenarioError, fmt_point
 from tmr.model.chain import Chain
+from tmr.model.diffdrive import RobotModel
 from tmr.model.params import (
     WINCH_FIELDS,
     ChainParams,
@@ -88,6 +89,7 @@ class Problem:
     route_mode: str = "rrt"
     fixed_duration: bool = False  # T_end was set by the user (the train references cannot keep it)
     defaulted: tuple[str, ...] = ()  # parameters the active winch filled in (tmr.model.params.with_winch_defaults)
+    robot_model: RobotModel | None = None  # drive = "diff": the robots' model (tmr.model.diffdrive)
 
     @property
     def env(self) -> Any:
@@ -103,6 +105,8 @@ class Problem:
         out.update(route=self.route_mode, T_end=float(self.trajectory.t[-1]))
         if self.route is not None:
             out.update(route_length=self.route.length, n_min=self.route.n_min, n_lower=self.route.n_lower)
+        if self.robot_model is not None:  # differential drive only: an omnidirectional plan's records keep their bytes
+            out.update(robot_model_params=self.robot_model.record())
         return out
 
 
@@ -240,6 +244,9 @@ def build_problem(
         raise ScenarioError(f"unknown parameter(s) {sorted(rest)} in scenario {scenario.name!r}")
     if path_iterations is not None:
         path_params = replace(path_params, path_iterations=int(path_iterations))
+    robot_model = None
+    if chain_params.diff_drive:
+        robot_model, path_params = _diff_drive_setup(chain_params, path_params)
     N = int(n_robots if n_robots is not None else scenario.n_robots)
     if start is not None:  # before the route: a start never changes N by itself
         try:
@@ -338,7 +345,55 @@ def build_problem(
         route_mode=route,
         fixed_duration="T_end" in values,
         defaulted=defaulted,
+        robot_model=robot_model,
     )
+
+
+#: With differential drive the leader's time law is capped at these fractions of the robot's v_max and a_max: the
+#: rest is the CLIK correction's room (Caruso 2021 eq. 20) and the heading's turns (``formulations/diffdrive.md``).
+DIFF_SPEED_FRACTION = 0.8
+DIFF_ACCEL_FRACTION = 0.5
+
+
+def _diff_drive_setup(chain_params: ChainParams, path_params: PathParams) -> tuple[RobotModel, PathParams]:
+    """The robot model of ``drive = "diff"`` (:func:`tmr.model.diffdrive.load_robot_model`) and the path parameters
+    with the leader's speed and acceleration within the robot's reach (:data:`DIFF_SPEED_FRACTION`,
+    :data:`DIFF_ACCEL_FRACTION`). Refuses (ParameterError, exit 2) a footprint that the safety disc round the exit
+    point does not hold (b + r_f > r)."""
+    from tmr.model.diffdrive import model_for
+
+    model = model_for(chain_params.robot_model, chain_params.safety_radius)
+    path_params = replace(
+        path_params,
+        leader_speed=min(path_params.leader_speed, DIFF_SPEED_FRACTION * model.v_max),
+        leader_accel=min(path_params.leader_accel, DIFF_ACCEL_FRACTION * model.a_max),
+    )
+    return model, path_params
+
+
+def initial_headings(problem: Problem) -> Array:
+    """Every robot's heading θ_0 [rad] at the start of a differential-drive plan: along the first motion of its
+    reference (the leader's trajectory; a follower's route reference), else along its tether from the previous
+    robot (the anchor for robot 1): the chain pays out away from the anchor."""
+    chain = problem.chain
+    P = chain.points(problem.q0) if not chain.spatial else None
+    assert P is not None
+    N = chain.n_robots
+    out = np.empty(N)
+    refs: list[Array | None] = [None] * N
+    if problem.references is not None:
+        for i in range(N):
+            refs[i] = np.asarray(problem.references.velocities, dtype=float)[:, i, :]
+    refs[-1] = np.asarray(problem.trajectory.xd, dtype=float)[:, :2]
+    for i in range(N):
+        link = P[i + 1] - P[i]
+        out[i] = math.atan2(link[1], link[0])
+        V = refs[i]
+        if V is not None:
+            moving = np.flatnonzero(np.linalg.norm(V, axis=1) > 1e-9)
+            if moving.size:
+                out[i] = math.atan2(V[moving[0], 1], V[moving[0], 0])
+    return out
 
 
 def _trajectory_along(
@@ -504,6 +559,19 @@ def make_qp(
         chain, problem.span_limits, p.joint_speed_max, p.span_speed_max, p.accel_max, p.span_margin,
         p.span_approach_rate,
     )  # fmt: skip
+    if getattr(problem, "robot_model", None) is not None:  # diff drive: v, ω rows, poses (tmr.control.diffdrive)
+        from tmr.control.diffdrive import DiffDriveAcceleration, DiffDriveSpeed, make_diffdrive_qp
+
+        limits += [DiffDriveSpeed(problem.robot_model), DiffDriveAcceleration(problem.robot_model)]
+        if problem.chain_params.active_winch:  # x = [v, Ṫ], the v/ω rows padded like every limit
+            from tmr.control.winch import make_winch_qp
+
+            inner: Any = make_winch_qp(
+                chain, levels, limits, box, problem.chain_params, p.span_margin, p.solver, p.span_approach_rate
+            )
+        else:
+            inner = LexicographicQP(chain, levels, limits, box, solver=p.solver)
+        return make_diffdrive_qp(inner, chain, problem.robot_model, initial_headings(problem))  # type: ignore[return-value]
     if problem.chain_params.active_winch:  # x = [v, Ṫ] (tmr.control.winch)
         from tmr.control.winch import make_winch_qp
 
@@ -515,6 +583,8 @@ def make_qp(
 
 def formulation(problem: Problem, method: str | Formulation) -> Formulation:
     """The formulation object for ``method``: ``"pinv"``, ``"qp"``, or a formulation object (returned as is)."""
+    if getattr(problem, "robot_model", None) is not None and method in ("pinv", "horizon"):
+        raise ParameterError(f"drive = 'diff' is planned by --method qp only (not --method {method} yet)")
     if method == "pinv":
         _qp_only(problem, "the pinv baseline")
         if problem.chain_params.active_winch:
@@ -560,6 +630,9 @@ def plan(problem: Problem, method: str | Formulation = "pinv", *, progress: bool
     tensions = getattr(form, "tensions", None)
     if tensions is not None:
         result.winch_tension = tensions(result.t.size)
+    poses = getattr(form, "poses", None)
+    if poses is not None:  # differential drive: axle centres, headings, v, ω per state
+        result.axle, result.heading, result.drive_v, result.drive_omega = poses(result.t.size)
     for lim in getattr(getattr(form, "qp", form), "limits", ()):
         note = lim.note() if hasattr(lim, "note") else None
         if note:  # what held the chain at the end (a leader that stops short says why)
@@ -599,6 +672,8 @@ def solve(
         result, metrics = _checked(problem, method, progress)
         return _whole(result, metrics, start)
     # a whole-trajectory NLP, not a per-step formulation
+    if getattr(problem, "robot_model", None) is not None:
+        raise ParameterError("drive = 'diff' is planned by --method qp only (not --method horizon yet)")
     refuse_low_obstacles(problem.env, "--method horizon", "its NLP keeps no cable height above them; use --method qp")
     _qp_only(problem, "the horizon NLP")
     from tmr.control.horizon import DEFAULT_TIME_LIMIT, HorizonInfeasible, plan_horizon  # casadi: when used

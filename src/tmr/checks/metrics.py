@@ -31,6 +31,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from tmr.checks.diffdrive import DIFF_KINDS, diff_drive_check
 from tmr.checks.lowpass import butter_lowpass, filtfilt
 from tmr.errors import ParameterError
 
@@ -509,6 +510,10 @@ class Metrics:
     #: crosses one), see :func:`low_obstacle_margins`; and its sample k
     low_obstacle_margin: float | None = None
     low_obstacle_margin_step: int | None = None
+    #: differential drive only (None otherwise, and then not written): what the checker measured from the recorded
+    #: poses (:func:`tmr.checks.diffdrive.diff_drive_check`): lateral velocity, peak v, ω and accelerations, steps
+    #: turning in place per robot
+    diff_drive: dict[str, Any] | None = None
 
     @property
     def fitness(self) -> tuple[float, float, float, float]:
@@ -528,6 +533,8 @@ class Metrics:
         if out["low_obstacle_margin"] is None:  # no low obstacle: its metrics.json keeps the keys it always had
             for key in _OPTIONAL_FIELDS:
                 del out[key]
+        if out["diff_drive"] is None:  # an omnidirectional plan: its metrics.json keeps its keys
+            del out["diff_drive"]
         return json_safe(out)
 
 
@@ -654,6 +661,12 @@ def evaluate(
     if tension is not None:  # an active winch: its tension within the pulley's range, changing within its rate
         masks.update(_winch_masks(plan, tension, Ts, tol))
         kinds = (*kinds, *WINCH_KINDS)
+    diff = diff_drive_check(plan, Ts)
+    diff_summary: dict[str, Any] | None = None
+    if diff is not None:  # differential drive: the recorded poses (tmr.checks.diffdrive)
+        masks.update(diff[0])
+        diff_summary = diff[1]
+        kinds = (*kinds, *DIFF_KINDS)
     steps = {kind: np.flatnonzero(masks[kind]).tolist() for kind in kinds}
     first = {kind: (steps[kind][0] if steps[kind] else None) for kind in kinds}
     any_violation = np.logical_or.reduce([masks[kind] for kind in kinds])
@@ -706,6 +719,7 @@ def evaluate(
         qp_fallback_solves=int(np.nansum(fallbacks)) if fallbacks.size else 0,
         low_obstacle_margin=low_margin,
         low_obstacle_margin_step=low_step,
+        diff_drive=diff_summary,
     )
 
 

@@ -44,6 +44,10 @@ class Plan:
         goal: leader goal (2,) [m].
         winch_tension: with an active winch, every tether's planned horizontal tension T0 per state (K+1, N) [N];
             None for the paper's constant-tension winch.
+        axle, heading, drive_v, drive_omega: differential-drive robots only (else None; :mod:`tmr.control.diffdrive`):
+            axle centres (K+1, N, 2) [m], headings θ (K+1, N) [rad, continuous], forward speed v and yaw rate ω
+            (K+1, N) [m/s, rad/s] held over [t_k, t_k+1] (0 at K). ``robots`` are then the tethers' exit points
+            c + b e(θ).
     """
 
     method: str
@@ -64,6 +68,10 @@ class Plan:
     params: dict[str, Any] = field(default_factory=dict)
     goal: Array | None = None
     winch_tension: Array | None = None
+    axle: Array | None = None
+    heading: Array | None = None
+    drive_v: Array | None = None
+    drive_omega: Array | None = None
 
     @property
     def Ts(self) -> float:

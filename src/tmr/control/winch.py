@@ -342,6 +342,11 @@ class GroundWinchQP:
     def level_keys(self) -> list[str]:
         return self.qp.level_keys
 
+    @property
+    def limits(self) -> list[Any]:
+        """The limits of its lexicographic QP (a differential-drive QP wrapping this one reads their notes)."""
+        return self.qp.limits
+
     def reset(self) -> None:
         self.qp.reset()
         self._T = None

@@ -30,6 +30,7 @@ __all__ = [
     "atomic_write_bytes",
     "atomic_write_text",
     "trajectories_dict",
+    "write_cmd_vel",
     "write_metrics_json",
     "write_trajectories_csv",
     "write_trajectories_json",
@@ -107,6 +108,37 @@ def _robot_entries(t: list[float], robots: np.ndarray) -> list[dict[str, Any]]:
     ]
 
 
+def diff_drive_arrays(plan: Any) -> dict[str, np.ndarray] | None:
+    """A differential-drive plan's per-state arrays (K+1, N): ``x``, ``y`` the axle centre [m], ``theta`` [rad],
+    ``v`` [m/s], ``omega`` [rad/s], ``exit_x``, ``exit_y`` the tether's exit point [m] (``plan.robots``); None for an
+    omnidirectional plan."""
+    heading = getattr(plan, "heading", None)
+    if heading is None:
+        return None
+    robots = np.asarray(plan.robots, dtype=float)
+    axle = np.asarray(plan.axle, dtype=float)
+    out = {
+        "x": axle[..., 0],
+        "y": axle[..., 1],
+        "theta": np.asarray(heading, dtype=float),
+        "v": np.asarray(plan.drive_v, dtype=float),
+        "omega": np.asarray(plan.drive_omega, dtype=float),
+        "exit_x": robots[..., 0],
+        "exit_y": robots[..., 1],
+    }
+    for key, arr in out.items():
+        if arr.shape != robots.shape[:2] or not np.all(np.isfinite(arr)):
+            raise ParameterError(
+                f"differential drive: {key} must be finite of shape {robots.shape[:2]}, got {arr.shape}"
+            )
+    return out
+
+
+def _diff_entries(t: list[float], arrays: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+    n = arrays["x"].shape[1]
+    return [{"name": f"robot{i + 1}", "t": t, **{k: a[:, i].tolist() for k, a in arrays.items()}} for i in range(n)]
+
+
 def trajectories_dict(plan: Any, filtered: np.ndarray | None = None) -> dict[str, Any]:
     """Per-robot trajectories of a plan as a JSON-ready dict (format ``"tmr-trajectories/1"``).
 
@@ -136,6 +168,12 @@ def trajectories_dict(plan: Any, filtered: np.ndarray | None = None) -> dict[str
     All lists of one robot have K+1 entries; ``t`` starts at the plan's first sample (0 s normally). A robot
     node reads ``doc["filtered"]`` if present, else ``doc["robots"]``, and picks its entry by ``name``.
 
+    A differential-drive plan (``plan.heading`` set, :mod:`tmr.control.diffdrive`) adds ``"drive": "diff"`` and
+    ``"robot_model"`` (its numbers) after ``"base"``, and every robot entry holds ``x``, ``y`` the axle centre [m],
+    ``theta`` [rad], ``v`` [m/s], ``omega`` [rad/s] (held over [t_k, t_k+1], 0 at the end) and ``exit_x``,
+    ``exit_y`` the tether's exit point [m]; it has no ``"filtered"`` (a low-passed pose would slip sideways: the
+    robots execute ``cmd_vel/robotI.csv``).
+
     Args:
         plan: a :class:`tmr.control.clik.Plan` (fields ``t``, ``robots``, ``base``, ``scenario``, ``method``,
             ``success``, ``failure``).
@@ -160,6 +198,13 @@ def trajectories_dict(plan: Any, filtered: np.ndarray | None = None) -> dict[str
         "base": np.asarray(plan.base, dtype=float)[:2].tolist(),
         "robots": _robot_entries(t, robots),
     }
+    diff = diff_drive_arrays(plan)
+    if diff is not None:
+        doc.pop("robots")
+        doc["drive"] = "diff"
+        doc["robot_model"] = dict((getattr(plan, "params", None) or {}).get("robot_model_params") or {})
+        doc["robots"] = _diff_entries(t, diff)
+        filtered = None
     if filtered is not None:
         doc["filtered"] = _robot_entries(t, _positions(filtered, "filtered", n_samples, n_robots))
     tension = getattr(plan, "winch_tension", None)
@@ -207,13 +252,22 @@ def write_trajectories_csv(plan: Any, path: str | os.PathLike[str], filtered: np
     Columns: ``t`` [s], then ``robot1_x, robot1_y, ..., robotN_x, robotN_y`` [m] (raw), then if ``filtered``
     is given ``robot1_x_filtered, robot1_y_filtered, ...``, then with an active winch ``tether1_T0, ...`` [N] (the
     planned horizontal tension). One row per sample (K+1 rows after the header);
-    floats are written with ``repr`` (shortest round-trip form); ``\\n`` line endings.
+    floats are written with ``repr`` (shortest round-trip form); ``\\n`` line endings. A differential-drive plan:
+    ``robotI_x, robotI_y`` are the axle centres, then ``robotI_theta, robotI_v, robotI_omega, robotI_exit_x,
+    robotI_exit_y`` per robot [rad, m/s, rad/s, m, m]; no filtered columns.
     """
     doc = trajectories_dict(plan, filtered)  # validates shapes and finiteness
     n = doc["n_robots"]
     t = np.asarray(plan.t, dtype=float)
     blocks = [np.asarray(plan.robots, dtype=float).reshape(t.size, 2 * n)]
     header = ["t"] + [f"robot{i + 1}_{c}" for i in range(n) for c in ("x", "y")]
+    diff = diff_drive_arrays(plan)
+    if diff is not None:  # x, y the axle centres, then per robot theta, v, omega, exit_x, exit_y; no filtered columns
+        blocks = [np.stack([diff["x"], diff["y"]], axis=-1).reshape(t.size, 2 * n)]
+        keys = ("theta", "v", "omega", "exit_x", "exit_y")
+        blocks.append(np.stack([diff[k] for k in keys], axis=-1).reshape(t.size, len(keys) * n))
+        header += [f"robot{i + 1}_{k}" for i in range(n) for k in keys]
+        filtered = None
     if filtered is not None:
         blocks.append(np.asarray(filtered, dtype=float).reshape(t.size, 2 * n))
         header += [f"robot{i + 1}_{c}_filtered" for i in range(n) for c in ("x", "y")]
@@ -226,6 +280,39 @@ def write_trajectories_csv(plan: Any, path: str | os.PathLike[str], filtered: np
     writer.writerow(header)
     writer.writerows([[repr(v) for v in row] for row in table.tolist()])
     return atomic_write_text(path, buf.getvalue())
+
+
+#: Sub-directory of a differential-drive run holding one velocity command file per robot (:func:`write_cmd_vel`).
+CMD_VEL_DIR = "cmd_vel"
+
+
+def write_cmd_vel(plan: Any, directory: str | os.PathLike[str]) -> list[str]:
+    """Write ``robot1.csv … robotN.csv`` into ``directory`` for a differential-drive plan: columns ``t`` [s],
+    ``linear_x`` = v [m/s], ``angular_z`` = ω [rad/s] (a ``geometry_msgs/Twist`` held from t until the next row; the
+    last row stops the robot) and ``turn_in_place`` (1 where |v| < 1e-3 m/s and |ω| > 0.05 rad/s: the robot turns on
+    the spot). Returns the names written (relative to ``directory``'s parent); nothing for an omnidirectional plan."""
+    diff = diff_drive_arrays(plan)
+    if diff is None:
+        return []
+    from tmr.checks.diffdrive import TURN_IN_PLACE
+
+    t = np.asarray(plan.t, dtype=float)
+    names = []
+    for i in range(diff["v"].shape[1]):
+        v, w = diff["v"][:, i], diff["omega"][:, i]
+        turn = ((np.abs(v) < TURN_IN_PLACE[0]) & (np.abs(w) > TURN_IN_PLACE[1])).astype(int)
+        buf = _io.StringIO()
+        writer = csv.writer(buf, lineterminator="\n")
+        writer.writerow(["t", "linear_x", "angular_z", "turn_in_place"])
+        writer.writerows(
+            [
+                [repr(a), repr(b), repr(c), str(d)]
+                for a, b, c, d in zip(t.tolist(), v.tolist(), w.tolist(), turn.tolist(), strict=True)
+            ]
+        )
+        atomic_write_text(Path(directory) / f"robot{i + 1}.csv", buf.getvalue())
+        names.append(f"{Path(directory).name}/robot{i + 1}.csv")
+    return names
 
 
 def write_metrics_json(metrics_dict: Any, path: str | os.PathLike[str]) -> Path:

@@ -385,8 +385,9 @@ def _floats(value: Any, where: str, what: str) -> Array:
 
 
 def _positions(entries: Any, n: int, k: int, where: str, what: str) -> Array:
-    try:
-        out = np.stack([np.column_stack([e["x"], e["y"]]) for e in entries], axis=1).astype(float)
+    try:  # a differential-drive run: x, y are the axle centres, the chain's points are the tethers' exit points
+        keys = ("exit_x", "exit_y") if entries and "exit_x" in entries[0] else ("x", "y")
+        out = np.stack([np.column_stack([e[keys[0]], e[keys[1]]]) for e in entries], axis=1).astype(float)
     except (TypeError, KeyError, ValueError):
         raise RunDirError(f"{where}: trajectories.json {what} are malformed; re-run tmr.plan") from None
     if out.shape != (k, n, 2) or not np.all(np.isfinite(out)):

@@ -35,6 +35,10 @@ def _validate(obj: Any, positive: tuple[str, ...] = (), nonnegative: tuple[str, 
 #: the ground winch's kinds (:attr:`ChainParams.winch`) and the fields an active one adds to the records
 WINCHES = ("passive", "active")
 WINCH_FIELDS = ("winch", "winch_tension_min", "winch_tension_max", "winch_tension_rate")
+#: the ground robots' kinematics (:attr:`ChainParams.drive`, :mod:`tmr.model.diffdrive`) and the fields a
+#: differential-drive plan adds to the records
+DRIVES = ("omni", "diff")
+DRIVE_FIELDS = ("drive", "robot_model")
 
 #: What an active winch plans with unless given (issue 34's dynamic sag, ``formulations/catenary.md``, "Dynamic
 #: sag"): the tether's lowest point stays ≥ 5 cm above the floor (checked on the static catenary; planned 1 cm
@@ -83,6 +87,12 @@ class ChainParams:
             obstacle's footprint must be at least the obstacle's height plus this (checked by
             :func:`tmr.checks.metrics.evaluate`, kind ``low_obstacle``). Default 0.05 m. Left out of a plan's
             recorded parameters when the world has no low obstacle (their bytes unchanged).
+        drive: ``"omni"`` (every robot omnidirectional, Caruso 2021) or ``"diff"`` (differential drive: heading
+            state, no sideways motion of the axle, v/ω limits; :mod:`tmr.control.diffdrive`,
+            ``formulations/diffdrive.md``).
+        robot_model: with ``drive = "diff"``, a preset of :mod:`tmr.model.diffdrive` (``turtlebot3_burger``,
+            ``turtlebot3_waffle_pi``, ``clearpath_jackal``) or a robot model TOML file; empty: the default preset.
+            Both fields are left out of the records of an omnidirectional plan (their bytes unchanged).
     """
 
     safety_radius: float = 0.5
@@ -98,6 +108,8 @@ class ChainParams:
     winch_tension_max: float = 40.0
     winch_tension_rate: float = 20.0
     low_obstacle_clearance: float = 0.05
+    drive: str = "omni"
+    robot_model: str = ""
 
     def __post_init__(self) -> None:
         _validate(
@@ -110,6 +122,12 @@ class ChainParams:
         )  # fmt: skip
         if self.winch not in WINCHES:
             raise ParameterError(f"ChainParams.winch must be one of {', '.join(WINCHES)}, got {self.winch!r}")
+        if self.drive not in DRIVES:
+            raise ParameterError(f"ChainParams.drive must be one of {', '.join(DRIVES)}, got {self.drive!r}")
+        if self.robot_model and self.drive != "diff":
+            raise ParameterError(
+                f"robot_model = {self.robot_model!r} set but drive = {self.drive!r}: add drive = 'diff'"
+            )
         if self.active_winch:  # the range as a whole (a command line's --set checks each field on its own)
             if self.winch_tension_min > self.winch_tension_max:
                 raise ParameterError(
@@ -140,9 +158,20 @@ class ChainParams:
         if not self.active_winch:
             for name in WINCH_FIELDS:
                 out.pop(name)
+<<<<<<< HEAD
         if not self.sag_allowance:
             out.pop("sag_allowance")
+=======
+        if not self.diff_drive:  # an omnidirectional plan's records keep their bytes
+            for name in DRIVE_FIELDS:
+                out.pop(name)
+>>>>>>> h-diff
         return out
+
+    @property
+    def diff_drive(self) -> bool:
+        """Whether the robots are differential-drive (``drive = "diff"``)."""
+        return self.drive == "diff"
 
     @property
     def horizontal_tension(self) -> float:

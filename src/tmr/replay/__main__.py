@@ -261,6 +261,11 @@ def _main(args: argparse.Namespace) -> int:
                 f"{args.run} is a tmr.ccma run: the physics replay covers tmr.plan and tmr.mcdpr runs"
             ) from exc
         raise
+    if run.kind == "chain" and (run.record.get("params") or {}).get("drive") == "diff":
+        raise TmrError(
+            f"{args.run} is a differential-drive plan: the MuJoCo replay models omnidirectional robots only (a "
+            "wheeled replay is not there yet)"
+        )
     if args.tether_density is not None and run.kind != "drone":
         raise TmrError(f"--tether-density applies to drone-chain runs; {args.run} is a {run.kind} run")
     for flag, value in (("--track", args.track), ("--winch", args.winch)):

@@ -249,7 +249,8 @@ def plot_chain_poses(
     path, the robots' traces (thin), and at each pose time the tether polylines and the robots as circles of
     the safety radius, coloured by time (colour bar in s). Base = black square, goal = star (``goal``, else
     ``plan.goal``, else the reference's end). With a :class:`tmr.route.route.Route`, its shortest route (wide, light)
-    and its stations (diamonds) are drawn under the chain.
+    and its stations (diamonds) are drawn under the chain. A differential-drive plan (``plan.axle`` set) also draws
+    each robot's footprint round its axle (dotted) and its heading, a bar from the axle to the tether's exit point.
     """
     t = np.asarray(plan.t, dtype=float)
     robots = np.asarray(plan.robots, dtype=float)
@@ -257,6 +258,11 @@ def plot_chain_poses(
     ref = np.asarray(plan.reference, dtype=float)[:, :2]
     goal_xy = plan_goal(plan, goal)
     r = float(plan.safety_radius)
+    axle = getattr(plan, "axle", None)  # differential drive (tmr.control.diffdrive): axle centres, footprint radius
+    footprint = 0.0
+    if axle is not None:
+        axle = np.asarray(axle, dtype=float)
+        footprint = float(((getattr(plan, "params", None) or {}).get("robot_model_params") or {}).get("radius", 0.0))
 
     x0, y0, x1, y1 = view_bounds(env, np.vstack([robots.reshape(-1, 2), base[None], np.reshape(goal_xy, (1, 2))]))
     aspect = (y1 - y0) / max(x1 - x0, 1e-9)
@@ -305,6 +311,30 @@ def plot_chain_poses(
         )
         ax.add_collection(circles)
         ax.plot(robots[k, :, 0], robots[k, :, 1], "o", ms=2.5, color=color, zorder=7)
+        if axle is not None:  # differential drive: the footprint round the axle and the heading to the tether's exit
+            ax.add_collection(
+                PatchCollection(
+                    [Circle((float(x), float(y)), footprint) for x, y in axle[k]],
+                    facecolors="none",
+                    edgecolors=[color],
+                    linewidths=0.8,
+                    linestyles=":",
+                    zorder=6,
+                )
+            )
+            for (ax_x, ax_y), (ex, ey) in zip(axle[k], robots[k], strict=True):
+                ax.plot([ax_x, ex], [ax_y, ey], color=color, lw=2.0, solid_capstyle="butt", zorder=7)
+    if axle is not None:
+        handles.append(
+            Line2D(
+                [],
+                [],
+                color=cmap(0.5),
+                lw=2.0,
+                ls="-",
+                label=f"heading (r_f {footprint:g} m)",
+            )
+        )
     handles.append(
         Line2D(
             [],

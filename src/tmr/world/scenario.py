@@ -43,7 +43,9 @@ __all__ = [
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 
-_TOP_KEYS = {"name", "kind", "description", "robots", "base", "goal", "start", "map", "params"}
+_TOP_KEYS = {"name", "kind", "description", "robots", "base", "goal", "start", "map", "params", "drive", "robot_model"}
+#: Top-level keys that are parameters (``ChainParams.drive``, ``robot_model``): merged into ``params``.
+_PARAM_KEYS = ("drive", "robot_model")
 _MAP_KEYS = {"file", "bounds", "safety_radius", "resolution"}
 
 
@@ -307,6 +309,8 @@ def _load_toml(path: Path, safety_radius: float | None = None) -> Scenario:
     if not map_path.is_absolute():
         map_path = path.parent / map_path
     params = doc.get("params", {})
+    if isinstance(params, dict):
+        params = _drive_params(doc, params, path, label)
     if safety_radius is None and isinstance(params, dict) and "safety_radius" in params:
         safety_radius = _number(params["safety_radius"], "params.safety_radius", label)  # one r: the chain's
     if safety_radius is None:
@@ -330,6 +334,21 @@ def _load_toml(path: Path, safety_radius: float | None = None) -> Scenario:
         else params,
         source=path,
     )
+
+
+def _drive_params(doc: dict[str, Any], params: dict[str, Any], path: Path, label: str) -> dict[str, Any]:
+    """``params`` with the top-level ``drive`` and ``robot_model`` keys merged in (refused if ``[params]`` gives them
+    too), and a relative robot model file (``*.toml``) made relative to the scenario file, like its map. Unchanged
+    when the scenario has neither (its parameters keep their bytes)."""
+    top = {k: doc[k] for k in _PARAM_KEYS if k in doc}
+    twice = sorted(set(top) & set(params))
+    if twice:
+        raise ScenarioError(f"{label}: {', '.join(twice)} given at the top and in [params]: give one")
+    out = dict(params) | top if top else params
+    model = out.get("robot_model")
+    if isinstance(model, str) and model.lower().endswith(".toml") and not Path(model).is_absolute():
+        out = dict(out) | {"robot_model": str(path.parent / model)}
+    return out
 
 
 def _number(value: Any, what: str, label: str) -> float:

@@ -1,0 +1,230 @@
+"""The lexicographic QP of a chain of differential-drive robots (``--drive diff``; math in
+``formulations/diffdrive.md``).
+
+Caruso 2021's chain model drives each robot's tether exit point p_i. A differential-drive robot carries a heading θ_i
+and its exit point lies b ahead of the axle centre c_i (p = c + b e(θ)), so (:mod:`tmr.model.diffdrive`)
+
+    ṗ_i = v_i e(θ_i) + b ω_i e_⊥(θ_i),   i.e.   v_i = e(θ_i)·ṗ_i,   ω_i = e_⊥(θ_i)·ṗ_i / b   (b ≠ 0).
+
+The QP keeps its unknowns (the exit points' velocities v = [ṗ_1, …, ṗ_N] and the joint rates, tied by q̇ = T v) and
+every task and limit of the omnidirectional QP; (v_i, ω_i) are linear in ṗ_i at the step's heading, so the robots'
+limits are two more sets of hard rows on robot velocities:
+
+- :class:`DiffDriveSpeed` (hard): ``|e_i·ṗ_i| ≤ v_max``, ``|e_⊥i·ṗ_i| / b ≤ ω_max``;
+- :class:`DiffDriveAcceleration` (comfort, like :class:`~tmr.control.limits.RobotAcceleration`):
+  ``|v_i − v_i,k−1| ≤ a_max Ts``, ``|ω_i − ω_i,k−1| ≤ α_max Ts``.
+
+The non-holonomic constraint (no sideways motion of the axle centre) is not a row but the integration:
+:class:`DiffDriveQP` reads (v_i, ω_i) off the QP's ṗ_i, holds them over the step and moves every pose along the exact
+unicycle arc (:func:`tmr.model.diffdrive.unicycle_step`), so the recorded axle centres never slip sideways whatever
+the solver's tolerance; the exit points follow as c + b e(θ) and the chain's joints are recomputed from them (spans =
+distances, angles = directions, continuous): the plan loop :func:`tmr.control.clik.run` receives the joint rates
+that reach exactly those joints (they differ from the QP's by O(Ts²) per step: the arc against the straight step).
+With b ≠ 0 eliminating (v, ω) is exact; the alternative, x = [ṗ, v, ω] with equality rows ṗ_i − v_i e_i − b ω_i
+e_⊥i = 0, has the same feasible set with 2N more unknowns and 2N more equality rows per level.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tmr.control.limits import Limit, LimitRows
+from tmr.control.tasks import StepContext
+from tmr.errors import ParameterError
+from tmr.model.chain import Chain
+from tmr.model.diffdrive import RobotModel, exit_point, unicycle_step
+
+Array = NDArray[np.float64]
+
+__all__ = ["DiffDriveAcceleration", "DiffDriveContext", "DiffDriveQP", "DiffDriveSpeed", "TURN_IN_PLACE"]
+
+#: A robot turns in place at a step where |v| < TURN_IN_PLACE[0] [m/s] and |ω| > TURN_IN_PLACE[1] [rad/s].
+TURN_IN_PLACE = (1e-3, 0.05)
+
+
+class DiffDriveContext:
+    """The step seen by the QP of differential-drive robots: ``base`` the :class:`StepContext`, ``heading`` (N,)
+    [rad] every robot's θ_k, ``v_prev`` (N,) [m/s] and ``omega_prev`` (N,) [rad/s] the speeds held over the previous
+    step (0 at the start: the robots start at rest); every other attribute is the base's."""
+
+    def __init__(self, base: StepContext, heading: Array, v_prev: Array, omega_prev: Array) -> None:
+        self.base = base
+        self.heading = heading
+        self.v_prev = v_prev
+        self.omega_prev = omega_prev
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.base, name)
+
+
+class _DiffRows(Limit):
+    """Rows (2N, 2N) on robot velocities: per robot i, ``e(θ_i)·ṗ_i`` (= v_i) and ``e_⊥(θ_i)·ṗ_i / b`` (= ω_i)."""
+
+    space = "robot"
+
+    def __init__(self, model: RobotModel) -> None:
+        self.model = model
+        self._A: Array | None = None
+
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        N = chain.n_robots
+        return np.kron(np.eye(N, dtype=bool), np.ones((2, 2), dtype=bool))
+
+    def rows(self, heading: Array) -> Array:
+        N = heading.size
+        if self._A is None or self._A.shape[0] != 2 * N:
+            self._A = np.zeros((2 * N, 2 * N))
+        c, s = np.cos(heading), np.sin(heading)
+        i = np.arange(N)
+        b = self.model.exit_offset
+        A = self._A
+        A[2 * i, 2 * i], A[2 * i, 2 * i + 1] = c, s  # v_i = e_i·ṗ_i
+        A[2 * i + 1, 2 * i], A[2 * i + 1, 2 * i + 1] = -s / b, c / b  # ω_i = e_⊥i·ṗ_i / b
+        return A
+
+    def reset(self) -> None:
+        self._A = None
+
+
+class DiffDriveSpeed(_DiffRows):
+    """|v_i| ≤ v_max [m/s] and |ω_i| ≤ ω_max [rad/s] for every robot (hard)."""
+
+    name = "diff_speed"
+
+    def compute(self, ctx: Any) -> LimitRows:
+        N = ctx.heading.size
+        up = np.tile([self.model.v_max, self.model.omega_max], N)
+        return LimitRows(self.rows(ctx.heading), -up, up)
+
+
+class DiffDriveAcceleration(_DiffRows):
+    """|v_i − v_i,k−1| ≤ a_max Ts and |ω_i − ω_i,k−1| ≤ α_max Ts (a comfort limit: dropped for a step only if the
+    safety limits need it, as :class:`~tmr.control.limits.RobotAcceleration`; the checker then reports it)."""
+
+    name = "diff_acceleration"
+    relaxable = True
+
+    def compute(self, ctx: Any) -> LimitRows:
+        prev = np.column_stack([ctx.v_prev, ctx.omega_prev]).reshape(-1)
+        step = np.tile([self.model.a_max * ctx.Ts, self.model.alpha_max * ctx.Ts], ctx.heading.size)
+        return LimitRows(self.rows(ctx.heading), prev - step, prev + step)
+
+
+class DiffDriveQP:
+    """The per-step formulation of differential-drive robots (module docstring): the lexicographic QP ``qp`` (built
+    with :class:`DiffDriveSpeed` and :class:`DiffDriveAcceleration` among its limits), the robots' poses, and the
+    exact unicycle integration. ``heading0`` (N,) [rad] are the initial headings.
+
+    ``step`` returns the joint rates that move the chain's exit points to c_{k+1} + b e(θ_{k+1}); :meth:`poses`
+    gives the recorded axle centres, headings, v and ω.
+    """
+
+    name = "qp"
+
+    def __init__(self, qp: Any, chain: Chain, model: RobotModel, heading0: Array) -> None:
+        if chain.spatial:
+            raise ParameterError("differential drive is a ground robot's kinematics: not for a spatial chain")
+        self.qp, self.chain, self.model = qp, chain, model
+        if hasattr(qp, "tensions"):  # an active winch's QP (tmr.control.winch.GroundWinchQP): its tensions per state
+            self.tensions = qp.tensions
+        self.heading0 = np.asarray(heading0, dtype=float).copy()
+        if self.heading0.shape != (chain.n_robots,):
+            raise ParameterError(
+                f"heading0 must have one heading per robot ({chain.n_robots}), got {self.heading0.shape}"
+            )
+        self.reset_state()
+
+    @property
+    def level_keys(self) -> list[str]:
+        return self.qp.level_keys
+
+    @property
+    def limits(self) -> list[Limit]:
+        return _limits(self.qp)
+
+    def reset_state(self) -> None:
+        N = self.chain.n_robots
+        self._axle: Array | None = None
+        self._theta = self.heading0.copy()
+        self._v, self._w = np.zeros(N), np.zeros(N)
+        self._hist: list[tuple[Array, Array, Array, Array]] = []
+
+    def reset(self) -> None:
+        self.qp.reset()
+        self.reset_state()
+
+    def step(self, ctx: StepContext) -> tuple[Array, dict[str, float]]:
+        m = self.model
+        b, Ts = m.exit_offset, ctx.Ts
+        if self._axle is None:  # the chain's start places the exit points: the axles are b behind them
+            self._axle = ctx.points[1:] - b * np.column_stack([np.cos(self._theta), np.sin(self._theta)])
+        dctx = DiffDriveContext(ctx, self._theta, self._v, self._w)
+        qdot, diag = self.qp.step(dctx)
+        pdot = ctx.velocity_map.robot_velocities(qdot).reshape(-1, 2)
+        c, s = np.cos(self._theta), np.sin(self._theta)
+        v = c * pdot[:, 0] + s * pdot[:, 1]
+        w = (-s * pdot[:, 0] + c * pdot[:, 1]) / b
+        # the solver meets its rows to ~1e-5: the commands are put inside the bounds it was given (the acceleration's
+        # too unless the step dropped them), so the poses keep them exactly
+        v_lo, v_hi = np.full_like(v, -m.v_max), np.full_like(v, m.v_max)
+        w_lo, w_hi = np.full_like(w, -m.omega_max), np.full_like(w, m.omega_max)
+        if not diag.get("relaxed", 0.0):
+            v_lo, v_hi = np.maximum(v_lo, self._v - m.a_max * Ts), np.minimum(v_hi, self._v + m.a_max * Ts)
+            w_lo, w_hi = np.maximum(w_lo, self._w - m.alpha_max * Ts), np.minimum(w_hi, self._w + m.alpha_max * Ts)
+        v_c, w_c = np.clip(v, v_lo, v_hi), np.clip(w, w_lo, w_hi)
+        diag["diff_clip"] = float(max(np.max(np.abs(v_c - v)), b * np.max(np.abs(w_c - w))))
+        diag["turning_in_place"] = float(
+            np.count_nonzero((np.abs(v_c) < TURN_IN_PLACE[0]) & (np.abs(w_c) > TURN_IN_PLACE[1]))
+        )
+        self._hist.append((self._axle, self._theta, v_c, w_c))
+        axle, theta = unicycle_step(self._axle, self._theta, v_c, w_c, Ts)
+        qdot_eff = self._joint_step(ctx, exit_point(axle, theta, b)) / Ts
+        self._axle, self._theta, self._v, self._w = axle, theta, v_c, w_c
+        return qdot_eff, diag
+
+    def _joint_step(self, ctx: StepContext, p_new: Array) -> Array:
+        """q_{k+1} − q_k that places the robots at ``p_new`` (N, 2): per link the change of its direction (continuous,
+        the angle between the old and the new direction) and of its (signed) span."""
+        P_old = ctx.points
+        P_new = np.vstack([P_old[:1], p_new])
+        d_old = ctx.spans
+        D_old, D_new = np.diff(P_old, axis=0), np.diff(P_new, axis=0)
+        d_new = np.sign(d_old) * np.linalg.norm(D_new, axis=1)
+        cross = D_old[:, 0] * D_new[:, 1] - D_old[:, 1] * D_new[:, 0]
+        dot = np.einsum("ij,ij->i", D_old, D_new)
+        dphi = np.arctan2(cross, dot)  # the turn of link j's direction u_j (signed spans turn u and D alike)
+        dq = np.empty(self.chain.dof)
+        dq[self.chain.revolute_index] = dphi - np.r_[0.0, dphi[:-1]]  # θ_j = φ_j − φ_{j−1}
+        dq[self.chain.prismatic_index] = d_new - d_old
+        return dq
+
+    def poses(self, n_states: int) -> tuple[Array, Array, Array, Array]:
+        """Axle centres (n, N, 2) [m], headings (n, N) [rad, continuous], v (n, N) [m/s] and ω (n, N) [rad/s] at
+        states 0..n−1: (v, ω) of state k are held over [t_k, t_k+1] (0 after the last step, like ``Plan.qdot``)."""
+        if self._axle is None:
+            raise ParameterError("no step was planned: the poses are not known")
+        rows = [*self._hist, (self._axle, self._theta, np.zeros_like(self._v), np.zeros_like(self._w))]
+        if len(rows) < n_states:
+            raise ParameterError(f"{len(rows)} poses recorded, {n_states} asked")
+        rows = rows[:n_states]
+        return tuple(np.array([r[i] for r in rows]) for i in range(4))  # type: ignore[return-value]
+
+
+def _limits(qp: Any) -> list[Limit]:
+    """The limits of a :class:`~tmr.control.qp.LexicographicQP`, or of the one inside an active winch's QP."""
+    return list(getattr(qp, "limits", None) or getattr(qp.qp, "limits", []))
+
+
+def make_diffdrive_qp(qp: Any, chain: Chain, model: RobotModel, heading0: Array) -> DiffDriveQP:
+    """``qp`` (a :class:`~tmr.control.qp.LexicographicQP`, or an active winch's
+    :class:`~tmr.control.winch.GroundWinchQP`, whose limits already hold :class:`DiffDriveSpeed` and
+    :class:`DiffDriveAcceleration`, padded with the tension columns there) wrapped as the differential-drive
+    formulation. With an active winch the winch's QP receives the :class:`DiffDriveContext` as its step context, so
+    the padded v/ω rows read the headings from it."""
+    names = {lim.name for lim in _limits(qp)}
+    if not {DiffDriveSpeed.name, DiffDriveAcceleration.name} <= names:
+        raise ParameterError("the differential-drive QP needs the diff_speed and diff_acceleration limits")
+    return DiffDriveQP(qp, chain, model, heading0)
