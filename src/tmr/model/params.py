@@ -152,20 +152,18 @@ class ChainParams:
         return self.horizontal_tension
 
     def record(self) -> dict[str, Any]:
-        """The fields as a dict, without the active winch's four when the winch is passive and without a zero
-        ``sag_allowance`` (a passive plan's records keep the bytes they had before the active winch existed)."""
+        """The fields as a dict, without the active winch's four when the winch is passive, without a zero
+        ``sag_allowance`` and without the drive's fields for omnidirectional robots (a passive omnidirectional plan's
+        records keep the bytes they had before these existed)."""
         out = asdict(self)
         if not self.active_winch:
             for name in WINCH_FIELDS:
                 out.pop(name)
-<<<<<<< HEAD
         if not self.sag_allowance:
             out.pop("sag_allowance")
-=======
         if not self.diff_drive:  # an omnidirectional plan's records keep their bytes
             for name in DRIVE_FIELDS:
                 out.pop(name)
->>>>>>> h-diff
         return out
 
     @property
