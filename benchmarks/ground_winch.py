@@ -5,7 +5,8 @@
 
 Scenario J (a loading dock 0.25 m high between base and goal: a low obstacle the tethers may pass over) and E (a
 30 m route), each with ``--method qp``, the active winch (``--set winch=active``) and the constant 13.5 N
-(``--set winch=passive``); E with ``ground_clearance = 0.05`` (the winch pulls spans to their reach). Per case: the
+(``--set winch=passive``); E with ``ground_clearance = 0.05`` (the winch pulls spans to their reach); the active
+rows with the active winch's defaults (``tmr.model.params.ACTIVE_WINCH_DEFAULTS``). Per case: the
 exit code and verdict of the whole ``tmr plan`` process (``--robots auto``: the robots chosen), the largest planned
 tension, f1 and f4, the least margin of the cable over the dock (the checker's, sampled on the catenary every cm), and
 the MuJoCo replay's verdict, lowest tether point and contacts. Writes ``benchmarks/results/ground_winch.md``.
@@ -21,6 +22,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from provenance import source_version, versions  # noqa: E402
+
+from tmr.model.params import ACTIVE_WINCH_DEFAULTS  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "results" / "ground_winch.md"
 CASES = [
@@ -85,6 +88,11 @@ def main() -> None:
             "J: a 3 m × 4 m loading dock 0.25 m high between base and goal (the tethers may pass over it 5 cm",
             "above its top). E: the 30 m route, with `ground_clearance = 0.05`. `low_obstacle margin`: the",
             "checker's least height of a cable above the dock's top plus 5 cm, over every crossing of every step.",
+            "The active rows plan with the active winch's defaults ("
+            + ", ".join(f"{k} = {v:g}" for k, v in ACTIVE_WINCH_DEFAULTS.items())
+            + ";",
+            '`formulations/catenary.md`, "Dynamic sag"); the passive rows with the paper\'s model (J: clearance 0,',
+            "E: the 5 cm clearance given, no allowance, no damper).",
             "",
             "| scenario | --robots | winch | exit | verdict | robots | max T0 [N] | f1 | f4 | "
             "low obstacle margin [m] | replay | replay contacts |",

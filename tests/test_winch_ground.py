@@ -436,7 +436,6 @@ def test_the_active_winch_plans_with_its_dynamic_sag_defaults_and_horizon_accept
 
     passive = build_problem(load_scenario("A"))
     assert passive.chain_params.ground_clearance == 0.0 and passive.qp_params.span_approach_rate is None
-    assert passive.defaulted == ()
     problem = build_problem(load_scenario("A"), overrides=ACTIVE)
     assert problem.chain_params.ground_clearance == 0.05 and problem.qp_params.span_approach_rate == 0.5
     assert problem.chain_params.sag_allowance == 0.01 and problem.span_limits[0, 1] == pytest.approx(
@@ -445,10 +444,42 @@ def test_the_active_winch_plans_with_its_dynamic_sag_defaults_and_horizon_accept
     record = problem.params_dict()  # recorded, so the run says what it planned with
     assert record["span_approach_rate"] == 0.5 and record["sag_allowance"] == 0.01
     assert "sag_allowance" not in passive.params_dict()
-    _qp_only(problem, "the horizon NLP")  # a default the horizon's qp warm start keeps: not refused
-    given = build_problem(load_scenario("A"), overrides=ACTIVE | {"span_approach_rate": 0.5})
+    # the horizon keeps an active winch's damper through the tension, given or not; a passive one it cannot keep
+    _qp_only(problem, "the horizon NLP", by_tension=True)
+    _qp_only(build_problem(load_scenario("A"), overrides=ACTIVE | {"span_approach_rate": 0.3}), "x", by_tension=True)
+    given = build_problem(load_scenario("A"), overrides={"span_approach_rate": 0.5})
     with pytest.raises(ParameterError, match="span_approach_rate is a limit of --method qp"):
-        _qp_only(given, "the horizon NLP")
+        _qp_only(given, "the horizon NLP", by_tension=True)
+    with pytest.raises(ParameterError, match="sag_allowance set but winch = 'passive'"):
+        build_problem(load_scenario("A"), overrides={"sag_allowance": 0.01})
+    with pytest.raises(ParameterError, match=r"ground_clearance \(0.425 m\) \+ sag_allowance \(0.01 m\)"):
+        ChainParams(winch="active", ground_clearance=0.425, sag_allowance=0.01)
+
+
+def test_horizon_with_the_default_damper_keeps_it_through_the_tension() -> None:
+    """E with 4 robots and the active winch's defaults: the horizon's tension schedule keeps the pay-out damper
+    (the room to the reach shrinks at most geometrically), which the plain least envelope breaks."""
+    from tmr.control.winch import least_tension_schedule
+    from tmr.planner import build_problem, solve
+    from tmr.world.scenario import load_scenario
+
+    problem = build_problem(load_scenario("E"), n_robots=4, overrides=ACTIVE)
+    plan, metrics = solve(problem, "horizon", time_limit=90.0)
+    assert plan.success and metrics.success, plan.failure
+    p, q = problem.chain_params, problem.qp_params
+    T = plan.winch_tension
+    spans = np.abs(plan.spans)
+    cat = catenary_params(p)
+    room = np.empty_like(spans)
+    for j in range(spans.shape[1]):
+        h1 = p.base_height if j == 0 else p.exit_height
+        reach = [catenary.max_span(h1, p.exit_height, replace(cat, horizontal_tension=t)) for t in T[:, j]]
+        room[:, j] = np.asarray(reach) - q.span_margin - spans[:, j]
+    shrink = 1 - q.span_approach_rate * plan.Ts
+    assert np.all(room[1:] >= shrink * room[:-1] - 1e-5)
+    plain = least_tension_schedule(spans, p, plan.Ts, q.span_margin)
+    assert np.max(T - plain) > 1.0  # the damper held tensions up the plain envelope lets fall
+    assert np.all(T >= plain - 1e-9)
 
 
 def test_replay_of_d_with_the_active_winch_defaults_keeps_the_floor_clearance(tmp_path) -> None:

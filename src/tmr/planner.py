@@ -88,7 +88,6 @@ class Problem:
     references: ChainReference | None = None
     route_mode: str = "rrt"
     fixed_duration: bool = False  # T_end was set by the user (the train references cannot keep it)
-    defaulted: tuple[str, ...] = ()  # parameters the active winch filled in (tmr.model.params.with_winch_defaults)
     robot_model: RobotModel | None = None  # drive = "diff": the robots' model (tmr.model.diffdrive)
 
     @property
@@ -228,11 +227,11 @@ def build_problem(
             f"safety_radius = {values['safety_radius']} m, but the environment's obstacles are grown by {r_env:g} m; "
             "use one robot radius (e.g. Environment.with_safety_radius, or load the scenario with it)"
         )
-    values, defaulted = with_winch_defaults(values)
+    values = with_winch_defaults(values)[0]
     chain_params, rest = apply_overrides(ChainParams(), values)
     top = max(chain_params.exit_height, chain_params.base_height)
     refuse_impassable_low_obstacles(scenario.environment, top, chain_params.low_obstacle_clearance)
-    idle = sorted(k for k in WINCH_FIELDS[1:] if k in values and not chain_params.active_winch)
+    idle = sorted(k for k in (*WINCH_FIELDS[1:], "sag_allowance") if k in values and not chain_params.active_winch)
     if idle:  # a range or rate of a winch that does not use them: refused, not silently dropped
         raise ParameterError(f"{', '.join(idle)} set but winch = {chain_params.winch!r}: add winch = 'active'")
     time_params, rest = apply_overrides(TimeParams(), rest)
@@ -344,7 +343,6 @@ def build_problem(
         references=ref,
         route_mode=route,
         fixed_duration="T_end" in values,
-        defaulted=defaulted,
         robot_model=robot_model,
     )
 
@@ -600,11 +598,16 @@ def formulation(problem: Problem, method: str | Formulation) -> Formulation:
     return method
 
 
-def _qp_only(problem: Problem, who: str) -> None:
-    """Refuse the per-step QP's pay-out damper for a method that would not keep it (ParameterError)."""
-    if problem.qp_params.span_approach_rate is not None and "span_approach_rate" not in problem.defaulted:
+def _qp_only(problem: Problem, who: str, *, by_tension: bool = False) -> None:
+    """Refuse the per-step QP's pay-out damper for a method that would not keep it (ParameterError); ``by_tension``:
+    the method keeps it through an active winch's tension (``--method horizon``,
+    :func:`tmr.control.winch.least_tension_schedule`), so only a passive winch's damper is refused."""
+    if by_tension and problem.chain_params.active_winch:
+        return
+    if problem.qp_params.span_approach_rate is not None:
         raise ParameterError(
-            f"span_approach_rate is a limit of --method qp's per-step QP: {who} does not keep it (leave it unset)"
+            f"span_approach_rate is a limit of --method qp's per-step QP: {who} does not keep it (leave it unset"
+            + ("; with winch = 'active' the horizon keeps it through the tension)" if by_tension else ")")
         )
 
 
@@ -675,7 +678,7 @@ def solve(
     if getattr(problem, "robot_model", None) is not None:
         raise ParameterError("drive = 'diff' is planned by --method qp only (not --method horizon yet)")
     refuse_low_obstacles(problem.env, "--method horizon", "its NLP keeps no cable height above them; use --method qp")
-    _qp_only(problem, "the horizon NLP")
+    _qp_only(problem, "the horizon NLP", by_tension=True)
     from tmr.control.horizon import DEFAULT_TIME_LIMIT, HorizonInfeasible, plan_horizon  # casadi: when used
 
     problem, warm, warm_metrics = _solve_qp(problem, progress)  # the very plan ``--method qp`` returns

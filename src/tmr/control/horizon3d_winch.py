@@ -193,7 +193,7 @@ def least_drone_tensions(
         fails = check[~rule.holds(ends[kk[check], jj[check]], ends[kk[check], jj[check] + 1], jj[check], flat[check])]
         if fails.size == 0 or passes == max_passes:
             break
-        need.ravel()[fails] = held.ravel()[fails]  # non-monotone there: the held tension (the NLP's) instead
+        need.flat[fails] = held.flat[fails]  # non-monotone there: the held tension (the NLP's) instead
         raised += int(fails.size)
     return sched, dict(need=need, passes=passes, raised=raised, unverified=int(fails.size))
 

@@ -207,6 +207,8 @@ def chain_run_dict(plan: Any, env: Any, extra: dict[str, Any] | None = None) -> 
     }
     if p.get("winch") == "active":  # the tension is planned (trajectories.json "tethers"); d_max is T_max's reach
         tether.update({k: p[k] for k in ("winch", "winch_tension_min", "winch_tension_max", "winch_tension_rate")})
+    if p.get("sag_allowance"):  # the planner's d_max keeps the cable this much above ground_clearance
+        tether["sag_allowance"] = p["sag_allowance"]
     ex = dict(extra or {})
     return {
         "format": RUN_FORMAT,

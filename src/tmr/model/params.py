@@ -71,8 +71,9 @@ class ChainParams:
         pulley_radius: winch pulley radius [m]; horizontal tension T0 = torque / radius.
         cable_mass_per_length: ρ [kg/m].
         ground_clearance: lowest allowed height of the cable [m] (checked on the static catenary).
-        sag_allowance: how much higher than ``ground_clearance`` the planner keeps the static catenary [m] (the
-            checker holds it to ``ground_clearance``): room for the MuJoCo cable, which near a long span's reach
+        sag_allowance: with the active winch only (refused with the passive one), how much higher than
+            ``ground_clearance`` the planner keeps the static catenary [m] (the checker holds it to
+            ``ground_clearance``): room for the MuJoCo cable, which near a long span's reach
             hangs up to 2 mm below the static catenary (``formulations/catenary.md``, "Dynamic sag"). Default 0;
             0.01 m with the active winch (:data:`ACTIVE_WINCH_DEFAULTS`). Left out of the records while 0.
         winch: ``"passive"`` (the paper's winch: a constant horizontal tension T0) or ``"active"`` (Caruso 2021's
@@ -120,6 +121,13 @@ class ChainParams:
             ),
             nonnegative=("low_obstacle_clearance", "sag_allowance"),
         )  # fmt: skip
+        top = min(self.exit_height, self.base_height)
+        if self.ground_clearance + self.sag_allowance >= top:
+            raise ParameterError(
+                f"ChainParams.ground_clearance ({self.ground_clearance:g} m) + sag_allowance "
+                f"({self.sag_allowance:g} m) must be below the tether ends ({top:g} m): lower the clearance or the "
+                "allowance"
+            )
         if self.winch not in WINCHES:
             raise ParameterError(f"ChainParams.winch must be one of {', '.join(WINCHES)}, got {self.winch!r}")
         if self.drive not in DRIVES:
