@@ -158,7 +158,12 @@ def goal_pose(text: str) -> tuple[float, ...]:
         theta = theta[:-3]
     elif theta.endswith("rad"):
         theta, scale = theta[:-3], 1.0
-    x, y, th = _floats(",".join([*parts[:2], theta]), 3, "X,Y or X,Y,THETA (metres, THETA in degrees)")
+    try:
+        x, y, th = _floats(",".join([*parts[:2], theta]), 3, "")
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(
+            f"expected X,Y or X,Y,THETA (finite; metres, THETA in degrees or with a rad suffix), got {text!r}"
+        ) from None
     return x, y, th * scale
 
 
