@@ -155,15 +155,17 @@ class GoalHeading:
     c_a = G − b e(θ_a). The goal pose is the exit point at G with heading Θ, i.e. the axle at c_f = G − b e(Θ). From
     the state at ``k_arrive`` (measured, not predicted) the manoeuvre is turn in place → straight drive → turn in place:
 
-    1. turn about c_a from θ_a to φ, the direction of d = c_f − c_a (or φ + π, driving backwards, whichever needs less
-       turning in all);
-    2. drive the axle by ±|d| (≤ 2b) along e(φ);
+    1. turn about c_a from θ_a to φ, the direction of d = c_f − c_a (forwards only: driving backwards, the heading's
+       internal dynamics would amplify its errors by up to e^(|d|/b));
+    2. drive the axle by |d| (≤ 2b) along e(φ);
     3. turn about c_f from φ to Θ* (Θ + 2πn nearest φ).
 
     Each piece is a rest-to-rest profile (:func:`rest_to_rest`) at ``v_lim``, ``a_lim`` [m/s, m/s²] or ``omega_lim``,
-    ``alpha_lim`` [rad/s, rad/s²]. Its exit point p = c + b e(θ), ṗ = ċ + b θ̇ e_⊥(θ) is the leader's reference from
-    ``k_arrive`` on (the leader task's x_d, ẋ_d); it ends exactly at G. :meth:`budget` is the longest manoeuvre
-    (two half turns and a 2b drive) [s]: the planner holds the reference that long after the route.
+    ``alpha_lim`` [rad/s, rad/s²]. Its exit point p = c + b e(θ), ṗ = ċ + b θ̇ e_⊥(θ) (:meth:`at`) ends exactly at
+    G. :class:`DiffDriveQP` makes it the leader task's reference from ``k_arrive`` on: x_d = p(τ) (in the last turn and
+    after it c_k + b e(θ_ref(τ)), about the leader's own axle c_k, so the CLIK corrects the heading, not the axle) and
+    ẋ_d the exit-point velocity whose (v, ω) at the leader's heading are :meth:`step_commands`. :meth:`budget` is the
+    longest manoeuvre (two half turns and a 2b drive) [s]: the planner holds the reference that long after the route.
     """
 
     def __init__(
@@ -180,6 +182,7 @@ class GoalHeading:
         self.theta, self.goal, self.k_arrive, self.b = float(theta), np.asarray(goal, dtype=float), int(k_arrive), b
         self.v_lim, self.a_lim, self.omega_lim, self.alpha_lim = v_lim, a_lim, omega_lim, alpha_lim
         self._pieces: list[tuple[str, float, Array, float, float, Any]] | None = None
+        self.final_turn_start = math.inf  # τ [s] at which the last turn starts (set by start)
         self.reference: dict[int, Array] = {}  # state k → the leader's reference exit point used [m]
 
     def budget(self) -> float:
@@ -198,23 +201,14 @@ class GoalHeading:
         def near(angle: float, to: float) -> float:  # angle + 2πn nearest ``to``
             return angle + 2.0 * math.pi * round((to - angle) / (2.0 * math.pi))
 
-        if dist <= 1e-12:
-            phi, sign = theta, 1.0
-        else:
-            best = None
-            for sgn, base in ((1.0, math.atan2(d[1], d[0])), (-1.0, math.atan2(-d[1], -d[0]))):
-                ph = near(base, theta)
-                cost = abs(ph - theta) + abs(near(self.theta, ph) - ph)
-                if best is None or cost < best[0] - 1e-12:
-                    best = (cost, ph, sgn)
-            assert best is not None
-            phi, sign = best[1], best[2]
+        # forwards only (reversing would amplify heading errors); no drive when the axle already stands at c_f
+        phi = theta if dist <= 1e-12 else near(math.atan2(d[1], d[0]), theta)
         theta_f = near(self.theta, phi)
         pieces = []
         t0 = 0.0
         for kind, start, dist_or_turn in (
             ("turn", np.array([*axle, theta]), phi - theta),
-            ("drive", np.array([*axle, phi]), sign * dist),
+            ("drive", np.array([*axle, phi]), dist),
             ("turn", np.array([*c_f, phi]), theta_f - phi),
         ):
             lim = (self.omega_lim, self.alpha_lim) if kind == "turn" else (self.v_lim, self.a_lim)
@@ -222,25 +216,39 @@ class GoalHeading:
             pieces.append((kind, t0, start, math.copysign(1.0, dist_or_turn), T, f))
             t0 += T
         self._pieces = pieces
+        self.final_turn_start = pieces[-1][1]
         self.end_pose = (c_f, theta_f)
+
+    def pose(self, tau: float) -> tuple[Array, float, Array, float]:
+        """The reference axle centre (2,) [m], heading [rad] and their rates (2,) [m/s], [rad/s] at ``tau`` [s] after
+        ``k_arrive`` (the end pose once the manoeuvre is over)."""
+        assert self._pieces is not None, "start() first"
+        for kind, t0, start, sgn, T, f in self._pieces:
+            if tau < t0 + T or t0 == self._pieces[-1][1]:
+                s, sd = f(tau - t0)
+                c, th = start[:2].copy(), float(start[2])
+                if kind == "turn":
+                    return c, th + sgn * s, np.zeros(2), sgn * sd
+                e = np.array([math.cos(th), math.sin(th)])
+                return c + sgn * s * e, th, sgn * sd * e, 0.0
+        raise AssertionError("unreachable")
 
     def at(self, tau: float) -> tuple[Array, Array]:
         """The reference exit point (2,) [m] and its velocity (2,) [m/s] at ``tau`` [s] after ``k_arrive``."""
-        assert self._pieces is not None, "start() first"
-        b = self.b
-        for kind, t0, start, sgn, T, f in self._pieces:
-            if tau < t0 + T or (kind, t0) == self._pieces[-1][:2]:
-                s, sd = f(tau - t0)
-                c, th = start[:2].copy(), float(start[2])
-                cdot, thdot = np.zeros(2), 0.0
-                if kind == "turn":
-                    th, thdot = th + sgn * s, sgn * sd
-                else:
-                    e = np.array([math.cos(th), math.sin(th)])
-                    c, cdot = c + sgn * s * e, sgn * sd * e
-                e, en = np.array([math.cos(th), math.sin(th)]), np.array([-math.sin(th), math.cos(th)])
-                return c + b * e, cdot + b * thdot * en
-        raise AssertionError("unreachable")
+        c, th, cdot, thdot = self.pose(tau)
+        e, en = np.array([math.cos(th), math.sin(th)]), np.array([-math.sin(th), math.cos(th)])
+        return c + self.b * e, cdot + self.b * thdot * en
+
+    def step_commands(self, tau: float, Ts: float) -> tuple[float, float]:
+        """(v [m/s], ω [rad/s]) that, held over [tau, tau + Ts] (:func:`tmr.model.diffdrive.unicycle_step`), move the
+        reference pose at ``tau`` exactly to the one at ``tau + Ts`` (:func:`tmr.model.diffdrive.step_velocities`; a
+        step across two pieces is not one arc: its residual is O(a Ts³), both pieces at rest there)."""
+        from tmr.model.diffdrive import step_velocities
+
+        c0, th0, _, _ = self.pose(tau)
+        c1, th1, _, _ = self.pose(tau + Ts)
+        v, w, _ = step_velocities(np.array([c0, c1]), np.array([th0, th1]), Ts)
+        return float(v[0]), float(w[0])
 
 
 class DiffDriveQP:
@@ -300,7 +308,19 @@ class DiffDriveQP:
         if gh is not None and ctx.k >= gh.k_arrive:  # the final manoeuvre to the goal heading replaces x_d, ẋ_d
             if ctx.k == gh.k_arrive:
                 gh.start(self._axle[-1], float(self._theta[-1]))
-            ctx.x_d, ctx.xd_d = gh.at((ctx.k - gh.k_arrive) * Ts)
+            tau = (ctx.k - gh.k_arrive) * Ts
+            # x_d the manoeuvre's exit point; ẋ_d the exit-point velocity whose (v, ω) at the leader's heading θ_k
+            # are the step's exact arc commands (the tangent ṗ would leave the O(Ts² b ω²) chord error of every step
+            # to the CLIK, and its lag turns the heading by lag / b)
+            v_ff, w_ff = gh.step_commands(tau, Ts)
+            th = float(self._theta[-1])
+            if tau < gh.final_turn_start:
+                ctx.x_d = gh.at(tau)[0]
+            else:  # the last turn and the hold: about the leader's own axle, so the CLIK corrects the heading itself
+                th_ref = gh.pose(tau)[1]
+                ctx.x_d = self._axle[-1] + b * np.array([math.cos(th_ref), math.sin(th_ref)])
+            e, e_n = np.array([math.cos(th), math.sin(th)]), np.array([-math.sin(th), math.cos(th)])
+            ctx.xd_d = v_ff * e + b * w_ff * e_n
             gh.reference[ctx.k] = ctx.x_d
         dctx = DiffDriveContext(ctx, self._theta, self._v, self._w)
         qdot, diag = self.qp.step(dctx)
