@@ -77,3 +77,16 @@ def test_omni_bag_has_no_drive_topics(tmp_path):
     with Reader(out / "ros2_bag") as r:
         topics = {c.topic for c in r.connections}
     assert not any(t.endswith(("/cmd_vel", "/odom")) for t in topics)
+
+
+def test_motion_refuses_misshapen_drive_arrays():
+    from tmr.errors import ParameterError
+    from tmr.views.motion import DiffDrive, Motion, Track
+
+    t = np.array([0.0, 0.05])
+    tracks = (Track("robot1", np.zeros((2, 3)), "leader"),)
+    ok = DiffDrive(np.zeros((2, 1, 2)), np.zeros((2, 1)), np.zeros((2, 1)), np.zeros((2, 1)))
+    Motion("chain", "x", t, tracks, (), (), (), (0, 0, 1, 1), diff_drive=ok)
+    bad = DiffDrive(np.zeros((2, 1, 2)), np.zeros((3, 1)), np.zeros((2, 1)), np.zeros((2, 1)))
+    with pytest.raises(ParameterError, match="diff_drive.theta"):
+        Motion("chain", "x", t, tracks, (), (), (), (0, 0, 1, 1), diff_drive=bad)
