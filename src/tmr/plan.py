@@ -36,7 +36,18 @@ from typing import Any
 import numpy as np
 
 from tmr.errors import NoPathFound, TmrError
-from tmr.io.cli_args import ArgumentParser, add_common, bounds, count, param, path_arg, point, points, positive_float
+from tmr.io.cli_args import (
+    ArgumentParser,
+    add_common,
+    bounds,
+    count,
+    goal_pose,
+    param,
+    path_arg,
+    point,
+    points,
+    positive_float,
+)
 from tmr.io.console import LOG, progress_enabled
 from tmr.io.console import run as run_cli
 from tmr.views.flags import VIEW_NAMES, write_views
@@ -119,7 +130,12 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     )
     src.add_argument("--bounds", type=bounds, help="room bounds xmin,ymin,xmax,ymax [m] for a GeoJSON/WKT --map")
     src.add_argument("--base", type=point, help="tether anchor X,Y [m]")
-    src.add_argument("--goal", type=point, help="leader goal X,Y [m]")
+    src.add_argument(
+        "--goal",
+        type=goal_pose,
+        help="leader goal X,Y [m], or X,Y,THETA with the leader's final heading THETA in degrees (90, 90deg; "
+        "1.57rad for radians; --drive diff only)",
+    )
     src.add_argument(
         "--start",
         type=points,
@@ -249,7 +265,9 @@ def load_inputs(args: argparse.Namespace) -> Any:
         check_start_count(args, n, "a --map run without --robots plans")
         if r is not None:
             kwargs["safety_radius"] = r
-        sc = scenario_from_map(args.map, args.base, args.goal, start=args.start, n_robots=n, **kwargs)
+        sc = scenario_from_map(args.map, args.base, args.goal[:2], start=args.start, n_robots=n, **kwargs)
+        if len(args.goal) == 3:
+            sc = replace(sc, goal_heading=args.goal[2])
     else:
         sc = load_scenario(args.scenario or "A", safety_radius=r)
         check_start_count(args, sc.n_robots, f"scenario {sc.name} has")
@@ -257,7 +275,8 @@ def load_inputs(args: argparse.Namespace) -> Any:
         if args.base is not None:
             changes["base"] = np.array(args.base)
         if args.goal is not None:
-            changes["goal"] = np.array(args.goal)
+            changes["goal"] = np.array(args.goal[:2])  # X,Y replaces the scenario's goal pose, heading included
+            changes["goal_heading"] = args.goal[2] if len(args.goal) == 3 else None
         if changes:
             sc = replace(sc, **changes)
     return sc
@@ -338,6 +357,7 @@ def summary(plan: Any, metrics: Any) -> str:
         "final_speed",
         "max_abs_distance_error",
         "final_leader_error",
+        "final_heading_error",
         "violations",
         "wall_time",
         "ms_per_step",
@@ -352,6 +372,12 @@ def summary(plan: Any, metrics: Any) -> str:
     lines = [
         f"tmr plan: scenario {plan.scenario}, method {plan.method}, {plan.n_robots} robots, {plan.t.size - 1} steps"
     ]
+    dd = d.get("diff_drive") or {}
+    if "final_heading_error" in dd:  # a goal heading (--goal X,Y,THETA): the leader's final heading error [deg]
+        err, tol = math.degrees(dd["final_heading_error"]), dd["heading_tolerance_deg"]
+        d["final_heading_error"] = f"{err:.4g} deg (tolerance {tol:g} deg)"
+    else:
+        keys.remove("final_heading_error")
     for k in keys:
         v = d[k]
         lines.append(f"  {k:24s} {v:.6g}" if isinstance(v, float) else f"  {k:24s} {v}")
@@ -471,6 +497,8 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
     chain_params = made[ChainParams]
     if rest:
         raise TmrError(f"unknown parameter(s) {sorted(rest)}; the names are the fields of tmr.model.params")
+    if scenario.goal_heading is not None and not chain_params.diff_drive:
+        raise TmrError("a goal heading (--goal X,Y,THETA, goal = [x, y, theta]) needs --drive diff")
     if chain_params.diff_drive:  # exit 2 before the route: the model, its footprint, the methods that plan it
         from tmr.model.diffdrive import model_for
 

@@ -89,6 +89,10 @@ class Problem:
     route_mode: str = "rrt"
     fixed_duration: bool = False  # T_end was set by the user (the train references cannot keep it)
     robot_model: RobotModel | None = None  # drive = "diff": the robots' model (tmr.model.diffdrive)
+    #: drive = "diff" with a goal heading: the leader's final heading [rad] and the state at which its route ends
+    #: (the final manoeuvre, :class:`tmr.control.diffdrive.GoalHeading`, follows it)
+    goal_heading: float | None = None
+    goal_arrive: int | None = None
 
     @property
     def env(self) -> Any:
@@ -106,6 +110,8 @@ class Problem:
             out.update(route_length=self.route.length, n_min=self.route.n_min, n_lower=self.route.n_lower)
         if self.robot_model is not None:  # differential drive only: an omnidirectional plan's records keep their bytes
             out.update(robot_model_params=self.robot_model.record())
+        if self.goal_heading is not None:  # only with --goal X,Y,THETA: other plans' records keep their bytes
+            out.update(goal_heading=self.goal_heading, goal_arrive_time=float(self.trajectory.t[self.goal_arrive]))
         return out
 
 
@@ -246,6 +252,8 @@ def build_problem(
     robot_model = None
     if chain_params.diff_drive:
         robot_model, path_params = _diff_drive_setup(chain_params, path_params)
+    elif scenario.goal_heading is not None:
+        raise ParameterError("a goal heading needs --drive diff (an omnidirectional robot has no heading)")
     N = int(n_robots if n_robots is not None else scenario.n_robots)
     if start is not None:  # before the route: a start never changes N by itself
         try:
@@ -326,7 +334,7 @@ def build_problem(
             traj = _trajectory_along(env, _path_tail(anchor_path, leader_at), time_params, path_params)
         if traj is None:
             traj = _rrt_trajectory(env, P[-1], goal, seed, time_params, path_params)
-    return Problem(
+    problem = Problem(
         scenario,
         chain,
         chain_params,
@@ -344,6 +352,66 @@ def build_problem(
         route_mode=route,
         fixed_duration="T_end" in values,
         robot_model=robot_model,
+    )
+    return _with_goal_heading(problem)
+
+
+#: Time [s] the leader's reference holds the goal pose after the longest goal-heading manoeuvre (the CLIK settles).
+GOAL_HEADING_SETTLE = 1.0
+
+
+def goal_heading_manoeuvre(problem: Problem) -> Any:
+    """The leader's final manoeuvre (:class:`tmr.control.diffdrive.GoalHeading`) of a problem with a goal heading,
+    at the leader time law's fractions of the robot's limits (:data:`DIFF_SPEED_FRACTION`, :data:`DIFF_ACCEL_FRACTION`
+    of v_max, ω_max and a_max, α_max); None without one."""
+    from tmr.control.diffdrive import GoalHeading
+
+    m = problem.robot_model
+    if problem.goal_heading is None or m is None:
+        return None
+    k = problem.goal_arrive if problem.goal_arrive is not None else problem.trajectory.t.size - 1
+    return GoalHeading(
+        problem.goal_heading,
+        np.asarray(problem.trajectory.x, dtype=float)[k],
+        k,
+        m.exit_offset,
+        DIFF_SPEED_FRACTION * m.v_max,
+        DIFF_ACCEL_FRACTION * m.a_max,
+        DIFF_SPEED_FRACTION * m.omega_max,
+        DIFF_ACCEL_FRACTION * m.alpha_max,
+    )
+
+
+def _with_goal_heading(problem: Problem) -> Problem:
+    """``problem`` with its leader's reference (and every route reference) held at the route's end for the longest
+    goal-heading manoeuvre plus :data:`GOAL_HEADING_SETTLE` (``goal_arrive`` = the route's last state); as is without
+    a goal heading."""
+    heading = problem.scenario.goal_heading
+    if heading is None or problem.robot_model is None:
+        return problem
+    problem = replace(problem, goal_heading=float(heading), goal_arrive=None)
+    tr = problem.trajectory
+    Ts = problem.time_params.Ts
+    K = tr.t.size - 1
+    man = goal_heading_manoeuvre(problem)
+    M = int(math.ceil((man.budget() + GOAL_HEADING_SETTLE) / Ts - 1e-9))
+
+    def hold(a: Array, zero: bool) -> Array:
+        a = np.asarray(a, dtype=float)
+        last = np.zeros_like(a[-1:]) if zero else a[-1:]
+        return np.concatenate([a, np.repeat(last, M, axis=0)])
+
+    t = np.concatenate([tr.t, tr.t[-1] + Ts * np.arange(1, M + 1)])
+    traj = tr._replace(t=t, x=hold(tr.x, False), xd=hold(tr.xd, True), xdd=hold(tr.xdd, True))
+    ref = problem.references
+    if ref is not None:
+        ref = replace(ref, trajectory=traj, positions=hold(ref.positions, False), velocities=hold(ref.velocities, True))
+    return replace(
+        problem,
+        trajectory=traj,
+        references=ref,
+        time_params=replace(problem.time_params, T_end=float(t[-1])),
+        goal_arrive=K,
     )
 
 
@@ -569,7 +637,9 @@ def make_qp(
             )
         else:
             inner = LexicographicQP(chain, levels, limits, box, solver=p.solver)
-        return make_diffdrive_qp(inner, chain, problem.robot_model, initial_headings(problem))  # type: ignore[return-value]
+        return make_diffdrive_qp(  # type: ignore[return-value]
+            inner, chain, problem.robot_model, initial_headings(problem), goal_heading_manoeuvre(problem)
+        )
     if problem.chain_params.active_winch:  # x = [v, Ṫ] (tmr.control.winch)
         from tmr.control.winch import make_winch_qp
 
@@ -636,6 +706,13 @@ def plan(problem: Problem, method: str | Formulation = "pinv", *, progress: bool
     poses = getattr(form, "poses", None)
     if poses is not None:  # differential drive: axle centres, headings, v, ω per state
         result.axle, result.heading, result.drive_v, result.drive_omega = poses(result.t.size)
+    gh = getattr(form, "goal_heading", None)
+    if gh is not None and gh.reference:  # the leader's reference of the final manoeuvre, as tracked
+        for k, x_d in gh.reference.items():
+            if k < result.t.size:
+                result.reference[k] = x_d
+        if result.t.size - 1 > gh.k_arrive:
+            result.reference[-1] = gh.at((result.t.size - 1 - gh.k_arrive) * problem.time_params.Ts)[0]
     for lim in getattr(getattr(form, "qp", form), "limits", ()):
         note = lim.note() if hasattr(lim, "note") else None
         if note:  # what held the chain at the end (a leader that stops short says why)
@@ -764,8 +841,10 @@ def train_problem(problem: Problem) -> Problem:
         settle=path.route_settle,
     )
     T_end = float(ref.trajectory.t[-1])
-    return replace(
-        problem, references=ref, trajectory=ref.trajectory, time_params=replace(problem.time_params, T_end=T_end)
+    return _with_goal_heading(
+        replace(
+            problem, references=ref, trajectory=ref.trajectory, time_params=replace(problem.time_params, T_end=T_end)
+        )
     )
 
 
@@ -807,7 +886,8 @@ def check(plan: Plan, env: Any, goal_tolerance: float = 0.1) -> Metrics:
 
     A plan that completed its steps fails (``plan.success = False``, f1–f4 = +∞ as in Caruso 2021 §4.2.2) if at any
     step a robot or a tether enters the inflated obstacles, a span leaves [d_lo, d_max], two robots come closer than
-    2r, or if the leader ends farther than ``goal_tolerance`` [m] from the goal.
+    2r, or if the leader ends farther than ``goal_tolerance`` [m] from the goal, or (a differential-drive plan with a
+    goal heading) its final heading is more than :data:`tmr.checks.diffdrive.HEADING_TOLERANCE_DEG` from it.
     """
     metrics = evaluate(plan, env)
     if not plan.success:
@@ -822,6 +902,12 @@ def check(plan: Plan, env: Any, goal_tolerance: float = 0.1) -> Metrics:
         reasons.append(
             f"leader ends {metrics.final_leader_error:.3f} m from the goal (tolerance {goal_tolerance} m)"
             + (f", held back: {held}" if held else "")
+        )
+    dd = metrics.diff_drive or {}
+    if "final_heading_error" in dd and math.degrees(dd["final_heading_error"]) > dd["heading_tolerance_deg"]:
+        reasons.append(
+            f"leader ends {math.degrees(dd['final_heading_error']):.3g} deg from the goal heading "
+            f"{math.degrees(dd['goal_heading']):.6g} deg (tolerance {dd['heading_tolerance_deg']:g} deg)"
         )
     if reasons:
         plan.success = False

@@ -24,7 +24,21 @@ import numpy as np
 
 from tmr.model.diffdrive import MODEL_FIELDS, exit_point, step_velocities
 
-__all__ = ["DIFF_KINDS", "EXIT_TOLERANCE", "LATERAL_TOLERANCE", "RELATIVE_TOLERANCE", "diff_drive_check"]
+__all__ = [
+    "DIFF_KINDS",
+    "EXIT_TOLERANCE",
+    "HEADING_TOLERANCE_DEG",
+    "LATERAL_TOLERANCE",
+    "RELATIVE_TOLERANCE",
+    "diff_drive_check",
+    "heading_error",
+]
+
+
+def heading_error(theta: float, goal: float) -> float:
+    """|θ − Θ| wrapped to [0, π] [rad]: the turn left between a heading θ and a goal heading Θ [rad]."""
+    return abs(math.remainder(float(theta) - float(goal), 2.0 * math.pi))
+
 
 #: Violation kinds of a differential-drive plan, in report order.
 DIFF_KINDS = (
@@ -41,6 +55,8 @@ LATERAL_TOLERANCE = 1e-9
 RELATIVE_TOLERANCE = 1e-9
 #: Largest distance [m] of a recorded exit point from c + b e(θ).
 EXIT_TOLERANCE = 1e-9
+#: Largest accepted error of the leader's final heading against a goal heading (``--goal X,Y,THETA``) [deg].
+HEADING_TOLERANCE_DEG = 1.0
 #: A robot turns in place where |v| < 1e-3 m/s and |ω| > 0.05 rad/s (as :data:`tmr.control.diffdrive.TURN_IN_PLACE`).
 TURN_IN_PLACE = (1e-3, 0.05)
 
@@ -71,6 +87,13 @@ def diff_drive_check(plan: Any, Ts: float) -> tuple[dict[str, np.ndarray], dict[
     exit_err = np.linalg.norm(p - exit_point(c, th, model["exit_offset"]), axis=-1)
     masks["exit_point"] = (exit_err > EXIT_TOLERANCE).any(axis=1)
     summary: dict[str, Any] = {"max_exit_point_error": float(exit_err.max()) if exit_err.size else 0.0}
+    goal_heading = (getattr(plan, "params", None) or {}).get("goal_heading")
+    if goal_heading is not None:  # --goal X,Y,THETA: the leader's final heading against THETA (plan.check judges it)
+        summary.update(
+            goal_heading=float(goal_heading),
+            final_heading_error=heading_error(th[-1, -1], goal_heading),
+            heading_tolerance_deg=HEADING_TOLERANCE_DEG,
+        )
     if K1 < 2 or not math.isfinite(Ts) or Ts <= 0:
         summary.update(max_lateral_velocity=0.0, peak_v=0.0, peak_omega=0.0)
         return masks, summary

@@ -26,6 +26,7 @@ e_⊥i = 0, has the same feasible set with 2N more unknowns and 2N more equality
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -39,7 +40,15 @@ from tmr.model.diffdrive import RobotModel, exit_point, unicycle_step
 
 Array = NDArray[np.float64]
 
-__all__ = ["DiffDriveAcceleration", "DiffDriveContext", "DiffDriveQP", "DiffDriveSpeed", "TURN_IN_PLACE"]
+__all__ = [
+    "DiffDriveAcceleration",
+    "DiffDriveContext",
+    "DiffDriveQP",
+    "DiffDriveSpeed",
+    "GoalHeading",
+    "TURN_IN_PLACE",
+    "rest_to_rest",
+]
 
 #: A robot turns in place at a step where |v| < TURN_IN_PLACE[0] [m/s] and |ω| > TURN_IN_PLACE[1] [rad/s].
 TURN_IN_PLACE = (1e-3, 0.05)
@@ -113,6 +122,135 @@ class DiffDriveAcceleration(_DiffRows):
         return LimitRows(self.rows(ctx.heading), prev - step, prev + step)
 
 
+def rest_to_rest(distance: float, v_lim: float, a_lim: float) -> tuple[float, Any]:
+    """The time-optimal rest-to-rest profile over ``distance`` ≥ 0 with speed ≤ ``v_lim`` and acceleration ≤ ``a_lim``
+    (trapezoid, or triangle when ``v_lim`` is not reached; units of the distance: m or rad). Returns its duration [s]
+    and ``f(t) -> (s, ṡ)`` (clamped to [0, duration])."""
+    if distance <= 0.0:
+        return 0.0, lambda t: (0.0, 0.0)
+    ta = v_lim / a_lim
+    if a_lim * ta * ta >= distance:  # triangle: the peak speed stays below v_lim
+        ta = math.sqrt(distance / a_lim)
+        T = 2.0 * ta
+    else:
+        T = distance / v_lim + ta
+    vp = a_lim * ta
+
+    def f(t: float) -> tuple[float, float]:
+        t = min(max(t, 0.0), T)
+        if t < ta:
+            return 0.5 * a_lim * t * t, a_lim * t
+        if t > T - ta:
+            r = T - t
+            return distance - 0.5 * a_lim * r * r, a_lim * r
+        return 0.5 * a_lim * ta * ta + vp * (t - ta), vp
+
+    return T, f
+
+
+class GoalHeading:
+    """The leader's final manoeuvre to a goal heading Θ [rad] (``--goal X,Y,THETA``, ``formulations/diffdrive.md``).
+
+    The leader's exit point reaches the goal G along the route at state ``k_arrive`` with some heading θ_a and axle
+    c_a = G − b e(θ_a). The goal pose is the exit point at G with heading Θ, i.e. the axle at c_f = G − b e(Θ). From
+    the state at ``k_arrive`` (measured, not predicted) the manoeuvre is turn in place → straight drive → turn in place:
+
+    1. turn about c_a from θ_a to φ, the direction of d = c_f − c_a (forwards only: driving backwards, the heading's
+       internal dynamics would amplify its errors by up to e^(|d|/b));
+    2. drive the axle by |d| (≤ 2b) along e(φ);
+    3. turn about c_f from φ to Θ* (Θ + 2πn nearest φ).
+
+    Each piece is a rest-to-rest profile (:func:`rest_to_rest`) at ``v_lim``, ``a_lim`` [m/s, m/s²] or ``omega_lim``,
+    ``alpha_lim`` [rad/s, rad/s²]. Its exit point p = c + b e(θ), ṗ = ċ + b θ̇ e_⊥(θ) (:meth:`at`) ends exactly at
+    G. :class:`DiffDriveQP` makes it the leader task's reference from ``k_arrive`` on: x_d = p(τ) (in the last turn and
+    after it c_k + b e(θ_ref(τ)), about the leader's own axle c_k, so the CLIK corrects the heading, not the axle) and
+    ẋ_d the exit-point velocity whose (v, ω) at the leader's heading are :meth:`step_commands`. :meth:`budget` is the
+    longest manoeuvre (two half turns and a 2b drive) [s]: the planner holds the reference that long after the route.
+    """
+
+    def __init__(
+        self,
+        theta: float,
+        goal: Array,
+        k_arrive: int,
+        b: float,
+        v_lim: float,
+        a_lim: float,
+        omega_lim: float,
+        alpha_lim: float,
+    ) -> None:
+        self.theta, self.goal, self.k_arrive, self.b = float(theta), np.asarray(goal, dtype=float), int(k_arrive), b
+        self.v_lim, self.a_lim, self.omega_lim, self.alpha_lim = v_lim, a_lim, omega_lim, alpha_lim
+        self._pieces: list[tuple[str, float, Array, float, float, Any]] | None = None
+        self.final_turn_start = math.inf  # τ [s] at which the last turn starts (set by start)
+        self.reference: dict[int, Array] = {}  # state k → the leader's reference exit point used [m]
+
+    def budget(self) -> float:
+        """The longest manoeuvre [s]: two turns of π and a drive of 2b."""
+        t_turn = rest_to_rest(math.pi, self.omega_lim, self.alpha_lim)[0]
+        return 2.0 * t_turn + rest_to_rest(2.0 * abs(self.b), self.v_lim, self.a_lim)[0]
+
+    def start(self, axle: Array, theta: float) -> None:
+        """Plan the three pieces from the leader's axle centre ``axle`` (2,) [m] and heading ``theta`` [rad] at
+        ``k_arrive``."""
+        b = self.b
+        c_f = self.goal - b * np.array([math.cos(self.theta), math.sin(self.theta)])
+        d = c_f - axle
+        dist = float(np.hypot(*d))
+
+        def near(angle: float, to: float) -> float:  # angle + 2πn nearest ``to``
+            return angle + 2.0 * math.pi * round((to - angle) / (2.0 * math.pi))
+
+        # forwards only (reversing would amplify heading errors); no drive when the axle already stands at c_f
+        phi = theta if dist <= 1e-12 else near(math.atan2(d[1], d[0]), theta)
+        theta_f = near(self.theta, phi)
+        pieces = []
+        t0 = 0.0
+        for kind, start, dist_or_turn in (
+            ("turn", np.array([*axle, theta]), phi - theta),
+            ("drive", np.array([*axle, phi]), dist),
+            ("turn", np.array([*c_f, phi]), theta_f - phi),
+        ):
+            lim = (self.omega_lim, self.alpha_lim) if kind == "turn" else (self.v_lim, self.a_lim)
+            T, f = rest_to_rest(abs(dist_or_turn), *lim)
+            pieces.append((kind, t0, start, math.copysign(1.0, dist_or_turn), T, f))
+            t0 += T
+        self._pieces = pieces
+        self.final_turn_start = pieces[-1][1]
+        self.end_pose = (c_f, theta_f)
+
+    def pose(self, tau: float) -> tuple[Array, float, Array, float]:
+        """The reference axle centre (2,) [m], heading [rad] and their rates (2,) [m/s], [rad/s] at ``tau`` [s] after
+        ``k_arrive`` (the end pose once the manoeuvre is over)."""
+        assert self._pieces is not None, "start() first"
+        for kind, t0, start, sgn, T, f in self._pieces:
+            if tau < t0 + T or t0 == self._pieces[-1][1]:
+                s, sd = f(tau - t0)
+                c, th = start[:2].copy(), float(start[2])
+                if kind == "turn":
+                    return c, th + sgn * s, np.zeros(2), sgn * sd
+                e = np.array([math.cos(th), math.sin(th)])
+                return c + sgn * s * e, th, sgn * sd * e, 0.0
+        raise AssertionError("unreachable")
+
+    def at(self, tau: float) -> tuple[Array, Array]:
+        """The reference exit point (2,) [m] and its velocity (2,) [m/s] at ``tau`` [s] after ``k_arrive``."""
+        c, th, cdot, thdot = self.pose(tau)
+        e, en = np.array([math.cos(th), math.sin(th)]), np.array([-math.sin(th), math.cos(th)])
+        return c + self.b * e, cdot + self.b * thdot * en
+
+    def step_commands(self, tau: float, Ts: float) -> tuple[float, float]:
+        """(v [m/s], ω [rad/s]) that, held over [tau, tau + Ts] (:func:`tmr.model.diffdrive.unicycle_step`), move the
+        reference pose at ``tau`` exactly to the one at ``tau + Ts`` (:func:`tmr.model.diffdrive.step_velocities`; a
+        step across two pieces is not one arc: its residual is O(a Ts³), both pieces at rest there)."""
+        from tmr.model.diffdrive import step_velocities
+
+        c0, th0, _, _ = self.pose(tau)
+        c1, th1, _, _ = self.pose(tau + Ts)
+        v, w, _ = step_velocities(np.array([c0, c1]), np.array([th0, th1]), Ts)
+        return float(v[0]), float(w[0])
+
+
 class DiffDriveQP:
     """The per-step formulation of differential-drive robots (module docstring): the lexicographic QP ``qp`` (built
     with :class:`DiffDriveSpeed` and :class:`DiffDriveAcceleration` among its limits), the robots' poses, and the
@@ -124,7 +262,10 @@ class DiffDriveQP:
 
     name = "qp"
 
-    def __init__(self, qp: Any, chain: Chain, model: RobotModel, heading0: Array) -> None:
+    def __init__(
+        self, qp: Any, chain: Chain, model: RobotModel, heading0: Array, goal_heading: GoalHeading | None = None
+    ) -> None:
+        self.goal_heading = goal_heading
         if chain.spatial:
             raise ParameterError("differential drive is a ground robot's kinematics: not for a spatial chain")
         self.qp, self.chain, self.model = qp, chain, model
@@ -151,6 +292,8 @@ class DiffDriveQP:
         self._theta = self.heading0.copy()
         self._v, self._w = np.zeros(N), np.zeros(N)
         self._hist: list[tuple[Array, Array, Array, Array]] = []
+        if self.goal_heading is not None:
+            self.goal_heading.reference.clear()
 
     def reset(self) -> None:
         self.qp.reset()
@@ -161,6 +304,24 @@ class DiffDriveQP:
         b, Ts = m.exit_offset, ctx.Ts
         if self._axle is None:  # the chain's start places the exit points: the axles are b behind them
             self._axle = ctx.points[1:] - b * np.column_stack([np.cos(self._theta), np.sin(self._theta)])
+        gh = self.goal_heading
+        if gh is not None and ctx.k >= gh.k_arrive:  # the final manoeuvre to the goal heading replaces x_d, ẋ_d
+            if ctx.k == gh.k_arrive:
+                gh.start(self._axle[-1], float(self._theta[-1]))
+            tau = (ctx.k - gh.k_arrive) * Ts
+            # x_d the manoeuvre's exit point; ẋ_d the exit-point velocity whose (v, ω) at the leader's heading θ_k
+            # are the step's exact arc commands (the tangent ṗ would leave the O(Ts² b ω²) chord error of every step
+            # to the CLIK, and its lag turns the heading by lag / b)
+            v_ff, w_ff = gh.step_commands(tau, Ts)
+            th = float(self._theta[-1])
+            if tau < gh.final_turn_start:
+                ctx.x_d = gh.at(tau)[0]
+            else:  # the last turn and the hold: about the leader's own axle, so the CLIK corrects the heading itself
+                th_ref = gh.pose(tau)[1]
+                ctx.x_d = self._axle[-1] + b * np.array([math.cos(th_ref), math.sin(th_ref)])
+            e, e_n = np.array([math.cos(th), math.sin(th)]), np.array([-math.sin(th), math.cos(th)])
+            ctx.xd_d = v_ff * e + b * w_ff * e_n
+            gh.reference[ctx.k] = ctx.x_d
         dctx = DiffDriveContext(ctx, self._theta, self._v, self._w)
         qdot, diag = self.qp.step(dctx)
         pdot = ctx.velocity_map.robot_velocities(qdot).reshape(-1, 2)
@@ -218,13 +379,16 @@ def _limits(qp: Any) -> list[Limit]:
     return list(getattr(qp, "limits", None) or getattr(qp.qp, "limits", []))
 
 
-def make_diffdrive_qp(qp: Any, chain: Chain, model: RobotModel, heading0: Array) -> DiffDriveQP:
+def make_diffdrive_qp(
+    qp: Any, chain: Chain, model: RobotModel, heading0: Array, goal_heading: GoalHeading | None = None
+) -> DiffDriveQP:
     """``qp`` (a :class:`~tmr.control.qp.LexicographicQP`, or an active winch's
     :class:`~tmr.control.winch.GroundWinchQP`, whose limits already hold :class:`DiffDriveSpeed` and
     :class:`DiffDriveAcceleration`, padded with the tension columns there) wrapped as the differential-drive
-    formulation. With an active winch the winch's QP receives the :class:`DiffDriveContext` as its step context, so
+    formulation; ``goal_heading`` the leader's final manoeuvre (:class:`GoalHeading`) or None. With an active winch
+    the winch's QP receives the :class:`DiffDriveContext` as its step context, so
     the padded v/ω rows read the headings from it."""
     names = {lim.name for lim in _limits(qp)}
     if not {DiffDriveSpeed.name, DiffDriveAcceleration.name} <= names:
         raise ParameterError("the differential-drive QP needs the diff_speed and diff_acceleration limits")
-    return DiffDriveQP(qp, chain, model, heading0)
+    return DiffDriveQP(qp, chain, model, heading0, goal_heading)

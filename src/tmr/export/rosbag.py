@@ -19,11 +19,27 @@ topic                                     type                                  
                                                                                   inflated outlines, room, anchor,
                                                                                   goal, task points
 ``/tf``                                   ``tf2_msgs/msg/TFMessage``              one per sample: map → every body
+``/robot<i>/cmd_vel``                     ``geometry_msgs/msg/Twist``             differential-drive runs only: one
+                                                                                  per sample and robot
+``/robot<i>/odom``                        ``nav_msgs/msg/Odometry``               differential-drive runs only: one
+                                                                                  per sample and robot
 ========================================  ======================================  ====================================
 
 Bodies are the motion's tracks: ``robot1..N`` (chain), ``base1..p`` and ``platform`` (MoPICK), the agents and
 ``end_effector`` (CCMA). Orientation is the body's yaw when it has one (MoPICK bases, CCMA agents), else identity
-(omnidirectional chain robots carry no heading).
+(omnidirectional chain robots carry no heading; a differential-drive chain's robots carry theta at their exit point).
+
+A differential-drive chain (``--drive diff``, :class:`tmr.views.motion.DiffDrive`) adds, per robot i and sample k
+(stamp t_k as above), the command the robot executes over [t_k, t_k+1] and its odometry:
+
+* ``/robot<i>/cmd_vel`` — ``geometry_msgs/msg/Twist``: ``linear.x`` = v [m/s], ``angular.z`` = omega [rad/s], every
+  other component 0 (v = omega = 0 at the last sample);
+* ``/robot<i>/odom`` — ``nav_msgs/msg/Odometry``: header stamp t_k, frame ``odom`` (:data:`ODOM_FRAME`, coincident
+  with ``map``: the plan's positions are exact), ``child_frame_id`` ``robot<i>/base_link``; pose = the axle centre
+  (x, y, 0) [m] and the heading quaternion (0, 0, sin(theta/2), cos(theta/2)); twist in the body frame = (v, 0, 0)
+  [m/s], (0, 0, omega) [rad/s]; both covariances zero (the plan is not an estimate).
+
+An omnidirectional chain's bag has none of these topics and its bytes are unchanged.
 
 A tethered drone chain (issue 32) has its own writer, :func:`write_drone_bag`, with the same topics from a
 ``DronePlan`` and its ``World3D``: 3-D poses, each tether's catenary as a ``LINE_STRIP``, the drones as spheres and the
@@ -48,9 +64,11 @@ import numpy as np
 
 from tmr.views.motion import OBSTACLE_HEIGHT, Motion
 
-__all__ = ["FRAME", "TOPIC_TYPES", "drone_topics", "stamp_ns", "topics", "write_bag", "write_drone_bag"]
+__all__ = ["FRAME", "ODOM_FRAME", "TOPIC_TYPES", "drone_topics", "stamp_ns", "topics", "write_bag", "write_drone_bag"]
 
 FRAME = "map"
+#: Frame of a differential-drive robot's ``nav_msgs/Odometry`` (``/robot<i>/odom``).
+ODOM_FRAME = "odom"
 
 TOPIC_TYPES = {
     "pose": "geometry_msgs/msg/PoseStamped",
@@ -58,6 +76,8 @@ TOPIC_TYPES = {
     "trajectory": "trajectory_msgs/msg/MultiDOFJointTrajectory",
     "markers": "visualization_msgs/msg/MarkerArray",
     "tf": "tf2_msgs/msg/TFMessage",
+    "cmd_vel": "geometry_msgs/msg/Twist",
+    "odom": "nav_msgs/msg/Odometry",
 }
 
 _COLORS = {  # r, g, b, a
@@ -84,7 +104,19 @@ def stamp_ns(t: float) -> int:
 
 def topics(motion: Motion) -> dict[str, str]:
     """Every topic :func:`write_bag` writes for ``motion`` → its message type."""
-    return _topics(tr.name for tr in motion.tracks)
+    out = _topics(tr.name for tr in motion.tracks)
+    for name in _diff_robots(motion):
+        out[f"/{name}/cmd_vel"] = TOPIC_TYPES["cmd_vel"]
+        out[f"/{name}/odom"] = TOPIC_TYPES["odom"]
+    return out
+
+
+def _diff_robots(motion: Motion) -> list[str]:
+    """The robot names ``robot1..N`` of a differential-drive chain's motion (in the order of its ``diff_drive``
+    arrays), else []."""
+    if getattr(motion, "diff_drive", None) is None:
+        return []
+    return [f"robot{i + 1}" for i in range(np.shape(motion.diff_drive.theta)[1])]
 
 
 def _topics(bodies: Iterable[str]) -> dict[str, str]:
@@ -114,8 +146,8 @@ class _Msgs:
     def duration(self, ns: int) -> Any:
         return self.T["builtin_interfaces/msg/Duration"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
-    def header(self, ns: int) -> Any:
-        return self.T["std_msgs/msg/Header"](stamp=self.time(ns), frame_id=FRAME)
+    def header(self, ns: int, frame: str = FRAME) -> Any:
+        return self.T["std_msgs/msg/Header"](stamp=self.time(ns), frame_id=frame)
 
     def point(self, p: Any) -> Any:
         return self.T["geometry_msgs/msg/Point"](x=float(p[0]), y=float(p[1]), z=float(p[2]))
@@ -134,6 +166,26 @@ class _Msgs:
 
     def transform(self, p: Any, yaw: float | None) -> Any:
         return self.T["geometry_msgs/msg/Transform"](translation=self.vector(p), rotation=self.quat(yaw))
+
+    def twist(self, v: float, omega: float) -> Any:
+        """A body-frame ``geometry_msgs/Twist``: forward speed ``v`` [m/s], yaw rate ``omega`` [rad/s]."""
+        return self.T["geometry_msgs/msg/Twist"](
+            linear=self.vector((v, 0.0, 0.0)), angular=self.vector((0.0, 0.0, omega))
+        )
+
+    def odometry(self, ns_stamp: int, child: str, xy: Any, theta: float, v: float, omega: float) -> Any:
+        """A ``nav_msgs/Odometry`` in :data:`ODOM_FRAME`: axle centre ``xy`` [m] at z = 0, heading ``theta`` [rad],
+        body-frame twist (``v`` [m/s], ``omega`` [rad/s]); zero covariances."""
+        T = self.T
+        zero = np.zeros(36, dtype=np.float64)
+        return T["nav_msgs/msg/Odometry"](
+            header=self.header(ns_stamp, ODOM_FRAME),
+            child_frame_id=child,
+            pose=T["geometry_msgs/msg/PoseWithCovariance"](
+                pose=self.pose((xy[0], xy[1], 0.0), float(theta)), covariance=zero
+            ),
+            twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=self.twist(v, omega), covariance=zero.copy()),
+        )
 
     def color(self, key: str) -> Any:
         r, g, b, a = _COLORS[key]
@@ -352,6 +404,12 @@ def write_bag(
                 for tr in motion.tracks
             ]
             w.write(conns["/tf"], s, ser(ts.types["tf2_msgs/msg/TFMessage"](transforms=tfs), TOPIC_TYPES["tf"]))
+            for i, name in enumerate(_diff_robots(motion)):  # differential drive: the command and the odometry
+                dd = motion.diff_drive
+                v, omega = float(dd.v[k, i]), float(dd.omega[k, i])
+                w.write(conns[f"/{name}/cmd_vel"], s, ser(m.twist(v, omega), TOPIC_TYPES["cmd_vel"]))
+                odom = m.odometry(s, f"{name}/base_link", dd.axle[k, i], dd.theta[k, i], v, omega)
+                w.write(conns[f"/{name}/odom"], s, ser(odom, TOPIC_TYPES["odom"]))
     return path
 
 

@@ -147,6 +147,26 @@ def point(text: str) -> tuple[float, float]:
     return x, y
 
 
+def goal_pose(text: str) -> tuple[float, ...]:
+    """``X,Y`` [m] or ``X,Y,THETA``: THETA the leader's final heading in degrees (counter-clockwise from +x; a
+    ``deg`` suffix is allowed, a ``rad`` suffix gives radians). Returns (x, y) or (x, y, theta [rad])."""
+    parts = text.replace(" ", "").split(",")
+    if len(parts) != 3:
+        return point(text)
+    theta, scale = parts[2].lower(), math.pi / 180.0
+    if theta.endswith("deg"):
+        theta = theta[:-3]
+    elif theta.endswith("rad"):
+        theta, scale = theta[:-3], 1.0
+    try:
+        x, y, th = _floats(",".join([*parts[:2], theta]), 3, "")
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(
+            f"expected X,Y or X,Y,THETA (finite; metres, THETA in degrees or with a rad suffix), got {text!r}"
+        ) from None
+    return x, y, th * scale
+
+
 def points(text: str) -> np.ndarray:
     """``X1,Y1;X2,Y2;…`` [m]: one or more points, as an (n, 2) array."""
     pts = [_floats(p, 2, "X1,Y1;X2,Y2;… in metres") for p in text.split(";") if p.strip()]

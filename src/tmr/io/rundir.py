@@ -284,6 +284,9 @@ class ChainRun:
     #: with an active winch, every tether's planned horizontal tension per sample (K+1, N) [N]; None: constant T0
     winch_tension: Array | None = None
     low_obstacles: list[Any] = field(default_factory=list)
+    #: a differential-drive run (``"drive": "diff"`` in trajectories.json): ``axle`` (K+1, N, 2) [m], ``theta``
+    #: [rad], ``v`` [m/s], ``omega`` [rad/s] (K+1, N) each; None for an omnidirectional run
+    diff_drive: dict[str, Array] | None = None
 
     kind = "chain"
 
@@ -341,9 +344,10 @@ class ChainRun:
     def motion(self, rate: float = 10.0, trajectory: str = "raw") -> Any:
         """The :class:`tmr.views.motion.Motion` of the run: ``trajectory`` ``"raw"`` (the checked plan) or
         ``"filtered"`` (the low-passed positions the robots track); ``rate`` is unused (the plan has a time law)."""
-        from tmr.views.motion import tethered_chain
+        from tmr.views.motion import DiffDrive, tethered_chain
 
         rec = self.record
+        dd = self.diff_drive
         robots = self.filtered if trajectory == "filtered" else self.robots
         verdict = "" if rec.get("success", True) else " — FAILED"
         what = "filtered trajectory" if trajectory == "filtered" else f"{self.n_robots} tethered robots"
@@ -361,6 +365,7 @@ class ChainRun:
             view=self.known_free,
             low_obstacles=tuple(self.low_obstacles),
             tension=self.winch_tension,  # the planned tension per sample (filtered positions too: same stamps)
+            diff_drive=None if dd is None else DiffDrive(dd["axle"], dd["theta"], dd["v"], dd["omega"]),
         )
 
 
@@ -423,6 +428,7 @@ def _load_chain(path: Path, rec: dict[str, Any], where: str) -> ChainRun:
             raise RunDirError(f"{where}: trajectories.json has unreadable tether tensions; re-run tmr.plan") from None
         if tension.shape != (t.size, n) or not np.all(np.isfinite(tension)) or np.any(tension <= 0):
             raise RunDirError(f"{where}: trajectories.json's tether tensions are not ({t.size}, {n}) finite > 0 N")
+    diff = _diff_drive(traj.get("robots"), n, t.size, where) if traj.get("drive") == "diff" else None
     return ChainRun(
         path=path,
         record=rec,
@@ -435,7 +441,21 @@ def _load_chain(path: Path, rec: dict[str, Any], where: str) -> ChainRun:
         grown=polygons_from_json(m.get("grown", []), where),
         winch_tension=tension,
         low_obstacles=low_obstacles_from_json(m.get("low_obstacles", []), where),
+        diff_drive=diff,
     )
+
+
+def _diff_drive(entries: Any, n: int, k: int, where: str) -> dict[str, Array]:
+    """A differential-drive run's ``axle`` (k, n, 2) [m], ``theta`` [rad], ``v`` [m/s], ``omega`` [rad/s] (k, n) from
+    trajectories.json's robot entries (keys ``x``, ``y``, ``theta``, ``v``, ``omega``)."""
+    try:
+        cols = {key: np.array([e[key] for e in entries], dtype=float).T for key in ("x", "y", "theta", "v", "omega")}
+    except (TypeError, KeyError, ValueError):
+        raise RunDirError(f"{where}: trajectories.json's robot poses are malformed; re-run tmr.plan") from None
+    for key, arr in cols.items():
+        if arr.shape != (k, n) or not np.all(np.isfinite(arr)):
+            raise RunDirError(f"{where}: trajectories.json's robot {key} have shape {arr.shape}, expected ({k}, {n})")
+    return {"axle": np.stack([cols["x"], cols["y"]], axis=-1), **{key: cols[key] for key in ("theta", "v", "omega")}}
 
 
 # ----------------------------------------------------------------------------------------------------------

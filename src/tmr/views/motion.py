@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 from tmr.errors import ParameterError
 
 __all__ = [
+    "DiffDrive",
     "Lines",
     "Motion",
     "Track",
@@ -54,6 +55,19 @@ class Track:
     role: str
     radius: float = 0.0
     yaw: Array | None = None
+
+
+@dataclass(frozen=True)
+class DiffDrive:
+    """The differential-drive state of a chain's robots (``--drive diff``, :mod:`tmr.model.diffdrive`) at the
+    motion's stamps: ``axle`` (K, N, 2) the axle centres [m], ``theta`` (K, N) the headings [rad, continuous], ``v``
+    (K, N) the forward speeds [m/s] and ``omega`` (K, N) the yaw rates [rad/s] commanded over [t_k, t_k+1] (0 at the
+    last sample). Robot i is the track ``robot<i+1>``."""
+
+    axle: Array
+    theta: Array
+    v: Array
+    omega: Array
 
 
 @dataclass(frozen=True)
@@ -105,6 +119,8 @@ class Motion:
     trail: str | None = None
     notes: tuple[str, ...] = ()
     low_obstacles: tuple[Any, ...] = ()
+    #: a differential-drive chain's axle poses and commands (the ROS 2 bag's ``cmd_vel`` / ``odom``), else None
+    diff_drive: DiffDrive | None = None
 
     def __post_init__(self) -> None:
         t = np.asarray(self.t, dtype=float)
@@ -118,6 +134,14 @@ class Motion:
             shp = np.shape(ln.points)
             if len(shp) != 3 or shp[0] != k or shp[2] != 3 or shp[1] < 2 or not np.all(np.isfinite(ln.points)):
                 raise ParameterError(f"line {ln.name}: points must be finite with shape ({k}, M >= 2, 3), got {shp}")
+        dd = self.diff_drive
+        if dd is not None:
+            n = sum(1 for tr in self.tracks if tr.role in ("robot", "leader"))
+            shapes = {"axle": (k, n, 2), "theta": (k, n), "v": (k, n), "omega": (k, n)}
+            for key, shape in shapes.items():
+                arr = getattr(dd, key)
+                if np.shape(arr) != shape or not np.all(np.isfinite(arr)):
+                    raise ParameterError(f"diff_drive.{key} must be finite with shape {shape}, got {np.shape(arr)}")
 
     def inflated_in_room(self) -> tuple[Any, ...]:
         """The grown obstacles cut to the room (the walls grown by r reach r beyond it), as polygons to draw."""
@@ -233,6 +257,7 @@ def chain_motion(plan: Any, env: Any, chain_params: Any = None, title: str | Non
     )
     obs, inf, bounds = _room_parts(env)
     n = int(np.asarray(plan.robots).shape[1])
+    heading = getattr(plan, "heading", None)  # None for an omnidirectional plan
     verdict = "" if plan.success else " — FAILED"
     return tethered_chain(
         t=plan.t,
@@ -248,6 +273,9 @@ def chain_motion(plan: Any, env: Any, chain_params: Any = None, title: str | Non
         view=_known_view(env),
         low_obstacles=tuple(getattr(env, "low_obstacles", ())),
         tension=getattr(plan, "winch_tension", None),
+        diff_drive=None
+        if heading is None
+        else DiffDrive(*(np.asarray(a, dtype=float) for a in (plan.axle, heading, plan.drive_v, plan.drive_omega))),
     )
 
 
@@ -271,8 +299,12 @@ def tethered_chain(
     view: tuple[float, float, float, float] | None = None,
     low_obstacles: tuple[Any, ...] = (),
     tension: Array | None = None,
+    diff_drive: DiffDrive | None = None,
 ) -> Motion:
     """Motion of a tethered chain: ``robots`` (K, N, 2) [m] at stamps ``t`` (K,) [s], robot N the leader.
+
+    ``diff_drive``: a differential-drive chain's axle poses and commands (``robots`` are then the tethers' exit
+    points); each robot's track then carries its heading as ``yaw`` [rad].
 
     Robots stand at the tether exit height H (``cat.end_height``), the anchor at ``cat.base_height``; tether i hangs
     from robot i−1 (the anchor for i = 1) to robot i as the catenary of ``cat`` (a
@@ -287,7 +319,8 @@ def tethered_chain(
     tracks = []
     for i in range(n):
         xyz = np.column_stack([robots[:, i], np.full(k, h)])
-        tracks.append(Track(f"robot{i + 1}", xyz, "leader" if i == n - 1 else "robot", radius=radius))
+        yaw = None if diff_drive is None else np.asarray(diff_drive.theta, dtype=float)[:, i]
+        tracks.append(Track(f"robot{i + 1}", xyz, "leader" if i == n - 1 else "robot", radius=radius, yaw=yaw))
     lines = []
     prev, h_prev = np.broadcast_to(base, (k, 2)), float(cat.base_height)
     T = None if tension is None else np.asarray(tension, dtype=float).reshape(k, n)
@@ -320,6 +353,7 @@ def tethered_chain(
             + f", rho = {cat.mass_per_length:g} kg/m)",
         ),
         low_obstacles=tuple(low_obstacles),
+        diff_drive=diff_drive,
     )
 
 

@@ -69,9 +69,22 @@ class Scenario:
     n_robots: int
     params: dict[str, Any] = field(default_factory=dict)
     source: Path | None = None
+    #: the leader's final heading [rad] (differential drive only), or None: a scenario file's ``goal = [x, y,
+    #: theta]`` gives it in degrees (``goal`` is then the (2,) position)
+    goal_heading: float | None = None
 
     def __post_init__(self) -> None:
         label = self._label()
+        if np.shape(self.goal) == (3,):  # [x, y, theta]: theta in degrees
+            goal = list(self.goal)
+            if self.goal_heading is not None:
+                raise ParameterError(f"{label}: the goal heading is given twice (goal = [x, y, theta], goal_heading)")
+            theta = _finite_array(goal[2:], "goal heading (degrees)", label)[0]
+            self.goal, self.goal_heading = list(goal[:2]), math.radians(float(theta))
+        if self.goal_heading is not None:
+            if isinstance(self.goal_heading, bool) or not math.isfinite(float(self.goal_heading)):
+                raise ParameterError(f"{label}: the goal heading must be a finite angle, got {self.goal_heading!r}")
+            self.goal_heading = float(self.goal_heading)
         if isinstance(self.n_robots, bool | np.bool_) or not isinstance(self.n_robots, int | np.integer):
             raise ParameterError(f"{label}: robots must be an integer >= 1, got {self.n_robots!r}")
         if self.n_robots < 1:
