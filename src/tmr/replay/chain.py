@@ -498,6 +498,7 @@ def _wheel_report(setup: Any, drv: Any, axle: Array, theta: Array, sub: int, dt:
         heading_error=np.abs(np.angle(np.exp(1j * (theta - th_ref)))),
         lateral_demand=np.abs(ref.lateral[::sub][:K]),
         peak_wheel=drv.peak_wheel,
+        peak_wheel_at=drv.peak_wheel_at,
         peak_cmd=drv.peak_cmd,
         saturated_time=drv.saturated_steps * dt,
         peak_slip=drv.peak_slip,

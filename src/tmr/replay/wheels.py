@@ -317,6 +317,7 @@ class WheelDriver:
     q_wheel_vel: NDArray[np.int64]  # (N, 2) dof addresses of the left, right wheel
     act: NDArray[np.int64]  # (N, 2) actuator ids left, right
     peak_wheel: Array = field(default_factory=lambda: np.zeros(0))  # (N,) largest |wheel speed| measured [rad/s]
+    peak_wheel_at: Array = field(default_factory=lambda: np.zeros(0))  # (N,) when [s]
     peak_cmd: Array = field(default_factory=lambda: np.zeros(0))  # (N,) largest |wheel command| before the limit
     saturated_steps: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     peak_slip: Array = field(default_factory=lambda: np.zeros(0))  # (N,) largest |lateral axle speed| [m/s]
@@ -337,7 +338,9 @@ class WheelDriver:
         aid = mujoco.mjtObj.mjOBJ_ACTUATOR
         act = np.array([[mujoco.mj_name2id(model, aid, f"r{i + 1}_a{s}") for s in ("l", "r")] for i in range(n)])
         z = np.zeros(n)
-        return cls(setup, model, q, v, w, act, z.copy(), z.copy(), np.zeros(n, dtype=np.int64), z.copy(), z.copy())
+        return cls(
+            setup, model, q, v, w, act, z.copy(), z.copy(), z.copy(), np.zeros(n, dtype=np.int64), z.copy(), z.copy()
+        )
 
     def pose(self, d: Any) -> tuple[Array, Array]:
         """(axle (N, 2) [m], heading (N,) [rad]) of the simulated chassis."""
@@ -381,7 +384,9 @@ class WheelDriver:
         """After a physics step: the wheels' speeds and the chassis' lateral speed."""
         _, th = self.pose(d)
         w = np.abs(d.qvel[self.q_wheel_vel]).max(axis=1)
-        self.peak_wheel = np.maximum(self.peak_wheel, w)
+        faster = w > self.peak_wheel
+        self.peak_wheel = np.where(faster, w, self.peak_wheel)
+        self.peak_wheel_at = np.where(faster, now, self.peak_wheel_at)
         vel = d.qvel[self.v_pose]
         lat = np.abs(-np.sin(th) * vel[:, 0] + np.cos(th) * vel[:, 1])
         more = lat > self.peak_slip
@@ -403,7 +408,116 @@ class WheelReport:
     heading_error: Array  # (K, N) |wrap(θ − θ_r)|
     lateral_demand: Array  # (K, N) |lateral axle speed| the plan demands
     peak_wheel: Array  # (N,)
+    peak_wheel_at: Array  # (N,)
     peak_cmd: Array  # (N,)
     saturated_time: Array  # (N,) physics time with a clipped wheel command [s]
     peak_slip: Array  # (N,)
     peak_slip_at: Array  # (N,)
+
+    def failures(self, t: Array, tolerance: float) -> list[tuple[float, str, str]]:
+        """The wheeled robots' failed checks as (time [s], check, message), for the verdict
+        (:func:`tmr.replay.report.chain_verdict`): the plan demands sideways motion (lateral axle speed >
+        :data:`LATERAL_DEMAND_TOL`), the axle off its reference by more than ``tolerance`` [m], the heading by more
+        than ``config.heading_tolerance``, a wheel faster than its limit by more than :data:`WHEEL_SPEED_SLACK`. Each
+        check names its first robot and time (``t``: (K,) sample times [s])."""
+        from tmr.replay.report import first_over
+
+        out: list[tuple[float, str, str]] = []
+        lat = self.lateral_demand
+        if (at := first_over(lat > LATERAL_DEMAND_TOL, lat)) is not None:
+            k, i = at
+            kk = int(np.argmax(lat[:, i]))
+            out.append(
+                (
+                    float(t[k]),
+                    "sideways",
+                    f"robot {i + 1} is asked to move sideways at {lat[k, i]:.3f} m/s at t = {t[k]:.2f} s (largest "
+                    f"{lat[kk, i]:.3f} m/s at t = {t[kk]:.2f} s): a differential drive cannot (the plan is "
+                    f"{self.config.plan_drive}, replayed on {self.config.model.name} wheels)",
+                )
+            )
+        e = self.axle_error
+        if (at := first_over(e > tolerance, e)) is not None:
+            k, i = at
+            out.append(
+                (
+                    float(t[k]),
+                    "axle-tracking",
+                    f"robot {i + 1} axle tracking error {e[k, i]:.3f} m > tolerance {tolerance:g} m at "
+                    f"t = {t[k]:.2f} s (largest {float(e.max()):.3f} m)",
+                )
+            )
+        h = self.heading_error
+        tol_h = self.config.heading_tolerance
+        if (at := first_over(h > tol_h, h)) is not None:
+            k, i = at
+            out.append(
+                (
+                    float(t[k]),
+                    "heading",
+                    f"robot {i + 1} heading error {h[k, i]:.3f} rad > tolerance {tol_h:g} rad at t = {t[k]:.2f} s "
+                    f"(largest {float(h.max()):.3f} rad)",
+                )
+            )
+        lim = self.config.wheel_limit
+        for i in np.flatnonzero(self.peak_wheel > lim * (1 + WHEEL_SPEED_SLACK)):
+            out.append(
+                (
+                    float(self.peak_wheel_at[i]),
+                    "wheel-speed",
+                    f"robot {i + 1} wheel speed {self.peak_wheel[i]:.2f} rad/s > limit {lim:.2f} rad/s at "
+                    f"t = {self.peak_wheel_at[i]:.2f} s (the wheels are driven past their limit)",
+                )
+            )
+        return out
+
+    def document(self, t: Array) -> dict[str, Any]:
+        """The ``wheels`` section of ``replay.json`` (units: m, rad, rad/s, m/s, s)."""
+        robots = []
+        for i in range(self.axle_error.shape[1]):
+            ka = int(np.argmax(self.axle_error[:, i]))
+            kh = int(np.argmax(self.heading_error[:, i]))
+            kl = int(np.argmax(self.lateral_demand[:, i]))
+            robots.append(
+                {
+                    "name": f"robot{i + 1}",
+                    "axle_error_max": float(self.axle_error[ka, i]),
+                    "axle_error_max_at": float(t[ka]),
+                    "axle_error_rms": float(np.sqrt(np.mean(self.axle_error[:, i] ** 2))),
+                    "heading_error_max": float(self.heading_error[kh, i]),
+                    "heading_error_max_at": float(t[kh]),
+                    "wheel_speed_peak": float(self.peak_wheel[i]),
+                    "wheel_speed_peak_at": float(self.peak_wheel_at[i]),
+                    "wheel_command_peak": float(self.peak_cmd[i]),
+                    "wheel_limit": self.config.wheel_limit,
+                    "saturated_time": float(self.saturated_time[i]),
+                    "lateral_slip_peak": float(self.peak_slip[i]),
+                    "lateral_slip_peak_at": float(self.peak_slip_at[i]),
+                    "lateral_demand_max": float(self.lateral_demand[kl, i]),
+                    "lateral_demand_max_at": float(t[kl]),
+                }
+            )
+        return {
+            "config": self.config.record(),
+            "robots": robots,
+            "series": {
+                "axle": self.axle,
+                "theta": self.theta,
+                "axle_error": self.axle_error,
+                "heading_error": self.heading_error,
+            },
+        }
+
+    def summary(self) -> list[str]:
+        """Console lines, one per robot."""
+        lim = self.config.wheel_limit
+        lines = []
+        for i in range(self.axle_error.shape[1]):
+            lines.append(
+                f"  robot{i + 1}   wheels: axle error max {1000 * self.axle_error[:, i].max():.2f} mm, heading error "
+                f"max {math.degrees(self.heading_error[:, i].max()):.2f} deg; wheel speed peak "
+                f"{self.peak_wheel[i]:.2f} of {lim:.2f} rad/s (commanded {self.peak_cmd[i]:.2f}, clipped "
+                f"{self.saturated_time[i]:.2f} s); lateral slip max {1000 * self.peak_slip[i]:.2f} mm/s; "
+                f"sideways demand max {self.lateral_demand[:, i].max():.3f} m/s"
+            )
+        return lines
