@@ -95,6 +95,7 @@ class WheelConfig:
         friction: wheel-floor sliding friction μ.
         wheel_mass: mass of one wheel as a fraction of the robot mass.
         heading_tolerance: heading error beyond which the replay fails [rad].
+        armature_share: the reflected rotor inertia of a wheel's motor as a multiple of (M / 2) r_w² (:meth:`armature`).
     """
 
     model: RobotModel
@@ -108,16 +109,24 @@ class WheelConfig:
     servo_time: float = 0.005
     friction: float = 1.0
     wheel_mass: float = 0.02
-    heading_tolerance: float = 0.2
+    heading_tolerance: float = 0.1
+    armature_share: float = 1.0
 
     @property
     def wheel_limit(self) -> float:
         """w_max = (v_max + ω_max L / 2) / r_w [rad/s]."""
         return (self.model.v_max + self.model.omega_max * self.track / 2) / self.wheel_radius
 
+    def armature(self, robot_mass: float) -> float:
+        """The rotor inertia a gear motor reflects onto each wheel's hinge [kg m²], taken equal to the robot's share
+        (M / 2) r_w² (a geared motor's reflected inertia is of that order; without it the light wheel spins up
+        against MuJoCo's soft contact faster than the ground can roll it, and skids)."""
+        return self.armature_share * 0.5 * robot_mass * self.wheel_radius**2
+
     def servo_gain(self, robot_mass: float) -> float:
-        """k_w [N m s/rad] of each wheel's velocity servo for a robot of ``robot_mass`` [kg]."""
-        return 0.5 * robot_mass * self.wheel_radius**2 / self.servo_time
+        """k_w = ((M / 2) r_w² + armature) / τ_w [N m s/rad], each wheel's velocity servo for a robot of
+        ``robot_mass`` [kg]."""
+        return (0.5 * robot_mass * self.wheel_radius**2 + self.armature(robot_mass)) / self.servo_time
 
     def record(self) -> dict[str, Any]:
         """JSON-ready description (replay.json ``wheels.config``)."""
@@ -135,6 +144,7 @@ class WheelConfig:
             "friction": self.friction,
             "wheel_mass_fraction": self.wheel_mass,
             "heading_tolerance": self.heading_tolerance,
+            "armature": self.armature_share,
             "lateral_demand_tolerance": LATERAL_DEMAND_TOL,
             "wheel_speed_slack": WHEEL_SPEED_SLACK,
         }
@@ -256,6 +266,7 @@ class WheelSetup:
         mw = wc.wheel_mass * M
         izz = 0.5 * M * rf * rf
         rc = 0.5 * rw  # caster radius
+        arm = wc.armature(M)
         xc = 0.7 * rf  # casters ahead of and behind the axle
         z0 = rw  # footprint cylinder starts at the wheel axle's height
         hz = max(0.5 * (height - z0), 0.02)
@@ -288,9 +299,11 @@ class WheelSetup:
             f'<body name="r{n}_base" euler="0 0 {th0!r}">'
             f'<geom name="r{n}_caster_f" {caster} pos="{xc!r} 0 {rc!r}" mass="0"/>'
             f'<geom name="r{n}_caster_b" {caster} pos="{-xc!r} 0 {rc!r}" mass="0"/>'
-            f'<body name="r{n}_wl" pos="0 {L / 2!r} {rw!r}"><joint name="r{n}_wl" type="hinge" axis="0 1 0"/>'
+            f'<body name="r{n}_wl" pos="0 {L / 2!r} {rw!r}">'
+            f'<joint name="r{n}_wl" type="hinge" axis="0 1 0" armature="{arm!r}"/>'
             f'<geom name="r{n}_wl" {wheel_geom}/></body>'
-            f'<body name="r{n}_wr" pos="0 {-L / 2!r} {rw!r}"><joint name="r{n}_wr" type="hinge" axis="0 1 0"/>'
+            f'<body name="r{n}_wr" pos="0 {-L / 2!r} {rw!r}">'
+            f'<joint name="r{n}_wr" type="hinge" axis="0 1 0" armature="{arm!r}"/>'
             f'<geom name="r{n}_wr" {wheel_geom}/></body>'
             "</body>" + tether_xml + "</body>"
         )
