@@ -5,7 +5,8 @@ convex prisms (:mod:`tmr.replay.world`); the fixed anchor at its height; N robot
 robot radius on two slides (x, y) and a hinge (yaw), driven by force-limited actuators that track the planned
 trajectory (feed-forward of mass × reference acceleration and of the planned tethers' horizontal pull, plus PD
 feedback); N tethers (:mod:`tmr.replay.tether`), tether j leaving robot j's winch at the exit height and held at
-robot j-1's exit point (the anchor for j = 1).
+robot j-1's exit point (the anchor for j = 1). Differential-drive robots (``wheels=``, :mod:`tmr.replay.wheels`) are
+instead chassis on two driven wheels and two casters, the tether leaving at the exit point ahead of the axle.
 
 :func:`replay_chain` steps the model over the plan and records, at every plan sample, the robots' positions, each
 tether's lowest point, paid-out length and end tensions next to the static catenary of the same ends
