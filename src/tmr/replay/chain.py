@@ -95,7 +95,7 @@ class ChainModel:
     xml: str
     tethers: list[TetherState]
     robot_q: NDArray[np.int64]  # (N, 3) qpos addresses of x, y, yaw
-    robot_act: NDArray[np.int64]  # (N, 3) actuator ids
+    robot_act: NDArray[np.int64]  # (N, 3) actuator ids x, y, yaw (wheeled robots: (N, 2) left, right wheel)
     start: Array  # (N, 2) robot positions at qpos0 [m]
     geom_kind: NDArray[np.int64]  # 0 floor, 1 obstacle/wall, 2 tether, 3 robot, -1 other
     geom_owner: NDArray[np.int64]  # tether or robot index (0-based) of a geom
