@@ -8,8 +8,11 @@ rests on its wheels and casters under gravity), with
   ``velocity`` actuator whose ``ctrlrange`` is the wheel-speed limit
   w_max = (v_max + ω_max L / 2) / r_w [rad/s] — the fastest wheel a command inside the plan's (v, ω) box needs;
 - two passive casters (spheres ahead of and behind the axle, frictionless contacts: ``condim="1"``);
-- Coulomb friction μ = 1 between the wheels and the floor (elliptic cone, ``condim="3"``): a wheel grips sideways,
-  so the chassis moves sideways only if the tether's pull beats the friction (measured: the lateral slip speed);
+- Coulomb friction μ = 1 between the wheels and the floor (``condim="3"``, MuJoCo's default pyramidal cone, the
+  floor's contact softness): a wheel grips sideways, so the chassis moves sideways only as far as the soft contact
+  creeps or the tether's pull beats the friction (measured: the lateral slip speed);
+- on each wheel hinge the reflected rotor inertia of a gear motor, ``armature`` = (M / 2) r_w² (without it the light
+  wheel spins up against the soft contact faster than the ground can roll it, and the wheels skid);
 - the tether attached at the exit point, b ahead of the axle, at the exit height.
 
 The drive (:class:`WheelDriver`): the reference pose (c_r, θ_r) and command (v_r, ω_r) of every physics step, the
@@ -22,7 +25,8 @@ ICRA) with the error in the robot's frame, e_x = e(θ)·(c_r − c), e_y = e_⊥
 (|v_r| in the heading term keeps the law stable when reversing; K_h, not in Kanayama's law, turns the heading back
 when v_r ≈ 0, where the other terms vanish), then inverse kinematics w_R,L = (v ± ω L / 2) / r_w [rad/s], both scaled
 down by the same factor when one exceeds w_max (the turn's curvature is kept). The velocity servo of each wheel
-applies the torque k_w (w_cmd − w) [N m]; no torque limit (the floor's friction bounds the traction).
+applies the torque k_w (w_cmd − w) [N m], k_w = ((M / 2) r_w² + armature) / τ_w; no torque limit (the floor's
+friction bounds the traction).
 
 References: a diff-drive plan (``trajectories.json`` x, y, theta, v, omega: the exact arcs of the held cmd_vel,
 :func:`tmr.model.diffdrive.unicycle_step`), or an omnidirectional plan replayed on wheels (the robot is asked to follow
