@@ -183,7 +183,7 @@ def wheel_config(
     geo = WHEEL_GEOMETRY.get(model.name)
     if (wheel_radius is None or track is None) and geo is None:
         raise ReplayError(
-            f"no wheel geometry for robot model {model.name!r}: give --wheel-radius and --track "
+            f"no wheel geometry for robot model {model.name!r}: give --wheel-radius and --wheel-track "
             f"(presets: {', '.join(sorted(WHEEL_GEOMETRY))})"
         )
     r = wheel_radius if wheel_radius is not None else geo[0]  # type: ignore[index]
