@@ -212,5 +212,5 @@ def test_cli_refusals_and_outputs(tmp_path, capsys):
     assert cmd[0] == "t,linear_x,angular_z,turn_in_place" and len(cmd) == len(r["t"]) + 1
     header = (out / "trajectories.csv").read_text().splitlines()[0].split(",")
     assert header[:3] == ["t", "robot1_x", "robot1_y"] and "robot3_omega" in header
-    assert cli.main(["replay", str(out)]) == 2  # the MuJoCo replay models omnidirectional robots only
+    assert cli.main(["replay", str(out), "--drive", "omni"]) == 2  # a diff-drive plan replays on wheels only
     assert "differential-drive" in capsys.readouterr().err

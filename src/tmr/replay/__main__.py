@@ -75,6 +75,25 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
         help="ground chains: winch law: hold the horizontal tension T0 (the planner's model, default) or the "
         "winch-end tension (drone chains always hold the planner's: T_w at its winch_end)",
     )
+    p.add_argument(
+        "--drive",
+        choices=["omni", "diff"],
+        help="ground chains: the robots' bodies: omnidirectional (an omni plan's default) or differential drives on "
+        "two wheels and casters (a diff-drive plan's, and the only one it takes); --drive diff on an omni plan "
+        "replays it on wheels (its sideways motions are caught)",
+    )
+    p.add_argument(
+        "--robot-model",
+        metavar="NAME|FILE.toml",
+        help="--drive diff on an omni plan: the robot model (a preset of tmr plan --robot-model or a file; default "
+        "turtlebot3_burger); a diff-drive plan replays on its own model",
+    )
+    p.add_argument("--wheel-radius", type=positive_float, help="--drive diff: wheel radius [m] (default: the preset's)")
+    p.add_argument(
+        "--wheel-track",
+        type=positive_float,
+        help="--drive diff: distance between the two wheels [m] (default: the preset's)",
+    )
     # no --seed (nothing random), no --html/--export: the replay's --gif is its own (rendered from the simulation)
     add_common(p, out=None, out_help="where to write the replay (default RUN/replay)", views=False)
     return p
@@ -122,7 +141,7 @@ def _chain(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str
             cfg = replace(cfg, **{name: value})
     LOG.debug("MuJoCo replay of %s", run.label)
     with _bar("replay") as progress:
-        rp = replay_chain(run, cfg, progress=progress)
+        rp = replay_chain(run, cfg, progress=progress, wheels=args.wheels)
     verdict = chain_verdict(rp, run)
     names = write_chain_outputs(out, rp, run, verdict, plots=not args.no_plots)
     if args.gif:
@@ -138,6 +157,13 @@ def _chain(args: argparse.Namespace, run: Any, out: Path) -> tuple[int, list[str
         e = rp.tracking_error[:, i]
         rms = 1000 * float((e**2).mean()) ** 0.5
         lines.append(f"  robot{i + 1}   tracking error max {1000 * e.max():.2f} mm, rms {rms:.2f} mm")
+    if rp.wheels is not None:
+        wc = rp.wheels.config
+        lines.append(
+            f"  wheels    {wc.plan_drive} plan on {wc.model.name} wheels (radius {wc.wheel_radius:g} m, track "
+            f"{wc.track:g} m, limit {wc.wheel_limit:.2f} rad/s); tracking error above: the tethers' exit points"
+        )
+        lines += rp.wheels.summary()
     for j in range(rp.lowest.shape[1]):
         k = int(rp.lowest[:, j].argmin())
         line = (
@@ -261,11 +287,26 @@ def _main(args: argparse.Namespace) -> int:
                 f"{args.run} is a tmr.ccma run: the physics replay covers tmr.plan and tmr.mcdpr runs"
             ) from exc
         raise
-    if run.kind == "chain" and (run.record.get("params") or {}).get("drive") == "diff":
-        raise TmrError(
-            f"{args.run} is a differential-drive plan: the MuJoCo replay models omnidirectional robots only (a "
-            "wheeled replay is not there yet)"
-        )
+    wheel_flags = (
+        ("--drive", args.drive),
+        ("--robot-model", args.robot_model),
+        ("--wheel-radius", args.wheel_radius),
+        ("--wheel-track", args.wheel_track),
+    )
+    for flag, value in wheel_flags:
+        if value is not None and run.kind != "chain":
+            raise TmrError(f"{flag} applies to ground-chain runs; {args.run} is a {run.kind} run")
+    args.wheels = None
+    if run.kind == "chain":
+        plan_diff = (run.record.get("params") or {}).get("drive") == "diff"
+        if plan_diff and args.drive == "omni":
+            raise TmrError(f"{args.run} is a differential-drive plan: it replays on wheels only (no --drive omni)")
+        if plan_diff or args.drive == "diff":
+            from tmr.replay.wheels import wheel_config
+
+            args.wheels = wheel_config(run, args.robot_model, args.wheel_radius, args.wheel_track)
+        elif any(v is not None for _, v in wheel_flags[1:]):
+            raise TmrError("--robot-model, --wheel-radius and --wheel-track go with --drive diff")
     if args.tether_density is not None and run.kind != "drone":
         raise TmrError(f"--tether-density applies to drone-chain runs; {args.run} is a {run.kind} run")
     for flag, value in (("--track", args.track), ("--winch", args.winch)):

@@ -5,7 +5,8 @@ convex prisms (:mod:`tmr.replay.world`); the fixed anchor at its height; N robot
 robot radius on two slides (x, y) and a hinge (yaw), driven by force-limited actuators that track the planned
 trajectory (feed-forward of mass × reference acceleration and of the planned tethers' horizontal pull, plus PD
 feedback); N tethers (:mod:`tmr.replay.tether`), tether j leaving robot j's winch at the exit height and held at
-robot j-1's exit point (the anchor for j = 1).
+robot j-1's exit point (the anchor for j = 1). Differential-drive robots (``wheels=``, :mod:`tmr.replay.wheels`) are
+instead chassis on two driven wheels and two casters, the tether leaving at the exit point ahead of the axle.
 
 :func:`replay_chain` steps the model over the plan and records, at every plan sample, the robots' positions, each
 tether's lowest point, paid-out length and end tensions next to the static catenary of the same ends
@@ -94,7 +95,7 @@ class ChainModel:
     xml: str
     tethers: list[TetherState]
     robot_q: NDArray[np.int64]  # (N, 3) qpos addresses of x, y, yaw
-    robot_act: NDArray[np.int64]  # (N, 3) actuator ids
+    robot_act: NDArray[np.int64]  # (N, 3) actuator ids x, y, yaw (wheeled robots: (N, 2) left, right wheel)
     start: Array  # (N, 2) robot positions at qpos0 [m]
     geom_kind: NDArray[np.int64]  # 0 floor, 1 obstacle/wall, 2 tether, 3 robot, -1 other
     geom_owner: NDArray[np.int64]  # tether or robot index (0-based) of a geom
@@ -131,6 +132,8 @@ class ChainReplay(RealTimeFactors):
     #: (K, N) the simulated cable's least height above the top of a low obstacle it hangs over [m] (+inf: over
     #: none); None without low obstacles (:func:`low_obstacle_gaps`)
     low_gap: Array | None = None
+    #: wheeled robots (:mod:`tmr.replay.wheels`): what the wheels did; None for the omnidirectional bodies
+    wheels: Any = None
 
 
 #: simulated time at the start pose before the plan's first sample [s] (lets the constraint forces settle).
@@ -139,9 +142,10 @@ WARMUP = 0.25
 CONTACT_KINDS = ("robot-obstacle", "robot-robot", "tether-obstacle", "tether-floor")
 
 
-def build_chain_model(run: Any, cfg: ReplayConfig, track: Array | None = None) -> ChainModel:
+def build_chain_model(run: Any, cfg: ReplayConfig, track: Array | None = None, wheels: Any = None) -> ChainModel:
     """Compile the MuJoCo model of a :class:`tmr.io.rundir.ChainRun` (robots start at the tracked trajectory's first
-    sample, yaw 0)."""
+    sample, yaw 0); ``wheels``: a :class:`tmr.replay.wheels.WheelSetup` for differential-drive robots on wheels
+    (chassis at the start axle and heading, tethers from the exit points), None for the omnidirectional bodies."""
     import mujoco
 
     rec = run.record
@@ -163,13 +167,17 @@ def build_chain_model(run: Any, cfg: ReplayConfig, track: Array | None = None) -
     specs = []
     for j in range(n):
         root_world = (sl[j][0], sl[j][1], H)
+        root_local = (0.0, 0.0, H)
+        if wheels is not None:  # the exit point, b ahead of the axle at the start heading (chassis frame world-aligned)
+            b, th0 = wheels.config.model.exit_offset, float(wheels.start_theta[j])
+            root_local = (b * math.cos(th0), b * math.sin(th0), H)
         far_world = tuple(anchor) if j == 0 else (sl[j - 1][0], sl[j - 1][1], H)
         specs.append(
             TetherSpec(
                 name=f"t{j + 1}",
                 n_links=cfg.n_links,
                 root_body=f"r{j + 1}",
-                root_local=(0.0, 0.0, H),
+                root_local=root_local,
                 root_world=root_world,
                 end_body="world" if j == 0 else f"r{j}",
                 end_world=far_world,  # type: ignore[arg-type]
@@ -181,7 +189,7 @@ def build_chain_model(run: Any, cfg: ReplayConfig, track: Array | None = None) -
     bodies = []
     hz = cfg.robot_height / 2
     izz = 0.5 * cfg.robot_mass * r * r
-    for i in range(n):
+    for i in range(n if wheels is None else 0):
         bodies.append(
             f'<body name="r{i + 1}" pos="{sl[i][0]!r} {sl[i][1]!r} 0">'
             f'<joint name="r{i + 1}_x" type="slide" axis="1 0 0"/>'
@@ -194,10 +202,12 @@ def build_chain_model(run: Any, cfg: ReplayConfig, track: Array | None = None) -
             f'<geom type="cylinder" size="0.03 {H / 2!r}" pos="0 0 {H / 2!r}" contype="0" conaffinity="0" '
             f'rgba="0.2 0.2 0.2 1"/>' + tether_body_xml(specs[i]) + "</body>"
         )
+    if wheels is not None:
+        bodies = [wheels.body_xml(i, H, cfg.robot_height, tether_body_xml(specs[i])) for i in range(n)]
     extras = [tether_extra_xml(s) for s in specs]
     kp, kv, fl = cfg.kp, cfg.kv, cfg.force_limit
-    acts = []
-    for i in range(n):
+    acts = [] if wheels is None else [wheels.actuator_xml(i) for i in range(n)]
+    for i in range(n if wheels is None else 0):
         for ax in ("x", "y"):
             acts.append(
                 f'<general name="r{i + 1}_a{ax}" joint="r{i + 1}_{ax}" gainprm="{kp!r}" biastype="affine" '
@@ -240,7 +250,8 @@ def build_chain_model(run: Any, cfg: ReplayConfig, track: Array | None = None) -
         return int(mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, name))
 
     robot_q = np.array([[jq(f"r{i + 1}_{a}") for a in ("x", "y", "yaw")] for i in range(n)])
-    robot_act = np.array([[aid(f"r{i + 1}_a{a}") for a in ("x", "y", "yaw")] for i in range(n)])
+    axes = ("x", "y", "yaw") if wheels is None else ("l", "r")
+    robot_act = np.array([[aid(f"r{i + 1}_a{a}") for a in axes] for i in range(n)])
     kinds = np.full(model.ngeom, -1)
     owner = np.full(model.ngeom, -1)
     names = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, k) or "" for k in range(model.ngeom)]
@@ -279,13 +290,15 @@ def _contact_kind(k1: int, k2: int) -> str | None:
     return None
 
 
-def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None) -> ChainReplay:
+def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None, wheels: Any = None) -> ChainReplay:
     """Simulate the run's plan in MuJoCo and measure it (see the module docstring).
 
     Args:
         run: a :class:`tmr.io.rundir.ChainRun`.
         cfg: replay choices.
         progress: optional callable(fraction) called every plan sample.
+        wheels: a :class:`tmr.replay.wheels.WheelConfig`: differential-drive robots on two wheels and casters
+            (:mod:`tmr.replay.wheels`) instead of the omnidirectional bodies; their report is ``ChainReplay.wheels``.
     """
     import mujoco
 
@@ -293,7 +306,19 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
     if cfg.track not in ("filtered", "raw"):
         raise ReplayError(f"track must be 'filtered' or 'raw', got {cfg.track!r}")
     traj = run.filtered if cfg.track == "filtered" else run.robots
-    cm = build_chain_model(run, cfg, traj)
+    setup = None
+    if wheels is not None:
+        from tmr.replay.wheels import WheelSetup, wheel_reference
+
+        t_ = np.asarray(run.t, dtype=float)
+        Ts_ = float(run.record["Ts"])
+        sub_ = max(1, int(round(Ts_ / cfg.timestep)))
+        K_ = t_.size + int(round(cfg.settle / Ts_))
+        times_ = t_[0] + np.arange((K_ - 1) * sub_ + 1) * cfg.timestep
+        wref = wheel_reference(run, wheels, t_, times_, traj)
+        setup = WheelSetup(wheels, cfg.robot_mass, wref.axle[0].copy(), wref.theta[0].copy(), wref)
+        traj = np.concatenate([wref.exit[:1], np.asarray(traj)[1:]], axis=0)  # the tethers leave the exit points
+    cm = build_chain_model(run, cfg, traj, wheels=setup)
     m = cm.model
     d = mujoco.MjData(m)
     n = traj.shape[1]
@@ -340,12 +365,23 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
     rec_tw = np.zeros((K, n))
     rec_tf = np.zeros((K, n))
     ax_ids = cm.robot_act[:, :2]
-    yaw_ids = cm.robot_act[:, 2]
+    yaw_ids = cm.robot_act[:, 2] if setup is None else cm.robot_act[:, :0]
     rq = cm.robot_q
     diverged = None
+    drv = None
+    if setup is not None:
+        from tmr.replay.wheels import WheelDriver
+
+        drv = WheelDriver.build(setup, m)
+        rec_axle = np.zeros((K, n, 2))
+        rec_theta = np.zeros((K, n))
 
     def record(k: int) -> None:
-        rec_actual[k] = cm.start + d.qpos[rq[:, :2]]
+        if drv is None:
+            rec_actual[k] = cm.start + d.qpos[rq[:, :2]]
+        else:
+            rec_actual[k] = drv.exit(d)
+            rec_axle[k], rec_theta[k] = drv.pose(d)
         rec_nodes.append(np.stack([ts.nodes(d) for ts in cm.tethers]))
         rec_qpos.append(np.array(d.qpos))
         for j, ts in enumerate(cm.tethers):
@@ -367,8 +403,11 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
             ts.t0 = float(tension[0, j])
     # warm-up at the start pose (not recorded): the soft constraints build up the cable's static forces
     for _ in range(int(round(WARMUP / cfg.timestep))):
-        d.ctrl[ax_ids] = u_hold
-        d.ctrl[yaw_ids] = 0.0
+        if drv is None:
+            d.ctrl[ax_ids] = u_hold
+            d.ctrl[yaw_ids] = 0.0
+        else:
+            drv.hold(d)
         for ts in cm.tethers:
             ts.update(m, d)
         mujoco.mj_step(m, d)
@@ -378,8 +417,11 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
     step = 0
     for k in range(1, K):
         for _ in range(sub):
-            d.ctrl[ax_ids] = u_ref[step]
-            d.ctrl[yaw_ids] = 0.0
+            if drv is None:
+                d.ctrl[ax_ids] = u_ref[step]
+                d.ctrl[yaw_ids] = 0.0
+            else:
+                drv.command(d, step)
             if planned is not None:
                 for j, ts in enumerate(cm.tethers):
                     ts.t0 = float(tension[step, j])
@@ -387,6 +429,8 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
                 ts.update(m, d)
             mujoco.mj_step(m, d)
             step += 1
+            if drv is not None:
+                drv.measure(d, times[step])
             if d.ncon:
                 _log_contacts(d, cm, contacts, times[step])
         if not np.all(np.isfinite(d.qpos)) or d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number:
@@ -398,7 +442,10 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
             progress(k / (K - 1))
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     K = rec_actual.shape[0]
-    ref_k = np.asarray(p_ref[::sub][:K])
+    ref_k = np.asarray(p_ref[::sub][:K]) if setup is None else setup.reference.exit[::sub][:K]
+    wheel_report = None
+    if drv is not None:
+        wheel_report = _wheel_report(setup, drv, rec_axle[:K], rec_theta[:K], sub, cfg.timestep)
     nodes = rec_nodes[:K]
     lowest = np.array([[float(tn[:, 2].min()) for tn in nd] for nd in nodes])
     root = np.array([[tn[0] for tn in nd] for nd in nodes])  # (K, N, 3) winch exits
@@ -430,6 +477,33 @@ def replay_chain(run: Any, cfg: ReplayConfig | None = None, progress: Any = None
         qpos=rec_qpos[:K],
         built=cm,
         low_gap=low_obstacle_gaps(nodes, run.low_obstacles) if getattr(run, "low_obstacles", None) else None,
+        wheels=wheel_report,
+    )
+
+
+def _wheel_report(setup: Any, drv: Any, axle: Array, theta: Array, sub: int, dt: float) -> Any:
+    """The :class:`tmr.replay.wheels.WheelReport` of a wheeled replay (per plan sample: the physics step's pose
+    against the reference of the same instant)."""
+    from tmr.replay.wheels import WheelReport
+
+    ref = setup.reference
+    K = axle.shape[0]
+    c_ref, th_ref = ref.axle[::sub][:K], ref.theta[::sub][:K]
+    return WheelReport(
+        config=setup.config,
+        axle=axle,
+        theta=theta,
+        axle_reference=c_ref,
+        theta_reference=th_ref,
+        axle_error=np.linalg.norm(axle - c_ref, axis=2),
+        heading_error=np.abs(np.angle(np.exp(1j * (theta - th_ref)))),
+        lateral_demand=np.abs(ref.lateral[::sub][:K]),
+        peak_wheel=drv.peak_wheel,
+        peak_wheel_at=drv.peak_wheel_at,
+        peak_cmd=drv.peak_cmd,
+        saturated_time=drv.saturated_steps * dt,
+        peak_slip=drv.peak_slip,
+        peak_slip_at=drv.peak_slip_at,
     )
 
 

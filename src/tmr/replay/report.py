@@ -94,6 +94,8 @@ def chain_verdict(rp: ChainReplay, run: Any) -> Verdict:
         fails.append((float(rp.t[k]), "tracking", msg))
     if rp.diverged:
         fails.append((float(rp.t[-1]), "diverged", rp.diverged))
+    if getattr(rp, "wheels", None) is not None:  # differential-drive robots on wheels (tmr.replay.wheels)
+        fails += rp.wheels.failures(rp.t, tol)
     fails.sort(key=lambda f: f[0])
     return Verdict(ok=not fails, reason=fails[0][2] if fails else None, failures=tuple(fails))
 
@@ -188,12 +190,14 @@ def chain_document(rp: ChainReplay, run: Any, verdict: Verdict) -> dict[str, Any
         "warmup": WARMUP,
         "integrator": "implicitfast",
     }
+    wheels = {} if getattr(rp, "wheels", None) is None else {"wheels": rp.wheels.document(rp.t)}
     return _head("chain", run, verdict) | {
         "model": model,
         "sim_time": rp.sim_time,
         "steps": rp.steps,
         "robots": robots,
         "tethers": tethers,
+        **wheels,
         "contacts": rp.contacts,
         "series": {
             "t": rp.t,
