@@ -102,6 +102,18 @@ def test_check_flags_speed_acceleration_and_exit_point():
     off = _plan(*_straight())
     off.robots = off.robots + 1e-6  # the tether's point off its pose
     assert diff_drive_check(off, 0.05)[0]["exit_point"].all()
+    # a wheel's rim: driving at 0.2 m/s while turning at 1 rad/s puts the outer wheel at 0.2 + 0.08 = 0.28 m/s
+    axle, heading = [np.zeros((1, 2))], [np.zeros(1)]
+    for _ in range(8):
+        c, th = unicycle_step(axle[-1], heading[-1], np.array([0.2]), np.array([1.0]), 0.05)
+        axle.append(c)
+        heading.append(th)
+    arc = _plan(np.array(axle), np.array(heading))
+    masks, summary = diff_drive_check(arc, 0.05)
+    assert not masks["wheel_speed"].any()  # without a track: no wheel rows
+    arc.params = {"robot_model_params": BURGER | {"track": 0.16}}
+    masks, summary = diff_drive_check(arc, 0.05)
+    assert masks["wheel_speed"][1:8].all() and summary["peak_wheel_rim_speed"] == pytest.approx(0.28)
 
 
 def test_robot_models(tmp_path):
@@ -164,6 +176,8 @@ def test_diff_plan_of_A_passes_with_no_lateral_velocity():
     assert np.max(np.abs(lat)) <= 1e-9
     model = problem.robot_model
     assert np.max(np.abs(v)) <= model.v_max * (1 + 1e-9) and np.max(np.abs(w)) <= model.omega_max * (1 + 1e-9)
+    rim = np.abs(v) + np.abs(w) * model.track / 2  # each wheel's rim speed, the real robot's limit
+    assert np.max(rim) <= model.v_max * (1 + 1e-9) and np.max(rim) > 0.99 * model.v_max
     dv = np.diff(np.vstack([np.zeros((1, 3)), v]), axis=0) / plan.Ts
     assert np.max(np.abs(dv)) <= model.a_max * (1 + 1e-9)
     assert np.allclose(exit_point(plan.axle, plan.heading, model.exit_offset), plan.robots, atol=1e-9)

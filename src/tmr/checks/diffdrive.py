@@ -10,9 +10,9 @@ recorded and the robot model (recorded in the plan's parameters, ``robot_model_p
 - the exit point's offset |p_k − c_k − b e(θ_k)|.
 
 Violation kinds (:data:`DIFF_KINDS`, reported by :func:`tmr.checks.metrics.evaluate` for a plan with headings): a
-lateral velocity above :data:`LATERAL_TOLERANCE`, |v| > v_max, |ω| > ω_max, |v̇| > a_max, |ω̇| > α_max (each beyond a
-relative :data:`RELATIVE_TOLERANCE`), an exit point off its pose by more than :data:`EXIT_TOLERANCE`. A step's
-violation is reported at its sample k.
+lateral velocity above :data:`LATERAL_TOLERANCE`, |v| > v_max, |ω| > ω_max, a wheel rim |v ± ω L/2| > v_max (with
+a track L), |v̇| > a_max, |ω̇| > α_max (each beyond a relative :data:`RELATIVE_TOLERANCE`), an exit point off its pose
+by more than :data:`EXIT_TOLERANCE`. A step's violation is reported at its sample k.
 """
 
 from __future__ import annotations
@@ -45,6 +45,7 @@ DIFF_KINDS = (
     "lateral_velocity",
     "linear_speed",
     "angular_speed",
+    "wheel_speed",
     "linear_acceleration",
     "angular_acceleration",
     "exit_point",
@@ -65,7 +66,10 @@ def _model(plan: Any) -> dict[str, float] | None:
     rec = (getattr(plan, "params", None) or {}).get("robot_model_params")
     if not isinstance(rec, dict) or any(k not in rec for k in MODEL_FIELDS):
         return None
-    return {k: float(rec[k]) for k in MODEL_FIELDS}
+    out = {k: float(rec[k]) for k in MODEL_FIELDS}
+    if rec.get("track") is not None:  # the wheels' rim speeds |v ± ω L/2| ≤ v_max are checked too
+        out["track"] = float(rec["track"])
+    return out
 
 
 def diff_drive_check(plan: Any, Ts: float) -> tuple[dict[str, np.ndarray], dict[str, Any]] | None:
@@ -106,6 +110,7 @@ def diff_drive_check(plan: Any, Ts: float) -> tuple[dict[str, np.ndarray], dict[
         "lateral_velocity": np.abs(lat) > LATERAL_TOLERANCE,
         "linear_speed": np.abs(v) > model["v_max"] * slack,
         "angular_speed": np.abs(w) > model["omega_max"] * slack,
+        "wheel_speed": np.abs(v) + np.abs(w) * 0.5 * model.get("track", 0.0) > model["v_max"] * slack,
         "linear_acceleration": np.abs(dv) > model["a_max"] * slack,
         "angular_acceleration": np.abs(dw) > model["alpha_max"] * slack,
     }
@@ -116,6 +121,7 @@ def diff_drive_check(plan: Any, Ts: float) -> tuple[dict[str, np.ndarray], dict[
         max_lateral_velocity=float(np.abs(lat).max()),
         peak_v=float(np.abs(v).max()),
         peak_omega=float(np.abs(w).max()),
+        peak_wheel_rim_speed=float((np.abs(v) + np.abs(w) * 0.5 * model.get("track", 0.0)).max()),
         peak_linear_acceleration=float(np.abs(dv).max()),
         peak_angular_acceleration=float(np.abs(dw).max()),
         turn_in_place_steps=[int(n) for n in turning.sum(axis=0)],

@@ -10,7 +10,8 @@ The QP keeps its unknowns (the exit points' velocities v = [ṗ_1, …, ṗ_N] a
 every task and limit of the omnidirectional QP; (v_i, ω_i) are linear in ṗ_i at the step's heading, so the robots'
 limits are two more sets of hard rows on robot velocities:
 
-- :class:`DiffDriveSpeed` (hard): ``|e_i·ṗ_i| ≤ v_max``, ``|e_⊥i·ṗ_i| / b ≤ ω_max``;
+- :class:`DiffDriveSpeed` (hard): ``|e_i·ṗ_i| ≤ v_max``, ``|e_⊥i·ṗ_i| / b ≤ ω_max``, and with a wheel track L each
+  wheel's rim speed ``|v_i ± ω_i L/2| ≤ v_max``;
 - :class:`DiffDriveAcceleration` (comfort, like :class:`~tmr.control.limits.RobotAcceleration`):
   ``|v_i − v_i,k−1| ≤ a_max Ts``, ``|ω_i − ω_i,k−1| ≤ α_max Ts``.
 
@@ -99,14 +100,28 @@ class _DiffRows(Limit):
 
 
 class DiffDriveSpeed(_DiffRows):
-    """|v_i| ≤ v_max [m/s] and |ω_i| ≤ ω_max [rad/s] for every robot (hard)."""
+    """|v_i| ≤ v_max [m/s] and |ω_i| ≤ ω_max [rad/s] for every robot (hard); with a wheel track L (the robot model's
+    ``track``) also each wheel's rim speed |v_i ± ω_i L/2| ≤ v_max (2 more rows per robot)."""
 
     name = "diff_speed"
 
+    def pattern(self, chain: Chain) -> NDArray[np.bool_]:
+        base = super().pattern(chain)
+        return np.vstack([base, base]) if self.model.track else base
+
     def compute(self, ctx: Any) -> LimitRows:
         N = ctx.heading.size
-        up = np.tile([self.model.v_max, self.model.omega_max], N)
-        return LimitRows(self.rows(ctx.heading), -up, up)
+        m = self.model
+        A = self.rows(ctx.heading)
+        up = np.tile([m.v_max, m.omega_max], N)
+        if not m.track:
+            return LimitRows(A, -up, up)
+        h = 0.5 * m.track
+        W = np.empty_like(A)
+        W[0::2] = A[0::2] + h * A[1::2]  # right wheel's rim speed v + ω L/2
+        W[1::2] = A[0::2] - h * A[1::2]  # left wheel's v − ω L/2
+        up = np.concatenate([up, np.full(2 * N, m.v_max)])
+        return LimitRows(np.vstack([A, W]), -up, up)
 
 
 class DiffDriveAcceleration(_DiffRows):

@@ -45,6 +45,7 @@ __all__ = [
     "DRIVES",
     "MODEL_FIELDS",
     "RobotModel",
+    "WHEEL_FIELDS",
     "exit_jacobian",
     "exit_point",
     "exit_velocity",
@@ -59,6 +60,9 @@ __all__ = [
 DRIVES = ("omni", "diff")
 #: The numeric fields of a robot model file (all required, SI units).
 MODEL_FIELDS = ("radius", "v_max", "omega_max", "a_max", "alpha_max", "exit_offset")
+#: The optional fields of a robot model: its wheels (radius r_w and track L [m]); with a track the planner also keeps
+#: each wheel's rim speed |v ± ω L/2| ≤ v_max (``formulations/diffdrive.md``, "Wheel speeds").
+WHEEL_FIELDS = ("wheel_radius", "track")
 #: The preset used by ``--drive diff`` without ``--robot-model``.
 DEFAULT_MODEL = "turtlebot3_burger"
 
@@ -75,6 +79,10 @@ class RobotModel:
         a_max: forward acceleration bound |v̇| [m/s²].
         alpha_max: yaw acceleration bound |ω̇| [rad/s²].
         exit_offset: b [m], the tether's exit point ahead of the axle centre along the heading (> 0).
+        wheel_radius: r_w [m] of the two driven wheels, or None (the MuJoCo replay needs it).
+        track: L [m], the distance between the driven wheels, or None. With a track each wheel's rim speed
+            |v ± ω L/2| is kept ≤ v_max (v_max being the straight-line speed, the wheels' own limit): turning while
+            driving slows the robot down, as on the real one.
     """
 
     name: str
@@ -84,16 +92,20 @@ class RobotModel:
     a_max: float
     alpha_max: float
     exit_offset: float
+    wheel_radius: float | None = None
+    track: float | None = None
 
     def __post_init__(self) -> None:
-        for f in MODEL_FIELDS:
+        for f in MODEL_FIELDS + WHEEL_FIELDS:
             v = getattr(self, f)
+            if f in WHEEL_FIELDS and v is None:
+                continue
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise ParameterError(f"robot model {self.name!r}: {f} must be a finite number > 0, got {v!r}")
 
     def record(self) -> dict[str, Any]:
-        """The model as a JSON-ready dict (recorded in a diff-drive plan's parameters)."""
-        return asdict(self)
+        """The model as a JSON-ready dict (recorded in a diff-drive plan's parameters; wheels only if given)."""
+        return {k: v for k, v in asdict(self).items() if not (k in WHEEL_FIELDS and v is None)}
 
     @property
     def lateral_max(self) -> float:
@@ -112,12 +124,13 @@ def preset_names() -> list[str]:
 
 
 def _from_table(name: str, table: dict[str, Any], where: str) -> RobotModel:
-    unknown = sorted(set(table) - set(MODEL_FIELDS) - {"name"})
+    unknown = sorted(set(table) - set(MODEL_FIELDS) - set(WHEEL_FIELDS) - {"name"})
     missing = [f for f in MODEL_FIELDS if f not in table]
     if unknown or missing:
         parts = ([f"unknown keys {unknown}"] if unknown else []) + ([f"missing {missing}"] if missing else [])
         raise ParameterError(f"{where}: {'; '.join(parts)}; a robot model has {', '.join(MODEL_FIELDS)} (SI units)")
-    return RobotModel(str(table.get("name", name)), *(table[f] for f in MODEL_FIELDS))
+    wheels = {f: table[f] for f in WHEEL_FIELDS if f in table}
+    return RobotModel(str(table.get("name", name)), *(table[f] for f in MODEL_FIELDS), **wheels)
 
 
 def load_robot_model(name_or_file: str) -> RobotModel:

@@ -51,7 +51,6 @@ from tmr.replay.errors import ReplayError
 Array = NDArray[np.float64]
 
 __all__ = [
-    "WHEEL_GEOMETRY",
     "WheelConfig",
     "WheelDriver",
     "WheelReference",
@@ -60,17 +59,6 @@ __all__ = [
     "wheel_reference",
 ]
 
-#: Wheel radius r_w and track L (distance between the wheels' contact points) per preset [m]:
-#: TurtleBot3 Burger 0.033 / 0.160 and Waffle Pi 0.033 / 0.287 (ROBOTIS TurtleBot3 e-Manual specifications and
-#: the TurtleBot3 firmware's WHEEL_RADIUS / WHEEL_SEPARATION; e.g. philipdames/mee4411_turtlebot3
-#: tb3_simulation/src/tb3_utils/tb3_params/__init__.py: wheel_separation 0.160 / 0.287, wheel_radius 0.033);
-#: Clearpath Jackal 0.098 / 0.37 (wheel_radius 0.098 of the jackal_velocity_controller configurations; track 0.37 m
-#: between the wheel centres of the four-wheel skid-steer base, replayed here as two wheels).
-WHEEL_GEOMETRY: dict[str, tuple[float, float]] = {
-    "turtlebot3_burger": (0.033, 0.160),
-    "turtlebot3_waffle_pi": (0.033, 0.287),
-    "clearpath_jackal": (0.098, 0.37),
-}
 
 #: Largest demanded lateral (sideways) speed of the axle that a plan may ask of a differential drive [m/s]
 #: (diff-drive plans: ≤ 4e-14 m/s, ``formulations/diffdrive.md``).
@@ -118,8 +106,9 @@ class WheelConfig:
 
     @property
     def wheel_limit(self) -> float:
-        """w_max = (v_max + ω_max L / 2) / r_w [rad/s]."""
-        return (self.model.v_max + self.model.omega_max * self.track / 2) / self.wheel_radius
+        """w_max = v_max / r_w [rad/s]: a wheel's rim is as fast as the robot driving straight (the planner keeps
+        |v ± ω L/2| ≤ v_max when the robot model has a track)."""
+        return self.model.v_max / self.wheel_radius
 
     def armature(self, robot_mass: float) -> float:
         """The rotor inertia a gear motor reflects onto each wheel's hinge [kg m²], taken equal to the robot's share
@@ -162,7 +151,7 @@ def wheel_config(
 ) -> WheelConfig:
     """The :class:`WheelConfig` of a run: a diff-drive run's own recorded robot model (``robot_model`` must be None
     or its name), or for an omni run the model ``robot_model`` (a preset or TOML file; default the Burger). Wheel
-    radius and track: the preset's (:data:`WHEEL_GEOMETRY`) unless given [m]. Raises :class:`ReplayError`."""
+    radius and track: the robot model's (``wheel_radius``, ``track``) unless given [m]. Raises :class:`ReplayError`."""
     params = run.record.get("params") or {}
     if params.get("drive") == "diff":
         rec = dict(params.get("robot_model_params") or {})
@@ -180,14 +169,13 @@ def wheel_config(
     else:
         model = load_robot_model(robot_model or "turtlebot3_burger")
         plan_drive = "omni"
-    geo = WHEEL_GEOMETRY.get(model.name)
-    if (wheel_radius is None or track is None) and geo is None:
+    r = wheel_radius if wheel_radius is not None else model.wheel_radius
+    L = track if track is not None else model.track
+    if r is None or L is None:
         raise ReplayError(
-            f"no wheel geometry for robot model {model.name!r}: give --wheel-radius and --wheel-track "
-            f"(presets: {', '.join(sorted(WHEEL_GEOMETRY))})"
+            f"no wheel geometry for robot model {model.name!r}: give --wheel-radius and --wheel-track (or "
+            "wheel_radius and track in its TOML file)"
         )
-    r = wheel_radius if wheel_radius is not None else geo[0]  # type: ignore[index]
-    L = track if track is not None else geo[1]  # type: ignore[index]
     return WheelConfig(model=model, wheel_radius=float(r), track=float(L), plan_drive=plan_drive)
 
 
