@@ -647,11 +647,12 @@ def _diff_final(
     su = model.su
     diag: dict[str, float] = {}
     su.diff_log = diag
-    for cand in (chosen, warm_c):
+    for cand in (chosen, warm_c) if warm_c is not chosen else (chosen,):
         if cand is None:
             continue
-        if cand.result == "warm_start" and np.array_equal(cand.Q, Qraw):
-            return cand, warm_poses, what
+        if cand.result == "warm_start" and np.allclose(cand.Q, Qraw, rtol=0.0, atol=1e-9):
+            # the qp plan itself (its joints recomputed from its positions round to 1e-15): its own recorded poses
+            return cand._replace(Q=Qraw, J=_cost(su, Qraw)), warm_poses, what
         if cand.x is None:
             continue
         Q, poses, clip, moved = _integrate_poses(model, cand.x)
@@ -661,7 +662,7 @@ def _diff_final(
         if not viol and _no_worse(model, Q):
             return cand._replace(Q=Q, J=_cost(su, Q), x=xi), poses, what
         bad = _describe(viol, worst=1) if viol else "a term of the fitness worse than the warm start's"
-        what = f"{what}; the {cand.detail} executed along exact unicycle arcs violates {bad}"
+        what = f"{what}; {cand.detail} executed along exact unicycle arcs violates {bad}"
     raise HorizonInfeasible(
         f"horizon NLP (differential drive): {what}; no executed candidate satisfies the rows",
         [],
