@@ -204,7 +204,6 @@ def test_cli_refusals_and_outputs(tmp_path, capsys):
     from tmr import cli
 
     for args in (
-        ["--drive", "diff", "--method", "horizon"],
         ["--drive", "diff", "--method", "pinv"],
         ["--robot-model", "turtlebot9"],
         ["--drive", "omni", "--robot-model", "turtlebot3_burger"],

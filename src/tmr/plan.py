@@ -184,7 +184,7 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
         "--drive",
         choices=["omni", "diff"],
         help="ground robots' kinematics: omni (omnidirectional, Caruso 2021; default) or diff (differential drive: "
-        "heading, no sideways motion, v/ω limits; --method qp only); same as --set drive=...",
+        "heading, no sideways motion, v/ω limits; --method qp and horizon); same as --set drive=...",
     )
     p.add_argument(
         "--robot-model",
@@ -503,8 +503,8 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
         from tmr.model.diffdrive import model_for
 
         model_for(chain_params.robot_model, chain_params.safety_radius)
-        if args.method != "qp":
-            raise TmrError(f"--drive diff is planned by --method qp only (--method {args.method} is not yet)")
+        if args.method not in ("qp", "horizon"):
+            raise TmrError(f"--drive diff is planned by --method qp and horizon (not --method {args.method})")
     from tmr.world.environment import refuse_impassable_low_obstacles
 
     top = max(chain_params.exit_height, chain_params.base_height)

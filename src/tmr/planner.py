@@ -651,8 +651,8 @@ def make_qp(
 
 def formulation(problem: Problem, method: str | Formulation) -> Formulation:
     """The formulation object for ``method``: ``"pinv"``, ``"qp"``, or a formulation object (returned as is)."""
-    if getattr(problem, "robot_model", None) is not None and method in ("pinv", "horizon"):
-        raise ParameterError(f"drive = 'diff' is planned by --method qp only (not --method {method} yet)")
+    if getattr(problem, "robot_model", None) is not None and method == "pinv":
+        raise ParameterError("drive = 'diff' is planned by --method qp and horizon (not --method pinv)")
     if method == "pinv":
         _qp_only(problem, "the pinv baseline")
         if problem.chain_params.active_winch:
@@ -752,8 +752,6 @@ def solve(
         result, metrics = _checked(problem, method, progress)
         return _whole(result, metrics, start)
     # a whole-trajectory NLP, not a per-step formulation
-    if getattr(problem, "robot_model", None) is not None:
-        raise ParameterError("drive = 'diff' is planned by --method qp only (not --method horizon yet)")
     refuse_low_obstacles(problem.env, "--method horizon", "its NLP keeps no cable height above them; use --method qp")
     _qp_only(problem, "the horizon NLP", by_tension=True)
     from tmr.control.horizon import DEFAULT_TIME_LIMIT, HorizonInfeasible, plan_horizon  # casadi: when used

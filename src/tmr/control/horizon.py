@@ -292,6 +292,8 @@ def plan_horizon(
     deadline = start_time + limit
     opts = _options(options)
     su = _Setup(problem, opts)
+    if su.drive is not None and opts.window is not None:
+        raise ParameterError("windowed solves (window=...) are not implemented for differential drive (drive = 'diff')")
     env = problem.env
     bad = _check_start(su, env)
     if bad:
@@ -304,6 +306,7 @@ def plan_horizon(
     tol = max(10 * opts.constr_viol_tol, 1e-6)  # a row "holds" if violated by at most this (its unit)
     t0 = time.perf_counter()
     Qraw, info = _warm_start(su, warm_start)
+    warm_poses = _warm_poses(su, warm_start) if su.drive is not None else None
     warm_time = time.perf_counter() - t0
     t0 = time.perf_counter()
     model = _Model(su, distance_spline(env), bounds=info["warm_start_terms"], bspline=distance_bspline(env))
@@ -470,7 +473,7 @@ def plan_horizon(
     final: _Candidate | None = None
     if stop == "converged":
         Q = model.q_of(xv)
-        final = _Candidate(Q, _cost(su, Q), "optimal", "the optimum")
+        final = _Candidate(Q, _cost(su, Q), "optimal", "the optimum", xv)
     final_no_worse = final is not None and _no_worse(model, final.Q)
     if final is not None and (warm_c is None or final.J <= warm_c.J) and final_no_worse:
         chosen: _Candidate | None = final
@@ -499,8 +502,11 @@ def plan_horizon(
             )
         raise HorizonInfeasible(message + warm_note, viol, status=status or stop, diagnostics=diag)
 
+    poses: tuple[Array, Array, Array, Array] | None = None
+    if warm_poses is not None:  # differential drive: the poses integrated exactly along the unicycle's arcs
+        chosen, poses, what = _diff_final(model, chosen, warm_c, Qraw, warm_poses, tol, what)
     Q = chosen.Q
-    xv = model.x_of(Q)
+    xv = model.x_of(Q) if poses is None else model.x_of(Q, poses[1])
     vals = model.values(xv)
     diag = _diagnostics(model, tr, stats, xv, vals, rounds, info, J_warm, trans_time, solve_time, start_time)
     versus = f"warm start {warm_c.J:.6g}" if warm_c else f"warm start {J_warm:.6g}, outside the NLP's own rows"
@@ -536,6 +542,8 @@ def plan_horizon(
     )
     if opts.window is not None:
         diag.update(window_log=windows, ipopt_iterations=iterations)
+    if poses is not None:  # differential drive: how much executing the NLP's poses changed them
+        diag.update(su.diff_log)
     qdot = np.vstack([np.diff(Q, axis=0) / su.Ts, np.zeros((1, su.n))])
     if warm_start.q.shape == Q.shape and np.array_equal(warm_start.q, Q) and warm_start.qdot.shape == qdot.shape:
         qdot = warm_start.qdot.copy()  # the warm start itself: its own rates (a difference quotient rounds apart)
@@ -557,6 +565,108 @@ def plan_horizon(
         wall_time=time.perf_counter() - start_time,
         params=dict(problem.params_dict(), **_params(opts)),
         goal=np.asarray(problem.scenario.goal, float).copy(),
+        **({} if poses is None else dict(axle=poses[0], heading=poses[1], drive_v=poses[2], drive_omega=poses[3])),
+    )
+
+
+def _warm_poses(su: Any, warm: Plan) -> tuple[Array, Array, Array, Array]:
+    """Differential drive: the warm start's recorded poses — axle centres (K+1, N, 2), headings, v, ω (K+1, N) —
+    padded with its last pose at rest if it stopped early; sets the NLP's start headings ``su.heading0`` and the
+    headings of its initial point ``su.warm_heading``."""
+    arrays = [getattr(warm, name, None) for name in ("axle", "heading", "drive_v", "drive_omega")]
+    if any(a is None for a in arrays):
+        raise ParameterError(
+            "differential drive: the warm start has no recorded poses (axle, heading, v, ω): plan it with the "
+            "diff-drive qp (tmr.planner.solve(problem, 'qp'))"
+        )
+    out = []
+    for i, a in enumerate(arrays):
+        a = np.asarray(a, dtype=float)[: su.K + 1]
+        if a.shape[0] < su.K + 1:
+            last = a[-1:] if i < 2 else np.zeros_like(a[-1:])
+            a = np.concatenate([a, np.repeat(last, su.K + 1 - a.shape[0], axis=0)])
+        out.append(a.copy())
+    su.heading0, su.warm_heading = out[1][0].copy(), out[1].copy()
+    return out[0], out[1], out[2], out[3]
+
+
+def _integrate_poses(model: _Model, xv: Array) -> tuple[Array, tuple[Array, Array, Array, Array], float, float]:
+    """Differential drive: the NLP's variables ``xv`` (exit points and headings) turned into commands and executed.
+
+    Per step and robot (v, ω) are read off the NLP's poses as the checker reads them (axle c = p − b e(θ),
+    :func:`tmr.model.diffdrive.step_velocities`), put inside the bounds (|v| ≤ v_max, |ω| ≤ ω_max and the
+    acceleration bounds from the previous clipped command, from rest), held over the step and integrated along the
+    exact arc (:func:`tmr.model.diffdrive.unicycle_step`) from the start pose, so the recorded axle centres slip
+    sideways only by rounding; the exit points follow as c + b e(θ) and the joints from them (:meth:`_Model.q_of`).
+    Returns the joints (K+1, n), the poses (axle (K+1, N, 2), heading, v, ω (K+1, N), v and ω 0 at the end), the
+    largest command change of the clip (v [m/s], b ω [m/s]) and the largest exit-point move against the NLP's [m]."""
+    from tmr.model.diffdrive import exit_point, step_velocities, unicycle_step
+
+    su = model.su
+    m = su.drive
+    N, K, Ts, b = su.N, su.K, su.Ts, float(m.exit_offset)
+    P = np.asarray(xv, dtype=float)[: model.n_pos].reshape(K + 1, 2 * N)
+    p = np.stack([P[:, :N], P[:, N:]], axis=-1)
+    th = model.heading_of(xv)
+    v, w, _ = step_velocities(exit_point(p, th, -b), th, Ts)
+    vc, wc = np.zeros((K + 1, N)), np.zeros((K + 1, N))
+    vp, wp = np.zeros(N), np.zeros(N)
+    for k in range(K):
+        vc[k] = np.clip(v[k], np.maximum(-m.v_max, vp - m.a_max * Ts), np.minimum(m.v_max, vp + m.a_max * Ts))
+        wc[k] = np.clip(
+            w[k], np.maximum(-m.omega_max, wp - m.alpha_max * Ts), np.minimum(m.omega_max, wp + m.alpha_max * Ts)
+        )
+        vp, wp = vc[k], wc[k]
+    clip = float(max(np.max(np.abs(vc[:-1] - v)), b * np.max(np.abs(wc[:-1] - w))))
+    axle = np.empty((K + 1, N, 2))
+    heading = np.empty((K + 1, N))
+    heading[0] = su.heading0
+    axle[0] = exit_point(su.robots(su.q0)[0], heading[0], -b)
+    for k in range(K):
+        axle[k + 1], heading[k + 1] = unicycle_step(axle[k], heading[k], vc[k], wc[k], Ts)
+    exits = exit_point(axle, heading, b)
+    x_new = np.concatenate([np.concatenate([exits[..., 0], exits[..., 1]], axis=1).ravel(), heading.ravel()])
+    Q = model.q_of(x_new)
+    moved = float(np.max(np.linalg.norm(exits - p, axis=-1)))
+    return Q, (axle, heading, vc, wc), clip, moved
+
+
+def _diff_final(
+    model: _Model,
+    chosen: _Candidate,
+    warm_c: _Candidate | None,
+    Qraw: Array,
+    warm_poses: tuple[Array, Array, Array, Array],
+    tol: float,
+    what: str,
+) -> tuple[_Candidate, tuple[Array, Array, Array, Array], str]:
+    """Differential drive: the poses of the plan returned. The warm start as given keeps its own recorded poses;
+    any other candidate is executed (:func:`_integrate_poses`) and re-checked — every row of every group at ``tol``
+    on the executed joints and headings, and f1, f2, f4 no worse than the warm start's; if the executed plan fails,
+    the warm start is returned instead (the note says why). Returns the candidate, its poses and the note's head."""
+    su = model.su
+    diag: dict[str, float] = {}
+    su.diff_log = diag
+    for cand in (chosen, warm_c) if warm_c is not chosen else (chosen,):
+        if cand is None:
+            continue
+        if cand.result == "warm_start" and np.allclose(cand.Q, Qraw, rtol=0.0, atol=1e-9):
+            # the qp plan itself (its joints recomputed from its positions round to 1e-15): its own recorded poses
+            return cand._replace(Q=Qraw, J=_cost(su, Qraw)), warm_poses, what
+        if cand.x is None:
+            continue
+        Q, poses, clip, moved = _integrate_poses(model, cand.x)
+        xi = model.x_of(Q, poses[1])
+        viol = _violations(model, model.values(xi), xi, tol)
+        diag.update(diff_command_clip=clip, diff_exit_point_shift=moved)
+        if not viol and _no_worse(model, Q):
+            return cand._replace(Q=Q, J=_cost(su, Q), x=xi), poses, what
+        bad = _describe(viol, worst=1) if viol else "a term of the fitness worse than the warm start's"
+        what = f"{what}; {cand.detail} executed along exact unicycle arcs violates {bad}"
+    raise HorizonInfeasible(
+        f"horizon NLP (differential drive): {what}; no executed candidate satisfies the rows",
+        [],
+        status="diff_execution",
     )
 
 

@@ -34,6 +34,9 @@ GROUPS: tuple[str, ...] = (
     "joint_accel",
     "robot_speed",
     "robot_accel",
+    "diff_lateral",
+    "diff_speed",
+    "diff_accel",
 )
 
 
@@ -393,6 +396,11 @@ class _Setup:
             for i in range(S)
         ]
         self.pairs = [(int(i), int(j)) for i, j in zip(*np.triu_indices(self.N, k=1), strict=True)]
+        # differential drive (``formulations/diffdrive.md``, "horizon"): the robot model and the start headings θ_0
+        # (N,) [rad], set by plan_horizon from the warm start's poses; None for omnidirectional robots
+        self.drive = getattr(problem, "robot_model", None)
+        self.heading0: Array | None = None
+        self.warm_heading: Array | None = None  # (K+1, N) the warm start's headings [rad]
 
     def robots(self, Q: Array) -> Array:
         """(K+1, N, 2) robot positions of joints Q (K+1, n) (Caruso 2021 eq. 2, planar closed form)."""
@@ -411,6 +419,51 @@ class _Rows(NamedTuple):
     knots: NDArray[np.int_]  # (cols,) knot of every column
     items: list[str]  # (rows,) labels
     unit: str
+
+
+def _sinc(s: Any) -> Any:
+    """sin(s) / s, 1 at s = 0, numerically safe in casadi (value and derivatives): the Taylor series 1 − s²/6 + s⁴/120
+    for |s| < 1e-3 (error < s⁶/5040 < 2e-22), sin(s) / s beyond (its denominator replaced by 1 where it is not used,
+    so neither branch has a 0/0 in its value or its derivatives)."""
+    small = ca.fabs(s) < 1e-3
+    s2 = s * s
+    return ca.if_else(small, 1 - s2 / 6 + s2 * s2 / 120, ca.sin(s) / ca.if_else(small, 1, s))
+
+
+def _diff_rows(su: _Setup, X: Any, Y: Any, TH: Any) -> dict[str, _Rows]:
+    """The unicycle rows of differential-drive robots (``formulations/diffdrive.md``, "horizon") over the exit points
+    X, Y (N, K+1) [m] and headings TH (N, K+1) [rad]: per step k (columns 0..K−1, the step from knot k to k+1) and
+    robot, with the axle centres c = p − b e(θ), Δc, Δθ and the mid heading θ_m = θ_k + Δθ / 2,
+
+        lateral = Δc·e_⊥(θ_m) / Ts = 0                      (the exact unicycle arc: its chord lies along θ_m)
+        v = Δc·e(θ_m) / (Ts sinc(Δθ / 2)),  ω = Δθ / Ts,   |v| ≤ v_max, |ω| ≤ ω_max
+        |v_k − v_k−1| ≤ a_max Ts,  |ω_k − ω_k−1| ≤ α_max Ts    (from rest: v_−1 = ω_−1 = 0)
+
+    — what :func:`tmr.checks.diffdrive.diff_drive_check` measures on the recorded poses."""
+    m = su.drive
+    N, K, Ts, b = su.N, su.K, su.Ts, float(m.exit_offset)
+    CX, CY = X - b * ca.cos(TH), Y - b * ca.sin(TH)
+    dTH = TH[:, 1:] - TH[:, :-1]
+    THm = TH[:, :-1] + 0.5 * dTH
+    dCX, dCY = CX[:, 1:] - CX[:, :-1], CY[:, 1:] - CY[:, :-1]
+    cm, sm = ca.cos(THm), ca.sin(THm)
+    lateral = (cm * dCY - sm * dCX) / Ts
+    V = (cm * dCX + sm * dCY) / (Ts * _sinc(0.5 * dTH))
+    W = dTH / Ts
+    z = ca.DM.zeros(N, 1)
+    dV = (V - ca.horzcat(z, V[:, :-1])) / Ts
+    dW = (W - ca.horzcat(z, W[:, :-1])) / Ts
+    steps = np.arange(K)
+    labels = [f"robot {i + 1} {a}" for a in ("v", "ω") for i in range(N)]
+    up = np.concatenate([np.full(N, m.v_max), np.full(N, m.omega_max)])
+    upa = np.concatenate([np.full(N, m.a_max), np.full(N, m.alpha_max)])
+    return {
+        "diff_lateral": _Rows(
+            lateral, np.zeros(N), np.zeros(N), steps, [f"robot {i + 1} axle sideways" for i in range(N)], "m/s"
+        ),
+        "diff_speed": _Rows(ca.vertcat(V, W), -up, up, steps, labels, "m/s | rad/s"),
+        "diff_accel": _Rows(ca.vertcat(dV, dW), -upa, upa, steps, labels, "m/s² | rad/s²"),
+    }
 
 
 class _Model:
@@ -437,7 +490,13 @@ class _Model:
         N, n, K, Ts = su.N, su.n, su.K, su.Ts
         self.su, self.clr = su, clr
         self.bspline = bspline  # the clearance spline in scipy: structured derivatives (None: casadi's own)
+        self.warm_heading = su.warm_heading  # differential drive: the headings x_of appends by default
         xs = ca.MX.sym("p", 2 * N * (K + 1))  # x = [P_0; P_1; ...; P_K], P_k = (x_1..x_N, y_1..y_N)
+        xin = xs
+        if su.drive is not None:  # differential drive: the headings Θ_0..Θ_K, Θ_k = (θ_1..θ_N), after the positions
+            ths = ca.MX.sym("theta", N * (K + 1))
+            xin = ca.vertcat(xs, ths)
+        self.n_pos = 2 * N * (K + 1)
         P = ca.reshape(xs, 2 * N, K + 1)  # column k = P_k
         X, Y = P[:N, :], P[N:, :]
         ones = ca.DM.ones(1, K + 1)
@@ -461,7 +520,7 @@ class _Model:
         J = opts.w_energy * f1 + opts.w_uniformity * f2 + opts.w_smoothness * f4
         if opts.leader_tolerance > 0:
             J = J + opts.w_tracking * f3
-        self.terms = ca.Function("terms", [xs], [f1, f2, f3, f4])
+        self.terms = ca.Function("terms", [xin], [f1, f2, f3, f4])
 
         # bounds on the variables: the start fixed, the leader on its reference (equality leader)
         lbx = np.full((K + 1, 2 * N), -np.inf)
@@ -472,6 +531,13 @@ class _Model:
             lbx[1:, N - 1] = ubx[1:, N - 1] = su.ref[1:, 0]
             lbx[1:, 2 * N - 1] = ubx[1:, 2 * N - 1] = su.ref[1:, 1]
         self.lbx, self.ubx = lbx.ravel(), ubx.ravel()
+        if su.drive is not None:  # θ_0 fixed (the warm start's, i.e. tmr.planner.initial_headings), the rest free
+            if su.heading0 is None:
+                raise ParameterError("differential drive: the start headings (the warm start's poses) are missing")
+            lbt = np.full((K + 1, N), -np.inf)
+            ubt = np.full((K + 1, N), np.inf)
+            lbt[0] = ubt[0] = su.heading0
+            self.lbx, self.ubx = np.concatenate([self.lbx, lbt.ravel()]), np.concatenate([self.ubx, ubt.ravel()])
 
         k1 = np.arange(1, K + 1)
         rows: dict[str, _Rows] = {}
@@ -528,12 +594,14 @@ class _Model:
         rows["robot_accel"] = _Rows(
             ca.vertcat(Ax, Ay), np.full(2 * N, -su.a_rob), np.full(2 * N, su.a_rob), np.arange(K + 1), rl, "m/s²"
         )
+        if su.drive is not None:
+            rows.update(_diff_rows(su, X, Y, ca.reshape(ths, N, K + 1)))
         names = [g for g in rows if g != "clearance"]
-        x = xs
+        x = xin
         self.x, self.J = x, J
         self.rows = rows
         # clearance sample points (N S, K+1), index in vec order = m + N S k
-        Pm = ca.reshape(x, 2 * N, K + 1)
+        Pm = ca.reshape(xs, 2 * N, K + 1)
         Ls, ones = ca.DM(su.Ls), ca.DM.ones(1, K + 1)
         self.Px = ca.vec(ca.mtimes(Ls, ca.vertcat(su.base[0] * ones, Pm[:N, :])))
         self.Py = ca.vec(ca.mtimes(Ls, ca.vertcat(su.base[1] * ones, Pm[N:, :])))
@@ -560,7 +628,7 @@ class _Model:
         b = np.where((j == 0)[:, None], (1.0 - s)[:, None] * su.base[None, :], 0.0)
 
         def dm(cols: Array) -> Any:
-            a = csc_matrix((w, (rows, cols)), shape=(n, 2 * N * (su.K + 1)))
+            a = csc_matrix((w, (rows, cols)), shape=(n, int(self.lbx.size)))
             a.sort_indices()
             sp = ca.Sparsity(n, a.shape[1], a.indptr.tolist(), a.indices.tolist())
             return ca.DM(sp, a.data.tolist())
@@ -568,17 +636,26 @@ class _Model:
         return dm(col), dm(col + N), b
 
     # --- joints <-> positions --------------------------------------------------------------------------------
-    def x_of(self, Q: Array) -> Array:
-        """The variables (robot positions, see the class docstring) of joints Q (K+1, n)."""
+    def x_of(self, Q: Array, heading: Array | None = None) -> Array:
+        """The variables (robot positions, see the class docstring) of joints Q (K+1, n); with differential drive
+        followed by the headings ``heading`` (K+1, N) [rad] (default :attr:`warm_heading`, the warm start's)."""
         R = self.su.robots(Q)  # (K+1, N, 2)
-        return np.concatenate([R[..., 0], R[..., 1]], axis=1).ravel()
+        x = np.concatenate([R[..., 0], R[..., 1]], axis=1).ravel()
+        if self.su.drive is None:
+            return x
+        th = self.warm_heading if heading is None else heading
+        return np.concatenate([x, np.asarray(th, dtype=float).ravel()])
+
+    def heading_of(self, xv: Array) -> Array:
+        """The headings (K+1, N) [rad] of the variables ``xv`` (differential drive only)."""
+        return np.asarray(xv, dtype=float)[self.n_pos :].reshape(self.su.K + 1, self.su.N)
 
     def q_of(self, xv: Array) -> Array:
         """Joints (K+1, n) of the variables ``xv``: spans ‖u_i‖, relative angles from the absolute link headings
         unwrapped along the horizon from q_0's (so a heading that turns by more than π over the plan is kept);
         q_0 is the start exactly."""
         su = self.su
-        P = np.asarray(xv, dtype=float).reshape(su.K + 1, 2 * su.N)
+        P = np.asarray(xv, dtype=float)[: self.n_pos].reshape(su.K + 1, 2 * su.N)
         R = np.stack([P[:, : su.N], P[:, su.N :]], axis=-1)
         U = R - np.concatenate([np.broadcast_to(su.base, (su.K + 1, 1, 2)), R[:, :-1]], axis=1)
         phi = np.unwrap(np.arctan2(U[..., 1], U[..., 0]), axis=0)
@@ -629,7 +706,7 @@ class _Model:
             m = v < opts.activation
         elif name == "separation":
             m = v < (self.su.sep_min + opts.activation) ** 2
-        elif name in ("leader", "fitness", "span"):
+        elif name in ("leader", "fitness", "span", "diff_lateral"):
             m = np.ones(v.shape, dtype=bool)
         else:  # symmetric bounds ±b: |v| beyond a fraction of b
             m = np.abs(v) >= opts.rate_activation * self.rows[name].hi[:, None]

@@ -41,7 +41,7 @@ def _violations(model: _Model, vals: dict[str, Array], xv: Array, tol: float) ->
         for i, c in zip(*np.nonzero(a > tol), strict=True):
             put(name, int(r.knots[c]), r.items[i], a[i, c], r.unit)
     if su.opts.leader_tolerance == 0:
-        P = np.asarray(xv, dtype=float).reshape(su.K + 1, 2 * su.N)
+        P = np.asarray(xv, dtype=float)[: model.n_pos].reshape(su.K + 1, 2 * su.N)
         e = np.hypot(P[1:, su.N - 1] - su.ref[1:, 0], P[1:, -1] - su.ref[1:, 1])
         for k in np.flatnonzero(e > tol):
             put("leader", int(k) + 1, f"robot {su.N} (off the reference)", e[k], "m")
@@ -130,6 +130,7 @@ class _Candidate(NamedTuple):
     J: float  #: weighted objective w1 f1 + w2 f2 + w4 f4 (+ w3 f3)
     result: str  #: "optimal", "best_feasible_iterate" or "warm_start"
     detail: str  #: where it comes from, for the note
+    x: Array | None = None  #: its NLP variables (differential drive: the headings with the positions), if known
 
 
 def _cost(su: _Setup, Q: Array) -> float:
@@ -175,14 +176,14 @@ def _warm_candidate(model: _Model, warm: Plan, Qw: Array, raw: Array, tol: float
     x_raw, x_w = model.x_of(raw), model.x_of(Qw)
     viol_raw = _violations(model, model.values(x_raw), x_raw, tol)
     if at_start and not viol_raw:
-        return _Candidate(raw, _cost(su, raw), "warm_start", name), ""
+        return _Candidate(raw, _cost(su, raw), "warm_start", name, x_raw), ""
 
     def as_given() -> tuple[_Candidate | None, str]:
         err = float(np.max(np.linalg.norm(su.robots(raw[1:])[:, -1] - su.ref[1:], axis=1)))
         rest = blocking([v for v in viol_raw if v.group != "leader"])
         if not rest and err <= su.opts.warm_start_leader_error:
             detail = f"{name} as given, leader within {1e3 * err:.1f} mm of the reference" + dip(viol_raw)
-            return _Candidate(raw, _cost(su, raw), "warm_start", detail), ""
+            return _Candidate(raw, _cost(su, raw), "warm_start", detail, x_raw), ""
         groups = [g for g in GROUPS if any(v.group == g for v in rest)]
         why = f" (as given: leader up to {err:.3g} m off the reference"
         return None, why + (f", and {', '.join(groups)} violated)" if rest else ")")
@@ -196,7 +197,7 @@ def _warm_candidate(model: _Model, warm: Plan, Qw: Array, raw: Array, tol: float
     viol = _violations(model, model.values(x_w), x_w, tol)
     if not blocking(viol) and _no_worse(model, Qw):
         detail = f"{name}, leader projected on the reference" if su.opts.leader_tolerance == 0 else name
-        return _Candidate(Qw, _cost(su, Qw), "warm_start", detail + dip(viol)), ""
+        return _Candidate(Qw, _cost(su, Qw), "warm_start", detail + dip(viol), x_w), ""
     why = f"the {warm.method} plan violates {_describe(blocking(viol), worst=1)}" if blocking(viol) else ""
     why = why or f"the {warm.method} plan, leader projected on the reference, is worse in a term of the fitness"
     if lagging and not su.opts.no_worse_terms:
@@ -257,6 +258,6 @@ class _Pool:
                 continue
             J = _cost(su, Q)
             if J < J_limit and (best is None or J < best.J):
-                best = _Candidate(Q, J, "best_feasible_iterate", f"its best feasible iterate ({where})")
+                best = _Candidate(Q, J, "best_feasible_iterate", f"its best feasible iterate ({where})", x)
                 break  # ascending cost: the next ones cost more (up to the tiny change of the projection)
         return best
