@@ -595,7 +595,8 @@ def _integrate_poses(model: _Model, xv: Array) -> tuple[Array, tuple[Array, Arra
 
     Per step and robot (v, ω) are read off the NLP's poses as the checker reads them (axle c = p − b e(θ),
     :func:`tmr.model.diffdrive.step_velocities`), put inside the bounds (|v| ≤ v_max, |ω| ≤ ω_max and the
-    acceleration bounds from the previous clipped command, from rest), held over the step and integrated along the
+    acceleration bounds from the previous clipped command, from rest; then both scaled into the wheels' rim bound
+    |v| + |ω| L/2 ≤ v_max), held over the step and integrated along the
     exact arc (:func:`tmr.model.diffdrive.unicycle_step`) from the start pose, so the recorded axle centres slip
     sideways only by rounding; the exit points follow as c + b e(θ) and the joints from them (:meth:`_Model.q_of`).
     Returns the joints (K+1, n), the poses (axle (K+1, N, 2), heading, v, ω (K+1, N), v and ω 0 at the end), the
@@ -616,6 +617,10 @@ def _integrate_poses(model: _Model, xv: Array) -> tuple[Array, tuple[Array, Arra
         wc[k] = np.clip(
             w[k], np.maximum(-m.omega_max, wp - m.alpha_max * Ts), np.minimum(m.omega_max, wp + m.alpha_max * Ts)
         )
+        if m.track:  # each wheel's rim within v_max: both scaled down together (the NLP's rows keep it to ~1e-6)
+            rim = np.abs(vc[k]) + 0.5 * m.track * np.abs(wc[k])
+            scale = np.minimum(1.0, m.v_max / np.maximum(rim, 1e-300))
+            vc[k], wc[k] = vc[k] * scale, wc[k] * scale
         vp, wp = vc[k], wc[k]
     clip = float(max(np.max(np.abs(vc[:-1] - v)), b * np.max(np.abs(wc[:-1] - w))))
     axle = np.empty((K + 1, N, 2))

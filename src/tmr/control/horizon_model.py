@@ -436,7 +436,7 @@ def _diff_rows(su: _Setup, X: Any, Y: Any, TH: Any) -> dict[str, _Rows]:
     robot, with the axle centres c = p − b e(θ), Δc, Δθ and the mid heading θ_m = θ_k + Δθ / 2,
 
         lateral = Δc·e_⊥(θ_m) / Ts = 0                      (the exact unicycle arc: its chord lies along θ_m)
-        v = Δc·e(θ_m) / (Ts sinc(Δθ / 2)),  ω = Δθ / Ts,   |v| ≤ v_max, |ω| ≤ ω_max
+        v = Δc·e(θ_m) / (Ts sinc(Δθ / 2)),  ω = Δθ / Ts,   |v| ≤ v_max, |ω| ≤ ω_max, |v ± ω L/2| ≤ v_max (a track L)
         |v_k − v_k−1| ≤ a_max Ts,  |ω_k − ω_k−1| ≤ α_max Ts    (from rest: v_−1 = ω_−1 = 0)
 
     — what :func:`tmr.checks.diffdrive.diff_drive_check` measures on the recorded poses."""
@@ -457,11 +457,17 @@ def _diff_rows(su: _Setup, X: Any, Y: Any, TH: Any) -> dict[str, _Rows]:
     labels = [f"robot {i + 1} {a}" for a in ("v", "ω") for i in range(N)]
     up = np.concatenate([np.full(N, m.v_max), np.full(N, m.omega_max)])
     upa = np.concatenate([np.full(N, m.a_max), np.full(N, m.alpha_max)])
+    speed = ca.vertcat(V, W)
+    if m.track:  # each wheel's rim speed |v ± ω L/2| ≤ v_max (the per-step QP's DiffDriveSpeed rows)
+        h = 0.5 * float(m.track)
+        speed = ca.vertcat(speed, V + h * W, V - h * W)
+        up = np.concatenate([up, np.full(2 * N, m.v_max)])
+        labels = labels + [f"robot {i + 1} {a} wheel" for a in ("right", "left") for i in range(N)]
     return {
         "diff_lateral": _Rows(
             lateral, np.zeros(N), np.zeros(N), steps, [f"robot {i + 1} axle sideways" for i in range(N)], "m/s"
         ),
-        "diff_speed": _Rows(ca.vertcat(V, W), -up, up, steps, labels, "m/s | rad/s"),
+        "diff_speed": _Rows(speed, -up, up, steps, labels, "m/s | rad/s"),
         "diff_accel": _Rows(ca.vertcat(dV, dW), -upa, upa, steps, labels, "m/s² | rad/s²"),
     }
 
