@@ -601,6 +601,7 @@ def _integrate_poses(model: _Model, xv: Array) -> tuple[Array, tuple[Array, Arra
     sideways only by rounding; the exit points follow as c + b e(θ) and the joints from them (:meth:`_Model.q_of`).
     Returns the joints (K+1, n), the poses (axle (K+1, N, 2), heading, v, ω (K+1, N), v and ω 0 at the end), the
     largest command change of the clip (v [m/s], b ω [m/s]) and the largest exit-point move against the NLP's [m]."""
+    from tmr.control.diffdrive import WHEEL_RESERVE
     from tmr.model.diffdrive import exit_point, step_velocities, unicycle_step
 
     su = model.su
@@ -619,7 +620,7 @@ def _integrate_poses(model: _Model, xv: Array) -> tuple[Array, tuple[Array, Arra
         )
         if m.track:  # each wheel's rim within v_max: both scaled down together (the NLP's rows keep it to ~1e-6)
             rim = np.abs(vc[k]) + 0.5 * m.track * np.abs(wc[k])
-            scale = np.minimum(1.0, m.v_max / np.maximum(rim, 1e-300))
+            scale = np.minimum(1.0, (1.0 - WHEEL_RESERVE) * m.v_max / np.maximum(rim, 1e-300))
             vc[k], wc[k] = vc[k] * scale, wc[k] * scale
         vp, wp = vc[k], wc[k]
     clip = float(max(np.max(np.abs(vc[:-1] - v)), b * np.max(np.abs(wc[:-1] - w))))

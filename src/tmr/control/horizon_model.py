@@ -461,7 +461,9 @@ def _diff_rows(su: _Setup, X: Any, Y: Any, TH: Any) -> dict[str, _Rows]:
     if m.track:  # each wheel's rim speed |v ± ω L/2| ≤ v_max (the per-step QP's DiffDriveSpeed rows)
         h = 0.5 * float(m.track)
         speed = ca.vertcat(speed, V + h * W, V - h * W)
-        up = np.concatenate([up, np.full(2 * N, m.v_max)])
+        from tmr.control.diffdrive import WHEEL_RESERVE  # the tracking feedback's share, as the per-step QP
+
+        up = np.concatenate([up, np.full(2 * N, (1.0 - WHEEL_RESERVE) * m.v_max)])
         labels = labels + [f"robot {i + 1} {a} wheel" for a in ("right", "left") for i in range(N)]
     return {
         "diff_lateral": _Rows(
