@@ -21,6 +21,7 @@ import argparse
 import csv
 import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -35,21 +36,33 @@ RESULTS = Path(__file__).resolve().parent / "results"
 
 #: case → (room name or None for a built-in scenario, scenario, robots or None for the scenario's own)
 CASES: dict[str, tuple[str | None, str | None, int | None]] = {
+    # E with 4 robots and the active winch, the damper and the sag allowance off: the NLP of
+    # tests/test_winch_ground.py::test_horizon_with_the_active_winch_is_never_worse_than_qp
+    "E4active": (None, "E", 4),
     "A": (None, "A", None),
     "B": (None, "B", None),
     "C": (None, "C", None),
     "D": (None, "D", None),
     "E6": (None, "E", 6),
     "walls5": ("walls-corner-150917237", None, 5),
+    "walls8": ("walls-corner-150917237", None, 8),
+    "wallsfar5": ("walls-far-2884920346", None, 5),
+    "wallsfar8": ("walls-far-2884920346", None, 8),
     "medium5": ("medium-far-634801725", None, 5),
-    "narrow8": ("narrow-near-2642120001", None, 8),
+    "medium8": ("medium-far-634801725", None, 8),
+    "mediummid2": ("medium-mid-3677149159", None, 2),
     "mediumnear5": ("medium-near-742431198", None, 5),
+    "mediumnear8": ("medium-near-742431198", None, 8),
+    "narrow8": ("narrow-near-2642120001", None, 8),
+    "dense8": ("dense-near-533521220", None, 8),
+    "sparse8": ("sparse-near-2968811710", None, 8),
 }
 
 #: variant → HorizonOptions fields (``ipopt`` merged last into IPOPT's options)
 VARIANTS: dict[str, dict] = {
     "base": {},
     "log": {"ipopt": {"print_level": 5, "print_timing_statistics": "yes"}},  # IPOPT's iteration log on stdout
+    "log_1e-3": {"min_hessian_perturbation": 1e-3, "ipopt": {"print_level": 5, "print_timing_statistics": "yes"}},
     "ma27": {"linear_solver": "ma27"},
     "ma57": {"linear_solver": "ma57"},
     "spral": {"linear_solver": "spral"},
@@ -64,6 +77,12 @@ VARIANTS: dict[str, dict] = {
     "perturb_1e-5": {"min_hessian_perturbation": 1e-5},
     "perturb_1e-6": {"min_hessian_perturbation": 1e-6},
     "unscaled": {"scale_objective": False},
+    # per-iteration cost: one round of 15 IPOPT iterations, no retry (the NLP is not solved: compare CPU only)
+    "it15_mumps": {"max_iter": 15, "max_rounds": 1, "retry": False},
+    "it15_spral": {"max_iter": 15, "max_rounds": 1, "retry": False, "linear_solver": "spral"},
+    "it15_mumps_auto": {"max_iter": 15, "max_rounds": 1, "retry": False, "mumps_pivot_order": 7},
+    "p4_restart": {"min_hessian_perturbation": 1e-4, "restart_rounds": True},
+    "p5_restart": {"min_hessian_perturbation": 1e-5, "restart_rounds": True},
     "p5_spral": {"min_hessian_perturbation": 1e-5, "linear_solver": "spral"},
     "p5_mumps_auto": {"min_hessian_perturbation": 1e-5, "mumps_pivot_order": 7},
     "p5_probing": {"min_hessian_perturbation": 1e-5, "ipopt": {"mu_oracle": "probing"}},
@@ -81,6 +100,9 @@ def _argv(case: str, tmp: Path, time_limit: float) -> list[str]:
     room_name, scenario, robots = CASES[case]
     argv = ["--method", "horizon", "--no-plots", "--out", str(tmp / "out"), "--seed", "0"]
     argv += ["--robots", str(robots)] if robots is not None else []
+    if case == "E4active":
+        sets = ("winch=active", "ground_clearance=0.05", "span_approach_rate=off", "sag_allowance=0")
+        argv += [a for kv in sets for a in ("--set", kv)]
     argv += ["--time-limit", f"{time_limit:g}"]
     if scenario is not None:
         return ["--scenario", scenario, *argv]
@@ -132,7 +154,6 @@ def child(case: str, variant: str, time_limit: float = 60.0) -> dict:
         knots=captured.get("knots"),
         success=metrics.get("success"),
         process=time.perf_counter() - t0,
-        cpu=time.process_time(),  # this process's CPU time [s]: less sensitive than wall time to other load
     )
     for k in ("f1", "f2", "f4"):
         if terms.get(k) is not None and warm.get(k):
@@ -143,6 +164,7 @@ def child(case: str, variant: str, time_limit: float = 60.0) -> dict:
 def run(case: str, variant: str, timeout: float, time_limit: float) -> dict:
     env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
     t0 = time.perf_counter()
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     try:
         proc = subprocess.run(
             [sys.executable, __file__, "--child", case, variant, "--time-limit", f"{time_limit:g}"],
@@ -154,12 +176,15 @@ def run(case: str, variant: str, timeout: float, time_limit: float) -> dict:
     except subprocess.TimeoutExpired:
         return dict(case=case, variant=variant, exit=None, result="timeout", process=time.perf_counter() - t0)
     wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
     if not lines:
         tail = (proc.stderr.strip().splitlines() or [""])[-1]
         return dict(case=case, variant=variant, exit=proc.returncode, result=f"error: {tail[:120]}", process=wall)
     out = json.loads(lines[-1])
     out["process"] = wall  # interpreter start to exit, seen from here
+    out["cpu"] = cpu  # user + system CPU of the child and its descendants: less sensitive to other load than wall
     return out
 
 
@@ -234,6 +259,30 @@ def fatrop_probe(scenario: str, structure: str) -> dict:
     return out
 
 
+def e4_library(options: dict, time_limit: float) -> dict:
+    """The library call on the NLP of ``test_horizon_with_the_active_winch_is_never_worse_than_qp`` (E, 4 robots,
+    active winch, damper and sag allowance off): ``plan_horizon(problem, qp_plan, time_limit, **options)``."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    from tmr.control.horizon import HorizonInfeasible, plan_horizon
+    from tmr.planner import build_problem, solve
+    from tmr.world.scenario import load_scenario
+
+    overrides = {"winch": "active", "ground_clearance": 0.05, "span_approach_rate": "off", "sag_allowance": 0.0}
+    problem = build_problem(load_scenario("E"), n_robots=4, overrides=overrides)
+    qp = solve(problem, "qp")[0]
+    out: dict = dict(case="E4active-library", options=options, time_limit=time_limit)
+    try:
+        plan = plan_horizon(problem, qp, time_limit=time_limit, **options)
+        d = plan.diagnostics
+        rounds = [(r["round"], r["attempt"], r["status"], r["iterations"]) for r in d.get("round_log", [])]
+        out.update(result=d.get("horizon_result"), stop=d.get("horizon_stop"), rounds=rounds)
+        out.update(objective=d.get("horizon_summary", {}).get("objective"), note=d.get("horizon_note"))
+    except HorizonInfeasible as exc:
+        out.update(result="HorizonInfeasible", note=str(exc)[:400])
+    out.update(wall=time.perf_counter() - t0, cpu=time.process_time() - c0)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--child", nargs=2, metavar=("CASE", "VARIANT"), help=argparse.SUPPRESS)
@@ -243,11 +292,15 @@ def main() -> None:
     ap.add_argument("--timeout", type=float, default=150.0, help="per process [s]")
     ap.add_argument("--time-limit", type=float, default=60.0, help="the CLI's --time-limit of the horizon NLP [s]")
     ap.add_argument("--probe", action="store_true")
+    ap.add_argument("--e4-library", metavar="OPTIONS_JSON", help="the E4active NLP through the library call")
     ap.add_argument("--fatrop", nargs=2, metavar=("SCENARIO", "STRUCTURE"), help="fatrop on a scenario's NLP")
     ap.add_argument("--out", default="horizon_solvers", help="results file stem under benchmarks/results")
     args = ap.parse_args()
     if args.child:
         print(json.dumps(child(*args.child, time_limit=args.time_limit)))
+        return
+    if args.e4_library:
+        print(json.dumps(e4_library(json.loads(args.e4_library), args.time_limit), default=str))
         return
     if args.fatrop:
         print(json.dumps(fatrop_probe(*args.fatrop)))
