@@ -77,6 +77,9 @@ VARIANTS: dict[str, dict] = {
     "perturb_1e-5": {"min_hessian_perturbation": 1e-5},
     "perturb_1e-6": {"min_hessian_perturbation": 1e-6},
     "unscaled": {"scale_objective": False},
+    # IPOPT's curvature test (Zavala and Chiang 2014): wrong inertia ignored when the step has positive curvature
+    "negcurv": {"ipopt": {"neg_curv_test_tol": 1e-11}},
+    "negcurv_1e-8": {"ipopt": {"neg_curv_test_tol": 1e-8}},
     # per-iteration cost: one round of 15 IPOPT iterations, no retry (the NLP is not solved: compare CPU only)
     "it15_mumps": {"max_iter": 15, "max_rounds": 1, "retry": False},
     "it15_spral": {"max_iter": 15, "max_rounds": 1, "retry": False, "linear_solver": "spral"},
