@@ -277,11 +277,15 @@ def e4_library(options: dict, time_limit: float) -> dict:
     try:
         plan = plan_horizon(problem, qp, time_limit=time_limit, **options)
         d = plan.diagnostics
-        rounds = [(r["round"], r["attempt"], r["status"], r["iterations"]) for r in d.get("round_log", [])]
-        out.update(result=d.get("horizon_result"), stop=d.get("horizon_stop"), rounds=rounds)
+        out.update(result=d.get("horizon_result"), stop=d.get("horizon_stop"))
         out.update(objective=d.get("horizon_summary", {}).get("objective"), note=d.get("horizon_note"))
     except HorizonInfeasible as exc:
-        out.update(result="HorizonInfeasible", note=str(exc)[:400])
+        d = exc.diagnostics
+        out.update(result="HorizonInfeasible", stop=d.get("horizon_stop"), note=str(exc)[:400])
+    # (round, attempt, IPOPT status, iterations, rows violated after it)
+    out["rounds"] = [
+        (r["round"], r["attempt"], r["status"], r["iterations"], r["violated"]) for r in d.get("round_log", [])
+    ]
     out.update(wall=time.perf_counter() - t0, cpu=time.process_time() - c0)
     return out
 
