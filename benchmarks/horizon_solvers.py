@@ -135,6 +135,22 @@ def child(case: str, variant: str, time_limit: float = 60.0) -> dict:
         return plan
 
     hz.plan_horizon = wrapped
+    trace: list[list[float]] = []  # per IPOPT attempt: the largest move of any robot coordinate from its start [m]
+    if os.environ.get("HS_TRACE"):
+        import numpy as np
+
+        first: dict = {}
+        eval_original = hz._IterationCallback.eval
+
+        def traced(self, arg):  # the iteration callback, recording max |x − x_start| of every iterate
+            x = np.asarray(arg[0], dtype=float).ravel()
+            if self.iteration == 0:
+                first[id(self)] = x.copy()
+                trace.append([])
+            trace[-1].append(round(float(np.max(np.abs(x - first[id(self)]))), 3))
+            return eval_original(self, arg)
+
+        hz._IterationCallback.eval = traced
     with tempfile.TemporaryDirectory(prefix="tmr-hs-") as tmp:
         tmpd = Path(tmp)
         argv = _argv(case, tmpd, time_limit)
@@ -158,6 +174,8 @@ def child(case: str, variant: str, time_limit: float = 60.0) -> dict:
         success=metrics.get("success"),
         process=time.perf_counter() - t0,
     )
+    if trace:
+        out["max_move_per_iteration"] = trace
     for k in ("f1", "f2", "f4"):
         if terms.get(k) is not None and warm.get(k):
             out[f"{k}_ratio"] = terms[k] / warm[k]
