@@ -135,7 +135,9 @@ def child(case: str, variant: str, time_limit: float = 60.0) -> dict:
         return plan
 
     hz.plan_horizon = wrapped
-    trace: list[list[float]] = []  # per IPOPT attempt: the largest move of any robot coordinate from its start [m]
+    # per IPOPT attempt and iterate: (largest move of a robot coordinate from the attempt's start [m], rows left out of
+    # the transcription that the iterate violates, the worst such clearance row [m])
+    trace: list[list[tuple[float, int, float]]] = []
     if os.environ.get("HS_TRACE"):
         import numpy as np
 
@@ -147,7 +149,19 @@ def child(case: str, variant: str, time_limit: float = 60.0) -> dict:
             if self.iteration == 0:
                 first[id(self)] = x.copy()
                 trace.append([])
-            trace[-1].append(round(float(np.max(np.abs(x - first[id(self)]))), 3))
+            move = round(float(np.max(np.abs(x - first[id(self)]))), 3)
+            # rows left out of this transcription that the iterate violates: how many, and the worst clearance [m]
+            model, vals = self.tr.model, self.tr.model.values(x)
+            left_out, worst = 0, 0.0
+            for name, idx in self.tr.index.items():
+                v = model.violation(name, vals[name]).ravel(order="F")
+                out_rows = np.ones(v.size, dtype=bool)
+                out_rows[idx] = False
+                bad = out_rows & (v > 1e-5)
+                left_out += int(bad.sum())
+                if name == "clearance" and bad.any():
+                    worst = max(worst, float(v[bad].max()))
+            trace[-1].append((move, left_out, round(worst, 3)))
             return eval_original(self, arg)
 
         hz._IterationCallback.eval = traced
