@@ -159,7 +159,10 @@ def test_scenario_keys_drive_and_robot_model(tmp_path):
     body = a.read_text().replace('file = "A.geojson"', f'file = "{a.parent / "A.geojson"}"')
     (tmp_path / "s.toml").write_text('drive = "diff"\nrobot_model = "models/mybot.toml"\n' + body)
     problem = build_problem(load_scenario(tmp_path / "s.toml"))
-    assert problem.robot_model.name == "mybot" and problem.path_params.leader_speed == pytest.approx(0.32)
+    from tmr.planner import DIFF_SPEED_FRACTION
+
+    assert problem.robot_model.name == "mybot"
+    assert problem.path_params.leader_speed == pytest.approx(DIFF_SPEED_FRACTION * 0.4)  # the model's v_max, capped
     (tmp_path / "t.toml").write_text('drive = "diff"\n' + body + '\n[params]\ndrive = "omni"\n')
     with pytest.raises(ScenarioError, match="given at the top and in"):
         load_scenario(tmp_path / "t.toml")

@@ -417,7 +417,7 @@ def _with_goal_heading(problem: Problem) -> Problem:
 
 #: With differential drive the leader's time law is capped at these fractions of the robot's v_max and a_max: the
 #: rest is the CLIK correction's room (Caruso 2021 eq. 20) and the heading's turns (``formulations/diffdrive.md``).
-DIFF_SPEED_FRACTION = 0.8
+DIFF_SPEED_FRACTION = 0.6
 DIFF_ACCEL_FRACTION = 0.5
 
 
