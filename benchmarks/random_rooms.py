@@ -62,7 +62,15 @@ from provenance import source_version, versions  # noqa: E402
 from tmr.route.route import CHORD_CLEARANCE  # noqa: E402
 from tmr.sweep.executor import make_executor  # noqa: E402
 from tmr.sweep.room_runs import RoomRun, decide_count, run_room  # noqa: E402
-from tmr.sweep.rooms import DENSITIES, GOAL_CLASSES, Room, default_d_max, room_from_spec, room_set  # noqa: E402
+from tmr.sweep.rooms import (  # noqa: E402
+    DENSITIES,
+    GOAL_CLASSES,
+    SAFETY_RADIUS,
+    Room,
+    default_d_max,
+    room_from_spec,
+    room_set,
+)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PACKAGES = ("numpy", "scipy", "shapely", "osqp", "ompl")
@@ -674,7 +682,9 @@ def drive_comparison(args: argparse.Namespace, argv: list[str] | None) -> int:
     n_rooms = QUICK_ROOMS if args.quick else args.rooms
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
-    diff_args = ("--drive", "diff", "--robot-model", model_arg)
+    # the rooms' r (0.5 m, what the omni runs use and the independent check keeps): a diff-drive --map run would
+    # otherwise take the model's footprint reach b + r_f (tmr.plan.diff_map_radius), not the same problem
+    diff_args = ("--drive", "diff", "--robot-model", model_arg, "--robot-radius", f"{SAFETY_RADIUS:g}")
 
     t_start = time.perf_counter()
     load0 = os.getloadavg()
