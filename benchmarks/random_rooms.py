@@ -628,6 +628,7 @@ DIFF_COLUMNS = [
     "diff_exit", "diff_ok", "diff_n_robots", "diff_plan_s", "diff_wall_s", "diff_steps", "diff_duration_s",
     "diff_f1", "diff_f4", "diff_max_lateral_m_s", "diff_peak_v", "diff_v_max", "diff_peak_omega", "diff_omega_max",
     "diff_turn_in_place_steps", "diff_min_robot_clr", "diff_min_tether_clr",
+    "omni_references", "diff_references", "diff_references_note",
     "plan_time_ratio", "wall_time_ratio", "duration_ratio", "diff_failure",
 ]  # fmt: skip
 
@@ -741,6 +742,9 @@ def drive_comparison(args: argparse.Namespace, argv: list[str] | None) -> int:
                     "plan_time_ratio": _ratio(d.get("plan_wall_time"), o.get("plan_wall_time")) if both else None,
                     "wall_time_ratio": _ratio(d.get("wall_time"), o.get("wall_time")) if both else None,
                     "duration_ratio": _ratio(d.get("duration"), o.get("duration")) if both else None,
+                    "omni_references": o.get("references"),
+                    "diff_references": d.get("references"),
+                    "diff_references_note": d.get("references_note"),
                     "diff_failure": _reason(d),
                     "omni_failure": _reason(o),
                 }
@@ -808,6 +812,15 @@ def drive_comparison(args: argparse.Namespace, argv: list[str] | None) -> int:
                 for g in GOAL_CLASSES))  # fmt: skip
     over = sum(v > TARGET_DIFF_TIME_RATIO for v in pr)
     w(f". {over} of {len(pr)} rooms both plan have a plan time ratio above {TARGET_DIFF_TIME_RATIO:g}.\n\n")
+
+    both_train = [r for r in both if r["diff_references"] == "train" and r["omni_references"] != "train"]
+    w("Rooms both plan where diff needed the train references (one robot at a time; its trailing-reference plan ")
+    w(f"failed) and omni did not: {len(both_train)}")
+    if both_train:
+        w(" — " + "; ".join(f"{r['room']}: ratio {_fmt(r['plan_time_ratio'])}, {r['diff_references_note'] or ''}"
+                            for r in both_train))  # fmt: skip
+    rest = _vals([r for r in both if r not in both_train], "plan_time_ratio")
+    w(f". Plan time ratio over the other rooms: median {_fmt(_med(rest))}, max {_fmt(max(rest, default=None))}.\n\n")
 
     w("## Differential-drive checks (successful diff plans)\n\n")
     dok = [r for r in pairs if r["diff_ok"]]

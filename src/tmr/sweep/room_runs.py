@@ -252,7 +252,8 @@ def run_room(spec: RoomRun) -> dict[str, Any]:
     :func:`tmr.route.route.plan_route`: the leader starts along the route, not at the anchor), ``route_ratio``
     (leader_length / leader_route_length), and
     :func:`independent_check` of the raw trajectories (plus ``ind_filtered_*`` minima of the filtered ones); also
-    ``n_steps``, ``duration`` (the motion [s]), ``f1``, ``f4`` (Caruso 2021 eq. 24, 27), ``violation_kinds`` and, for
+    ``references`` / ``references_note`` (trailing or train references, and why), ``n_steps``, ``duration`` (the motion
+    [s]), ``f1``, ``f4`` (Caruso 2021 eq. 24, 27), ``violation_kinds`` and, for
     ``--drive diff``, the checker's ``max_lateral_velocity`` [m/s], ``peak_v``, ``v_max`` [m/s], ``peak_omega``,
     ``omega_max`` [rad/s] and ``turn_in_place_steps`` (summed over the robots).
     """
@@ -301,6 +302,8 @@ def run_room(spec: RoomRun) -> dict[str, Any]:
         out["n_min_cli"] = metrics.get("n_min")
         out["n_lower_cli"] = metrics.get("n_lower")
         out["robots_auto"] = metrics.get("robots_auto")
+        out["references"] = metrics.get("references")  # trail, or train when the trailing ones failed
+        out["references_note"] = metrics.get("references_note")
         out["n_steps"] = metrics.get("n_steps")
         out["duration"] = _num(metrics.get("duration"))  # s, the motion
         out["f1"], out["f4"] = _num(metrics.get("f1")), _num(metrics.get("f4"))
