@@ -95,6 +95,12 @@ def main() -> None:
         "|" + "---|" * len(COLUMNS),
     ]
     lines += ["| " + " | ".join(_fmt(r[c]) for c in COLUMNS) + " |" for r in rows]
+    lines += [
+        "",
+        "The same robots on the seeded random rooms, planned with omni and diff on the same inputs "
+        "(success, time ratio,",
+        "failures): `diffdrive_rooms.md` (`benchmarks/random_rooms.py --drive diff`).",
+    ]
     OUT.write_text("\n".join(lines) + "\n")
     print(f"wrote {OUT}")
 

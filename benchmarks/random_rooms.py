@@ -3,6 +3,7 @@
     python benchmarks/random_rooms.py [--rooms 216] [--seed 0] [--methods qp[,pinv,horizon]] [--subset K]
                                       [--robots 2,3,5,8,auto] [--jobs N | --scheduler tcp://host:port]
                                       [--timeout 600] [--keep-failures DIR] [--quick]
+                                      [--drive diff [--robot-model NAME|FILE.toml] [--repeat R]]
 
 A benchmark, not a test. Rooms come from the project's own generator (:mod:`tmr.sweep.rooms`): 20 m × 20 m,
 densities sparse / medium / dense / walls / narrow / long_walls × goal classes near / mid / corner / far, evenly
@@ -24,6 +25,13 @@ spans vs d_max, every robot pair ≥ 2r; :func:`tmr.sweep.room_runs.independent_
 Writes ``benchmarks/results/random_rooms.md``, ``.csv`` (one row per run) and ``.png`` (success per density × N,
 histograms of whole-process times). BLAS runs on one thread per process unless OPENBLAS_NUM_THREADS/OMP_NUM_THREADS
 is set. ``--quick``: the first 16 rooms (every density, every goal class), for smoke runs.
+
+``--drive diff`` (issue 35, ``formulations/diffdrive.md``): every (room, N) is planned twice on the same inputs, with
+the omnidirectional robots of Caruso 2021 and with ``--drive diff --robot-model M`` (M: ``--robot-model``, default the
+planner's own default, :data:`tmr.model.diffdrive.DEFAULT_MODEL`); the report compares them (success of each, diff's
+failures where omni plans and why, the planner's wall time ratio diff / omni per room both plan, median of
+``--repeat`` runs each, f1, f4, the motion's duration, the diff checker's lateral velocity and v / ω peaks) and is
+written to ``benchmarks/results/diffdrive_rooms.md`` / ``.csv`` (``--name``); the omni report is not touched.
 """
 
 from __future__ import annotations
@@ -54,7 +62,15 @@ from provenance import source_version, versions  # noqa: E402
 from tmr.route.route import CHORD_CLEARANCE  # noqa: E402
 from tmr.sweep.executor import make_executor  # noqa: E402
 from tmr.sweep.room_runs import RoomRun, decide_count, run_room  # noqa: E402
-from tmr.sweep.rooms import DENSITIES, GOAL_CLASSES, Room, default_d_max, room_from_spec, room_set  # noqa: E402
+from tmr.sweep.rooms import (  # noqa: E402
+    DENSITIES,
+    GOAL_CLASSES,
+    SAFETY_RADIUS,
+    Room,
+    default_d_max,
+    room_from_spec,
+    room_set,
+)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PACKAGES = ("numpy", "scipy", "shapely", "osqp", "ompl")
@@ -314,7 +330,26 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help=f"smoke run: the first {QUICK_ROOMS} rooms")
     ap.add_argument("--out", default=str(RESULTS), help="output directory (default benchmarks/results)")
     ap.add_argument("--name", default="random_rooms", help="output file stem (default random_rooms)")
+    ap.add_argument(
+        "--drive",
+        choices=("omni", "diff"),
+        default="omni",
+        help="diff: plan every room with omni and with differential-drive robots and compare them",
+    )
+    ap.add_argument("--robot-model", help="differential-drive preset or TOML file (implies --drive diff)")
+    ap.add_argument(
+        "--repeat",
+        type=int,
+        default=1,
+        help="--drive diff: runs per (room, N, drive); times are their median (default 1)",
+    )
     args = ap.parse_args(argv)
+    if args.robot_model:
+        args.drive = "diff"
+    if args.drive == "diff":
+        if args.name == "random_rooms":
+            args.name = "diffdrive_rooms"
+        return drive_comparison(args, argv)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     robots = [n.strip() for n in args.robots.split(",") if n.strip()]
     n_rooms = QUICK_ROOMS if args.quick else args.rooms
@@ -576,6 +611,270 @@ def main(argv: list[str] | None = None) -> int:
     stem.with_suffix(".md").write_text(buf.getvalue())
     print(buf.getvalue())
     print(f"wrote {stem.with_suffix('.md')}, .csv, .png")
+    return 0
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# --drive diff: omni and differential drive on the same rooms
+# ----------------------------------------------------------------------------------------------------------------
+#: Targets of issue 35 for differential drive on the random rooms.
+TARGET_DIFF_SUCCESS = 0.95  # diff's successes / omni's successes, same rooms and N
+TARGET_DIFF_TIME_RATIO = 2.0  # planner wall time diff / omni per room both plan (median; reported with the max)
+
+DIFF_COLUMNS = [
+    "room", "room_seed", "density", "goal_class", "n_obstacles", "connected", "route_length", "n_min", "robots",
+    "omni_exit", "omni_ok", "omni_n_robots", "omni_plan_s", "omni_wall_s", "omni_steps", "omni_duration_s",
+    "omni_f1", "omni_f4",
+    "diff_exit", "diff_ok", "diff_n_robots", "diff_plan_s", "diff_wall_s", "diff_steps", "diff_duration_s",
+    "diff_f1", "diff_f4", "diff_max_lateral_m_s", "diff_peak_v", "diff_v_max", "diff_peak_omega", "diff_omega_max",
+    "diff_turn_in_place_steps", "diff_min_robot_clr", "diff_min_tether_clr",
+    "omni_references", "diff_references", "diff_references_note",
+    "plan_time_ratio", "wall_time_ratio", "duration_ratio", "diff_failure",
+]  # fmt: skip
+
+
+def _ok(r: dict[str, Any]) -> bool:
+    """A success: exit 0 and the independent check of the raw trajectories passed."""
+    return r["exit_code"] == 0 and r.get("independent_ok") is True
+
+
+def _reason(r: dict[str, Any]) -> str:
+    """Why a run is not a success, in one line."""
+    if _ok(r):
+        return ""
+    if r["exit_code"] is None:
+        return "timeout"
+    if r["exit_code"] == 0:
+        return f"independent check: {r.get('ind_violations') or 'failed'}"
+    parts = [f"exit {r['exit_code']}"]
+    if r.get("violation_kinds"):
+        parts.append(f"violations: {r['violation_kinds']}")
+    if r.get("failure"):
+        parts.append(str(r["failure"]))
+    if r.get("stderr_last"):
+        parts.append(str(r["stderr_last"]))
+    return "; ".join(parts)[:300]
+
+
+def _merge_repeats(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """The first run's row with ``plan_wall_time`` and ``wall_time`` [s] replaced by the medians of the runs."""
+    row = dict(runs[0])
+    for key in ("plan_wall_time", "wall_time"):
+        v = [float(r[key]) for r in runs if r.get(key) is not None]
+        row[key] = statistics.median(v) if v else None
+    row["repeats"] = len(runs)
+    return row
+
+
+def _ratio(a: Any, b: Any) -> float | None:
+    return float(a) / float(b) if a is not None and b is not None and float(b) > 0 else None
+
+
+def drive_comparison(args: argparse.Namespace, argv: list[str] | None) -> int:
+    """``--drive diff``: omni and diff on the same rooms (see the module docstring); writes ``args.name`` .md/.csv."""
+    from tmr.model.diffdrive import DEFAULT_MODEL, load_robot_model
+
+    model = load_robot_model(args.robot_model or DEFAULT_MODEL)
+    model_arg = args.robot_model or DEFAULT_MODEL
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    if methods != ["qp"]:
+        raise SystemExit("--drive diff is planned by --method qp only")
+    robots = [n.strip() for n in args.robots.split(",") if n.strip()]
+    n_rooms = QUICK_ROOMS if args.quick else args.rooms
+    out_dir = Path(args.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    # the rooms' r (0.5 m, what the omni runs use and the independent check keeps): a diff-drive --map run would
+    # otherwise take the model's footprint reach b + r_f (tmr.plan.diff_map_radius), not the same problem
+    diff_args = ("--drive", "diff", "--robot-model", model_arg, "--robot-radius", f"{SAFETY_RADIUS:g}")
+
+    t_start = time.perf_counter()
+    load0 = os.getloadavg()
+    executor = make_executor(args.jobs, args.scheduler, progress=True)
+    try:
+        specs = room_set(n_rooms, args.seed)
+        t0 = time.perf_counter()
+        generated = executor.map(room_from_spec, specs, desc="rooms")
+        t_gen = time.perf_counter() - t0
+        rooms_ok: list[Room] = [g for g in generated if isinstance(g, Room)]
+        gen_errors = [g for g in generated if not isinstance(g, Room)]
+        keys, tasks = [], []
+        for room in rooms_ok:
+            for n in robots:
+                for drive, extra in (("omni", ()), ("diff", diff_args)):
+                    for _ in range(max(1, args.repeat)):
+                        keys.append((room.name, n, drive))
+                        tasks.append(
+                            RoomRun(room, "qp", n, args.plan_seed, args.timeout, args.keep_failures, tuple(extra))
+                        )
+        t0 = time.perf_counter()
+        results = executor.map(run_room, tasks, desc="plans")
+        t_runs = time.perf_counter() - t0
+    finally:
+        executor.close()
+    grouped: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
+    for k, r in zip(keys, results, strict=True):
+        grouped.setdefault(k, []).append(r)
+    pairs = []
+    for room in rooms_ok:
+        for n in robots:
+            o = _merge_repeats(grouped[(room.name, n, "omni")])
+            d = _merge_repeats(grouped[(room.name, n, "diff")])
+            both = _ok(o) and _ok(d)
+            pairs.append(
+                {
+                    "room": room.name, "room_seed": o.get("room_seed"), "density": o.get("density"),
+                    "goal_class": o.get("goal_class"), "n_obstacles": o.get("n_obstacles"),
+                    "connected": o.get("connected"), "route_length": o.get("route_length"), "n_min": o.get("n_min"),
+                    "robots": n,
+                    "omni_exit": o["exit_code"], "omni_ok": _ok(o), "omni_n_robots": o.get("n_robots"),
+                    "omni_plan_s": o.get("plan_wall_time"), "omni_wall_s": o.get("wall_time"),
+                    "omni_steps": o.get("n_steps"), "omni_duration_s": o.get("duration"),
+                    "omni_f1": o.get("f1"), "omni_f4": o.get("f4"),
+                    "diff_exit": d["exit_code"], "diff_ok": _ok(d), "diff_n_robots": d.get("n_robots"),
+                    "diff_plan_s": d.get("plan_wall_time"), "diff_wall_s": d.get("wall_time"),
+                    "diff_steps": d.get("n_steps"), "diff_duration_s": d.get("duration"),
+                    "diff_f1": d.get("f1"), "diff_f4": d.get("f4"),
+                    "diff_max_lateral_m_s": d.get("max_lateral_velocity"), "diff_peak_v": d.get("peak_v"),
+                    "diff_v_max": d.get("v_max"), "diff_peak_omega": d.get("peak_omega"),
+                    "diff_omega_max": d.get("omega_max"), "diff_turn_in_place_steps": d.get("turn_in_place_steps"),
+                    "diff_min_robot_clr": d.get("ind_robot_clearance"),
+                    "diff_min_tether_clr": d.get("ind_tether_clearance"),
+                    "plan_time_ratio": _ratio(d.get("plan_wall_time"), o.get("plan_wall_time")) if both else None,
+                    "wall_time_ratio": _ratio(d.get("wall_time"), o.get("wall_time")) if both else None,
+                    "duration_ratio": _ratio(d.get("duration"), o.get("duration")) if both else None,
+                    "omni_references": o.get("references"),
+                    "diff_references": d.get("references"),
+                    "diff_references_note": d.get("references_note"),
+                    "diff_failure": _reason(d),
+                    "omni_failure": _reason(o),
+                }
+            )  # fmt: skip
+    total = time.perf_counter() - t_start
+    load1 = os.getloadavg()
+
+    stem = out_dir / args.name
+    buf = io.StringIO()
+    cw = csv.DictWriter(buf, fieldnames=DIFF_COLUMNS, extrasaction="ignore", lineterminator="\n")
+    cw.writeheader()
+    for r in pairs:
+        cw.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in DIFF_COLUMNS})
+    stem.with_suffix(".csv").write_text(buf.getvalue())
+
+    buf = io.StringIO()
+    w = buf.write
+    cmd = " ".join(argv if argv is not None else sys.argv[1:])
+    jobs_desc = "serial" if args.jobs == 1 else f"{args.jobs or os.cpu_count()} local worker processes"
+    w(f"# Random rooms: omni against differential drive ({model.name})\n\n")
+    if args.quick:
+        w(f"**Quick smoke run ({n_rooms} rooms)**: not the full benchmark.\n\n")
+    w(f"`python benchmarks/random_rooms.py {cmd}` — {datetime.date.today().isoformat()}, `{platform.machine()}`, ")
+    w(f"nproc {os.cpu_count()}, Python {platform.python_version()}; {versions(PACKAGES)}; {source_version()}.\n")
+    w(f"{jobs_desc}; total {total:.0f} s (room generation {t_gen:.0f} s, {len(tasks)} runs {t_runs:.0f} s); load ")
+    w(f"average {load0[0]:.1f} at the start, {load1[0]:.1f} at the end (other work shares the 2 cores).\n\n")
+    w(f"{len(rooms_ok)} rooms of `tmr.sweep.rooms.room_set({n_rooms}, seed={args.seed})` (the rooms of ")
+    w("`random_rooms.md`, 20 m × 20 m, safety radius r = 0.5 m)")
+    w(f"; {len(gen_errors)} could not be generated" if gen_errors else "")
+    w(f"; N ∈ {{{', '.join(robots)}}}. Every (room, N) runs `python -m tmr.plan --map ROOM --base … --goal … ")
+    w(f"--robots N --method qp` twice: omni (Caruso 2021) and with `{' '.join(diff_args)}` ")
+    w(f"(r_f {model.radius:g} m, v_max {model.v_max:g} m/s, ω_max {model.omega_max:g} rad/s, a_max ")
+    w(f"{model.a_max:g} m/s², α_max {model.alpha_max:g} rad/s², b {model.exit_offset:g} m). *Success*: exit 0 and ")
+    w("the independent shapely check of the raw trajectories (diff: of the tethers' exit points) passed. ")
+    w("*plan time*: the planner's `wall_time` in `timings.json` (route, loop, checks; no interpreter start), ")
+    w(f"median of {max(1, args.repeat)} run(s); *process*: the whole subprocess.\n\n")
+
+    w("## Success and time\n\n")
+    w("| N | rooms | omni success | diff success | diff / omni successes | both | diff fails, omni plans | ")
+    w("omni fails, diff plans | plan time ratio median / max | process time ratio median / max | ")
+    w("motion duration ratio median / max |\n|---|" + "---:|" * 10 + "\n")
+    lines = []
+    for n in [*robots, "all"]:
+        rs = [r for r in pairs if n == "all" or r["robots"] == n]
+        if n == "all" and len(robots) == 1:
+            continue
+        o_ok = sum(r["omni_ok"] for r in rs)
+        d_ok = sum(r["diff_ok"] for r in rs)
+        both = [r for r in rs if r["omni_ok"] and r["diff_ok"]]
+        pr, wr, dr = (_vals(both, k) for k in ("plan_time_ratio", "wall_time_ratio", "duration_ratio"))
+        lines.append((n, o_ok, d_ok, pr))
+        w(f"| {n} | {len(rs)} | {o_ok} | {d_ok} | {_fmt(d_ok / o_ok if o_ok else None, '.3f')} | {len(both)} | ")
+        w(f"{sum(r['omni_ok'] and not r['diff_ok'] for r in rs)} | ")
+        w(f"{sum(r['diff_ok'] and not r['omni_ok'] for r in rs)}")
+        w(f" | {_fmt(_med(pr))} / {_fmt(max(pr, default=None))} | {_fmt(_med(wr))} / {_fmt(max(wr, default=None))} ")
+        w(f"| {_fmt(_med(dr))} / {_fmt(max(dr, default=None))} |\n")
+    w("\n")
+    both = [r for r in pairs if r["omni_ok"] and r["diff_ok"]]
+    pr = _vals(both, "plan_time_ratio")
+    w("Plan time ratio per density (rooms both plan): ")
+    w("; ".join(f"{d} {_fmt(_med(_vals([r for r in both if r['density'] == d], 'plan_time_ratio')))}"
+                for d in DENSITIES))  # fmt: skip
+    w(". Per goal class: ")
+    w("; ".join(f"{g} {_fmt(_med(_vals([r for r in both if r['goal_class'] == g], 'plan_time_ratio')))}"
+                for g in GOAL_CLASSES))  # fmt: skip
+    over = sum(v > TARGET_DIFF_TIME_RATIO for v in pr)
+    w(f". {over} of {len(pr)} rooms both plan have a plan time ratio above {TARGET_DIFF_TIME_RATIO:g}.\n\n")
+
+    both_train = [r for r in both if r["diff_references"] == "train" and r["omni_references"] != "train"]
+    w("Rooms both plan where diff needed the train references (one robot at a time; its trailing-reference plan ")
+    w(f"failed) and omni did not: {len(both_train)}")
+    if both_train:
+        w(" — " + "; ".join(f"{r['room']}: ratio {_fmt(r['plan_time_ratio'])}, {r['diff_references_note'] or ''}"
+                            for r in both_train))  # fmt: skip
+    rest = _vals([r for r in both if r not in both_train], "plan_time_ratio")
+    w(f". Plan time ratio over the other rooms: median {_fmt(_med(rest))}, max {_fmt(max(rest, default=None))}.\n\n")
+
+    w("## Differential-drive checks (successful diff plans)\n\n")
+    dok = [r for r in pairs if r["diff_ok"]]
+    if dok:
+        w(f"max lateral velocity of an axle centre {_fmt(max(_vals(dok, 'diff_max_lateral_m_s')), '.3g')} m/s; ")
+        w(f"peak v {_fmt(max(_vals(dok, 'diff_peak_v')), '.4f')} m/s (v_max {model.v_max:g}); peak ω ")
+        w(f"{_fmt(max(_vals(dok, 'diff_peak_omega')), '.3f')} rad/s (ω_max {model.omega_max:g}); turn-in-place ")
+        tip = _vals(dok, "diff_turn_in_place_steps")
+        w(f"steps per plan median {_fmt(_med(tip), '.0f')}, max {_fmt(max(tip), '.0f')}; least robot clearance ")
+        w(f"{_fmt(min(_vals(dok, 'diff_min_robot_clr')), '.3f')} m, tether ")
+        w(f"{_fmt(min(_vals(dok, 'diff_min_tether_clr')), '.3f')} m ")
+        w("(independent, exit points). f1 and f4 (Caruso 2021 eq. 24, 27) per room are in the CSV; medians over the ")
+        w(f"rooms both plan: f1 omni {_fmt(_med(_vals(both, 'omni_f1')), '.4g')}, diff ")
+        w(f"{_fmt(_med(_vals(both, 'diff_f1')), '.4g')}; f4 omni {_fmt(_med(_vals(both, 'omni_f4')), '.4g')}, diff ")
+        w(f"{_fmt(_med(_vals(both, 'diff_f4')), '.4g')}.\n\n")
+    else:
+        w("No successful diff plan.\n\n")
+
+    w("## Targets (issue 35)\n\n| target | measured | met |\n|---|---|---|\n")
+    o_all = sum(r["omni_ok"] for r in pairs)
+    d_all = sum(r["diff_ok"] for r in pairs)
+    frac = d_all / o_all if o_all else math.nan
+    w(f"| diff plans ≥ {100 * TARGET_DIFF_SUCCESS:.0f} % of omni's successes on the same rooms | {d_all} / {o_all} ")
+    w(f"= {100 * frac:.1f} % | {'yes' if frac >= TARGET_DIFF_SUCCESS else '**no**'} |\n")
+    med = _med(pr)
+    w(f"| plan time diff / omni ≤ {TARGET_DIFF_TIME_RATIO:g}× per plan | median {_fmt(med)}, max ")
+    w(f"{_fmt(max(pr, default=None))}, {over} of {len(pr)} above | ")
+    if pr and max(pr) <= TARGET_DIFF_TIME_RATIO:
+        met = "yes"
+    elif med is not None and med <= TARGET_DIFF_TIME_RATIO:
+        met = "median only"
+    else:
+        met = "**no**"
+    w(f"{met} |\n\n")
+
+    fails = [r for r in pairs if r["omni_ok"] and not r["diff_ok"]]
+    w(f"## Rooms where diff fails and omni plans ({len(fails)})\n\n")
+    if fails:
+        w("| room | N | density | goal | diff exit | reason |\n|---|---|---|---|---:|---|\n")
+        for r in fails:
+            w(f"| {r['room']} | {r['robots']} | {r['density']} | {r['goal_class']} | {r['diff_exit']} | ")
+            w(f"{r['diff_failure'].replace('|', '/')} |\n")
+    else:
+        w("None.\n")
+    rev = [r for r in pairs if r["diff_ok"] and not r["omni_ok"]]
+    if rev:
+        w(f"\nRooms where omni fails and diff plans ({len(rev)}): ")
+        w("; ".join(f"{r['room']} N={r['robots']} ({r['omni_failure'][:120]})" for r in rev) + ".\n")
+    neither = [r for r in pairs if not r["diff_ok"] and not r["omni_ok"]]
+    w(f"\nNeither plans: {len(neither)} (room, N) (goal not connected: "
+      f"{sum(not r['connected'] for r in neither)}). Every row: `{stem.with_suffix('.csv').name}`.\n")  # fmt: skip
+    stem.with_suffix(".md").write_text(buf.getvalue())
+    print(buf.getvalue())
+    print(f"wrote {stem.with_suffix('.md')}, .csv")
     return 0
 
 

@@ -151,7 +151,8 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
         "--robot-radius",
         type=positive_float,
         metavar="R",
-        help="robot radius r [m] (default: the scenario's; 0.5 for ground robots, 0.3 for drones): obstacles grown "
+        help="robot radius r [m] (default: the scenario's; 0.5 for ground robots, 0.3 for drones; a --map run of "
+        "--drive diff robots: the model's exit_offset + radius, 0.185 for turtlebot3_burger): obstacles grown "
         "by r, robots kept 2r apart, the route and the messages use it; same as --set safety_radius=R",
     )
     p.add_argument(
@@ -189,7 +190,8 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     p.add_argument(
         "--robot-model",
         metavar="NAME|FILE",
-        help="differential-drive robot: turtlebot3_burger (default), turtlebot3_waffle_pi, clearpath_jackal, or a "
+        help="differential-drive robot: turtlebot3_burger (default), turtlebot3_waffle_pi, clearpath_jackal (short: "
+        "burger, waffle_pi, jackal), or a "
         "TOML file with radius, v_max, omega_max, a_max, alpha_max, exit_offset (SI units); implies --drive diff",
     )
     p.add_argument(
@@ -246,6 +248,19 @@ def check_start_count(args: argparse.Namespace, scenario_robots: int, owner: str
         )
 
 
+def diff_map_radius(args: argparse.Namespace) -> float | None:
+    """A ``--map`` run of differential-drive robots without a robot radius: r = b + r_f [m] of the robot model (the
+    smallest disc round the tether's exit point that holds the footprint, ``tmr.model.diffdrive.model_for``), instead
+    of the 0.5 m of Caruso 2021's robots; None otherwise (omni, a scenario, or a radius given)."""
+    given = dict(args.set)
+    if not args.map or robot_radius(args) is not None or str(given.get("drive", "")).strip() != "diff":
+        return None
+    from tmr.model.diffdrive import DEFAULT_MODEL, load_robot_model
+
+    model = load_robot_model(str(given.get("robot_model") or DEFAULT_MODEL))
+    return model.exit_offset + model.radius
+
+
 def load_inputs(args: argparse.Namespace) -> Any:
     """Scenario object from the arguments (built-in, TOML, or map + base + goal)."""
     from dataclasses import replace
@@ -254,6 +269,7 @@ def load_inputs(args: argparse.Namespace) -> Any:
 
     r = robot_radius(args)  # one r: the obstacles are grown by it and the chain keeps it (tmr.world.scenario)
     if args.map:
+        r = diff_map_radius(args) or r
         if args.scenario:
             raise TmrError("give either --scenario or --map, not both")
         if args.base is None or args.goal is None:
@@ -618,8 +634,10 @@ def _drive_args(args: argparse.Namespace) -> None:
     if model is not None:
         if drive == "omni":
             raise TmrError("--robot-model is a differential-drive robot: it needs --drive diff (or no --drive)")
+        from tmr.model.diffdrive import canonical_model_name
+
         drive = drive or "diff"
-        extra.append(("robot_model", model))
+        extra.append(("robot_model", canonical_model_name(model)))  # burger -> turtlebot3_burger in the records
     if drive is not None:
         extra.insert(0, ("drive", drive))
     twice = sorted(given & {k for k, _ in extra})

@@ -44,8 +44,10 @@ Array = NDArray[np.float64]
 __all__ = [
     "DRIVES",
     "MODEL_FIELDS",
+    "PRESET_ALIASES",
     "RobotModel",
     "WHEEL_FIELDS",
+    "canonical_model_name",
     "exit_jacobian",
     "exit_point",
     "exit_velocity",
@@ -65,6 +67,8 @@ MODEL_FIELDS = ("radius", "v_max", "omega_max", "a_max", "alpha_max", "exit_offs
 WHEEL_FIELDS = ("wheel_radius", "track")
 #: The preset used by ``--drive diff`` without ``--robot-model``.
 DEFAULT_MODEL = "turtlebot3_burger"
+#: Short names of the presets (``--robot-model burger``): alias → preset name.
+PRESET_ALIASES = {"burger": "turtlebot3_burger", "waffle_pi": "turtlebot3_waffle_pi", "jackal": "clearpath_jackal"}
 
 
 @dataclass(frozen=True)
@@ -123,6 +127,13 @@ def preset_names() -> list[str]:
     return sorted(_presets())
 
 
+def canonical_model_name(name_or_file: str) -> str:
+    """The preset name of an alias (:data:`PRESET_ALIASES`, ``burger`` → ``turtlebot3_burger``); anything else (a
+    preset name, a file) unchanged, stripped of surrounding blanks."""
+    key = str(name_or_file).strip()
+    return PRESET_ALIASES.get(key, key)
+
+
 def _from_table(name: str, table: dict[str, Any], where: str) -> RobotModel:
     unknown = sorted(set(table) - set(MODEL_FIELDS) - set(WHEEL_FIELDS) - {"name"})
     missing = [f for f in MODEL_FIELDS if f not in table]
@@ -134,17 +145,18 @@ def _from_table(name: str, table: dict[str, Any], where: str) -> RobotModel:
 
 
 def load_robot_model(name_or_file: str) -> RobotModel:
-    """A preset by name (:func:`preset_names`), or a TOML file with ``radius``, ``v_max``, ``omega_max``, ``a_max``,
-    ``alpha_max``, ``exit_offset`` (and an optional ``name``). Raises :class:`ParameterError` (exit 2 on the command
-    line) for an unknown name or a bad file."""
+    """A preset by name (:func:`preset_names`, or a short name of :data:`PRESET_ALIASES`), or a TOML file with
+    ``radius``, ``v_max``, ``omega_max``, ``a_max``, ``alpha_max``, ``exit_offset`` (and an optional ``name``). Raises
+    :class:`ParameterError` (exit 2 on the command line) for an unknown name or a bad file."""
     presets = _presets()
-    key = str(name_or_file).strip()
+    key = canonical_model_name(name_or_file)
     if key in presets:
         return _from_table(key, presets[key], f"preset {key!r}")
     path = Path(key)
     if path.suffix.lower() != ".toml" and not path.exists():
         raise ParameterError(
-            f"unknown robot model {key!r}: the presets are {', '.join(sorted(presets))}, or give a .toml file with "
+            f"unknown robot model {key!r}: the presets are {', '.join(sorted(presets))} (short names "
+            f"{', '.join(sorted(PRESET_ALIASES))}), or give a .toml file with "
             f"{', '.join(MODEL_FIELDS)}"
         )
     try:

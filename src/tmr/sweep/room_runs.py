@@ -180,9 +180,14 @@ def decide_count(room: Room) -> dict[str, Any]:
 
 
 def trajectory_positions(doc: dict[str, Any], key: str = "robots") -> NDArray[np.float64]:
-    """(K+1, N, 2) positions from a ``tmr-trajectories/1`` document (``key``: "robots" raw, "filtered")."""
+    """(K+1, N, 2) positions [m] from a ``tmr-trajectories/1`` document (``key``: "robots" raw, "filtered").
+
+    The chain's points: for a differential-drive plan (``"drive": "diff"``) the tethers' exit points ``exit_x``,
+    ``exit_y`` (``x``, ``y`` are there the axle centres, ``formulations/diffdrive.md``), which the safety disc of
+    radius r is kept round; otherwise ``x``, ``y``."""
     entries = doc[key]
-    return np.stack([np.column_stack([e["x"], e["y"]]) for e in entries], axis=1).astype(float)
+    xk, yk = ("exit_x", "exit_y") if doc.get("drive") == "diff" else ("x", "y")
+    return np.stack([np.column_stack([e[xk], e[yk]]) for e in entries], axis=1).astype(float)
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -246,7 +251,11 @@ def run_room(spec: RoomRun) -> dict[str, Any]:
     length of the leader [m]), ``leader_route_length`` (shortest free route from the leader's *start* to the goal,
     :func:`tmr.route.route.plan_route`: the leader starts along the route, not at the anchor), ``route_ratio``
     (leader_length / leader_route_length), and
-    :func:`independent_check` of the raw trajectories (plus ``ind_filtered_*`` minima of the filtered ones).
+    :func:`independent_check` of the raw trajectories (plus ``ind_filtered_*`` minima of the filtered ones); also
+    ``references`` / ``references_note`` (trailing or train references, and why), ``n_steps``, ``duration`` (the motion
+    [s]), ``f1``, ``f4`` (Caruso 2021 eq. 24, 27), ``violation_kinds`` and, for
+    ``--drive diff``, the checker's ``max_lateral_velocity`` [m/s], ``peak_v``, ``v_max`` [m/s], ``peak_omega``,
+    ``omega_max`` [rad/s] and ``turn_in_place_steps`` (summed over the robots).
     """
     room = spec.room
     out: dict[str, Any] = room.summary()
@@ -293,6 +302,18 @@ def run_room(spec: RoomRun) -> dict[str, Any]:
         out["n_min_cli"] = metrics.get("n_min")
         out["n_lower_cli"] = metrics.get("n_lower")
         out["robots_auto"] = metrics.get("robots_auto")
+        out["references"] = metrics.get("references")  # trail, or train when the trailing ones failed
+        out["references_note"] = metrics.get("references_note")
+        out["n_steps"] = metrics.get("n_steps")
+        out["duration"] = _num(metrics.get("duration"))  # s, the motion
+        out["f1"], out["f4"] = _num(metrics.get("f1")), _num(metrics.get("f4"))
+        dd = metrics.get("diff_drive")
+        if isinstance(dd, dict):  # --drive diff: what the checker measured from the recorded poses
+            for key in ("max_lateral_velocity", "peak_v", "v_max", "peak_omega", "omega_max"):
+                out[key] = _num(dd.get(key))
+            out["turn_in_place_steps"] = int(sum(dd.get("turn_in_place_steps") or []))
+        if isinstance(metrics.get("violation_steps"), dict):
+            out["violation_kinds"] = ",".join(sorted(k for k, v in metrics["violation_steps"].items() if v))
         for key in ("min_robot_clearance", "min_tether_clearance", "max_span_ratio", "final_leader_error", "d_max"):
             out[key] = _num(metrics.get(key))
         tfile = out_dir / "timings.json"  # the planner's wall time is kept apart from the reproducible metrics

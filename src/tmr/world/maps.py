@@ -17,6 +17,8 @@ never the reverse. :func:`load_environment` does both steps.
   ``free_thresh`` exceeds 0.196 (Nav2's map_saver wrote 0.25 until 2025) would read map_saver's unknown grey 205 as
   free; those pixels are kept unknown, with a warning (:func:`saver_grey_reads_free`).
 * GeoJSON / WKT: see :func:`load_map`.
+* Bundled maps (:data:`BUNDLED_MAP_DIR`, ``src/tmr/world/maps/``, sources in its README): a bare file name that is not
+  a file in the current directory, e.g. ``--map turtlebot3_world.yaml``, names one of them (:func:`resolve_map_path`).
 """
 
 from __future__ import annotations
@@ -50,7 +52,10 @@ from tmr.world.environment import (
 )
 
 __all__ = [
+    "BUNDLED_MAP_DIR",
     "SAVER_UNKNOWN",
+    "bundled_maps",
+    "resolve_map_path",
     "saver_grey_reads_free",
     "MAP_SUFFIXES",
     "IMAGE_SUFFIXES",
@@ -93,6 +98,26 @@ class RosMapMeta:
     mode: str  #: trinary, scale or raw
 
 
+#: Maps shipped with tmr (ROS map_server .yaml + image), each with its source in the directory's README.md.
+BUNDLED_MAP_DIR = Path(__file__).resolve().parent / "maps"
+
+
+def bundled_maps() -> list[str]:
+    """File names of the bundled maps' YAML files (``turtlebot3_world.yaml``, ...)."""
+    return sorted(f.name for f in BUNDLED_MAP_DIR.glob("*.yaml"))
+
+
+def resolve_map_path(path: str | Path) -> Path:
+    """``path`` itself if it exists; else, if it is a bare file name (no directory part) of a bundled map
+    (:func:`bundled_maps`), that map's file in :data:`BUNDLED_MAP_DIR`; else ``path`` unchanged (its reader then says
+    it is not found)."""
+    p = Path(path)
+    if p.exists() or p.parent != Path("."):
+        return p
+    bundled = BUNDLED_MAP_DIR / p.name
+    return bundled if bundled.is_file() and p.name in bundled_maps() else p
+
+
 def load_environment(
     path: str | Path,
     bounds: Any = None,
@@ -101,8 +126,9 @@ def load_environment(
 ) -> Environment:
     """:func:`load_map` then an :class:`~tmr.world.environment.Environment` with obstacles grown by ``safety_radius`` r
     [m] (``resolution`` [m]: cell of its distance field). ``bounds`` (xmin, ymin, xmax, ymax) [m] overrides the
-    file's room; raises MapError naming the file and the problem."""
-    p = Path(path)
+    file's room; raises MapError naming the file and the problem. A bundled map may be named by its bare file name
+    (:func:`resolve_map_path`)."""
+    p = resolve_map_path(path)
     geo = load_map(p)
     room = bounds if bounds is not None else geo.bounds
     if room is None:
@@ -132,10 +158,12 @@ def load_map(path: str | Path) -> MapGeometry:
       tall obstacles.
     * ``.wkt``: one WKT geometry (e.g. a GEOMETRYCOLLECTION or MULTIPOLYGON), or one per line; ``#``
       starts a comment line; a comment ``# bounds: xmin ymin xmax ymax`` gives the room.
+
+    A bare file name that is not in the current directory may name a bundled map (:func:`resolve_map_path`).
     """
-    p = Path(path)
+    p = resolve_map_path(path)
     if not p.exists():
-        raise MapError(f"{p}: map file not found")
+        raise MapError(f"{p}: map file not found (bundled maps, by bare file name: {', '.join(bundled_maps())})")
     if not p.is_file():
         raise MapError(f"{p}: is a directory, not a map file" if p.is_dir() else f"{p}: not a regular file")
     suffix = p.suffix.lower()
