@@ -654,12 +654,12 @@ def formulation(problem: Problem, method: str | Formulation) -> Formulation:
     if getattr(problem, "robot_model", None) is not None and method == "pinv":
         raise ParameterError("drive = 'diff' is planned by --method qp and horizon (not --method pinv)")
     if method == "pinv":
-        _qp_only(problem, "the pinv baseline")
-        if problem.chain_params.active_winch:
+        if problem.chain_params.active_winch:  # first: its damper is one of the active winch's defaults
             raise ParameterError(
                 "an active winch (winch = 'active') is planned by --method qp and horizon only: the pinv baseline "
                 "keeps the paper's constant tension"
             )
+        _qp_only(problem, "the pinv baseline")
         return make_pinv(problem)
     if method == "qp":
         return make_qp(problem)
