@@ -51,8 +51,7 @@ ACTIVE_WINCH_DEFAULTS: dict[str, float] = {"ground_clearance": 0.05, "sag_allowa
 
 def with_winch_defaults(values: dict[str, Any]) -> tuple[dict[str, Any], tuple[str, ...]]:
     """``values`` (parameter overrides by field name) with :data:`ACTIVE_WINCH_DEFAULTS` filled in where not given,
-    if they ask for ``winch = "active"``; and the names filled in (so a method that cannot keep one can tell a
-    default from a request)."""
+    if they ask for ``winch = "active"``; and the names it filled in."""
     if str(values.get("winch", "passive")) != "active":
         return dict(values), ()
     filled = tuple(k for k in ACTIVE_WINCH_DEFAULTS if k not in values)
