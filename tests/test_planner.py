@@ -150,12 +150,21 @@ def scenario_a_qp():
     return problem, *solve(problem, "qp")
 
 
-@pytest.mark.parametrize("limit", [1e-3, 0.3], ids=["before IPOPT", "IPOPT stopped"])
-def test_horizon_stopped_early_is_never_worse_than_qp_in_any_term(scenario_a_qp, limit):
+@pytest.mark.parametrize("limit", [1e-3, 0.5], ids=["before IPOPT", "IPOPT stopped"])
+def test_horizon_stopped_early_is_never_worse_than_qp_in_any_term(scenario_a_qp, limit, monkeypatch):
     """``solve(problem, "horizon")`` starts from the very plan ``solve(problem, "qp")`` returns: stopped by its time
     limit before IPOPT runs it returns that plan itself (same joints, bit for bit); stopped during IPOPT, a plan
     whose f1, f2, f3, f4 are each ≤ the qp plan's, passing every check."""
     problem, qp, qp_metrics = scenario_a_qp
+    if limit >= 0.01:  # the horizon reads its clock 14 times before IPOPT, then once an iteration: 20 ms a reading
+        # stops IPOPT after about 11 of the 18 iterations it takes on A, on any machine
+        import itertools
+        from types import SimpleNamespace
+
+        import tmr.control.horizon as horizon
+
+        ticks = itertools.count()
+        monkeypatch.setattr(horizon, "time", SimpleNamespace(perf_counter=lambda: 0.02 * next(ticks)))
     plan, metrics = solve(problem, "horizon", time_limit=limit)
     d = plan.diagnostics
     assert plan.success and metrics.n_violation_steps == 0 and d["time_limit_hit"]
@@ -165,6 +174,8 @@ def test_horizon_stopped_early_is_never_worse_than_qp_in_any_term(scenario_a_qp,
         assert d["horizon_result"] == "warm_start" and d["ipopt_iterations"] == 0
         np.testing.assert_array_equal(plan.q, qp.q)
         assert "the warm-start qp plan as given" in d["horizon_note"]
+    else:
+        assert d["ipopt_iterations"] > 0 and d["horizon_stop"] == "time_limit"  # IPOPT ran, and was stopped
     assert "vs its qp warm start: f1 " in d["horizon_note"] and "IPOPT iterations in all" in d["horizon_note"]
     assert d["horizon_summary"]["warm_start_terms"]["f1"] == pytest.approx(qp_metrics.f1, rel=1e-9)
 
