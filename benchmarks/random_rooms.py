@@ -304,6 +304,15 @@ def write_figure(rows: list[dict[str, Any]], method: str, robots: list[str], pat
     plt.close(fig)
 
 
+def generate_rooms(executor: Any, n_rooms: int, seed: int) -> tuple[list[Room], list[Any], float]:
+    """The seeded rooms of ``room_set(n_rooms, seed)`` built on ``executor``: those generated, the errors of the
+    others, and the time it took [s]."""
+    t0 = time.perf_counter()
+    generated = executor.map(room_from_spec, room_set(n_rooms, seed), desc="rooms")
+    t_gen = time.perf_counter() - t0
+    return [g for g in generated if isinstance(g, Room)], [g for g in generated if not isinstance(g, Room)], t_gen
+
+
 def import_baseline(repeats: int = 3) -> float:
     """Median wall time [s] of importing what a refusal needs (tmr.plan, tmr.world.scenario, tmr.route.route) in a new
     process: the floor of every whole-process time."""
@@ -361,12 +370,7 @@ def main(argv: list[str] | None = None) -> int:
     baseline = import_baseline()
     executor = make_executor(args.jobs, args.scheduler, progress=True)
     try:
-        specs = room_set(n_rooms, args.seed)
-        t0 = time.perf_counter()
-        generated = executor.map(room_from_spec, specs, desc="rooms")
-        t_gen = time.perf_counter() - t0
-        rooms_ok: list[Room] = [g for g in generated if isinstance(g, Room)]
-        gen_errors = [g for g in generated if not isinstance(g, Room)]
+        rooms_ok, gen_errors, t_gen = generate_rooms(executor, n_rooms, args.seed)
         # where N_min lies when the proven bound is below the plans' count (a proof for each N, a clear chain)
         gap_rooms = [r for r in rooms_ok if r.n_min is not None and r.n_lower is not None and r.n_lower < r.n_min]
         t0 = time.perf_counter()
@@ -691,12 +695,7 @@ def drive_comparison(args: argparse.Namespace, argv: list[str] | None) -> int:
     load0 = os.getloadavg()
     executor = make_executor(args.jobs, args.scheduler, progress=True)
     try:
-        specs = room_set(n_rooms, args.seed)
-        t0 = time.perf_counter()
-        generated = executor.map(room_from_spec, specs, desc="rooms")
-        t_gen = time.perf_counter() - t0
-        rooms_ok: list[Room] = [g for g in generated if isinstance(g, Room)]
-        gen_errors = [g for g in generated if not isinstance(g, Room)]
+        rooms_ok, gen_errors, t_gen = generate_rooms(executor, n_rooms, args.seed)
         keys, tasks = [], []
         for room in rooms_ok:
             for n in robots:
