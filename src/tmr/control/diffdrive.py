@@ -119,15 +119,32 @@ class DiffDriveSpeed(_DiffRows):
         N = ctx.heading.size
         m = self.model
         A = self.rows(ctx.heading)
-        up = np.tile([m.v_max, m.omega_max], N)
+        rows = 4 * N if m.track else 2 * N
+        if self._up is None or self._up.size != rows:  # the bounds and the stacked rows: allocated once per N
+            up = np.tile([m.v_max, m.omega_max], N)
+            if m.track:
+                up = np.concatenate([up, np.full(2 * N, (1.0 - WHEEL_RESERVE) * m.v_max)])
+                self._stack = np.empty((rows, 2 * N))
+            self._up, self._lo = up, -up
         if not m.track:
-            return LimitRows(A, -up, up)
+            return LimitRows(A, self._lo, self._up)
         h = 0.5 * m.track
-        W = np.empty_like(A)
-        W[0::2] = A[0::2] + h * A[1::2]  # right wheel's rim speed v + ω L/2
-        W[1::2] = A[0::2] - h * A[1::2]  # left wheel's v − ω L/2
-        up = np.concatenate([up, np.full(2 * N, (1.0 - WHEEL_RESERVE) * m.v_max)])
-        return LimitRows(np.vstack([A, W]), -up, up)
+        S = self._stack
+        S[: 2 * N] = A
+        W = S[2 * N :]
+        np.add(A[0::2], h * A[1::2], out=W[0::2])  # right wheel's rim speed v + ω L/2
+        np.subtract(A[0::2], h * A[1::2], out=W[1::2])  # left wheel's v − ω L/2
+        return LimitRows(S, self._lo, self._up)
+
+    def __init__(self, model: RobotModel) -> None:
+        super().__init__(model)
+        self.reset()
+
+    def reset(self) -> None:
+        super().reset()
+        self._up: Array | None = None
+        self._lo: Array | None = None
+        self._stack: Array | None = None
 
 
 class DiffDriveAcceleration(_DiffRows):
