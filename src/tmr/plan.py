@@ -491,16 +491,7 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
     (exit 2) for a task proven impossible: no free route, fewer robots than the route needs, or more than fit in
     the free space at once (before the route search).
     """
-    from tmr.model.params import (
-        ChainParams,
-        PathParams,
-        PinvParams,
-        QPParams,
-        TaskParams,
-        TimeParams,
-        apply_overrides,
-        with_winch_defaults,
-    )  # fmt: skip
+    from tmr.model.params import PARAM_CLASSES, ChainParams, TimeParams, apply_overrides, with_winch_defaults
     from tmr.model.spans import span_limits
     from tmr.route.route import TooFewRobotsError, check_fit, plan_route
 
@@ -508,7 +499,7 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
     values = with_winch_defaults(values)[0]  # the planner's own defaults (tmr.planner.build_problem)
     rest = dict(values)
     made = {}
-    for cls in (ChainParams, TimeParams, PathParams, TaskParams, PinvParams, QPParams):  # bad values: exit 2 now
+    for cls in PARAM_CLASSES:  # bad values: exit 2 now
         made[cls], rest = apply_overrides(cls(), rest)
     chain_params = made[ChainParams]
     if rest:
