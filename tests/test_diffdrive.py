@@ -233,3 +233,138 @@ def test_cli_refusals_and_outputs(tmp_path, capsys):
     assert header[:3] == ["t", "robot1_x", "robot1_y"] and "robot3_omega" in header
     assert cli.main(["replay", str(out), "--drive", "omni"]) == 2  # a diff-drive plan replays on wheels only
     assert "differential-drive" in capsys.readouterr().err
+
+
+def test_model_name_and_exit_offset_are_checked(tmp_path):
+    """A model's name must be text, and b ≥ MIN_EXIT_OFFSET: a b of 1e-12 m passed '> 0' and then failed the plan with
+    rows violated by 4e9 and advice about the speed bounds."""
+    from tmr.model.diffdrive import MIN_EXIT_OFFSET
+
+    own = tmp_path / "m.toml"
+    body = "radius = 0.1\nv_max = 0.5\nomega_max = 2.0\na_max = 1.0\nalpha_max = 3.0\n"
+    own.write_text(body + "exit_offset = 1e-12\n")
+    with pytest.raises(ParameterError, match="exit_offset = 1e-12 m is below"):
+        load_robot_model(str(own))
+    own.write_text(body + f"exit_offset = {MIN_EXIT_OFFSET}\n")
+    assert load_robot_model(str(own)).exit_offset == MIN_EXIT_OFFSET
+    own.write_text(body + "exit_offset = 0.1\nname = 5\n")
+    with pytest.raises(ParameterError, match="name must be non-empty text"):
+        load_robot_model(str(own))
+
+
+def test_cli_robot_model_flags_set_and_records(tmp_path, capsys):
+    """``--set drive=diff --set robot_model=burger`` (either order) plans like ``--robot-model burger``; the records
+    keep the preset's full name, the default model's too; an empty or unknown --robot-model, --set robot_model
+    without drive = diff and --filter-cutoff with diff drive exit 2 with one line naming the flag."""
+    from tmr import cli
+
+    runs = {
+        "flag": ["--robot-model", "burger"],
+        "set": ["--set", "robot_model=burger", "--set", "drive=diff"],
+        "default": ["--drive", "diff"],
+    }
+    for name, args in runs.items():
+        out = tmp_path / name
+        assert cli.main(["plan", "--scenario", "A", *args, "--out", str(out), "--no-plots", "-q"]) == 0, name
+        assert json.loads((out / "run.json").read_text())["params"]["robot_model"] == "turtlebot3_burger"
+    assert (tmp_path / "flag" / "trajectories.json").read_bytes() == (
+        tmp_path / "set" / "trajectories.json"
+    ).read_bytes()
+    for args, where in (
+        (["--robot-model", ""], "tmr plan: error: --robot-model: must name"),
+        (["--robot-model", "burgr"], "tmr plan: error: --robot-model: unknown robot model 'burgr'"),
+        (["--set", "robot_model=burgr", "--set", "drive=diff"], "unknown robot model 'burgr'"),
+        (["--set", "robot_model=burger"], "is a differential-drive robot but drive = 'omni'"),
+        (["--drive", "diff", "--filter-cutoff", "2"], "--filter-cutoff: a differential-drive plan is not filtered"),
+    ):
+        out = tmp_path / "refused"
+        assert cli.main(["plan", "--scenario", "A", *args, "--out", str(out), "--no-plots"]) == 2, args
+        err = capsys.readouterr().err.strip()
+        assert where in err and err.count("\n") == 0, (args, err)
+        assert not out.exists()
+
+
+def test_a_motion_longer_than_max_steps_is_refused_up_front(tmp_path, capsys):
+    """A robot model with v_max = 1e-6 m/s asks for 1.6e8 steps: refused with exit 2 before any array of that length
+    is allocated (it took 24 GB and the kernel's OOM killer), as is a T_end / Ts above MAX_STEPS."""
+    from tmr import cli
+    from tmr.model.params import MAX_STEPS, TimeParams
+
+    slow = tmp_path / "slow.toml"
+    slow.write_text(
+        "radius = 0.105\nv_max = 1e-6\nomega_max = 2.84\na_max = 2.5\nalpha_max = 3.2\nexit_offset = 0.08\n"
+    )
+    out = tmp_path / "o"
+    assert cli.main(["plan", "--scenario", "A", "--robot-model", str(slow), "--out", str(out), "--no-plots"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"above the planner's limit of {MAX_STEPS:,} steps" in err and err.count("\n") == 0
+    assert not out.exists()
+    with pytest.raises(ParameterError, match="MAX_STEPS"):
+        TimeParams(T_end=MAX_STEPS * 0.05 + 1.0, Ts=0.05)
+    assert TimeParams(T_end=MAX_STEPS * 0.05, Ts=0.05).steps == MAX_STEPS
+
+
+def test_rrt_route_is_retimed_to_the_robot(tmp_path, capsys):
+    """``--route rrt`` keeps the paper's 15 s for omni robots; with differential drive the same RRT* path is retimed
+    so the leader's reference stays within leader_speed (0.6 v_max) and the plan passes; a T_end the user sets that
+    asks for more than v_max is refused up front."""
+    from tmr import cli
+    from tmr.planner import DIFF_SPEED_FRACTION
+
+    out = tmp_path / "rrt"
+    assert (
+        cli.main(
+            ["plan", "--scenario", "A", "--drive", "diff", "--route", "rrt", "--out", str(out), "--no-plots", "-q"]
+        )
+        == 0
+    )
+    doc = json.loads((out / "run.json").read_text())
+    T_end = doc["params"]["T_end"]
+    assert T_end > 15.0
+    traj = json.loads((out / "trajectories.json").read_text())
+    assert traj["robots"][-1]["t"][-1] == pytest.approx(T_end)
+    lead = np.column_stack([traj["robots"][-1]["exit_x"], traj["robots"][-1]["exit_y"]])
+    speed = np.linalg.norm(np.diff(lead, axis=0), axis=1) / 0.05
+    assert speed.max() <= 0.22 * (1 + 1e-9) and np.median(speed[speed > 1e-3]) <= DIFF_SPEED_FRACTION * 0.22 * 1.05
+    refused = tmp_path / "fast"
+    args = ["plan", "--scenario", "A", "--drive", "diff", "--route", "rrt", "--set", "T_end=15", "--out", str(refused)]
+    assert cli.main([*args, "--no-plots"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "above the robot's v_max 0.22 m/s" in err and err.count("\n") == 0 and not refused.exists()
+
+
+def test_drive_figure_of_a_diff_plan(tmp_path):
+    """A diff plan with figures writes drive.png; plot_drive draws v, both wheel rims and ω per robot with the limits
+    (±v_max, the planned rim bound, ±ω_max), and trajectories.png of a diff plan has no 'filtered' curve."""
+    from tmr import cli
+    from tmr.control.diffdrive import WHEEL_RESERVE
+    from tmr.views.plot import plot_drive, plot_trajectories
+
+    out = tmp_path / "figs"
+    assert cli.main(["plan", "--scenario", "A", "--drive", "diff", "--out", str(out), "-q"]) == 0
+    assert (out / "drive.png").stat().st_size > 10_000
+    doc = json.loads((out / "trajectories.json").read_text())
+    params = json.loads((out / "run.json").read_text())["params"]
+    robots = doc["robots"]
+    plan = SimpleNamespace(
+        t=np.array(robots[0]["t"]),
+        drive_v=np.column_stack([r["v"] for r in robots]),
+        drive_omega=np.column_stack([r["omega"] for r in robots]),
+        robots=np.stack([np.column_stack([r["exit_x"], r["exit_y"]]) for r in robots], axis=1),
+        heading=np.column_stack([r["theta"] for r in robots]),
+        params=params, scenario="A", method="qp", success=True, failure=None,
+    )  # fmt: skip
+    fig = plot_drive(plan)
+    assert len(fig.axes) == 2 * len(robots)
+    m = params["robot_model_params"]
+    av, aw = fig.axes[0], fig.axes[1]
+    levels = {round(float(ln.get_ydata()[0]), 9) for ln in av.lines if len(set(ln.get_ydata())) == 1}
+    assert {m["v_max"], -m["v_max"], round((1 - WHEEL_RESERVE) * m["v_max"], 9)} <= levels
+    assert np.allclose(av.lines[0].get_ydata(), plan.drive_v[:, 0]) and np.allclose(
+        aw.lines[0].get_ydata(), plan.drive_omega[:, 0]
+    )
+    legend = [t.get_text() for t in av.get_legend().get_texts()]
+    assert "right wheel rim" in legend and "left wheel rim" in legend
+    traj_fig = plot_trajectories(plan)
+    labels = {t.get_text() for ax in traj_fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()}
+    assert labels == {"tether exit point (planned)"}

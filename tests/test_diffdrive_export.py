@@ -90,3 +90,37 @@ def test_motion_refuses_misshapen_drive_arrays():
     bad = DiffDrive(np.zeros((2, 1, 2)), np.zeros((3, 1)), np.zeros((2, 1)), np.zeros((2, 1)))
     with pytest.raises(ParameterError, match="diff_drive.theta"):
         Motion("chain", "x", t, tracks, (), (), (), (0, 0, 1, 1), diff_drive=bad)
+
+
+def test_tf_tree_places_the_odometry_on_the_map(diff_run):
+    """/tf links map → odom (identity) → robotK/base_link at every sample, the base_link at the odometry's pose, so a
+    viewer can place /robotK/odom; map → robotK stays the tether's exit point (b ahead of the axle)."""
+    doc = json.loads((diff_run / "trajectories.json").read_text())
+    msgs, _ = _read(diff_run / "ros2_bag")
+    tf = msgs["/tf"]
+    assert len(tf) == len(doc["robots"][0]["t"])
+    for k, (_, m) in enumerate(tf):
+        by_child = {t.child_frame_id: t for t in m.transforms}
+        odom = by_child["odom"]
+        assert odom.header.frame_id == "map"
+        tr, q = odom.transform.translation, odom.transform.rotation
+        assert (tr.x, tr.y, tr.z, q.x, q.y, q.z, q.w) == (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+        for i, r in enumerate(doc["robots"], start=1):
+            base = by_child[f"robot{i}/base_link"]
+            assert base.header.frame_id == "odom"
+            p, q = base.transform.translation, base.transform.rotation
+            assert abs(p.x - r["x"][k]) <= 1e-9 and abs(p.y - r["y"][k]) <= 1e-9
+            assert abs(q.z - math.sin(r["theta"][k] / 2)) <= 1e-9 and abs(q.w - math.cos(r["theta"][k] / 2)) <= 1e-9
+            ex = by_child[f"robot{i}"].transform.translation
+            assert abs(ex.x - r["exit_x"][k]) <= 1e-9 and abs(ex.y - r["exit_y"][k]) <= 1e-9
+
+
+def test_filtered_export_of_a_diff_run_is_refused(diff_run, tmp_path, capsys):
+    """A differential-drive plan is not filtered: --trajectory filtered exits 2 with one line, nothing written."""
+    from tmr.export.__main__ import main
+
+    out = tmp_path / "bag"
+    assert main([str(diff_run), "--out", str(out), "--trajectory", "filtered", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "not filtered" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()

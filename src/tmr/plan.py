@@ -47,6 +47,7 @@ from tmr.io.cli_args import (
     point,
     points,
     positive_float,
+    robot_model_arg,
 )
 from tmr.io.console import LOG, progress_enabled
 from tmr.io.console import run as run_cli
@@ -64,6 +65,7 @@ OUTPUT_NAMES = (
     "trajectories.png",
     "distance_errors.png",
     "speeds.png",
+    "drive.png",
 )
 #: Keys of the metrics that are timings [s] (``ms_per_step`` [ms]): written to ``timings.json``, not ``metrics.json``.
 #: ``wall_time`` is the whole planning time, from the route to the checked plan (every ``--robots auto`` attempt);
@@ -189,6 +191,7 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--robot-model",
+        type=robot_model_arg,
         metavar="NAME|FILE",
         help="differential-drive robot: turtlebot3_burger (default), turtlebot3_waffle_pi, clearpath_jackal (short: "
         "burger, waffle_pi, jackal), or a "
@@ -329,12 +332,16 @@ def write_outputs(
         io.write_cmd_vel(plan, out / io.CMD_VEL_DIR)
         names.append(io.CMD_VEL_DIR)
     if plots:
+        diff = getattr(plan, "heading", None) is not None  # not filtered: no filtered curve beside the plan's
+        shown = None if diff else filtered
         figures = {
             "chain_poses.png": ("plot_chain_poses", (plan, env), {"route": route}),
-            "trajectories.png": ("plot_trajectories", (plan, filtered), {}),
+            "trajectories.png": ("plot_trajectories", (plan, shown), {}),
             "distance_errors.png": ("plot_distance_errors", (plan,), {}),
-            "speeds.png": ("plot_speeds", (plan, filtered), {}),
+            "speeds.png": ("plot_speeds", (plan, shown), {}),
         }
+        if diff:
+            figures["drive.png"] = ("plot_drive", (plan,), {})
         if getattr(plan, "winch_tension", None) is not None:
             figures["winch_tension.png"] = ("plot_winch", (plan,), {})
         rendered = _pooled(pool, figures)
@@ -385,10 +392,19 @@ def summary(plan: Any, metrics: Any) -> str:
         )
         at = keys.index("violations") + 1
         keys[at:at] = ["qp_levels", "qp_fallback_solves"]
-    lines = [
-        f"tmr plan: scenario {plan.scenario}, method {plan.method}, {plan.n_robots} robots, {plan.t.size - 1} steps"
-    ]
     dd = d.get("diff_drive") or {}
+    model = (plan.params or {}).get("robot_model") if dd else None
+    drive = f", differential drive ({model})" if model else ""
+    lines = [
+        f"tmr plan: scenario {plan.scenario}, method {plan.method}, {plan.n_robots} robots{drive}, "
+        f"{plan.t.size - 1} steps"
+    ]
+    if dd.get("v_max"):  # the peaks the independent check measured against the robot's limits
+        lines.append(
+            f"  {'drive peaks':<24} v {dd['peak_v']:.3g} of {dd['v_max']:g} m/s, ω {dd['peak_omega']:.3g} of "
+            f"{dd['omega_max']:g} rad/s, wheel rim {dd.get('peak_wheel_rim_speed', 0.0):.3g} m/s; turn in place "
+            f"{sum(dd.get('turn_in_place_steps', [])):d} steps"
+        )
     if "final_heading_error" in dd:  # a goal heading (--goal X,Y,THETA): the leader's final heading error [deg]
         err, tol = math.degrees(dd["final_heading_error"]), dd["heading_tolerance_deg"]
         d["final_heading_error"] = f"{err:.4g} deg (tolerance {tol:g} deg)"
@@ -510,6 +526,11 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
         from tmr.model.diffdrive import model_for
 
         model_for(chain_params.robot_model, chain_params.safety_radius)
+        if args.filter_cutoff != FILTER_CUTOFF:
+            raise TmrError(
+                "--filter-cutoff: a differential-drive plan is not filtered (its robots execute cmd_vel/robotK.csv, "
+                "whose poses are the checked plan)"
+            )
         if args.method not in ("qp", "horizon"):
             raise TmrError(f"--drive diff is planned by --method qp and horizon (not --method {args.method})")
     from tmr.world.environment import refuse_impassable_low_obstacles
@@ -625,10 +646,8 @@ def _drive_args(args: argparse.Namespace) -> None:
     if model is not None:
         if drive == "omni":
             raise TmrError("--robot-model is a differential-drive robot: it needs --drive diff (or no --drive)")
-        from tmr.model.diffdrive import canonical_model_name
-
         drive = drive or "diff"
-        extra.append(("robot_model", canonical_model_name(model)))  # burger -> turtlebot3_burger in the records
+        extra.append(("robot_model", model))  # burger -> turtlebot3_burger in the records (robot_model_arg)
     if drive is not None:
         extra.insert(0, ("drive", drive))
     twice = sorted(given & {k for k, _ in extra})
@@ -719,7 +738,7 @@ def _main(args: argparse.Namespace) -> int:
                 )
             else:  # differential drive: the robots execute cmd_vel/ (a low-passed pose would slip sideways)
                 filtered = np.asarray(plan.robots, dtype=float).copy()
-                filter_note = "differential drive: not filtered, the robots execute cmd_vel/robotI.csv"
+                filter_note = "differential drive: not filtered, the robots execute cmd_vel/robot1.csv …"
             extra = _extras(problem, plan, auto_note) | ({"filter_note": filter_note} if filter_note else {}) | timings
             from tmr.io.outdir import Stage
 

@@ -109,6 +109,10 @@ class Problem:
         if self.route is not None:
             out.update(route_length=self.route.length, n_min=self.route.n_min, n_lower=self.route.n_lower)
         if self.robot_model is not None:  # differential drive only: an omnidirectional plan's records keep their bytes
+            from tmr.model.diffdrive import DEFAULT_MODEL, canonical_model_name
+
+            # the preset's full name (the default one too, or a short name from a scenario file), or the file
+            out.update(robot_model=canonical_model_name(out.get("robot_model") or DEFAULT_MODEL))
             out.update(robot_model_params=self.robot_model.record())
         if self.goal_heading is not None:  # only with --goal X,Y,THETA: other plans' records keep their bytes
             out.update(goal_heading=self.goal_heading, goal_arrive_time=float(self.trajectory.t[self.goal_arrive]))
@@ -334,6 +338,9 @@ def build_problem(
             traj = _trajectory_along(env, _path_tail(anchor_path, leader_at), time_params, path_params)
         if traj is None:
             traj = _rrt_trajectory(env, P[-1], goal, seed, time_params, path_params)
+        if robot_model is not None:  # the paper's 15 s are an omnidirectional robot's: slowed to the robot's reach
+            traj = _within_robot_reach(env, traj, time_params, path_params, robot_model, "T_end" in values)
+            time_params = replace(time_params, T_end=float(traj.t[-1]))
     problem = Problem(
         scenario,
         chain,
@@ -477,6 +484,34 @@ def _trajectory_along(
         return time_law(waypoints, T_end=time_params.T_end, Ts=time_params.Ts, env=env, clearance=spline_clearance)
     except (PathError, ParameterError):
         return None
+
+
+def _within_robot_reach(
+    env: Any, traj: Trajectory, time_params: TimeParams, path_params: PathParams, model: Any, user_T: bool
+) -> Trajectory:
+    """``--route rrt`` with differential drive: the leader's B-spline time law over the paper's T_end (15 s) retimed
+    along the same waypoints to the longest of T_end, the time that keeps its peak speed ≤ ``leader_speed`` and the
+    one that keeps its peak acceleration ≤ ``leader_accel`` (both capped for the robot, :func:`_diff_drive_setup`;
+    speed scales as 1/T, acceleration as 1/T²), rounded up to whole steps. A T_end the user set is kept, unless its
+    peak speed is above the robot's v_max (ParameterError, exit 2: no robot could follow it)."""
+    T, Ts = float(traj.t[-1]), time_params.Ts
+    v_peak = float(np.max(np.linalg.norm(traj.xd, axis=1), initial=0.0))
+    a_peak = float(np.max(np.linalg.norm(traj.xdd, axis=1), initial=0.0))
+    if user_T:
+        if v_peak > model.v_max:
+            need = T * v_peak / model.v_max
+            raise ParameterError(
+                f"T_end = {T:g} s asks the leader for {v_peak:.3g} m/s along its path, above the robot's v_max "
+                f"{model.v_max:g} m/s ({model.name}): give T_end ≥ {need:.4g} s, or leave T_end out (it is then "
+                "chosen from the robot's speed)"
+            )
+        return traj
+    scale = max(1.0, v_peak / path_params.leader_speed, math.sqrt(a_peak / path_params.leader_accel))
+    if scale <= 1.0:
+        return traj
+    T_new = math.ceil(T * scale / Ts - 1e-9) * Ts
+    slow = _trajectory_along(env, traj.waypoints, replace(time_params, T_end=T_new), path_params)
+    return traj if slow is None else slow
 
 
 def _rrt_trajectory(

@@ -19,6 +19,8 @@ topic                                     type                                  
                                                                                   inflated outlines, room, anchor,
                                                                                   goal, task points
 ``/tf``                                   ``tf2_msgs/msg/TFMessage``              one per sample: map → every body
+                                                                                  (diff drive: also map → odom →
+                                                                                  robot<i>/base_link)
 ``/robot<i>/cmd_vel``                     ``geometry_msgs/msg/Twist``             differential-drive runs only: one
                                                                                   per sample and robot
 ``/robot<i>/odom``                        ``nav_msgs/msg/Odometry``               differential-drive runs only: one
@@ -37,7 +39,10 @@ A differential-drive chain (``--drive diff``, :class:`tmr.views.motion.DiffDrive
 * ``/robot<i>/odom`` — ``nav_msgs/msg/Odometry``: header stamp t_k, frame ``odom`` (:data:`ODOM_FRAME`, coincident
   with ``map``: the plan's positions are exact), ``child_frame_id`` ``robot<i>/base_link``; pose = the axle centre
   (x, y, 0) [m] and the heading quaternion (0, 0, sin(theta/2), cos(theta/2)); twist in the body frame = (v, 0, 0)
-  [m/s], (0, 0, omega) [rad/s]; both covariances zero (the plan is not an estimate).
+  [m/s], (0, 0, omega) [rad/s]; both covariances zero (the plan is not an estimate);
+* on ``/tf`` with every sample: ``map`` → ``odom`` (identity) and ``odom`` → ``robot<i>/base_link`` (the odometry's
+  pose), so a viewer places the odometry and the robot's body on the map (``map`` → ``robot<i>`` stays the tether's
+  exit point).
 
 An omnidirectional chain's bag has none of these topics and its bytes are unchanged.
 
@@ -403,8 +408,21 @@ def write_bag(
                 TS(header=m.header(s), child_frame_id=tr.name, transform=m.transform(tr.xyz[k], _yaw(tr, k)))
                 for tr in motion.tracks
             ]
+            diff_robots = _diff_robots(motion)
+            if diff_robots:  # map → odom (identity: the plan is exact) → robot<i>/base_link (the odometry's pose)
+                tfs.append(TS(header=m.header(s), child_frame_id=ODOM_FRAME, transform=m.transform((0, 0, 0), None)))
+                for i, name in enumerate(diff_robots):
+                    dd = motion.diff_drive
+                    xy, th = dd.axle[k, i], float(dd.theta[k, i])
+                    tfs.append(
+                        TS(
+                            header=m.header(s, ODOM_FRAME),
+                            child_frame_id=f"{name}/base_link",
+                            transform=m.transform((xy[0], xy[1], 0.0), th),
+                        )
+                    )
             w.write(conns["/tf"], s, ser(ts.types["tf2_msgs/msg/TFMessage"](transforms=tfs), TOPIC_TYPES["tf"]))
-            for i, name in enumerate(_diff_robots(motion)):  # differential drive: the command and the odometry
+            for i, name in enumerate(diff_robots):  # differential drive: the command and the odometry
                 dd = motion.diff_drive
                 v, omega = float(dd.v[k, i]), float(dd.omega[k, i])
                 w.write(conns[f"/{name}/cmd_vel"], s, ser(m.twist(v, omega), TOPIC_TYPES["cmd_vel"]))

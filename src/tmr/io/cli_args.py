@@ -214,12 +214,35 @@ def param(text: str) -> tuple[str, Any]:
     for cls in owners:
         try:
             typed = convert_field(cls, key, value)
-            cls(**{key: typed})  # the field's own range (e.g. d_min > 0), the other fields at their defaults
+            # the field's own range (e.g. d_min > 0), the other fields at their defaults; a robot model is a
+            # differential-drive robot's (drive = "diff", which another --set or --drive gives)
+            cls(**({key: typed} | ({"drive": "diff"} if key == "robot_model" else {})))
+            if key == "robot_model":
+                from tmr.model.diffdrive import canonical_model_name, load_robot_model
+
+                load_robot_model(typed)  # a preset or a readable model file, now (exit 2)
+                typed = canonical_model_name(typed)
         except ParameterError as exc:
             first = first or exc
             continue
         return key, typed
     raise argparse.ArgumentTypeError(f"{key}={value}: {first}") from None
+
+
+def robot_model_arg(text: str) -> str:
+    """``--robot-model NAME|FILE``: a preset (or its short name) or a robot model TOML file that loads
+    (:func:`tmr.model.diffdrive.load_robot_model`); returns the preset's full name (``burger`` →
+    ``turtlebot3_burger``, as the records keep it) or the file as given."""
+    from tmr.errors import ParameterError
+    from tmr.model.diffdrive import canonical_model_name, load_robot_model
+
+    if not text.strip():
+        raise argparse.ArgumentTypeError("must name a robot model preset or a .toml file, got an empty value")
+    try:
+        load_robot_model(text)
+    except ParameterError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return canonical_model_name(text)
 
 
 def path_arg(text: str) -> str:

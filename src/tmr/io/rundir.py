@@ -348,6 +348,11 @@ class ChainRun:
 
         rec = self.record
         dd = self.diff_drive
+        if dd is not None and trajectory == "filtered":
+            raise RunDirError(
+                f"--trajectory filtered: {self.path} is a differential-drive plan, which is not filtered (its robots "
+                "execute cmd_vel/robotK.csv, whose poses are the checked plan): use --trajectory raw"
+            )
         robots = self.filtered if trajectory == "filtered" else self.robots
         verdict = "" if rec.get("success", True) else " — FAILED"
         what = "filtered trajectory" if trajectory == "filtered" else f"{self.n_robots} tethered robots"

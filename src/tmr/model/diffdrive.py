@@ -65,6 +65,9 @@ MODEL_FIELDS = ("radius", "v_max", "omega_max", "a_max", "alpha_max", "exit_offs
 #: The optional fields of a robot model: its wheels (radius r_w and track L [m]); with a track the planner also keeps
 #: each wheel's rim speed |v ± ω L/2| ≤ v_max (``formulations/diffdrive.md``, "Wheel speeds").
 WHEEL_FIELDS = ("wheel_radius", "track")
+#: The least exit offset b [m] a model may give (b = 0 leaves the exit point no sideways motion at all; the presets
+#: have 0.08–0.15 m).
+MIN_EXIT_OFFSET = 1e-3
 #: The preset used by ``--drive diff`` without ``--robot-model``.
 DEFAULT_MODEL = "turtlebot3_burger"
 #: Short names of the presets (``--robot-model burger``): alias → preset name.
@@ -100,12 +103,20 @@ class RobotModel:
     track: float | None = None
 
     def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise ParameterError(f"a robot model's name must be non-empty text, got {self.name!r}")
         for f in MODEL_FIELDS + WHEEL_FIELDS:
             v = getattr(self, f)
             if f in WHEEL_FIELDS and v is None:
                 continue
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise ParameterError(f"robot model {self.name!r}: {f} must be a finite number > 0, got {v!r}")
+        if self.exit_offset < MIN_EXIT_OFFSET:
+            raise ParameterError(
+                f"robot model {self.name!r}: exit_offset = {self.exit_offset:g} m is below {MIN_EXIT_OFFSET:g} m: the "
+                f"exit point then moves sideways at most b ω_max = {self.exit_offset * self.omega_max:.3g} m/s and "
+                "the heading turns by its sideways error / b (formulations/diffdrive.md); measure b from the axle"
+            )
 
     def record(self) -> dict[str, Any]:
         """The model as a JSON-ready dict (recorded in a diff-drive plan's parameters; wheels only if given)."""
@@ -141,7 +152,10 @@ def _from_table(name: str, table: dict[str, Any], where: str) -> RobotModel:
         parts = ([f"unknown keys {unknown}"] if unknown else []) + ([f"missing {missing}"] if missing else [])
         raise ParameterError(f"{where}: {'; '.join(parts)}; a robot model has {', '.join(MODEL_FIELDS)} (SI units)")
     wheels = {f: table[f] for f in WHEEL_FIELDS if f in table}
-    return RobotModel(str(table.get("name", name)), *(table[f] for f in MODEL_FIELDS), **wheels)
+    given = table.get("name", name)
+    if not isinstance(given, str):
+        raise ParameterError(f"{where}: name must be non-empty text, got {given!r}")
+    return RobotModel(given, *(table[f] for f in MODEL_FIELDS), **wheels)
 
 
 def load_robot_model(name_or_file: str) -> RobotModel:

@@ -133,7 +133,8 @@ class ChainParams:
             raise ParameterError(f"ChainParams.drive must be one of {', '.join(DRIVES)}, got {self.drive!r}")
         if self.robot_model and self.drive != "diff":
             raise ParameterError(
-                f"robot_model = {self.robot_model!r} set but drive = {self.drive!r}: add drive = 'diff'"
+                f"robot_model = {self.robot_model!r} is a differential-drive robot but drive = {self.drive!r}: give "
+                "drive = 'diff' (--drive diff), or no robot model"
             )
         if self.active_winch:  # the range as a whole (a command line's --set checks each field on its own)
             if self.winch_tension_min > self.winch_tension_max:
@@ -184,6 +185,12 @@ class ChainParams:
         return self.pulley_torque / self.pulley_radius
 
 
+#: The most time steps a plan may have: 200,000 steps are 10,000 s (2.8 h) of motion at Ts = 0.05 s, 40 times the
+#: longest plan measured (the Burger's 26.9 m narrow room, 19,037 steps). A time law that needs more (a very slow
+#: robot model, a huge T_end) is refused up front instead of allocating arrays of that length.
+MAX_STEPS = 200_000
+
+
 @dataclass(frozen=True)
 class TimeParams:
     """Time law of the leader (Caruso 2021 §4.2): duration T_end [s] and sampling period Ts [s]."""
@@ -195,6 +202,11 @@ class TimeParams:
         _validate(self)
         if self.T_end <= 0 or self.Ts <= 0 or self.Ts > self.T_end:
             raise ParameterError(f"need 0 < Ts ≤ T_end, got Ts={self.Ts}, T_end={self.T_end}")
+        if self.T_end / self.Ts > MAX_STEPS:
+            raise ParameterError(
+                f"T_end / Ts = {self.T_end / self.Ts:.6g} steps is above the planner's limit of {MAX_STEPS:,} steps "
+                "(tmr.model.params.MAX_STEPS): a shorter T_end or a longer Ts"
+            )
 
     @property
     def steps(self) -> int:

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from tmr.errors import TmrError
-from tmr.io.cli_args import ArgumentParser, add_common, count, path_arg, positive_float
+from tmr.io.cli_args import ArgumentParser, add_common, count, path_arg, positive_float, robot_model_arg
 from tmr.io.console import LOG, progress_enabled
 from tmr.io.console import run as run_command
 
@@ -84,6 +84,7 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--robot-model",
+        type=robot_model_arg,
         metavar="NAME|FILE.toml",
         help="--drive diff on an omni plan: the robot model (a preset of tmr plan --robot-model or a file; default "
         "turtlebot3_burger); a diff-drive plan replays on its own model",

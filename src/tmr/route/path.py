@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tmr.errors import NoPathFound, ParameterError, PathError, fmt_point
+from tmr.model.params import MAX_STEPS
 from tmr.route.splines import HermiteSpline, NotAKnotSpline
 
 Array = NDArray[np.float64]
@@ -550,6 +551,12 @@ def time_law(
         raise ParameterError(
             f"T_end / Ts must be a whole number of steps, got T_end = {T_end} s, Ts = {Ts} s "
             f"(ratio {ratio:.6g}); choose Ts dividing T_end"
+        )
+    if K > MAX_STEPS:  # before any array of K samples: a very slow leader is refused, not an out-of-memory crash
+        raise ParameterError(
+            f"the leader's motion would take {T_end:.6g} s, {K:,} steps of Ts = {Ts:g} s: above the planner's limit of "
+            f"{MAX_STEPS:,} steps (tmr.model.params.MAX_STEPS); a faster leader (leader_speed, or a robot model's "
+            "v_max) or a shorter route"
         )
     t = np.linspace(0.0, T_end, K + 1)
 

@@ -31,6 +31,7 @@ __all__ = [
     "plot_chain_poses",
     "plot_distance_errors",
     "plot_speeds",
+    "plot_drive",
     "plot_trajectories",
     "save_figure",
 ]
@@ -412,7 +413,8 @@ def plot_trajectories(plan: Any, filtered: np.ndarray | None = None) -> Figure:
         name = f"robot {i + 1}" + (" (leader)" if i == n - 1 else "")
         for c, coord in enumerate("xy"):
             ax = axes[i, c]
-            ax.plot(t, robots[:, i, c], color=RAW_COLOR, lw=1.8, label="planner output")
+            label = "planner output" if getattr(plan, "heading", None) is None else "tether exit point (planned)"
+            ax.plot(t, robots[:, i, c], color=RAW_COLOR, lw=1.8, label=label)
             if filtered is not None:
                 ax.plot(t, np.asarray(filtered)[:, i, c], color=FILTERED_COLOR, lw=1.0, label="filtered")
             ax.set_ylabel(f"{coord} [m]")
@@ -534,6 +536,54 @@ def plot_speeds(plan: Any, filtered: np.ndarray | None = None) -> Figure:
     axes[0].legend(loc="best", fontsize=8)
     axes[-1].set_xlabel("time [s]")
     _suptitle(fig, _title(plan, f"normalised robot speeds ($v_n$ = {v_n:.3g} m/s)"))
+    return fig
+
+
+def plot_drive(plan: Any) -> Figure:
+    """A differential-drive plan's commands (``cmd_vel/robotK.csv``): per robot, the forward speed v(t) [m/s] with
+    each wheel's rim speed v ± ω L/2 (with a track L) against ±v_max (left), and the yaw rate ω(t) [rad/s] against
+    ±ω_max (right); the rims are planned within (1 − WHEEL_RESERVE) v_max; turn-in-place steps shaded
+    (``formulations/diffdrive.md``)."""
+    from tmr.checks.diffdrive import TURN_IN_PLACE
+
+    t = np.asarray(plan.t, dtype=float)
+    v = np.asarray(plan.drive_v, dtype=float)
+    w = np.asarray(plan.drive_omega, dtype=float)
+    m = dict((plan.params or {}).get("robot_model_params") or {})
+    n = v.shape[1]
+    fig = _new_figure(9.0, 1.9 * n + 0.9)
+    axes = _grid(fig, n, 2)
+    for i in range(n):
+        name = f"robot {i + 1}" + (" (leader)" if i == n - 1 else "")
+        av, aw = axes[i, 0], axes[i, 1]
+        av.plot(t, v[:, i], color=RAW_COLOR, lw=1.5, label="v")
+        if m.get("track"):
+            from tmr.control.diffdrive import WHEEL_RESERVE
+
+            half = 0.5 * m["track"] * w[:, i]
+            rim = (1.0 - WHEEL_RESERVE) * m["v_max"]
+            av.axhline(rim, color="0.4", ls=":", lw=0.9, label="planned rim bound")
+            av.axhline(-rim, color="0.4", ls=":", lw=0.9)
+            av.plot(t, v[:, i] + half, color="C2", lw=0.8, alpha=0.8, label="right wheel rim")
+            av.plot(t, v[:, i] - half, color="C1", lw=0.8, alpha=0.8, label="left wheel rim")
+        aw.plot(t, w[:, i], color=RAW_COLOR, lw=1.5, label="ω")
+        for ax, key in ((av, "v_max"), (aw, "omega_max")):
+            if key in m:
+                ax.axhline(m[key], color="0.4", ls="--", lw=0.9, label="limit")
+                ax.axhline(-m[key], color="0.4", ls="--", lw=0.9)
+            ax.grid(True, lw=0.3, alpha=0.5)
+        turning = (np.abs(v[:, i]) < TURN_IN_PLACE[0]) & (np.abs(w[:, i]) > TURN_IN_PLACE[1])
+        if turning.any():
+            aw.fill_between(t, 0, 1, where=turning, color="0.85", transform=aw.get_xaxis_transform(),
+                            label="turn in place")  # fmt: skip
+        av.set_ylabel("v [m/s]")
+        aw.set_ylabel("ω [rad/s]")
+        av.set_title(f"{name}: forward speed", fontsize=10, y=1.0)
+        aw.set_title(f"{name}: yaw rate", fontsize=10, y=1.0)
+    for c in range(2):
+        axes[-1, c].set_xlabel("time [s]")
+        axes[0, c].legend(loc="best", fontsize=8)
+    _suptitle(fig, _title(plan, f"differential drive commands ({(plan.params or {}).get('robot_model', '')})"))
     return fig
 
 
