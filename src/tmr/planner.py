@@ -51,7 +51,7 @@ from tmr.model.params import (
 )
 from tmr.model.spans import span_limits
 from tmr.route.path import Trajectory, leader_trajectory, path_length, plan_leader_path, time_law
-from tmr.route.references import ChainReference, chain_reference, start_placement
+from tmr.route.references import CATCH_UP, ChainReference, chain_reference, start_placement
 from tmr.route.route import Route, TooFewRobotsError, check_fit, plan_route
 from tmr.world.environment import refuse_impassable_low_obstacles, refuse_low_obstacles
 from tmr.world.scenario import Scenario
@@ -329,6 +329,7 @@ def build_problem(
             accel=path_params.leader_accel,
             spacing=limits[:, 0].max() + 0.2,
             settle=0.0 if "T_end" in values else path_params.route_settle,
+            **({} if robot_model is None else {"catch_up": diff_catch_up(robot_model)}),
         )
         traj = ref.trajectory
         time_params = replace(time_params, T_end=float(traj.t[-1]))
@@ -426,6 +427,17 @@ def _with_goal_heading(problem: Problem) -> Problem:
 #: rest is the CLIK correction's room (Caruso 2021 eq. 20) and the heading's turns (``formulations/diffdrive.md``).
 DIFF_SPEED_FRACTION = 0.6
 DIFF_ACCEL_FRACTION = 0.5
+
+
+def diff_catch_up(model: RobotModel) -> float:
+    """The fastest rise [m/s] of a differential-drive follower's trailing reference at a corner
+    (:func:`tmr.route.references.chain_reference` ``catch_up``; :data:`~tmr.route.references.CATCH_UP` = 1.2 m/s for
+    omnidirectional robots): the straight-line speed the wheels' rim rows leave, (1 −
+    :data:`tmr.control.diffdrive.WHEEL_RESERVE`) v_max. References rising at 1.2 m/s ran away from Burgers
+    (0.198 m/s): their chain was pulled taut and the leader stalled (``formulations/diffdrive.md``)."""
+    from tmr.control.diffdrive import WHEEL_RESERVE
+
+    return min(CATCH_UP, (1.0 - WHEEL_RESERVE) * model.v_max)
 
 
 def _diff_drive_setup(chain_params: ChainParams, path_params: PathParams) -> tuple[RobotModel, PathParams]:
@@ -656,11 +668,17 @@ def make_qp(
         reach = float(np.max(problem.span_limits[:, 1]))
         limits.append(CableOverLowObstacles(chain, problem.env, cp, cp.low_obstacle_clearance, p.approach_rate, reach))
     limits.extend(extra_limits)
+    model = getattr(problem, "robot_model", None)
+    brake = None
+    if model is not None:  # diff drive: the spans reach their band at a rate the robots can brake
+        from tmr.control.diffdrive import span_brake
+
+        brake = span_brake(model)
     box = JointBox(
         chain, problem.span_limits, p.joint_speed_max, p.span_speed_max, p.accel_max, p.span_margin,
-        p.span_approach_rate,
+        p.span_approach_rate, brake,
     )  # fmt: skip
-    if getattr(problem, "robot_model", None) is not None:  # diff drive: v, ω rows, poses (tmr.control.diffdrive)
+    if model is not None:  # diff drive: v, ω rows, poses (tmr.control.diffdrive)
         from tmr.control.diffdrive import DiffDriveAcceleration, DiffDriveSpeed, make_diffdrive_qp
 
         limits += [DiffDriveSpeed(problem.robot_model), DiffDriveAcceleration(problem.robot_model)]

@@ -13,7 +13,10 @@ limits are two more sets of hard rows on robot velocities:
 - :class:`DiffDriveSpeed` (hard): ``|e_i·ṗ_i| ≤ v_max``, ``|e_⊥i·ṗ_i| / b ≤ ω_max``, and with a wheel track L each
   wheel's rim speed ``|v_i ± ω_i L/2| ≤ v_max``;
 - :class:`DiffDriveAcceleration` (comfort, like :class:`~tmr.control.limits.RobotAcceleration`):
-  ``|v_i − v_i,k−1| ≤ a_max Ts``, ``|ω_i − ω_i,k−1| ≤ α_max Ts``.
+  ``|v_i − v_i,k−1| ≤ a_max Ts``, ``|ω_i − ω_i,k−1| ≤ α_max Ts``;
+- and in the joint box (:class:`~tmr.control.limits.JointBox`, built by :func:`tmr.planner.make_qp`) every span meets
+  its band along a braking curve at :func:`span_brake` (:func:`~tmr.control.limits.braking_rate`), so that the robots
+  can stop it there within their acceleration bounds.
 
 The non-holonomic constraint (no sideways motion of the axle centre) is not a row but the integration:
 :class:`DiffDriveQP` reads (v_i, ω_i) off the QP's ṗ_i, holds them over the step and moves every pose along the exact
@@ -47,9 +50,11 @@ __all__ = [
     "DiffDriveQP",
     "DiffDriveSpeed",
     "GoalHeading",
+    "SPAN_BRAKE_FRACTION",
     "TURN_IN_PLACE",
     "WHEEL_RESERVE",
     "rest_to_rest",
+    "span_brake",
 ]
 
 #: A robot turns in place at a step where |v| < TURN_IN_PLACE[0] [m/s] and |ω| > TURN_IN_PLACE[1] [rad/s].
@@ -58,6 +63,17 @@ TURN_IN_PLACE = (1e-3, 0.05)
 #: |v ± ω L/2| ≤ (1 − WHEEL_RESERVE) v_max (the checker holds the plan to v_max itself). Planned to the full v_max, the
 #: wheeled MuJoCo replays of D and E (Burger) saturated their wheels while correcting and fell behind (62 mm on E).
 WHEEL_RESERVE = 0.1
+#: The share of a_max the span band's braking curve counts on (:func:`span_brake`): a span rate ḋ_i = u_i·(ṗ_i −
+#: ṗ_i−1) falls at a_max only when robot i drives along its tether (at a_max cos φ at an angle φ to it).
+SPAN_BRAKE_FRACTION = 0.5
+
+
+def span_brake(model: RobotModel) -> float:
+    """The deceleration [m/s²] of a span rate that the span band's braking curve counts on
+    (:class:`~tmr.control.limits.JointBox` ``span_brake``, :func:`~tmr.control.limits.braking_rate`):
+    :data:`SPAN_BRAKE_FRACTION` of a_max. Without it a span ran into d_max at 0.133 m/s and the robot had to stop
+    within one step (2.66 m/s² > a_max = 2.5 m/s²): the comfort limit was dropped for that step."""
+    return SPAN_BRAKE_FRACTION * model.a_max
 
 
 class DiffDriveContext:

@@ -69,6 +69,22 @@ def approach_bound(g: Array, g_min: float, rate: float, Ts: float) -> Array:
     return -np.minimum(rate * Ts, 1.0) * np.maximum(g - g_min, 0.0)
 
 
+def braking_rate(gap: Array, decel: float, Ts: float) -> Array:
+    """The largest rate v ≥ 0 at which a distance ``gap`` ≥ 0 to a limit may shrink so that a rate falling by at most
+    ``decel`` Ts per step still stops at the limit (a discrete braking curve; ``formulations/diffdrive.md``).
+
+    v is the largest with Ts (v + (v − decel Ts) + (v − 2 decel Ts) + …, its positive terms) ≤ gap: with h = decel
+    Ts² and m = ⌊(√(1 + 8 gap / h) − 1) / 2⌋ (the steps after this one), v = gap / ((m + 1) Ts) + m decel Ts / 2.
+    Continuous, increasing, ≤ gap / Ts (m = 0: the plain one-step bound), ≈ √(2 decel gap) far from the limit; and
+    recursively feasible: after a step at v ≤ braking_rate(g), braking_rate(g − Ts v) ≥ v − decel Ts. A negative gap
+    counts as 0 (the rate must not shrink it further).
+    """
+    g = np.maximum(np.asarray(gap, dtype=float), 0.0)
+    h = decel * Ts * Ts
+    m = np.floor(0.5 * (np.sqrt(1.0 + 8.0 * g / h) - 1.0))
+    return g / ((m + 1.0) * Ts) + 0.5 * m * decel * Ts
+
+
 class Limit(ABC):
     """A hard limit: ``lower ≤ A q̇ ≤ upper`` rows with a fixed pattern.
 
@@ -342,7 +358,11 @@ class JointBox:
       - speed: ``|θ̇| ≤ omega_max`` [rad/s], ``|ḋ| ≤ v_span_max`` [m/s];
       - acceleration: ``|q̇ − q̇_{k−1}| ≤ a_max Ts`` (a_max in rad/s² and m/s²);
       - span (hard, catenary): ``d_lo + margin ≤ d + Ts ḋ ≤ d_max − margin``; with ``span_rate`` ρ_d [1/s] also
-        ``ḋ ≤ ρ_d (d_max − margin − d)`` (a tether slows down as it is paid out towards its limit).
+        ``ḋ ≤ ρ_d (d_max − margin − d)`` (a tether slows down as it is paid out towards its limit); with
+        ``span_brake`` b_d [m/s²] (differential drive) also ``|ḋ| ≤ braking_rate(gap, b_d, Ts)`` towards either end
+        of the band (:func:`braking_rate`): a span reaches its bound at a rate that falls by at most b_d Ts per step,
+        so robots whose acceleration is bounded can stop it there (without it a span may run into its bound at full
+        speed and must stop within one step).
     A span already outside its band is only asked not to get worse; where the acceleration bound cannot reach the span
     band, the span band wins (the box is never empty).
     """
@@ -356,9 +376,13 @@ class JointBox:
         a_max: float,
         span_margin: float = 0.01,
         span_rate: float | None = None,
+        span_brake: float | None = None,
     ) -> None:
         self.chain = chain
         self.span_rate = None if span_rate is None else float(span_rate)
+        if span_brake is not None and not span_brake > 0:
+            raise ParameterError(f"span_brake must be > 0 (a deceleration [m/s²]) or None, got {span_brake}")
+        self.span_brake = None if span_brake is None else float(span_brake)
         self.limits = np.broadcast_to(np.asarray(span_limits, float), (chain.n_robots, 2)).copy()
         self.vmax = np.where(chain.is_prismatic, v_span_max, omega_max).astype(float)
         self.a_max = float(a_max)
@@ -384,6 +408,10 @@ class JointBox:
         band_hi = (np.maximum(self._q_hi, q) - q) / Ts
         if self.span_rate is not None:  # paid out towards d_max at most at ρ_d (d_max − m − d)
             band_hi = np.minimum(band_hi, self.span_rate * (np.maximum(self._q_hi, q) - q))
+        if self.span_brake is not None:  # either end of the band reached at a rate the robots can brake
+            p = self.chain.prismatic_index
+            band_hi[p] = np.minimum(band_hi[p], braking_rate(self._q_hi[p] - q[p], self.span_brake, Ts))
+            band_lo[p] = np.maximum(band_lo[p], -braking_rate(q[p] - self._q_lo[p], self.span_brake, Ts))
         lo, hi = np.maximum(lb, band_lo), np.minimum(ub, band_hi)
         empty = lo > hi
         if empty.any():  # speed/acceleration and the span band do not meet: the span band (the safety limit) wins

@@ -520,6 +520,11 @@ def _stays_joined(env: Any, P: Array, start_arcs: Array, f_arcs: Array, f_pts: A
     )
 
 
+#: :func:`chain_reference`'s default ``catch_up`` [m/s] (omnidirectional robots; a differential-drive chain's is its
+#: robots' straight-line speed, :func:`tmr.planner.diff_catch_up`).
+CATCH_UP = 1.2
+
+
 def chain_reference(
     env: Any,
     route: Route,
@@ -534,7 +539,7 @@ def chain_reference(
     spacing: float,
     spline_clearance: float = 0.05,
     settle: float = 0.0,
-    catch_up: float = 1.2,
+    catch_up: float = CATCH_UP,
 ) -> ChainReference:
     """References of every robot from ``start`` (N, 2) along the route to the final stations.
 
