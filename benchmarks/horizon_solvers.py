@@ -56,6 +56,7 @@ CASES: dict[str, tuple[str | None, str | None, int | None]] = {
     "mediumnear5": ("medium-near-742431198", None, 5),
     "mediumnear8": ("medium-near-742431198", None, 8),
     "narrow8": ("narrow-near-2642120001", None, 8),
+    "narrow2": ("narrow-near-2642120001", None, 2),  # --robots auto picks 2 here
     "dense8": ("dense-near-533521220", None, 8),
     "sparse8": ("sparse-near-2968811710", None, 8),
 }

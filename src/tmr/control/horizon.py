@@ -497,6 +497,7 @@ def plan_horizon(
     if fast_state is not None and not phase_rounds:  # no time left for the fallback to run IPOPT: the fast attempt's
         stop, status, stats, phase_rounds, final, xv, vals, viol, tr = fast_state
         too_big = None
+        del pools[1:]  # the fallback's pool is empty
         assert fast_log is not None
         fast_log["fallback"] = "no time left"
 
@@ -534,7 +535,7 @@ def plan_horizon(
             what = f"IPOPT's optimum ({status}) is worse than the warm start in a term of the fitness"
         elif final is not None:
             what = f"IPOPT's optimum ({status}, objective {final.J:.6g}) costs more than the warm start"
-        chosen = _best_of(pools, model, tol, warm_c.J if warm_c else math.inf) or warm_c
+        chosen = _best_of(pools, model, tol, warm_c.J if warm_c else math.inf, deadline) or warm_c
     floor = f"{opts.min_hessian_perturbation:g}"
     if fast_log is None:
         floor_note = f"IPOPT min_hessian_perturbation {floor}"
@@ -554,6 +555,7 @@ def plan_horizon(
         warm_note = f"; the warm start is no fallback: {warm_why}"
         diag = _diagnostics(model, tr, stats, xv, vals, rounds, info, J_warm, trans_time, solve_time, start_time)
         diag.update(horizon_stop=stop, time_limit=time_limit, time_limit_hit=stop == "time_limit")
+        diag.update(horizon_fast_attempt=fast_log, horizon_floor_note=floor_note)
         if stop == "rows_left_out":
             message = (
                 f"horizon NLP: rows left out of the NLP are still violated after {opts.max_rounds} rounds of "
@@ -798,10 +800,14 @@ def _floor_used(opts: HorizonOptions, fast_log: dict[str, Any] | None, chosen: _
     return float(opts.min_hessian_perturbation)
 
 
-def _best_of(pools: list[_Pool], model: _Model, tol: float, J_limit: float) -> _Candidate | None:
-    """The cheapest feasible kept iterate over the attempts' pools (:meth:`_Pool.best` of each)."""
+def _best_of(pools: list[_Pool], model: _Model, tol: float, J_limit: float, deadline: float) -> _Candidate | None:
+    """The cheapest feasible kept iterate over the attempts' pools (:meth:`_Pool.best` of each): the last attempt's
+    pool first (as without a fast attempt), the earlier ones only for a cheaper iterate and only before ``deadline``
+    (each check evaluates every row; a time-limited run overruns by no more checks than without the fast attempt)."""
     best: _Candidate | None = None
-    for p in pools:
+    for i, p in enumerate(reversed(pools)):
+        if i > 0 and time.perf_counter() >= deadline:
+            break
         c = p.best(model, tol, J_limit if best is None else min(J_limit, best.J))
         if c is not None and (best is None or c.J < best.J):
             best = c
