@@ -85,8 +85,8 @@ class HorizonOptions:
             optimum costs more than the warm start or more in a term), the procedure starts again from the warm start
             with ``min_hessian_perturbation`` — exactly as without the fast attempt, in the time that is left
             (``formulations/horizon.md``, "Two regularisation floors").
-        fast_max_iter: IPOPT iterations per round of the fast attempt (60: the accepted cases need ≤ 38 in a round;
-            the diverging one, scenario E with 4 robots and the active winch, 110 in its first).
+        fast_max_iter: IPOPT iterations per round of the fast attempt (60: the accepted rounds measured took 2–50,
+            the one that diverges, scenario E with 4 robots and the active winch, runs 110 in its first).
         fast_time_share: fraction of the time left (if there is a time limit) that the fast attempt may use (1: all
             of it; the iteration cap bounds what a failing fast attempt costs; stopped by the limit, the fast
             attempt's best feasible iterate is a fallback as the default attempt's would be).
