@@ -39,6 +39,8 @@ CASES: dict[str, tuple[str | None, str | None, int | None]] = {
     # E with 4 robots and the active winch, the damper and the sag allowance off: the NLP of
     # tests/test_winch_ground.py::test_horizon_with_the_active_winch_is_never_worse_than_qp
     "E4active": (None, "E", 4),
+    "E4winch": (None, "E", 4),  # E, 4 robots, --set winch=active only (the CLI command of the fast-attempt work)
+    "E": (None, "E", None),
     "A": (None, "A", None),
     "B": (None, "B", None),
     "C": (None, "C", None),
@@ -54,6 +56,7 @@ CASES: dict[str, tuple[str | None, str | None, int | None]] = {
     "mediumnear5": ("medium-near-742431198", None, 5),
     "mediumnear8": ("medium-near-742431198", None, 8),
     "narrow8": ("narrow-near-2642120001", None, 8),
+    "narrow2": ("narrow-near-2642120001", None, 2),  # --robots auto picks 2 here
     "dense8": ("dense-near-533521220", None, 8),
     "sparse8": ("sparse-near-2968811710", None, 8),
 }
@@ -106,6 +109,8 @@ def _argv(case: str, tmp: Path, time_limit: float) -> list[str]:
     if case == "E4active":
         sets = ("winch=active", "ground_clearance=0.05", "span_approach_rate=off", "sag_allowance=0")
         argv += [a for kv in sets for a in ("--set", kv)]
+    if case == "E4winch":
+        argv += ["--set", "winch=active"]
     argv += ["--time-limit", f"{time_limit:g}"]
     if scenario is not None:
         return ["--scenario", scenario, *argv]
@@ -187,6 +192,11 @@ def child(case: str, variant: str, time_limit: float = 60.0) -> dict:
         knots=captured.get("knots"),
         success=metrics.get("success"),
         process=time.perf_counter() - t0,
+        wall_time=timings.get("wall_time"),
+        floor=h.get("min_hessian_perturbation", "n/a"),  # the attempt that produced the plan (absent before it)
+        fast=(h.get("fast_attempt") or {}).get("result"),
+        fast_iterations=(h.get("fast_attempt") or {}).get("iterations"),
+        fast_reason=(h.get("fast_attempt") or {}).get("reason"),
     )
     if trace:
         out["max_move_per_iteration"] = trace

@@ -145,6 +145,48 @@ def test_cost_never_above_warm_start_and_beats_qp(solved):
     assert metrics.f1 < warm_metrics.f1 and metrics.f4 < warm_metrics.f4
 
 
+def test_fast_attempt_first_and_its_fallback_to_the_default_floor(solved):
+    """The fast attempt (min_hessian_perturbation 1e-5) solves the small problem; forced to stop after one iteration
+    (fast_max_iter=1) it falls back to 1e-3 from the warm start — the very plan of a run without the fast attempt,
+    never worse than qp in any term — and the note and the summary say which attempt produced the plan."""
+    problem, warm, warm_metrics, plan = solved
+    fast = plan.diagnostics["horizon_summary"]["fast_attempt"]
+    assert fast["result"] == "accepted" and fast["min_hessian_perturbation"] == 1e-5
+    assert plan.diagnostics["horizon_summary"]["min_hessian_perturbation"] == 1e-5
+    assert "IPOPT min_hessian_perturbation 1e-05 (the fast attempt)" in plan.diagnostics["horizon_note"]
+    assert {r["phase"] for r in plan.diagnostics["round_log"]} == {"fast"}
+    without = plan_horizon(problem, warm, fast_min_hessian_perturbation=None)
+    assert without.diagnostics["horizon_summary"]["fast_attempt"] is None
+    assert {r["phase"] for r in without.diagnostics["round_log"]} == {"default"}
+    assert "IPOPT min_hessian_perturbation 0.001;" in without.diagnostics["horizon_note"]
+    fell = plan_horizon(problem, warm, fast_max_iter=1)
+    d = fell.diagnostics
+    assert d["horizon_result"] == "optimal" and d["horizon_stop"] == "converged"
+    assert d["horizon_summary"]["fast_attempt"] == dict(
+        min_hessian_perturbation=1e-5,
+        max_iter_per_round=1,
+        iterations=1,
+        rounds=1,
+        result="fell_back",
+        reason="round 1 stopped with 'Maximum_Iterations_Exceeded' after 1 iterations",
+    )
+    assert d["horizon_summary"]["min_hessian_perturbation"] == 1e-3
+    assert (
+        "IPOPT min_hessian_perturbation 1e-05 first (1 iterations): round 1 stopped with "
+        "'Maximum_Iterations_Exceeded' after 1 iterations, so fell back to 0.001 from the warm start"
+        in d["horizon_note"]
+    )
+    np.testing.assert_array_equal(fell.q, without.q)  # the fallback is the procedure without the fast attempt
+    both = without.diagnostics["ipopt_iterations"] + 1
+    assert d["ipopt_iterations"] == both and d["horizon_summary"]["iterations"] == both  # both attempts count
+    assert [r["phase"] for r in d["round_log"]][:2] == ["fast", "fallback"]
+    assert d["rounds"] == len(d["round_log"])
+    metrics = check(fell, problem.env)
+    assert metrics.n_violation_steps == 0
+    for f in ("f1", "f2", "f4"):
+        assert getattr(metrics, f) <= getattr(warm_metrics, f) * (1 + 1e-9)
+
+
 def test_objective_terms_are_the_paper_fitness(solved):
     problem, warm, _, plan = solved
     for p in (warm, plan):

@@ -822,7 +822,9 @@ def solve(
             warm_metrics = evaluate(warm, problem.env)
             terms = {k: float(getattr(warm_metrics, k)) for k in ("f1", "f2", "f3", "f4")}
             warm.diagnostics = dict(warm.diagnostics, horizon_result="warm_start")
-            warm.diagnostics["horizon_note"] = f"{first}; returned its qp warm start, which passes every check"
+            floor = exc.diagnostics.get("horizon_floor_note")  # which IPOPT attempts ran (the fast one, a fallback)
+            floor = f"; {floor}" if floor else ""
+            warm.diagnostics["horizon_note"] = f"{first}{floor}; returned its qp warm start, which passes every check"
             warm.diagnostics["horizon_summary"] = dict(
                 result="warm_start",
                 stop=exc.diagnostics.get("horizon_stop", exc.status),
@@ -830,6 +832,8 @@ def solve(
                 rounds=int(exc.diagnostics.get("rounds", 0)),
                 terms=terms,
                 warm_start_terms=dict(terms),
+                min_hessian_perturbation=None,  # the plan is no IPOPT point
+                fast_attempt=exc.diagnostics.get("horizon_fast_attempt"),
             )
             return _whole(warm, warm_metrics, start, **parts)
         warm.success = False

@@ -333,16 +333,15 @@ def plan_horizon(
     warm_c, warm_why = _warm_candidate(model, warm_start, Qw, Qraw, tol)
     viol = _violations(model, vals, xv, tol)  # at the current point (the last iterate once IPOPT ran)
     info["warm_start_time"] = warm_time + time.perf_counter() - t0
-    pool = _Pool(_POOL_SIZE, _POOL_SCREEN, (warm_c.J if warm_c else math.inf) / obj_scale)
+    f_limit = (warm_c.J if warm_c else math.inf) / obj_scale
+    pool = _Pool(_POOL_SIZE, _POOL_SCREEN, f_limit)
+    pools = [pool]  # one per attempt: the fast attempt's iterates never crowd out the fallback's
     rounds: list[dict[str, Any]] = []
     tr: _Transcription | None = None
     lam: tuple[Array, Array] | None = None
     stats: dict[str, Any] = {}
     status = ""
     stop = ""  # why the rounds ended: converged, ipopt_failed, time_limit, rows_left_out
-    attempts = [("primary", {})]
-    if opts.retry:
-        attempts.append(("retry", dict(opts.retry_ipopt)))
     bar = tqdm(  # no total: IPOPT's iterations are counted, its rounds named ("horizon NLP, round 1 (primary solve)")
         desc="horizon NLP",
         unit="IPOPT iteration",
@@ -363,95 +362,153 @@ def plan_horizon(
         window_time = time.perf_counter() - t1
         solve_time += sum(w["solve_time"] for w in windows)
         trans_time += window_time - sum(w["solve_time"] for w in windows)
+    phases = _phases(opts)
+    x_phase, masks_phase, viol_phase = xv, masks, viol  # where every attempt of the procedure starts
+    fast_log: dict[str, Any] | None = None  # the fast attempt: its floor, iterations, "accepted" or why it fell back
+    final: _Candidate | None = None
+    phase_rounds: list[dict[str, Any]] = []
+    tr_first: _Transcription | None = None  # round 1's transcription (the same rows for the fallback's round 1)
+    fast_state: tuple[Any, ...] | None = None  # the fast attempt's end, if it fell back
     try:
-        for rnd in range(1, opts.max_rounds + 1):
-            if time.perf_counter() >= deadline:
-                stop = "time_limit"
-                break
-            t1 = time.perf_counter()
-            prev, tr = tr, _Transcription(model, masks)
-            trans_time += time.perf_counter() - t1
-            x_start, lam_start = xv, lam
-            if opts.restart_rounds and rnd > 1:  # the added rows, from the initial point (primal only)
-                x_start, lam_start = x_init, None
-            ok = False
-            for label, extra in attempts:
-                remaining = deadline - time.perf_counter()
-                # building the solver (casadi: the NLP's derivatives) cannot be interrupted: do not start one that
-                # would overrun the limit — as long as the last one took, or its size times the measured rate
-                expected = max(build_time * tr.size / max(built_rows, 1), _expected_build(tr.size))
-                if math.isfinite(limit) and remaining <= expected:
-                    stop = "time_limit"
-                    too_big = (tr.size, expected) if not rounds else None
-                    break
-                if math.isfinite(limit):
-                    extra = dict(extra, max_wall_time=float(remaining))
-                bar.set_description_str(f"horizon NLP, round {rnd} ({label} solve)")
-                t2 = time.perf_counter()
-                callback = _IterationCallback(tr, pool, bar, f"round {rnd} {label}", deadline)
-                solver = tr.solver(obj_scale, extra, callback)
-                build_time, built_rows = time.perf_counter() - t2, tr.size
-                kwargs: dict[str, Any] = dict(x0=x_start, lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg)
-                if prev is not None and lam_start is not None:  # primal–dual warm start from the previous round
-                    kwargs.update(lam_x0=lam_start[0], lam_g0=tr.carry_multipliers(prev, lam_start[1]))
-                elif rnd == 1 and window_lam is not None:  # the polishing pass: the windows' multipliers
-                    kwargs.update(lam_g0=_stitched_multipliers(tr, window_lam))
-                t3 = time.perf_counter()
-                _LOG.debug("horizon NLP round %d %s: IPOPT on %d rows", rnd, label, tr.size)
-                with _ctrl_c_stops_ipopt():
-                    sol = solver(**kwargs)
-                t4 = time.perf_counter()
-                trans_time += t3 - t2
-                solve_time += t4 - t3
-                stats = solver.stats()
-                status = str(stats.get("return_status", ""))
-                if callback.timed_out and not _INTERRUPT.is_set():
-                    status = _WALL_TIME  # stopped by the callback at the deadline ("User_Requested_Stop" to IPOPT)
-                xv = np.asarray(sol["x"], dtype=float).ravel()
-                lam = (np.asarray(sol["lam_x"], dtype=float).ravel(), np.asarray(sol["lam_g"], dtype=float).ravel())
+        for phase, attempts in phases:
+            if phase == "fallback":  # the procedure again, from its start, as if the fast attempt had not run
+                xv, masks, viol, lam, tr = x_phase, masks_phase, viol_phase, None, None
                 vals = model.values(xv)
-                viol = _violations(model, vals, xv, tol=tol)
-                rounds.append(
-                    dict(
-                        round=rnd,
-                        attempt=label,
-                        status=status,
-                        iterations=int(stats.get("iter_count", -1)),
-                        rows=int(tr.size),
-                        clearance_rows=int(tr.index["clearance"].size),
-                        violated=len(viol),
-                        transcription_time=(t2 - t1 if label == "primary" else 0.0) + t3 - t2,
-                        solve_time=t4 - t3,
-                        t_wall={k[7:]: round(float(v), 4) for k, v in stats.items() if k.startswith("t_wall_nlp")},
-                    )
-                )
-                ok = status in _SUCCESS or (opts.accept_acceptable and status in _ACCEPTABLE)
-                if ok:
-                    break
-                if status == _WALL_TIME:
+                stats, status, stop, too_big = {}, "", "", None
+                pool = _Pool(_POOL_SIZE, _POOL_SCREEN, f_limit)
+                pools.append(pool)
+            phase_deadline = deadline
+            if phase == "fast" and math.isfinite(limit):
+                now = time.perf_counter()
+                phase_deadline = now + opts.fast_time_share * max(deadline - now, 0.0)
+            first_round = len(rounds)
+            for rnd in range(1, opts.max_rounds + 1):
+                if time.perf_counter() >= phase_deadline:
                     stop = "time_limit"
                     break
-            if stop:
+                t1 = time.perf_counter()
+                if rnd == 1 and tr_first is not None:  # the fast attempt's first transcription: its derivatives built
+                    prev, tr = None, tr_first
+                else:
+                    prev, tr = tr, _Transcription(model, masks)
+                if rnd == 1 and phase == "fast":
+                    tr_first = tr
+                trans_time += time.perf_counter() - t1
+                x_start, lam_start = xv, lam
+                if opts.restart_rounds and rnd > 1:  # the added rows, from the initial point (primal only)
+                    x_start, lam_start = x_init, None
+                ok = False
+                for label, extra in attempts:
+                    remaining = phase_deadline - time.perf_counter()
+                    # building the solver (casadi: the NLP's derivatives) cannot be interrupted: do not start one
+                    # that would overrun the limit — as long as the last one took, or its size times the measured rate
+                    expected = max(build_time * tr.size / max(built_rows, 1), _expected_build(tr.size))
+                    if math.isfinite(limit) and remaining <= expected:
+                        stop = "time_limit"
+                        too_big = (tr.size, expected) if len(rounds) == first_round else None
+                        break
+                    if math.isfinite(limit):
+                        extra = dict(extra, max_wall_time=float(remaining))
+                    name = f"round {rnd} {label if phase != 'fast' else 'fast'}"
+                    bar.set_description_str(f"horizon NLP, {_BAR[phase]}round {rnd} ({label} solve)")
+                    t2 = time.perf_counter()
+                    callback = _IterationCallback(tr, pool, bar, name, phase_deadline)
+                    solver = tr.solver(obj_scale, extra, callback)
+                    build_time, built_rows = time.perf_counter() - t2, tr.size
+                    kwargs: dict[str, Any] = dict(x0=x_start, lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg)
+                    if prev is not None and lam_start is not None:  # primal–dual warm start from the previous round
+                        kwargs.update(lam_x0=lam_start[0], lam_g0=tr.carry_multipliers(prev, lam_start[1]))
+                    elif rnd == 1 and window_lam is not None:  # the polishing pass: the windows' multipliers
+                        kwargs.update(lam_g0=_stitched_multipliers(tr, window_lam))
+                    t3 = time.perf_counter()
+                    _LOG.debug("horizon NLP %s: IPOPT on %d rows", name, tr.size)  # "round 1 primary", …
+                    with _ctrl_c_stops_ipopt():
+                        sol = solver(**kwargs)
+                    t4 = time.perf_counter()
+                    trans_time += t3 - t2
+                    solve_time += t4 - t3
+                    stats = solver.stats()
+                    status = str(stats.get("return_status", ""))
+                    if callback.timed_out and not _INTERRUPT.is_set():
+                        status = _WALL_TIME  # stopped by the callback at the deadline ("User_Requested_Stop")
+                    xv = np.asarray(sol["x"], dtype=float).ravel()
+                    lam = (np.asarray(sol["lam_x"], dtype=float).ravel(), np.asarray(sol["lam_g"], dtype=float).ravel())
+                    vals = model.values(xv)
+                    viol = _violations(model, vals, xv, tol=tol)
+                    rounds.append(
+                        dict(
+                            round=rnd,
+                            attempt=label,
+                            phase=phase,
+                            min_hessian_perturbation=float(
+                                extra.get("min_hessian_perturbation", opts.min_hessian_perturbation)
+                            ),
+                            status=status,
+                            iterations=int(stats.get("iter_count", -1)),
+                            rows=int(tr.size),
+                            clearance_rows=int(tr.index["clearance"].size),
+                            violated=len(viol),
+                            transcription_time=(t2 - t1 if label == "primary" else 0.0) + t3 - t2,
+                            solve_time=t4 - t3,
+                            t_wall={k[7:]: round(float(v), 4) for k, v in stats.items() if k.startswith("t_wall_nlp")},
+                        )
+                    )
+                    ok = status in _SUCCESS or (opts.accept_acceptable and status in _ACCEPTABLE)
+                    if ok:
+                        break
+                    if status == _WALL_TIME:
+                        stop = "time_limit"
+                        break
+                if stop:
+                    break
+                if not ok:
+                    stop = "ipopt_failed"
+                    break
+                if not viol:
+                    stop = "converged"
+                    break
+                masks = {name: masks[name] | model.near(name, vals[name]) for name in model.rows}
+            else:
+                stop = "rows_left_out"
+            phase_rounds = rounds[first_round:]
+            final = None
+            if stop == "converged":
+                Q = model.q_of(xv)
+                final = _Candidate(Q, _cost(su, Q), "optimal", "the optimum", xv)
+            if phase != "fast":
                 break
-            if not ok:
-                stop = "ipopt_failed"
+            if not phase_rounds:  # IPOPT never ran (too little time for the build): no fast attempt, the default one
+                continue
+            fast_log = dict(
+                min_hessian_perturbation=float(opts.fast_min_hessian_perturbation or 0.0),
+                max_iter_per_round=int(attempts[0][1]["max_iter"]),
+                iterations=int(sum(r["iterations"] for r in phase_rounds)),
+                rounds=len(phase_rounds),
+            )
+            if final is not None and (warm_c is None or final.J <= warm_c.J) and _no_worse(model, final.Q):
+                fast_log.update(result="accepted")
                 break
-            if not viol:
-                stop = "converged"
+            fast_log.update(result="fell_back", reason=_fast_reason(stop, final, warm_c, model, phase_rounds, opts))
+            fast_state = (stop, status, stats, phase_rounds, final, xv, vals, viol, tr)
+            if _INTERRUPT.is_set():
                 break
-            masks = {name: masks[name] | model.near(name, vals[name]) for name in model.rows}
-        else:
-            stop = "rows_left_out"
     finally:
         bar.close()
+    if fast_state is not None and not phase_rounds:  # no time left for the fallback to run IPOPT: the fast attempt's
+        stop, status, stats, phase_rounds, final, xv, vals, viol, tr = fast_state
+        too_big = None
+        del pools[1:]  # the fallback's pool is empty
+        assert fast_log is not None
+        fast_log["fallback"] = "no time left"
 
     # what happened, in words; then the choice: optimum, best feasible iterate, warm start
-    last = rounds[-1]["round"] if rounds else 0
+    last = phase_rounds[-1]["round"] if phase_rounds else 0
     tried = " and ".join(f"{r['attempt']}: {r['status']!r} after {r['iterations']} iterations"
-                         for r in rounds if r["round"] == last)  # fmt: skip
+                         for r in phase_rounds if r["round"] == last)  # fmt: skip
     iterations = int(sum(r["iterations"] for r in rounds)) + int(sum(w["iterations"] for w in windows))
+    phase_iterations = int(sum(r["iterations"] for r in phase_rounds))
     if stop == "converged":
-        what = f"IPOPT solved the NLP ({status}, {iterations} iterations in {last} round(s))"
+        what = f"IPOPT solved the NLP ({status}, {phase_iterations} iterations in {last} round(s))"
         if windows:
             what += f" after {len(windows)} windows of {opts.window} knots"
     elif stop == "ipopt_failed":
@@ -459,8 +516,8 @@ def plan_horizon(
     elif stop == "time_limit":
         where = (
             f"in round {last} ({tried})"
-            if rounds and rounds[-1]["status"] == _WALL_TIME
-            else (f"after round {last} ({tried})" if rounds else "before IPOPT started")
+            if phase_rounds and phase_rounds[-1]["status"] == _WALL_TIME
+            else (f"after round {last} ({tried})" if phase_rounds else "before IPOPT started")
         )
         what = f"time limit of {limit:g} s reached {where}"
         if too_big is not None:
@@ -470,10 +527,6 @@ def plan_horizon(
             )
     else:
         what = f"rows left out of the NLP were still violated after {opts.max_rounds} rounds of constraint generation"
-    final: _Candidate | None = None
-    if stop == "converged":
-        Q = model.q_of(xv)
-        final = _Candidate(Q, _cost(su, Q), "optimal", "the optimum", xv)
     final_no_worse = final is not None and _no_worse(model, final.Q)
     if final is not None and (warm_c is None or final.J <= warm_c.J) and final_no_worse:
         chosen: _Candidate | None = final
@@ -482,11 +535,27 @@ def plan_horizon(
             what = f"IPOPT's optimum ({status}) is worse than the warm start in a term of the fitness"
         elif final is not None:
             what = f"IPOPT's optimum ({status}, objective {final.J:.6g}) costs more than the warm start"
-        chosen = pool.best(model, tol, warm_c.J if warm_c else math.inf) or warm_c
+        chosen = _best_of(pools, model, tol, warm_c.J if warm_c else math.inf, deadline) or warm_c
+    floor = f"{opts.min_hessian_perturbation:g}"
+    if fast_log is None:
+        floor_note = f"IPOPT min_hessian_perturbation {floor}"
+    elif fast_log["result"] == "accepted":
+        floor_note = f"IPOPT min_hessian_perturbation {fast_log['min_hessian_perturbation']:g} (the fast attempt)"
+    elif "fallback" in fast_log:
+        floor_note = (
+            f"IPOPT min_hessian_perturbation {fast_log['min_hessian_perturbation']:g} first "
+            f"({fast_log['iterations']} iterations): {fast_log['reason']}; no time left to fall back to {floor}"
+        )
+    else:
+        floor_note = (
+            f"IPOPT min_hessian_perturbation {fast_log['min_hessian_perturbation']:g} first "
+            f"({fast_log['iterations']} iterations): {fast_log['reason']}, so fell back to {floor} from the warm start"
+        )
     if chosen is None:
         warm_note = f"; the warm start is no fallback: {warm_why}"
         diag = _diagnostics(model, tr, stats, xv, vals, rounds, info, J_warm, trans_time, solve_time, start_time)
         diag.update(horizon_stop=stop, time_limit=time_limit, time_limit_hit=stop == "time_limit")
+        diag.update(horizon_fast_attempt=fast_log, horizon_floor_note=floor_note)
         if stop == "rows_left_out":
             message = (
                 f"horizon NLP: rows left out of the NLP are still violated after {opts.max_rounds} rounds of "
@@ -500,7 +569,7 @@ def plan_horizon(
             message = f"horizon NLP: {lead}; {at}" + (
                 _describe(viol) if viol else "none above tolerance (not converged: raise max_iter)"
             )
-        raise HorizonInfeasible(message + warm_note, viol, status=status or stop, diagnostics=diag)
+        raise HorizonInfeasible(message + warm_note + f" ({floor_note})", viol, status=status or stop, diagnostics=diag)
 
     poses: tuple[Array, Array, Array, Array] | None = None
     if warm_poses is not None:  # differential drive: the poses integrated exactly along the unicycle's arcs
@@ -520,8 +589,8 @@ def plan_horizon(
     diag.update(
         horizon_result=chosen.result,
         horizon_note=(
-            f"{what}; {ran}; {returned} (objective {chosen.J:.6g} vs {versus}); vs its {info['warm_start_method']} "
-            f"warm start: {change}"
+            f"{what}; {floor_note}; {ran}; {returned} (objective {chosen.J:.6g} vs {versus}); vs its "
+            f"{info['warm_start_method']} warm start: {change}"
         ),
         horizon_summary=dict(
             result=chosen.result,
@@ -530,6 +599,8 @@ def plan_horizon(
             rounds=last,
             objective=chosen.J,
             objective_warm_start=warm_c.J if warm_c else J_warm,
+            min_hessian_perturbation=_floor_used(opts, fast_log, chosen),
+            fast_attempt=fast_log,
             terms=terms,
             warm_start_terms={k: float(v) for k, v in before.items()},
         ),
@@ -674,6 +745,73 @@ def _diff_final(
         [],
         status="diff_execution",
     )
+
+
+#: The progress bar's round prefix per attempt of the procedure (:func:`_phases`).
+_BAR = {"default": "", "fast": "", "fallback": "fallback "}
+
+
+def _phases(opts: HorizonOptions) -> list[tuple[str, list[tuple[str, dict[str, Any]]]]]:
+    """The attempts of the constraint-generation procedure: ``("fast", …)`` with the low regularisation floor
+    ``fast_min_hessian_perturbation`` (each round capped at ``fast_max_iter`` iterations, no retry) when it is on and
+    below ``min_hessian_perturbation``, then ``("fallback", …)`` — or ``("default", …)`` alone — with the primary
+    solve and the retry as always. Each entry: (phase, [(label, extra IPOPT options), …])."""
+    attempts: list[tuple[str, dict[str, Any]]] = [("primary", {})]
+    if opts.retry:
+        attempts.append(("retry", dict(opts.retry_ipopt)))
+    fast = opts.fast_min_hessian_perturbation
+    if fast is None or not fast < opts.min_hessian_perturbation or "min_hessian_perturbation" in opts.ipopt:
+        return [("default", attempts)]
+    capped = {"min_hessian_perturbation": float(fast), "max_iter": min(int(opts.fast_max_iter), int(opts.max_iter))}
+    return [("fast", [("primary", capped)]), ("fallback", attempts)]
+
+
+def _fast_reason(
+    stop: str,
+    final: _Candidate | None,
+    warm_c: _Candidate | None,
+    model: _Model,
+    rounds: list[dict[str, Any]],
+    opts: HorizonOptions,
+) -> str:
+    """Why the fast attempt's result was not taken (one phrase for ``horizon_note``)."""
+    last = rounds[-1] if rounds else None
+    if stop == "converged" and final is not None:
+        if not _no_worse(model, final.Q):
+            return f"its optimum (round {last['round'] if last else 0}) is worse than the warm start in a term"
+        return f"its optimum (objective {final.J:.6g}) costs more than the warm start ({warm_c.J if warm_c else 0:.6g})"
+    if stop == "rows_left_out":
+        return f"rows left out were still violated after {opts.max_rounds} rounds"
+    if last is None:
+        return "its time share ran out before IPOPT started"
+    if stop == "time_limit":
+        if opts.fast_time_share < 1:
+            return f"its share of the time left ({opts.fast_time_share:.0%}) ran out in round {last['round']}"
+        return f"the time limit stopped round {last['round']}"
+    return f"round {last['round']} stopped with {last['status']!r} after {last['iterations']} iterations"
+
+
+def _floor_used(opts: HorizonOptions, fast_log: dict[str, Any] | None, chosen: _Candidate) -> float | None:
+    """IPOPT's ``min_hessian_perturbation`` of the attempt whose point was returned (``None``: the warm start)."""
+    if chosen.result == "warm_start":
+        return None
+    if fast_log is not None and (fast_log["result"] == "accepted" or " fast, iteration " in chosen.detail):
+        return float(fast_log["min_hessian_perturbation"])
+    return float(opts.min_hessian_perturbation)
+
+
+def _best_of(pools: list[_Pool], model: _Model, tol: float, J_limit: float, deadline: float) -> _Candidate | None:
+    """The cheapest feasible kept iterate over the attempts' pools (:meth:`_Pool.best` of each): the last attempt's
+    pool first (as without a fast attempt), the earlier ones only for a cheaper iterate and only before ``deadline``
+    (each check evaluates every row; a time-limited run overruns by no more checks than without the fast attempt)."""
+    best: _Candidate | None = None
+    for i, p in enumerate(reversed(pools)):
+        if i > 0 and time.perf_counter() >= deadline:
+            break
+        c = p.best(model, tol, J_limit if best is None else min(J_limit, best.J))
+        if c is not None and (best is None or c.J < best.J):
+            best = c
+    return best
 
 
 def _params(opts: HorizonOptions) -> dict[str, Any]:
@@ -865,7 +1003,7 @@ def _diagnostics(
         "rows_full": int(sum(vals[g].shape[0] * np.count_nonzero(~model.fixed_columns(g)) for g in model.rows)),
         "clearance_rows": int(tr.index["clearance"].size) if tr is not None else 0,
         "samples_per_link": int(su.S),
-        "rounds": len({r["round"] for r in rounds}),
+        "rounds": len({(r.get("phase"), r["round"]) for r in rounds}),
         "round_log": rounds,
         "warm_start_method": info.get("warm_start_method", ""),
         "warm_start_success": info.get("warm_start_success"),
