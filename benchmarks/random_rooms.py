@@ -679,11 +679,13 @@ def _ratio(a: Any, b: Any) -> float | None:
 def same_speed_args(model: Any) -> tuple[str, ...]:
     """``--set`` arguments that give the omnidirectional chain the differential-drive robot's speeds: the leader's
     time law of ``--drive diff`` (:data:`tmr.planner.DIFF_SPEED_FRACTION` of v_max, :data:`~tmr.planner.
-    DIFF_ACCEL_FRACTION` of a_max, as ``tmr.planner._diff_drive_setup``), every robot's speed bound at v_max [m/s]
-    (per axis, the omni model's bound) and its acceleration bound at a_max [m/s²]. With them, diff against omni
-    measures what the drive costs, not that the robot is slower than the paper's (0.8 m/s leader)."""
+    DIFF_ACCEL_FRACTION` of a_max, as ``tmr.planner._diff_drive_setup``), the followers' references rising at most
+    at the diff run's catch-up speed (:func:`tmr.planner.diff_catch_up`), every robot's speed bound at v_max [m/s]
+    (per axis, the omni model's bound: up to √2 v_max diagonally) and its acceleration bound at a_max [m/s²]. With
+    them, diff against omni measures what the drive costs (its heading, the wheel rows, the span braking curve), not
+    that the robot is slower than the paper's (0.8 m/s leader)."""
     from tmr.model.params import PathParams, QPParams
-    from tmr.planner import DIFF_ACCEL_FRACTION, DIFF_SPEED_FRACTION
+    from tmr.planner import DIFF_ACCEL_FRACTION, DIFF_SPEED_FRACTION, diff_catch_up
 
     path, qp = PathParams(), QPParams()
     values = {
@@ -691,6 +693,7 @@ def same_speed_args(model: Any) -> tuple[str, ...]:
         "leader_accel": min(path.leader_accel, DIFF_ACCEL_FRACTION * model.a_max),
         "robot_speed_max": min(qp.robot_speed_max, model.v_max),
         "robot_accel_max": min(qp.robot_accel_max, model.a_max),
+        "catch_up": diff_catch_up(model),
     }
     return tuple(a for k, v in values.items() for a in ("--set", f"{k}={v:.12g}"))
 
@@ -808,8 +811,9 @@ def drive_comparison(args: argparse.Namespace, argv: list[str] | None) -> int:
     w(f"; N ∈ {{{', '.join(robots)}}}. Every (room, N) runs `python -m tmr.plan --map ROOM --base … --goal … ")
     w("--robots N --method qp` three times: omni (Caruso 2021, leader at ")
     w(f"{_fmt(PathParams().leader_speed, 'g')} m/s), ")
-    w(f"*omni at the robot's speeds* (`{' '.join(same_args)}`: the diff run's leader time law and the robot's ")
-    w(f"v_max, a_max as the omni bounds; `same_speed_args`) and with `{' '.join(diff_args)}` ")
+    w(f"*omni at the robot's speeds* (`{' '.join(same_args)}`: the diff run's leader time law and followers' ")
+    w("catch-up speed, the robot's v_max (per axis: up to √2 v_max diagonally) and a_max as the omni bounds; ")
+    w(f"`same_speed_args`) and with `{' '.join(diff_args)}` ")
     w(f"(r_f {model.radius:g} m, v_max {model.v_max:g} m/s, ω_max {model.omega_max:g} rad/s, a_max ")
     w(f"{model.a_max:g} m/s², α_max {model.alpha_max:g} rad/s², b {model.exit_offset:g} m). *Success*: exit 0 and ")
     w("the independent shapely check of the raw trajectories (diff: of the tethers' exit points) passed. ")
@@ -818,9 +822,10 @@ def drive_comparison(args: argparse.Namespace, argv: list[str] | None) -> int:
 
     w("Two time ratios per room: **diff / omni** compares with the paper's faster robots, so it mostly measures ")
     w("the longer motion (column *motion duration ratio*: the same route at the robot's speed takes that many more ")
-    w("0.05 s steps); **diff / same-speed omni** compares the same robot, route, time law and step count up to the ")
-    w("drive, so it measures what the non-holonomic drive itself costs the planner. The issue's ≤ 2× target is read ")
-    w("on the second (the first is reported beside it).\n\n")
+    w("0.05 s steps); **diff / same-speed omni** compares the same route, time law, reference speeds and step count; ")
+    w("what differs is the drive (the heading and exact arcs, v/ω and wheel-rim rows, the span braking curve; the ")
+    w("omni bound is per axis), so it measures what the non-holonomic drive itself costs the planner. The issue's ")
+    w("≤ 2× target is read on the second (the first is reported beside it).\n\n")
     w("## Success and time\n\n")
     w("| N | rooms | omni success | diff success | diff / omni successes | both | diff fails, omni plans | ")
     w("omni fails, diff plans | plan time ratio median / max | process time ratio median / max | ")
@@ -906,7 +911,7 @@ def drive_comparison(args: argparse.Namespace, argv: list[str] | None) -> int:
             met = "**no**"
         w(f"{met}{'' if label.startswith('same') else ' (not the target: the motion is longer, see above)'} |\n")
     w("\n")
-    over_rows = sorted((r for r in both_same if r["plan_time_ratio_same"] > TARGET_DIFF_TIME_RATIO),
+    over_rows = sorted((r for r in both_same if (r["plan_time_ratio_same"] or 0.0) > TARGET_DIFF_TIME_RATIO),
                        key=lambda r: -r["plan_time_ratio_same"])  # fmt: skip
     if over_rows:
         w("Rooms above the target against same-speed omni: ")

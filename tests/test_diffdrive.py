@@ -275,7 +275,7 @@ def test_cli_robot_model_flags_set_and_records(tmp_path, capsys):
         (["--robot-model", "burgr"], "tmr plan: error: --robot-model: unknown robot model 'burgr'"),
         (["--set", "robot_model=burgr", "--set", "drive=diff"], "unknown robot model 'burgr'"),
         (["--set", "robot_model=burger"], "is a differential-drive robot but drive = 'omni'"),
-        (["--drive", "diff", "--filter-cutoff", "2"], "--filter-cutoff: a differential-drive plan is not filtered"),
+        (["--drive", "diff", "--filter-cutoff", "1"], "--filter-cutoff: a differential-drive plan is not filtered"),
     ):
         out = tmp_path / "refused"
         assert cli.main(["plan", "--scenario", "A", *args, "--out", str(out), "--no-plots"]) == 2, args
@@ -368,3 +368,63 @@ def test_drive_figure_of_a_diff_plan(tmp_path):
     traj_fig = plot_trajectories(plan)
     labels = {t.get_text() for ax in traj_fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()}
     assert labels == {"tether exit point (planned)"}
+
+
+def test_set_judges_t_end_and_ts_together_and_catch_up():
+    """``--set T_end=12000 --set Ts=0.1`` is 120,000 steps (within MAX_STEPS): each is parsed on its own, and the pair
+    is judged where both are known; ``catch_up`` is a parameter (off = the robots' default) and is left out of the
+    records while it is the default."""
+    import argparse
+
+    from tmr.io.cli_args import param
+    from tmr.model.params import PathParams
+
+    assert param("T_end=12000") == ("T_end", 12000.0) and param("Ts=0.1") == ("Ts", 0.1)
+    with pytest.raises(argparse.ArgumentTypeError, match="T_end"):
+        param("T_end=-1")
+    assert param("catch_up=0.5") == ("catch_up", 0.5) and param("catch_up=off") == ("catch_up", None)
+    with pytest.raises(argparse.ArgumentTypeError, match="catch_up"):
+        param("catch_up=0")
+    assert "catch_up" not in PathParams().record() and PathParams(catch_up=0.5).record()["catch_up"] == 0.5
+
+
+def test_catch_up_reaches_the_references():
+    """A follower's reference rises at a corner at most at ``catch_up`` (and follows the leader's progress
+    otherwise): the default is 1.2 m/s for omni robots and the wheels' 0.198 m/s for Burgers
+    (tmr.planner.diff_catch_up); a set value is used for either."""
+    from tmr.planner import build_problem
+    from tmr.world.scenario import load_scenario
+
+    def peak(params):
+        problem = build_problem(load_scenario("A"), overrides=params)
+        ref = problem.references
+        return float(np.linalg.norm(np.asarray(ref.velocities)[:, :-1], axis=-1).max())
+
+    assert peak({}) == pytest.approx(1.2)  # A's corner: the catch-up binds
+    assert peak({"catch_up": 0.3, "leader_speed": 0.2}) == pytest.approx(0.3)  # (the leader's 0.8 m/s binds else)
+    assert peak({"drive": "diff"}) == pytest.approx(0.198)
+    assert peak({"drive": "diff", "catch_up": 1.2}) == pytest.approx(1.2)  # a set value wins
+
+
+def test_a_train_longer_than_max_steps_is_a_train_verdict(monkeypatch):
+    """A train-reference plan longer than MAX_STEPS is a search verdict (TrainError, exit 1 after the trailing plan's
+    failure), not a ParameterError blaming a T_end the user did not set."""
+    import tmr.planner as planner
+    from tmr.route.train import TrainError
+    from tmr.world.scenario import load_scenario
+
+    problem = planner.build_problem(load_scenario("A"))
+    monkeypatch.setattr(planner, "MAX_STEPS", 10)
+    with pytest.raises(TrainError, match="above the planner's limit of 10 steps"):
+        planner.train_problem(problem)
+
+
+def test_a_diff_plan_with_a_long_step_is_not_held_to_the_filter(tmp_path):
+    """A diff plan is not filtered, so Ts = 0.5 s (filter Nyquist 1 Hz, the default cut-off's own) is not refused."""
+    from tmr import cli
+
+    out = tmp_path / "ts"
+    assert cli.main(
+        ["plan", "--scenario", "A", "--drive", "diff", "--set", "Ts=0.5", "--out", str(out), "--no-plots", "-q"]
+    ) in (0, 1)
+    assert (out / "trajectories.json").is_file()

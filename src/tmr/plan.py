@@ -208,12 +208,17 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     p.add_argument(
         "--filter-cutoff",
         type=positive_float,
-        default=FILTER_CUTOFF,
         metavar="HZ",
-        help=f"cut-off of the trajectory filter [Hz], below the Nyquist frequency 1/(2 Ts) (default {FILTER_CUTOFF:g})",
+        help=f"cut-off of the trajectory filter [Hz], below the Nyquist frequency 1/(2 Ts) (default {FILTER_CUTOFF:g}; "
+        "omnidirectional ground chains only: a differential-drive or drone plan is not filtered)",
     )
     add_common(p, out="runs/plan", seed_help="seed of the leader's RRT* (--route rrt)")
     return p
+
+
+def filter_cutoff(args: argparse.Namespace) -> float:
+    """The trajectory filter's cut-off [Hz]: ``--filter-cutoff`` or :data:`FILTER_CUTOFF`."""
+    return FILTER_CUTOFF if args.filter_cutoff is None else float(args.filter_cutoff)
 
 
 def robot_radius(args: argparse.Namespace) -> float | None:
@@ -526,7 +531,7 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
         from tmr.model.diffdrive import model_for
 
         model_for(chain_params.robot_model, chain_params.safety_radius)
-        if args.filter_cutoff != FILTER_CUTOFF:
+        if args.filter_cutoff is not None:
             raise TmrError(
                 "--filter-cutoff: a differential-drive plan is not filtered (its robots execute cmd_vel/robotK.csv, "
                 "whose poses are the checked plan)"
@@ -544,9 +549,10 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
             scenario.environment, "--method horizon", "its NLP keeps no cable height above them; use --method qp"
         )
     nyquist = 0.5 / made[TimeParams].Ts
-    if not args.filter_cutoff < nyquist:  # refused before the route and the plan, not after them
+    cutoff = filter_cutoff(args)
+    if not chain_params.diff_drive and not cutoff < nyquist:  # refused before the route and the plan, not after them
         raise TmrError(
-            f"--filter-cutoff {args.filter_cutoff:g} Hz must be below the Nyquist frequency {nyquist:g} Hz "
+            f"--filter-cutoff {cutoff:g} Hz must be below the Nyquist frequency {nyquist:g} Hz "
             f"(Ts = {made[TimeParams].Ts:g} s)"
         )
     n = args.robots if isinstance(args.robots, int) else scenario.n_robots  # --start has n positions (load_inputs)
@@ -734,7 +740,7 @@ def _main(args: argparse.Namespace) -> int:
             LOG.debug("writing the outputs")
             if getattr(plan, "heading", None) is None:
                 filtered, filter_note = filter_within_limits(
-                    plan, problem.env, problem.time_params.Ts, cutoff_hz=args.filter_cutoff
+                    plan, problem.env, problem.time_params.Ts, cutoff_hz=filter_cutoff(args)
                 )
             else:  # differential drive: the robots execute cmd_vel/ (a low-passed pose would slip sideways)
                 filtered = np.asarray(plan.robots, dtype=float).copy()

@@ -42,9 +42,7 @@ def _refuse_ground_options(args: argparse.Namespace) -> None:
             f'{", ".join(given)}: not taken by a drone scenario (kind = "drone"): its base, goal and world are in '
             "the scenario file"
         )
-    from tmr.plan import FILTER_CUTOFF
-
-    if args.filter_cutoff != FILTER_CUTOFF:
+    if args.filter_cutoff is not None:
         raise TmrError("--filter-cutoff: a drone plan is written as checked, without a trajectory filter")
     if args.route != "shortest":
         raise TmrError(f"--route {args.route}: a drone chain follows its 3-D shortest route (--route shortest)")

@@ -13,8 +13,10 @@ This is the library entry point behind ``python -m tmr.plan``::
 
 from __future__ import annotations
 
+import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
@@ -38,6 +40,7 @@ from tmr.errors import ParameterError, PathError, ScenarioError, fmt_point
 from tmr.model.chain import Chain
 from tmr.model.diffdrive import RobotModel
 from tmr.model.params import (
+    MAX_STEPS,
     WINCH_FIELDS,
     ChainParams,
     PathParams,
@@ -63,6 +66,8 @@ if TYPE_CHECKING:  # the formulations import their solvers (osqp, qpsolvers): lo
 Array = NDArray[np.float64]
 
 METHODS = ("pinv", "qp", "horizon")
+_LOG = logging.getLogger("tmr")
+
 #: Leader routes: ``shortest`` — the tether-aware shortest route with references for every robot (default);
 #: ``rrt`` — the paper's RRT* leader path with the fixed 15 s time law (Caruso 2021 §4.2), for the faithful comparison.
 ROUTES = ("shortest", "rrt")
@@ -329,18 +334,29 @@ def build_problem(
             accel=path_params.leader_accel,
             spacing=limits[:, 0].max() + 0.2,
             settle=0.0 if "T_end" in values else path_params.route_settle,
-            **({} if robot_model is None else {"catch_up": diff_catch_up(robot_model)}),
+            catch_up=_catch_up(path_params, robot_model),
         )
         traj = ref.trajectory
         time_params = replace(time_params, T_end=float(traj.t[-1]))
     else:
-        traj = None
+        traj = along = None
         if anchor_path is not None and leader_at is not None:  # the leader is on the anchor's path: follow its tail
-            traj = _trajectory_along(env, _path_tail(anchor_path, leader_at), time_params, path_params)
+            along = _path_tail(anchor_path, leader_at)
+            traj = _trajectory_along(env, along, time_params, path_params)
+            along = along if traj is not None else None
         if traj is None:
             traj = _rrt_trajectory(env, P[-1], goal, seed, time_params, path_params)
         if robot_model is not None:  # the paper's 15 s are an omnidirectional robot's: slowed to the robot's reach
-            traj = _within_robot_reach(env, traj, time_params, path_params, robot_model, "T_end" in values)
+
+            def rebuild(tp: TimeParams) -> Trajectory | None:  # the same path as above, over tp.T_end
+                if along is not None:
+                    return _trajectory_along(env, along, tp, path_params)
+                try:
+                    return _rrt_trajectory(env, P[-1], goal, seed, tp, path_params)
+                except PathError:
+                    return None
+
+            traj = _within_robot_reach(traj, time_params, path_params, robot_model, "T_end" in values, rebuild)
             time_params = replace(time_params, T_end=float(traj.t[-1]))
     problem = Problem(
         scenario,
@@ -429,6 +445,14 @@ DIFF_SPEED_FRACTION = 0.6
 DIFF_ACCEL_FRACTION = 0.5
 
 
+def _catch_up(path_params: PathParams, model: RobotModel | None) -> float:
+    """The followers' catch-up speed [m/s]: ``PathParams.catch_up`` if set, else :data:`CATCH_UP` (omnidirectional)
+    or :func:`diff_catch_up` (differential drive)."""
+    if path_params.catch_up is not None:
+        return float(path_params.catch_up)
+    return CATCH_UP if model is None else diff_catch_up(model)
+
+
 def diff_catch_up(model: RobotModel) -> float:
     """The fastest rise [m/s] of a differential-drive follower's trailing reference at a corner
     (:func:`tmr.route.references.chain_reference` ``catch_up``; :data:`~tmr.route.references.CATCH_UP` = 1.2 m/s for
@@ -499,13 +523,20 @@ def _trajectory_along(
 
 
 def _within_robot_reach(
-    env: Any, traj: Trajectory, time_params: TimeParams, path_params: PathParams, model: Any, user_T: bool
+    traj: Trajectory,
+    time_params: TimeParams,
+    path_params: PathParams,
+    model: Any,
+    user_T: bool,
+    rebuild: Callable[[TimeParams], Trajectory | None],
 ) -> Trajectory:
     """``--route rrt`` with differential drive: the leader's B-spline time law over the paper's T_end (15 s) retimed
-    along the same waypoints to the longest of T_end, the time that keeps its peak speed ≤ ``leader_speed`` and the
-    one that keeps its peak acceleration ≤ ``leader_accel`` (both capped for the robot, :func:`_diff_drive_setup`;
-    speed scales as 1/T, acceleration as 1/T²), rounded up to whole steps. A T_end the user set is kept, unless its
-    peak speed is above the robot's v_max (ParameterError, exit 2: no robot could follow it)."""
+    to the longest of T_end, the time that keeps its peak speed ≤ ``leader_speed`` and the one that keeps its peak
+    acceleration ≤ ``leader_accel`` (both capped for the robot, :func:`_diff_drive_setup`; speed scales as 1/T,
+    acceleration as 1/T²), rounded up to whole steps. ``rebuild(time_params)`` builds the same path and spline again
+    over the new T_end (the same inputs and seed: only the time law changes). A T_end the user set is kept, unless
+    its peak speed is above the robot's v_max; a retimed motion longer than ``MAX_STEPS`` is refused (both
+    ParameterError, exit 2)."""
     T, Ts = float(traj.t[-1]), time_params.Ts
     v_peak = float(np.max(np.linalg.norm(traj.xd, axis=1), initial=0.0))
     a_peak = float(np.max(np.linalg.norm(traj.xdd, axis=1), initial=0.0))
@@ -521,9 +552,24 @@ def _within_robot_reach(
     scale = max(1.0, v_peak / path_params.leader_speed, math.sqrt(a_peak / path_params.leader_accel))
     if scale <= 1.0:
         return traj
-    T_new = math.ceil(T * scale / Ts - 1e-9) * Ts
-    slow = _trajectory_along(env, traj.waypoints, replace(time_params, T_end=T_new), path_params)
-    return traj if slow is None else slow
+    steps = math.ceil(T * scale / Ts - 1e-9)
+    if steps > MAX_STEPS:
+        raise ParameterError(
+            f"the leader's motion at {path_params.leader_speed:.3g} m/s would take {steps * Ts:.6g} s, {steps:,} "
+            f"steps of Ts = {Ts:g} s: above the planner's limit of {MAX_STEPS:,} steps (tmr.model.params.MAX_STEPS); "
+            "a faster leader (leader_speed, or a robot model's v_max) or a shorter route"
+        )
+    slow = rebuild(replace(time_params, T_end=steps * Ts))
+    if slow is None:  # not expected: the same inputs built the 15 s law
+        _LOG.warning(
+            "--route rrt: the leader's path could not be retimed to %.4g s for %s; it keeps %.4g s (peak %.3g m/s)",
+            steps * Ts,
+            model.name,
+            T,
+            v_peak,
+        )
+        return traj
+    return slow
 
 
 def _rrt_trajectory(
@@ -873,7 +919,7 @@ def train_problem(problem: Problem) -> Problem:
     its trailing ones: same route, start and stations; the leader's trajectory and the duration come from the
     train. The train keeps the QP's own limits plus a little (clearance d_safe + 5 mm, separation 2r + margin +
     5 mm, spans ≥ d_lo + span margin). Raises :class:`tmr.route.train.TrainError` if the train stalls."""
-    from tmr.route.train import TRAIN_CLEARANCE, TrainLimits, train_reference
+    from tmr.route.train import TRAIN_CLEARANCE, TrainError, TrainLimits, train_reference
 
     if problem.references is None:
         raise ParameterError("train references need a route-guided problem (route='shortest')")
@@ -896,6 +942,12 @@ def train_problem(problem: Problem) -> Problem:
         settle=path.route_settle,
     )
     T_end = float(ref.trajectory.t[-1])
+    steps = round(T_end / problem.time_params.Ts)
+    if steps > MAX_STEPS:  # a search verdict (exit 1), not the user's T_end: the train is longer than a plan may be
+        raise TrainError(
+            f"the train references take {T_end:.6g} s ({steps:,} steps), above the planner's limit of {MAX_STEPS:,} "
+            "steps (tmr.model.params.MAX_STEPS)"
+        )
     return _with_goal_heading(
         replace(
             problem, references=ref, trajectory=ref.trajectory, time_params=replace(problem.time_params, T_end=T_end)

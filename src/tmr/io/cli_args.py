@@ -215,8 +215,9 @@ def param(text: str) -> tuple[str, Any]:
         try:
             typed = convert_field(cls, key, value)
             # the field's own range (e.g. d_min > 0), the other fields at their defaults; a robot model is a
-            # differential-drive robot's (drive = "diff", which another --set or --drive gives)
-            cls(**({key: typed} | ({"drive": "diff"} if key == "robot_model" else {})))
+            # differential-drive robot's (drive = "diff", which another --set or --drive gives); T_end and Ts are
+            # judged together (their step count, MAX_STEPS) where both are known, by the planner's precheck
+            cls(**({key: typed} | _companions(cls, key, typed)))
             if key == "robot_model":
                 from tmr.model.diffdrive import canonical_model_name, load_robot_model
 
@@ -227,6 +228,17 @@ def param(text: str) -> tuple[str, Any]:
             continue
         return key, typed
     raise argparse.ArgumentTypeError(f"{key}={value}: {first}") from None
+
+
+def _companions(cls: type, key: str, typed: Any) -> dict[str, Any]:
+    """The other fields a field of ``cls`` is judged with on its own in ``--set`` (:func:`param`): a robot model with
+    ``drive = "diff"``; ``T_end`` or ``Ts`` with the other equal to it (one step: the step count of the pair is judged
+    when both are known)."""
+    if key == "robot_model":
+        return {"drive": "diff"}
+    if cls.__name__ == "TimeParams" and key in ("T_end", "Ts") and typed > 0:
+        return {"T_end": typed, "Ts": typed}
+    return {}
 
 
 def robot_model_arg(text: str) -> str:

@@ -185,9 +185,9 @@ class ChainParams:
         return self.pulley_torque / self.pulley_radius
 
 
-#: The most time steps a plan may have: 200,000 steps are 10,000 s (2.8 h) of motion at Ts = 0.05 s, 40 times the
-#: longest plan measured (the Burger's 26.9 m narrow room, 19,037 steps). A time law that needs more (a very slow
-#: robot model, a huge T_end) is refused up front instead of allocating arrays of that length.
+#: The most time steps a plan may have: 200,000 steps are 10,000 s (2.8 h) of motion at Ts = 0.05 s, ten times the
+#: longest plan measured (a train-reference plan of Burgers in a 26.9 m narrow room, 19,037 steps). A time law that
+#: needs more (a very slow robot model, a huge T_end) is refused up front instead of allocating arrays that long.
 MAX_STEPS = 200_000
 
 
@@ -202,10 +202,11 @@ class TimeParams:
         _validate(self)
         if self.T_end <= 0 or self.Ts <= 0 or self.Ts > self.T_end:
             raise ParameterError(f"need 0 < Ts ≤ T_end, got Ts={self.Ts}, T_end={self.T_end}")
-        if self.T_end / self.Ts > MAX_STEPS:
+        if round(self.T_end / self.Ts) > MAX_STEPS:
             raise ParameterError(
                 f"T_end / Ts = {self.T_end / self.Ts:.6g} steps is above the planner's limit of {MAX_STEPS:,} steps "
-                "(tmr.model.params.MAX_STEPS): a shorter T_end or a longer Ts"
+                "(tmr.model.params.MAX_STEPS): a shorter motion (T_end; or a faster leader: leader_speed, a robot "
+                "model's v_max; a shorter route) or a longer Ts"
             )
 
     @property
@@ -231,6 +232,10 @@ class PathParams:
         route_weight: weight of that task in the QP's tether level.
         route_settle: time [s] the route references hold still at their end, the leader on the goal, so that the
             followers come to rest on their stations before the plan ends (not added to a ``T_end`` the user set).
+        catch_up: fastest rise [m/s] of a follower's trailing reference at a corner (``tmr.route.references.
+            chain_reference``); None (the default): 1.2 m/s for omnidirectional robots
+            (``tmr.route.references.CATCH_UP``), the wheels' straight-line speed for differential drive
+            (``tmr.planner.diff_catch_up``).
     """
 
     path_clearance: float = 0.6
@@ -242,9 +247,12 @@ class PathParams:
     route_gain: float = 1.0
     route_weight: float = 10.0
     route_settle: float = 2.0
+    catch_up: float | None = None
 
     def __post_init__(self) -> None:
         _validate(self)
+        if self.catch_up is not None and not self.catch_up > 0:
+            raise ParameterError(f"PathParams.catch_up must be > 0 m/s or None, got {self.catch_up!r}")
         if self.path_clearance < 0 or self.path_clearance_min < 0 or self.path_iterations < 1:
             raise ParameterError(f"need path_clearance ≥ 0, path_clearance_min ≥ 0, path_iterations ≥ 1; got {self}")
         if not 0.0 <= self.route_settle <= 60.0:
@@ -254,6 +262,13 @@ class PathParams:
                 "need leader_speed > 0 [m/s], leader_accel > 0 [m/s²], route_gain > 0 [1/s], route_weight ≥ 0; "
                 f"got {self.leader_speed}, {self.leader_accel}, {self.route_gain}, {self.route_weight}"
             )
+
+    def record(self) -> dict[str, Any]:
+        """The fields as a dict, without ``catch_up`` while it is the default (the records keep their bytes)."""
+        out = asdict(self)
+        if self.catch_up is None:
+            out.pop("catch_up")
+        return out
 
     @property
     def clearances(self) -> tuple[float, ...]:
