@@ -209,8 +209,9 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
         "--filter-cutoff",
         type=positive_float,
         metavar="HZ",
-        help=f"cut-off of the trajectory filter [Hz], below the Nyquist frequency 1/(2 Ts) (default {FILTER_CUTOFF:g}; "
-        "omnidirectional ground chains only: a differential-drive or drone plan is not filtered)",
+        help="cut-off of the trajectory filter [Hz], below the Nyquist frequency 1/(2 Ts) "
+        f"(default {FILTER_CUTOFF:g}); omnidirectional ground chains only: a differential-drive or drone plan is not "
+        "filtered",
     )
     add_common(p, out="runs/plan", seed_help="seed of the leader's RRT* (--route rrt)")
     return p
