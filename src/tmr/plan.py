@@ -142,7 +142,8 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
         "--start",
         type=points,
         help="robot start positions 'x1,y1;x2,y2;...' [m], one per robot (N: --robots, else the scenario's; "
-        "default: computed)",
+        "default: computed); with --drive diff the tethers' exit points (each axle is b behind its exit point, the "
+        "start heading along the robot's first motion)",
     )
     src.add_argument(
         "--robots",
