@@ -428,3 +428,19 @@ def test_a_diff_plan_with_a_long_step_is_not_held_to_the_filter(tmp_path):
         ["plan", "--scenario", "A", "--drive", "diff", "--set", "Ts=0.5", "--out", str(out), "--no-plots", "-q"]
     ) in (0, 1)
     assert (out / "trajectories.json").is_file()
+
+
+def test_a_bad_value_in_a_scenario_file_names_the_file(tmp_path, capsys):
+    """``drive = 1`` in a scenario file: exit 2, one line naming the file (it named only ChainParams.drive)."""
+    from tmr import cli
+    from tmr.world.scenario import all_builtins
+
+    a = all_builtins()["A"]
+    body = a.read_text().replace('file = "A.geojson"', f'file = "{a.parent / "A.geojson"}"')
+    (tmp_path / "s.toml").write_text("drive = 1\n" + body)
+    out = tmp_path / "o"
+    assert cli.main(["plan", "--scenario", str(tmp_path / "s.toml"), "--out", str(out), "--no-plots"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert (
+        err == f"error: scenario file {tmp_path / 's.toml'}: ChainParams.drive takes text, got 1" and not out.exists()
+    )

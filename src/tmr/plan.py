@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import sys
 import time
 from dataclasses import replace
@@ -35,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from tmr.errors import NoPathFound, TmrError
+from tmr.errors import NoPathFound, ParameterError, TmrError
 from tmr.io.cli_args import (
     ArgumentParser,
     add_common,
@@ -522,8 +523,15 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
     values = with_winch_defaults(values)[0]  # the planner's own defaults (tmr.planner.build_problem)
     rest = dict(values)
     made = {}
-    for cls in PARAM_CLASSES:  # bad values: exit 2 now
-        made[cls], rest = apply_overrides(cls(), rest)
+    try:
+        for cls in PARAM_CLASSES:  # bad values: exit 2 now
+            made[cls], rest = apply_overrides(cls(), rest)
+    except ParameterError as exc:  # a value of the scenario's own file: say which file
+        given = {k for k, _ in args.set}
+        own = [k for k in (scenario.params or {}) if k not in given and re.search(rf"\b{re.escape(k)}\b", str(exc))]
+        if own and scenario.source is not None:
+            raise TmrError(f"scenario file {scenario.source}: {exc}") from None
+        raise
     chain_params = made[ChainParams]
     if rest:
         raise TmrError(f"unknown parameter(s) {sorted(rest)}; the names are the fields of tmr.model.params")
