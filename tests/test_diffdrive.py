@@ -163,6 +163,9 @@ def test_scenario_keys_drive_and_robot_model(tmp_path):
 
     assert problem.robot_model.name == "mybot"
     assert problem.path_params.leader_speed == pytest.approx(DIFF_SPEED_FRACTION * 0.4)  # the model's v_max, capped
+    (tmp_path / "m.toml").write_text('robot_model = "jackal"\n' + body)  # a model implies drive = "diff"
+    implied = build_problem(load_scenario(tmp_path / "m.toml"))
+    assert implied.chain_params.drive == "diff" and implied.robot_model.name == "clearpath_jackal"
     (tmp_path / "t.toml").write_text('drive = "diff"\n' + body + '\n[params]\ndrive = "omni"\n')
     with pytest.raises(ScenarioError, match="given at the top and in"):
         load_scenario(tmp_path / "t.toml")

@@ -351,13 +351,16 @@ def _load_toml(path: Path, safety_radius: float | None = None) -> Scenario:
 
 def _drive_params(doc: dict[str, Any], params: dict[str, Any], path: Path, label: str) -> dict[str, Any]:
     """``params`` with the top-level ``drive`` and ``robot_model`` keys merged in (refused if ``[params]`` gives them
-    too), and a relative robot model file (``*.toml``) made relative to the scenario file, like its map. Unchanged
-    when the scenario has neither (its parameters keep their bytes)."""
+    too; a robot model without a drive implies ``drive = "diff"``, as ``--robot-model`` does), and a relative robot
+    model file (``*.toml``) made relative to the scenario file, like its map. Unchanged when the scenario has neither
+    (its parameters keep their bytes)."""
     top = {k: doc[k] for k in _PARAM_KEYS if k in doc}
     twice = sorted(set(top) & set(params))
     if twice:
         raise ScenarioError(f"{label}: {', '.join(twice)} given at the top and in [params]: give one")
     out = dict(params) | top if top else params
+    if "robot_model" in out and "drive" not in out:  # a robot model is a differential drive's, as --robot-model
+        out = dict(out) | {"drive": "diff"}
     model = out.get("robot_model")
     if isinstance(model, str) and model.lower().endswith(".toml") and not Path(model).is_absolute():
         out = dict(out) | {"robot_model": str(path.parent / model)}
