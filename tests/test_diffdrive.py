@@ -447,3 +447,24 @@ def test_a_bad_value_in_a_scenario_file_names_the_file(tmp_path, capsys):
     assert (
         err == f"error: scenario file {tmp_path / 's.toml'}: ChainParams.drive takes text, got 1" and not out.exists()
     )
+
+
+def test_goal_forms_are_named_in_refusals(tmp_path, capsys):
+    """``--goal 1,2,3,4`` and a scenario's ``goal = [x, y, theta, z]`` name both accepted forms; a heading written as
+    text (``"90"``) is refused (numpy would have converted it)."""
+    from tmr import cli
+    from tmr.world.scenario import all_builtins
+
+    out = tmp_path / "o"
+    assert cli.main(["plan", "--scenario", "A", "--drive", "diff", "--goal", "1,2,3,4", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "expected X,Y or X,Y,THETA" in err and err.count("\n") == 0
+    a = all_builtins()["A"]
+    body = a.read_text().replace('file = "A.geojson"', f'file = "{a.parent / "A.geojson"}"')
+    for goal, why in (('[6.7, 5.0, "90"]', "must be numbers"), ("[6.7, 5.0, 90, 1]", "or [x, y, theta]")):
+        lines = [f"goal = {goal}" if ln.startswith("goal =") else ln for ln in body.splitlines()]
+        (tmp_path / "s.toml").write_text('drive = "diff"\n' + "\n".join(lines) + "\n")
+        assert cli.main(["plan", "--scenario", str(tmp_path / "s.toml"), "--out", str(out), "--no-plots"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert why in err and err.count("\n") == 0, err
+    assert not out.exists()

@@ -151,6 +151,10 @@ def goal_pose(text: str) -> tuple[float, ...]:
     """``X,Y`` [m] or ``X,Y,THETA``: THETA the leader's final heading in degrees (counter-clockwise from +x; a
     ``deg`` suffix is allowed, a ``rad`` suffix gives radians). Returns (x, y) or (x, y, theta [rad])."""
     parts = text.replace(" ", "").split(",")
+    if len(parts) > 3:
+        raise argparse.ArgumentTypeError(
+            f"expected X,Y or X,Y,THETA (metres, THETA in degrees or with a rad suffix), got {text!r}"
+        )
     if len(parts) != 3:
         return point(text)
     theta, scale = parts[2].lower(), math.pi / 180.0

@@ -155,6 +155,11 @@ class Scenario:
 
 
 def _finite_array(value: Any, what: str, label: str) -> NDArray[np.float64]:
+    def texts(v: Any) -> bool:  # a TOML string or boolean is not a number, though numpy would convert "90" or true
+        return isinstance(v, str | bool) or (isinstance(v, list | tuple) and any(texts(u) for u in v))
+
+    if texts(value):
+        raise ParameterError(f"{label}: {what} must be numbers, got {value!r}")
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
@@ -167,7 +172,8 @@ def _finite_array(value: Any, what: str, label: str) -> NDArray[np.float64]:
 def _point(value: Any, what: str, label: str) -> NDArray[np.float64]:
     arr = _finite_array(value, what, label)
     if arr.shape != (2,):
-        raise ParameterError(f"{label}: {what} must be [x, y] in metres, got {np.asarray(value).tolist()!r}")
+        form = "[x, y] in metres, or [x, y, theta] (theta in degrees)" if what == "goal" else "[x, y] in metres"
+        raise ParameterError(f"{label}: {what} must be {form}, got {np.asarray(value).tolist()!r}")
     return arr
 
 
