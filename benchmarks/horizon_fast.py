@@ -22,7 +22,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import horizon_solvers  # noqa: E402
 
 FIELDS = ["case", "code", "result", "stop", "iterations", "rounds", "floor", "fast", "fast_iterations", "fast_reason",
-          "wall_time", "nlp_time", "process", "cpu", "f1_ratio", "f2_ratio", "f4_ratio", "knots", "exit"]  # fmt: skip
+          "wall_time", "nlp_time", "process", "cpu", "f1_ratio", "f2_ratio", "f4_ratio", "knots", "exit",
+          "fallback_start"]  # fmt: skip
 
 
 def main() -> None:

@@ -197,6 +197,7 @@ def child(case: str, variant: str, time_limit: float = 60.0) -> dict:
         fast=(h.get("fast_attempt") or {}).get("result"),
         fast_iterations=(h.get("fast_attempt") or {}).get("iterations"),
         fast_reason=(h.get("fast_attempt") or {}).get("reason"),
+        fallback_start=(h.get("fast_attempt") or {}).get("fallback_start"),  # the fast attempt's iterate, if any
     )
     if trace:
         out["max_move_per_iteration"] = trace

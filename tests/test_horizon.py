@@ -187,6 +187,36 @@ def test_fast_attempt_first_and_its_fallback_to_the_default_floor(solved):
         assert getattr(metrics, f) <= getattr(warm_metrics, f) * (1 + 1e-9)
 
 
+def test_fallback_starts_from_the_fast_attempts_best_feasible_iterate(solved):
+    """Cut at 12 iterations, the fast attempt falls back; its best feasible iterate (every row, cheaper than qp) is
+    where the 1e-3 fallback starts — the note and the summary say so — and the plan is never worse than qp: the
+    fitness rows still refer to the qp plan. Fewer fallback iterations than from the warm start."""
+    problem, warm, warm_metrics, _ = solved
+    fell = plan_horizon(problem, warm, fast_max_iter=12)
+    d = fell.diagnostics
+    fast = d["horizon_summary"]["fast_attempt"]
+    assert fast["result"] == "fell_back" and fast["iterations"] == 12
+    assert fast["fallback_start"].startswith("round 1 fast, iteration ")
+    seed_cost = float(fast["fallback_start"].rsplit("objective ", 1)[1])
+    assert seed_cost < d["objective_warm_start"]
+    assert (
+        "so fell back to 0.001 from the fast attempt's best feasible iterate (round 1 fast, iteration "
+        in (d["horizon_note"])
+    )
+    assert d["horizon_result"] == "optimal" and d["objective"] <= seed_cost
+    fallback = [r for r in d["round_log"] if r["phase"] == "fallback"]
+    assert fallback and fallback[0]["min_hessian_perturbation"] == 1e-3
+    cold = plan_horizon(problem, warm, fast_min_hessian_perturbation=None)  # 1e-3 from the warm start
+    assert sum(r["iterations"] for r in fallback) < cold.diagnostics["ipopt_iterations"]
+    metrics = check(fell, problem.env)
+    assert metrics.n_violation_steps == 0
+    for f in ("f1", "f2", "f4"):
+        assert getattr(metrics, f) <= getattr(warm_metrics, f) * (1 + 1e-9)
+    few = plan_horizon(problem, warm, fast_max_iter=1)  # no feasible iterate cheaper than qp yet: the warm start
+    assert "fallback_start" not in few.diagnostics["horizon_summary"]["fast_attempt"]
+    assert "so fell back to 0.001 from the warm start" in few.diagnostics["horizon_note"]
+
+
 def test_objective_terms_are_the_paper_fitness(solved):
     problem, warm, _, plan = solved
     for p in (warm, plan):

@@ -369,10 +369,22 @@ def plan_horizon(
     phase_rounds: list[dict[str, Any]] = []
     tr_first: _Transcription | None = None  # round 1's transcription (the same rows for the fallback's round 1)
     fast_state: tuple[Any, ...] | None = None  # the fast attempt's end, if it fell back
+    masks_fast = masks
     try:
         for phase, attempts in phases:
-            if phase == "fallback":  # the procedure again, from its start, as if the fast attempt had not run
+            if phase == "fallback":  # the procedure again, from its start or the fast attempt's best feasible iterate
                 xv, masks, viol, lam, tr = x_phase, masks_phase, viol_phase, None, None
+                seed = None
+                if time.perf_counter() < deadline:  # every row at tol, f1, f2, f4 no worse than qp, cheaper than it
+                    seed = pools[0].best(model, tol, warm_c.J if warm_c else math.inf)
+                if seed is not None:
+                    assert fast_log is not None
+                    where = seed.detail.removeprefix("its best feasible iterate (").removesuffix(")")
+                    fast_log["fallback_start"] = f"{where}, objective {seed.J:.6g}"
+                    xv = x_init = seed.x
+                    vals = model.values(xv)
+                    masks = {name: masks_fast[name] | model.near(name, vals[name]) for name in model.rows}
+                    viol, tr_first = _violations(model, vals, xv, tol), None  # round 1: the rows near the seed
                 vals = model.values(xv)
                 stats, status, stop, too_big = {}, "", "", None
                 pool = _Pool(_POOL_SIZE, _POOL_SCREEN, f_limit)
@@ -490,6 +502,7 @@ def plan_horizon(
                 break
             fast_log.update(result="fell_back", reason=_fast_reason(stop, final, warm_c, model, phase_rounds, opts))
             fast_state = (stop, status, stats, phase_rounds, final, xv, vals, viol, tr)
+            masks_fast = masks  # the rows the fast attempt generated
             if _INTERRUPT.is_set():
                 break
     finally:
@@ -549,8 +562,10 @@ def plan_horizon(
     else:
         floor_note = (
             f"IPOPT min_hessian_perturbation {fast_log['min_hessian_perturbation']:g} first "
-            f"({fast_log['iterations']} iterations): {fast_log['reason']}, so fell back to {floor} from the warm start"
-        )
+            f"({fast_log['iterations']} iterations): {fast_log['reason']}, so fell back to {floor} from "
+            + (f"the fast attempt's best feasible iterate ({fast_log['fallback_start']})"
+               if "fallback_start" in fast_log else "the warm start")
+        )  # fmt: skip
     if chosen is None:
         warm_note = f"; the warm start is no fallback: {warm_why}"
         diag = _diagnostics(model, tr, stats, xv, vals, rounds, info, J_warm, trans_time, solve_time, start_time)

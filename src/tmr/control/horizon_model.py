@@ -82,9 +82,10 @@ class HorizonOptions:
             6 robots optimal in 31 iterations instead of 175, narrow rooms in 55 instead of 165), each round capped at
             ``fast_max_iter`` iterations and without the retry; if it does not end in an accepted optimum (a round
             stops without a solution or at the cap, rows left out stay violated, its time share runs out, or the
-            optimum costs more than the warm start or more in a term), the procedure starts again from the warm start
-            with ``min_hessian_perturbation`` — exactly as without the fast attempt, in the time that is left
-            (``formulations/horizon.md``, "Two regularisation floors").
+            optimum costs more than the warm start or more in a term), the procedure starts again with
+            ``min_hessian_perturbation`` in the time that is left, from the fast attempt's best feasible iterate
+            (every row holds, cheaper than the warm start, no term worse) if there is one, else from the warm start —
+            then exactly as without the fast attempt (``formulations/horizon.md``, "Two regularisation floors").
         fast_max_iter: IPOPT iterations per round of the fast attempt (60: the accepted rounds measured took 2–50,
             the one that diverges, scenario E with 4 robots and the active winch, runs 110 in its first).
         fast_time_share: fraction of the time left (if there is a time limit) that the fast attempt may use (1: all
