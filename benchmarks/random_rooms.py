@@ -678,19 +678,18 @@ def _ratio(a: Any, b: Any) -> float | None:
 
 def same_speed_args(model: Any) -> tuple[str, ...]:
     """``--set`` arguments that give the omnidirectional chain the differential-drive robot's speeds: the leader's
-    time law of ``--drive diff`` (:data:`tmr.planner.DIFF_SPEED_FRACTION` of v_max, :data:`~tmr.planner.
-    DIFF_ACCEL_FRACTION` of a_max, as ``tmr.planner._diff_drive_setup``), the followers' references rising at most
+    time law of ``--drive diff`` (:func:`tmr.planner.diff_leader_law`), the followers' references rising at most
     at the diff run's catch-up speed (:func:`tmr.planner.diff_catch_up`), every robot's speed bound at v_max [m/s]
     (per axis, the omni model's bound: up to √2 v_max diagonally) and its acceleration bound at a_max [m/s²]. With
     them, diff against omni measures what the drive costs (its heading, the wheel rows, the span braking curve), not
     that the robot is slower than the paper's (0.8 m/s leader)."""
     from tmr.model.params import PathParams, QPParams
-    from tmr.planner import DIFF_ACCEL_FRACTION, DIFF_SPEED_FRACTION, diff_catch_up
+    from tmr.planner import diff_catch_up, diff_leader_law
 
-    path, qp = PathParams(), QPParams()
+    path, qp = diff_leader_law(PathParams(), model), QPParams()
     values = {
-        "leader_speed": min(path.leader_speed, DIFF_SPEED_FRACTION * model.v_max),
-        "leader_accel": min(path.leader_accel, DIFF_ACCEL_FRACTION * model.a_max),
+        "leader_speed": path.leader_speed,
+        "leader_accel": path.leader_accel,
         "robot_speed_max": min(qp.robot_speed_max, model.v_max),
         "robot_accel_max": min(qp.robot_accel_max, model.a_max),
         "catch_up": diff_catch_up(model),

@@ -472,12 +472,17 @@ def _diff_drive_setup(chain_params: ChainParams, path_params: PathParams) -> tup
     from tmr.model.diffdrive import model_for
 
     model = model_for(chain_params.robot_model, chain_params.safety_radius)
-    path_params = replace(
+    return model, diff_leader_law(path_params, model)
+
+
+def diff_leader_law(path_params: PathParams, model: RobotModel) -> PathParams:
+    """``path_params`` with the leader's speed [m/s] and acceleration [m/s²] capped at :data:`DIFF_SPEED_FRACTION`
+    of the robot's v_max and :data:`DIFF_ACCEL_FRACTION` of its a_max (the time law of ``drive = "diff"``)."""
+    return replace(
         path_params,
         leader_speed=min(path_params.leader_speed, DIFF_SPEED_FRACTION * model.v_max),
         leader_accel=min(path_params.leader_accel, DIFF_ACCEL_FRACTION * model.a_max),
     )
-    return model, path_params
 
 
 def initial_headings(problem: Problem) -> Array:

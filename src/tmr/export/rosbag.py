@@ -383,6 +383,7 @@ def write_bag(
         MA = ts.types["visualization_msgs/msg/MarkerArray"]
         from tqdm import tqdm
 
+        diff_robots, dd = _diff_robots(motion), motion.diff_drive  # differential drive: its robots, poses, commands
         for k, s in enumerate(tqdm(stamps, desc="bag samples", unit="sample", leave=False, disable=not progress)):
             for tr in motion.tracks:
                 msg = ts.types["geometry_msgs/msg/PoseStamped"](header=m.header(s), pose=m.pose(tr.xyz[k], _yaw(tr, k)))
@@ -408,11 +409,9 @@ def write_bag(
                 TS(header=m.header(s), child_frame_id=tr.name, transform=m.transform(tr.xyz[k], _yaw(tr, k)))
                 for tr in motion.tracks
             ]
-            diff_robots = _diff_robots(motion)
             if diff_robots:  # map → odom (identity: the plan is exact) → robot<i>/base_link (the odometry's pose)
                 tfs.append(TS(header=m.header(s), child_frame_id=ODOM_FRAME, transform=m.transform((0, 0, 0), None)))
                 for i, name in enumerate(diff_robots):
-                    dd = motion.diff_drive
                     xy, th = dd.axle[k, i], float(dd.theta[k, i])
                     tfs.append(
                         TS(
@@ -423,7 +422,6 @@ def write_bag(
                     )
             w.write(conns["/tf"], s, ser(ts.types["tf2_msgs/msg/TFMessage"](transforms=tfs), TOPIC_TYPES["tf"]))
             for i, name in enumerate(diff_robots):  # differential drive: the command and the odometry
-                dd = motion.diff_drive
                 v, omega = float(dd.v[k, i]), float(dd.omega[k, i])
                 w.write(conns[f"/{name}/cmd_vel"], s, ser(m.twist(v, omega), TOPIC_TYPES["cmd_vel"]))
                 odom = m.odometry(s, f"{name}/base_link", dd.axle[k, i], dd.theta[k, i], v, omega)

@@ -223,10 +223,7 @@ def param(text: str) -> tuple[str, Any]:
             # judged together (their step count, MAX_STEPS) where both are known, by the planner's precheck
             cls(**({key: typed} | _companions(cls, key, typed)))
             if key == "robot_model":
-                from tmr.model.diffdrive import canonical_model_name, load_robot_model
-
-                load_robot_model(typed)  # a preset or a readable model file, now (exit 2)
-                typed = canonical_model_name(typed)
+                typed = _robot_model_name(typed)
         except ParameterError as exc:
             first = first or exc
             continue
@@ -245,20 +242,27 @@ def _companions(cls: type, key: str, typed: Any) -> dict[str, Any]:
     return {}
 
 
+def _robot_model_name(text: str) -> str:
+    """The preset's full name (``burger`` → ``turtlebot3_burger``, as the records keep it) or the file as given, once
+    the model loads (:func:`tmr.model.diffdrive.load_robot_model`; ParameterError otherwise)."""
+    from tmr.model.diffdrive import canonical_model_name, load_robot_model
+
+    load_robot_model(text)
+    return canonical_model_name(text)
+
+
 def robot_model_arg(text: str) -> str:
     """``--robot-model NAME|FILE``: a preset (or its short name) or a robot model TOML file that loads
     (:func:`tmr.model.diffdrive.load_robot_model`); returns the preset's full name (``burger`` →
     ``turtlebot3_burger``, as the records keep it) or the file as given."""
     from tmr.errors import ParameterError
-    from tmr.model.diffdrive import canonical_model_name, load_robot_model
 
     if not text.strip():
         raise argparse.ArgumentTypeError("must name a robot model preset or a .toml file, got an empty value")
     try:
-        load_robot_model(text)
+        return _robot_model_name(text)
     except ParameterError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
-    return canonical_model_name(text)
 
 
 def path_arg(text: str) -> str:

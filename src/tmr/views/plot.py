@@ -545,6 +545,7 @@ def plot_drive(plan: Any) -> Figure:
     ±ω_max (right); the rims are planned within (1 − WHEEL_RESERVE) v_max; turn-in-place steps shaded
     (``formulations/diffdrive.md``)."""
     from tmr.checks.diffdrive import TURN_IN_PLACE
+    from tmr.control.diffdrive import WHEEL_RESERVE
 
     t = np.asarray(plan.t, dtype=float)
     v = np.asarray(plan.drive_v, dtype=float)
@@ -558,8 +559,6 @@ def plot_drive(plan: Any) -> Figure:
         av, aw = axes[i, 0], axes[i, 1]
         av.plot(t, v[:, i], color=RAW_COLOR, lw=1.5, label="v")
         if m.get("track"):
-            from tmr.control.diffdrive import WHEEL_RESERVE
-
             half = 0.5 * m["track"] * w[:, i]
             rim = (1.0 - WHEEL_RESERVE) * m["v_max"]
             av.axhline(rim, color="0.4", ls=":", lw=0.9, label="planned rim bound")
