@@ -537,7 +537,7 @@ def _within_robot_reach(
 ) -> Trajectory:
     """``--route rrt`` with differential drive: the leader's B-spline time law over the paper's T_end (15 s) retimed
     to the longest of T_end, the time that keeps its peak speed ≤ ``leader_speed`` and the one that keeps its peak
-    acceleration ≤ ``leader_accel`` (both capped for the robot, :func:`_diff_drive_setup`; speed scales as 1/T,
+    acceleration ≤ ``leader_accel`` (both capped for the robot, :func:`diff_leader_law`; speed scales as 1/T,
     acceleration as 1/T²), rounded up to whole steps. ``rebuild(time_params)`` builds the same path and spline again
     over the new T_end (the same inputs and seed: only the time law changes). A T_end the user set is kept, unless
     its peak speed is above the robot's v_max; a retimed motion longer than ``MAX_STEPS`` is refused (both
