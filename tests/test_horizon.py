@@ -44,9 +44,9 @@ THROUGH = ((3.2, 2.9), (4.2, 2.3), (5.2, 2.9))  # the reference dips 0.5 m into 
 GRAZING = ((3.2, 2.9), (4.2, 2.8), (5.2, 2.9))  # the reference touches the inflated column (clearance ≈ 0 < d_safe)
 
 
-def small_problem(waypoints=PAST, T_end: float = 1.5, limits=None) -> Problem:
+def small_problem(waypoints=PAST, T_end: float = 1.5, limits=None, columns=(COLUMN,)) -> Problem:
     """N = 2 robots in an 8 m × 5 m room with one column, K = 30 steps (T_end = 1.5 s, Ts = 0.05 s)."""
-    env = Environment.from_geometry([Point(*COLUMN).buffer(0.3, 64)], (0.0, 0.0, 8.0, 5.0))
+    env = Environment.from_geometry([Point(*c).buffer(0.3, 64) for c in columns], (0.0, 0.0, 8.0, 5.0))
     start = np.array([[2.0, 2.5], list(waypoints[0])])
     sc = Scenario(
         name="small",
@@ -153,17 +153,18 @@ def test_fast_attempt_first_and_its_fallback_to_the_default_floor(solved):
     fast = plan.diagnostics["horizon_summary"]["fast_attempt"]
     assert fast["result"] == "accepted" and fast["min_hessian_perturbation"] == 1e-5
     assert plan.diagnostics["horizon_summary"]["min_hessian_perturbation"] == 1e-5
-    assert "IPOPT min_hessian_perturbation 1e-05 (the fast attempt)" in plan.diagnostics["horizon_note"]
+    assert "IPOPT min_hessian_perturbation 1e-05 (exact Hessian, the fast attempt)" in plan.diagnostics["horizon_note"]
     assert {r["phase"] for r in plan.diagnostics["round_log"]} == {"fast"}
     without = plan_horizon(problem, warm, fast_min_hessian_perturbation=None)
     assert without.diagnostics["horizon_summary"]["fast_attempt"] is None
     assert {r["phase"] for r in without.diagnostics["round_log"]} == {"default"}
-    assert "IPOPT min_hessian_perturbation 0.001;" in without.diagnostics["horizon_note"]
+    assert "IPOPT min_hessian_perturbation 0.001 (Gauss–Newton Hessian);" in without.diagnostics["horizon_note"]
     fell = plan_horizon(problem, warm, fast_max_iter=1)
     d = fell.diagnostics
     assert d["horizon_result"] == "optimal" and d["horizon_stop"] == "converged"
     assert d["horizon_summary"]["fast_attempt"] == dict(
         min_hessian_perturbation=1e-5,
+        hessian="exact",
         max_iter_per_round=1,
         iterations=1,
         rounds=1,
@@ -172,9 +173,9 @@ def test_fast_attempt_first_and_its_fallback_to_the_default_floor(solved):
     )
     assert d["horizon_summary"]["min_hessian_perturbation"] == 1e-3
     assert (
-        "IPOPT min_hessian_perturbation 1e-05 first (1 iterations): round 1 stopped with "
-        "'Maximum_Iterations_Exceeded' after 1 iterations, so fell back to 0.001 from the warm start"
-        in d["horizon_note"]
+        "IPOPT min_hessian_perturbation 1e-05 (exact Hessian) first (1 iterations): round 1 stopped with "
+        "'Maximum_Iterations_Exceeded' after 1 iterations, so fell back to 0.001 (Gauss–Newton Hessian) from the "
+        "warm start" in d["horizon_note"]
     )
     np.testing.assert_array_equal(fell.q, without.q)  # the fallback is the procedure without the fast attempt
     both = without.diagnostics["ipopt_iterations"] + 1
@@ -200,8 +201,8 @@ def test_fallback_starts_from_the_fast_attempts_best_feasible_iterate(solved):
     seed_cost = float(fast["fallback_start"].rsplit("objective ", 1)[1])
     assert seed_cost < d["objective_warm_start"]
     assert (
-        "so fell back to 0.001 from the fast attempt's best feasible iterate (round 1 fast, iteration "
-        in (d["horizon_note"])
+        "so fell back to 0.001 (Gauss–Newton Hessian) from the fast attempt's best feasible iterate (round 1 fast, "
+        "iteration " in (d["horizon_note"])
     )
     assert d["horizon_result"] == "optimal" and d["objective"] <= seed_cost
     fallback = [r for r in d["round_log"] if r["phase"] == "fallback"]
@@ -214,7 +215,7 @@ def test_fallback_starts_from_the_fast_attempts_best_feasible_iterate(solved):
         assert getattr(metrics, f) <= getattr(warm_metrics, f) * (1 + 1e-9)
     few = plan_horizon(problem, warm, fast_max_iter=1)  # no feasible iterate cheaper than qp yet: the warm start
     assert "fallback_start" not in few.diagnostics["horizon_summary"]["fast_attempt"]
-    assert "so fell back to 0.001 from the warm start" in few.diagnostics["horizon_note"]
+    assert "so fell back to 0.001 (Gauss–Newton Hessian) from the warm start" in few.diagnostics["horizon_note"]
 
 
 def test_objective_terms_are_the_paper_fitness(solved):
@@ -277,6 +278,29 @@ def test_reference_through_obstacle_with_equality_leader_fails_clearly():
     assert "leader's reference passes closer to the obstacles" in msg and f"knot {worst.knot}" in msg
     for v in err.violations:
         assert v.group in GROUPS and 0 < v.knot <= 30 and v.amount > 0 and v.t == pytest.approx(0.05 * v.knot)
+
+
+def test_a_start_inside_d_safe_keeps_the_warm_starts_clearance_until_it_reaches_d_safe(monkeypatch):
+    """A second column 3 cm (inflated) below the first tether's midpoint at the start: from rest a robot moves
+    ≤ a_rob Ts² = 1.5 cm in its first step, so d_safe = 5 cm cannot hold at knot 1. Those samples keep the warm
+    start's clearance until it reaches d_safe; the plan is an optimum and clear of the obstacles (exact check).
+    Without that, the NLP has no feasible point near the start."""
+    problem = small_problem(columns=(COLUMN, (1.4, 2.5 - 0.83)))
+    warm, _ = solve(problem, "qp")
+    assert warm.success
+    plan = plan_horizon(problem, warm)
+    d = plan.diagnostics
+    assert d["start_clearance_rows"] > 0 and d["horizon_result"] == "optimal"
+    assert min(d["min_field_clearance"][:3]) < 0.05  # the first knots are inside d_safe, as the start is
+    metrics = check(plan, problem.env)
+    assert plan.success and metrics.n_violation_steps == 0 and metrics.min_tether_clearance > 0
+    assert objective(plan.q, problem) < objective(warm.q, problem)
+    monkeypatch.setattr(horizon_model._Model, "keep_start_clearance", lambda self, c: 0)
+    try:
+        plain = plan_horizon(problem, warm)
+    except InfeasibleStep:
+        return
+    assert plain.diagnostics["horizon_result"] != "optimal"
 
 
 def test_bounded_leader_error_passes_where_equality_cannot():
@@ -627,7 +651,7 @@ def test_structured_jacobian_and_hessian_equal_casadis_automatic_ones():
         masks[name][:, model.fixed_columns(name)] = False
     tr = horizon_model._Transcription(model, masks)
     assert tr.index["clearance"].size > 0
-    custom = tr.derivatives(2.5)
+    custom = tr.derivatives(2.5, "exact")
     assert set(custom) == {"jac_g", "hess_lag"}
     rng = np.random.default_rng(3)
     x = xv + rng.normal(0.0, 0.02, xv.size)
@@ -668,6 +692,77 @@ def test_structured_jacobian_and_hessian_equal_casadis_automatic_ones():
     for i in range(3):
         np.testing.assert_allclose([float(d1[0][i]), float(d1[1][i])], np.asarray(grad(far[:, i])).ravel(), atol=1e-9)
     assert all(float(d[0]) == 0.0 and float(d[1]) == 0.0 for d in d2) and float(d2[1][2]) != 0.0
+
+
+def test_gauss_newton_hessian_is_the_residuals_jacobian_product_and_the_rows_exact_curvature():
+    """hessian="gauss-newton": the cost's part is 2 Σ w_i J_iᵀJ_i with J_i the finite-difference Jacobian of the
+    paper's residuals written here from their definitions (q̇, d_i − d_j, q̈ of eq. 24, 25, 27; Σ r² = f_i), it is
+    positive semidefinite, a fitness row adds its own Gauss–Newton term (multiplier clipped at 0), and every other
+    row keeps casadi's exact curvature."""
+    problem = small_problem()
+    warm, _ = solve(problem, "qp")
+    su = horizon_model._Setup(problem, horizon_model._options({}))
+    Q, info = horizon_model._warm_start(su, warm)
+    env = problem.env
+    model = horizon_model._Model(
+        su, distance_spline(env), bounds=info["warm_start_terms"], bspline=horizon_model.distance_bspline(env)
+    )
+    xv = model.project(model.x_of(Q))
+    vals = model.values(xv)
+    masks = {name: np.ones_like(vals[name], dtype=bool) for name in model.rows}
+    for name in masks:
+        masks[name][:, model.fixed_columns(name)] = False
+    tr = horizon_model._Transcription(model, masks)
+    scale, Ts = 2.5, problem.time_params.Ts
+    gn = tr.derivatives(scale, "gauss-newton")["hess_lag"]
+    exact = tr.derivatives(scale, "exact")["hess_lag"]
+    rng = np.random.default_rng(5)
+    x = xv + rng.normal(0.0, 0.02, xv.size)
+    lam = rng.normal(0.0, 1.0, tr.size)
+    fit = slice(tr.offset["fitness"], tr.offset["fitness"] + tr.index["fitness"].size)
+    lam[fit] = 0.0
+
+    def residuals(xx):
+        q = model.q_of(xx)
+        qd = np.diff(q, axis=0) / Ts
+        qdd = np.diff(np.vstack([qd, np.zeros((1, q.shape[1]))]), axis=0) / Ts  # q̈_1 … q̈_K (q̇_K = 0)
+        d = q[:, 1::2]
+        pairs = [(i, j) for i in range(d.shape[1]) for j in range(i + 1, d.shape[1])]
+        return {"f1": qd.ravel(), "f2": np.concatenate([d[:, i] - d[:, j] for i, j in pairs]), "f4": qdd.ravel()}
+
+    terms = objective_terms(model.q_of(x), Ts)
+    r0 = residuals(x)
+    for k in ("f1", "f2", "f4"):
+        assert np.sum(r0[k] ** 2) == pytest.approx(terms[k], rel=1e-9)
+    h = 1e-6
+    jac = {k: np.zeros((r0[k].size, x.size)) for k in r0}
+    for c in range(x.size):
+        e = np.zeros(x.size)
+        e[c] = h
+        rp, rm = residuals(x + e), residuals(x - e)
+        for k in r0:
+            jac[k][:, c] = (rp[k] - rm[k]) / (2 * h)
+    free = slice(2 * su.N, x.size)  # knot 0 is the fixed start (q_of returns q_0 exactly)
+    jac = {k: J[:, free] for k, J in jac.items()}
+    want = sum(2 * 0.7 / scale * J.T @ J for J in jac.values())
+    H_obj = (gn(x, [], 0.7, lam) - gn(x, [], 0.0, lam)).full()
+    H_obj = (np.triu(H_obj) + np.triu(H_obj, 1).T)[free, free]
+    np.testing.assert_allclose(H_obj, want, rtol=0, atol=1e-5 * np.abs(want).max())
+    assert np.linalg.eigvalsh(H_obj).min() > -1e-9 * np.abs(want).max()  # positive semidefinite
+    # the rows' curvature (fitness multipliers 0) is the exact one
+    np.testing.assert_allclose(gn(x, [], 0.0, lam).full(), exact(x, [], 0.0, lam).full(), rtol=0, atol=1e-9)
+    # a fitness row adds 2 μ / f_i,warm JᵣᵀJᵣ of its term, and nothing for a negative multiplier
+    mu = np.zeros(tr.size)
+    mu[fit.start] = 0.3
+    k = [t for t in ("f1", "f2", "f4") if model.bounds.get(t, 0.0) > 0][0]
+    H_fit = gn(x, [], 0.0, mu).full()
+    H_fit = (np.triu(H_fit) + np.triu(H_fit, 1).T)[free, free]
+    want_fit = 2 * 0.3 / model.bounds[k] * jac[k].T @ jac[k]
+    np.testing.assert_allclose(H_fit, want_fit, rtol=0, atol=1e-5 * np.abs(want_fit).max())
+    assert np.abs(gn(x, [], 0.0, -mu).full()).max() == 0.0
+    H_ex = exact(x, [], 0.0, mu).full()
+    H_ex = (np.triu(H_ex) + np.triu(H_ex, 1).T)[free, free]
+    assert np.abs(H_ex - H_fit).max() > 1e-3 * np.abs(want_fit).max()  # not the exact one
 
 
 # windowed solves along the route, then the whole NLP (HorizonOptions.window)

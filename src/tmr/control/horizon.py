@@ -68,6 +68,7 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from tmr.control.clik import Plan
+from tmr.control.horizon_coarse import coarse_problem, interpolate, stride
 from tmr.control.horizon_model import (
     GROUPS,
     HorizonInfeasible,
@@ -314,6 +315,7 @@ def plan_horizon(
     Qw = model.q_of(xv)
     x_init = xv
     vals = model.values(xv)
+    info["start_clearance_rows"] = model.keep_start_clearance(vals["clearance"])
     masks = {name: model.near(name, vals[name]) for name in model.rows}
     J_warm = _cost(su, Qw)
     obj_scale = max(J_warm, 1e-6) if opts.scale_objective else 1.0
@@ -363,6 +365,22 @@ def plan_horizon(
         solve_time += sum(w["solve_time"] for w in windows)
         trans_time += window_time - sum(w["solve_time"] for w in windows)
     phases = _phases(opts)
+    coarse_c: _Candidate | None = None  # the coarse pass's interpolated optimum, if every row holds
+    coarse_log: dict[str, Any] | None = None
+    M = stride(su.K, opts.coarse_knots, opts.coarse_from)
+    if M > 1 and su.drive is None and opts.window is None and time.perf_counter() < deadline:
+        bar.set_description_str(f"horizon NLP, every {M}th knot")
+        coarse_c, coarse_log = _coarse_pass(problem, warm_start, M, options, model, warm_c, tol, deadline, limit)
+        solve_time += coarse_log.pop("solve_time", 0.0)
+        trans_time += coarse_log.pop("transcription_time", 0.0)
+        if coarse_c is not None:
+            phases = []  # every row of the whole NLP holds at the interpolated optimum: no fine solve
+        elif coarse_log.get("x") is not None:  # rows violated between the coarse knots: the whole NLP starts there
+            xv = x_init = coarse_log.pop("x")
+            vals = model.values(xv)
+            masks = {name: masks[name] | model.near(name, vals[name]) for name in model.rows}
+            viol = _violations(model, vals, xv, tol)
+            coarse_log["fine_start"] = "the interpolated coarse optimum"
     x_phase, masks_phase, viol_phase = xv, masks, viol  # where every attempt of the procedure starts
     fast_log: dict[str, Any] | None = None  # the fast attempt: its floor, iterations, "accepted" or why it fell back
     final: _Candidate | None = None
@@ -389,6 +407,7 @@ def plan_horizon(
                 stats, status, stop, too_big = {}, "", "", None
                 pool = _Pool(_POOL_SIZE, _POOL_SCREEN, f_limit)
                 pools.append(pool)
+            hessian = opts.fast_hessian if phase == "fast" else opts.hessian
             phase_deadline = deadline
             if phase == "fast" and math.isfinite(limit):
                 now = time.perf_counter()
@@ -425,7 +444,7 @@ def plan_horizon(
                     bar.set_description_str(f"horizon NLP, {_BAR[phase]}round {rnd} ({label} solve)")
                     t2 = time.perf_counter()
                     callback = _IterationCallback(tr, pool, bar, name, phase_deadline)
-                    solver = tr.solver(obj_scale, extra, callback)
+                    solver = tr.solver(obj_scale, extra, callback, hessian)
                     build_time, built_rows = time.perf_counter() - t2, tr.size
                     kwargs: dict[str, Any] = dict(x0=x_start, lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg)
                     if prev is not None and lam_start is not None:  # primal–dual warm start from the previous round
@@ -455,6 +474,7 @@ def plan_horizon(
                             min_hessian_perturbation=float(
                                 extra.get("min_hessian_perturbation", opts.min_hessian_perturbation)
                             ),
+                            hessian=hessian,
                             status=status,
                             iterations=int(stats.get("iter_count", -1)),
                             rows=int(tr.size),
@@ -493,6 +513,7 @@ def plan_horizon(
                 continue
             fast_log = dict(
                 min_hessian_perturbation=float(opts.fast_min_hessian_perturbation or 0.0),
+                hessian=opts.fast_hessian,
                 max_iter_per_round=int(attempts[0][1]["max_iter"]),
                 iterations=int(sum(r["iterations"] for r in phase_rounds)),
                 rounds=len(phase_rounds),
@@ -519,6 +540,7 @@ def plan_horizon(
     tried = " and ".join(f"{r['attempt']}: {r['status']!r} after {r['iterations']} iterations"
                          for r in phase_rounds if r["round"] == last)  # fmt: skip
     iterations = int(sum(r["iterations"] for r in rounds)) + int(sum(w["iterations"] for w in windows))
+    iterations += int(coarse_log["iterations"]) if coarse_log is not None else 0
     phase_iterations = int(sum(r["iterations"] for r in phase_rounds))
     if stop == "converged":
         what = f"IPOPT solved the NLP ({status}, {phase_iterations} iterations in {last} round(s))"
@@ -549,23 +571,34 @@ def plan_horizon(
         elif final is not None:
             what = f"IPOPT's optimum ({status}, objective {final.J:.6g}) costs more than the warm start"
         chosen = _best_of(pools, model, tol, warm_c.J if warm_c else math.inf, deadline) or warm_c
-    floor = f"{opts.min_hessian_perturbation:g}"
+    if coarse_c is not None:
+        assert coarse_log is not None
+        chosen, stop, what = coarse_c, "converged", coarse_log["what"]
+    floor = f"{opts.min_hessian_perturbation:g} ({_HESSIAN[opts.hessian]} Hessian)"
     if fast_log is None:
         floor_note = f"IPOPT min_hessian_perturbation {floor}"
     elif fast_log["result"] == "accepted":
-        floor_note = f"IPOPT min_hessian_perturbation {fast_log['min_hessian_perturbation']:g} (the fast attempt)"
+        floor_note = (
+            f"IPOPT min_hessian_perturbation {fast_log['min_hessian_perturbation']:g} "
+            f"({_HESSIAN[opts.fast_hessian]} Hessian, the fast attempt)"
+        )
     elif "fallback" in fast_log:
         floor_note = (
-            f"IPOPT min_hessian_perturbation {fast_log['min_hessian_perturbation']:g} first "
+            f"IPOPT min_hessian_perturbation {fast_log['min_hessian_perturbation']:g} "
+            f"({_HESSIAN[opts.fast_hessian]} Hessian) first "
             f"({fast_log['iterations']} iterations): {fast_log['reason']}; no time left to fall back to {floor}"
         )
     else:
         floor_note = (
-            f"IPOPT min_hessian_perturbation {fast_log['min_hessian_perturbation']:g} first "
+            f"IPOPT min_hessian_perturbation {fast_log['min_hessian_perturbation']:g} "
+            f"({_HESSIAN[opts.fast_hessian]} Hessian) first "
             f"({fast_log['iterations']} iterations): {fast_log['reason']}, so fell back to {floor} from "
             + (f"the fast attempt's best feasible iterate ({fast_log['fallback_start']})"
                if "fallback_start" in fast_log else "the warm start")
         )  # fmt: skip
+    if coarse_c is not None:
+        assert coarse_log is not None
+        floor_note = f"every {M}th knot: {coarse_log['floor_note']}"
     if chosen is None:
         warm_note = f"; the warm start is no fallback: {warm_why}"
         diag = _diagnostics(model, tr, stats, xv, vals, rounds, info, J_warm, trans_time, solve_time, start_time)
@@ -626,8 +659,15 @@ def plan_horizon(
         warm_start_fallback=warm_c.detail if warm_c else f"none: {warm_why}",
         iterates_kept=len(pool),
     )
+    diag.update(horizon_floor_note=floor_note)
     if opts.window is not None:
         diag.update(window_log=windows, ipopt_iterations=iterations)
+    if coarse_log is not None:  # only where the coarse pass ran: the records of the others are unchanged
+        diag["horizon_summary"]["coarse"] = coarse_log
+        diag.update(ipopt_iterations=iterations)
+        if coarse_c is not None:
+            diag["horizon_summary"]["min_hessian_perturbation"] = coarse_log["min_hessian_perturbation"]
+            diag.update(ipopt_status=coarse_log["status"], ipopt_success=True, rounds=coarse_log["rounds"])
     if poses is not None:  # differential drive: how much executing the NLP's poses changed them
         diag.update(su.diff_log)
     qdot = np.vstack([np.diff(Q, axis=0) / su.Ts, np.zeros((1, su.n))])
@@ -764,6 +804,73 @@ def _diff_final(
 
 #: The progress bar's round prefix per attempt of the procedure (:func:`_phases`).
 _BAR = {"default": "", "fast": "", "fallback": "fallback "}
+
+
+_HESSIAN = {"exact": "exact", "gauss-newton": "Gauss–Newton", "limited-memory": "limited-memory"}  # for the notes
+
+
+def _coarse_pass(
+    problem: Any,
+    warm_start: Plan,
+    M: int,
+    options: dict[str, Any],
+    model: _Model,
+    warm_c: _Candidate | None,
+    tol: float,
+    deadline: float,
+    limit: float,
+) -> tuple[_Candidate | None, dict[str, Any]]:
+    """The NLP on every M-th knot (:mod:`tmr.control.horizon_coarse`; d_safe + ``coarse_margin``, rate bounds ×
+    ``coarse_rate_scale``), solved by :func:`plan_horizon` itself in ``coarse_time_share`` of the time left, its
+    optimum interpolated to every knot: the candidate if every row of the whole NLP holds there, no term is worse than
+    the warm start's and it costs no more (else ``None``); and the log (stride, knots, iterations, result, why)."""
+    opts, su = model.su.opts, model.su
+    t0 = time.perf_counter()
+    pc, wc = coarse_problem(problem, warm_start, M, opts.coarse_rate_scale)
+    sub = dict(options, coarse_knots=None, d_safe=su.d_safe + opts.coarse_margin)
+    budget = None if not math.isfinite(limit) else max(opts.coarse_time_share * (deadline - t0), 1e-3)
+    log: dict[str, Any] = dict(stride=M, knots=int(pc.trajectory.t.size), iterations=0)
+    try:
+        cplan = plan_horizon(pc, wc, time_limit=budget, **sub)
+    except HorizonInfeasible as exc:
+        d = exc.diagnostics or {}
+        log.update(iterations=int(d.get("ipopt_iterations", 0)), result="failed", reason="no feasible coarse plan")
+        log.update(solve_time=time.perf_counter() - t0)
+        return None, log
+    d = cplan.diagnostics
+    log.update(
+        iterations=int(d.get("ipopt_iterations", 0)),
+        rounds=int(d.get("rounds", 0)),
+        status=str(d.get("ipopt_status", "")),
+        min_hessian_perturbation=d["horizon_summary"].get("min_hessian_perturbation"),
+        floor_note=str(d.get("horizon_floor_note", "")),
+        solve_time=float(d.get("solve_time", 0.0)),
+        transcription_time=time.perf_counter() - t0 - float(d.get("solve_time", 0.0)),
+    )
+    if d.get("horizon_result") != "optimal":
+        log.update(result="failed", reason=f"the coarse NLP returned its {d.get('horizon_result')}")
+        return None, log
+    R = interpolate(np.asarray(cplan.robots, dtype=float), su.t, M)
+    xv = model.project(np.concatenate([R[:, :, 0], R[:, :, 1]], axis=1).ravel())
+    Q = model.q_of(xv)
+    viol = _violations(model, model.values(xv), xv, tol)
+    J = _cost(su, Q)
+    if viol:
+        reason = "interpolated, it violates " + _describe(viol)
+    elif not _no_worse(model, Q):
+        reason = "interpolated, it is worse than the warm start in a term of the fitness"
+    elif warm_c is not None and J > warm_c.J:
+        reason = f"interpolated, it costs more ({J:.6g}) than the warm start ({warm_c.J:.6g})"
+    else:
+        log.update(result="accepted")
+        log["what"] = (
+            f"IPOPT solved the NLP on every {M}th knot ({log['knots']} of {su.K + 1}; {log['status']}, "
+            f"{log['iterations']} iterations in {log['rounds']} round(s)), its optimum interpolated to every knot "
+            "(quadratic spline), where every row holds"
+        )
+        return _Candidate(Q, J, "optimal", f"the optimum on every {M}th knot, interpolated", xv), log
+    log.update(result="rejected", reason=reason[:300], x=xv)
+    return None, log
 
 
 def _phases(opts: HorizonOptions) -> list[tuple[str, list[tuple[str, dict[str, Any]]]]]:
@@ -1023,6 +1130,7 @@ def _diagnostics(
         "warm_start_method": info.get("warm_start_method", ""),
         "warm_start_success": info.get("warm_start_success"),
         "warm_start_time": float(info.get("warm_start_time", 0.0)),
+        "start_clearance_rows": int(info.get("start_clearance_rows", 0)),
         "transcription_time": float(trans_time),
         "solve_time": float(solve_time),
         "total_time": time.perf_counter() - start_time,

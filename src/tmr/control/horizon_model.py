@@ -137,7 +137,8 @@ class HorizonOptions:
     constr_viol_tol: float = 1e-6
     mu_strategy: str = "adaptive"
     mu_init: float = 1e-3
-    hessian: str = "exact"
+    hessian: str = "gauss-newton"
+    fast_hessian: str = "exact"
     linear_solver: str = "mumps"
     mumps_pivot_order: int = 0
     nlp_scaling: str = "none"
@@ -151,6 +152,11 @@ class HorizonOptions:
     warm_start_leader_error: float = 0.01
     expand: bool = False
     scale_objective: bool = True
+    coarse_knots: int | None = 200
+    coarse_from: int = 500
+    coarse_margin: float = 0.005
+    coarse_rate_scale: float = 0.95
+    coarse_time_share: float = 0.5
     window: int | None = None
     window_overlap: int | None = None
     window_mode: str = "fixed"
@@ -188,8 +194,10 @@ class HorizonOptions:
             raise ParameterError(f"window_overlap must be in [0, window), got {self.window_overlap!r}")
         if self.window_mode not in ("fixed", "sub"):
             raise ParameterError(f"window_mode must be 'fixed' or 'sub', got {self.window_mode!r}")
-        if self.hessian not in ("exact", "limited-memory"):
-            raise ParameterError(f"hessian must be 'exact' or 'limited-memory', got {self.hessian!r}")
+        for name in ("hessian", "fast_hessian"):
+            v = getattr(self, name)
+            if v not in ("exact", "limited-memory", "gauss-newton"):
+                raise ParameterError(f"{name} must be 'exact', 'gauss-newton' or 'limited-memory', got {v!r}")
 
 
 class Violation(NamedTuple):
@@ -552,6 +560,13 @@ class _Model:
         if opts.leader_tolerance > 0:
             J = J + opts.w_tracking * f3
         self.terms = ca.Function("terms", [xin], [f1, f2, f3, f4])
+        # f_i = Σ r_i² (Gauss–Newton Hessians: hessian="gauss-newton")
+        self.residuals = {
+            "f1": ca.vec(Qd),
+            "f2": ca.vertcat(*[ca.vec(D[i, :] - D[j, :]) for i, j in su.pairs]) if su.pairs else ca.MX(0, 1),
+            "f3": ca.vertcat(ca.vec(ex), ca.vec(ey)),
+            "f4": ca.vec(Qdd[:, 1:]),
+        }
 
         # bounds on the variables: the start fixed, the leader on its reference (equality leader)
         lbx = np.full((K + 1, 2 * N), -np.inf)
@@ -636,6 +651,8 @@ class _Model:
         Ls, ones = ca.DM(su.Ls), ca.DM.ones(1, K + 1)
         self.Px = ca.vec(ca.mtimes(Ls, ca.vertcat(su.base[0] * ones, Pm[:N, :])))
         self.Py = ca.vec(ca.mtimes(Ls, ca.vertcat(su.base[1] * ones, Pm[N:, :])))
+        # per-entry lower bounds that replace a group's per-row ones (:meth:`keep_start_clearance`)
+        self.lo_entries: dict[str, Array] = {}
         # numeric evaluation of every row of every group (the clearance of all samples through one mapped call)
         self._names = names
         self._full = ca.Function("rows", [x], [rows[g].expr for g in names] + [ca.horzcat(self.Px, self.Py).T])
@@ -720,10 +737,31 @@ class _Model:
             return knots == 0
         return np.zeros(knots.size, dtype=bool)
 
+    def lower(self, name: str) -> Array:
+        """Lower bounds of every entry of group ``name``, (rows, cols)."""
+        r = self.rows[name]
+        lo = self.lo_entries.get(name)
+        return lo if lo is not None else np.broadcast_to(r.lo[:, None], (r.lo.size, r.knots.size))
+
+    def keep_start_clearance(self, clearance: Array) -> int:
+        """Where the fixed start already has a tether sample closer than d_safe, that sample's row keeps the warm
+        start's clearance ``clearance`` (N S, K+1) [m] instead of d_safe until the warm start first reaches d_safe:
+        the bound is min(d_safe, c_warm). From rest a robot moves at most a_rob T_s² (1.5 cm) in its first step, so
+        a start 2 cm inside d_safe makes the rows of the first knots infeasible (formulations/horizon.md, "The
+        start's clearance"). Returns the number of entries relaxed (0: the bounds are unchanged)."""
+        c = np.asarray(clearance, dtype=float)
+        lo = np.array(self.lower("clearance"), dtype=float)
+        below = np.logical_and.accumulate(c < lo, axis=1)  # from knot 0 until the warm start first reaches d_safe
+        if not below[:, 0].any():
+            return 0
+        lo[below] = c[below]
+        self.lo_entries["clearance"] = lo
+        return int(below[:, 1:].sum())
+
     def violation(self, name: str, v: Array) -> Array:
         """How far each entry of group ``name`` (values ``v`` (rows, cols)) is beyond its bounds (≤ 0: satisfied)."""
         r = self.rows[name]
-        return np.maximum(r.lo[:, None] - v, v - r.hi[:, None])
+        return np.maximum(self.lower(name) - v, v - r.hi[:, None])
 
     def near(self, name: str, v: Array) -> NDArray[np.bool_]:
         """Entries that are rows of the next transcription (lazy rows): every leader, fitness and span entry (the
@@ -789,7 +827,8 @@ class _Transcription:
             else:
                 g.append(ca.vec(r.expr)[idx.tolist()])
                 (rest_after if self._clr is not None else rest_before).append(g[-1])
-            lbg.append(r.lo[idx % rows])
+            lo = model.lo_entries.get(name)
+            lbg.append(r.lo[idx % rows] if lo is None else lo.ravel(order="F")[idx])
             ubg.append(r.hi[idx % rows])
             start += idx.size
         self.size = start
@@ -804,14 +843,21 @@ class _Transcription:
         self._derivatives: dict[float, dict[str, Any]] = {}
         self._callbacks: list[ca.Callback] = []  # the spline derivatives must outlive the functions that call them
 
-    def derivatives(self, obj_scale: float) -> dict[str, ca.Function]:
+    def derivatives(self, obj_scale: float, hessian: str | None = None) -> dict[str, ca.Function]:
         """casadi ``nlpsol`` options ``jac_g`` and ``hess_lag`` with the structured clearance derivatives (see the
         class docstring) for the cost divided by ``obj_scale``; empty (casadi's own) without the scipy spline or
-        clearance rows; no ``hess_lag`` with ``hessian="limited-memory"``."""
+        clearance rows; no ``hess_lag`` with ``hessian="limited-memory"``; ``hessian``: ``None`` = the options'."""
+        hessian = hessian or self.opts.hessian
+        key = (obj_scale, hessian)
+        if key in self._derivatives:
+            return self._derivatives[key]
         if self.model.bspline is None or self._clr is None:
-            return {}
-        if obj_scale in self._derivatives:
-            return self._derivatives[obj_scale]
+            if hessian != "gauss-newton":
+                return {}
+            lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.size)  # casadi differentiates every row
+            hess = ca.triu(self._gauss_newton(obj_scale, lam_f, lam_g, self.g))
+            self._derivatives[key] = {"hess_lag": self._hess_lag(lam_f, lam_g, hess)}
+            return self._derivatives[key]
         x, f = self.model.x, self.model.J / obj_scale
         Ax, Ay, P = self._clr
         n = Ax.shape[0]
@@ -826,32 +872,69 @@ class _Transcription:
         J_clr = ca.mtimes(ca.diag(cx), Ax) + ca.mtimes(ca.diag(cy), Ay)
         jac = ca.vertcat(J_rest[:nb, :], J_clr, J_rest[nb:, :])
         jac_g = ca.Function("nlp_jac_g", [x, p], [self.g, jac], ["x", "p"], ["g", "jac_g_x"])
-        if self.opts.hessian != "exact":  # IPOPT's quasi-Newton approximation: no Hessian to build
-            self._derivatives[obj_scale] = {"jac_g": jac_g}
-            return self._derivatives[obj_scale]
+        if hessian == "limited-memory":  # IPOPT's quasi-Newton approximation: no Hessian to build
+            self._derivatives[key] = {"jac_g": jac_g}
+            return self._derivatives[key]
         lam_f = ca.MX.sym("lam_f")
         lam_g = ca.MX.sym("lam_g", self.size)
         lam_c = lam_g[nb : nb + n]
         lam_rest = ca.vertcat(lam_g[:nb], lam_g[nb + n : nb + n + na])
-        H_rest = ca.hessian(lam_f * f + ca.dot(lam_rest, rest), x)[0]
+        if hessian == "gauss-newton":  # the fitness rows lie before the clearance rows: same offsets in rest and g
+            H_rest = self._gauss_newton(obj_scale, lam_f, lam_rest, rest)
+        else:
+            H_rest = ca.hessian(lam_f * f + ca.dot(lam_rest, rest), x)[0]
         cxx, cxy, cyy = d2(P)
         AxT, AyT = Ax.T, Ay.T
         Wxx, Wxy, Wyy = ca.diag(lam_c * cxx.T), ca.diag(lam_c * cxy.T), ca.diag(lam_c * cyy.T)
         Hxy = ca.mtimes(AxT, ca.mtimes(Wxy, Ay))
         H_clr = ca.mtimes(AxT, ca.mtimes(Wxx, Ax)) + ca.mtimes(AyT, ca.mtimes(Wyy, Ay)) + Hxy + Hxy.T
-        hess = ca.triu(H_rest + H_clr)
-        hess_lag = ca.Function(
-            "nlp_hess_l", [x, p, lam_f, lam_g], [hess], ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]
-        )
-        self._derivatives[obj_scale] = {"jac_g": jac_g, "hess_lag": hess_lag}
-        return self._derivatives[obj_scale]
+        self._derivatives[key] = {"jac_g": jac_g, "hess_lag": self._hess_lag(lam_f, lam_g, ca.triu(H_rest + H_clr))}
+        return self._derivatives[key]
 
-    def solver(self, obj_scale: float, extra: dict[str, Any], callback: ca.Callback | None = None) -> ca.Function:
-        """IPOPT on this transcription, cost divided by ``obj_scale``, with ``extra`` IPOPT options and an optional
-        casadi ``iteration_callback`` (called with x, f, g, … of every iterate; it must outlive the solver)."""
+    def _hess_lag(self, lam_f: Any, lam_g: Any, triu: Any) -> ca.Function:
+        """casadi's ``hess_lag`` signature around the upper triangle ``triu`` of the Lagrangian's Hessian."""
+        p = ca.MX.sym("p", 0, 1)
+        return ca.Function(
+            "nlp_hess_l", [self.model.x, p, lam_f, lam_g], [triu], ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]
+        )
+
+    def _gauss_newton(self, obj_scale: float, lam_f: Any, lam: Any, rows: Any) -> Any:
+        """Hessian of ``lam_f`` × cost / ``obj_scale`` + ``lam``ᵀ ``rows`` (``rows``: the NLP's rows or all but the
+        clearance ones, the fitness rows at their offsets in the NLP) with every sum of squares f = Σ r² — the cost's
+        f1, f2, f4 (and f3 with a leader tolerance) and the fitness rows f_i / f_i,warm — replaced by its
+        Gauss–Newton part 2 JᵣᵀJᵣ, positive semidefinite (a fitness row's multiplier clipped at ≥ 0); every other
+        row's curvature is exact (``formulations/horizon.md``, "Gauss–Newton Hessian")."""
+        m, o, x = self.model, self.opts, self.model.x
+        w = {"f1": o.w_energy, "f2": o.w_uniformity, "f4": o.w_smoothness}
+        if o.leader_tolerance > 0:
+            w["f3"] = o.w_tracking
+        coef = {k: w[k] * lam_f / obj_scale for k in w}
+        keep = np.ones(rows.shape[0])
+        fit = self.index.get("fitness")
+        if fit is not None and fit.size:  # the rows f_i / f_i,warm ≤ 1, in _Model's order
+            names = [k for k in ("f1", "f2", "f4") if m.bounds.get(k, 0.0) > 0]
+            for i, k in enumerate(names):
+                row = self.offset["fitness"] + i
+                keep[row] = 0.0
+                coef[k] = coef[k] + ca.fmax(lam[row], 0) / m.bounds[k]
+        H = ca.hessian(ca.dot(lam * ca.DM(keep), rows), x)[0]
+        for k, c in coef.items():
+            r = m.residuals[k]
+            if r.shape[0] > 0:
+                Jr = ca.jacobian(r, x)
+                H = H + 2 * c * ca.mtimes(Jr.T, Jr)
+        return H
+
+    def solver(
+        self, obj_scale: float, extra: dict[str, Any], callback: ca.Callback | None = None, hessian: str | None = None
+    ) -> ca.Function:
+        """IPOPT on this transcription, cost divided by ``obj_scale``, with ``extra`` IPOPT options, an optional
+        casadi ``iteration_callback`` (called with x, f, g, … of every iterate; it must outlive the solver) and the
+        Hessian ``hessian`` (``None``: ``HorizonOptions.hessian``)."""
+        hessian = hessian or self.opts.hessian
         nlp = dict(self.nlp, f=self.nlp["f"] / obj_scale)
-        opts = _solver_opts(self.opts, extra)
-        opts.update(self.derivatives(obj_scale))
+        opts = _solver_opts(self.opts, extra, hessian)
+        opts.update(self.derivatives(obj_scale, hessian))
         if callback is not None:
             opts["iteration_callback"] = callback
         return ca.nlpsol("horizon", "ipopt", nlp, opts)
@@ -869,7 +952,10 @@ class _Transcription:
         return out
 
 
-def _solver_opts(opts: HorizonOptions, extra: dict[str, Any] | None = None) -> dict[str, Any]:
+def _solver_opts(
+    opts: HorizonOptions, extra: dict[str, Any] | None = None, hessian: str | None = None
+) -> dict[str, Any]:
+    hessian = hessian or opts.hessian
     ip: dict[str, Any] = {
         "print_level": 0,
         "sb": "yes",
@@ -883,7 +969,7 @@ def _solver_opts(opts: HorizonOptions, extra: dict[str, Any] | None = None) -> d
         "mu_init": float(opts.mu_init),
         "linear_solver": opts.linear_solver,
         "mumps_pivot_order": int(opts.mumps_pivot_order),
-        "hessian_approximation": opts.hessian,
+        "hessian_approximation": "limited-memory" if hessian == "limited-memory" else "exact",
         "nlp_scaling_method": opts.nlp_scaling,
         "min_hessian_perturbation": float(opts.min_hessian_perturbation),
         "acceptable_constr_viol_tol": float(opts.constr_viol_tol),

@@ -1,0 +1,84 @@
+"""Coarse knots for long horizons: the NLP on every M-th knot first, interpolated to every knot (issue 33).
+
+A horizon of K + 1 knots (the ``qp`` plan's steps, T_s = 0.05 s) is an NLP of 2 N (K + 1) variables whose IPOPT
+iterations cost in proportion to K and whose iteration counts grow with it (walls rooms, 720–900 knots: 130–430
+iterations of ≈ 0.2 s). The same NLP on every M-th knot (T_s' = M T_s, the leader's reference and the warm start
+sampled there) has M times fewer variables and rows. Its optimum is interpolated to every knot by a quadratic spline
+through the coarse knots (positions; a cubic spline overshoots between knots: f4 12.7 against 0.72 on a walls room
+with 8 robots), and accepted as the plan if *every* row of the whole NLP holds at every knot and it is no worse than
+the warm start in each term — otherwise :func:`tmr.control.horizon.plan_horizon` solves the whole NLP as before
+(``formulations/horizon.md``, "Coarse knots").
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.interpolate import make_interp_spline
+
+Array = NDArray[np.float64]
+
+
+def stride(K: int, coarse_knots: int | None, coarse_from: int) -> int:
+    """Knot stride M of the coarse pass for a horizon of K + 1 knots: ⌈K / coarse_knots⌉ if K + 1 ≥ ``coarse_from``
+    (and M ≥ 2), else 1 (no coarse pass)."""
+    if coarse_knots is None or K + 1 < coarse_from:
+        return 1
+    return max(1, math.ceil(K / int(coarse_knots)))
+
+
+def coarse_indices(K: int, M: int) -> NDArray[np.int_]:
+    """Fine knots of the coarse ones: 0, M, 2M, … and K last (the final interval may be shorter than M T_s; the coarse
+    NLP gives it M T_s, so its leader moves slower there than on the fine grid — still the same points)."""
+    Kc = -(-K // M)
+    return np.minimum(np.arange(Kc + 1) * M, K)
+
+
+def coarse_problem(problem: Any, warm: Any, M: int, rate_scale: float) -> tuple[Any, Any]:
+    """The problem and the warm start on every M-th knot (:func:`coarse_indices`): the leader's reference sampled at
+    those knots with period M T_s, the warm start's joints there, and the rate bounds (speeds and accelerations of
+    joints and robots, ``QPParams``) scaled by ``rate_scale`` ≤ 1 — a margin for the interpolation between knots."""
+    tr = problem.trajectory
+    K = tr.t.size - 1
+    Ts = float(tr.t[1] - tr.t[0])
+    idx = coarse_indices(K, M)
+    tc = np.arange(idx.size) * M * Ts
+    traj = tr._replace(t=tc, x=tr.x[idx], xd=tr.xd[idx], xdd=tr.xdd[idx])
+    qp = problem.qp_params
+    scaled = {
+        f.name: getattr(qp, f.name) * rate_scale
+        for f in dataclasses.fields(qp)
+        if f.name in ("span_speed_max", "joint_speed_max", "accel_max", "robot_speed_max", "robot_accel_max")
+    }
+    pc = dataclasses.replace(problem, trajectory=traj, qp_params=dataclasses.replace(qp, **scaled))
+    Q = np.asarray(warm.q, dtype=float)
+    if Q.shape[0] < K + 1:  # a plan that stopped early: hold its last configuration (as _warm_start does)
+        Q = np.vstack([Q, np.repeat(Q[-1:], K + 1 - Q.shape[0], axis=0)])
+    Qc = Q[idx]
+    wc = dataclasses.replace(
+        warm,
+        t=tc,
+        q=Qc,
+        qdot=np.vstack([np.diff(Qc, axis=0) / (M * Ts), np.zeros((1, Qc.shape[1]))]),
+        robots=np.asarray(warm.robots, dtype=float)[np.minimum(idx, len(warm.robots) - 1)],
+        reference=tr.x[idx],
+        spans=Qc[:, 1::2],
+        diagnostics={},
+    )
+    return pc, wc
+
+
+def interpolate(robots: Array, t_fine: Array, M: int) -> Array:
+    """Robot positions (K+1, N, 2) [m] at the fine knots ``t_fine`` from the coarse plan's ``robots`` (Kc+1, N, 2) at
+    :func:`coarse_indices`: a quadratic interpolating spline in time per coordinate (C¹; its accelerations are the
+    coarse differences' to first order)."""
+    K = t_fine.size - 1
+    idx = coarse_indices(K, M)
+    tj = t_fine[idx]
+    keep = np.r_[True, np.diff(tj) > 0]  # K itself may be the last coarse knot twice
+    k = min(2, int(keep.sum()) - 1)
+    return np.asarray(make_interp_spline(tj[keep], robots[keep], k=k, axis=0)(t_fine), dtype=float)
