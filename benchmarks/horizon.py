@@ -201,7 +201,8 @@ def tables(rows: dict[str, list[dict]], seed: int, repeats: int) -> tuple[str, l
 
 ROOM_KEYS = (
     "room", "density", "goal_class", "robots", "n_robots", "exit_code", "horizon_result", "horizon_stop",
-    "horizon_iterations", "wall_time", "nlp_time", "qp_time", "knots", "route_length_cli", "independent_ok",
+    "horizon_iterations", "horizon_coarse", "wall_time", "nlp_time", "qp_time", "knots", "route_length_cli",
+    "independent_ok",
     "horizon_f1", "qp_f1", "horizon_f2", "qp_f2", "horizon_f3", "qp_f3", "horizon_f4", "qp_f4", "stderr_last",
 )  # fmt: skip
 
@@ -227,6 +228,7 @@ def _scenario_e(robots: int, time_limit: float) -> dict:
         out.update(n_robots=m.get("n_robots"), route_length_cli=m.get("route_length"), independent_ok=None)
         out.update(horizon_result=hz.get("result"), horizon_stop=hz.get("stop"))
         out["horizon_iterations"] = hz.get("iterations")
+        out["horizon_coarse"] = (hz.get("coarse") or {}).get("result")
         out.update(nlp_time=t.get("nlp_time"), qp_time=t.get("qp_time"))
         traj = Path(tmp) / "out" / "trajectories.json"
         out["knots"] = trajectory_positions(json.loads(traj.read_text())).shape[0] if traj.is_file() else None
@@ -371,7 +373,9 @@ def rooms_main(args: argparse.Namespace) -> None:
       "`metrics.json`).\n\n")  # fmt: skip
     counts = Counter(r["horizon_result"] for r in planned)
     refused = [r for r in rows if not r.get("horizon_result")]
-    w(f"**{len(planned)} plans**: {counts['optimal']} optimal, {counts['best_feasible_iterate']} best feasible "
+    on_coarse = sum(1 for r in planned if r["horizon_result"] == "optimal" and r.get("horizon_coarse") == "accepted")
+    w(f"**{len(planned)} plans**: {counts['optimal']} optimal ({on_coarse} of them the optimum on every M-th knot, "
+      f"interpolated: `formulations/horizon.md`, \"Coarse knots\"), {counts['best_feasible_iterate']} best feasible "
       f"iterate, {counts['warm_start']} the qp plan itself; {len(refused)} runs without a horizon plan (exit 2: N "
       "below the route's proven count or no route; exit 1: no qp plan to start from).\n\n")  # fmt: skip
     terms = ("f1", "f2", "f3", "f4")
