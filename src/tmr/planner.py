@@ -886,6 +886,8 @@ def solve(
                 min_hessian_perturbation=None,  # the plan is no IPOPT point
                 fast_attempt=exc.diagnostics.get("horizon_fast_attempt"),
             )
+            if exc.diagnostics.get("horizon_coarse") is not None:  # long horizons: what the coarse pass did
+                warm.diagnostics["horizon_summary"]["coarse"] = exc.diagnostics["horizon_coarse"]
             return _whole(warm, warm_metrics, start, **parts)
         warm.success = False
         reason = f"horizon: {exc}"

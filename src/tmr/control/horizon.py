@@ -367,10 +367,12 @@ def plan_horizon(
     phases = _phases(opts)
     coarse_c: _Candidate | None = None  # the coarse pass's interpolated optimum, if every row holds
     coarse_log: dict[str, Any] | None = None
+    coarse_what = coarse_floor = ""  # what the coarse pass did, and its floor note (for the note)
     M = stride(su.K, opts.coarse_knots, opts.coarse_from)
     if M > 1 and su.drive is None and opts.window is None and time.perf_counter() < deadline:
-        bar.set_description_str(f"horizon NLP, every {M}th knot")
+        bar.set_description_str(f"horizon NLP, every {_nth(M)} knot")
         coarse_c, coarse_log = _coarse_pass(problem, warm_start, M, options, model, warm_c, tol, deadline, limit)
+        coarse_what, coarse_floor = coarse_log.pop("what", ""), coarse_log.pop("floor_note", "")
         solve_time += coarse_log.pop("solve_time", 0.0)
         trans_time += coarse_log.pop("transcription_time", 0.0)
         if coarse_c is not None:
@@ -573,7 +575,7 @@ def plan_horizon(
         chosen = _best_of(pools, model, tol, warm_c.J if warm_c else math.inf, deadline) or warm_c
     if coarse_c is not None:
         assert coarse_log is not None
-        chosen, stop, what = coarse_c, "converged", coarse_log["what"]
+        chosen, stop, what = coarse_c, "converged", coarse_what
     floor = f"{opts.min_hessian_perturbation:g} ({_HESSIAN[opts.hessian]} Hessian)"
     if fast_log is None:
         floor_note = f"IPOPT min_hessian_perturbation {floor}"
@@ -598,12 +600,14 @@ def plan_horizon(
         )  # fmt: skip
     if coarse_c is not None:
         assert coarse_log is not None
-        floor_note = f"every {M}th knot: {coarse_log['floor_note']}"
+        floor_note = f"every {_nth(M)} knot: {coarse_floor}"
     if chosen is None:
         warm_note = f"; the warm start is no fallback: {warm_why}"
         diag = _diagnostics(model, tr, stats, xv, vals, rounds, info, J_warm, trans_time, solve_time, start_time)
         diag.update(horizon_stop=stop, time_limit=time_limit, time_limit_hit=stop == "time_limit")
         diag.update(horizon_fast_attempt=fast_log, horizon_floor_note=floor_note)
+        if coarse_log is not None:
+            diag.update(horizon_coarse=coarse_log, ipopt_iterations=iterations)
         if stop == "rows_left_out":
             message = (
                 f"horizon NLP: rows left out of the NLP are still violated after {opts.max_rounds} rounds of "
@@ -809,6 +813,12 @@ _BAR = {"default": "", "fast": "", "fallback": "fallback "}
 _HESSIAN = {"exact": "exact", "gauss-newton": "Gauss–Newton", "limited-memory": "limited-memory"}  # for the notes
 
 
+def _nth(M: int) -> str:
+    """3 → "3rd", 12 → "12th" (for the notes)."""
+    suffix = "th" if 10 <= M % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(M % 10, "th")
+    return f"{M}{suffix}"
+
+
 def _coarse_pass(
     problem: Any,
     warm_start: Plan,
@@ -826,7 +836,7 @@ def _coarse_pass(
     the warm start's and it costs no more (else ``None``); and the log (stride, knots, iterations, result, why)."""
     opts, su = model.su.opts, model.su
     t0 = time.perf_counter()
-    pc, wc = coarse_problem(problem, warm_start, M, opts.coarse_rate_scale)
+    pc, wc = coarse_problem(problem, warm_start, M, opts.coarse_rate_scale, opts.coarse_margin)
     sub = dict(options, coarse_knots=None, d_safe=su.d_safe + opts.coarse_margin)
     budget = None if not math.isfinite(limit) else max(opts.coarse_time_share * (deadline - t0), 1e-3)
     log: dict[str, Any] = dict(stride=M, knots=int(pc.trajectory.t.size), iterations=0)
@@ -864,11 +874,11 @@ def _coarse_pass(
     else:
         log.update(result="accepted")
         log["what"] = (
-            f"IPOPT solved the NLP on every {M}th knot ({log['knots']} of {su.K + 1}; {log['status']}, "
+            f"IPOPT solved the NLP on every {_nth(M)} knot ({log['knots']} of {su.K + 1}; {log['status']}, "
             f"{log['iterations']} iterations in {log['rounds']} round(s)), its optimum interpolated to every knot "
             "(quadratic spline), where every row holds"
         )
-        return _Candidate(Q, J, "optimal", f"the optimum on every {M}th knot, interpolated", xv), log
+        return _Candidate(Q, J, "optimal", f"the optimum on every {_nth(M)} knot, interpolated", xv), log
     log.update(result="rejected", reason=reason[:300], x=xv)
     return None, log
 

@@ -38,10 +38,11 @@ def coarse_indices(K: int, M: int) -> NDArray[np.int_]:
     return np.minimum(np.arange(Kc + 1) * M, K)
 
 
-def coarse_problem(problem: Any, warm: Any, M: int, rate_scale: float) -> tuple[Any, Any]:
+def coarse_problem(problem: Any, warm: Any, M: int, rate_scale: float, margin: float = 0.0) -> tuple[Any, Any]:
     """The problem and the warm start on every M-th knot (:func:`coarse_indices`): the leader's reference sampled at
-    those knots with period M T_s, the warm start's joints there, and the rate bounds (speeds and accelerations of
-    joints and robots, ``QPParams``) scaled by ``rate_scale`` ≤ 1 — a margin for the interpolation between knots."""
+    those knots with period M T_s, the warm start's joints there, the rate bounds (speeds and accelerations of joints
+    and robots, ``QPParams``) scaled by ``rate_scale`` ≤ 1 and the robots' separation margin raised by ``margin`` [m]
+    — margins for the interpolation between knots (the clearance's is the caller's ``d_safe``)."""
     tr = problem.trajectory
     K = tr.t.size - 1
     Ts = float(tr.t[1] - tr.t[0])
@@ -54,6 +55,7 @@ def coarse_problem(problem: Any, warm: Any, M: int, rate_scale: float) -> tuple[
         for f in dataclasses.fields(qp)
         if f.name in ("span_speed_max", "joint_speed_max", "accel_max", "robot_speed_max", "robot_accel_max")
     }
+    scaled["separation_margin"] = qp.separation_margin + margin
     pc = dataclasses.replace(problem, trajectory=traj, qp_params=dataclasses.replace(qp, **scaled))
     Q = np.asarray(warm.q, dtype=float)
     if Q.shape[0] < K + 1:  # a plan that stopped early: hold its last configuration (as _warm_start does)

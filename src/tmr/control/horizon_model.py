@@ -73,9 +73,24 @@ class HorizonOptions:
             previous round's primal–dual solution (measured from the qp plan: D 6.7 s against 9.4 s with
             ``activation`` 0.3 against 0.6, B and C even, E unsolved either way; off by default).
         max_rounds: transcriptions at most (a round adds the clearance rows that were left out and came out violated).
-        max_iter, tol, acceptable_tol, acceptable_iter, constr_viol_tol, mu_strategy, mu_init, hessian,
-            linear_solver, nlp_scaling, min_hessian_perturbation: IPOPT options (choices and measurements in
+        max_iter, tol, acceptable_tol, acceptable_iter, constr_viol_tol, mu_strategy, mu_init, linear_solver,
+            nlp_scaling, min_hessian_perturbation: IPOPT options (choices and measurements in
             ``formulations/horizon.md``).
+        hessian: the Hessian of the Lagrangian IPOPT is given in the default procedure (and the fallback after the
+            fast attempt): ``"gauss-newton"`` (default) — the cost's and the fitness rows' sums of squares by their
+            Gauss–Newton part 2 JᵣᵀJᵣ (positive semidefinite), every other row's curvature exact (walls rooms, 720–900
+            knots: 4 of 4 optimal where the exact Hessian solved 2); ``"exact"``; ``"limited-memory"`` (IPOPT's
+            L-BFGS; no Hessian built).
+        fast_hessian: the fast attempt's Hessian (``"exact"``: scenario E with 6 robots in 31 iterations, 53 with
+            Gauss–Newton).
+        coarse_knots: a horizon of at least ``coarse_from`` knots is solved first on every M-th knot, M =
+            ⌈K / coarse_knots⌉ (T_s' = M T_s; :mod:`tmr.control.horizon_coarse`), its optimum interpolated to every
+            knot and returned if every row of the whole NLP holds there and it is no worse than the warm start in any
+            term; else the whole NLP starts from it (``None``: off; ``formulations/horizon.md``, "Coarse knots").
+        coarse_from: the smallest horizon (knots) that gets the coarse pass.
+        coarse_margin: added to d_safe in the coarse NLP [m] (the interpolation between its knots).
+        coarse_rate_scale: the coarse NLP's speed and acceleration bounds (joints and robots) times this (≤ 1).
+        coarse_time_share: fraction of the time left (with a time limit) the coarse pass may use.
         fast_min_hessian_perturbation: IPOPT's ``min_hessian_perturbation`` of a first, fast attempt (``None``: no
             fast attempt; also skipped unless it is below ``min_hessian_perturbation`` and ``ipopt`` does not set
             that option): the whole constraint-generation procedure runs first with this floor (10⁻⁵: scenario E with
@@ -154,7 +169,7 @@ class HorizonOptions:
     scale_objective: bool = True
     coarse_knots: int | None = 200
     coarse_from: int = 500
-    coarse_margin: float = 0.005
+    coarse_margin: float = 0.02
     coarse_rate_scale: float = 0.95
     coarse_time_share: float = 0.5
     window: int | None = None
@@ -192,6 +207,11 @@ class HorizonOptions:
             raise ParameterError(f"window must be ≥ 2 knots (or None: no windows), got {self.window!r}")
         if self.window_overlap is not None and not 0 <= int(self.window_overlap) < int(self.window or 2):
             raise ParameterError(f"window_overlap must be in [0, window), got {self.window_overlap!r}")
+        if self.coarse_knots is not None and (isinstance(self.coarse_knots, bool) or int(self.coarse_knots) < 2):
+            raise ParameterError(f"coarse_knots must be ≥ 2 (or None: no coarse pass), got {self.coarse_knots!r}")
+        share, scale = self.coarse_time_share, self.coarse_rate_scale
+        if not 0 <= self.coarse_margin < 1 or not 0 < scale <= 1 or not 0 < share <= 1:
+            raise ParameterError("coarse_margin must be in [0, 1) m, coarse_rate_scale and coarse_time_share in (0, 1]")
         if self.window_mode not in ("fixed", "sub"):
             raise ParameterError(f"window_mode must be 'fixed' or 'sub', got {self.window_mode!r}")
         for name in ("hessian", "fast_hessian"):

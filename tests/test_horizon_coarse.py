@@ -1,0 +1,108 @@
+"""The coarse pass of the horizon NLP (``tmr.control.horizon_coarse``, ``formulations/horizon.md`` "Coarse knots"):
+the NLP on every M-th knot, its optimum interpolated to every knot and returned only if every row of the whole NLP
+holds there; else the whole NLP starts from it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import tmr.control.horizon as horizon_module
+import tmr.control.horizon_coarse as coarse
+from tests.test_horizon import small_problem
+from tmr.control.horizon import objective_terms, plan_horizon
+from tmr.errors import ParameterError
+from tmr.planner import check, solve
+
+ON = dict(coarse_knots=10, coarse_from=10)  # K = 30: every 3rd knot, 11 coarse knots
+
+
+@pytest.fixture(scope="module")
+def problem_and_warm():
+    problem = small_problem()
+    warm, warm_metrics = solve(problem, "qp")
+    assert warm.success
+    return problem, warm, warm_metrics
+
+
+def test_stride_indices_and_the_coarse_problem(problem_and_warm):
+    problem, warm, _ = problem_and_warm
+    assert coarse.stride(30, 10, 10) == 3 and coarse.stride(30, 10, 32) == 1 and coarse.stride(30, None, 0) == 1
+    assert coarse.stride(1126, 200, 500) == 6
+    np.testing.assert_array_equal(coarse.coarse_indices(30, 3), np.arange(0, 31, 3))
+    np.testing.assert_array_equal(coarse.coarse_indices(31, 3)[-2:], [30, 31])  # K itself is the last coarse knot
+    pc, wc = coarse.coarse_problem(problem, warm, 3, 0.9, 0.02)
+    t = pc.trajectory.t
+    np.testing.assert_allclose(np.diff(t), 0.15)
+    np.testing.assert_array_equal(pc.trajectory.x, problem.trajectory.x[::3])
+    np.testing.assert_array_equal(wc.q, warm.q[::3])
+    assert pc.qp_params.robot_accel_max == pytest.approx(0.9 * problem.qp_params.robot_accel_max)
+    assert pc.qp_params.span_speed_max == pytest.approx(0.9 * problem.qp_params.span_speed_max)
+    assert pc.qp_params.separation_margin == pytest.approx(problem.qp_params.separation_margin + 0.02)
+    assert pc.qp_params.d_safe == problem.qp_params.d_safe  # the clearance margin is plan_horizon's d_safe option
+    assert problem.trajectory.t.size == 31  # the problem itself is unchanged
+
+
+def test_interpolation_passes_through_the_coarse_knots_with_the_coarse_accelerations():
+    t = np.arange(31) * 0.05
+    idx = coarse.coarse_indices(30, 3)
+    rng = np.random.default_rng(0)
+    R = np.cumsum(rng.normal(0, 0.01, (idx.size, 2, 2)), axis=0)
+    F = coarse.interpolate(R, t, 3)
+    np.testing.assert_allclose(F[idx], R, atol=1e-12)
+    # a quadratic in time is reproduced exactly (the spline is quadratic): its accelerations are the coarse ones
+    Rq = 0.5 * 2.0 * (t[idx] ** 2)[:, None, None] * np.ones((1, 2, 2))
+    Fq = coarse.interpolate(Rq, t, 3)
+    np.testing.assert_allclose(Fq[:, 0, 0], t**2, atol=1e-12)
+
+
+def test_the_coarse_optimum_is_returned_only_where_every_row_holds(problem_and_warm):
+    problem, warm, warm_metrics = problem_and_warm
+    plan = plan_horizon(problem, warm, **ON)
+    d = plan.diagnostics
+    log = d["horizon_summary"]["coarse"]
+    assert log["stride"] == 3 and log["knots"] == 11 and log["result"] in ("accepted", "rejected")
+    assert d["horizon_result"] == "optimal"
+    if log["result"] == "accepted":
+        assert d["horizon_note"].startswith("IPOPT solved the NLP on every 3rd knot (11 of 31")
+        assert d["ipopt_iterations"] == log["iterations"] and d["rows"] == 0
+    metrics = check(plan, problem.env)  # exact clearances of robots and tether segments at every step
+    assert plan.success and metrics.n_violation_steps == 0
+    for f in ("f1", "f2", "f4"):
+        assert getattr(metrics, f) <= getattr(warm_metrics, f) * (1 + 1e-9)
+    terms = objective_terms(plan.q, 0.05)
+    assert terms["f1"] == pytest.approx(d["f1"], rel=1e-9)
+    # no coarse pass below coarse_from: the records hold no "coarse" entry
+    plain = plan_horizon(problem, warm)
+    assert "coarse" not in plain.diagnostics["horizon_summary"]
+
+
+def test_a_rejected_interpolation_starts_the_whole_nlp_from_it(problem_and_warm, monkeypatch):
+    """Interpolated with a kink that breaks the robot acceleration rows, the coarse optimum is rejected (the log names
+    the rows); the whole NLP then starts from it and its optimum is returned, every row holding."""
+    problem, warm, warm_metrics = problem_and_warm
+    real = coarse.interpolate
+
+    def kinked(robots, t, M):
+        F = real(robots, t, M)
+        F[15, 0, 1] += 0.05  # robot 1 jumps 5 cm up at one knot: |ÿ| = 0.05 / Ts² = 20 m/s² > a_rob
+        return F
+
+    monkeypatch.setattr(horizon_module, "interpolate", kinked)
+    plan = plan_horizon(problem, warm, **ON)
+    d = plan.diagnostics
+    log = d["horizon_summary"]["coarse"]
+    assert log["result"] == "rejected" and "robot_accel" in log["reason"]
+    assert log["fine_start"] == "the interpolated coarse optimum" and "x" not in log
+    assert d["horizon_result"] == "optimal" and d["ipopt_iterations"] > log["iterations"]
+    metrics = check(plan, problem.env)
+    assert plan.success and metrics.n_violation_steps == 0
+    for f in ("f1", "f2", "f4"):
+        assert getattr(metrics, f) <= getattr(warm_metrics, f) * (1 + 1e-9)
+
+
+def test_coarse_options_are_checked(problem_and_warm):
+    problem, warm, _ = problem_and_warm
+    for bad in (dict(coarse_knots=1), dict(coarse_margin=-0.1), dict(coarse_rate_scale=0), dict(coarse_time_share=2)):
+        with pytest.raises(ParameterError):
+            plan_horizon(problem, warm, **bad)
