@@ -493,7 +493,26 @@ QUOTES = [
         r"What is left in `horizon` is IPOPT's (\d+)–(\d+) iterations",
         lambda: (min(horizon_iterations()), max(horizon_iterations())),
     ),
+    Quote(
+        r"E with 6 robots: optimal in (\S+) s, whole process",
+        lambda: cell("horizon_rooms.csv", "wall_time", room="scenario E", horizon_result="optimal"),
+    ),
+    Quote(
+        r"walls rooms with 5–8 robots at (\d+)–(\d+) s, one narrow room whose `qp` plan alone takes (\d+) s",
+        lambda: (min(slow_walls()), max(slow_walls()), statistics.median(qp_only_times())),
+    ),
 ]
+
+
+def slow_walls() -> list[float]:
+    """Whole-process times [s] of the walls runs of horizon_rooms.csv that took 10 s or more."""
+    out = [float(r["wall_time"]) for r in rows("horizon_rooms.csv") if r["density"] == "walls" and r["horizon_result"]]
+    return [t for t in out if t >= 10]
+
+
+def qp_only_times() -> list[float]:
+    """The qp time [s] of the runs of horizon_rooms.csv that returned the qp plan."""
+    return [float(r["qp_time"]) for r in rows("horizon_rooms.csv") if r["horizon_result"] == "warm_start"]
 
 
 def drone_horizon_f4_cut(scenario: str) -> float:
