@@ -290,7 +290,7 @@ def test_a_start_inside_d_safe_keeps_the_warm_starts_clearance_until_it_reaches_
     assert warm.success
     plan = plan_horizon(problem, warm)
     d = plan.diagnostics
-    assert d["start_clearance_rows"] > 0 and d["horizon_result"] == "optimal"
+    assert d["start_clearance_entries"] > 0 and d["horizon_result"] == "optimal"
     assert min(d["min_field_clearance"][:3]) < 0.05  # the first knots are inside d_safe, as the start is
     metrics = check(plan, problem.env)
     assert plan.success and metrics.n_violation_steps == 0 and metrics.min_tether_clearance > 0

@@ -9,12 +9,14 @@ import pytest
 
 import tmr.control.horizon as horizon_module
 import tmr.control.horizon_coarse as coarse
+import tmr.control.horizon_model as horizon_model
 from tests.test_horizon import small_problem
 from tmr.control.horizon import objective_terms, plan_horizon
 from tmr.errors import ParameterError
 from tmr.planner import check, solve
 
-ON = dict(coarse_knots=10, coarse_from=10)  # K = 30: every 3rd knot, 11 coarse knots
+ON = dict(coarse_knots=10, coarse_from=10)  # K = 30: every 3rd knot (and every knot of the first and last 3 steps)
+GRID = np.array([0, 1, 2, 3, 6, 9, 12, 15, 18, 21, 24, 27, 28, 29, 30])
 
 
 @pytest.fixture(scope="module")
@@ -29,18 +31,37 @@ def test_stride_indices_and_the_coarse_problem(problem_and_warm):
     problem, warm, _ = problem_and_warm
     assert coarse.stride(30, 10, 10) == 3 and coarse.stride(30, 10, 32) == 1 and coarse.stride(30, None, 0) == 1
     assert coarse.stride(1126, 200, 500) == 6
-    np.testing.assert_array_equal(coarse.coarse_indices(30, 3), np.arange(0, 31, 3))
-    np.testing.assert_array_equal(coarse.coarse_indices(31, 3)[-2:], [30, 31])  # K itself is the last coarse knot
+    np.testing.assert_array_equal(coarse.coarse_indices(30, 3), GRID)
+    np.testing.assert_array_equal(coarse.coarse_indices(31, 3)[-5:], [27, 28, 29, 30, 31])
+    np.testing.assert_array_equal(coarse.coarse_indices(30, 1), np.arange(31))
     pc, wc = coarse.coarse_problem(problem, warm, 3, 0.9, 0.02)
     t = pc.trajectory.t
-    np.testing.assert_allclose(np.diff(t), 0.15)
-    np.testing.assert_array_equal(pc.trajectory.x, problem.trajectory.x[::3])
-    np.testing.assert_array_equal(wc.q, warm.q[::3])
+    np.testing.assert_allclose(t, problem.trajectory.t[GRID])  # the true times: steps of 0.05 s at the ends, 0.15 s
+    np.testing.assert_array_equal(pc.trajectory.x, problem.trajectory.x[GRID])
+    np.testing.assert_array_equal(wc.q, warm.q[GRID])
     assert pc.qp_params.robot_accel_max == pytest.approx(0.9 * problem.qp_params.robot_accel_max)
     assert pc.qp_params.span_speed_max == pytest.approx(0.9 * problem.qp_params.span_speed_max)
     assert pc.qp_params.separation_margin == pytest.approx(problem.qp_params.separation_margin + 0.02)
     assert pc.qp_params.d_safe == problem.qp_params.d_safe  # the clearance margin is plan_horizon's d_safe option
     assert problem.trajectory.t.size == 31  # the problem itself is unchanged
+
+
+def test_the_non_uniform_grid_weights_each_term_by_its_interval():
+    """On the coarse grid q̇_k = Δq_k / h_k, q̈_k = (q̇_k − q̇_{k−1}) / h̄_k, and each term is weighted by its interval
+    over h_0: a trajectory sampled from a uniform one gives about the uniform sums (exactly for f1 of a straight
+    line at constant speed)."""
+    t = np.arange(31) * 0.05
+    q = np.zeros((31, 4))
+    q[:, 1] = 1.0 + 0.2 * t  # span 1 grows at 0.2 m/s, span 2 constant
+    q[:, 3] = 1.0
+    fine = objective_terms(q, 0.05)
+    on_grid = objective_terms(q[GRID], t[GRID])
+    assert on_grid["f1"] == pytest.approx(fine["f1"], rel=1e-12)  # Σ (h_k / h_0) q̇² = Σ over the fine steps
+    assert on_grid["f2"] == pytest.approx(fine["f2"], rel=0.02)
+    h, hbar = horizon_model.knot_weights(t[GRID])
+    np.testing.assert_allclose(h, np.diff(t[GRID]))
+    np.testing.assert_allclose(hbar[[0, -1, 4]], [0.05, 0.05, 0.15])
+    np.testing.assert_allclose(objective_terms(q, t)["f4"], fine["f4"], rtol=1e-12)  # uniform times: the same sums
 
 
 def test_interpolation_passes_through_the_coarse_knots_with_the_coarse_accelerations():
@@ -56,16 +77,25 @@ def test_interpolation_passes_through_the_coarse_knots_with_the_coarse_accelerat
     np.testing.assert_allclose(Fq[:, 0, 0], t**2, atol=1e-12)
 
 
-def test_the_coarse_optimum_is_returned_only_where_every_row_holds(problem_and_warm):
+@pytest.mark.parametrize("polish", [15, 0])
+def test_the_coarse_optimum_is_returned_only_where_every_row_holds(problem_and_warm, polish):
+    """Accepted (every row of the whole NLP holds at the interpolated coarse optimum), it is polished by the whole
+    NLP (converged: "optimal"), or returned as it is without a polish ("coarse_optimal"); either passes the exact
+    check and is no worse than qp. The polish reaches a lower cost than the coarse optimum."""
     problem, warm, warm_metrics = problem_and_warm
-    plan = plan_horizon(problem, warm, **ON)
+    plan = plan_horizon(problem, warm, coarse_polish_iter=polish, **ON)
     d = plan.diagnostics
     log = d["horizon_summary"]["coarse"]
-    assert log["stride"] == 3 and log["knots"] == 11 and log["result"] in ("accepted", "rejected")
-    assert d["horizon_result"] == "optimal"
-    if log["result"] == "accepted":
-        assert d["horizon_note"].startswith("IPOPT solved the NLP on every 3rd knot (11 of 31")
-        assert d["ipopt_iterations"] == log["iterations"] and d["rows"] == 0
+    assert log["stride"] == 3 and log["knots"] == GRID.size and log["result"] == "accepted"
+    assert d["horizon_note"].startswith(f"IPOPT solved the NLP on every 3rd knot ({GRID.size} of 31")
+    if polish:
+        assert log["polish"] == "converged" and d["horizon_result"] == "optimal"
+        assert d["ipopt_iterations"] > log["iterations"] and "from it, IPOPT solved the NLP" in d["horizon_note"]
+        coarse_only = plan_horizon(problem, warm, coarse_polish_iter=0, **ON)
+        assert d["objective"] < coarse_only.diagnostics["objective"]
+    else:
+        assert d["horizon_result"] == "coarse_optimal" and d["ipopt_iterations"] == log["iterations"]
+        assert d["rows"] == 0 and "returned the optimum on every 3rd knot, interpolated" in d["horizon_note"]
     metrics = check(plan, problem.env)  # exact clearances of robots and tether segments at every step
     assert plan.success and metrics.n_violation_steps == 0
     for f in ("f1", "f2", "f4"):
@@ -103,6 +133,13 @@ def test_a_rejected_interpolation_starts_the_whole_nlp_from_it(problem_and_warm,
 
 def test_coarse_options_are_checked(problem_and_warm):
     problem, warm, _ = problem_and_warm
-    for bad in (dict(coarse_knots=1), dict(coarse_margin=-0.1), dict(coarse_rate_scale=0), dict(coarse_time_share=2)):
+    bad_options = (
+        dict(coarse_knots=1),
+        dict(coarse_margin=-0.1),
+        dict(coarse_rate_scale=0),
+        dict(coarse_time_share=2),
+        dict(clearance_margin=-0.01),
+    )
+    for bad in bad_options:
         with pytest.raises(ParameterError):
             plan_horizon(problem, warm, **bad)

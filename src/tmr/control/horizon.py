@@ -268,8 +268,9 @@ def plan_horizon(
     Returns:
         A :class:`tmr.control.clik.Plan`, ``method="horizon"``: ``q`` the trajectory, ``qdot[k] = (q[k+1] − q[k])/Ts``,
         ``qdot[K] = 0``, ``robots`` its forward kinematics, ``success=True``; ``diagnostics`` holds
-        ``horizon_result`` ("optimal", "best_feasible_iterate" or "warm_start"), ``horizon_note`` (one line: what
-        IPOPT did and what was returned), ``horizon_stop`` ("converged", "ipopt_failed", "time_limit",
+        ``horizon_result`` ("optimal", "coarse_optimal" — the coarse pass's optimum, interpolated, every row holding:
+        ``formulations/horizon.md``, "Coarse knots" — "best_feasible_iterate" or "warm_start"), ``horizon_note``
+        (one line: what IPOPT did and what was returned), ``horizon_stop`` ("converged", "ipopt_failed", "time_limit",
         "rows_left_out"), IPOPT's status and iterations, the objective returned and at the warm start, f1–f4, the
         largest row violation, the row counts, the rounds and the time split (warm-start preparation, transcription,
         solve); ``wall_time`` is the total. Run :func:`tmr.planner.check` on it for the exact (shapely) verification.
@@ -315,7 +316,8 @@ def plan_horizon(
     Qw = model.q_of(xv)
     x_init = xv
     vals = model.values(xv)
-    info["start_clearance_rows"] = model.keep_start_clearance(vals["clearance"])
+    # only a plan that passed its checks (the qp plan) lends its clearance to the rows the start makes infeasible
+    info["start_clearance_entries"] = model.keep_start_clearance(vals["clearance"]) if warm_start.success else 0
     masks = {name: model.near(name, vals[name]) for name in model.rows}
     J_warm = _cost(su, Qw)
     obj_scale = max(J_warm, 1e-6) if opts.scale_objective else 1.0
@@ -375,8 +377,12 @@ def plan_horizon(
         coarse_what, coarse_floor = coarse_log.pop("what", ""), coarse_log.pop("floor_note", "")
         solve_time += coarse_log.pop("solve_time", 0.0)
         trans_time += coarse_log.pop("transcription_time", 0.0)
-        if coarse_c is not None:
-            phases = []  # every row of the whole NLP holds at the interpolated optimum: no fine solve
+        if coarse_c is not None:  # every row holds at the interpolated optimum: the whole NLP polishes it, briefly
+            xv = x_init = coarse_c.x
+            vals = model.values(xv)
+            masks = {name: masks[name] | model.near(name, vals[name]) for name in model.rows}
+            viol = []
+            phases = _polish_phases(opts)
         elif coarse_log.get("x") is not None:  # rows violated between the coarse knots: the whole NLP starts there
             xv = x_init = coarse_log.pop("x")
             vals = model.values(xv)
@@ -409,7 +415,7 @@ def plan_horizon(
                 stats, status, stop, too_big = {}, "", "", None
                 pool = _Pool(_POOL_SIZE, _POOL_SCREEN, f_limit)
                 pools.append(pool)
-            hessian = opts.fast_hessian if phase == "fast" else opts.hessian
+            hessian = opts.fast_hessian if phase in ("fast", "polish") else opts.hessian
             phase_deadline = deadline
             if phase == "fast" and math.isfinite(limit):
                 now = time.perf_counter()
@@ -573,9 +579,17 @@ def plan_horizon(
         elif final is not None:
             what = f"IPOPT's optimum ({status}, objective {final.J:.6g}) costs more than the warm start"
         chosen = _best_of(pools, model, tol, warm_c.J if warm_c else math.inf, deadline) or warm_c
-    if coarse_c is not None:
+    if coarse_c is not None:  # the polish's optimum, else the cheaper of its best feasible iterate and the coarse plan
         assert coarse_log is not None
-        chosen, stop, what = coarse_c, "converged", coarse_what
+        polished = chosen is not None and chosen.result == "optimal"
+        coarse_log["polish"] = "converged" if polished else (stop or "not started")
+        if polished:
+            what = f"{coarse_what}; from it, {what}"
+        else:  # no polish (coarse_polish_iter = 0, or no time left for it), or it did not converge
+            what = f"{coarse_what}; from it, the whole NLP: {what}" if phase_rounds else coarse_what
+            stop = stop if phase_rounds else "converged"
+            if chosen is None or chosen.result != "best_feasible_iterate" or chosen.J >= coarse_c.J:
+                chosen = coarse_c
     floor = f"{opts.min_hessian_perturbation:g} ({_HESSIAN[opts.hessian]} Hessian)"
     if fast_log is None:
         floor_note = f"IPOPT min_hessian_perturbation {floor}"
@@ -599,8 +613,13 @@ def plan_horizon(
                if "fallback_start" in fast_log else "the warm start")
         )  # fmt: skip
     if coarse_c is not None:
-        assert coarse_log is not None
+        pf, ph = _polish_floor(opts)
         floor_note = f"every {_nth(M)} knot: {coarse_floor}"
+        if opts.coarse_polish_iter > 0:
+            floor_note += (
+                f"; the whole NLP from its optimum: IPOPT min_hessian_perturbation {pf:g} ({_HESSIAN[ph]} Hessian), "
+                f"at most {opts.coarse_polish_iter} iterations"
+            )
     if chosen is None:
         warm_note = f"; the warm start is no fallback: {warm_why}"
         diag = _diagnostics(model, tr, stats, xv, vals, rounds, info, J_warm, trans_time, solve_time, start_time)
@@ -618,6 +637,8 @@ def plan_horizon(
             at = "no iterate satisfies the hard constraints; violated constraints at its last iterate: "
             if not rounds:
                 at = "violated constraints at the initial point (the warm start, leader projected): "
+                if coarse_log is not None and "fine_start" in coarse_log:
+                    at = "violated constraints at the initial point (the interpolated coarse optimum): "
             message = f"horizon NLP: {lead}; {at}" + (
                 _describe(viol) if viol else "none above tolerance (not converged: raise max_iter)"
             )
@@ -634,7 +655,7 @@ def plan_horizon(
     returned = {"optimal": "returned the optimum"}.get(chosen.result, f"returned {chosen.detail}")
     ran = f"{iterations} IPOPT iterations in all"  # no seconds here: the note goes to metrics.json (reproducible)
     # f1–f4 of the returned joints by the very function that gave the warm start's (no rounding apart)
-    terms = {k: float(v) for k, v in objective_terms(Q, su.Ts, su.ref, su.base).items()}
+    terms = {k: float(v) for k, v in objective_terms(Q, su.step, su.ref, su.base).items()}
     diag.update(terms)
     before = info["warm_start_terms"]
     change = ", ".join(f"{k} {terms[k]:.4g} ({_percent(terms[k], before[k])})" for k in ("f1", "f2", "f4"))
@@ -669,9 +690,12 @@ def plan_horizon(
     if coarse_log is not None:  # only where the coarse pass ran: the records of the others are unchanged
         diag["horizon_summary"]["coarse"] = coarse_log
         diag.update(ipopt_iterations=iterations)
-        if coarse_c is not None:
+        if chosen is coarse_c:  # the coarse NLP's optimum, interpolated
             diag["horizon_summary"]["min_hessian_perturbation"] = coarse_log["min_hessian_perturbation"]
+            diag["horizon_summary"]["rounds"] = coarse_log["rounds"]
             diag.update(ipopt_status=coarse_log["status"], ipopt_success=True, rounds=coarse_log["rounds"])
+        elif coarse_c is not None:  # the polish's point
+            diag["horizon_summary"]["min_hessian_perturbation"] = _polish_floor(opts)[0]
     if poses is not None:  # differential drive: how much executing the NLP's poses changed them
         diag.update(su.diff_log)
     qdot = np.vstack([np.diff(Q, axis=0) / su.Ts, np.zeros((1, su.n))])
@@ -807,7 +831,7 @@ def _diff_final(
 
 
 #: The progress bar's round prefix per attempt of the procedure (:func:`_phases`).
-_BAR = {"default": "", "fast": "", "fallback": "fallback "}
+_BAR = {"default": "", "fast": "", "fallback": "fallback ", "polish": "from the coarse optimum, "}
 
 
 _HESSIAN = {"exact": "exact", "gauss-newton": "Gauss–Newton", "limited-memory": "limited-memory"}  # for the notes
@@ -837,14 +861,18 @@ def _coarse_pass(
     opts, su = model.su.opts, model.su
     t0 = time.perf_counter()
     pc, wc = coarse_problem(problem, warm_start, M, opts.coarse_rate_scale, opts.coarse_margin)
-    sub = dict(options, coarse_knots=None, d_safe=su.d_safe + opts.coarse_margin)
+    # the margin on the samples' bounds, not on d_safe: the same samples per tether as the whole NLP (the sagitta
+    # bound asks for fewer with a larger d_safe, whose clearance says nothing about the samples between them), and
+    # none on the equality leader's own sample (its reference is fixed)
+    sub = dict(options, coarse_knots=None, clearance_margin=opts.coarse_margin)
     budget = None if not math.isfinite(limit) else max(opts.coarse_time_share * (deadline - t0), 1e-3)
     log: dict[str, Any] = dict(stride=M, knots=int(pc.trajectory.t.size), iterations=0)
     try:
         cplan = plan_horizon(pc, wc, time_limit=budget, **sub)
     except HorizonInfeasible as exc:
         d = exc.diagnostics or {}
-        log.update(iterations=int(d.get("ipopt_iterations", 0)), result="failed", reason="no feasible coarse plan")
+        why = str(exc).split(";")[0].removeprefix("horizon NLP: ")[:200]
+        log.update(iterations=int(d.get("ipopt_iterations", 0)), result="failed", reason=f"{exc.status}: {why}")
         log.update(solve_time=time.perf_counter() - t0)
         return None, log
     d = cplan.diagnostics
@@ -878,9 +906,26 @@ def _coarse_pass(
             f"{log['iterations']} iterations in {log['rounds']} round(s)), its optimum interpolated to every knot "
             "(quadratic spline), where every row holds"
         )
-        return _Candidate(Q, J, "optimal", f"the optimum on every {_nth(M)} knot, interpolated", xv), log
+        return _Candidate(Q, J, "coarse_optimal", f"the optimum on every {_nth(M)} knot, interpolated", xv), log
     log.update(result="rejected", reason=reason[:300], x=xv)
     return None, log
+
+
+def _polish_floor(opts: HorizonOptions) -> tuple[float, str]:
+    """The polishing pass's IPOPT floor and Hessian: the fast attempt's if it is on, else the default ones."""
+    fast = opts.fast_min_hessian_perturbation
+    if fast is not None and fast < opts.min_hessian_perturbation and "min_hessian_perturbation" not in opts.ipopt:
+        return float(fast), opts.fast_hessian
+    return float(opts.min_hessian_perturbation), opts.fast_hessian
+
+
+def _polish_phases(opts: HorizonOptions) -> list[tuple[str, list[tuple[str, dict[str, Any]]]]]:
+    """The polishing pass after an accepted coarse optimum: one attempt of the whole NLP from it, each round capped at
+    ``coarse_polish_iter`` IPOPT iterations, no retry (none at all with a cap of 0)."""
+    if opts.coarse_polish_iter <= 0:
+        return []
+    cap = {"min_hessian_perturbation": _polish_floor(opts)[0], "max_iter": int(opts.coarse_polish_iter)}
+    return [("polish", [("primary", cap)])]
 
 
 def _phases(opts: HorizonOptions) -> list[tuple[str, list[tuple[str, dict[str, Any]]]]]:
@@ -1140,7 +1185,7 @@ def _diagnostics(
         "warm_start_method": info.get("warm_start_method", ""),
         "warm_start_success": info.get("warm_start_success"),
         "warm_start_time": float(info.get("warm_start_time", 0.0)),
-        "start_clearance_rows": int(info.get("start_clearance_rows", 0)),
+        "start_clearance_entries": int(info.get("start_clearance_entries", 0)),
         "transcription_time": float(trans_time),
         "solve_time": float(solve_time),
         "total_time": time.perf_counter() - start_time,

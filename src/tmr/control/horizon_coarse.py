@@ -2,8 +2,9 @@
 
 A horizon of K + 1 knots (the ``qp`` plan's steps, T_s = 0.05 s) is an NLP of 2 N (K + 1) variables whose IPOPT
 iterations cost in proportion to K and whose iteration counts grow with it (walls rooms, 720–900 knots: 130–430
-iterations of ≈ 0.2 s). The same NLP on every M-th knot (T_s' = M T_s, the leader's reference and the warm start
-sampled there) has M times fewer variables and rows. Its optimum is interpolated to every knot by a quadratic spline
+iterations of ≈ 0.2 s). The same NLP on every M-th knot (steps of M T_s, the leader's reference and the warm start
+sampled there; every knot of the first and last M steps, where the chain starts from and comes to rest) has about M
+times fewer variables and rows. Its optimum is interpolated to every knot by a quadratic spline
 through the coarse knots (positions; a cubic spline overshoots between knots: f4 12.7 against 0.72 on a walls room
 with 8 robots), and accepted as the plan if *every* row of the whole NLP holds at every knot and it is no worse than
 the warm start in each term — otherwise :func:`tmr.control.horizon.plan_horizon` solves the whole NLP as before
@@ -32,10 +33,12 @@ def stride(K: int, coarse_knots: int | None, coarse_from: int) -> int:
 
 
 def coarse_indices(K: int, M: int) -> NDArray[np.int_]:
-    """Fine knots of the coarse ones: 0, M, 2M, … and K last (the final interval may be shorter than M T_s; the coarse
-    NLP gives it M T_s, so its leader moves slower there than on the fine grid — still the same points)."""
-    Kc = -(-K // M)
-    return np.minimum(np.arange(Kc + 1) * M, K)
+    """Fine knots of the coarse ones: every knot of the first and the last M steps (where the chain starts from and
+    comes to rest: the acceleration rows from rest need the fine step there), every M-th knot between, and K last."""
+    if M <= 1:
+        return np.arange(K + 1)
+    ends = np.arange(min(M, K) + 1)
+    return np.unique(np.concatenate([ends, np.arange(0, K + 1, M), K - ends]))
 
 
 def coarse_problem(problem: Any, warm: Any, M: int, rate_scale: float, margin: float = 0.0) -> tuple[Any, Any]:
@@ -45,9 +48,8 @@ def coarse_problem(problem: Any, warm: Any, M: int, rate_scale: float, margin: f
     — margins for the interpolation between knots (the clearance's is the caller's ``d_safe``)."""
     tr = problem.trajectory
     K = tr.t.size - 1
-    Ts = float(tr.t[1] - tr.t[0])
     idx = coarse_indices(K, M)
-    tc = np.arange(idx.size) * M * Ts
+    tc = np.asarray(tr.t, dtype=float)[idx]  # a non-uniform grid: the NLP's rates and cost take each step's length
     traj = tr._replace(t=tc, x=tr.x[idx], xd=tr.xd[idx], xdd=tr.xdd[idx])
     qp = problem.qp_params
     scaled = {
@@ -65,7 +67,7 @@ def coarse_problem(problem: Any, warm: Any, M: int, rate_scale: float, margin: f
         warm,
         t=tc,
         q=Qc,
-        qdot=np.vstack([np.diff(Qc, axis=0) / (M * Ts), np.zeros((1, Qc.shape[1]))]),
+        qdot=np.vstack([np.diff(Qc, axis=0) / np.diff(tc)[:, None], np.zeros((1, Qc.shape[1]))]),
         robots=np.asarray(warm.robots, dtype=float)[np.minimum(idx, len(warm.robots) - 1)],
         reference=tr.x[idx],
         spans=Qc[:, 1::2],
@@ -78,9 +80,6 @@ def interpolate(robots: Array, t_fine: Array, M: int) -> Array:
     """Robot positions (K+1, N, 2) [m] at the fine knots ``t_fine`` from the coarse plan's ``robots`` (Kc+1, N, 2) at
     :func:`coarse_indices`: a quadratic interpolating spline in time per coordinate (C¹; its accelerations are the
     coarse differences' to first order)."""
-    K = t_fine.size - 1
-    idx = coarse_indices(K, M)
-    tj = t_fine[idx]
-    keep = np.r_[True, np.diff(tj) > 0]  # K itself may be the last coarse knot twice
-    k = min(2, int(keep.sum()) - 1)
-    return np.asarray(make_interp_spline(tj[keep], robots[keep], k=k, axis=0)(t_fine), dtype=float)
+    idx = coarse_indices(t_fine.size - 1, M)
+    k = min(2, idx.size - 1)
+    return np.asarray(make_interp_spline(t_fine[idx], robots, k=k, axis=0)(t_fine), dtype=float)

@@ -88,9 +88,14 @@ class HorizonOptions:
             knot and returned if every row of the whole NLP holds there and it is no worse than the warm start in any
             term; else the whole NLP starts from it (``None``: off; ``formulations/horizon.md``, "Coarse knots").
         coarse_from: the smallest horizon (knots) that gets the coarse pass.
+        clearance_margin: added to d_safe [m] for every clearance sample except the equality leader's own (it
+            depends on the fixed reference only); the coarse pass sets it to ``coarse_margin``.
         coarse_margin: added to d_safe in the coarse NLP [m] (the interpolation between its knots).
         coarse_rate_scale: the coarse NLP's speed and acceleration bounds (joints and robots) times this (≤ 1).
         coarse_time_share: fraction of the time left (with a time limit) the coarse pass may use.
+        coarse_polish_iter: IPOPT iterations (per round) of the whole NLP started from an accepted coarse optimum: if
+            it converges, its optimum is the plan (``"optimal"``), else the coarse optimum (``"coarse_optimal"``) or a
+            cheaper feasible iterate of it; 0: no polish.
         fast_min_hessian_perturbation: IPOPT's ``min_hessian_perturbation`` of a first, fast attempt (``None``: no
             fast attempt; also skipped unless it is below ``min_hessian_perturbation`` and ``ipopt`` does not set
             that option): the whole constraint-generation procedure runs first with this floor (10⁻⁵: scenario E with
@@ -167,9 +172,11 @@ class HorizonOptions:
     warm_start_leader_error: float = 0.01
     expand: bool = False
     scale_objective: bool = True
+    clearance_margin: float = 0.0
     coarse_knots: int | None = 200
     coarse_from: int = 500
-    coarse_margin: float = 0.02
+    coarse_margin: float = 0.01
+    coarse_polish_iter: int = 15
     coarse_rate_scale: float = 0.95
     coarse_time_share: float = 0.5
     window: int | None = None
@@ -209,6 +216,8 @@ class HorizonOptions:
             raise ParameterError(f"window_overlap must be in [0, window), got {self.window_overlap!r}")
         if self.coarse_knots is not None and (isinstance(self.coarse_knots, bool) or int(self.coarse_knots) < 2):
             raise ParameterError(f"coarse_knots must be ≥ 2 (or None: no coarse pass), got {self.coarse_knots!r}")
+        if not 0 <= self.clearance_margin < 1:
+            raise ParameterError(f"clearance_margin must be in [0, 1) m, got {self.clearance_margin!r}")
         share, scale = self.coarse_time_share, self.coarse_rate_scale
         if not 0 <= self.coarse_margin < 1 or not 0 < scale <= 1 or not 0 < share <= 1:
             raise ParameterError("coarse_margin must be in [0, 1) m, coarse_rate_scale and coarse_time_share in (0, 1]")
@@ -353,22 +362,50 @@ def samples_needed(span_max: float, r: float, d_safe: float, field_error: float)
     return max(1, math.ceil(span_max / delta - 1e-9))
 
 
-def objective_terms(q: Array, Ts: float, reference: Array | None = None, base: Array | None = None) -> dict[str, float]:
+def knot_weights(t: Array) -> tuple[Array, Array]:
+    """Intervals h_k = t_{k+1} − t_k (K,) and the knots' spans h̄_k (K+1,): h̄_0 = h_0, h̄_K = h_{K−1}, else
+    (h_{k−1} + h_k) / 2 [s] — the steps of the finite differences on a non-uniform grid (the coarse pass's)."""
+    h = np.diff(np.asarray(t, dtype=float))
+    hbar = np.concatenate([h[:1], 0.5 * (h[:-1] + h[1:]), h[-1:]])
+    return h, hbar
+
+
+def objective_terms(
+    q: Array, Ts: float | Array, reference: Array | None = None, base: Array | None = None
+) -> dict[str, float]:
     """f1, f2, f4 (and f3 when ``reference`` and ``base`` are given) of a joint trajectory ``q`` (K+1, 2N).
 
     q̇_k = (q_{k+1} − q_k)/Ts for k < K, q̇_K = 0, q̈_k = (q̇_k − q̇_{k−1})/Ts: exactly
     :func:`tmr.checks.metrics.fitness` of a
-    plan with these joints (Caruso 2021 eq. 24–27).
+    plan with these joints (Caruso 2021 eq. 24–27). ``Ts`` may be the knot times t (K+1,) of a non-uniform grid
+    (the coarse pass): then q̇_k = Δq_k / h_k, q̈_k = (q̇_k − q̇_{k−1}) / h̄_k (:func:`knot_weights`), and each term of
+    the sums is weighted by its interval over h_0 (h_k / h_0 for f1, h̄_k / h_0 for f2 and f4), so that the sums
+    approximate those of the grid of step h_0.
     """
     q = np.asarray(q, dtype=float)
-    qd = np.vstack([np.diff(q, axis=0) / Ts, np.zeros((1, q.shape[1]))])
+    if np.ndim(Ts) == 1:
+        h, hbar = knot_weights(np.asarray(Ts, dtype=float))
+        qd = np.vstack([np.diff(q, axis=0) / h[:, None], np.zeros((1, q.shape[1]))])
+        qdd = np.diff(qd, axis=0) / hbar[1:, None]
+        w1, wk = np.append(h / h[0], 0.0), hbar / h[0]
+    else:
+        qd = np.vstack([np.diff(q, axis=0) / Ts, np.zeros((1, q.shape[1]))])
+        qdd = np.diff(qd, axis=0) / Ts
+        w1 = wk = None
     d = q[:, 1::2]
     i, j = np.triu_indices(d.shape[1], k=1)
-    out = {
-        "f1": float(np.sum(qd * qd)),
-        "f2": float(np.sum((d[:, i] - d[:, j]) ** 2)),
-        "f4": float(np.sum((np.diff(qd, axis=0) / Ts) ** 2)),
-    }
+    if w1 is None or wk is None:
+        out = {
+            "f1": float(np.sum(qd * qd)),
+            "f2": float(np.sum((d[:, i] - d[:, j]) ** 2)),
+            "f4": float(np.sum(qdd**2)),
+        }
+    else:
+        out = {
+            "f1": float(np.sum(w1[:, None] * qd * qd)),
+            "f2": float(np.sum(wk[:, None] * (d[:, i] - d[:, j]) ** 2)),
+            "f4": float(np.sum(wk[1:, None] * qdd**2)),
+        }
     if reference is not None and base is not None:
         phi = np.cumsum(q[:, 0::2], axis=1)
         xe = np.asarray(base, float)[:2] + np.stack([np.sum(d * np.cos(phi), 1), np.sum(d * np.sin(phi), 1)], 1)
@@ -419,6 +456,10 @@ class _Setup:
         if self.K < 2:
             raise ParameterError("the horizon needs at least 2 steps (K ≥ 2)")
         self.Ts = float(self.t[1] - self.t[0])
+        dt = np.diff(self.t)
+        # a non-uniform grid only from the coarse pass (tmr.control.horizon_coarse); every other problem is uniform
+        self.uniform = bool(np.all(np.abs(dt - self.Ts) <= 1e-9 * self.Ts))
+        self.step: float | Array = self.Ts if self.uniform else self.t  # objective_terms' time argument
         self.ref = np.asarray(problem.trajectory.x, dtype=float)[:, :2]
         self.q0 = chain.check_q(problem.q0).astype(float)
         self.limits = np.broadcast_to(np.asarray(problem.span_limits, float), (self.N, 2)).copy()
@@ -567,25 +608,38 @@ class _Model:
         dphi = ca.atan2(cross, dot)  # (N, K) heading change of every link per step
         dtheta = dphi - ca.vertcat(ca.DM.zeros(1, K), dphi[: N - 1, :])  # relative joint angles' change
         dD = D[:, 1:] - D[:, :-1]
-        Qd = ca.vertcat(*[r for i in range(N) for r in (dtheta[i, :], dD[i, :])]) / Ts  # q̇_0..q̇_{K−1}; q̇_K = 0
         zn = ca.DM.zeros(n, 1)
-        Qdd = (ca.horzcat(Qd, zn) - ca.horzcat(zn, Qd)) / Ts  # q̈_0 (from rest) .. q̈_K (to rest)
+        dQ = ca.vertcat(*[r for i in range(N) for r in (dtheta[i, :], dD[i, :])])
+        Dij = [D[i, :] - D[j, :] for i, j in su.pairs]
+        if su.uniform:
+            Qd = dQ / Ts  # q̇_0..q̇_{K−1}; q̇_K = 0
+            Qdd = (ca.horzcat(Qd, zn) - ca.horzcat(zn, Qd)) / Ts  # q̈_0 (from rest) .. q̈_K (to rest)
+            Qd_w, Qdd_w, Dij_w = Qd, Qdd[:, 1:], Dij
+        else:  # the coarse pass's grid: steps h_k, knot spans h̄_k, each term weighted by its share of time
+            if su.drive is not None:
+                raise ParameterError("a non-uniform time grid is not implemented for differential drive")
+            h, hbar = knot_weights(su.t)
+            Qd = dQ * ca.DM(np.tile(1.0 / h, (n, 1)))
+            Qdd = (ca.horzcat(Qd, zn) - ca.horzcat(zn, Qd)) * ca.DM(np.tile(1.0 / hbar, (n, 1)))
+            Qd_w = Qd * ca.DM(np.tile(np.sqrt(h / h[0]), (n, 1)))
+            Qdd_w = Qdd[:, 1:] * ca.DM(np.tile(np.sqrt(hbar[1:] / h[0]), (n, 1)))
+            Dij_w = [e * ca.DM(np.sqrt(hbar / h[0])).T for e in Dij]
         ex = X[N - 1, 1:] - su.ref[1:, 0].reshape(1, -1)
         ey = Y[N - 1, 1:] - su.ref[1:, 1].reshape(1, -1)
-        f1 = ca.sumsqr(Qd)
-        f2 = sum((ca.sumsqr(D[i, :] - D[j, :]) for i, j in su.pairs), ca.MX(0))
+        f1 = ca.sumsqr(Qd_w)
+        f2 = sum((ca.sumsqr(e) for e in Dij_w), ca.MX(0))
         f3 = ca.sumsqr(ex) + ca.sumsqr(ey)
-        f4 = ca.sumsqr(Qdd[:, 1:])  # eq. 27: k = 1..K
+        f4 = ca.sumsqr(Qdd_w)  # eq. 27: k = 1..K
         J = opts.w_energy * f1 + opts.w_uniformity * f2 + opts.w_smoothness * f4
         if opts.leader_tolerance > 0:
             J = J + opts.w_tracking * f3
         self.terms = ca.Function("terms", [xin], [f1, f2, f3, f4])
         # f_i = Σ r_i² (Gauss–Newton Hessians: hessian="gauss-newton")
         self.residuals = {
-            "f1": ca.vec(Qd),
-            "f2": ca.vertcat(*[ca.vec(D[i, :] - D[j, :]) for i, j in su.pairs]) if su.pairs else ca.MX(0, 1),
+            "f1": ca.vec(Qd_w),
+            "f2": ca.vertcat(*[ca.vec(e) for e in Dij_w]) if su.pairs else ca.MX(0, 1),
             "f3": ca.vertcat(ca.vec(ex), ca.vec(ey)),
-            "f4": ca.vec(Qdd[:, 1:]),
+            "f4": ca.vec(Qdd_w),
         }
 
         # bounds on the variables: the start fixed, the leader on its reference (equality leader)
@@ -649,14 +703,23 @@ class _Model:
         rows["joint_accel"] = _Rows(
             Qdd, np.full(n, -su.amax), np.full(n, su.amax), np.arange(K + 1), jl, "rad/s² | m/s²"
         )
-        Vx, Vy = (X[:, 1:] - X[:, :-1]) / Ts, (Y[:, 1:] - Y[:, :-1]) / Ts
+        if su.uniform:
+            Vx, Vy = (X[:, 1:] - X[:, :-1]) / Ts, (Y[:, 1:] - Y[:, :-1]) / Ts
+        else:
+            Hn = ca.DM(np.tile(1.0 / knot_weights(su.t)[0], (N, 1)))
+            Vx, Vy = (X[:, 1:] - X[:, :-1]) * Hn, (Y[:, 1:] - Y[:, :-1]) * Hn
         rl = [f"robot {i + 1} {a}" for a in "xy" for i in range(N)]
         rows["robot_speed"] = _Rows(
             ca.vertcat(Vx, Vy), np.full(2 * N, -su.v_rob), np.full(2 * N, su.v_rob), np.arange(K), rl, "m/s"
         )
         zN = ca.DM.zeros(N, 1)
-        Ax = (ca.horzcat(Vx, zN) - ca.horzcat(zN, Vx)) / Ts
-        Ay = (ca.horzcat(Vy, zN) - ca.horzcat(zN, Vy)) / Ts
+        if su.uniform:
+            Ax = (ca.horzcat(Vx, zN) - ca.horzcat(zN, Vx)) / Ts
+            Ay = (ca.horzcat(Vy, zN) - ca.horzcat(zN, Vy)) / Ts
+        else:
+            Hb = ca.DM(np.tile(1.0 / knot_weights(su.t)[1], (N, 1)))
+            Ax = (ca.horzcat(Vx, zN) - ca.horzcat(zN, Vx)) * Hb
+            Ay = (ca.horzcat(Vy, zN) - ca.horzcat(zN, Vy)) * Hb
         rows["robot_accel"] = _Rows(
             ca.vertcat(Ax, Ay), np.full(2 * N, -su.a_rob), np.full(2 * N, su.a_rob), np.arange(K + 1), rl, "m/s²"
         )
@@ -673,6 +736,11 @@ class _Model:
         self.Py = ca.vec(ca.mtimes(Ls, ca.vertcat(su.base[1] * ones, Pm[N:, :])))
         # per-entry lower bounds that replace a group's per-row ones (:meth:`keep_start_clearance`)
         self.lo_entries: dict[str, Array] = {}
+        if opts.clearance_margin > 0:
+            lo = np.full((M, K + 1), su.d_safe + opts.clearance_margin)
+            if opts.leader_tolerance == 0:
+                lo[M - 1] = su.d_safe  # the leader's own sample: on its reference, nothing to gain a margin with
+            self.lo_entries["clearance"] = lo
         # numeric evaluation of every row of every group (the clearance of all samples through one mapped call)
         self._names = names
         self._full = ca.Function("rows", [x], [rows[g].expr for g in names] + [ca.horzcat(self.Px, self.Py).T])
@@ -860,13 +928,14 @@ class _Transcription:
         # the start (and the equality leader) are fixed: IPOPT removes them (fixed_variable_treatment make_parameter)
         self.lbx, self.ubx = model.lbx, model.ubx
         self.nlp = {"x": model.x, "f": model.J, "g": self.g}
-        self._derivatives: dict[float, dict[str, Any]] = {}
+        self._derivatives: dict[tuple[float, str], dict[str, Any]] = {}
         self._callbacks: list[ca.Callback] = []  # the spline derivatives must outlive the functions that call them
 
     def derivatives(self, obj_scale: float, hessian: str | None = None) -> dict[str, ca.Function]:
         """casadi ``nlpsol`` options ``jac_g`` and ``hess_lag`` with the structured clearance derivatives (see the
-        class docstring) for the cost divided by ``obj_scale``; empty (casadi's own) without the scipy spline or
-        clearance rows; no ``hess_lag`` with ``hessian="limited-memory"``; ``hessian``: ``None`` = the options'."""
+        class docstring) for the cost divided by ``obj_scale``; without the scipy spline or clearance rows empty
+        (casadi's own), except ``hess_lag`` for ``hessian="gauss-newton"``; no ``hess_lag`` with
+        ``hessian="limited-memory"``; ``hessian``: ``None`` = the options'."""
         hessian = hessian or self.opts.hessian
         key = (obj_scale, hessian)
         if key in self._derivatives:
@@ -989,7 +1058,8 @@ def _solver_opts(
         "mu_init": float(opts.mu_init),
         "linear_solver": opts.linear_solver,
         "mumps_pivot_order": int(opts.mumps_pivot_order),
-        "hessian_approximation": "limited-memory" if hessian == "limited-memory" else "exact",
+        # "gauss-newton" is ours (given as hess_lag): IPOPT sees "exact"; anything else goes to IPOPT as it is
+        "hessian_approximation": "exact" if hessian == "gauss-newton" else hessian,
         "nlp_scaling_method": opts.nlp_scaling,
         "min_hessian_perturbation": float(opts.min_hessian_perturbation),
         "acceptable_constr_viol_tol": float(opts.constr_viol_tol),
@@ -1022,7 +1092,7 @@ def _warm_start(su: _Setup, warm: Plan) -> tuple[Array, dict[str, Any]]:
     if Q.shape[0] < su.K + 1:  # a plan that stopped early: hold its last configuration
         Q = np.vstack([Q, np.repeat(Q[-1:], su.K + 1 - Q.shape[0], axis=0)])
     raw = Q[: su.K + 1].copy()
-    terms = objective_terms(raw, su.Ts, su.ref, su.base)
+    terms = objective_terms(raw, su.step, su.ref, su.base)
     info["objective_warm_start_raw"] = _weighted(terms, su.opts)
     info["warm_start_terms"] = terms
     return raw, info

@@ -54,7 +54,7 @@ def _reference_violations(model: _Model, vals: dict[str, Array], tol: float) -> 
     no trajectory satisfies them (checked before IPOPT)."""
     su = model.su
     row = su.N * su.S - 1  # the last sample of the last tether: the leader
-    a = model.violation("clearance", vals["clearance"][row : row + 1])[0]
+    a = model.violation("clearance", vals["clearance"])[row]  # its own bounds (the start's clearance may be kept)
     return [
         Violation("clearance", int(k), float(su.t[k]), su.sample_labels[row], float(a[k]), "m")
         for k in np.flatnonzero(a > tol)
@@ -134,7 +134,7 @@ class _Candidate(NamedTuple):
 
 
 def _cost(su: _Setup, Q: Array) -> float:
-    return _weighted(objective_terms(Q, su.Ts, su.ref, su.base), su.opts)
+    return _weighted(objective_terms(Q, su.step, su.ref, su.base), su.opts)
 
 
 def _no_worse(model: _Model, Q: Array) -> bool:
@@ -142,7 +142,7 @@ def _no_worse(model: _Model, Q: Array) -> bool:
     IPOPT's tolerance; always True without."""
     if not (model.su.opts.no_worse_terms and model.bounds):
         return True
-    terms = objective_terms(Q, model.su.Ts)
+    terms = objective_terms(Q, model.su.step)
     return all(terms[k] <= model.bounds[k] for k in ("f1", "f2", "f4") if k in model.bounds)
 
 
