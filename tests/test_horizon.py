@@ -303,6 +303,18 @@ def test_a_start_inside_d_safe_keeps_the_warm_starts_clearance_until_it_reaches_
     assert plain.diagnostics["horizon_result"] != "optimal"
 
 
+def test_a_leader_starting_inside_d_safe_is_not_refused_as_a_reference_too_close():
+    """The leader starts 3 cm (inflated) under a column: its own sample keeps the warm start's clearance until the
+    reference reaches d_safe, and the check of the fixed reference reads that row's own bounds (it read row 0's)."""
+    problem = small_problem(columns=(COLUMN, (3.2, 2.9 + 0.83)))
+    warm, _ = solve(problem, "qp")
+    assert warm.success
+    plan = plan_horizon(problem, warm)
+    assert plan.diagnostics["horizon_result"] == "optimal" and plan.diagnostics["start_clearance_entries"] > 0
+    metrics = check(plan, problem.env)
+    assert plan.success and metrics.n_violation_steps == 0
+
+
 def test_bounded_leader_error_passes_where_equality_cannot():
     problem = small_problem(GRAZING)
     warm = solve(problem, "qp")[0]
