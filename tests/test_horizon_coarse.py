@@ -15,8 +15,9 @@ from tmr.control.horizon import objective_terms, plan_horizon
 from tmr.errors import ParameterError
 from tmr.planner import check, solve
 
-ON = dict(coarse_knots=10, coarse_from=10)  # K = 30: every 3rd knot (and every knot of the first and last 3 steps)
-GRID = np.array([0, 1, 2, 3, 6, 9, 12, 15, 18, 21, 24, 27, 28, 29, 30])
+ON = dict(coarse_knots=10, coarse_from=10)  # K = 30: every 3rd knot
+GRID = np.arange(0, 31, 3)
+ENDS = np.array([0, 1, 2, 3, 6, 9, 12, 15, 18, 21, 24, 27, 28, 29, 30])  # coarse_ends = 3: every knot of both ends
 
 
 @pytest.fixture(scope="module")
@@ -32,11 +33,13 @@ def test_stride_indices_and_the_coarse_problem(problem_and_warm):
     assert coarse.stride(30, 10, 10) == 3 and coarse.stride(30, 10, 32) == 1 and coarse.stride(30, None, 0) == 1
     assert coarse.stride(1126, 200, 500) == 6
     np.testing.assert_array_equal(coarse.coarse_indices(30, 3), GRID)
-    np.testing.assert_array_equal(coarse.coarse_indices(31, 3)[-5:], [27, 28, 29, 30, 31])
+    np.testing.assert_array_equal(coarse.coarse_indices(31, 3)[-3:], [24, 27, 31])  # a 1-step last step merged
+    np.testing.assert_array_equal(coarse.coarse_indices(32, 3)[-3:], [27, 30, 32])  # a 2-step last step kept
+    np.testing.assert_array_equal(coarse.coarse_indices(30, 3, 3), ENDS)
     np.testing.assert_array_equal(coarse.coarse_indices(30, 1), np.arange(31))
     pc, wc = coarse.coarse_problem(problem, warm, 3, 0.9, 0.02)
     t = pc.trajectory.t
-    np.testing.assert_allclose(t, problem.trajectory.t[GRID])  # the true times: steps of 0.05 s at the ends, 0.15 s
+    np.testing.assert_allclose(t, problem.trajectory.t[GRID])  # the knots' own times
     np.testing.assert_array_equal(pc.trajectory.x, problem.trajectory.x[GRID])
     np.testing.assert_array_equal(wc.q, warm.q[GRID])
     assert pc.qp_params.robot_accel_max == pytest.approx(0.9 * problem.qp_params.robot_accel_max)
@@ -55,11 +58,11 @@ def test_the_non_uniform_grid_weights_each_term_by_its_interval():
     q[:, 1] = 1.0 + 0.2 * t  # span 1 grows at 0.2 m/s, span 2 constant
     q[:, 3] = 1.0
     fine = objective_terms(q, 0.05)
-    on_grid = objective_terms(q[GRID], t[GRID])
+    on_grid = objective_terms(q[ENDS], t[ENDS])
     assert on_grid["f1"] == pytest.approx(fine["f1"], rel=1e-12)  # Σ (h_k / h_0) q̇² = Σ over the fine steps
     assert on_grid["f2"] == pytest.approx(fine["f2"], rel=0.02)
-    h, hbar = horizon_model.knot_weights(t[GRID])
-    np.testing.assert_allclose(h, np.diff(t[GRID]))
+    h, hbar = horizon_model.knot_weights(t[ENDS])
+    np.testing.assert_allclose(h, np.diff(t[ENDS]))
     np.testing.assert_allclose(hbar[[0, -1, 4]], [0.05, 0.05, 0.15])
     np.testing.assert_allclose(objective_terms(q, t)["f4"], fine["f4"], rtol=1e-12)  # uniform times: the same sums
 
@@ -77,17 +80,18 @@ def test_interpolation_passes_through_the_coarse_knots_with_the_coarse_accelerat
     np.testing.assert_allclose(Fq[:, 0, 0], t**2, atol=1e-12)
 
 
-@pytest.mark.parametrize("polish", [15, 0])
-def test_the_coarse_optimum_is_returned_only_where_every_row_holds(problem_and_warm, polish):
+@pytest.mark.parametrize("polish, ends", [(15, 0), (0, 0), (0, 3)])
+def test_the_coarse_optimum_is_returned_only_where_every_row_holds(problem_and_warm, polish, ends):
     """Accepted (every row of the whole NLP holds at the interpolated coarse optimum), it is polished by the whole
     NLP (converged: "optimal"), or returned as it is without a polish ("coarse_optimal"); either passes the exact
     check and is no worse than qp. The polish reaches a lower cost than the coarse optimum."""
     problem, warm, warm_metrics = problem_and_warm
-    plan = plan_horizon(problem, warm, coarse_polish_iter=polish, **ON)
+    plan = plan_horizon(problem, warm, coarse_polish_iter=polish, coarse_ends=ends, **ON)
     d = plan.diagnostics
     log = d["horizon_summary"]["coarse"]
-    assert log["stride"] == 3 and log["knots"] == GRID.size and log["result"] == "accepted"
-    assert d["horizon_note"].startswith(f"IPOPT solved the NLP on every 3rd knot ({GRID.size} of 31")
+    grid = ENDS if ends else GRID  # with ends: the non-uniform grid's NLP, end to end
+    assert log["stride"] == 3 and log["knots"] == grid.size and log["result"] == "accepted"
+    assert d["horizon_note"].startswith(f"IPOPT solved the NLP on every 3rd knot ({grid.size} of 31")
     if polish:
         assert log["polish"] == "converged" and d["horizon_result"] == "optimal"
         assert d["ipopt_iterations"] > log["iterations"] and "from it, IPOPT solved the NLP" in d["horizon_note"]
@@ -113,8 +117,8 @@ def test_a_rejected_interpolation_starts_the_whole_nlp_from_it(problem_and_warm,
     problem, warm, warm_metrics = problem_and_warm
     real = coarse.interpolate
 
-    def kinked(robots, t, M):
-        F = real(robots, t, M)
+    def kinked(robots, t, M, ends=0):
+        F = real(robots, t, M, ends)
         F[15, 0, 1] += 0.05  # robot 1 jumps 5 cm up at one knot: |ÿ| = 0.05 / Ts² = 20 m/s² > a_rob
         return F
 
@@ -139,6 +143,7 @@ def test_coarse_options_are_checked(problem_and_warm):
         dict(coarse_rate_scale=0),
         dict(coarse_time_share=2),
         dict(clearance_margin=-0.01),
+        dict(coarse_ends=-1),
     )
     for bad in bad_options:
         with pytest.raises(ParameterError):

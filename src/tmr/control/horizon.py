@@ -860,11 +860,16 @@ def _coarse_pass(
     the warm start's and it costs no more (else ``None``); and the log (stride, knots, iterations, result, why)."""
     opts, su = model.su.opts, model.su
     t0 = time.perf_counter()
-    pc, wc = coarse_problem(problem, warm_start, M, opts.coarse_rate_scale, opts.coarse_margin)
-    # the margin on the samples' bounds, not on d_safe: the same samples per tether as the whole NLP (the sagitta
-    # bound asks for fewer with a larger d_safe, whose clearance says nothing about the samples between them), and
-    # none on the equality leader's own sample (its reference is fixed)
-    sub = dict(options, coarse_knots=None, clearance_margin=opts.coarse_margin)
+    pc, wc = coarse_problem(problem, warm_start, M, opts.coarse_rate_scale, opts.coarse_margin, opts.coarse_ends)
+    # the margin on the samples' bounds, not on d_safe, so none on the equality leader's own sample (its reference is
+    # fixed); the samples per tether of d_safe + margin (fewer: the coarse NLP solves where the fine count did not
+    # on the walls rooms; the fine rows between them are checked at acceptance)
+    S = (
+        su.S
+        if opts.samples_per_link is not None
+        else samples_needed(float(su.limits[:, 1].max()), su.r, su.d_safe + opts.coarse_margin, opts.field_error)
+    )
+    sub = dict(options, coarse_knots=None, clearance_margin=opts.coarse_margin, samples_per_link=S)
     budget = None if not math.isfinite(limit) else max(opts.coarse_time_share * (deadline - t0), 1e-3)
     log: dict[str, Any] = dict(stride=M, knots=int(pc.trajectory.t.size), iterations=0)
     try:
@@ -888,7 +893,7 @@ def _coarse_pass(
     if d.get("horizon_result") != "optimal":
         log.update(result="failed", reason=f"the coarse NLP returned its {d.get('horizon_result')}")
         return None, log
-    R = interpolate(np.asarray(cplan.robots, dtype=float), su.t, M)
+    R = interpolate(np.asarray(cplan.robots, dtype=float), su.t, M, opts.coarse_ends)
     xv = model.project(np.concatenate([R[:, :, 0], R[:, :, 1]], axis=1).ravel())
     Q = model.q_of(xv)
     viol = _violations(model, model.values(xv), xv, tol)

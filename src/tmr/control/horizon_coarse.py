@@ -32,23 +32,32 @@ def stride(K: int, coarse_knots: int | None, coarse_from: int) -> int:
     return max(1, math.ceil(K / int(coarse_knots)))
 
 
-def coarse_indices(K: int, M: int) -> NDArray[np.int_]:
-    """Fine knots of the coarse ones: every knot of the first and the last M steps (where the chain starts from and
-    comes to rest: the acceleration rows from rest need the fine step there), every M-th knot between, and K last."""
+def coarse_indices(K: int, M: int, ends: int = 0) -> NDArray[np.int_]:
+    """Fine knots of the coarse ones: every M-th knot and K last — a last step shorter than M/2 merged into the one
+    before (steps between M/2 and 3M/2: no tiny step where the chain comes to rest) — and every knot of the first and
+    the last ``ends`` steps (where the chain starts from and comes to rest; 0: none)."""
     if M <= 1:
         return np.arange(K + 1)
-    ends = np.arange(min(M, K) + 1)
-    return np.unique(np.concatenate([ends, np.arange(0, K + 1, M), K - ends]))
+    grid = np.arange(0, K + 1, M)
+    if grid[-1] != K:
+        if K - grid[-1] < M / 2 and grid.size > 1:
+            grid[-1] = K
+        else:
+            grid = np.append(grid, K)
+    e = np.arange(min(int(ends), K) + 1)
+    return np.unique(np.concatenate([e, grid, K - e]))
 
 
-def coarse_problem(problem: Any, warm: Any, M: int, rate_scale: float, margin: float = 0.0) -> tuple[Any, Any]:
+def coarse_problem(
+    problem: Any, warm: Any, M: int, rate_scale: float, margin: float = 0.0, ends: int = 0
+) -> tuple[Any, Any]:
     """The problem and the warm start on every M-th knot (:func:`coarse_indices`): the leader's reference sampled at
     those knots with period M T_s, the warm start's joints there, the rate bounds (speeds and accelerations of joints
     and robots, ``QPParams``) scaled by ``rate_scale`` ≤ 1 and the robots' separation margin raised by ``margin`` [m]
     — margins for the interpolation between knots (the clearance's is the caller's ``d_safe``)."""
     tr = problem.trajectory
     K = tr.t.size - 1
-    idx = coarse_indices(K, M)
+    idx = coarse_indices(K, M, ends)
     tc = np.asarray(tr.t, dtype=float)[idx]  # a non-uniform grid: the NLP's rates and cost take each step's length
     traj = tr._replace(t=tc, x=tr.x[idx], xd=tr.xd[idx], xdd=tr.xdd[idx])
     qp = problem.qp_params
@@ -76,10 +85,10 @@ def coarse_problem(problem: Any, warm: Any, M: int, rate_scale: float, margin: f
     return pc, wc
 
 
-def interpolate(robots: Array, t_fine: Array, M: int) -> Array:
+def interpolate(robots: Array, t_fine: Array, M: int, ends: int = 0) -> Array:
     """Robot positions (K+1, N, 2) [m] at the fine knots ``t_fine`` from the coarse plan's ``robots`` (Kc+1, N, 2) at
     :func:`coarse_indices`: a quadratic interpolating spline in time per coordinate (C¹; its accelerations are the
     coarse differences' to first order)."""
-    idx = coarse_indices(t_fine.size - 1, M)
+    idx = coarse_indices(t_fine.size - 1, M, ends)
     k = min(2, idx.size - 1)
     return np.asarray(make_interp_spline(t_fine[idx], robots, k=k, axis=0)(t_fine), dtype=float)

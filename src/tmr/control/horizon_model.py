@@ -90,7 +90,9 @@ class HorizonOptions:
         coarse_from: the smallest horizon (knots) that gets the coarse pass.
         clearance_margin: added to d_safe [m] for every clearance sample except the equality leader's own (it
             depends on the fixed reference only); the coarse pass sets it to ``coarse_margin``.
-        coarse_margin: added to d_safe in the coarse NLP [m] (the interpolation between its knots).
+        coarse_margin: added to the coarse NLP's clearance bounds (but the equality leader's own) and separation
+            margin [m] (the interpolation between its knots).
+        coarse_ends: the coarse grid also has every knot of the first and last this many steps (0: none).
         coarse_rate_scale: the coarse NLP's speed and acceleration bounds (joints and robots) times this (≤ 1).
         coarse_time_share: fraction of the time left (with a time limit) the coarse pass may use.
         coarse_polish_iter: IPOPT iterations (per round) of the whole NLP started from an accepted coarse optimum: if
@@ -175,7 +177,8 @@ class HorizonOptions:
     clearance_margin: float = 0.0
     coarse_knots: int | None = 200
     coarse_from: int = 500
-    coarse_margin: float = 0.01
+    coarse_margin: float = 0.02
+    coarse_ends: int = 0
     coarse_polish_iter: int = 15
     coarse_rate_scale: float = 0.95
     coarse_time_share: float = 0.5
@@ -216,6 +219,8 @@ class HorizonOptions:
             raise ParameterError(f"window_overlap must be in [0, window), got {self.window_overlap!r}")
         if self.coarse_knots is not None and (isinstance(self.coarse_knots, bool) or int(self.coarse_knots) < 2):
             raise ParameterError(f"coarse_knots must be ≥ 2 (or None: no coarse pass), got {self.coarse_knots!r}")
+        if isinstance(self.coarse_ends, bool) or int(self.coarse_ends) < 0:
+            raise ParameterError(f"coarse_ends must be ≥ 0 steps, got {self.coarse_ends!r}")
         if not 0 <= self.clearance_margin < 1:
             raise ParameterError(f"clearance_margin must be in [0, 1) m, got {self.clearance_margin!r}")
         share, scale = self.coarse_time_share, self.coarse_rate_scale
