@@ -854,10 +854,11 @@ def _coarse_pass(
     deadline: float,
     limit: float,
 ) -> tuple[_Candidate | None, dict[str, Any]]:
-    """The NLP on every M-th knot (:mod:`tmr.control.horizon_coarse`; d_safe + ``coarse_margin``, rate bounds ×
-    ``coarse_rate_scale``), solved by :func:`plan_horizon` itself in ``coarse_time_share`` of the time left, its
-    optimum interpolated to every knot: the candidate if every row of the whole NLP holds there, no term is worse than
-    the warm start's and it costs no more (else ``None``); and the log (stride, knots, iterations, result, why)."""
+    """The NLP on every M-th knot (:mod:`tmr.control.horizon_coarse`; clearance bounds and separation margin +
+    ``coarse_margin``, rate bounds × ``coarse_rate_scale``), solved by :func:`plan_horizon` itself in
+    ``coarse_time_share`` of the time left, its optimum interpolated to every knot: the candidate if every row of the
+    whole NLP holds there, no term is worse than the warm start's and it costs no more (else ``None``); and the log
+    (stride, knots, iterations, result, why)."""
     opts, su = model.su.opts, model.su
     t0 = time.perf_counter()
     pc, wc = coarse_problem(problem, warm_start, M, opts.coarse_rate_scale, opts.coarse_margin, opts.coarse_ends)
