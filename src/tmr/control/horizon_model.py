@@ -84,9 +84,10 @@ class HorizonOptions:
         fast_hessian: the fast attempt's Hessian (``"exact"``: scenario E with 6 robots in 31 iterations, 53 with
             Gauss–Newton).
         coarse_knots: a horizon of at least ``coarse_from`` knots is solved first on every M-th knot, M =
-            ⌈K / coarse_knots⌉ (T_s' = M T_s; :mod:`tmr.control.horizon_coarse`), its optimum interpolated to every
-            knot and returned if every row of the whole NLP holds there and it is no worse than the warm start in any
-            term; else the whole NLP starts from it (``None``: off; ``formulations/horizon.md``, "Coarse knots").
+            ⌈K / coarse_knots⌉ (steps of M T_s; :mod:`tmr.control.horizon_coarse`), its optimum interpolated to every
+            knot; if every row of the whole NLP holds there and it is no worse than the warm start in any term, it is
+            polished (``coarse_polish_iter``) and is the plan if the polish does not converge (``"coarse_optimal"``);
+            else the whole NLP starts from it (``None``: off; ``formulations/horizon.md``, "Coarse knots").
         coarse_from: the smallest horizon (knots) that gets the coarse pass.
         clearance_margin: added to d_safe [m] for every clearance sample except the equality leader's own (it
             depends on the fixed reference only); the coarse pass sets it to ``coarse_margin``.
