@@ -642,12 +642,9 @@ def test_an_nlp_too_big_to_build_within_the_limit_is_not_started(feasible_warm, 
     assert plan_horizon(problem, warm, **WEIGHTED).diagnostics["horizon_result"] == "optimal"
 
 
-def test_structured_jacobian_and_hessian_equal_casadis_automatic_ones():
-    """The NLP's Jacobian and Lagrangian Hessian assembled from the scipy spline's derivatives and the sparse point
-    maps (``_Transcription.derivatives``) are casadi's own (automatic differentiation of the transcribed rows), at a
-    point off the warm start with random multipliers; the scipy spline is casadi's."""
-    import casadi as ca
-
+def full_transcription():
+    """The small problem's NLP at its warm start with every row of every group in it (clearance included): the
+    problem, its setup, model, IPOPT's initial point and the transcription."""
     problem = small_problem()
     warm, _ = solve(problem, "qp")
     su = horizon_model._Setup(problem, horizon_model._options({}))
@@ -658,10 +655,20 @@ def test_structured_jacobian_and_hessian_equal_casadis_automatic_ones():
     )
     xv = model.project(model.x_of(Q))
     vals = model.values(xv)
-    masks = {name: np.ones_like(vals[name], dtype=bool) for name in model.rows}  # every row, clearance included
+    masks = {name: np.ones_like(vals[name], dtype=bool) for name in model.rows}
     for name in masks:
         masks[name][:, model.fixed_columns(name)] = False
-    tr = horizon_model._Transcription(model, masks)
+    return problem, su, model, xv, horizon_model._Transcription(model, masks)
+
+
+def test_structured_jacobian_and_hessian_equal_casadis_automatic_ones():
+    """The NLP's Jacobian and Lagrangian Hessian assembled from the scipy spline's derivatives and the sparse point
+    maps (``_Transcription.derivatives``) are casadi's own (automatic differentiation of the transcribed rows), at a
+    point off the warm start with random multipliers; the scipy spline is casadi's."""
+    import casadi as ca
+
+    problem, su, model, xv, tr = full_transcription()
+    env = problem.env
     assert tr.index["clearance"].size > 0
     custom = tr.derivatives(2.5, "exact")
     assert set(custom) == {"jac_g", "hess_lag"}
@@ -711,20 +718,7 @@ def test_gauss_newton_hessian_is_the_residuals_jacobian_product_and_the_rows_exa
     paper's residuals written here from their definitions (q̇, d_i − d_j, q̈ of eq. 24, 25, 27; Σ r² = f_i), it is
     positive semidefinite, a fitness row adds its own Gauss–Newton term (multiplier clipped at 0), and every other
     row keeps casadi's exact curvature."""
-    problem = small_problem()
-    warm, _ = solve(problem, "qp")
-    su = horizon_model._Setup(problem, horizon_model._options({}))
-    Q, info = horizon_model._warm_start(su, warm)
-    env = problem.env
-    model = horizon_model._Model(
-        su, distance_spline(env), bounds=info["warm_start_terms"], bspline=horizon_model.distance_bspline(env)
-    )
-    xv = model.project(model.x_of(Q))
-    vals = model.values(xv)
-    masks = {name: np.ones_like(vals[name], dtype=bool) for name in model.rows}
-    for name in masks:
-        masks[name][:, model.fixed_columns(name)] = False
-    tr = horizon_model._Transcription(model, masks)
+    problem, su, model, xv, tr = full_transcription()
     scale, Ts = 2.5, problem.time_params.Ts
     gn = tr.derivatives(scale, "gauss-newton")["hess_lag"]
     exact = tr.derivatives(scale, "exact")["hess_lag"]

@@ -362,7 +362,7 @@ def plan_horizon(
         t1 = time.perf_counter()
         xv, windows, window_lam = _windowed(model, masks, xv, obj_scale, pool, bar, deadline, limit)
         vals = model.values(xv)
-        masks = {name: masks[name] | model.near(name, vals[name]) for name in model.rows}
+        masks = model.grown(masks, vals)
         window_time = time.perf_counter() - t1
         solve_time += sum(w["solve_time"] for w in windows)
         trans_time += window_time - sum(w["solve_time"] for w in windows)
@@ -380,13 +380,13 @@ def plan_horizon(
         if coarse_c is not None:  # every row holds at the interpolated optimum: the whole NLP polishes it, briefly
             xv = x_init = coarse_c.x
             vals = model.values(xv)
-            masks = {name: masks[name] | model.near(name, vals[name]) for name in model.rows}
+            masks = model.grown(masks, vals)
             viol = []
             phases = _polish_phases(opts)
         elif coarse_log.get("x") is not None:  # rows violated between the coarse knots: the whole NLP starts there
             xv = x_init = coarse_log.pop("x")
             vals = model.values(xv)
-            masks = {name: masks[name] | model.near(name, vals[name]) for name in model.rows}
+            masks = model.grown(masks, vals)
             viol = _violations(model, vals, xv, tol)
             coarse_log["fine_start"] = "the interpolated coarse optimum"
     x_phase, masks_phase, viol_phase = xv, masks, viol  # where every attempt of the procedure starts
@@ -409,7 +409,7 @@ def plan_horizon(
                     fast_log["fallback_start"] = f"{where}, objective {seed.J:.6g}"
                     xv = x_init = seed.x
                     vals = model.values(xv)
-                    masks = {name: masks_fast[name] | model.near(name, vals[name]) for name in model.rows}
+                    masks = model.grown(masks_fast, vals)
                     viol, tr_first = _violations(model, vals, xv, tol), None  # round 1: the rows near the seed
                 vals = model.values(xv)
                 stats, status, stop, too_big = {}, "", "", None
@@ -507,7 +507,7 @@ def plan_horizon(
                 if not viol:
                     stop = "converged"
                     break
-                masks = {name: masks[name] | model.near(name, vals[name]) for name in model.rows}
+                masks = model.grown(masks, vals)
             else:
                 stop = "rows_left_out"
             phase_rounds = rounds[first_round:]
@@ -613,11 +613,11 @@ def plan_horizon(
                if "fallback_start" in fast_log else "the warm start")
         )  # fmt: skip
     if coarse_c is not None:
-        pf, ph = _polish_floor(opts)
         floor_note = f"every {_nth(M)} knot: {coarse_floor}"
         if opts.coarse_polish_iter > 0:
             floor_note += (
-                f"; the whole NLP from its optimum: IPOPT min_hessian_perturbation {pf:g} ({_HESSIAN[ph]} Hessian), "
+                f"; the whole NLP from its optimum: IPOPT min_hessian_perturbation {_polish_floor(opts):g} "
+                f"({_HESSIAN[opts.fast_hessian]} Hessian), "
                 f"at most {opts.coarse_polish_iter} iterations"
             )
     if chosen is None:
@@ -695,7 +695,7 @@ def plan_horizon(
             diag["horizon_summary"]["rounds"] = coarse_log["rounds"]
             diag.update(ipopt_status=coarse_log["status"], ipopt_success=True, rounds=coarse_log["rounds"])
         elif coarse_c is not None:  # the polish's point
-            diag["horizon_summary"]["min_hessian_perturbation"] = _polish_floor(opts)[0]
+            diag["horizon_summary"]["min_hessian_perturbation"] = _polish_floor(opts)
     if poses is not None:  # differential drive: how much executing the NLP's poses changed them
         diag.update(su.diff_log)
     qdot = np.vstack([np.diff(Q, axis=0) / su.Ts, np.zeros((1, su.n))])
@@ -917,12 +917,13 @@ def _coarse_pass(
     return None, log
 
 
-def _polish_floor(opts: HorizonOptions) -> tuple[float, str]:
-    """The polishing pass's IPOPT floor and Hessian: the fast attempt's if it is on, else the default ones."""
+def _polish_floor(opts: HorizonOptions) -> float:
+    """The polishing pass's IPOPT floor: the fast attempt's if it is on, else the default one (its Hessian is
+    always the fast attempt's, ``fast_hessian``)."""
     fast = opts.fast_min_hessian_perturbation
     if fast is not None and fast < opts.min_hessian_perturbation and "min_hessian_perturbation" not in opts.ipopt:
-        return float(fast), opts.fast_hessian
-    return float(opts.min_hessian_perturbation), opts.fast_hessian
+        return float(fast)
+    return float(opts.min_hessian_perturbation)
 
 
 def _polish_phases(opts: HorizonOptions) -> list[tuple[str, list[tuple[str, dict[str, Any]]]]]:
@@ -930,7 +931,7 @@ def _polish_phases(opts: HorizonOptions) -> list[tuple[str, list[tuple[str, dict
     ``coarse_polish_iter`` IPOPT iterations, no retry (none at all with a cap of 0)."""
     if opts.coarse_polish_iter <= 0:
         return []
-    cap = {"min_hessian_perturbation": _polish_floor(opts)[0], "max_iter": int(opts.coarse_polish_iter)}
+    cap = {"min_hessian_perturbation": _polish_floor(opts), "max_iter": int(opts.coarse_polish_iter)}
     return [("polish", [("primary", cap)])]
 
 

@@ -616,6 +616,7 @@ class _Model:
         dD = D[:, 1:] - D[:, :-1]
         zn = ca.DM.zeros(n, 1)
         dQ = ca.vertcat(*[r for i in range(N) for r in (dtheta[i, :], dD[i, :])])
+        h, hbar = knot_weights(su.t)  # steps and knot spans [s] (all Ts on a uniform grid)
         Dij = [D[i, :] - D[j, :] for i, j in su.pairs]
         if su.uniform:
             Qd = dQ / Ts  # q̇_0..q̇_{K−1}; q̇_K = 0
@@ -624,7 +625,6 @@ class _Model:
         else:  # the coarse pass's grid: steps h_k, knot spans h̄_k, each term weighted by its share of time
             if su.drive is not None:
                 raise ParameterError("a non-uniform time grid is not implemented for differential drive")
-            h, hbar = knot_weights(su.t)
             Qd = dQ * ca.DM(np.tile(1.0 / h, (n, 1)))
             Qdd = (ca.horzcat(Qd, zn) - ca.horzcat(zn, Qd)) * ca.DM(np.tile(1.0 / hbar, (n, 1)))
             Qd_w = Qd * ca.DM(np.tile(np.sqrt(h / h[0]), (n, 1)))
@@ -677,18 +677,21 @@ class _Model:
                 "m²",
             )
         self.bounds = {k: float(v) for k, v in (bounds or {}).items()}
-        if opts.no_worse_terms and bounds:
+        # the fitness rows f_i / f_i,warm ≤ 1, in this order (empty: no such rows)
+        self.fitness_terms = (
+            [k for k in ("f1", "f2", "f4") if self.bounds.get(k, 0.0) > 0] if opts.no_worse_terms else []
+        )
+        if self.fitness_terms:
             terms = {"f1": f1, "f2": f2, "f4": f4}
-            names = [k for k in ("f1", "f2", "f4") if self.bounds.get(k, 0.0) > 0]
-            if names:
-                rows["fitness"] = _Rows(
-                    ca.vertcat(*[terms[k] / self.bounds[k] for k in names]),
-                    np.full(len(names), -np.inf),
-                    np.full(len(names), 1.0 - _NO_WORSE_MARGIN),
-                    np.array([K]),
-                    [f"{k} relative to the warm start's" for k in names],
-                    "× warm start",
-                )
+            names = self.fitness_terms
+            rows["fitness"] = _Rows(
+                ca.vertcat(*[terms[k] / self.bounds[k] for k in names]),
+                np.full(len(names), -np.inf),
+                np.full(len(names), 1.0 - _NO_WORSE_MARGIN),
+                np.array([K]),
+                [f"{k} relative to the warm start's" for k in names],
+                "× warm start",
+            )
         M = N * su.S
         rows["clearance"] = _Rows(
             None, np.full(M, su.d_safe), np.full(M, np.inf), np.arange(K + 1), su.sample_labels, "m"
@@ -712,7 +715,7 @@ class _Model:
         if su.uniform:
             Vx, Vy = (X[:, 1:] - X[:, :-1]) / Ts, (Y[:, 1:] - Y[:, :-1]) / Ts
         else:
-            Hn = ca.DM(np.tile(1.0 / knot_weights(su.t)[0], (N, 1)))
+            Hn = ca.DM(np.tile(1.0 / h, (N, 1)))
             Vx, Vy = (X[:, 1:] - X[:, :-1]) * Hn, (Y[:, 1:] - Y[:, :-1]) * Hn
         rl = [f"robot {i + 1} {a}" for a in "xy" for i in range(N)]
         rows["robot_speed"] = _Rows(
@@ -723,7 +726,7 @@ class _Model:
             Ax = (ca.horzcat(Vx, zN) - ca.horzcat(zN, Vx)) / Ts
             Ay = (ca.horzcat(Vy, zN) - ca.horzcat(zN, Vy)) / Ts
         else:
-            Hb = ca.DM(np.tile(1.0 / knot_weights(su.t)[1], (N, 1)))
+            Hb = ca.DM(np.tile(1.0 / hbar, (N, 1)))
             Ax = (ca.horzcat(Vx, zN) - ca.horzcat(zN, Vx)) * Hb
             Ay = (ca.horzcat(Vy, zN) - ca.horzcat(zN, Vy)) * Hb
         rows["robot_accel"] = _Rows(
@@ -856,6 +859,10 @@ class _Model:
         """How far each entry of group ``name`` (values ``v`` (rows, cols)) is beyond its bounds (≤ 0: satisfied)."""
         r = self.rows[name]
         return np.maximum(self.lower(name) - v, v - r.hi[:, None])
+
+    def grown(self, masks: dict[str, NDArray[np.bool_]], vals: dict[str, Array]) -> dict[str, NDArray[np.bool_]]:
+        """``masks`` with the entries :meth:`near` at ``vals`` added (the rows of the next transcription)."""
+        return {name: masks[name] | self.near(name, vals[name]) for name in self.rows}
 
     def near(self, name: str, v: Array) -> NDArray[np.bool_]:
         """Entries that are rows of the next transcription (lazy rows): every leader, fitness and span entry (the
@@ -1007,8 +1014,7 @@ class _Transcription:
         keep = np.ones(rows.shape[0])
         fit = self.index.get("fitness")
         if fit is not None and fit.size:  # the rows f_i / f_i,warm ≤ 1, in _Model's order
-            names = [k for k in ("f1", "f2", "f4") if m.bounds.get(k, 0.0) > 0]
-            for i, k in enumerate(names):
+            for i, k in enumerate(m.fitness_terms):
                 row = self.offset["fitness"] + i
                 keep[row] = 0.0
                 coef[k] = coef[k] + ca.fmax(lam[row], 0) / m.bounds[k]
