@@ -80,8 +80,6 @@ from tmr.control.horizon_model import (
     _Transcription,
     _warm_start,
     _weighted,
-    distance_bspline,
-    distance_spline,
     objective,
     objective_terms,
     samples_needed,
@@ -99,6 +97,7 @@ from tmr.control.horizon_pool import (
     _violations,
     _warm_candidate,
 )
+from tmr.control.horizon_spline import ClearanceSpline, distance_spline
 from tmr.errors import ParameterError
 from tmr.world.environment import refuse_low_obstacles
 
@@ -311,7 +310,7 @@ def plan_horizon(
     warm_poses = _warm_poses(su, warm_start) if su.drive is not None else None
     warm_time = time.perf_counter() - t0
     t0 = time.perf_counter()
-    model = _Model(su, distance_spline(env), bounds=info["warm_start_terms"], bspline=distance_bspline(env))
+    model = _Model(su, distance_spline(env), bounds=info["warm_start_terms"], spline=ClearanceSpline(env))
     xv = model.project(model.x_of(Qraw))  # IPOPT's initial point: q_0 = start, the equality leader on x_d
     Qw = model.q_of(xv)
     x_init = xv

@@ -100,7 +100,7 @@ def distance_field3d(
     distance to the obstacles (and to the room's faces with ``walls``).
 
     The control points are the exact distance at the grid nodes (nothing is fitted: the quasi-interpolant of
-    ``tmr.control.horizon_model.distance_spline`` in 3-D). The cell ``h`` [m] grows if the box would need more than
+    ``tmr.control.horizon_spline.distance_spline`` in 3-D). The cell ``h`` [m] grows if the box would need more than
     ``max_nodes`` nodes. The overestimate D̃ − D is measured at ``error_points`` points — half uniform in the box, half
     the ``probe`` points (e.g. the warm start's drones and tether samples) moved by random offsets of up to 0.5 m —
     among those where the spline reads at least ``band`` [m] (the smallest bound of any clearance row: a point that

@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tmr.control.clik import Plan
+from tmr.control.horizon_spline import ClearanceSpline, SplineRows
 from tmr.errors import InfeasibleStep, ParameterError
 
 Array = NDArray[np.float64]
@@ -274,84 +275,6 @@ class HorizonInfeasible(InfeasibleStep):
 # ----------------------------------------------------------------------------------------------------------------
 # building blocks
 # ----------------------------------------------------------------------------------------------------------------
-def _spline_tables(env: Any) -> tuple[list[float], list[float], Array]:
-    """Knots (x, y) and control points (nx, ny) of the clearance B-spline: the environment's signed-distance samples
-    (``env._grid``, cell h = ``env.resolution``) on uniform knots centred on them (see :func:`distance_spline`)."""
-    fld, origin, _ = env._grid
-    d = np.asarray(fld[..., 0], dtype=float)
-    nx, ny = d.shape
-    h = float(env.resolution)
-    kx = (origin[0] + h * (np.arange(nx + 4) - 2.0)).tolist()
-    ky = (origin[1] + h * (np.arange(ny + 4) - 2.0)).tolist()
-    return kx, ky, d
-
-
-def distance_spline(env: Any) -> ca.Function:
-    """Smooth signed distance to the inflated obstacles, ``f(p (2, 1)) -> c`` [m] (casadi; ``f.map(M)`` for batches).
-
-    A cubic tensor B-spline whose control points are the samples of the environment's signed distance field
-    (``env._grid``, cell h = ``env.resolution``) on uniform knots centred on the samples: nothing is fitted, so it is
-    built instantly. This quasi-interpolant reproduces bilinear functions; elsewhere it is a local weighted mean of the
-    samples (weights ≥ 0, second moment 2h²/3), so it lies *below* the field at the field's kinks in free space (the
-    distance to a union is a minimum of distances: concave there) and above it by at most κh²/3 where the field is
-    smooth with curvature κ ≤ 1/r (1.7 mm for h = 5 cm, r = 0.5 m). Measured against the exact (shapely) clearance
-    within 0.5 m of the obstacles of A–D: overestimate ≤ 9 mm (99.9 % ≤ 2.7 mm).
-
-    It is wrapped with ``never_inline`` so that an SX-expanded NLP keeps it as a call node (the B-spline node has no SX
-    form). Its derivatives in the NLP come from :func:`distance_bspline` (the same spline), see :class:`_Transcription`.
-    """
-    kx, ky, d = _spline_tables(env)
-    spline = ca.Function.bspline("clearance_spline", [kx, ky], d.ravel(order="F").tolist(), [3, 3], 1, {})
-    p = ca.MX.sym("p", 2, 1)
-    return ca.Function("clearance", [p], [spline(p)], {"never_inline": True})
-
-
-def distance_bspline(env: Any) -> Any:
-    """The spline of :func:`distance_spline` as a :class:`scipy.interpolate.NdBSpline` (same knots, control points
-    and degree 3 × 3): its first and second derivatives for the NLP's Jacobian and Hessian (:class:`_SplineDerivatives`;
-    casadi's own second derivative of its B-spline node costs 3.4 µs a point against scipy's 1.4 µs for all five)."""
-    from scipy.interpolate import NdBSpline
-
-    kx, ky, d = _spline_tables(env)
-    return NdBSpline((np.asarray(kx), np.asarray(ky)), d, 3)
-
-
-class _SplineDerivatives(ca.Callback):
-    """Derivatives of the clearance spline at n points, ``P (2, n) -> (a, b, c)`` each (1, n): order 1 gives
-    (∂c/∂x, ∂c/∂y, 0), order 2 (∂²c/∂x², ∂²c/∂x∂y, ∂²c/∂y²) [1, 1/m]. Evaluated by scipy (:func:`distance_bspline`);
-    never differentiated itself: the NLP's Jacobian and Hessian are assembled from them (:class:`_Transcription`).
-    Outside the knot box [t_0, t_last]² casadi's B-spline is 0 (scipy's extrapolates): the derivatives are 0 there
-    too, so they stay those of the function the NLP evaluates."""
-
-    def __init__(self, bspline: Any, n: int, order: int) -> None:
-        ca.Callback.__init__(self)
-        self.bspline, self.n = bspline, int(n)
-        self.box = np.array([[t[0], t[-1]] for t in bspline.t])  # (2, 2): casadi's spline is 0 outside
-        self.nus = ((1, 0), (0, 1)) if order == 1 else ((2, 0), (1, 1), (0, 2))
-        self.construct(f"clearance_d{order}_{n}", {})
-
-    def get_n_in(self) -> int:
-        return 1
-
-    def get_n_out(self) -> int:
-        return len(self.nus)
-
-    def get_sparsity_in(self, i: int) -> ca.Sparsity:
-        return ca.Sparsity.dense(2, self.n)
-
-    def get_sparsity_out(self, i: int) -> ca.Sparsity:
-        return ca.Sparsity.dense(1, self.n)
-
-    def eval(self, arg: list[Any]) -> list[Any]:
-        pts = np.asarray(arg[0], dtype=float).T
-        out = [self.bspline(pts, nu=nu).reshape(1, -1) for nu in self.nus]
-        outside = ((pts < self.box[:, 0]) | (pts > self.box[:, 1])).any(axis=1)
-        if outside.any():
-            for o in out:
-                o[0, outside] = 0.0
-        return out
-
-
 def samples_needed(span_max: float, r: float, d_safe: float, field_error: float) -> int:
     """Clearance samples per tether so that the straight tether between two samples stays out of the obstacles.
 
@@ -590,12 +513,16 @@ class _Model:
     """
 
     def __init__(
-        self, su: _Setup, clr: ca.Function, bounds: dict[str, float] | None = None, bspline: Any = None
+        self,
+        su: _Setup,
+        clr: ca.Function,
+        bounds: dict[str, float] | None = None,
+        spline: ClearanceSpline | None = None,
     ) -> None:
         opts = su.opts
         N, n, K, Ts = su.N, su.n, su.K, su.Ts
         self.su, self.clr = su, clr
-        self.bspline = bspline  # the clearance spline in scipy: structured derivatives (None: casadi's own)
+        self.spline = spline  # the clearance spline in numpy: structured derivatives (None: casadi's own)
         self.warm_heading = su.warm_heading  # differential drive: the headings x_of appends by default
         xs = ca.MX.sym("p", 2 * N * (K + 1))  # x = [P_0; P_1; ...; P_K], P_k = (x_1..x_N, y_1..y_N)
         xin = xs
@@ -888,13 +815,13 @@ class _Model:
 class _Transcription:
     """The NLP of one round: the selected rows of every group, their bounds and labels, and the IPOPT solver.
 
-    With the model's scipy spline (``_Model.bspline``) the constraint Jacobian and the Hessian of the Lagrangian are
-    assembled here instead of casadi's automatic ones (casadi options ``jac_g``, ``hess_lag``): a clearance row
-    c(A x + b) has the Jacobian row ∇c(p)ᵀ A and adds Aᵀ (λ ∇²c(p)) A to the Hessian, with A the sparse point map
-    (:meth:`_Model.point_maps`, two robots a row) and ∇c, ∇²c from :class:`_SplineDerivatives`; every other row is
-    differentiated by casadi. The automatic Hessian colours the whole banded Lagrangian and evaluates every B-spline
-    once per colour (scenario E, 6 robots, 31,308 rows: 0.24 s Jacobian and 0.32 s Hessian per IPOPT iteration,
-    6 s to build; measured by ``benchmarks/horizon.py``'s derivative rows).
+    With the model's numpy spline (``_Model.spline``) the clearance rows, the constraint Jacobian and the Hessian of
+    the Lagrangian are assembled here instead of casadi's automatic ones (casadi options ``jac_g``, ``hess_lag``): a
+    clearance row c(A x + b) has the Jacobian row ∇c(p)ᵀ A and adds Aᵀ (λ ∇²c(p)) A to the Hessian, with A the sparse
+    point map (:meth:`_Model.point_maps`, two robots a row) and c, ∇c, ∇²c from one :class:`SplineRows` node (one
+    evaluation an iterate); every other row is differentiated by casadi. The automatic Hessian colours the whole banded
+    Lagrangian and evaluates every B-spline once per colour (scenario E, 6 robots, 31,308 rows: 0.24 s Jacobian and
+    0.32 s Hessian per IPOPT iteration, 6 s to build; measured by ``benchmarks/horizon.py``'s derivative rows).
     """
 
     def __init__(self, model: _Model, masks: dict[str, NDArray[np.bool_]]) -> None:
@@ -907,7 +834,8 @@ class _Transcription:
         self.offset: dict[str, int] = {}
         rest_before: list[Any] = []  # rows differentiated by casadi, before and after the clearance rows
         rest_after: list[Any] = []
-        self._clr: tuple[Any, Any, Any] | None = None  # (A_x, A_y, points) of the clearance rows
+        self._clr: tuple[Any, Any, Any] | None = None  # (A_x, A_y, the spline's outputs) of the clearance rows
+        self._callbacks: list[ca.Callback] = []  # the spline nodes must outlive the functions that call them
         x = model.x
         start = 0
         for name in GROUPS:
@@ -923,8 +851,12 @@ class _Transcription:
             if name == "clearance":
                 Ax, Ay, b = model.point_maps(idx)
                 P = ca.horzcat(ca.mtimes(Ax, x) + b[:, 0], ca.mtimes(Ay, x) + b[:, 1]).T
-                self._clr = (Ax, Ay, P)
-                g.append(ca.vec(model.clr.map(idx.size)(P)))
+                if model.spline is None:  # casadi's B-spline node: casadi differentiates it
+                    g.append(ca.vec(model.clr.map(idx.size)(P)))
+                else:  # c, ∇c, ∇²c in one node (the derivatives: jac_g, hess_lag)
+                    self._callbacks.append(SplineRows(model.spline, idx.size))
+                    self._clr = (Ax, Ay, self._callbacks[-1](P))
+                    g.append(ca.vec(self._clr[2][0]))
             else:
                 g.append(ca.vec(r.expr)[idx.tolist()])
                 (rest_after if self._clr is not None else rest_before).append(g[-1])
@@ -942,18 +874,17 @@ class _Transcription:
         self.lbx, self.ubx = model.lbx, model.ubx
         self.nlp = {"x": model.x, "f": model.J, "g": self.g}
         self._derivatives: dict[tuple[float, str], dict[str, Any]] = {}
-        self._callbacks: list[ca.Callback] = []  # the spline derivatives must outlive the functions that call them
 
     def derivatives(self, obj_scale: float, hessian: str | None = None) -> dict[str, ca.Function]:
         """casadi ``nlpsol`` options ``jac_g`` and ``hess_lag`` with the structured clearance derivatives (see the
-        class docstring) for the cost divided by ``obj_scale``; without the scipy spline or clearance rows empty
+        class docstring) for the cost divided by ``obj_scale``; without the numpy spline or clearance rows empty
         (casadi's own), except ``hess_lag`` for ``hessian="gauss-newton"``; no ``hess_lag`` with
         ``hessian="limited-memory"``; ``hessian``: ``None`` = the options'."""
         hessian = hessian or self.opts.hessian
         key = (obj_scale, hessian)
         if key in self._derivatives:
             return self._derivatives[key]
-        if self.model.bspline is None or self._clr is None:
+        if self._clr is None:
             if hessian != "gauss-newton":
                 return {}
             lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.size)  # casadi differentiates every row
@@ -961,14 +892,11 @@ class _Transcription:
             self._derivatives[key] = {"hess_lag": self._hess_lag(lam_f, lam_g, hess)}
             return self._derivatives[key]
         x, f = self.model.x, self.model.J / obj_scale
-        Ax, Ay, P = self._clr
+        Ax, Ay, (_, cx, cy, cxx, cxy, cyy) = self._clr
         n = Ax.shape[0]
         before, after = self._rest
         nb, na = before.shape[0], after.shape[0]
-        d1, d2 = _SplineDerivatives(self.model.bspline, n, 1), _SplineDerivatives(self.model.bspline, n, 2)
-        self._callbacks += [d1, d2]
         p = ca.MX.sym("p", 0, 1)
-        cx, cy = d1(P)
         rest = ca.vertcat(before, after)
         J_rest = ca.jacobian(rest, x)
         J_clr = ca.mtimes(ca.diag(cx), Ax) + ca.mtimes(ca.diag(cy), Ay)
@@ -985,7 +913,6 @@ class _Transcription:
             H_rest = self._gauss_newton(obj_scale, lam_f, lam_rest, rest)
         else:
             H_rest = ca.hessian(lam_f * f + ca.dot(lam_rest, rest), x)[0]
-        cxx, cxy, cyy = d2(P)
         AxT, AyT = Ax.T, Ay.T
         Wxx, Wxy, Wyy = ca.diag(lam_c * cxx.T), ca.diag(lam_c * cxy.T), ca.diag(lam_c * cyy.T)
         Hxy = ca.mtimes(AxT, ca.mtimes(Wxy, Ay))
