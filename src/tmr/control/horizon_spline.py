@@ -1,8 +1,8 @@
-"""The clearance spline of the whole-horizon NLP (``formulations/horizon.md``, "One spline evaluation an iterate"): a cubic tensor
-B-spline on the environment's signed-distance samples, as casadi's B-spline node (:func:`distance_spline`: the rows
-when casadi differentiates them, and every numeric check) and as :class:`ClearanceSpline`, the same spline with its
-first and second derivatives from one vectorised pass: the NLP's clearance rows, Jacobian and Hessian
-(:class:`SplineRows`).
+"""The clearance spline of the whole-horizon NLP (``formulations/horizon.md``, "One spline evaluation an
+iterate"): a cubic tensor B-spline on the environment's signed-distance samples, as casadi's B-spline node
+(:func:`distance_spline`: the rows when casadi differentiates them, and every numeric check) and as
+:class:`ClearanceSpline`, the same spline with its first and second derivatives from one vectorised pass: the NLP's
+clearance rows, Jacobian and Hessian (:class:`SplineRows`).
 
 Why not scipy's ``NdBSpline``: it evaluates one derivative order per call, so value, gradient and Hessian take five
 calls plus casadi's value; ``benchmarks/horizon_spline.py`` measures both. Tested against both
