@@ -181,7 +181,7 @@ class HorizonOptions:
     coarse_from: int = 500
     coarse_margin: float = 0.02
     coarse_ends: int = 0
-    coarse_polish_iter: int = 15
+    coarse_polish_iter: int = 60
     coarse_rate_scale: float = 0.95
     coarse_time_share: float = 0.5
     window: int | None = None
