@@ -681,6 +681,46 @@ class _Model:
         self._names = names
         self._full = ca.Function("rows", [x], [rows[g].expr for g in names] + [ca.horzcat(self.Px, self.Py).T])
         self._clr_all = clr.map(M * (K + 1))
+        # the non-clearance rows for the Lagrangian's Hessian (:meth:`rows_hessian`): every entry, GROUPS order
+        self.rest_groups = [g for g in GROUPS if g in rows and g != "clearance"]
+        self.rest_offset: dict[str, int] = {}
+        self.rest_size = 0
+        for g in self.rest_groups:
+            self.rest_offset[g] = self.rest_size
+            self.rest_size += int(rows[g].expr.numel())
+        self.gn_terms = ["f1", "f2", "f4"] + (["f3"] if opts.leader_tolerance > 0 else [])
+        self._rows_hessian: dict[str, ca.Function] = {}
+
+    def rows_hessian(self, hessian: str) -> ca.Function:
+        """The Hessian (x × x) of the cost and every non-clearance row, ``H(x, c, λ)``, built once per model and
+        Hessian kind (casadi's symbolic Hessian of ≈ 40,000 rows takes ≈ 1.4 s; every round's transcription reuses
+        it): λ the multipliers of every entry of every group of :attr:`rest_groups` (each group's entries
+        column-major at :attr:`rest_offset`; 0 for entries that are not rows of the NLP). ``"exact"``: c (1,) weighs
+        the cost J; ``"gauss-newton"``: c (len(:attr:`gn_terms`),) weighs 2 JᵣᵀJᵣ of each term's residuals r
+        (f = Σ r², ``formulations/horizon.md`` "Gauss–Newton Hessian"), and the fitness rows (sums of squares over
+        f_i,warm) carry no curvature of their own: their Gauss–Newton part is the caller's share of c."""
+        if hessian in self._rows_hessian:
+            return self._rows_hessian[hessian]
+        x = self.x
+        rest = ca.vertcat(*[ca.vec(self.rows[g].expr) for g in self.rest_groups])
+        lam = ca.MX.sym("lam", self.rest_size)
+        if hessian == "gauss-newton":
+            c = ca.MX.sym("c", len(self.gn_terms))
+            keep = np.ones(self.rest_size)
+            if "fitness" in self.rest_offset:
+                o = self.rest_offset["fitness"]
+                keep[o : o + len(self.fitness_terms)] = 0.0
+            # Σ 2 c_k J_kᵀJ_k as one product of the stacked √(2 c_k) J_k (c ≥ 0: IPOPT's cost factor, the weights
+            # and clipped multipliers are)
+            root = ca.sqrt(2 * ca.fmax(c, 0))
+            Js = [root[i] * ca.jacobian(self.residuals[k], x) for i, k in enumerate(self.gn_terms)]
+            Js = ca.vertcat(*[J for J in Js if J.shape[0] > 0])
+            H = ca.hessian(ca.dot(lam * ca.DM(keep), rest), x)[0] + ca.mtimes(Js.T, Js)
+        else:
+            c = ca.MX.sym("c", 1)
+            H = ca.hessian(c * self.J + ca.dot(lam, rest), x)[0]
+        self._rows_hessian[hessian] = ca.Function("rows_hessian_" + hessian.replace("-", "_"), [x, c, lam], [H])
+        return self._rows_hessian[hessian]
 
     def point_maps(self, idx: NDArray[np.int_]) -> tuple[Any, Any, Array]:
         """The clearance samples ``idx`` (flat, column-major in (N S, K+1)) as affine maps of the variables:
@@ -859,7 +899,7 @@ class _Transcription:
                     g.append(ca.vec(self._clr[2][0]))
             else:
                 g.append(ca.vec(r.expr)[idx.tolist()])
-                (rest_after if self._clr is not None else rest_before).append(g[-1])
+                (rest_after if "clearance" in self.index else rest_before).append(g[-1])
             lo = model.lo_entries.get(name)
             lbg.append(r.lo[idx % rows] if lo is None else lo.ravel(order="F")[idx])
             ubg.append(r.hi[idx % rows])
@@ -874,6 +914,12 @@ class _Transcription:
         self.lbx, self.ubx = model.lbx, model.ubx
         self.nlp = {"x": model.x, "f": model.J, "g": self.g}
         self._derivatives: dict[tuple[float, str], dict[str, Any]] = {}
+        # the non-clearance rows' entries in the model's list of every entry (_Model.rows_hessian)
+        sel = [model.rest_offset[g] + self.index[g] for g in model.rest_groups if g in self.index]
+        full = np.concatenate(sel) if sel else np.zeros(0, dtype=int)
+        self._rest_select = ca.DM(
+            ca.Sparsity.triplet(model.rest_size, full.size, full.tolist(), list(range(full.size))), 1.0
+        )
 
     def derivatives(self, obj_scale: float, hessian: str | None = None) -> dict[str, ca.Function]:
         """casadi ``nlpsol`` options ``jac_g`` and ``hess_lag`` with the structured clearance derivatives (see the
@@ -884,18 +930,21 @@ class _Transcription:
         key = (obj_scale, hessian)
         if key in self._derivatives:
             return self._derivatives[key]
-        if self._clr is None:
-            if hessian != "gauss-newton":
-                return {}
-            lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.size)  # casadi differentiates every row
-            hess = ca.triu(self._gauss_newton(obj_scale, lam_f, lam_g, self.g))
-            self._derivatives[key] = {"hess_lag": self._hess_lag(lam_f, lam_g, hess)}
-            return self._derivatives[key]
-        x, f = self.model.x, self.model.J / obj_scale
-        Ax, Ay, (_, cx, cy, cxx, cxy, cyy) = self._clr
-        n = Ax.shape[0]
+        x = self.model.x
         before, after = self._rest
         nb, na = before.shape[0], after.shape[0]
+        if self._clr is None:  # casadi's B-spline node: casadi differentiates the clearance rows
+            if hessian != "gauss-newton":
+                return {}
+            lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.size)
+            n = self.size - nb - na  # the clearance rows, between the two
+            H = self._rows_hessian(obj_scale, hessian, lam_f, ca.vertcat(lam_g[:nb], lam_g[nb + n :]))
+            if n:
+                H = H + ca.hessian(ca.dot(lam_g[nb : nb + n], self.g[nb : nb + n]), x)[0]
+            self._derivatives[key] = {"hess_lag": self._hess_lag(lam_f, lam_g, ca.triu(H))}
+            return self._derivatives[key]
+        Ax, Ay, (_, cx, cy, cxx, cxy, cyy) = self._clr
+        n = Ax.shape[0]
         p = ca.MX.sym("p", 0, 1)
         rest = ca.vertcat(before, after)
         J_rest = ca.jacobian(rest, x)
@@ -909,10 +958,7 @@ class _Transcription:
         lam_g = ca.MX.sym("lam_g", self.size)
         lam_c = lam_g[nb : nb + n]
         lam_rest = ca.vertcat(lam_g[:nb], lam_g[nb + n : nb + n + na])
-        if hessian == "gauss-newton":  # the fitness rows lie before the clearance rows: same offsets in rest and g
-            H_rest = self._gauss_newton(obj_scale, lam_f, lam_rest, rest)
-        else:
-            H_rest = ca.hessian(lam_f * f + ca.dot(lam_rest, rest), x)[0]
+        H_rest = self._rows_hessian(obj_scale, hessian, lam_f, lam_rest)
         AxT, AyT = Ax.T, Ay.T
         Wxx, Wxy, Wyy = ca.diag(lam_c * cxx.T), ca.diag(lam_c * cxy.T), ca.diag(lam_c * cyy.T)
         Hxy = ca.mtimes(AxT, ca.mtimes(Wxy, Ay))
@@ -927,31 +973,24 @@ class _Transcription:
             "nlp_hess_l", [self.model.x, p, lam_f, lam_g], [triu], ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]
         )
 
-    def _gauss_newton(self, obj_scale: float, lam_f: Any, lam: Any, rows: Any) -> Any:
-        """Hessian of ``lam_f`` × cost / ``obj_scale`` + ``lam``ᵀ ``rows`` (``rows``: the NLP's rows or all but the
-        clearance ones, the fitness rows at their offsets in the NLP) with every sum of squares f = Σ r² — the cost's
-        f1, f2, f4 (and f3 with a leader tolerance) and the fitness rows f_i / f_i,warm — replaced by its
-        Gauss–Newton part 2 JᵣᵀJᵣ, positive semidefinite (a fitness row's multiplier clipped at ≥ 0); every other
-        row's curvature is exact (``formulations/horizon.md``, "Gauss–Newton Hessian")."""
-        m, o, x = self.model, self.opts, self.model.x
-        w = {"f1": o.w_energy, "f2": o.w_uniformity, "f4": o.w_smoothness}
-        if o.leader_tolerance > 0:
-            w["f3"] = o.w_tracking
-        coef = {k: w[k] * lam_f / obj_scale for k in w}
-        keep = np.ones(rows.shape[0])
+    def _rows_hessian(self, obj_scale: float, hessian: str, lam_f: Any, lam_rest: Any) -> Any:
+        """Hessian of ``lam_f`` × cost / ``obj_scale`` + ``lam_rest``ᵀ (the NLP's non-clearance rows, in their order
+        in g) from :meth:`_Model.rows_hessian`. ``"gauss-newton"``: every sum of squares f = Σ r² — the cost's f1,
+        f2, f4 (and f3 with a leader tolerance) and the fitness rows f_i / f_i,warm — replaced by its Gauss–Newton
+        part 2 JᵣᵀJᵣ, positive semidefinite (a fitness row's multiplier clipped at ≥ 0); every other row's curvature
+        is exact (``formulations/horizon.md``, "Gauss–Newton Hessian")."""
+        m, o = self.model, self.opts
+        lam = ca.mtimes(self._rest_select, lam_rest)
+        if hessian != "gauss-newton":
+            return m.rows_hessian(hessian)(m.x, lam_f / obj_scale, lam)
+        w = {"f1": o.w_energy, "f2": o.w_uniformity, "f4": o.w_smoothness, "f3": o.w_tracking}
+        coef = {k: w[k] * lam_f / obj_scale for k in m.gn_terms}
         fit = self.index.get("fitness")
-        if fit is not None and fit.size:  # the rows f_i / f_i,warm ≤ 1, in _Model's order
+        if fit is not None and fit.size:  # the rows f_i / f_i,warm ≤ 1, in _Model's order, first of lam_rest
+            off = self.offset["fitness"]
             for i, k in enumerate(m.fitness_terms):
-                row = self.offset["fitness"] + i
-                keep[row] = 0.0
-                coef[k] = coef[k] + ca.fmax(lam[row], 0) / m.bounds[k]
-        H = ca.hessian(ca.dot(lam * ca.DM(keep), rows), x)[0]
-        for k, c in coef.items():
-            r = m.residuals[k]
-            if r.shape[0] > 0:
-                Jr = ca.jacobian(r, x)
-                H = H + 2 * c * ca.mtimes(Jr.T, Jr)
-        return H
+                coef[k] = coef[k] + ca.fmax(lam_rest[off + i], 0) / m.bounds[k]
+        return m.rows_hessian(hessian)(m.x, ca.vertcat(*[coef[k] for k in m.gn_terms]), lam)
 
     def solver(
         self, obj_scale: float, extra: dict[str, Any], callback: ca.Callback | None = None, hessian: str | None = None
