@@ -270,7 +270,8 @@ def fatrop_probe(scenario: str, structure: str) -> dict:
     import casadi as ca
     import numpy as np
 
-    from tmr.control.horizon_model import _Model, _options, _Setup, _Transcription, _warm_start, distance_spline
+    from tmr.control.horizon_model import _Model, _options, _Setup, _Transcription, _warm_start
+    from tmr.control.horizon_spline import distance_spline
     from tmr.planner import build_problem, solve
     from tmr.world.scenario import load_scenario
 
