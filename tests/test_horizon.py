@@ -819,3 +819,43 @@ def test_windows_stop_at_the_time_limit_and_the_plan_is_never_worse(feasible_war
     assert len(d["window_log"]) == 1 and d["window_log"][0]["iterations"] <= 1
     assert d["horizon_stop"] == "time_limit" and d["horizon_result"] in ("warm_start", "best_feasible_iterate")
     assert plan.success and objective(plan.q, problem) <= J_warm and d["constraint_violation"] <= 1e-5
+
+
+def test_a_stalled_fast_attempt_stops_and_falls_back(monkeypatch):
+    """fast_stall_iter: the iteration callback stops a fast round once that many iterations passed without a cheaper
+    iterate holding the round's rows (status "Stalled"), and the fallback starts; iterates outside the rows never
+    count as progress; the fallback's own rounds never stall."""
+    from tmr.control import horizon
+
+    problem = small_problem()
+    warm, _ = solve(problem, "qp")
+    _, _, _, xv, tr = full_transcription()
+    pool = horizon_pool._Pool(4, 1e-6, math.inf)
+    from tqdm import tqdm
+
+    cb = horizon._IterationCallback(tr, pool, tqdm(disable=True), "round 1 fast", math.inf, 3)
+    names = [str(n) for n in __import__("casadi").nlpsol_out()]
+    g_ok = np.clip(np.zeros(tr.size), tr.lbg, tr.ubg)
+    g_bad = np.where(np.isfinite(tr.lbg), tr.lbg - 1.0, tr.ubg + 1.0)
+
+    def step(f, g):
+        a = {"x": tr.lbx.clip(-1e9, 1e9), "f": f, "g": g, "lam_x": np.zeros(tr.lbx.size), "lam_g": np.zeros(tr.size)}
+        return int(cb.eval([a.get(n, np.zeros(0)) for n in names])[0])
+
+    assert [step(f, g_ok) for f in (1.0, 0.9, 0.95)] == [0, 0, 0]
+    assert step(0.1, g_bad) == 0  # cheaper but outside the rows: no progress
+    assert step(0.97, g_ok) == 1 and cb.stalled  # three iterations after the cheapest (0.9)
+
+    class NeverCheaper(horizon._IterationCallback):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            self._best = (-math.inf, 0)  # every iterate is "no cheaper"
+
+    monkeypatch.setattr(horizon, "_IterationCallback", NeverCheaper)
+    d = plan_horizon(problem, warm, fast_stall_iter=2).diagnostics
+    fast = [r for r in d["round_log"] if r["phase"] == "fast"]
+    assert fast and fast[0]["status"] == "Stalled" and fast[0]["iterations"] <= 3
+    assert any(r["phase"] == "fallback" for r in d["round_log"]) and d["horizon_result"] == "optimal"
+    assert "'Stalled'" in d["horizon_note"]
+    with pytest.raises(ParameterError, match="fast_stall_iter"):
+        plan_horizon(problem, warm, fast_stall_iter=0)

@@ -140,6 +140,7 @@ DEFAULT_TIME_LIMIT: float = 60.0
 _SUCCESS = ("Solve_Succeeded",)
 _ACCEPTABLE = ("Solved_To_Acceptable_Level",)
 _WALL_TIME = "Maximum_WallTime_Exceeded"
+_STALLED = "Stalled"  # the fast attempt's round, stopped by the iteration callback (fast_stall_iter)
 
 _LOG = logging.getLogger("tmr")
 
@@ -167,15 +168,28 @@ def _ctrl_c_stops_ipopt() -> Iterator[None]:
 
 class _IterationCallback(ca.Callback):
     """IPOPT's per-iteration hook (casadi ``iteration_callback``): advances the progress bar and offers the iterate
-    to the pool. Stops IPOPT (returns 1) after Ctrl-C (:func:`_ctrl_c_stops_ipopt`) or once ``deadline`` (a
-    :func:`time.perf_counter` value: the time limit) has passed (``timed_out``)."""
+    to the pool. Stops IPOPT (returns 1) after Ctrl-C (:func:`_ctrl_c_stops_ipopt`), once ``deadline`` (a
+    :func:`time.perf_counter` value: the time limit) has passed (``timed_out``), or, with ``stall``, once that many
+    iterations have passed without a cheaper iterate within the pool's screen of the round's rows (``stalled``:
+    ``HorizonOptions.fast_stall_iter``)."""
 
-    def __init__(self, tr: _Transcription, pool: _Pool, bar: Any, label: str, deadline: float = math.inf) -> None:
+    def __init__(
+        self,
+        tr: _Transcription,
+        pool: _Pool,
+        bar: Any,
+        label: str,
+        deadline: float = math.inf,
+        stall: int | None = None,
+    ) -> None:
         ca.Callback.__init__(self)
         self.nx, self.ng = int(tr.lbx.size), int(tr.size)
         self.tr, self.pool, self.bar, self.label = tr, pool, bar, label
         self.deadline = deadline  # time.perf_counter() at which IPOPT is asked to stop (the time limit)
         self.timed_out = False
+        self.stall = stall  # stop after this many iterations without a cheaper iterate within the pool's screen
+        self.stalled = False
+        self._best: tuple[float, int] | None = None  # (cost, iteration) of the cheapest screened iterate
         self.iteration = 0
         self._names = list(ca.nlpsol_out())
         self.construct("horizon_iteration", {})
@@ -215,12 +229,16 @@ class _IterationCallback(ca.Callback):
             float(np.max(x - tr.ubx, initial=0.0)),
         )
         self.pool.offer(f, viol, x, f"{self.label}, iteration {self.iteration}")
+        if self.stall is not None:
+            if viol <= self.pool.screen and (self._best is None or f < self._best[0]):
+                self._best = (f, self.iteration)
+            self.stalled = self._best is not None and self.iteration - self._best[1] >= self.stall
         self.iteration += 1
         self.bar.update(1)
         self.bar.set_postfix_str(f"cost/warm {f:.3g}, row violation {viol:.1e}", refresh=False)
         if time.perf_counter() >= self.deadline:  # IPOPT's max_wall_time starts after the solver is built: not ours
             self.timed_out = True
-        return [1 if _INTERRUPT.is_set() or self.timed_out else 0]
+        return [1 if _INTERRUPT.is_set() or self.timed_out or self.stalled else 0]
 
 
 def _time_limit(time_limit: float | None) -> float:
@@ -450,7 +468,8 @@ def plan_horizon(
                     name = f"round {rnd} {label if phase != 'fast' else 'fast'}"
                     bar.set_description_str(f"horizon NLP, {_BAR[phase]}round {rnd} ({label} solve)")
                     t2 = time.perf_counter()
-                    callback = _IterationCallback(tr, pool, bar, name, phase_deadline)
+                    stall = opts.fast_stall_iter if phase == "fast" else None
+                    callback = _IterationCallback(tr, pool, bar, name, phase_deadline, stall)
                     solver = tr.solver(obj_scale, extra, callback, hessian)
                     build_time, built_rows = time.perf_counter() - t2, tr.size
                     kwargs: dict[str, Any] = dict(x0=x_start, lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg)
@@ -469,6 +488,8 @@ def plan_horizon(
                     status = str(stats.get("return_status", ""))
                     if callback.timed_out and not _INTERRUPT.is_set():
                         status = _WALL_TIME  # stopped by the callback at the deadline ("User_Requested_Stop")
+                    elif callback.stalled and not _INTERRUPT.is_set():
+                        status = _STALLED  # stopped by the callback: no cheaper iterate for fast_stall_iter
                     xv = np.asarray(sol["x"], dtype=float).ravel()
                     lam = (np.asarray(sol["lam_x"], dtype=float).ravel(), np.asarray(sol["lam_g"], dtype=float).ravel())
                     vals = model.values(xv)

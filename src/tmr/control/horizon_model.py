@@ -112,6 +112,9 @@ class HorizonOptions:
             then exactly as without the fast attempt (``formulations/horizon.md``, "Two regularisation floors").
         fast_max_iter: IPOPT iterations per round of the fast attempt (60: the accepted rounds measured took 2–50,
             the one that diverges, scenario E with 4 robots and the active winch, runs 110 in its first).
+        fast_stall_iter: the fast attempt's round stops (status ``"Stalled"``) once this many IPOPT iterations have
+            passed without a new cheapest iterate among those that hold the round's rows (``None``: never): it falls
+            back from that iterate instead of spending the rest of its cap.
         fast_time_share: fraction of the time left (if there is a time limit) that the fast attempt may use (1: all
             of it; the iteration cap bounds what a failing fast attempt costs; stopped by the limit, the fast
             attempt's best feasible iterate is a fallback as the default attempt's would be).
@@ -169,6 +172,7 @@ class HorizonOptions:
     min_hessian_perturbation: float = 1e-3
     fast_min_hessian_perturbation: float | None = 1e-5
     fast_max_iter: int = 60
+    fast_stall_iter: int | None = 20
     fast_time_share: float = 1.0
     accept_acceptable: bool = True
     retry: bool = True
@@ -202,6 +206,8 @@ class HorizonOptions:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ParameterError(f"HorizonOptions.{name} must be a finite number ≥ 0, got {v!r}")
+        if self.fast_stall_iter is not None and int(self.fast_stall_iter) < 1:
+            raise ParameterError(f"fast_stall_iter must be ≥ 1 or None, got {self.fast_stall_iter}")
         if self.samples_per_link is not None and int(self.samples_per_link) < 1:
             raise ParameterError(f"samples_per_link must be ≥ 1, got {self.samples_per_link}")
         if not self.activation > 0:
