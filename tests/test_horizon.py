@@ -859,3 +859,110 @@ def test_a_stalled_fast_attempt_stops_and_falls_back(monkeypatch):
     assert "'Stalled'" in d["horizon_note"]
     with pytest.raises(ParameterError, match="fast_stall_iter"):
         plan_horizon(problem, warm, fast_stall_iter=0)
+
+
+def _transcriptions(problem, options, clearance=True):
+    """The problem's NLP at its warm start with about half of every group's entries as rows (the fitness rows all;
+    no clearance rows with ``clearance=False``), once with the numpy spline and once with casadi's B-spline node:
+    (model, reference model, point off the warm start, transcription, reference transcription)."""
+    from tmr.control.horizon import _warm_poses
+
+    warm, _ = solve(problem, "qp")
+    built = []
+    for spline in (True, False):
+        su = horizon_model._Setup(problem, horizon_model._options(options))
+        Q, info = horizon_model._warm_start(su, warm)
+        if su.drive is not None:
+            _warm_poses(su, warm)
+        env = problem.env
+        model = horizon_model._Model(
+            su, distance_spline(env), bounds=info["warm_start_terms"], spline=ClearanceSpline(env) if spline else None
+        )
+        built.append((model, model.project(model.x_of(Q))))
+    (model, xv), (ref_model, _) = built
+    rng = np.random.default_rng(11)
+    masks = {}
+    for name, v in model.values(xv).items():
+        m = np.ones_like(v, dtype=bool) if name == "fitness" else rng.random(v.shape) < 0.5
+        if name == "clearance" and not clearance:
+            m[:] = False
+        m[:, model.fixed_columns(name)] = False
+        masks[name] = m
+    x = xv + np.random.default_rng(3).normal(0.0, 0.01, xv.size)
+    x = np.where(model.lbx == model.ubx, model.lbx, x)
+    return (
+        model,
+        ref_model,
+        x,
+        horizon_model._Transcription(model, masks),
+        horizon_model._Transcription(ref_model, masks),
+    )
+
+
+@pytest.mark.parametrize("case", ["leader tolerance", "no clearance rows", "differential drive"])
+def test_assembled_derivatives_on_partial_rows_with_a_leader_tolerance(case):
+    """With a leader tolerance (its rows before the fitness rows, the tracking term f3 in the cost), half of every
+    group's entries as rows, and also without clearance rows or with differential drive: the assembled Jacobian and
+    exact Hessian are casadi's automatic ones of the same rows through casadi's B-spline node, and the Gauss–Newton
+    Hessian is written here from its definition — the rows' exact curvature with the fitness rows' multipliers set to
+    0, plus Σ 2 c_k J_kᵀJ_k with c_k = w_k λ_f / scale + max(μ_k, 0) / f_k,warm."""
+    import casadi as ca
+
+    problem = small_problem()
+    if case == "differential drive":
+        from tmr.model.diffdrive import DEFAULT_MODEL, load_robot_model
+
+        problem = dataclasses.replace(problem, robot_model=load_robot_model(DEFAULT_MODEL))
+    model, ref_model, x, tr, ref = _transcriptions(
+        problem, {"leader_tolerance": 0.05}, clearance=case != "no clearance rows"
+    )
+    assert tr.size == ref.size and tr.offset["fitness"] > 0  # the leader's rows come first
+    lam = np.random.default_rng(4).normal(0.0, 1.0, tr.size)
+    lf, scale = 0.7, 2.5
+    rx = ref_model.x
+    lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", ref.size)
+
+    def full(H):
+        H = H.full()
+        return np.triu(H) + np.triu(H, 1).T
+
+    def close(a, b):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * max(1.0, float(np.abs(b).max())))
+
+    exact = tr.derivatives(scale, "exact")
+    if case == "no clearance rows":
+        assert exact == {}  # nothing to assemble: casadi's own derivatives
+    else:
+        g1, J1 = exact["jac_g"](x, [])
+        close(np.asarray(g1).ravel(), np.asarray(ca.Function("g", [rx], [ref.g])(x)).ravel())
+        close(J1.full(), ca.Function("J", [rx], [ca.jacobian(ref.g, rx)])(x).full())
+        L = lam_f * ref_model.J / scale + ca.dot(lam_g, ref.g)
+        close(
+            full(exact["hess_lag"](x, [], lf, lam)),
+            ca.Function("H", [rx, lam_f, lam_g], [ca.hessian(L, rx)[0]])(x, lf, lam).full(),
+        )
+    o = model.su.opts
+    coef = {"f1": o.w_energy, "f2": o.w_uniformity, "f4": o.w_smoothness, "f3": o.w_tracking}
+    coef = {k: w * lf / scale for k, w in coef.items()}
+    keep = np.ones(tr.size)
+    for i, k in enumerate(model.fitness_terms):
+        row = tr.offset["fitness"] + i
+        keep[row] = 0.0
+        coef[k] += max(lam[row], 0.0) / model.bounds[k]
+    want = ca.Function("Hg", [rx, lam_g], [ca.hessian(ca.dot(lam_g, ref.g), rx)[0]])(x, lam * keep).full()
+    for k, c in coef.items():
+        Jr = ca.Function("Jr", [rx], [ca.jacobian(ref_model.residuals[k], rx)])(x).full()
+        want += 2 * c * Jr.T @ Jr
+    assert model.fitness_terms and any(lam[tr.offset["fitness"] + i] > 0 for i in range(len(model.fitness_terms)))
+    close(full(tr.derivatives(scale, "gauss-newton")["hess_lag"](x, [], lf, lam)), want)
+    close(full(ref.derivatives(scale, "gauss-newton")["hess_lag"](x, [], lf, lam)), want)
+
+
+def test_ipopts_own_hessian_option_decides_whether_a_hessian_is_built():
+    """``ipopt={"hessian_approximation": "exact"}`` with ``hessian="limited-memory"``: the Hessian is assembled (the
+    clearance node has no second derivatives of casadi's own, so casadi could not build it); the plan is optimal."""
+    problem = small_problem()
+    warm, _ = solve(problem, "qp")
+    kw = dict(hessian="limited-memory", fast_hessian="limited-memory", ipopt={"hessian_approximation": "exact"})
+    d = plan_horizon(problem, warm, **kw).diagnostics
+    assert d["horizon_result"] == "optimal" and d["round_log"][0]["iterations"] < 60

@@ -85,8 +85,12 @@ def test_node_evaluates_once_per_point_set_and_differentiates_exactly(env):
         np.testing.assert_array_equal(np.asarray(got).ravel(), want)
     node(P)
     assert node.evaluations == 1
-    node(P + 1e-3)
+    Q = P.copy()
+    Q[0, -1] += 1e-3  # one coordinate of the last point (where c_x = −1)
+    got = node(Q)
     assert node.evaluations == 2
+    np.testing.assert_array_equal(np.asarray(got[0]).ravel(), spline.evaluate(Q)[0])
+    assert np.asarray(got[0]).ravel()[-1] != np.asarray(out[0]).ravel()[-1]
 
     S = ca.MX.sym("P", 2, n)
     w = [rng.normal(size=(1, n)) for _ in range(6)]

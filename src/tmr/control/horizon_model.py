@@ -129,7 +129,8 @@ class HorizonOptions:
         warm_start_leader_error: with the equality leader, the warm start *as given* (not projected on the reference)
             is still a fallback if its leader stays within this distance [m] of the reference at every knot and every
             other row holds (a ``qp`` plan lags its reference by ≤ 4.6 mm on A–D: CLIK).
-        expand: expand the MX graph to SX (default False: measured 3× slower, the B-spline is one call node per point).
+        expand: expand the MX graph to SX (default False: measured 3× slower when the B-spline was one call node per
+            point; the clearance rows are now one numpy node, :class:`tmr.control.horizon_spline.SplineRows`).
         scale_objective: divide the cost by its warm-start value, so IPOPT sees O(1) (without: 35–80 % more
             iterations on A–D).
         window: windowed solves along the route before the whole NLP (``None``: off, the default): windows of this
@@ -699,12 +700,13 @@ class _Model:
 
     def rows_hessian(self, hessian: str) -> ca.Function:
         """The Hessian (x × x) of the cost and every non-clearance row, ``H(x, c, λ)``, built once per model and
-        Hessian kind (casadi's symbolic Hessian of ≈ 40,000 rows takes ≈ 1.4 s; every round's transcription reuses
-        it): λ the multipliers of every entry of every group of :attr:`rest_groups` (each group's entries
-        column-major at :attr:`rest_offset`; 0 for entries that are not rows of the NLP). ``"exact"``: c (1,) weighs
-        the cost J; ``"gauss-newton"``: c (len(:attr:`gn_terms`),) weighs 2 JᵣᵀJᵣ of each term's residuals r
-        (f = Σ r², ``formulations/horizon.md`` "Gauss–Newton Hessian"), and the fitness rows (sums of squares over
-        f_i,warm) carry no curvature of their own: their Gauss–Newton part is the caller's share of c."""
+        Hessian kind (casadi's symbolic Hessian takes 1.5–2.3 s on a walls room with 8 robots, 72,000 entries; every
+        round's transcription reuses it): λ the multipliers of every entry of every group of :attr:`rest_groups`
+        (each group's entries column-major at :attr:`rest_offset`; 0 for entries that are not rows of the NLP).
+        ``"exact"``: c (1,) weighs the cost J; ``"gauss-newton"``: c (len(:attr:`gn_terms`),) weighs 2 JᵣᵀJᵣ of each
+        term's residuals r (f = Σ r², ``formulations/horizon.md`` "Gauss–Newton Hessian"), and the fitness rows (sums
+        of squares over f_i,warm) carry no curvature of their own: their Gauss–Newton part is the caller's share of
+        c."""
         if hessian in self._rows_hessian:
             return self._rows_hessian[hessian]
         x = self.x
@@ -1005,6 +1007,12 @@ class _Transcription:
         casadi ``iteration_callback`` (called with x, f, g, … of every iterate; it must outlive the solver) and the
         Hessian ``hessian`` (``None``: ``HorizonOptions.hessian``)."""
         hessian = hessian or self.opts.hessian
+        # IPOPT's own option, if given (HorizonOptions.ipopt), decides whether a Hessian is needed at all
+        asked = self.opts.ipopt.get("hessian_approximation")
+        if asked == "limited-memory":
+            hessian = "limited-memory"
+        elif asked == "exact" and hessian == "limited-memory":
+            hessian = "exact"
         nlp = dict(self.nlp, f=self.nlp["f"] / obj_scale)
         opts = _solver_opts(self.opts, extra, hessian)
         opts.update(self.derivatives(obj_scale, hessian))

@@ -72,9 +72,11 @@ class ClearanceSpline:
     """The spline of :func:`distance_spline` with its derivatives, evaluated in numpy.
 
     ``evaluate(P (2, n))`` returns (c, ∂c/∂x, ∂c/∂y, ∂²c/∂x², ∂²c/∂x∂y, ∂²c/∂y²), each (n,) [m, 1, 1/m], from one
-    gather of each point's 4 × 4 control points. It is casadi's B-spline exactly (to rounding): the polynomial piece of
-    the nearest valid cell extends over the outer three cells of the knot box (de Boor's rule at the ends), and
-    outside the knot box [t_0, t_last]² everything is 0.
+    gather of each point's 4 × 4 control points. Its values are casadi's B-spline's (to rounding): the polynomial
+    piece of the nearest valid cell extends over the outer three cells of the knot box (de Boor's rule at the ends),
+    and outside the knot box [t_0, t_last]² everything is 0. Its derivatives are those of these values (scipy's
+    ``NdBSpline``'s); casadi's own automatic ones differ in the outer cells (0 in [t_0, t_1) for the gradient, in
+    [t_0, t_2) for the Hessian), a band more than two cells outside the environment's bounds.
     """
 
     def __init__(self, env: Any) -> None:
