@@ -494,6 +494,10 @@ QUOTES = [
         lambda: (min(horizon_iterations()), max(horizon_iterations())),
     ),
     Quote(
+        r"now evaluated once per iterate, (\d+)× faster again",
+        lambda: md("horizon_spline.md", r"\| 28,195 \|(?: [\d.]+ \|){5} ([\d.]+)× \|")[0],
+    ),
+    Quote(
         r"E with 6 robots: optimal in (\S+) s, whole process",
         lambda: cell("horizon_rooms.csv", "wall_time", room="scenario E", horizon_result="optimal"),
     ),
