@@ -21,6 +21,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import make_interp_spline
 
+from tmr.control.horizon_model import held
+
 Array = NDArray[np.float64]
 
 
@@ -68,10 +70,7 @@ def coarse_problem(
     }
     scaled["separation_margin"] = qp.separation_margin + margin
     pc = dataclasses.replace(problem, trajectory=traj, qp_params=dataclasses.replace(qp, **scaled))
-    Q = np.asarray(warm.q, dtype=float)
-    if Q.shape[0] < K + 1:  # a plan that stopped early: hold its last configuration (as _warm_start does)
-        Q = np.vstack([Q, np.repeat(Q[-1:], K + 1 - Q.shape[0], axis=0)])
-    Qc = Q[idx]
+    Qc = held(np.asarray(warm.q, dtype=float), K)[idx]
     wc = dataclasses.replace(
         warm,
         t=tc,

@@ -324,24 +324,17 @@ def objective_terms(
         qd = np.vstack([np.diff(q, axis=0) / h[:, None], np.zeros((1, q.shape[1]))])
         qdd = np.diff(qd, axis=0) / hbar[1:, None]
         w1, wk = np.append(h / h[0], 0.0), hbar / h[0]
-    else:
+    else:  # unit weights: the products are the plain squares, bit for bit
         qd = np.vstack([np.diff(q, axis=0) / Ts, np.zeros((1, q.shape[1]))])
         qdd = np.diff(qd, axis=0) / Ts
-        w1 = wk = None
+        w1 = wk = np.ones(q.shape[0])
     d = q[:, 1::2]
     i, j = np.triu_indices(d.shape[1], k=1)
-    if w1 is None or wk is None:
-        out = {
-            "f1": float(np.sum(qd * qd)),
-            "f2": float(np.sum((d[:, i] - d[:, j]) ** 2)),
-            "f4": float(np.sum(qdd**2)),
-        }
-    else:
-        out = {
-            "f1": float(np.sum(w1[:, None] * qd * qd)),
-            "f2": float(np.sum(wk[:, None] * (d[:, i] - d[:, j]) ** 2)),
-            "f4": float(np.sum(wk[1:, None] * qdd**2)),
-        }
+    out = {
+        "f1": float(np.sum(w1[:, None] * qd * qd)),
+        "f2": float(np.sum(wk[:, None] * (d[:, i] - d[:, j]) ** 2)),
+        "f4": float(np.sum(wk[1:, None] * qdd**2)),
+    }
     if reference is not None and base is not None:
         phi = np.cumsum(q[:, 0::2], axis=1)
         xe = np.asarray(base, float)[:2] + np.stack([np.sum(d * np.cos(phi), 1), np.sum(d * np.sin(phi), 1)], 1)
@@ -1070,6 +1063,13 @@ def _solver_opts(
 # ----------------------------------------------------------------------------------------------------------------
 # warm start
 # ----------------------------------------------------------------------------------------------------------------
+def held(Q: Array, K: int) -> Array:
+    """The first K + 1 rows of ``Q``; a plan that stopped early holds its last configuration to K + 1 rows."""
+    if Q.shape[0] < K + 1:
+        Q = np.vstack([Q, np.repeat(Q[-1:], K + 1 - Q.shape[0], axis=0)])
+    return Q[: K + 1]
+
+
 def _warm_start(su: _Setup, warm: Plan) -> tuple[Array, dict[str, Any]]:
     """The warm start's joints (K+1, n) as given (padded with its last configuration if it stopped early) and notes
     on it; :meth:`_Model.project` of :meth:`_Model.x_of` them is IPOPT's initial point (q_0 = start, the leader on
@@ -1081,9 +1081,7 @@ def _warm_start(su: _Setup, warm: Plan) -> tuple[Array, dict[str, Any]]:
     info["warm_start_method"] = str(warm.method)
     info["warm_start_success"] = bool(warm.success)
     info["warm_start_steps"] = int(Q.shape[0] - 1)
-    if Q.shape[0] < su.K + 1:  # a plan that stopped early: hold its last configuration
-        Q = np.vstack([Q, np.repeat(Q[-1:], su.K + 1 - Q.shape[0], axis=0)])
-    raw = Q[: su.K + 1].copy()
+    raw = held(Q, su.K).copy()
     terms = objective_terms(raw, su.step, su.ref, su.base)
     info["objective_warm_start_raw"] = _weighted(terms, su.opts)
     info["warm_start_terms"] = terms

@@ -105,27 +105,23 @@ class ClearanceSpline:
         By, dBy, ddBy = _cubic_basis(sy - jy)
         first = (jx - 3) * self.ny + (jy - 3)
         patch = self.coef.ravel()[first[:, None] + self._offsets].reshape(-1, 4, 4)
-        if third:  # the third derivative of each cubic piece in u is constant
-            d3 = np.broadcast_to(_THIRD, Bx.shape)
-            s0, s1 = np.einsum("nab,nb->na", patch, By), np.einsum("nab,nb->na", patch, dBy)
-            s2, s3 = np.einsum("nab,nb->na", patch, ddBy), np.einsum("nab,nb->na", patch, d3)
-            h3 = h * h * h
-            out3 = tuple(np.einsum("na,na->n", a, b) / h3 for a, b in ((d3, s0), (ddBx, s1), (dBx, s2), (Bx, s3)))
-            if not inside.all():
-                for o in out3:
-                    o[~inside] = 0.0
-            return out3
         t0 = np.einsum("nab,nb->na", patch, By)
         t1 = np.einsum("nab,nb->na", patch, dBy)
         t2 = np.einsum("nab,nb->na", patch, ddBy)
-        out = (
-            np.einsum("na,na->n", Bx, t0),
-            np.einsum("na,na->n", dBx, t0) / h,
-            np.einsum("na,na->n", Bx, t1) / h,
-            np.einsum("na,na->n", ddBx, t0) / (h * h),
-            np.einsum("na,na->n", dBx, t1) / (h * h),
-            np.einsum("na,na->n", Bx, t2) / (h * h),
-        )
+        if third:  # the third derivative of each cubic piece in u is constant
+            d3 = np.broadcast_to(_THIRD, Bx.shape)
+            t3 = np.einsum("nab,nb->na", patch, d3)
+            h3 = h * h * h
+            out = tuple(np.einsum("na,na->n", a, b) / h3 for a, b in ((d3, t0), (ddBx, t1), (dBx, t2), (Bx, t3)))
+        else:
+            out = (
+                np.einsum("na,na->n", Bx, t0),
+                np.einsum("na,na->n", dBx, t0) / h,
+                np.einsum("na,na->n", Bx, t1) / h,
+                np.einsum("na,na->n", ddBx, t0) / (h * h),
+                np.einsum("na,na->n", dBx, t1) / (h * h),
+                np.einsum("na,na->n", Bx, t2) / (h * h),
+            )
         if not inside.all():
             for o in out:
                 o[~inside] = 0.0
