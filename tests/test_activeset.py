@@ -172,3 +172,46 @@ def test_a_nearly_singular_kkt_system_is_declined_without_a_warning():
         warnings.simplefilter("error")
         assert WarmActiveSet().solve(P, q, A, lo, up, np.zeros(0, np.int8)) is None
         assert WarmActiveSet(dense_below=0).solve(sp.csr_matrix(P), q, A, lo, up, np.zeros(0, np.int8)) is None
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_certify_accepts_an_exact_optimum_and_its_multipliers(seed):
+    import daqp
+
+    P, q, A, lo, up = random_qp(seed)
+    sense = np.where(lo == up, 5, 0).astype(np.int32)
+    x, _, flag, info = daqp.solve(P, q, A, up, lo, sense)
+    assert flag == 1
+    res = WarmActiveSet().certify(P, q, A, lo, up, np.asarray(x), np.asarray(info["lam"]))
+    assert res is not None and res.rounds == 0
+    np.testing.assert_allclose(res.x, reference(P, q, A, lo, up), atol=1e-7)
+    np.testing.assert_allclose(P @ res.x + q + A.T @ res.y, 0.0, atol=1e-8)  # res.y: the multipliers, in row order
+
+
+def test_certify_accepts_a_weakly_active_row():
+    """The optimum sits on a row whose multiplier is 0: the answer is still optimal."""
+    P, q = np.eye(2), np.array([-1.0, 0.0])  # unconstrained optimum (1, 0)
+    A = np.array([[1.0, 0.0], [0.0, 1.0]])
+    lo, up = np.array([-np.inf, -1.0]), np.array([1.0, 1.0])  # x1 ≤ 1 touches the optimum, its multiplier 0
+    res = WarmActiveSet().certify(P, q, A, lo, up, np.array([1.0, 0.0]), np.array([1e-13, 0.0]))
+    assert res is not None
+    np.testing.assert_array_equal(res.x, [1.0, 0.0])
+
+
+@pytest.mark.parametrize(
+    "q1, x, y, why",
+    [
+        (-2.0, [1.0, 0.0], [0.0, 0.0], "not stationary"),  # the cost pulls x1 to 2; the bound holds it with y = 1
+        (0.0, [1.0, 0.0], [-1.0, 0.0], "stationary, but a multiplier of the wrong sign for the bound x1 is on"),
+        (-2.0, [1.5, 0.0], [0.5, 0.0], "stationary, but infeasible"),
+        (-2.0, [0.5, 0.0], [1.5, 0.0], "stationary, but a multiplier on a row away from its bound"),
+    ],
+)
+def test_certify_declines_what_is_not_an_optimum(q1, x, y, why):
+    P, A = np.eye(2), np.eye(2)
+    lo, up = np.array([-np.inf, -1.0]), np.array([1.0, 1.0])  # x1 ≤ 1
+    ws = WarmActiveSet()
+    q = np.array([-2.0, 0.0])  # unconstrained optimum (2, 0): the optimum is (1, 0) with y = (1, 0)
+    assert ws.certify(P, q, A, lo, up, np.array([1.0, 0.0]), np.array([1.0, 0.0])) is not None
+    q = np.array([q1, 0.0])
+    assert ws.certify(P, q, A, lo, up, np.array(x), np.array(y)) is None, why

@@ -199,20 +199,54 @@ def test_random_clutter_never_violates_silently(seed):
 @pytest.mark.parametrize("route", ["rrt", "shortest"])
 def test_warm_active_set_and_osqp_give_the_same_plan(route):
     problem = build_problem(random_scenario(5), seed=1, path_iterations=300, route=route)
-    warm = make_qp(problem)
+    warm = make_qp(problem)  # the default: a miss of the warm active set is solved by DAQP
+    coarse = make_qp(problem)
+    coarse.exact_miss = False  # a miss goes to OSQP's coarse pass
     cold = make_qp(problem)
     cold.warm_start = False
-    a, b = plan(problem, warm), plan(problem, cold)
-    assert a.success == b.success
+    a, m, b = plan(problem, warm), plan(problem, coarse), plan(problem, cold)
+    assert a.success == m.success == b.success
     # nearly every step is settled by one verified KKT solve from the previous active set; OSQP runs on the few steps
     # where the active set changes (one step on each route here), its coarse pass finding the new one
-    osqp_steps = np.count_nonzero(np.nan_to_num(a.diagnostics["solver_iterations"]) > 0)
-    assert osqp_steps <= 3, osqp_steps
-    assert np.nanmax(a.diagnostics["solver_iterations"]) <= OSQP_COARSE["max_iter"]  # no tight 1e-8 run was needed
-    assert np.nansum(a.diagnostics["solver_iterations"]) < 0.05 * np.nansum(b.diagnostics["solver_iterations"])
+    osqp_steps = np.count_nonzero(np.nan_to_num(m.diagnostics["solver_iterations"]) > 0)
+    assert 1 <= osqp_steps <= 3, osqp_steps
+    assert np.nanmax(m.diagnostics["solver_iterations"]) <= OSQP_COARSE["max_iter"]  # no tight 1e-8 run was needed
+    assert np.nansum(m.diagnostics["solver_iterations"]) < 0.05 * np.nansum(b.diagnostics["solver_iterations"])
     assert np.nansum(b.diagnostics["solver_iterations"]) > 0  # OSQP iterated
+    # by default DAQP settles those steps instead, and OSQP never iterates
+    assert warm.exact_solves >= osqp_steps and coarse.exact_solves == 0
+    assert np.nansum(a.diagnostics["solver_iterations"]) == 0
     # OSQP's answers are polished to their exact KKT point (or, if that does not verify, checked by DAQP)
+    np.testing.assert_allclose(m.q, b.q, atol=1e-8)
     np.testing.assert_allclose(a.q, b.q, atol=1e-8)
+
+
+def test_a_level_daqp_proves_infeasible_never_reaches_osqp():
+    """A miss of the warm active set on an infeasible level: DAQP's verdict (a certificate HiGHS confirms here) is
+    returned at once, without OSQP's 20 000 iterations of not converging; the caller then relaxes the level."""
+    from scipy.optimize import linprog
+
+    from tmr.control.activeset import WarmActiveSet
+    from tmr.control.qp_backends import _OsqpLevel
+
+    A = np.array([[1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    lo = np.array([1.0, -np.inf, 0.5])
+    up = np.array([np.inf, 1.2, np.inf])  # x1 ≥ 1, x2 ≥ 0.5, x1 + x2 ≤ 1.2: no point
+    assert linprog(np.zeros(2), A_ub=np.vstack([-A[0], A[1], -A[2]]), b_ub=[-1.0, 1.2, -0.5]).status == 2
+    Jw, tw = np.eye(2), np.zeros(2)
+    level = _OsqpLevel(1e-9, WarmActiveSet())
+    x, status, iters = level.solve(A, lo, up, Jw, tw)
+    assert x is None and status == "primal infeasible (daqp)" and iters == 0
+    assert level.setups == 0  # OSQP never set up
+    feasible_up = np.array([np.inf, 2.0, np.inf])  # the optimum (1, 0.5): two rows active, none guessed
+    level = _OsqpLevel(1e-9, WarmActiveSet(rounds=1))  # one KKT solve: the empty guess misses
+    x, status, iters = level.solve(A, lo, feasible_up, Jw, tw)
+    assert status == "verified" and level.exact_hits == 1 and level.warm_hits == 0 and level.setups == 0
+    np.testing.assert_allclose(x, [1.0, 0.5], atol=1e-9)
+    x, status, iters = level.solve(A, lo, feasible_up, Jw, tw)  # the same level again: DAQP's set is the guess
+    assert status == "verified" and level.warm_hits == 1 and level.exact_hits == 1
+    x_osqp, status_osqp, _ = _OsqpLevel(1e-9, WarmActiveSet(), exact_miss=False).solve(A, lo, up, Jw, tw)
+    assert x_osqp is None or status_osqp != "verified"  # OSQP's path: no answer either, after its iterations
 
 
 def test_same_problem_same_plan():

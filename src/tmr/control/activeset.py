@@ -212,6 +212,31 @@ class WarmActiveSet:
                 s[(Ax > up + tol) & free] = 1
         return None
 
+    def certify(
+        self, P: Array | sp.spmatrix, q: Array, A: Array, lo: Array, up: Array, x: Array, y: Array
+    ) -> ActiveSetResult | None:
+        """A solver's own answer ``x`` with row multipliers ``y`` (positive at an upper bound, negative at a lower one,
+        the convention of :func:`active_set`) as a verified optimum: the KKT conditions :meth:`solve` checks on its
+        KKT point, with the same tolerances — stationarity ``P x + q + Aᵀy = 0`` relative to q, every row within its
+        bounds, and every row with a multiplier beyond the sign tolerance at the bound that multiplier's sign names.
+        No solve: the proof for an active-set solver (DAQP) that stopped at a vertex with exact multipliers, where a
+        multiplier of 10⁻¹² on a weakly active row would make the set from :func:`active_set` fail to verify.
+        None if a condition fails."""
+        tol = self.tol
+        qscale = 1.0 + float(np.max(np.abs(q), initial=0.0))
+        if not np.abs(P @ x + q + A.T @ y).max(initial=0.0) <= 10 * tol * qscale:
+            return None
+        Ax = A @ x
+        if Ax.size and not np.maximum(lo - Ax, Ax - up).max() <= tol:
+            return None
+        s = active_set(y, lo, up, tol * qscale)
+        at = np.where(s == 1, up, lo)
+        rows = s != 0
+        b = at[rows]
+        if b.size and not (np.all(np.isfinite(b)) and np.abs(Ax[rows] - b).max() <= tol * (1.0 + np.abs(b).max())):
+            return None  # a multiplier on a row away from the bound it names (or naming a bound the row lacks)
+        return ActiveSetResult(x, s, 0, y[rows])
+
     def _verified_kkt(
         self,
         P: Array | sp.spmatrix,

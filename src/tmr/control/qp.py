@@ -175,6 +175,10 @@ class LexicographicQP:
         optimistic: try each step first with level 1 met exactly (one QP instead of two; exact when feasible).
         warm_start: with ``"osqp"``, first solve each level from the previous step's active set by one KKT solve,
             verified by the KKT conditions (:mod:`tmr.control.activeset`); OSQP runs only when it fails.
+        exact_miss: with ``"osqp"`` and ``warm_start``, solve a miss of the warm active set by DAQP first (an exact
+            dual active-set solve, its answer verified by the same KKT conditions; a level DAQP proves infeasible
+            goes straight to the fallbacks and the relaxed freeze), OSQP only if DAQP fails otherwise. Off: OSQP's
+            coarse pass finds the new active set, as before (the same plans to 10⁻¹¹ m on the rooms measured).
         fallbacks: backends tried in order after the primary one (default :data:`FALLBACK_SOLVERS`, the installed
             ones other than the primary).
 
@@ -203,6 +207,7 @@ class LexicographicQP:
         freeze_slack: float = 1e-6,
         optimistic: bool = True,
         warm_start: bool = True,
+        exact_miss: bool = True,
         fallbacks: Sequence[str] | None = None,
     ) -> None:
         if not levels or any(not level.tasks for level in levels):
@@ -226,6 +231,7 @@ class LexicographicQP:
         self.widen, self.slack = float(widening), float(freeze_slack)
         self.optimistic = bool(optimistic)
         self.warm_start = bool(warm_start)
+        self.exact_miss = bool(exact_miss)
         primary = solver.removeprefix("qpsolvers-")
         names = FALLBACK_SOLVERS if fallbacks is None else tuple(fallbacks)
         available = _installed(names)
@@ -318,11 +324,16 @@ class LexicographicQP:
         ws = self._workspaces.get(key)
         if ws is None:
             if self.solver == "osqp":
-                ws = _OsqpLevel(self.eps, WarmActiveSet() if self.warm_start else None)
+                ws = _OsqpLevel(self.eps, WarmActiveSet() if self.warm_start else None, self.exact_miss)
             else:
                 ws = _QpsolversLevel(self.solver.removeprefix("qpsolvers-"), self.eps)
             self._workspaces[key] = ws
         return ws
+
+    @property
+    def exact_solves(self) -> int:
+        """Misses of the warm active set that DAQP solved (``exact_miss``) so far."""
+        return sum(getattr(ws, "exact_hits", 0) for ws in self._workspaces.values())
 
     @property
     def setups(self) -> int:
