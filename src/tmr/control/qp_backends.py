@@ -107,8 +107,10 @@ class _OsqpLevel:
     """
 
     sparse_above = 80
-    #: chains with at most this many joint variables solve a miss of the warm active set by DAQP first
-    #: (:meth:`_exact`); longer ones go straight to OSQP's coarse pass (dense DAQP grows as n³: 20 ms a step at N = 100)
+    #: levels with at most this many variables (x = [v, q̇]: 4 per planar robot) solve a miss of the warm active set
+    #: by DAQP first (:meth:`_exact`): measured up to N = 100 (benchmarks/qp_step.py: no slower than OSQP's coarse
+    #: pass there); larger ones go straight to OSQP (dense DAQP costs O(n³) a solve: 20 ms a step at N = 100 when it
+    #: solves every step)
     exact_above = 400
 
     def __init__(self, eps: float, warm: WarmActiveSet | None = None, exact_miss: bool = True) -> None:
