@@ -861,13 +861,15 @@ def test_a_stalled_fast_attempt_stops_and_falls_back(monkeypatch):
         plan_horizon(problem, warm, fast_stall_iter=0)
 
 
-def _transcriptions(problem, options, clearance=True):
-    """The problem's NLP at its warm start with about half of every group's entries as rows (the fitness rows all;
-    no clearance rows with ``clearance=False``), once with the numpy spline and once with casadi's B-spline node:
-    (model, reference model, point off the warm start, transcription, reference transcription)."""
+def _transcriptions(problem, options, clearance=True, warm=None):
+    """The problem's NLP at its warm start (default: the qp plan) with about half of every group's entries as rows
+    (the fitness rows all; no clearance rows with ``clearance=False``), once with the numpy spline and once with
+    casadi's B-spline node: (model, reference model, point off the warm start, transcription, reference
+    transcription)."""
     from tmr.control.horizon import _warm_poses
 
-    warm, _ = solve(problem, "qp")
+    if warm is None:
+        warm, _ = solve(problem, "qp")
     built = []
     for spline in (True, False):
         su = horizon_model._Setup(problem, horizon_model._options(options))
@@ -899,24 +901,37 @@ def _transcriptions(problem, options, clearance=True):
     )
 
 
-@pytest.mark.parametrize("case", ["leader tolerance", "no clearance rows", "differential drive"])
+@pytest.mark.parametrize(
+    "case", ["leader tolerance", "no clearance rows", "differential drive", "coarse grid", "without the tolerance"]
+)
 def test_assembled_derivatives_on_partial_rows_with_a_leader_tolerance(case):
     """With a leader tolerance (its rows before the fitness rows, the tracking term f3 in the cost), half of every
-    group's entries as rows, and also without clearance rows or with differential drive: the assembled Jacobian and
+    group's entries as rows, and also without clearance rows, with differential drive, on the coarse pass's
+    non-uniform grid (every 3rd knot, the 2 end steps fine) or with the equality leader: the assembled Jacobian and
     exact Hessian are casadi's automatic ones of the same rows through casadi's B-spline node, and the Gauss–Newton
     Hessian is written here from its definition — the rows' exact curvature with the fitness rows' multipliers set to
     0, plus Σ 2 c_k J_kᵀJ_k with c_k = w_k λ_f / scale + max(μ_k, 0) / f_k,warm."""
     import casadi as ca
 
     problem = small_problem()
+    warm = None
     if case == "differential drive":
         from tmr.model.diffdrive import DEFAULT_MODEL, load_robot_model
 
         problem = dataclasses.replace(problem, robot_model=load_robot_model(DEFAULT_MODEL))
-    model, ref_model, x, tr, ref = _transcriptions(
-        problem, {"leader_tolerance": 0.05}, clearance=case != "no clearance rows"
-    )
-    assert tr.size == ref.size and tr.offset["fitness"] > 0  # the leader's rows come first
+    if case == "coarse grid":
+        from tmr.control.horizon_coarse import coarse_problem
+
+        problem, warm = coarse_problem(problem, solve(problem, "qp")[0], 3, 1.0, ends=2)
+        assert np.ptp(np.diff(problem.trajectory.t)) > 0.04  # steps of Ts and 3 Ts
+    options = {} if case == "without the tolerance" else {"leader_tolerance": 0.05}
+    model, ref_model, x, tr, ref = _transcriptions(problem, options, clearance=case != "no clearance rows", warm=warm)
+    if case == "without the tolerance":
+        coef_terms = ("f1", "f2", "f4")
+        assert "leader" not in tr.offset and tr.offset["fitness"] == 0
+    else:
+        coef_terms = ("f1", "f2", "f4", "f3")
+    assert tr.size == ref.size and (tr.offset["fitness"] > 0 or case == "without the tolerance")  # the leader first
     lam = np.random.default_rng(4).normal(0.0, 1.0, tr.size)
     lf, scale = 0.7, 2.5
     rx = ref_model.x
@@ -943,7 +958,7 @@ def test_assembled_derivatives_on_partial_rows_with_a_leader_tolerance(case):
         )
     o = model.su.opts
     coef = {"f1": o.w_energy, "f2": o.w_uniformity, "f4": o.w_smoothness, "f3": o.w_tracking}
-    coef = {k: w * lf / scale for k, w in coef.items()}
+    coef = {k: w * lf / scale for k, w in coef.items() if k in coef_terms}
     keep = np.ones(tr.size)
     for i, k in enumerate(model.fitness_terms):
         row = tr.offset["fitness"] + i

@@ -495,6 +495,48 @@ def _diff_rows(su: _Setup, X: Any, Y: Any, TH: Any) -> dict[str, _Rows]:
     }
 
 
+def _joint_terms(su: _Setup, dtheta: Any, D: Any) -> dict[str, Any]:
+    """The joint rates and the terms f1, f2, f4 from the joints' changes: ``dtheta`` (N, K) the relative angles'
+    change per step [rad], ``D`` (N, K+1) the spans [m] (casadi expressions of the variables in :class:`_Model`, or
+    of a symbol z in :meth:`_Model.rows_hessian`). ``Qd`` (2N, K) q̇_0..q̇_{K−1} (q̇_K = 0), ``Qdd`` (2N, K+1) q̈_0
+    (from rest) .. q̈_K (to rest), ``f1``, ``f2``, ``f4`` (Caruso 2021 eq. 24, 25, 27) and their residuals ``r1``,
+    ``r2``, ``r4`` (f = Σ r²). On the coarse pass's grid (steps h_k, knot spans h̄_k) each term is weighted by its
+    share of time (:func:`knot_weights`)."""
+    N, n, Ts = su.N, su.n, su.Ts
+    dD = D[:, 1:] - D[:, :-1]
+    zn = ca.DM.zeros(n, 1)
+    dQ = ca.vertcat(*[r for i in range(N) for r in (dtheta[i, :], dD[i, :])])
+    Dij = [D[i, :] - D[j, :] for i, j in su.pairs]
+    if su.uniform:
+        Qd = dQ / Ts  # q̇_0..q̇_{K−1}; q̇_K = 0
+        Qdd = (ca.horzcat(Qd, zn) - ca.horzcat(zn, Qd)) / Ts  # q̈_0 (from rest) .. q̈_K (to rest)
+        Qd_w, Qdd_w, Dij_w = Qd, Qdd[:, 1:], Dij
+    else:  # the coarse pass's grid: steps h_k, knot spans h̄_k, each term weighted by its share of time
+        h, hbar = knot_weights(su.t)
+        Qd = dQ * ca.DM(np.tile(1.0 / h, (n, 1)))
+        Qdd = (ca.horzcat(Qd, zn) - ca.horzcat(zn, Qd)) * ca.DM(np.tile(1.0 / hbar, (n, 1)))
+        Qd_w = Qd * ca.DM(np.tile(np.sqrt(h / h[0]), (n, 1)))
+        Qdd_w = Qdd[:, 1:] * ca.DM(np.tile(np.sqrt(hbar[1:] / h[0]), (n, 1)))
+        Dij_w = [e * ca.DM(np.sqrt(hbar / h[0])).T for e in Dij]
+    return {
+        "Qd": Qd,
+        "Qdd": Qdd,
+        "f1": ca.sumsqr(Qd_w),
+        "f2": sum((ca.sumsqr(e) for e in Dij_w), ca.MX(0)),
+        "f4": ca.sumsqr(Qdd_w),  # eq. 27: k = 1..K
+        "r1": ca.vec(Qd_w),
+        "r2": ca.vertcat(*[ca.vec(e) for e in Dij_w]) if su.pairs else ca.MX(0, 1),
+        "r4": ca.vec(Qdd_w),
+    }
+
+
+def _dm(a: Any) -> ca.DM:
+    """A scipy.sparse matrix as a casadi DM with the same sparsity pattern."""
+    a = a.tocsc()
+    a.sort_indices()
+    return ca.DM(ca.Sparsity(a.shape[0], a.shape[1], a.indptr.tolist(), a.indices.tolist()), a.data.tolist())
+
+
 class _Model:
     """Whole-horizon symbolic model (casadi MX, every knot at once) and the full numeric evaluation of every row.
 
@@ -540,40 +582,24 @@ class _Model:
         dot = Ux[:, :-1] * Ux[:, 1:] + Uy[:, :-1] * Uy[:, 1:]
         dphi = ca.atan2(cross, dot)  # (N, K) heading change of every link per step
         dtheta = dphi - ca.vertcat(ca.DM.zeros(1, K), dphi[: N - 1, :])  # relative joint angles' change
-        dD = D[:, 1:] - D[:, :-1]
-        zn = ca.DM.zeros(n, 1)
-        dQ = ca.vertcat(*[r for i in range(N) for r in (dtheta[i, :], dD[i, :])])
+        if su.drive is not None and not su.uniform:
+            raise ParameterError("a non-uniform time grid is not implemented for differential drive")
+        # every joint rate, span and term f1, f2, f4 is a function of z = (Δθ, D): linear (the rates, the spans)
+        # or a sum of squares (f1, f2, f4) in z (rows_hessian uses it)
+        self.z = ca.vertcat(ca.vec(dtheta), ca.vec(D))
+        self._links = (Ux, Uy)  # the link vectors (N, K+1) [m]
+        jt = _joint_terms(su, dtheta, D)
         h, hbar = knot_weights(su.t)  # steps and knot spans [s] (all Ts on a uniform grid)
-        Dij = [D[i, :] - D[j, :] for i, j in su.pairs]
-        if su.uniform:
-            Qd = dQ / Ts  # q̇_0..q̇_{K−1}; q̇_K = 0
-            Qdd = (ca.horzcat(Qd, zn) - ca.horzcat(zn, Qd)) / Ts  # q̈_0 (from rest) .. q̈_K (to rest)
-            Qd_w, Qdd_w, Dij_w = Qd, Qdd[:, 1:], Dij
-        else:  # the coarse pass's grid: steps h_k, knot spans h̄_k, each term weighted by its share of time
-            if su.drive is not None:
-                raise ParameterError("a non-uniform time grid is not implemented for differential drive")
-            Qd = dQ * ca.DM(np.tile(1.0 / h, (n, 1)))
-            Qdd = (ca.horzcat(Qd, zn) - ca.horzcat(zn, Qd)) * ca.DM(np.tile(1.0 / hbar, (n, 1)))
-            Qd_w = Qd * ca.DM(np.tile(np.sqrt(h / h[0]), (n, 1)))
-            Qdd_w = Qdd[:, 1:] * ca.DM(np.tile(np.sqrt(hbar[1:] / h[0]), (n, 1)))
-            Dij_w = [e * ca.DM(np.sqrt(hbar / h[0])).T for e in Dij]
+        Qd, Qdd, f1, f2, f4 = jt["Qd"], jt["Qdd"], jt["f1"], jt["f2"], jt["f4"]
         ex = X[N - 1, 1:] - su.ref[1:, 0].reshape(1, -1)
         ey = Y[N - 1, 1:] - su.ref[1:, 1].reshape(1, -1)
-        f1 = ca.sumsqr(Qd_w)
-        f2 = sum((ca.sumsqr(e) for e in Dij_w), ca.MX(0))
         f3 = ca.sumsqr(ex) + ca.sumsqr(ey)
-        f4 = ca.sumsqr(Qdd_w)  # eq. 27: k = 1..K
         J = opts.w_energy * f1 + opts.w_uniformity * f2 + opts.w_smoothness * f4
         if opts.leader_tolerance > 0:
             J = J + opts.w_tracking * f3
         self.terms = ca.Function("terms", [xin], [f1, f2, f3, f4])
         # f_i = Σ r_i² (Gauss–Newton Hessians: hessian="gauss-newton")
-        self.residuals = {
-            "f1": ca.vec(Qd_w),
-            "f2": ca.vertcat(*[ca.vec(e) for e in Dij_w]) if su.pairs else ca.MX(0, 1),
-            "f3": ca.vertcat(ca.vec(ex), ca.vec(ey)),
-            "f4": ca.vec(Qdd_w),
-        }
+        self.residuals = {"f1": jt["r1"], "f2": jt["r2"], "f3": ca.vertcat(ca.vec(ex), ca.vec(ey)), "f4": jt["r4"]}
 
         # bounds on the variables: the start fixed, the leader on its reference (equality leader)
         lbx = np.full((K + 1, 2 * N), -np.inf)
@@ -691,37 +717,139 @@ class _Model:
         self.gn_terms = ["f1", "f2", "f4"] + (["f3"] if opts.leader_tolerance > 0 else [])
         self._rows_hessian: dict[str, ca.Function] = {}
 
+    #: the groups whose rows are linear in z = (Δθ, D) (:meth:`rows_hessian`), each the expression of ``_joint_terms``
+    Z_LINEAR = {"span": "D", "joint_speed": "Qd", "joint_accel": "Qdd"}
+    #: the groups whose rows are linear in the variables: no curvature (finite differences of the positions)
+    LINEAR = ("robot_speed", "robot_accel")
+
     def rows_hessian(self, hessian: str) -> ca.Function:
         """The Hessian (x × x) of the cost and every non-clearance row, ``H(x, c, λ)``, built once per model and
-        Hessian kind (casadi's symbolic Hessian takes 1.5–2.3 s on a walls room with 8 robots, 72,000 entries; every
-        round's transcription reuses it): λ the multipliers of every entry of every group of :attr:`rest_groups`
-        (each group's entries column-major at :attr:`rest_offset`; 0 for entries that are not rows of the NLP).
-        ``"exact"``: c (1,) weighs the cost J; ``"gauss-newton"``: c (len(:attr:`gn_terms`),) weighs 2 JᵣᵀJᵣ of each
-        term's residuals r (f = Σ r², ``formulations/horizon.md`` "Gauss–Newton Hessian"), and the fitness rows (sums
-        of squares over f_i,warm) carry no curvature of their own: their Gauss–Newton part is the caller's share of
-        c."""
+        Hessian kind (every round's transcription reuses it): λ the multipliers of every entry of every group of
+        :attr:`rest_groups` (each group's entries column-major at :attr:`rest_offset`; 0 for entries that are not
+        rows of the NLP). ``"exact"``: c (1,) weighs the cost J; ``"gauss-newton"``: c (len(:attr:`gn_terms`),)
+        weighs 2 JᵣᵀJᵣ of each term's residuals r (f = Σ r², ``formulations/horizon.md`` "Gauss–Newton Hessian"),
+        and the fitness rows (sums of squares over f_i,warm) carry no curvature of their own: their Gauss–Newton
+        part is the caller's share of c.
+
+        Assembled as one product ``Jᵀ W J`` (``formulations/horizon.md``, "The Hessian of the cost and the other
+        rows"): f1, f2, f4 are quadratic forms ½ zᵀH_t z in z = (Δθ, D) (:attr:`z`, H_t constant) and the span and
+        joint-rate rows linear ones L_g z, so with Φ(z) = Σ μ_t f_t + Σ λ_gᵀ L_g z (μ_t = c w_t + λ_t / f_t,warm;
+        Gauss–Newton: μ_t = c_t) the chain rule gives J_zᵀ (Σ μ_t H_t) J_z + Σ_j ρ_j ∇²z_j, ρ = ∂Φ/∂z =
+        (Σ μ_t H_t) z + Σ L_gᵀ λ_g (Gauss–Newton: without the first term). Each z_j is a function of one link
+        vector u_i,k = p_i,k − p_i−1,k (a span ‖u‖) or of two (Δφ = φ(u_i,k+1) − φ(u_i,k), φ = atan2(u_y, u_x)),
+        so Σ ρ_j ∇²z_j = Tᵀ G T with T the constant map x → u and G 2 × 2 blocks per link and knot, from ∇²φ and
+        ∇²‖u‖ in closed form (:meth:`_link_curvature`). The separation rows (E_x x)² + (E_y x)² (E constant) add
+        Eᵀ diag(2λ) E; the robots' rates are linear. Any other row (a leader tolerance, differential drive) is
+        differentiated by casadi. On a walls room with 8 robots (720 knots, 575,184 entries) casadi's own Hessian
+        of the whole sum took 1.7–1.8 s to build and 26 (exact) and 53 ms (Gauss–Newton) to evaluate; this one
+        0.2 s and 11–12 ms."""
         if hessian in self._rows_hessian:
             return self._rows_hessian[hessian]
-        x = self.x
-        rest = ca.vertcat(*[ca.vec(self.rows[g].expr) for g in self.rest_groups])
+        x, su, opts = self.x, self.su, self.su.opts
+        N, K = su.N, su.K
         lam = ca.MX.sym("lam", self.rest_size)
+        lam_of = {g: lam[self.rest_offset[g] : self.rest_offset[g] + int(self.rows[g].expr.numel())]
+                  for g in self.rest_groups}  # fmt: skip
+        # constants in z: the terms' Hessians H_t and the linear rows' matrices L_g (exact: quadratic and linear)
+        nz = int(self.z.numel())
+        Z = ca.MX.sym("z", nz)
+        jt = _joint_terms(su, ca.reshape(Z[: N * K], N, K), ca.reshape(Z[N * K :], N, K + 1))
+        jt["D"] = ca.reshape(Z[N * K :], N, K + 1)
+        linear = [g for g in self.Z_LINEAR if g in lam_of]
+        const = ca.Function(
+            "z_constants",
+            [Z],
+            [ca.hessian(jt[t], Z)[0] for t in ("f1", "f2", "f4")]
+            + [ca.jacobian(ca.vec(jt[self.Z_LINEAR[g]]), Z) for g in linear],
+        )(np.zeros(nz))
+        H_t = dict(zip(("f1", "f2", "f4"), const[:3], strict=True))
+        rho = sum((ca.mtimes(Lg.T, lam_of[g]) for g, Lg in zip(linear, const[3:], strict=True)), ca.MX.zeros(nz, 1))
         if hessian == "gauss-newton":
             c = ca.MX.sym("c", len(self.gn_terms))
-            keep = np.ones(self.rest_size)
-            if "fitness" in self.rest_offset:
-                o = self.rest_offset["fitness"]
-                keep[o : o + len(self.fitness_terms)] = 0.0
-            # Σ 2 c_k J_kᵀJ_k as one product of the stacked √(2 c_k) J_k (c ≥ 0: IPOPT's cost factor, the weights
-            # and clipped multipliers are)
-            root = ca.sqrt(2 * ca.fmax(c, 0))
-            Js = [root[i] * ca.jacobian(self.residuals[k], x) for i, k in enumerate(self.gn_terms)]
-            Js = ca.vertcat(*[J for J in Js if J.shape[0] > 0])
-            H = ca.hessian(ca.dot(lam * ca.DM(keep), rest), x)[0] + ca.mtimes(Js.T, Js)
+            mu = {t: ca.fmax(c[i], 0) for i, t in enumerate(self.gn_terms)}  # c ≥ 0 (weights, clipped multipliers)
+            HF = sum((mu[t] * H_t[t] for t in ("f1", "f2", "f4")), ca.MX(nz, nz))
+            phi = ca.MX(0)
         else:
             c = ca.MX.sym("c", 1)
-            H = ca.hessian(c * self.J + ca.dot(lam, rest), x)[0]
+            w = {"f1": opts.w_energy, "f2": opts.w_uniformity, "f4": opts.w_smoothness}
+            mu = {t: c * w[t] for t in w}
+            if "fitness" in lam_of:  # the rows f_t / f_t,warm ≤ 1
+                for i, t in enumerate(self.fitness_terms):
+                    mu[t] = mu[t] + lam_of["fitness"][i] / self.bounds[t]
+            HF = sum((mu[t] * H_t[t] for t in ("f1", "f2", "f4")), ca.MX(nz, nz))
+            rho = rho + ca.mtimes(HF, self.z)
+            phi = c * opts.w_tracking * self.terms(x)[2] if opts.leader_tolerance > 0 else ca.MX(0)
+        nx = int(x.numel())
+        blocks = [(ca.jacobian(self.z, x), HF), (self._link_map(nx), self._link_curvature(rho))]
+        if "separation" in lam_of:
+            ls = lam_of["separation"]
+            blocks.append((self._separation_map(nx), ca.diag(2 * ca.vertcat(ls, ls))))
+        Jall = ca.vertcat(*[b[0] for b in blocks])
+        H = ca.mtimes(Jall.T, ca.mtimes(ca.diagcat(*[b[1] for b in blocks]), Jall))
+        done = {"fitness", "separation", *self.Z_LINEAR, *self.LINEAR}
+        rest = [ca.dot(lam_of[g], ca.vec(self.rows[g].expr)) for g in lam_of if g not in done]
+        if rest or opts.leader_tolerance > 0:  # a leader tolerance, differential drive: casadi's own Hessian
+            H = H + ca.hessian(phi + sum(rest, ca.MX(0)), x)[0]
+        if hessian == "gauss-newton" and "f3" in self.gn_terms:  # the leader's residuals: not functions of z
+            J3 = ca.sqrt(2 * mu["f3"]) * ca.jacobian(self.residuals["f3"], x)
+            H = H + ca.mtimes(J3.T, J3)
         self._rows_hessian[hessian] = ca.Function("rows_hessian_" + hessian.replace("-", "_"), [x, c, lam], [H])
         return self._rows_hessian[hessian]
+
+    def _link_map(self, nx: int) -> ca.DM:
+        """T (2N(K+1) × nx, constant): the variables to the link vectors u = (vec Ux, vec Uy), u_i,k = p_i,k −
+        p_i−1,k (p_0 the base, a constant: not in T)."""
+        from scipy.sparse import csc_matrix
+
+        N, K = self.su.N, self.su.K
+        L = N * (K + 1)
+        k, i = np.divmod(np.arange(L), N)  # u index k N + i: link i + 1 at knot k
+        col = k * 2 * N + i
+        prev = np.flatnonzero(i > 0)
+        rows = np.concatenate([np.arange(L), np.arange(L) + L, prev, prev + L])
+        cols = np.concatenate([col, col + N, col[prev] - 1, col[prev] + N - 1])
+        vals = np.concatenate([np.ones(2 * L), -np.ones(2 * prev.size)])
+        return _dm(csc_matrix((vals, (rows, cols)), shape=(2 * L, nx)))
+
+    def _separation_map(self, nx: int) -> ca.DM:
+        """E = [E_x; E_y] (2 P(K+1) × nx, constant): row p + P k of E_x is x_i,k − x_j,k of the p-th pair (i, j),
+        so that the separation rows are (E_x x)² + (E_y x)², in their vec order."""
+        from scipy.sparse import csc_matrix
+
+        N, K, pairs = self.su.N, self.su.K, np.asarray(self.su.pairs)
+        P = len(pairs)
+        k, p = np.divmod(np.arange(P * (K + 1)), P)
+        r = np.arange(P * (K + 1))
+        ci, cj = k * 2 * N + pairs[p, 0], k * 2 * N + pairs[p, 1]
+        rows = np.concatenate([r, r, r + r.size, r + r.size])
+        cols = np.concatenate([ci, cj, ci + N, cj + N])
+        vals = np.concatenate([np.ones(r.size), -np.ones(r.size), np.ones(r.size), -np.ones(r.size)])
+        return _dm(csc_matrix((vals, (rows, cols)), shape=(2 * r.size, nx)))
+
+    def _link_curvature(self, rho: Any) -> Any:
+        """G (2N(K+1) square, a 2 × 2 block on (u_x, u_y) of each link and knot): Σ_j ρ_j ∇²z_j in the link
+        vectors u, ``rho`` the weights of z = (vec Δθ, vec D). Δθ_i,k = Δφ_i,k − Δφ_i−1,k with Δφ_i,k =
+        φ(u_i,k+1) − φ(u_i,k), so φ(u_i,k) is weighed by a_i,k = σ_i,k−1 − σ_i,k, σ_i,k = ρ_θ,i,k − ρ_θ,i+1,k; with
+        r = ‖u‖, ∇²φ = [2u_x u_y, u_y² − u_x²; u_y² − u_x², −2u_x u_y] / r⁴ and ∇²r = [u_y², −u_x u_y; −u_x u_y,
+        u_x²] / r³."""
+        N, K = self.su.N, self.su.K
+        L = N * (K + 1)
+        Ux, Uy = self._links
+        rt, rD = ca.reshape(rho[: N * K], N, K), ca.reshape(rho[N * K :], N, K + 1)
+        sig = rt - ca.vertcat(rt[1:, :], ca.DM.zeros(1, K))
+        zc = ca.DM.zeros(N, 1)
+        a = ca.horzcat(zc, sig) - ca.horzcat(sig, zc)
+        r2 = Ux * Ux + Uy * Uy
+        r4, r3 = r2 * r2, r2 * ca.sqrt(r2)
+        pxx, pxy = 2 * Ux * Uy / r4, (Uy * Uy - Ux * Ux) / r4
+        gxx = ca.vec(a * pxx + rD * Uy * Uy / r3)
+        gxy = ca.vec(a * pxy - rD * Ux * Uy / r3)
+        gyy = ca.vec(-a * pxx + rD * Ux * Ux / r3)
+        # CSC of the blocks: the columns u_x and u_y of link l each hold the rows (l, l + L)
+        ii = np.arange(L)
+        pair = np.stack([ii, ii + L], 1).ravel()
+        sp = ca.Sparsity(2 * L, 2 * L, np.arange(0, 4 * L + 1, 2).tolist(), np.concatenate([pair, pair]).tolist())
+        return ca.MX(sp, ca.vertcat(ca.vec(ca.horzcat(gxx, gxy).T), ca.vec(ca.horzcat(gxy, gyy).T)))
 
     def point_maps(self, idx: NDArray[np.int_]) -> tuple[Any, Any, Array]:
         """The clearance samples ``idx`` (flat, column-major in (N S, K+1)) as affine maps of the variables:
