@@ -119,13 +119,17 @@ __all__ = [
 
 #: Seconds casadi takes to build IPOPT's solver per NLP row (the derivatives of the rows other than clearance, the
 #: structured clearance derivatives, the solver) up to :data:`BUILD_REFERENCE_ROWS` rows, measured on the 2-core
-#: reference machine: 1.87 s for the 32,522 rows of scenario E's first round with 6 robots (0.057 ms; 7.5 s for
-#: 31,308 rows with casadi's automatic derivatives). Beyond, the time per row grows as (rows / reference) ^
-#: :data:`BUILD_GROWTH`: 57 s for the 382,944 rows of a generated narrow room with 8 robots and 9,533 knots (0.15 ms).
-#: A round whose build would overrun the time limit is not started (:func:`_expected_build`).
-BUILD_SECONDS_PER_ROW: float = 6.0e-5
+#: reference machine with the assembled Hessian of stop 47 (``_Model.rows_hessian``): 0.83 s for the 32,522 rows of
+#: scenario E's first round with 6 robots (0.026 ms; 1.87 s before it, 7.5 s for 31,308 rows with casadi's automatic
+#: derivatives). Beyond, the time per row grows as (rows / reference) ^ :data:`BUILD_GROWTH`: 24–28 s for the 398,188
+#: rows of a generated narrow room with 8 robots and 9,564 knots (0.07 ms; 57 s before). A round whose build would
+#: overrun the time limit is not started (:func:`_expected_build`, :data:`BUILD_SHARE`).
+BUILD_SECONDS_PER_ROW: float = 2.6e-5
 BUILD_REFERENCE_ROWS: int = 32_522
 BUILD_GROWTH: float = 0.4
+#: A round is started only if this estimate of its build (:func:`_expected_build`) is at most this share of the time
+#: left: the rest is for IPOPT's iterations, which cost 3–5 s each on the narrow room above after its 24–28 s build.
+BUILD_SHARE: float = 0.4
 
 
 def _expected_build(rows: int) -> float:
@@ -372,7 +376,7 @@ def plan_horizon(
         disable=not (progress and _is_terminal(sys.stderr)),
     )
     build_time, built_rows = 0.0, 0  # the last solver's build [s] (outside IPOPT's clock) and its rows
-    too_big: tuple[int, float] | None = None  # (rows, expected build [s]) if IPOPT never started for that reason
+    too_big: tuple[int, float, float] | None = None  # (rows, expected build, time left [s]) if IPOPT never started
     windows: list[dict[str, Any]] = []
     window_lam: dict[str, Array] | None = None  # the windows' row multipliers (stitched), by group and entry
     if opts.window is not None and int(opts.window) < su.K:
@@ -457,11 +461,13 @@ def plan_horizon(
                 for label, extra in attempts:
                     remaining = phase_deadline - time.perf_counter()
                     # building the solver (casadi: the NLP's derivatives) cannot be interrupted: do not start one
-                    # that would overrun the limit — as long as the last one took, or its size times the measured rate
-                    expected = max(build_time * tr.size / max(built_rows, 1), _expected_build(tr.size))
-                    if math.isfinite(limit) and remaining <= expected:
+                    # that would overrun the limit — as long as the last one took — or whose estimated build would
+                    # leave IPOPT less than 1 − BUILD_SHARE of the time left
+                    estimate = _expected_build(tr.size)
+                    if math.isfinite(limit) and remaining <= max(build_time * tr.size / max(built_rows, 1),
+                                                                 estimate / BUILD_SHARE):  # fmt: skip
                         stop = "time_limit"
-                        too_big = (tr.size, expected) if len(rounds) == first_round else None
+                        too_big = (tr.size, estimate, remaining) if len(rounds) == first_round else None
                         break
                     if math.isfinite(limit):
                         extra = dict(extra, max_wall_time=float(remaining))
@@ -586,7 +592,8 @@ def plan_horizon(
         if too_big is not None:
             what = (
                 f"IPOPT not started: the NLP has {too_big[0]:,} rows, building its solver would take ≈ "
-                f"{too_big[1]:.0f} s, beyond the time limit of {limit:g} s (raise --time-limit)"
+                f"{too_big[1]:.0f} s, more than {BUILD_SHARE:.0%} of the {max(too_big[2], 0.0):.0f} s left of the "
+                f"time limit of {limit:g} s (raise --time-limit)"
             )
     else:
         what = f"rows left out of the NLP were still violated after {opts.max_rounds} rounds of constraint generation"
