@@ -215,3 +215,13 @@ def test_certify_declines_what_is_not_an_optimum(q1, x, y, why):
     assert ws.certify(P, q, A, lo, up, np.array([1.0, 0.0]), np.array([1.0, 0.0])) is not None
     q = np.array([q1, 0.0])
     assert ws.certify(P, q, A, lo, up, np.array(x), np.array(y)) is None, why
+
+
+def test_certify_ignores_multipliers_below_the_sign_tolerance():
+    """A multiplier too small to name a bound proves nothing: on a row far from its bound it must not cancel the
+    gradient (a reviewer's case: min ½x² − x with the row 10⁹ x ≤ 10¹², x = 0 and y = 10⁻⁹ is stationary)."""
+    P, q = np.eye(1), np.array([-1.0])
+    A, lo, up = np.array([[1e9]]), np.array([-1e30]), np.array([1e12])
+    ws = WarmActiveSet()
+    assert ws.certify(P, q, A, lo, up, np.array([0.0]), np.array([1e-9])) is None
+    assert ws.certify(P, q, A, lo, up, np.array([1.0]), np.array([0.0])) is not None  # the optimum

@@ -347,3 +347,32 @@ def test_a_limit_changing_its_row_count_is_a_clear_error(column_room):
     qp.step(ctx)
     with pytest.raises(ParameterError, match="shrinking"):
         qp.step(ctx)
+
+
+def test_daqps_infeasible_verdict_is_confirmed_before_it_is_trusted():
+    """A level's P = JᵀJ + εI with fewer task rows than variables is nearly singular (condition ≈ 1/ε): there DAQP
+    can call a feasible level infeasible (exit flag −1). Each generated level has a feasible point x0 by
+    construction; the miss path never calls it infeasible (the verdict is confirmed with P = I, f = 0), although
+    DAQP with the level's own P does for some of them."""
+    import daqp
+
+    from tmr.control.activeset import WarmActiveSet
+    from tmr.control.qp_backends import DAQP_INFEASIBLE, _OsqpLevel
+
+    rng = np.random.default_rng(1)
+    fooled = 0
+    for _ in range(60):
+        n, m = int(rng.integers(2, 13)), int(rng.integers(1, 20))
+        r = int(rng.integers(1, n))
+        Jw, tw = rng.normal(size=(r, n)), rng.normal(size=r) * 10
+        P, q = Jw.T @ Jw + 1e-9 * np.eye(n), -(tw @ Jw)
+        A, x0 = rng.normal(size=(m, n)), rng.normal(size=n)
+        lo, up = A @ x0 - rng.uniform(0.01, 1.0, m), A @ x0 + rng.uniform(0.01, 1.0, m)  # x0 strictly inside
+        ne = int(rng.integers(0, min(m, n - 1) + 1))
+        lo[rng.random(m) < 0.3] = -1e30
+        up[rng.random(m) < 0.3] = 1e30
+        lo[:ne] = up[:ne] = A[:ne] @ x0
+        sense = np.where(lo == up, 5, 0).astype(np.int32)
+        fooled += daqp.solve(P, q, A, up, lo, sense)[2] == -1
+        assert _OsqpLevel(1e-9, WarmActiveSet())._exact(P, q, A, lo, up) != DAQP_INFEASIBLE
+    assert fooled >= 1  # the case the confirmation is for occurs among these levels

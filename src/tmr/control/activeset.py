@@ -224,14 +224,15 @@ class WarmActiveSet:
         None if a condition fails."""
         tol = self.tol
         qscale = 1.0 + float(np.max(np.abs(q), initial=0.0))
+        s = active_set(y, lo, up, tol * qscale)
+        rows = s != 0
+        y = np.where(rows, y, 0.0)  # only rows at a bound carry a multiplier (a tiny one elsewhere proves nothing)
         if not np.abs(P @ x + q + A.T @ y).max(initial=0.0) <= 10 * tol * qscale:
             return None
         Ax = A @ x
         if Ax.size and not np.maximum(lo - Ax, Ax - up).max() <= tol:
             return None
-        s = active_set(y, lo, up, tol * qscale)
         at = np.where(s == 1, up, lo)
-        rows = s != 0
         b = at[rows]
         if b.size and not (np.all(np.isfinite(b)) and np.abs(Ax[rows] - b).max() <= tol * (1.0 + np.abs(b).max())):
             return None  # a multiplier on a row away from the bound it names (or naming a bound the row lacks)

@@ -376,7 +376,7 @@ def plan_horizon(
         disable=not (progress and _is_terminal(sys.stderr)),
     )
     build_time, built_rows = 0.0, 0  # the last solver's build [s] (outside IPOPT's clock) and its rows
-    too_big: tuple[int, float, float] | None = None  # (rows, expected build, time left [s]) if IPOPT never started
+    too_big: tuple[int, str] | None = None  # (rows, why its build was not started) if IPOPT never started
     windows: list[dict[str, Any]] = []
     window_lam: dict[str, Array] | None = None  # the windows' row multipliers (stitched), by group and entry
     if opts.window is not None and int(opts.window) < su.K:
@@ -463,11 +463,19 @@ def plan_horizon(
                     # building the solver (casadi: the NLP's derivatives) cannot be interrupted: do not start one
                     # that would overrun the limit — as long as the last one took — or whose estimated build would
                     # leave IPOPT less than 1 − BUILD_SHARE of the time left
-                    estimate = _expected_build(tr.size)
-                    if math.isfinite(limit) and remaining <= max(build_time * tr.size / max(built_rows, 1),
-                                                                 estimate / BUILD_SHARE):  # fmt: skip
+                    scaled, estimate = build_time * tr.size / max(built_rows, 1), _expected_build(tr.size)
+                    if math.isfinite(limit) and remaining <= max(scaled, estimate / BUILD_SHARE):
                         stop = "time_limit"
-                        too_big = (tr.size, estimate, remaining) if len(rounds) == first_round else None
+                        too_big = None
+                        if len(rounds) == first_round:
+                            why = (
+                                f"would take ≈ {estimate:.2g} s, more than {BUILD_SHARE:.0%} of the "
+                                f"{max(remaining, 0.0):.2g} s left"
+                                if estimate / BUILD_SHARE >= scaled
+                                else f"would take ≈ {scaled:.2g} s (the last build, scaled by the rows), more than "
+                                f"the {max(remaining, 0.0):.2g} s left"
+                            )
+                            too_big = (tr.size, why)
                         break
                     if math.isfinite(limit):
                         extra = dict(extra, max_wall_time=float(remaining))
@@ -591,8 +599,7 @@ def plan_horizon(
         what = f"time limit of {limit:g} s reached {where}"
         if too_big is not None:
             what = (
-                f"IPOPT not started: the NLP has {too_big[0]:,} rows, building its solver would take ≈ "
-                f"{too_big[1]:.0f} s, more than {BUILD_SHARE:.0%} of the {max(too_big[2], 0.0):.0f} s left of the "
+                f"IPOPT not started: the NLP has {too_big[0]:,} rows, building its solver {too_big[1]} of the "
                 f"time limit of {limit:g} s (raise --time-limit)"
             )
     else:
