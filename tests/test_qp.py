@@ -351,9 +351,9 @@ def test_a_limit_changing_its_row_count_is_a_clear_error(column_room):
 
 def test_daqps_infeasible_verdict_is_confirmed_before_it_is_trusted():
     """A level's P = JᵀJ + εI with fewer task rows than variables is nearly singular (condition ≈ 1/ε): there DAQP
-    can call a feasible level infeasible (exit flag −1). Each generated level has a feasible point x0 by
-    construction; the miss path never calls it infeasible (the verdict is confirmed with P = I, f = 0), although
-    DAQP with the level's own P does for some of them."""
+    with its default singularity tolerance calls some feasible levels infeasible (exit flag −1). Each generated
+    level has a feasible point x0 by construction; the miss path (DAQP_SING_TOL, and a −1 confirmed with P = I,
+    f = 0) never calls one infeasible, and solves each level the default DAQP was fooled by to a certified optimum."""
     import daqp
 
     from tmr.control.activeset import WarmActiveSet
@@ -373,6 +373,9 @@ def test_daqps_infeasible_verdict_is_confirmed_before_it_is_trusted():
         up[rng.random(m) < 0.3] = 1e30
         lo[:ne] = up[:ne] = A[:ne] @ x0
         sense = np.where(lo == up, 5, 0).astype(np.int32)
-        fooled += daqp.solve(P, q, A, up, lo, sense)[2] == -1
-        assert _OsqpLevel(1e-9, WarmActiveSet())._exact(P, q, A, lo, up) != DAQP_INFEASIBLE
-    assert fooled >= 1  # the case the confirmation is for occurs among these levels
+        res = _OsqpLevel(1e-9, WarmActiveSet())._exact(P, q, A, lo, up)
+        assert res != DAQP_INFEASIBLE
+        if daqp.solve(P, q, A, up, lo, sense)[2] == -1:
+            fooled += 1
+            assert res is not None  # certified: the KKT conditions hold at DAQP's answer
+    assert fooled >= 1  # the case occurs among these levels

@@ -35,6 +35,12 @@ OSQP_SETTINGS = dict(eps_abs=1e-8, eps_rel=1e-8, polishing=False, max_iter=20000
 OSQP_COARSE = dict(eps_abs=1e-5, eps_rel=1e-5, max_iter=400)
 #: Backends that take over a level, in this order, when the primary one fails (no answer, or one that fails the checks).
 FALLBACK_SOLVERS: tuple[str, ...] = ("daqp", "clarabel")
+#: DAQP's singularity tolerance (its default 10⁻¹¹ is too coarse here): a level's P = JᵀJ + εI has eigenvalues down to
+#: ε = 10⁻⁹ (fewer task rows than variables), which DAQP's default treats as singular, calling feasible levels
+#: infeasible (exit flag −1): 28 of the 40 first such verdicts on narrow-far-4253401181 with 8 robots (HiGHS found a
+#: point for each), 60 of 1,500 random levels of that shape (a reviewer's test); with 10⁻¹⁴ none, and DAQP's answer
+#: is certified optimal on 1,499 of those 1,500 instead of 1,421.
+DAQP_SING_TOL = 1e-14
 #: What :meth:`_OsqpLevel._exact` returns when DAQP proves a level infeasible (its exit flag −1).
 DAQP_INFEASIBLE = "infeasible"
 #: OSQP's infinity: bounds beyond it are clipped.
@@ -171,11 +177,9 @@ class _OsqpLevel:
         """A miss of the warm active set solved by DAQP (dense, dual active-set: exact at a vertex, no iteration
         count to tune), warm-started from the previous step's active set; its answer is verified by the KKT conditions
         (:meth:`WarmActiveSet.certify`, the tolerances of a hit). :data:`DAQP_INFEASIBLE` if DAQP finds the level
-        infeasible twice — with the level's P and again with P = I, f = 0, which only asks whether a point exists: P =
-        JᵀJ + εI with fewer task rows than variables has a condition number near 1/ε = 10⁹ and there DAQP called 60
-        of 1,500 random feasible levels infeasible (a reviewer's test), none with P = I — so that OSQP does not spend
-        its 20 000 iterations failing to converge; None if DAQP fails otherwise or its answer does not verify (OSQP
-        takes over)."""
+        infeasible twice — with the level's P (singularity tolerance :data:`DAQP_SING_TOL`) and again with P = I, f = 0,
+        which only asks whether a point exists — so that OSQP does not spend its 20 000 iterations failing to
+        converge; None if DAQP fails otherwise or its answer does not verify (OSQP takes over)."""
         import daqp
 
         m = A.shape[0]
@@ -185,8 +189,8 @@ class _OsqpLevel:
             sense[guess == 1] = 1
             sense[guess == -1] = 3
         sense[lo == up] = 5  # equality (active, immutable)
-        x, _, flag, info = daqp.solve(P, q, A, up, lo, sense)
-        if flag == -1:  # confirmed on the same rows with H = I, f = 0 (a nearly singular P fools DAQP's test)
+        x, _, flag, info = daqp.solve(P, q, A, up, lo, sense, sing_tol=DAQP_SING_TOL)
+        if flag == -1:  # confirmed on the same rows with H = I, f = 0: a question of feasibility alone
             n = A.shape[1]
             if daqp.solve(np.eye(n), np.zeros(n), A, up, lo, np.where(lo == up, 5, 0).astype(np.int32))[2] == -1:
                 return DAQP_INFEASIBLE
@@ -273,6 +277,7 @@ class _QpsolversLevel:
     OPTIONS: dict[str, dict[str, float]] = {
         "osqp": {"eps_abs": 1e-8, "eps_rel": 1e-8, "max_iter": 20000, "polishing": False},
         "proxqp": {"eps_abs": 1e-9, "eps_rel": 0.0},
+        "daqp": {"sing_tol": DAQP_SING_TOL},
     }
 
     #: rows within this distance (relative to 1 + |bound|) of a bound are the polishing guess of the active set
