@@ -452,8 +452,8 @@ QUOTES = [
     Quote(r"and the worst step (\S+) ms \(", lambda: ccma_max("warm_max_ms", "vm")),
     # speed
     Quote(
-        r"load 1.2–1.5\): 3 robots (\d+) µs per step including building the matrices \(DAQP (\d+) µs\), 30 robots no "
-        r"step above (\S+) ms \(DAQP (\S+) ms\), 100 robots (\S+) ms per step \(DAQP (\S+) ms\)",
+        r"load [\d.]+–[\d.]+\): 3 robots (\d+) µs per step including building the matrices \(DAQP alone (\d+) µs\), "
+        r"30 robots no step above (\S+) ms \(DAQP (\S+) ms\), 100 robots (\S+) ms per step \(DAQP (\S+) ms\)",
         lambda: (
             1000 * qp_step(3, "osqp", "step_ms"),
             1000 * qp_step(3, "daqp", "step_ms"),
@@ -502,8 +502,17 @@ QUOTES = [
         lambda: cell("horizon_rooms.csv", "wall_time", room="scenario E", horizon_result="optimal"),
     ),
     Quote(
-        r"one walls room at up to (\d+) s, one narrow room whose `qp` plan alone takes (\d+) s",
+        r"one walls room at up to (\d+) s,\s+and one narrow room, 9,530 knots of train references with its `qp` plan"
+        r" in (\d+) s,",
         lambda: (max(slow_walls()), statistics.median(qp_only_times())),
+    ),
+    Quote(
+        r"(\d+)× faster to build than casadi's symbolic Hessian and (\d+)× faster to evaluate",
+        lambda: md(
+            "horizon_hessian.md",
+            r"\| 150917237:walls:corner:8 \| [\d,]+ \| \d+ \| exact \|(?: [\d.,]+ \|){3} ([\d.]+)× \|"
+            r"(?: [\d.]+ \|){2} ([\d.]+)× \|",
+        ),
     ),
 ]
 
