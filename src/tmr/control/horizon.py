@@ -132,6 +132,11 @@ BUILD_GROWTH: float = 0.4
 BUILD_SHARE: float = 0.4
 
 
+def _seconds(v: float) -> str:
+    """A duration [s] for a note: two significant digits below 10 s, whole seconds above."""
+    return f"{v:.2g}" if v < 10 else f"{v:.0f}"
+
+
 def _expected_build(rows: int) -> float:
     """Expected seconds to build the solver of an NLP with ``rows`` rows (see :data:`BUILD_SECONDS_PER_ROW`)."""
     return rows * BUILD_SECONDS_PER_ROW * max(1.0, rows / BUILD_REFERENCE_ROWS) ** BUILD_GROWTH
@@ -468,12 +473,12 @@ def plan_horizon(
                         stop = "time_limit"
                         too_big = None
                         if len(rounds) == first_round:
+                            left = _seconds(max(remaining, 0.0))
                             why = (
-                                f"would take ≈ {estimate:.2g} s, more than {BUILD_SHARE:.0%} of the "
-                                f"{max(remaining, 0.0):.2g} s left"
+                                f"would take ≈ {_seconds(estimate)} s, more than {BUILD_SHARE:.0%} of the {left} s left"
                                 if estimate / BUILD_SHARE >= scaled
-                                else f"would take ≈ {scaled:.2g} s (the last build, scaled by the rows), more than "
-                                f"the {max(remaining, 0.0):.2g} s left"
+                                else f"would take ≈ {_seconds(scaled)} s (the last build, scaled by the rows), more "
+                                f"than the {left} s left"
                             )
                             too_big = (tr.size, why)
                         break

@@ -741,8 +741,8 @@ class _Model:
         ∇²‖u‖ in closed form (:meth:`_link_curvature`). The separation rows (E_x x)² + (E_y x)² (E constant) add
         Eᵀ diag(2λ) E; the robots' rates are linear. Any other row (a leader tolerance, differential drive) is
         differentiated by casadi. On a walls room with 8 robots (720 knots, 575,184 entries) casadi's own Hessian
-        of the whole sum took 1.7–1.8 s to build and 26 (exact) and 53 ms (Gauss–Newton) to evaluate; this one
-        0.2 s and 11–12 ms."""
+        of the whole sum takes 1.3–1.5 s to build and 25 (exact) and 35–56 ms (Gauss–Newton) to evaluate; this one
+        0.16–0.18 s and 11–12 ms (``benchmarks/horizon_hessian.py``)."""
         if hessian in self._rows_hessian:
             return self._rows_hessian[hessian]
         x, su, opts = self.x, self.su, self.su.opts

@@ -229,7 +229,7 @@ class _OsqpLevel:
             P = P.toarray()
         if self.warm is not None and self.exact_miss and A.shape[1] <= self.exact_above:
             res = self._exact(P, q, A, lo, up)
-            if res == DAQP_INFEASIBLE:
+            if isinstance(res, str):  # DAQP_INFEASIBLE
                 return None, "primal infeasible (daqp)", 0
             if res is not None:
                 self.guess = res.active
