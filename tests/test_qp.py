@@ -222,7 +222,7 @@ def test_warm_active_set_and_osqp_give_the_same_plan(route):
 
 
 def test_a_level_daqp_proves_infeasible_never_reaches_osqp():
-    """A miss of the warm active set on an infeasible level: DAQP's verdict (a certificate HiGHS confirms here) is
+    """A miss of the warm active set on an infeasible level: DAQP's verdict (confirmed with P = I; HiGHS agrees) is
     returned at once, without OSQP's 20 000 iterations of not converging; the caller then relaxes the level."""
     from scipy.optimize import linprog
 
@@ -349,7 +349,7 @@ def test_a_limit_changing_its_row_count_is_a_clear_error(column_room):
         qp.step(ctx)
 
 
-def test_daqps_infeasible_verdict_is_confirmed_before_it_is_trusted():
+def test_daqp_never_calls_a_feasible_nearly_singular_level_infeasible():
     """A level's P = JᵀJ + εI with fewer task rows than variables is nearly singular (condition ≈ 1/ε): there DAQP
     with its default singularity tolerance calls some feasible levels infeasible (exit flag −1). Each generated
     level has a feasible point x0 by construction; the miss path (DAQP_SING_TOL, and a −1 confirmed with P = I,
