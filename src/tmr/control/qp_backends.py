@@ -35,11 +35,11 @@ OSQP_SETTINGS = dict(eps_abs=1e-8, eps_rel=1e-8, polishing=False, max_iter=20000
 OSQP_COARSE = dict(eps_abs=1e-5, eps_rel=1e-5, max_iter=400)
 #: Backends that take over a level, in this order, when the primary one fails (no answer, or one that fails the checks).
 FALLBACK_SOLVERS: tuple[str, ...] = ("daqp", "clarabel")
-#: DAQP's singularity tolerance (its default 10⁻¹¹ is too coarse here): a level's P = JᵀJ + εI has eigenvalues down to
-#: ε = 10⁻⁹ (fewer task rows than variables), which DAQP's default treats as singular, calling feasible levels
-#: infeasible (exit flag −1): 28 of the 40 first such verdicts on narrow-far-4253401181 with 8 robots (HiGHS found a
-#: point for each), 60 of 1,500 random levels of that shape (a reviewer's test); with 10⁻¹⁴ none, and DAQP's answer
-#: is certified optimal on 1,499 of those 1,500 instead of 1,421.
+#: DAQP's singularity tolerance for the pivots of its working set (its default 3.7·10⁻¹¹ is too coarse here): a
+#: level's P = JᵀJ + εI has eigenvalues down to ε = 10⁻⁹ (fewer task rows than variables), which DAQP's default
+#: treats as singular, calling feasible levels infeasible (exit flag −1): 28 of the 40 first such verdicts on
+#: narrow-far-4253401181 with 8 robots (HiGHS found a point for each), 60 of 1,500 random levels of that shape (a
+#: reviewer's test); with 10⁻¹⁴ none, and DAQP's answer is certified optimal on 1,499 of those 1,500 instead of 1,421.
 DAQP_SING_TOL = 1e-14
 #: What :meth:`_OsqpLevel._exact` returns when DAQP proves a level infeasible (its exit flag −1).
 DAQP_INFEASIBLE = "infeasible"
