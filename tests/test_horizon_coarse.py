@@ -129,6 +129,10 @@ def test_a_rejected_interpolation_starts_the_whole_nlp_from_it(problem_and_warm,
     assert log["result"] == "rejected" and "robot_accel" in log["reason"]
     assert log["fine_start"] == "the interpolated coarse optimum" and "x" not in log
     assert d["horizon_result"] == "optimal" and d["ipopt_iterations"] > log["iterations"]
+    # the note says what became of the coarse pass (its first violated group), and the fine attempt's floor
+    first = log["reason"].split(" | ")[0].split("; ")[0]  # "interpolated, it violates <group>: …, worst: <row>"
+    assert f"; before it, the NLP on every 3rd knot was solved, its optimum rejected ({first});" in d["horizon_note"]
+    assert "IPOPT min_hessian_perturbation" in d["horizon_note"]
     metrics = check(plan, problem.env)
     assert plan.success and metrics.n_violation_steps == 0
     for f in ("f1", "f2", "f4"):

@@ -629,8 +629,15 @@ def plan_horizon(
             stop = stop if phase_rounds else "converged"
             if chosen is None or chosen.result != "best_feasible_iterate" or chosen.J >= coarse_c.J:
                 chosen = coarse_c
+    if coarse_log is not None and coarse_c is None and coarse_log.get("result") in ("failed", "rejected"):
+        # the coarse pass ran first: say what became of it
+        why = str(coarse_log.get("reason", "")).split(" | ")[0].split("; ")[0]  # its first group, worst row
+        did = {"failed": "found no plan", "rejected": "was solved, its optimum rejected"}[coarse_log["result"]]
+        what += f"; before it, the NLP on every {_nth(M)} knot {did}" + (f" ({why})" if why else "")
     floor = f"{opts.min_hessian_perturbation:g} ({_HESSIAN[opts.hessian]} Hessian)"
-    if fast_log is None:
+    if not rounds and coarse_c is None:  # IPOPT never ran on the whole NLP: no floor was used
+        floor_note = "no IPOPT round on the whole NLP"
+    elif fast_log is None:
         floor_note = f"IPOPT min_hessian_perturbation {floor}"
     elif fast_log["result"] == "accepted":
         floor_note = (
