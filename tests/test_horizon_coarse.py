@@ -111,6 +111,29 @@ def test_the_coarse_optimum_is_returned_only_where_every_row_holds(problem_and_w
     assert "coarse" not in plain.diagnostics["horizon_summary"]
 
 
+def test_an_accepted_coarse_optimum_without_time_to_polish_says_so(problem_and_warm, monkeypatch):
+    """The time limit is reached once the coarse pass is done: its optimum is returned ("coarse_optimal") and the
+    note says that the polish did not start, instead of describing it."""
+    import time
+
+    problem, warm, _ = problem_and_warm
+    real = horizon_module._coarse_pass
+
+    def then_out_of_time(*args):
+        out = real(*args)
+        deadline = args[7]
+        time.sleep(max(0.0, deadline - time.perf_counter()) + 0.01)  # the rest of the limit passes
+        return out
+
+    monkeypatch.setattr(horizon_module, "_coarse_pass", then_out_of_time)
+    d = plan_horizon(problem, warm, time_limit=6, **ON).diagnostics
+    log = d["horizon_summary"]["coarse"]
+    assert log["result"] == "accepted" and log["polish"] == "time_limit"
+    assert d["horizon_result"] == "coarse_optimal" and d["ipopt_iterations"] == log["iterations"]
+    assert "the whole NLP from its optimum: not started (time limit)" in d["horizon_note"]
+    assert "at most 60 iterations" not in d["horizon_note"]
+
+
 def test_a_rejected_interpolation_starts_the_whole_nlp_from_it(problem_and_warm, monkeypatch):
     """Interpolated with a kink that breaks the robot acceleration rows, the coarse optimum is rejected (the log names
     the rows); the whole NLP then starts from it and its optimum is returned, every row holding."""

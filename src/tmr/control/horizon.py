@@ -660,12 +660,14 @@ def plan_horizon(
         )  # fmt: skip
     if coarse_c is not None:
         floor_note = f"every {_nth(M)} knot: {coarse_floor}"
-        if opts.coarse_polish_iter > 0:
+        if opts.coarse_polish_iter > 0 and phase_rounds:
             floor_note += (
                 f"; the whole NLP from its optimum: IPOPT min_hessian_perturbation {_polish_floor(opts):g} "
                 f"({_HESSIAN[opts.fast_hessian]} Hessian), "
                 f"at most {opts.coarse_polish_iter} iterations"
             )
+        elif opts.coarse_polish_iter > 0:  # no polishing round ran (no time left for its build)
+            floor_note += f"; the whole NLP from its optimum: not started ({coarse_log['polish'].replace('_', ' ')})"
     if chosen is None:
         warm_note = f"; the warm start is no fallback: {warm_why}"
         diag = _diagnostics(model, tr, stats, xv, vals, rounds, info, J_warm, trans_time, solve_time, start_time)
