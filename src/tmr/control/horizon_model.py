@@ -868,11 +868,8 @@ class _Model:
         col = k[rows] * 2 * N + node
         b = np.where((j == 0)[:, None], (1.0 - s)[:, None] * su.base[None, :], 0.0)
 
-        def dm(cols: Array) -> Any:
-            a = csc_matrix((w, (rows, cols)), shape=(n, int(self.lbx.size)))
-            a.sort_indices()
-            sp = ca.Sparsity(n, a.shape[1], a.indptr.tolist(), a.indices.tolist())
-            return ca.DM(sp, a.data.tolist())
+        def dm(cols: Array) -> ca.DM:
+            return _dm(csc_matrix((w, (rows, cols)), shape=(n, int(self.lbx.size))))
 
         return dm(col), dm(col + N), b
 
