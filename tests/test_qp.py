@@ -379,3 +379,43 @@ def test_daqp_never_calls_a_feasible_nearly_singular_level_infeasible():
             fooled += 1
             assert res is not None  # certified: the KKT conditions hold at DAQP's answer
     assert fooled >= 1  # the case occurs among these levels
+
+
+def test_a_daqp_fallback_answer_is_certified_by_its_own_multipliers(monkeypatch):
+    """The DAQP backend's answer to a level with equalities, two-sided and one-sided rows is proven optimal by its
+    own multipliers (mapped to one per row of A, ``WarmActiveSet.certify``), without the KKT polish; an answer moved
+    off the optimum is not."""
+    from tmr.control.activeset import WarmActiveSet
+    from tmr.control.qp_backends import _QpsolversLevel
+
+    rng = np.random.default_rng(5)
+    n, m = 6, 10
+    Jw, tw = rng.normal(size=(n, n)), rng.normal(size=n) * 5
+    A, x0 = rng.normal(size=(m, n)), rng.normal(size=n) * 0.1
+    lo, up = A @ x0 - rng.uniform(0.05, 0.3, m), A @ x0 + rng.uniform(0.05, 0.3, m)
+    lo[:2] = up[:2] = A[:2] @ x0  # equalities
+    lo[2:4] = -np.inf  # upper bounds only
+    up[4:5] = np.inf  # a lower bound only
+    polished = []
+    real = WarmActiveSet.solve
+    monkeypatch.setattr(WarmActiveSet, "solve", lambda self, *a: polished.append(1) or real(self, *a))
+    level = _QpsolversLevel("daqp", 1e-9)
+    x, status, _ = level.solve(A, lo, up, Jw, tw)
+    assert status == "verified" and not polished
+    ref = _QpsolversLevel("clarabel", 1e-9).solve(A, lo, up, Jw, tw)[0]  # polished to its exact KKT point
+    np.testing.assert_allclose(x, ref, atol=1e-7)
+    r = A @ x
+    assert np.any((r > up - 1e-9) & (lo < up)) or np.any((r < lo + 1e-9) & (lo < up))  # an inequality is active
+    import qpsolvers
+
+    real_solve = qpsolvers.solve_problem
+
+    def off(*a, **k):
+        sol = real_solve(*a, **k)
+        sol.x = sol.x + 1e-4  # no longer stationary with its multipliers
+        return sol
+
+    monkeypatch.setattr(qpsolvers, "solve_problem", off)
+    polished.clear()
+    _QpsolversLevel("daqp", 1e-9).solve(A, lo, up, Jw, tw)
+    assert polished  # not certified: the KKT polish ran

@@ -284,9 +284,10 @@ class _QpsolversLevel:
     POLISH_ROWS = 1e-7
     #: backends that never warn on a failed solve (no warnings filter needed: it costs a few µs per call)
     SILENT = frozenset({"daqp"})
-    #: backends whose own multipliers may prove an answer optimal (:meth:`_certified`): an active-set method stops on
-    #: a vertex with exact multipliers; interior-point (Clarabel), ADMM (OSQP) and augmented-Lagrangian (proxqp)
-    #: answers sit near the bounds with spread multipliers and can pass the test while off by 1e-5: they are polished
+    #: backends whose own multipliers may prove an answer optimal (:meth:`WarmActiveSet.certify`): an active-set method
+    #: stops on a vertex with exact multipliers; interior-point (Clarabel), ADMM (OSQP) and augmented-Lagrangian
+    #: (proxqp) answers sit near the bounds with spread multipliers and can pass the test while off by 1e-5: they are
+    #: polished
     CERTIFY = frozenset({"daqp"})
 
     def __init__(self, solver: str, eps: float, polish: bool = True) -> None:
@@ -335,8 +336,10 @@ class _QpsolversLevel:
         x = np.array(x, dtype=float)
         if self.polish is None:
             return x, "solved", 0
-        if self.solver in self.CERTIFY and self._certified(P, q, x, sol, G, h, Aeq, beq):
-            return x, "verified", 0
+        if self.solver in self.CERTIFY:
+            y = self._row_multipliers(sol, has_u, has_l, eq)
+            if y is not None and self.polish.certify(P, q, A, lo, up, x, y) is not None:
+                return x, "verified", 0
         # polish: the exact optimum on the rows the answer has at their bounds, if it verifies
         r = A @ x
         at_up = r >= up - self.POLISH_ROWS * (1.0 + np.abs(np.where(np.isfinite(up), up, 0.0)))
@@ -347,39 +350,23 @@ class _QpsolversLevel:
             return res.x, "verified", 0
         return x, "solved", 0
 
-    def _certified(
-        self,
-        P: Array | sp.spmatrix,
-        q: Array,
-        x: Array,
-        sol: qpsolvers.Solution,
-        G: Array | sp.spmatrix,
-        h: Array,
-        Aeq: Array | sp.spmatrix | None,
-        beq: Array | None,
-    ) -> bool:
-        """Whether the backend's own multipliers prove x optimal (``G x ≤ h``, ``Aeq x = beq``): stationarity
-        ``P x + q + Gᵀz + Aeqᵀy = 0`` relative to q, every row within its bound, z ≥ 0 and z = 0 off the bound — the
-        KKT conditions :class:`WarmActiveSet` verifies, with its tolerances. No solve: the usual proof for an
-        active-set backend (DAQP) that stopped exactly."""
+    @staticmethod
+    def _row_multipliers(
+        sol: qpsolvers.Solution, has_u: NDArray[np.bool_], has_l: NDArray[np.bool_], eq: NDArray[np.bool_]
+    ) -> Array | None:
+        """The backend's multipliers of ``G x ≤ h`` (the rows with an upper bound, then the negated rows with a lower
+        one) and of ``Aeq x = beq`` as one multiplier per row of A, positive at the upper bound and negative at the
+        lower (:func:`tmr.control.activeset.active_set`'s convention), for :meth:`WarmActiveSet.certify` — the KKT
+        conditions a warm hit and the DAQP miss path are verified by. None if the backend gave none."""
         z, y = getattr(sol, "z", None), getattr(sol, "y", None)
-        if (h.size and (z is None or np.size(z) != h.size)) or (
-            beq is not None and (y is None or np.size(y) != beq.size)
-        ):
-            return False
-        tol = self.polish.tol
-        qscale = 1.0 + float(np.abs(q).max(initial=0.0))
-        grad = P @ x + q
-        if h.size:
+        nu, nl, ne = int(has_u.sum()), int(has_l.sum()), int(eq.sum())
+        if (nu + nl and (z is None or np.size(z) != nu + nl)) or (ne and (y is None or np.size(y) != ne)):
+            return None
+        out = np.zeros(eq.size)
+        if nu + nl:
             z = np.asarray(z, dtype=float).ravel()
-            slack = h - G @ x  # ≥ 0 inside
-            if not slack.min() >= -tol or not z.min() >= -tol * qscale:
-                return False
-            if not np.abs(z[slack > tol * (1.0 + np.abs(h))]).max(initial=0.0) <= tol * qscale:
-                return False  # a multiplier on a row away from its bound
-            grad = grad + G.T @ z
-        if beq is not None:
-            if not np.abs(Aeq @ x - beq).max() <= tol * (1.0 + np.abs(beq).max()):
-                return False
-            grad = grad + Aeq.T @ np.asarray(y, dtype=float).ravel()
-        return bool(np.abs(grad).max() <= 10 * tol * qscale)
+            out[has_u] += z[:nu]
+            out[has_l] -= z[nu:]
+        if ne:
+            out[eq] = np.asarray(y, dtype=float).ravel()
+        return out
