@@ -22,9 +22,7 @@ entry (the two are the same matrix). Writes ``benchmarks/results/horizon_hessian
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -32,31 +30,13 @@ import casadi as ca
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from horizon_cases import build, median_ms  # noqa: E402
 from provenance import source_version, versions  # noqa: E402
 
 from tmr.control import horizon_model as hm  # noqa: E402
 from tmr.control.horizon_spline import ClearanceSpline, distance_spline  # noqa: E402
-from tmr.planner import build_problem, solve  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
-
-
-def build(case: str):
-    """(problem, its qp plan) of ``case``: ``E6`` or ``seed:density:goal:robots``."""
-    from tmr.world.scenario import load_scenario, scenario_from_map
-
-    if case == "E6":
-        sc, n = load_scenario("E"), 6
-    else:
-        from tmr.sweep.rooms import generate_room, write_geojson
-
-        seed, density, goal, n = case.split(":")
-        room = generate_room(int(seed), density, goal)
-        n = int(n)
-        with tempfile.TemporaryDirectory() as tmp:
-            sc = scenario_from_map(write_geojson(room, Path(tmp) / "room.geojson"), room.base, room.goal, n_robots=n)
-    problem = build_problem(sc, seed=0, n_robots=n)
-    return problem, solve(problem, "qp")[0]
 
 
 def casadis(model: hm._Model, kind: str) -> ca.Function:
@@ -77,16 +57,6 @@ def casadis(model: hm._Model, kind: str) -> ca.Function:
         Js = ca.vertcat(*[root[i] * ca.jacobian(model.residuals[k], x) for i, k in enumerate(model.gn_terms)])
         H = ca.hessian(ca.dot(lam * ca.DM(keep), rest), x)[0] + ca.mtimes(Js.T, Js)
     return ca.Function("casadi_" + kind.replace("-", "_"), [x, c, lam], [H])
-
-
-def median_ms(fn, repeats: int) -> float:
-    fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * statistics.median(times)
 
 
 def main() -> None:

@@ -21,9 +21,7 @@ Median of ``--repeats`` [ms]; the ratio is "before" over "node". Writes ``benchm
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import casadi as ca
@@ -31,22 +29,13 @@ import numpy as np
 from scipy.interpolate import NdBSpline
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from horizon_cases import median_ms  # noqa: E402
 from provenance import source_version, versions  # noqa: E402
 
 from tmr.control.horizon_spline import ClearanceSpline, SplineRows, distance_spline, spline_tables  # noqa: E402
 from tmr.world.scenario import load_scenario  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
-
-
-def median_ms(fn, repeats: int) -> float:
-    fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * statistics.median(times)
 
 
 def main() -> None:

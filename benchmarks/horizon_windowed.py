@@ -13,31 +13,14 @@ import argparse
 import json
 import os
 import pickle
-import tempfile
+import sys
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from horizon_cases import build  # noqa: E402
+
 CACHE = Path("/tmp/hw")
-
-
-def build(case: str):
-    from tmr.planner import build_problem, solve
-    from tmr.world.scenario import load_scenario, scenario_from_map
-
-    if case == "E6":
-        sc, n = load_scenario("E"), 6
-    else:
-        from tmr.sweep.rooms import generate_room, write_geojson
-
-        seed, density, goal, n = case.split(":")
-        room = generate_room(int(seed), density, goal)
-        n = int(n)
-        with tempfile.TemporaryDirectory() as tmp:
-            path = write_geojson(room, Path(tmp) / "room.geojson")
-            sc = scenario_from_map(path, room.base, room.goal, n_robots=n)
-    problem = build_problem(sc, seed=0, n_robots=n)
-    warm = solve(problem, "qp")[0]
-    return problem, warm
 
 
 def main() -> None:

@@ -1,0 +1,42 @@
+"""Shared pieces of the horizon benchmarks (``horizon_windowed.py``, ``horizon_hessian.py``, ``horizon_spline.py``):
+the benchmark cases, built as the command line builds them, and the median timing of a callable."""
+
+from __future__ import annotations
+
+import statistics
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+
+def build(case: str) -> tuple[Any, Any]:
+    """(problem, its ``qp`` plan) of ``case``: ``E6`` (scenario E, 6 robots) or ``ROOMSEED:DENSITY:GOAL:N`` (a
+    generated room, :func:`tmr.sweep.rooms.generate_room`, N robots); shortest route, seed 0."""
+    from tmr.planner import build_problem, solve
+    from tmr.world.scenario import load_scenario, scenario_from_map
+
+    if case == "E6":
+        sc, n = load_scenario("E"), 6
+    else:
+        from tmr.sweep.rooms import generate_room, write_geojson
+
+        seed, density, goal, count = case.split(":")
+        room = generate_room(int(seed), density, goal)
+        n = int(count)
+        with tempfile.TemporaryDirectory() as tmp:
+            sc = scenario_from_map(write_geojson(room, Path(tmp) / "room.geojson"), room.base, room.goal, n_robots=n)
+    problem = build_problem(sc, seed=0, n_robots=n)
+    return problem, solve(problem, "qp")[0]
+
+
+def median_ms(fn: Callable[[], Any], repeats: int) -> float:
+    """Median wall time [ms] of ``fn()`` over ``repeats`` calls, after one untimed call."""
+    fn()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return 1e3 * statistics.median(times)
