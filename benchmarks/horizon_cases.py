@@ -13,8 +13,10 @@ from typing import Any
 
 def build(case: str) -> tuple[Any, Any]:
     """(problem, its ``qp`` plan) of ``case``: ``E6`` (scenario E, 6 robots) or ``ROOMSEED:DENSITY:GOAL:N`` (a
-    generated room, :func:`tmr.sweep.rooms.generate_room`, N robots); shortest route, seed 0."""
-    from tmr.planner import build_problem, solve
+    generated room, :func:`tmr.sweep.rooms.generate_room`, N robots); shortest route, seed 0. If the plan was made
+    along train references (the trailing ones failed), the problem is the one with those references
+    (:func:`tmr.planner.train_problem`): the pair ``tmr plan --method horizon`` hands to the NLP."""
+    from tmr.planner import build_problem, solve, train_problem
     from tmr.world.scenario import load_scenario, scenario_from_map
 
     if case == "E6":
@@ -28,7 +30,10 @@ def build(case: str) -> tuple[Any, Any]:
         with tempfile.TemporaryDirectory() as tmp:
             sc = scenario_from_map(write_geojson(room, Path(tmp) / "room.geojson"), room.base, room.goal, n_robots=n)
     problem = build_problem(sc, seed=0, n_robots=n)
-    return problem, solve(problem, "qp")[0]
+    plan = solve(problem, "qp")[0]
+    if plan.diagnostics.get("references") == "train":
+        problem = train_problem(problem)
+    return problem, plan
 
 
 def median_ms(fn: Callable[[], Any], repeats: int) -> float:
