@@ -95,6 +95,50 @@ def test_train_is_deterministic(door_problem) -> None:
     assert a.velocities.tobytes() == b.velocities.tobytes()
 
 
+def test_a_sweeps_moves_run_together_in_as_few_groups_as_the_limits_allow(door_problem, monkeypatch) -> None:
+    """Each sweep's moves run in consecutive groups, the moves of a group together; two consecutive groups run
+    together would break a limit (checked with shapely here), and some group moves more than one robot."""
+    import tmr.route.train as train
+
+    sweeps = []
+    timed = train._timed_sweep
+
+    def record(env, base, X0, limits, moves, *args):
+        out = timed(env, base, X0, limits, moves, *args)
+        sweeps.append((X0.copy(), [i for i, _ in moves], out, limits))
+        return out
+
+    monkeypatch.setattr(train, "_timed_sweep", record)
+    train_problem(door_problem)
+    assert sweeps
+    wider = 0
+    for X0, robots, out, limits in sweeps:
+        starts = [X0] + [X[-1] for X, _ in out[:-1]]  # where each group starts
+        moved = [
+            [i for i in range(X0.shape[0]) if np.any(X[:, i] != now[i])]
+            for (X, _), now in zip(out, starts, strict=True)
+        ]
+        at = 0
+        for group in moved:  # the sweep's moves, in order, each once: consecutive runs of them
+            assert sorted(group) == sorted(robots[at : at + len(group)])
+            at += len(group)
+        assert at == len(robots)
+        wider = max(wider, max(len(g) for g in moved))
+        for (Xa, _), (Xb, _), gb in zip(out[:-1], out[1:], moved[1:], strict=True):
+            K = max(len(Xa), len(Xb))
+            both = np.concatenate([Xa, np.repeat(Xa[-1:], K - len(Xa), axis=0)])  # group a's walks, then held
+            for j in gb:  # group b's walks at the same time
+                both[:, j] = np.concatenate([Xb[:, j], np.repeat(Xb[-1:, j], K - len(Xb), axis=0)])
+            bad = _independent_violations(door_problem, both, limits.clearance, limits.separation)
+            spans = np.linalg.norm(
+                np.diff(np.concatenate([np.broadcast_to(door_problem.scenario.base, (K, 1, 2)), both], axis=1), axis=1),
+                axis=2,
+            )
+            short = np.any(spans < limits.spans[:, 0] - 1e-6)
+            assert bad or short, "two groups of a sweep could have run together"
+    assert wider > 1
+
+
 #: Three narrow doors the guide meets at a slant, 6 robots: the train stalls along the guide and along it pulled
 #: taut (a robot in a door, its neighbour round a jamb), and passes along the axial guide (tmr.route.train._axial).
 SLANT_ROOM = (3896625273, "narrow", "far")

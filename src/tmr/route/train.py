@@ -688,7 +688,7 @@ def _timed(P: Array, speed: float, accel: float, Ts: float) -> tuple[Array, Arra
 
 
 def _timed_sweep(
-    env: Any,
+    env: tuple[_Fast, _Fast],
     base: Array,
     X0: Array,
     limits: TrainLimits,
@@ -697,38 +697,54 @@ def _timed_sweep(
     accel: float,
     Ts: float,
 ) -> list[tuple[Array, Array]]:
-    """Sampled (positions (k, N, 2), velocities) of one sweep from positions X0: its moves together if every
-    sampled state keeps the limits (the robots that finish early wait), else one after the other."""
+    """Sampled (positions (k, N, 2), velocities) of one sweep from positions X0 (``env``: the robots' and the tethers'
+    environments at the train's clearance, :func:`_states_valid`): its moves in as few groups as the
+    limits allow, one group after the other, the moves of a group together (the robots that finish early wait) —
+    each group the longest run of the sweep's next moves (leader-most first) whose every sampled joint state keeps
+    the limits; a move alone always keeps them (the search tested it from the state it starts in)."""
     N = len(X0)
     walks = [(i, *_timed(P, speed, accel, Ts)) for i, P in moves]
-    if len(moves) > 1:  # a sweep moves each robot at most once
-        K = max(len(x) for _, x, _ in walks)
-        X = np.repeat(X0[None], K, axis=0)
-        V = np.zeros((K, N, 2))
-        for i, x, v in walks:
-            X[: len(x), i], X[len(x) :, i], V[: len(x), i] = x, x[-1], v
-        if _states_valid(env, base, X, limits):
-            return [(X, V)]
-    out = []
+    out: list[tuple[Array, Array]] = []
     now = X0.copy()
-    for i, x, v in walks:
-        X = np.repeat(now[None], len(x), axis=0)
-        X[:, i] = x
-        V = np.zeros((len(x), N, 2))
-        V[:, i] = v
-        out.append((X, V))
-        now[i] = x[-1]
+    a = 0
+    while a < len(walks):
+        b = len(walks)
+        block = _together(now, walks[a:b], N)
+        if b - a > 1 and not _states_valid(env, base, block[0], limits):  # else: all the rest together
+            b = a + 1
+            block = _together(now, walks[a:b], N)
+        while b < len(walks):
+            wider = _together(now, walks[a : b + 1], N)
+            if not _states_valid(env, base, wider[0], limits):
+                break
+            block, b = wider, b + 1
+        out.append(block)
+        now = block[0][-1].copy()
+        a = b
     return out
 
 
-def _states_valid(env: Any, base: Array, X: Array, limits: TrainLimits) -> bool:
-    """Every state (k, N, 2) keeps the train's limits (clearances ≥ ``limits.clearance``, spans, separation)."""
+def _together(X0: Array, walks: list[tuple[int, Array, Array]], N: int) -> tuple[Array, Array]:
+    """Positions (k, N, 2) and velocities of ``walks`` (robot, samples, velocities) run together from X0, k the
+    longest walk's samples (a robot that finishes early waits where its walk ends; the others hold still)."""
+    K = max(len(x) for _, x, _ in walks)
+    X = np.repeat(X0[None], K, axis=0)
+    V = np.zeros((K, N, 2))
+    for i, x, v in walks:
+        X[: len(x), i], X[len(x) :, i], V[: len(x), i] = x, x[-1], v
+    return X, V
+
+
+def _states_valid(env: tuple[_Fast, _Fast], base: Array, X: Array, limits: TrainLimits) -> bool:
+    """Every state (k, N, 2) keeps the train's limits (clearances > ``limits.clearance``, spans, separation); ``env``:
+    the robots' and the tethers' environments (:class:`_Fast` at that clearance: exact, pre-filtered)."""
     k, N, _ = X.shape
     c = limits.clearance
-    if np.any(np.asarray(env.exact_clearance(X), float) <= c):
+    robots, tethers = env
+    if not np.all(robots.clear_above(X.reshape(-1, 2), c)):
         return False
     starts = np.concatenate([np.broadcast_to(base, (k, 1, 2)), X[:, :-1]], axis=1)
-    if not np.all(tether_env(env).segment_is_free(starts, X, c)):
+    if not np.all(tethers.segment_is_free(starts, X, c)):
         return False
     length = np.linalg.norm(X - starts, axis=2)
     if np.any(length < limits.spans[:, 0] - 1e-9) or np.any(length > limits.spans[:, 1] + 1e-9):
@@ -790,8 +806,11 @@ def train_reference(
     X0 = np.asarray(ref.start, dtype=float).copy()  # every path starts where its robot stands
     now = X0.copy()
     blocks_x, blocks_v = [X0[None]], [np.zeros((1, N, 2))]
+    robots = _Fast(env, limits.clearance)
+    tenv = tether_env(env)
+    fast = (robots, robots if tenv is env else _Fast(tenv, limits.clearance))
     for moves in sweeps:
-        for X, V in _timed_sweep(env, base, now, limits, moves, speed, accel, Ts):
+        for X, V in _timed_sweep(fast, base, now, limits, moves, speed, accel, Ts):
             blocks_x.append(X)
             blocks_v.append(V)
         now = blocks_x[-1][-1].copy()
