@@ -95,10 +95,20 @@ def test_train_is_deterministic(door_problem) -> None:
     assert a.velocities.tobytes() == b.velocities.tobytes()
 
 
-def test_a_sweeps_moves_run_together_in_as_few_groups_as_the_limits_allow(door_problem, monkeypatch) -> None:
+#: A long narrow route for 8 robots: the trailing references fail, and many of the train's sweeps cannot run all
+#: their moves together but can run some (5,078 knots in groups; 9,564 with each such sweep one move at a time).
+LONG_ROOM = (4253401181, "narrow", "far")
+
+
+def test_a_sweeps_moves_run_together_in_as_few_groups_as_the_limits_allow(tmp_path, monkeypatch) -> None:
     """Each sweep's moves run in consecutive groups, the moves of a group together; two consecutive groups run
-    together would break a limit (checked with shapely here), and some group moves more than one robot."""
+    together would break a limit (checked with shapely here), and a sweep split in groups has one of more than one
+    move."""
     import tmr.route.train as train
+
+    room = generate_room(*LONG_ROOM)
+    sc = scenario_from_map(write_geojson(room, tmp_path / "room.geojson"), room.base, room.goal, n_robots=8)
+    problem = build_problem(sc, n_robots=8)
 
     sweeps = []
     timed = train._timed_sweep
@@ -109,7 +119,7 @@ def test_a_sweeps_moves_run_together_in_as_few_groups_as_the_limits_allow(door_p
         return out
 
     monkeypatch.setattr(train, "_timed_sweep", record)
-    train_problem(door_problem)
+    train_problem(problem)
     assert sweeps
     wider = 0
     for X0, robots, out, limits in sweeps:
@@ -123,15 +133,16 @@ def test_a_sweeps_moves_run_together_in_as_few_groups_as_the_limits_allow(door_p
             assert sorted(group) == sorted(robots[at : at + len(group)])
             at += len(group)
         assert at == len(robots)
-        wider = max(wider, max(len(g) for g in moved))
+        if len(moved) > 1:  # the sweep could not run all its moves together
+            wider = max(wider, max(len(g) for g in moved))
         for (Xa, _), (Xb, _), gb in zip(out[:-1], out[1:], moved[1:], strict=True):
             K = max(len(Xa), len(Xb))
             both = np.concatenate([Xa, np.repeat(Xa[-1:], K - len(Xa), axis=0)])  # group a's walks, then held
             for j in gb:  # group b's walks at the same time
                 both[:, j] = np.concatenate([Xb[:, j], np.repeat(Xb[-1:, j], K - len(Xb), axis=0)])
-            bad = _independent_violations(door_problem, both, limits.clearance, limits.separation)
+            bad = _independent_violations(problem, both, limits.clearance, limits.separation)
             spans = np.linalg.norm(
-                np.diff(np.concatenate([np.broadcast_to(door_problem.scenario.base, (K, 1, 2)), both], axis=1), axis=1),
+                np.diff(np.concatenate([np.broadcast_to(problem.scenario.base, (K, 1, 2)), both], axis=1), axis=1),
                 axis=2,
             )
             short = np.any(spans < limits.spans[:, 0] - 1e-6)
