@@ -9,6 +9,7 @@ import io
 import math
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -981,3 +982,29 @@ def test_ipopts_own_hessian_option_decides_whether_a_hessian_is_built():
     kw = dict(hessian="limited-memory", fast_hessian="limited-memory", ipopt={"hessian_approximation": "exact"})
     d = plan_horizon(problem, warm, **kw).diagnostics
     assert d["horizon_result"] == "optimal" and d["round_log"][0]["iterations"] < 60
+
+
+def test_the_fallback_checks_stop_a_share_of_the_limit_past_the_deadline(monkeypatch):
+    """The kept iterates are checked cheapest first, every row each (``_Pool.best``); past the time limit by more
+    than LATE_CHECK_SHARE of it, no check starts but the first, so a run stopped by the limit overruns it by no more
+    than that: here the only feasible iterate is the dearest one, found without a limit and not after it."""
+    from tmr.control import horizon
+
+    problem, su, model, xv, _ = full_transcription()
+    x_opt = model.project(model.x_of(plan_horizon(problem, solve(problem, "qp")[0]).q))  # every row holds there
+    rng = np.random.default_rng(0)
+    pool = horizon_pool._Pool(8, 1.0, math.inf)
+    for i in range(5):  # cheaper, each with a robot 0.5 m off: infeasible
+        pool.offer(0.1 * (i + 1), 0.0, xv + 0.5 * rng.standard_normal(xv.size), f"bad {i}")
+    pool.offer(1.0, 0.0, x_opt, "the optimum")
+    calls = []
+    values = model.values
+    monkeypatch.setattr(model, "values", lambda x: calls.append(1) or values(x))
+    now = time.perf_counter()
+    found = horizon._best_of([pool], model, 1e-5, math.inf, now - 10.0, math.inf)
+    assert found is not None and found.detail.endswith("(the optimum)") and len(calls) == 6
+    calls.clear()
+    late = horizon._best_of([pool], model, 1e-5, math.inf, now - 10.0, 60.0)  # 10 s past a 60 s limit: 2 % is 1.2 s
+    assert late is None and len(calls) == 1
+    calls.clear()
+    assert horizon._best_of([pool], model, 1e-5, math.inf, now + 60.0, 60.0) is not None and len(calls) == 6

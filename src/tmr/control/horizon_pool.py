@@ -6,6 +6,8 @@ converge). Used by :func:`tmr.control.horizon.plan_horizon`.
 from __future__ import annotations
 
 import heapq
+import math
+import time
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -244,12 +246,16 @@ class _Pool:
         """The kept iterates (f, x, where), the cheapest first (ties: the earliest)."""
         return [(-f, x, w) for f, _, x, w in sorted(self._heap, key=lambda it: (-it[0], it[1]))]
 
-    def best(self, model: _Model, tol: float, J_limit: float) -> _Candidate | None:
+    def best(self, model: _Model, tol: float, J_limit: float, until: float = math.inf) -> _Candidate | None:
         """The lowest-cost kept iterate that satisfies every row at ``tol`` (its fixed variables projected: the start,
-        the equality leader on its reference) and costs less than ``J_limit``; ``None`` if there is none."""
+        the equality leader on its reference) and costs less than ``J_limit``; ``None`` if there is none. Each check
+        evaluates every row (0.28 s on 5,078 knots with 8 robots): none is started after ``until`` (a
+        :func:`time.perf_counter` value) but the first."""
         su = model.su
         best: _Candidate | None = None
-        for _, x, where in self.sorted():
+        for i, (_, x, where) in enumerate(self.sorted()):
+            if i > 0 and time.perf_counter() >= until:
+                break
             x = model.project(x)
             if _violations(model, model.values(x), x, tol):
                 continue
