@@ -922,7 +922,7 @@ def _checked(problem: Problem, method: str | Formulation, progress: bool) -> tup
 
 
 def train_problem(problem: Problem) -> Problem:
-    """``problem`` with train references (:mod:`tmr.route.train`: one robot at a time, every state checked) in place of
+    """``problem`` with train references (:mod:`tmr.route.train`: the robots in turn, every state checked) in place of
     its trailing ones: same route, start and stations; the leader's trajectory and the duration come from the
     train. The train keeps the QP's own limits plus a little (clearance d_safe + 5 mm, separation 2r + margin +
     5 mm, spans ≥ d_lo + span margin). Raises :class:`tmr.route.train.TrainError` if the train stalls."""
@@ -990,7 +990,7 @@ def _solve_qp(problem: Problem, progress: bool) -> tuple[Problem, Plan, Metrics]
         return problem, result, metrics
     retry.diagnostics["references"] = "train"
     retry.diagnostics["references_note"] = (
-        f"the trailing references failed ({first}); planned along train references (one robot at a time)"
+        f"the trailing references failed ({first}); planned along train references (the robots in turn)"
     )
     return trained, retry, retry_metrics
 

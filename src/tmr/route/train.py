@@ -20,8 +20,9 @@ longer plan (``formulations/route.md``, "Train references"):
   along the door's axis (:func:`_axial`: a robot in a door has its neighbours on the axis, not round a jamb); then
   along that guide pulled taut, no robot passing, along the guide, the robot ahead of it (:func:`_attempts`);
 * **timing**: every advance follows the minimum-jerk law within the leader's speed and acceleration limits, stopping
-  at each turn of its path sharper than :data:`TURN_STOP`; the advances of one sweep run together when every sampled
-  state of the joint motion keeps the same limits, else one after the other.
+  at each turn of its path sharper than :data:`TURN_STOP`; the advances of one sweep run in as few consecutive groups
+  as the limits allow, the advances of a group together (each group the longest run of the sweep's next advances
+  whose every sampled joint state keeps the same limits; an advance alone always does).
 
 The result is a :class:`tmr.route.references.ChainReference` (the leader's trajectory and every robot's reference), so
 the
