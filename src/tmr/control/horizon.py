@@ -292,7 +292,8 @@ def plan_horizon(
             callback; ``max_wall_time`` as a backstop), and no solver is built (round or retry) unless the remaining
             budget exceeds its expected build time — the last build scaled by the rows, at least
             :func:`_expected_build` of the rows; the overrun is at most one IPOPT iteration, a build whose estimate
-            was too low, and the fallback check. A run that does not reach it gives the same plan as without.
+            was too low, and the fallback check (:data:`LATE_CHECK_SHARE` of the limit, and one iterate's check).
+            A run that does not reach it gives the same plan as without.
         progress: show a tqdm bar of the IPOPT iterations on stderr (only if stderr is a terminal).
         **options: fields of :class:`HorizonOptions` (weights, leader tolerance, samples, IPOPT options, …).
 
