@@ -1001,10 +1001,33 @@ def test_the_fallback_checks_stop_a_share_of_the_limit_past_the_deadline(monkeyp
     values = model.values
     monkeypatch.setattr(model, "values", lambda x: calls.append(1) or values(x))
     now = time.perf_counter()
-    found = horizon._best_of([pool], model, 1e-5, math.inf, now - 10.0, math.inf)
+    found = horizon._best_of([pool], model, 1e-5, math.inf, now - 10.0, math.inf)  # no limit
     assert found is not None and found.detail.endswith("(the optimum)") and len(calls) == 6
     calls.clear()
-    late = horizon._best_of([pool], model, 1e-5, math.inf, now - 10.0, 60.0)  # 10 s past a 60 s limit: 2 % is 1.2 s
+    late = horizon._best_of([pool], model, 1e-5, math.inf, now - 10.0, now - 8.8)  # 10 s past a 60 s limit, 2 %: 1.2 s
     assert late is None and len(calls) == 1
     calls.clear()
-    assert horizon._best_of([pool], model, 1e-5, math.inf, now + 60.0, 60.0) is not None and len(calls) == 6
+    assert horizon._best_of([pool], model, 1e-5, math.inf, now + 60.0, now + 61.2) is not None and len(calls) == 6
+
+
+def test_the_fast_attempts_best_feasible_iterate_is_kept_when_the_fallback_finds_nothing(feasible_warm, monkeypatch):
+    """The fallback starts from the fast attempt's best feasible iterate (checked then); if the fallback then ends
+    without a plan and the final checks find nothing (here: none allowed, as past the late-check time), that iterate
+    is the plan, not the qp warm start."""
+    from tmr.control import horizon
+
+    problem, warm, J_warm = feasible_warm
+
+    class LateFallback(horizon._IterationCallback):
+        def __init__(self, tr, pool, bar, label, *args, **kwargs):
+            super().__init__(tr, pool, bar, label, *args, **kwargs)
+            if "fast" not in label:
+                self.deadline = -math.inf  # the fallback's rounds stop at their first iteration
+
+    monkeypatch.setattr(horizon, "_IterationCallback", LateFallback)
+    monkeypatch.setattr(horizon, "_best_of", lambda *args: None)
+    plan = plan_horizon(problem, warm, **WEIGHTED, fast_max_iter=4, fast_stall_iter=None)
+    d = plan.diagnostics
+    assert "fallback_start" in d["horizon_summary"]["fast_attempt"]
+    assert d["horizon_result"] == "best_feasible_iterate" and "fast" in d["horizon_note"]
+    assert objective(plan.q, problem, **WEIGHTED) < J_warm

@@ -142,9 +142,10 @@ def _expected_build(rows: int) -> float:
     return rows * BUILD_SECONDS_PER_ROW * max(1.0, rows / BUILD_REFERENCE_ROWS) ** BUILD_GROWTH
 
 
-#: Share of the time limit that the checks of the kept iterates (the fallback, :func:`_best_of`) may run past it: on
-#: a generated narrow room with 8 robots and 5,078 knots, stopped by the limit of 60 s, the 64 iterates of the round
-#: took 6.6 s to check (0.28 s each, none feasible).
+#: Share of the time limit past it after which no check of a kept iterate starts (the fallback's, :func:`_best_of`,
+#: and the fast attempt's best feasible iterate, :meth:`_Pool.best`), but the first: each evaluates every row, about
+#: 0.28 s on a generated narrow room with 8 robots and 5,078 knots, whose round stopped by the limit of 60 s left
+#: iterates that took 6.6 s to check (none feasible). A check started before it may end after it.
 LATE_CHECK_SHARE: float = 0.02
 
 #: Wall-clock limit [s] of a whole :func:`plan_horizon` call used by the command line (``--time-limit``); the library
@@ -428,13 +429,15 @@ def plan_horizon(
     tr_first: _Transcription | None = None  # round 1's transcription (the same rows for the fallback's round 1)
     fast_state: tuple[Any, ...] | None = None  # the fast attempt's end, if it fell back
     masks_fast = masks
+    seed: _Candidate | None = None  # the fast attempt's best feasible iterate, where the fallback starts
+    late = deadline + LATE_CHECK_SHARE * limit if math.isfinite(limit) else math.inf  # no iterate's check after it
     try:
         for phase, attempts in phases:
             if phase == "fallback":  # the procedure again, from its start or the fast attempt's best feasible iterate
                 xv, masks, viol, lam, tr = x_phase, masks_phase, viol_phase, None, None
                 seed = None
                 if time.perf_counter() < deadline:  # every row at tol, f1, f2, f4 no worse than qp, cheaper than it
-                    seed = pools[0].best(model, tol, warm_c.J if warm_c else math.inf)
+                    seed = pools[0].best(model, tol, warm_c.J if warm_c else math.inf, late)
                 if seed is not None:
                     assert fast_log is not None
                     where = seed.detail.removeprefix("its best feasible iterate (").removesuffix(")")
@@ -623,7 +626,10 @@ def plan_horizon(
             what = f"IPOPT's optimum ({status}) is worse than the warm start in a term of the fitness"
         elif final is not None:
             what = f"IPOPT's optimum ({status}, objective {final.J:.6g}) costs more than the warm start"
-        chosen = _best_of(pools, model, tol, warm_c.J if warm_c else math.inf, deadline, limit) or warm_c
+        chosen = _best_of(pools, model, tol, warm_c.J if warm_c else math.inf, deadline, late)
+        if seed is not None and (chosen is None or seed.J < chosen.J):  # checked already (pools[0] may be skipped)
+            chosen = seed
+        chosen = chosen or warm_c
     if coarse_c is not None:  # the polish's optimum, else the cheaper of its best feasible iterate and the coarse plan
         assert coarse_log is not None
         polished = chosen is not None and chosen.result == "optimal"
@@ -1039,14 +1045,13 @@ def _floor_used(opts: HorizonOptions, fast_log: dict[str, Any] | None, chosen: _
 
 
 def _best_of(
-    pools: list[_Pool], model: _Model, tol: float, J_limit: float, deadline: float, limit: float
+    pools: list[_Pool], model: _Model, tol: float, J_limit: float, deadline: float, until: float
 ) -> _Candidate | None:
     """The cheapest feasible kept iterate over the attempts' pools (:meth:`_Pool.best` of each): the last attempt's
     pool first (as without a fast attempt), the earlier ones only for a cheaper iterate and only before ``deadline``.
-    Each check evaluates every row: with a time limit ``limit`` [s], none starts later than
-    :data:`LATE_CHECK_SHARE` of it past the deadline (but the cheapest iterate's)."""
+    Each check evaluates every row: none starts after ``until`` (the deadline plus :data:`LATE_CHECK_SHARE` of the
+    time limit; :func:`time.perf_counter` values) but the last pool's cheapest iterate's."""
     best: _Candidate | None = None
-    until = deadline + LATE_CHECK_SHARE * limit if math.isfinite(limit) else math.inf
     for i, p in enumerate(reversed(pools)):
         if i > 0 and time.perf_counter() >= deadline:
             break
