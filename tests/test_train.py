@@ -100,10 +100,34 @@ def test_train_is_deterministic(door_problem) -> None:
 LONG_ROOM = (4253401181, "narrow", "far")
 
 
+def _keeps(problem, X: np.ndarray, limits) -> bool:
+    """Every state (k, N, 2) keeps the train's limits, with shapely on the free region (not tmr's code): robots and
+    tether chords farther than ``limits.clearance`` from its boundary, spans in ``limits.spans``, robots at least
+    ``limits.separation`` apart."""
+    free = problem.env.free
+    k, N, _ = X.shape
+    pts = X.reshape(-1, 2)
+    c = limits.clearance
+    if not np.all(shapely.contains_xy(free, pts[:, 0], pts[:, 1])):
+        return False
+    if not np.all(shapely.distance(shapely.points(pts), free.boundary) > c):
+        return False
+    starts = np.concatenate([np.broadcast_to(problem.scenario.base, (k, 1, 2)), X[:, :-1]], axis=1).reshape(-1, 2)
+    lines = shapely.linestrings(np.stack([starts, pts], axis=1))
+    if not np.all(shapely.covers(free, lines) & (shapely.distance(lines, free.boundary) > c)):
+        return False
+    spans = np.linalg.norm(pts - starts, axis=1).reshape(k, N)
+    if np.any(spans < limits.spans[:, 0] - 1e-9) or np.any(spans > limits.spans[:, 1] + 1e-9):
+        return False
+    iu = np.triu_indices(N, 1)
+    D = np.linalg.norm(X[:, :, None] - X[:, None], axis=3)[:, iu[0], iu[1]]
+    return bool(np.all(D >= limits.separation - 1e-9))
+
+
 def test_a_sweeps_moves_run_together_in_as_few_groups_as_the_limits_allow(tmp_path, monkeypatch) -> None:
-    """Each sweep's moves run in consecutive groups, the moves of a group together; two consecutive groups run
-    together would break a limit (checked with shapely here), and a sweep split in groups has one of more than one
-    move."""
+    """Each sweep's moves run in consecutive groups, the moves of a group together, every state keeping the train's
+    limits; a group followed by another would break a limit if the next group's first move joined it (checked with
+    shapely here); and a sweep split in groups has one of more than one move."""
     import tmr.route.train as train
 
     room = generate_room(*LONG_ROOM)
@@ -119,8 +143,9 @@ def test_a_sweeps_moves_run_together_in_as_few_groups_as_the_limits_allow(tmp_pa
         return out
 
     monkeypatch.setattr(train, "_timed_sweep", record)
-    train_problem(problem)
+    trained = train_problem(problem)
     assert sweeps
+    assert _keeps(problem, trained.references.positions, sweeps[0][3])
     wider = 0
     for X0, robots, out, limits in sweeps:
         starts = [X0] + [X[-1] for X, _ in out[:-1]]  # where each group starts
@@ -128,25 +153,19 @@ def test_a_sweeps_moves_run_together_in_as_few_groups_as_the_limits_allow(tmp_pa
             [i for i in range(X0.shape[0]) if np.any(X[:, i] != now[i])]
             for (X, _), now in zip(out, starts, strict=True)
         ]
-        at = 0
+        at, first = 0, []
         for group in moved:  # the sweep's moves, in order, each once: consecutive runs of them
             assert sorted(group) == sorted(robots[at : at + len(group)])
+            first.append(robots[at])
             at += len(group)
         assert at == len(robots)
         if len(moved) > 1:  # the sweep could not run all its moves together
             wider = max(wider, max(len(g) for g in moved))
-        for (Xa, _), (Xb, _), gb in zip(out[:-1], out[1:], moved[1:], strict=True):
+        for (Xa, _), (Xb, _), j in zip(out[:-1], out[1:], first[1:], strict=True):
             K = max(len(Xa), len(Xb))
             both = np.concatenate([Xa, np.repeat(Xa[-1:], K - len(Xa), axis=0)])  # group a's walks, then held
-            for j in gb:  # group b's walks at the same time
-                both[:, j] = np.concatenate([Xb[:, j], np.repeat(Xb[-1:, j], K - len(Xb), axis=0)])
-            bad = _independent_violations(problem, both, limits.clearance, limits.separation)
-            spans = np.linalg.norm(
-                np.diff(np.concatenate([np.broadcast_to(problem.scenario.base, (K, 1, 2)), both], axis=1), axis=1),
-                axis=2,
-            )
-            short = np.any(spans < limits.spans[:, 0] - 1e-6)
-            assert bad or short, "two groups of a sweep could have run together"
+            both[:, j] = np.concatenate([Xb[:, j], np.repeat(Xb[-1:, j], K - len(Xb), axis=0)])  # and b's first
+            assert not _keeps(problem, both, limits), "a group could have taken the next move too"
     assert wider > 1
 
 

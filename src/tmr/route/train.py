@@ -1,4 +1,4 @@
-"""Sequential ("train") references: the chain advances along the route one robot at a time, every state checked.
+"""Sequential ("train") references: the chain advances along the route robot by robot, every state checked.
 
 The trailing references of :func:`tmr.route.references.chain_reference` move every robot at once and leave the hard
 limits
@@ -334,6 +334,14 @@ class _Fast:
         return out.reshape(shape)
 
 
+def _environments(env: Any, clearance: float) -> tuple[_Fast, _Fast]:
+    """The robots' and the tethers' environments (:func:`tmr.route.geodesic.tether_env`: low obstacles left out) at
+    the train's ``clearance`` [m], pre-filtered (:class:`_Fast`; one object if they are the same)."""
+    robots = _Fast(env, clearance)
+    tenv = tether_env(env)
+    return robots, robots if tenv is env else _Fast(tenv, clearance)
+
+
 def _clear(env: _Fast, least: float, pts: Array) -> NDArray[np.bool_]:
     return env.clear_above(np.asarray(pts, dtype=float).reshape(-1, 2), least)
 
@@ -484,13 +492,14 @@ def _repair(state: _State, paths: _Paths, mover: int, other: int, step: float) -
     return None
 
 
-def _search(env: Any, base: Array, paths: _Paths, limits: TrainLimits, step: float) -> list[list[tuple[int, Array]]]:
-    """Moves (robot, polyline travelled), grouped by sweep (module docstring)."""
+def _search(
+    fast: tuple[_Fast, _Fast], base: Array, paths: _Paths, limits: TrainLimits, step: float
+) -> list[list[tuple[int, Array]]]:
+    """Moves (robot, polyline travelled), grouped by sweep (module docstring); ``fast``: the robots' and the tethers'
+    environments at the train's clearance (:func:`_environments`)."""
     N = len(paths.length)
     X = np.array([paths.at(i, 0.0) for i in range(N)])
-    fast = _Fast(env, limits.clearance)
-    tenv = tether_env(env)
-    state = _State(fast, base, X, limits, paths, fast if tenv is env else _Fast(tenv, limits.clearance))
+    state = _State(fast[0], base, X, limits, paths, fast[1])
     sweeps: list[list[tuple[int, Array]]] = []
     count = 0
     stuck, best = 0, float(paths.garc.sum() + np.sum(paths.u >= paths.length - 1e-9))
@@ -699,26 +708,27 @@ def _timed_sweep(
     Ts: float,
 ) -> list[tuple[Array, Array]]:
     """Sampled (positions (k, N, 2), velocities) of one sweep from positions X0 (``env``: the robots' and the tethers'
-    environments at the train's clearance, :func:`_states_valid`): its moves in as few groups as the
-    limits allow, one group after the other, the moves of a group together (the robots that finish early wait) —
-    each group the longest run of the sweep's next moves (leader-most first) whose every sampled joint state keeps
-    the limits; a move alone always keeps them (the search tested it from the state it starts in)."""
+    environments at the train's clearance, :func:`_states_valid`): its moves in consecutive groups, one group after
+    the other, the moves of a group together (the robots that finish early wait). A group is all the sweep's moves
+    left if every sampled joint state of them keeps the limits; else its next move, joined by the moves after it one
+    at a time while the joint states keep the limits. A move alone always keeps them (the search tested it from the
+    state it starts in)."""
     N = len(X0)
     walks = [(i, *_timed(P, speed, accel, Ts)) for i, P in moves]
     out: list[tuple[Array, Array]] = []
     now = X0.copy()
-    a = 0
-    while a < len(walks):
-        b = len(walks)
-        block = _together(now, walks[a:b], N)
-        if b - a > 1 and not _states_valid(env, base, block[0], limits):  # else: all the rest together
+    a, n = 0, len(walks)
+    while a < n:
+        b = n
+        block = _together(now, walks[a:], N)
+        if n - a > 1 and not _states_valid(env, base, block[0], limits):  # not all the rest: the longest run of them
             b = a + 1
             block = _together(now, walks[a:b], N)
-        while b < len(walks):
-            wider = _together(now, walks[a : b + 1], N)
-            if not _states_valid(env, base, wider[0], limits):
-                break
-            block, b = wider, b + 1
+            while b + 1 < n:  # walks[a:n] failed already
+                wider = _together(now, walks[a : b + 1], N)
+                if not _states_valid(env, base, wider[0], limits):
+                    break
+                block, b = wider, b + 1
         out.append(block)
         now = block[0][-1].copy()
         a = b
@@ -793,9 +803,10 @@ def train_reference(
     """
     base = np.asarray(base, dtype=float)
     first: TrainError | None = None
+    fast = _environments(env, limits.clearance)
     for paths in _attempts(env, ref, limits.clearance):
         try:
-            sweeps = _search(env, base, paths, limits, step)
+            sweeps = _search(fast, base, paths, limits, step)
             break
         except TrainError as exc:
             first = first or exc
@@ -807,9 +818,6 @@ def train_reference(
     X0 = np.asarray(ref.start, dtype=float).copy()  # every path starts where its robot stands
     now = X0.copy()
     blocks_x, blocks_v = [X0[None]], [np.zeros((1, N, 2))]
-    robots = _Fast(env, limits.clearance)
-    tenv = tether_env(env)
-    fast = (robots, robots if tenv is env else _Fast(tenv, limits.clearance))
     for moves in sweeps:
         for X, V in _timed_sweep(fast, base, now, limits, moves, speed, accel, Ts):
             blocks_x.append(X)
