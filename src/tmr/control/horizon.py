@@ -122,7 +122,8 @@ __all__ = [
 #: reference machine with the assembled Hessian of stop 47 (``_Model.rows_hessian``): 0.83 s for the 32,522 rows of
 #: scenario E's first round with 6 robots (0.026 ms; 1.87 s before it, 7.5 s for 31,308 rows with casadi's automatic
 #: derivatives). Beyond, the time per row grows as (rows / reference) ^ :data:`BUILD_GROWTH`: 24–28 s for the 398,188
-#: rows of a generated narrow room with 8 robots and 9,564 knots (0.07 ms; 57 s before). A round whose build would
+#: rows of a generated narrow room with 8 robots and 9,564 knots (its train references before they grouped moves;
+#: 0.07 ms; 57 s before). A round whose build would
 #: overrun the time limit is not started (:func:`_expected_build`, :data:`BUILD_SHARE`).
 BUILD_SECONDS_PER_ROW: float = 2.6e-5
 BUILD_REFERENCE_ROWS: int = 32_522
