@@ -1010,10 +1010,13 @@ def test_the_fallback_checks_stop_a_share_of_the_limit_past_the_deadline(monkeyp
     assert horizon._best_of([pool], model, 1e-5, math.inf, now + 60.0, now + 61.2) is not None and len(calls) == 6
 
 
-def test_the_fast_attempts_best_feasible_iterate_is_kept_when_the_fallback_finds_nothing(feasible_warm, monkeypatch):
-    """The fallback starts from the fast attempt's best feasible iterate (checked then); if the fallback then ends
-    without a plan and the final checks find nothing (here: none allowed, as past the late-check time), that iterate
-    is the plan, not the qp warm start."""
+@pytest.mark.parametrize("found", ["nothing", "cheaper", "dearer"])
+def test_the_fast_attempts_best_feasible_iterate_is_kept_when_the_fallback_finds_nothing(
+    feasible_warm, monkeypatch, found
+):
+    """The fallback starts from the fast attempt's best feasible iterate (checked then, under the late-check bound
+    deadline + LATE_CHECK_SHARE × limit); if the fallback then ends without a plan, the plan is the cheaper of that
+    iterate and what the final checks find (under the same bound) — not the qp warm start when they find nothing."""
     from tmr.control import horizon
 
     problem, warm, J_warm = feasible_warm
@@ -1024,10 +1027,33 @@ def test_the_fast_attempts_best_feasible_iterate_is_kept_when_the_fallback_finds
             if "fast" not in label:
                 self.deadline = -math.inf  # the fallback's rounds stop at their first iteration
 
+    bounds, seeds = [], []
+    best = horizon_pool._Pool.best
+
+    def seed_check(self, model, tol, J_limit, until=math.inf):
+        seeds.append(until)
+        return best(self, model, tol, J_limit, until)
+
+    def final_checks(pools, model, tol, J_limit, deadline, until):
+        bounds.append((deadline, until))
+        seed = seeds and pools[0].best(model, tol, J_limit)
+        if found == "nothing" or not seed:
+            return None
+        J = seed.J * (0.5 if found == "cheaper" else 2.0)
+        return horizon_pool._Candidate(
+            seed.Q, J, "best_feasible_iterate", f"its best feasible iterate ({found})", seed.x
+        )
+
     monkeypatch.setattr(horizon, "_IterationCallback", LateFallback)
-    monkeypatch.setattr(horizon, "_best_of", lambda *args: None)
-    plan = plan_horizon(problem, warm, **WEIGHTED, fast_max_iter=4, fast_stall_iter=None)
+    monkeypatch.setattr(horizon_pool._Pool, "best", seed_check)
+    monkeypatch.setattr(horizon, "_best_of", final_checks)
+    plan = plan_horizon(problem, warm, **WEIGHTED, fast_max_iter=4, fast_stall_iter=None, time_limit=60.0)
     d = plan.diagnostics
     assert "fallback_start" in d["horizon_summary"]["fast_attempt"]
-    assert d["horizon_result"] == "best_feasible_iterate" and "fast" in d["horizon_note"]
+    assert d["horizon_result"] == "best_feasible_iterate"
+    detail = "(cheaper)" if found == "cheaper" else "(round 1 fast"
+    assert f"returned its best feasible iterate {detail}" in d["horizon_note"]
     assert objective(plan.q, problem, **WEIGHTED) < J_warm
+    ((deadline, until),) = bounds
+    assert until == pytest.approx(deadline + horizon.LATE_CHECK_SHARE * 60.0, abs=1e-9)
+    assert seeds[0] == until  # the seed's check: the same bound
