@@ -146,7 +146,8 @@ def _expected_build(rows: int) -> float:
 #: Share of the time limit past it after which no check of a kept iterate starts (the fallback's, :func:`_best_of`,
 #: and the fast attempt's best feasible iterate, :meth:`_Pool.best`), but the first: each evaluates every row, about
 #: 0.28 s on a generated narrow room with 8 robots and 5,078 knots, whose round stopped by the limit of 60 s left
-#: iterates that took 6.6 s to check (none feasible). A check started before it may end after it.
+#: iterates that took 6.6 s to check (none feasible). A check started before it may end after it, and the last
+#: pool's first check always runs: past it, the checks add at most two iterates' checks.
 LATE_CHECK_SHARE: float = 0.02
 
 #: Wall-clock limit [s] of a whole :func:`plan_horizon` call used by the command line (``--time-limit``); the library
@@ -294,8 +295,8 @@ def plan_horizon(
             callback; ``max_wall_time`` as a backstop), and no solver is built (round or retry) unless the remaining
             budget exceeds its expected build time — the last build scaled by the rows, at least
             :func:`_expected_build` of the rows; the overrun is at most one IPOPT iteration, a build whose estimate
-            was too low, and the fallback check (:data:`LATE_CHECK_SHARE` of the limit, and one iterate's check).
-            A run that does not reach it gives the same plan as without.
+            was too low, and the fallback check (:data:`LATE_CHECK_SHARE` of the limit, and up to two iterates'
+            checks). A run that does not reach it (its checks included) gives the same plan as without.
         progress: show a tqdm bar of the IPOPT iterations on stderr (only if stderr is a terminal).
         **options: fields of :class:`HorizonOptions` (weights, leader tolerance, samples, IPOPT options, …).
 
