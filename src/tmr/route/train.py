@@ -20,9 +20,10 @@ longer plan (``formulations/route.md``, "Train references"):
   along the door's axis (:func:`_axial`: a robot in a door has its neighbours on the axis, not round a jamb); then
   along that guide pulled taut, no robot passing, along the guide, the robot ahead of it (:func:`_attempts`);
 * **timing**: every advance follows the minimum-jerk law within the leader's speed and acceleration limits, stopping
-  at each turn of its path sharper than :data:`TURN_STOP`; the advances of one sweep run in as few consecutive groups
-  as the limits allow, the advances of a group together (each group the longest run of the sweep's next advances
-  whose every sampled joint state keeps the same limits; an advance alone always does).
+  at each turn of its path sharper than :data:`TURN_STOP`; the advances of one sweep run in consecutive groups, the
+  advances of a group together: all the sweep's advances left if every sampled joint state keeps the same limits,
+  else the next one joined by those after it, one at a time, while the joint states keep them (an advance alone
+  always does).
 
 The result is a :class:`tmr.route.references.ChainReference` (the leader's trajectory and every robot's reference), so
 the
@@ -721,7 +722,7 @@ def _timed_sweep(
     while a < n:
         b = n
         block = _together(now, walks[a:], N)
-        if n - a > 1 and not _states_valid(env, base, block[0], limits):  # not all the rest: the longest run of them
+        if n - a > 1 and not _states_valid(env, base, block[0], limits):  # not all the rest: the next, then more
             b = a + 1
             block = _together(now, walks[a:b], N)
             while b + 1 < n:  # walks[a:n] failed already
