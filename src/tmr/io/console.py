@@ -112,6 +112,10 @@ def progress_enabled(stream: Any = None) -> bool:
     return tty and not _state["quiet"] and _state["progress"]
 
 
+#: The module of importlib's own file reads (``<frozen importlib._bootstrap_external>``), a ``warnings`` filter pattern.
+_IMPORTLIB = r"importlib\._bootstrap"
+
+
 def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> int:
     """Call ``body(args)`` with logging set up from ``args``; map what it raises to an exit code (module doc)."""
     quiet, verbose, debug = (bool(getattr(args, k, False)) for k in ("quiet", "verbose", "debug"))
@@ -121,9 +125,12 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
     if not verbose:  # a file left open by an interrupted import or write is reported when it is freed, perhaps
         # after this function (a second line after 'interrupted'): not a user's concern, for the whole process
         warnings.filterwarnings("ignore", category=ResourceWarning)
+    # nor, even with --verbose, the .pyc file importlib itself had open when a Ctrl-C interrupted an import
+    warnings.filterwarnings("ignore", category=ResourceWarning, module=_IMPORTLIB)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("default")  # each distinct warning once, through logging
+            warnings.filterwarnings("ignore", category=ResourceWarning, module=_IMPORTLIB)
             if not verbose:
                 warnings.filterwarnings("ignore", category=ResourceWarning)
             return body(args)
