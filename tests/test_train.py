@@ -124,7 +124,7 @@ def _keeps(problem, X: np.ndarray, limits) -> bool:
     return bool(np.all(D >= limits.separation - 1e-9))
 
 
-def test_a_sweeps_moves_run_together_in_as_few_groups_as_the_limits_allow(tmp_path, monkeypatch) -> None:
+def test_a_sweeps_moves_run_together_in_greedy_groups_that_keep_the_limits(tmp_path, monkeypatch) -> None:
     """Each sweep's moves run in consecutive groups, the moves of a group together, every state keeping the train's
     limits; a group followed by another would break a limit if the next group's first move joined it (checked with
     shapely here); and a sweep split in groups has one of more than one move."""
