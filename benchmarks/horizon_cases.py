@@ -13,10 +13,11 @@ from typing import Any
 
 def build(case: str) -> tuple[Any, Any]:
     """(problem, its ``qp`` plan) of ``case``: ``E6`` (scenario E, 6 robots) or ``ROOMSEED:DENSITY:GOAL:N`` (a
-    generated room, :func:`tmr.sweep.rooms.generate_room`, N robots); shortest route, seed 0. If the plan was made
-    along train references (the trailing ones failed), the problem is the one with those references
-    (:func:`tmr.planner.train_problem`): the pair ``tmr plan --method horizon`` hands to the NLP."""
-    from tmr.planner import build_problem, solve, train_problem
+    generated room, :func:`tmr.sweep.rooms.generate_room`, N robots); shortest route, seed 0. The planner's own
+    ``qp`` step (``tmr.planner._solve_qp``, as ``solve(problem, "horizon")`` runs it): with train references if the
+    trailing ones failed, the problem then the one with them — the pair ``tmr plan --method horizon`` hands to the
+    NLP."""
+    from tmr.planner import _solve_qp, build_problem
     from tmr.world.scenario import load_scenario, scenario_from_map
 
     if case == "E6":
@@ -29,10 +30,7 @@ def build(case: str) -> tuple[Any, Any]:
         n = int(count)
         with tempfile.TemporaryDirectory() as tmp:
             sc = scenario_from_map(write_geojson(room, Path(tmp) / "room.geojson"), room.base, room.goal, n_robots=n)
-    problem = build_problem(sc, seed=0, n_robots=n)
-    plan = solve(problem, "qp")[0]
-    if plan.diagnostics.get("references") == "train":
-        problem = train_problem(problem)
+    problem, plan, _ = _solve_qp(build_problem(sc, seed=0, n_robots=n), False)
     return problem, plan
 
 
