@@ -822,6 +822,65 @@ def test_windows_stop_at_the_time_limit_and_the_plan_is_never_worse(feasible_war
     assert plan.success and objective(plan.q, problem) <= J_warm and d["constraint_violation"] <= 1e-5
 
 
+def test_crossed_is_the_deepest_violated_clearance_row():
+    """_crossed: how far [m] the deepest violated clearance row is past d_safe; other groups (other units) do not
+    count."""
+    V = horizon_model.Violation
+    viol = [
+        V("clearance", 3, 0.15, "tether 1 at s = 0.5", 0.2, "m"),
+        V("separation", 4, 0.2, "robots 1–2 (distance²)", 5.0, "m²"),
+        V("clearance", 9, 0.45, "tether 2 at s = 0.1", 0.7, "m"),
+    ]
+    assert horizon_module._crossed(viol) == 0.7
+    assert horizon_module._crossed(viol[1:2]) == 0.0 and horizon_module._crossed([]) == 0.0
+
+
+def test_a_fast_round_that_crossed_obstacles_falls_back_and_other_rounds_restart_inside_the_rows(monkeypatch):
+    """A round whose optimum violates the clearance rows left out of it by more than ``activation`` crossed obstacles
+    (the walls rooms: tethers 0.65–1.5 m past d_safe, and IPOPT's next round, started there, crawls in restoration):
+    the fast attempt falls back at once; any other round's successor starts from the cheapest kept iterate that
+    holds every row, primal only, and reaches the same optimum. Here the depth is forced (the small problem's round 1
+    leaves 1.2 cm), so both branches run on a real NLP."""
+    problem = small_problem()
+    warm, _ = solve(problem, "qp")
+    plain = plan_horizon(problem, warm, activation=0.3, fast_min_hessian_perturbation=None)
+    first = plain.diagnostics["round_log"][0]
+    assert 0 < first["crossed"] < 0.3 and len(plain.diagnostics["round_log"]) == 2 and "next_start" not in first
+
+    monkeypatch.setattr(horizon_module, "_crossed", lambda viol: 10.0 if viol else 0.0)
+    calls: list[tuple[dict, np.ndarray]] = []  # each IPOPT call: its arguments and the x it returned
+    build = horizon_model._Transcription.solver
+
+    class Spy:
+        def __init__(self, solver):
+            self.solver = solver
+
+        def __call__(self, **kwargs):
+            sol = self.solver(**kwargs)
+            calls.append((kwargs, np.asarray(sol["x"], dtype=float).ravel()))
+            return sol
+
+        def stats(self):
+            return self.solver.stats()
+
+    monkeypatch.setattr(horizon_model._Transcription, "solver", lambda tr, *a, **k: Spy(build(tr, *a, **k)))
+    plan = plan_horizon(problem, warm, activation=0.3, fast_min_hessian_perturbation=None)
+    d = plan.diagnostics
+    log = d["round_log"]
+    assert [r["round"] for r in log] == [1, 2] and log[0]["next_start"].startswith("round 1 primary, iteration ")
+    (_, x1), (args2, _) = calls
+    assert "lam_g0" not in args2 and not np.allclose(np.asarray(args2["x0"], dtype=float).ravel(), x1, atol=1e-6)
+    assert d["horizon_result"] == "optimal" and check(plan, problem.env).n_violation_steps == 0
+    assert d["objective"] == pytest.approx(plain.diagnostics["objective"], rel=1e-5)
+
+    plan = plan_horizon(problem, warm, activation=0.3)  # the fast attempt on: it falls back after its round 1
+    d = plan.diagnostics
+    fast = [r for r in d["round_log"] if r["phase"] == "fast"]
+    assert len(fast) == 1 and d["horizon_summary"]["fast_attempt"]["result"] == "fell_back"
+    assert "crossed obstacles whose rows were left out" in d["horizon_note"]
+    assert d["horizon_result"] == "optimal" and check(plan, problem.env).n_violation_steps == 0
+
+
 def test_a_stalled_fast_attempt_stops_and_falls_back(monkeypatch):
     """fast_stall_iter: the iteration callback stops a fast round once that many iterations passed without a cheaper
     iterate holding the round's rows (status "Stalled"), and the fallback starts; iterates outside the rows never

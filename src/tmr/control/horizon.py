@@ -147,7 +147,8 @@ def _expected_build(rows: int) -> float:
 #: and the fast attempt's best feasible iterate, :meth:`_Pool.best`), but the first: each evaluates every row, about
 #: 0.28 s on a generated narrow room with 8 robots and 5,078 knots, whose round stopped by the limit of 60 s left
 #: iterates that took 6.6 s to check (none feasible). A check started before it may end after it, and the last
-#: pool's first check always runs: past it, the checks add at most two iterates' checks.
+#: pool's first check always runs: past it, the checks add at most two iterates' checks. It is also the budget of the
+#: checks that look for the start of the round after one whose optimum crossed obstacles (:func:`plan_horizon`).
 LATE_CHECK_SHARE: float = 0.02
 
 #: Wall-clock limit [s] of a whole :func:`plan_horizon` call used by the command line (``--time-limit``); the library
@@ -306,9 +307,10 @@ def plan_horizon(
         ``horizon_result`` ("optimal", "coarse_optimal" — the coarse pass's optimum, interpolated, every row holding:
         ``formulations/horizon.md``, "Coarse knots" — "best_feasible_iterate" or "warm_start"), ``horizon_note``
         (one line: what IPOPT did and what was returned), ``horizon_stop`` ("converged", "ipopt_failed", "time_limit",
-        "rows_left_out"), IPOPT's status and iterations, the objective returned and at the warm start, f1–f4, the
-        largest row violation, the row counts, the rounds and the time split (warm-start preparation, transcription,
-        solve); ``wall_time`` is the total. Run :func:`tmr.planner.check` on it for the exact (shapely) verification.
+        "rows_left_out", or "rows_crossed": the fast attempt's, with no time left for its fallback), IPOPT's status
+        and iterations, the objective returned and at the warm start, f1–f4, the largest row violation, the row
+        counts, the rounds and the time split (warm-start preparation, transcription, solve); ``wall_time`` is the
+        total. Run :func:`tmr.planner.check` on it for the exact (shapely) verification.
 
     Raises:
         ParameterError: no warm start, a warm start of the wrong shape, a bad option or time limit; a world with low
@@ -380,7 +382,7 @@ def plan_horizon(
     lam: tuple[Array, Array] | None = None
     stats: dict[str, Any] = {}
     status = ""
-    stop = ""  # why the rounds ended: converged, ipopt_failed, time_limit, rows_left_out
+    stop = ""  # why the rounds ended: converged, ipopt_failed, time_limit, rows_left_out, rows_crossed (fast attempt)
     bar = tqdm(  # no total: IPOPT's iterations are counted, its rounds named ("horizon NLP, round 1 (primary solve)")
         desc="horizon NLP",
         unit="IPOPT iteration",
@@ -538,6 +540,7 @@ def plan_horizon(
                             rows=int(tr.size),
                             clearance_rows=int(tr.index["clearance"].size),
                             violated=len(viol),
+                            crossed=_crossed(viol),
                             transcription_time=(t2 - t1 if label == "primary" else 0.0) + t3 - t2,
                             solve_time=t4 - t3,
                             t_wall={k[7:]: round(float(v), 4) for k, v in stats.items() if k.startswith("t_wall_nlp")},
@@ -557,7 +560,21 @@ def plan_horizon(
                 if not viol:
                     stop = "converged"
                     break
-                masks = model.grown(masks, vals)
+                crossed = _crossed(viol) > opts.activation  # the optimum crossed obstacles whose rows were left out
+                if crossed and phase == "fast":  # it falls back rather than start its next round inside them
+                    stop = "rows_crossed"
+                    break
+                masks = model.grown(masks, vals)  # the rows the optimum violates join the next round
+                if crossed:  # the next round starts from the cheapest kept iterate that holds every row, primal only
+                    now = time.perf_counter()
+                    until = min(late, now + LATE_CHECK_SHARE * limit) if math.isfinite(limit) else math.inf
+                    back = pool.best(model, tol, math.inf, until)
+                    if back is not None:
+                        xv, lam = back.x, None
+                        vals = model.values(xv)
+                        viol = _violations(model, vals, xv, tol)
+                        masks = model.grown(masks, vals)
+                        rounds[-1]["next_start"] = back.detail.removeprefix("its best feasible iterate (")[:-1]
             else:
                 stop = "rows_left_out"
             phase_rounds = rounds[first_round:]
@@ -618,6 +635,11 @@ def plan_horizon(
                 f"IPOPT not started: the NLP has {too_big[0]:,} rows, building its solver {too_big[1]} of the "
                 f"time limit of {limit:g} s (raise --time-limit)"
             )
+    elif stop == "rows_crossed":  # the fast attempt's, with no time left for the fallback
+        what = (
+            f"the optimum of round {last} ({tried}) crossed obstacles whose rows were left out, "
+            f"{phase_rounds[-1]['crossed']:.3g} m past d_safe"
+        )
     else:
         what = f"rows left out of the NLP were still violated after {opts.max_rounds} rounds of constraint generation"
     final_no_worse = final is not None and _no_worse(model, final.Q)
@@ -1012,6 +1034,11 @@ def _phases(opts: HorizonOptions) -> list[tuple[str, list[tuple[str, dict[str, A
     return [("fast", [("primary", capped)]), ("fallback", attempts)]
 
 
+def _crossed(viol: list[Violation]) -> float:
+    """How far [m] the deepest violated clearance row is past its bound d_safe (0: none violated)."""
+    return max((v.amount for v in viol if v.group == "clearance"), default=0.0)
+
+
 def _fast_reason(
     stop: str,
     final: _Candidate | None,
@@ -1028,6 +1055,11 @@ def _fast_reason(
         return f"its optimum (objective {final.J:.6g}) costs more than the warm start ({warm_c.J if warm_c else 0:.6g})"
     if stop == "rows_left_out":
         return f"rows left out were still violated after {opts.max_rounds} rounds"
+    if stop == "rows_crossed" and last is not None:
+        return (
+            f"the optimum of its round {last['round']} crossed obstacles whose rows were left out (a tether sample "
+            f"{last['crossed']:.3g} m past d_safe, more than the activation distance {opts.activation:g} m)"
+        )
     if last is None:
         return "its time share ran out before IPOPT started"
     if stop == "time_limit":
