@@ -836,18 +836,18 @@ def test_crossed_is_the_deepest_violated_clearance_row():
 
 
 def test_a_fast_round_that_crossed_obstacles_falls_back_and_other_rounds_restart_inside_the_rows(monkeypatch):
-    """A round whose optimum violates the clearance rows left out of it by more than ``activation`` crossed obstacles
-    (the walls rooms: tethers 0.65–1.5 m past d_safe, and IPOPT's next round, started there, crawls in restoration):
-    the fast attempt falls back at once; any other round's successor starts from the cheapest kept iterate that
-    holds every row, primal only, and reaches the same optimum. Here the depth is forced (the small problem's round 1
-    leaves 1.2 cm), so both branches run on a real NLP."""
+    """crossing_depth: a round whose optimum leaves a left-out clearance row more than that past d_safe crossed an
+    obstacle (the walls rooms: 0.59–0.82 m, and IPOPT's next round, started there, crawls in restoration): the fast
+    attempt falls back at once; any other round's successor starts from the cheapest kept iterate that holds every
+    row, primal only, and reaches the same optimum. The small problem's round 1 (activation 0.3 m) ends 1.2 cm past
+    d_safe: the default depth (0.3 m) lets the next round start there, 5 mm does not."""
     problem = small_problem()
     warm, _ = solve(problem, "qp")
-    plain = plan_horizon(problem, warm, activation=0.3, fast_min_hessian_perturbation=None)
+    single = dict(activation=0.3, fast_min_hessian_perturbation=None)
+    plain = plan_horizon(problem, warm, **single)
     first = plain.diagnostics["round_log"][0]
-    assert 0 < first["crossed"] < 0.3 and len(plain.diagnostics["round_log"]) == 2 and "next_start" not in first
+    assert 0.005 < first["crossed"] < 0.3 and len(plain.diagnostics["round_log"]) == 2 and "next_start" not in first
 
-    monkeypatch.setattr(horizon_module, "_crossed", lambda viol: 10.0 if viol else 0.0)
     calls: list[tuple[dict, np.ndarray]] = []  # each IPOPT call: its arguments and the x it returned
     build = horizon_model._Transcription.solver
 
@@ -864,21 +864,28 @@ def test_a_fast_round_that_crossed_obstacles_falls_back_and_other_rounds_restart
             return self.solver.stats()
 
     monkeypatch.setattr(horizon_model._Transcription, "solver", lambda tr, *a, **k: Spy(build(tr, *a, **k)))
-    plan = plan_horizon(problem, warm, activation=0.3, fast_min_hessian_perturbation=None)
+    plan = plan_horizon(problem, warm, crossing_depth=0.005, **single)
     d = plan.diagnostics
     log = d["round_log"]
     assert [r["round"] for r in log] == [1, 2] and log[0]["next_start"].startswith("round 1 primary, iteration ")
-    (_, x1), (args2, _) = calls
+    (args1, x1), (args2, _) = calls
     assert "lam_g0" not in args2 and not np.allclose(np.asarray(args2["x0"], dtype=float).ravel(), x1, atol=1e-6)
     assert d["horizon_result"] == "optimal" and check(plan, problem.env).n_violation_steps == 0
     assert d["objective"] == pytest.approx(plain.diagnostics["objective"], rel=1e-5)
 
-    plan = plan_horizon(problem, warm, activation=0.3)  # the fast attempt on: it falls back after its round 1
+    plan = plan_horizon(problem, warm, activation=0.3, crossing_depth=0.005)  # the fast attempt falls back
     d = plan.diagnostics
-    fast = [r for r in d["round_log"] if r["phase"] == "fast"]
-    assert len(fast) == 1 and d["horizon_summary"]["fast_attempt"]["result"] == "fell_back"
-    assert "crossed obstacles whose rows were left out" in d["horizon_note"]
+    assert [r["phase"] for r in d["round_log"]][:2] == ["fast", "fallback"]
+    assert d["horizon_summary"]["fast_attempt"]["result"] == "fell_back"
+    assert (
+        "crossed obstacles whose rows were left out" in d["horizon_note"]
+        and "crossing_depth 0.005 m" in d["horizon_note"]
+    )
     assert d["horizon_result"] == "optimal" and check(plan, problem.env).n_violation_steps == 0
+    plan = plan_horizon(problem, warm, activation=0.3)  # 1.2 cm: its round 2 starts at its round 1's optimum
+    assert [r["phase"] for r in plan.diagnostics["round_log"]] == ["fast", "fast"]
+    with pytest.raises(ParameterError, match="crossing_depth"):
+        plan_horizon(problem, warm, crossing_depth=0.0)
 
 
 def test_a_stalled_fast_attempt_stops_and_falls_back(monkeypatch):

@@ -560,7 +560,8 @@ def plan_horizon(
                 if not viol:
                     stop = "converged"
                     break
-                crossed = _crossed(viol) > opts.activation  # the optimum crossed obstacles whose rows were left out
+                depth = opts.crossing_depth  # the optimum crossed obstacles whose rows were left out
+                crossed = depth is not None and _crossed(viol) > depth
                 if crossed and phase == "fast":  # it falls back rather than start its next round inside them
                     stop = "rows_crossed"
                     break
@@ -1058,7 +1059,7 @@ def _fast_reason(
     if stop == "rows_crossed" and last is not None:
         return (
             f"the optimum of its round {last['round']} crossed obstacles whose rows were left out (a tether sample "
-            f"{last['crossed']:.3g} m past d_safe, more than the activation distance {opts.activation:g} m)"
+            f"{last['crossed']:.3g} m past d_safe, more than crossing_depth {opts.crossing_depth:g} m)"
         )
     if last is None:
         return "its time share ran out before IPOPT started"

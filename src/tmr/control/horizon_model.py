@@ -74,6 +74,11 @@ class HorizonOptions:
             previous round's primal–dual solution (measured from the qp plan: D 6.7 s against 9.4 s with
             ``activation`` 0.3 against 0.6, B and C even, E unsolved either way; off by default).
         max_rounds: transcriptions at most (a round adds the clearance rows that were left out and came out violated).
+        crossing_depth: a round whose optimum leaves a clearance row that was left out of it more than this past
+            d_safe [m] crossed an obstacle: the fast attempt falls back at once, any other attempt starts its next
+            round from its cheapest kept iterate that holds every row, primal only (``None``: never;
+            ``formulations/horizon.md``, "A round that crossed obstacles": rounds that ended 0.59–0.82 m past did
+            not recover, 0.17 m and less did).
         max_iter, tol, acceptable_tol, acceptable_iter, constr_viol_tol, mu_strategy, mu_init, linear_solver,
             nlp_scaling, min_hessian_perturbation: IPOPT options (choices and measurements in
             ``formulations/horizon.md``).
@@ -158,6 +163,7 @@ class HorizonOptions:
     no_worse_terms: bool = True
     max_rounds: int = 4
     restart_rounds: bool = False
+    crossing_depth: float | None = 0.3
     max_iter: int = 200
     tol: float = 1e-6
     acceptable_tol: float = 1e-4
@@ -213,6 +219,9 @@ class HorizonOptions:
             raise ParameterError(f"samples_per_link must be ≥ 1, got {self.samples_per_link}")
         if not self.activation > 0:
             raise ParameterError(f"activation must be > 0 m, got {self.activation}")
+        depth = self.crossing_depth
+        if depth is not None and (isinstance(depth, bool) or not isinstance(depth, (int, float)) or not depth > 0):
+            raise ParameterError(f"crossing_depth must be > 0 m (or None: never), got {depth!r}")
         if not 0 <= self.rate_activation < 1:
             raise ParameterError(f"rate_activation must be in [0, 1), got {self.rate_activation}")
         if self.max_rounds < 1 or self.max_iter < 1:
