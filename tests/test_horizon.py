@@ -837,10 +837,10 @@ def test_crossed_is_the_deepest_violated_clearance_row():
 
 def test_a_fast_round_that_crossed_obstacles_falls_back_and_other_rounds_restart_inside_the_rows(monkeypatch):
     """crossing_depth: a round whose optimum leaves a left-out clearance row more than that past d_safe crossed an
-    obstacle (the walls rooms: 0.59–0.82 m, and IPOPT's next round, started there, crawls in restoration): the fast
+    obstacle (the walls rooms: 0.65–0.82 m, and IPOPT's next round, started there, crawls in restoration): the fast
     attempt falls back at once; any other round's successor starts from the cheapest kept iterate that holds every
     row, primal only, and reaches the same optimum. The small problem's round 1 (activation 0.3 m) ends 1.2 cm past
-    d_safe: the default depth (0.3 m) lets the next round start there, 5 mm does not."""
+    d_safe: the default depth (0.6 m) lets the next round start there, 5 mm does not."""
     problem = small_problem()
     warm, _ = solve(problem, "qp")
     single = dict(activation=0.3, fast_min_hessian_perturbation=None)
@@ -879,7 +879,7 @@ def test_a_fast_round_that_crossed_obstacles_falls_back_and_other_rounds_restart
     assert d["horizon_summary"]["fast_attempt"]["result"] == "fell_back"
     assert (
         "crossed obstacles whose rows were left out" in d["horizon_note"]
-        and "crossing_depth 0.005 m" in d["horizon_note"]
+        and "crossing_depth = 0.005 m" in d["horizon_note"]
     )
     assert d["horizon_result"] == "optimal" and check(plan, problem.env).n_violation_steps == 0
     plan = plan_horizon(problem, warm, activation=0.3)  # 1.2 cm: its round 2 starts at its round 1's optimum

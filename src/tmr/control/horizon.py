@@ -1059,7 +1059,7 @@ def _fast_reason(
     if stop == "rows_crossed" and last is not None:
         return (
             f"the optimum of its round {last['round']} crossed obstacles whose rows were left out (a tether sample "
-            f"{last['crossed']:.3g} m past d_safe, more than crossing_depth {opts.crossing_depth:g} m)"
+            f"{last['crossed']:.3g} m past d_safe, more than crossing_depth = {opts.crossing_depth:g} m)"
         )
     if last is None:
         return "its time share ran out before IPOPT started"

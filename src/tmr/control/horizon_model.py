@@ -77,8 +77,9 @@ class HorizonOptions:
         crossing_depth: a round whose optimum leaves a clearance row that was left out of it more than this past
             d_safe [m] crossed an obstacle: the fast attempt falls back at once, any other attempt starts its next
             round from its cheapest kept iterate that holds every row, primal only (``None``: never;
-            ``formulations/horizon.md``, "A round that crossed obstacles": rounds that ended 0.59–0.82 m past did
-            not recover, 0.17 m and less did).
+            ``formulations/horizon.md``, "A round that crossed obstacles": the next rounds from optima 0.65 and
+            0.82 m past did not recover, from 0.17 m and less they did; between, 0.52 and 0.58 m did and 0.59 m did
+            not, so the depth is no sharp test: 0.6, the default ``activation``, is where it acts).
         max_iter, tol, acceptable_tol, acceptable_iter, constr_viol_tol, mu_strategy, mu_init, linear_solver,
             nlp_scaling, min_hessian_perturbation: IPOPT options (choices and measurements in
             ``formulations/horizon.md``).
@@ -163,7 +164,7 @@ class HorizonOptions:
     no_worse_terms: bool = True
     max_rounds: int = 4
     restart_rounds: bool = False
-    crossing_depth: float | None = 0.3
+    crossing_depth: float | None = 0.6
     max_iter: int = 200
     tol: float = 1e-6
     acceptable_tol: float = 1e-4
