@@ -868,6 +868,7 @@ def test_a_fast_round_that_crossed_obstacles_falls_back_and_other_rounds_restart
     d = plan.diagnostics
     log = d["round_log"]
     assert [r["round"] for r in log] == [1, 2] and log[0]["next_start"].startswith("round 1 primary, iteration ")
+    assert log[1]["rows"] >= plain.diagnostics["round_log"][1]["rows"]  # the rows the optimum crossed, and more
     (args1, x1), (args2, _) = calls
     assert "lam_g0" not in args2 and not np.allclose(np.asarray(args2["x0"], dtype=float).ravel(), x1, atol=1e-6)
     assert d["horizon_result"] == "optimal" and check(plan, problem.env).n_violation_steps == 0
@@ -877,11 +878,22 @@ def test_a_fast_round_that_crossed_obstacles_falls_back_and_other_rounds_restart
     d = plan.diagnostics
     assert [r["phase"] for r in d["round_log"]][:2] == ["fast", "fallback"]
     assert d["horizon_summary"]["fast_attempt"]["result"] == "fell_back"
+    assert f"a tether sample {d['round_log'][0]['crossed']:.3g} m past d_safe" in d["horizon_note"]
     assert (
         "crossed obstacles whose rows were left out" in d["horizon_note"]
         and "crossing_depth = 0.005 m" in d["horizon_note"]
     )
     assert d["horizon_result"] == "optimal" and check(plan, problem.env).n_violation_steps == 0
+    real_build = horizon_module._expected_build
+    builds = iter([False])  # the fast round's solver is built, the fallback's would take "too long"
+    monkeypatch.setattr(
+        horizon_module, "_expected_build", lambda rows: real_build(rows) if next(builds, True) is False else 1e9
+    )
+    d = plan_horizon(problem, warm, activation=0.3, crossing_depth=0.005, time_limit=60.0).diagnostics
+    assert d["horizon_stop"] == "rows_crossed" and d["horizon_summary"]["fast_attempt"]["fallback"] == "no time left"
+    assert "the optimum of round 1 (primary: 'Solve_Succeeded' after" in d["horizon_note"]
+    assert "crossed obstacles whose rows were left out" in d["horizon_note"]
+    monkeypatch.setattr(horizon_module, "_expected_build", real_build)
     plan = plan_horizon(problem, warm, activation=0.3)  # 1.2 cm: its round 2 starts at its round 1's optimum
     assert [r["phase"] for r in plan.diagnostics["round_log"]] == ["fast", "fast"]
     with pytest.raises(ParameterError, match="crossing_depth"):

@@ -144,11 +144,11 @@ def _expected_build(rows: int) -> float:
 
 
 #: Share of the time limit past it after which no check of a kept iterate starts (the fallback's, :func:`_best_of`,
-#: and the fast attempt's best feasible iterate, :meth:`_Pool.best`), but the first: each evaluates every row, about
-#: 0.28 s on a generated narrow room with 8 robots and 5,078 knots, whose round stopped by the limit of 60 s left
-#: iterates that took 6.6 s to check (none feasible). A check started before it may end after it, and the last
-#: pool's first check always runs: past it, the checks add at most two iterates' checks. It is also the budget of the
-#: checks that look for the start of the round after one whose optimum crossed obstacles (:func:`plan_horizon`).
+#: the fast attempt's best feasible iterate and the restart after a round that crossed obstacles, :meth:`_Pool.best`),
+#: but the first: each evaluates every row, about 0.28 s on a generated narrow room with 8 robots and 5,078 knots,
+#: whose round stopped by the limit of 60 s left iterates that took 6.6 s to check (none feasible). A check started
+#: before it may end after it, and the last pool's first check always runs: past it, the checks add at most two
+#: iterates' checks.
 LATE_CHECK_SHARE: float = 0.02
 
 #: Wall-clock limit [s] of a whole :func:`plan_horizon` call used by the command line (``--time-limit``); the library
@@ -562,15 +562,21 @@ def plan_horizon(
                     break
                 depth = opts.crossing_depth  # the optimum crossed obstacles whose rows were left out
                 crossed = depth is not None and _crossed(viol) > depth
+                masks = model.grown(masks, vals)  # the rows the optimum violates join the next round (or the fallback)
                 if crossed and phase == "fast":  # it falls back rather than start its next round inside them
                     stop = "rows_crossed"
                     break
-                masks = model.grown(masks, vals)  # the rows the optimum violates join the next round
-                if crossed:  # the next round starts from the cheapest kept iterate that holds every row, primal only
-                    now = time.perf_counter()
-                    until = min(late, now + LATE_CHECK_SHARE * limit) if math.isfinite(limit) else math.inf
-                    back = pool.best(model, tol, math.inf, until)
-                    if back is not None:
+                # the next round (if one runs, and starts here) from the cheapest kept iterate that holds every row
+                if (
+                    crossed
+                    and rnd < opts.max_rounds
+                    and not opts.restart_rounds
+                    and time.perf_counter() < phase_deadline
+                ):
+                    back = pool.best(model, tol, math.inf, late)  # its checks: at most the pool's 64, before late
+                    if back is None:  # as before the rule: from the optimum, with its multipliers
+                        rounds[-1]["next_start"] = "the optimum (no kept iterate holds every row)"
+                    else:  # primal only: the multipliers are the optimum's
                         xv, lam = back.x, None
                         vals = model.values(xv)
                         viol = _violations(model, vals, xv, tol)

@@ -78,7 +78,7 @@ class HorizonOptions:
             d_safe [m] crossed an obstacle: the fast attempt falls back at once, any other attempt starts its next
             round from its cheapest kept iterate that holds every row, primal only (``None``: never;
             ``formulations/horizon.md``, "A round that crossed obstacles": the next rounds from optima 0.65 and
-            0.82 m past did not recover, from 0.17 m and less they did; between, 0.52 and 0.58 m did and 0.59 m did
+            0.82 m past did not recover, from 0.45 m and less they did; between, 0.52 and 0.58 m did and 0.59 m did
             not, so the depth is no sharp test: 0.6, the default ``activation``, is where it acts).
         max_iter, tol, acceptable_tol, acceptable_iter, constr_viol_tol, mu_strategy, mu_init, linear_solver,
             nlp_scaling, min_hessian_perturbation: IPOPT options (choices and measurements in
