@@ -892,7 +892,7 @@ def test_a_fast_round_that_crossed_obstacles_falls_back_and_other_rounds_restart
     d = plan_horizon(problem, warm, activation=0.3, crossing_depth=0.005, time_limit=60.0).diagnostics
     assert d["horizon_stop"] == "rows_crossed" and d["horizon_summary"]["fast_attempt"]["fallback"] == "no time left"
     assert "the optimum of round 1 (primary: 'Solve_Succeeded' after" in d["horizon_note"]
-    assert "crossed obstacles whose rows were left out" in d["horizon_note"]
+    assert f"crossed obstacles whose rows were left out, {d['round_log'][0]['crossed']:.3g} m past" in d["horizon_note"]
     monkeypatch.setattr(horizon_module, "_expected_build", real_build)
     plan = plan_horizon(problem, warm, activation=0.3)  # 1.2 cm: its round 2 starts at its round 1's optimum
     assert [r["phase"] for r in plan.diagnostics["round_log"]] == ["fast", "fast"]
