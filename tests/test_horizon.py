@@ -823,7 +823,7 @@ def test_windows_stop_at_the_time_limit_and_the_plan_is_never_worse(feasible_war
 
 
 def test_crossed_is_the_deepest_violated_clearance_row():
-    """_crossed: how far [m] the deepest violated clearance row is past d_safe; other groups (other units) do not
+    """_crossed: how far [m] the deepest violated clearance row is past its bound; other groups (other units) do not
     count."""
     V = horizon_model.Violation
     viol = [
@@ -878,7 +878,7 @@ def test_a_fast_round_that_crossed_obstacles_falls_back_and_other_rounds_restart
     d = plan.diagnostics
     assert [r["phase"] for r in d["round_log"]][:2] == ["fast", "fallback"]
     assert d["horizon_summary"]["fast_attempt"]["result"] == "fell_back"
-    assert f"a tether sample {d['round_log'][0]['crossed']:.3g} m past d_safe" in d["horizon_note"]
+    assert f"a tether sample {d['round_log'][0]['crossed']:.3g} m past its clearance bound" in d["horizon_note"]
     assert (
         "crossed obstacles whose rows were left out" in d["horizon_note"]
         and "crossing_depth = 0.005 m" in d["horizon_note"]

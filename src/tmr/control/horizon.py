@@ -645,7 +645,7 @@ def plan_horizon(
     elif stop == "rows_crossed":  # the fast attempt's, with no time left for the fallback
         what = (
             f"the optimum of round {last} ({tried}) crossed obstacles whose rows were left out, "
-            f"{phase_rounds[-1]['crossed']:.3g} m past d_safe"
+            f"{phase_rounds[-1]['crossed']:.3g} m past its clearance bound"
         )
     else:
         what = f"rows left out of the NLP were still violated after {opts.max_rounds} rounds of constraint generation"
@@ -1042,7 +1042,8 @@ def _phases(opts: HorizonOptions) -> list[tuple[str, list[tuple[str, dict[str, A
 
 
 def _crossed(viol: list[Violation]) -> float:
-    """How far [m] the deepest violated clearance row is past its bound d_safe (0: none violated)."""
+    """How far [m] the deepest violated clearance row is past its bound (0: none violated): d_safe, d_safe plus the
+    coarse pass's margin, or the start's own clearance where the start is inside d_safe."""
     return max((v.amount for v in viol if v.group == "clearance"), default=0.0)
 
 
@@ -1065,7 +1066,7 @@ def _fast_reason(
     if stop == "rows_crossed" and last is not None:
         return (
             f"the optimum of its round {last['round']} crossed obstacles whose rows were left out (a tether sample "
-            f"{last['crossed']:.3g} m past d_safe, more than crossing_depth = {opts.crossing_depth:g} m)"
+            f"{last['crossed']:.3g} m past its clearance bound, more than crossing_depth = {opts.crossing_depth:g} m)"
         )
     if last is None:
         return "its time share ran out before IPOPT started"

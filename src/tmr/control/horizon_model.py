@@ -75,8 +75,8 @@ class HorizonOptions:
             ``activation`` 0.3 against 0.6, B and C even, E unsolved either way; off by default).
         max_rounds: transcriptions at most (a round adds the clearance rows that were left out and came out violated).
         crossing_depth: a round whose optimum leaves a clearance row that was left out of it more than this past
-            d_safe [m] crossed an obstacle: the fast attempt falls back at once, any other attempt starts its next
-            round from its cheapest kept iterate that holds every row, primal only (``None``: never;
+            its bound (d_safe) [m] crossed an obstacle: the fast attempt falls back at once, any other attempt
+            starts its next round from its cheapest kept iterate that holds every row, primal only (``None``: never;
             ``formulations/horizon.md``, "A round that crossed obstacles": the next rounds from optima 0.65 and
             0.82 m past did not recover, from 0.45 m and less they did; between, 0.52 and 0.58 m did and 0.59 m did
             not, so the depth is no sharp test: 0.6, the default ``activation``, is where it acts).
