@@ -874,6 +874,20 @@ def test_a_fast_round_that_crossed_obstacles_falls_back_and_other_rounds_restart
     assert d["horizon_result"] == "optimal" and check(plan, problem.env).n_violation_steps == 0
     assert d["objective"] == pytest.approx(plain.diagnostics["objective"], rel=1e-5)
 
+    # no kept iterate holds every row: the next round starts from the attempt's initial point (primal only)
+    best = horizon_pool._Pool.best
+    monkeypatch.setattr(
+        horizon_pool._Pool, "best", lambda pool, m, tol, J, *a: None if J == math.inf else best(pool, m, tol, J, *a)
+    )
+    calls.clear()
+    plan = plan_horizon(problem, warm, crossing_depth=0.005, **single)
+    d = plan.diagnostics
+    assert d["round_log"][0]["next_start"] == "the attempt's initial point (no kept iterate holds every row)"
+    (args1, _), (args2, _) = calls[:2]
+    assert "lam_g0" not in args2 and np.array_equal(np.asarray(args2["x0"]), np.asarray(args1["x0"]))
+    assert d["horizon_result"] == "optimal" and check(plan, problem.env).n_violation_steps == 0
+    monkeypatch.setattr(horizon_pool._Pool, "best", best)
+
     plan = plan_horizon(problem, warm, activation=0.3, crossing_depth=0.005)  # the fast attempt falls back
     d = plan.diagnostics
     assert [r["phase"] for r in d["round_log"]][:2] == ["fast", "fallback"]

@@ -574,14 +574,16 @@ def plan_horizon(
                     and time.perf_counter() < phase_deadline
                 ):
                     back = pool.best(model, tol, math.inf, late)  # its checks: at most the pool's 64, before late
-                    if back is None:  # as before the rule: from the optimum, with its multipliers
-                        rounds[-1]["next_start"] = "the optimum (no kept iterate holds every row)"
-                    else:  # primal only: the multipliers are the optimum's
-                        xv, lam = back.x, None
-                        vals = model.values(xv)
-                        viol = _violations(model, vals, xv, tol)
-                        masks = model.grown(masks, vals)
-                        rounds[-1]["next_start"] = back.detail.removeprefix("its best feasible iterate (")[:-1]
+                    # else from the attempt's initial point; primal only either way (the multipliers are the optimum's)
+                    xv, lam = (x_init, None) if back is None else (back.x, None)
+                    vals = model.values(xv)
+                    viol = _violations(model, vals, xv, tol)
+                    masks = model.grown(masks, vals)
+                    rounds[-1]["next_start"] = (
+                        "the attempt's initial point (no kept iterate holds every row)"
+                        if back is None
+                        else back.detail.removeprefix("its best feasible iterate (")[:-1]
+                    )
             else:
                 stop = "rows_left_out"
             phase_rounds = rounds[first_round:]
