@@ -701,7 +701,8 @@ def plan_horizon(
             f"({_HESSIAN[opts.fast_hessian]} Hessian) first "
             f"({fast_log['iterations']} iterations): {fast_log['reason']}, so fell back to {floor} from "
             + (f"the fast attempt's best feasible iterate ({fast_log['fallback_start']})"
-               if "fallback_start" in fast_log else "the warm start")
+               if "fallback_start" in fast_log
+               else str((coarse_log or {}).get("fine_start", "the warm start")))  # where the procedure started
         )  # fmt: skip
     if coarse_c is not None:
         floor_note = f"every {_nth(M)} knot: {coarse_floor}"
