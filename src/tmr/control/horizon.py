@@ -444,7 +444,7 @@ def plan_horizon(
                     seed = pools[0].best(model, tol, warm_c.J if warm_c else math.inf, late)
                 if seed is not None:
                     assert fast_log is not None
-                    where = seed.detail.removeprefix("its best feasible iterate (").removesuffix(")")
+                    where = _iterate(seed)
                     fast_log["fallback_start"] = f"{where}, objective {seed.J:.6g}"
                     xv = x_init = seed.x
                     vals = model.values(xv)
@@ -561,7 +561,7 @@ def plan_horizon(
                     stop = "converged"
                     break
                 depth = opts.crossing_depth  # the optimum crossed obstacles whose rows were left out
-                crossed = depth is not None and _crossed(viol) > depth
+                crossed = depth is not None and rounds[-1]["crossed"] > depth
                 masks = model.grown(masks, vals)  # the rows the optimum violates join the next round (or the fallback)
                 if crossed and phase == "fast":  # it falls back rather than start its next round inside them
                     stop = "rows_crossed"
@@ -574,16 +574,15 @@ def plan_horizon(
                     and time.perf_counter() < phase_deadline
                 ):
                     back = pool.best(model, tol, math.inf, late)  # its checks: at most the pool's 64, before late
-                    # else from the attempt's initial point; primal only either way (the multipliers are the optimum's)
-                    xv, lam = (x_init, None) if back is None else (back.x, None)
+                    if back is None:
+                        xv, where = x_init, "the attempt's initial point (no kept iterate holds every row)"
+                    else:
+                        xv, where = back.x, _iterate(back)
+                    lam = None  # primal only either way: the multipliers are the optimum's
                     vals = model.values(xv)
                     viol = _violations(model, vals, xv, tol)
                     masks = model.grown(masks, vals)
-                    rounds[-1]["next_start"] = (
-                        "the attempt's initial point (no kept iterate holds every row)"
-                        if back is None
-                        else back.detail.removeprefix("its best feasible iterate (")[:-1]
-                    )
+                    rounds[-1]["next_start"] = where
             else:
                 stop = "rows_left_out"
             phase_rounds = rounds[first_round:]
@@ -1042,6 +1041,11 @@ def _phases(opts: HorizonOptions) -> list[tuple[str, list[tuple[str, dict[str, A
         return [("default", attempts)]
     capped = {"min_hessian_perturbation": float(fast), "max_iter": min(int(opts.fast_max_iter), int(opts.max_iter))}
     return [("fast", [("primary", capped)]), ("fallback", attempts)]
+
+
+def _iterate(c: _Candidate) -> str:
+    """Which kept iterate a best feasible iterate is ("round 1 fast, iteration 6"), from its detail."""
+    return c.detail.removeprefix("its best feasible iterate (").removesuffix(")")
 
 
 def _crossed(viol: list[Violation]) -> float:
