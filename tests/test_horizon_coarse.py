@@ -111,6 +111,22 @@ def test_the_coarse_optimum_is_returned_only_where_every_row_holds(problem_and_w
     assert "coarse" not in plain.diagnostics["horizon_summary"]
 
 
+def test_the_polish_runs_with_its_own_floor(problem_and_warm):
+    """The polish's IPOPT floor is ``coarse_polish_min_hessian_perturbation`` (10⁻⁴), recorded in its rounds and the
+    note; ``None`` gives the fast attempt's (10⁻⁵); an ``ipopt`` floor, merged last, wins and is the one named."""
+    problem, warm, _ = problem_and_warm
+    for given, floor in ((None, 1e-4), ({"coarse_polish_min_hessian_perturbation": None}, 1e-5)):
+        d = plan_horizon(problem, warm, coarse_polish_iter=15, **ON, **(given or {})).diagnostics
+        polish = [r for r in d["round_log"] if r["phase"] == "polish"]
+        assert polish and all(r["min_hessian_perturbation"] == floor for r in polish)
+        assert f"the whole NLP from its optimum: IPOPT min_hessian_perturbation {floor:g} (exact Hessian)" in (
+            d["horizon_note"]
+        )
+    opts = horizon_model._options({"ipopt": {"min_hessian_perturbation": 3e-6}})
+    assert horizon_module._polish_floor(opts) == 3e-6
+    assert horizon_module._polish_phases(opts)[0][1][0][1]["min_hessian_perturbation"] == 3e-6
+
+
 def test_an_accepted_coarse_optimum_without_time_to_polish_says_so(problem_and_warm, monkeypatch):
     """The time limit is reached once the coarse pass is done: its optimum is returned ("coarse_optimal") and the
     note says that the polish did not start, instead of describing it."""
@@ -134,22 +150,81 @@ def test_an_accepted_coarse_optimum_without_time_to_polish_says_so(problem_and_w
     assert "at most 60 iterations" not in d["horizon_note"]
 
 
-def test_a_rejected_interpolation_starts_the_whole_nlp_from_it(problem_and_warm, monkeypatch):
-    """Interpolated with a kink that breaks the robot acceleration rows, the coarse optimum is rejected (the log names
-    the rows); the whole NLP then starts from it and its optimum is returned, every row holding."""
-    problem, warm, warm_metrics = problem_and_warm
+def _kink(monkeypatch, knot=15, up=0.05):
+    """The interpolation with robot 1 ``up`` [m] higher at one ``knot`` (5 cm: |ÿ| = 0.05 / Ts² = 20 m/s² > a_rob)."""
     real = coarse.interpolate
 
     def kinked(robots, t, M, ends=0):
         F = real(robots, t, M, ends)
-        F[15, 0, 1] += 0.05  # robot 1 jumps 5 cm up at one knot: |ÿ| = 0.05 / Ts² = 20 m/s² > a_rob
+        F[knot, 0, 1] += up
         return F
 
     monkeypatch.setattr(horizon_module, "interpolate", kinked)
+
+
+def test_repair_spans_pad_and_merge_the_failing_knots():
+    assert horizon_module._repair_spans([0, 1], 30, 6) == [(1, 7)]  # knot 0 is fixed: windows start at 1
+    assert horizon_module._repair_spans([15], 30, 6) == [(9, 21)]
+    assert horizon_module._repair_spans([3, 17, 30], 30, 6) == [(1, 9), (11, 30)]  # 23 and 24 adjacent: merged
+    assert horizon_module._repair_spans([3, 15, 29], 30, 6) == [(1, 21), (23, 30)]  # 1–9 and 9–21 overlap
+    assert horizon_module._repair_spans([], 30, 6) == []
+
+
+def test_rows_failing_at_a_few_knots_of_the_interpolation_are_repaired_in_windows(problem_and_warm, monkeypatch):
+    """Interpolated with a kink that breaks the robot acceleration rows at knots 14–16, the coarse optimum is repaired:
+    the whole NLP in one window of knots 14–16 ± 2 coarse steps (``coarse_repair`` = 2, M = 3), every other knot held;
+    every row then holds, so it is accepted and polished. Only the window's knots moved."""
+    problem, warm, warm_metrics = problem_and_warm
+    _kink(monkeypatch)
+    seen = {}
+    real_windowed = horizon_module._windowed
+
+    def spy(model, masks, xv, *args, **kwargs):
+        out = real_windowed(model, masks, xv, *args, **kwargs)
+        seen.update(before=xv.copy(), after=out[0].copy(), width=2 * model.su.N)
+        return out
+
+    monkeypatch.setattr(horizon_module, "_windowed", spy)
+    plan = plan_horizon(problem, warm, coarse_polish_iter=0, **ON)
+    d = plan.diagnostics
+    log = d["horizon_summary"]["coarse"]
+    assert log["result"] == "accepted" and [w["knots"] for w in log["repair"]] == [(8, 22)]
+    assert log["repair"][0]["kept"] and log["repair_iterations"] == log["repair"][0]["iterations"] > 0
+    assert d["horizon_result"] == "coarse_optimal"
+    assert d["ipopt_iterations"] == log["iterations"] + log["repair_iterations"]
+    assert "then the whole NLP in 1 window(s) around the knots where rows failed (knots 8–22;" in d["horizon_note"]
+    knots = np.unique(np.flatnonzero(seen["before"] != seen["after"]) // seen["width"])  # the knots that moved
+    assert knots.min() >= 8 and knots.max() <= 22 and 15 in knots
+    metrics = check(plan, problem.env)  # exact clearances of robots and tether segments at every step
+    assert plan.success and metrics.n_violation_steps == 0
+    a = np.diff(plan.robots, 2, axis=0) / 0.05**2
+    assert np.abs(a).max() <= problem.qp_params.robot_accel_max * (1 + 1e-6)  # the kink is gone
+    for f in ("f1", "f2", "f4"):
+        assert getattr(metrics, f) <= getattr(warm_metrics, f) * (1 + 1e-9)
+
+
+def test_no_repair_where_a_whole_horizon_row_fails(problem_and_warm, monkeypatch):
+    """A kink of 0.5 m makes f4 worse than the warm start's: a fitness row (a sum over every knot) fails, which no
+    window can mend, so the interpolation is rejected without a repair and the whole NLP starts from it."""
+    problem, warm, _ = problem_and_warm
+    _kink(monkeypatch, up=0.5)
+    d = plan_horizon(problem, warm, coarse_polish_iter=0, **ON).diagnostics
+    log = d["horizon_summary"]["coarse"]
+    assert log["result"] == "rejected" and "fitness" in log["reason"] and "repair" not in log
+    assert d["horizon_result"] == "optimal"
+
+
+def test_a_rejected_interpolation_starts_the_whole_nlp_from_it(problem_and_warm, monkeypatch):
+    """Interpolated with a kink that breaks the robot acceleration rows, the coarse optimum is rejected when it is
+    not repaired (``coarse_repair=0``; the log names the rows); the whole NLP then starts from it and its optimum is
+    returned, every row holding."""
+    problem, warm, warm_metrics = problem_and_warm
+    _kink(monkeypatch)
+    ON = dict(globals()["ON"], coarse_repair=0)
     plan = plan_horizon(problem, warm, **ON)
     d = plan.diagnostics
     log = d["horizon_summary"]["coarse"]
-    assert log["result"] == "rejected" and "robot_accel" in log["reason"]
+    assert log["result"] == "rejected" and "robot_accel" in log["reason"] and "repair" not in log
     assert log["fine_start"] == "the interpolated coarse optimum" and "x" not in log
     assert d["horizon_result"] == "optimal" and d["ipopt_iterations"] > log["iterations"]
     # the note says what became of the coarse pass (its first violated group), and the fine attempt's floor
@@ -176,6 +251,8 @@ def test_coarse_options_are_checked(problem_and_warm):
         dict(coarse_time_share=2),
         dict(clearance_margin=-0.01),
         dict(coarse_ends=-1),
+        dict(coarse_repair=-1),
+        dict(coarse_polish_min_hessian_perturbation=0),
     )
     for bad in bad_options:
         with pytest.raises(ParameterError):

@@ -410,7 +410,9 @@ def plan_horizon(
     M = stride(su.K, opts.coarse_knots, opts.coarse_from)
     if M > 1 and su.drive is None and opts.window is None and time.perf_counter() < deadline:
         bar.set_description_str(f"horizon NLP, every {_nth(M)} knot")
-        coarse_c, coarse_log = _coarse_pass(problem, warm_start, M, options, model, warm_c, tol, deadline, limit)
+        coarse_c, coarse_log = _coarse_pass(
+            problem, warm_start, M, options, model, warm_c, tol, deadline, limit, obj_scale, bar
+        )
         coarse_what, coarse_floor = coarse_log.pop("what", ""), coarse_log.pop("floor_note", "")
         solve_time += coarse_log.pop("solve_time", 0.0)
         trans_time += coarse_log.pop("transcription_time", 0.0)
@@ -623,7 +625,7 @@ def plan_horizon(
     tried = " and ".join(f"{r['attempt']}: {r['status']!r} after {r['iterations']} iterations"
                          for r in phase_rounds if r["round"] == last)  # fmt: skip
     iterations = int(sum(r["iterations"] for r in rounds)) + int(sum(w["iterations"] for w in windows))
-    iterations += int(coarse_log["iterations"]) if coarse_log is not None else 0
+    iterations += int(coarse_log["iterations"]) + int(coarse_log.get("repair_iterations", 0)) if coarse_log else 0
     phase_iterations = int(sum(r["iterations"] for r in phase_rounds))
     if stop == "converged":
         what = f"IPOPT solved the NLP ({status}, {phase_iterations} iterations in {last} round(s))"
@@ -946,12 +948,15 @@ def _coarse_pass(
     tol: float,
     deadline: float,
     limit: float,
+    obj_scale: float,
+    bar: Any,
 ) -> tuple[_Candidate | None, dict[str, Any]]:
     """The NLP on every M-th knot (:mod:`tmr.control.horizon_coarse`; clearance bounds and separation margin +
     ``coarse_margin``, rate bounds × ``coarse_rate_scale``), solved by :func:`plan_horizon` itself in
-    ``coarse_time_share`` of the time left, its optimum interpolated to every knot: the candidate if every row of the
-    whole NLP holds there, no term is worse than the warm start's and it costs no more (else ``None``); and the log
-    (stride, knots, iterations, result, why)."""
+    ``coarse_time_share`` of the time left, its optimum interpolated to every knot — and where rows of the whole NLP
+    fail there, repaired by windows of the whole NLP around those knots (``coarse_repair``, :func:`_repair_spans`):
+    the candidate if every row of the whole NLP holds, no term is worse than the warm start's and it costs no more
+    (else ``None``); and the log (stride, knots, iterations, the repair's windows, result, why)."""
     opts, su = model.su.opts, model.su
     t0 = time.perf_counter()
     pc, wc = coarse_problem(problem, warm_start, M, opts.coarse_rate_scale, opts.coarse_margin, opts.coarse_ends)
@@ -990,7 +995,22 @@ def _coarse_pass(
     R = interpolate(np.asarray(cplan.robots, dtype=float), su.t, M, opts.coarse_ends)
     xv = model.project(np.concatenate([R[:, :, 0], R[:, :, 1]], axis=1).ravel())
     Q = model.q_of(xv)
-    viol = _violations(model, model.values(xv), xv, tol)
+    vals = model.values(xv)
+    viol = _violations(model, vals, xv, tol)
+    if viol and opts.coarse_repair > 0 and not any(v.group in ("fitness", "leader") for v in viol):
+        # whole-horizon sums (fitness) and the fixed leader are no window's to mend; other rows are local
+        spans = _repair_spans(sorted({v.knot for v in viol}), su.K, int(opts.coarse_repair) * M)
+        masks = {name: model.near(name, vals[name]) for name in model.rows}  # the failing rows are near ones
+        scratch = _Pool(_POOL_SIZE, _POOL_SCREEN, math.inf)  # a window's iterates are checked here, not kept
+        t1 = time.perf_counter()
+        xv, windows, _ = _windowed(model, masks, xv, obj_scale, scratch, bar, deadline, limit, spans=spans, mode="sub")
+        solved = float(sum(w["solve_time"] for w in windows))
+        log["solve_time"] += solved
+        log["transcription_time"] += time.perf_counter() - t1 - solved
+        log["repair"] = [{k: w[k] for k in ("knots", "status", "iterations", "kept", "solve_time")} for w in windows]
+        log["repair_iterations"] = int(sum(w["iterations"] for w in windows))
+        Q = model.q_of(xv)
+        viol = _violations(model, model.values(xv), xv, tol)
     J = _cost(su, Q)
     if viol:
         reason = "interpolated, it violates " + _describe(viol)
@@ -1000,21 +1020,46 @@ def _coarse_pass(
         reason = f"interpolated, it costs more ({J:.6g}) than the warm start ({warm_c.J:.6g})"
     else:
         log.update(result="accepted")
+        repaired = ""
+        if log.get("repair"):
+            where = ", ".join(f"{a}–{b}" for a, b in (w["knots"] for w in log["repair"]))
+            repaired = (
+                f", then the whole NLP in {len(log['repair'])} window(s) around the knots where rows failed (knots "
+                f"{where}; {log['repair_iterations']} iterations)"
+            )
         log["what"] = (
             f"IPOPT solved the NLP on every {_nth(M)} knot ({log['knots']} of {su.K + 1}; {log['status']}, "
             f"{log['iterations']} iterations in {log['rounds']} round(s)), its optimum interpolated to every knot "
-            "(quadratic spline), where every row holds"
+            f"(quadratic spline){repaired}, where every row holds"
         )
         return _Candidate(Q, J, "coarse_optimal", f"the optimum on every {_nth(M)} knot, interpolated", xv), log
     log.update(result="rejected", reason=reason[:300], x=xv)
     return None, log
 
 
+def _repair_spans(knots: list[int], K: int, pad: int) -> list[tuple[int, int]]:
+    """Windows [a, b] of free knots (1 ≤ a ≤ b ≤ K) around the sorted ``knots`` where rows fail: each knot ± ``pad``,
+    overlapping or adjacent ones merged into one."""
+    spans: list[tuple[int, int]] = []
+    for k in knots:
+        a, b = max(1, k - pad), min(K, k + pad)
+        if spans and a <= spans[-1][1] + 1:
+            spans[-1] = (spans[-1][0], max(b, spans[-1][1]))
+        else:
+            spans.append((a, b))
+    return spans
+
+
 def _polish_floor(opts: HorizonOptions) -> float:
-    """The polishing pass's IPOPT floor: the fast attempt's if it is on, else the default one (its Hessian is
-    always the fast attempt's, ``fast_hessian``)."""
+    """The polishing pass's IPOPT floor (its Hessian is always the fast attempt's, ``fast_hessian``): an ``ipopt``
+    ``min_hessian_perturbation`` (merged last, it wins), else ``coarse_polish_min_hessian_perturbation``, else the
+    fast attempt's if it is on, else the default one."""
+    if "min_hessian_perturbation" in opts.ipopt:
+        return float(opts.ipopt["min_hessian_perturbation"])
+    if opts.coarse_polish_min_hessian_perturbation is not None:
+        return float(opts.coarse_polish_min_hessian_perturbation)
     fast = opts.fast_min_hessian_perturbation
-    if fast is not None and fast < opts.min_hessian_perturbation and "min_hessian_perturbation" not in opts.ipopt:
+    if fast is not None and fast < opts.min_hessian_perturbation:
         return float(fast)
     return float(opts.min_hessian_perturbation)
 
@@ -1169,6 +1214,8 @@ def _windowed(
     bar: Any,
     deadline: float,
     limit: float,
+    spans: list[tuple[int, int]] | None = None,
+    mode: str | None = None,
 ) -> tuple[Array, list[dict[str, Any]], dict[str, Array]]:
     """Windowed solves along the route (``HorizonOptions.window``): each window of knots from the current
     trajectory, the knots outside it fixed by their bounds; a window's solution replaces the trajectory only if
@@ -1177,22 +1224,24 @@ def _windowed(
     Stops at the deadline (the iterates went to ``pool``), and before a solver whose expected build
     (:func:`_expected_build`) would overrun it."""
     su, opts = model.su, model.su.opts
-    W = int(opts.window)  # type: ignore[arg-type]
-    overlap = W // 4 if opts.window_overlap is None else int(opts.window_overlap)
+    mode = opts.window_mode if mode is None else mode
+    if spans is None:
+        W = int(opts.window)  # type: ignore[arg-type]
+        spans = _window_spans(su.K, W, W // 4 if opts.window_overlap is None else int(opts.window_overlap))
     width = 2 * su.N
     log: list[dict[str, Any]] = []
     tr: _Transcription | None = None
     solver: Any = None
     callback: _IterationCallback | None = None
     lam = {name: np.zeros(m.size) for name, m in masks.items()}
-    for i, (a, b) in enumerate(_window_spans(su.K, W, overlap)):
+    for i, (a, b) in enumerate(spans):
         remaining = deadline - time.perf_counter()
         if remaining <= 0:
             break
         t1 = time.perf_counter()
-        if opts.window_mode == "sub" or tr is None:
+        if mode == "sub" or tr is None:
             sub = {n: m & _window_columns(model, n, a, b)[None, :] for n, m in masks.items()}
-            tr = _Transcription(model, sub if opts.window_mode == "sub" else masks)
+            tr = _Transcription(model, sub if mode == "sub" else masks)
             solver = None
         if solver is None:  # "fixed": one solver (and its callback) for every window
             if math.isfinite(limit) and remaining <= _expected_build(tr.size):  # as the rounds: no build past it

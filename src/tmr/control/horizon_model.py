@@ -103,9 +103,18 @@ class HorizonOptions:
         coarse_ends: the coarse grid also has every knot of the first and last this many steps (0: none).
         coarse_rate_scale: the coarse NLP's speed and acceleration bounds (joints and robots) times this (≤ 1).
         coarse_time_share: fraction of the time left (with a time limit) the coarse pass may use.
+        coarse_repair: if rows of the whole NLP fail at a few knots of the interpolated coarse optimum (a start from
+            rest the spline does not keep, a tether grazing a corner between coarse knots), the whole NLP is solved
+            in windows around them — each failing knot ± this many coarse steps, every other knot held — and the
+            repaired trajectory is checked again (0: no repair; ``formulations/horizon.md``, "Coarse knots").
         coarse_polish_iter: IPOPT iterations (per round) of the whole NLP started from an accepted coarse optimum: if
             it converges, its optimum is the plan (``"optimal"``), else the coarse optimum (``"coarse_optimal"``) or a
             cheaper feasible iterate of it; 0: no polish.
+        coarse_polish_min_hessian_perturbation: IPOPT's floor in that polish (exact Hessian, ``fast_hessian``;
+            ``None``: the fast attempt's floor). 10⁻⁴: the corner walls room with 8 robots, its coarse optimum
+            repaired, converges in 36 iterations where 10⁻⁵ stops at the cap of 60 (steps of 5–10 cm in a flat
+            valley, the floor hit at every iteration); scenario E with 6 robots takes 15 instead of 5
+            (``formulations/horizon.md``, "Coarse knots").
         fast_min_hessian_perturbation: IPOPT's ``min_hessian_perturbation`` of a first, fast attempt (``None``: no
             fast attempt; also skipped unless it is below ``min_hessian_perturbation`` and ``ipopt`` does not set
             that option): the whole constraint-generation procedure runs first with this floor (10⁻⁵: scenario E with
@@ -193,7 +202,9 @@ class HorizonOptions:
     coarse_from: int = 500
     coarse_margin: float = 0.02
     coarse_ends: int = 0
+    coarse_repair: int = 2
     coarse_polish_iter: int = 60
+    coarse_polish_min_hessian_perturbation: float | None = 1e-4
     coarse_rate_scale: float = 0.95
     coarse_time_share: float = 0.5
     window: int | None = None
@@ -230,6 +241,11 @@ class HorizonOptions:
         fast = self.fast_min_hessian_perturbation
         if fast is not None and (isinstance(fast, bool) or not isinstance(fast, (int, float)) or not fast > 0):
             raise ParameterError(f"fast_min_hessian_perturbation must be > 0 (or None: no fast attempt), got {fast!r}")
+        polish = self.coarse_polish_min_hessian_perturbation
+        if polish is not None and (isinstance(polish, bool) or not isinstance(polish, (int, float)) or not polish > 0):
+            raise ParameterError(
+                f"coarse_polish_min_hessian_perturbation must be > 0 (or None: the fast attempt's), got {polish!r}"
+            )
         if self.fast_max_iter < 1 or not 0 < self.fast_time_share <= 1:
             raise ParameterError("fast_max_iter must be ≥ 1 and fast_time_share in (0, 1]")
         if self.window is not None and (isinstance(self.window, bool) or int(self.window) < 2):
@@ -240,6 +256,8 @@ class HorizonOptions:
             raise ParameterError(f"coarse_knots must be ≥ 2 (or None: no coarse pass), got {self.coarse_knots!r}")
         if isinstance(self.coarse_ends, bool) or int(self.coarse_ends) < 0:
             raise ParameterError(f"coarse_ends must be ≥ 0 steps, got {self.coarse_ends!r}")
+        if isinstance(self.coarse_repair, bool) or int(self.coarse_repair) < 0:
+            raise ParameterError(f"coarse_repair must be ≥ 0 coarse steps, got {self.coarse_repair!r}")
         if not 0 <= self.clearance_margin < 1:
             raise ParameterError(f"clearance_margin must be in [0, 1) m, got {self.clearance_margin!r}")
         share, scale = self.coarse_time_share, self.coarse_rate_scale
