@@ -119,8 +119,9 @@ def test_the_polish_runs_with_its_own_floor(problem_and_warm):
         d = plan_horizon(problem, warm, coarse_polish_iter=15, **ON, **(given or {})).diagnostics
         polish = [r for r in d["round_log"] if r["phase"] == "polish"]
         assert polish and all(r["min_hessian_perturbation"] == floor for r in polish)
-        assert f"the whole NLP from its optimum: IPOPT min_hessian_perturbation {floor:g} (exact Hessian)" in (
-            d["horizon_note"]
+        assert (
+            f"the whole NLP from its optimum: IPOPT min_hessian_perturbation {floor:g} (exact Hessian)"
+            in (d["horizon_note"])
         )
     opts = horizon_model._options({"ipopt": {"min_hessian_perturbation": 3e-6}})
     assert horizon_module._polish_floor(opts) == 3e-6
