@@ -204,15 +204,52 @@ def test_rows_failing_at_a_few_knots_of_the_interpolation_are_repaired_in_window
         assert getattr(metrics, f) <= getattr(warm_metrics, f) * (1 + 1e-9)
 
 
-def test_no_repair_where_a_whole_horizon_row_fails(problem_and_warm, monkeypatch):
-    """A kink of 0.5 m makes f4 worse than the warm start's: a fitness row (a sum over every knot) fails, which no
-    window can mend, so the interpolation is rejected without a repair and the whole NLP starts from it."""
-    problem, warm, _ = problem_and_warm
+def test_a_whole_horizon_row_gets_no_window_and_the_check_after_the_repair_decides(problem_and_warm, monkeypatch):
+    """A kink of 0.5 m also makes f4 worse than the warm start's: a fitness row (a sum over every knot, reported at
+    knot K) fails besides the local ones. The windows go round the local rows only (knots 8–22, not K); the check
+    after the repair, of every row, the fitness ones included, accepts the repaired trajectory."""
+    problem, warm, warm_metrics = problem_and_warm
     _kink(monkeypatch, up=0.5)
+    seen = {}
+    real_violations = horizon_module._violations
+
+    def first(model, vals, xv, tol):  # the violations at the interpolation, before the repair
+        out = real_violations(model, vals, xv, tol)
+        seen.setdefault("groups", {v.group for v in out})
+        return out
+
+    monkeypatch.setattr(horizon_module, "_violations", first)
+    plan = plan_horizon(problem, warm, coarse_polish_iter=0, **ON)
+    d = plan.diagnostics
+    log = d["horizon_summary"]["coarse"]
+    assert "fitness" in seen["groups"] and [w["knots"] for w in log["repair"]] == [(8, 22)]
+    assert log["result"] == "accepted" and d["horizon_result"] == "coarse_optimal"
+    metrics = check(plan, problem.env)
+    assert plan.success and metrics.n_violation_steps == 0
+    for f in ("f1", "f2", "f4"):
+        assert getattr(metrics, f) <= getattr(warm_metrics, f) * (1 + 1e-9)
+
+
+def test_the_repair_is_checked_padded_by_coarse_repair_and_bounded(problem_and_warm, monkeypatch):
+    """What the windows return is checked like the interpolation (a repair that mends nothing is rejected, with the
+    rows named); ``coarse_repair`` = 1 pads the failing knots 14–16 by one coarse step (3 knots); windows over more
+    than half the knots are not solved (``coarse_repair`` = 10: knots 1–30), and the log says why. The log holds no
+    seconds (it is written to metrics.json)."""
+    problem, warm, _ = problem_and_warm
+    _kink(monkeypatch)
+    d = plan_horizon(problem, warm, coarse_polish_iter=0, coarse_repair=1, **ON).diagnostics
+    log = d["horizon_summary"]["coarse"]
+    assert [w["knots"] for w in log["repair"]] == [(11, 19)] and log["result"] == "accepted"
+    assert set(log["repair"][0]) == {"knots", "status", "iterations", "kept"}
+    d = plan_horizon(problem, warm, coarse_polish_iter=0, coarse_repair=10, **ON).diagnostics
+    log = d["horizon_summary"]["coarse"]
+    assert "repair" not in log and log["repair_skipped"] == "windows of 30 of 30 knots (more than 50 %)"
+    assert log["result"] == "rejected" and log["reason"].startswith("interpolated, it violates joint_accel")
+    monkeypatch.setattr(horizon_module, "_windowed", lambda model, masks, xv, *a, **k: (xv, [], {}))
     d = plan_horizon(problem, warm, coarse_polish_iter=0, **ON).diagnostics
     log = d["horizon_summary"]["coarse"]
-    assert log["result"] == "rejected" and "fitness" in log["reason"] and "repair" not in log
-    assert d["horizon_result"] == "optimal"
+    assert log["repair"] == [] and log["result"] == "rejected" and "robot_accel" in log["reason"]
+    assert d["horizon_result"] == "optimal"  # the whole NLP from the interpolation
 
 
 def test_a_rejected_interpolation_starts_the_whole_nlp_from_it(problem_and_warm, monkeypatch):
@@ -253,8 +290,14 @@ def test_coarse_options_are_checked(problem_and_warm):
         dict(clearance_margin=-0.01),
         dict(coarse_ends=-1),
         dict(coarse_repair=-1),
+        dict(coarse_repair=0.5),
+        dict(coarse_repair="2"),
+        dict(coarse_repair=None),
         dict(coarse_polish_min_hessian_perturbation=0),
+        dict(coarse_polish_min_hessian_perturbation=float("inf")),
     )
     for bad in bad_options:
         with pytest.raises(ParameterError):
             plan_horizon(problem, warm, **bad)
+    fine = horizon_model._options({"coarse_polish_min_hessian_perturbation": np.float32(1e-4), "coarse_repair": 3})
+    assert horizon_module._polish_floor(fine) == pytest.approx(1e-4) and fine.coarse_repair == 3

@@ -7,6 +7,7 @@ whole horizon, IPOPT's options and the warm start projected onto the leader's pa
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field, fields, replace
 from typing import Any, NamedTuple
 
@@ -106,15 +107,16 @@ class HorizonOptions:
         coarse_repair: if rows of the whole NLP fail at a few knots of the interpolated coarse optimum (a start from
             rest the spline does not keep, a tether grazing a corner between coarse knots), the whole NLP is solved
             in windows around them — each failing knot ± this many coarse steps, every other knot held — and the
-            repaired trajectory is checked again (0: no repair; ``formulations/horizon.md``, "Coarse knots").
+            repaired trajectory is checked again (0: no repair; only if the windows span at most half the knots,
+            in ``coarse_time_share`` of the time left; ``formulations/horizon.md``, "Coarse knots").
         coarse_polish_iter: IPOPT iterations (per round) of the whole NLP started from an accepted coarse optimum: if
             it converges, its optimum is the plan (``"optimal"``), else the coarse optimum (``"coarse_optimal"``) or a
             cheaper feasible iterate of it; 0: no polish.
         coarse_polish_min_hessian_perturbation: IPOPT's floor in that polish (exact Hessian, ``fast_hessian``;
-            ``None``: the fast attempt's floor). 10⁻⁴: the corner walls room with 8 robots, its coarse optimum
-            repaired, converges in 36 iterations where 10⁻⁵ stops at the cap of 60 (steps of 5–10 cm in a flat
-            valley, the floor hit at every iteration); scenario E with 6 robots takes 15 instead of 5
-            (``formulations/horizon.md``, "Coarse knots").
+            ``None``: the fast attempt's floor if it is on, else ``min_hessian_perturbation``). 10⁻⁴: the corner
+            walls room with 8 robots, its coarse optimum repaired, converges in 36 iterations where 10⁻⁵ stops at
+            the cap of 60 (steps of 5–10 cm in a flat valley, the floor hit at every iteration); scenario E with 6
+            robots takes 15 instead of 5 (``formulations/horizon.md``, "Coarse knots").
         fast_min_hessian_perturbation: IPOPT's ``min_hessian_perturbation`` of a first, fast attempt (``None``: no
             fast attempt; also skipped unless it is below ``min_hessian_perturbation`` and ``ipopt`` does not set
             that option): the whole constraint-generation procedure runs first with this floor (10⁻⁵: scenario E with
@@ -242,7 +244,9 @@ class HorizonOptions:
         if fast is not None and (isinstance(fast, bool) or not isinstance(fast, (int, float)) or not fast > 0):
             raise ParameterError(f"fast_min_hessian_perturbation must be > 0 (or None: no fast attempt), got {fast!r}")
         polish = self.coarse_polish_min_hessian_perturbation
-        if polish is not None and (isinstance(polish, bool) or not isinstance(polish, (int, float)) or not polish > 0):
+        if polish is not None and (
+            isinstance(polish, bool) or not isinstance(polish, numbers.Real) or not 0 < polish < math.inf
+        ):
             raise ParameterError(
                 f"coarse_polish_min_hessian_perturbation must be > 0 (or None: the fast attempt's), got {polish!r}"
             )
@@ -256,8 +260,9 @@ class HorizonOptions:
             raise ParameterError(f"coarse_knots must be ≥ 2 (or None: no coarse pass), got {self.coarse_knots!r}")
         if isinstance(self.coarse_ends, bool) or int(self.coarse_ends) < 0:
             raise ParameterError(f"coarse_ends must be ≥ 0 steps, got {self.coarse_ends!r}")
-        if isinstance(self.coarse_repair, bool) or int(self.coarse_repair) < 0:
-            raise ParameterError(f"coarse_repair must be ≥ 0 coarse steps, got {self.coarse_repair!r}")
+        repair = self.coarse_repair
+        if isinstance(repair, bool) or not isinstance(repair, numbers.Integral) or repair < 0:
+            raise ParameterError(f"coarse_repair must be a whole number ≥ 0 of coarse steps, got {repair!r}")
         if not 0 <= self.clearance_margin < 1:
             raise ParameterError(f"clearance_margin must be in [0, 1) m, got {self.clearance_margin!r}")
         share, scale = self.coarse_time_share, self.coarse_rate_scale
