@@ -100,6 +100,7 @@ def test_the_coarse_optimum_is_returned_only_where_every_row_holds(problem_and_w
     else:
         assert d["horizon_result"] == "coarse_optimal" and d["ipopt_iterations"] == log["iterations"]
         assert d["rows"] == 0 and "returned the optimum on every 3rd knot, interpolated" in d["horizon_note"]
+        assert "repaired" not in d["horizon_note"]
     metrics = check(plan, problem.env)  # exact clearances of robots and tether segments at every step
     assert plan.success and metrics.n_violation_steps == 0
     for f in ("f1", "f2", "f4"):
@@ -194,6 +195,7 @@ def test_rows_failing_at_a_few_knots_of_the_interpolation_are_repaired_in_window
     assert d["horizon_result"] == "coarse_optimal"
     assert d["ipopt_iterations"] == log["iterations"] + log["repair_iterations"]
     assert "then the whole NLP in 1 window(s) around the knots where rows failed (knots 8–22;" in d["horizon_note"]
+    assert "returned the optimum on every 3rd knot, interpolated and repaired" in d["horizon_note"]
     knots = np.unique(np.flatnonzero(seen["before"] != seen["after"]) // seen["width"])  # the knots that moved
     assert knots.min() >= 8 and knots.max() <= 22 and 15 in knots
     metrics = check(plan, problem.env)  # exact clearances of robots and tether segments at every step

@@ -1047,7 +1047,8 @@ def _coarse_pass(
             f"{log['iterations']} iterations in {log['rounds']} round(s)), its optimum interpolated to every knot "
             f"(quadratic spline){repaired}, where every row holds"
         )
-        return _Candidate(Q, J, "coarse_optimal", f"the optimum on every {_nth(M)} knot, interpolated", xv), log
+        detail = f"the optimum on every {_nth(M)} knot, interpolated" + (" and repaired" if repaired else "")
+        return _Candidate(Q, J, "coarse_optimal", detail, xv), log
     log.update(result="rejected", reason=reason[:300], x=xv)
     return None, log
 
