@@ -120,10 +120,8 @@ def test_the_polish_runs_with_its_own_floor(problem_and_warm):
         d = plan_horizon(problem, warm, coarse_polish_iter=15, **ON, **(given or {})).diagnostics
         polish = [r for r in d["round_log"] if r["phase"] == "polish"]
         assert polish and all(r["min_hessian_perturbation"] == floor for r in polish)
-        assert (
-            f"the whole NLP from its optimum: IPOPT min_hessian_perturbation {floor:g} (exact Hessian)"
-            in (d["horizon_note"])
-        )
+        note = d["horizon_note"]
+        assert f"the whole NLP from its optimum: IPOPT min_hessian_perturbation {floor:g} (exact Hessian)" in note
     opts = horizon_model._options({"ipopt": {"min_hessian_perturbation": 3e-6}})
     assert horizon_module._polish_floor(opts) == 3e-6
     assert horizon_module._polish_phases(opts)[0][1][0][1]["min_hessian_perturbation"] == 3e-6
@@ -175,7 +173,8 @@ def test_repair_spans_pad_and_merge_the_failing_knots():
 def test_rows_failing_at_a_few_knots_of_the_interpolation_are_repaired_in_windows(problem_and_warm, monkeypatch):
     """Interpolated with a kink that breaks the robot acceleration rows at knots 14–16, the coarse optimum is repaired:
     the whole NLP in one window of knots 14–16 ± 2 coarse steps (``coarse_repair`` = 2, M = 3), every other knot held;
-    every row then holds, so it is accepted and polished. Only the window's knots moved."""
+    every row then holds, so it is accepted (here without the polish: ``coarse_polish_iter=0``). Only the window's
+    knots moved."""
     problem, warm, warm_metrics = problem_and_warm
     _kink(monkeypatch)
     seen = {}
@@ -260,8 +259,8 @@ def test_a_rejected_interpolation_starts_the_whole_nlp_from_it(problem_and_warm,
     returned, every row holding."""
     problem, warm, warm_metrics = problem_and_warm
     _kink(monkeypatch)
-    ON = dict(globals()["ON"], coarse_repair=0)
-    plan = plan_horizon(problem, warm, **ON)
+    unrepaired = dict(ON, coarse_repair=0)
+    plan = plan_horizon(problem, warm, **unrepaired)
     d = plan.diagnostics
     log = d["horizon_summary"]["coarse"]
     assert log["result"] == "rejected" and "robot_accel" in log["reason"] and "repair" not in log
@@ -276,7 +275,7 @@ def test_a_rejected_interpolation_starts_the_whole_nlp_from_it(problem_and_warm,
     for f in ("f1", "f2", "f4"):
         assert getattr(metrics, f) <= getattr(warm_metrics, f) * (1 + 1e-9)
     # a fast attempt cut at 1 iteration falls back to where the procedure started: the interpolation, not the qp plan
-    d = plan_horizon(problem, warm, **ON, fast_max_iter=1).diagnostics
+    d = plan_horizon(problem, warm, **unrepaired, fast_max_iter=1).diagnostics
     fast = d["horizon_summary"]["fast_attempt"]
     assert fast["result"] == "fell_back" and "fallback_start" not in fast  # its one iterate holds no row more
     assert ", so fell back to 0.001 (Gauss–Newton Hessian) from the interpolated coarse optimum;" in d["horizon_note"]
