@@ -246,6 +246,11 @@ def test_the_repair_is_checked_padded_by_coarse_repair_and_bounded(problem_and_w
     log = d["horizon_summary"]["coarse"]
     assert "repair" not in log and log["repair_skipped"] == "windows of 30 of 30 knots (more than 50 %)"
     assert log["result"] == "rejected" and log["reason"].startswith("interpolated, it violates joint_accel")
+    monkeypatch.setattr(horizon_module, "REPAIR_MAX_ITER", 1)  # a window cut at its cap is not kept
+    log = plan_horizon(problem, warm, coarse_polish_iter=0, **ON).diagnostics["horizon_summary"]["coarse"]
+    assert [(w["iterations"], w["kept"]) for w in log["repair"]] == [(1, False)] and log["result"] == "rejected"
+    assert log["reason"].startswith("interpolated, it violates")
+    assert log["fine_start"] == "the interpolated coarse optimum"
     monkeypatch.setattr(horizon_module, "_windowed", lambda model, masks, xv, *a, **k: (xv, [], {}))
     d = plan_horizon(problem, warm, coarse_polish_iter=0, **ON).diagnostics
     log = d["horizon_summary"]["coarse"]

@@ -121,6 +121,9 @@ __all__ = [
 #: the horizon's knots (the rooms benchmark's: 8 of 720, 10 of 897, 50 of 847): wider windows would cost about what
 #: the whole NLP does, which then starts from the interpolation as before.
 REPAIR_SHARE: float = 0.5
+#: IPOPT iterations of a repair window (the rooms benchmark's repairs took 4–15; E with 4 robots and the active winch
+#: spent 200 on a window of 85 knots that did not converge).
+REPAIR_MAX_ITER: int = 50
 #: Seconds casadi takes to build IPOPT's solver per NLP row (the derivatives of the rows other than clearance, the
 #: structured clearance derivatives, the solver) up to :data:`BUILD_REFERENCE_ROWS` rows, measured on the 2-core
 #: reference machine with the assembled Hessian of stop 47 (``_Model.rows_hessian``): 0.83 s for the 32,522 rows of
@@ -1016,7 +1019,8 @@ def _coarse_pass(
             until = now + opts.coarse_time_share * max(deadline - now, 0.0) if math.isfinite(limit) else deadline
             masks = {name: model.near(name, vals[name]) for name in model.rows}  # the failing rows are near ones
             scratch = _Pool(_POOL_SIZE, _POOL_SCREEN, math.inf)  # a window's iterates are checked here, not kept
-            xv, windows, _ = _windowed(model, masks, xv, obj_scale, scratch, bar, until, limit, spans=spans, mode="sub")
+            args = (model, masks, xv, obj_scale, scratch, bar, until, limit)
+            xv, windows, _ = _windowed(*args, spans=spans, mode="sub", max_iter=REPAIR_MAX_ITER)
             solved = float(sum(w["solve_time"] for w in windows))
             log["solve_time"] += solved
             log["transcription_time"] += time.perf_counter() - now - solved
@@ -1232,13 +1236,16 @@ def _windowed(
     limit: float,
     spans: list[tuple[int, int]] | None = None,
     mode: str | None = None,
+    max_iter: int | None = None,
 ) -> tuple[Array, list[dict[str, Any]], dict[str, Array]]:
     """Windowed solves along the route (``HorizonOptions.window``): each window of knots from the current
     trajectory, the knots outside it fixed by their bounds; a window's solution replaces the trajectory only if
     IPOPT solved it (its rows: those of ``masks``). Returns the stitched variables, a log per window and the row
     multipliers of the windows (group → flat entries in column-major order, the last window that held a row wins).
     Stops at the deadline (the iterates went to ``pool``), and before a solver whose expected build
-    (:func:`_expected_build`) would overrun it."""
+    (:func:`_expected_build`) would overrun it. ``spans`` (default: ``window`` knots along the route, the windows of
+    :func:`_window_spans`), ``mode`` (default ``window_mode``) and ``max_iter`` (IPOPT's cap per window; default
+    ``max_iter``) serve the coarse pass's repair."""
     su, opts = model.su, model.su.opts
     mode = opts.window_mode if mode is None else mode
     if spans is None:
@@ -1263,6 +1270,8 @@ def _windowed(
             if math.isfinite(limit) and remaining <= _expected_build(tr.size):  # as the rounds: no build past it
                 break
             extra: dict[str, Any] = {"max_wall_time": float(remaining)} if math.isfinite(limit) else {}
+            if max_iter is not None:
+                extra["max_iter"] = int(max_iter)
             callback = _IterationCallback(tr, pool, bar, "", deadline)
             solver = tr.solver(obj_scale, extra, callback)
         callback.label, callback.iteration = f"window {i + 1} [{a}, {b}]", 0

@@ -200,7 +200,7 @@ class HorizonOptions:
     expand: bool = False
     scale_objective: bool = True
     clearance_margin: float = 0.0
-    coarse_knots: int | None = 200
+    coarse_knots: int | None = 100
     coarse_from: int = 500
     coarse_margin: float = 0.02
     coarse_ends: int = 0
