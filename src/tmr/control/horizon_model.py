@@ -95,7 +95,9 @@ class HorizonOptions:
             ⌈K / coarse_knots⌉ (steps of M T_s; :mod:`tmr.control.horizon_coarse`), its optimum interpolated to every
             knot; if every row of the whole NLP holds there and it is no worse than the warm start in any term, it is
             polished (``coarse_polish_iter``) and is the plan if the polish does not converge (``"coarse_optimal"``);
-            else the whole NLP starts from it (``None``: off; ``formulations/horizon.md``, "Coarse knots").
+            else the whole NLP starts from it (``None``: off; ``formulations/horizon.md``, "Coarse knots"). 100 (200
+            until stop 50): with the repair and the polish's own floor, the rooms benchmark ran 57 of 59 runs under
+            10 s instead of 56, the corner walls room with 8 robots in 6.6 s instead of 12.2.
         coarse_from: the smallest horizon (knots) that gets the coarse pass.
         clearance_margin: added to d_safe [m] for every clearance sample except the equality leader's own (it
             depends on the fixed reference only); the coarse pass sets it to ``coarse_margin``.
