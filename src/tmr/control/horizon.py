@@ -434,8 +434,6 @@ def plan_horizon(
             vals = model.values(xv)
             masks = model.grown(masks, vals)
             viol = _violations(model, vals, xv, tol)
-            point = "repaired" if any(w["kept"] for w in coarse_log.get("repair", [])) else "interpolated"
-            coarse_log["fine_start"] = f"the {point} coarse optimum"
     x_phase, masks_phase, viol_phase = xv, masks, viol  # where every attempt of the procedure starts
     fast_log: dict[str, Any] | None = None  # the fast attempt: its floor, iterations, "accepted" or why it fell back
     final: _Candidate | None = None
@@ -1040,7 +1038,7 @@ def _coarse_pass(
     else:
         log.update(result="accepted")
         repaired = ""
-        if log.get("repair"):
+        if point == "repaired":
             where = ", ".join(f"{a}–{b}" for a, b in (w["knots"] for w in log["repair"]))
             repaired = (
                 f", then the whole NLP in {len(log['repair'])} window(s) around the knots where rows failed (knots "
@@ -1053,7 +1051,7 @@ def _coarse_pass(
         )
         detail = f"the optimum on every {_nth(M)} knot, interpolated" + (" and repaired" if repaired else "")
         return _Candidate(Q, J, "coarse_optimal", detail, xv), log
-    log.update(result="rejected", reason=reason[:300], x=xv)
+    log.update(result="rejected", reason=reason[:300], x=xv, fine_start=f"the {point} coarse optimum")
     return None, log
 
 
