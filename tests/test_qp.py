@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -247,6 +248,45 @@ def test_a_level_daqp_proves_infeasible_never_reaches_osqp():
     assert status == "verified" and level.warm_hits == 1 and level.exact_hits == 1
     x_osqp, status_osqp, _ = _OsqpLevel(1e-9, WarmActiveSet(), exact_miss=False).solve(A, lo, up, Jw, tw)
     assert x_osqp is None or status_osqp != "verified"  # OSQP's path: no answer either, after its iterations
+
+
+def test_a_daqp_answer_that_does_not_verify_is_polished_on_its_active_set_not_sent_to_osqp():
+    """A real level (narrow-far-4253401181, 8 robots: cond P ≈ 10⁹) where DAQP's vertex misses a row by 3·10⁻⁹, above
+    the 10⁻⁹ the KKT certificate allows: the exact KKT solve on DAQP's active set verifies, so OSQP is not called
+    (it reached its iteration cap on 189 of 225 such levels of that room). The optimum is not unique (P is nearly
+    singular): checked by its objective against Clarabel's interior point, its feasibility and its stationarity."""
+    import qpsolvers
+    import scipy.sparse as sp
+
+    from tmr.control.activeset import WarmActiveSet
+    from tmr.control.qp_backends import DAQP_SING_TOL, _OsqpLevel
+
+    d = np.load(Path(__file__).parent / "data" / "daqp_unverified_level.npz")
+    P, q, A, lo, up, guess = (d[k] for k in ("P", "q", "A", "lo", "up", "guess"))
+    import daqp
+
+    sense = np.where(guess == 1, 1, np.where(guess == -1, 3, 0)).astype(np.int32)
+    sense[lo == up] = 5
+    x, _, flag, info = daqp.solve(P, q, A, up, lo, sense, sing_tol=DAQP_SING_TOL)
+    assert flag == 1  # DAQP solved it, but its answer does not verify: the case at hand
+    assert WarmActiveSet().certify(P, q, A, lo, up, np.asarray(x), np.asarray(info["lam"])) is None
+    level = _OsqpLevel(1e-6, WarmActiveSet())
+    level.guess = guess
+    res = level._exact(P, q, A, lo, up)
+    assert res is not None and not isinstance(res, str)
+    Ax = A @ res.x
+    assert np.maximum(lo - Ax, Ax - up).max() <= 1e-12
+    np.testing.assert_allclose(P @ res.x + q + A.T @ res.y, 0.0, atol=1e-9)  # res.y: every row's multiplier
+    eq = lo == up
+    G = np.vstack([A[~eq], -A[~eq]])
+    h = np.concatenate([up[~eq], -lo[~eq]])
+    x_ref = qpsolvers.solve_qp(
+        sp.csc_matrix(P), q, sp.csc_matrix(G), h, sp.csc_matrix(A[eq]), lo[eq],
+        solver="clarabel", tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12,
+    )  # fmt: skip
+    f, f_ref = 0.5 * res.x @ P @ res.x + q @ res.x, 0.5 * x_ref @ P @ x_ref + q @ x_ref
+    assert abs(f - f_ref) <= 1e-9 * abs(f_ref)
+    assert level.setups == 0  # OSQP never set up
 
 
 def test_same_problem_same_plan():

