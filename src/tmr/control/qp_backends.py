@@ -180,7 +180,7 @@ class _OsqpLevel:
         levels DAQP's vertex can miss a row by 10⁻⁷–10⁻⁵ where the tolerance is 10⁻⁹) is polished: the exact KKT solve
         on DAQP's active set (:meth:`WarmActiveSet.solve`, as OSQP's answers are). Measured on narrow-far-4253401181
         with 8 robots: 149 of the 173 misses that did not verify did after the polish, instead of going to OSQP,
-        which reached its iteration cap on 189 of 225 (1.8 s of 7.9); the same plan, byte for byte, in 6.4 s.
+        which reached its iteration cap on 189 of 225 (1.8 s of 7.9); the same plan, byte for byte, in 6.6 s.
         :data:`DAQP_INFEASIBLE` if DAQP finds the level
         infeasible twice — with the level's P (singularity tolerance :data:`DAQP_SING_TOL`) and again with P = I, f = 0,
         which only asks whether a point exists — so that OSQP does not spend its 20 000 iterations failing to
