@@ -503,7 +503,7 @@ QUOTES = [
     ),
     Quote(
         r"the slowest (\S+) s\); the remaining gap \(one narrow room, ([\d,]+)\s+knots of train references with its"
-        r" `qp` plan in (\d+) s,",
+        r" `qp` plan in ([\d.]+) s,",
         lambda: (max(optimal_times()), statistics.median(qp_only_knots()), statistics.median(qp_only_times())),
     ),
     Quote(
