@@ -253,8 +253,10 @@ def test_a_level_daqp_proves_infeasible_never_reaches_osqp():
 def test_a_daqp_answer_that_does_not_verify_is_polished_on_its_active_set_not_sent_to_osqp():
     """A real level (narrow-far-4253401181, 8 robots: cond P ≈ 10⁹) where DAQP's vertex misses a row by 3·10⁻⁹, above
     the 10⁻⁹ the KKT certificate allows: the exact KKT solve on DAQP's active set verifies, so OSQP is not called
-    (it reached its iteration cap on 189 of 225 such levels of that room). The optimum is not unique (P is nearly
-    singular): checked by its objective against Clarabel's interior point, its feasibility and its stationarity."""
+    (it reached its iteration cap on 189 of 225 such levels of that room). The optimum is unique but ill-determined
+    (P's smallest eigenvalue ≈ 10⁻⁹): checked by its objective against Clarabel's interior point, its feasibility,
+    its stationarity and its multipliers' signs; then through the level's ``solve`` (its P and q given as they were):
+    verified by DAQP's path, OSQP never set up."""
     import qpsolvers
     import scipy.sparse as sp
 
@@ -286,7 +288,19 @@ def test_a_daqp_answer_that_does_not_verify_is_polished_on_its_active_set_not_se
     )  # fmt: skip
     f, f_ref = 0.5 * res.x @ P @ res.x + q @ res.x, 0.5 * x_ref @ P @ x_ref + q @ x_ref
     assert abs(f - f_ref) <= 1e-9 * abs(f_ref)
-    assert level.setups == 0  # OSQP never set up
+    # a multiplier ≥ 0 at an upper bound, ≤ 0 at a lower one (active_set's convention; equalities, 2, either sign),
+    # to the sign tolerance of the certificate; none on a row away from its bounds
+    ineq = np.abs(res.active) == 1
+    assert np.all(res.y[ineq] * res.active[ineq] >= -1e-9 * (1 + np.abs(q).max()))
+    assert np.all(res.y[res.active == 0] == 0.0)
+    # the same level through solve(): the warm active set misses, DAQP's answer is polished, OSQP is never set up
+    level = _OsqpLevel(1e-6, WarmActiveSet())
+    level.guess = guess.copy()
+    level._hessian = lambda Jw, tw: (P, q)  # the level's P and q as recorded (Jw, tw only give the shapes)
+    x, status, iters = level.solve(A, lo, up, np.zeros((1, A.shape[1])), np.zeros(1))
+    assert status == "verified" and iters == 0
+    assert level.warm_hits == 0 and level.exact_hits == 1 and level.setups == 0
+    np.testing.assert_array_equal(x, res.x)
 
 
 def test_same_problem_same_plan():
