@@ -190,6 +190,39 @@ def test_fast_attempt_first_and_its_fallback_to_the_default_floor(solved):
         assert getattr(metrics, f) <= getattr(warm_metrics, f) * (1 + 1e-9)
 
 
+def test_the_recorded_floor_is_the_one_ipopt_used(solved):
+    """An ``ipopt`` ``min_hessian_perturbation`` is merged last and wins over every attempt's own (no fast attempt):
+    the round log, the summary and the note give that floor, not the default 10⁻³. And for a kept iterate the floor
+    is the one of the round and attempt it came from (a retry's 10⁻², the fast attempt's 10⁻⁵), for an optimum the
+    last round's."""
+    import tmr.control.horizon as horizon_module
+    from tmr.control.horizon_pool import _Candidate
+
+    problem, warm, _, _ = solved
+    d = plan_horizon(problem, warm, ipopt={"min_hessian_perturbation": 2e-3}).diagnostics
+    assert d["horizon_result"] == "optimal" and d["horizon_summary"]["fast_attempt"] is None
+    assert d["round_log"] and all(r["min_hessian_perturbation"] == 2e-3 for r in d["round_log"])
+    assert d["horizon_summary"]["min_hessian_perturbation"] == 2e-3
+    assert "IPOPT min_hessian_perturbation 0.002 (Gauss–Newton Hessian);" in d["horizon_note"]
+    opts = horizon_model._options({})
+    rounds = [
+        dict(round=1, phase="fast", attempt="primary", min_hessian_perturbation=1e-5),
+        dict(round=1, phase="fallback", attempt="primary", min_hessian_perturbation=1e-3),
+        dict(round=1, phase="fallback", attempt="retry", min_hessian_perturbation=1e-2),
+    ]
+    Q = np.zeros(1)
+
+    def floor(result: str, detail: str) -> float | None:
+        return horizon_module._floor_used(opts, rounds, rounds[1:], _Candidate(Q, 0.0, result, detail, Q))
+
+    assert floor("best_feasible_iterate", "its best feasible iterate (round 1 retry, iteration 7)") == 1e-2
+    assert floor("best_feasible_iterate", "its best feasible iterate (round 1 fast, iteration 6)") == 1e-5
+    assert floor("best_feasible_iterate", "its best feasible iterate (round 1 primary, iteration 3)") == 1e-3
+    assert floor("best_feasible_iterate", "its best feasible iterate (, iteration 3)") == 1e-3  # a window's
+    assert floor("optimal", "the optimum") == 1e-2  # the retry converged: the phase's last round entry
+    assert floor("warm_start", "the qp plan") is None
+
+
 def test_fallback_starts_from_the_fast_attempts_best_feasible_iterate(solved):
     """Cut at 12 iterations, the fast attempt falls back; its best feasible iterate (every row, cheaper than qp) is
     where the 1e-3 fallback starts — the note and the summary say so — and the plan is never worse than qp: the

@@ -54,6 +54,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import re
 import signal
 import sys
 import threading
@@ -539,9 +540,7 @@ def plan_horizon(
                             round=rnd,
                             attempt=label,
                             phase=phase,
-                            min_hessian_perturbation=float(
-                                extra.get("min_hessian_perturbation", opts.min_hessian_perturbation)
-                            ),
+                            min_hessian_perturbation=_floor_of(opts, extra),
                             hessian=hessian,
                             status=status,
                             iterations=int(stats.get("iter_count", -1)),
@@ -686,7 +685,7 @@ def plan_horizon(
         why = str(coarse_log.get("reason", "")).split(" | ")[0].split("; ")[0]  # its first group, worst row
         did = {"failed": "found no plan", "rejected": "was solved, its optimum rejected"}[coarse_log["result"]]
         what += f"; before it, the NLP on every {_nth(M)} knot {did}" + (f" ({why})" if why else "")
-    floor = f"{opts.min_hessian_perturbation:g} ({_HESSIAN[opts.hessian]} Hessian)"
+    floor = f"{_floor_of(opts, {}):g} ({_HESSIAN[opts.hessian]} Hessian)"
     if not rounds and coarse_c is None:  # IPOPT never ran on the whole NLP: no floor was used
         floor_note = "no IPOPT round on the whole NLP"
     elif fast_log is None:
@@ -773,7 +772,7 @@ def plan_horizon(
             rounds=last,
             objective=chosen.J,
             objective_warm_start=warm_c.J if warm_c else J_warm,
-            min_hessian_perturbation=_floor_used(opts, fast_log, chosen),
+            min_hessian_perturbation=_floor_used(opts, rounds, phase_rounds, chosen),
             fast_attempt=fast_log,
             terms=terms,
             warm_start_terms={k: float(v) for k, v in before.items()},
@@ -1147,13 +1146,30 @@ def _fast_reason(
     return f"round {last['round']} stopped with {last['status']!r} after {last['iterations']} iterations"
 
 
-def _floor_used(opts: HorizonOptions, fast_log: dict[str, Any] | None, chosen: _Candidate) -> float | None:
-    """IPOPT's ``min_hessian_perturbation`` of the attempt whose point was returned (``None``: the warm start)."""
+def _floor_of(opts: HorizonOptions, extra: dict[str, Any]) -> float:
+    """IPOPT's ``min_hessian_perturbation`` in a solve with the attempt's ``extra`` options: an ``ipopt`` one is merged
+    last and wins (:func:`tmr.control.horizon_model._solver_opts`), then the attempt's, then the default."""
+    return float(opts.ipopt.get("min_hessian_perturbation", extra.get("min_hessian_perturbation",
+                                                                      opts.min_hessian_perturbation)))  # fmt: skip
+
+
+def _floor_used(
+    opts: HorizonOptions, rounds: list[dict[str, Any]], phase_rounds: list[dict[str, Any]], chosen: _Candidate
+) -> float | None:
+    """IPOPT's ``min_hessian_perturbation`` of the solve whose point was returned, from the round log (``None``: the
+    warm start): the last round's for the optimum; for a kept iterate ("round 2 retry, iteration 7", "round 1 fast,
+    iteration 6") that round's attempt (a window's iterate: the default floor)."""
     if chosen.result == "warm_start":
         return None
-    if fast_log is not None and (fast_log["result"] == "accepted" or " fast, iteration " in chosen.detail):
-        return float(fast_log["min_hessian_perturbation"])
-    return float(opts.min_hessian_perturbation)
+    if chosen.result == "optimal" and phase_rounds:
+        return float(phase_rounds[-1]["min_hessian_perturbation"])
+    m = re.fullmatch(r"round (\d+) (\w+), iteration \d+", _iterate(chosen))
+    if m is not None:
+        rnd, label = int(m[1]), m[2]
+        for r in rounds:
+            if r["round"] == rnd and (r["phase"] == "fast") == (label == "fast") and label in ("fast", r["attempt"]):
+                return float(r["min_hessian_perturbation"])
+    return _floor_of(opts, {})
 
 
 def _best_of(
