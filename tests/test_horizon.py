@@ -947,6 +947,19 @@ def test_a_fast_round_that_crossed_obstacles_falls_back_and_other_rounds_restart
         plan_horizon(problem, warm, crossing_depth=0.0)
 
 
+@pytest.mark.parametrize(
+    "name", ["crossing_depth", "fast_min_hessian_perturbation", "coarse_polish_min_hessian_perturbation"]
+)
+def test_positive_or_none_options_share_one_rule(name):
+    """The three options that are a positive number or None take the same values: a finite real > 0 (numpy's too),
+    or None; not 0, a negative, inf, NaN, a bool or a string."""
+    for good in (None, 0.3, 1e-5, np.float32(1e-4), 2):
+        horizon_model._options({name: good})
+    for bad in (0, 0.0, -1e-3, math.inf, math.nan, True, "1e-4"):
+        with pytest.raises(ParameterError, match=name):
+            horizon_model._options({name: bad})
+
+
 def test_a_stalled_fast_attempt_stops_and_falls_back(monkeypatch):
     """fast_stall_iter: the iteration callback stops a fast round once that many iterations passed without a cheaper
     iterate holding the round's rows (status "Stalled"), and the fallback starts; iterates outside the rows never

@@ -235,23 +235,19 @@ class HorizonOptions:
             raise ParameterError(f"samples_per_link must be ≥ 1, got {self.samples_per_link}")
         if not self.activation > 0:
             raise ParameterError(f"activation must be > 0 m, got {self.activation}")
-        depth = self.crossing_depth
-        if depth is not None and (isinstance(depth, bool) or not isinstance(depth, (int, float)) or not depth > 0):
-            raise ParameterError(f"crossing_depth must be > 0 m (or None: never), got {depth!r}")
+        _positive_or_none(self.crossing_depth, "crossing_depth", " m (or None: never)")
         if not 0 <= self.rate_activation < 1:
             raise ParameterError(f"rate_activation must be in [0, 1), got {self.rate_activation}")
         if self.max_rounds < 1 or self.max_iter < 1:
             raise ParameterError("max_rounds and max_iter must be ≥ 1")
-        fast = self.fast_min_hessian_perturbation
-        if fast is not None and (isinstance(fast, bool) or not isinstance(fast, (int, float)) or not fast > 0):
-            raise ParameterError(f"fast_min_hessian_perturbation must be > 0 (or None: no fast attempt), got {fast!r}")
-        polish = self.coarse_polish_min_hessian_perturbation
-        if polish is not None and (
-            isinstance(polish, bool) or not isinstance(polish, numbers.Real) or not 0 < polish < math.inf
-        ):
-            raise ParameterError(
-                f"coarse_polish_min_hessian_perturbation must be > 0 (or None: the fast attempt's), got {polish!r}"
-            )
+        _positive_or_none(
+            self.fast_min_hessian_perturbation, "fast_min_hessian_perturbation", " (or None: no fast attempt)"
+        )
+        _positive_or_none(
+            self.coarse_polish_min_hessian_perturbation,
+            "coarse_polish_min_hessian_perturbation",
+            " (or None: the fast attempt's)",
+        )
         if self.fast_max_iter < 1 or not 0 < self.fast_time_share <= 1:
             raise ParameterError("fast_max_iter must be ≥ 1 and fast_time_share in (0, 1]")
         if self.window is not None and (isinstance(self.window, bool) or int(self.window) < 2):
@@ -276,6 +272,14 @@ class HorizonOptions:
             v = getattr(self, name)
             if v not in ("exact", "limited-memory", "gauss-newton"):
                 raise ParameterError(f"{name} must be 'exact', 'gauss-newton' or 'limited-memory', got {v!r}")
+
+
+def _positive_or_none(value: Any, name: str, what: str) -> None:
+    """Raise :class:`ParameterError` unless ``value`` is None or a finite real number > 0 (not a bool)."""
+    if value is None:
+        return
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0 < value < math.inf:
+        raise ParameterError(f"{name} must be a finite number > 0{what}, got {value!r}")
 
 
 class Violation(NamedTuple):
