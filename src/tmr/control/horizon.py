@@ -363,7 +363,7 @@ def plan_horizon(
     vals = model.values(xv)
     # only a plan that passed its checks (the qp plan) lends its clearance to the rows the start makes infeasible
     info["start_clearance_entries"] = model.keep_start_clearance(vals["clearance"]) if warm_start.success else 0
-    masks = {name: model.near(name, vals[name]) for name in model.rows}
+    masks = model.near_masks(vals)
     J_warm = _cost(su, Qw)
     obj_scale = max(J_warm, 1e-6) if opts.scale_objective else 1.0
     trans_time, solve_time = time.perf_counter() - t0, 0.0
@@ -1014,7 +1014,7 @@ def _coarse_pass(
         else:
             now = time.perf_counter()
             until = now + opts.coarse_time_share * max(deadline - now, 0.0) if math.isfinite(limit) else deadline
-            masks = {name: model.near(name, vals[name]) for name in model.rows}  # the failing rows are near ones
+            masks = model.near_masks(vals)  # the failing rows are near ones
             scratch = _Pool(_POOL_SIZE, _POOL_SCREEN, math.inf)  # a window's iterates are checked here, not kept
             args = (model, masks, xv, obj_scale, scratch, bar, until, limit)
             xv, windows, _ = _windowed(*args, spans=spans, mode="sub", max_iter=REPAIR_MAX_ITER)

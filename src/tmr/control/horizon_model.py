@@ -1016,6 +1016,10 @@ class _Model:
         m[:, self.fixed_columns(name)] = False
         return m
 
+    def near_masks(self, vals: dict[str, Array]) -> dict[str, NDArray[np.bool_]]:
+        """:meth:`near` of every row group at the values ``vals`` (:meth:`values`): the first transcription's rows."""
+        return {name: self.near(name, vals[name]) for name in self.rows}
+
 
 class _Transcription:
     """The NLP of one round: the selected rows of every group, their bounds and labels, and the IPOPT solver.
