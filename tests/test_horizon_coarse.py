@@ -183,6 +183,7 @@ def test_rows_failing_at_a_few_knots_of_the_interpolation_are_repaired_in_window
     def spy(model, masks, xv, *args, **kwargs):
         out = real_windowed(model, masks, xv, *args, **kwargs)
         seen.update(before=xv.copy(), after=out[0].copy(), width=2 * model.su.N)
+        seen["window_solve"] = sum(w["solve_time"] for w in out[1])
         return out
 
     monkeypatch.setattr(horizon_module, "_windowed", spy)
@@ -195,6 +196,9 @@ def test_rows_failing_at_a_few_knots_of_the_interpolation_are_repaired_in_window
     assert d["ipopt_iterations"] == log["iterations"] + log["repair_iterations"]
     assert "then the whole NLP in 1 window(s) around the knots where rows failed (knots 8–22;" in d["horizon_note"]
     assert "returned the optimum on every 3rd knot, interpolated and repaired" in d["horizon_note"]
+    # the repair's seconds are counted once: its IPOPT time in the solve time, the rest in the transcription time
+    assert d["solve_time"] >= seen["window_solve"] > 0
+    assert d["solve_time"] + d["transcription_time"] <= d["total_time"] + 1e-6
     knots = np.unique(np.flatnonzero(seen["before"] != seen["after"]) // seen["width"])  # the knots that moved
     assert knots.min() >= 8 and knots.max() <= 22 and 15 in knots
     metrics = check(plan, problem.env)  # exact clearances of robots and tether segments at every step
