@@ -6,10 +6,17 @@ import copy
 
 import numpy as np
 import pytest
+from hypothesis import settings
 from shapely.geometry import Point
 
 from tmr.route.path import time_law
 from tmr.world.environment import Environment
+
+# the property tests draw the same examples on every run (hypothesis's own seed per test): a CI run is reproducible, and
+# a failure it finds is one every later run shows too; ``pytest --hypothesis-profile=explore`` draws new ones
+settings.register_profile("ci", derandomize=True)
+settings.register_profile("explore", derandomize=False)
+settings.load_profile("ci")
 
 
 @pytest.fixture(scope="session")

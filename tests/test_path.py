@@ -8,6 +8,7 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import tmr.route.path as path_module
 from tmr.errors import ParameterError, PathError
 from tmr.route.path import Trajectory, leader_trajectory, path_length, plan_leader_path, time_law
 from tmr.world.environment import Environment
@@ -223,6 +224,36 @@ def test_time_law_properties_random_polylines(steps, T_end):
     v = np.linalg.norm(tr.xd[1:-1], axis=1)
     at = np.sum(tr.xdd[1:-1] * tr.xd[1:-1], axis=1) / v
     np.testing.assert_allclose(at, L[0] * 60 * tau * (1 - tau) * (1 - 2 * tau) / T_end**2, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    "steps",
+    [
+        [(1.0, 0.0), (0.75, 1.0), (0.25, -0.75), (1.0, 0.0), (1.3125, 0.875)],  # found by hypothesis in a CI run
+        [(0.5, 0.0), (0.203125, -0.75), (1.5, 0.0), (1.8125, 1.0)],  # every turn < 90°, a short segment
+    ],
+)
+def test_a_spline_that_loops_round_a_sharp_turn_is_refined_not_refused(steps):
+    """The interpolating spline through these polylines (x always increasing: no reversal) loops round a sharp turn
+    next to a short segment — a cusp of the spline, not of the waypoints. Midpoints are inserted round it until the
+    spline is regular: the trajectory passes through every waypoint, its tangent never turns by 90° between samples
+    and its speed is positive inside the motion."""
+    wp = np.vstack([[0.0, 0.0], np.cumsum(np.array(steps), axis=0)])
+    with pytest.raises(ParameterError, match="cusp"):
+        path_module._ArcLengthSpline(path_module._ensure_four(wp))  # the spline through the waypoints alone
+    tr = time_law(wp, T_end=5.0, Ts=0.01)
+    assert np.array_equal(tr.x[0], wp[0]) and np.array_equal(tr.x[-1], wp[-1])
+    speed = np.linalg.norm(tr.xd[1:-1], axis=1)
+    assert np.all(speed > 0)
+    assert np.all(np.sum(tr.xd[1:-2] * tr.xd[2:-1], axis=1) > 0)  # no turn of 90° or more between samples
+    d = np.min(np.linalg.norm(tr.x[:, None, :] - wp[None, :, :], axis=2), axis=0)
+    assert d.max() < 0.05  # every waypoint is passed within one sample's travel (≤ 0.05 m at Ts = 0.01 s here)
+
+
+def test_waypoints_that_retrace_their_path_are_still_refused():
+    """A true reversal (the polyline turns back along itself) keeps its cusp however densely it is refined."""
+    with pytest.raises(ParameterError, match="turn back on themselves"):
+        time_law([[0.0, 0.0], [1.0, 0.0], [0.5, 0.0]], T_end=5.0)
 
 
 @pytest.mark.parametrize("wp", [[[1.0, 2.0], [1.0, 2.0]], [[1.0, 2.0], [1.0, 2.0], [1.0, 2.0 + 1e-12]]])

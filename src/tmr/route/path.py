@@ -398,10 +398,19 @@ def plan_leader_path(
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
 
 
+class _Cusp(ParameterError):
+    """The spline's tangent turns by 90° or more within 0.02 m (or stops): a cusp or a loop, at parameter ``u``."""
+
+    def __init__(self, message: str, u: float) -> None:
+        super().__init__(message)
+        self.u = u
+
+
 class _ArcLengthSpline:
     """Cubic interpolating spline p(u) (not-a-knot, :class:`tmr.route.splines.NotAKnotSpline`) through the points
     (u = cumulative chord length [m]), its arc length s(u) (Gauss-Legendre) and the inverse u(s) (Hermite
-    interpolation of a table, :class:`tmr.route.splines.HermiteSpline`, then Newton steps)."""
+    interpolation of a table, :class:`tmr.route.splines.HermiteSpline`, then Newton steps). Raises :class:`_Cusp`
+    where the spline turns back on itself."""
 
     def __init__(self, points: Array) -> None:
         chords = np.linalg.norm(np.diff(points, axis=0), axis=1)
@@ -416,10 +425,11 @@ class _ArcLengthSpline:
         speed = np.linalg.norm(d1, axis=1)
         turn = np.sum(d1[:-1] * d1[1:], axis=1)  # <= 0: the tangent turns >= 90 deg within 0.02 m: a cusp
         if np.min(speed) < 1e-9 or np.any(turn <= 0.0):
-            i = int(np.argmin(turn))
-            raise ParameterError(
+            i = int(np.argmin(turn)) if np.any(turn <= 0.0) else int(np.argmin(speed))
+            raise _Cusp(
                 f"the waypoints turn back on themselves near {fmt_point(self._p(self.u_grid[i]))} (a cusp "
-                "of the spline); remove the reversal from the waypoints"
+                "of the spline); remove the reversal from the waypoints",
+                float(self.u_grid[i]),
             )
         ds = self._integrate(self.u_grid[:-1], self.u_grid[1:])
         self.s_grid = np.concatenate([[0.0], np.cumsum(ds)])
@@ -515,7 +525,10 @@ def time_law(
 
     If ``env`` is given, the whole spline (not only the samples) must keep exact clearance >= ``clearance``
     [m]. Where it cuts a corner, midpoints are inserted into the offending waypoint intervals and the spline
-    is rebuilt (at most MAX_REFINEMENTS rounds, deterministic).
+    is rebuilt (at most MAX_REFINEMENTS rounds, deterministic). The same where the spline loops round a sharp turn
+    between short segments (its tangent turning by 90° or more within 0.02 m: a cusp of the spline, not of the
+    waypoints): the midpoints there keep it close to the polyline; a polyline that itself turns back along its path
+    keeps its cusp and is refused.
 
     Args:
         waypoints: (M, 2) positions [m], M >= 2 (e.g. from :func:`plan_leader_path`). Coincident consecutive
@@ -531,7 +544,7 @@ def time_law(
 
     Raises:
         ParameterError: NaN/inf, fewer than 2 waypoints, T_end or Ts <= 0, T_end / Ts not an integer,
-            waypoints reversing onto themselves (cusp).
+            waypoints reversing onto themselves (a cusp that MAX_REFINEMENTS rounds of midpoints do not remove).
         PathError: the waypoint polyline itself, or the spline after refinement, violates ``clearance``.
     """
     try:
@@ -580,8 +593,16 @@ def time_law(
             )
 
     pts = _ensure_four(pts)
+    cusp: _Cusp | None = None
     for _ in range(MAX_REFINEMENTS + 1):
-        spline = _ArcLengthSpline(pts)
+        try:
+            spline = _ArcLengthSpline(pts)
+        except _Cusp as exc:  # the spline loops round a sharp turn between short segments: denser waypoints there
+            cusp = exc
+            u_knots = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+            pts = _refine(pts, u_knots, np.array([exc.u]))
+            continue
+        cusp = None
         if env is None:
             break
         ok, u_bad, cmin = _check_spline(env, spline, clearance)
@@ -589,6 +610,8 @@ def time_law(
             break
         pts = _refine(pts, spline.u_knots, u_bad)
     else:
+        if cusp is not None:  # still a cusp: the waypoints themselves turn back (a reversal no refinement removes)
+            raise ParameterError(str(cusp))
         raise PathError(
             f"the cubic spline through the waypoints cuts a corner (clearance {cmin:.3f} m < {clearance} m) even "
             f"after {MAX_REFINEMENTS} refinements; pass a smaller clearance or waypoints with more clearance"
