@@ -137,6 +137,13 @@ class DroneHorizonOptions:
             nlp_scaling, min_hessian_perturbation, expand, ipopt: IPOPT options (as
             :class:`tmr.control.horizon_model.HorizonOptions`, through the same
             :func:`tmr.control.horizon_model._solver_opts`).
+        min_hessian_perturbation: IPOPT's floor on the Hessian's regularisation, 10⁻⁵ (10⁻³ until stop 51: IPOPT
+            corrected the inertia at the floor at every iteration and crept along, H's objective 0.608 → 0.580 of
+            the qp plan's in iterations 20–150, cut by the 60 s limit). Whole processes, time limit 60 s, 10⁻³ →
+            10⁻⁵: H a best iterate at the limit → optimal (86 iterations, 49 s); F 198 → 159 iterations (7.4 →
+            5.1 s); I (active winch) 63 → 23 (3.9 → 2.1 s); G 168 → 221 (21.9 → 28.5 s); 12 generated worlds
+            (``drone_worlds(12, 0)``, ``--robots auto``): 7 → 8 optimal, 4 → 3 the qp plan at the limit, none
+            worse; 10⁻⁴ failed G (the qp plan after 60 s) (``formulations/horizon3d.md``, "F, G, H").
         mumps_pivot_order: MUMPS's ordering, 7 = automatic here (F: 7.3 s against 9.0 s with AMD, 0, the ground
             chain's choice: the drone NLP's catenary rows couple a tether's ends and θ, not a band).
         accept_acceptable: also accept ``Solved_To_Acceptable_Level``.
@@ -174,7 +181,7 @@ class DroneHorizonOptions:
     linear_solver: str = "mumps"
     mumps_pivot_order: int = 7
     nlp_scaling: str = "none"
-    min_hessian_perturbation: float = 1e-3
+    min_hessian_perturbation: float = 1e-5
     expand: bool = False
     accept_acceptable: bool = True
     pool_checks: int = 3
