@@ -4,6 +4,7 @@ and at scale, on generated rooms and robot counts.
     python benchmarks/horizon.py [--scenarios A B C D] [--repeats 3] [--seed 0]
     python benchmarks/horizon.py --rooms 16 [--robots 2,3,5,8,auto] [--time-limit 60] [--jobs 2] [--scenario-e 6]
     python benchmarks/horizon.py --drones F G H [--repeats 3] [--time-limit 60]
+    python benchmarks/horizon.py --drone-worlds 12 [--seed 0] [--jobs 2] [--time-limit 60]
 
 ``--rooms K``: the first K rooms of :func:`tmr.sweep.rooms.room_set` (every density and goal class), each with every
 robot count of ``--robots``, and scenario E with ``--scenario-e`` robots: the whole command line ``python -m tmr.plan
@@ -16,6 +17,10 @@ the optimal runs (target ≤ 1.3). Writes ``benchmarks/results/horizon_rooms.md`
 ``--drones F G H``: the drone chain's ``horizon`` against its ``qp`` plan, each the whole command line in its own
 process, one at a time (:func:`drones_main`): exit, result, f1–f4 of the checker and their ratios to ``qp``, times.
 Writes ``benchmarks/results/horizon_drones.md`` and ``.csv``.
+
+``--drone-worlds N``: the drone ``horizon`` with ``--robots auto`` on the generated worlds
+``tmr.sweep.rooms3d.drone_worlds(N, seed)``, ``--jobs`` processes at a time (:func:`drone_worlds_main`): result,
+rounds, iterations, time, f1–f4 against the qp plan. Writes ``benchmarks/results/horizon_drone_worlds.md``, ``.csv``.
 
 A benchmark, not a test. Every repeat of every scenario runs in a **new Python process** (cold: imports, the lazy
 distance field of the map, the casadi transcription and IPOPT's first call all count), which
@@ -240,19 +245,21 @@ def _scenario_e(robots: int, time_limit: float) -> dict:
         return out
 
 
-def _drone_run(scenario: str, method: str, time_limit: float) -> dict:
+def _drone_run(scenario: str, method: str, time_limit: float, extra: tuple[str, ...] = ()) -> dict:
     """``python -m tmr.plan --scenario S --method M --no-plots`` of a drone scenario in its own process: exit code,
-    whole-process time [s], the checker's f1–f4 and, for ``horizon``, its summary (``metrics.json``) and NLP time."""
+    whole-process time [s], the checker's f1–f4 and, for ``horizon``, its summary (``metrics.json``: the qp plan's
+    terms too) and NLP time."""
     import tempfile
 
-    with tempfile.TemporaryDirectory(prefix=f"tmr-horizon-{scenario}-") as tmp:
+    name = Path(scenario).stem
+    with tempfile.TemporaryDirectory(prefix=f"tmr-horizon-{name}-") as tmp:
         cmd = [sys.executable, "-m", "tmr.plan", "--scenario", scenario, "--method", method, "--no-plots",
-               "--time-limit", str(time_limit), "--out", str(Path(tmp) / "out")]  # fmt: skip
+               "--time-limit", str(time_limit), "--out", str(Path(tmp) / "out"), *extra]  # fmt: skip
         if method != "horizon":
             cmd = cmd[: cmd.index("--time-limit")] + cmd[cmd.index("--time-limit") + 2 :]
         t0 = time.perf_counter()
         proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
-        out: dict = {"scenario": scenario, "method": method, "exit_code": proc.returncode}
+        out: dict = {"scenario": name, "method": method, "exit_code": proc.returncode}
         out["process_s"] = time.perf_counter() - t0
         metrics_path, timings_path = Path(tmp) / "out" / "metrics.json", Path(tmp) / "out" / "timings.json"
         m = json.loads(metrics_path.read_text()) if metrics_path.is_file() else {}
@@ -261,6 +268,8 @@ def _drone_run(scenario: str, method: str, time_limit: float) -> dict:
         out.update({k: m.get(k) for k in ("f1", "f2", "f3", "f4")})
         hz = m.get("horizon", {})
         out.update(result=hz.get("result", ""), stop=hz.get("stop", ""), iterations=hz.get("iterations"))
+        out.update({f"qp_{k}": v for k, v in (hz.get("warm_start_terms") or {}).items()})
+        out["rounds"] = hz.get("rounds")
         out.update(nlp_s=t.get("nlp_time"), qp_s=t.get("qp_time"))
         lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
         out["stderr_last"] = lines[-1].strip() if lines else ""
@@ -324,6 +333,73 @@ def drones_main(args: argparse.Namespace) -> None:
     n_h = sum(r["method"] == "horizon" for r in rows)
     lines += ["", f"Never worse than `qp`: {n_h - worse}/{n_h} horizon plans have every one of f1–f4 ≤ the qp plan's."]
     (RESULTS / "horizon_drones.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+def drone_worlds_main(args: argparse.Namespace) -> None:
+    """``--drone-worlds N``: ``horizon`` on the generated drone worlds ``drone_worlds(N, seed)`` with ``--robots
+    auto``, each the whole command line in its own process, ``--jobs`` at a time: result (optimal / best feasible
+    iterate / the qp plan), rounds, iterations, time, f1–f4 against the qp plan (``metrics.json``). Writes
+    ``benchmarks/results/horizon_drone_worlds.md`` and ``.csv``."""
+    import tempfile
+    from concurrent.futures import ThreadPoolExecutor
+
+    from tmr.sweep.rooms3d import drone_worlds
+
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="tmr-drone-worlds-") as tmp:
+        paths = [str(w.write(tmp)) for w in drone_worlds(args.drone_worlds, args.seed)]
+        extra = ("--robots", "auto")
+        with ThreadPoolExecutor(max_workers=args.jobs) as pool:
+            rows = list(pool.map(lambda p: _drone_run(p, "horizon", args.time_limit, extra), paths))
+    total = time.perf_counter() - t0
+    keys = ["scenario", "exit_code", "n_robots", "result", "stop", "rounds", "iterations", "f1", "f2", "f3", "f4",
+            "qp_f1", "qp_f2", "qp_f3", "qp_f4", "process_s", "qp_s", "nlp_s", "stderr_last"]  # fmt: skip
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    with open(RESULTS / "horizon_drone_worlds.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    planned = [r for r in rows if r["exit_code"] == 0 and r["result"]]
+    count = {k: sum(r["result"] == k for r in planned) for k in ("optimal", "best_feasible_iterate", "warm_start")}
+    worse = [r["scenario"] for r in planned
+             if any(r.get(k) is not None and r.get(f"qp_{k}") is not None and r[k] > r[f"qp_{k}"] * (1 + 1e-9)
+                    for k in ("f1", "f2", "f3", "f4"))]  # fmt: skip
+    times = [r["process_s"] for r in planned if r["result"] == "optimal"]
+    lines = [
+        "# horizon on generated drone worlds",
+        "",
+        f"`python benchmarks/horizon.py --drone-worlds {args.drone_worlds} --seed {args.seed} --jobs {args.jobs} "
+        f"--time-limit {args.time_limit:g}` — {datetime_now()}, {platform.machine()}, {os.cpu_count()} cores, "
+        f"{args.jobs} runs at a time; total {total:.0f} s. The worlds of `tmr.sweep.rooms3d.drone_worlds"
+        f"({args.drone_worlds}, {args.seed})`; every run is the whole command line `python -m tmr.plan --scenario "
+        "WORLD.toml --robots auto --method horizon --no-plots` in its own process (*process*: start to exit); f1–f4 "
+        "are the independent checker's of the plan written, *qp* the plan `--method qp` returns (the NLP's warm "
+        "start, recorded in `metrics.json`). The formulation: [formulations/horizon3d.md]"
+        "(../../formulations/horizon3d.md).",
+        "",
+        f"**{len(planned)} plans**: {count['optimal']} optimal, {count['best_feasible_iterate']} best feasible "
+        f"iterate, {count['warm_start']} the qp plan itself; {len(rows) - len(planned)} runs without a horizon plan "
+        f"(no qp plan, or the goal refused). Never worse than `qp`: {len(planned) - len(worse)}/{len(planned)}. "
+        + (
+            f"Optimal runs: median {statistics.median(times):.1f} s, max {max(times):.1f} s (process)." if times else ""
+        ),
+        "",
+        "| world | exit | N | result | rounds | IPOPT iter. | f1 / qp | f2 / qp | f4 / qp | process [s] |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+
+    def ratio(r: dict, k: str) -> str:
+        a, b = r.get(k), r.get(f"qp_{k}")
+        return f"{a / b:.3f}" if a is not None and b else "-"
+
+    for r in rows:
+        lines.append(
+            f"| {r['scenario']} | {r['exit_code']} | {r['n_robots']} | {r['result'] or '-'} | {r.get('rounds') or '-'} "
+            f"| {r['iterations'] if r['iterations'] is not None else '-'} | {ratio(r, 'f1')} | {ratio(r, 'f2')} | "
+            f"{ratio(r, 'f4')} | {r['process_s']:.1f} |"
+        )
+    (RESULTS / "horizon_drone_worlds.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
 
@@ -464,6 +540,7 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--scenario-e", type=int, default=6, help="also scenario E with this many robots (0: not)")
     ap.add_argument("--drones", nargs="*", help="the drone mode: these drone scenarios (default F G H), qp vs horizon")
+    ap.add_argument("--drone-worlds", type=int, default=0, help="the drone worlds mode: this many generated worlds")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
@@ -471,6 +548,9 @@ def main() -> None:
         return
     if args.rooms:
         rooms_main(args)
+        return
+    if args.drone_worlds:
+        drone_worlds_main(args)
         return
     if args.drones is not None:  # --drones alone: F G H
         args.drones = args.drones or ["F", "G", "H"]

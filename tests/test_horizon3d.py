@@ -16,6 +16,7 @@ pytest.importorskip("casadi")
 from tmr.checks.drones import check_drone_plan  # noqa: E402
 from tmr.control.horizon3d import DroneHorizonOptions, _Model, plan_horizon_drones  # noqa: E402
 from tmr.control.horizon3d_field import EPS_SPAN, catenary_samples, exact_distance, theta_warm  # noqa: E402
+from tmr.errors import ParameterError  # noqa: E402
 from tmr.model.catenary3d import DroneTetherParams, solve3d  # noqa: E402
 
 SMALL = """name = "small"
@@ -95,6 +96,31 @@ def test_optimum_is_strictly_better_than_qp_no_worse_in_each_term_and_checked(re
         assert "accelerates at" in d["horizon_leader"] and new[2] == old[2]
         np.testing.assert_array_equal(plan.robots[:, -1], warm.robots[:, -1])
         assert sum(r["tether_clearance_rows"] for r in d["horizon_rounds"]) > 500  # measured 1,090
+
+
+def test_a_round_that_crossed_rows_left_out_is_not_where_the_next_starts(low):
+    """With rows activated only within 2 cm of their bounds, round 1's optimum stretches a tether 25 m past its length
+    (its length row was left out); started there, round 2 never recovers and the qp plan is returned. With the
+    default ``crossing_depth`` (2 m) round 2 starts from the initial point instead and converges: the optimum, checked,
+    never worse than qp in any term, and the note and the round log say why."""
+    problem, warm, wm = low
+    plan, _ = plan_horizon_drones(problem, _copy(warm), wm, time_limit=60.0, activation=0.02, crossing_depth=None)
+    rounds = plan.diagnostics["horizon_rounds"]
+    assert rounds[0]["worst_group"] == "tether_length" and rounds[0]["worst_violation"] > 20  # measured 25.0 m
+    assert plan.diagnostics["horizon_result"] != "optimal" and "next_start" not in rounds[0]
+    plan, metrics = plan_horizon_drones(problem, _copy(warm), wm, time_limit=60.0, activation=0.02)
+    d = plan.diagnostics
+    first = d["horizon_rounds"][0]
+    assert first["crossed_group"] == "tether_length" and first["crossed"] > 2.0
+    assert first["next_start"] == "the initial point"
+    assert d["horizon_result"] == "optimal" and len(d["horizon_rounds"]) == 2
+    assert "round 1's optimum crossed rows left out of it (tether_length 25" in d["horizon_note"]
+    assert "so round 2 started from the initial point" in d["horizon_note"]
+    again = check_drone_plan(plan, problem.scenario, params=problem.params, update_plan=False)
+    assert again.success and all(n <= o for n, o in zip(again.fitness_raw, wm.fitness_raw, strict=True))
+    for bad in (0, -1.0, math.inf, True):
+        with pytest.raises(ParameterError, match="crossing_depth"):
+            plan_horizon_drones(problem, _copy(warm), wm, crossing_depth=bad)
 
 
 @pytest.mark.parametrize("kind", ["max_iter", "time_limit"])

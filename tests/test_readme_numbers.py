@@ -507,6 +507,11 @@ QUOTES = [
         lambda: (max(optimal_times()), statistics.median(qp_only_knots()), statistics.median(qp_only_times())),
     ),
     Quote(
+        r"on (\d+) generated drone worlds \(`--robots auto`\), (\d+) optimal, the median in ([\d.]+) s, whole"
+        r" process",
+        lambda: drone_worlds_optimal(),
+    ),
+    Quote(
         r"(\d+)× faster to build than casadi's symbolic Hessian and (\d+)× faster to evaluate",
         lambda: md(
             "horizon_hessian.md",
@@ -533,6 +538,13 @@ def qp_only_knots() -> list[float]:
 def qp_only_times() -> list[float]:
     """The qp time [s] of the runs of horizon_rooms.csv that returned the qp plan."""
     return [float(r["qp_time"]) for r in rows("horizon_rooms.csv") if r["horizon_result"] == "warm_start"]
+
+
+def drone_worlds_optimal() -> tuple[float, float, float]:
+    """Worlds, optimal horizon plans and the median whole-process time of those [s] (horizon_drone_worlds.csv)."""
+    rs = rows("horizon_drone_worlds.csv")
+    times = [float(r["process_s"]) for r in rs if r["result"] == "optimal"]
+    return float(len(rs)), float(len(times)), statistics.median(times)
 
 
 def drone_horizon_f4_cut(scenario: str) -> float:

@@ -28,7 +28,8 @@ at ≥ sqrt((c + ε)² + δ²/4) keep the whole curve ≥ c; e_D is the spline's
 (:func:`tmr.control.horizon3d_field.distance_field3d`).
 
 Rows are generated lazily as in 2-D (rows near their bounds along the warm start; after each solve every row is
-evaluated and the violated or near ones are added). The catenary equalities and the fitness rows are always
+evaluated and the violated or near ones are added; a round whose optimum lies more than ``crossing_depth`` past
+rows it left out does not start the next one). The catenary equalities and the fitness rows are always
 complete; the shallow-branch rows enter only where an iterate has left the branch. The leader is on its reference
 unless that reference breaks the leader's own speed or acceleration bound or the qp leader lags it by more than
 ``leader_lag_max``: then it is on the qp plan's leader path (``DroneHorizonOptions.leader``). The returned plan is
@@ -91,6 +92,10 @@ _NO_WORSE_MARGIN = 1e-6
 _SUCCESS = ("Solve_Succeeded",)
 _ACCEPTABLE = ("Solved_To_Acceptable_Level",)
 
+#: Row groups whose violation is a distance [m] into an obstacle, the floor, past a tether's length or a lower end
+#: above its upper one: how far a round's optimum crossed rows left out of it (``crossing_depth``).
+CROSSING_GROUPS: tuple[str, ...] = ("drone_clearance", "tether_clearance", "tether_floor", "tether_length", "lower_end")
+
 #: Row groups of the drone NLP, in report order.
 DRONE_GROUPS: tuple[str, ...] = (
     "fitness",
@@ -150,6 +155,14 @@ class DroneHorizonOptions:
         pool_checks: IPOPT iterates checked at most by the checker (the cheapest first) when the optimum is not
             returned; pool_screen: kept iterates (the cheapest first) whose every row is evaluated at most (0.3 s each
             on H) to find those; after them, the cheapest iterate verified on every row during the solve.
+        crossing_depth: a round whose optimum is more than this [m] past a row of :data:`CROSSING_GROUPS` that was
+            left out of it (into an obstacle or the floor, beyond a tether's length, a lower end above its upper one)
+            crossed it: the next round starts from the cheapest iterate verified on every row, else from the
+            initial point (primal only) — not from that optimum (``None``: never). 2 m: on 12 generated worlds
+            (``drone_worlds(12, 0)``, ``--robots auto``) the rounds that never recovered within the 60 s limit from
+            such an optimum were 2.7–4.6 m past (and all 4 then converged, in 14–46 s), the rounds that did
+            recover 1.2 m at most (F 1.24, H 0.55) (``formulations/horizon3d.md``, "A round that crossed rows left out
+            of it").
         leader: the leader's fixed path: ``"reference"`` (x_d(t_k) at every knot: f3 = 0), ``"warm_start"`` (the qp
             plan's leader: f3 equal to the qp plan's) or ``"auto"`` (default): the reference unless it breaks the
             leader's speed or acceleration bound itself (no plan on it can pass the checker) or the qp leader lags it
@@ -186,6 +199,7 @@ class DroneHorizonOptions:
     accept_acceptable: bool = True
     pool_checks: int = 3
     pool_screen: int = 4
+    crossing_depth: float | None = 2.0
     leader: str = "auto"
     leader_lag_max: float = 0.25
     ipopt: dict[str, Any] = field(default_factory=dict)
@@ -203,6 +217,11 @@ class DroneHorizonOptions:
             raise ParameterError(f"rate_activation must be in [0, 1), got {self.rate_activation}")
         if self.max_rounds < 1 or self.max_iter < 1:
             raise ParameterError("max_rounds and max_iter must be ≥ 1")
+        depth = self.crossing_depth
+        if depth is not None and (
+            isinstance(depth, bool) or not isinstance(depth, (int, float)) or not 0 < depth < math.inf
+        ):
+            raise ParameterError(f"crossing_depth must be a finite number > 0 m (or None: never), got {depth!r}")
         if self.leader not in ("auto", "reference", "warm_start"):
             raise ParameterError(f"leader must be 'auto', 'reference' or 'warm_start', got {self.leader!r}")
 
@@ -539,10 +558,12 @@ class _Model:
             m &= self.dep[name]
         return m
 
-    def worst(self, vals: dict[str, Array]) -> tuple[float, str]:
-        """The largest violation of any row (fixed entries excluded) and its group."""
+    def worst(self, vals: dict[str, Array], groups: tuple[str, ...] | None = None) -> tuple[float, str]:
+        """The largest violation of any row (fixed entries excluded) and its group; only ``groups`` if given."""
         best, where = 0.0, ""
         for name, v in vals.items():
+            if groups is not None and name not in groups:
+                continue
             a = self.violation(name, v)
             if name in self.dep:
                 a = np.where(self.dep[name], a, -np.inf)
@@ -867,7 +888,15 @@ def plan_horizon_drones(
             if viol <= 1e-6:
                 stop = "converged"
                 break
+            # the round converged: its own rows hold, so a violated row of these groups is one it left out
+            crossed, group = model.worst(vals, CROSSING_GROUPS)
             masks = {name: masks[name] | model.near(name, vals[name]) for name in masks}
+            if opts.crossing_depth is not None and crossed > opts.crossing_depth:  # it crossed rows left out
+                xv = pool.verified[1] if pool.verified is not None else model.x0
+                lam = None  # primal only: the multipliers are the crossed optimum's
+                rounds[-1].update(crossed=crossed, crossed_group=group,
+                                  next_start=f"its best verified iterate ({pool.verified[2]})"
+                                  if pool.verified is not None else "the initial point")  # fmt: skip
             if time.perf_counter() >= deadline:
                 stop = "time_limit"
                 break
@@ -923,6 +952,12 @@ def plan_horizon_drones(
            (f"after round {len(rounds)}" if rounds else "before IPOPT started")),
         "rows_left_out": f"rows left out were still violated after {opts.max_rounds} rounds",
     }[stop]  # fmt: skip
+    for r in rounds:
+        if "next_start" in r:  # crossing_depth: that round's optimum was not where the next one started
+            what += (
+                f"; round {r['round']}'s optimum crossed rows left out of it ({r['crossed_group']} {r['crossed']:.3g} "
+                f"m past), so round {r['round'] + 1} started from {r['next_start']}"
+            )
     winch: dict[str, Any] | None = None
     if chosen is None:
         result, plan, detail = "warm_start", replace(warm_start, method="horizon"), "the qp plan itself"
