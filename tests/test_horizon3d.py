@@ -121,6 +121,11 @@ def test_a_round_that_crossed_rows_left_out_is_not_where_the_next_starts(low):
     for bad in (0, -1.0, math.inf, True):
         with pytest.raises(ParameterError, match="crossing_depth"):
             plan_horizon_drones(problem, _copy(warm), wm, crossing_depth=bad)
+    # with no round after it, nothing is restarted and the note claims no round 2
+    plan, _ = plan_horizon_drones(problem, _copy(warm), wm, time_limit=60.0, activation=0.02, max_rounds=1)
+    d = plan.diagnostics
+    assert len(d["horizon_rounds"]) == 1 and "next_start" not in d["horizon_rounds"][0]
+    assert "round 2" not in d["horizon_note"] and d["horizon_stop"] == "rows_left_out"
 
 
 @pytest.mark.parametrize("kind", ["max_iter", "time_limit"])

@@ -70,7 +70,7 @@ from tmr.control.horizon import (
     _time_limit,
 )
 from tmr.control.horizon3d_field import EPS_SPAN, catenary_samples, distance_field3d, theta_warm
-from tmr.control.horizon_model import _solver_opts
+from tmr.control.horizon_model import _positive_or_none, _solver_opts
 from tmr.control.horizon_pool import _Pool as _IteratePool
 from tmr.control.plan3d import DronePlan
 from tmr.errors import ParameterError
@@ -145,7 +145,7 @@ class DroneHorizonOptions:
         min_hessian_perturbation: IPOPT's floor on the Hessian's regularisation, 10⁻⁵ (10⁻³ until stop 51: IPOPT
             corrected the inertia at the floor at every iteration and crept along, H's objective 0.608 → 0.580 of
             the qp plan's in iterations 20–150, cut by the 60 s limit). Whole processes, time limit 60 s, 10⁻³ →
-            10⁻⁵: H a best iterate at the limit → optimal (86 iterations, 49 s); F 198 → 159 iterations (7.4 →
+            10⁻⁵: H a best iterate at the limit → optimal (86 iterations, 47–49 s); F 198 → 159 iterations (7.4 →
             5.1 s); I (active winch) 63 → 23 (3.9 → 2.1 s); G 168 → 221 (21.9 → 28.5 s); 12 generated worlds
             (``drone_worlds(12, 0)``, ``--robots auto``): 7 → 8 optimal, 4 → 3 the qp plan at the limit, none
             worse; 10⁻⁴ failed G (the qp plan after 60 s) (``formulations/horizon3d.md``, "F, G, H").
@@ -217,11 +217,7 @@ class DroneHorizonOptions:
             raise ParameterError(f"rate_activation must be in [0, 1), got {self.rate_activation}")
         if self.max_rounds < 1 or self.max_iter < 1:
             raise ParameterError("max_rounds and max_iter must be ≥ 1")
-        depth = self.crossing_depth
-        if depth is not None and (
-            isinstance(depth, bool) or not isinstance(depth, (int, float)) or not 0 < depth < math.inf
-        ):
-            raise ParameterError(f"crossing_depth must be a finite number > 0 m (or None: never), got {depth!r}")
+        _positive_or_none(self.crossing_depth, "crossing_depth", " m (or None: never)")
         if self.leader not in ("auto", "reference", "warm_start"):
             raise ParameterError(f"leader must be 'auto', 'reference' or 'warm_start', got {self.leader!r}")
 
@@ -891,7 +887,8 @@ def plan_horizon_drones(
             # the round converged: its own rows hold, so a violated row of these groups is one it left out
             crossed, group = model.worst(vals, CROSSING_GROUPS)
             masks = {name: masks[name] | model.near(name, vals[name]) for name in masks}
-            if opts.crossing_depth is not None and crossed > opts.crossing_depth:  # it crossed rows left out
+            another = rnd < opts.max_rounds and time.perf_counter() < deadline  # a next round may start
+            if another and opts.crossing_depth is not None and crossed > opts.crossing_depth:  # crossed rows left out
                 xv = pool.verified[1] if pool.verified is not None else model.x0
                 lam = None  # primal only: the multipliers are the crossed optimum's
                 rounds[-1].update(crossed=crossed, crossed_group=group,
@@ -952,7 +949,7 @@ def plan_horizon_drones(
            (f"after round {len(rounds)}" if rounds else "before IPOPT started")),
         "rows_left_out": f"rows left out were still violated after {opts.max_rounds} rounds",
     }[stop]  # fmt: skip
-    for r in rounds:
+    for r in rounds[:-1]:  # a round another followed
         if "next_start" in r:  # crossing_depth: that round's optimum was not where the next one started
             what += (
                 f"; round {r['round']}'s optimum crossed rows left out of it ({r['crossed_group']} {r['crossed']:.3g} "
