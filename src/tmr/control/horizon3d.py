@@ -160,7 +160,7 @@ class DroneHorizonOptions:
             crossed it: the next round starts from the cheapest iterate verified on every row, else from the
             initial point (primal only) — not from that optimum (``None``: never). 2 m: on 12 generated worlds
             (``drone_worlds(12, 0)``, ``--robots auto``) the rounds that never recovered within the 60 s limit from
-            such an optimum were 2.7–4.6 m past (and all 4 then converged, in 14–46 s), the rounds that did
+            such an optimum were 2.7–4.6 m past (all 4 now optimal, in 15–50 s, whole process), the rounds that did
             recover 1.2 m at most (F 1.24, H 0.55) (``formulations/horizon3d.md``, "A round that crossed rows left out
             of it").
         leader: the leader's fixed path: ``"reference"`` (x_d(t_k) at every knot: f3 = 0), ``"warm_start"`` (the qp
