@@ -399,11 +399,12 @@ _GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
 
 
 class _Cusp(ParameterError):
-    """The spline's tangent turns by 90° or more within 0.02 m (or stops): a cusp or a loop, at parameter ``u``."""
+    """The spline's tangent turns by 90° or more within 0.02 m (or stops): a cusp or a loop, at parameter ``u`` of the
+    spline whose waypoint parameters are ``u_knots``."""
 
-    def __init__(self, message: str, u: float) -> None:
+    def __init__(self, message: str, u: float, u_knots: Array) -> None:
         super().__init__(message)
-        self.u = u
+        self.u, self.u_knots = u, u_knots
 
 
 class _ArcLengthSpline:
@@ -430,6 +431,7 @@ class _ArcLengthSpline:
                 f"the waypoints turn back on themselves near {fmt_point(self._p(self.u_grid[i]))} (a cusp "
                 "of the spline); remove the reversal from the waypoints",
                 float(self.u_grid[i]),
+                self.u_knots,
             )
         ds = self._integrate(self.u_grid[:-1], self.u_grid[1:])
         self.s_grid = np.concatenate([[0.0], np.cumsum(ds)])
@@ -599,8 +601,7 @@ def time_law(
             spline = _ArcLengthSpline(pts)
         except _Cusp as exc:  # the spline loops round a sharp turn between short segments: denser waypoints there
             cusp = exc
-            u_knots = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
-            pts = _refine(pts, u_knots, np.array([exc.u]))
+            pts = _refine(pts, exc.u_knots, np.array([exc.u]))
             continue
         cusp = None
         if env is None:
