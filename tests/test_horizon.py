@@ -381,6 +381,37 @@ def test_bad_options_and_warm_start():
         with pytest.raises(ParameterError, match="time_limit"):
             plan_horizon(problem, warm, time_limit=limit)
     assert DEFAULT_TIME_LIMIT == 60.0
+    with pytest.raises(ParameterError, match="retry_hessian"):
+        plan_horizon(problem, warm, retry_hessian="bfgs")
+    for bad_activation in (0.0, -1.0):
+        with pytest.raises(ParameterError, match="coarse_train_activation"):
+            plan_horizon(problem, warm, coarse_train_activation=bad_activation)
+
+
+def test_keep_warm_margins_lowers_only_the_entries_the_warm_start_keeps_less_than():
+    """The coarse NLP from a train plan (``keep_warm_margins``): a clearance entry nearer than d_safe + margin, or a
+    pair nearer than its raised separation, takes the warm start's own value as its bound (a clearance never below
+    d_safe); every other bound is unchanged, and the warm start then holds every clearance and separation row."""
+    problem = small_problem()
+    warm, _ = solve(problem, "qp")
+    opts = horizon_model._options({"clearance_margin": 0.4})
+    su = horizon_model._Setup(dataclasses.replace(problem, qp_params=dataclasses.replace(
+        problem.qp_params, separation_margin=problem.qp_params.separation_margin + 4.0)), opts)  # fmt: skip
+    Q, info = horizon_model._warm_start(su, warm)
+    env = problem.env
+    model = horizon_model._Model(su, distance_spline(env), bounds=info["warm_start_terms"], spline=ClearanceSpline(env))
+    vals = model.values(model.project(model.x_of(Q)))
+    before = {g: np.array(model.lower(g), dtype=float) for g in ("clearance", "separation")}
+    inside = {g: vals[g] < before[g] for g in before}
+    assert inside["clearance"].any() and inside["separation"].any()  # the margins reach the warm start
+    assert model.keep_warm_margins(vals) == sum(int(m.sum()) for m in inside.values())
+    for g, floor in (("clearance", su.d_safe), ("separation", 0.0)):
+        after = model.lower(g)
+        np.testing.assert_array_equal(after[~inside[g]], before[g][~inside[g]])
+        np.testing.assert_array_equal(after[inside[g]], np.maximum(vals[g][inside[g]], floor))
+        held = vals[g] >= floor  # where the warm start itself keeps the floor, its row now holds
+        assert np.all(model.violation(g, vals[g])[held] <= 0.0)
+    assert model.keep_warm_margins(vals) == 0  # a second call finds nothing inside
 
 
 # ----------------------------------------------------------------------------------------------------------------

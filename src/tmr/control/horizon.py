@@ -363,6 +363,8 @@ def plan_horizon(
     vals = model.values(xv)
     # only a plan that passed its checks (the qp plan) lends its clearance to the rows the start makes infeasible
     info["start_clearance_entries"] = model.keep_start_clearance(vals["clearance"]) if warm_start.success else 0
+    if opts.keep_warm_margins and opts.clearance_margin > 0 and warm_start.success:  # coarse NLP from a train plan
+        info["warm_margin_entries"] = model.keep_warm_margins(vals)
     masks = model.near_masks(vals)
     J_warm = _cost(su, Qw)
     obj_scale = max(J_warm, 1e-6) if opts.scale_objective else 1.0
@@ -511,7 +513,8 @@ def plan_horizon(
                     t2 = time.perf_counter()
                     stall = opts.fast_stall_iter if phase == "fast" else None
                     callback = _IterationCallback(tr, pool, bar, name, phase_deadline, stall)
-                    solver = tr.solver(obj_scale, extra, callback, hessian)
+                    used = opts.retry_hessian if label == "retry" and opts.retry_hessian is not None else hessian
+                    solver = tr.solver(obj_scale, extra, callback, used)
                     build_time, built_rows = time.perf_counter() - t2, tr.size
                     kwargs: dict[str, Any] = dict(x0=x_start, lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg)
                     if prev is not None and lam_start is not None:  # primal–dual warm start from the previous round
@@ -541,7 +544,7 @@ def plan_horizon(
                             attempt=label,
                             phase=phase,
                             min_hessian_perturbation=_floor_of(opts, extra),
-                            hessian=hessian,
+                            hessian=used,
                             status=status,
                             iterations=int(stats.get("iter_count", -1)),
                             rows=int(tr.size),
@@ -564,6 +567,8 @@ def plan_horizon(
                 if not ok:
                     stop = "ipopt_failed"
                     break
+                if label != attempts[0][0]:  # the attempt that solved this round goes first in the next ones
+                    attempts = sorted(attempts, key=lambda a: a[0] != label)
                 if not viol:
                     stop = "converged"
                     break
@@ -686,6 +691,10 @@ def plan_horizon(
         did = {"failed": "found no plan", "rejected": "was solved, its optimum rejected"}[coarse_log["result"]]
         what += f"; before it, the NLP on every {_nth(M)} knot {did}" + (f" ({why})" if why else "")
     floor = f"{_floor_of(opts, {}):g} ({_HESSIAN[opts.hessian]} Hessian)"
+    retried = [r for r in phase_rounds if r["attempt"] == "retry" and r["phase"] != "fast"]
+    if retried:  # a retry ran: its own floor and Hessian (HorizonOptions.retry_ipopt, retry_hessian)
+        rt = retried[-1]
+        floor += f", its retry {rt['min_hessian_perturbation']:g} ({_HESSIAN[rt['hessian']]} Hessian)"
     if not rounds and coarse_c is None:  # IPOPT never ran on the whole NLP: no floor was used
         floor_note = "no IPOPT round on the whole NLP"
     elif fast_log is None:
@@ -974,17 +983,24 @@ def _coarse_pass(
         else samples_needed(float(su.limits[:, 1].max()), su.r, su.d_safe + opts.coarse_margin, opts.field_error)
     )
     sub = dict(options, coarse_knots=None, clearance_margin=opts.coarse_margin, samples_per_link=S)
+    train = opts.coarse_train_activation is not None and (warm_start.diagnostics or {}).get("references") == "train"
+    if train:  # a train plan: inside the margins in places, far from the optimum (formulations/horizon.md)
+        sub.update(activation=opts.coarse_train_activation, keep_warm_margins=True)
     budget = None if not math.isfinite(limit) else max(opts.coarse_time_share * (deadline - t0), 1e-3)
     log: dict[str, Any] = dict(stride=M, knots=int(pc.trajectory.t.size), iterations=0)
     try:
         cplan = plan_horizon(pc, wc, time_limit=budget, **sub)
     except HorizonInfeasible as exc:
         d = exc.diagnostics or {}
+        if train:
+            log["train"] = _train_log(opts, d)
         why = str(exc).split(";")[0].removeprefix("horizon NLP: ")[:200]
         log.update(iterations=int(d.get("ipopt_iterations", 0)), result="failed", reason=f"{exc.status}: {why}")
         log.update(solve_time=time.perf_counter() - t0)
         return None, log
     d = cplan.diagnostics
+    if train:
+        log["train"] = _train_log(opts, d)
     log.update(
         iterations=int(d.get("ipopt_iterations", 0)),
         rounds=int(d.get("rounds", 0)),
@@ -1043,8 +1059,14 @@ def _coarse_pass(
                 f", then the whole NLP in {len(log['repair'])} window(s) around the knots where rows failed (knots "
                 f"{where}; {log['repair_iterations']} iterations)"
             )
+        along = (
+            f", from the train plan with its own clearance and spacing at {log['train']['warm_margin_entries']} "
+            f"entries inside the margins and rows within {opts.coarse_train_activation:g} m"
+            if train
+            else ""
+        )
         log["what"] = (
-            f"IPOPT solved the NLP on every {_nth(M)} knot ({log['knots']} of {su.K + 1}; {log['status']}, "
+            f"IPOPT solved the NLP on every {_nth(M)} knot ({log['knots']} of {su.K + 1}{along}; {log['status']}, "
             f"{log['iterations']} iterations in {log['rounds']} round(s)), its optimum interpolated to every knot "
             f"(quadratic spline){repaired}, where every row holds"
         )
@@ -1052,6 +1074,12 @@ def _coarse_pass(
         return _Candidate(Q, J, "coarse_optimal", detail, xv), log
     log.update(result="rejected", reason=reason[:300], x=xv, fine_start=f"the {point} coarse optimum")
     return None, log
+
+
+def _train_log(opts: HorizonOptions, d: dict[str, Any]) -> dict[str, Any]:
+    """The coarse log's record of a train plan's coarse NLP: its activation [m] and the entries that kept the plan's
+    own clearance or spacing inside the margins (``HorizonOptions.coarse_train_activation``)."""
+    return dict(activation=opts.coarse_train_activation, warm_margin_entries=d.get("warm_margin_entries"))
 
 
 def _repair_spans(knots: list[int], K: int, pad: int) -> list[tuple[int, int]]:
@@ -1393,6 +1421,7 @@ def _diagnostics(
         "warm_start_success": info.get("warm_start_success"),
         "warm_start_time": float(info.get("warm_start_time", 0.0)),
         "start_clearance_entries": int(info.get("start_clearance_entries", 0)),
+        **({"warm_margin_entries": int(info["warm_margin_entries"])} if "warm_margin_entries" in info else {}),
         "transcription_time": float(trans_time),
         "solve_time": float(solve_time),
         "total_time": time.perf_counter() - start_time,

@@ -103,6 +103,16 @@ class HorizonOptions:
             depends on the fixed reference only); the coarse pass sets it to ``coarse_margin``.
         coarse_margin: added to the coarse NLP's clearance bounds (but the equality leader's own) and separation
             margin [m] (the interpolation between its knots).
+        coarse_train_activation: for a warm start along train references (``diagnostics["references"]`` ``"train"``,
+            :mod:`tmr.route.train`): the coarse NLP's ``activation`` [m], and its margins keep the plan's own values
+            where it is inside them (``keep_warm_margins``); ``None``: as any warm start. 1.5 m (stop 52): the train
+            keeps 0.055 m from the obstacles and 2r + 5 mm between robots, inside the coarse margins, so the coarse
+            NLP started outside its own rows (``Infeasible_Problem_Detected``); and the plan, the robots moving in
+            turn, is far from the optimum, so the rows within 0.6 m of it were the wrong ones (rounds crossing
+            obstacles) — ``formulations/horizon.md``, "Coarse knots", *From a train plan*.
+        keep_warm_margins: an NLP with ``clearance_margin`` > 0 (the coarse pass sets both, for a train plan): the
+            entries where the warm start keeps less than a margin take the warm start's own value as their bound
+            (:meth:`_Model.keep_warm_margins`).
         coarse_ends: the coarse grid also has every knot of the first and last this many steps (0: none).
         coarse_rate_scale: the coarse NLP's speed and acceleration bounds (joints and robots) times this (≤ 1).
         coarse_time_share: fraction of the time left (with a time limit) the coarse pass may use.
@@ -143,8 +153,14 @@ class HorizonOptions:
         accept_acceptable: also accept IPOPT's ``Solved_To_Acceptable_Level`` (KKT error below ``acceptable_tol`` for
             ``acceptable_iter`` iterations, constraint violation below ``constr_viol_tol``); the status is recorded.
         retry: if IPOPT stops without a solution, solve the round once more from the same start with ``retry_ipopt``
-            merged into the options (another path to the optimum;
-            the fallbacks of :func:`plan_horizon` are used only if both attempts fail).
+            merged into the options and the Hessian ``retry_hessian`` (another path to the optimum; the fallbacks of
+            :func:`plan_horizon` are used only if both attempts fail). The attempt that solved a round goes first in
+            the rounds after it.
+        retry_hessian: the retry's Hessian (``None``: the one of its phase, ``hessian``). ``"exact"`` (stop 52): where
+            the Gauss–Newton Hessian leaves out the curvature that decides — the flat valley of a straight chain of 2
+            robots (long_walls-mid-1226144109), a no-worse row f1 ≤ f1 of the ``qp`` plan active at the optimum
+            (dense-near-4036741510 with 5 robots) — its primary ends at ``max_iter`` and the exact retry converges
+            (``formulations/horizon.md``, "Two regularisation floors", item 5).
         warm_start_leader_error: with the equality leader, the warm start *as given* (not projected on the reference)
             is still a fallback if its leader stays within this distance [m] of the reference at every knot and every
             other row holds (a ``qp`` plan lags its reference by ≤ 4.6 mm on A–D: CLIK).
@@ -198,6 +214,7 @@ class HorizonOptions:
     accept_acceptable: bool = True
     retry: bool = True
     retry_ipopt: dict[str, Any] = field(default_factory=lambda: {"min_hessian_perturbation": 1e-2})
+    retry_hessian: str | None = "exact"
     warm_start_leader_error: float = 0.01
     expand: bool = False
     scale_objective: bool = True
@@ -205,6 +222,8 @@ class HorizonOptions:
     coarse_knots: int | None = 100
     coarse_from: int = 500
     coarse_margin: float = 0.02
+    coarse_train_activation: float | None = 1.5
+    keep_warm_margins: bool = False
     coarse_ends: int = 0
     coarse_repair: int = 2
     coarse_polish_iter: int = 60
@@ -236,6 +255,7 @@ class HorizonOptions:
         if not self.activation > 0:
             raise ParameterError(f"activation must be > 0 m, got {self.activation}")
         _positive_or_none(self.crossing_depth, "crossing_depth", " m (or None: never)")
+        _positive_or_none(self.coarse_train_activation, "coarse_train_activation", " m (or None: as any plan)")
         if not 0 <= self.rate_activation < 1:
             raise ParameterError(f"rate_activation must be in [0, 1), got {self.rate_activation}")
         if self.max_rounds < 1 or self.max_iter < 1:
@@ -268,8 +288,10 @@ class HorizonOptions:
             raise ParameterError("coarse_margin must be in [0, 1) m, coarse_rate_scale and coarse_time_share in (0, 1]")
         if self.window_mode not in ("fixed", "sub"):
             raise ParameterError(f"window_mode must be 'fixed' or 'sub', got {self.window_mode!r}")
-        for name in ("hessian", "fast_hessian"):
+        for name in ("hessian", "fast_hessian", "retry_hessian"):
             v = getattr(self, name)
+            if name == "retry_hessian" and v is None:
+                continue
             if v not in ("exact", "limited-memory", "gauss-newton"):
                 raise ParameterError(f"{name} must be 'exact', 'gauss-newton' or 'limited-memory', got {v!r}")
 
@@ -986,6 +1008,25 @@ class _Model:
         lo[below] = c[below]
         self.lo_entries["clearance"] = lo
         return int(below[:, 1:].sum())
+
+    def keep_warm_margins(self, vals: dict[str, Array]) -> int:
+        """The coarse pass's NLP (``clearance_margin`` > 0, its separation margin raised as much): where the warm
+        start, a plan that passed its checks, keeps less than a margin — a clearance sample nearer than d_safe +
+        margin, a pair nearer than 2r + its raised margin — that entry's lower bound is the warm start's own value
+        (a clearance never below d_safe), so the coarse NLP starts inside its rows. Train references
+        (:mod:`tmr.route.train`) keep 0.055 m from the obstacles and 2r + 5 mm between robots, less than the margins
+        (``formulations/horizon.md``, "Coarse knots"). Returns the number of entries relaxed."""
+        relaxed = 0
+        for name, floor in (("clearance", self.su.d_safe), ("separation", 0.0)):
+            if name not in self.rows:
+                continue
+            lo = np.array(self.lower(name), dtype=float)
+            inside = vals[name] < lo
+            if inside.any():
+                lo[inside] = np.maximum(vals[name][inside], floor)
+                self.lo_entries[name] = lo
+                relaxed += int(inside.sum())
+        return relaxed
 
     def violation(self, name: str, v: Array) -> Array:
         """How far each entry of group ``name`` (values ``v`` (rows, cols)) is beyond its bounds (≤ 0: satisfied)."""

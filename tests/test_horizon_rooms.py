@@ -1,0 +1,95 @@
+"""Whole-horizon NLP (``tmr.control.horizon``) on generated rooms where its fallbacks matter (issue 33): the retry with
+the exact Hessian where the Gauss–Newton one stalls, the attempt that solved a round going first in the next, and the
+coarse pass from a train plan (``formulations/horizon.md``, "The retry's Hessian" and "Coarse knots")."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import tmr.control.horizon as horizon_module
+from tmr.control.horizon import plan_horizon
+
+_SOLVED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+
+
+class _Caught(BaseException):
+    """Raised in place of the horizon NLP once the planner has made its ``qp`` warm start."""
+
+
+def room_problem(monkeypatch: pytest.MonkeyPatch, tmp_path: Path, seed: int, density: str, goal: str, n: int):
+    """The (problem, ``qp`` plan) that ``tmr plan --method horizon`` passes to :func:`plan_horizon` for the generated
+    room ``(seed, density, goal)`` of :func:`tmr.sweep.rooms.generate_room` with ``n`` robots."""
+    from tmr.plan import main
+    from tmr.sweep.rooms import generate_room, write_geojson
+
+    room = generate_room(seed, density, goal)
+    path = write_geojson(room, tmp_path / "room.geojson")
+    got: dict[str, Any] = {}
+
+    def catch(problem, warm, **_: Any):
+        got.update(problem=problem, warm=warm)
+        raise _Caught
+
+    monkeypatch.setattr(horizon_module, "plan_horizon", catch)
+    base, goal_xy = ",".join(map(str, room.base)), ",".join(map(str, room.goal))
+    argv = ["--map", str(path), f"--base={base}", f"--goal={goal_xy}", "--robots", str(n), "--method", "horizon"]
+    with pytest.raises(_Caught):
+        main([*argv, "--no-plots", "--out", str(tmp_path / "out")])
+    monkeypatch.undo()
+    return got["problem"], got["warm"]
+
+
+def _fallback(d: dict[str, Any]) -> list[dict[str, Any]]:
+    return [r for r in d["round_log"] if r["phase"] == "fallback"]
+
+
+def test_the_retry_with_the_exact_hessian_solves_where_gauss_newton_stalls(monkeypatch, tmp_path):
+    """long_walls-mid-1226144109, 2 robots (a straight chain): the fast attempt stalls, the Gauss–Newton fallback ends
+    at max_iter in a flat valley; its retry with the exact Hessian converges. With a Gauss–Newton retry (the old
+    procedure) no optimum is found."""
+    problem, warm = room_problem(monkeypatch, tmp_path, 1226144109, "long_walls", "mid", 2)
+    d = plan_horizon(problem, warm).diagnostics
+    assert d["horizon_result"] == "optimal", d["horizon_note"]
+    primary, retry = _fallback(d)
+    assert (primary["attempt"], primary["hessian"]) == ("primary", "gauss-newton")
+    assert primary["status"] not in _SOLVED
+    assert (retry["attempt"], retry["hessian"], retry["min_hessian_perturbation"]) == ("retry", "exact", 1e-2)
+    assert retry["status"] in _SOLVED
+    assert "its retry 0.01 (exact Hessian)" in d["horizon_note"]
+    old = plan_horizon(problem, warm, retry_hessian=None).diagnostics
+    assert old["horizon_result"] != "optimal"
+    assert [r["hessian"] for r in _fallback(old)] == ["gauss-newton", "gauss-newton"]
+
+
+def test_the_attempt_that_solved_a_round_goes_first_in_the_next(monkeypatch, tmp_path):
+    """dense-near-4036741510, 5 robots folded near the base: round 1's Gauss–Newton primary fails and its exact retry
+    solves it; round 2 (the rows that came out violated added) starts with the retry, not with another failing
+    primary."""
+    problem, warm = room_problem(monkeypatch, tmp_path, 4036741510, "dense", "near", 5)
+    d = plan_horizon(problem, warm).diagnostics
+    assert d["horizon_result"] == "optimal", d["horizon_note"]
+    log = _fallback(d)
+    assert [(r["round"], r["attempt"]) for r in log[:2]] == [(1, "primary"), (1, "retry")]
+    assert log[0]["status"] not in _SOLVED and log[1]["status"] in _SOLVED
+    later = [r for r in log if r["round"] > 1]
+    assert later and all(r["attempt"] == "retry" and r["hessian"] == "exact" for r in later)
+    terms, before = d["horizon_summary"]["terms"], d["horizon_summary"]["warm_start_terms"]
+    assert all(terms[k] <= before[k] * (1 + 1e-9) for k in ("f1", "f2", "f4"))  # never worse than qp in a term
+
+
+def test_the_coarse_pass_from_a_train_plan_keeps_its_margins_and_wider_rows(monkeypatch, tmp_path):
+    """narrow-far-2842938094, 5 robots: the trailing references fail, the qp plan follows train references (0.055 m
+    from the obstacles, 2r + 5 mm between robots, inside the coarse pass's margins). The coarse NLP keeps the plan's
+    own values there and takes rows within ``coarse_train_activation``: its optimum is accepted and polished (before,
+    it stopped in Infeasible_Problem_Detected and the whole NLP ran from the qp plan)."""
+    problem, warm = room_problem(monkeypatch, tmp_path, 2842938094, "narrow", "far", 5)
+    assert warm.diagnostics["references"] == "train"
+    d = plan_horizon(problem, warm).diagnostics
+    coarse = d["horizon_summary"]["coarse"]
+    assert coarse["result"] == "accepted", coarse
+    assert coarse["train"]["activation"] == 1.5 and coarse["train"]["warm_margin_entries"] > 0
+    assert d["horizon_result"] == "optimal", d["horizon_note"]
+    assert "from the train plan with its own clearance and spacing" in d["horizon_note"]
