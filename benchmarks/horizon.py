@@ -3,6 +3,7 @@ and at scale, on generated rooms and robot counts.
 
     python benchmarks/horizon.py [--scenarios A B C D] [--repeats 3] [--seed 0]
     python benchmarks/horizon.py --rooms 16 [--robots 2,3,5,8,auto] [--time-limit 60] [--jobs 2] [--scenario-e 6]
+                                 [--seed 0] [--name horizon_rooms]
     python benchmarks/horizon.py --drones F G H [--repeats 3] [--time-limit 60]
     python benchmarks/horizon.py --drone-worlds 12 [--seed 0] [--jobs 2] [--time-limit 60]
 
@@ -12,7 +13,8 @@ robot count of ``--robots``, and scenario E with ``--scenario-e`` robots: the wh
 from the very plan ``--method qp`` returns, and ``metrics.json`` records that plan's f1–f4 beside the horizon's, so
 no second run is needed. Per room class and N: optimal / best feasible iterate / warm start, whole-process time,
 f1–f4 against ``qp``, knots; a scaling plot of the whole-process time against knots × N with the exponent fitted on
-the optimal runs (target ≤ 1.3). Writes ``benchmarks/results/horizon_rooms.md``, ``.csv`` and ``.png``.
+the optimal runs (target ≤ 1.3). Writes ``benchmarks/results/horizon_rooms.md``, ``.csv`` and ``.png``
+(``--name``: another stem, e.g. ``--seed 1 --name horizon_rooms_seed1`` for a second sample of rooms).
 
 ``--drones F G H``: the drone chain's ``horizon`` against its ``qp`` plan, each the whole command line in its own
 process, one at a time (:func:`drones_main`): exit, result, f1–f4 of the checker and their ratios to ``qp``, times.
@@ -54,6 +56,8 @@ from collections import Counter
 from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "results"
+#: The rooms mode's default file stem (``--name``): ``benchmarks/results/horizon_rooms.md``, ``.csv``, ``.png``.
+ROOMS_NAME = "horizon_rooms"
 
 METRIC_KEYS = (
     "success",
@@ -425,7 +429,7 @@ def rooms_main(args: argparse.Namespace) -> None:
     RESULTS.mkdir(parents=True, exist_ok=True)
 
     def write_csv() -> None:  # after the rooms already: a failure of the E run loses nothing
-        with open(RESULTS / "horizon_rooms.csv", "w", newline="") as fh:
+        with open(RESULTS / f"{args.name}.csv", "w", newline="") as fh:
             wr = csv.writer(fh)
             wr.writerow(ROOM_KEYS)
             for r in rows:
@@ -440,8 +444,9 @@ def rooms_main(args: argparse.Namespace) -> None:
     md = io.StringIO()
     w = md.write
     w("# horizon at scale: generated rooms and robot counts\n\n")
+    named = (f" --seed {args.seed}" if args.seed else "") + (f" --name {args.name}" if args.name != ROOMS_NAME else "")
     w(f"`python benchmarks/horizon.py --rooms {args.rooms} --robots {args.robots} --time-limit {args.time_limit:g} "
-      f"--jobs {args.jobs} --scenario-e {args.scenario_e}` — {datetime_now()}, {platform.machine()}, "
+      f"--jobs {args.jobs} --scenario-e {args.scenario_e}{named}` — {datetime_now()}, {platform.machine()}, "
       f"{os.cpu_count()} cores, {args.jobs} runs at a time; total {time.perf_counter() - t_start:.0f} s. "
       "Every run is the whole command line `python -m tmr.plan --map ROOM --base --goal --robots N --method horizon "
       "--no-plots` (or `--scenario E`) in its own process; *time* is that process, interpreter start to exit. The "
@@ -486,9 +491,9 @@ def rooms_main(args: argparse.Namespace) -> None:
     within = sum(1 for r in planned if r["wall_time"] < 10)
     w(f"\nWhole process < 10 s: {within}/{len(planned)}. Fitted exponent of time ∝ (knots × N)^a over the "
       f"{len(ok)} optimal and coarse-optimal runs: **a = {slope:.2f}** (target ≤ 1.3).\n\n"
-      "![scaling](horizon_rooms.png)\n")  # fmt: skip
-    (RESULTS / "horizon_rooms.md").write_text(md.getvalue())
-    _rooms_plot(planned, slope)
+      f"![scaling]({args.name}.png)\n")  # fmt: skip
+    (RESULTS / f"{args.name}.md").write_text(md.getvalue())
+    _rooms_plot(planned, slope, RESULTS / f"{args.name}.png")
     print(md.getvalue())
 
 
@@ -498,7 +503,7 @@ def datetime_now() -> str:
     return datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
 
 
-def _rooms_plot(rows: list[dict], slope: float) -> None:
+def _rooms_plot(rows: list[dict], slope: float, path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -524,7 +529,7 @@ def _rooms_plot(rows: list[dict], slope: float) -> None:
     ax.set_title(f"horizon at scale: fitted exponent a = {slope:.2f} on the optimal runs")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(RESULTS / "horizon_rooms.png")
+    fig.savefig(path)
     plt.close(fig)
 
 
@@ -539,6 +544,7 @@ def main() -> None:
     ap.add_argument("--timeout", type=float, default=300.0, help="a run taking longer is killed [s]")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--scenario-e", type=int, default=6, help="also scenario E with this many robots (0: not)")
+    ap.add_argument("--name", default=ROOMS_NAME, help=f"the rooms mode's file stem (default {ROOMS_NAME})")
     ap.add_argument("--drones", nargs="*", help="the drone mode: these drone scenarios (default F G H), qp vs horizon")
     ap.add_argument("--drone-worlds", type=int, default=0, help="the drone worlds mode: this many generated worlds")
     ap.add_argument("--child", help=argparse.SUPPRESS)
