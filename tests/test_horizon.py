@@ -386,32 +386,43 @@ def test_bad_options_and_warm_start():
     for bad_activation in (0.0, -1.0):
         with pytest.raises(ParameterError, match="coarse_train_activation"):
             plan_horizon(problem, warm, coarse_train_activation=bad_activation)
+    with pytest.raises(ParameterError, match="keep_warm_margins"):
+        plan_horizon(problem, warm, keep_warm_margins="yes")
 
 
 def test_keep_warm_margins_lowers_only_the_entries_the_warm_start_keeps_less_than():
     """The coarse NLP from a train plan (``keep_warm_margins``): a clearance entry nearer than d_safe + margin, or a
-    pair nearer than its raised separation, takes the warm start's own value as its bound (a clearance never below
-    d_safe); every other bound is unchanged, and the warm start then holds every clearance and separation row."""
+    pair nearer than its raised separation, takes the warm start's own value as its bound, never below the fine
+    NLP's (d_safe; (2r + separation margin)²); every other bound is unchanged, the fixed start's entries are neither
+    lowered nor counted, and the warm start then holds every clearance and separation row it can."""
     problem = small_problem()
     warm, _ = solve(problem, "qp")
-    opts = horizon_model._options({"clearance_margin": 0.4})
-    su = horizon_model._Setup(dataclasses.replace(problem, qp_params=dataclasses.replace(
-        problem.qp_params, separation_margin=problem.qp_params.separation_margin + 4.0)), opts)  # fmt: skip
+    margin, sep = 0.4, problem.qp_params.separation_margin
+    opts = horizon_model._options({"clearance_margin": margin, "keep_warm_margins": True})
+    raised = dataclasses.replace(problem.qp_params, separation_margin=sep + margin)  # as the coarse pass raises it
+    su = horizon_model._Setup(dataclasses.replace(problem, qp_params=raised), opts)
     Q, info = horizon_model._warm_start(su, warm)
     env = problem.env
     model = horizon_model._Model(su, distance_spline(env), bounds=info["warm_start_terms"], spline=ClearanceSpline(env))
-    vals = model.values(model.project(model.x_of(Q)))
-    before = {g: np.array(model.lower(g), dtype=float) for g in ("clearance", "separation")}
-    inside = {g: vals[g] < before[g] for g in before}
-    assert inside["clearance"].any() and inside["separation"].any()  # the margins reach the warm start
+    vals = {g: v.copy() for g, v in model.values(model.project(model.x_of(Q))).items()}
+    floors = {"clearance": su.d_safe, "separation": (2 * su.r + sep) ** 2}
+    vals["clearance"][0, 5] = su.d_safe - 0.01  # inside the fine bound too: lowered to the floor only
+    vals["separation"][0, 5] = floors["separation"] - 0.1
+    vals["clearance"][:, 0] = 0.0  # the fixed start: not a row
+    before = {g: np.array(model.lower(g), dtype=float) for g in floors}
+    inside = {g: vals[g] < before[g] for g in floors}
+    for m in inside.values():
+        m[:, 0] = False
+    assert inside["clearance"][:, 1:].sum() > 1 and inside["separation"].sum() > 1  # the margins reach the warm start
     assert model.keep_warm_margins(vals) == sum(int(m.sum()) for m in inside.values())
-    for g, floor in (("clearance", su.d_safe), ("separation", 0.0)):
+    for g, floor in floors.items():
         after = model.lower(g)
         np.testing.assert_array_equal(after[~inside[g]], before[g][~inside[g]])
         np.testing.assert_array_equal(after[inside[g]], np.maximum(vals[g][inside[g]], floor))
-        held = vals[g] >= floor  # where the warm start itself keeps the floor, its row now holds
-        assert np.all(model.violation(g, vals[g])[held] <= 0.0)
-    assert model.keep_warm_margins(vals) == 0  # a second call finds nothing inside
+        assert after[0, 5] == pytest.approx(floor)  # clamped, not the value inside the fine bound
+        held = inside[g] & (vals[g] >= floor)  # where the warm start itself keeps the floor, its row now holds
+        assert held.any() and np.all(model.violation(g, vals[g])[held] <= 0.0)
+    assert model.keep_warm_margins(vals) == 2  # a second call finds only the two entries below the fine bounds
 
 
 # ----------------------------------------------------------------------------------------------------------------

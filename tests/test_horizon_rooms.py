@@ -82,7 +82,7 @@ def test_the_attempt_that_solved_a_round_goes_first_in_the_next(monkeypatch, tmp
 
 def test_the_coarse_pass_from_a_train_plan_keeps_its_margins_and_wider_rows(monkeypatch, tmp_path):
     """narrow-far-2842938094, 5 robots: the trailing references fail, the qp plan follows train references (0.055 m
-    from the obstacles, 2r + 5 mm between robots, inside the coarse pass's margins). The coarse NLP keeps the plan's
+    from the obstacles, 2r + 25 mm between robots, inside the coarse pass's margins). The coarse NLP keeps the plan's
     own values there and takes rows within ``coarse_train_activation``: its optimum is accepted and polished (before,
     it stopped in Infeasible_Problem_Detected and the whole NLP ran from the qp plan)."""
     problem, warm = room_problem(monkeypatch, tmp_path, 2842938094, "narrow", "far", 5)

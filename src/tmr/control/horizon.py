@@ -81,6 +81,7 @@ from tmr.control.horizon_model import (
     _Transcription,
     _warm_start,
     _weighted,
+    hessian_used,
     objective,
     objective_terms,
     samples_needed,
@@ -363,8 +364,9 @@ def plan_horizon(
     vals = model.values(xv)
     # only a plan that passed its checks (the qp plan) lends its clearance to the rows the start makes infeasible
     info["start_clearance_entries"] = model.keep_start_clearance(vals["clearance"]) if warm_start.success else 0
-    if opts.keep_warm_margins and opts.clearance_margin > 0 and warm_start.success:  # coarse NLP from a train plan
-        info["warm_margin_entries"] = model.keep_warm_margins(vals)
+    if opts.keep_warm_margins:  # the coarse NLP from a train plan: its margins where the plan keeps less
+        margins = opts.clearance_margin > 0 and warm_start.success
+        info["warm_margin_entries"] = model.keep_warm_margins(vals) if margins else 0
     masks = model.near_masks(vals)
     J_warm = _cost(su, Qw)
     obj_scale = max(J_warm, 1e-6) if opts.scale_objective else 1.0
@@ -487,7 +489,7 @@ def plan_horizon(
                 if opts.restart_rounds and rnd > 1:  # the added rows, from the initial point (primal only)
                     x_start, lam_start = x_init, None
                 ok = False
-                for label, extra in attempts:
+                for i_attempt, (label, extra) in enumerate(attempts):
                     remaining = phase_deadline - time.perf_counter()
                     # building the solver (casadi: the NLP's derivatives) cannot be interrupted: do not start one
                     # that would overrun the limit — as long as the last one took — or whose estimated build would
@@ -513,7 +515,9 @@ def plan_horizon(
                     t2 = time.perf_counter()
                     stall = opts.fast_stall_iter if phase == "fast" else None
                     callback = _IterationCallback(tr, pool, bar, name, phase_deadline, stall)
-                    used = opts.retry_hessian if label == "retry" and opts.retry_hessian is not None else hessian
+                    used = hessian_used(
+                        opts, opts.retry_hessian if label == "retry" and opts.retry_hessian is not None else hessian
+                    )
                     solver = tr.solver(obj_scale, extra, callback, used)
                     build_time, built_rows = time.perf_counter() - t2, tr.size
                     kwargs: dict[str, Any] = dict(x0=x_start, lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg)
@@ -551,7 +555,7 @@ def plan_horizon(
                             clearance_rows=int(tr.index["clearance"].size),
                             violated=len(viol),
                             crossed=_crossed(viol),
-                            transcription_time=(t2 - t1 if label == "primary" else 0.0) + t3 - t2,
+                            transcription_time=(t2 - t1 if i_attempt == 0 else 0.0) + t3 - t2,
                             solve_time=t4 - t3,
                             t_wall={k[7:]: round(float(v), 4) for k, v in stats.items() if k.startswith("t_wall_nlp")},
                         )

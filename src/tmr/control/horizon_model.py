@@ -106,13 +106,13 @@ class HorizonOptions:
         coarse_train_activation: for a warm start along train references (``diagnostics["references"]`` ``"train"``,
             :mod:`tmr.route.train`): the coarse NLP's ``activation`` [m], and its margins keep the plan's own values
             where it is inside them (``keep_warm_margins``); ``None``: as any warm start. 1.5 m (stop 52): the train
-            keeps 0.055 m from the obstacles and 2r + 5 mm between robots, inside the coarse margins, so the coarse
+            keeps 0.055 m from the obstacles and 2r + 25 mm between robots, inside the coarse margins, so the coarse
             NLP started outside its own rows (``Infeasible_Problem_Detected``); and the plan, the robots moving in
             turn, is far from the optimum, so the rows within 0.6 m of it were the wrong ones (rounds crossing
             obstacles) — ``formulations/horizon.md``, "Coarse knots", *From a train plan*.
         keep_warm_margins: an NLP with ``clearance_margin`` > 0 (the coarse pass sets both, for a train plan): the
             entries where the warm start keeps less than a margin take the warm start's own value as their bound
-            (:meth:`_Model.keep_warm_margins`).
+            (:meth:`_Model.keep_warm_margins`); with ``clearance_margin`` 0 there is no margin and nothing to keep.
         coarse_ends: the coarse grid also has every knot of the first and last this many steps (0: none).
         coarse_rate_scale: the coarse NLP's speed and acceleration bounds (joints and robots) times this (≤ 1).
         coarse_time_share: fraction of the time left (with a time limit) the coarse pass may use.
@@ -256,6 +256,8 @@ class HorizonOptions:
             raise ParameterError(f"activation must be > 0 m, got {self.activation}")
         _positive_or_none(self.crossing_depth, "crossing_depth", " m (or None: never)")
         _positive_or_none(self.coarse_train_activation, "coarse_train_activation", " m (or None: as any plan)")
+        if not isinstance(self.keep_warm_margins, bool):
+            raise ParameterError(f"keep_warm_margins must be True or False, got {self.keep_warm_margins!r}")
         if not 0 <= self.rate_activation < 1:
             raise ParameterError(f"rate_activation must be in [0, 1), got {self.rate_activation}")
         if self.max_rounds < 1 or self.max_iter < 1:
@@ -294,6 +296,18 @@ class HorizonOptions:
                 continue
             if v not in ("exact", "limited-memory", "gauss-newton"):
                 raise ParameterError(f"{name} must be 'exact', 'gauss-newton' or 'limited-memory', got {v!r}")
+
+
+def hessian_used(opts: HorizonOptions, hessian: str | None = None) -> str:
+    """The Hessian a solve gets when ``hessian`` is asked for (``None``: ``opts.hessian``): IPOPT's own
+    ``hessian_approximation``, if given in ``opts.ipopt``, decides whether a Hessian is needed at all."""
+    hessian = hessian or opts.hessian
+    asked = opts.ipopt.get("hessian_approximation")
+    if asked == "limited-memory":
+        return "limited-memory"
+    if asked == "exact" and hessian == "limited-memory":
+        return "exact"
+    return hessian
 
 
 def _positive_or_none(value: Any, name: str, what: str) -> None:
@@ -1010,18 +1024,23 @@ class _Model:
         return int(below[:, 1:].sum())
 
     def keep_warm_margins(self, vals: dict[str, Array]) -> int:
-        """The coarse pass's NLP (``clearance_margin`` > 0, its separation margin raised as much): where the warm
+        """The coarse pass's NLP (``clearance_margin`` > 0, its separation margin raised by as much): where the warm
         start, a plan that passed its checks, keeps less than a margin — a clearance sample nearer than d_safe +
-        margin, a pair nearer than 2r + its raised margin — that entry's lower bound is the warm start's own value
-        (a clearance never below d_safe), so the coarse NLP starts inside its rows. Train references
-        (:mod:`tmr.route.train`) keep 0.055 m from the obstacles and 2r + 5 mm between robots, less than the margins
-        (``formulations/horizon.md``, "Coarse knots"). Returns the number of entries relaxed."""
+        margin, a pair nearer than 2r + its raised margin — that entry's lower bound is the warm start's own value,
+        never below the fine NLP's (d_safe; 2r + separation margin, the raised one less ``clearance_margin``), so the
+        coarse NLP starts inside its rows. Train references (:mod:`tmr.route.train`) keep 0.055 m from the
+        obstacles and 2r + separation margin + 5 mm between robots, less than the margins (``formulations/horizon.md``,
+        "Coarse knots"). The fixed start's entries are no rows and are not counted. Returns the number of entries
+        relaxed."""
+        su = self.su
+        hard = max(su.sep_min - su.opts.clearance_margin, 0.0)  # the fine NLP's 2r + separation_margin [m]
         relaxed = 0
-        for name, floor in (("clearance", self.su.d_safe), ("separation", 0.0)):
+        for name, floor in (("clearance", su.d_safe), ("separation", hard * hard)):
             if name not in self.rows:
                 continue
             lo = np.array(self.lower(name), dtype=float)
             inside = vals[name] < lo
+            inside[:, self.fixed_columns(name)] = False  # the fixed start: no row of the NLP
             if inside.any():
                 lo[inside] = np.maximum(vals[name][inside], floor)
                 self.lo_entries[name] = lo
@@ -1208,13 +1227,7 @@ class _Transcription:
         """IPOPT on this transcription, cost divided by ``obj_scale``, with ``extra`` IPOPT options, an optional
         casadi ``iteration_callback`` (called with x, f, g, … of every iterate; it must outlive the solver) and the
         Hessian ``hessian`` (``None``: ``HorizonOptions.hessian``)."""
-        hessian = hessian or self.opts.hessian
-        # IPOPT's own option, if given (HorizonOptions.ipopt), decides whether a Hessian is needed at all
-        asked = self.opts.ipopt.get("hessian_approximation")
-        if asked == "limited-memory":
-            hessian = "limited-memory"
-        elif asked == "exact" and hessian == "limited-memory":
-            hessian = "exact"
+        hessian = hessian_used(self.opts, hessian)
         nlp = dict(self.nlp, f=self.nlp["f"] / obj_scale)
         opts = _solver_opts(self.opts, extra, hessian)
         opts.update(self.derivatives(obj_scale, hessian))
