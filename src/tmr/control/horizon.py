@@ -1134,6 +1134,8 @@ def _phases(opts: HorizonOptions) -> list[tuple[str, list[tuple[str, dict[str, A
     if fast is None or not fast < opts.min_hessian_perturbation or "min_hessian_perturbation" in opts.ipopt:
         return [("default", attempts)]
     capped = {"min_hessian_perturbation": float(fast), "max_iter": min(int(opts.fast_max_iter), int(opts.max_iter))}
+    if opts.fast_max_hessian_perturbation is not None:
+        capped["max_hessian_perturbation"] = float(opts.fast_max_hessian_perturbation)
     return [("fast", [("primary", capped)]), ("fallback", attempts)]
 
 

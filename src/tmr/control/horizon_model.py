@@ -141,6 +141,11 @@ class HorizonOptions:
             then exactly as without the fast attempt (``formulations/horizon.md``, "Two regularisation floors").
         fast_max_iter: IPOPT iterations per round of the fast attempt (60: the accepted rounds measured took 2–50,
             the one that diverges, scenario E with 4 robots and the active winch, runs 110 in its first).
+        fast_max_hessian_perturbation: IPOPT's ``max_hessian_perturbation`` in the fast attempt (``None``: IPOPT's
+            10²⁰): a step whose inertia correction needs more fails, and the attempt falls back. 10⁸ (stop 52): in
+            sparse-near-3098419812 with 5 robots the fast attempt regularised by 10¹⁰–10¹¹ and MUMPS reallocated
+            its memory at every factorisation, 95 s for 10 iterations (``formulations/horizon.md``, "Two
+            regularisation floors", item 6).
         fast_stall_iter: the fast attempt's round stops (status ``"Stalled"``) once this many IPOPT iterations have
             passed without a new cheapest iterate among those that hold the round's rows (``None``: never): it falls
             back from that iterate instead of spending the rest of its cap.
@@ -209,6 +214,7 @@ class HorizonOptions:
     min_hessian_perturbation: float = 1e-3
     fast_min_hessian_perturbation: float | None = 1e-5
     fast_max_iter: int = 60
+    fast_max_hessian_perturbation: float | None = 1e8
     fast_stall_iter: int | None = 20
     fast_time_share: float = 1.0
     accept_acceptable: bool = True
@@ -262,6 +268,7 @@ class HorizonOptions:
             raise ParameterError(f"rate_activation must be in [0, 1), got {self.rate_activation}")
         if self.max_rounds < 1 or self.max_iter < 1:
             raise ParameterError("max_rounds and max_iter must be ≥ 1")
+        _positive_or_none(self.fast_max_hessian_perturbation, "fast_max_hessian_perturbation", " (or None: IPOPT's)")
         _positive_or_none(
             self.fast_min_hessian_perturbation, "fast_min_hessian_perturbation", " (or None: no fast attempt)"
         )
