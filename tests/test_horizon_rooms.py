@@ -98,10 +98,11 @@ def test_the_coarse_pass_from_a_train_plan_keeps_its_margins_and_wider_rows(monk
 def test_the_fast_attempt_gives_up_before_ipopts_regularisation_runs_away(monkeypatch, tmp_path):
     """sparse-near-3098419812, 5 robots: in the fast attempt IPOPT regularised the Hessian by 10¹⁰–10¹¹ and MUMPS
     reallocated its memory again and again (95 s for 10 iterations, past the 60 s limit; the qp plan returned). With
-    ``fast_max_hessian_perturbation`` = 10⁸ the fast attempt stops within seconds and the fallback is optimal."""
+    ``fast_max_hessian_perturbation`` = 10⁸ the fast attempt stalls, the limit is not reached and the fallback is
+    optimal."""
     problem, warm = room_problem(monkeypatch, tmp_path, 3098419812, "sparse", "near", 5)
     d = plan_horizon(problem, warm, time_limit=60).diagnostics
     assert d["horizon_result"] == "optimal", d["horizon_note"]
     fast = [r for r in d["round_log"] if r["phase"] == "fast"]
-    assert fast and sum(r["solve_time"] for r in fast) < 30  # 95 s before: a bound far from either, not a timing
-    assert any(r["phase"] == "fallback" for r in d["round_log"])
+    assert fast and fast[-1]["status"] != "Maximum_WallTime_Exceeded"  # before: the limit stopped it, the qp plan
+    assert not d["time_limit_hit"] and any(r["phase"] == "fallback" for r in d["round_log"])
