@@ -37,11 +37,29 @@ def test_info_to_stdout_warnings_to_stderr_quiet_and_verbose(capsys):
         _args("--quiet", "--verbose")
 
 
+def _system_error_from_ctrl_c() -> SystemError:
+    """What CPython raises when a Ctrl-C lands inside a C extension's function (seen in casadi's DM.__array__): a
+    SystemError whose cause is the KeyboardInterrupt."""
+    try:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as ctrl_c:
+            raise SystemError("<function DM.__array__> returned a result with an exception set") from ctrl_c
+    except SystemError as exc:
+        return exc
+
+
 @pytest.mark.parametrize(
     ("exc", "code", "line"),
     [
         (TmrError("bad --goal"), 2, "error: bad --goal"),
         (KeyboardInterrupt(), 130, "interrupted"),
+        (_system_error_from_ctrl_c(), 130, "interrupted"),
+        (
+            SystemError("not from a Ctrl-C"),
+            1,
+            "internal error: SystemError: not from a Ctrl-C (rerun with --debug for the traceback)",
+        ),  # fmt: skip
         (RuntimeError("boom"), 1, "internal error: RuntimeError: boom (rerun with --debug for the traceback)"),
     ],
 )

@@ -683,6 +683,46 @@ def test_ctrl_c_during_the_nlp_stops_ipopt_and_is_raised_after_it() -> None:
         signal.signal(signal.SIGINT, outer)
 
 
+def test_ctrl_c_while_the_nlp_is_built_is_not_swallowed_by_casadi(monkeypatch) -> None:
+    """A Ctrl-C while a round's transcription is built (casadi calls Python helpers there and swallowed the
+    KeyboardInterrupt raised in them: the run went on to its end) stops the run: the whole of plan_horizon records
+    SIGINT, nested blocks keep the flag, and KeyboardInterrupt is raised before IPOPT finishes; the handler is
+    restored."""
+    import os
+    import signal
+
+    from tmr.control import horizon as hz
+
+    problem = small_problem()
+    warm, _ = solve(problem, "qp")
+    built = horizon_model._Transcription.__init__
+    solves: list[int] = []
+
+    def interrupted_build(self, *args, **kwargs):
+        built(self, *args, **kwargs)
+        if not solves:
+            solves.append(1)
+            os.kill(os.getpid(), signal.SIGINT)  # as if it landed inside casadi's own Python helpers
+
+    outer = signal.getsignal(signal.SIGINT)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    before = signal.getsignal(signal.SIGINT)
+    monkeypatch.setattr(horizon_model._Transcription, "__init__", interrupted_build)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            plan_horizon(problem, warm)
+        assert signal.getsignal(signal.SIGINT) is before and hz._DEPTH == [0]
+        nested: list[bool] = []
+        with pytest.raises(KeyboardInterrupt):  # a flag set in an inner block is raised at its end, not cleared
+            with hz._ctrl_c_stops_ipopt():
+                with hz._ctrl_c_stops_ipopt():
+                    os.kill(os.getpid(), signal.SIGINT)
+                nested.append(True)  # not reached: the inner block raised
+        assert not nested and hz._DEPTH == [0]
+    finally:
+        signal.signal(signal.SIGINT, outer)
+
+
 def test_time_limit_stops_ipopt_at_the_next_iteration(feasible_warm, monkeypatch):
     """IPOPT's own ``max_wall_time`` starts after casadi built the solver (seconds on long routes), so the iteration
     callback stops IPOPT at the first iteration past the deadline: a deadline already passed stops it after one

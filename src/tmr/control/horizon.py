@@ -175,20 +175,35 @@ _LOG = logging.getLogger("tmr")
 _INTERRUPT = threading.Event()
 
 
+#: How many :func:`_ctrl_c_stops_ipopt` blocks are open (the whole NLP's, a solve's inside it, the coarse pass's).
+_DEPTH = [0]
+
+
 @contextlib.contextmanager
 def _ctrl_c_stops_ipopt() -> Iterator[None]:
     """Ctrl-C during IPOPT: casadi catches the KeyboardInterrupt raised inside the iteration callback and IPOPT goes
     on (or its caller retries), so the first Ctrl-C was lost. Here SIGINT only sets :data:`_INTERRUPT`; the callback
-    then asks IPOPT to stop, and KeyboardInterrupt is raised once the solver has returned."""
-    _INTERRUPT.clear()
+    then asks IPOPT to stop, and KeyboardInterrupt is raised once the solver has returned. The whole of
+    :func:`plan_horizon` runs in such a block too: casadi also swallows a KeyboardInterrupt raised inside the Python
+    helpers it calls while the NLP is built (``IM_from_array`` converting an index list: the run went on to its end,
+    exit 0, 2 Ctrl-C in 12 on scenario E), so a Ctrl-C there is recorded and raised at the end of the next block
+    (a solve's, a round's start, the whole NLP's). Blocks nest: only the outermost one clears the flag and sets the
+    handler."""
     if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
         yield  # a worker that ignores Ctrl-C (tmr.sweep: the parent stops it) keeps ignoring it
         return
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: _INTERRUPT.set())
+    outer = _DEPTH[0] == 0
+    previous: Any = None
+    if outer:
+        _INTERRUPT.clear()
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: _INTERRUPT.set())
+    _DEPTH[0] += 1
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        _DEPTH[0] -= 1
+        if outer:
+            signal.signal(signal.SIGINT, previous)
     if _INTERRUPT.is_set():
         raise KeyboardInterrupt
 
@@ -280,6 +295,20 @@ def _time_limit(time_limit: float | None) -> float:
 # the planner
 # ----------------------------------------------------------------------------------------------------------------
 def plan_horizon(
+    problem: Any,
+    warm_start: Plan | None,
+    *,
+    time_limit: float | None = None,
+    progress: bool = False,
+    **options: Any,
+) -> Plan:
+    """Plan the whole horizon at once (:func:`_plan_horizon`; a Ctrl-C anywhere in it stops it, see
+    :func:`_ctrl_c_stops_ipopt`)."""
+    with _ctrl_c_stops_ipopt():
+        return _plan_horizon(problem, warm_start, time_limit=time_limit, progress=progress, **options)
+
+
+def _plan_horizon(
     problem: Any,
     warm_start: Plan | None,
     *,
@@ -474,6 +503,8 @@ def plan_horizon(
                 phase_deadline = now + opts.fast_time_share * max(deadline - now, 0.0)
             first_round = len(rounds)
             for rnd in range(1, opts.max_rounds + 1):
+                if _INTERRUPT.is_set():  # a Ctrl-C while the last round was checked or this one is set up
+                    raise KeyboardInterrupt
                 if time.perf_counter() >= phase_deadline:
                     stop = "time_limit"
                     break

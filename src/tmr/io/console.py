@@ -135,13 +135,7 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
                 warnings.filterwarnings("ignore", category=ResourceWarning)
             return body(args)
     except KeyboardInterrupt:
-        _ignore_further_interrupts()  # a second Ctrl-C (or one sent to the whole process group) while reporting
-        _handled_interrupt()
-        if debug:
-            LOG.exception("interrupted")
-        else:
-            LOG.error("interrupted")
-        return EXIT_INTERRUPTED
+        return _report_interrupt(debug)
     except TmrError as exc:
         if debug:
             LOG.exception("error: %s", exc)
@@ -149,6 +143,8 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
             LOG.error("error: %s", exc)
         return 2
     except Exception as exc:  # not a user error: one line unless --debug
+        if _from_interrupt(exc):  # Ctrl-C inside a C extension's call: its SystemError is the KeyboardInterrupt's
+            return _report_interrupt(debug)
         if debug:
             LOG.exception("internal error")
         else:
@@ -160,6 +156,31 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
         _state["running"] = False
         if _state.get("sigint") is not None:  # give the caller (e.g. a test session) its handler back
             signal.signal(signal.SIGINT, _state.pop("sigint"))
+
+
+def _report_interrupt(debug: bool) -> int:
+    """One line, "interrupted" (the traceback with --debug); further Ctrl-C ignored; the exit code 130."""
+    _ignore_further_interrupts()  # a second Ctrl-C (or one sent to the whole process group) while reporting
+    _handled_interrupt()
+    if debug:
+        LOG.exception("interrupted")
+    else:
+        LOG.error("interrupted")
+    return EXIT_INTERRUPTED
+
+
+def _from_interrupt(exc: BaseException) -> bool:
+    """Whether ``exc`` was caused by a KeyboardInterrupt: a Ctrl-C that lands while a C extension's function runs
+    (casadi's ``DM.__array__`` converting a solver's result) surfaces as ``SystemError: … returned a result with an
+    exception set`` whose cause is the KeyboardInterrupt."""
+    seen: set[int] = set()
+    e: BaseException | None = exc
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
 
 
 def _handled_interrupt() -> None:
