@@ -22,11 +22,9 @@ class _Caught(BaseException):
 def room_problem(monkeypatch: pytest.MonkeyPatch, tmp_path: Path, seed: int, density: str, goal: str, n: int):
     """The (problem, ``qp`` plan) that ``tmr plan --method horizon`` passes to :func:`plan_horizon` for the generated
     room ``(seed, density, goal)`` of :func:`tmr.sweep.rooms.generate_room` with ``n`` robots."""
+    from tests.test_plan_cli import _room_args
     from tmr.plan import main
-    from tmr.sweep.rooms import generate_room, write_geojson
 
-    room = generate_room(seed, density, goal)
-    path = write_geojson(room, tmp_path / "room.geojson")
     got: dict[str, Any] = {}
 
     def catch(problem, warm, **_: Any):
@@ -34,10 +32,9 @@ def room_problem(monkeypatch: pytest.MonkeyPatch, tmp_path: Path, seed: int, den
         raise _Caught
 
     monkeypatch.setattr(horizon_module, "plan_horizon", catch)
-    base, goal_xy = ",".join(map(str, room.base)), ",".join(map(str, room.goal))
-    argv = ["--map", str(path), f"--base={base}", f"--goal={goal_xy}", "--robots", str(n), "--method", "horizon"]
+    argv, _ = _room_args(tmp_path, seed, density, goal, n, "--method", "horizon", "--no-plots")
     with pytest.raises(_Caught):
-        main([*argv, "--no-plots", "--out", str(tmp_path / "out")])
+        main(argv)
     monkeypatch.undo()
     return got["problem"], got["warm"]
 

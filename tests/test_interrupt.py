@@ -199,8 +199,9 @@ def _interrupt(argv: list[str], trigger: str | None, delay: float, timeout: floa
         # in could land after the run, in the interpreter's exit, where SIGINT kills it: exit -2)
         ("qp loop", ["--scenario", "E", "--robots", "6", "--method", "qp"], r"^planning with", (0.2, 0.6)),
         # IPOPT (casadi): the iteration callback stops it, then KeyboardInterrupt (no "time limit"/"best iterate");
-        # E with 6 robots: IPOPT's first round runs for ~20 s (A's whole NLP now takes ~0.5 s: a Ctrl-C 0.3 s in
-        # could land after the outputs are published)
+        # E with 6 robots: its NLP takes ≈ 2 s after the first round's line, so a Ctrl-C 0.3 s in lands in a round or
+        # in the building of one (where casadi swallowed it: exit 0, 2 in 12 before plan_horizon recorded SIGINT
+        # throughout; A's whole NLP takes ~0.5 s: a Ctrl-C 0.3 s in could land after the outputs are published)
         (
             "IPOPT",
             ["--scenario", "E", "--robots", "6", "--method", "horizon", "--no-plots"],

@@ -726,7 +726,7 @@ def _plan_horizon(
         did = {"failed": "found no plan", "rejected": "was solved, its optimum rejected"}[coarse_log["result"]]
         what += f"; before it, the NLP on every {_nth(M)} knot {did}" + (f" ({why})" if why else "")
     floor = f"{_floor_of(opts, {}):g} ({_HESSIAN[opts.hessian]} Hessian)"
-    retried = [r for r in phase_rounds if r["attempt"] == "retry" and r["phase"] != "fast"]
+    retried = [r for r in phase_rounds if r["attempt"] == "retry"]  # the fast attempt has none
     if retried:  # a retry ran: its own floor and Hessian (HorizonOptions.retry_ipopt, retry_hessian)
         rt = retried[-1]
         floor += f", its retry {rt['min_hessian_perturbation']:g} ({_HESSIAN[rt['hessian']]} Hessian)"
