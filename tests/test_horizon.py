@@ -308,11 +308,32 @@ def test_reference_through_obstacle_with_equality_leader_fails_clearly():
     assert all(v.item == "robot 2" for v in err.violations)
     worst = max(err.violations, key=lambda v: v.amount)
     assert inside[worst.knot]
-    assert {v.knot for v in err.violations} >= set(np.flatnonzero(inside))  # d_safe > 0: a superset
+    # where it is outside but nearer than d_safe, its bound is its own clearance (a constant): only the inside knots
+    assert {v.knot for v in err.violations} == set(np.flatnonzero(inside[1:]) + 1)
     msg = str(err)
-    assert "leader's reference passes closer to the obstacles" in msg and f"knot {worst.knot}" in msg
+    assert "leader's reference passes inside the inflated obstacles" in msg and f"knot {worst.knot}" in msg
     for v in err.violations:
         assert v.group in GROUPS and 0 < v.knot <= 30 and v.amount > 0 and v.t == pytest.approx(0.05 * v.knot)
+
+
+def test_a_reference_nearer_than_d_safe_but_clear_keeps_its_own_clearance():
+    """The reference passes 2 cm over the inflated column (0 < c < d_safe = 5 cm): the equality leader's own sample is
+    a constant there, so its bound is its own clearance and it is no row; the rest of the chain keeps d_safe, and the
+    plan passes the exact check (which asks c ≥ 0). Before, the NLP was refused (``reference_infeasible``)."""
+    problem = small_problem(((3.2, 2.9), (4.2, 2.82), (5.2, 2.9)), T_end=3.0)
+    c = problem.env.exact_clearance(problem.trajectory.x)
+    near = np.flatnonzero((c >= 0) & (c < problem.qp_params.d_safe))
+    assert c.min() >= 0 and near.size
+    warm = solve(problem, "qp")[0]
+    plan = plan_horizon(problem, warm)
+    d = plan.diagnostics
+    assert d["horizon_result"] == "optimal", d["horizon_note"]
+    assert d["reference_clearance_entries"] == near.size
+    assert check(plan, problem.env).n_violation_steps == 0
+    assert np.linalg.norm(plan.robots[:, -1] - problem.trajectory.x, axis=1).max() < 1e-6  # on its reference
+    # the rest of the chain keeps d_safe: the follower's robot and the tethers' other samples (spline field)
+    clr = problem.env.exact_clearance(plan.robots[1:, 0])
+    assert clr.min() >= problem.qp_params.d_safe - 0.015  # field_error: the spline may overestimate by this
 
 
 def test_a_start_inside_d_safe_keeps_the_warm_starts_clearance_until_it_reaches_d_safe(monkeypatch):

@@ -396,6 +396,10 @@ def _plan_horizon(
     if opts.keep_warm_margins:  # the coarse NLP from a train plan: its margins where the plan keeps less
         margins = opts.clearance_margin > 0 and warm_start.success
         info["warm_margin_entries"] = model.keep_warm_margins(vals) if margins else 0
+    # the equality leader's own clearance: a constant; where its reference keeps less than d_safe, the bound is its own
+    if opts.leader_tolerance == 0:
+        exact = env.exact_clearance(su.ref)  # [m], the checker's hard limit: ≥ 0
+        info["reference_clearance_entries"] = model.keep_reference_clearance(vals["clearance"], exact)
     masks = model.near_masks(vals)
     J_warm = _cost(su, Qw)
     obj_scale = max(J_warm, 1e-6) if opts.scale_objective else 1.0
@@ -405,8 +409,8 @@ def _plan_horizon(
         bad = _reference_violations(model, vals, tol)
         if bad:
             raise HorizonInfeasible(
-                "horizon NLP: the leader's reference passes closer to the obstacles than d_safe (the equality leader "
-                "is on it at every knot), so no trajectory satisfies the rows: "
+                "horizon NLP: the leader's reference passes inside the inflated obstacles (the equality leader is on "
+                "it at every knot), so no trajectory satisfies the rows: "
                 + _describe(bad)
                 + "; give it a leader tolerance (leader_tolerance > 0) or a reference that keeps clear",
                 bad,
@@ -1458,6 +1462,7 @@ def _diagnostics(
         "warm_start_success": info.get("warm_start_success"),
         "warm_start_time": float(info.get("warm_start_time", 0.0)),
         "start_clearance_entries": int(info.get("start_clearance_entries", 0)),
+        "reference_clearance_entries": int(info.get("reference_clearance_entries", 0)),
         **({"warm_margin_entries": int(info["warm_margin_entries"])} if "warm_margin_entries" in info else {}),
         "transcription_time": float(trans_time),
         "solve_time": float(solve_time),

@@ -780,6 +780,8 @@ class _Model:
         self.Py = ca.vec(ca.mtimes(Ls, ca.vertcat(su.base[1] * ones, Pm[N:, :])))
         # per-entry lower bounds that replace a group's per-row ones (:meth:`keep_start_clearance`)
         self.lo_entries: dict[str, Array] = {}
+        # entries on fixed variables only that hold by their bounds: no rows (:meth:`keep_reference_clearance`)
+        self.constant_entries: dict[str, NDArray[np.bool_]] = {}
         if opts.clearance_margin > 0:
             lo = np.full((M, K + 1), su.d_safe + opts.clearance_margin)
             if opts.leader_tolerance == 0:
@@ -1030,6 +1032,34 @@ class _Model:
         self.lo_entries["clearance"] = lo
         return int(below[:, 1:].sum())
 
+    def keep_reference_clearance(self, clearance: Array, exact: Array) -> int:
+        """The equality leader (``leader_tolerance`` = 0) is on its reference x_d at every knot, so its own clearance
+        sample (the last tether's last, row N S − 1) is a constant, not a row IPOPT can act on. Where the reference
+        passes nearer than the bound — d_safe, a margin the planner keeps — yet outside the inflated obstacles (its
+        exact clearance ``exact`` (K+1,) ≥ 0 [m], the hard limit :func:`tmr.planner.check` verifies), that entry's
+        bound is the spline's own value there, min(d_safe, c), and it is left out of every transcription (a constant
+        row at its bound has no interior). The route planner keeps its reference clear of the inflated obstacles, not
+        d_safe from them, and the qp plan follows it (``formulations/horizon.md``, "The leader's reference").
+        ``clearance`` (N S, K+1) [m] are the spline's values. Knot 0 (the fixed start) is no row and is not counted;
+        where the reference is inside an obstacle the bound stays (the plan is refused: ``reference_infeasible``).
+        Returns the number of entries relaxed."""
+        su = self.su
+        if su.opts.leader_tolerance != 0:
+            return 0
+        row = su.N * su.S - 1
+        c = np.asarray(clearance, dtype=float)[row]
+        lo = np.array(self.lower("clearance"), dtype=float)
+        near = (c < lo[row]) & (np.asarray(exact, dtype=float) >= 0.0)
+        near[self.fixed_columns("clearance")] = False
+        if not near.any():
+            return 0
+        lo[row, near] = c[near]
+        self.lo_entries["clearance"] = lo
+        const = np.zeros(lo.shape, dtype=bool)
+        const[row] = near
+        self.constant_entries["clearance"] = const
+        return int(near.sum())
+
     def keep_warm_margins(self, vals: dict[str, Array]) -> int:
         """The coarse pass's NLP (``clearance_margin`` > 0, its separation margin raised by as much): where the warm
         start, a plan that passed its checks, keeps less than a margin — a clearance sample nearer than d_safe +
@@ -1081,6 +1111,9 @@ class _Model:
             m = np.abs(v) >= opts.rate_activation * self.rows[name].hi[:, None]
         m |= self.violation(name, v) > 0
         m[:, self.fixed_columns(name)] = False
+        const = self.constant_entries.get(name)
+        if const is not None:
+            m &= ~const
         return m
 
     def near_masks(self, vals: dict[str, Array]) -> dict[str, NDArray[np.bool_]]:
