@@ -1101,6 +1101,9 @@ def test_a_stalled_fast_attempt_stops_and_falls_back(monkeypatch):
     assert "'Stalled'" in d["horizon_note"]
     with pytest.raises(ParameterError, match="fast_stall_iter"):
         plan_horizon(problem, warm, fast_stall_iter=0)
+    for bad in (0, 1.5, True):
+        with pytest.raises(ParameterError, match="retry_first_after"):
+            plan_horizon(problem, warm, retry_first_after=bad)
 
 
 def _transcriptions(problem, options, clearance=True, warm=None):

@@ -608,6 +608,8 @@ def _plan_horizon(
                     break
                 if label != attempts[0][0]:  # the attempt that solved this round goes first in the next ones
                     attempts = sorted(attempts, key=lambda a: a[0] != label)
+                elif phase != "fast" and opts.retry_first_after is not None and rnd >= opts.retry_first_after:
+                    attempts = sorted(attempts, key=lambda a: a[0] != "retry")  # near a KKT point: the exact retry
                 if not viol:
                     stop = "converged"
                     break
@@ -1022,6 +1024,7 @@ def _coarse_pass(
         else samples_needed(float(su.limits[:, 1].max()), su.r, su.d_safe + opts.coarse_margin, opts.field_error)
     )
     sub = dict(options, coarse_knots=None, clearance_margin=opts.coarse_margin, samples_per_link=S)
+    sub.update(retry_first_after=None)  # measured: the exact retry first in its later rounds ended at max_iter
     train = opts.coarse_train_activation is not None and (warm_start.diagnostics or {}).get("references") == "train"
     if train:  # a train plan: inside the margins in places, far from the optimum (formulations/horizon.md)
         sub.update(activation=opts.coarse_train_activation, keep_warm_margins=True)

@@ -166,6 +166,12 @@ class HorizonOptions:
             robots (long_walls-mid-1226144109), a no-worse row f1 ≤ f1 of the ``qp`` plan active at the optimum
             (dense-near-4036741510 with 5 robots) — its primary ends at ``max_iter`` and the exact retry converges
             (``formulations/horizon.md``, "Two regularisation floors", item 5).
+        retry_first_after: in the whole NLP's fallback procedure (not the fast attempt, not the coarse pass), the
+            retry goes first from this round on once a round was solved (``None``: only after it solved one). A
+            round ≥ 2 starts at the last round's optimum with its multipliers, near a KKT point, where the
+            Gauss–Newton primary converges linearly — 150–200 iterations, or ``max_iter`` — and the exact Hessian
+            of the retry in 10–35 (stop 53: ``medium-far-1537572430`` with 8 robots 20.8 → 4.6 s,
+            ``formulations/horizon.md``, "Two regularisation floors", item 7).
         warm_start_leader_error: with the equality leader, the warm start *as given* (not projected on the reference)
             is still a fallback if its leader stays within this distance [m] of the reference at every knot and every
             other row holds (a ``qp`` plan lags its reference by ≤ 4.6 mm on A–D: CLIK).
@@ -221,6 +227,7 @@ class HorizonOptions:
     retry: bool = True
     retry_ipopt: dict[str, Any] = field(default_factory=lambda: {"min_hessian_perturbation": 1e-2})
     retry_hessian: str | None = "exact"
+    retry_first_after: int | None = 1
     warm_start_leader_error: float = 0.01
     expand: bool = False
     scale_objective: bool = True
@@ -256,6 +263,9 @@ class HorizonOptions:
                 raise ParameterError(f"HorizonOptions.{name} must be a finite number ≥ 0, got {v!r}")
         if self.fast_stall_iter is not None and int(self.fast_stall_iter) < 1:
             raise ParameterError(f"fast_stall_iter must be ≥ 1 or None, got {self.fast_stall_iter}")
+        after = self.retry_first_after
+        if after is not None and (isinstance(after, bool) or not isinstance(after, int) or after < 1):
+            raise ParameterError(f"retry_first_after must be a round number ≥ 1 or None, got {after!r}")
         if self.samples_per_link is not None and int(self.samples_per_link) < 1:
             raise ParameterError(f"samples_per_link must be ≥ 1, got {self.samples_per_link}")
         if not self.activation > 0:
