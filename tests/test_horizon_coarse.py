@@ -127,6 +127,30 @@ def test_the_polish_runs_with_its_own_floor(problem_and_warm):
     assert horizon_module._polish_phases(opts)[0][1][0][1]["min_hessian_perturbation"] == 3e-6
 
 
+def test_a_polish_stopped_at_its_cap_is_retried_from_its_last_iterate(problem_and_warm):
+    """The polish capped at 2 iterations stops at the cap: its retry (``coarse_polish_retry``, 10⁻²) goes on from the
+    last iterate and its multipliers and converges, so the plan is the optimum, and the note and the summary say so;
+    without the retry the polish's best feasible iterate is returned (stop 53: three generated rooms)."""
+    problem, warm, _ = problem_and_warm
+    d = plan_horizon(problem, warm, coarse_polish_iter=2, **ON).diagnostics
+    first, retry = [r for r in d["round_log"] if r["phase"] == "polish"]
+    assert (first["attempt"], first["status"], first["iterations"], first["from_last"]) == (
+        "primary",
+        "Maximum_Iterations_Exceeded",
+        2,
+        False,
+    )
+    assert (retry["attempt"], retry["min_hessian_perturbation"], retry["from_last"]) == ("retry", 1e-2, True)
+    assert retry["status"] == "Solve_Succeeded" and d["horizon_result"] == "optimal"
+    assert "at most 2 iterations, its retry 0.01 (exact Hessian) from the polish's last iterate" in d["horizon_note"]
+    assert d["horizon_summary"]["min_hessian_perturbation"] == 1e-2  # the floor of the solve that was returned
+    without = plan_horizon(problem, warm, coarse_polish_iter=2, coarse_polish_retry=None, **ON).diagnostics
+    assert without["horizon_result"] == "best_feasible_iterate"
+    assert [r["attempt"] for r in without["round_log"]] == ["primary"]
+    with pytest.raises(ParameterError, match="coarse_polish_retry"):
+        plan_horizon(problem, warm, coarse_polish_retry=1e-2)
+
+
 def test_an_accepted_coarse_optimum_without_time_to_polish_says_so(problem_and_warm, monkeypatch):
     """The time limit is reached once the coarse pass is done: its optimum is returned ("coarse_optimal") and the
     note says that the polish did not start, instead of describing it."""

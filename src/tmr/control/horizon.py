@@ -167,6 +167,7 @@ DEFAULT_TIME_LIMIT: float = 60.0
 _SUCCESS = ("Solve_Succeeded",)
 _ACCEPTABLE = ("Solved_To_Acceptable_Level",)
 _WALL_TIME = "Maximum_WallTime_Exceeded"
+_MAX_ITER = "Maximum_Iterations_Exceeded"  # IPOPT stopped at max_iter
 _STALLED = "Stalled"  # the fast attempt's round, stopped by the iteration callback (fast_stall_iter)
 
 _LOG = logging.getLogger("tmr")
@@ -560,6 +561,9 @@ def _plan_horizon(
                         kwargs.update(lam_x0=lam_start[0], lam_g0=tr.carry_multipliers(prev, lam_start[1]))
                     elif rnd == 1 and window_lam is not None:  # the polishing pass: the windows' multipliers
                         kwargs.update(lam_g0=_stitched_multipliers(tr, window_lam))
+                    from_last = phase == "polish" and i_attempt > 0 and status == _MAX_ITER and lam is not None
+                    if from_last:  # the polish stopped at its cap near the optimum: its retry goes on from there
+                        kwargs.update(x0=xv, lam_x0=lam[0], lam_g0=lam[1])  # primal–dual
                     t3 = time.perf_counter()
                     _LOG.debug("horizon NLP %s: IPOPT on %d rows", name, tr.size)  # "round 1 primary", …
                     with _ctrl_c_stops_ipopt():
@@ -584,6 +588,7 @@ def _plan_horizon(
                             phase=phase,
                             min_hessian_perturbation=_floor_of(opts, extra),
                             hessian=used,
+                            from_last=from_last,
                             status=status,
                             iterations=int(stats.get("iter_count", -1)),
                             rows=int(tr.size),
@@ -608,7 +613,12 @@ def _plan_horizon(
                     break
                 if label != attempts[0][0]:  # the attempt that solved this round goes first in the next ones
                     attempts = sorted(attempts, key=lambda a: a[0] != label)
-                elif phase != "fast" and opts.retry_first_after is not None and rnd >= opts.retry_first_after:
+                elif (
+                    phase != "fast"
+                    and phase != "polish"
+                    and opts.retry_first_after is not None
+                    and rnd >= opts.retry_first_after
+                ):
                     attempts = sorted(attempts, key=lambda a: a[0] != "retry")  # near a KKT point: the exact retry
                 if not viol:
                     stop = "converged"
@@ -768,6 +778,10 @@ def _plan_horizon(
                 f"({_HESSIAN[opts.fast_hessian]} Hessian), "
                 f"at most {opts.coarse_polish_iter} iterations"
             )
+            if retried:  # the polish's own retry (HorizonOptions.coarse_polish_retry)
+                rt = retried[-1]
+                floor_note += f", its retry {rt['min_hessian_perturbation']:g} ({_HESSIAN[rt['hessian']]} Hessian)"
+                floor_note += " from the polish's last iterate" if rt.get("from_last") else ""
         elif opts.coarse_polish_iter > 0:  # no polishing round ran (no time left for its build)
             floor_note += f"; the whole NLP from its optimum: not started ({coarse_log['polish'].replace('_', ' ')})"
     if chosen is None:
@@ -844,8 +858,6 @@ def _plan_horizon(
             diag["horizon_summary"]["min_hessian_perturbation"] = coarse_log["min_hessian_perturbation"]
             diag["horizon_summary"]["rounds"] = coarse_log["rounds"]
             diag.update(ipopt_status=coarse_log["status"], ipopt_success=True, rounds=coarse_log["rounds"])
-        elif coarse_c is not None:  # the polish's point
-            diag["horizon_summary"]["min_hessian_perturbation"] = _polish_floor(opts)
     if poses is not None:  # differential drive: how much executing the NLP's poses changed them
         diag.update(su.diff_log)
     qdot = np.vstack([np.diff(Q, axis=0) / su.Ts, np.zeros((1, su.n))])
@@ -1152,12 +1164,16 @@ def _polish_floor(opts: HorizonOptions) -> float:
 
 
 def _polish_phases(opts: HorizonOptions) -> list[tuple[str, list[tuple[str, dict[str, Any]]]]]:
-    """The polishing pass after an accepted coarse optimum: one attempt of the whole NLP from it, each round capped at
-    ``coarse_polish_iter`` IPOPT iterations, no retry (none at all with a cap of 0)."""
+    """The polishing pass after an accepted coarse optimum: the whole NLP from it, each round capped at
+    ``coarse_polish_iter`` IPOPT iterations, then ``coarse_polish_retry`` if that attempt fails (no pass at all with a
+    cap of 0)."""
     if opts.coarse_polish_iter <= 0:
         return []
     cap = {"min_hessian_perturbation": _polish_floor(opts), "max_iter": int(opts.coarse_polish_iter)}
-    return [("polish", [("primary", cap)])]
+    attempts: list[tuple[str, dict[str, Any]]] = [("primary", cap)]
+    if opts.coarse_polish_retry is not None:
+        attempts.append(("retry", dict(opts.coarse_polish_retry)))
+    return [("polish", attempts)]
 
 
 def _phases(opts: HorizonOptions) -> list[tuple[str, list[tuple[str, dict[str, Any]]]]]:

@@ -129,6 +129,13 @@ class HorizonOptions:
             walls room with 8 robots, its coarse optimum repaired, converges in 36 iterations where 10⁻⁵ stops at
             the cap of 60 (steps of 5–10 cm in a flat valley, the floor hit at every iteration); scenario E with 6
             robots takes 15 instead of 5 (``formulations/horizon.md``, "Coarse knots").
+        coarse_polish_retry: if the polish stops without a solution, it is solved once more with these IPOPT
+            options merged in and the Hessian ``retry_hessian`` — from the polish's last iterate and multipliers if
+            it stopped at its cap, else from the same start (``None``: no retry; the coarse optimum or a cheaper
+            feasible iterate is returned). 10⁻², at most 150 iterations: ``walls-far-3968734336`` with 5 robots,
+            ``medium-far-2413201021`` with 5 and ``narrow-mid-3934587917`` with 3 stop at the cap of 60 at 10⁻⁴;
+            the retry converges in 21, 17 + 17 and 18 iterations (stop 53, ``formulations/horizon.md``, "Coarse
+            knots").
         fast_min_hessian_perturbation: IPOPT's ``min_hessian_perturbation`` of a first, fast attempt (``None``: no
             fast attempt; also skipped unless it is below ``min_hessian_perturbation`` and ``ipopt`` does not set
             that option): the whole constraint-generation procedure runs first with this floor (10⁻⁵: scenario E with
@@ -241,6 +248,9 @@ class HorizonOptions:
     coarse_repair: int = 2
     coarse_polish_iter: int = 60
     coarse_polish_min_hessian_perturbation: float | None = 1e-4
+    coarse_polish_retry: dict[str, Any] | None = field(
+        default_factory=lambda: {"min_hessian_perturbation": 1e-2, "max_iter": 150}
+    )
     coarse_rate_scale: float = 0.95
     coarse_time_share: float = 0.5
     window: int | None = None
@@ -287,6 +297,10 @@ class HorizonOptions:
             "coarse_polish_min_hessian_perturbation",
             " (or None: the fast attempt's)",
         )
+        if self.coarse_polish_retry is not None and not isinstance(self.coarse_polish_retry, dict):
+            raise ParameterError(
+                f"coarse_polish_retry must be a dict of IPOPT options or None, got {self.coarse_polish_retry!r}"
+            )
         if self.fast_max_iter < 1 or not 0 < self.fast_time_share <= 1:
             raise ParameterError("fast_max_iter must be ≥ 1 and fast_time_share in (0, 1]")
         if self.window is not None and (isinstance(self.window, bool) or int(self.window) < 2):
