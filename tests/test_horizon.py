@@ -316,24 +316,59 @@ def test_reference_through_obstacle_with_equality_leader_fails_clearly():
         assert v.group in GROUPS and 0 < v.knot <= 30 and v.amount > 0 and v.t == pytest.approx(0.05 * v.knot)
 
 
-def test_a_reference_nearer_than_d_safe_but_clear_keeps_its_own_clearance():
+def test_a_reference_nearer_than_d_safe_but_clear_keeps_its_own_clearance(monkeypatch):
     """The reference passes 2 cm over the inflated column (0 < c < d_safe = 5 cm): the equality leader's own sample is
     a constant there, so its bound is its own clearance and it is no row; the rest of the chain keeps d_safe, and the
     plan passes the exact check (which asks c ≥ 0). Before, the NLP was refused (``reference_infeasible``)."""
     problem = small_problem(((3.2, 2.9), (4.2, 2.82), (5.2, 2.9)), T_end=3.0)
-    c = problem.env.exact_clearance(problem.trajectory.x)
-    near = np.flatnonzero((c >= 0) & (c < problem.qp_params.d_safe))
-    assert c.min() >= 0 and near.size
+    ref, d_safe = problem.trajectory.x, problem.qp_params.d_safe
+    assert problem.env.exact_clearance(ref).min() >= 0
+    spline = ClearanceSpline(problem.env).evaluate(ref.T)[0]
+    near = np.flatnonzero(spline[1:] < d_safe) + 1  # the spline's own entries below d_safe, knots ≥ 1
+    assert near.size
     warm = solve(problem, "qp")[0]
+    rows: list[np.ndarray] = []  # the leader sample's clearance entries that were rows, in every transcription
+    init = horizon_model._Transcription.__init__
+
+    def spy(self, model, masks):
+        rows.append(masks["clearance"][model.su.N * model.su.S - 1].copy())
+        init(self, model, masks)
+
+    monkeypatch.setattr(horizon_model._Transcription, "__init__", spy)
     plan = plan_horizon(problem, warm)
     d = plan.diagnostics
     assert d["horizon_result"] == "optimal", d["horizon_note"]
     assert d["reference_clearance_entries"] == near.size
+    assert rows and not any(r[near].any() for r in rows)  # constants: never rows
+    assert any(r[near.min() - 3 : near.min()].any() for r in rows)  # the leader's other knots near the column are
     assert check(plan, problem.env).n_violation_steps == 0
-    assert np.linalg.norm(plan.robots[:, -1] - problem.trajectory.x, axis=1).max() < 1e-6  # on its reference
-    # the rest of the chain keeps d_safe: the follower's robot and the tethers' other samples (spline field)
-    clr = problem.env.exact_clearance(plan.robots[1:, 0])
-    assert clr.min() >= problem.qp_params.d_safe - 0.015  # field_error: the spline may overestimate by this
+    assert np.linalg.norm(plan.robots[:, -1] - ref, axis=1).max() < 1e-6  # on its reference
+    # the follower keeps d_safe (its robot: the spline may overestimate the exact clearance by field_error)
+    assert problem.env.exact_clearance(plan.robots[1:, 0]).min() >= d_safe - 0.015
+
+
+def test_a_horizon_plan_that_fails_the_exact_check_gives_way_to_the_qp_plan(monkeypatch):
+    """The NLP keeps the spline field's clearance at sampled tether points; should its plan still fail the exact
+    (shapely) check, ``solve`` returns the verified qp plan (``horizon_result`` "warm_start", stop "exact_check") and
+    says why, instead of a failed plan. Here the NLP's plan is made to put the follower inside the column."""
+    problem = small_problem()
+    real = horizon_module.plan_horizon
+
+    def inside(problem, warm, **kw):
+        plan = real(problem, warm, **kw)
+        robots = plan.robots.copy()
+        robots[10:13, 0] = (4.2, 2.0)  # the column's centre
+        return dataclasses.replace(plan, robots=robots)
+
+    monkeypatch.setattr(horizon_module, "plan_horizon", inside)
+    plan, metrics = solve(problem, "horizon")
+    d = plan.diagnostics
+    assert metrics.violation_free and plan.success and plan.method == "horizon"
+    assert d["horizon_result"] == "warm_start" and d["horizon_summary"]["stop"] == "exact_check"
+    assert "fails the exact check (robot_clearance at 3 step(s) from 10" in d["horizon_note"]
+    assert d["horizon_note"].endswith("returned its qp warm start, which passes every check")
+    qp, _ = solve(problem, "qp")
+    np.testing.assert_array_equal(plan.q, qp.q)
 
 
 def test_a_start_inside_d_safe_keeps_the_warm_starts_clearance_until_it_reaches_d_safe(monkeypatch):
@@ -1104,6 +1139,11 @@ def test_a_stalled_fast_attempt_stops_and_falls_back(monkeypatch):
     for bad in (0, 1.5, True):
         with pytest.raises(ParameterError, match="retry_first_after"):
             plan_horizon(problem, warm, retry_first_after=bad)
+        with pytest.raises(ParameterError, match="retry_first_max_iter"):
+            plan_horizon(problem, warm, retry_first_max_iter=bad)
+    for bad in (1e-2, {"max_iter": 0}, {"min_hessian_perturbation": -1.0}):
+        with pytest.raises(ParameterError, match="coarse_polish_retry"):
+            plan_horizon(problem, warm, coarse_polish_retry=bad)
 
 
 def _transcriptions(problem, options, clearance=True, warm=None):

@@ -117,7 +117,8 @@ def test_the_polish_runs_with_its_own_floor(problem_and_warm):
     note; ``None`` gives the fast attempt's (10⁻⁵); an ``ipopt`` floor, merged last, wins and is the one named."""
     problem, warm, _ = problem_and_warm
     for given, floor in ((None, 1e-4), ({"coarse_polish_min_hessian_perturbation": None}, 1e-5)):
-        d = plan_horizon(problem, warm, coarse_polish_iter=15, **ON, **(given or {})).diagnostics
+        d = plan_horizon(problem, warm, coarse_polish_iter=15, coarse_polish_retry=None, **ON, **(given or {}))
+        d = d.diagnostics
         polish = [r for r in d["round_log"] if r["phase"] == "polish"]
         assert polish and all(r["min_hessian_perturbation"] == floor for r in polish)
         note = d["horizon_note"]
@@ -132,7 +133,28 @@ def test_a_polish_stopped_at_its_cap_is_retried_from_its_last_iterate(problem_an
     last iterate and its multipliers and converges, so the plan is the optimum, and the note and the summary say so;
     without the retry the polish's best feasible iterate is returned (stop 53: three generated rooms)."""
     problem, warm, _ = problem_and_warm
-    d = plan_horizon(problem, warm, coarse_polish_iter=2, **ON).diagnostics
+    calls: list[tuple[dict, np.ndarray]] = []  # each IPOPT call's arguments and the x it returned
+    build = horizon_model._Transcription.solver
+
+    class Spy:
+        def __init__(self, solver):
+            self.solver = solver
+
+        def __call__(self, **kwargs):
+            sol = self.solver(**kwargs)
+            calls.append((kwargs, np.asarray(sol["x"], dtype=float).ravel()))
+            return sol
+
+        def stats(self):
+            return self.solver.stats()
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(horizon_model._Transcription, "solver", lambda tr, *a, **k: Spy(build(tr, *a, **k)))
+        d = plan_horizon(problem, warm, coarse_polish_iter=2, **ON).diagnostics
+    (primary_args, primary_x), (retry_args, _) = calls[-2:]  # the polish's two solves, after the coarse NLP's
+    np.testing.assert_array_equal(np.asarray(retry_args["x0"], dtype=float).ravel(), primary_x)  # its last iterate
+    assert "lam_g0" in retry_args and "lam_x0" in retry_args  # and its multipliers
+    assert not np.array_equal(np.asarray(primary_args["x0"], dtype=float).ravel(), primary_x)
     first, retry = [r for r in d["round_log"] if r["phase"] == "polish"]
     assert (first["attempt"], first["status"], first["iterations"], first["from_last"]) == (
         "primary",

@@ -64,9 +64,9 @@ def test_the_retry_with_the_exact_hessian_solves_where_gauss_newton_stalls(monke
 def test_the_attempt_that_solved_a_round_goes_first_in_the_next(monkeypatch, tmp_path):
     """dense-near-4036741510, 5 robots folded near the base: round 1's Gauss–Newton primary fails and its exact retry
     solves it; round 2 (the rows that came out violated added) starts with the retry, not with another failing
-    primary."""
+    primary (``retry_first_after=None``: this rule alone)."""
     problem, warm = room_problem(monkeypatch, tmp_path, 4036741510, "dense", "near", 5)
-    d = plan_horizon(problem, warm).diagnostics
+    d = plan_horizon(problem, warm, retry_first_after=None).diagnostics
     assert d["horizon_result"] == "optimal", d["horizon_note"]
     log = _fallback(d)
     assert [(r["round"], r["attempt"]) for r in log[:2]] == [(1, "primary"), (1, "retry")]

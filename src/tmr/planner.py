@@ -840,8 +840,10 @@ def solve(
     Returns the plan (``success`` False with the reason if a constraint is violated anywhere) and its metrics. The
     horizon NLP starts from the very plan ``solve(problem, "qp")`` returns (trailing or train references, whichever
     it used) and is never worse than it, in each of f1–f4 (rows of the NLP): if IPOPT fails, it is the best feasible
-    iterate or the ``qp`` plan itself (``diagnostics["horizon_result"]`` says which); if nothing feasible is found,
-    the failed plan names the violated limits.
+    iterate or the ``qp`` plan itself (``diagnostics["horizon_result"]`` says which); a horizon plan that fails the
+    exact check (:func:`check`: the NLP keeps the spline field's clearance at sampled tether points) is replaced by the
+    ``qp`` plan if that one passes (``horizon_summary["stop"]`` "exact_check"); if nothing feasible is found, the
+    failed plan names the violated limits.
 
     The plan's ``wall_time`` (and its metrics' ``wall_time``, ``ms_per_step``) is the whole of this call [s]: every
     qp run (the train-reference retry too), the horizon's warm start and NLP, and the checks;
@@ -870,24 +872,9 @@ def solve(
         warm.method = "horizon"
         first = str(exc).split(";")[0]
         if warm.success:  # the NLP's own rows are stricter than the checks: the verified warm start stands
-            warm_metrics = evaluate(warm, problem.env)
-            terms = {k: float(getattr(warm_metrics, k)) for k in ("f1", "f2", "f3", "f4")}
-            warm.diagnostics = dict(warm.diagnostics, horizon_result="warm_start")
             floor = exc.diagnostics.get("horizon_floor_note")  # which IPOPT attempts ran (the fast one, a fallback)
             floor = f"; {floor}" if floor else ""
-            warm.diagnostics["horizon_note"] = f"{first}{floor}; returned its qp warm start, which passes every check"
-            warm.diagnostics["horizon_summary"] = dict(
-                result="warm_start",
-                stop=exc.diagnostics.get("horizon_stop", exc.status),
-                iterations=int(exc.diagnostics.get("ipopt_iterations", 0)),
-                rounds=int(exc.diagnostics.get("rounds", 0)),
-                terms=terms,
-                warm_start_terms=dict(terms),
-                min_hessian_perturbation=None,  # the plan is no IPOPT point
-                fast_attempt=exc.diagnostics.get("horizon_fast_attempt"),
-            )
-            if exc.diagnostics.get("horizon_coarse") is not None:  # long horizons: what the coarse pass did
-                warm.diagnostics["horizon_summary"]["coarse"] = exc.diagnostics["horizon_coarse"]
+            warm_metrics = _qp_plan_returned(warm, problem, f"{first}{floor}", exc.diagnostics, exc.status)
             return _whole(warm, warm_metrics, start, **parts)
         warm.success = False
         reason = f"horizon: {exc}"
@@ -902,7 +889,37 @@ def solve(
             result.spans, problem.chain_params, result.Ts, q.span_margin, q.span_approach_rate
         )
     metrics = check(result, problem.env, goal_tolerance=problem.path_params.goal_tolerance)
+    if not metrics.violation_free and warm.success:  # the NLP's rows held, the exact check did not: the qp plan
+        bad = ", ".join(f"{k} at {len(ks)} step(s) from {ks[0]}" for k, ks in metrics.violation_steps.items() if ks)
+        d = result.diagnostics
+        why = f"horizon NLP: its plan ({d.get('horizon_result')}) fails the exact check ({bad})"
+        diagnostics = dict(d, horizon_stop="exact_check", ipopt_iterations=d.get("ipopt_iterations", 0))
+        warm.method = "horizon"
+        warm_metrics = _qp_plan_returned(warm, problem, why, diagnostics, "exact_check")
+        return _whole(warm, warm_metrics, start, **parts)
     return _whole(result, metrics, start, **parts)
+
+
+def _qp_plan_returned(warm: Plan, problem: Problem, why: str, diagnostics: dict[str, Any], status: str) -> Metrics:
+    """The verified ``qp`` plan ``warm`` as the horizon's plan (``horizon_result`` "warm_start"), its note ``why`` and
+    "returned its qp warm start", its summary from the NLP's ``diagnostics``; returns its metrics."""
+    warm_metrics = evaluate(warm, problem.env)
+    terms = {k: float(getattr(warm_metrics, k)) for k in ("f1", "f2", "f3", "f4")}
+    warm.diagnostics = dict(warm.diagnostics, horizon_result="warm_start")
+    warm.diagnostics["horizon_note"] = f"{why}; returned its qp warm start, which passes every check"
+    warm.diagnostics["horizon_summary"] = dict(
+        result="warm_start",
+        stop=diagnostics.get("horizon_stop", status),
+        iterations=int(diagnostics.get("ipopt_iterations", 0)),
+        rounds=int(diagnostics.get("rounds", 0)),
+        terms=terms,
+        warm_start_terms=dict(terms),
+        min_hessian_perturbation=None,  # the plan is no IPOPT point
+        fast_attempt=diagnostics.get("horizon_fast_attempt"),
+    )
+    if diagnostics.get("horizon_coarse") is not None:  # long horizons: what the coarse pass did
+        warm.diagnostics["horizon_summary"]["coarse"] = diagnostics["horizon_coarse"]
+    return warm_metrics
 
 
 def _whole(result: Plan, metrics: Metrics, start: float, **parts: float) -> tuple[Plan, Metrics]:

@@ -398,16 +398,20 @@ def _plan_horizon(
         margins = opts.clearance_margin > 0 and warm_start.success
         info["warm_margin_entries"] = model.keep_warm_margins(vals) if margins else 0
     # the equality leader's own clearance: a constant; where its reference keeps less than d_safe, the bound is its own
+    exact = np.full(su.K + 1, np.inf)  # the reference's exact clearance [m] where the spline has it below d_safe
     if opts.leader_tolerance == 0:
-        exact = env.exact_clearance(su.ref)  # [m], the checker's hard limit: ≥ 0
-        info["reference_clearance_entries"] = model.keep_reference_clearance(vals["clearance"], exact)
+        low = vals["clearance"][su.N * su.S - 1] < su.d_safe
+        if low.any():
+            exact[low] = env.exact_clearance(su.ref[low])  # the checker's hard limit: ≥ 0
+            info["reference_clearance_entries"] = model.keep_reference_clearance(vals["clearance"], exact)
     masks = model.near_masks(vals)
     J_warm = _cost(su, Qw)
     obj_scale = max(J_warm, 1e-6) if opts.scale_objective else 1.0
     trans_time, solve_time = time.perf_counter() - t0, 0.0
     t0 = time.perf_counter()
     if opts.leader_tolerance == 0:  # the leader's own clearance rows depend on fixed variables only
-        bad = _reference_violations(model, vals, tol)
+        bad = _reference_violations(model, vals, tol)  # only where the reference is inside: how deep, exactly [m]
+        bad = [v._replace(amount=float(-exact[v.knot])) if np.isfinite(exact[v.knot]) else v for v in bad]
         if bad:
             raise HorizonInfeasible(
                 "horizon NLP: the leader's reference passes inside the inflated obstacles (the equality leader is on "
@@ -507,6 +511,7 @@ def _plan_horizon(
                 now = time.perf_counter()
                 phase_deadline = now + opts.fast_time_share * max(deadline - now, 0.0)
             first_round = len(rounds)
+            retry_failed = False  # a retry of this phase stopped without a solution (it no longer goes first)
             for rnd in range(1, opts.max_rounds + 1):
                 if _INTERRUPT.is_set():  # a Ctrl-C while the last round was checked or this one is set up
                     raise KeyboardInterrupt
@@ -525,7 +530,17 @@ def _plan_horizon(
                 if opts.restart_rounds and rnd > 1:  # the added rows, from the initial point (primal only)
                     x_start, lam_start = x_init, None
                 ok = False
-                for i_attempt, (label, extra) in enumerate(attempts):
+                order = attempts
+                if (  # near the last round's optimum: the exact retry first, unless one failed
+                    phase in ("fallback", "default")
+                    and opts.retry_first_after is not None
+                    and rnd > opts.retry_first_after
+                    and not retry_failed
+                ):
+                    order = sorted(attempts, key=lambda a: a[0] != "retry")
+                    if opts.retry_first_max_iter is not None and order[0][0] == "retry":  # a short try, then the other
+                        order[0] = ("retry", dict(order[0][1], max_iter=int(opts.retry_first_max_iter)))
+                for i_attempt, (label, extra) in enumerate(order):
                     remaining = phase_deadline - time.perf_counter()
                     # building the solver (casadi: the NLP's derivatives) cannot be interrupted: do not start one
                     # that would overrun the limit — as long as the last one took — or whose estimated build would
@@ -561,7 +576,7 @@ def _plan_horizon(
                         kwargs.update(lam_x0=lam_start[0], lam_g0=tr.carry_multipliers(prev, lam_start[1]))
                     elif rnd == 1 and window_lam is not None:  # the polishing pass: the windows' multipliers
                         kwargs.update(lam_g0=_stitched_multipliers(tr, window_lam))
-                    from_last = phase == "polish" and i_attempt > 0 and status == _MAX_ITER and lam is not None
+                    from_last = phase == "polish" and label == "retry" and i_attempt > 0 and status == _MAX_ITER
                     if from_last:  # the polish stopped at its cap near the optimum: its retry goes on from there
                         kwargs.update(x0=xv, lam_x0=lam[0], lam_g0=lam[1])  # primal–dual
                     t3 = time.perf_counter()
@@ -601,6 +616,7 @@ def _plan_horizon(
                         )
                     )
                     ok = status in _SUCCESS or (opts.accept_acceptable and status in _ACCEPTABLE)
+                    retry_failed = retry_failed or (label == "retry" and not ok)
                     if ok:
                         break
                     if status == _WALL_TIME:
@@ -613,13 +629,6 @@ def _plan_horizon(
                     break
                 if label != attempts[0][0]:  # the attempt that solved this round goes first in the next ones
                     attempts = sorted(attempts, key=lambda a: a[0] != label)
-                elif (
-                    phase != "fast"
-                    and phase != "polish"
-                    and opts.retry_first_after is not None
-                    and rnd >= opts.retry_first_after
-                ):
-                    attempts = sorted(attempts, key=lambda a: a[0] != "retry")  # near a KKT point: the exact retry
                 if not viol:
                     stop = "converged"
                     break
@@ -727,11 +736,14 @@ def _plan_horizon(
         chosen = chosen or warm_c
     if coarse_c is not None:  # the polish's optimum, else the cheaper of its best feasible iterate and the coarse plan
         assert coarse_log is not None
-        polished = chosen is not None and chosen.result == "optimal"
-        coarse_log["polish"] = "converged" if polished else (stop or "not started")
+        costlier = chosen is not None and chosen.result == "optimal" and chosen.J > coarse_c.J
+        polished = chosen is not None and chosen.result == "optimal" and not costlier
+        coarse_log["polish"] = "converged" if polished else "costlier" if costlier else (stop or "not started")
         if polished:
             what = f"{coarse_what}; from it, {what}"
-        else:  # no polish (coarse_polish_iter = 0, or no time left for it), or it did not converge
+        else:  # no polish (coarse_polish_iter = 0, or no time left for it), it did not converge or costs more
+            if costlier:  # a KKT point of the whole NLP, but above the coarse optimum it started from
+                what += f", its optimum costing more than the coarse one ({chosen.J:.6g} > {coarse_c.J:.6g})"
             what = f"{coarse_what}; from it, the whole NLP: {what}" if phase_rounds else coarse_what
             stop = stop if phase_rounds else "converged"
             if chosen is None or chosen.result != "best_feasible_iterate" or chosen.J >= coarse_c.J:
@@ -1171,7 +1183,7 @@ def _polish_phases(opts: HorizonOptions) -> list[tuple[str, list[tuple[str, dict
         return []
     cap = {"min_hessian_perturbation": _polish_floor(opts), "max_iter": int(opts.coarse_polish_iter)}
     attempts: list[tuple[str, dict[str, Any]]] = [("primary", cap)]
-    if opts.coarse_polish_retry is not None:
+    if opts.retry and opts.coarse_polish_retry is not None:
         attempts.append(("retry", dict(opts.coarse_polish_retry)))
     return [("polish", attempts)]
 
@@ -1472,7 +1484,10 @@ def _diagnostics(
         "constraint_violation": max(worst, 0.0),
         "variables": int(model.x.shape[0]),
         "rows": int(tr.size) if tr is not None else 0,
-        "rows_full": int(sum(vals[g].shape[0] * np.count_nonzero(~model.fixed_columns(g)) for g in model.rows)),
+        "rows_full": int(
+            sum(vals[g].shape[0] * np.count_nonzero(~model.fixed_columns(g)) for g in model.rows)
+            - sum(int(c.sum()) for c in model.constant_entries.values())  # constants, no rows
+        ),
         "clearance_rows": int(tr.index["clearance"].size) if tr is not None else 0,
         "samples_per_link": int(su.S),
         "rounds": len({(r.get("phase"), r["round"]) for r in rounds}),

@@ -122,8 +122,9 @@ class HorizonOptions:
             repaired trajectory is checked again (0: no repair; only if the windows span at most half the knots,
             in ``coarse_time_share`` of the time left; ``formulations/horizon.md``, "Coarse knots").
         coarse_polish_iter: IPOPT iterations (per round) of the whole NLP started from an accepted coarse optimum: if
-            it converges, its optimum is the plan (``"optimal"``), else the coarse optimum (``"coarse_optimal"``) or a
-            cheaper feasible iterate of it; 0: no polish.
+            it converges (at most this, or its retry ``coarse_polish_retry``) to an optimum no costlier than the
+            coarse one, that is the plan (``"optimal"``), else the coarse optimum (``"coarse_optimal"``) or a cheaper
+            feasible iterate of it; 0: no polish.
         coarse_polish_min_hessian_perturbation: IPOPT's floor in that polish (exact Hessian, ``fast_hessian``;
             ``None``: the fast attempt's floor if it is on, else ``min_hessian_perturbation``). 10⁻⁴: the corner
             walls room with 8 robots, its coarse optimum repaired, converges in 36 iterations where 10⁻⁵ stops at
@@ -131,11 +132,11 @@ class HorizonOptions:
             robots takes 15 instead of 5 (``formulations/horizon.md``, "Coarse knots").
         coarse_polish_retry: if the polish stops without a solution, it is solved once more with these IPOPT
             options merged in and the Hessian ``retry_hessian`` — from the polish's last iterate and multipliers if
-            it stopped at its cap, else from the same start (``None``: no retry; the coarse optimum or a cheaper
-            feasible iterate is returned). 10⁻², at most 150 iterations: ``walls-far-3968734336`` with 5 robots,
-            ``medium-far-2413201021`` with 5 and ``narrow-mid-3934587917`` with 3 stop at the cap of 60 at 10⁻⁴;
-            the retry converges in 21, 17 + 17 and 18 iterations (stop 53, ``formulations/horizon.md``, "Coarse
-            knots").
+            it stopped at its cap, else from the same start (``None``, or ``retry`` False: no retry; the coarse
+            optimum or a cheaper feasible iterate is returned). 10⁻², at most 150 iterations:
+            ``walls-far-3968734336`` with 5 robots, ``medium-far-2413201021`` with 5 and ``narrow-mid-3934587917``
+            with 3 stop at the cap of 60 at 10⁻⁴; the retry converges in 21, 17 + 17 and 18 iterations (stop 53,
+            ``formulations/horizon.md``, "Coarse knots").
         fast_min_hessian_perturbation: IPOPT's ``min_hessian_perturbation`` of a first, fast attempt (``None``: no
             fast attempt; also skipped unless it is below ``min_hessian_perturbation`` and ``ipopt`` does not set
             that option): the whole constraint-generation procedure runs first with this floor (10⁻⁵: scenario E with
@@ -173,12 +174,15 @@ class HorizonOptions:
             robots (long_walls-mid-1226144109), a no-worse row f1 ≤ f1 of the ``qp`` plan active at the optimum
             (dense-near-4036741510 with 5 robots) — its primary ends at ``max_iter`` and the exact retry converges
             (``formulations/horizon.md``, "Two regularisation floors", item 5).
-        retry_first_after: in the whole NLP's fallback procedure (not the fast attempt, not the coarse pass), the
-            retry goes first from this round on once a round was solved (``None``: only after it solved one). A
-            round ≥ 2 starts at the last round's optimum with its multipliers, near a KKT point, where the
-            Gauss–Newton primary converges linearly — 150–200 iterations, or ``max_iter`` — and the exact Hessian
-            of the retry in 10–35 (stop 53: ``medium-far-1537572430`` with 8 robots 20.8 → 4.6 s,
-            ``formulations/horizon.md``, "Two regularisation floors", item 7).
+        retry_first_after: in the whole NLP's fallback procedure (not the fast attempt, the polish or the coarse
+            pass), the retry goes first in the rounds after this one, until a retry of the procedure fails
+            (``None``: only where it solved the round before). There, near a KKT point, the Gauss–Newton primary
+            converges linearly — 150–200 iterations, or ``max_iter`` — and the exact retry in 10–35 (stop 53: ``medium-far-1537572430``
+            with 8 robots 20.8 → 4.6 s; a different KKT point, objective 12.5 → 14.0; ``formulations/horizon.md``,
+            "Two regularisation floors", item 7).
+        retry_first_max_iter: the iterations that retry may take when it goes first (``None``: ``max_iter``); if it
+            stops there, the primary solves the round (``dense-far-2639215061`` with 8 robots: the exact retry needed
+            89 iterations where Gauss–Newton needs 19; the retries that paid converged in 10–35).
         warm_start_leader_error: with the equality leader, the warm start *as given* (not projected on the reference)
             is still a fallback if its leader stays within this distance [m] of the reference at every knot and every
             other row holds (a ``qp`` plan lags its reference by ≤ 4.6 mm on A–D: CLIK).
@@ -235,6 +239,7 @@ class HorizonOptions:
     retry_ipopt: dict[str, Any] = field(default_factory=lambda: {"min_hessian_perturbation": 1e-2})
     retry_hessian: str | None = "exact"
     retry_first_after: int | None = 1
+    retry_first_max_iter: int | None = 40
     warm_start_leader_error: float = 0.01
     expand: bool = False
     scale_objective: bool = True
@@ -274,7 +279,7 @@ class HorizonOptions:
         if self.fast_stall_iter is not None and int(self.fast_stall_iter) < 1:
             raise ParameterError(f"fast_stall_iter must be ≥ 1 or None, got {self.fast_stall_iter}")
         after = self.retry_first_after
-        if after is not None and (isinstance(after, bool) or not isinstance(after, int) or after < 1):
+        if after is not None and (isinstance(after, bool) or not isinstance(after, numbers.Integral) or after < 1):
             raise ParameterError(f"retry_first_after must be a round number ≥ 1 or None, got {after!r}")
         if self.samples_per_link is not None and int(self.samples_per_link) < 1:
             raise ParameterError(f"samples_per_link must be ≥ 1, got {self.samples_per_link}")
@@ -297,9 +302,17 @@ class HorizonOptions:
             "coarse_polish_min_hessian_perturbation",
             " (or None: the fast attempt's)",
         )
-        if self.coarse_polish_retry is not None and not isinstance(self.coarse_polish_retry, dict):
+        if self.retry_first_max_iter is not None and not _positive_integer(self.retry_first_max_iter):
+            raise ParameterError(f"retry_first_max_iter must be ≥ 1 or None, got {self.retry_first_max_iter!r}")
+        polish_retry = self.coarse_polish_retry
+        if polish_retry is not None and (
+            not isinstance(polish_retry, dict)
+            or not _positive_integer(polish_retry.get("max_iter", 1))
+            or not _positive_number(polish_retry.get("min_hessian_perturbation", 1.0))
+        ):
             raise ParameterError(
-                f"coarse_polish_retry must be a dict of IPOPT options or None, got {self.coarse_polish_retry!r}"
+                "coarse_polish_retry must be None or a dict of IPOPT options (max_iter ≥ 1, min_hessian_perturbation "
+                f"> 0), got {polish_retry!r}"
             )
         if self.fast_max_iter < 1 or not 0 < self.fast_time_share <= 1:
             raise ParameterError("fast_max_iter must be ≥ 1 and fast_time_share in (0, 1]")
@@ -327,6 +340,14 @@ class HorizonOptions:
                 continue
             if v not in ("exact", "limited-memory", "gauss-newton"):
                 raise ParameterError(f"{name} must be 'exact', 'gauss-newton' or 'limited-memory', got {v!r}")
+
+
+def _positive_integer(v: Any) -> bool:
+    return isinstance(v, numbers.Integral) and not isinstance(v, bool) and v >= 1
+
+
+def _positive_number(v: Any) -> bool:
+    return isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v) and v > 0
 
 
 def hessian_used(opts: HorizonOptions, hessian: str | None = None) -> str:
@@ -1073,7 +1094,8 @@ class _Model:
         row = su.N * su.S - 1
         c = np.asarray(clearance, dtype=float)[row]
         lo = np.array(self.lower("clearance"), dtype=float)
-        near = (c < lo[row]) & (np.asarray(exact, dtype=float) >= 0.0)
+        # below d_safe (also where keep_start_clearance bounded it by c already: a constant row at its bound too)
+        near = (c < su.d_safe) & (c <= lo[row]) & (np.asarray(exact, dtype=float) >= 0.0)
         near[self.fixed_columns("clearance")] = False
         if not near.any():
             return 0
