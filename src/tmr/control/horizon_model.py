@@ -177,9 +177,9 @@ class HorizonOptions:
         retry_first_after: in the whole NLP's fallback procedure (not the fast attempt, the polish or the coarse
             pass), the retry goes first in the rounds after this one, until a retry of the procedure fails
             (``None``: only where it solved the round before). There, near a KKT point, the Gauss–Newton primary
-            converges linearly — 150–200 iterations, or ``max_iter`` — and the exact retry in 10–35 (stop 53: ``medium-far-1537572430``
-            with 8 robots 20.8 → 4.6 s; a different KKT point, objective 12.5 → 14.0; ``formulations/horizon.md``,
-            "Two regularisation floors", item 7).
+            converges linearly — 150–200 iterations, or ``max_iter`` — and the exact retry in 10–35 (stop 53:
+            ``medium-far-1537572430`` with 8 robots 20.8 → 4.6 s; a different KKT point, objective 12.5 → 14.0;
+            ``formulations/horizon.md``, "Two regularisation floors", item 7).
         retry_first_max_iter: the iterations that retry may take when it goes first (``None``: ``max_iter``); if it
             stops there, the primary solves the round (``dense-far-2639215061`` with 8 robots: the exact retry needed
             89 iterations where Gauss–Newton needs 19; the retries that paid converged in 10–35).
