@@ -537,10 +537,15 @@ QUOTES = [
 ]
 
 
+#: the horizon's optimum, or the coarse pass's optimum interpolated with every row holding where the polish's optimum
+#: costs more (its documented equivalent: formulations/horizon.md, "Coarse knots")
+OPTIMAL = ("optimal", "coarse_optimal")
+
+
 def optimal_times() -> list[float]:
     """Whole-process times [s] of the runs of horizon_rooms.csv whose horizon plan is optimal (all under 10 s, as the
     README says)."""
-    times = [float(r["wall_time"]) for r in rows("horizon_rooms.csv") if r["horizon_result"] == "optimal"]
+    times = [float(r["wall_time"]) for r in rows("horizon_rooms.csv") if r["horizon_result"] in OPTIMAL]
     assert max(times) < 10, "the README says every optimal run takes under 10 s"
     return times
 
@@ -550,7 +555,7 @@ def second_sample() -> tuple[int, int]:
     whole process, as the README says."""
     planned = [r for r in rows("horizon_rooms_seed1.csv") if r["horizon_result"]]
     assert all(float(r["wall_time"]) < 10 for r in planned), "the README says every plan takes under 10 s"
-    return sum(r["horizon_result"] == "optimal" for r in planned), len(planned)
+    return sum(r["horizon_result"] in OPTIMAL for r in planned), len(planned)
 
 
 def all_rooms() -> tuple[int, int, float, float]:
@@ -559,7 +564,7 @@ def all_rooms() -> tuple[int, int, float, float]:
     planned = [r for r in rows("horizon_rooms_216.csv") if r["horizon_result"]]
     for r in planned:
         assert all(float(r[f"horizon_{k}"]) <= float(r[f"qp_{k}"]) for k in ("f1", "f2", "f3", "f4")), r["room"]
-    good = [r for r in planned if r["horizon_result"] == "optimal" and float(r["wall_time"]) < 10]
+    good = [r for r in planned if r["horizon_result"] in OPTIMAL and float(r["wall_time"]) < 10]
     bad = [r for r in planned if r not in good]
     knots = [statistics.median(float(r["knots"]) for r in rs) for rs in (bad, good)]
     return len(good), len(planned), knots[0], knots[1]
