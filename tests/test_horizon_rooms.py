@@ -122,3 +122,23 @@ def test_rounds_after_the_first_start_with_the_exact_retry(monkeypatch, tmp_path
     assert all(r["status"] in _SOLVED and r["iterations"] < 60 for r in firsts)
     terms, before = d["horizon_summary"]["terms"], d["horizon_summary"]["warm_start_terms"]
     assert all(terms[k] <= before[k] * (1 + 1e-9) for k in ("f1", "f2", "f4"))
+
+
+def test_a_polish_costlier_than_the_coarse_optimum_does_not_replace_it(monkeypatch, tmp_path):
+    """walls-far-2884920346, 8 robots: the polish from the accepted coarse optimum converges to a KKT point of the
+    whole NLP that costs more than that coarse optimum; the coarse optimum (every row holding at every knot) is the
+    plan, and the note gives both objectives (stop 52's code returned the costlier optimum as "optimal")."""
+    import re
+
+    problem, warm = room_problem(monkeypatch, tmp_path, 2884920346, "walls", "far", 8)
+    plan = plan_horizon(problem, warm)
+    d = plan.diagnostics
+    assert d["horizon_result"] == "coarse_optimal", d["horizon_note"]
+    assert d["horizon_summary"]["coarse"]["polish"] == "costlier"
+    polished, coarse = (
+        float(v) for v in re.search(r"costing more than the coarse one \((\S+) > (\S+)\)", d["horizon_note"]).groups()
+    )
+    assert coarse < polished
+    assert d["horizon_summary"]["objective"] == pytest.approx(coarse, rel=1e-5)
+    terms, before = d["horizon_summary"]["terms"], d["horizon_summary"]["warm_start_terms"]
+    assert all(terms[k] <= before[k] * (1 + 1e-9) for k in ("f1", "f2", "f4"))
