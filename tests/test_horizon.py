@@ -365,6 +365,7 @@ def test_a_horizon_plan_that_fails_the_exact_check_gives_way_to_the_qp_plan(monk
     d = plan.diagnostics
     assert metrics.violation_free and plan.success and plan.method == "horizon"
     assert d["horizon_result"] == "warm_start" and d["horizon_summary"]["stop"] == "exact_check"
+    assert d["horizon_summary"]["iterations"] > 0  # what the NLP did before its plan was checked
     assert "fails the exact check (robot_clearance at 3 step(s) from 10" in d["horizon_note"]
     assert d["horizon_note"].endswith("returned its qp warm start, which passes every check")
     qp, _ = solve(problem, "qp")

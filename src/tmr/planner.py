@@ -893,7 +893,14 @@ def solve(
         bad = ", ".join(f"{k} at {len(ks)} step(s) from {ks[0]}" for k, ks in metrics.violation_steps.items() if ks)
         d = result.diagnostics
         why = f"horizon NLP: its plan ({d.get('horizon_result')}) fails the exact check ({bad})"
-        diagnostics = dict(d, horizon_stop="exact_check", ipopt_iterations=d.get("ipopt_iterations", 0))
+        summary = d.get("horizon_summary", {})  # what the NLP did: its fast attempt, its coarse pass
+        diagnostics = dict(
+            d,
+            horizon_stop="exact_check",
+            ipopt_iterations=d.get("ipopt_iterations", summary.get("iterations", 0)),
+            horizon_fast_attempt=summary.get("fast_attempt"),
+            horizon_coarse=summary.get("coarse"),
+        )
         warm.method = "horizon"
         warm_metrics = _qp_plan_returned(warm, problem, why, diagnostics, "exact_check")
         return _whole(warm, warm_metrics, start, **parts)
