@@ -340,7 +340,7 @@ def test_a_reference_nearer_than_d_safe_but_clear_keeps_its_own_clearance(monkey
     assert d["horizon_result"] == "optimal", d["horizon_note"]
     assert d["reference_clearance_entries"] == near.size
     assert rows and not any(r[near].any() for r in rows)  # constants: never rows
-    assert any(r[near.min() - 3 : near.min()].any() for r in rows)  # the leader's other knots near the column are
+    assert any(r[near.min() - 3 : near.min()].any() for r in rows)  # its knots nearer than 0.6 m but ≥ d_safe: rows
     assert check(plan, problem.env).n_violation_steps == 0
     assert np.linalg.norm(plan.robots[:, -1] - ref, axis=1).max() < 1e-6  # on its reference
     # the follower keeps d_safe (its robot: the spline may overestimate the exact clearance by field_error)
