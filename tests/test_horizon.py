@@ -1007,20 +1007,10 @@ def test_crossed_is_the_deepest_violated_clearance_row():
     assert horizon_module._crossed(viol[1:2]) == 0.0 and horizon_module._crossed([]) == 0.0
 
 
-def test_a_fast_round_that_crossed_obstacles_falls_back_and_other_rounds_restart_inside_the_rows(monkeypatch):
-    """crossing_depth: a round whose optimum leaves a left-out clearance row more than that past d_safe crossed an
-    obstacle (the walls rooms: 0.65–0.82 m, and IPOPT's next round, started there, crawls in restoration): the fast
-    attempt falls back at once; any other round's successor starts from the cheapest kept iterate that holds every
-    row, primal only, and reaches the same optimum. The small problem's round 1 (activation 0.3 m) ends 1.2 cm past
-    d_safe: the default depth (0.6 m) lets the next round start there, 5 mm does not."""
-    problem = small_problem()
-    warm, _ = solve(problem, "qp")
-    single = dict(activation=0.3, fast_min_hessian_perturbation=None)
-    plain = plan_horizon(problem, warm, **single)
-    first = plain.diagnostics["round_log"][0]
-    assert 0.005 < first["crossed"] < 0.3 and len(plain.diagnostics["round_log"]) == 2 and "next_start" not in first
-
-    calls: list[tuple[dict, np.ndarray]] = []  # each IPOPT call: its arguments and the x it returned
+def spy_ipopt_calls(monkeypatch: pytest.MonkeyPatch) -> list[tuple[dict, np.ndarray]]:
+    """Every IPOPT solve of the horizon NLP from now on (``_Transcription.solver`` wrapped): a list that fills with
+    each call's keyword arguments (x0, lam_g0, …) and the x it returned."""
+    calls: list[tuple[dict, np.ndarray]] = []
     build = horizon_model._Transcription.solver
 
     class Spy:
@@ -1036,6 +1026,23 @@ def test_a_fast_round_that_crossed_obstacles_falls_back_and_other_rounds_restart
             return self.solver.stats()
 
     monkeypatch.setattr(horizon_model._Transcription, "solver", lambda tr, *a, **k: Spy(build(tr, *a, **k)))
+    return calls
+
+
+def test_a_fast_round_that_crossed_obstacles_falls_back_and_other_rounds_restart_inside_the_rows(monkeypatch):
+    """crossing_depth: a round whose optimum leaves a left-out clearance row more than that past d_safe crossed an
+    obstacle (the walls rooms: 0.65–0.82 m, and IPOPT's next round, started there, crawls in restoration): the fast
+    attempt falls back at once; any other round's successor starts from the cheapest kept iterate that holds every
+    row, primal only, and reaches the same optimum. The small problem's round 1 (activation 0.3 m) ends 1.2 cm past
+    d_safe: the default depth (0.6 m) lets the next round start there, 5 mm does not."""
+    problem = small_problem()
+    warm, _ = solve(problem, "qp")
+    single = dict(activation=0.3, fast_min_hessian_perturbation=None)
+    plain = plan_horizon(problem, warm, **single)
+    first = plain.diagnostics["round_log"][0]
+    assert 0.005 < first["crossed"] < 0.3 and len(plain.diagnostics["round_log"]) == 2 and "next_start" not in first
+
+    calls = spy_ipopt_calls(monkeypatch)
     plan = plan_horizon(problem, warm, crossing_depth=0.005, **single)
     d = plan.diagnostics
     log = d["round_log"]

@@ -10,7 +10,7 @@ import pytest
 import tmr.control.horizon as horizon_module
 import tmr.control.horizon_coarse as coarse
 import tmr.control.horizon_model as horizon_model
-from tests.test_horizon import small_problem
+from tests.test_horizon import small_problem, spy_ipopt_calls
 from tmr.control.horizon import objective_terms, plan_horizon
 from tmr.errors import ParameterError
 from tmr.planner import check, solve
@@ -128,29 +128,14 @@ def test_the_polish_runs_with_its_own_floor(problem_and_warm):
     assert horizon_module._polish_phases(opts)[0][1][0][1]["min_hessian_perturbation"] == 3e-6
 
 
-def test_a_polish_stopped_at_its_cap_is_retried_from_its_last_iterate(problem_and_warm):
+def test_a_polish_stopped_at_its_cap_is_retried_from_its_last_iterate(problem_and_warm, monkeypatch):
     """The polish capped at 2 iterations stops at the cap: its retry (``coarse_polish_retry``, 10⁻²) goes on from the
     last iterate and its multipliers and converges, so the plan is the optimum, and the note and the summary say so;
     without the retry the polish's best feasible iterate is returned (stop 53: three generated rooms)."""
     problem, warm, _ = problem_and_warm
-    calls: list[tuple[dict, np.ndarray]] = []  # each IPOPT call's arguments and the x it returned
-    build = horizon_model._Transcription.solver
-
-    class Spy:
-        def __init__(self, solver):
-            self.solver = solver
-
-        def __call__(self, **kwargs):
-            sol = self.solver(**kwargs)
-            calls.append((kwargs, np.asarray(sol["x"], dtype=float).ravel()))
-            return sol
-
-        def stats(self):
-            return self.solver.stats()
-
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(horizon_model._Transcription, "solver", lambda tr, *a, **k: Spy(build(tr, *a, **k)))
-        d = plan_horizon(problem, warm, coarse_polish_iter=2, **ON).diagnostics
+    calls = spy_ipopt_calls(monkeypatch)
+    d = plan_horizon(problem, warm, coarse_polish_iter=2, **ON).diagnostics
+    monkeypatch.undo()
     (primary_args, primary_x), (retry_args, _) = calls[-2:]  # the polish's two solves, after the coarse NLP's
     np.testing.assert_array_equal(np.asarray(retry_args["x0"], dtype=float).ravel(), primary_x)  # its last iterate
     assert "lam_g0" in retry_args and "lam_x0" in retry_args  # and its multipliers

@@ -279,7 +279,7 @@ class HorizonOptions:
         if self.fast_stall_iter is not None and int(self.fast_stall_iter) < 1:
             raise ParameterError(f"fast_stall_iter must be ≥ 1 or None, got {self.fast_stall_iter}")
         after = self.retry_first_after
-        if after is not None and (isinstance(after, bool) or not isinstance(after, numbers.Integral) or after < 1):
+        if after is not None and not _positive_integer(after):
             raise ParameterError(f"retry_first_after must be a round number ≥ 1 or None, got {after!r}")
         if self.samples_per_link is not None and int(self.samples_per_link) < 1:
             raise ParameterError(f"samples_per_link must be ≥ 1, got {self.samples_per_link}")
@@ -343,10 +343,12 @@ class HorizonOptions:
 
 
 def _positive_integer(v: Any) -> bool:
+    """Whether ``v`` is a whole number ≥ 1 (numpy's too; not a bool)."""
     return isinstance(v, numbers.Integral) and not isinstance(v, bool) and v >= 1
 
 
 def _positive_number(v: Any) -> bool:
+    """Whether ``v`` is a finite real number > 0 (not a bool)."""
     return isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v) and v > 0
 
 
@@ -366,7 +368,7 @@ def _positive_or_none(value: Any, name: str, what: str) -> None:
     """Raise :class:`ParameterError` unless ``value`` is None or a finite real number > 0 (not a bool)."""
     if value is None:
         return
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0 < value < math.inf:
+    if not _positive_number(value):
         raise ParameterError(f"{name} must be a finite number > 0{what}, got {value!r}")
 
 
