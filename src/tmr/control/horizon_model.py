@@ -231,7 +231,7 @@ class HorizonOptions:
     min_hessian_perturbation: float = 1e-3
     fast_min_hessian_perturbation: float | None = 1e-5
     fast_max_iter: int = 60
-    fast_max_hessian_perturbation: float | None = 1e8
+    fast_max_hessian_perturbation: float | None = 1e4
     fast_stall_iter: int | None = 20
     fast_time_share: float = 1.0
     accept_acceptable: bool = True
