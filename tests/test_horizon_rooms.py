@@ -11,6 +11,7 @@ import pytest
 
 import tmr.control.horizon as horizon_module
 from tmr.control.horizon import plan_horizon
+from tmr.control.horizon_model import HorizonOptions
 
 _SOLVED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 
@@ -46,9 +47,12 @@ def _fallback(d: dict[str, Any]) -> list[dict[str, Any]]:
 def test_the_retry_with_the_exact_hessian_solves_where_gauss_newton_stalls(monkeypatch, tmp_path):
     """long_walls-mid-1226144109, 2 robots (a straight chain): the fast attempt stalls, the Gauss–Newton fallback ends
     at max_iter in a flat valley; its retry with the exact Hessian converges. With a Gauss–Newton retry (the old
-    procedure) no optimum is found."""
+    procedure) no optimum is found. The fast attempt runs with stop 53's ceiling on its regularisation, 10⁸: with
+    10⁴ (the default since stop 54) it is optimal itself, and the fallback never runs."""
     problem, warm = room_problem(monkeypatch, tmp_path, 1226144109, "long_walls", "mid", 2)
-    d = plan_horizon(problem, warm).diagnostics
+    now = plan_horizon(problem, warm).diagnostics
+    assert now["horizon_result"] == "optimal" and not _fallback(now), now["round_log"]
+    d = plan_horizon(problem, warm, fast_max_hessian_perturbation=1e8).diagnostics
     assert d["horizon_result"] == "optimal", d["horizon_note"]
     primary, retry = _fallback(d)
     assert (primary["attempt"], primary["hessian"]) == ("primary", "gauss-newton")
@@ -56,7 +60,7 @@ def test_the_retry_with_the_exact_hessian_solves_where_gauss_newton_stalls(monke
     assert (retry["attempt"], retry["hessian"], retry["min_hessian_perturbation"]) == ("retry", "exact", 1e-2)
     assert retry["status"] in _SOLVED
     assert "its retry 0.01 (exact Hessian)" in d["horizon_note"]
-    old = plan_horizon(problem, warm, retry_hessian=None).diagnostics
+    old = plan_horizon(problem, warm, fast_max_hessian_perturbation=1e8, retry_hessian=None).diagnostics
     assert old["horizon_result"] != "optimal"
     assert [r["hessian"] for r in _fallback(old)] == ["gauss-newton", "gauss-newton"]
 
@@ -95,14 +99,28 @@ def test_the_coarse_pass_from_a_train_plan_keeps_its_margins_and_wider_rows(monk
 def test_the_fast_attempt_gives_up_before_ipopts_regularisation_runs_away(monkeypatch, tmp_path):
     """sparse-near-3098419812, 5 robots: in the fast attempt IPOPT regularised the Hessian by 10¹⁰–10¹¹ and MUMPS
     reallocated its memory again and again (95 s for 10 iterations, past the 60 s limit; the qp plan returned). With
-    ``fast_max_hessian_perturbation`` = 10⁸ the fast attempt stalls, the limit is not reached and the fallback is
-    optimal."""
+    ``fast_max_hessian_perturbation`` = 10⁸ (10⁴ since stop 54) the fast attempt stalls, the limit is not reached
+    and the fallback is optimal."""
     problem, warm = room_problem(monkeypatch, tmp_path, 3098419812, "sparse", "near", 5)
     d = plan_horizon(problem, warm, time_limit=60).diagnostics
     assert d["horizon_result"] == "optimal", d["horizon_note"]
     fast = [r for r in d["round_log"] if r["phase"] == "fast"]
     assert fast and fast[-1]["status"] != "Maximum_WallTime_Exceeded"  # before: the limit stopped it, the qp plan
     assert not d["time_limit_hit"] and any(r["phase"] == "fallback" for r in d["round_log"])
+
+
+def test_a_step_beyond_the_fast_ceiling_goes_through_ipopts_restoration(monkeypatch, tmp_path):
+    """dense-near-3289016738, 8 robots: with the fast attempt's ceiling at 10⁸ its regularisation climbed to 10⁸,
+    the attempt ended at its cap of 60 iterations and the fallback took 108 more (stop 53). With 10⁴ the step that
+    needs more is not taken, IPOPT's restoration phase takes over for two iterations, and the fast attempt is
+    optimal in well under its cap per round."""
+    problem, warm = room_problem(monkeypatch, tmp_path, 3289016738, "dense", "near", 8)
+    assert HorizonOptions().fast_max_hessian_perturbation == 1e4
+    d = plan_horizon(problem, warm, time_limit=60).diagnostics
+    assert d["horizon_result"] == "optimal", d["horizon_note"]
+    assert d["round_log"] and all(r["phase"] == "fast" for r in d["round_log"]), d["round_log"]
+    assert all(r["status"] in _SOLVED for r in d["round_log"])
+    assert d["horizon_summary"]["iterations"] < 60  # 10⁸: 60 in the fast attempt, then 108 in the fallback
 
 
 def test_rounds_after_the_first_start_with_the_exact_retry(monkeypatch, tmp_path):

@@ -150,10 +150,11 @@ class HorizonOptions:
         fast_max_iter: IPOPT iterations per round of the fast attempt (60: the accepted rounds measured took 2–50,
             the one that diverges, scenario E with 4 robots and the active winch, runs 110 in its first).
         fast_max_hessian_perturbation: IPOPT's ``max_hessian_perturbation`` in the fast attempt (``None``: IPOPT's
-            10²⁰): a step whose inertia correction needs more fails, and the attempt falls back. 10⁸ (stop 52): in
-            sparse-near-3098419812 with 5 robots the fast attempt regularised by 10¹⁰–10¹¹ and MUMPS reallocated
-            its memory at every factorisation, 95 s for 10 iterations (``formulations/horizon.md``, "Two
-            regularisation floors", item 6).
+            10²⁰): a step whose inertia correction needs more is not taken, IPOPT turns to its restoration phase
+            (or the attempt stops and falls back). 10⁸ at stop 52: in sparse-near-3098419812 with 5 robots the fast
+            attempt regularised by 10¹⁰–10¹¹ and MUMPS reallocated its memory at every factorisation, 95 s for 10
+            iterations. 10⁴ since stop 54: dense-near-3289016738 with 8 robots 168 → 45 IPOPT iterations
+            (``formulations/horizon.md``, "Two regularisation floors", item 6).
         fast_stall_iter: the fast attempt's round stops (status ``"Stalled"``) once this many IPOPT iterations have
             passed without a new cheapest iterate among those that hold the round's rows (``None``: never): it falls
             back from that iterate instead of spending the rest of its cap.
