@@ -882,6 +882,33 @@ def test_structured_jacobian_and_hessian_equal_casadis_automatic_ones():
     np.testing.assert_allclose((Ay @ x).full().ravel() + b[:, 1], P[:, 1], atol=1e-12)
 
 
+def test_the_rest_jacobian_group_by_group_is_casadis_jacobian_of_the_stacked_rows():
+    """``_Transcription.rest_jacobian`` (casadi's Jacobian of each non-clearance group, stacked) is casadi's Jacobian
+    of the non-clearance rows stacked in their order in g, and ``jac_g`` places it around the clearance rows — with
+    every row, and with a round's lazy rows (the rows near the warm start, one group left out)."""
+    import casadi as ca
+
+    problem, su, model, xv, full = full_transcription()
+    masks = model.near_masks(model.values(xv))
+    masks["joint_accel"][:] = False  # a group without a row in the round
+    lazy = horizon_model._Transcription(model, masks)
+    assert 0 < sum(lazy.index[g].size for g in model.rest_groups) < sum(full.index[g].size for g in model.rest_groups)
+    rng = np.random.default_rng(7)
+    x = xv + rng.normal(0.0, 0.02, xv.size)
+    for tr in (full, lazy):
+        before, after = tr._rest
+        stacked = ca.Function("J", [model.x], [ca.jacobian(ca.vertcat(before, after), model.x)])(x).full()
+        ours = ca.Function("J", [model.x], [tr.rest_jacobian()])(x).full()
+        assert ours.shape == stacked.shape == (before.shape[0] + after.shape[0], xv.size)
+        np.testing.assert_allclose(ours, stacked, rtol=0, atol=1e-12 * max(1.0, float(np.abs(stacked).max())))
+        # in jac_g: the rows before the clearance rows, the clearance rows, the rows after them
+        _, J = tr.derivatives(2.5, "exact")["jac_g"](x, [])
+        J = J.full()
+        nb, nc = before.shape[0], tr.index["clearance"].size
+        np.testing.assert_array_equal(J[:nb], ours[:nb])
+        np.testing.assert_array_equal(J[nb + nc :], ours[nb:])
+
+
 def test_gauss_newton_hessian_is_the_residuals_jacobian_product_and_the_rows_exact_curvature():
     """hessian="gauss-newton": the cost's part is 2 Σ w_i J_iᵀJ_i with J_i the finite-difference Jacobian of the
     paper's residuals written here from their definitions (q̇, d_i − d_j, q̈ of eq. 24, 25, 27; Σ r² = f_i), it is

@@ -1226,6 +1226,7 @@ class _Transcription:
         self.g = ca.vertcat(*g) if g else ca.MX(0, 1)
         self.lbg = np.concatenate(lbg) if lbg else np.zeros(0)
         self.ubg = np.concatenate(ubg) if ubg else np.zeros(0)
+        self._rest_parts = (rest_before, rest_after)  # one expression a group (their Jacobians: one a group)
         self._rest = (ca.vertcat(*rest_before) if rest_before else ca.MX(0, 1),
                       ca.vertcat(*rest_after) if rest_after else ca.MX(0, 1))  # fmt: skip
         # the start (and the equality leader) are fixed: IPOPT removes them (fixed_variable_treatment make_parameter)
@@ -1264,8 +1265,7 @@ class _Transcription:
         Ax, Ay, (_, cx, cy, cxx, cxy, cyy) = self._clr
         n = Ax.shape[0]
         p = ca.MX.sym("p", 0, 1)
-        rest = ca.vertcat(before, after)
-        J_rest = ca.jacobian(rest, x)
+        J_rest = self.rest_jacobian()
         J_clr = ca.mtimes(ca.diag(cx), Ax) + ca.mtimes(ca.diag(cy), Ay)
         jac = ca.vertcat(J_rest[:nb, :], J_clr, J_rest[nb:, :])
         jac_g = ca.Function("nlp_jac_g", [x, p], [self.g, jac], ["x", "p"], ["g", "jac_g_x"])
@@ -1283,6 +1283,14 @@ class _Transcription:
         H_clr = ca.mtimes(AxT, ca.mtimes(Wxx, Ax)) + ca.mtimes(AyT, ca.mtimes(Wyy, Ay)) + Hxy + Hxy.T
         self._derivatives[key] = {"jac_g": jac_g, "hess_lag": self._hess_lag(lam_f, lam_g, ca.triu(H_rest + H_clr))}
         return self._derivatives[key]
+
+    def rest_jacobian(self) -> Any:
+        """The Jacobian (rows × variables, MX) of the NLP's non-clearance rows in their order in g (the groups before
+        the clearance rows, then those after): casadi's Jacobian of each group's rows, stacked. The same matrix as
+        casadi's Jacobian of the stacked rows, which colours every group together: on a generated room with 8 robots
+        (3,528 knots; 41,841 rows) 2.2 s to build against 0.2 s (``benchmarks/horizon_jacobian.py``)."""
+        x = self.model.x
+        return ca.vertcat(ca.MX(0, x.numel()), *[ca.jacobian(e, x) for e in self._rest_parts[0] + self._rest_parts[1]])
 
     def _hess_lag(self, lam_f: Any, lam_g: Any, triu: Any) -> ca.Function:
         """casadi's ``hess_lag`` signature around the upper triangle ``triu`` of the Lagrangian's Hessian."""
