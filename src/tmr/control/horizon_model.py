@@ -155,6 +155,11 @@ class HorizonOptions:
             attempt regularised by 10¹⁰–10¹¹ and MUMPS reallocated its memory at every factorisation, 95 s for 10
             iterations. 10⁴ since stop 54: dense-near-3289016738 with 8 robots 168 → 45 IPOPT iterations
             (``formulations/horizon.md``, "Two regularisation floors", item 6).
+        max_hessian_perturbation: IPOPT's ``max_hessian_perturbation`` in every other attempt (the fallback, its
+            retry, the coarse pass, the repair windows, the polish; ``None``: IPOPT's 10²⁰). 10⁹ (stop 55): in
+            sparse-near-3098419812 with 5 robots the fallback's exact retry regularised by 10¹⁰·⁶, MUMPS reallocated
+            its memory four times and 10 iterations took 81 s, past the 60 s limit; from 10⁹·⁸ on MUMPS reallocated.
+            10⁸ stops that too but loses dense-near-4036741510 with 5 robots, whose retry converges with 10⁹.
         fast_stall_iter: the fast attempt's round stops (status ``"Stalled"``) once this many IPOPT iterations have
             passed without a new cheapest iterate among those that hold the round's rows (``None``: never): it falls
             back from that iterate instead of spending the rest of its cap.
@@ -233,6 +238,7 @@ class HorizonOptions:
     fast_min_hessian_perturbation: float | None = 1e-5
     fast_max_iter: int = 60
     fast_max_hessian_perturbation: float | None = 1e4
+    max_hessian_perturbation: float | None = 1e9
     fast_stall_iter: int | None = 20
     fast_time_share: float = 1.0
     accept_acceptable: bool = True
@@ -295,6 +301,7 @@ class HorizonOptions:
         if self.max_rounds < 1 or self.max_iter < 1:
             raise ParameterError("max_rounds and max_iter must be ≥ 1")
         _positive_or_none(self.fast_max_hessian_perturbation, "fast_max_hessian_perturbation", " (or None: IPOPT's)")
+        _positive_or_none(self.max_hessian_perturbation, "max_hessian_perturbation", " (or None: IPOPT's)")
         _positive_or_none(
             self.fast_min_hessian_perturbation, "fast_min_hessian_perturbation", " (or None: no fast attempt)"
         )
@@ -1327,6 +1334,8 @@ class _Transcription:
         hessian = hessian_used(self.opts, hessian)
         nlp = dict(self.nlp, f=self.nlp["f"] / obj_scale)
         opts = _solver_opts(self.opts, extra, hessian)
+        if self.opts.max_hessian_perturbation is not None:  # every attempt's ceiling, unless it has its own
+            opts["ipopt"].setdefault("max_hessian_perturbation", float(self.opts.max_hessian_perturbation))
         opts.update(self.derivatives(obj_scale, hessian))
         if callback is not None:
             opts["iteration_callback"] = callback
