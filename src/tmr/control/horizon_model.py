@@ -149,17 +149,18 @@ class HorizonOptions:
             then exactly as without the fast attempt (``formulations/horizon.md``, "Two regularisation floors").
         fast_max_iter: IPOPT iterations per round of the fast attempt (60: the accepted rounds measured took 2–50,
             the one that diverges, scenario E with 4 robots and the active winch, runs 110 in its first).
-        fast_max_hessian_perturbation: IPOPT's ``max_hessian_perturbation`` in the fast attempt (``None``: IPOPT's
-            10²⁰): a step whose inertia correction needs more is not taken, IPOPT turns to its restoration phase
-            (or the attempt stops and falls back). 10⁸ at stop 52: in sparse-near-3098419812 with 5 robots the fast
-            attempt regularised by 10¹⁰–10¹¹ and MUMPS reallocated its memory at every factorisation, 95 s for 10
-            iterations. 10⁴ since stop 54: dense-near-3289016738 with 8 robots 168 → 45 IPOPT iterations
-            (``formulations/horizon.md``, "Two regularisation floors", item 6).
-        max_hessian_perturbation: IPOPT's ``max_hessian_perturbation`` in every other attempt (the fallback, its
-            retry, the coarse pass, the repair windows, the polish; ``None``: IPOPT's 10²⁰). 10⁹ (stop 55): in
-            sparse-near-3098419812 with 5 robots the fallback's exact retry regularised by 10¹⁰·⁶, MUMPS reallocated
-            its memory four times and 10 iterations took 81 s, past the 60 s limit; from 10⁹·⁸ on MUMPS reallocated.
-            10⁸ stops that too but loses dense-near-4036741510 with 5 robots, whose retry converges with 10⁹.
+        fast_max_hessian_perturbation: IPOPT's ``max_hessian_perturbation`` in the fast attempt (``None``:
+            ``max_hessian_perturbation``'s): a step whose inertia correction needs more is not taken, IPOPT turns to
+            its restoration phase (or the attempt stops and falls back). 10⁸ at stop 52: in sparse-near-3098419812
+            with 5 robots the fast attempt regularised by 10¹⁰–10¹¹ and MUMPS reallocated its memory at every
+            factorisation, 95 s for 10 iterations. 10⁴ since stop 54: dense-near-3289016738 with 8 robots 168 → 45
+            IPOPT iterations (``formulations/horizon.md``, "Two regularisation floors", item 6).
+        max_hessian_perturbation: IPOPT's ``max_hessian_perturbation`` in every attempt without a ceiling of its
+            own (the fallback, its retry, the coarse pass, the repair windows, the polish; ``None``: IPOPT's 10²⁰).
+            10⁹ (stop 55): in sparse-near-3098419812 with 5 robots the fallback's exact retry regularised by 10¹⁰·⁶,
+            MUMPS reallocated its memory four times and 10 iterations took 81 s, past the 60 s limit; from 10⁹·⁸ on
+            MUMPS reallocated. 10⁸ stops that too but loses dense-near-4036741510 with 5 robots, whose retry
+            converges with 10⁹ (``formulations/horizon.md``, "Two regularisation floors", item 8).
         fast_stall_iter: the fast attempt's round stops (status ``"Stalled"``) once this many IPOPT iterations have
             passed without a new cheapest iterate among those that hold the round's rows (``None``: never): it falls
             back from that iterate instead of spending the rest of its cap.
@@ -1295,7 +1296,7 @@ class _Transcription:
         """The Jacobian (rows × variables, MX) of the NLP's non-clearance rows in their order in g (the groups before
         the clearance rows, then those after): casadi's Jacobian of each group's rows, stacked. The same matrix as
         casadi's Jacobian of the stacked rows, which colours every group together: on a generated room with 8 robots
-        (3,528 knots; 41,841 rows) 2.2 s to build against 0.2 s (``benchmarks/horizon_jacobian.py``)."""
+        (3,528 knots; 41,411 rows in round 1) 2.16 s to build against 0.23 s (``benchmarks/horizon_jacobian.py``)."""
         x = self.model.x
         return ca.vertcat(ca.MX(0, x.numel()), *[ca.jacobian(e, x) for e in self._rest_parts[0] + self._rest_parts[1]])
 
