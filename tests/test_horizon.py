@@ -445,6 +445,13 @@ def test_bad_options_and_warm_start():
             plan_horizon(problem, warm, coarse_train_activation=bad_activation)
     with pytest.raises(ParameterError, match="keep_warm_margins"):
         plan_horizon(problem, warm, keep_warm_margins="yes")
+    # a ceiling on IPOPT's regularisation at or below a floor it caps (the retry's 10⁻², the fast attempt's 10⁻⁵)
+    for ceiling in (1e-2, 1e-3, 0.0):
+        with pytest.raises(ParameterError, match="max_hessian_perturbation"):
+            plan_horizon(problem, warm, max_hessian_perturbation=ceiling)
+    with pytest.raises(ParameterError, match="fast_max_hessian_perturbation"):
+        plan_horizon(problem, warm, fast_max_hessian_perturbation=1e-5)
+    horizon_model._options({"max_hessian_perturbation": None, "fast_max_hessian_perturbation": None})  # IPOPT's
 
 
 def test_keep_warm_margins_lowers_only_the_entries_the_warm_start_keeps_less_than():
@@ -907,6 +914,10 @@ def test_the_rest_jacobian_group_by_group_is_casadis_jacobian_of_the_stacked_row
         nb, nc = before.shape[0], tr.index["clearance"].size
         np.testing.assert_array_equal(J[:nb], ours[:nb])
         np.testing.assert_array_equal(J[nb + nc :], ours[nb:])
+        # and those are the rows of g itself: casadi's Jacobian of the whole g, outside the clearance rows
+        whole = ca.Function("J", [model.x], [ca.jacobian(tr.g, model.x)])(x).full()
+        rest = np.r_[0:nb, nb + nc : tr.size]
+        np.testing.assert_allclose(J[rest], whole[rest], rtol=0, atol=1e-12 * max(1.0, float(np.abs(whole).max())))
 
 
 def test_gauss_newton_hessian_is_the_residuals_jacobian_product_and_the_rows_exact_curvature():

@@ -156,7 +156,9 @@ class HorizonOptions:
             factorisation, 95 s for 10 iterations. 10⁴ since stop 54: dense-near-3289016738 with 8 robots 168 → 45
             IPOPT iterations (``formulations/horizon.md``, "Two regularisation floors", item 6).
         max_hessian_perturbation: IPOPT's ``max_hessian_perturbation`` in every attempt without a ceiling of its
-            own (the fallback, its retry, the coarse pass, the repair windows, the polish; ``None``: IPOPT's 10²⁰).
+            own (the fallback or the single procedure, its retry, the coarse NLP's fallback and retry, the repair
+            windows, the polish and its retry; the fast attempts too with ``fast_max_hessian_perturbation`` None;
+            ``None``: IPOPT's 10²⁰); it must be above every floor it caps.
             10⁹ (stop 55): in sparse-near-3098419812 with 5 robots the fallback's exact retry regularised by 10¹⁰·⁶,
             MUMPS reallocated its memory four times and 10 iterations took 81 s, past the 60 s limit; from 10⁹·⁸ on
             MUMPS reallocated. 10⁸ stops that too but loses dense-near-4036741510 with 5 robots, whose retry
@@ -325,6 +327,22 @@ class HorizonOptions:
             )
         if self.fast_max_iter < 1 or not 0 < self.fast_time_share <= 1:
             raise ParameterError("fast_max_iter must be ≥ 1 and fast_time_share in (0, 1]")
+        # a ceiling at or below a floor leaves IPOPT no inertia correction at all (Error_In_Step_Computation at once)
+        retry_floor = self.retry_ipopt.get("min_hessian_perturbation") if isinstance(self.retry_ipopt, dict) else None
+        floors = [self.min_hessian_perturbation, self.coarse_polish_min_hessian_perturbation, retry_floor]
+        floors.append(polish_retry.get("min_hessian_perturbation") if polish_retry is not None else None)
+        top = max(float(f) for f in floors if f is not None)
+        if self.max_hessian_perturbation is not None and not self.max_hessian_perturbation > top:
+            raise ParameterError(
+                f"max_hessian_perturbation must be above every floor it caps ({top:g}), got "
+                f"{self.max_hessian_perturbation!r}"
+            )
+        fast_ceiling, fast_floor = self.fast_max_hessian_perturbation, self.fast_min_hessian_perturbation
+        if fast_ceiling is not None and fast_floor is not None and not fast_ceiling > fast_floor:
+            raise ParameterError(
+                f"fast_max_hessian_perturbation must be above fast_min_hessian_perturbation ({fast_floor:g}), got "
+                f"{fast_ceiling!r}"
+            )
         if self.window is not None and (isinstance(self.window, bool) or int(self.window) < 2):
             raise ParameterError(f"window must be ≥ 2 knots (or None: no windows), got {self.window!r}")
         if self.window_overlap is not None and not 0 <= int(self.window_overlap) < int(self.window or 2):
