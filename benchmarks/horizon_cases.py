@@ -1,5 +1,6 @@
-"""Shared pieces of the horizon benchmarks (``horizon_windowed.py``, ``horizon_hessian.py``, ``horizon_spline.py``):
-the benchmark cases, built as the command line builds them, and the median timing of a callable."""
+"""Shared pieces of the horizon benchmarks (``horizon_windowed.py``, ``horizon_hessian.py``, ``horizon_jacobian.py``,
+``horizon_spline.py``): the benchmark cases, built as the command line builds them, the NLP's model at a case's
+``qp`` plan, and the median timing of a callable."""
 
 from __future__ import annotations
 
@@ -32,6 +33,21 @@ def build(case: str) -> tuple[Any, Any]:
             sc = scenario_from_map(write_geojson(room, Path(tmp) / "room.geojson"), room.base, room.goal, n_robots=n)
     problem, plan, _ = _solve_qp(build_problem(sc, seed=0, n_robots=n), False)
     return problem, plan
+
+
+def model_at(problem: Any, warm: Any) -> tuple[Any, Any, Any]:
+    """(setup, model, IPOPT's initial point) of the horizon NLP of ``problem`` with the default options, from the
+    warm start ``warm`` (:func:`build`'s ``qp`` plan), with the numpy clearance spline, as ``plan_horizon`` builds
+    them."""
+    from tmr.control import horizon_model as hm
+    from tmr.control.horizon_spline import ClearanceSpline, distance_spline
+
+    su = hm._Setup(problem, hm._options({}))
+    Q, info = hm._warm_start(su, warm)
+    model = hm._Model(
+        su, distance_spline(problem.env), bounds=info["warm_start_terms"], spline=ClearanceSpline(problem.env)
+    )
+    return su, model, model.project(model.x_of(Q))
 
 
 def median_ms(fn: Callable[[], Any], repeats: int) -> float:

@@ -30,11 +30,10 @@ import casadi as ca
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from horizon_cases import build, median_ms  # noqa: E402
+from horizon_cases import build, median_ms, model_at  # noqa: E402
 from provenance import source_version, versions  # noqa: E402
 
 from tmr.control import horizon_model as hm  # noqa: E402
-from tmr.control.horizon_spline import ClearanceSpline, distance_spline  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -67,13 +66,8 @@ def main() -> None:
     rows = []
     for case in args.cases:
         problem, warm = build(case)
-        su = hm._Setup(problem, hm._options({}))
-        Q, info = hm._warm_start(su, warm)
-        model = hm._Model(
-            su, distance_spline(problem.env), bounds=info["warm_start_terms"], spline=ClearanceSpline(problem.env)
-        )
+        su, model, xv = model_at(problem, warm)
         rng = np.random.default_rng(0)
-        xv = model.project(model.x_of(Q))
         lam = rng.normal(0.0, 1.0, model.rest_size)
         for kind, c in (("exact", 0.7), ("gauss-newton", np.array([0.5, 1.5, 2.0]))):
             r = {"case": case, "knots": su.K + 1, "robots": su.N, "kind": kind}

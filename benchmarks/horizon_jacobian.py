@@ -28,11 +28,10 @@ from pathlib import Path
 import casadi as ca
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from horizon_cases import build, median_ms  # noqa: E402
+from horizon_cases import build, median_ms, model_at  # noqa: E402
 from provenance import source_version, versions  # noqa: E402
 
 from tmr.control import horizon_model as hm  # noqa: E402
-from tmr.control.horizon_spline import ClearanceSpline, distance_spline  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 DEFAULT_CASES = ["E6", "150917237:walls:corner:8", "1355359843:narrow:corner:8"]
@@ -46,12 +45,7 @@ def main() -> None:
     rows = []
     for case in args.cases:
         problem, warm = build(case)
-        su = hm._Setup(problem, hm._options({}))
-        Q, info = hm._warm_start(su, warm)
-        model = hm._Model(
-            su, distance_spline(problem.env), bounds=info["warm_start_terms"], spline=ClearanceSpline(problem.env)
-        )
-        xv = model.project(model.x_of(Q))
+        su, model, xv = model_at(problem, warm)
         tr = hm._Transcription(model, model.near_masks(model.values(xv)))  # round 1's rows
         before, after = tr._rest
         r = {"case": case, "knots": su.K + 1, "robots": su.N, "rows": int(before.shape[0] + after.shape[0])}
