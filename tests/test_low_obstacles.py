@@ -397,13 +397,15 @@ def test_plan_horizon_itself_refuses_low_obstacles() -> None:
     from types import SimpleNamespace
 
     from tmr.control.horizon import plan_horizon
-    from tmr.planner import solve
+    from tmr.planner import qp_run, solve
 
     problem = SimpleNamespace(env=tray_env(0.15))
     with pytest.raises(ParameterError, match=r"--method horizon cannot plan over low obstacles .*tray \(0\.15 m\)"):
         plan_horizon(problem, None)
     with pytest.raises(ParameterError, match="low obstacles"):
         solve(problem, "horizon")  # before its qp warm start
+    with pytest.raises(ParameterError, match="low obstacles"):
+        qp_run(problem)  # the warm start --robots auto makes first: refused before it too
 
 
 def test_a_robot_on_the_tray_is_a_robot_clearance_violation() -> None:

@@ -352,6 +352,52 @@ def test_robots_auto_picks_the_fewest_that_plan(tmp_path, capsys):
     assert metrics["final_speed"] < 0.02
 
 
+def test_robots_auto_runs_the_horizon_nlp_only_from_a_qp_plan_that_passes(tmp_path, capsys, monkeypatch):
+    """``--robots auto --method horizon``: N is chosen by the ``qp`` plan, the NLP runs once, from the plan of the
+    fewest robots that passes (not planned again). Here the 5-robot qp plan is failed by the test: the summary names
+    its qp failure, no NLP runs for it, and 6 robots are planned, their horizon starting from their own qp run. When
+    every N's qp plan fails, no NLP runs at all: the last failed plan is written and named, exit 1."""
+    import tmr.control.horizon as horizon
+    import tmr.planner as planner
+
+    real_qp, real_nlp = planner._solve_qp, horizon.plan_horizon
+    qp_runs, nlp_runs, fail = [], [], {5}
+
+    def qp(problem, progress):
+        used, plan, metrics = real_qp(problem, progress)
+        qp_runs.append(problem.chain.n_robots)
+        if problem.chain.n_robots in fail:
+            plan.success, plan.failure = False, "tether_clearance violated at 1 step(s) (made by the test); more"
+        return used, plan, metrics
+
+    def nlp(problem, warm, **kwargs):
+        nlp_runs.append(problem.chain.n_robots)
+        assert warm.success
+        return real_nlp(problem, warm, **kwargs)
+
+    monkeypatch.setattr(planner, "_solve_qp", qp)
+    monkeypatch.setattr(horizon, "plan_horizon", nlp)
+    out = tmp_path / "auto"
+    args = ["--map", str(_corridor(tmp_path)), "--base", "1,2", "--goal", "25,2", "--robots", "auto", "--no-plots"]
+    args += ["--method", "horizon", "--time-limit", "0.05"]
+    code, stdout, _ = run_cli([*args, "--out", str(out)], capsys)
+    assert code == 0 and qp_runs == [5, 6] and nlp_runs == [6]
+    assert (
+        "--robots auto: N_min = 5; 5: qp warm start: tether_clearance violated at 1 step(s) (made by the test); "
+        "6: planned; chose N = 6" in stdout
+    )
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["n_robots"] == 6 and metrics["success"] and metrics["method"] == "horizon"
+    timings = json.loads((out / "timings.json").read_text())
+    assert timings["other_attempts_time"] > 0 and timings["qp_time"] > 0
+    fail.update(range(5, 9))
+    qp_runs.clear()
+    code, stdout, err = run_cli([*args, "--out", str(tmp_path / "none")], capsys)
+    assert code == 1 and nlp_runs == [6] and qp_runs == [5, 6, 7, 8]
+    assert "plan FAILED: qp warm start: tether_clearance violated" in err
+    assert "--robots auto runs the horizon NLP only from one that passes" in err
+
+
 def test_route_guided_plan_goes_round_the_wall(tmp_path, capsys):
     """The straight line is 4 m, the route 30 m: the chain must go round the wall's end, with at least 6 robots."""
     out = tmp_path / "wall"

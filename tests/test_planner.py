@@ -12,7 +12,7 @@ from tmr.errors import ParameterError, ScenarioError
 from tmr.model import catenary
 from tmr.model.chain import Chain
 from tmr.model.params import ChainParams, PathParams, PinvParams, QPParams, TimeParams, apply_overrides
-from tmr.planner import build_problem, check, default_start, solve, span_limits
+from tmr.planner import build_problem, check, default_start, qp_run, solve, span_limits
 from tmr.world.scenario import load_scenario
 
 
@@ -189,6 +189,31 @@ def test_horizon_converged_is_no_worse_than_qp_in_any_term(scenario_a_qp):
     assert metrics.f1 < qp_metrics.f1 and metrics.f2 < qp_metrics.f2 and metrics.f4 < qp_metrics.f4
     assert metrics.f3 <= qp_metrics.f3  # the leader on its reference: ~0
     assert d["horizon_summary"]["result"] == "optimal" and d["horizon_summary"]["iterations"] > 0
+
+
+def test_horizon_from_a_qp_run_is_the_horizon_that_plans_its_own(scenario_a_qp, monkeypatch):
+    """``solve(problem, "horizon", qp=qp_run(problem))`` starts from that run's plan without planning it again and
+    returns the plan ``solve(problem, "horizon")`` does (the same joints, bit for bit), its qp seconds counted in its
+    ``wall_time`` and ``qp_time``; ``qp=`` with another method is refused."""
+    import tmr.planner
+
+    problem = scenario_a_qp[0]
+    own, _ = solve(problem, "horizon")
+    run = qp_run(problem)
+    assert run.plan.success and run.problem is problem and run.seconds > 0
+
+    def again(*a, **k):
+        raise AssertionError("the qp plan was planned again")
+
+    monkeypatch.setattr(tmr.planner, "_solve_qp", again)
+    plan, metrics = solve(problem, "horizon", qp=run)
+    np.testing.assert_array_equal(plan.q, own.q)
+    assert plan.diagnostics["horizon_result"] == own.diagnostics["horizon_result"] == "optimal"
+    timings = plan.diagnostics["timings"]
+    assert timings["qp_time"] >= run.seconds and plan.wall_time >= run.seconds + timings["nlp_time"]
+    assert metrics.wall_time == plan.wall_time
+    with pytest.raises(ParameterError, match="method 'horizon' only"):
+        solve(problem, "qp", qp=run)
 
 
 def test_a_start_of_another_count_is_refused_before_the_route(monkeypatch):

@@ -6,7 +6,8 @@ and prints a metrics summary. Inputs are validated before anything is written; a
 directory first and moved into ``--out`` only when every one of them is complete.
 
 Before any motion is planned, the shortest free route from the anchor to the goal tells whether the goal can be
-reached and with how many robots (:mod:`tmr.route.route`); ``--robots auto`` takes the fewest that plan.
+reached and with how many robots (:mod:`tmr.route.route`); ``--robots auto`` takes the fewest that plan (with
+``--method horizon``: the fewest whose ``qp`` warm start passes, the NLP run once, from it).
 
 One robot radius r (``--robot-radius R``, or ``--set safety_radius=R``; default the scenario's) is used everywhere:
 the obstacles are grown by it, the robots kept 2r apart, the route and the messages use it.
@@ -149,7 +150,8 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     src.add_argument(
         "--robots",
         type=_robots,
-        help="number of robots N, or 'auto' for the fewest that plan (default: the scenario's, 3)",
+        help="number of robots N, or 'auto' for the fewest that plan (with --method horizon: whose qp warm start "
+        "passes; default: the scenario's, 3)",
     )
     src.add_argument(
         "--robot-radius",
@@ -435,10 +437,15 @@ def summary(plan: Any, metrics: Any) -> str:
     return "\n".join(lines)
 
 
-def _plan_once(args: argparse.Namespace, scenario: Any, n_robots: int | None, route: Any) -> tuple[Any, Any, Any]:
+def _plan_once(
+    args: argparse.Namespace, scenario: Any, n_robots: int | None, route: Any, qp_first: bool = False
+) -> tuple[Any, Any, Any]:
     """Build and solve with ``n_robots``, reusing the precheck's ``route`` (its span limits are those of any N ≥ 2,
-    and for N ≥ its N_min no tighter margin is tried): the route is not computed twice."""
-    from tmr.planner import build_problem, solve
+    and for N ≥ its N_min no tighter margin is tried): the route is not computed twice. With ``qp_first`` (``--robots
+    auto``) the horizon NLP runs only from a ``qp`` plan that passes every check: where that plan fails, it is
+    returned, failed, without an NLP (the NLP from a failed ``qp`` plan ran to its time limit and found none in every
+    such run of the rooms benchmark, ``formulations/horizon.md``, "Warm start")."""
+    from tmr.planner import build_problem, qp_run, solve
 
     start = time.perf_counter()
     overrides = dict(args.set) | ({"solver": args.solver} if args.solver else {})
@@ -454,7 +461,14 @@ def _plan_once(args: argparse.Namespace, scenario: Any, n_robots: int | None, ro
     )
     problem_time = time.perf_counter() - start
     LOG.debug("planning with %d robots: %s", problem.chain.n_robots, args.method)
-    plan, metrics = solve(problem, args.method, time_limit=args.time_limit, progress=progress_enabled())
+    qp = qp_run(problem, progress_enabled()) if qp_first and args.method == "horizon" else None
+    if qp is not None and not qp.plan.success:
+        plan, metrics = qp.plan, qp.metrics
+        plan.method = "horizon"
+        plan.failure = f"qp warm start: {plan.failure}; --robots auto runs the horizon NLP only from one that passes"
+        plan.diagnostics["timings"] = dict(qp_time=qp.seconds, problem_time=problem_time)
+        return qp.problem, plan, metrics
+    plan, metrics = solve(problem, args.method, time_limit=args.time_limit, progress=progress_enabled(), qp=qp)
     plan.diagnostics["timings"] = dict(plan.diagnostics.get("timings", {}), problem_time=problem_time)
     return problem, plan, metrics
 
@@ -726,7 +740,7 @@ def _main(args: argparse.Namespace) -> int:
                 for n in range(rt.n_min, last + 1):
                     attempt_start = time.perf_counter()
                     try:
-                        attempt = _plan_once(args, scenario, n, rt)
+                        attempt = _plan_once(args, scenario, n, rt, qp_first=True)
                     except TmrError as exc:  # refused, no start placement or no path with this N: try the next one
                         tried.append(f"{n}: {_short(exc)}")
                         continue

@@ -824,8 +824,42 @@ def plan(problem: Problem, method: str | Formulation = "pinv", *, progress: bool
     return result
 
 
+@dataclass(frozen=True)
+class QPRun:
+    """The plan ``--method qp`` returns for a problem (:func:`qp_run`): the problem it was planned on (its train
+    references if the trailing ones failed), the plan, its metrics and the run's wall time [s]."""
+
+    problem: Problem
+    plan: Plan
+    metrics: Metrics
+    seconds: float
+
+
+def _refuse_for_horizon(problem: Problem) -> None:
+    """What ``--method horizon`` refuses before its ``qp`` warm start (ParameterError): low obstacles, a passive
+    winch's pay-out damper."""
+    refuse_low_obstacles(problem.env, "--method horizon", "its NLP keeps no cable height above them; use --method qp")
+    _qp_only(problem, "the horizon NLP", by_tension=True)
+
+
+def qp_run(problem: Problem, progress: bool = False) -> QPRun:
+    """The horizon NLP's warm start: the ``qp`` plan exactly as ``solve(problem, "qp")`` makes it (trailing
+    references, then train references if those fail), kept with the problem it was planned on, so that
+    ``solve(problem, "horizon", qp=...)`` starts from it without planning it again (``--robots auto`` chooses N by
+    it). What ``solve(problem, "horizon")`` refuses is refused first, before the plan (ParameterError)."""
+    _refuse_for_horizon(problem)
+    start = time.perf_counter()
+    used, result, metrics = _solve_qp(problem, progress)
+    return QPRun(used, result, metrics, time.perf_counter() - start)
+
+
 def solve(
-    problem: Problem, method: str | Formulation = "qp", *, time_limit: float | None = None, progress: bool = False
+    problem: Problem,
+    method: str | Formulation = "qp",
+    *,
+    time_limit: float | None = None,
+    progress: bool = False,
+    qp: QPRun | None = None,
 ) -> tuple[Plan, Metrics]:
     """Plan with ``method`` and check every hard constraint on the recorded states.
 
@@ -836,6 +870,8 @@ def solve(
             ``step(ctx)`` (e.g. ``make_qp(problem, extra_limits=...)`` or your own).
         time_limit: wall-clock limit of the horizon NLP [s] (None: its default); progress: progress bars (the
             steps, once they take 2 s; the horizon NLP's iterations).
+        qp: for ``"horizon"`` only: its ``qp`` warm start, already made for this very problem by :func:`qp_run` (not
+            planned again; its seconds count in the plan's ``wall_time`` and ``qp_time``).
 
     Returns the plan (``success`` False with the reason if a constraint is violated anywhere) and its metrics. The
     horizon NLP starts from the very plan ``solve(problem, "qp")`` returns (trailing or train references, whichever
@@ -851,6 +887,8 @@ def solve(
     ``nlp_time`` (``horizon`` only; IPOPT's rounds with their transcription and fallback choice).
     """
     start = time.perf_counter()
+    if qp is not None and method != "horizon":
+        raise ParameterError(f"qp= is the horizon NLP's warm start: method 'horizon' only, got {method!r}")
     if method == "qp":
         result, metrics = _solve_qp(problem, progress)[1:]
         return _whole(result, metrics, start, qp_time=time.perf_counter() - start)
@@ -858,11 +896,14 @@ def solve(
         result, metrics = _checked(problem, method, progress)
         return _whole(result, metrics, start)
     # a whole-trajectory NLP, not a per-step formulation
-    refuse_low_obstacles(problem.env, "--method horizon", "its NLP keeps no cable height above them; use --method qp")
-    _qp_only(problem, "the horizon NLP", by_tension=True)
+    _refuse_for_horizon(problem)
     from tmr.control.horizon import DEFAULT_TIME_LIMIT, HorizonInfeasible, plan_horizon  # casadi: when used
 
-    problem, warm, warm_metrics = _solve_qp(problem, progress)  # the very plan ``--method qp`` returns
+    if qp is None:
+        problem, warm, warm_metrics = _solve_qp(problem, progress)  # the very plan ``--method qp`` returns
+    else:  # made by qp_run: its seconds are the start of this call's
+        start -= qp.seconds
+        problem, warm, warm_metrics = qp.problem, qp.plan, qp.metrics
     qp_done = time.perf_counter()
     limit = DEFAULT_TIME_LIMIT if time_limit is None else time_limit
     try:
