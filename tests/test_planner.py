@@ -193,27 +193,33 @@ def test_horizon_converged_is_no_worse_than_qp_in_any_term(scenario_a_qp):
 
 def test_horizon_from_a_qp_run_is_the_horizon_that_plans_its_own(scenario_a_qp, monkeypatch):
     """``solve(problem, "horizon", qp=qp_run(problem))`` starts from that run's plan without planning it again and
-    returns the plan ``solve(problem, "horizon")`` does (the same joints, bit for bit), its qp seconds counted in its
-    ``wall_time`` and ``qp_time``; ``qp=`` with another method is refused."""
+    returns the plan ``solve(problem, "horizon")`` does (the same joints, bit for bit), the run's seconds counted
+    once in its ``qp_time`` and ``wall_time``; ``qp=`` with another method, or made for another problem, is
+    refused."""
+    import dataclasses
+
     import tmr.planner
 
     problem = scenario_a_qp[0]
     own, _ = solve(problem, "horizon")
     run = qp_run(problem)
-    assert run.plan.success and run.problem is problem and run.seconds > 0
+    assert run.plan.success and run.problem is run.source is problem and run.seconds > 0
+    with pytest.raises(ParameterError, match="method 'horizon' only"):
+        solve(problem, "qp", qp=run)
+    with pytest.raises(ParameterError, match="made for another problem"):
+        solve(dataclasses.replace(problem), "horizon", qp=run)
 
     def again(*a, **k):
         raise AssertionError("the qp plan was planned again")
 
     monkeypatch.setattr(tmr.planner, "_solve_qp", again)
+    run = dataclasses.replace(run, seconds=1000.0)  # a qp run of 1000 s: counted once, not twice, not left out
     plan, metrics = solve(problem, "horizon", qp=run)
     np.testing.assert_array_equal(plan.q, own.q)
     assert plan.diagnostics["horizon_result"] == own.diagnostics["horizon_result"] == "optimal"
     timings = plan.diagnostics["timings"]
-    assert timings["qp_time"] >= run.seconds and plan.wall_time >= run.seconds + timings["nlp_time"]
+    assert 1000.0 <= timings["qp_time"] < 1001.0 and 1000.0 + timings["nlp_time"] <= plan.wall_time < 1100.0
     assert metrics.wall_time == plan.wall_time
-    with pytest.raises(ParameterError, match="method 'horizon' only"):
-        solve(problem, "qp", qp=run)
 
 
 def test_a_start_of_another_count_is_refused_before_the_route(monkeypatch):

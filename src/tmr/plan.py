@@ -443,8 +443,8 @@ def _plan_once(
     """Build and solve with ``n_robots``, reusing the precheck's ``route`` (its span limits are those of any N ≥ 2,
     and for N ≥ its N_min no tighter margin is tried): the route is not computed twice. With ``qp_first`` (``--robots
     auto``) the horizon NLP runs only from a ``qp`` plan that passes every check: where that plan fails, it is
-    returned, failed, without an NLP (the NLP from a failed ``qp`` plan ran to its time limit and found none in every
-    such run of the rooms benchmark, ``formulations/horizon.md``, "Warm start")."""
+    returned, failed, without an NLP (the NLP from a failed ``qp`` plan found none in any run of the rooms benchmark,
+    and ran up to its time limit for each such N of ``--robots auto``: ``formulations/horizon.md``, "Warm start")."""
     from tmr.planner import build_problem, qp_run, solve
 
     start = time.perf_counter()
@@ -461,7 +461,7 @@ def _plan_once(
     )
     problem_time = time.perf_counter() - start
     LOG.debug("planning with %d robots: %s", problem.chain.n_robots, args.method)
-    qp = qp_run(problem, progress_enabled()) if qp_first and args.method == "horizon" else None
+    qp = qp_run(problem, progress=progress_enabled()) if qp_first and args.method == "horizon" else None
     if qp is not None and not qp.plan.success:
         plan, metrics = qp.plan, qp.metrics
         plan.method = "horizon"

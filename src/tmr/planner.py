@@ -826,9 +826,12 @@ def plan(problem: Problem, method: str | Formulation = "pinv", *, progress: bool
 
 @dataclass(frozen=True)
 class QPRun:
-    """The plan ``--method qp`` returns for a problem (:func:`qp_run`): the problem it was planned on (its train
-    references if the trailing ones failed), the plan, its metrics and the run's wall time [s]."""
+    """The plan ``--method qp`` returns for a problem (:func:`qp_run`): the problem it was made for (``source``), the
+    problem it was planned on (``problem``: the train references' if the trailing ones failed), the plan, its metrics
+    and the run's wall time [s]. For one ``solve(source, "horizon", qp=...)``: that call may change the plan in place
+    (it is the plan returned when the NLP finds none better)."""
 
+    source: Problem
     problem: Problem
     plan: Plan
     metrics: Metrics
@@ -842,15 +845,16 @@ def _refuse_for_horizon(problem: Problem) -> None:
     _qp_only(problem, "the horizon NLP", by_tension=True)
 
 
-def qp_run(problem: Problem, progress: bool = False) -> QPRun:
-    """The horizon NLP's warm start: the ``qp`` plan exactly as ``solve(problem, "qp")`` makes it (trailing
-    references, then train references if those fail), kept with the problem it was planned on, so that
-    ``solve(problem, "horizon", qp=...)`` starts from it without planning it again (``--robots auto`` chooses N by
-    it). What ``solve(problem, "horizon")`` refuses is refused first, before the plan (ParameterError)."""
+def qp_run(problem: Problem, *, progress: bool = False) -> QPRun:
+    """The horizon NLP's warm start: the plan ``solve(problem, "qp")`` returns (trailing references, then train
+    references if those fail; its ``wall_time`` the last loop's, the whole run's in ``seconds``), kept with the problem
+    it was planned on, so that ``solve(problem, "horizon", qp=...)`` starts from it without planning it again
+    (``--robots auto`` chooses N by it). What ``solve(problem, "horizon")`` refuses is refused first, before the plan
+    (ParameterError)."""
     _refuse_for_horizon(problem)
     start = time.perf_counter()
     used, result, metrics = _solve_qp(problem, progress)
-    return QPRun(used, result, metrics, time.perf_counter() - start)
+    return QPRun(problem, used, result, metrics, time.perf_counter() - start)
 
 
 def solve(
@@ -871,7 +875,8 @@ def solve(
         time_limit: wall-clock limit of the horizon NLP [s] (None: its default); progress: progress bars (the
             steps, once they take 2 s; the horizon NLP's iterations).
         qp: for ``"horizon"`` only: its ``qp`` warm start, already made for this very problem by :func:`qp_run` (not
-            planned again; its seconds count in the plan's ``wall_time`` and ``qp_time``).
+            planned again; its seconds count in the plan's ``wall_time`` and ``qp_time``; ParameterError if it was
+            made for another problem).
 
     Returns the plan (``success`` False with the reason if a constraint is violated anywhere) and its metrics. The
     horizon NLP starts from the very plan ``solve(problem, "qp")`` returns (trailing or train references, whichever
@@ -889,6 +894,8 @@ def solve(
     start = time.perf_counter()
     if qp is not None and method != "horizon":
         raise ParameterError(f"qp= is the horizon NLP's warm start: method 'horizon' only, got {method!r}")
+    if qp is not None and qp.source is not problem:
+        raise ParameterError("qp= was made for another problem: pass qp_run(problem) of this very problem")
     if method == "qp":
         result, metrics = _solve_qp(problem, progress)[1:]
         return _whole(result, metrics, start, qp_time=time.perf_counter() - start)
