@@ -399,6 +399,32 @@ def test_robots_auto_runs_the_horizon_nlp_only_from_a_qp_plan_that_passes(tmp_pa
     assert "--robots auto runs the horizon NLP only from one that passes" in err
 
 
+@pytest.mark.parametrize(
+    ("method", "setting", "says"),
+    [
+        ("horizon", "span_approach_rate=1", "span_approach_rate is a limit of --method qp's per-step QP: the horizon"),
+        ("pinv", "span_approach_rate=1", "the pinv baseline does not keep it"),
+        ("pinv", "winch=active", "an active winch (winch = 'active') is planned by --method qp and horizon only"),
+    ],
+)
+def test_a_setting_the_method_refuses_is_refused_before_the_route_with_any_robots(
+    tmp_path, capsys, monkeypatch, method, setting, says
+):
+    """A parameter the method cannot keep is bad input whatever N is: one line, exit 2, nothing written, before the
+    route is searched — with ``--robots auto`` too (until stop 56 it was caught per N: "no plan found", exit 1)."""
+    import tmr.route.route as route
+
+    def boom(*a, **k):
+        raise AssertionError("searched a route for a refused setting")
+
+    monkeypatch.setattr(route, "plan_route", boom)
+    for robots in ("auto", "3"):
+        out = tmp_path / f"{method}-{robots}"
+        args = ["--scenario", "A", "--method", method, "--set", setting, "--robots", robots, "--out", str(out)]
+        code, _, err = run_cli(args, capsys)
+        assert code == 2 and says in err and err.count("\n") == 1 and not out.exists(), err
+
+
 def test_route_guided_plan_goes_round_the_wall(tmp_path, capsys):
     """The straight line is 4 m, the route 30 m: the chain must go round the wall's end, with at least 6 robots."""
     out = tmp_path / "wall"

@@ -431,7 +431,8 @@ def test_active_winch_defaults_fill_only_what_is_not_given() -> None:
 
 
 def test_the_active_winch_plans_with_its_dynamic_sag_defaults_and_horizon_accepts_them() -> None:
-    from tmr.planner import _qp_only, build_problem
+    from tmr.model.params import refuse_method_limits
+    from tmr.planner import build_problem
     from tmr.world.scenario import load_scenario
 
     passive = build_problem(load_scenario("A"))
@@ -445,11 +446,13 @@ def test_the_active_winch_plans_with_its_dynamic_sag_defaults_and_horizon_accept
     assert record["span_approach_rate"] == 0.5 and record["sag_allowance"] == 0.01
     assert "sag_allowance" not in passive.params_dict()
     # the horizon keeps an active winch's damper through the tension, given or not; a passive one it cannot keep
-    _qp_only(problem, "the horizon NLP", by_tension=True)
-    _qp_only(build_problem(load_scenario("A"), overrides=ACTIVE | {"span_approach_rate": 0.3}), "x", by_tension=True)
+    refuse_method_limits("horizon", problem.chain_params, problem.qp_params)
+    other = build_problem(load_scenario("A"), overrides=ACTIVE | {"span_approach_rate": 0.3})
+    refuse_method_limits("horizon", other.chain_params, other.qp_params)
     given = build_problem(load_scenario("A"), overrides={"span_approach_rate": 0.5})
     with pytest.raises(ParameterError, match="span_approach_rate is a limit of --method qp"):
-        _qp_only(given, "the horizon NLP", by_tension=True)
+        refuse_method_limits("horizon", given.chain_params, given.qp_params)
+    refuse_method_limits("qp", given.chain_params, given.qp_params)  # the QP's own limit
     with pytest.raises(ParameterError, match="sag_allowance set but winch = 'passive'"):
         build_problem(load_scenario("A"), overrides={"sag_allowance": 0.01})
     with pytest.raises(ParameterError, match=r"ground_clearance \(0.425 m\) \+ sag_allowance \(0.01 m\)"):

@@ -529,7 +529,15 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
     (exit 2) for a task proven impossible: no free route, fewer robots than the route needs, or more than fit in
     the free space at once (before the route search).
     """
-    from tmr.model.params import PARAM_CLASSES, ChainParams, TimeParams, apply_overrides, with_winch_defaults
+    from tmr.model.params import (
+        PARAM_CLASSES,
+        ChainParams,
+        QPParams,
+        TimeParams,
+        apply_overrides,
+        refuse_method_limits,
+        with_winch_defaults,
+    )
     from tmr.model.spans import span_limits
     from tmr.route.route import TooFewRobotsError, check_fit, plan_route
 
@@ -566,6 +574,7 @@ def precheck(args: argparse.Namespace, scenario: Any) -> tuple[Any, int | None]:
 
     top = max(chain_params.exit_height, chain_params.base_height)
     refuse_impassable_low_obstacles(scenario.environment, top, chain_params.low_obstacle_clearance)
+    refuse_method_limits(args.method, chain_params, made[QPParams])  # before the route (and --robots auto's N): exit 2
     if args.method == "horizon":  # before the route: exit 2
         from tmr.world.environment import refuse_low_obstacles
 

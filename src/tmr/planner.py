@@ -50,6 +50,7 @@ from tmr.model.params import (
     TimeParams,
     apply_overrides,
     as_dict,
+    refuse_method_limits,
     with_winch_defaults,
 )
 from tmr.model.spans import span_limits
@@ -758,31 +759,13 @@ def formulation(problem: Problem, method: str | Formulation) -> Formulation:
     if getattr(problem, "robot_model", None) is not None and method == "pinv":
         raise ParameterError("drive = 'diff' is planned by --method qp and horizon (not --method pinv)")
     if method == "pinv":
-        if problem.chain_params.active_winch:  # first: its damper is one of the active winch's defaults
-            raise ParameterError(
-                "an active winch (winch = 'active') is planned by --method qp and horizon only: the pinv baseline "
-                "keeps the paper's constant tension"
-            )
-        _qp_only(problem, "the pinv baseline")
+        refuse_method_limits("pinv", problem.chain_params, problem.qp_params)
         return make_pinv(problem)
     if method == "qp":
         return make_qp(problem)
     if isinstance(method, str):
         raise ParameterError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
     return method
-
-
-def _qp_only(problem: Problem, who: str, *, by_tension: bool = False) -> None:
-    """Refuse the per-step QP's pay-out damper for a method that would not keep it (ParameterError); ``by_tension``:
-    the method keeps it through an active winch's tension (``--method horizon``,
-    :func:`tmr.control.winch.least_tension_schedule`), so only a passive winch's damper is refused."""
-    if by_tension and problem.chain_params.active_winch:
-        return
-    if problem.qp_params.span_approach_rate is not None:
-        raise ParameterError(
-            f"span_approach_rate is a limit of --method qp's per-step QP: {who} does not keep it (leave it unset"
-            + ("; with winch = 'active' the horizon keeps it through the tension)" if by_tension else ")")
-        )
 
 
 def plan(problem: Problem, method: str | Formulation = "pinv", *, progress: bool = False) -> Plan:
@@ -842,7 +825,7 @@ def _refuse_for_horizon(problem: Problem) -> None:
     """What ``--method horizon`` refuses before its ``qp`` warm start (ParameterError): low obstacles, a passive
     winch's pay-out damper."""
     refuse_low_obstacles(problem.env, "--method horizon", "its NLP keeps no cable height above them; use --method qp")
-    _qp_only(problem, "the horizon NLP", by_tension=True)
+    refuse_method_limits("horizon", problem.chain_params, problem.qp_params)
 
 
 def qp_run(problem: Problem, *, progress: bool = False) -> QPRun:

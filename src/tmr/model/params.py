@@ -49,6 +49,28 @@ DRIVE_FIELDS = ("drive", "robot_model")
 ACTIVE_WINCH_DEFAULTS: dict[str, float] = {"ground_clearance": 0.05, "sag_allowance": 0.01, "span_approach_rate": 0.5}
 
 
+def refuse_method_limits(method: str, chain_params: ChainParams, qp_params: QPParams) -> None:
+    """What ``method`` refuses in the parameters, whatever the number of robots (ParameterError): ``"pinv"`` an
+    active winch (the paper's constant tension) and the per-step QP's pay-out damper ``span_approach_rate``;
+    ``"horizon"`` that damper unless the winch is active (the NLP keeps it through the tension,
+    :func:`tmr.control.winch.least_tension_schedule`); ``"qp"`` nothing. ``tmr plan`` calls it before the route, the
+    planner again before it plans."""
+    if method == "pinv" and chain_params.active_winch:  # first: its damper is one of the active winch's defaults
+        raise ParameterError(
+            "an active winch (winch = 'active') is planned by --method qp and horizon only: the pinv baseline "
+            "keeps the paper's constant tension"
+        )
+    if method not in ("pinv", "horizon") or qp_params.span_approach_rate is None:
+        return
+    if method == "horizon" and chain_params.active_winch:
+        return
+    who = "the pinv baseline" if method == "pinv" else "the horizon NLP"
+    raise ParameterError(
+        f"span_approach_rate is a limit of --method qp's per-step QP: {who} does not keep it (leave it unset"
+        + ("; with winch = 'active' the horizon keeps it through the tension)" if method == "horizon" else ")")
+    )
+
+
 def with_winch_defaults(values: dict[str, Any]) -> tuple[dict[str, Any], tuple[str, ...]]:
     """``values`` (parameter overrides by field name) with :data:`ACTIVE_WINCH_DEFAULTS` filled in where not given,
     if they ask for ``winch = "active"``; and the names it filled in."""
