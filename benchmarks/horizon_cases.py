@@ -59,3 +59,14 @@ def median_ms(fn: Callable[[], Any], repeats: int) -> float:
         fn()
         times.append(time.perf_counter() - t0)
     return 1e3 * statistics.median(times)
+
+
+def record(rows: list[dict[str, Any]], row: dict[str, Any], reference: Any, ours: Any) -> None:
+    """Complete ``row`` with the entries of the casadi matrix ``ours`` and its largest difference from ``reference``
+    (relative to the reference's largest entry), append it to ``rows`` and print it."""
+    import casadi as ca
+
+    row["entries"] = ours.nnz()
+    row["difference"] = float(ca.norm_inf(reference - ours)) / float(ca.norm_inf(reference))
+    rows.append(row)
+    print({k: round(v, 4) if isinstance(v, float) else v for k, v in row.items()}, flush=True)

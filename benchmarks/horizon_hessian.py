@@ -30,7 +30,7 @@ import casadi as ca
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from horizon_cases import build, median_ms, model_at  # noqa: E402
+from horizon_cases import build, median_ms, model_at, record  # noqa: E402
 from provenance import source_version, versions  # noqa: E402
 
 from tmr.control import horizon_model as hm  # noqa: E402
@@ -79,11 +79,7 @@ def main() -> None:
             r["tmr build"] = time.perf_counter() - t0
             r["casadi eval"] = median_ms(lambda f=theirs, c=c, x=xv, m=lam: f(x, c, m), args.repeats)
             r["tmr eval"] = median_ms(lambda f=ours, c=c, x=xv, m=lam: f(x, c, m), args.repeats)
-            A, B = theirs(xv, c, lam), ours(xv, c, lam)
-            r["entries"] = B.nnz()
-            r["difference"] = float(ca.norm_inf(A - B)) / float(ca.norm_inf(A))
-            rows.append(r)
-            print({k: round(v, 4) if isinstance(v, float) else v for k, v in r.items()}, flush=True)
+            record(rows, r, theirs(xv, c, lam), ours(xv, c, lam))
     lines = [
         "# The Hessian of the cost and the non-clearance rows: casadi's against the assembled product",
         "",

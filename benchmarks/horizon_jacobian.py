@@ -28,7 +28,7 @@ from pathlib import Path
 import casadi as ca
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from horizon_cases import build, median_ms, model_at  # noqa: E402
+from horizon_cases import build, median_ms, model_at, record  # noqa: E402
 from provenance import source_version, versions  # noqa: E402
 
 from tmr.control import horizon_model as hm  # noqa: E402
@@ -57,11 +57,7 @@ def main() -> None:
         r["by group build"] = time.perf_counter() - t0
         r["stacked eval"] = median_ms(lambda f=stacked, x=xv: f(x), args.repeats)
         r["by group eval"] = median_ms(lambda f=ours, x=xv: f(x), args.repeats)
-        A, B = stacked(xv), ours(xv)
-        r["entries"] = B.nnz()
-        r["difference"] = float(ca.norm_inf(A - B)) / float(ca.norm_inf(A))
-        rows.append(r)
-        print({k: round(v, 4) if isinstance(v, float) else v for k, v in r.items()}, flush=True)
+        record(rows, r, stacked(xv), ours(xv))
     lines = [
         "# The Jacobian of the non-clearance rows: casadi's of the stacked rows against one group at a time",
         "",
