@@ -576,8 +576,11 @@ def _plan_horizon(
                         kwargs.update(lam_x0=lam_start[0], lam_g0=tr.carry_multipliers(prev, lam_start[1]))
                     elif rnd == 1 and window_lam is not None:  # the polishing pass: the windows' multipliers
                         kwargs.update(lam_g0=_stitched_multipliers(tr, window_lam))
-                    from_last = phase == "polish" and label == "retry" and i_attempt > 0 and status == _MAX_ITER
-                    if from_last:  # the polish stopped at its cap near the optimum: its retry goes on from there
+                    # the attempt before stopped at its iteration cap (the polish near the optimum; a Gauss–Newton
+                    # round oscillating next to a KKT point): the retry goes on from its last iterate (not the fast
+                    # attempt, which has no retry)
+                    from_last = label == "retry" and i_attempt > 0 and status == _MAX_ITER
+                    if from_last:
                         kwargs.update(x0=xv, lam_x0=lam[0], lam_g0=lam[1])  # primal–dual
                     t3 = time.perf_counter()
                     _LOG.debug("horizon NLP %s: IPOPT on %d rows", name, tr.size)  # "round 1 primary", …
@@ -757,7 +760,9 @@ def _plan_horizon(
     retried = [r for r in phase_rounds if r["attempt"] == "retry"]  # the fast attempt has none
     if retried:  # a retry ran: its own floor and Hessian (HorizonOptions.retry_ipopt, retry_hessian)
         rt = retried[-1]
-        floor += f", its retry {rt['min_hessian_perturbation']:g} ({_HESSIAN[rt['hessian']]} Hessian)"
+        capped = any(r["from_last"] for r in retried)  # a retry went on from an attempt stopped at its cap
+        went_on = "; continuing the attempt stopped at its iteration cap" if capped else ""
+        floor += f", its retry {rt['min_hessian_perturbation']:g} ({_HESSIAN[rt['hessian']]} Hessian{went_on})"
     if not rounds and coarse_c is None:  # IPOPT never ran on the whole NLP: no floor was used
         floor_note = "no IPOPT round on the whole NLP"
     elif fast_log is None:
