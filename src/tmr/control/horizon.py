@@ -234,6 +234,7 @@ class _IterationCallback(ca.Callback):
         self.stalled = False
         self._best: tuple[float, int] | None = None  # (cost, iteration) of the cheapest screened iterate
         self.iteration = 0
+        self.last_violation = math.inf
         self._names = list(ca.nlpsol_out())
         self.construct("horizon_iteration", {})
 
@@ -271,6 +272,7 @@ class _IterationCallback(ca.Callback):
             float(np.max(tr.lbx - x, initial=0.0)),
             float(np.max(x - tr.ubx, initial=0.0)),
         )
+        self.last_violation = viol  # the largest violation of the round's rows and bounds at the last iterate
         self.pool.offer(f, viol, x, f"{self.label}, iteration {self.iteration}")
         if self.stall is not None:
             if viol <= self.pool.screen and (self._best is None or f < self._best[0]):
@@ -540,6 +542,7 @@ def _plan_horizon(
                     order = sorted(attempts, key=lambda a: a[0] != "retry")
                     if opts.retry_first_max_iter is not None and order[0][0] == "retry":  # a short try, then the other
                         order[0] = ("retry", dict(order[0][1], max_iter=int(opts.retry_first_max_iter)))
+                last_violation = math.inf  # the row violation at the last attempt's last iterate
                 for i_attempt, (label, extra) in enumerate(order):
                     remaining = phase_deadline - time.perf_counter()
                     # building the solver (casadi: the NLP's derivatives) cannot be interrupted: do not start one
@@ -576,10 +579,15 @@ def _plan_horizon(
                         kwargs.update(lam_x0=lam_start[0], lam_g0=tr.carry_multipliers(prev, lam_start[1]))
                     elif rnd == 1 and window_lam is not None:  # the polishing pass: the windows' multipliers
                         kwargs.update(lam_g0=_stitched_multipliers(tr, window_lam))
-                    # the attempt before stopped at its iteration cap (the polish near the optimum; a Gauss–Newton
-                    # round oscillating next to a KKT point): the retry goes on from its last iterate (not the fast
-                    # attempt, which has no retry)
-                    from_last = label == "retry" and i_attempt > 0 and status == _MAX_ITER
+                    # the attempt before stopped at its iteration cap near a solution: the retry goes on from its last
+                    # iterate — the polish's (it starts at an accepted optimum), or one holding the round's rows (a
+                    # Gauss–Newton round oscillating next to a KKT point); from one far outside them, the round's start
+                    from_last = (
+                        label == "retry"
+                        and i_attempt > 0
+                        and status == _MAX_ITER
+                        and (phase == "polish" or last_violation <= tol)
+                    )
                     if from_last:
                         kwargs.update(x0=xv, lam_x0=lam[0], lam_g0=lam[1])  # primal–dual
                     t3 = time.perf_counter()
@@ -587,6 +595,7 @@ def _plan_horizon(
                     with _ctrl_c_stops_ipopt():
                         sol = solver(**kwargs)
                     t4 = time.perf_counter()
+                    last_violation = callback.last_violation
                     trans_time += t3 - t2
                     solve_time += t4 - t3
                     stats = solver.stats()
