@@ -7,9 +7,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 import tmr.control.horizon as horizon_module
+from tests.test_horizon import spy_ipopt_calls
 from tmr.control.horizon import plan_horizon
 from tmr.control.horizon_model import HorizonOptions
 
@@ -50,7 +52,8 @@ def test_the_retry_with_the_exact_hessian_solves_where_gauss_newton_stalls(monke
     procedure) no optimum is found. The fast attempt runs with stop 53's ceiling on its regularisation, 10⁸: with
     10⁴ (the default since stop 54) it is optimal itself, and the fallback never runs. Since stop 55 (the rows'
     Jacobian built group by group: the same matrix, other rounding) the Gauss–Newton fallback crosses the valley in
-    62 iterations; with ``max_iter`` 40 it stops there, and the exact retry from the same start converges in 3."""
+    62 iterations; with ``max_iter`` 40 it stops there, and the exact retry from the same start converged in 3. Since
+    stop 57 the retry goes on from the primary's last iterate, which holds the round's rows, and converges in 1."""
     problem, warm = room_problem(monkeypatch, tmp_path, 1226144109, "long_walls", "mid", 2)
     now = plan_horizon(problem, warm).diagnostics
     assert now["horizon_result"] == "optimal" and not _fallback(now), now["round_log"]
@@ -61,7 +64,8 @@ def test_the_retry_with_the_exact_hessian_solves_where_gauss_newton_stalls(monke
     assert primary["status"] not in _SOLVED
     assert (retry["attempt"], retry["hessian"], retry["min_hessian_perturbation"]) == ("retry", "exact", 1e-2)
     assert retry["status"] in _SOLVED
-    assert "its retry 0.01 (exact Hessian)" in d["horizon_note"]
+    assert retry["from_last"] and retry["iterations"] <= 3
+    assert "its retry 0.01 (exact Hessian; continuing the attempt stopped at its iteration cap)" in d["horizon_note"]
     old = plan_horizon(problem, warm, fast_max_hessian_perturbation=1e8, max_iter=40, retry_hessian=None).diagnostics
     assert old["horizon_result"] != "optimal"
     assert [r["hessian"] for r in _fallback(old)] == ["gauss-newton", "gauss-newton"]
@@ -105,17 +109,61 @@ def test_the_fast_attempt_gives_up_before_ipopts_regularisation_runs_away(monkey
     and the fallback was optimal. Since stop 55 (the rows' Jacobian built group by group: the same matrix, other
     rounding) the fallback's Gauss–Newton primary ends at ``max_iter`` and its exact retry (floor 10⁻²) ran away in the
     same way (10¹⁰·⁶, four MUMPS reallocations, 81 s for 10 iterations: 83 s against the 60 s limit, then the qp
-    plan). Every attempt now has the ceiling ``max_hessian_perturbation`` = 10⁹: the retry stops at ``max_iter``
-    instead, no round reaches the time limit, and the verified ``qp`` plan is returned in seconds."""
+    plan). Every attempt now has the ceiling ``max_hessian_perturbation`` = 10⁹: no round reaches the time limit.
+
+    Stop 57: the Gauss–Newton primary does not stall far away, it oscillates next to a KKT point — in its last 180
+    iterations one robot's final rest position flips sign every step, the step growing by 1.14 a time, the objective
+    constant to seven digits (the Gauss–Newton Hessian lacks the curvature of f2's large span residuals). The retry
+    from the warm start then ran to ``max_iter`` elsewhere and the ``qp`` plan was returned (4.3 s). The retry now
+    goes on from the primary's last iterate and multipliers, as the polish's retry does, and converges in 2
+    iterations: optimal, f2 509 → 188."""
     problem, warm = room_problem(monkeypatch, tmp_path, 3098419812, "sparse", "near", 5)
     assert HorizonOptions().max_hessian_perturbation == 1e9
+    calls = spy_ipopt_calls(monkeypatch)
     d = plan_horizon(problem, warm, time_limit=60).diagnostics
-    assert d["horizon_result"] in ("optimal", "warm_start"), d["horizon_note"]
+    monkeypatch.undo()
+    assert d["horizon_result"] == "optimal", d["horizon_note"]
     fast = [r for r in d["round_log"] if r["phase"] == "fast"]
     assert fast and fast[-1]["status"] != "Maximum_WallTime_Exceeded"  # before: the limit stopped it, the qp plan
-    assert any(r["phase"] == "fallback" for r in d["round_log"])
     assert not d["time_limit_hit"], d["horizon_note"]  # without the ceiling: the retry overran the limit
     assert all(r["status"] != "Maximum_WallTime_Exceeded" for r in d["round_log"]), d["round_log"]
+    primary, retry = _fallback(d)[:2]
+    assert (primary["attempt"], primary["hessian"], primary["status"]) == (
+        "primary",
+        "gauss-newton",
+        "Maximum_Iterations_Exceeded",
+    )
+    assert (retry["attempt"], retry["hessian"], retry["from_last"]) == ("retry", "exact", True)
+    assert retry["status"] in _SOLVED and retry["iterations"] < 20
+    i = len(fast) + 1  # the fallback's primary, then its retry, among the IPOPT solves
+    (_, primary_x), (retry_args, _) = calls[i - 1], calls[i]
+    np.testing.assert_array_equal(np.asarray(retry_args["x0"], dtype=float).ravel(), primary_x)  # its last iterate
+    assert "lam_g0" in retry_args and "lam_x0" in retry_args  # and its multipliers
+    assert "its retry 0.01 (exact Hessian; continuing the attempt stopped at its iteration cap)" in d["horizon_note"]
+    terms, before = d["horizon_summary"]["terms"], d["horizon_summary"]["warm_start_terms"]
+    assert all(terms[k] <= before[k] * (1 + 1e-9) for k in ("f1", "f2", "f4"))  # never worse than qp in a term
+    assert terms["f2"] < 0.5 * before["f2"]
+
+
+def test_a_retry_starts_where_its_round_started_after_an_attempt_capped_outside_its_rows(monkeypatch, tmp_path):
+    """narrow-near-798204745, 8 robots: the fallback's Gauss–Newton primary also stops at ``max_iter``, but its last
+    iterate is 70 outside the round's rows (scaled objective 1.7, the start's 1). A retry from there ran to
+    ``max_iter`` too (stop 57, before the condition: a best feasible iterate, f1 + f2 + f4 2,047 against the
+    optimum's 211); from where the round started — the fast attempt's best feasible iterate — it converges."""
+    problem, warm = room_problem(monkeypatch, tmp_path, 798204745, "narrow", "near", 8)
+    calls = spy_ipopt_calls(monkeypatch)
+    d = plan_horizon(problem, warm, time_limit=60).diagnostics
+    monkeypatch.undo()
+    assert d["horizon_result"] == "optimal", d["horizon_note"]
+    fast = [r for r in d["round_log"] if r["phase"] == "fast"]
+    primary, retry = _fallback(d)[:2]
+    assert (primary["attempt"], primary["status"]) == ("primary", "Maximum_Iterations_Exceeded")
+    assert (retry["attempt"], retry["from_last"]) == ("retry", False) and retry["status"] in _SOLVED
+    i = len(fast) + 1
+    (primary_args, primary_x), (retry_args, _) = calls[i - 1], calls[i]
+    assert not np.array_equal(np.asarray(retry_args["x0"], dtype=float).ravel(), primary_x)
+    np.testing.assert_array_equal(np.asarray(retry_args["x0"]), np.asarray(primary_args["x0"]))  # the round's start
+    assert "continuing the attempt" not in d["horizon_note"]
 
 
 def test_under_the_fast_ceiling_the_dense_room_is_solved_by_the_fast_attempt(monkeypatch, tmp_path):
