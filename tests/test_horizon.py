@@ -564,9 +564,12 @@ def test_normal_run_is_optimal_and_not_worse(feasible_warm):
 
 @pytest.mark.parametrize(
     "limit",
-    [{"max_iter": 1}, {"max_iter": 2}, {"max_iter": 3}, {"time_limit": 1e-3}],
+    # with max_iter alone the retry would go on from the capped primary's last iterate (it holds its rows) and
+    # reach the optimum of this small problem in 2 × 2 iterations: IPOPT is stopped early only with the retry off
+    [{"max_iter": 1, "retry": False}, {"max_iter": 2, "retry": False}, {"max_iter": 3, "retry": False},
+     {"time_limit": 1e-3}],
     ids=["max_iter=1", "max_iter=2", "max_iter=3", "time_limit=1ms"],
-)
+)  # fmt: skip
 def test_stopped_ipopt_returns_a_feasible_plan_not_worse_than_warm_start(feasible_warm, limit):
     problem, warm, J_warm = feasible_warm
     plan = plan_horizon(problem, warm, **WEIGHTED, **limit)
@@ -595,10 +598,14 @@ def test_iterate_fallback_beats_warm_start(feasible_warm):
     """Two IPOPT iterations already lower the cost from a feasible start; the iterate is kept, projected on the
     reference and checked on every row."""
     problem, warm, J_warm = feasible_warm
-    plan = plan_horizon(problem, warm, **WEIGHTED, max_iter=2)
+    plan = plan_horizon(problem, warm, **WEIGHTED, max_iter=2, retry=False)  # the retry would go on to the optimum
     d = plan.diagnostics
     assert d["horizon_result"] == "best_feasible_iterate"
     assert objective(plan.q, problem) < J_warm - 0.01  # 120.10 vs 120.15 (every span row in since this change)
+    went_on = plan_horizon(problem, warm, **WEIGHTED, max_iter=2).diagnostics  # the retry continues the primary
+    primary, retry = [r for r in went_on["round_log"] if r["phase"] == "fallback"][:2]  # after the fast attempt's
+    assert primary["status"] == "Maximum_Iterations_Exceeded" and retry["from_last"] and retry["iterations"] <= 2
+    assert went_on["horizon_result"] == "optimal" and went_on["objective"] < d["objective"]
     assert d["iterates_kept"] >= 1 and check(plan, problem.env).n_violation_steps == 0
 
 

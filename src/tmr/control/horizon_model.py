@@ -174,10 +174,11 @@ class HorizonOptions:
             MUMPS's automatic choice 7), 2 AMF, 4 PORD, 6 QAMD, 7 automatic.
         accept_acceptable: also accept IPOPT's ``Solved_To_Acceptable_Level`` (KKT error below ``acceptable_tol`` for
             ``acceptable_iter`` iterations, constraint violation below ``constr_viol_tol``); the status is recorded.
-        retry: if IPOPT stops without a solution, solve the round once more from the same start with ``retry_ipopt``
-            merged into the options and the Hessian ``retry_hessian`` (another path to the optimum; the fallbacks of
-            :func:`plan_horizon` are used only if both attempts fail). The attempt that solved a round goes first in
-            the rounds after it.
+        retry: if IPOPT stops without a solution, solve the round once more with ``retry_ipopt`` merged into the
+            options and the Hessian ``retry_hessian`` (another path to the optimum; the fallbacks of
+            :func:`plan_horizon` are used only if both attempts fail): from the same start, or, where the attempt
+            stopped at its iteration cap with its last iterate holding the round's rows, from that iterate and its
+            multipliers (stop 57). The attempt that solved a round goes first in the rounds after it.
         retry_hessian: the retry's Hessian (``None``: the one of its phase, ``hessian``). ``"exact"`` (stop 52): where
             the Gauss–Newton Hessian leaves out the curvature that decides — the flat valley of a straight chain of 2
             robots (long_walls-mid-1226144109), a no-worse row f1 ≤ f1 of the ``qp`` plan active at the optimum
