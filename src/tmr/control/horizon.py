@@ -234,7 +234,6 @@ class _IterationCallback(ca.Callback):
         self.stalled = False
         self._best: tuple[float, int] | None = None  # (cost, iteration) of the cheapest screened iterate
         self.iteration = 0
-        self.last_violation = math.inf
         self._names = list(ca.nlpsol_out())
         self.construct("horizon_iteration", {})
 
@@ -272,7 +271,6 @@ class _IterationCallback(ca.Callback):
             float(np.max(tr.lbx - x, initial=0.0)),
             float(np.max(x - tr.ubx, initial=0.0)),
         )
-        self.last_violation = viol  # the largest violation of the round's rows and bounds at the last iterate
         self.pool.offer(f, viol, x, f"{self.label}, iteration {self.iteration}")
         if self.stall is not None:
             if viol <= self.pool.screen and (self._best is None or f < self._best[0]):
@@ -595,7 +593,6 @@ def _plan_horizon(
                     with _ctrl_c_stops_ipopt():
                         sol = solver(**kwargs)
                     t4 = time.perf_counter()
-                    last_violation = callback.last_violation
                     trans_time += t3 - t2
                     solve_time += t4 - t3
                     stats = solver.stats()
@@ -606,6 +603,13 @@ def _plan_horizon(
                         status = _STALLED  # stopped by the callback: no cheaper iterate for fast_stall_iter
                     xv = np.asarray(sol["x"], dtype=float).ravel()
                     lam = (np.asarray(sol["lam_x"], dtype=float).ravel(), np.asarray(sol["lam_g"], dtype=float).ravel())
+                    g_end = np.asarray(sol["g"], dtype=float).ravel()  # the round's rows and bounds at IPOPT's point
+                    last_violation = max(
+                        float(np.max(tr.lbg - g_end, initial=0.0)),
+                        float(np.max(g_end - tr.ubg, initial=0.0)),
+                        float(np.max(tr.lbx - xv, initial=0.0)),
+                        float(np.max(xv - tr.ubx, initial=0.0)),
+                    )
                     vals = model.values(xv)
                     viol = _violations(model, vals, xv, tol=tol)
                     rounds.append(
@@ -769,7 +773,7 @@ def _plan_horizon(
     retried = [r for r in phase_rounds if r["attempt"] == "retry"]  # the fast attempt has none
     if retried:  # a retry ran: its own floor and Hessian (HorizonOptions.retry_ipopt, retry_hessian)
         rt = retried[-1]
-        capped = any(r["from_last"] for r in retried)  # a retry went on from an attempt stopped at its cap
+        capped = any(r["from_last"] for r in retried)  # a retry (of any round) went on from a capped attempt
         went_on = "; continuing the attempt stopped at its iteration cap" if capped else ""
         floor += f", its retry {rt['min_hessian_perturbation']:g} ({_HESSIAN[rt['hessian']]} Hessian{went_on})"
     if not rounds and coarse_c is None:  # IPOPT never ran on the whole NLP: no floor was used
