@@ -264,13 +264,7 @@ class _IterationCallback(ca.Callback):
         x = np.asarray(a["x"], dtype=float).ravel()
         g = np.asarray(a["g"], dtype=float).ravel()
         f = float(a["f"])
-        tr = self.tr
-        viol = max(
-            float(np.max(tr.lbg - g, initial=0.0)),
-            float(np.max(g - tr.ubg, initial=0.0)),
-            float(np.max(tr.lbx - x, initial=0.0)),
-            float(np.max(x - tr.ubx, initial=0.0)),
-        )
+        viol = _round_violation(self.tr, x, g)
         self.pool.offer(f, viol, x, f"{self.label}, iteration {self.iteration}")
         if self.stall is not None:
             if viol <= self.pool.screen and (self._best is None or f < self._best[0]):
@@ -282,6 +276,17 @@ class _IterationCallback(ca.Callback):
         if time.perf_counter() >= self.deadline:  # IPOPT's max_wall_time starts after the solver is built: not ours
             self.timed_out = True
         return [1 if _INTERRUPT.is_set() or self.timed_out or self.stalled else 0]
+
+
+def _round_violation(tr: _Transcription, x: Array, g: Array) -> float:
+    """The largest violation of a round's transcribed rows ``g`` and variable bounds at ``x`` (0 if all hold), in the
+    rows' own units."""
+    return max(
+        float(np.max(tr.lbg - g, initial=0.0)),
+        float(np.max(g - tr.ubg, initial=0.0)),
+        float(np.max(tr.lbx - x, initial=0.0)),
+        float(np.max(x - tr.ubx, initial=0.0)),
+    )
 
 
 def _time_limit(time_limit: float | None) -> float:
@@ -603,13 +608,7 @@ def _plan_horizon(
                         status = _STALLED  # stopped by the callback: no cheaper iterate for fast_stall_iter
                     xv = np.asarray(sol["x"], dtype=float).ravel()
                     lam = (np.asarray(sol["lam_x"], dtype=float).ravel(), np.asarray(sol["lam_g"], dtype=float).ravel())
-                    g_end = np.asarray(sol["g"], dtype=float).ravel()  # the round's rows and bounds at IPOPT's point
-                    last_violation = max(
-                        float(np.max(tr.lbg - g_end, initial=0.0)),
-                        float(np.max(g_end - tr.ubg, initial=0.0)),
-                        float(np.max(tr.lbx - xv, initial=0.0)),
-                        float(np.max(xv - tr.ubx, initial=0.0)),
-                    )
+                    last_violation = _round_violation(tr, xv, np.asarray(sol["g"], dtype=float).ravel())
                     vals = model.values(xv)
                     viol = _violations(model, vals, xv, tol=tol)
                     rounds.append(
