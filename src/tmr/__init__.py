@@ -176,3 +176,16 @@ _previous_excepthook = sys.excepthook
 sys.excepthook = _ctrl_c_before_run
 _previous_unraisablehook = sys.unraisablehook
 sys.unraisablehook = _ctrl_c_not_lost
+
+
+def _count_ctrl_c_of_a_command() -> None:
+    """In ``python -m tmr.<command>`` and tmr's console scripts, count Ctrl-C presses from here on, before the
+    command's imports (where a Cython module's initialisation can swallow the KeyboardInterrupt): :mod:`tmr.io.sigint`.
+    """
+    from tmr.io import sigint
+
+    if sigint.is_command_line():
+        sigint.install()
+
+
+_count_ctrl_c_of_a_command()

@@ -19,8 +19,10 @@ at its next iteration. Where a solver catches SIGINT itself, the stop is handed 
 failed or early stop: IPOPT's iteration callback stops it and KeyboardInterrupt follows
 (:mod:`tmr.control.horizon`); OSQP's "interrupted" status delivers the SIGINT again
 (:mod:`tmr.control.qp`). Worker processes (figures, sweeps) start with SIGINT blocked
-(:func:`children_without_ctrl_c`), ignore it, and are terminated, not waited for. Measured per phase by
-``benchmarks/interrupt.py``.
+(:func:`children_without_ctrl_c`), ignore it, and are terminated, not waited for. Each press is counted
+(:mod:`tmr.io.sigint`): one whose KeyboardInterrupt a library swallowed stops the run at its next message (or before
+``--out`` changes), and an error that ends a run after a press is reported as the interruption. Measured per phase
+by ``benchmarks/interrupt.py``.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 from tmr.errors import TmrError
+from tmr.io import sigint
 
 __all__ = [
     "LOG",
@@ -70,6 +73,7 @@ class _StdHandler(logging.Handler):
     a caller's redirection, e.g. pytest's capture, is honoured)."""
 
     def emit(self, record: logging.LogRecord) -> None:
+        sigint.checkpoint()  # a Ctrl-C a library swallowed stops the run here at the latest (tmr.io.sigint)
         try:
             stream = sys.stderr if record.levelno >= logging.WARNING else sys.stdout
             stream.write(self.format(record) + "\n")
@@ -122,6 +126,7 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
     setup_logging(quiet, verbose)
     logging.captureWarnings(True)
     _state["running"] = True  # a KeyboardInterrupt Python can only ignore is raised again (tmr._ctrl_c_not_lost)
+    ours = sigint.install()  # a caller in Python (tests): Python's handler is given back at the end
     if not verbose:  # a file left open by an interrupted import or write is reported when it is freed, perhaps
         # after this function (a second line after 'interrupted'): not a user's concern, for the whole process
         warnings.filterwarnings("ignore", category=ResourceWarning)
@@ -133,7 +138,10 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
             warnings.filterwarnings("ignore", category=ResourceWarning, module=_IMPORTLIB)
             if not verbose:
                 warnings.filterwarnings("ignore", category=ResourceWarning)
-            return body(args)
+            sigint.checkpoint()  # a Ctrl-C during the command's imports whose KeyboardInterrupt a library swallowed
+            code = body(args)
+            sigint.checkpoint()  # ... or during the run, after its last message
+            return code
     except KeyboardInterrupt:
         return _report_interrupt(debug)
     except TmrError as exc:
@@ -143,7 +151,9 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
             LOG.error("error: %s", exc)
         return 2
     except Exception as exc:  # not a user error: one line unless --debug
-        if _from_interrupt(exc):  # Ctrl-C inside a C extension's call: its SystemError is the KeyboardInterrupt's
+        # Ctrl-C inside a C extension's call: its SystemError is the KeyboardInterrupt's; or the KeyboardInterrupt
+        # became an error with no trace of it (matplotlib's C++ code: ValueError), but the press was counted
+        if _from_interrupt(exc) or sigint.presses():
             return _report_interrupt(debug)
         if debug:
             LOG.exception("internal error")
@@ -156,11 +166,15 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
         _state["running"] = False
         if _state.get("sigint") is not None:  # give the caller (e.g. a test session) its handler back
             signal.signal(signal.SIGINT, _state.pop("sigint"))
+        sigint.reset()
+        if ours:
+            sigint.uninstall()
 
 
 def _report_interrupt(debug: bool) -> int:
     """One line, "interrupted" (the traceback with --debug); further Ctrl-C ignored; the exit code 130."""
     _ignore_further_interrupts()  # a second Ctrl-C (or one sent to the whole process group) while reporting
+    sigint.reset()  # reported: the message below is no checkpoint for it
     _handled_interrupt()
     if debug:
         LOG.exception("interrupted")

@@ -51,6 +51,7 @@ from pathlib import Path
 from typing import Any
 
 from tmr.errors import TmrError
+from tmr.io import sigint
 
 __all__ = [
     "MANIFEST",
@@ -373,11 +374,14 @@ def _stale_stages(places: Iterable[Path]) -> list[Path]:
 
 @contextlib.contextmanager
 def _sigint_deferred() -> Iterator[None]:
-    """Hold SIGINT back while ``--out`` changes (a few renames); a Ctrl-C in between arrives right after."""
+    """Hold SIGINT back while ``--out`` changes (a few renames); a Ctrl-C in between arrives right after. A Ctrl-C
+    counted before, whose KeyboardInterrupt a library swallowed, stops the run here: nothing is published
+    (:func:`tmr.io.sigint.checkpoint`)."""
     main = threading.current_thread() is threading.main_thread() and hasattr(signal, "pthread_sigmask")
     if main:
         old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
+        sigint.checkpoint()
         yield
     finally:
         if main:
