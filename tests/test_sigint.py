@@ -13,6 +13,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
@@ -142,6 +143,79 @@ def test_another_handler_in_place_is_left_alone():
     assert seen == [True] and sigint.presses() == 0
 
 
+def test_a_library_error_tmr_wraps_as_bad_input_after_a_ctrl_c_is_the_interruption(capsys):
+    from tmr.errors import MapError
+
+    def body(_):
+        _swallowed_ctrl_c()
+        raise MapError("malformed coordinates")
+
+    assert console.run(body, _args()) == 130
+    assert capsys.readouterr().err == "interrupted\n"
+
+
+def test_an_interrupted_run_leaves_nothing_to_the_next_in_the_same_process(capsys):
+    """In-process callers (tests, a notebook) run several commands: the press, and the handler, are the run's."""
+
+    def interrupted(_):
+        _swallowed_ctrl_c()
+        return 0
+
+    def clean(_):
+        console.LOG.info("planned")
+        return 0
+
+    assert console.run(interrupted, _args()) == 130
+    assert console.run(clean, _args()) == 0
+    assert capsys.readouterr() == ("planned\n", "interrupted\n")
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    # the same after an ordinary interruption, and after a press counted outside any run (install() starts at 0)
+    assert console.run(lambda _: signal.raise_signal(signal.SIGINT), _args()) == 130
+    sigint.install()
+    _swallowed_ctrl_c()
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    assert console.run(clean, _args()) == 0
+
+
+def test_the_checkpoint_is_quiet_in_other_threads_and_in_an_except_block():
+    sigint.install()
+    _swallowed_ctrl_c()
+    raised = []
+
+    def worker():
+        try:
+            sigint.checkpoint()
+        except KeyboardInterrupt:
+            raised.append("thread")
+
+    t = threading.Thread(target=worker)
+    t.start()
+    t.join()
+    try:
+        raise OSError("a library's recovery")
+    except OSError:
+        sigint.checkpoint()  # an exception is being handled: no KeyboardInterrupt here
+    with pytest.raises(KeyboardInterrupt):
+        sigint.checkpoint()
+    assert raised == []
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="fork")
+def test_a_forked_worker_does_not_inherit_a_counted_press():
+    sigint.install()
+    _swallowed_ctrl_c()
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: report its count, leave at once
+        os.write(w, str(sigint.presses()).encode())
+        os._exit(0)
+    os.close(w)
+    assert os.read(r, 16) == b"0"
+    os.close(r)
+    os.waitpid(pid, 0)
+    assert sigint.presses() == 1
+
+
 @pytest.mark.parametrize(
     ("orig_argv", "argv0", "expected"),
     [
@@ -155,6 +229,13 @@ def test_another_handler_in_place_is_left_alone():
         (["python", "/venv/bin/tmr", "plan"], "/venv/bin/tmr", True),
         (["python", "/venv/bin/tmr-plan"], "/venv/bin/tmr-plan", True),
         (["python", "/venv/bin/pytest"], "/venv/bin/pytest", False),
+        (["python", "-mtmr.plan"], "-m", True),
+        (["python", "-Bm", "tmr.plan"], "-m", True),
+        (["python", "-Wdefault", "-Xdev", "-m", "tmr.ccma"], "-m", True),
+        (["python", "--check-hash-based-pycs", "always", "-m", "tmr.plan"], "-m", True),
+        (["python", "-Bc", "import tmr", "-m", "tmr.plan"], "-c", False),
+        (["python", "-", "-m", "tmr.plan"], "-", False),
+        (["python", "C:\\venv\\Scripts\\tmr.exe", "plan"], "C:/venv/Scripts/tmr.exe", True),
     ],
 )
 def test_is_command_line(monkeypatch, orig_argv, argv0, expected):
@@ -191,6 +272,13 @@ def test_a_ctrl_c_swallowed_during_a_commands_imports_stops_it_before_it_starts(
         "sys.exit(run(body, argparse.Namespace()))\n"
     )
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
-    p = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, timeout=60)
+    p = subprocess.run(
+        [sys.executable, str(script)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # as a foreground job (not ignored)
+    )
     assert (p.returncode, p.stderr.strip()) == (130, "interrupted")
     assert not marker.exists()

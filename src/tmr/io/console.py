@@ -20,9 +20,9 @@ failed or early stop: IPOPT's iteration callback stops it and KeyboardInterrupt 
 (:mod:`tmr.control.horizon`); OSQP's "interrupted" status delivers the SIGINT again
 (:mod:`tmr.control.qp`). Worker processes (figures, sweeps) start with SIGINT blocked
 (:func:`children_without_ctrl_c`), ignore it, and are terminated, not waited for. Each press is counted
-(:mod:`tmr.io.sigint`): one whose KeyboardInterrupt a library swallowed stops the run at its next message (or before
-``--out`` changes), and an error that ends a run after a press is reported as the interruption. Measured per phase
-by ``benchmarks/interrupt.py``.
+(:mod:`tmr.io.sigint`): one whose KeyboardInterrupt a library swallowed stops the run at its next message (before
+``--out`` changes at the latest), and an error that ends a run after a press is reported as the interruption.
+Measured per phase by ``benchmarks/interrupt.py``.
 """
 
 from __future__ import annotations
@@ -126,13 +126,14 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
     setup_logging(quiet, verbose)
     logging.captureWarnings(True)
     _state["running"] = True  # a KeyboardInterrupt Python can only ignore is raised again (tmr._ctrl_c_not_lost)
-    ours = sigint.install()  # a caller in Python (tests): Python's handler is given back at the end
+    ours = False  # the press-counting handler installed here (a caller in Python, tests): Python's is given back
     if not verbose:  # a file left open by an interrupted import or write is reported when it is freed, perhaps
         # after this function (a second line after 'interrupted'): not a user's concern, for the whole process
         warnings.filterwarnings("ignore", category=ResourceWarning)
     # nor, even with --verbose, the .pyc file importlib itself had open when a Ctrl-C interrupted an import
     warnings.filterwarnings("ignore", category=ResourceWarning, module=_IMPORTLIB)
     try:
+        ours = sigint.install()
         with warnings.catch_warnings():
             warnings.simplefilter("default")  # each distinct warning once, through logging
             warnings.filterwarnings("ignore", category=ResourceWarning, module=_IMPORTLIB)
@@ -145,6 +146,8 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
     except KeyboardInterrupt:
         return _report_interrupt(debug)
     except TmrError as exc:
+        if _from_interrupt(exc) or sigint.presses():  # a library's error after a Ctrl-C, wrapped as a user's
+            return _report_interrupt(debug)  # (MapError for shapely's ValueError): the interruption, not bad input
         if debug:
             LOG.exception("error: %s", exc)
         else:
@@ -164,11 +167,13 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
         logging.captureWarnings(False)
         _state["quiet"] = False
         _state["running"] = False
-        if _state.get("sigint") is not None:  # give the caller (e.g. a test session) its handler back
-            signal.signal(signal.SIGINT, _state.pop("sigint"))
-        sigint.reset()
-        if ours:
-            sigint.uninstall()
+        # the caller's handler back (a test session's; Python's where the counting one was installed here), in
+        # one call: a Ctrl-C in between would leave the counting handler in place with a press counted
+        previous = signal.default_int_handler if ours else _state.get("sigint")
+        _state.pop("sigint", None)
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+        sigint.reset()  # every press counted was reported above (checkpoint → KeyboardInterrupt, or an error's)
 
 
 def _report_interrupt(debug: bool) -> int:
