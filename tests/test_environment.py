@@ -101,6 +101,23 @@ def test_segment_is_free_agrees_with_segment_clearance(builtin_envs: dict[str, E
         np.testing.assert_array_equal(env.segment_is_free(a, b, per_segment), value > per_segment)
 
 
+def test_segment_is_free_on_and_from_the_boundary(builtin_envs: dict[str, Environment]) -> None:
+    """Segments along the free space's boundary (``covers`` holds, clearance 0), from its vertices inward and
+    outward, and across an obstacle with both ends free: the boolean test (the prepared boundary met or not, the
+    start inside) still equals ``segment_clearance > margin``; and after pickling (the prepared boundary rebuilt)."""
+    for env in builtin_envs.values():
+        V = shapely.get_coordinates(shapely.boundary(env.free))
+        a, b = V[:-1], V[1:]  # boundary edges (and the jumps between rings)
+        inward = V + np.random.default_rng(4).normal(scale=0.4, size=V.shape)
+        A = np.vstack([a, V, inward, a + 1e-9])
+        B = np.vstack([b, inward, V, b + 1e-9])
+        value = env.segment_clearance(A, B)
+        for margin in (0.0, 0.03, 0.3):
+            np.testing.assert_array_equal(env.segment_is_free(A, B, margin), value > margin)
+        again = pickle.loads(pickle.dumps(env))
+        np.testing.assert_array_equal(again.segment_is_free(A, B, 0.03), value > 0.03)
+
+
 def test_thin_obstacle_crossing_is_negative() -> None:
     env = Environment.from_geometry(LineString([(5, 0), (5, 6)]), (0, 0, 10, 10), R, 0.05)
     # end points are free, the segment crosses the zero-thickness wall (a band 1 m wide once inflated)

@@ -161,7 +161,7 @@ def start_placement(
             for Pp in candidates:
                 tried += 1
                 try:
-                    sub = plan_route(env, Pp[-1], goal, lim[parked:], fewest=False)
+                    sub = plan_route(env, Pp[-1], goal, lim[parked:], fewest=False, at_most=active)
                 except RouteVerdict:
                     continue
                 if sub.n_route <= active:  # the active robots start along sub.points, the route chain's guide

@@ -317,6 +317,7 @@ def plan_route(
     margin: float = ROUTE_MARGIN,
     robots: int | None = None,
     fewest: bool = True,
+    at_most: int | None = None,
 ) -> Route:
     """Shortest free route from the anchor ``base`` to ``goal`` and the robots it needs (module docstring).
 
@@ -334,6 +335,11 @@ def plan_route(
         fewest: search for the fewest robots (the corner proof, the chain off the route, :func:`tight_chain`);
             False: the route and its station chain only (``n_lower`` by length, ``n_min`` = ``n_route``), for callers
             that only follow the route (start placements try many).
+        at_most: with ``fewest=False``, the most robots the caller can use: a route whose length alone proves it
+            needs more (⌈L_lower / d_max⌉, L_lower the lower bound of every route's length) is refused before its
+            station search, with the verdict every route would get from the caller (a start placement's parking:
+            ``n_route`` > the active robots). The bound is the same term ``n_route`` takes its maximum with, so
+            no route that would have been accepted is refused.
 
     Raises:
         NoRouteError: base or goal outside the room or in an obstacle, or in different pieces of free space.
@@ -359,6 +365,15 @@ def plan_route(
     lower = _Graph(tether_env(env), 0.0, outward=True).shortest(base, goal)  # chains live in the tethers' world
     L_lower = float(guide_arcs(lower)[-1]) if lower is not None else 0.0
     d_max = float(lim[:, 1].max())
+    if at_most is not None and not fewest:  # n_route ≥ ⌈min(L_lower, L) / d_max⌉ and L ≥ L_lower (to rounding)
+        by_length = _length_bound(L_lower * (1 - 1e-9), L_lower, d_max)
+        if by_length > at_most:
+            raise TooFewRobotsError(
+                f"the route from {_xy(base)} to {_xy(goal)} is at least {L_lower:.2f} m long: it needs at least "
+                f"{by_length} robots of tethers ≤ {d_max:g} m, more than {at_most}",
+                by_length,
+                proven=True,
+            )
     ladder = [m for m in dict.fromkeys((margin, margin / 2, NARROW_MARGIN)) if m >= min(margin, NARROW_MARGIN)]
     ladder += [RETRY_MARGIN] if RETRY_MARGIN < ladder[-1] else []
     best: _Along | None = None

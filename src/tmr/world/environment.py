@@ -358,7 +358,7 @@ class Environment:
     # pickling
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
-        for key in ("_grid", "_tree", "tether_environment"):  # cached heavy objects; rebuilt on demand
+        for key in ("_grid", "_tree", "_boundary", "tether_environment"):  # cached heavy objects; rebuilt on demand
             state.pop(key, None)
         return state
 
@@ -544,6 +544,14 @@ class Environment:
         segments = shapely.linestrings(np.stack([coords[:-1][same], coords[1:][same]], axis=1))
         return shapely.STRtree(segments), segments
 
+    @cached_property
+    def _boundary(self) -> BaseGeometry:
+        """The free space's boundary (walls and obstacles grown by r), prepared: a segment that does not meet it and
+        starts inside the free space lies inside (:meth:`segment_is_free`)."""
+        boundary = shapely.boundary(self.free)
+        shapely.prepare(boundary)
+        return boundary
+
     def _boundary_distance(self, geoms: NDArray[np.object_]) -> NDArray[np.float64]:
         tree, _ = self._tree
         dist = np.empty(len(geoms))
@@ -617,11 +625,14 @@ class Environment:
             out[degenerate] = self.exact_clearance(A[degenerate]) > M[degenerate]
         seg = np.flatnonzero(~degenerate)
         if len(seg):
+            # clear of the boundary and started inside: inside (the test the free space's ``covers`` makes, less
+            # the segments that touch the boundary, whose clearance 0 is not > margin): 1.7× faster on the 1.8
+            # million segments of a 34 m route's placement (long_walls-corner-1883971893, 8 robots)
             lines = shapely.linestrings(np.stack([A[seg], B[seg]], axis=1))
-            covered = shapely.covers(self.free, lines)
-            inside = seg[covered]
-            if len(inside):
-                out[inside] = self._boundary_distance(lines[covered]) > M[inside]
+            inside = ~shapely.intersects(self._boundary, lines)
+            inside &= shapely.contains_xy(self.free, A[seg, 0], A[seg, 1])
+            if inside.any():
+                out[seg[inside]] = self._boundary_distance(lines[inside]) > M[seg[inside]]
         return out.reshape(shape)
 
     def visible_region(self, point: ArrayLike, radius: float) -> BaseGeometry:
