@@ -341,8 +341,8 @@ def test_parkings_whose_route_is_too_long_for_the_active_robots_skip_the_station
     """long_walls-corner-1883971893 with 8 robots (a 34 m route): no placement along the route's own points, so the
     parkings are tried (each a route from the walk's end and its station search, ~60 ms), then the route's bends.
     A parking route whose length alone proves more robots than remain active (``plan_route(..., at_most=)``) is
-    refused before its station search: the same placement, 49 → 9 station searches (31 parking routes refused by
-    length; ``tmr plan --method qp`` 6.7 → 4.7 s, the same output bytes). And each refusal by length is a route
+    refused before its station search: the same placement, 40 → 9 station searches (``tmr plan --method qp``
+    6.6 → 4.1 s with the faster ``segment_is_free``, the same output bytes). And each refusal by length is a route
     the caller would have refused (more robots than active)."""
     import tmr.route.references as references
     import tmr.route.route as route_mod
@@ -355,11 +355,14 @@ def test_parkings_whose_route_is_too_long_for_the_active_robots_skip_the_station
     route = plan_route(env, room.base, room.goal, lim, robots=N)
     spacing = lim[:, 0].max() + 0.2
     searches: list[Any] = []
+    counting = [True]
     along, plan = route_mod._along, route_mod.plan_route
 
     def counted(*a: Any, **k: Any) -> Any:
-        searches.append(a[1])
-        return along(*a, **k)
+        found = along(*a, **k)  # a refusal by length raises before the station search: not counted
+        if counting[0] and found is not None:
+            searches.append(a[1])
+        return found
 
     monkeypatch.setattr(route_mod, "_along", counted)
     P, parked = start_placement(env, route, N, spacing, span_limits=lim)
@@ -368,10 +371,14 @@ def test_parkings_whose_route_is_too_long_for_the_active_robots_skip_the_station
 
     def unbounded(env_: Any, start: Any, goal: Any, lim_: Any, **k: Any) -> Any:
         at_most = k.pop("at_most", None)
+        counting[0] = False  # the probe: would at_most refuse it?
         try:
             plan(env_, start, goal, lim_, at_most=at_most, **k)
         except TooFewRobotsError:
             refused.append((start, lim_, at_most))
+        except Exception:
+            pass
+        counting[0] = True
         return plan(env_, start, goal, lim_, **k)
 
     monkeypatch.setattr(references, "plan_route", unbounded)
@@ -379,7 +386,8 @@ def test_parkings_whose_route_is_too_long_for_the_active_robots_skip_the_station
     P0, parked0 = start_placement(env, route, N, spacing, span_limits=lim)
     assert parked0 == parked and np.array_equal(P0, P)
     print(f"station searches: {pruned} with at_most, {len(searches)} without; {len(refused)} refused by length")
-    assert pruned < len(searches) - 20, (pruned, len(searches))
-    assert len(refused) >= 20
+    assert pruned + 20 < len(searches) and len(searches) - pruned <= len(refused)
     for start, lim_, at_most in refused:  # each refused by length needs more robots than were active
         assert plan(env, start, room.goal, lim_, fewest=False).n_route > at_most
+    with pytest.raises(ParameterError):  # the corner proof and the search off the route know no such bound
+        plan(env, room.base, room.goal, lim, at_most=3)

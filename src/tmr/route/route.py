@@ -335,11 +335,10 @@ def plan_route(
         fewest: search for the fewest robots (the corner proof, the chain off the route, :func:`tight_chain`);
             False: the route and its station chain only (``n_lower`` by length, ``n_min`` = ``n_route``), for callers
             that only follow the route (start placements try many).
-        at_most: with ``fewest=False``, the most robots the caller can use: a route whose length alone proves it
-            needs more (⌈L_lower / d_max⌉, L_lower the lower bound of every route's length) is refused before its
-            station search, with the verdict every route would get from the caller (a start placement's parking:
-            ``n_route`` > the active robots). The bound is the same term ``n_route`` takes its maximum with, so
-            no route that would have been accepted is refused.
+        at_most: with ``fewest=False`` only, the most robots the caller can use: a route whose length alone
+            proves it needs more (⌈min(L_lower, L) / d_max⌉, the very term ``n_route`` takes its maximum with) is
+            refused (:class:`TooFewRobotsError`) before its station search, so no route that would have needed
+            ``at_most`` robots or fewer is refused (a start placement's parkings: ``n_route`` ≤ the active robots).
 
     Raises:
         NoRouteError: base or goal outside the room or in an obstacle, or in different pieces of free space.
@@ -359,21 +358,14 @@ def plan_route(
             f"no free route from the anchor {_xy(base)} to the goal {_xy(goal)}: the "
             f"obstacles grown by the safety radius {env.safety_radius:g} m separate them"
         )
+    if at_most is not None and fewest:
+        raise ParameterError("at_most is for fewest=False: the route's station chain only")
     if robots is not None:  # before any search: more robots than fit in the room at once (a proof, milliseconds)
         check_fit(env, base, robots)
     # lower bound: the shortest path in a region that contains the free space (grown by t, then simplified)
     lower = _Graph(tether_env(env), 0.0, outward=True).shortest(base, goal)  # chains live in the tethers' world
     L_lower = float(guide_arcs(lower)[-1]) if lower is not None else 0.0
     d_max = float(lim[:, 1].max())
-    if at_most is not None and not fewest:  # n_route ≥ ⌈min(L_lower, L) / d_max⌉ and L ≥ L_lower (to rounding)
-        by_length = _length_bound(L_lower * (1 - 1e-9), L_lower, d_max)
-        if by_length > at_most:
-            raise TooFewRobotsError(
-                f"the route from {_xy(base)} to {_xy(goal)} is at least {L_lower:.2f} m long: it needs at least "
-                f"{by_length} robots of tethers ≤ {d_max:g} m, more than {at_most}",
-                by_length,
-                proven=True,
-            )
     ladder = [m for m in dict.fromkeys((margin, margin / 2, NARROW_MARGIN)) if m >= min(margin, NARROW_MARGIN)]
     ladder += [RETRY_MARGIN] if RETRY_MARGIN < ladder[-1] else []
     best: _Along | None = None
@@ -384,7 +376,7 @@ def plan_route(
         if best is None and m == RETRY_MARGIN:  # a retry only: no route keeps NARROW_MARGIN
             break
         try:
-            found = _along(env, base, goal, lim, m, L_lower)
+            found = _along(env, base, goal, lim, m, L_lower, at_most)
         except RouteVerdict:
             if best is None:
                 raise

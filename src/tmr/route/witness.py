@@ -22,6 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 from tmr.route.geodesic import (
     CHORD_CLEARANCE,
     SPACING_MARGIN,
+    TooFewRobotsError,
     _dedupe,
     _Graph,
     anchor_tether_clearance,
@@ -275,17 +276,29 @@ class _Along:
     edges: int
 
 
-def _along(env: Any, base: Array, goal: Array, lim: Array, margin: float, L_lower: float) -> _Along | None:
-    """The shortest route keeping ``margin`` [m] and its station chain; None if no route keeps it."""
+def _along(
+    env: Any, base: Array, goal: Array, lim: Array, margin: float, L_lower: float, at_most: int | None = None
+) -> _Along | None:
+    """The shortest route keeping ``margin`` [m] and its station chain; None if no route keeps it.
+    :class:`TooFewRobotsError` before the station search if the route's length alone (the term of ``n_min`` below)
+    proves more than ``at_most`` robots."""
     graph = _Graph(env, margin)
     points = graph.shortest(base, goal)
     if points is None:
         return None
     points = _dedupe(points)
     L = float(guide_arcs(points)[-1])
+    by_length = _length_bound(L_lower, L, float(lim[:, 1].max()))
+    if at_most is not None and by_length > at_most:
+        raise TooFewRobotsError(
+            f"the route from ({base[0]:.4g}, {base[1]:.4g}) to ({goal[0]:.4g}, {goal[1]:.4g}) is {L:.2f} m long: "
+            f"it needs at least {by_length} robots of tethers ≤ {float(lim[:, 1].max()):g} m, more than {at_most}",
+            by_length,
+            proven=False,
+        )
     spacing_min = np.concatenate([lim[:1, 0], lim[1:, 0]]) + SPACING_MARGIN
     arcs, st = stations(env, points, lim[:, 1], spacing_min)
     st = st.copy()
     st[-1] = goal
-    n_min = max(len(arcs), _length_bound(L_lower, L, float(lim[:, 1].max())))
+    n_min = max(len(arcs), by_length)
     return _Along(points, L, float(margin), n_min, st, arcs, len(graph.V), graph.edges)

@@ -609,7 +609,8 @@ class Environment:
         """Whether each straight segment a-b keeps a clearance > ``margin`` [m] from the inflated obstacles and
         walls: ``segment_clearance(a, b) > margin`` without measuring how deep a blocked segment goes when
         ``margin`` ≥ 0 (exact, and much cheaper for long blocked segments); shape (...). ``margin`` is a scalar
-        or one value per segment (broadcast with the segments' shape)."""
+        or one value per segment (broadcast with the segments' shape). A segment that meets the free space's
+        boundary is not free (its clearance is 0), decided by GEOS's robust ``intersects``, not by a distance."""
         pa, pb = np.broadcast_arrays(_as_points(a, "a"), _as_points(b, "b"))
         shape = pa.shape[:-1]
         m = np.asarray(margin, dtype=float)
