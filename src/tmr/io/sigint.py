@@ -6,9 +6,10 @@ error". Seen in ``tmr plan`` (CI runs of ``tests/test_interrupt.py``; loops of r
 
 * a Ctrl-C during the import of a Cython extension module (numpy's ``numpy.random._generator``, scipy's
   ``_ccallback_c``): the KeyboardInterrupt raised in ``abc.register``, which the module's initialisation calls, is
-  cleared and the import succeeds. With both cores loaded, 2 of about 120 runs of ``tmr plan -v --scenario A
-  --method qp`` interrupted 0.15–0.65 s after their start went on to exit 0, their outputs published; with this
-  module, 4 of 200 presses landed there and all 200 runs ended ``interrupted``, 130;
+  cleared and the import succeeds. With both cores loaded and a SIGINT handler recording where each press landed,
+  2 of about 120 runs of ``tmr plan -v --scenario A --method qp`` interrupted 0.15–0.65 s after their start went
+  on to exit 0, their outputs published; with this module, 4 of 200 presses landed there and all 200 runs ended
+  ``interrupted``, 130;
 * a Ctrl-C while matplotlib's C++ code converts an array (drawing the GIF): the KeyboardInterrupt becomes
   ``ValueError: Invalid affine transformation matrix``, with no trace of the KeyboardInterrupt (exit 1).
 
