@@ -145,19 +145,19 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
             return code
     except KeyboardInterrupt:
         return _report_interrupt(debug)
-    except TmrError as exc:
-        if _from_interrupt(exc) or sigint.presses():  # a library's error after a Ctrl-C, wrapped as a user's
-            return _report_interrupt(debug)  # (MapError for shapely's ValueError): the interruption, not bad input
-        if debug:
-            LOG.exception("error: %s", exc)
-        else:
-            LOG.error("error: %s", exc)
-        return 2
-    except Exception as exc:  # not a user error: one line unless --debug
+    except Exception as exc:
         # Ctrl-C inside a C extension's call: its SystemError is the KeyboardInterrupt's; or the KeyboardInterrupt
-        # became an error with no trace of it (matplotlib's C++ code: ValueError), but the press was counted
+        # became an error with no trace of it (matplotlib's C++ code: ValueError), perhaps wrapped by tmr as a
+        # user's (MapError for shapely's ValueError), but the press was counted: the interruption, not an error
         if _from_interrupt(exc) or sigint.presses():
             return _report_interrupt(debug)
+        if isinstance(exc, TmrError):  # bad input, a task proven impossible
+            if debug:
+                LOG.exception("error: %s", exc)
+            else:
+                LOG.error("error: %s", exc)
+            return 2
+        # not a user error: one line unless --debug
         if debug:
             LOG.exception("internal error")
         else:

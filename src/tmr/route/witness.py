@@ -288,11 +288,12 @@ def _along(
         return None
     points = _dedupe(points)
     L = float(guide_arcs(points)[-1])
-    by_length = _length_bound(L_lower, L, float(lim[:, 1].max()))
+    d_max = float(lim[:, 1].max())
+    by_length = _length_bound(L_lower, L, d_max)
     if at_most is not None and by_length > at_most:
         raise TooFewRobotsError(
             f"the route from ({base[0]:.4g}, {base[1]:.4g}) to ({goal[0]:.4g}, {goal[1]:.4g}) is {L:.2f} m long: "
-            f"it needs at least {by_length} robots of tethers ≤ {float(lim[:, 1].max()):g} m, more than {at_most}",
+            f"it needs at least {by_length} robots of tethers ≤ {d_max:g} m, more than {at_most}",
             by_length,
             proven=False,
         )

@@ -627,8 +627,10 @@ class Environment:
         seg = np.flatnonzero(~degenerate)
         if len(seg):
             # clear of the boundary and started inside: inside (the test the free space's ``covers`` makes, less
-            # the segments that touch the boundary, whose clearance 0 is not > margin): 1.7× faster on the 1.8
-            # million segments of a 34 m route's placement (long_walls-corner-1883971893, 8 robots)
+            # the segments that touch the boundary, whose clearance 0 is not > margin). On the 1.8 million segments
+            # of a 34 m route's placement (long_walls-corner-1883971893, 8 robots) the test takes 0.77 s against
+            # covers' 1.31 s (the whole of these 21,415 calls 2.40 → 2.08 s); the STR-tree of boundary segments
+            # (``_tree``) queried with ``intersects`` took 3.1 s, prepared ``dwithin`` for the whole test 6.2 s
             lines = shapely.linestrings(np.stack([A[seg], B[seg]], axis=1))
             inside = ~shapely.intersects(self._boundary, lines)
             inside &= shapely.contains_xy(self.free, A[seg, 0], A[seg, 1])
