@@ -1347,6 +1347,41 @@ def test_the_fallback_checks_stop_a_share_of_the_limit_past_the_deadline(monkeyp
     assert horizon._best_of([pool], model, 1e-5, math.inf, now + 60.0, now + 61.2) is not None and len(calls) == 6
 
 
+def test_a_later_rounds_feasible_iterates_are_kept_beside_an_earlier_rounds_cheaper_ones():
+    """_Pool.new_round: a round's iterates, cheaper because they violate rows left out of it, no longer crowd out the
+    next round's, which hold them (each round its own places; the earlier rounds share the other ``keep``); an
+    earlier round's feasible iterate cheaper than the current round's is still preferred."""
+    problem, su, model, xv, _ = full_transcription()
+    x_opt = model.project(model.x_of(plan_horizon(problem, solve(problem, "qp")[0]).q))  # every row holds there
+    rng = np.random.default_rng(0)
+    bad = [xv + 0.5 * rng.standard_normal(xv.size) for _ in range(6)]  # a robot 0.5 m off: infeasible
+    pool = horizon_pool._Pool(4, 1.0, math.inf)
+    for i, x in enumerate(bad):  # round 1: cheap and infeasible, more than the pool keeps
+        pool.offer(0.1 * (i + 1), 0.0, x, f"round 1, iteration {i}")
+    pool.new_round()
+    pool.offer(2.0, 0.0, x_opt, "round 2, iteration 0")  # dearer than every round-1 iterate
+    pool.offer(3.0, 0.0, bad[0], "round 2, iteration 1")
+    assert len(pool) == 6 and [w for _, _, w in pool.sorted()][:4] == [f"round 1, iteration {i}" for i in range(4)]
+    found = pool.best(model, 1e-5, math.inf)
+    assert found is not None and found.detail == "its best feasible iterate (round 2, iteration 0)"
+    one_heap = horizon_pool._Pool(4, 1.0, math.inf)  # the round-1 iterates fill every place: none holds every row
+    for i, x in enumerate(bad):
+        one_heap.offer(0.1 * (i + 1), 0.0, x, f"round 1, iteration {i}")
+    one_heap.offer(2.0, 0.0, x_opt, "round 2, iteration 0")
+    assert one_heap.best(model, 1e-5, math.inf) is None
+    pool.new_round()  # round 3: the earlier rounds keep their 4 cheapest, the optimum among them only if it is one
+    pool.offer(5.0, 0.0, x_opt, "round 3, iteration 0")
+    assert pool.best(model, 1e-5, math.inf).detail.endswith("(round 3, iteration 0)")
+    qp_plan = solve(problem, "qp")[0]
+    x_alt = model.project(model.x_of(plan_horizon(problem, qp_plan, w_uniformity=100.0).q))  # feasible, dearer
+    earlier = horizon_pool._Pool(4, 1.0, math.inf)
+    earlier.offer(0.5, 0.0, x_opt, "round 1, iteration 0")  # feasible, cheaper than any of round 2
+    earlier.new_round()
+    earlier.offer(0.7, 0.0, x_alt, "round 2, iteration 0")
+    assert earlier.best(model, 1e-5, math.inf, until=-math.inf).detail.endswith("(round 2, iteration 0)")  # 1 check
+    assert earlier.best(model, 1e-5, math.inf).detail.endswith("(round 1, iteration 0)")
+
+
 @pytest.mark.parametrize("found", ["nothing", "cheaper", "dearer"])
 def test_the_fast_attempts_best_feasible_iterate_is_kept_when_the_fallback_finds_nothing(
     feasible_warm, monkeypatch, found

@@ -528,6 +528,8 @@ def _plan_horizon(
                     prev, tr = None, tr_first
                 else:
                     prev, tr = tr, _Transcription(model, masks)
+                if rnd > 1:  # more rows: its iterates are kept apart from the last round's (_Pool.new_round)
+                    pool.new_round()
                 if rnd == 1 and phase == "fast":
                     tr_first = tr
                 trans_time += time.perf_counter() - t1
