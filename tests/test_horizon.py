@@ -1352,7 +1352,8 @@ def test_a_later_rounds_feasible_iterates_are_kept_beside_an_earlier_rounds_chea
     next round's, which hold them (each round its own places; the earlier rounds share the other ``keep``); an
     earlier round's feasible iterate cheaper than the current round's is still preferred."""
     problem, su, model, xv, _ = full_transcription()
-    x_opt = model.project(model.x_of(plan_horizon(problem, solve(problem, "qp")[0]).q))  # every row holds there
+    qp_plan = solve(problem, "qp")[0]
+    x_opt = model.project(model.x_of(plan_horizon(problem, qp_plan).q))  # every row holds there
     rng = np.random.default_rng(0)
     bad = [xv + 0.5 * rng.standard_normal(xv.size) for _ in range(6)]  # a robot 0.5 m off: infeasible
     pool = horizon_pool._Pool(4, 1.0, math.inf)
@@ -1372,7 +1373,6 @@ def test_a_later_rounds_feasible_iterates_are_kept_beside_an_earlier_rounds_chea
     pool.new_round()  # round 3: the earlier rounds keep their 4 cheapest, the optimum among them only if it is one
     pool.offer(5.0, 0.0, x_opt, "round 3, iteration 0")
     assert pool.best(model, 1e-5, math.inf).detail.endswith("(round 3, iteration 0)")
-    qp_plan = solve(problem, "qp")[0]
     x_alt = model.project(model.x_of(plan_horizon(problem, qp_plan, w_uniformity=100.0).q))  # feasible, dearer
     earlier = horizon_pool._Pool(4, 1.0, math.inf)
     earlier.offer(0.5, 0.0, x_opt, "round 1, iteration 0")  # feasible, cheaper than any of round 2
@@ -1380,6 +1380,23 @@ def test_a_later_rounds_feasible_iterates_are_kept_beside_an_earlier_rounds_chea
     earlier.offer(0.7, 0.0, x_alt, "round 2, iteration 0")
     assert earlier.best(model, 1e-5, math.inf, until=-math.inf).detail.endswith("(round 2, iteration 0)")  # 1 check
     assert earlier.best(model, 1e-5, math.inf).detail.endswith("(round 1, iteration 0)")
+
+
+def test_every_round_after_the_first_and_the_whole_nlp_after_its_windows_start_a_new_round_of_the_pool(monkeypatch):
+    """plan_horizon calls _Pool.new_round before each round ≥ 2 of an attempt (the small problem with activation 0.3 m:
+    two rounds) and after the windowed solves (the whole NLP's iterates apart from the windows'), never before an
+    attempt's round 1 (a new pool)."""
+    problem = small_problem()
+    warm, _ = solve(problem, "qp")
+    calls: list[int] = []
+    real = horizon_pool._Pool.new_round
+    monkeypatch.setattr(horizon_pool._Pool, "new_round", lambda self: calls.append(len(self)) or real(self))
+    d = plan_horizon(problem, warm, activation=0.3, fast_min_hessian_perturbation=None).diagnostics
+    assert [r["round"] for r in d["round_log"]] == [1, 2] and len(calls) == 1 and calls[0] > 0  # round 1's kept
+    calls.clear()
+    d = plan_horizon(problem, warm, window=12, window_overlap=4, fast_min_hessian_perturbation=None).diagnostics
+    rounds = [r["round"] for r in d["round_log"]]
+    assert len(calls) == 1 + sum(r > 1 for r in rounds) and calls[0] > 0  # the windows' iterates, then each round
 
 
 @pytest.mark.parametrize("found", ["nothing", "cheaper", "dearer"])

@@ -453,6 +453,7 @@ def _plan_horizon(
     if opts.window is not None and int(opts.window) < su.K:
         t1 = time.perf_counter()
         xv, windows, window_lam = _windowed(model, masks, xv, obj_scale, pool, bar, deadline, limit)
+        pool.new_round()  # the whole NLP's rows: its iterates apart from the windows'
         vals = model.values(xv)
         masks = model.grown(masks, vals)
         window_time = time.perf_counter() - t1
@@ -662,7 +663,7 @@ def _plan_horizon(
                     and not opts.restart_rounds
                     and time.perf_counter() < phase_deadline
                 ):
-                    back = pool.best(model, tol, math.inf, late)  # its checks: at most the pool's 64, before late
+                    back = pool.best(model, tol, math.inf, late)  # its checks: at most the pool's 2 × 64, before late
                     if back is None:
                         xv, where = x_init, "the attempt's initial point (no kept iterate holds every row)"
                     else:
@@ -1297,7 +1298,7 @@ def _best_of(
     """The cheapest feasible kept iterate over the attempts' pools (:meth:`_Pool.best` of each): the last attempt's
     pool first (as without a fast attempt), the earlier ones only for a cheaper iterate and only before ``deadline``.
     Each check evaluates every row: none starts after ``until`` (the deadline plus :data:`LATE_CHECK_SHARE` of the
-    time limit; :func:`time.perf_counter` values) but the last pool's cheapest iterate's."""
+    time limit; :func:`time.perf_counter` values) but the first of the last pool (its current round's cheapest)."""
     best: _Candidate | None = None
     for i, p in enumerate(reversed(pools)):
         if i > 0 and time.perf_counter() >= deadline:

@@ -19,7 +19,8 @@ from tmr.control.horizon_model import GROUPS, Violation, _Model, _Setup, _weight
 Array = NDArray[np.float64]
 
 
-_POOL_SIZE = 64  # iterates kept for the fallback (the cheapest ones; 64 × 9 k doubles ≈ 4.6 MB on A–D)
+_POOL_SIZE = 64  # iterates kept for the fallback, of the current round and of the earlier ones each (the cheapest;
+# 2 × 64 × 9 k doubles ≈ 9.2 MB on A–D)
 _POOL_SCREEN = 1e-3  # kept only if no transcribed row is violated by more than this (the leader is projected after)
 
 
@@ -265,9 +266,11 @@ class _Pool:
     def best(self, model: _Model, tol: float, J_limit: float, until: float = math.inf) -> _Candidate | None:
         """The lowest-cost kept iterate that satisfies every row at ``tol`` (its fixed variables projected: the start,
         the equality leader on its reference) and costs less than ``J_limit``; ``None`` if there is none. The current
-        round's are checked first, the cheapest first; then the earlier rounds' cheaper than the one found. Each check
-        evaluates every row (0.28 s on 5,078 knots with 8 robots): none is started after ``until`` (a
-        :func:`time.perf_counter` value) but the first."""
+        round's are checked first, the cheapest first; then the earlier rounds', cheapest first, those cheaper than the
+        one found (all of them if none was). Each check evaluates every row (0.28 s on 5,078 knots with 8 robots):
+        none is started after ``until`` (a :func:`time.perf_counter` value) but the first. So where ``until`` cuts the
+        checks short, an earlier round's cheaper iterate may go unchecked: the current round's are the likelier to
+        hold the rows its predecessors left out (see the class docstring)."""
         su = model.su
         best: _Candidate | None = None
         best_f = math.inf  # the pool's (scaled) cost of ``best``
