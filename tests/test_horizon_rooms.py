@@ -217,3 +217,29 @@ def test_a_polish_costlier_than_the_coarse_optimum_does_not_replace_it(monkeypat
     assert d["horizon_summary"]["objective"] == pytest.approx(coarse, rel=1e-5)
     terms, before = d["horizon_summary"]["terms"], d["horizon_summary"]["warm_start_terms"]
     assert all(terms[k] <= before[k] * (1 + 1e-9) for k in ("f1", "f2", "f4"))
+
+
+def test_one_robot_whose_reference_breaks_a_row_is_refused_before_ipopt(monkeypatch, tmp_path):
+    """With one robot the start and the equality leader on its reference fix every variable, so the NLP is that one
+    trajectory. In the generated room ``walls-near-2244656161`` its span is 6.1 mm past the NLP's bound from knot 202
+    on (the ``qp`` plan lags its reference by as much to keep it): refused before any IPOPT solve, with the rows
+    named (until stop 59 three IPOPT builds each said 'Infeasible_Problem_Detected' after 0 iterations); the planner
+    returns the verified ``qp`` plan with that reason; a leader tolerance frees the leader and IPOPT solves it."""
+    from tmr.control.horizon_model import HorizonInfeasible
+    from tmr.planner import check, solve
+
+    problem, warm = room_problem(monkeypatch, tmp_path, 2244656161, "walls", "near", 1)
+    calls = spy_ipopt_calls(monkeypatch)
+    with pytest.raises(HorizonInfeasible) as caught:
+        plan_horizon(problem, warm, time_limit=60.0)
+    exc = caught.value
+    assert exc.status == "reference_infeasible" and not calls
+    assert "with one robot on its reference every variable is fixed" in str(exc)
+    assert {v.group for v in exc.violations} == {"span"} and min(v.knot for v in exc.violations) == 202
+    assert 0.005 < max(v.amount for v in exc.violations) < 0.007
+    plan, _ = solve(problem, "horizon")  # the planner: the qp plan, which passes every check, and why
+    assert plan.success and plan.diagnostics["horizon_result"] == "warm_start" and not calls
+    assert "with one robot on its reference every variable is fixed" in plan.diagnostics["horizon_note"]
+    freed = plan_horizon(problem, warm, time_limit=60.0, leader_tolerance=0.01)
+    assert calls and freed.diagnostics["horizon_result"] == "optimal"
+    assert check(freed, problem.env).n_violation_steps == 0

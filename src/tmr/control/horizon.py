@@ -359,8 +359,9 @@ def _plan_horizon(
     Raises:
         ParameterError: no warm start, a warm start of the wrong shape, a bad option or time limit; a world with low
             obstacles (``problem.env.low_obstacles``: the NLP has no row for a cable's height over one).
-        HorizonInfeasible: the start violates a hard constraint, or neither IPOPT's optimum, nor an iterate, nor the
-            warm start satisfies them; the message names the violated constraint groups with knots, times and
+        HorizonInfeasible: the start violates a hard constraint, the equality leader's reference does (its own
+            clearance; with one robot, any row: every variable is fixed), or neither IPOPT's optimum, nor an iterate,
+            nor the warm start satisfies them; the message names the violated constraint groups with knots, times and
             amounts (also in ``.violations``).
     """
     start_time = time.perf_counter()
@@ -426,6 +427,17 @@ def _plan_horizon(
                 bad,
                 status="reference_infeasible",
             )
+        if not np.any(model.lbx < model.ubx):  # one robot: the start and the leader on its reference fix every variable
+            bad = _violations(model, vals, xv, tol)  # the one trajectory there is: every row of every group
+            if bad:
+                raise HorizonInfeasible(
+                    "horizon NLP: with one robot on its reference every variable is fixed, and that one trajectory "
+                    "violates rows, so no trajectory satisfies them: "
+                    + _describe(bad)
+                    + "; give it a leader tolerance (leader_tolerance > 0)",
+                    bad,
+                    status="reference_infeasible",
+                )
     warm_c, warm_why = _warm_candidate(model, warm_start, Qw, Qraw, tol)
     viol = _violations(model, vals, xv, tol)  # at the current point (the last iterate once IPOPT ran)
     info["warm_start_time"] = warm_time + time.perf_counter() - t0
