@@ -222,24 +222,41 @@ def test_a_polish_costlier_than_the_coarse_optimum_does_not_replace_it(monkeypat
 def test_one_robot_whose_reference_breaks_a_row_is_refused_before_ipopt(monkeypatch, tmp_path):
     """With one robot the start and the equality leader on its reference fix every variable, so the NLP is that one
     trajectory. In the generated room ``walls-near-2244656161`` its span is 6.1 mm past the NLP's bound from knot 202
-    on (the ``qp`` plan lags its reference by as much to keep it): refused before any IPOPT solve, with the rows
-    named (until stop 59 three IPOPT builds each said 'Infeasible_Problem_Detected' after 0 iterations); the planner
-    returns the verified ``qp`` plan with that reason; a leader tolerance frees the leader and IPOPT solves it."""
+    on (the ``qp`` plan lags its reference by as much to keep it): no IPOPT solve (until stop 59 three IPOPT builds
+    each said 'Infeasible_Problem_Detected' after 0 iterations); the warm start is returned (``horizon_stop``
+    "reference_infeasible", the rows named), or, if it is no fallback, ``HorizonInfeasible`` says why; a leader
+    tolerance frees the leader and IPOPT solves it. Where the one trajectory holds every row (``narrow-near-798204745``
+    with one robot), IPOPT runs as before: optimal after 0 iterations."""
+    import copy
+
     from tmr.control.horizon_model import HorizonInfeasible
     from tmr.planner import check, solve
 
     problem, warm = room_problem(monkeypatch, tmp_path, 2244656161, "walls", "near", 1)
     calls = spy_ipopt_calls(monkeypatch)
+    plan = plan_horizon(problem, warm, time_limit=60.0)
+    d = plan.diagnostics
+    assert d["horizon_result"] == "warm_start" and d["horizon_stop"] == "reference_infeasible" and not calls
+    assert np.array_equal(plan.q, warm.q) and d["horizon_summary"]["iterations"] == 0
+    why = "with one robot on its reference every variable is fixed, and that one trajectory violates rows"
+    assert d["horizon_note"].startswith(why) and "span: 52 knot(s), k = 202–253" in d["horizon_note"]
+    assert "returned the warm-start qp plan as given" in d["horizon_note"]
+    no_fallback = copy.deepcopy(warm)
+    no_fallback.success = False
     with pytest.raises(HorizonInfeasible) as caught:
-        plan_horizon(problem, warm, time_limit=60.0)
+        plan_horizon(problem, no_fallback, time_limit=60.0)
     exc = caught.value
-    assert exc.status == "reference_infeasible" and not calls
-    assert "with one robot on its reference every variable is fixed" in str(exc)
+    assert exc.status == "reference_infeasible" and not calls and why in str(exc)
     assert {v.group for v in exc.violations} == {"span"} and min(v.knot for v in exc.violations) == 202
     assert 0.005 < max(v.amount for v in exc.violations) < 0.007
-    plan, _ = solve(problem, "horizon")  # the planner: the qp plan, which passes every check, and why
-    assert plan.success and plan.diagnostics["horizon_result"] == "warm_start" and not calls
-    assert "with one robot on its reference every variable is fixed" in plan.diagnostics["horizon_note"]
+    assert "the warm start is no fallback: the qp plan failed" in str(exc)
+    planned, _ = solve(problem, "horizon")  # the planner: the qp plan, which passes every check, and why
+    assert planned.success and planned.diagnostics["horizon_result"] == "warm_start" and not calls
+    assert why in planned.diagnostics["horizon_note"]
     freed = plan_horizon(problem, warm, time_limit=60.0, leader_tolerance=0.01)
     assert calls and freed.diagnostics["horizon_result"] == "optimal"
     assert check(freed, problem.env).n_violation_steps == 0
+    held, held_warm = room_problem(monkeypatch, tmp_path, 798204745, "narrow", "near", 1)
+    calls = spy_ipopt_calls(monkeypatch)
+    d = plan_horizon(held, held_warm, time_limit=60.0).diagnostics
+    assert calls and d["horizon_result"] == "optimal" and d["horizon_stop"] == "converged"

@@ -351,7 +351,9 @@ def _plan_horizon(
         ``horizon_result`` ("optimal", "coarse_optimal" — the coarse pass's optimum, interpolated, every row holding:
         ``formulations/horizon.md``, "Coarse knots" — "best_feasible_iterate" or "warm_start"), ``horizon_note``
         (one line: what IPOPT did and what was returned), ``horizon_stop`` ("converged", "ipopt_failed", "time_limit",
-        "rows_left_out", or "rows_crossed": the fast attempt's, with no time left for its fallback), IPOPT's status
+        "rows_left_out", "rows_crossed": the fast attempt's, with no time left for its fallback, or
+        "reference_infeasible": one robot, every variable fixed, its one trajectory breaking rows, IPOPT not run and
+        the warm start returned), IPOPT's status
         and iterations, the objective returned and at the warm start, f1–f4, the largest row violation, the row
         counts, the rounds and the time split (warm-start preparation, transcription, solve); ``wall_time`` is the
         total. Run :func:`tmr.planner.check` on it for the exact (shapely) verification.
@@ -360,9 +362,9 @@ def _plan_horizon(
         ParameterError: no warm start, a warm start of the wrong shape, a bad option or time limit; a world with low
             obstacles (``problem.env.low_obstacles``: the NLP has no row for a cable's height over one).
         HorizonInfeasible: the start violates a hard constraint, the equality leader's reference does (its own
-            clearance; with one robot, any row: every variable is fixed), or neither IPOPT's optimum, nor an iterate,
-            nor the warm start satisfies them; the message names the violated constraint groups with knots, times and
-            amounts (also in ``.violations``).
+            clearance; with one robot any row, every variable being fixed, and the warm start no fallback), or neither
+            IPOPT's optimum, nor an iterate, nor the warm start satisfies them; the message names the violated
+            constraint groups with knots, times and amounts (also in ``.violations``).
     """
     start_time = time.perf_counter()
     no_height_row = "its NLP keeps no cable height above them; use --method qp"
@@ -415,6 +417,7 @@ def _plan_horizon(
     obj_scale = max(J_warm, 1e-6) if opts.scale_objective else 1.0
     trans_time, solve_time = time.perf_counter() - t0, 0.0
     t0 = time.perf_counter()
+    fixed_bad: list[Violation] = []  # with every variable fixed (one robot), the rows its one trajectory breaks
     if opts.leader_tolerance == 0:  # the leader's own clearance rows depend on fixed variables only
         bad = _reference_violations(model, vals, tol)  # only where the reference is inside: how deep, exactly [m]
         bad = [v._replace(amount=float(-exact[v.knot])) if np.isfinite(exact[v.knot]) else v for v in bad]
@@ -428,17 +431,20 @@ def _plan_horizon(
                 status="reference_infeasible",
             )
         if not np.any(model.lbx < model.ubx):  # one robot: the start and the leader on its reference fix every variable
-            bad = _violations(model, vals, xv, tol)  # the one trajectory there is: every row of every group
-            if bad:
-                raise HorizonInfeasible(
-                    "horizon NLP: with one robot on its reference every variable is fixed, and that one trajectory "
-                    "violates rows, so no trajectory satisfies them: "
-                    + _describe(bad)
-                    + "; give it a leader tolerance (leader_tolerance > 0)",
-                    bad,
-                    status="reference_infeasible",
-                )
+            fixed_bad = _violations(model, vals, xv, tol)  # the one trajectory there is: every row of every group
     warm_c, warm_why = _warm_candidate(model, warm_start, Qw, Qraw, tol)
+    fixed_what = ""  # no IPOPT at all: the NLP is one trajectory, and it breaks rows (the warm start, if a fallback)
+    if fixed_bad:
+        fixed_what = (
+            "with one robot on its reference every variable is fixed, and that one trajectory violates rows, so no "
+            "trajectory satisfies them (give it a leader tolerance, leader_tolerance > 0): " + _describe(fixed_bad)
+        )
+        if warm_c is None:
+            raise HorizonInfeasible(
+                f"horizon NLP: {fixed_what}; the warm start is no fallback: {warm_why}",
+                fixed_bad,
+                status="reference_infeasible",
+            )
     viol = _violations(model, vals, xv, tol)  # at the current point (the last iterate once IPOPT ran)
     info["warm_start_time"] = warm_time + time.perf_counter() - t0
     f_limit = (warm_c.J if warm_c else math.inf) / obj_scale
@@ -449,7 +455,8 @@ def _plan_horizon(
     lam: tuple[Array, Array] | None = None
     stats: dict[str, Any] = {}
     status = ""
-    stop = ""  # why the rounds ended: converged, ipopt_failed, time_limit, rows_left_out, rows_crossed (fast attempt)
+    stop = ""  # why the rounds ended: converged, ipopt_failed, time_limit, rows_left_out, rows_crossed (fast attempt),
+    # reference_infeasible (no round: every variable fixed, fixed_bad)
     bar = tqdm(  # no total: IPOPT's iterations are counted, its rounds named ("horizon NLP, round 1 (primary solve)")
         desc="horizon NLP",
         unit="IPOPT iteration",
@@ -462,7 +469,7 @@ def _plan_horizon(
     too_big: tuple[int, str] | None = None  # (rows, why its build was not started) if IPOPT never started
     windows: list[dict[str, Any]] = []
     window_lam: dict[str, Array] | None = None  # the windows' row multipliers (stitched), by group and entry
-    if opts.window is not None and int(opts.window) < su.K:
+    if opts.window is not None and int(opts.window) < su.K and not fixed_bad:
         t1 = time.perf_counter()
         xv, windows, window_lam = _windowed(model, masks, xv, obj_scale, pool, bar, deadline, limit)
         pool.new_round()  # the whole NLP's rows: its iterates apart from the windows'
@@ -471,12 +478,12 @@ def _plan_horizon(
         window_time = time.perf_counter() - t1
         solve_time += sum(w["solve_time"] for w in windows)
         trans_time += window_time - sum(w["solve_time"] for w in windows)
-    phases = _phases(opts)
+    phases = [] if fixed_bad else _phases(opts)
     coarse_c: _Candidate | None = None  # the coarse pass's interpolated optimum, if every row holds
     coarse_log: dict[str, Any] | None = None
     coarse_what = coarse_floor = ""  # what the coarse pass did, and its floor note (for the note)
     M = stride(su.K, opts.coarse_knots, opts.coarse_from)
-    if M > 1 and su.drive is None and opts.window is None and time.perf_counter() < deadline:
+    if M > 1 and su.drive is None and opts.window is None and not fixed_bad and time.perf_counter() < deadline:
         bar.set_description_str(f"horizon NLP, every {_nth(M)} knot")
         coarse_c, coarse_log = _coarse_pass(
             problem, warm_start, M, options, model, warm_c, tol, deadline, limit, obj_scale, bar
@@ -745,6 +752,8 @@ def _plan_horizon(
                 f"IPOPT not started: the NLP has {too_big[0]:,} rows, building its solver {too_big[1]} of the "
                 f"time limit of {limit:g} s (raise --time-limit)"
             )
+    elif fixed_bad:  # no IPOPT: the one trajectory breaks rows, the warm start is returned
+        stop, what = "reference_infeasible", fixed_what
     elif stop == "rows_crossed":  # the fast attempt's, with no time left for the fallback
         what = (
             f"the optimum of round {last} ({tried}) crossed obstacles whose rows were left out, "
