@@ -417,6 +417,7 @@ def _plan_horizon(
     obj_scale = max(J_warm, 1e-6) if opts.scale_objective else 1.0
     trans_time, solve_time = time.perf_counter() - t0, 0.0
     t0 = time.perf_counter()
+    viol = _violations(model, vals, xv, tol)  # at the current point (the last iterate once IPOPT ran)
     fixed_bad: list[Violation] = []  # with every variable fixed (one robot), the rows its one trajectory breaks
     if opts.leader_tolerance == 0:  # the leader's own clearance rows depend on fixed variables only
         bad = _reference_violations(model, vals, tol)  # only where the reference is inside: how deep, exactly [m]
@@ -431,7 +432,7 @@ def _plan_horizon(
                 status="reference_infeasible",
             )
         if not np.any(model.lbx < model.ubx):  # one robot: the start and the leader on its reference fix every variable
-            fixed_bad = _violations(model, vals, xv, tol)  # the one trajectory there is: every row of every group
+            fixed_bad = viol  # the one trajectory there is: every row of every group
     warm_c, warm_why = _warm_candidate(model, warm_start, Qw, Qraw, tol)
     fixed_what = ""  # no IPOPT at all: the NLP is one trajectory, and it breaks rows (the warm start, if a fallback)
     if fixed_bad:
@@ -445,7 +446,6 @@ def _plan_horizon(
                 fixed_bad,
                 status="reference_infeasible",
             )
-    viol = _violations(model, vals, xv, tol)  # at the current point (the last iterate once IPOPT ran)
     info["warm_start_time"] = warm_time + time.perf_counter() - t0
     f_limit = (warm_c.J if warm_c else math.inf) / obj_scale
     pool = _Pool(_POOL_SIZE, _POOL_SCREEN, f_limit)

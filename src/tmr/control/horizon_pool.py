@@ -210,6 +210,11 @@ def _warm_candidate(model: _Model, warm: Plan, Qw: Array, raw: Array, tol: float
     return None, why + given_why
 
 
+def _cheapest_first(items: list[tuple[float, int, Array, str]]) -> list[tuple[float, int, Array, str]]:
+    """A pool's heap entries (−f, seq, x, where) by ascending cost f, ties the earliest first."""
+    return sorted(items, key=lambda it: (-it[0], it[1]))
+
+
 class _Pool:
     """The ``keep`` lowest-cost IPOPT iterates of the current round, and the ``keep`` lowest-cost ones of the rounds
     before it, that nearly satisfy their round's transcribed rows.
@@ -252,7 +257,7 @@ class _Pool:
     def new_round(self) -> None:
         """The iterates offered from now on belong to a new round (more rows transcribed): the current round's join
         the earlier rounds' (the ``keep`` cheapest of them stay)."""
-        self._before = sorted(self._before + self._heap, key=lambda it: (-it[0], it[1]))[: self.keep]
+        self._before = _cheapest_first(self._before + self._heap)[: self.keep]
         heapq.heapify(self._before)
         self._heap = []
 
@@ -261,7 +266,7 @@ class _Pool:
 
     def sorted(self) -> list[tuple[float, Array, str]]:
         """The kept iterates (f, x, where), the cheapest first (ties: the earliest)."""
-        return [(-f, x, w) for f, _, x, w in sorted(self._heap + self._before, key=lambda it: (-it[0], it[1]))]
+        return [(-f, x, w) for f, _, x, w in _cheapest_first(self._heap + self._before)]
 
     def best(self, model: _Model, tol: float, J_limit: float, until: float = math.inf) -> _Candidate | None:
         """The lowest-cost kept iterate that satisfies every row at ``tol`` (its fixed variables projected: the start,
@@ -276,7 +281,7 @@ class _Pool:
         best_f = math.inf  # the pool's (scaled) cost of ``best``
         checks = 0
         for heap in (self._heap, self._before):
-            for f, _, x, where in sorted(heap, key=lambda it: (-it[0], it[1])):
+            for f, _, x, where in _cheapest_first(heap):
                 f = -f
                 if f >= best_f:
                     break  # ascending cost: the next ones cost more (up to the tiny change of the projection)
