@@ -25,6 +25,7 @@ from tmr.control.horizon import (
     DEFAULT_TIME_LIMIT,
     GROUPS,
     HorizonInfeasible,
+    HorizonOptions,
     distance_spline,
     objective,
     objective_terms,
@@ -296,13 +297,13 @@ def test_unreachable_reference_reports_the_overstretched_tethers():
 
 
 def test_reference_through_obstacle_with_equality_leader_fails_clearly():
-    """The leader's reference crosses the column: with the equality leader no trajectory exists, said before IPOPT
-    runs, naming the knots where the reference is inside."""
+    """The leader's reference crosses the column: with the equality leader kept (``leader_release=None``) no
+    trajectory exists, said before IPOPT runs, naming the knots where the reference is inside."""
     problem = small_problem(THROUGH)
     inside = problem.env.exact_clearance(problem.trajectory.x) < 0
     assert inside.any()
     with pytest.raises(HorizonInfeasible) as info:
-        plan_horizon(problem, solve(problem, "qp")[0])
+        plan_horizon(problem, solve(problem, "qp")[0], leader_release=None)
     err = info.value
     assert err.status == "reference_infeasible" and err.groups == ["clearance"]
     assert all(v.item == "robot 2" for v in err.violations)
@@ -407,11 +408,62 @@ def test_a_leader_starting_inside_d_safe_is_not_refused_as_a_reference_too_close
     assert plan.success and metrics.n_violation_steps == 0
 
 
+def _leader_lag(plan, problem) -> np.ndarray:
+    """The leader's distance to its reference at every knot [m]."""
+    return np.linalg.norm(plan.robots[:, -1] - problem.trajectory.x[:, :2], axis=1)
+
+
+def test_a_leader_whose_warm_start_lags_far_or_cannot_be_on_its_reference_is_released():
+    """THROUGH: the reference crosses the column and the qp plan goes round it, 0.93 m off the reference — more than
+    ``leader_release`` = 0.5 m, so the leader is released: every NLP of the call with ``leader_tolerance`` = that lag
+    + 1 mm, w3 f3 in the cost. Optimal, the exact check passes, the leader within the tolerance at every knot, and
+    no worse than the qp plan in f1–f4, f3 included. With ``leader_release`` above the lag the equality leader is
+    tried, found infeasible before IPOPT (its reference inside the inflated column), and released all the same; with
+    ``None`` it is refused (the test above). GRAZING: the qp plan lags 0.27 m, under ``leader_release``, but the
+    reference dips 0.2 mm into the inflated column: released for that reason."""
+    from tmr.control.horizon import _leader_release
+
+    problem = small_problem(THROUGH)
+    warm = solve(problem, "qp")[0]
+    lag = _leader_lag(warm, problem)
+    assert warm.success and lag.max() > HorizonOptions().leader_release == 0.5
+    for options, why in (({}, "more than leader_release = 0.5 m"), ({"leader_release": 2.0}, "inside the inflated")):
+        plan = plan_horizon(problem, warm, **options)
+        d = plan.diagnostics
+        assert d["horizon_result"] == "optimal", d["horizon_note"]
+        assert plan.success and check(plan, problem.env).n_violation_steps == 0
+        released = d["leader_released"]
+        assert released["lag"] == pytest.approx(lag.max()) and released["knot"] == int(np.argmax(lag))
+        assert released["tolerance"] == pytest.approx(lag.max() + 1e-3)
+        assert _leader_lag(plan, problem).max() <= released["tolerance"] + 1e-6
+        assert why in d["horizon_note"] and "so the leader was released" in d["horizon_note"]
+        terms, before = d["horizon_summary"]["terms"], d["horizon_summary"]["warm_start_terms"]
+        assert all(terms[k] <= before[k] for k in ("f1", "f2", "f3", "f4")), (terms, before)
+        assert terms["f3"] < 0.5 * before["f3"]  # w3 f3 in the cost: nearer the reference than the qp plan
+    problem = small_problem(GRAZING)
+    warm = solve(problem, "qp")[0]
+    assert 0 < _leader_lag(warm, problem).max() < 0.5
+    plan = plan_horizon(problem, warm)
+    d = plan.diagnostics
+    assert d["horizon_result"] == "optimal" and check(plan, problem.env).n_violation_steps == 0
+    assert "the equality leader is infeasible (its reference passes inside the inflated obstacles" in d["horizon_note"]
+    # only a verified plan lends its leader, only with the equality leader, only omnidirectional robots
+    opts = HorizonOptions()
+    assert _leader_release(problem, warm, opts, why="x") is not None
+    assert _leader_release(problem, dataclasses.replace(warm, success=False), opts, why="x") is None
+    assert _leader_release(problem, warm, dataclasses.replace(opts, leader_release=None), why="x") is None
+    assert _leader_release(problem, warm, dataclasses.replace(opts, leader_tolerance=0.1), why="x") is None
+    assert _leader_release(dataclasses.replace(problem, robot_model=object()), warm, opts, why="x") is None
+    assert _leader_release(problem, warm, opts) is None  # 0.27 m: under leader_release, nothing proven
+    with pytest.raises(ParameterError, match="leader_release"):
+        plan_horizon(problem, warm, leader_release=0.0)
+
+
 def test_bounded_leader_error_passes_where_equality_cannot():
     problem = small_problem(GRAZING)
     warm = solve(problem, "qp")[0]
     with pytest.raises(HorizonInfeasible, match="leader"):
-        plan_horizon(problem, warm)
+        plan_horizon(problem, warm, leader_release=None)
     plan = plan_horizon(problem, warm, leader_tolerance=0.1)
     metrics = check(plan, problem.env)
     assert plan.success and metrics.n_violation_steps == 0

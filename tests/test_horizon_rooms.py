@@ -53,20 +53,22 @@ def test_the_retry_with_the_exact_hessian_solves_where_gauss_newton_stalls(monke
     10⁴ (the default since stop 54) it is optimal itself, and the fallback never runs. Since stop 55 (the rows'
     Jacobian built group by group: the same matrix, other rounding) the Gauss–Newton fallback crosses the valley in
     62 iterations; with ``max_iter`` 40 it stops there, and the exact retry from the same start converged in 3. Since
-    stop 57 the retry goes on from the primary's last iterate, which holds the round's rows, and converges in 1."""
+    stop 57 the retry goes on from the primary's last iterate, which holds the round's rows, and converges in 1. On
+    another machine (stop 60: other rounding) the Gauss–Newton primary reached the acceptable level in exactly 40
+    iterations, so the cap is 30 now (there: the exact retry 2 iterations, the Gauss–Newton one still at its cap)."""
     problem, warm = room_problem(monkeypatch, tmp_path, 1226144109, "long_walls", "mid", 2)
     now = plan_horizon(problem, warm).diagnostics
     assert now["horizon_result"] == "optimal" and not _fallback(now), now["round_log"]
-    d = plan_horizon(problem, warm, fast_max_hessian_perturbation=1e8, max_iter=40).diagnostics
+    d = plan_horizon(problem, warm, fast_max_hessian_perturbation=1e8, max_iter=30).diagnostics
     assert d["horizon_result"] == "optimal", d["horizon_note"]
     primary, retry = _fallback(d)
     assert (primary["attempt"], primary["hessian"]) == ("primary", "gauss-newton")
     assert primary["status"] not in _SOLVED
     assert (retry["attempt"], retry["hessian"], retry["min_hessian_perturbation"]) == ("retry", "exact", 1e-2)
     assert retry["status"] in _SOLVED
-    assert retry["from_last"] and retry["iterations"] <= 3
+    assert retry["from_last"] and retry["iterations"] <= 10
     assert "its retry 0.01 (exact Hessian; continuing the attempt stopped at its iteration cap)" in d["horizon_note"]
-    old = plan_horizon(problem, warm, fast_max_hessian_perturbation=1e8, max_iter=40, retry_hessian=None).diagnostics
+    old = plan_horizon(problem, warm, fast_max_hessian_perturbation=1e8, max_iter=30, retry_hessian=None).diagnostics
     assert old["horizon_result"] != "optimal"
     assert [r["hessian"] for r in _fallback(old)] == ["gauss-newton", "gauss-newton"]
 
@@ -116,7 +118,9 @@ def test_the_fast_attempt_gives_up_before_ipopts_regularisation_runs_away(monkey
     constant to seven digits (the Gauss–Newton Hessian lacks the curvature of f2's large span residuals). The retry
     from the warm start then ran to ``max_iter`` elsewhere and the ``qp`` plan was returned (4.3 s). The retry now
     goes on from the primary's last iterate and multipliers, as the polish's retry does, and converges in 2
-    iterations: optimal, f2 509 → 188."""
+    iterations: optimal, f2 509 → 188. Stop 60, on another machine (other rounding): the primary's last iterate is
+    4.3·10⁻⁵ off its rows, past the rows' tolerance (10⁻⁵), so the retry started from the warm start, ran to
+    ``max_iter`` and the ``qp`` plan was returned; the retry now goes on from an iterate within ``NEAR_ROWS`` = 10⁻³."""
     problem, warm = room_problem(monkeypatch, tmp_path, 3098419812, "sparse", "near", 5)
     assert HorizonOptions().max_hessian_perturbation == 1e9
     calls = spy_ipopt_calls(monkeypatch)
@@ -219,30 +223,47 @@ def test_a_polish_costlier_than_the_coarse_optimum_does_not_replace_it(monkeypat
     assert all(terms[k] <= before[k] * (1 + 1e-9) for k in ("f1", "f2", "f4"))
 
 
-def test_one_robot_whose_reference_breaks_a_row_is_refused_before_ipopt(monkeypatch, tmp_path):
+def test_one_robot_whose_reference_breaks_a_row_has_its_leader_released(monkeypatch, tmp_path):
     """With one robot the start and the equality leader on its reference fix every variable, so the NLP is that one
     trajectory. In the generated room ``walls-near-2244656161`` its span is 6.1 mm past the NLP's bound from knot 202
-    on (the ``qp`` plan lags its reference by as much to keep it): no IPOPT solve (until stop 59 three IPOPT builds
-    each said 'Infeasible_Problem_Detected' after 0 iterations); the warm start is returned (``horizon_stop``
-    "reference_infeasible", the rows named), or, if it is no fallback, ``HorizonInfeasible`` says why; a leader
-    tolerance frees the leader and IPOPT solves it. Where the one trajectory holds every row (``narrow-near-798204745``
-    with one robot), IPOPT runs as before: optimal after 0 iterations."""
+    on (the ``qp`` plan lags its reference by as much to keep it). Since stop 60 the leader is released (within the
+    ``qp`` plan's largest lag + 1 mm) and IPOPT solves it: no worse than the ``qp`` plan in f1–f4, f3 included. With
+    the equality leader kept (``leader_release=None``): no IPOPT solve (until stop 59 three IPOPT builds each said
+    'Infeasible_Problem_Detected' after 0 iterations); the warm start is returned (``horizon_stop``
+    "reference_infeasible", the rows named), or, if it is no fallback, ``HorizonInfeasible`` says why. Where the one
+    trajectory holds every row (``narrow-near-798204745`` with one robot), IPOPT runs as before: optimal after 0
+    iterations, the leader on its reference."""
     import copy
 
     from tmr.control.horizon_model import HorizonInfeasible
     from tmr.planner import check, solve
 
     problem, warm = room_problem(monkeypatch, tmp_path, 2244656161, "walls", "near", 1)
+    lag = np.linalg.norm(warm.robots[:, -1] - problem.trajectory.x[:, :2], axis=1)
     calls = spy_ipopt_calls(monkeypatch)
-    plan = plan_horizon(problem, warm, time_limit=60.0)
-    d = plan.diagnostics
-    assert d["horizon_result"] == "warm_start" and d["horizon_stop"] == "reference_infeasible" and not calls
-    assert np.array_equal(plan.q, warm.q) and d["horizon_summary"]["iterations"] == 0
+    freed = plan_horizon(problem, warm, time_limit=60.0)
+    d = freed.diagnostics
+    assert calls and d["horizon_result"] == "optimal", d["horizon_note"]
+    assert check(freed, problem.env).n_violation_steps == 0
+    released = d["leader_released"]
+    assert released["lag"] == pytest.approx(lag.max()) and 0.005 < released["lag"] < 0.007
+    assert released["tolerance"] == pytest.approx(lag.max() + 1e-3)
+    free_lag = np.linalg.norm(freed.robots[:, -1] - problem.trajectory.x[:, :2], axis=1)
+    assert free_lag.max() <= released["tolerance"] + 1e-6
     why = "with one robot on its reference every variable is fixed, and that one trajectory violates rows"
+    assert d["horizon_note"].startswith("the equality leader is infeasible (one robot on its reference fixes every")
+    assert "so the leader was released" in d["horizon_note"] and "f3 " in d["horizon_note"]
+    terms, before = d["horizon_summary"]["terms"], d["horizon_summary"]["warm_start_terms"]
+    assert all(terms[k] <= before[k] for k in ("f1", "f2", "f3", "f4")), (terms, before)
+    calls.clear()
+    kept = plan_horizon(problem, warm, time_limit=60.0, leader_release=None)
+    d = kept.diagnostics
+    assert d["horizon_result"] == "warm_start" and d["horizon_stop"] == "reference_infeasible" and not calls
+    assert np.array_equal(kept.q, warm.q) and d["horizon_summary"]["iterations"] == 0
     assert d["horizon_note"].startswith(why) and "span: 52 knot(s), k = 202–253" in d["horizon_note"]
     assert "returned the warm-start qp plan as given" in d["horizon_note"]
     no_fallback = copy.deepcopy(warm)
-    no_fallback.success = False
+    no_fallback.success = False  # no fallback, and no release either (only a verified plan lends its leader)
     with pytest.raises(HorizonInfeasible) as caught:
         plan_horizon(problem, no_fallback, time_limit=60.0)
     exc = caught.value
@@ -250,13 +271,11 @@ def test_one_robot_whose_reference_breaks_a_row_is_refused_before_ipopt(monkeypa
     assert {v.group for v in exc.violations} == {"span"} and min(v.knot for v in exc.violations) == 202
     assert 0.005 < max(v.amount for v in exc.violations) < 0.007
     assert "the warm start is no fallback: the qp plan failed" in str(exc)
-    planned, _ = solve(problem, "horizon")  # the planner: the qp plan, which passes every check, and why
-    assert planned.success and planned.diagnostics["horizon_result"] == "warm_start" and not calls
-    assert why in planned.diagnostics["horizon_note"]
-    freed = plan_horizon(problem, warm, time_limit=60.0, leader_tolerance=0.01)
-    assert calls and freed.diagnostics["horizon_result"] == "optimal"
-    assert check(freed, problem.env).n_violation_steps == 0
+    planned, _ = solve(problem, "horizon")  # the planner: released, optimal
+    assert planned.success and planned.diagnostics["horizon_result"] == "optimal" and calls
+    assert "so the leader was released" in planned.diagnostics["horizon_note"]
     held, held_warm = room_problem(monkeypatch, tmp_path, 798204745, "narrow", "near", 1)
     calls = spy_ipopt_calls(monkeypatch)
     d = plan_horizon(held, held_warm, time_limit=60.0).diagnostics
     assert calls and d["horizon_result"] == "optimal" and d["horizon_stop"] == "converged"
+    assert "leader_released" not in d and d["f3"] < 1e-12

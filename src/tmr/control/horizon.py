@@ -168,6 +168,14 @@ _SUCCESS = ("Solve_Succeeded",)
 _ACCEPTABLE = ("Solved_To_Acceptable_Level",)
 _WALL_TIME = "Maximum_WallTime_Exceeded"
 _MAX_ITER = "Maximum_Iterations_Exceeded"  # IPOPT stopped at max_iter
+
+#: A round's last iterate this near its rows (the largest violation, in the rows' own units: m, m/s, m/s², rad/s)
+#: counts as next to them: where the attempt before stopped at its iteration cap, the retry goes on from it and its
+#: multipliers, not from the round's start. ``sparse-near-3098419812`` with 5 robots: the Gauss–Newton primary ends
+#: its 200 iterations oscillating next to a KKT point, on one machine within 10⁻⁶ of its rows, on another 4.3·10⁻⁵
+#: off them (other rounding); from there the exact retry converges in a few iterations, from the round's start it
+#: ran to ``max_iter`` and the ``qp`` plan was returned (``formulations/horizon.md``, "Two regularisation floors").
+NEAR_ROWS = 1e-3
 _STALLED = "Stalled"  # the fast attempt's round, stopped by the iteration callback (fast_stall_iter)
 
 _LOG = logging.getLogger("tmr")
@@ -320,6 +328,8 @@ def _plan_horizon(
     *,
     time_limit: float | None = None,
     progress: bool = False,
+    _started: float | None = None,
+    _released: dict[str, Any] | None = None,
     **options: Any,
 ) -> Plan:
     """Plan the whole horizon at once: one NLP over q_0..q_K solved by IPOPT (``formulations/horizon.md``).
@@ -366,7 +376,7 @@ def _plan_horizon(
             IPOPT's optimum, nor an iterate, nor the warm start satisfies them; the message names the violated
             constraint groups with knots, times and amounts (also in ``.violations``).
     """
-    start_time = time.perf_counter()
+    start_time = time.perf_counter() if _started is None else _started  # a released leader's call: the caller's
     no_height_row = "its NLP keeps no cable height above them; use --method qp"
     refuse_low_obstacles(getattr(problem, "env", None), "--method horizon", no_height_row)
     if warm_start is None:
@@ -377,6 +387,21 @@ def _plan_horizon(
     limit = _time_limit(time_limit)
     deadline = start_time + limit
     opts = _options(options)
+    released = _released if _released is not None else _leader_release(problem, warm_start, opts)
+
+    def release(why: str) -> Plan | None:
+        """The equality leader proven infeasible before IPOPT (``why``): this call again with the leader released,
+        if it may be (:func:`_leader_release`), else ``None``."""
+        rel = _leader_release(problem, warm_start, opts, why=why)
+        if rel is None:
+            return None
+        return _plan_horizon(
+            problem, warm_start, time_limit=time_limit, progress=progress, _started=start_time, _released=rel, **options
+        )
+
+    if released is not None:  # every NLP of this call (the coarse pass, windows, polish) with the leader free
+        options = dict(options, leader_tolerance=released["tolerance"], leader_release=None)
+        opts = _options(options)
     su = _Setup(problem, opts)
     if su.drive is not None and opts.window is not None:
         raise ParameterError("windowed solves (window=...) are not implemented for differential drive (drive = 'diff')")
@@ -392,6 +417,8 @@ def _plan_horizon(
     tol = max(10 * opts.constr_viol_tol, 1e-6)  # a row "holds" if violated by at most this (its unit)
     t0 = time.perf_counter()
     Qraw, info = _warm_start(su, warm_start)
+    if released is not None:
+        info["leader_released"] = released
     warm_poses = _warm_poses(su, warm_start) if su.drive is not None else None
     warm_time = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -423,6 +450,9 @@ def _plan_horizon(
         bad = _reference_violations(model, vals, tol)  # only where the reference is inside: how deep, exactly [m]
         bad = [v._replace(amount=float(-exact[v.knot])) if np.isfinite(exact[v.knot]) else v for v in bad]
         if bad:
+            plan = release(f"its reference passes inside the inflated obstacles, {_describe(bad, worst=1)}")
+            if plan is not None:
+                return plan
             raise HorizonInfeasible(
                 "horizon NLP: the leader's reference passes inside the inflated obstacles (the equality leader is on "
                 "it at every knot), so no trajectory satisfies the rows: "
@@ -436,6 +466,10 @@ def _plan_horizon(
     warm_c, warm_why = _warm_candidate(model, warm_start, Qw, Qraw, tol)
     fixed_what = ""  # no IPOPT at all: the NLP is one trajectory, and it breaks rows (the warm start, if a fallback)
     if fixed_bad:
+        plan = release(f"one robot on its reference fixes every variable, and that trajectory violates rows, "
+                       f"{_describe(fixed_bad, worst=1)}")  # fmt: skip
+        if plan is not None:
+            return plan
         fixed_what = (
             "with one robot on its reference every variable is fixed, and that one trajectory violates rows, so no "
             "trajectory satisfies them (give it a leader tolerance, leader_tolerance > 0): " + _describe(fixed_bad)
@@ -605,13 +639,13 @@ def _plan_horizon(
                     elif rnd == 1 and window_lam is not None:  # the polishing pass: the windows' multipliers
                         kwargs.update(lam_g0=_stitched_multipliers(tr, window_lam))
                     # the attempt before stopped at its iteration cap near a solution: the retry goes on from its last
-                    # iterate — the polish's (it starts at an accepted optimum), or one holding the round's rows (a
-                    # Gauss–Newton round oscillating next to a KKT point); from one far outside them, the round's start
+                    # iterate — the polish's (it starts at an accepted optimum), or one within NEAR_ROWS of the round's
+                    # rows (a Gauss–Newton round oscillating next to a KKT point); from farther, the round's start
                     from_last = (
                         label == "retry"
                         and i_attempt > 0
                         and status == _MAX_ITER
-                        and (phase == "polish" or last_violation <= tol)
+                        and (phase == "polish" or last_violation <= NEAR_ROWS)
                     )
                     if from_last:
                         kwargs.update(x0=xv, lam_x0=lam[0], lam_g0=lam[1])  # primal–dual
@@ -859,6 +893,8 @@ def _plan_horizon(
             message = f"horizon NLP: {lead}; {at}" + (
                 _describe(viol) if viol else "none above tolerance (not converged: raise max_iter)"
             )
+        if released is not None:
+            message += f"; {_release_note(released, info['warm_start_method'])}"
         raise HorizonInfeasible(message + warm_note + f" ({floor_note})", viol, status=status or stop, diagnostics=diag)
 
     poses: tuple[Array, Array, Array, Array] | None = None
@@ -875,7 +911,10 @@ def _plan_horizon(
     terms = {k: float(v) for k, v in objective_terms(Q, su.step, su.ref, su.base).items()}
     diag.update(terms)
     before = info["warm_start_terms"]
-    change = ", ".join(f"{k} {terms[k]:.4g} ({_percent(terms[k], before[k])})" for k in ("f1", "f2", "f4"))
+    shown = ("f1", "f2", "f3", "f4") if opts.leader_tolerance > 0 else ("f1", "f2", "f4")
+    change = ", ".join(f"{k} {terms[k]:.4g} ({_percent(terms[k], before[k])})" for k in shown)
+    if released is not None:
+        what = f"{_release_note(released, info['warm_start_method'])}; {what}"
     diag.update(
         horizon_result=chosen.result,
         horizon_note=(
@@ -1050,6 +1089,54 @@ _BAR = {"default": "", "fast": "", "fallback": "fallback ", "polish": "from the 
 
 
 _HESSIAN = {"exact": "exact", "gauss-newton": "Gauss–Newton", "limited-memory": "limited-memory"}  # for the notes
+
+
+#: The released leader's tolerance above the warm start's largest lag [m]: the warm start's own leader strictly inside.
+_RELEASE_SLACK = 1e-3
+
+
+def _leader_release(problem: Any, warm: Plan, opts: HorizonOptions, why: str | None = None) -> dict[str, Any] | None:
+    """With the equality leader: where the verified warm start's leader lags its reference by more than
+    ``opts.leader_release`` [m] at some knot — or by any amount where ``why`` says the equality leader is infeasible
+    (its reference inside the inflated obstacles; one robot whose one trajectory breaks rows) — the leader is released:
+    ``{"lag": largest lag [m], "knot": its knot, "t": its time [s], "tolerance": lag + 1 mm, "release":
+    leader_release, "why": why}``, the ``leader_tolerance`` of this call's NLPs; else ``None``.
+
+    The equality leader's initial point is the warm start with its leader set on the reference; where the warm start
+    lags by a metre, that point breaks the spans (``medium-mid-2793577033`` with 3 robots: tether 3 by 0.96 m) and
+    IPOPT spends its iterations looking for feasibility (``formulations/horizon.md``, "The leader released").
+    Omnidirectional robots only (differential drive keeps the equality leader)."""
+    if opts.leader_tolerance > 0 or opts.leader_release is None or not warm.success:
+        return None
+    if getattr(problem, "robot_model", None) is not None:
+        return None
+    ref = np.asarray(problem.trajectory.x, dtype=float)[:, :2]
+    robots = np.asarray(warm.robots, dtype=float)
+    if robots.ndim != 3 or robots.shape[0] != ref.shape[0]:
+        return None  # not a plan of this problem: _warm_start says why
+    lag = np.linalg.norm(robots[:, -1] - ref, axis=1)
+    k = int(np.argmax(lag))
+    if why is None and not lag[k] > opts.leader_release:
+        return None
+    t = float(problem.trajectory.t[k])
+    tolerance = float(lag[k]) + _RELEASE_SLACK
+    return dict(lag=float(lag[k]), knot=k, t=t, tolerance=tolerance, release=float(opts.leader_release), why=why)
+
+
+def _release_note(released: dict[str, Any], method: str) -> str:
+    """The notes' words for a released leader (:func:`_leader_release`)."""
+    lag = f"{released['lag']:.3g} m (knot {released['knot']}, t = {released['t']:.2f} s)"
+    if released["why"]:
+        head = f"the equality leader is infeasible ({released['why']}); its {method} warm start lags by up to {lag}"
+    else:
+        head = (
+            f"its {method} warm start lags the leader's reference by up to {lag}, more than leader_release = "
+            f"{released['release']:g} m"
+        )
+    return (
+        f"{head}, so the leader was released: kept within {released['tolerance']:.4g} m of its reference "
+        "(leader_tolerance), w3 f3 in the cost and no worse than the warm start's"
+    )
 
 
 def _nth(M: int) -> str:
@@ -1539,6 +1626,7 @@ def _diagnostics(
         "start_clearance_entries": int(info.get("start_clearance_entries", 0)),
         "reference_clearance_entries": int(info.get("reference_clearance_entries", 0)),
         **({"warm_margin_entries": int(info["warm_margin_entries"])} if "warm_margin_entries" in info else {}),
+        **({"leader_released": dict(info["leader_released"])} if "leader_released" in info else {}),
         "transcription_time": float(trans_time),
         "solve_time": float(solve_time),
         "total_time": time.perf_counter() - start_time,

@@ -193,6 +193,14 @@ class HorizonOptions:
         retry_first_max_iter: the iterations that retry may take when it goes first (``None``: ``max_iter``); if it
             stops there, the primary solves the round (``dense-far-2639215061`` with 8 robots: the exact retry needed
             89 iterations where Gauss–Newton needs 19; the retries that paid converged in 10–35).
+        leader_release: with the equality leader, a verified warm start (``success``) whose leader lags its reference by
+            more than this [m] at some knot releases the leader: the NLP is solved with ``leader_tolerance`` = that
+            largest lag + 1 mm instead (w3 f3 in the cost, and a plan no worse than the warm start in f3 either), so
+            IPOPT starts from the warm start's own leader instead of from it set on a reference the chain could not
+            reach (``None``: never; omnidirectional robots only). ``medium-mid-2793577033`` with 3 robots: its ``qp``
+            plan lags by up to 1.09 m, the equality NLP ends in ``Maximum_Iterations_Exceeded`` (460 iterations) and
+            the ``qp`` plan is returned; released, optimal in 213–308 iterations, f3 50.9 → 0.69
+            (``formulations/horizon.md``, "The leader released").
         warm_start_leader_error: with the equality leader, the warm start *as given* (not projected on the reference)
             is still a fallback if its leader stays within this distance [m] of the reference at every knot and every
             other row holds (a ``qp`` plan lags its reference by ≤ 4.6 mm on A–D: CLIK).
@@ -217,6 +225,7 @@ class HorizonOptions:
     w_smoothness: float = 1.0
     w_tracking: float = 1.0e4
     leader_tolerance: float = 0.0
+    leader_release: float | None = 0.5
     samples_per_link: int | None = None
     field_error: float = 0.015
     d_safe: float | None = None
@@ -297,6 +306,7 @@ class HorizonOptions:
         if not self.activation > 0:
             raise ParameterError(f"activation must be > 0 m, got {self.activation}")
         _positive_or_none(self.crossing_depth, "crossing_depth", " m (or None: never)")
+        _positive_or_none(self.leader_release, "leader_release", " m (or None: never)")
         _positive_or_none(self.coarse_train_activation, "coarse_train_activation", " m (or None: as any plan)")
         if not isinstance(self.keep_warm_margins, bool):
             raise ParameterError(f"keep_warm_margins must be True or False, got {self.keep_warm_margins!r}")

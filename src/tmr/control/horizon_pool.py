@@ -142,11 +142,16 @@ def _cost(su: _Setup, Q: Array) -> float:
 
 def _no_worse(model: _Model, Q: Array) -> bool:
     """With ``no_worse_terms``: f1, f2 and f4 of joints Q are each ≤ the warm start's (as given) — exactly, not to
-    IPOPT's tolerance; always True without."""
-    if not (model.su.opts.no_worse_terms and model.bounds):
+    IPOPT's tolerance — and so is f3 where the leader is free (``leader_tolerance`` > 0; the equality leader's f3 is
+    0); always True without."""
+    su = model.su
+    if not (su.opts.no_worse_terms and model.bounds):
         return True
-    terms = objective_terms(Q, model.su.step)
-    return all(terms[k] <= model.bounds[k] for k in ("f1", "f2", "f4") if k in model.bounds)
+    if su.opts.leader_tolerance > 0:
+        terms, names = objective_terms(Q, su.step, su.ref, su.base), ("f1", "f2", "f3", "f4")
+    else:
+        terms, names = objective_terms(Q, su.step), ("f1", "f2", "f4")
+    return all(terms[k] <= model.bounds[k] for k in names if k in model.bounds)
 
 
 def _warm_candidate(model: _Model, warm: Plan, Qw: Array, raw: Array, tol: float) -> tuple[_Candidate | None, str]:
