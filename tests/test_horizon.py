@@ -455,6 +455,13 @@ def test_a_leader_whose_warm_start_lags_far_or_cannot_be_on_its_reference_is_rel
     assert _leader_release(problem, warm, dataclasses.replace(opts, leader_tolerance=0.1), why="x") is None
     assert _leader_release(dataclasses.replace(problem, robot_model=object()), warm, opts, why="x") is None
     assert _leader_release(problem, warm, opts) is None  # 0.27 m: under leader_release, nothing proven
+    # the planner returning the qp plan (here: a time limit before IPOPT starts) still says the leader was released
+    plan, _ = solve(small_problem(THROUGH), "horizon", time_limit=0.01)
+    d = plan.diagnostics
+    assert plan.success and d["horizon_result"] == "warm_start" and d["horizon_summary"]["leader_released"]
+    assert "(the leader released within 0.934 m of its reference" in d["horizon_note"]
+    with pytest.raises(ParameterError, match="_started"):
+        plan_horizon(problem, warm, _started=0.0)
     with pytest.raises(ParameterError, match="leader_release"):
         plan_horizon(problem, warm, leader_release=0.0)
 

@@ -4,6 +4,7 @@ coarse pass from a train plan (``formulations/horizon.md``, "The retry's Hessian
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -252,7 +253,8 @@ def test_one_robot_whose_reference_breaks_a_row_has_its_leader_released(monkeypa
     assert free_lag.max() <= released["tolerance"] + 1e-6
     why = "with one robot on its reference every variable is fixed, and that one trajectory violates rows"
     assert d["horizon_note"].startswith("the equality leader is infeasible (one robot on its reference fixes every")
-    assert "so the leader was released" in d["horizon_note"] and "f3 " in d["horizon_note"]
+    assert "so the leader was released" in d["horizon_note"]
+    assert re.search(r"warm start: f1 \S+ \([^)]*\), f2 \S+ \([^)]*\), f3 \S+ \(", d["horizon_note"])  # f3 given
     terms, before = d["horizon_summary"]["terms"], d["horizon_summary"]["warm_start_terms"]
     assert all(terms[k] <= before[k] for k in ("f1", "f2", "f3", "f4")), (terms, before)
     calls.clear()

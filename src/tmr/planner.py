@@ -957,6 +957,13 @@ def _qp_plan_returned(warm: Plan, problem: Problem, why: str, diagnostics: dict[
     )
     if diagnostics.get("horizon_coarse") is not None:  # long horizons: what the coarse pass did
         warm.diagnostics["horizon_summary"]["coarse"] = diagnostics["horizon_coarse"]
+    released = diagnostics.get("leader_released")
+    if released:  # the NLP ran with the leader free (tmr.control.horizon._leader_release): say so
+        warm.diagnostics["horizon_summary"]["leader_released"] = dict(released)
+        warm.diagnostics["horizon_note"] = (
+            f"{why} (the leader released within {released['tolerance']:.4g} m of its reference, the qp plan's "
+            f"largest lag + 1 mm); returned its qp warm start, which passes every check"
+        )
     return warm_metrics
 
 

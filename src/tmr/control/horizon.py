@@ -169,8 +169,9 @@ _ACCEPTABLE = ("Solved_To_Acceptable_Level",)
 _WALL_TIME = "Maximum_WallTime_Exceeded"
 _MAX_ITER = "Maximum_Iterations_Exceeded"  # IPOPT stopped at max_iter
 
-#: A round's last iterate this near its rows (the largest violation, in the rows' own units: m, m/s, m/s², rad/s)
-#: counts as next to them: where the attempt before stopped at its iteration cap, the retry goes on from it and its
+#: A round's last iterate this near its rows (the largest violation, in each row's own unit: m, m/s, m/s², rad/s,
+#: m² for the leader's and the separation rows, a fraction of the warm start's term for the fitness rows) counts as
+#: next to them: where the attempt before stopped at its iteration cap, the retry goes on from it and its
 #: multipliers, not from the round's start. ``sparse-near-3098419812`` with 5 robots: the Gauss–Newton primary ends
 #: its 200 iterations oscillating next to a KKT point, on one machine within 10⁻⁶ of its rows, on another 4.3·10⁻⁵
 #: off them (other rounding); from there the exact retry converges in a few iterations, from the round's start it
@@ -318,6 +319,9 @@ def plan_horizon(
 ) -> Plan:
     """Plan the whole horizon at once (:func:`_plan_horizon`; a Ctrl-C anywhere in it stops it, see
     :func:`_ctrl_c_stops_ipopt`)."""
+    private = sorted(k for k in options if k in ("_started", "_released"))
+    if private:
+        raise ParameterError(f"unknown horizon option(s) {private}")
     with _ctrl_c_stops_ipopt():
         return _plan_horizon(problem, warm_start, time_limit=time_limit, progress=progress, **options)
 
@@ -362,8 +366,9 @@ def _plan_horizon(
         ``formulations/horizon.md``, "Coarse knots" — "best_feasible_iterate" or "warm_start"), ``horizon_note``
         (one line: what IPOPT did and what was returned), ``horizon_stop`` ("converged", "ipopt_failed", "time_limit",
         "rows_left_out", "rows_crossed": the fast attempt's, with no time left for its fallback, or
-        "reference_infeasible": one robot, every variable fixed, its one trajectory breaking rows, IPOPT not run and
-        the warm start returned), IPOPT's status
+        "reference_infeasible": one robot, every variable fixed, its one trajectory breaking rows, the equality leader
+        kept — ``leader_release=None`` — IPOPT not run and the warm start returned), ``leader_released`` where the
+        leader was released (:func:`_leader_release`), IPOPT's status
         and iterations, the objective returned and at the warm start, f1–f4, the largest row violation, the row
         counts, the rounds and the time split (warm-start preparation, transcription, solve); ``wall_time`` is the
         total. Run :func:`tmr.planner.check` on it for the exact (shapely) verification.
@@ -371,8 +376,10 @@ def _plan_horizon(
     Raises:
         ParameterError: no warm start, a warm start of the wrong shape, a bad option or time limit; a world with low
             obstacles (``problem.env.low_obstacles``: the NLP has no row for a cable's height over one).
-        HorizonInfeasible: the start violates a hard constraint, the equality leader's reference does (its own
-            clearance; with one robot any row, every variable being fixed, and the warm start no fallback), or neither
+        HorizonInfeasible: the start violates a hard constraint, the equality leader's reference does and the leader
+            is not released (its own clearance; with one robot any row, every variable being fixed, and the warm start
+            no fallback; a verified warm start releases it, omnidirectional robots only, unless
+            ``leader_release=None``), or neither
             IPOPT's optimum, nor an iterate, nor the warm start satisfies them; the message names the violated
             constraint groups with knots, times and amounts (also in ``.violations``).
     """
@@ -463,13 +470,14 @@ def _plan_horizon(
             )
         if not np.any(model.lbx < model.ubx):  # one robot: the start and the leader on its reference fix every variable
             fixed_bad = viol  # the one trajectory there is: every row of every group
+            if fixed_bad:
+                plan = release(f"one robot on its reference fixes every variable, and that trajectory violates rows, "
+                               f"{_describe(fixed_bad, worst=1)}")  # fmt: skip
+                if plan is not None:
+                    return plan
     warm_c, warm_why = _warm_candidate(model, warm_start, Qw, Qraw, tol)
     fixed_what = ""  # no IPOPT at all: the NLP is one trajectory, and it breaks rows (the warm start, if a fallback)
     if fixed_bad:
-        plan = release(f"one robot on its reference fixes every variable, and that trajectory violates rows, "
-                       f"{_describe(fixed_bad, worst=1)}")  # fmt: skip
-        if plan is not None:
-            return plan
         fixed_what = (
             "with one robot on its reference every variable is fixed, and that one trajectory violates rows, so no "
             "trajectory satisfies them (give it a leader tolerance, leader_tolerance > 0): " + _describe(fixed_bad)
@@ -1177,6 +1185,7 @@ def _coarse_pass(
     )
     sub = dict(options, coarse_knots=None, clearance_margin=opts.coarse_margin, samples_per_link=S)
     sub.update(retry_first_after=None)  # measured: the exact retry first in its later rounds ended at max_iter
+    sub.update(leader_release=None)  # released or not as the whole NLP: its stricter rows may break a fixed leader
     train = opts.coarse_train_activation is not None and (warm_start.diagnostics or {}).get("references") == "train"
     if train:  # a train plan: inside the margins in places, far from the optimum (formulations/horizon.md)
         sub.update(activation=opts.coarse_train_activation, keep_warm_margins=True)

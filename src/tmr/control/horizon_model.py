@@ -69,8 +69,9 @@ class HorizonOptions:
             of its bound along the warm start (or a previous round's solution); 0 keeps every row. The leader,
             fitness and span rows are always complete.
         no_worse_terms: the rows f_i ≤ f_i of the warm start for f1, f2 and f4 (each one > 0 at the warm start,
-            group ``"fitness"``): the plan is no worse than its warm start in every term, not only in their weighted
-            sum (with the equality leader f3 = 0 ≤ the warm start's).
+            group ``"fitness"``), and f3 where the leader is free (``leader_tolerance`` > 0): the plan is no worse than
+            its warm start in every term, not only in their weighted sum (with the equality leader f3 = 0 ≤ the warm
+            start's).
         restart_rounds: start every round after the first from the initial point (primal only) instead of the
             previous round's primal–dual solution (measured from the qp plan: D 6.7 s against 9.4 s with
             ``activation`` 0.3 against 0.6, B and C even, E unsolved either way; off by default).
@@ -798,11 +799,11 @@ class _Model:
             )
         self.bounds = {k: float(v) for k, v in (bounds or {}).items()}
         # the fitness rows f_i / f_i,warm ≤ 1, in this order (empty: no such rows)
-        self.fitness_terms = (
-            [k for k in ("f1", "f2", "f4") if self.bounds.get(k, 0.0) > 0] if opts.no_worse_terms else []
-        )
+        # f3 too where the leader is free (leader_tolerance > 0; the equality leader's f3 is 0)
+        names = ("f1", "f2", "f3", "f4") if opts.leader_tolerance > 0 else ("f1", "f2", "f4")
+        self.fitness_terms = [k for k in names if self.bounds.get(k, 0.0) > 0] if opts.no_worse_terms else []
         if self.fitness_terms:
-            terms = {"f1": f1, "f2": f2, "f4": f4}
+            terms = {"f1": f1, "f2": f2, "f3": f3, "f4": f4}
             names = self.fitness_terms
             rows["fitness"] = _Rows(
                 ca.vertcat(*[terms[k] / self.bounds[k] for k in names]),
@@ -940,14 +941,15 @@ class _Model:
             phi = ca.MX(0)
         else:
             c = ca.MX.sym("c", 1)
-            w = {"f1": opts.w_energy, "f2": opts.w_uniformity, "f4": opts.w_smoothness}
+            w = {"f1": opts.w_energy, "f2": opts.w_uniformity, "f4": opts.w_smoothness, "f3": opts.w_tracking}
             mu = {t: c * w[t] for t in w}
             if "fitness" in lam_of:  # the rows f_t / f_t,warm ≤ 1
                 for i, t in enumerate(self.fitness_terms):
                     mu[t] = mu[t] + lam_of["fitness"][i] / self.bounds[t]
             HF = sum((mu[t] * H_t[t] for t in ("f1", "f2", "f4")), ca.MX(nz, nz))
             rho = rho + ca.mtimes(HF, self.z)
-            phi = c * opts.w_tracking * self.terms(x)[2] if opts.leader_tolerance > 0 else ca.MX(0)
+            # f3 (a free leader only): not a function of z, differentiated by casadi below
+            phi = mu["f3"] * self.terms(x)[2] if opts.leader_tolerance > 0 else ca.MX(0)
         nx = int(x.numel())
         blocks = [(ca.jacobian(self.z, x), HF), (self._link_map(nx), self._link_curvature(rho))]
         if "separation" in lam_of:

@@ -140,10 +140,15 @@ def _cost(su: _Setup, Q: Array) -> float:
     return _weighted(objective_terms(Q, su.step, su.ref, su.base), su.opts)
 
 
+#: Relative slack of :func:`_no_worse` for rounding (a term of the warm start, recomputed from its joints' round trip
+#: through positions, may exceed its own value by a few units in the last place).
+_ROUNDING = 1e-12
+
+
 def _no_worse(model: _Model, Q: Array) -> bool:
-    """With ``no_worse_terms``: f1, f2 and f4 of joints Q are each ≤ the warm start's (as given) — exactly, not to
-    IPOPT's tolerance — and so is f3 where the leader is free (``leader_tolerance`` > 0; the equality leader's f3 is
-    0); always True without."""
+    """With ``no_worse_terms``: f1, f2 and f4 of joints Q are each ≤ the warm start's (as given) — to rounding
+    (:data:`_ROUNDING`), not to IPOPT's tolerance — and so is f3 where the leader is free (``leader_tolerance`` > 0;
+    the equality leader's f3 is 0); always True without."""
     su = model.su
     if not (su.opts.no_worse_terms and model.bounds):
         return True
@@ -151,7 +156,8 @@ def _no_worse(model: _Model, Q: Array) -> bool:
         terms, names = objective_terms(Q, su.step, su.ref, su.base), ("f1", "f2", "f3", "f4")
     else:
         terms, names = objective_terms(Q, su.step), ("f1", "f2", "f4")
-    return all(terms[k] <= model.bounds[k] for k in names if k in model.bounds)
+    # to rounding: the warm start itself, through positions and back (q_of ∘ x_of), may differ in the last digits
+    return all(terms[k] <= model.bounds[k] * (1 + _ROUNDING) for k in names if k in model.bounds)
 
 
 def _warm_candidate(model: _Model, warm: Plan, Qw: Array, raw: Array, tol: float) -> tuple[_Candidate | None, str]:
