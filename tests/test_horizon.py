@@ -1302,9 +1302,9 @@ def _transcriptions(problem, options, clearance=True, warm=None):
     "case", ["leader tolerance", "no clearance rows", "differential drive", "coarse grid", "without the tolerance"]
 )
 def test_assembled_derivatives_on_partial_rows_with_a_leader_tolerance(case):
-    """With a leader tolerance (its rows before the fitness rows, the tracking term f3 in the cost), half of every
-    group's entries as rows, and also without clearance rows, with differential drive, on the coarse pass's
-    non-uniform grid (every 3rd knot, the 2 end steps fine) or with the equality leader: the assembled Jacobian and
+    """With a leader tolerance (its rows before the fitness rows, the tracking term f3 in the cost and a fitness row),
+    half of every group's entries as rows, and also without clearance rows, with differential drive, on the coarse
+    pass's non-uniform grid (every 3rd knot, the 2 end steps fine) or with the equality leader: the assembled Jacobian and
     exact Hessian are casadi's automatic ones of the same rows through casadi's B-spline node, and the Gauss–Newton
     Hessian is written here from its definition — the rows' exact curvature with the fitness rows' multipliers set to
     0, plus Σ 2 c_k J_kᵀJ_k with c_k = w_k λ_f / scale + max(μ_k, 0) / f_k,warm."""
@@ -1328,6 +1328,7 @@ def test_assembled_derivatives_on_partial_rows_with_a_leader_tolerance(case):
         assert "leader" not in tr.offset and tr.offset["fitness"] == 0
     else:
         coef_terms = ("f1", "f2", "f4", "f3")
+        assert "f3" in model.fitness_terms  # a free leader: f3 ≤ the warm start's is a row too (stop 60)
     assert tr.size == ref.size and (tr.offset["fitness"] > 0 or case == "without the tolerance")  # the leader first
     lam = np.random.default_rng(4).normal(0.0, 1.0, tr.size)
     lf, scale = 0.7, 2.5
