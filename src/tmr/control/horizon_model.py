@@ -200,8 +200,8 @@ class HorizonOptions:
             IPOPT starts from the warm start's own leader instead of from it set on a reference the chain could not
             reach (``None``: never; omnidirectional robots only). ``medium-mid-2793577033`` with 3 robots: its ``qp``
             plan lags by up to 1.09 m, the equality NLP ends in ``Maximum_Iterations_Exceeded`` (460 iterations) and
-            the ``qp`` plan is returned; released, optimal in 213–308 iterations, f3 50.9 → 0.69
-            (``formulations/horizon.md``, "The leader released").
+            the ``qp`` plan is returned; released, optimal (279 iterations; f3 50.9 → 0.63), and so are
+            ``walls-far-3994164092`` with 5 and 8 robots (``formulations/horizon.md``, "The leader released").
         warm_start_leader_error: with the equality leader, the warm start *as given* (not projected on the reference)
             is still a fallback if its leader stays within this distance [m] of the reference at every knot and every
             other row holds (a ``qp`` plan lags its reference by ≤ 4.6 mm on A–D: CLIK).
