@@ -1304,10 +1304,10 @@ def _transcriptions(problem, options, clearance=True, warm=None):
 def test_assembled_derivatives_on_partial_rows_with_a_leader_tolerance(case):
     """With a leader tolerance (its rows before the fitness rows, the tracking term f3 in the cost and a fitness row),
     half of every group's entries as rows, and also without clearance rows, with differential drive, on the coarse
-    pass's non-uniform grid (every 3rd knot, the 2 end steps fine) or with the equality leader: the assembled Jacobian and
-    exact Hessian are casadi's automatic ones of the same rows through casadi's B-spline node, and the Gauss–Newton
-    Hessian is written here from its definition — the rows' exact curvature with the fitness rows' multipliers set to
-    0, plus Σ 2 c_k J_kᵀJ_k with c_k = w_k λ_f / scale + max(μ_k, 0) / f_k,warm."""
+    pass's non-uniform grid (every 3rd knot, the 2 end steps fine) or with the equality leader: the assembled
+    Jacobian and exact Hessian are casadi's automatic ones of the same rows through casadi's B-spline node, and the
+    Gauss–Newton Hessian is written here from its definition — the rows' exact curvature with the fitness rows'
+    multipliers set to 0, plus Σ 2 c_k J_kᵀJ_k with c_k = w_k λ_f / scale + max(μ_k, 0) / f_k,warm."""
     import casadi as ca
 
     problem = small_problem()

@@ -944,6 +944,12 @@ def _qp_plan_returned(warm: Plan, problem: Problem, why: str, diagnostics: dict[
     warm_metrics = evaluate(warm, problem.env)
     terms = {k: float(getattr(warm_metrics, k)) for k in ("f1", "f2", "f3", "f4")}
     warm.diagnostics = dict(warm.diagnostics, horizon_result="warm_start")
+    released = diagnostics.get("leader_released")  # the NLP ran with the leader free (tmr.control.horizon)
+    if released:
+        why = (
+            f"{why} (the leader released within {released['tolerance']:.4g} m of its reference, the qp plan's "
+            "largest lag + 1 mm)"
+        )
     warm.diagnostics["horizon_note"] = f"{why}; returned its qp warm start, which passes every check"
     warm.diagnostics["horizon_summary"] = dict(
         result="warm_start",
@@ -957,13 +963,8 @@ def _qp_plan_returned(warm: Plan, problem: Problem, why: str, diagnostics: dict[
     )
     if diagnostics.get("horizon_coarse") is not None:  # long horizons: what the coarse pass did
         warm.diagnostics["horizon_summary"]["coarse"] = diagnostics["horizon_coarse"]
-    released = diagnostics.get("leader_released")
-    if released:  # the NLP ran with the leader free (tmr.control.horizon._leader_release): say so
+    if released:
         warm.diagnostics["horizon_summary"]["leader_released"] = dict(released)
-        warm.diagnostics["horizon_note"] = (
-            f"{why} (the leader released within {released['tolerance']:.4g} m of its reference, the qp plan's "
-            f"largest lag + 1 mm); returned its qp warm start, which passes every check"
-        )
     return warm_metrics
 
 

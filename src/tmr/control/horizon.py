@@ -76,6 +76,7 @@ from tmr.control.horizon_model import (
     HorizonOptions,
     Violation,
     _Model,
+    _no_worse_names,
     _options,
     _Setup,
     _Transcription,
@@ -919,8 +920,7 @@ def _plan_horizon(
     terms = {k: float(v) for k, v in objective_terms(Q, su.step, su.ref, su.base).items()}
     diag.update(terms)
     before = info["warm_start_terms"]
-    shown = ("f1", "f2", "f3", "f4") if opts.leader_tolerance > 0 else ("f1", "f2", "f4")
-    change = ", ".join(f"{k} {terms[k]:.4g} ({_percent(terms[k], before[k])})" for k in shown)
+    change = ", ".join(f"{k} {terms[k]:.4g} ({_percent(terms[k], before[k])})" for k in _no_worse_names(opts))
     if released is not None:
         what = f"{_release_note(released, info['warm_start_method'])}; {what}"
     diag.update(

@@ -519,6 +519,13 @@ def objective(q: Array, problem: Any, **options: Any) -> float:
     return _weighted(terms, opts)
 
 
+def _no_worse_names(opts: HorizonOptions) -> tuple[str, ...]:
+    """The terms a plan is held no worse than its warm start in (the fitness rows, :func:`horizon_pool._no_worse`,
+    the notes' change line): f1, f2, f4, and f3 where the leader is free (``leader_tolerance`` > 0; the equality
+    leader's f3 is 0)."""
+    return ("f1", "f2", "f3", "f4") if opts.leader_tolerance > 0 else ("f1", "f2", "f4")
+
+
 def _weighted(terms: dict[str, float], opts: HorizonOptions) -> float:
     J = opts.w_energy * terms["f1"] + opts.w_uniformity * terms["f2"] + opts.w_smoothness * terms["f4"]
     if opts.leader_tolerance > 0:
@@ -799,8 +806,7 @@ class _Model:
             )
         self.bounds = {k: float(v) for k, v in (bounds or {}).items()}
         # the fitness rows f_i / f_i,warm ≤ 1, in this order (empty: no such rows)
-        # f3 too where the leader is free (leader_tolerance > 0; the equality leader's f3 is 0)
-        names = ("f1", "f2", "f3", "f4") if opts.leader_tolerance > 0 else ("f1", "f2", "f4")
+        names = _no_worse_names(opts)  # f3 too where the leader is free
         self.fitness_terms = [k for k in names if self.bounds.get(k, 0.0) > 0] if opts.no_worse_terms else []
         if self.fitness_terms:
             terms = {"f1": f1, "f2": f2, "f3": f3, "f4": f4}

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tmr.control.clik import Plan
-from tmr.control.horizon_model import GROUPS, Violation, _Model, _Setup, _weighted, objective_terms
+from tmr.control.horizon_model import GROUPS, Violation, _Model, _no_worse_names, _Setup, _weighted, objective_terms
 
 Array = NDArray[np.float64]
 
@@ -152,10 +152,8 @@ def _no_worse(model: _Model, Q: Array) -> bool:
     su = model.su
     if not (su.opts.no_worse_terms and model.bounds):
         return True
-    if su.opts.leader_tolerance > 0:
-        terms, names = objective_terms(Q, su.step, su.ref, su.base), ("f1", "f2", "f3", "f4")
-    else:
-        terms, names = objective_terms(Q, su.step), ("f1", "f2", "f4")
+    names = _no_worse_names(su.opts)
+    terms = objective_terms(Q, su.step, su.ref, su.base) if "f3" in names else objective_terms(Q, su.step)
     # to rounding: the warm start itself, through positions and back (q_of ∘ x_of), may differ in the last digits
     return all(terms[k] <= model.bounds[k] * (1 + _ROUNDING) for k in names if k in model.bounds)
 
