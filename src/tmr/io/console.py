@@ -23,6 +23,9 @@ failed or early stop: IPOPT's iteration callback stops it and KeyboardInterrupt 
 (:mod:`tmr.io.sigint`): one whose KeyboardInterrupt a library swallowed stops the run at its next message (before
 ``--out`` changes at the latest), and an error that ends a run after a press is reported as the interruption.
 Measured per phase by ``benchmarks/interrupt.py``.
+
+Freed memory is kept in the process's heap for reuse (:mod:`tmr.io.heap`): the solvers' workspaces are not mapped
+afresh at each factorisation.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ from typing import Any
 
 from tmr.errors import TmrError
 from tmr.io import sigint
+from tmr.io.heap import keep_freed_memory
 
 __all__ = [
     "LOG",
@@ -124,6 +128,7 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
     """Call ``body(args)`` with logging set up from ``args``; map what it raises to an exit code (module doc)."""
     quiet, verbose, debug = (bool(getattr(args, k, False)) for k in ("quiet", "verbose", "debug"))
     setup_logging(quiet, verbose)
+    keep_freed_memory()  # the solvers' workspaces reused, not mapped afresh (tmr.io.heap)
     logging.captureWarnings(True)
     _state["running"] = True  # a KeyboardInterrupt Python can only ignore is raised again (tmr._ctrl_c_not_lost)
     ours = False  # the press-counting handler installed here (a caller in Python, tests): Python's is given back

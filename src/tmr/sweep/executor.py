@@ -66,10 +66,14 @@ class SerialExecutor:
 
 
 def _ignore_sigint() -> None:
-    """Worker initialiser: Ctrl-C is the parent's to handle (one line, exit 130), not every worker's traceback."""
+    """Worker initialiser: Ctrl-C is the parent's to handle (one line, exit 130), not every worker's traceback; freed
+    memory kept for reuse, as in the command's own process (:mod:`tmr.io.heap`)."""
     import signal
 
+    from tmr.io.heap import keep_freed_memory
+
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    keep_freed_memory()
 
 
 class LocalExecutor:
