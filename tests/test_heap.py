@@ -39,7 +39,7 @@ print(json.dumps([called, resource.getrusage(resource.RUSAGE_SELF).ru_minflt - b
 
 
 def _probe(mode: str, **env: str) -> tuple[bool | None, int]:
-    clean = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_")}
+    clean = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_") and k != "TMR_KEEP_FREED_MEMORY"}
     out = subprocess.run(
         [sys.executable, "-c", _PROBE, mode], env={**clean, **env}, capture_output=True, text=True, check=True
     )
@@ -59,9 +59,11 @@ def test_every_command_line_keeps_freed_memory() -> None:
     assert called is True and faults < 100
 
 
-def test_the_users_own_glibc_variables_stand() -> None:
-    called, faults = _probe("keep", MALLOC_TRIM_THRESHOLD_="131072")
+@pytest.mark.parametrize("env", [{"MALLOC_TRIM_THRESHOLD_": "131072"}, {"TMR_KEEP_FREED_MEMORY": "0"}])
+def test_the_users_own_glibc_variables_or_the_opt_out_stand(env: dict[str, str]) -> None:
+    called, faults = _probe("keep", **env)
     assert called is False and faults > 10_000
+    assert _probe("keep", TMR_KEEP_FREED_MEMORY="1")[0] is True
 
 
 def _kept_here(_: object) -> bool | None:

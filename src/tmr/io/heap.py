@@ -12,10 +12,11 @@ side: the same iterations, a median 0.94× the time (``formulations/horizon.md``
 :func:`keep_freed_memory` raises the mmap threshold and the heap's trim threshold to :data:`KEEP_BYTES` (1 GiB) for
 the process: a block freed below it stays in the heap and is handed out again. The cost is the peak of freed memory
 kept mapped until the process ends (533 MB peak RSS against 487 MB in that run). It is called by
-:func:`tmr.io.console.run`, so by every command line, and in the sweeps' worker processes; a program that imports tmr decides for its own process and may
-call it. It changes nothing where the user set glibc's own variables (``MALLOC_MMAP_THRESHOLD_``,
-``MALLOC_TRIM_THRESHOLD_``, ``MALLOC_MMAP_MAX_``, ``MALLOC_TOP_PAD_``) or on a C library without ``mallopt`` (macOS,
-Windows, musl).
+:func:`tmr.io.console.run`, so by every command line, and in the sweeps' worker processes; a program that imports tmr
+decides for its own process and may call it. It changes nothing where the user set glibc's own variables
+(``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_``, ``MALLOC_MMAP_MAX_``, ``MALLOC_TOP_PAD_``), with
+``TMR_KEEP_FREED_MEMORY=0`` (glibc's defaults, as ``benchmarks/heap.py`` measures them), or on a C library without
+``mallopt`` (macOS, Windows, musl).
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import logging
 import os
 import sys
 
-__all__ = ["KEEP_BYTES", "keep_freed_memory"]
+__all__ = ["KEEP_BYTES", "OPT_OUT", "keep_freed_memory"]
 
 LOG = logging.getLogger("tmr")
 
@@ -40,16 +41,21 @@ _M_MMAP_THRESHOLD = -3
 #: The glibc variables by which a user tunes the same thresholds: if any is set, the user's choice stands.
 _USER_VARIABLES = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_MAX_", "MALLOC_TOP_PAD_")
 
+#: ``TMR_KEEP_FREED_MEMORY=0``: glibc's defaults stand.
+OPT_OUT = "TMR_KEEP_FREED_MEMORY"
+
 _done: list[bool] = []  # the outcome, once per process
 
 
 def keep_freed_memory() -> bool:
     """Keep freed blocks of up to :data:`KEEP_BYTES` in the heap for reuse (module doc); once per process. Returns
-    whether glibc took both settings (False: not glibc, the user's own ``MALLOC_*`` variables, or refused)."""
+    whether glibc took both settings (False: not glibc, the user's own ``MALLOC_*`` variables or
+    ``TMR_KEEP_FREED_MEMORY=0``, or refused)."""
     if _done:
         return _done[0]
     ok = False
-    if sys.platform.startswith("linux") and not any(v in os.environ for v in _USER_VARIABLES):
+    mine = os.environ.get(OPT_OUT, "1").strip() != "0" and not any(v in os.environ for v in _USER_VARIABLES)
+    if mine and sys.platform.startswith("linux"):
         try:
             mallopt = ctypes.CDLL(None).mallopt  # the process's own C library
         except (OSError, AttributeError):  # a C library without mallopt
