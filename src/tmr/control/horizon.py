@@ -537,7 +537,9 @@ def _plan_horizon(
         if coarse_c is not None:  # every row holds at the interpolated optimum: the whole NLP polishes it, briefly
             xv = x_init = coarse_c.x
             vals = model.values(xv)
-            masks = model.grown(masks, vals)
+            # the rows near *it* only, not also those near the warm start: the polish starts at an optimum, far from
+            # the qp plan, whose near rows are no rows of its (formulations/horizon.md, "Coarse knots": stop 61)
+            masks = model.near_masks(vals)
             viol = []
             phases = _polish_phases(opts)
         elif coarse_log.get("x") is not None:  # rows violated between the coarse knots: the whole NLP starts there

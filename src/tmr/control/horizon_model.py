@@ -122,10 +122,11 @@ class HorizonOptions:
             in windows around them — each failing knot ± this many coarse steps, every other knot held — and the
             repaired trajectory is checked again (0: no repair; only if the windows span at most half the knots,
             in ``coarse_time_share`` of the time left; ``formulations/horizon.md``, "Coarse knots").
-        coarse_polish_iter: IPOPT iterations (per round) of the whole NLP started from an accepted coarse optimum: if
-            it converges (at most this, or its retry ``coarse_polish_retry``) to an optimum no costlier than the
-            coarse one, that is the plan (``"optimal"``), else the coarse optimum (``"coarse_optimal"``) or a cheaper
-            feasible iterate of it; 0: no polish.
+        coarse_polish_iter: IPOPT iterations (per round) of the whole NLP started from an accepted coarse optimum
+            (its first round: the rows near that optimum, :meth:`_Model.near`): if it converges (at most this, or its
+            retry ``coarse_polish_retry``) to an optimum no costlier than the coarse one, that is the plan
+            (``"optimal"``), else the coarse optimum (``"coarse_optimal"``) or a cheaper feasible iterate of it; 0: no
+            polish.
         coarse_polish_min_hessian_perturbation: IPOPT's floor in that polish (exact Hessian, ``fast_hessian``;
             ``None``: the fast attempt's floor if it is on, else ``min_hessian_perturbation``). 10⁻⁴: the corner
             walls room with 8 robots, its coarse optimum repaired, converges in 36 iterations where 10⁻⁵ stops at
