@@ -10,13 +10,16 @@ s in 4.8–5.0 s, the same iterates to the last digit. On 43 runs of the rooms b
 side: the same iterations, a median 0.94× the time (``formulations/horizon.md``, "Freed memory kept").
 
 :func:`keep_freed_memory` raises the mmap threshold and the heap's trim threshold to :data:`KEEP_BYTES` (1 GiB) for
-the process: a block freed below it stays in the heap and is handed out again. The cost is the peak of freed memory
-kept mapped until the process ends (533 MB peak RSS against 487 MB in that run). It is called by
-:func:`tmr.io.console.run`, so by every command line, and in the sweeps' worker processes; a program that imports tmr
-decides for its own process and may call it. It changes nothing where the user set glibc's own variables
-(``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_``, ``MALLOC_MMAP_MAX_``, ``MALLOC_TOP_PAD_``), with
-``TMR_KEEP_FREED_MEMORY=0`` (glibc's defaults, as ``benchmarks/heap.py`` measures them), or on a C library without
-``mallopt`` (macOS, Windows, musl).
+the process (a glibc before 2.35 that refuses a threshold past 32 MiB: no mmap at all, ``M_MMAP_MAX`` = 0): a block
+freed below it stays in the heap and is handed out again. The cost is the peak of freed memory kept mapped until the
+process ends (533 MB peak RSS against 487 MB in that run), in each worker process of a local sweep too. It is called
+by :func:`tmr.io.console.run` — every command line, also when its ``main()`` is called from Python — and in the local
+sweeps' worker processes (:class:`tmr.sweep.executor.LocalExecutor`; a Dask cluster's workers are the user's); a
+program that imports tmr otherwise decides for its own process and may call it. It changes nothing where the user set
+glibc's own variables (``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_``, ``MALLOC_MMAP_MAX_``,
+``MALLOC_TOP_PAD_``, or a ``glibc.malloc.`` tunable in ``GLIBC_TUNABLES``), with ``TMR_KEEP_FREED_MEMORY`` = ``0``,
+``false``, ``no`` or ``off`` (glibc's defaults, as ``benchmarks/heap.py`` measures them), or on a C library other
+than glibc (macOS, Windows, musl).
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from __future__ import annotations
 import ctypes
 import logging
 import os
+import platform
 import sys
 
 __all__ = ["KEEP_BYTES", "OPT_OUT", "keep_freed_memory"]
@@ -37,34 +41,40 @@ KEEP_BYTES = 1 << 30
 #: glibc's ``mallopt`` parameters (``<malloc.h>``).
 _M_TRIM_THRESHOLD = -1
 _M_MMAP_THRESHOLD = -3
+_M_MMAP_MAX = -4
 
 #: The glibc variables by which a user tunes the same thresholds: if any is set, the user's choice stands.
 _USER_VARIABLES = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_MAX_", "MALLOC_TOP_PAD_")
 
-#: ``TMR_KEEP_FREED_MEMORY=0``: glibc's defaults stand.
+#: ``TMR_KEEP_FREED_MEMORY`` = 0, false, no or off: glibc's defaults stand.
 OPT_OUT = "TMR_KEEP_FREED_MEMORY"
+_OFF = ("0", "false", "no", "off")
 
 _done: list[bool] = []  # the outcome, once per process
 
 
 def keep_freed_memory() -> bool:
     """Keep freed blocks of up to :data:`KEEP_BYTES` in the heap for reuse (module doc); once per process. Returns
-    whether glibc took both settings (False: not glibc, the user's own ``MALLOC_*`` variables or
-    ``TMR_KEEP_FREED_MEMORY=0``, or refused)."""
+    whether the C library took the settings (False: not glibc, the user's own ``MALLOC_*`` variables or malloc
+    tunables, ``TMR_KEEP_FREED_MEMORY`` off, or refused)."""
     if _done:
         return _done[0]
     ok = False
-    mine = os.environ.get(OPT_OUT, "1").strip() != "0" and not any(v in os.environ for v in _USER_VARIABLES)
-    if mine and sys.platform.startswith("linux"):
+    users = any(v in os.environ for v in _USER_VARIABLES) or "glibc.malloc." in os.environ.get("GLIBC_TUNABLES", "")
+    mine = os.environ.get(OPT_OUT, "1").strip().lower() not in _OFF and not users
+    if mine and sys.platform.startswith("linux") and platform.libc_ver()[0] == "glibc":
         try:
             mallopt = ctypes.CDLL(None).mallopt  # the process's own C library
-        except (OSError, AttributeError):  # a C library without mallopt
+        except (OSError, AttributeError):  # pragma: no cover - glibc has it
             mallopt = None
         if mallopt is not None:
             mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
-            # the trim threshold first: a heap grown by the kept blocks is then not given back at once
-            ok = bool(mallopt(_M_TRIM_THRESHOLD, KEEP_BYTES)) and bool(mallopt(_M_MMAP_THRESHOLD, KEEP_BYTES))
-            if not ok:
-                LOG.debug("glibc refused mallopt's thresholds of %d bytes: freed memory is given back", KEEP_BYTES)
+            # the trim threshold first: a heap grown by the kept blocks is then not given back at once; a glibc that
+            # caps the mmap threshold at 32 MiB (before 2.35) is told to map nothing instead
+            ok = bool(mallopt(_M_TRIM_THRESHOLD, KEEP_BYTES)) and bool(
+                mallopt(_M_MMAP_THRESHOLD, KEEP_BYTES) or mallopt(_M_MMAP_MAX, 0)
+            )
+            if not ok:  # pragma: no cover - no glibc seen refuses both
+                LOG.debug("glibc refused mallopt's settings: freed memory is given back as by default")
     _done.append(ok)
     return ok
