@@ -10,8 +10,8 @@ s in 4.8–5.0 s, the same iterates to the last digit. On 43 runs of the rooms b
 side: the same iterations, a median 0.94× the time (``formulations/horizon.md``, "Freed memory kept").
 
 :func:`keep_freed_memory` raises the mmap threshold and the heap's trim threshold to :data:`KEEP_BYTES` (1 GiB) for
-the process (a glibc before 2.35 that refuses a threshold past 32 MiB: no mmap at all, ``M_MMAP_MAX`` = 0): a block
-freed below it stays in the heap and is handed out again. The cost is the peak of freed memory kept mapped until the
+the process (where a glibc refuses a threshold past 32 MiB, as older releases may: no mmap at all, ``M_MMAP_MAX`` =
+0): a block freed below it stays in the heap and is handed out again. The cost is the peak of freed memory kept mapped until the
 process ends (533 MB peak RSS against 487 MB in that run), in each worker process of a local sweep too. It is called
 by :func:`tmr.io.console.run` — every command line, also when its ``main()`` is called from Python — and in the local
 sweeps' worker processes (:class:`tmr.sweep.executor.LocalExecutor`; a Dask cluster's workers are the user's); a
@@ -70,7 +70,7 @@ def keep_freed_memory() -> bool:
         if mallopt is not None:
             mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
             # the trim threshold first: a heap grown by the kept blocks is then not given back at once; a glibc that
-            # caps the mmap threshold at 32 MiB (before 2.35) is told to map nothing instead
+            # caps the mmap threshold at 32 MiB (older releases may) is told to map nothing instead
             ok = bool(mallopt(_M_TRIM_THRESHOLD, KEEP_BYTES)) and bool(
                 mallopt(_M_MMAP_THRESHOLD, KEEP_BYTES) or mallopt(_M_MMAP_MAX, 0)
             )
