@@ -9,17 +9,16 @@ time) that was 0.8–0.9 s of system time in 6.1–6.7 s of IPOPT's wall time; w
 s in 4.8–5.0 s, the same iterates to the last digit. On 43 runs of the rooms benchmark, whole processes side by
 side: the same iterations, a median 0.94× the time (``formulations/horizon.md``, "Freed memory kept").
 
-:func:`keep_freed_memory` raises the mmap threshold and the heap's trim threshold to :data:`KEEP_BYTES` (1 GiB) for
-the process (where a glibc refuses a threshold past 32 MiB, as older releases may: no mmap at all, ``M_MMAP_MAX`` =
-0): a block freed below it stays in the heap and is handed out again. The cost is the peak of freed memory kept mapped until the
-process ends (533 MB peak RSS against 487 MB in that run), in each worker process of a local sweep too. It is called
+:func:`keep_freed_memory` raises the mmap threshold and the heap's trim threshold to :data:`KEEP_BYTES` (1 GiB) for the
+process (where a glibc refuses a threshold past 32 MiB, as older releases may: no mmap at all, ``M_MMAP_MAX`` = 0): a
+block freed below it stays in the heap and is handed out again. The cost is the peak of freed memory kept mapped until
+the process ends (533 MB peak RSS against 487 MB in that run), in each worker process of a local sweep too. It is called
 by :func:`tmr.io.console.run` — every command line, also when its ``main()`` is called from Python — and in the local
-sweeps' worker processes (:class:`tmr.sweep.executor.LocalExecutor`; a Dask cluster's workers are the user's); a
-program that imports tmr otherwise decides for its own process and may call it. It changes nothing where the user set
-glibc's own variables (``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_``, ``MALLOC_MMAP_MAX_``,
-``MALLOC_TOP_PAD_``, or a ``glibc.malloc.`` tunable in ``GLIBC_TUNABLES``), with ``TMR_KEEP_FREED_MEMORY`` = ``0``,
-``false``, ``no`` or ``off`` (glibc's defaults, as ``benchmarks/heap.py`` measures them), or on a C library other
-than glibc (macOS, Windows, musl).
+sweeps' worker processes (:class:`tmr.sweep.executor.LocalExecutor`; a Dask cluster's workers are the user's); a program
+that imports tmr otherwise decides for its own process and may call it. It changes nothing where the user set glibc's
+own variables (``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_``, ``MALLOC_MMAP_MAX_``, ``MALLOC_TOP_PAD_``, or a
+``glibc.malloc.`` tunable in ``GLIBC_TUNABLES``), with ``TMR_KEEP_FREED_MEMORY`` = ``0``, ``false``, ``no`` or ``off``
+(glibc's defaults, as ``benchmarks/heap.py`` measures them), or on a C library other than glibc (macOS, Windows, musl).
 """
 
 from __future__ import annotations
