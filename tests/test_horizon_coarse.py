@@ -114,7 +114,7 @@ def test_the_coarse_optimum_is_returned_only_where_every_row_holds(problem_and_w
 
 def test_the_polish_starts_with_the_rows_near_the_coarse_optimum_only(problem_and_warm, monkeypatch):
     """The polish's first round holds the rows near the accepted coarse optimum it starts from (``_Model.near``), not
-    also those near the warm start, whose near rows are no rows of its (stop 61, on the 155 generated rooms with an
+    also those near the warm start, whose near rows are no rows of its (stop 61, on the 155 generated-room runs with an
     accepted coarse optimum: 8 more polished optima, 8 % less time in all, f1 + f2 + f4 a geometric mean 0.96×)."""
     problem, warm, _ = problem_and_warm
     built: list[tuple[object, dict[str, np.ndarray]]] = []
