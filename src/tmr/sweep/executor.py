@@ -65,7 +65,7 @@ class SerialExecutor:
         return "SerialExecutor()"
 
 
-def _ignore_sigint() -> None:
+def _init_worker() -> None:
     """Worker initialiser: Ctrl-C is the parent's to handle (one line, exit 130), not every worker's traceback; freed
     memory kept for reuse, as in the command's own process (:mod:`tmr.io.heap`)."""
     import signal
@@ -99,7 +99,7 @@ class LocalExecutor:
             # which plain fork can deadlock on
             methods = multiprocessing.get_all_start_methods()
             ctx = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
-            self._pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=_ignore_sigint)
+            self._pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=_init_worker)
         with children_without_ctrl_c():  # workers started by submit never see the group's Ctrl-C (tmr.io.console)
             futures = {self._pool.submit(fn, item): i for i, item in enumerate(items)}
         out: list[Any] = [None] * len(items)
