@@ -12,7 +12,7 @@ import shapely
 
 from tmr.planner import build_problem, solve, train_problem
 from tmr.route.references import _anticipate
-from tmr.route.train import TrainError, TrainLimits, train_reference
+from tmr.route.train import TrainError, TrainLimits, _Fast, train_reference
 from tmr.sweep.rooms import generate_room, write_geojson
 from tmr.world.scenario import load_scenario, scenario_from_map
 
@@ -54,6 +54,28 @@ def _independent_violations(problem, positions: np.ndarray, clearance: float, se
     if D.size and D.min() < separation - 1e-6:
         out.append(f"separation {D.min():.3f}")
     return out
+
+
+def test_the_fast_segment_test_decides_as_the_exact_distance(door_problem) -> None:
+    """The pre-filter's answer at the train's clearance c is shapely's own distance from each segment to the free
+    space's boundary > c (with the segment inside it), on segments of every kind: deep inside, crossing a wall,
+    passing within the 2 mm band of c; only segments within 1e-7 m of c are left out (either answer is exact)."""
+    env = door_problem.env
+    c = 0.06
+    fast = _Fast(env, c)
+    rng = np.random.default_rng(3)
+    lo, hi = np.asarray(env.free.bounds[:2]), np.asarray(env.free.bounds[2:])
+    A = rng.uniform(lo, hi, (6000, 2))
+    B = A + rng.normal(0.0, 0.6, (6000, 2))
+    lines = shapely.linestrings(np.stack([A, B], axis=1))
+    boundary = env.free.boundary
+    dist = shapely.distance(lines, boundary)
+    truth = shapely.covers(env.free, lines) & (dist > c)
+    got = fast.segment_is_free(A, B, c)
+    decided = np.abs(dist - c) > 1e-7
+    assert np.array_equal(got[decided], truth[decided])
+    assert truth.sum() > 500 and (~truth).sum() > 500  # both answers, many times
+    assert np.sum(np.abs(dist - c) < 0.002) > 20  # and segments in the band, where the exact distance decides
 
 
 def test_train_references_keep_every_limit_through_a_narrow_door(door_problem) -> None:

@@ -283,8 +283,12 @@ def _joins(env: Any, p: Array, a: Array, t: Array, clearance: float) -> bool:
 
 class _Fast:
     """The environment's exact tests, with a fast exact pre-filter for segments at the train's clearance c: a
-    segment covered by the free region eroded by c + 2 mm is free, one not covered by it eroded by c − 2 mm is
-    not (shapely ``covers`` on prepared polygons); only the others get the exact distance."""
+    segment inside the free region eroded by c + 2 mm is free, one not covered by it eroded by c − 2 mm is
+    not; only the others get the exact distance. A segment whose start is inside a region lies inside it iff it
+    does not meet the region's boundary (GEOS ``intersects`` on the prepared boundary: the test
+    :meth:`tmr.world.environment.Environment.segment_is_free` makes, far cheaper than ``covers`` on a polygon with
+    many holes). A segment that only touches a boundary from inside counts as meeting it: at the inner region's
+    it goes to the exact distance, at the outer region's its clearance there is c − 2 mm < c, not free."""
 
     BAND = 0.002  # [m]
 
@@ -292,8 +296,10 @@ class _Fast:
         self.env, self.c = env, float(clearance)
         self.inner = env.free.buffer(-(self.c + self.BAND), quad_segs=16)
         self.outer = env.free.buffer(-max(0.0, self.c - self.BAND), quad_segs=16)
-        shapely.prepare(self.inner)
-        shapely.prepare(self.outer)
+        self.inner_edge = shapely.boundary(self.inner)
+        self.outer_edge = shapely.boundary(self.outer)
+        for geom in (self.inner, self.outer, self.inner_edge, self.outer_edge):
+            shapely.prepare(geom)
 
     def exact_clearance(self, points: Any) -> Any:
         return self.env.exact_clearance(points)
@@ -327,9 +333,10 @@ class _Fast:
         ends = shapely.contains_xy(self.outer, A[:, 0], A[:, 1]) & shapely.contains_xy(self.outer, B[:, 0], B[:, 1])
         idx = np.flatnonzero(ends)
         lines = shapely.linestrings(np.stack([A[idx], B[idx]], axis=1))
-        inside = shapely.covers(self.inner, lines)
+        inside = shapely.contains_xy(self.inner, A[idx, 0], A[idx, 1])
+        inside[inside] = ~shapely.intersects(self.inner_edge, lines[inside])
         out[idx[inside]] = True
-        unsure = idx[~inside][shapely.covers(self.outer, lines[~inside])]
+        unsure = idx[~inside][~shapely.intersects(self.outer_edge, lines[~inside])]
         if len(unsure):
             out[unsure] = self.env.segment_is_free(A[unsure], B[unsure], margin)
         return out.reshape(shape)
