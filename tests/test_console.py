@@ -109,6 +109,21 @@ def test_progress_only_on_a_terminal_and_not_quiet():
     assert seen["bar"] is False and console.progress_enabled(_Tty()) is True
 
 
+def test_no_progress_ends_with_its_command():
+    """``--no-progress`` (set by the parser, :func:`tmr.io.console.set_progress`) holds for its command only, as
+    ``--quiet`` does: a later command in the same process, or a caller in Python, draws its bars again (a sweep
+    test's ``--no-progress`` once turned them off for the console tests after it)."""
+    seen = {}
+
+    def body(_):
+        console.set_progress(False)  # what the parser does for --no-progress
+        seen["bar"] = console.progress_enabled(_Tty())
+        return 0
+
+    console.run(body, _args())
+    assert seen["bar"] is False and console.progress_enabled(_Tty()) is True
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(
     "command",

@@ -171,6 +171,7 @@ def run(body: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
     finally:
         logging.captureWarnings(False)
         _state["quiet"] = False
+        _state["progress"] = True  # a command's --no-progress ends with it, as its --quiet does
         _state["running"] = False
         # the caller's handler back (a test session's; Python's where the counting one was installed here), in
         # one call: a Ctrl-C in between would leave the counting handler in place with a press counted
