@@ -459,7 +459,10 @@ def test_a_leader_whose_warm_start_lags_far_or_cannot_be_on_its_reference_is_rel
     plan, _ = solve(small_problem(THROUGH), "horizon", time_limit=0.01)
     d = plan.diagnostics
     assert plan.success and d["horizon_result"] == "warm_start" and d["horizon_summary"]["leader_released"]
-    assert "(the leader released within 0.934 m of its reference" in d["horizon_note"]
+    assert (
+        "(the leader released within 0.934 m of its reference, the qp plan's largest lag + 1 mm)" in d["horizon_note"]
+    )
+    assert d["horizon_summary"]["leader_released"]["slack"] == 1e-3
     with pytest.raises(ParameterError, match="_started"):
         plan_horizon(problem, warm, _started=0.0)
     with pytest.raises(ParameterError, match="leader_release"):

@@ -948,7 +948,7 @@ def _qp_plan_returned(warm: Plan, problem: Problem, why: str, diagnostics: dict[
     if released:
         why = (
             f"{why} (the leader released within {released['tolerance']:.4g} m of its reference, the qp plan's "
-            "largest lag + 1 mm)"
+            f"largest lag + {1e3 * released['slack']:g} mm)"
         )
     warm.diagnostics["horizon_note"] = f"{why}; returned its qp warm start, which passes every check"
     warm.diagnostics["horizon_summary"] = dict(

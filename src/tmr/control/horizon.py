@@ -1109,8 +1109,9 @@ def _leader_release(problem: Any, warm: Plan, opts: HorizonOptions, why: str | N
     """With the equality leader: where the verified warm start's leader lags its reference by more than
     ``opts.leader_release`` [m] at some knot — or by any amount where ``why`` says the equality leader is infeasible
     (its reference inside the inflated obstacles; one robot whose one trajectory breaks rows) — the leader is released:
-    ``{"lag": largest lag [m], "knot": its knot, "t": its time [s], "tolerance": lag + 1 mm, "release":
-    leader_release, "why": why}``, the ``leader_tolerance`` of this call's NLPs; else ``None``.
+    ``{"lag": largest lag [m], "knot": its knot, "t": its time [s], "tolerance": lag + slack, "slack":
+    :data:`_RELEASE_SLACK` [m], "release": leader_release, "why": why}``, the ``leader_tolerance`` of this call's
+    NLPs; else ``None``.
 
     The equality leader's initial point is the warm start with its leader set on the reference; where the warm start
     lags by a metre, that point breaks the spans (``medium-mid-2793577033`` with 3 robots: tether 3 by 0.96 m) and
@@ -1130,7 +1131,15 @@ def _leader_release(problem: Any, warm: Plan, opts: HorizonOptions, why: str | N
         return None
     t = float(problem.trajectory.t[k])
     tolerance = float(lag[k]) + _RELEASE_SLACK
-    return dict(lag=float(lag[k]), knot=k, t=t, tolerance=tolerance, release=float(opts.leader_release), why=why)
+    return dict(
+        lag=float(lag[k]),
+        knot=k,
+        t=t,
+        tolerance=tolerance,
+        slack=_RELEASE_SLACK,
+        release=float(opts.leader_release),
+        why=why,
+    )
 
 
 def _release_note(released: dict[str, Any], method: str) -> str:
