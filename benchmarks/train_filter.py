@@ -64,7 +64,10 @@ def _record(run: str) -> tuple[list[tuple[Any, np.ndarray, np.ndarray, float]], 
     """Every call of the pre-filter at the train's clearance while ``tmr plan --method qp`` plans ``run``: (the
     pre-filter object, starts, ends, clearance); and the command's exit code."""
     name, robots = run.rsplit(":", 1)
-    room = room_from_spec({s[0]: s for s in room_set(216)}[int(name.rsplit("-", 1)[1])])
+    spec = {s[0]: s for s in room_set(216)}.get(int(name.rsplit("-", 1)[1]))
+    room = room_from_spec(spec) if spec is not None else None
+    if room is None or isinstance(room, str) or room.name != name:
+        sys.exit(f"{name}: not a room of the 216-room set")
     calls: list[tuple[Any, np.ndarray, np.ndarray, float]] = []
     original = train._Fast.segment_is_free
 
@@ -114,12 +117,14 @@ def main() -> None:
         "",
         f"`python benchmarks/train_filter.py --run {args.run} --repeats {args.repeats}` — "
         f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; {source_version()}; "
-        f"{versions(['shapely', 'numpy'])}; {platform.machine()}, {os.cpu_count()} cores, nothing else running.",
+        f"{versions(['shapely', 'numpy'])}; {platform.machine()}, {os.cpu_count()} cores.",
         "",
         f"`tmr plan --method qp` on `{args.run.replace(':', '` with ')} robots (exit {code}) called the pre-filter "
         f"{len(calls):,} times at the train's clearance ({calls[0][3]:g} m), on {segments:,} segments; the eroded "
         f"free region has {vertices:,} vertices. Every call replayed in order through each pre-filter, alternating; "
-        f"medians of {args.repeats} repeats. Both give the same answer on every segment: "
+        f"medians of {args.repeats} repeats (the pre-filters built once, not timed; the new one's calls include its "
+        "margin test and reshaping, which the old code's replay here skips). Both give the same answer on every "
+        "segment: "
         f"**{'yes' if agree else 'NO'}**.",
         "",
         "| pre-filter | time [s] | per call [µs] | per segment [µs] |",

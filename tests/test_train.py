@@ -58,8 +58,10 @@ def _independent_violations(problem, positions: np.ndarray, clearance: float, se
 
 def test_the_fast_segment_test_decides_as_the_exact_distance(door_problem) -> None:
     """The pre-filter's answer at the train's clearance c is shapely's own distance from each segment to the free
-    space's boundary > c (with the segment inside it), on segments of every kind: deep inside, crossing a wall,
-    passing within the 2 mm band of c; only segments within 1e-7 m of c are left out (either answer is exact)."""
+    space's boundary > c (with the segment inside it), on random segments — deep inside, crossing a wall, passing
+    within the 2 mm band of c; only those within 1e-7 m of c are left out (either answer is exact) — and it is the
+    environment's exact test on segments along the eroded regions' own edges, on points, and where the eroded regions
+    are empty."""
     env = door_problem.env
     c = 0.06
     fast = _Fast(env, c)
@@ -76,6 +78,15 @@ def test_the_fast_segment_test_decides_as_the_exact_distance(door_problem) -> No
     assert np.array_equal(got[decided], truth[decided])
     assert truth.sum() > 500 and (~truth).sum() > 500  # both answers, many times
     assert np.sum(np.abs(dist - c) < 0.002) > 20  # and segments in the band, where the exact distance decides
+    # the cases the boundary test turns on: segments along the eroded regions' own edges (they touch or lie on the
+    # boundary), points (A = B), and a clearance no free point has (the eroded regions empty)
+    for margin in (c, 5.0):
+        f = _Fast(env, margin)
+        edges = [shapely.get_coordinates(e) for e in (f.inner_edge, f.outer_edge)]
+        P = np.concatenate([e[:-1] for e in edges] + [A[:200]])
+        Q = np.concatenate([e[1:] for e in edges] + [A[:200]])  # consecutive vertices, then zero-length segments
+        np.testing.assert_array_equal(f.segment_is_free(P, Q, margin), env.segment_is_free(P, Q, margin))
+    assert _Fast(env, 5.0).inner.is_empty
 
 
 def test_train_references_keep_every_limit_through_a_narrow_door(door_problem) -> None:

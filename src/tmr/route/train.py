@@ -284,7 +284,7 @@ def _joins(env: Any, p: Array, a: Array, t: Array, clearance: float) -> bool:
 class _Fast:
     """The environment's exact tests, with a fast exact pre-filter for segments at the train's clearance c: a
     segment inside the free region eroded by c + 2 mm is free, one not covered by it eroded by c − 2 mm is
-    not; only the others get the exact distance. A segment whose start is inside a region lies inside it iff it
+    not; only the others get the exact distance. A segment whose start is inside a region lies in its interior iff it
     does not meet the region's boundary (GEOS ``intersects`` on the prepared boundary: the test
     :meth:`tmr.world.environment.Environment.segment_is_free` makes, far cheaper than ``covers`` on a polygon with
     many holes). A segment that only touches a boundary from inside counts as meeting it: at the inner region's
