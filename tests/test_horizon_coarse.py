@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.optimize import brentq
 
 import tmr.control.horizon as horizon_module
 import tmr.control.horizon_coarse as coarse
@@ -215,12 +216,85 @@ def _kink(monkeypatch, knot=15, up=0.05):
     """The interpolation with robot 1 ``up`` [m] higher at one ``knot`` (5 cm: |ÿ| = 0.05 / Ts² = 20 m/s² > a_rob)."""
     real = coarse.interpolate
 
-    def kinked(robots, t, M, ends=0):
-        F = real(robots, t, M, ends)
+    def kinked(robots, t, M, ends=0, grid=None):
+        F = real(robots, t, M, ends, grid=grid)
         F[knot, 0, 1] += up
         return F
 
     monkeypatch.setattr(horizon_module, "interpolate", kinked)
+
+
+def test_refine_cuts_the_steps_round_the_failing_knots():
+    """Each step of the grid that holds a failing knot, and ``pad`` steps either side, is cut into ``parts`` steps as
+    equal as the fine knots allow; the grid's own knots stay; a step shorter than ``parts`` fine steps gets every fine
+    knot; knots on the grid's last knot fall in its last step."""
+    fine = np.arange(31)
+    np.testing.assert_array_equal(coarse.refine(GRID, [16], 3), np.r_[0:12:3, 12:22, 24:31:3])  # steps 12–21
+    np.testing.assert_array_equal(coarse.refine(GRID, [16], 3, pad=0), np.r_[0:15:3, 15:19, 21:31:3])
+    np.testing.assert_array_equal(coarse.refine(GRID, [0, 30], 4, pad=0), np.r_[0:4, 6:27:3, 27:31])
+    grid = np.array([0, 10, 20, 30])
+    np.testing.assert_array_equal(coarse.refine(grid, [12], 4, pad=0), [0, 10, 12, 15, 18, 20, 30])  # 2.5 → 12, 15…
+    np.testing.assert_array_equal(coarse.refine(grid, [5, 25], 2, pad=5), [0, 5, 10, 15, 20, 25, 30])  # pad clipped
+    refined = coarse.refine(coarse.refine(GRID, [16], 3), [16], 3)
+    np.testing.assert_array_equal(refined, coarse.refine(GRID, [16], 3))  # every fine knot there already
+    assert set(GRID) <= set(coarse.refine(GRID, fine, 2)) and coarse.refine(GRID, fine, 3).tolist() == fine.tolist()
+
+
+def test_rows_failing_between_coarse_knots_refine_the_grid_there(problem_and_warm, monkeypatch):
+    """Robot 1 moved towards the column at knot 16 of the interpolation on the first grid (between its knots 15 and
+    18), to d_safe / 2 from it: clearance rows fail there (a graze, not deeper than ``coarse_refine_depth``) and,
+    unrepaired (``coarse_repair=0``), the coarse NLP is solved again on the grid cut finer round knot 16
+    (:func:`coarse.refine`, ``coarse_refine_parts`` = 3: every knot of 12–21) from that interpolation sampled there;
+    its own interpolation holds every row and is accepted. With ``coarse_refine=0``, or a depth below the graze's,
+    the pass rejects it as before."""
+    problem, warm, warm_metrics = problem_and_warm
+    real = coarse.interpolate
+    grids, starts = [], []
+    env, d_safe = problem.env, problem.qp_params.d_safe
+
+    def to_the_edge(robots, t, M, ends=0, grid=None):
+        F = real(robots, t, M, ends, grid=grid)
+        grids.append(np.asarray(grid).tolist())
+        if np.array_equal(grid, GRID):  # along the line to the column's centre, to clearance 0 (d_safe inside)
+            p, c = F[16, 0].copy(), np.array([4.2, 2.0])
+            s = brentq(lambda s: env.exact_clearance((1 - s) * p + s * c) - d_safe / 2, 0.0, 1.0)
+            F[16, 0] = (1 - s) * p + s * c
+        return F
+
+    real_plan = horizon_module._plan_horizon
+
+    def spy(problem, warm_start, **kw):
+        starts.append(kw.get("_start"))
+        return real_plan(problem, warm_start, **kw)
+
+    monkeypatch.setattr(horizon_module, "interpolate", to_the_edge)
+    monkeypatch.setattr(horizon_module, "_plan_horizon", spy)
+    options = dict(ON, coarse_repair=0, coarse_polish_iter=0, coarse_refine_parts=3)
+    for off in (dict(coarse_refine=0), dict(coarse_refine_depth=0.01)):
+        log = plan_horizon(problem, warm, **off, **options).diagnostics["horizon_summary"]["coarse"]
+        assert log["result"] == "rejected" and "refined" not in log
+        assert "clearance: 1 knot(s), k = 16 (t = 0.80 s), worst: " in log["reason"]
+    grids.clear()
+    starts.clear()
+    plan = plan_horizon(problem, warm, **options)
+    d = plan.diagnostics
+    log = d["horizon_summary"]["coarse"]
+    fine = np.r_[0:12:3, 12:22, 24:31:3]
+    assert grids == [GRID.tolist(), fine.tolist()] and log["knots"] == fine.size
+    assert log["refined"] == [{"between": 1, "knots": fine.size}] and log["result"] == "accepted"
+    # the whole NLP and the first coarse NLP from the warm start, the refined one from the first interpolation there
+    assert [None if q is None else q.shape for q in starts] == [None, None, (fine.size, 4)]
+    P = problem.chain.robots(starts[2][fine.tolist().index(16)])
+    assert env.exact_clearance(P[0]) == pytest.approx(d_safe / 2, abs=1e-6)
+    assert d["horizon_result"] == "coarse_optimal"
+    assert (
+        "IPOPT solved the NLP on every 3rd knot, its steps round 1 knot where rows failed between them cut into 3 ("
+        in (d["horizon_note"])
+    )
+    metrics = check(plan, problem.env)  # exact clearances of robots and tether segments at every step
+    assert plan.success and metrics.n_violation_steps == 0
+    for f in ("f1", "f2", "f4"):
+        assert getattr(metrics, f) <= getattr(warm_metrics, f) * (1 + 1e-9)
 
 
 def test_repair_spans_pad_and_merge_the_failing_knots():
@@ -364,6 +438,13 @@ def test_coarse_options_are_checked(problem_and_warm):
         dict(coarse_repair=0.5),
         dict(coarse_repair="2"),
         dict(coarse_repair=None),
+        dict(coarse_refine=-1),
+        dict(coarse_refine=1.5),
+        dict(coarse_refine=True),
+        dict(coarse_refine_parts=1),
+        dict(coarse_refine_parts=None),
+        dict(coarse_refine_depth=-0.1),
+        dict(coarse_refine_depth=float("nan")),
         dict(coarse_polish_min_hessian_perturbation=0),
         dict(coarse_polish_min_hessian_perturbation=float("inf")),
     )

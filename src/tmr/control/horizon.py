@@ -69,7 +69,7 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from tmr.control.clik import Plan
-from tmr.control.horizon_coarse import coarse_problem, interpolate, stride
+from tmr.control.horizon_coarse import coarse_indices, coarse_problem, interpolate, refine, stride
 from tmr.control.horizon_model import (
     GROUPS,
     HorizonInfeasible,
@@ -82,6 +82,7 @@ from tmr.control.horizon_model import (
     _Transcription,
     _warm_start,
     _weighted,
+    held,
     hessian_used,
     objective,
     objective_terms,
@@ -320,7 +321,7 @@ def plan_horizon(
 ) -> Plan:
     """Plan the whole horizon at once (:func:`_plan_horizon`; a Ctrl-C anywhere in it stops it, see
     :func:`_ctrl_c_stops_ipopt`)."""
-    private = sorted(k for k in options if k in ("_started", "_released"))
+    private = sorted(k for k in options if k in ("_started", "_released", "_start"))
     if private:
         raise ParameterError(f"unknown horizon option(s) {private}")
     with _ctrl_c_stops_ipopt():
@@ -335,6 +336,7 @@ def _plan_horizon(
     progress: bool = False,
     _started: float | None = None,
     _released: dict[str, Any] | None = None,
+    _start: Array | None = None,
     **options: Any,
 ) -> Plan:
     """Plan the whole horizon at once: one NLP over q_0..q_K solved by IPOPT (``formulations/horizon.md``).
@@ -404,7 +406,14 @@ def _plan_horizon(
         if rel is None:
             return None
         return _plan_horizon(
-            problem, warm_start, time_limit=time_limit, progress=progress, _started=start_time, _released=rel, **options
+            problem,
+            warm_start,
+            time_limit=time_limit,
+            progress=progress,
+            _started=start_time,
+            _released=rel,
+            _start=_start,
+            **options,
         )
 
     if released is not None:  # every NLP of this call (the coarse pass, windows, polish) with the leader free
@@ -447,6 +456,9 @@ def _plan_horizon(
         if low.any():
             exact[low] = env.exact_clearance(su.ref[low])  # the checker's hard limit: ≥ 0
             info["reference_clearance_entries"] = model.keep_reference_clearance(vals["clearance"], exact)
+    if _start is not None:  # IPOPT starts here (a refined coarse grid: the last grid's result), not at the warm start
+        xv = x_init = model.project(model.x_of(held(np.asarray(_start, dtype=float), su.K)))
+        vals = model.values(xv)
     masks = model.near_masks(vals)
     J_warm = _cost(su, Qw)
     obj_scale = max(J_warm, 1e-6) if opts.scale_objective else 1.0
@@ -1180,12 +1192,14 @@ def _coarse_pass(
     """The NLP on every M-th knot (:mod:`tmr.control.horizon_coarse`; clearance bounds and separation margin +
     ``coarse_margin``, rate bounds × ``coarse_rate_scale``), solved by :func:`plan_horizon` itself in
     ``coarse_time_share`` of the time left, its optimum interpolated to every knot — and where rows of the whole NLP
-    fail there, repaired by windows of the whole NLP around those knots (``coarse_repair``, :func:`_repair_spans`):
-    the candidate if every row of the whole NLP holds, no term is worse than the warm start's and it costs no more
-    (else ``None``); and the log (stride, knots, iterations, the repair's windows, result, why)."""
+    fail there, repaired by windows of the whole NLP around those knots (``coarse_repair``, :func:`_repair_spans`) —
+    and where clearance rows still fail between coarse knots, by at most ``coarse_refine_depth``, the same again on
+    the grid cut finer round them (:func:`tmr.control.horizon_coarse.refine`, ``coarse_refine`` times at most), from
+    the last interpolation: the candidate if every row of the whole NLP holds, no term is worse than the warm start's
+    and it costs no more (else ``None``); and the log (stride, knots, iterations, the repair's windows, the
+    refinements, result, why)."""
     opts, su = model.su.opts, model.su
     t0 = time.perf_counter()
-    pc, wc = coarse_problem(problem, warm_start, M, opts.coarse_rate_scale, opts.coarse_margin, opts.coarse_ends)
     # the margin on the samples' bounds, not on d_safe, so none on the equality leader's own sample (its reference is
     # fixed); the samples per tether of d_safe + margin (fewer: the coarse NLP solves where the fine count did not
     # on the walls rooms; the fine rows between them are checked at acceptance)
@@ -1200,62 +1214,109 @@ def _coarse_pass(
     train = opts.coarse_train_activation is not None and (warm_start.diagnostics or {}).get("references") == "train"
     if train:  # a train plan: inside the margins in places, far from the optimum (formulations/horizon.md)
         sub.update(activation=opts.coarse_train_activation, keep_warm_margins=True)
-    budget = None if not math.isfinite(limit) else max(opts.coarse_time_share * (deadline - t0), 1e-3)
-    log: dict[str, Any] = dict(stride=M, knots=int(pc.trajectory.t.size), iterations=0)
-    try:
-        cplan = plan_horizon(pc, wc, time_limit=budget, **sub)
-    except HorizonInfeasible as exc:
-        d = exc.diagnostics or {}
-        if train:
-            log["train"] = _train_log(opts, d)
-        why = str(exc).split(";")[0].removeprefix("horizon NLP: ")[:200]
-        log.update(iterations=int(d.get("ipopt_iterations", 0)), result="failed", reason=f"{exc.status}: {why}")
-        log.update(solve_time=time.perf_counter() - t0)
-        return None, log
-    d = cplan.diagnostics
-    if train:
-        log["train"] = _train_log(opts, d)
-    log.update(
-        iterations=int(d.get("ipopt_iterations", 0)),
-        rounds=int(d.get("rounds", 0)),
-        status=str(d.get("ipopt_status", "")),
-        min_hessian_perturbation=d["horizon_summary"].get("min_hessian_perturbation"),
-        floor_note=str(d.get("horizon_floor_note", "")),
-        solve_time=float(d.get("solve_time", 0.0)),
-        transcription_time=time.perf_counter() - t0 - float(d.get("solve_time", 0.0)),
-    )
-    if d.get("horizon_result") != "optimal":
-        log.update(result="failed", reason=f"the coarse NLP returned its {d.get('horizon_result')}")
-        return None, log
-    R = interpolate(np.asarray(cplan.robots, dtype=float), su.t, M, opts.coarse_ends)
-    xv = model.project(np.concatenate([R[:, :, 0], R[:, :, 1]], axis=1).ravel())
-    Q = model.q_of(xv)
-    vals = model.values(xv)
-    viol = _violations(model, vals, xv, tol)
-    fixed_leader = opts.leader_tolerance == 0  # the equality leader: no variable can mend its rows
-    local = [v for v in viol if v.group != "fitness" and not (v.group == "leader" and fixed_leader)]
-    if local and opts.coarse_repair > 0 and not any(v.group == "leader" and fixed_leader for v in viol):
-        # windows round the rows of single knots; a fitness row (a sum over every knot) is no window's to place: the
-        # check after the repair decides on it, as on every other row
-        spans = _repair_spans(sorted({v.knot for v in local}), su.K, int(opts.coarse_repair) * M)
-        width = sum(b - a + 1 for a, b in spans)
-        if width > REPAIR_SHARE * su.K:
-            log["repair_skipped"] = f"windows of {width} of {su.K} knots (more than {100 * REPAIR_SHARE:g} %)"
+    grid = coarse_indices(su.K, M, opts.coarse_ends)
+    log: dict[str, Any] = dict(stride=M, knots=int(grid.size), iterations=0, solve_time=0.0, transcription_time=0.0)
+    refined: list[dict[str, Any]] = []  # the refinements (HorizonOptions.coarse_refine)
+    # the round before a refinement (its interpolation, violations, log entries): the pass's result if the refined
+    # grid's NLP finds no optimum
+    before: tuple[Array, list[Violation], dict[str, Any]] | None = None
+    start_q: Array | None = None  # IPOPT's start on a refined grid (its joints there; None: the warm start's)
+    while True:
+        start = time.perf_counter()
+        pc, wc = coarse_problem(
+            problem, warm_start, M, opts.coarse_rate_scale, opts.coarse_margin, opts.coarse_ends, grid=grid
+        )
+        budget = None if not math.isfinite(limit) else max(opts.coarse_time_share * (deadline - start), 1e-3)
+        try:
+            with _ctrl_c_stops_ipopt():  # as plan_horizon, with a refined grid's start
+                cplan = _plan_horizon(pc, wc, time_limit=budget, _start=start_q, **sub)
+        except HorizonInfeasible as exc:
+            d = exc.diagnostics or {}
+            if train:
+                log["train"] = _train_log(opts, d)
+            why = str(exc).split(";")[0].removeprefix("horizon NLP: ")[:200]
+            log["iterations"] += int(d.get("ipopt_iterations", 0))
+            log["solve_time"] += time.perf_counter() - start
+            cplan, failed = None, f"{exc.status}: {why}"
         else:
-            now = time.perf_counter()
-            until = now + opts.coarse_time_share * max(deadline - now, 0.0) if math.isfinite(limit) else deadline
-            masks = model.near_masks(vals)  # the failing rows are near ones
-            scratch = _Pool(_POOL_SIZE, _POOL_SCREEN, math.inf)  # a window's iterates are checked here, not kept
-            args = (model, masks, xv, obj_scale, scratch, bar, until, limit)
-            xv, windows, _ = _windowed(*args, spans=spans, mode="sub", max_iter=REPAIR_MAX_ITER)
-            solved = float(sum(w["solve_time"] for w in windows))
-            log["solve_time"] += solved
-            log["transcription_time"] += time.perf_counter() - now - solved
-            # no seconds in the log: it is written to metrics.json, whose bytes the same inputs reproduce
-            log["repair"] = [{k: w[k] for k in ("knots", "status", "iterations", "kept")} for w in windows]
-            log["repair_iterations"] = int(sum(w["iterations"] for w in windows))
+            d = cplan.diagnostics
+            if train:
+                log["train"] = _train_log(opts, d)
+            log["iterations"] += int(d.get("ipopt_iterations", 0))
+            log.update(
+                rounds=int(d.get("rounds", 0)),
+                status=str(d.get("ipopt_status", "")),
+                min_hessian_perturbation=d["horizon_summary"].get("min_hessian_perturbation"),
+                floor_note=str(d.get("horizon_floor_note", "")),
+            )
+            log["solve_time"] += float(d.get("solve_time", 0.0))
+            log["transcription_time"] += time.perf_counter() - start - float(d.get("solve_time", 0.0))
+            failed = (
+                "" if d.get("horizon_result") == "optimal" else f"the coarse NLP returned its {d.get('horizon_result')}"
+            )
+        if failed and before is None:
+            log.update(result="failed", reason=failed)
+            return None, log
+        if failed:  # a refined grid found no optimum: the previous round's interpolation is the pass's result
+            assert before is not None
+            refined[-1]["result"] = failed[:200]
+            xv, viol, last = before
+            log.update(last)
             Q = model.q_of(xv)
-            viol = _violations(model, model.values(xv), xv, tol)
+            break
+        assert cplan is not None
+        R = interpolate(np.asarray(cplan.robots, dtype=float), su.t, M, opts.coarse_ends, grid=grid)
+        xv = model.project(np.concatenate([R[:, :, 0], R[:, :, 1]], axis=1).ravel())
+        Q = model.q_of(xv)
+        vals = model.values(xv)
+        viol = _violations(model, vals, xv, tol)
+        fixed_leader = opts.leader_tolerance == 0  # the equality leader: no variable can mend its rows
+        local = [v for v in viol if v.group != "fitness" and not (v.group == "leader" and fixed_leader)]
+        log.pop("repair_skipped", None)
+        if local and opts.coarse_repair > 0 and not any(v.group == "leader" and fixed_leader for v in viol):
+            # windows round the rows of single knots; a fitness row (a sum over every knot) is no window's to place:
+            # the check after the repair decides on it, as on every other row
+            spans = _repair_spans(sorted({v.knot for v in local}), su.K, int(opts.coarse_repair) * M)
+            width = sum(b - a + 1 for a, b in spans)
+            if width > REPAIR_SHARE * su.K:
+                log["repair_skipped"] = f"windows of {width} of {su.K} knots (more than {100 * REPAIR_SHARE:g} %)"
+            else:
+                now = time.perf_counter()
+                until = now + opts.coarse_time_share * max(deadline - now, 0.0) if math.isfinite(limit) else deadline
+                masks = model.near_masks(vals)  # the failing rows are near ones
+                scratch = _Pool(_POOL_SIZE, _POOL_SCREEN, math.inf)  # a window's iterates are checked here, not kept
+                args = (model, masks, xv, obj_scale, scratch, bar, until, limit)
+                xv, windows, _ = _windowed(*args, spans=spans, mode="sub", max_iter=REPAIR_MAX_ITER)
+                solved = float(sum(w["solve_time"] for w in windows))
+                log["solve_time"] += solved
+                log["transcription_time"] += time.perf_counter() - now - solved
+                # no seconds in the log: it is written to metrics.json, whose bytes the same inputs reproduce
+                log["repair"] = [{k: w[k] for k in ("knots", "status", "iterations", "kept")} for w in windows]
+                log["repair_iterations"] = log.get("repair_iterations", 0) + int(sum(w["iterations"] for w in windows))
+                Q = model.q_of(xv)
+                viol = _violations(model, model.values(xv), xv, tol)
+        on_grid = set(grid.tolist())
+        between = [v for v in viol if v.group == "clearance" and v.knot not in on_grid]
+        used = time.perf_counter() - t0
+        if (
+            not between
+            or max(v.amount for v in between) > opts.coarse_refine_depth
+            or len(refined) >= opts.coarse_refine
+            or (math.isfinite(limit) and used >= opts.coarse_time_share * (deadline - t0))
+        ):
+            break
+        # tethers graze corners between coarse knots: the grid cut finer there, the coarse NLP solved on it from this
+        # round's result
+        knots = sorted({v.knot for v in between})
+        kept = ("knots", "repair", "repair_skipped", "rounds", "status", "min_hessian_perturbation", "floor_note")
+        before = (xv, viol, {k: log[k] for k in kept if k in log})
+        log.pop("repair", None)
+        grid = refine(grid, knots, int(opts.coarse_refine_parts))
+        start_q = Q[grid]
+        refined.append(dict(between=len(knots), knots=int(grid.size)))
+        log["knots"] = int(grid.size)
+    if refined:
+        log["refined"] = refined
     point = "repaired" if any(w["kept"] for w in log.get("repair", [])) else "interpolated"
     J = _cost(su, Q)
     if viol:
@@ -1269,9 +1330,9 @@ def _coarse_pass(
         repaired = ""
         if point == "repaired":
             where = ", ".join(f"{a}–{b}" for a, b in (w["knots"] for w in log["repair"]))
-            repaired = (
+            repaired = (  # the last grid's windows (repair_iterations: every round's, in the total)
                 f", then the whole NLP in {len(log['repair'])} window(s) around the knots where rows failed (knots "
-                f"{where}; {log['repair_iterations']} iterations)"
+                f"{where}; {sum(w['iterations'] for w in log['repair'])} iterations)"
             )
         along = (
             f", from the train plan with its own clearance and spacing at {log['train']['warm_margin_entries']} "
@@ -1279,12 +1340,22 @@ def _coarse_pass(
             if train
             else ""
         )
+        counts = [r["between"] for r in refined]
+        finer = (
+            f", its steps round {' and then '.join(map(str, counts))} {'knot' if counts == [1] else 'knots'} where "
+            f"rows failed between them cut into {opts.coarse_refine_parts}"
+            if refined
+            else ""
+        )
         log["what"] = (
-            f"IPOPT solved the NLP on every {_nth(M)} knot ({log['knots']} of {su.K + 1}{along}; {log['status']}, "
-            f"{log['iterations']} iterations in {log['rounds']} round(s)), its optimum interpolated to every knot "
+            f"IPOPT solved the NLP on every {_nth(M)} knot{finer} ({log['knots']} of {su.K + 1}{along}; "
+            f"{log['status']}, {log['iterations']} iterations in "
+            + (f"{len(refined) + 1} solves, the last in " if refined else "")
+            + f"{log['rounds']} round(s)), its optimum interpolated to every knot "
             f"(quadratic spline){repaired}, where every row holds"
         )
-        detail = f"the optimum on every {_nth(M)} knot, interpolated" + (" and repaired" if repaired else "")
+        detail = f"the optimum on every {_nth(M)} knot{' (refined)' if refined else ''}, interpolated"
+        detail += " and repaired" if repaired else ""
         return _Candidate(Q, J, "coarse_optimal", detail, xv), log
     log.update(result="rejected", reason=reason[:300], x=xv, fine_start=f"the {point} coarse optimum")
     return None, log

@@ -8,8 +8,9 @@ times fewer variables and rows. Its optimum is interpolated to every knot by a q
 through the coarse knots (positions; a cubic spline overshoots between knots: f4 12.7 against 0.72 on a walls room
 with 8 robots), and accepted as the plan if *every* row of the whole NLP holds at every knot and it is no worse than
 the warm start in each term — rows failing at a few knots first re-solved by windows of the whole NLP around them
-(``HorizonOptions.coarse_repair``) — otherwise :func:`tmr.control.horizon.plan_horizon` solves the whole NLP as before
-(``formulations/horizon.md``, "Coarse knots").
+(``HorizonOptions.coarse_repair``), and where tethers still graze obstacles' corners between coarse knots the coarse
+NLP solved again on a grid cut finer there (:func:`refine`, ``HorizonOptions.coarse_refine``) — otherwise
+:func:`tmr.control.horizon.plan_horizon` solves the whole NLP as before (``formulations/horizon.md``, "Coarse knots").
 """
 
 from __future__ import annotations
@@ -51,16 +52,35 @@ def coarse_indices(K: int, M: int, ends: int = 0) -> NDArray[np.int_]:
     return np.unique(np.concatenate([e, grid, K - e]))
 
 
+def refine(grid: NDArray[np.int_], knots: list[int] | NDArray[np.int_], parts: int, pad: int = 1) -> NDArray[np.int_]:
+    """The coarse ``grid`` (fine knots, sorted, from 0 to K) with each of its steps that holds one of the fine
+    ``knots`` — and ``pad`` steps either side of it — cut into ``parts`` steps as equal as the fine knots allow (a
+    step shorter than ``parts`` fine steps: at every fine knot). The grid where rows failed between its knots."""
+    grid = np.asarray(grid, dtype=np.intp)
+    j = np.clip(np.searchsorted(grid, np.asarray(knots, dtype=np.intp), side="right") - 1, 0, grid.size - 2)
+    steps = np.unique(np.clip((j[:, None] + np.arange(-pad, pad + 1)[None, :]).ravel(), 0, grid.size - 2))
+    a, b = grid[steps], grid[steps + 1]
+    cuts = np.rint(a[:, None] + (b - a)[:, None] * np.arange(1, parts)[None, :] / parts).astype(np.intp)
+    return np.unique(np.concatenate([grid, cuts.ravel()]))
+
+
 def coarse_problem(
-    problem: Any, warm: Any, M: int, rate_scale: float, margin: float = 0.0, ends: int = 0
+    problem: Any,
+    warm: Any,
+    M: int,
+    rate_scale: float,
+    margin: float = 0.0,
+    ends: int = 0,
+    grid: NDArray[np.int_] | None = None,
 ) -> tuple[Any, Any]:
-    """The problem and the warm start on every M-th knot (:func:`coarse_indices`): the leader's reference sampled at
-    those knots with period M T_s, the warm start's joints there, the rate bounds (speeds and accelerations of joints
-    and robots, ``QPParams``) scaled by ``rate_scale`` ≤ 1 and the robots' separation margin raised by ``margin`` [m]
-    — margins for the interpolation between knots (the clearance's is the caller's ``d_safe``)."""
+    """The problem and the warm start on every M-th knot (:func:`coarse_indices`; or on the fine knots ``grid``, e.g.
+    :func:`refine`'s): the leader's reference sampled at those knots, the warm start's joints there, the rate bounds
+    (speeds and accelerations of joints and robots, ``QPParams``) scaled by ``rate_scale`` ≤ 1 and the robots'
+    separation margin raised by ``margin`` [m] — margins for the interpolation between knots (the clearance's is the
+    caller's ``d_safe``)."""
     tr = problem.trajectory
     K = tr.t.size - 1
-    idx = coarse_indices(K, M, ends)
+    idx = coarse_indices(K, M, ends) if grid is None else np.asarray(grid, dtype=np.intp)
     tc = np.asarray(tr.t, dtype=float)[idx]  # a non-uniform grid: the NLP's rates and cost take each step's length
     traj = tr._replace(t=tc, x=tr.x[idx], xd=tr.xd[idx], xdd=tr.xdd[idx])
     qp = problem.qp_params
@@ -85,10 +105,10 @@ def coarse_problem(
     return pc, wc
 
 
-def interpolate(robots: Array, t_fine: Array, M: int, ends: int = 0) -> Array:
+def interpolate(robots: Array, t_fine: Array, M: int, ends: int = 0, grid: NDArray[np.int_] | None = None) -> Array:
     """Robot positions (K+1, N, 2) [m] at the fine knots ``t_fine`` from the coarse plan's ``robots`` (Kc+1, N, 2) at
-    :func:`coarse_indices`: a quadratic interpolating spline in time per coordinate (C¹; its accelerations are the
-    coarse differences' to first order)."""
-    idx = coarse_indices(t_fine.size - 1, M, ends)
+    :func:`coarse_indices` (or at the fine knots ``grid``): a quadratic interpolating spline in time per coordinate
+    (C¹; its accelerations are the coarse differences' to first order)."""
+    idx = coarse_indices(t_fine.size - 1, M, ends) if grid is None else np.asarray(grid, dtype=np.intp)
     k = min(2, idx.size - 1)
     return np.asarray(make_interp_spline(t_fine[idx], robots, k=k, axis=0)(t_fine), dtype=float)

@@ -122,6 +122,16 @@ class HorizonOptions:
             in windows around them — each failing knot ± this many coarse steps, every other knot held — and the
             repaired trajectory is checked again (0: no repair; only if the windows span at most half the knots,
             in ``coarse_time_share`` of the time left; ``formulations/horizon.md``, "Coarse knots").
+        coarse_refine: if clearance rows still fail *between* coarse knots after the repair (or its windows were too
+            wide) — a tether grazing an obstacle's corner, none deeper than ``coarse_refine_depth`` — the coarse NLP is
+            solved again, at most this many times, on its grid with each step that holds such a knot, and one step
+            either side, cut into ``coarse_refine_parts`` (:func:`tmr.control.horizon_coarse.refine`), from the last
+            round's result sampled there (its fitness rows still the warm start's), then interpolated and repaired as
+            before (0: never; only while the coarse pass has used less than ``coarse_time_share`` of the time).
+        coarse_refine_parts: how many steps each refined coarse step becomes (≥ 2).
+        coarse_refine_depth: the deepest clearance violation between coarse knots [m] the refinement takes on
+            (deeper: the chain swept across an obstacle, on its other side at the knots, which no finer grid started
+            from there mends).
         coarse_polish_iter: IPOPT iterations (per round) of the whole NLP started from an accepted coarse optimum
             (its first round: the rows near that optimum, :meth:`_Model.near`): if it converges (at most this, or its
             retry ``coarse_polish_retry``) to an optimum no costlier than the coarse one, that is the plan
@@ -273,6 +283,9 @@ class HorizonOptions:
     keep_warm_margins: bool = False
     coarse_ends: int = 0
     coarse_repair: int = 2
+    coarse_refine: int = 2
+    coarse_refine_parts: int = 4
+    coarse_refine_depth: float = 0.1
     coarse_polish_iter: int = 60
     coarse_polish_min_hessian_perturbation: float | None = 1e-4
     coarse_polish_retry: dict[str, Any] | None = field(
@@ -294,6 +307,7 @@ class HorizonOptions:
             "leader_tolerance",
             "field_error",
             "warm_start_leader_error",
+            "coarse_refine_depth",
         ):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
@@ -367,6 +381,10 @@ class HorizonOptions:
         repair = self.coarse_repair
         if isinstance(repair, bool) or not isinstance(repair, numbers.Integral) or repair < 0:
             raise ParameterError(f"coarse_repair must be a whole number ≥ 0 of coarse steps, got {repair!r}")
+        for name, least in (("coarse_refine", 0), ("coarse_refine_parts", 2)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < least:
+                raise ParameterError(f"{name} must be a whole number ≥ {least}, got {v!r}")
         if not 0 <= self.clearance_margin < 1:
             raise ParameterError(f"clearance_margin must be in [0, 1) m, got {self.clearance_margin!r}")
         share, scale = self.coarse_time_share, self.coarse_rate_scale
