@@ -269,6 +269,7 @@ def test_rows_failing_between_coarse_knots_refine_the_grid_there(problem_and_war
 
     monkeypatch.setattr(horizon_module, "interpolate", to_the_edge)
     monkeypatch.setattr(horizon_module, "_plan_horizon", spy)
+    ipopt = spy_ipopt_calls(monkeypatch)
     options = dict(ON, coarse_repair=0, coarse_polish_iter=0, coarse_refine_parts=3)
     for off in (dict(coarse_refine=0), dict(coarse_refine_depth=0.01)):
         log = plan_horizon(problem, warm, **off, **options).diagnostics["horizon_summary"]["coarse"]
@@ -276,6 +277,7 @@ def test_rows_failing_between_coarse_knots_refine_the_grid_there(problem_and_war
         assert "clearance: 1 knot(s), k = 16 (t = 0.80 s), worst: " in log["reason"]
     grids.clear()
     starts.clear()
+    ipopt.clear()
     plan = plan_horizon(problem, warm, **options)
     d = plan.diagnostics
     log = d["horizon_summary"]["coarse"]
@@ -286,6 +288,10 @@ def test_rows_failing_between_coarse_knots_refine_the_grid_there(problem_and_war
     assert [None if q is None else q.shape for q in starts] == [None, None, (fine.size, 4)]
     P = problem.chain.robots(starts[2][fine.tolist().index(16)])
     assert env.exact_clearance(P[0]) == pytest.approx(d_safe / 2, abs=1e-6)
+    # and IPOPT's first iterate on the refined grid is there: positions (knots, [x_1 x_2 y_1 y_2])
+    x0 = next(np.asarray(kw["x0"]).ravel() for kw, _ in ipopt if np.asarray(kw["x0"]).size >= 4 * fine.size)
+    at16 = x0[: 4 * fine.size].reshape(fine.size, 4)[fine.tolist().index(16)]
+    assert env.exact_clearance(at16[[0, 2]]) == pytest.approx(d_safe / 2, abs=1e-6)
     assert d["horizon_result"] == "coarse_optimal"
     assert (
         "IPOPT solved the NLP on every 3rd knot, its steps round 1 knot where rows failed between them cut into 3 ("
@@ -295,6 +301,44 @@ def test_rows_failing_between_coarse_knots_refine_the_grid_there(problem_and_war
     assert plan.success and metrics.n_violation_steps == 0
     for f in ("f1", "f2", "f4"):
         assert getattr(metrics, f) <= getattr(warm_metrics, f) * (1 + 1e-9)
+
+
+def test_a_refined_round_that_fails_or_goes_deeper_leaves_the_last_one(problem_and_warm, monkeypatch):
+    """The refined grid's NLP finding no optimum, or its interpolation breaking clearance deeper than the last one's,
+    leaves the last round's interpolation the pass's result (rejected here; the log's knots the first grid's, the
+    refinement's ``result`` says why). ``_start`` is no user option."""
+    problem, warm, _ = problem_and_warm
+    real, real_plan = coarse.interpolate, horizon_module._plan_horizon
+    c = np.array([4.2, 2.0])
+    env, d_safe = problem.env, problem.qp_params.d_safe
+
+    def towards_the_column(F, knot, clearance):
+        p = F[knot, 0].copy()
+        s = brentq(lambda s: env.exact_clearance((1 - s) * p + s * c) - clearance, 0.0, 1.0)
+        F[knot, 0] = (1 - s) * p + s * c
+
+    def graze_then_deeper(robots, t, M, ends=0, grid=None):
+        F = real(robots, t, M, ends, grid=grid)
+        towards_the_column(F, 16, d_safe / 2) if np.array_equal(grid, GRID) else towards_the_column(F, 13, -0.3)
+        return F
+
+    options = dict(ON, coarse_repair=0, coarse_polish_iter=0, coarse_refine_parts=3)
+    monkeypatch.setattr(horizon_module, "interpolate", graze_then_deeper)
+    log = plan_horizon(problem, warm, **options).diagnostics["horizon_summary"]["coarse"]
+    assert log["result"] == "rejected" and log["knots"] == GRID.size and "k = 16 (t = 0.80 s)" in log["reason"]
+    assert log["refined"][0]["result"].startswith("deeper: ") and len(log["refined"]) == 1
+
+    def refined_fails(problem, warm_start, **kw):
+        if kw.get("_start") is not None:
+            raise horizon_model.HorizonInfeasible("horizon NLP: no", [], status="Infeasible_Problem_Detected")
+        return real_plan(problem, warm_start, **kw)
+
+    monkeypatch.setattr(horizon_module, "_plan_horizon", refined_fails)
+    log = plan_horizon(problem, warm, **options).diagnostics["horizon_summary"]["coarse"]
+    assert log["result"] == "rejected" and log["knots"] == GRID.size and "k = 16 (t = 0.80 s)" in log["reason"]
+    assert log["refined"][0]["result"] == "Infeasible_Problem_Detected: no"
+    with pytest.raises(ParameterError, match="_start"):
+        plan_horizon(problem, warm, _start=warm.q)
 
 
 def test_repair_spans_pad_and_merge_the_failing_knots():

@@ -244,15 +244,18 @@ def test_least_tension_schedule_is_the_least_rate_bounded_cover() -> None:
 
 
 def test_horizon_with_the_active_winch_is_never_worse_than_qp(e4_active) -> None:
-    """The NLP optimises the positions within T_max's reach (optimal on E with 4 robots, ~20 s) and the least
-    rate-bounded tension follows."""
+    """The NLP optimises the positions within T_max's reach (on E with 4 robots, ~10 s: the coarse optimum on its
+    grid refined round 9 knots where a robot grazed a corner between coarse knots, its polish costlier — stop 63;
+    before it the whole NLP's optimum from the rejected interpolation, 13 % costlier) and the least rate-bounded
+    tension follows."""
     from tmr.control.winch import least_tension_schedule
     from tmr.planner import solve
 
     problem, qp_plan, qp_metrics = e4_active
     plan, metrics = solve(problem, "horizon", time_limit=90.0)
     assert plan.success, plan.failure
-    assert plan.diagnostics["horizon_result"] == "optimal"  # the NLP's own plan, its tension chosen after it
+    # the NLP's own plan (an optimum of the whole NLP or the coarse one's, every row holding), its tension after it
+    assert plan.diagnostics["horizon_result"] in ("optimal", "coarse_optimal")
     want = least_tension_schedule(plan.spans, problem.chain_params, plan.Ts, problem.qp_params.span_margin)
     assert np.array_equal(plan.winch_tension, want)
     for f in ("f1", "f2", "f4"):

@@ -456,7 +456,8 @@ def _plan_horizon(
         if low.any():
             exact[low] = env.exact_clearance(su.ref[low])  # the checker's hard limit: ≥ 0
             info["reference_clearance_entries"] = model.keep_reference_clearance(vals["clearance"], exact)
-    if _start is not None:  # IPOPT starts here (a refined coarse grid: the last grid's result), not at the warm start
+    if _start is not None:  # IPOPT starts here, round 1 with the rows near it (a refined coarse grid: the last grid's
+        # result); the fitness rows, the fallback, the no-worse test and the kept margins are still the warm start's
         xv = x_init = model.project(model.x_of(held(np.asarray(_start, dtype=float), su.K)))
         vals = model.values(xv)
     masks = model.near_masks(vals)
@@ -1190,12 +1191,14 @@ def _coarse_pass(
     bar: Any,
 ) -> tuple[_Candidate | None, dict[str, Any]]:
     """The NLP on every M-th knot (:mod:`tmr.control.horizon_coarse`; clearance bounds and separation margin +
-    ``coarse_margin``, rate bounds × ``coarse_rate_scale``), solved by :func:`plan_horizon` itself in
-    ``coarse_time_share`` of the time left, its optimum interpolated to every knot — and where rows of the whole NLP
+    ``coarse_margin``, rate bounds × ``coarse_rate_scale``), solved by :func:`plan_horizon` itself (a refined grid's
+    by :func:`_plan_horizon` with its start) in ``coarse_time_share`` of the time left, its optimum interpolated to
+    every knot — and where rows of the whole NLP
     fail there, repaired by windows of the whole NLP around those knots (``coarse_repair``, :func:`_repair_spans`) —
     and where clearance rows still fail between coarse knots, by at most ``coarse_refine_depth``, the same again on
     the grid cut finer round them (:func:`tmr.control.horizon_coarse.refine`, ``coarse_refine`` times at most), from
-    the last interpolation: the candidate if every row of the whole NLP holds, no term is worse than the warm start's
+    the last interpolation, keeping the last round's if the refined one fails deeper or finds no optimum: the
+    candidate if every row of the whole NLP holds, no term is worse than the warm start's
     and it costs no more (else ``None``); and the log (stride, knots, iterations, the repair's windows, the
     refinements, result, why)."""
     opts, su = model.su.opts, model.su
@@ -1221,6 +1224,9 @@ def _coarse_pass(
     # grid's NLP finds no optimum
     before: tuple[Array, list[Violation], dict[str, Any]] | None = None
     start_q: Array | None = None  # IPOPT's start on a refined grid (its joints there; None: the warm start's)
+    # a refined round ends (its NLP and repair) where the first round's repair could have: the pass as a whole uses
+    # no more of the time than before refinement, 1 − (1 − share)² of it (¾ with share ½)
+    cap = t0 + (1.0 - (1.0 - opts.coarse_time_share) ** 2) * (deadline - t0) if math.isfinite(limit) else deadline
     while True:
         start = time.perf_counter()
         pc, wc = coarse_problem(
@@ -1228,8 +1234,12 @@ def _coarse_pass(
         )
         budget = None if not math.isfinite(limit) else max(opts.coarse_time_share * (deadline - start), 1e-3)
         try:
-            with _ctrl_c_stops_ipopt():  # as plan_horizon, with a refined grid's start
-                cplan = _plan_horizon(pc, wc, time_limit=budget, _start=start_q, **sub)
+            if start_q is None:
+                cplan = plan_horizon(pc, wc, time_limit=budget, **sub)
+            else:  # a refined grid: from the last interpolation, and done by the cap
+                budget = None if budget is None else max(min(budget, cap - start), 1e-3)
+                with _ctrl_c_stops_ipopt():
+                    cplan = _plan_horizon(pc, wc, time_limit=budget, _start=start_q, **sub)
         except HorizonInfeasible as exc:
             d = exc.diagnostics or {}
             if train:
@@ -1261,6 +1271,7 @@ def _coarse_pass(
             assert before is not None
             refined[-1]["result"] = failed[:200]
             xv, viol, last = before
+            log.pop("repair_skipped", None)
             log.update(last)
             Q = model.q_of(xv)
             break
@@ -1283,6 +1294,7 @@ def _coarse_pass(
             else:
                 now = time.perf_counter()
                 until = now + opts.coarse_time_share * max(deadline - now, 0.0) if math.isfinite(limit) else deadline
+                until = until if start_q is None else min(until, cap)
                 masks = model.near_masks(vals)  # the failing rows are near ones
                 scratch = _Pool(_POOL_SIZE, _POOL_SCREEN, math.inf)  # a window's iterates are checked here, not kept
                 args = (model, masks, xv, obj_scale, scratch, bar, until, limit)
@@ -1295,6 +1307,14 @@ def _coarse_pass(
                 log["repair_iterations"] = log.get("repair_iterations", 0) + int(sum(w["iterations"] for w in windows))
                 Q = model.q_of(xv)
                 viol = _violations(model, model.values(xv), xv, tol)
+        if before is not None and _deepest(viol) > _deepest(before[1]):
+            # the refined grid's interpolation breaks clearance deeper than the last one: that one is the result
+            refined[-1]["result"] = f"deeper: {_deepest(viol):.3g} m > {_deepest(before[1]):.3g} m"
+            xv, viol, last = before
+            log.pop("repair_skipped", None)
+            log.update(last)
+            Q = model.q_of(xv)
+            break
         on_grid = set(grid.tolist())
         between = [v for v in viol if v.group == "clearance" and v.knot not in on_grid]
         used = time.perf_counter() - t0
@@ -1308,7 +1328,16 @@ def _coarse_pass(
         # tethers graze corners between coarse knots: the grid cut finer there, the coarse NLP solved on it from this
         # round's result
         knots = sorted({v.knot for v in between})
-        kept = ("knots", "repair", "repair_skipped", "rounds", "status", "min_hessian_perturbation", "floor_note")
+        kept = (
+            "knots",
+            "repair",
+            "repair_skipped",
+            "rounds",
+            "status",
+            "min_hessian_perturbation",
+            "floor_note",
+            "train",
+        )
         before = (xv, viol, {k: log[k] for k in kept if k in log})
         log.pop("repair", None)
         grid = refine(grid, knots, int(opts.coarse_refine_parts))
@@ -1342,7 +1371,7 @@ def _coarse_pass(
         )
         counts = [r["between"] for r in refined]
         finer = (
-            f", its steps round {' and then '.join(map(str, counts))} {'knot' if counts == [1] else 'knots'} where "
+            f", its steps round {' and then '.join(map(str, counts))} {'knot' if counts[-1] == 1 else 'knots'} where "
             f"rows failed between them cut into {opts.coarse_refine_parts}"
             if refined
             else ""
@@ -1359,6 +1388,11 @@ def _coarse_pass(
         return _Candidate(Q, J, "coarse_optimal", detail, xv), log
     log.update(result="rejected", reason=reason[:300], x=xv, fine_start=f"the {point} coarse optimum")
     return None, log
+
+
+def _deepest(viol: list[Violation]) -> float:
+    """The deepest clearance violation of ``viol`` [m] (0: none)."""
+    return max((v.amount for v in viol if v.group == "clearance"), default=0.0)
 
 
 def _train_log(opts: HorizonOptions, d: dict[str, Any]) -> dict[str, Any]:

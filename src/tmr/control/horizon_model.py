@@ -127,7 +127,9 @@ class HorizonOptions:
             solved again, at most this many times, on its grid with each step that holds such a knot, and one step
             either side, cut into ``coarse_refine_parts`` (:func:`tmr.control.horizon_coarse.refine`), from the last
             round's result sampled there (its fitness rows still the warm start's), then interpolated and repaired as
-            before (0: never; only while the coarse pass has used less than ``coarse_time_share`` of the time).
+            before; a refined round that finds no optimum or fails deeper leaves the last one's result (0: never;
+            only while the coarse pass has used less than ``coarse_time_share`` of the time, and a refined round done
+            by 1 − (1 − ``coarse_time_share``)² of it, where the first round's repair could end).
         coarse_refine_parts: how many steps each refined coarse step becomes (≥ 2).
         coarse_refine_depth: the deepest clearance violation between coarse knots [m] the refinement takes on
             (deeper: the chain swept across an obstacle, on its other side at the knots, which no finer grid started
