@@ -1193,14 +1193,13 @@ def _coarse_pass(
     """The NLP on every M-th knot (:mod:`tmr.control.horizon_coarse`; clearance bounds and separation margin +
     ``coarse_margin``, rate bounds × ``coarse_rate_scale``), solved by :func:`plan_horizon` itself (a refined grid's
     by :func:`_plan_horizon` with its start) in ``coarse_time_share`` of the time left, its optimum interpolated to
-    every knot — and where rows of the whole NLP
-    fail there, repaired by windows of the whole NLP around those knots (``coarse_repair``, :func:`_repair_spans`) —
-    and where clearance rows still fail between coarse knots, by at most ``coarse_refine_depth``, the same again on
-    the grid cut finer round them (:func:`tmr.control.horizon_coarse.refine`, ``coarse_refine`` times at most), from
-    the last interpolation, keeping the last round's if the refined one fails deeper or finds no optimum: the
-    candidate if every row of the whole NLP holds, no term is worse than the warm start's
-    and it costs no more (else ``None``); and the log (stride, knots, iterations, the repair's windows, the
-    refinements, result, why)."""
+    every knot — and where rows of the whole NLP fail there, repaired by windows of the whole NLP around those knots
+    (``coarse_repair``, :func:`_repair_spans`) — and where clearance rows still fail between coarse knots, by at
+    most ``coarse_refine_depth``, the same again on the grid cut finer round them
+    (:func:`tmr.control.horizon_coarse.refine`, ``coarse_refine`` times at most), from the last interpolation,
+    keeping the last round's if the refined one fails deeper or finds no optimum: the candidate if every row of the
+    whole NLP holds, no term is worse than the warm start's and it costs no more (else ``None``); and the log
+    (stride, knots, iterations, the repair's windows, the refinements, result, why)."""
     opts, su = model.su.opts, model.su
     t0 = time.perf_counter()
     # the margin on the samples' bounds, not on d_safe, so none on the equality leader's own sample (its reference is
