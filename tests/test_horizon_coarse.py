@@ -324,9 +324,15 @@ def test_a_refined_round_that_fails_or_goes_deeper_leaves_the_last_one(problem_a
 
     options = dict(ON, coarse_repair=0, coarse_polish_iter=0, coarse_refine_parts=3)
     monkeypatch.setattr(horizon_module, "interpolate", graze_then_deeper)
-    log = plan_horizon(problem, warm, **options).diagnostics["horizon_summary"]["coarse"]
+    d = plan_horizon(problem, warm, **options).diagnostics
+    log = d["horizon_summary"]["coarse"]
     assert log["result"] == "rejected" and log["knots"] == GRID.size and "k = 16 (t = 0.80 s)" in log["reason"]
     assert log["refined"][0]["result"].startswith("deeper: ") and len(log["refined"]) == 1
+    # the run's note says so: "…, its optimum rejected (…), its grid refined 1 time(s) … (the last: deeper: …)"
+    assert (
+        ", its grid refined 1 time(s) round knots where clearance failed between its knots (the last: deeper: "
+        in (d["horizon_note"])
+    )
 
     def refined_fails(problem, warm_start, **kw):
         if kw.get("_start") is not None:

@@ -850,6 +850,10 @@ def _plan_horizon(
         why = str(coarse_log.get("reason", "")).split(" | ")[0].split("; ")[0]  # its first group, worst row
         did = {"failed": "found no plan", "rejected": "was solved, its optimum rejected"}[coarse_log["result"]]
         what += f"; before it, the NLP on every {_nth(M)} knot {did}" + (f" ({why})" if why else "")
+        refs = coarse_log.get("refined") or []  # HorizonOptions.coarse_refine
+        if refs:
+            last = f" (the last: {refs[-1]['result']})" if "result" in refs[-1] else ""
+            what += f", its grid refined {len(refs)} time(s) round knots where clearance failed between its knots{last}"
     floor = f"{_floor_of(opts, {}):g} ({_HESSIAN[opts.hessian]} Hessian)"
     retried = [r for r in phase_rounds if r["attempt"] == "retry"]  # the fast attempt has none
     if retried:  # a retry ran: its own floor and Hessian (HorizonOptions.retry_ipopt, retry_hessian)
