@@ -1223,9 +1223,19 @@ def _coarse_pass(
     grid = coarse_indices(su.K, M, opts.coarse_ends)
     log: dict[str, Any] = dict(stride=M, knots=int(grid.size), iterations=0, solve_time=0.0, transcription_time=0.0)
     refined: list[dict[str, Any]] = []  # the refinements (HorizonOptions.coarse_refine)
-    # the round before a refinement (its interpolation, violations, log entries): the pass's result if the refined
-    # grid's NLP finds no optimum
-    before: tuple[Array, list[Violation], dict[str, Any]] | None = None
+    # the round before a refinement (its interpolation, joints, violations, log entries): the pass's result if the
+    # refined grid's NLP finds no optimum or fails deeper
+    before: tuple[Array, Array, list[Violation], dict[str, Any]] | None = None
+
+    def step_back(why: str) -> tuple[Array, Array, list[Violation]]:
+        """The round before the last refinement as the pass's result, the refinement's ``result`` saying ``why``."""
+        assert before is not None
+        refined[-1]["result"] = why[:200]
+        for k in _ROUND_KEYS:
+            log.pop(k, None)
+        log.update(before[3])
+        return before[0], before[1], before[2]
+
     start_q: Array | None = None  # IPOPT's start on a refined grid (its joints there; None: the warm start's)
     # a refined round ends (its NLP and repair) where the first round's repair could have: the pass as a whole uses
     # no more of the time than before refinement, 1 − (1 − share)² of it (¾ with share ½)
@@ -1271,12 +1281,7 @@ def _coarse_pass(
             log.update(result="failed", reason=failed)
             return None, log
         if failed:  # a refined grid found no optimum: the previous round's interpolation is the pass's result
-            assert before is not None
-            refined[-1]["result"] = failed[:200]
-            xv, viol, last = before
-            log.pop("repair_skipped", None)
-            log.update(last)
-            Q = model.q_of(xv)
+            xv, Q, viol = step_back(failed)
             break
         assert cplan is not None
         R = interpolate(np.asarray(cplan.robots, dtype=float), su.t, M, opts.coarse_ends, grid=grid)
@@ -1310,13 +1315,9 @@ def _coarse_pass(
                 log["repair_iterations"] = log.get("repair_iterations", 0) + int(sum(w["iterations"] for w in windows))
                 Q = model.q_of(xv)
                 viol = _violations(model, model.values(xv), xv, tol)
-        if before is not None and _deepest(viol) > _deepest(before[1]):
+        if before is not None and _deepest(viol) > _deepest(before[2]):
             # the refined grid's interpolation breaks clearance deeper than the last one: that one is the result
-            refined[-1]["result"] = f"deeper: {_deepest(viol):.3g} m > {_deepest(before[1]):.3g} m"
-            xv, viol, last = before
-            log.pop("repair_skipped", None)
-            log.update(last)
-            Q = model.q_of(xv)
+            xv, Q, viol = step_back(f"deeper: {_deepest(viol):.3g} m > {_deepest(before[2]):.3g} m")
             break
         on_grid = set(grid.tolist())
         between = [v for v in viol if v.group == "clearance" and v.knot not in on_grid]
@@ -1331,17 +1332,7 @@ def _coarse_pass(
         # tethers graze corners between coarse knots: the grid cut finer there, the coarse NLP solved on it from this
         # round's result
         knots = sorted({v.knot for v in between})
-        kept = (
-            "knots",
-            "repair",
-            "repair_skipped",
-            "rounds",
-            "status",
-            "min_hessian_perturbation",
-            "floor_note",
-            "train",
-        )
-        before = (xv, viol, {k: log[k] for k in kept if k in log})
+        before = (xv, Q, viol, {k: log[k] for k in _ROUND_KEYS if k in log})
         log.pop("repair", None)
         grid = refine(grid, knots, int(opts.coarse_refine_parts))
         start_q = Q[grid]
@@ -1391,6 +1382,20 @@ def _coarse_pass(
         return _Candidate(Q, J, "coarse_optimal", detail, xv), log
     log.update(result="rejected", reason=reason[:300], x=xv, fine_start=f"the {point} coarse optimum")
     return None, log
+
+
+#: The coarse log's entries of one round of the coarse pass (its grid, NLP and repair), put back when a refinement
+#: steps back to the round before it.
+_ROUND_KEYS = (
+    "knots",
+    "repair",
+    "repair_skipped",
+    "rounds",
+    "status",
+    "min_hessian_perturbation",
+    "floor_note",
+    "train",
+)
 
 
 def _deepest(viol: list[Violation]) -> float:
