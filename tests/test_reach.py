@@ -49,6 +49,26 @@ def test_short_hairpin_needs_three_robots_not_two():
     assert plan_route(env, A, G, LIM).n_lower == 3
 
 
+def test_a_given_n_at_or_above_n_min_gets_the_same_proof_as_none(monkeypatch):
+    """With N given and N ≥ N_min, the proof runs for N_min − 1 as it does without N: the same n_lower and n_lower_by
+    whatever N is asked, and no search for a chain of fewer robots once N_min − 1 are proven too few (it could find
+    none; at 5c8c65e it cost 3–5 s per run on the long_walls rooms with 8 robots, ``formulations/route.md``)."""
+    import tmr.route.route as route_mod
+
+    env = _short_wall()
+    auto = plan_route(env, A, G, LIM)
+    assert (auto.n_lower, auto.lower_by, auto.n_min) == (3, "corners", 3)
+
+    def no_search(*args, **kwargs):
+        raise AssertionError("searched for a chain of fewer robots than N_min - 1, which are proven too few")
+
+    monkeypatch.setattr(route_mod, "_witness", no_search)
+    for n in (3, 4, 6):
+        given = plan_route(env, A, G, LIM, robots=n)
+        assert (given.n_lower, given.lower_by, given.n_min, given.n_route) == (3, "corners", 3, auto.n_route)
+        assert given.points.tobytes() == auto.points.tobytes()
+
+
 def test_straight_corridor_is_never_refuted_at_its_length_bound():
     """An empty 30 m × 4 m corridor: N = ⌈L / d_max⌉ robots can reach (24 m: 5); 4 cannot (the length alone)."""
     env = Environment.from_geometry([], (0.0, 0.0, 30.0, 4.0))

@@ -401,7 +401,12 @@ def plan_route(
             f"obstacles grown by {env.safety_radius:g} m: a passage is too narrow for the chain"
         )
     n_min = max(best.n_min, n_lower)
-    if fewest and robots is None and n_lower < n_min and proven_too_few(env, base, goal, lim, n_min - 1):
+    if (
+        fewest
+        and (robots is None or robots >= n_min)
+        and n_lower < n_min
+        and proven_too_few(env, base, goal, lim, n_min - 1)
+    ):  # N_min − 1 too few: no chain of fewer robots to search for (N given and short of N_min: its own proof ran)
         n_lower, lower_by = n_min, "corners"
     notes = [f"route margin lowered to {best.margin:.3f} m in a narrow passage"] if best.margin < margin else []
     n_route = n_min
