@@ -456,3 +456,25 @@ def test_narrowing_proves_what_the_finest_grid_cannot():
     assert (
         route.n_lower == 6 and route.lower_by == "corners" and route.refusal(5).startswith("the goal needs at least 6")
     )
+
+
+def test_one_robot_fewer_than_the_chain_found_is_proven_before_the_relaxed_searches(monkeypatch):
+    """long_walls-far-661176739 with 8 robots: the route chain needs 9, the search off the route finds a chain of 8,
+    and 7 are proven too few round the corners, so the relaxed searches for a chain of 7 (``_widened``, 2.5–3 s of
+    vain search at a5c5229) do not run; n_lower reads the proven 8 (``corners``), as without N."""
+    import tmr.route.witness as witness_mod
+    from tmr.route.route import proven_too_few
+    from tmr.sweep.rooms import generate_room, span_rows
+
+    room = generate_room(661176739, "long_walls", "far")
+    env, lim = room.environment(), span_rows()
+    assert proven_too_few(env, room.base, room.goal, lim, 7) and not proven_too_few(env, room.base, room.goal, lim, 8)
+
+    def no_relaxed_search(*args, **kwargs):
+        raise AssertionError("searched for a chain of 7 robots, which are proven too few")
+
+    monkeypatch.setattr(witness_mod, "_widened", no_relaxed_search)
+    for robots in (8, None):
+        route = plan_route(env, room.base, room.goal, lim, robots=robots)
+        assert (route.n_lower, route.lower_by, route.n_min, route.n_route) == (8, "corners", 8, 9)
+    assert len(route.points) >= 2 and route.refusal(8) is None

@@ -414,7 +414,9 @@ def plan_route(
     if fewest and n_lower < n_min and (robots is None or robots >= n_lower):
         # fewer robots than the route chain needs: a chain anywhere in the free space (the same search whatever N;
         # none for an N already proven too few: its refusal stands, and names the route's count)
-        witness = _witness(env, base, goal, lim, n_min - 1, n_lower)
+        witness, proven = _witness(env, base, goal, lim, n_min - 1, n_lower)
+        if proven > n_lower:  # one robot fewer than the chain found: proven too few
+            n_lower, lower_by = proven, "corners"
         if witness is not None:
             n_min = max(len(witness) - 1, n_lower)  # a real chain: never below a sound proof
     tight = None
