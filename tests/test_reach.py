@@ -478,3 +478,37 @@ def test_one_robot_fewer_than_the_chain_found_is_proven_before_the_relaxed_searc
         route = plan_route(env, room.base, room.goal, lim, robots=robots)
         assert (route.n_lower, route.lower_by, route.n_min, route.n_route) == (8, "corners", 8, 9)
     assert len(route.points) >= 2 and route.refusal(8) is None
+
+
+def test_no_count_is_proven_twice_and_the_relaxed_search_runs_without_a_proof(monkeypatch):
+    """dense-far-2845717476 with 4 robots (n_lower = 2 by length; the route chain needs 6, a chain of 5 is found off
+    it): the route's proof for 4 fails, and the witness does not try it again for the chain of 5's one robot fewer
+    (the same 4, 0.6 s in vain before); with no proof, the relaxed searches for a chain of 4 run."""
+    import tmr.route.route as route_mod
+    import tmr.route.witness as witness_mod
+    from tmr.sweep.rooms import generate_room, span_rows
+
+    room = generate_room(2845717476, "dense", "far")  # its summary plans a route too: before the counting
+    env, lim = room.environment(), span_rows()
+    calls: list[tuple[str, int]] = []
+    proof, widened = witness_mod.proven_too_few, witness_mod._widened
+
+    def counted(tag):
+        def prove(env, base, goal, lim, robots):
+            calls.append((tag, robots))
+            return proof(env, base, goal, lim, robots)
+
+        return prove
+
+    def counted_widened(*args, **kwargs):
+        calls.append(("widened", args[6]))
+        return widened(*args, **kwargs)
+
+    monkeypatch.setattr(route_mod, "proven_too_few", counted("route"))
+    monkeypatch.setattr(witness_mod, "proven_too_few", counted("witness"))
+    monkeypatch.setattr(witness_mod, "_widened", counted_widened)
+    route = plan_route(env, room.base, room.goal, lim, robots=4)
+    assert (route.n_lower, route.lower_by, route.n_min, route.n_route) == (2, "length", 5, 6)
+    proofs = [n for tag, n in calls if tag != "widened"]
+    assert proofs == [4] and ("widened", 4) in calls
+    assert route.refusal(4) is not None and "nor proven impossible" in route.refusal(4)

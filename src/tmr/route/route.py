@@ -330,8 +330,9 @@ def plan_route(
             the route at ``margin`` needs more robots than that, the routes with the smaller margins (δ/2,
             ``NARROW_MARGIN``, then ``RETRY_MARGIN``: through narrower passages, often shorter) are tried too and the
             one needing the fewest robots is returned, unless N is first proven too few round the corners
-            (:mod:`tmr.route.reach`). Without it, ``n_lower`` is raised to ``n_min`` when N_min − 1 robots are
-            proven too few.
+            (:mod:`tmr.route.reach`). Without it, or with N ≥ N_min, ``n_lower`` is raised to ``n_min`` when
+            N_min − 1 robots are proven too few (and, when a chain of fewer robots is found off the route, to its
+            count when one robot fewer is proven too few: :func:`tmr.route.witness._witness`).
         fewest: search for the fewest robots (the corner proof, the chain off the route, :func:`tight_chain`);
             False: the route and its station chain only (``n_lower`` by length, ``n_min`` = ``n_route``), for callers
             that only follow the route (start placements try many).
@@ -370,6 +371,7 @@ def plan_route(
     ladder += [RETRY_MARGIN] if RETRY_MARGIN < ladder[-1] else []
     best: _Along | None = None
     n_lower, lower_by = 0, "length"
+    unproven = math.inf  # the fewest robots whose proof failed: no proof is tried again for as many or more
     for m in ladder:
         if best is not None and not (robots is not None and best.n_min > robots >= n_lower):
             break
@@ -386,13 +388,11 @@ def plan_route(
         if best is None:
             n_lower = _length_bound(L_lower, found.length, d_max)
             # corners: a proof that the chain given cannot reach the goal saves retrying narrower routes
-            if (
-                fewest
-                and robots is not None
-                and n_lower <= robots < found.n_min
-                and proven_too_few(env, base, goal, lim, robots)
-            ):
-                n_lower, lower_by = robots + 1, "corners"
+            if fewest and robots is not None and n_lower <= robots < found.n_min:
+                if proven_too_few(env, base, goal, lim, robots):
+                    n_lower, lower_by = robots + 1, "corners"
+                else:
+                    unproven = robots
         if best is None or found.n_min < best.n_min:
             best = found
     if best is None:
@@ -401,22 +401,21 @@ def plan_route(
             f"obstacles grown by {env.safety_radius:g} m: a passage is too narrow for the chain"
         )
     n_min = max(best.n_min, n_lower)
-    if (
-        fewest
-        and (robots is None or robots >= n_min)
-        and n_lower < n_min
-        and proven_too_few(env, base, goal, lim, n_min - 1)
-    ):  # N_min − 1 too few: no chain of fewer robots to search for (N given and short of N_min: its own proof ran)
-        n_lower, lower_by = n_min, "corners"
+    if fewest and (robots is None or robots >= n_min) and n_lower < n_min and n_min - 1 < unproven:
+        # N_min − 1 too few: no chain of fewer robots to search for (N given and short of N_min: its own proof ran)
+        if proven_too_few(env, base, goal, lim, n_min - 1):
+            n_lower, lower_by = n_min, "corners"
+        else:
+            unproven = n_min - 1
     notes = [f"route margin lowered to {best.margin:.3f} m in a narrow passage"] if best.margin < margin else []
     n_route = n_min
     witness = None
     if fewest and n_lower < n_min and (robots is None or robots >= n_lower):
         # fewer robots than the route chain needs: a chain anywhere in the free space (the same search whatever N;
         # none for an N already proven too few: its refusal stands, and names the route's count)
-        witness, proven = _witness(env, base, goal, lim, n_min - 1, n_lower)
-        if proven > n_lower:  # one robot fewer than the chain found: proven too few
-            n_lower, lower_by = proven, "corners"
+        witness, n_proven = _witness(env, base, goal, lim, n_min - 1, n_lower, unproven)
+        if n_proven > n_lower:  # one robot fewer than the chain found: proven too few
+            n_lower, lower_by = n_proven, "corners"
         if witness is not None:
             n_min = max(len(witness) - 1, n_lower)  # a real chain: never below a sound proof
     tight = None

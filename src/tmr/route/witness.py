@@ -66,13 +66,17 @@ def _witness_requirements(env: Any, base: Array, lim: Array) -> tuple[float, Arr
     return first, spans, 2 * env.safety_radius + SPACING_MARGIN
 
 
-def _witness(env: Any, base: Array, goal: Array, lim: Array, robots: int, n_lower: int) -> tuple[Array | None, int]:
+def _witness(
+    env: Any, base: Array, goal: Array, lim: Array, robots: int, n_lower: int, unproven: float = math.inf
+) -> tuple[Array | None, int]:
     """A chain of at most ``robots`` robots keeping the stations' clearance and spacing: 2 robots by the grid
     search of :func:`best_pair` when no proof rules them out, else :func:`tmr.route.reach.find_chain`; then, for one
     robot fewer than it found (or ``robots`` if it found none), a chain searched with the obstacles grown less
-    (:data:`WIDEN_RELAX`) and widened to the clearances (:func:`_widened`), unless :func:`proven_too_few` proves
-    that count too few first (a proof in milliseconds where the relaxed searches take seconds and could find no
-    chain; for ``robots`` the caller has run it).
+    (:data:`WIDEN_RELAX`) and widened to the clearances (:func:`_widened`). When the first search found a chain,
+    :func:`proven_too_few` is tried for that count first, unless the caller's proof already failed for ``unproven``
+    ≤ that count (a proof for more robots claims more, so it would fail again, or almost surely): a proof
+    that succeeds takes hundredths of a second where the relaxed searches take seconds and could find no chain;
+    one that fails uses its refinement and narrowing budgets, about 0.5–1 s on the random rooms.
 
     Returns the chain (None if none was found) and the lower bound on the robots it leaves: ``n_lower``, or the
     chain's own count when one robot fewer is proven too few."""
@@ -86,7 +90,7 @@ def _witness(env: Any, base: Array, goal: Array, lim: Array, robots: int, n_lowe
     chain = find_chain(env, base, goal, spans, robots, CHORD_CLEARANCE, first, spacing=spacing, at_least=n_lower)
     fewer = robots if chain is None else len(chain) - 2
     if fewer >= max(n_lower, 3):
-        if chain is not None and proven_too_few(env, base, goal, lim, fewer):
+        if chain is not None and fewer < unproven and proven_too_few(env, base, goal, lim, fewer):
             return chain, fewer + 1
         wide = _widened(env, base, goal, spans, spacing, _needs(first, fewer), fewer, n_lower)
         if wide is not None and wide.margin > 0:
