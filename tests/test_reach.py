@@ -52,7 +52,8 @@ def test_short_hairpin_needs_three_robots_not_two():
 def test_a_given_n_at_or_above_n_min_gets_the_same_proof_as_none(monkeypatch):
     """With N given and N ≥ N_min, the proof runs for N_min − 1 as it does without N: the same n_lower and n_lower_by
     whatever N is asked, and no search for a chain of fewer robots once N_min − 1 are proven too few (it could find
-    none; at 5c8c65e it cost 3–5 s per run on the long_walls rooms with 8 robots, ``formulations/route.md``)."""
+    none; at a5c5229 that search cost 2.6–4 s on long_walls-corner-1536391021 with 8 robots,
+    ``formulations/route.md``)."""
     import tmr.route.route as route_mod
 
     env = _short_wall()
