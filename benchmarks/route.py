@@ -33,6 +33,8 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
+from provenance import source_version  # benchmarks/ is the script's directory: on sys.path
+
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = Path(__file__).resolve().parent / "results"
 KEYS = (
@@ -125,7 +127,8 @@ def main() -> None:
         _child(args)
         return
     t_start = time.perf_counter()
-    here = _rev("HEAD") + ("+" if subprocess.run(["git", "diff", "--quiet", "HEAD"], cwd=ROOT).returncode else "")
+    measured = source_version()  # the commit and any uncommitted changes in src/ (the shared benchmark provenance)
+    here = _rev("HEAD") + ("+" if "uncommitted" in measured else "")
     with tempfile.TemporaryDirectory(prefix="tmr-route-bench-") as tmp:
         tmpdir = Path(tmp)
         runs = {here: (ROOT / "src", tmpdir / "here.json")}
@@ -158,12 +161,12 @@ def main() -> None:
         for rev, rs in rows.items():
             for r in rs:
                 w.writerow([rev if k == "commit" else (f"{r[k]:.4f}" if k == "time" else r[k]) for k in KEYS])
-    text = _tables(rows, args, time.perf_counter() - t_start)
+    text = _tables(rows, args, time.perf_counter() - t_start, measured)
     (RESULTS / f"{args.name}.md").write_text(text)
     print(text)
 
 
-def _tables(rows: dict[str, list[dict]], args: argparse.Namespace, total: float) -> str:
+def _tables(rows: dict[str, list[dict]], args: argparse.Namespace, total: float, measured: str) -> str:
     """The markdown of ``results/NAME.md``: per N, both commits' totals, the paired ratios, the routes that got
     faster or slower and the ones whose verdict changed (module docstring)."""
     md = io.StringIO()
@@ -174,7 +177,8 @@ def _tables(rows: dict[str, list[dict]], args: argparse.Namespace, total: float)
     p(
         f"`python benchmarks/route.py --rooms {args.rooms} --robots {args.robots} --repeat {args.repeat}{against}"
         f"{named}` — {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC, {platform.machine()}, {os.cpu_count()} cores; "
-        f"total {total:.0f} s. `plan_route` as the command line's precheck runs it, the median of {args.repeat} "
+        f"{measured}; total {total:.0f} s. `plan_route` as the command line's precheck runs it, the median of "
+        f"{args.repeat} "
         "call(s) per (room, N)"
         + ("; both commits measured at once, one process each.\n\n" if args.against else ".\n\n")
     )
