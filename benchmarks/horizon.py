@@ -6,6 +6,7 @@ and at scale, on generated rooms and robot counts.
                                  [--seed 0] [--name horizon_rooms]
     python benchmarks/horizon.py --drones F G H [--repeats 3] [--time-limit 60]
     python benchmarks/horizon.py --drone-worlds 12 [--seed 0] [--jobs 2] [--time-limit 60]
+    python benchmarks/horizon.py --misses horizon_rooms_216 [--calibrate 10] [--jobs 2] [--name NAME]
 
 ``--rooms K``: the first K rooms of :func:`tmr.sweep.rooms.room_set` (every density and goal class), each with every
 robot count of ``--robots``, and scenario E with ``--scenario-e`` robots: the whole command line ``python -m tmr.plan
@@ -23,6 +24,14 @@ Writes ``benchmarks/results/horizon_drones.md`` and ``.csv``.
 ``--drone-worlds N``: the drone ``horizon`` with ``--robots auto`` on the generated worlds
 ``tmr.sweep.rooms3d.drone_worlds(N, seed)``, ``--jobs`` processes at a time (:func:`drone_worlds_main`): result,
 rounds, iterations, time, f1–f4 against the qp plan. Writes ``benchmarks/results/horizon_drone_worlds.md``, ``.csv``.
+
+``--misses STEM``: the runs of a committed rooms table (``benchmarks/results/STEM.csv``) whose plan was not optimal
+(or the coarse optimum) within 10 s, run again with the code checked out, with the table's own ``--time-limit``
+(:func:`misses_main`); beside them ``--calibrate`` of the table's optimal runs with 8 robots in a sparse room (the
+first by name), whose median time now / then, over those that took the same IPOPT iterations, says how fast this
+machine is against the table's. Per run: the result and time then and now, the iterations. Writes
+``benchmarks/results/STEM_misses.md`` and ``.csv`` (``--name``: another stem). So the progress on the misses is
+measured without the hour of the whole table, and apart from the machine's speed.
 
 A benchmark, not a test. Every repeat of every scenario runs in a **new Python process** (cold: imports, the lazy
 distance field of the map, the casadi transcription and IPOPT's first call all count), which
@@ -497,6 +506,105 @@ def rooms_main(args: argparse.Namespace) -> None:
     print(md.getvalue())
 
 
+#: A run of a rooms table that issue 33 counts as met: an optimum (or the accepted coarse optimum) within 10 s.
+MET_SECONDS = 10.0
+
+
+def _met(r: dict) -> bool:
+    return r.get("horizon_result") in ("optimal", "coarse_optimal") and float(r["wall_time"]) < MET_SECONDS
+
+
+def select_misses(rows: list[dict], calibrate: int) -> tuple[list[dict], list[dict]]:
+    """The misses of a rooms table's planned ``rows`` (not :func:`_met`), and its first ``calibrate`` optimal runs
+    with 8 robots in sparse rooms by name (the speed reference of the ``--misses`` mode)."""
+    misses = [r for r in rows if r["horizon_result"] and not _met(r)]
+    reference = sorted(
+        (r for r in rows if r["density"] == "sparse" and r["robots"] == "8" and r["horizon_result"] == "optimal"),
+        key=lambda r: r["room"],
+    )[:calibrate]
+    return misses, reference
+
+
+def misses_main(args: argparse.Namespace) -> None:
+    """The ``--misses`` mode (module docstring): the misses of a committed rooms table again, and a speed reference."""
+    from provenance import source_version  # benchmarks/ is the script's directory: on sys.path
+
+    from tmr.sweep.executor import make_executor
+    from tmr.sweep.room_runs import RoomRun, run_room
+    from tmr.sweep.rooms import generate_room
+
+    source = RESULTS / f"{args.misses}.csv"
+    if not source.is_file():
+        sys.exit(f"horizon.py: no table {source}")
+    with open(source, newline="") as fh:
+        then = [r for r in csv.DictReader(fh) if r["density"] != "E" and r["horizon_result"]]
+    head = (RESULTS / f"{args.misses}.md").read_text() if (RESULTS / f"{args.misses}.md").is_file() else ""
+    limit = float(head.split("--time-limit ", 1)[1].split()[0]) if "--time-limit " in head else args.time_limit
+    misses, reference = select_misses(then, args.calibrate)
+    chosen = [("miss", r) for r in misses] + [("reference", r) for r in reference]
+    measured = source_version()  # the commit and any uncommitted changes in src/
+    t_start = time.perf_counter()
+    extra = ("--time-limit", f"{limit:g}")
+
+    def task(r: dict) -> RoomRun:
+        density, goal_class, seed = r["room"].split("-")
+        return RoomRun(generate_room(int(seed), density, goal_class), "horizon", r["robots"], 0, args.timeout, None,
+                       extra)  # fmt: skip
+
+    executor = make_executor(args.jobs, None, progress=True)
+    try:
+        now = executor.map(run_room, [task(r) for _, r in chosen], desc="runs")
+    finally:
+        executor.close()
+    rows = []
+    for (kind, a), b in zip(chosen, now, strict=True):
+        rows.append({
+            "kind": kind, "room": a["room"], "robots": a["robots"], "n_robots": b.get("n_robots"),
+            "result_then": a["horizon_result"], "result_now": b.get("horizon_result"),
+            "stop_now": b.get("horizon_stop"), "coarse_now": b.get("horizon_coarse"),
+            "iterations_then": int(a["horizon_iterations"] or 0), "iterations_now": b.get("horizon_iterations"),
+            "time_then": float(a["wall_time"]), "time_now": b["wall_time"], "nlp_now": b.get("nlp_time"),
+            "exit_now": b.get("exit_code"), "met_then": _met(a), "met_now": _met(b),
+        })  # fmt: skip
+    name = args.name if args.name != ROOMS_NAME else f"{args.misses}_misses"
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    with open(RESULTS / f"{name}.csv", "w", newline="") as fh:
+        wr = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        wr.writeheader()
+        wr.writerows(rows)
+    ref = [r for r in rows if r["kind"] == "reference"]
+    same = [r["time_now"] / r["time_then"] for r in ref if r["iterations_now"] == r["iterations_then"]]
+    factor = statistics.median(same) if same else math.nan
+    miss = [r for r in rows if r["kind"] == "miss"]
+    counts = Counter(str(r["result_now"]) for r in miss)
+    met = [r for r in miss if r["met_now"]]
+    scaled = [r for r in miss if r["result_now"] in ("optimal", "coarse_optimal") and r["time_now"] / factor < 10]
+    md = io.StringIO()
+    w = md.write
+    named = f" --name {args.name}" if args.name != ROOMS_NAME else ""
+    w(f"# The misses of `{args.misses}`, run again\n\n`python benchmarks/horizon.py --misses {args.misses} "
+      f"--calibrate {args.calibrate} --jobs {args.jobs}{named}` — {datetime_now()}, {measured}, {platform.machine()}, "
+      f"{os.cpu_count()} cores, {args.jobs} runs at a time, `--time-limit {limit:g}` (the table's); total "
+      f"{time.perf_counter() - t_start:.0f} s. Every run is the whole command line, as in the table "
+      "(`tmr.sweep.room_runs.run_room`). A *miss* is a run of the table that was not optimal (or the accepted "
+      f"coarse optimum) within {MET_SECONDS:g} s.\n\n")  # fmt: skip
+    w(f"**This machine against the table's:** the {len(ref)} reference runs (the table's first optimal runs with 8 "
+      f"robots in sparse rooms) took the same IPOPT iterations in {len(same)}; their median time now / then is "
+      f"**{factor:.2f}**.\n\n")  # fmt: skip
+    w(f"**The {len(miss)} misses now:** {', '.join(f'{v} {k}' for k, v in sorted(counts.items()))}; **{len(met)} "
+      f"optimal within {MET_SECONDS:g} s** on this machine, {len(scaled)} with their times divided by {factor:.2f} "
+      "(the table's machine).\n\n")  # fmt: skip
+    w("| run | N | then: result, time [s], iterations | now: result, time [s], iterations | stop now |\n"
+      "|---|---|---|---|---|\n")  # fmt: skip
+    for r in sorted(rows, key=lambda r: (r["kind"] != "miss", r["room"], r["robots"])):
+        mark = "**" if r["met_now"] and not r["met_then"] else ""
+        w(f"| {r['room']}{' (reference)' if r['kind'] == 'reference' else ''} | {r['robots']} | "
+          f"{r['result_then']}, {r['time_then']:.1f}, {r['iterations_then']} | {mark}{r['result_now']}, "
+          f"{r['time_now']:.1f}, {r['iterations_now']}{mark} | {r['stop_now']} |\n")  # fmt: skip
+    (RESULTS / f"{name}.md").write_text(md.getvalue())
+    print(md.getvalue())
+
+
 def datetime_now() -> str:
     import datetime
 
@@ -547,8 +655,13 @@ def main() -> None:
     ap.add_argument("--name", default=ROOMS_NAME, help=f"the rooms mode's file stem (default {ROOMS_NAME})")
     ap.add_argument("--drones", nargs="*", help="the drone mode: these drone scenarios (default F G H), qp vs horizon")
     ap.add_argument("--drone-worlds", type=int, default=0, help="the drone worlds mode: this many generated worlds")
+    ap.add_argument("--misses", help="the misses mode: run again the misses of benchmarks/results/STEM.csv")
+    ap.add_argument("--calibrate", type=int, default=10, help="reference runs of the misses mode (machine speed)")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.misses:
+        misses_main(args)
+        return
     if args.child:
         print(json.dumps(child(args.child, args.seed)))
         return

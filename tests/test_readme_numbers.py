@@ -512,6 +512,12 @@ QUOTES = [
         lambda: all_rooms(),
     ),
     Quote(
+        r"Run again at commit (\w+) \(\[`horizon_rooms_216_misses.md`\]\(benchmarks/results/"
+        r"horizon_rooms_216_misses.md\)\) on a machine ([\d.]+)× slower than the table's \(by its reference runs\),"
+        r" (\d+) misses gave (\d+) optimal plans, (\d+) of them under 10 s \((\d+) at the table's speed\)",
+        lambda: rooms_misses(),
+    ),
+    Quote(
         r"the remaining gap of the first sample \(one narrow room, ([\d,]+)\s+knots of train references with its"
         r" `qp` plan in\s+([\d.]+) s,",
         lambda: (statistics.median(qp_only_knots()), statistics.median(qp_only_times())),
@@ -568,6 +574,36 @@ def all_rooms() -> tuple[int, int, float, float]:
     bad = [r for r in planned if r not in good]
     knots = [statistics.median(float(r["knots"]) for r in rs) for rs in (bad, good)]
     return len(good), len(planned), knots[0], knots[1]
+
+
+def rooms_misses() -> tuple[str, float, int, int, int, int]:
+    """horizon_rooms_216_misses.csv (``benchmarks/horizon.py --misses horizon_rooms_216``): the commit measured (its
+    Markdown's header; src/ unchanged from it), this machine's time
+    against the table's (the median ratio over the reference runs that took the same IPOPT iterations), the misses'
+    count, those now optimal (or the coarse optimum), those of them under 10 s, and those under 10 s with the times
+    divided by that ratio. Its misses are exactly the table's, the runs of horizon_rooms_216.csv not optimal within
+    10 s (the runs the README counts the other way)."""
+    rs = rows("horizon_rooms_216_misses.csv")
+    ref = [r for r in rs if r["kind"] == "reference"]
+    factor = statistics.median(
+        float(r["time_now"]) / float(r["time_then"]) for r in ref if r["iterations_now"] == r["iterations_then"]
+    )
+    miss = [r for r in rs if r["kind"] == "miss"]
+    table = [r for r in rows("horizon_rooms_216.csv") if r["horizon_result"]]
+    met = {(r["room"], r["robots"]) for r in table if r["horizon_result"] in OPTIMAL and float(r["wall_time"]) < 10}
+    bad = {(r["room"], r["robots"]) for r in table} - met
+    assert {(r["room"], r["robots"]) for r in miss} == bad and len(miss) == len(bad)
+    now = [r for r in miss if r["result_now"] in OPTIMAL]
+    commit = re.search(r"tmr commit (\w+)( \+ uncommitted)?", text("horizon_rooms_216_misses.md"))
+    assert commit and not commit.group(2), "the misses table names no commit, or src/ had uncommitted changes"
+    return (
+        commit.group(1),
+        factor,
+        len(miss),
+        len(now),
+        sum(float(r["time_now"]) < 10 for r in now),
+        sum(float(r["time_now"]) / factor < 10 for r in now),
+    )
 
 
 def qp_only_knots() -> list[float]:
