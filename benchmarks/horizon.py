@@ -57,6 +57,7 @@ import json
 import math
 import os
 import platform
+import re
 import statistics
 import subprocess
 import sys
@@ -511,6 +512,8 @@ MET_SECONDS = 10.0
 
 
 def _met(r: dict) -> bool:
+    """Whether a run (a row of a rooms table, or :func:`tmr.sweep.room_runs.run_room`'s dict) is optimal (or the
+    accepted coarse optimum) within :data:`MET_SECONDS` of whole process."""
     return r.get("horizon_result") in ("optimal", "coarse_optimal") and float(r["wall_time"]) < MET_SECONDS
 
 
@@ -526,7 +529,12 @@ def select_misses(rows: list[dict], calibrate: int) -> tuple[list[dict], list[di
 
 
 def misses_main(args: argparse.Namespace) -> None:
-    """The ``--misses`` mode (module docstring): the misses of a committed rooms table again, and a speed reference."""
+    """The ``--misses`` mode (module docstring): the misses of a committed rooms table again, and a speed reference.
+
+    Writes ``benchmarks/results/STEM_misses.md`` and ``.csv`` (``--name``: another stem). The table's scenario-E row,
+    if any, is left out (it is no room). Every run takes the table's ``--time-limit`` (from its Markdown header; the
+    command line's if the header has none) and ``--seed 0``, the rooms mode's default (``tmr.plan --seed`` only
+    matters with ``--route rrt``, which the rooms runs do not use)."""
     from provenance import source_version  # benchmarks/ is the script's directory: on sys.path
 
     from tmr.sweep.executor import make_executor
@@ -534,13 +542,22 @@ def misses_main(args: argparse.Namespace) -> None:
     from tmr.sweep.rooms import generate_room
 
     source = RESULTS / f"{args.misses}.csv"
+    name = args.name if args.name != ROOMS_NAME else f"{args.misses}_misses"
     if not source.is_file():
         sys.exit(f"horizon.py: no table {source}")
+    if name == args.misses:
+        sys.exit(f"horizon.py: --name {name} would overwrite the table it reads")
     with open(source, newline="") as fh:
-        then = [r for r in csv.DictReader(fh) if r["density"] != "E" and r["horizon_result"]]
+        table = list(csv.DictReader(fh))
+    if table and not {"density", "horizon_result", "wall_time", "horizon_iterations"} <= set(table[0]):
+        sys.exit(f"horizon.py: {source} is not a rooms table of `--rooms`")
+    then = [r for r in table if r["density"] != "E" and r["horizon_result"]]
     head = (RESULTS / f"{args.misses}.md").read_text() if (RESULTS / f"{args.misses}.md").is_file() else ""
-    limit = float(head.split("--time-limit ", 1)[1].split()[0]) if "--time-limit " in head else args.time_limit
+    given = re.search(r"--time-limit ([\d.]+)", head)
+    limit, whose = (float(given.group(1)), "the table's") if given else (args.time_limit, "not in the table's header")
     misses, reference = select_misses(then, args.calibrate)
+    if not misses:
+        sys.exit(f"horizon.py: {source} has no misses: every run is optimal within {MET_SECONDS:g} s")
     chosen = [("miss", r) for r in misses] + [("reference", r) for r in reference]
     measured = source_version()  # the commit and any uncommitted changes in src/
     t_start = time.perf_counter()
@@ -562,38 +579,47 @@ def misses_main(args: argparse.Namespace) -> None:
             "kind": kind, "room": a["room"], "robots": a["robots"], "n_robots": b.get("n_robots"),
             "result_then": a["horizon_result"], "result_now": b.get("horizon_result"),
             "stop_now": b.get("horizon_stop"), "coarse_now": b.get("horizon_coarse"),
-            "iterations_then": int(a["horizon_iterations"] or 0), "iterations_now": b.get("horizon_iterations"),
+            "iterations_then": int(a["horizon_iterations"]) if a["horizon_iterations"] else None,
+            "iterations_now": b.get("horizon_iterations"),
             "time_then": float(a["wall_time"]), "time_now": b["wall_time"], "nlp_now": b.get("nlp_time"),
             "exit_now": b.get("exit_code"), "met_then": _met(a), "met_now": _met(b),
         })  # fmt: skip
-    name = args.name if args.name != ROOMS_NAME else f"{args.misses}_misses"
     RESULTS.mkdir(parents=True, exist_ok=True)
     with open(RESULTS / f"{name}.csv", "w", newline="") as fh:
         wr = csv.DictWriter(fh, fieldnames=list(rows[0]))
         wr.writeheader()
         wr.writerows(rows)
     ref = [r for r in rows if r["kind"] == "reference"]
-    same = [r["time_now"] / r["time_then"] for r in ref if r["iterations_now"] == r["iterations_then"]]
-    factor = statistics.median(same) if same else math.nan
+    same = [
+        r["time_now"] / r["time_then"]
+        for r in ref
+        if r["iterations_now"] is not None and r["iterations_now"] == r["iterations_then"]
+    ]
+    factor = statistics.median(same) if same else None  # None: no speed reference
     miss = [r for r in rows if r["kind"] == "miss"]
     counts = Counter(str(r["result_now"]) for r in miss)
     met = [r for r in miss if r["met_now"]]
-    scaled = [r for r in miss if r["result_now"] in ("optimal", "coarse_optimal") and r["time_now"] / factor < 10]
+    scaled = [
+        r for r in miss if r["result_now"] in ("optimal", "coarse_optimal") and factor and r["time_now"] / factor < 10
+    ]
     md = io.StringIO()
     w = md.write
     named = f" --name {args.name}" if args.name != ROOMS_NAME else ""
     w(f"# The misses of `{args.misses}`, run again\n\n`python benchmarks/horizon.py --misses {args.misses} "
       f"--calibrate {args.calibrate} --jobs {args.jobs}{named}` — {datetime_now()}, {measured}, {platform.machine()}, "
-      f"{os.cpu_count()} cores, {args.jobs} runs at a time, `--time-limit {limit:g}` (the table's); total "
+      f"{os.cpu_count()} cores, {args.jobs} runs at a time, `--time-limit {limit:g}` ({whose}); total "
       f"{time.perf_counter() - t_start:.0f} s. Every run is the whole command line, as in the table "
       "(`tmr.sweep.room_runs.run_room`). A *miss* is a run of the table that was not optimal (or the accepted "
       f"coarse optimum) within {MET_SECONDS:g} s.\n\n")  # fmt: skip
-    w(f"**This machine against the table's:** the {len(ref)} reference runs (the table's first optimal runs with 8 "
-      f"robots in sparse rooms) took the same IPOPT iterations in {len(same)}; their median time now / then is "
-      f"**{factor:.2f}**.\n\n")  # fmt: skip
+    w(
+        f"**This machine against the table's:** the {len(ref)} reference runs (the table's first optimal runs with 8 "
+        f"robots in sparse rooms) took the same IPOPT iterations in {len(same)}; "
+        + (f"their median time now / then is **{factor:.2f}**.\n\n" if factor else "so no speed reference.\n\n")
+    )
     w(f"**The {len(miss)} misses now:** {', '.join(f'{v} {k}' for k, v in sorted(counts.items()))}; **{len(met)} "
-      f"optimal within {MET_SECONDS:g} s** on this machine, {len(scaled)} with their times divided by {factor:.2f} "
-      "(the table's machine).\n\n")  # fmt: skip
+      f"optimal within {MET_SECONDS:g} s** on this machine"
+      + (f", {len(scaled)} with their times divided by {factor:.2f} (the table's machine).\n\n" if factor else
+         ".\n\n"))  # fmt: skip
     w("| run | N | then: result, time [s], iterations | now: result, time [s], iterations | stop now |\n"
       "|---|---|---|---|---|\n")  # fmt: skip
     for r in sorted(rows, key=lambda r: (r["kind"] != "miss", r["room"], r["robots"])):
