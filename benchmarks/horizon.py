@@ -545,6 +545,8 @@ def misses_main(args: argparse.Namespace) -> None:
     name = args.name if args.name != ROOMS_NAME else f"{args.misses}_misses"
     if not source.is_file():
         sys.exit(f"horizon.py: no table {source}")
+    if args.calibrate < 0:
+        sys.exit(f"horizon.py: --calibrate must be >= 0, got {args.calibrate}")
     if name == args.misses:
         sys.exit(f"horizon.py: --name {name} would overwrite the table it reads")
     with open(source, newline="") as fh:
@@ -599,9 +601,8 @@ def misses_main(args: argparse.Namespace) -> None:
     miss = [r for r in rows if r["kind"] == "miss"]
     counts = Counter(str(r["result_now"]) for r in miss)
     met = [r for r in miss if r["met_now"]]
-    scaled = [
-        r for r in miss if r["result_now"] in ("optimal", "coarse_optimal") and factor and r["time_now"] / factor < 10
-    ]
+    optimal_now = [r for r in miss if r["result_now"] in ("optimal", "coarse_optimal")]
+    scaled = [r for r in optimal_now if factor and r["time_now"] / factor < MET_SECONDS]
     md = io.StringIO()
     w = md.write
     named = f" --name {args.name}" if args.name != ROOMS_NAME else ""
