@@ -578,11 +578,11 @@ def all_rooms() -> tuple[int, int, float, float]:
 
 def rooms_misses() -> tuple[str, float, int, int, int, int]:
     """horizon_rooms_216_misses.csv (``benchmarks/horizon.py --misses horizon_rooms_216``): the commit measured (its
-    Markdown's header; src/ unchanged from it), this machine's time
-    against the table's (the median ratio over the reference runs that took the same IPOPT iterations), the misses'
-    count, those now optimal (or the coarse optimum), those of them under 10 s, and those under 10 s with the times
-    divided by that ratio. Its misses are exactly the table's, the runs of horizon_rooms_216.csv not optimal within
-    10 s (the runs the README counts the other way)."""
+    Markdown's header; src/ unchanged from it), this machine's time against the table's (the median ratio over the
+    reference runs that took the same IPOPT iterations), the misses' count, those now optimal (or the coarse
+    optimum), those of them under 10 s, and those under 10 s with the times divided by that ratio. Its misses are
+    exactly the table's, the runs of horizon_rooms_216.csv not optimal within 10 s (the runs the README counts the
+    other way), and its "then" columns are the table's."""
     rs = rows("horizon_rooms_216_misses.csv")
     ref = [r for r in rs if r["kind"] == "reference"]
     factor = statistics.median(
@@ -593,6 +593,11 @@ def rooms_misses() -> tuple[str, float, int, int, int, int]:
     met = {(r["room"], r["robots"]) for r in table if r["horizon_result"] in OPTIMAL and float(r["wall_time"]) < 10}
     bad = {(r["room"], r["robots"]) for r in table} - met
     assert {(r["room"], r["robots"]) for r in miss} == bad and len(miss) == len(bad)
+    by_run = {(r["room"], r["robots"]): r for r in table}
+    for r in rs:
+        t = by_run[r["room"], r["robots"]]
+        then = (t["horizon_result"], float(t["wall_time"]), t["horizon_iterations"])
+        assert (r["result_then"], float(r["time_then"]), r["iterations_then"]) == then, r["room"]
     now = [r for r in miss if r["result_now"] in OPTIMAL]
     commit = re.search(r"tmr commit (\w+)( \+ uncommitted)?", text("horizon_rooms_216_misses.md"))
     assert commit and not commit.group(2), "the misses table names no commit, or src/ had uncommitted changes"
