@@ -115,10 +115,9 @@ def _argv(case: str, tmp: Path, time_limit: float) -> list[str]:
     if scenario is not None:
         return ["--scenario", scenario, *argv]
     from tmr.sweep.room_runs import xy_arg
-    from tmr.sweep.rooms import generate_room, write_geojson
+    from tmr.sweep.rooms import generate_room, room_spec, write_geojson
 
-    density, goal_class, seed = room_name.split("-")
-    room = generate_room(int(seed), density, goal_class)
+    room = generate_room(*room_spec(room_name))
     path = write_geojson(room, tmp / f"{room.name}.geojson")
     return ["--map", str(path), f"--base={xy_arg(room.base)}", f"--goal={xy_arg(room.goal)}", *argv]
 

@@ -12,7 +12,16 @@ import shapely
 
 from tmr.sweep import rooms
 from tmr.sweep.room_runs import RoomRun, independent_check, run_room, xy_arg
-from tmr.sweep.rooms import DENSITIES, GOAL_CLASSES, MIN_CLEARANCE, Room, generate_room, room_set, write_geojson
+from tmr.sweep.rooms import (
+    DENSITIES,
+    GOAL_CLASSES,
+    MIN_CLEARANCE,
+    Room,
+    generate_room,
+    room_set,
+    room_spec,
+    write_geojson,
+)
 from tmr.world.maps import load_environment
 
 R = rooms.SAFETY_RADIUS
@@ -121,6 +130,14 @@ def test_closed_corner_is_not_connected() -> None:
     parts = list(shapely.get_parts(env.free))
     holder = [k for k, p in enumerate(parts) for q in (room.base, room.goal) if p.contains(shapely.Point(q))]
     assert len(holder) == 2 and holder[0] != holder[1]
+
+
+def test_room_spec_is_the_inverse_of_the_room_name(every_room: dict[tuple[str, str], Room]) -> None:
+    for (density, goal_class), room in every_room.items():
+        assert room_spec(room.name) == (7, density, goal_class)
+    for bad in ("sparse-near", "sparse-nowhere-12", "crowded-near-12", "sparse-near-x1", "long-walls-far-3"):
+        with pytest.raises(ValueError, match="not a room name"):
+            room_spec(bad)
 
 
 def test_room_set_is_balanced_and_deterministic() -> None:

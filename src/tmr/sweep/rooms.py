@@ -65,6 +65,7 @@ __all__ = [
     "room_from_spec",
     "room_geojson",
     "room_set",
+    "room_spec",
     "span_rows",
     "write_geojson",
 ]
@@ -504,6 +505,16 @@ def room_from_spec(spec: tuple[int, str, str]) -> Room | str:
         return generate_room(seed, density, goal_class)
     except RoomError as exc:
         return str(exc)
+
+
+def room_spec(name: str) -> tuple[int, str, str]:
+    """The (room seed, density, goal class) of a room's name ``"<density>-<goal_class>-<seed>"`` (:attr:`Room.name`,
+    the ``room`` column of the rooms benchmarks), the inverse of :func:`generate_room`'s naming; ValueError if it is
+    not one."""
+    parts = name.split("-")
+    if len(parts) != 3 or parts[0] not in DENSITIES or parts[1] not in GOAL_CLASSES or not parts[2].isdigit():
+        raise ValueError(f"not a room name (<density>-<goal_class>-<seed>): {name!r}")
+    return int(parts[2]), parts[0], parts[1]
 
 
 def room_set(n_rooms: int, seed: int = 0) -> list[tuple[int, str, str]]:
