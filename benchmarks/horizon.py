@@ -68,6 +68,8 @@ from pathlib import Path
 RESULTS = Path(__file__).resolve().parent / "results"
 #: The rooms mode's default file stem (``--name``): ``benchmarks/results/horizon_rooms.md``, ``.csv``, ``.png``.
 ROOMS_NAME = "horizon_rooms"
+#: The horizon results that count as optimal: a KKT point of the whole NLP, or the accepted coarse optimum.
+OPTIMAL = ("optimal", "coarse_optimal")
 
 METRIC_KEYS = (
     "success",
@@ -491,7 +493,7 @@ def rooms_main(args: argparse.Namespace) -> None:
           f"{c['warm_start']} | "
           f"{statistics.median(times):.1f} | {max(times):.1f} | {statistics.median(r['knots'] for r in rs):.0f} | "
           f"{ratio(rs, 'f1')} | {ratio(rs, 'f2')} | {ratio(rs, 'f4')} |\n")  # fmt: skip
-    ok = [r for r in planned if r["horizon_result"] in ("optimal", "coarse_optimal") and r.get("knots")
+    ok = [r for r in planned if r["horizon_result"] in OPTIMAL and r.get("knots")
           and r.get("n_robots")]  # fmt: skip
     slope = math.nan
     if len(ok) >= 3:
@@ -514,7 +516,7 @@ MET_SECONDS = 10.0
 def _met(r: dict) -> bool:
     """Whether a run (a row of a rooms table, or :func:`tmr.sweep.room_runs.run_room`'s dict) is optimal (or the
     accepted coarse optimum) within :data:`MET_SECONDS` of whole process."""
-    return r.get("horizon_result") in ("optimal", "coarse_optimal") and float(r["wall_time"]) < MET_SECONDS
+    return r.get("horizon_result") in OPTIMAL and float(r["wall_time"]) < MET_SECONDS
 
 
 def select_misses(rows: list[dict], calibrate: int) -> tuple[list[dict], list[dict]]:
@@ -539,7 +541,7 @@ def misses_main(args: argparse.Namespace) -> None:
 
     from tmr.sweep.executor import make_executor
     from tmr.sweep.room_runs import RoomRun, run_room
-    from tmr.sweep.rooms import generate_room
+    from tmr.sweep.rooms import room_from_spec, room_spec
 
     source = RESULTS / f"{args.misses}.csv"
     name = args.name if args.name != ROOMS_NAME else f"{args.misses}_misses"
@@ -564,15 +566,15 @@ def misses_main(args: argparse.Namespace) -> None:
     measured = source_version()  # the commit and any uncommitted changes in src/
     t_start = time.perf_counter()
     extra = ("--time-limit", f"{limit:g}")
-
-    def task(r: dict) -> RoomRun:
-        density, goal_class, seed = r["room"].split("-")
-        return RoomRun(generate_room(int(seed), density, goal_class), "horizon", r["robots"], 0, args.timeout, None,
-                       extra)  # fmt: skip
-
     executor = make_executor(args.jobs, None, progress=True)
-    try:
-        now = executor.map(run_room, [task(r) for _, r in chosen], desc="runs")
+    try:  # the rooms made by the executor's workers too, as in the rooms mode (one at a time, ~1 s each, before)
+        made = executor.map(room_from_spec, [room_spec(r["room"]) for _, r in chosen], desc="rooms")
+        failed = [m for m in made if isinstance(m, str)]
+        if failed:
+            sys.exit(f"horizon.py: a room of the table is not made again: {failed[0]}")
+        tasks = [RoomRun(room, "horizon", r["robots"], 0, args.timeout, None, extra)
+                 for room, (_, r) in zip(made, chosen, strict=True)]  # fmt: skip
+        now = executor.map(run_room, tasks, desc="runs")
     finally:
         executor.close()
     rows = []
@@ -601,7 +603,7 @@ def misses_main(args: argparse.Namespace) -> None:
     miss = [r for r in rows if r["kind"] == "miss"]
     counts = Counter(str(r["result_now"]) for r in miss)
     met = [r for r in miss if r["met_now"]]
-    optimal_now = [r for r in miss if r["result_now"] in ("optimal", "coarse_optimal")]
+    optimal_now = [r for r in miss if r["result_now"] in OPTIMAL]
     scaled = [r for r in optimal_now if factor and r["time_now"] / factor < MET_SECONDS]
     md = io.StringIO()
     w = md.write
