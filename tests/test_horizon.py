@@ -958,6 +958,28 @@ def test_structured_jacobian_and_hessian_equal_casadis_automatic_ones():
     np.testing.assert_allclose((Ay @ x).full().ravel() + b[:, 1], P[:, 1], atol=1e-12)
 
 
+def test_both_hessians_share_the_models_constants_built_once(monkeypatch):
+    """``_Model.rows_hessian``'s constants in z (the terms' Hessians, the linear rows' matrices) and ∂z/∂x are built
+    once per model: the Gauss–Newton Hessian built first and the exact one after it (as the coarse pass's repair and
+    its polish do) cost one build of them, and the exact Hessian is, to the last bit, that of a model that built only
+    it."""
+    _, _, model, xv, tr = full_transcription()
+    _, _, alone, _, tr_alone = full_transcription()
+    built = []
+    real = horizon_model._joint_terms
+    monkeypatch.setattr(horizon_model, "_joint_terms", lambda *a: built.append(1) or real(*a))
+    gn = tr.derivatives(2.5, "gauss-newton")["hess_lag"]
+    exact = tr.derivatives(2.5, "exact")["hess_lag"]
+    assert len(built) == 1 and model._z_constants() is model._z_constants()
+    only = tr_alone.derivatives(2.5, "exact")["hess_lag"]
+    assert len(built) == 2  # the other model: its own
+    rng = np.random.default_rng(11)
+    x = xv + rng.normal(0.0, 0.02, xv.size)
+    lam = rng.normal(0.0, 1.0, tr.size)
+    np.testing.assert_array_equal(exact(x, [], 0.7, lam).full(), only(x, [], 0.7, lam).full())
+    assert np.abs(exact(x, [], 0.7, lam).full() - gn(x, [], 0.7, lam).full()).max() > 1e-3
+
+
 def test_the_rest_jacobian_group_by_group_is_casadis_jacobian_of_the_stacked_rows():
     """``_Transcription.rest_jacobian`` (casadi's Jacobian of each non-clearance group, stacked) is casadi's Jacobian
     of the non-clearance rows stacked in their order in g, and ``jac_g`` places it around the clearance rows — with

@@ -913,6 +913,8 @@ class _Model:
             self.rest_size += int(rows[g].expr.numel())
         self.gn_terms = ["f1", "f2", "f4"] + (["f3"] if opts.leader_tolerance > 0 else [])
         self._rows_hessian: dict[str, ca.Function] = {}
+        self._z_const: tuple[dict[str, ca.DM], dict[str, ca.DM]] | None = None  # :meth:`_z_constants`
+        self._z_jac: ca.MX | None = None  # :meth:`_z_jacobian`
 
     #: the groups whose rows are linear in z = (Δθ, D) (:meth:`rows_hessian`), each the expression of ``_joint_terms``
     Z_LINEAR = {"span": "D", "joint_speed": "Qd", "joint_accel": "Qdd"}
@@ -942,25 +944,14 @@ class _Model:
         0.16–0.18 s and 11–12 ms (``benchmarks/horizon_hessian.py``)."""
         if hessian in self._rows_hessian:
             return self._rows_hessian[hessian]
-        x, su, opts = self.x, self.su, self.su.opts
-        N, K = su.N, su.K
+        x, opts = self.x, self.su.opts
         lam = ca.MX.sym("lam", self.rest_size)
         lam_of = {g: lam[self.rest_offset[g] : self.rest_offset[g] + int(self.rows[g].expr.numel())]
                   for g in self.rest_groups}  # fmt: skip
-        # constants in z: the terms' Hessians H_t and the linear rows' matrices L_g (exact: quadratic and linear)
         nz = int(self.z.numel())
-        Z = ca.MX.sym("z", nz)
-        jt = _joint_terms(su, ca.reshape(Z[: N * K], N, K), ca.reshape(Z[N * K :], N, K + 1))
-        jt["D"] = ca.reshape(Z[N * K :], N, K + 1)
+        H_t, L = self._z_constants()
         linear = [g for g in self.Z_LINEAR if g in lam_of]
-        const = ca.Function(
-            "z_constants",
-            [Z],
-            [ca.hessian(jt[t], Z)[0] for t in ("f1", "f2", "f4")]
-            + [ca.jacobian(ca.vec(jt[self.Z_LINEAR[g]]), Z) for g in linear],
-        )(np.zeros(nz))
-        H_t = dict(zip(("f1", "f2", "f4"), const[:3], strict=True))
-        rho = sum((ca.mtimes(Lg.T, lam_of[g]) for g, Lg in zip(linear, const[3:], strict=True)), ca.MX.zeros(nz, 1))
+        rho = sum((ca.mtimes(L[g].T, lam_of[g]) for g in linear), ca.MX.zeros(nz, 1))
         if hessian == "gauss-newton":
             c = ca.MX.sym("c", len(self.gn_terms))
             mu = {t: ca.fmax(c[i], 0) for i, t in enumerate(self.gn_terms)}  # c ≥ 0 (weights, clipped multipliers)
@@ -978,7 +969,7 @@ class _Model:
             # f3 (a free leader only): not a function of z, differentiated by casadi below
             phi = mu["f3"] * self.terms(x)[2] if opts.leader_tolerance > 0 else ca.MX(0)
         nx = int(x.numel())
-        blocks = [(ca.jacobian(self.z, x), HF), (self._link_map(nx), self._link_curvature(rho))]
+        blocks = [(self._z_jacobian(), HF), (self._link_map(nx), self._link_curvature(rho))]
         if "separation" in lam_of:
             ls = lam_of["separation"]
             blocks.append((self._separation_map(nx), ca.diag(2 * ca.vertcat(ls, ls))))
@@ -993,6 +984,34 @@ class _Model:
             H = H + ca.mtimes(J3.T, J3)
         self._rows_hessian[hessian] = ca.Function("rows_hessian_" + hessian.replace("-", "_"), [x, c, lam], [H])
         return self._rows_hessian[hessian]
+
+    def _z_constants(self) -> tuple[dict[str, ca.DM], dict[str, ca.DM]]:
+        """The constants of :meth:`rows_hessian` in z = (vec Δθ, vec D), computed once per model (both Hessian kinds
+        use them): the Hessians H_t of f1, f2, f4 (quadratic forms in z) and the matrices L_g of the rows linear in z
+        (:attr:`Z_LINEAR`, every such group of the model)."""
+        if self._z_const is None:
+            su = self.su
+            N, K = su.N, su.K
+            nz = int(self.z.numel())
+            Z = ca.MX.sym("z", nz)
+            jt = _joint_terms(su, ca.reshape(Z[: N * K], N, K), ca.reshape(Z[N * K :], N, K + 1))
+            jt["D"] = ca.reshape(Z[N * K :], N, K + 1)
+            linear = [g for g in self.Z_LINEAR if g in self.rows]
+            const = ca.Function(
+                "z_constants",
+                [Z],
+                [ca.hessian(jt[t], Z)[0] for t in ("f1", "f2", "f4")]
+                + [ca.jacobian(ca.vec(jt[self.Z_LINEAR[g]]), Z) for g in linear],
+            )(np.zeros(nz))
+            H_t = dict(zip(("f1", "f2", "f4"), const[:3], strict=True))
+            self._z_const = (H_t, dict(zip(linear, const[3:], strict=True)))
+        return self._z_const
+
+    def _z_jacobian(self) -> ca.MX:
+        """∂z/∂x (constant in the model's own MX graph), computed once per model."""
+        if self._z_jac is None:
+            self._z_jac = ca.jacobian(self.z, self.x)
+        return self._z_jac
 
     def _link_map(self, nx: int) -> ca.DM:
         """T (2N(K+1) × nx, constant): the variables to the link vectors u = (vec Ux, vec Uy), u_i,k = p_i,k −
