@@ -967,10 +967,11 @@ def test_both_hessians_share_the_models_constants_built_once(monkeypatch):
     _, _, alone, _, tr_alone = full_transcription()
     built = []
     real = horizon_model._joint_terms
-    monkeypatch.setattr(horizon_model, "_joint_terms", lambda *a: built.append(1) or real(*a))
+    monkeypatch.setattr(horizon_model, "_joint_terms", lambda *a, **k: built.append(1) or real(*a, **k))
     gn = tr.derivatives(2.5, "gauss-newton")["hess_lag"]
     exact = tr.derivatives(2.5, "exact")["hess_lag"]
     assert len(built) == 1 and model._z_constants() is model._z_constants()
+    assert model._z_jacobian() is model._z_jacobian()
     only = tr_alone.derivatives(2.5, "exact")["hess_lag"]
     assert len(built) == 2  # the other model: its own
     rng = np.random.default_rng(11)

@@ -1008,7 +1008,7 @@ class _Model:
         return self._z_const
 
     def _z_jacobian(self) -> ca.MX:
-        """∂z/∂x (constant in the model's own MX graph), computed once per model."""
+        """∂z/∂x, an MX expression of :attr:`x` (z is not linear in x), built once per model."""
         if self._z_jac is None:
             self._z_jac = ca.jacobian(self.z, self.x)
         return self._z_jac
