@@ -422,12 +422,14 @@ def drone_worlds_main(args: argparse.Namespace) -> None:
 def rooms_main(args: argparse.Namespace) -> None:
     """The ``--rooms`` mode (module docstring)."""
     import numpy as np
+    from provenance import source_version  # benchmarks/ is the script's directory: on sys.path
 
     from tmr.sweep.executor import make_executor
     from tmr.sweep.room_runs import RoomRun, run_room
     from tmr.sweep.rooms import room_from_spec, room_set
 
     t_start = time.perf_counter()
+    measured = source_version()  # the commit and any uncommitted changes in src/, as the runs start
     robots = [r.strip() for r in args.robots.split(",") if r.strip()]
     extra = ("--time-limit", str(args.time_limit))
     executor = make_executor(args.jobs, None, progress=True)
@@ -458,8 +460,9 @@ def rooms_main(args: argparse.Namespace) -> None:
     w("# horizon at scale: generated rooms and robot counts\n\n")
     named = (f" --seed {args.seed}" if args.seed else "") + (f" --name {args.name}" if args.name != ROOMS_NAME else "")
     w(f"`python benchmarks/horizon.py --rooms {args.rooms} --robots {args.robots} --time-limit {args.time_limit:g} "
-      f"--jobs {args.jobs} --scenario-e {args.scenario_e}{named}` — {datetime_now()}, {platform.machine()}, "
-      f"{os.cpu_count()} cores, {args.jobs} runs at a time; total {time.perf_counter() - t_start:.0f} s. "
+      f"--jobs {args.jobs} --scenario-e {args.scenario_e}{named}` — {datetime_now()}, {measured}, "
+      f"{platform.machine()}, {os.cpu_count()} cores, {args.jobs} runs at a time; "
+      f"total {time.perf_counter() - t_start:.0f} s. "
       "Every run is the whole command line `python -m tmr.plan --map ROOM --base --goal --robots N --method horizon "
       "--no-plots` (or `--scenario E`) in its own process; *time* is that process, interpreter start to exit. The "
       "`qp` columns are the plan `--method qp` returns for the same inputs (the horizon's warm start, recorded in "
