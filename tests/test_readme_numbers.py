@@ -518,6 +518,13 @@ QUOTES = [
         lambda: rooms_misses(),
     ),
     Quote(
+        r"Run again in full at commit (\w+) \(\[`horizon_rooms_216_(\w+).md`\]\(benchmarks/results/"
+        r"horizon_rooms_216_(\w+).md\)\) on a machine ([\d.]+)× slower than the table's \(by the (\d+) runs with the"
+        r" same result and IPOPT iterations in both\), (\d+) of (\d+) plans are optimal, (\d+) of them under 10 s"
+        r" there \((\d+) at the table's speed\), and every plan is no worse than `qp`",
+        lambda: rooms_rerun("64fa0ec"),
+    ),
+    Quote(
         r"the remaining gap of the first sample \(one narrow room, ([\d,]+)\s+knots of train references with its"
         r" `qp` plan in\s+([\d.]+) s,",
         lambda: (statistics.median(qp_only_knots()), statistics.median(qp_only_times())),
@@ -608,6 +615,42 @@ def rooms_misses() -> tuple[str, float, int, int, int, int]:
         len(now),
         sum(float(r["time_now"]) < 10 for r in now),
         sum(float(r["time_now"]) / factor < 10 for r in now),
+    )
+
+
+def rooms_rerun(commit: str) -> tuple[str, str, str, float, int, int, int, int, int]:
+    """horizon_rooms_216_COMMIT.csv (the rooms command run again in full at ``commit``): the commit in its file name
+    and its Markdown's header (src/ unchanged from it), this machine's time against horizon_rooms_216.csv's (the
+    median ratio over the runs with the same result and IPOPT iterations in both) and how many those are, the
+    optimal plans (or the coarse optimum), the plans, those optimal and under 10 s, and those with the times divided
+    by that ratio. The same runs planned as the table's, each no worse than qp in every term and passing the
+    independent check."""
+    stem = f"horizon_rooms_216_{commit}"
+    measured = re.search(r"tmr commit (\w+)( \+ uncommitted)?", text(f"{stem}.md"))
+    assert measured and measured.group(1) == commit and not measured.group(2), "another commit, or src/ changed"
+    new = {(r["room"], r["robots"]): r for r in rows(f"{stem}.csv") if r["horizon_result"]}
+    table = {(r["room"], r["robots"]): r for r in rows("horizon_rooms_216.csv") if r["horizon_result"]}
+    assert new.keys() == table.keys()
+    for r in new.values():
+        assert all(float(r[f"horizon_{k}"]) <= float(r[f"qp_{k}"]) for k in ("f1", "f2", "f3", "f4")), r["room"]
+        assert r["independent_ok"] == "True", r["room"]
+    same = [
+        float(new[k]["wall_time"]) / float(t["wall_time"])
+        for k, t in table.items()
+        if (t["horizon_result"], t["horizon_iterations"]) == (new[k]["horizon_result"], new[k]["horizon_iterations"])
+    ]
+    factor = statistics.median(same)
+    optimal = [r for r in new.values() if r["horizon_result"] in OPTIMAL]
+    return (
+        commit,
+        commit,
+        commit,
+        factor,
+        len(same),
+        len(optimal),
+        len(new),
+        sum(float(r["wall_time"]) < 10 for r in optimal),
+        sum(float(r["wall_time"]) / factor < 10 for r in optimal),
     )
 
 
