@@ -620,11 +620,11 @@ def rooms_misses() -> tuple[str, float, int, int, int, int]:
 
 def rooms_rerun(commit: str) -> tuple[str, str, str, float, int, int, int, int, int]:
     """horizon_rooms_216_COMMIT.csv (the rooms command run again in full at ``commit``): the commit in its file name
-    and its Markdown's header (no uncommitted changes in src/ when it ran), this machine's time against horizon_rooms_216.csv's (the
-    median ratio over the runs with the same result and IPOPT iterations in both) and how many those are, the
-    optimal plans (or the coarse optimum), the plans, those optimal and under 10 s, and those with the times divided
-    by that ratio. The same runs planned as the table's, each no worse than qp in every term and passing the
-    independent check."""
+    and its Markdown's header (no uncommitted changes in src/ when it ran), this machine's time against
+    horizon_rooms_216.csv's (the median ratio over the runs with the same result and IPOPT iterations in both) and how
+    many those are, the optimal plans (or the coarse optimum), the plans, those optimal and under 10 s, and those with
+    the times divided by that ratio. The same runs planned as the table's, each no worse than qp in every term and
+    passing the independent check."""
     stem = f"horizon_rooms_216_{commit}"
     measured = re.search(r"tmr commit (\w+)( \+ uncommitted)?", text(f"{stem}.md"))
     assert measured and measured.group(1) == commit and not measured.group(2), "another commit, or src/ changed"
