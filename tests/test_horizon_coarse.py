@@ -159,6 +159,16 @@ def test_the_polish_runs_with_its_own_floor(problem_and_warm):
     assert horizon_module._polish_phases(opts)[0][1][0][1]["min_hessian_perturbation"] == 3e-6
 
 
+def test_the_polish_curvature_test_is_its_first_attempts_alone():
+    """``coarse_polish_curvature_test`` is IPOPT's ``neg_curv_test_tol`` in the polish's first attempt and nowhere
+    else (its retry keeps the inertia test); ``None`` leaves IPOPT's inertia test everywhere."""
+    (_, attempts), *_ = horizon_module._polish_phases(horizon_model._options({"coarse_polish_curvature_test": 3e-4}))
+    assert [name for name, _ in attempts] == ["primary", "retry"]
+    assert attempts[0][1]["neg_curv_test_tol"] == 3e-4 and "neg_curv_test_tol" not in attempts[1][1]
+    (_, attempts), *_ = horizon_module._polish_phases(horizon_model._options({"coarse_polish_curvature_test": None}))
+    assert all("neg_curv_test_tol" not in extra for _, extra in attempts)
+
+
 def test_a_polish_stopped_at_its_cap_is_retried_from_its_last_iterate(problem_and_warm, monkeypatch):
     """The polish capped at 2 iterations stops at the cap: its retry (``coarse_polish_retry``, 10⁻²) goes on from the
     last iterate and its multipliers and converges, so the plan is the optimum, and the note and the summary say so;
@@ -497,6 +507,9 @@ def test_coarse_options_are_checked(problem_and_warm):
         dict(coarse_refine_depth=float("nan")),
         dict(coarse_polish_min_hessian_perturbation=0),
         dict(coarse_polish_min_hessian_perturbation=float("inf")),
+        dict(coarse_polish_curvature_test=0),
+        dict(coarse_polish_curvature_test=-1e-4),
+        dict(coarse_polish_curvature_test=True),
     )
     for bad in bad_options:
         with pytest.raises(ParameterError):

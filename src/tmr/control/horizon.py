@@ -1443,6 +1443,8 @@ def _polish_phases(opts: HorizonOptions) -> list[tuple[str, list[tuple[str, dict
     if opts.coarse_polish_iter <= 0:
         return []
     cap = {"min_hessian_perturbation": _polish_floor(opts), "max_iter": int(opts.coarse_polish_iter)}
+    if opts.coarse_polish_curvature_test is not None:
+        cap["neg_curv_test_tol"] = float(opts.coarse_polish_curvature_test)
     attempts: list[tuple[str, dict[str, Any]]] = [("primary", cap)]
     if opts.retry and opts.coarse_polish_retry is not None:
         attempts.append(("retry", dict(opts.coarse_polish_retry)))

@@ -144,6 +144,12 @@ class HorizonOptions:
             walls room with 8 robots, its coarse optimum repaired, converges in 36 iterations where 10⁻⁵ stops at
             the cap of 60 (steps of 5–10 cm in a flat valley, the floor hit at every iteration); scenario E with 6
             robots takes 15 instead of 5 (``formulations/horizon.md``, "Coarse knots").
+        coarse_polish_curvature_test: IPOPT's inertia-free curvature test in that polish's first attempt
+            (``neg_curv_test_tol``: a step whose curvature dᵀ(W + Σ)d is at least this times dᵀd is taken as it is,
+            from one factorisation; IPOPT's default, ``None``: the KKT matrix's inertia, factorised first without
+            regularisation and again with it wherever the Hessian is not convex enough). 10⁻⁴ on the rooms
+            benchmark's 79 slowest runs with an accepted coarse optimum: about the same time in all, 4 coarse optima
+            polished, 17 runs changed, 8 of them faster (``formulations/horizon.md``, "Limits", stop 66).
         coarse_polish_retry: if the polish stops without a solution, it is solved once more with these IPOPT
             options merged in and the Hessian ``retry_hessian`` — from the polish's last iterate and multipliers if
             it stopped at its cap, else from the same start (``None``, or ``retry`` False: no retry; the coarse
@@ -290,6 +296,7 @@ class HorizonOptions:
     coarse_refine_depth: float = 0.1
     coarse_polish_iter: int = 60
     coarse_polish_min_hessian_perturbation: float | None = 1e-4
+    coarse_polish_curvature_test: float | None = None
     coarse_polish_retry: dict[str, Any] | None = field(
         default_factory=lambda: {"min_hessian_perturbation": 1e-2, "max_iter": 150}
     )
@@ -341,6 +348,9 @@ class HorizonOptions:
             self.coarse_polish_min_hessian_perturbation,
             "coarse_polish_min_hessian_perturbation",
             " (or None: the fast attempt's)",
+        )
+        _positive_or_none(
+            self.coarse_polish_curvature_test, "coarse_polish_curvature_test", " (or None: the KKT matrix's inertia)"
         )
         if self.retry_first_max_iter is not None and not _positive_integer(self.retry_first_max_iter):
             raise ParameterError(f"retry_first_max_iter must be ≥ 1 or None, got {self.retry_first_max_iter!r}")
