@@ -959,9 +959,8 @@ class _Model:
         lam_of = {g: lam[self.rest_offset[g] : self.rest_offset[g] + int(self.rows[g].expr.numel())]
                   for g in self.rest_groups}  # fmt: skip
         nz = int(self.z.numel())
-        H_t, L = self._z_constants()
-        linear = [g for g in self.Z_LINEAR if g in lam_of]
-        rho = sum((ca.mtimes(L[g].T, lam_of[g]) for g in linear), ca.MX.zeros(nz, 1))
+        H_t, L = self._z_constants()  # L: every group of Z_LINEAR the model has (each in lam_of)
+        rho = sum((ca.mtimes(L[g].T, lam_of[g]) for g in L), ca.MX.zeros(nz, 1))
         if hessian == "gauss-newton":
             c = ca.MX.sym("c", len(self.gn_terms))
             mu = {t: ca.fmax(c[i], 0) for i, t in enumerate(self.gn_terms)}  # c ≥ 0 (weights, clipped multipliers)
