@@ -16,7 +16,7 @@ import csv
 import math
 import re
 import statistics
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from functools import cache
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -575,8 +575,7 @@ def all_rooms() -> tuple[int, int, float, float]:
     """horizon_rooms_216.csv (every room of benchmarks/random_rooms.py): plans optimal and under 10 s, plans, and the
     median knots of the other plans and of those; every plan no worse than qp in each term, as the README says."""
     planned = [r for r in rows("horizon_rooms_216.csv") if r["horizon_result"]]
-    for r in planned:
-        assert all(float(r[f"horizon_{k}"]) <= float(r[f"qp_{k}"]) for k in ("f1", "f2", "f3", "f4")), r["room"]
+    no_worse_than_qp(planned)
     good = [r for r in planned if r["horizon_result"] in OPTIMAL and float(r["wall_time"]) < 10]
     bad = [r for r in planned if r not in good]
     knots = [statistics.median(float(r["knots"]) for r in rs) for rs in (bad, good)]
@@ -608,14 +607,7 @@ def rooms_misses() -> tuple[str, float, int, int, int, int]:
     now = [r for r in miss if r["result_now"] in OPTIMAL]
     commit = re.search(r"tmr commit (\w+)( \+ uncommitted)?", text("horizon_rooms_216_misses.md"))
     assert commit and not commit.group(2), "the misses table names no commit, or src/ had uncommitted changes"
-    return (
-        commit.group(1),
-        factor,
-        len(miss),
-        len(now),
-        sum(float(r["time_now"]) < 10 for r in now),
-        sum(float(r["time_now"]) / factor < 10 for r in now),
-    )
+    return (commit.group(1), factor, len(miss), len(now), *under_10_s([float(r["time_now"]) for r in now], factor))
 
 
 def rooms_rerun(commit: str) -> tuple[str, str, str, float, int, int, int, int, int]:
@@ -631,8 +623,8 @@ def rooms_rerun(commit: str) -> tuple[str, str, str, float, int, int, int, int, 
     new = {(r["room"], r["robots"]): r for r in rows(f"{stem}.csv") if r["horizon_result"]}
     table = {(r["room"], r["robots"]): r for r in rows("horizon_rooms_216.csv") if r["horizon_result"]}
     assert new.keys() == table.keys()
+    no_worse_than_qp(new.values())
     for r in new.values():
-        assert all(float(r[f"horizon_{k}"]) <= float(r[f"qp_{k}"]) for k in ("f1", "f2", "f3", "f4")), r["room"]
         assert r["independent_ok"] == "True", r["room"]
     same = [
         float(new[k]["wall_time"]) / float(t["wall_time"])
@@ -640,18 +632,20 @@ def rooms_rerun(commit: str) -> tuple[str, str, str, float, int, int, int, int, 
         if (t["horizon_result"], t["horizon_iterations"]) == (new[k]["horizon_result"], new[k]["horizon_iterations"])
     ]
     factor = statistics.median(same)
-    optimal = [r for r in new.values() if r["horizon_result"] in OPTIMAL]
-    return (
-        commit,
-        commit,
-        commit,
-        factor,
-        len(same),
-        len(optimal),
-        len(new),
-        sum(float(r["wall_time"]) < 10 for r in optimal),
-        sum(float(r["wall_time"]) / factor < 10 for r in optimal),
-    )
+    optimal = [float(r["wall_time"]) for r in new.values() if r["horizon_result"] in OPTIMAL]
+    return (commit, commit, commit, factor, len(same), len(optimal), len(new), *under_10_s(optimal, factor))
+
+
+def no_worse_than_qp(planned: Iterable[dict[str, str]]) -> None:
+    """Every planned row of a rooms table is no worse than its qp plan in each of f1–f4, as the README says."""
+    for r in planned:
+        assert all(float(r[f"horizon_{k}"]) <= float(r[f"qp_{k}"]) for k in ("f1", "f2", "f3", "f4")), r["room"]
+
+
+def under_10_s(times: list[float], factor: float) -> tuple[int, int]:
+    """How many of ``times`` [s] are under 10 s, and how many with each divided by ``factor`` (this machine's time
+    against the table's: the count at the table's speed)."""
+    return sum(t < 10 for t in times), sum(t / factor < 10 for t in times)
 
 
 def qp_only_knots() -> list[float]:
