@@ -981,6 +981,42 @@ def test_both_hessians_share_the_models_constants_built_once(monkeypatch):
     assert np.abs(exact(x, [], 0.7, lam).full() - gn(x, [], 0.7, lam).full()).max() > 1e-3
 
 
+def test_a_hessian_shift_adds_it_to_the_diagonal_and_nothing_else():
+    """``shift`` δ (``HorizonOptions.coarse_polish_hessian_shift``) adds δ I to the Hessian of the Lagrangian given to
+    IPOPT, exact or Gauss–Newton, with the clearance curvature assembled here or by casadi (whose exact Hessian then
+    becomes a ``hess_lag`` of ours); the rows and their Jacobian are the same."""
+    import casadi as ca
+
+    _, _, model, xv, tr = full_transcription()
+    _, _, ref_model, _, ref = full_transcription(spline=False)
+    rng = np.random.default_rng(5)
+    x = xv + rng.normal(0.0, 0.02, xv.size)
+    lam = rng.normal(0.0, 1.0, tr.size)
+    delta = 3e-4
+    eye = np.eye(xv.size)
+    lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", ref.size)
+    rx = ref_model.x
+    own = ca.Function(
+        "H", [rx, lam_f, lam_g], [ca.triu(ca.hessian(lam_f * ref_model.J / 2.5 + ca.dot(lam_g, ref.g), rx)[0])]
+    )(x, 0.7, lam).full()  # casadi's exact Hessian, which ``ref`` leaves to IPOPT without a shift
+    assert ref.derivatives(2.5, "exact") == {}
+    for t in (tr, ref):
+        for kind in ("exact", "gauss-newton"):
+            H1, H3 = (t.derivatives(2.5, kind, d)["hess_lag"](x, [], 0.7, lam).full() for d in (delta, 3 * delta))
+            # the shift exactly: the same entries off the diagonal, its own to rounding on it
+            rounding = 8 * np.finfo(float).eps * float(np.abs(np.diag(H1)).max())
+            np.testing.assert_allclose(H3 - H1, 2 * delta * eye, rtol=0, atol=rounding)
+            np.testing.assert_array_equal((H3 - H1)[~eye.astype(bool)], 0.0)
+            # and the Hessian under it: the same function's without a shift, or casadi's own (exact, ``ref``)
+            plain = t.derivatives(2.5, kind).get("hess_lag")
+            H0 = own if plain is None else plain(x, [], 0.7, lam).full()
+            np.testing.assert_allclose(H1 - delta * eye, H0, rtol=0, atol=1e-9 * max(1.0, float(np.abs(H0).max())))
+    _, J0 = tr.derivatives(2.5, "exact")["jac_g"](x, [])
+    _, J1 = tr.derivatives(2.5, "exact", delta)["jac_g"](x, [])
+    np.testing.assert_array_equal(J0.full(), J1.full())
+    assert "hess_lag" not in tr.derivatives(2.5, "limited-memory", 0.0)
+
+
 def test_the_rest_jacobian_group_by_group_is_casadis_jacobian_of_the_stacked_rows():
     """``_Transcription.rest_jacobian`` (casadi's Jacobian of each non-clearance group, stacked) is casadi's Jacobian
     of the non-clearance rows stacked in their order in g, and ``jac_g`` places it around the clearance rows — with

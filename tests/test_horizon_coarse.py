@@ -169,6 +169,37 @@ def test_the_polish_curvature_test_is_its_first_attempts_alone():
     assert all("neg_curv_test_tol" not in extra for _, extra in attempts)
 
 
+def test_the_polish_hessian_shift_is_its_first_attempts_alone(problem_and_warm):
+    """``coarse_polish_hessian_shift`` δ is added to the Hessian of the polish's first attempt and of no other attempt
+    (its retry, the coarse NLP, the whole NLP without a coarse pass), recorded in every round and named in the note;
+    ``None``: no shift anywhere."""
+    problem, warm, _ = problem_and_warm
+    opts = horizon_model._options({"coarse_polish_hessian_shift": 3e-4})
+    assert horizon_module._hessian_shift(opts, "polish", "primary", "exact") == 3e-4
+    for phase, label, hessian in (
+        ("polish", "retry", "exact"),
+        ("polish", "primary", "limited-memory"),  # no Hessian to shift
+        ("fast", "primary", "exact"),
+        ("fallback", "primary", "exact"),
+        ("default", "primary", "gauss-newton"),
+    ):
+        assert horizon_module._hessian_shift(opts, phase, label, hessian) == 0.0
+    none = horizon_model._options({"coarse_polish_hessian_shift": None})
+    assert horizon_module._hessian_shift(none, "polish", "primary", "exact") == 0.0
+    for shift in (3e-4, None):
+        d = plan_horizon(problem, warm, coarse_polish_hessian_shift=shift, **ON).diagnostics
+        assert d["horizon_result"] in ("optimal", "coarse_optimal")
+        polish = [r for r in d["round_log"] if r["phase"] == "polish"]
+        assert polish and polish[0]["attempt"] == "primary"
+        assert [r["hessian_shift"] for r in polish if r["attempt"] == "primary"] == [shift or 0.0] * sum(
+            r["attempt"] == "primary" for r in polish
+        )
+        assert all(r["hessian_shift"] == 0.0 for r in d["round_log"] if r["phase"] != "polish")
+        assert ("(exact Hessian + 0.0003 I)" in d["horizon_note"]) == (shift is not None)
+    d = plan_horizon(problem, warm, coarse_polish_hessian_shift=3e-4).diagnostics  # K = 30: no coarse pass
+    assert d["round_log"] and all(r["hessian_shift"] == 0.0 for r in d["round_log"])
+
+
 def test_a_polish_stopped_at_its_cap_is_retried_from_its_last_iterate(problem_and_warm, monkeypatch):
     """The polish capped at 2 iterations stops at the cap: its retry (``coarse_polish_retry``, 10⁻²) goes on from the
     last iterate and its multipliers and converges, so the plan is the optimum, and the note and the summary say so;
@@ -510,6 +541,10 @@ def test_coarse_options_are_checked(problem_and_warm):
         dict(coarse_polish_curvature_test=0),
         dict(coarse_polish_curvature_test=-1e-4),
         dict(coarse_polish_curvature_test=True),
+        dict(coarse_polish_hessian_shift=0),
+        dict(coarse_polish_hessian_shift=-1e-4),
+        dict(coarse_polish_hessian_shift=float("nan")),
+        dict(coarse_polish_hessian_shift=True),
     )
     for bad in bad_options:
         with pytest.raises(ParameterError):

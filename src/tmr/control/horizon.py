@@ -655,7 +655,8 @@ def _plan_horizon(
                     used = hessian_used(
                         opts, opts.retry_hessian if label == "retry" and opts.retry_hessian is not None else hessian
                     )
-                    solver = tr.solver(obj_scale, extra, callback, used)
+                    shift = _hessian_shift(opts, phase, label, used)
+                    solver = tr.solver(obj_scale, extra, callback, used, shift)
                     build_time, built_rows = time.perf_counter() - t2, tr.size
                     kwargs: dict[str, Any] = dict(x0=x_start, lbx=tr.lbx, ubx=tr.ubx, lbg=tr.lbg, ubg=tr.ubg)
                     if prev is not None and lam_start is not None:  # primal–dual warm start from the previous round
@@ -698,6 +699,7 @@ def _plan_horizon(
                             phase=phase,
                             min_hessian_perturbation=_floor_of(opts, extra),
                             hessian=used,
+                            hessian_shift=shift,
                             from_last=from_last,
                             status=status,
                             iterations=int(stats.get("iter_count", -1)),
@@ -890,7 +892,7 @@ def _plan_horizon(
         if opts.coarse_polish_iter > 0 and phase_rounds:
             floor_note += (
                 f"; the whole NLP from its optimum: IPOPT min_hessian_perturbation {_polish_floor(opts):g} "
-                f"({_HESSIAN[opts.fast_hessian]} Hessian), "
+                f"({_HESSIAN[opts.fast_hessian]} Hessian{_shift_note(opts)}), "
                 f"at most {opts.coarse_polish_iter} iterations"
             )
             if retried:  # the polish's own retry (HorizonOptions.coarse_polish_retry)
@@ -1434,6 +1436,21 @@ def _polish_floor(opts: HorizonOptions) -> float:
     if fast is not None and fast < opts.min_hessian_perturbation:
         return float(fast)
     return float(opts.min_hessian_perturbation)
+
+
+def _hessian_shift(opts: HorizonOptions, phase: str, label: str, hessian: str) -> float:
+    """δ on the diagonal of the Hessian an attempt gives IPOPT: ``coarse_polish_hessian_shift`` in the polish's first
+    attempt (not with ``"limited-memory"``: no Hessian is given), else 0."""
+    shift = opts.coarse_polish_hessian_shift
+    if shift is None or phase != "polish" or label != "primary" or hessian == "limited-memory":
+        return 0.0
+    return float(shift)
+
+
+def _shift_note(opts: HorizonOptions) -> str:
+    """`` + δ I`` where the polish's first attempt shifts its Hessian (:func:`_hessian_shift`), else ``""``."""
+    shift = _hessian_shift(opts, "polish", "primary", opts.fast_hessian)
+    return f" + {shift:g} I" if shift else ""
 
 
 def _polish_phases(opts: HorizonOptions) -> list[tuple[str, list[tuple[str, dict[str, Any]]]]]:

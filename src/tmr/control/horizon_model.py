@@ -150,6 +150,13 @@ class HorizonOptions:
             regularisation and again with it wherever the Hessian is not convex enough). 10⁻⁴ on the rooms
             benchmark's 79 slowest runs with an accepted coarse optimum: about the same time in all, 4 coarse optima
             polished, 17 runs changed, 8 of them faster (``formulations/horizon.md``, "Limits", stop 66).
+        coarse_polish_hessian_shift: δ added to the diagonal of the Hessian of the Lagrangian that the polish's first
+            attempt gives IPOPT (IPOPT's scaled problem, where its regularisation δ_w I is added too; ``None``: none).
+            IPOPT factorises each iteration's KKT matrix first without regularisation and, where its inertia is
+            wrong, again with δ_w ≥ its floor; in the polish that happens at every iteration (stop 66), so with the
+            floor already in the Hessian the first factorisation passes: one an iteration instead of two. Not the
+            same steps as IPOPT's own δ_w: the slacks' block gets no δ, and an iteration that needed no
+            regularisation gets it too (``formulations/horizon.md``, "Limits", stop 67).
         coarse_polish_retry: if the polish stops without a solution, it is solved once more with these IPOPT
             options merged in and the Hessian ``retry_hessian`` — from the polish's last iterate and multipliers if
             it stopped at its cap, else from the same start (``None``, or ``retry`` False: no retry; the coarse
@@ -297,6 +304,7 @@ class HorizonOptions:
     coarse_polish_iter: int = 60
     coarse_polish_min_hessian_perturbation: float | None = 1e-4
     coarse_polish_curvature_test: float | None = None
+    coarse_polish_hessian_shift: float | None = None
     coarse_polish_retry: dict[str, Any] | None = field(
         default_factory=lambda: {"min_hessian_perturbation": 1e-2, "max_iter": 150}
     )
@@ -352,6 +360,7 @@ class HorizonOptions:
         _positive_or_none(
             self.coarse_polish_curvature_test, "coarse_polish_curvature_test", " (or None: the KKT matrix's inertia)"
         )
+        _positive_or_none(self.coarse_polish_hessian_shift, "coarse_polish_hessian_shift", " (or None: no shift)")
         if self.retry_first_max_iter is not None and not _positive_integer(self.retry_first_max_iter):
             raise ParameterError(f"retry_first_max_iter must be ≥ 1 or None, got {self.retry_first_max_iter!r}")
         polish_retry = self.coarse_polish_retry
@@ -1334,27 +1343,28 @@ class _Transcription:
             ca.Sparsity.triplet(model.rest_size, full.size, full.tolist(), list(range(full.size))), 1.0
         )
 
-    def derivatives(self, obj_scale: float, hessian: str | None = None) -> dict[str, ca.Function]:
+    def derivatives(self, obj_scale: float, hessian: str | None = None, shift: float = 0.0) -> dict[str, ca.Function]:
         """casadi ``nlpsol`` options ``jac_g`` and ``hess_lag`` with the structured clearance derivatives (see the
         class docstring) for the cost divided by ``obj_scale``; without the numpy spline or clearance rows empty
-        (casadi's own), except ``hess_lag`` for ``hessian="gauss-newton"``; no ``hess_lag`` with
-        ``hessian="limited-memory"``; ``hessian``: ``None`` = the options'."""
+        (casadi's own), except ``hess_lag`` for ``hessian="gauss-newton"`` or a ``shift``; no ``hess_lag`` with
+        ``hessian="limited-memory"``; ``hessian``: ``None`` = the options'; ``shift``: δ added to the Hessian's
+        diagonal (``HorizonOptions.coarse_polish_hessian_shift``)."""
         hessian = hessian or self.opts.hessian
-        key = (obj_scale, hessian)
+        key = (obj_scale, hessian, shift)
         if key in self._derivatives:
             return self._derivatives[key]
         x = self.model.x
         before, after = self._rest
         nb, na = before.shape[0], after.shape[0]
         if self._clr is None:  # casadi's B-spline node: casadi differentiates the clearance rows
-            if hessian != "gauss-newton":
+            if hessian == "limited-memory" or (hessian != "gauss-newton" and not shift):
                 return {}
             lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.size)
             n = self.size - nb - na  # the clearance rows, between the two
             H = self._rows_hessian(obj_scale, hessian, lam_f, ca.vertcat(lam_g[:nb], lam_g[nb + n :]))
             if n:
                 H = H + ca.hessian(ca.dot(lam_g[nb : nb + n], self.g[nb : nb + n]), x)[0]
-            self._derivatives[key] = {"hess_lag": self._hess_lag(lam_f, lam_g, ca.triu(H))}
+            self._derivatives[key] = {"hess_lag": self._hess_lag(lam_f, lam_g, ca.triu(H), shift)}
             return self._derivatives[key]
         Ax, Ay, (_, cx, cy, cxx, cxy, cyy) = self._clr
         n = Ax.shape[0]
@@ -1375,7 +1385,8 @@ class _Transcription:
         Wxx, Wxy, Wyy = ca.diag(lam_c * cxx.T), ca.diag(lam_c * cxy.T), ca.diag(lam_c * cyy.T)
         Hxy = ca.mtimes(AxT, ca.mtimes(Wxy, Ay))
         H_clr = ca.mtimes(AxT, ca.mtimes(Wxx, Ax)) + ca.mtimes(AyT, ca.mtimes(Wyy, Ay)) + Hxy + Hxy.T
-        self._derivatives[key] = {"jac_g": jac_g, "hess_lag": self._hess_lag(lam_f, lam_g, ca.triu(H_rest + H_clr))}
+        hess_lag = self._hess_lag(lam_f, lam_g, ca.triu(H_rest + H_clr), shift)
+        self._derivatives[key] = {"jac_g": jac_g, "hess_lag": hess_lag}
         return self._derivatives[key]
 
     def rest_jacobian(self) -> Any:
@@ -1386,9 +1397,12 @@ class _Transcription:
         x = self.model.x
         return ca.vertcat(ca.MX(0, x.numel()), *[ca.jacobian(e, x) for e in self._rest_parts[0] + self._rest_parts[1]])
 
-    def _hess_lag(self, lam_f: Any, lam_g: Any, triu: Any) -> ca.Function:
-        """casadi's ``hess_lag`` signature around the upper triangle ``triu`` of the Lagrangian's Hessian."""
+    def _hess_lag(self, lam_f: Any, lam_g: Any, triu: Any, shift: float = 0.0) -> ca.Function:
+        """casadi's ``hess_lag`` signature around the upper triangle ``triu`` of the Lagrangian's Hessian, plus
+        ``shift`` on its diagonal."""
         p = ca.MX.sym("p", 0, 1)
+        if shift:
+            triu = triu + float(shift) * ca.MX(ca.DM.eye(self.model.x.numel()))
         return ca.Function(
             "nlp_hess_l", [self.model.x, p, lam_f, lam_g], [triu], ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]
         )
@@ -1413,17 +1427,23 @@ class _Transcription:
         return m.rows_hessian(hessian)(m.x, ca.vertcat(*[coef[k] for k in m.gn_terms]), lam)
 
     def solver(
-        self, obj_scale: float, extra: dict[str, Any], callback: ca.Callback | None = None, hessian: str | None = None
+        self,
+        obj_scale: float,
+        extra: dict[str, Any],
+        callback: ca.Callback | None = None,
+        hessian: str | None = None,
+        shift: float = 0.0,
     ) -> ca.Function:
         """IPOPT on this transcription, cost divided by ``obj_scale``, with ``extra`` IPOPT options, an optional
-        casadi ``iteration_callback`` (called with x, f, g, … of every iterate; it must outlive the solver) and the
-        Hessian ``hessian`` (``None``: ``HorizonOptions.hessian``)."""
+        casadi ``iteration_callback`` (called with x, f, g, … of every iterate; it must outlive the solver), the
+        Hessian ``hessian`` (``None``: ``HorizonOptions.hessian``) and ``shift`` on its diagonal (ignored with
+        ``"limited-memory"``: no Hessian is given)."""
         hessian = hessian_used(self.opts, hessian)
         nlp = dict(self.nlp, f=self.nlp["f"] / obj_scale)
         opts = _solver_opts(self.opts, extra, hessian)
         if self.opts.max_hessian_perturbation is not None:  # every attempt's ceiling, unless it has its own
             opts["ipopt"].setdefault("max_hessian_perturbation", float(self.opts.max_hessian_perturbation))
-        opts.update(self.derivatives(obj_scale, hessian))
+        opts.update(self.derivatives(obj_scale, hessian, shift if hessian != "limited-memory" else 0.0))
         if callback is not None:
             opts["iteration_callback"] = callback
         return ca.nlpsol("horizon", "ipopt", nlp, opts)
