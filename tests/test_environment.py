@@ -101,6 +101,23 @@ def test_segment_is_free_agrees_with_segment_clearance(builtin_envs: dict[str, E
         np.testing.assert_array_equal(env.segment_is_free(a, b, per_segment), value > per_segment)
 
 
+def test_the_margin_test_is_the_nearest_distance_even_at_the_margin(builtin_envs: dict[str, Environment]) -> None:
+    """``Environment._farther_than`` (only the boundary segments near each segment, stop 67) answers as the distance
+    to the nearest boundary segment > the margin, also with each segment's margin its own distance, one rounding
+    below or above it, or 0 (the envelopes' filter must not leave out the nearest segment at the margin)."""
+    rng = np.random.default_rng(7)
+    for env in builtin_envs.values():
+        xmin, ymin, xmax, ymax = env.bounds
+        a = rng.uniform((xmin, ymin), (xmax, ymax), size=(300, 2))
+        b = a + rng.normal(scale=1.0, size=(300, 2))
+        lines = shapely.linestrings(np.stack([a, b], axis=1))
+        d = env._boundary_distance(lines)
+        assert (d > 0.05).sum() > 100  # far from the boundary, not only on it
+        for margin in (d, np.nextafter(d, 0.0), np.nextafter(d, np.inf), np.zeros_like(d), d + 0.1):
+            np.testing.assert_array_equal(env._farther_than(lines, margin), d > margin)
+        assert not env._farther_than(lines, d).any() and env._farther_than(lines, np.nextafter(d, 0.0))[d > 0].all()
+
+
 def test_segment_is_free_on_and_from_the_boundary(builtin_envs: dict[str, Environment]) -> None:
     """Segments along the free space's boundary (``covers`` holds, clearance 0), from its vertices inward and
     outward, and across an obstacle with both ends free: the boolean test (the prepared boundary met or not, the

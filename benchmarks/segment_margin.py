@@ -1,0 +1,151 @@
+"""The margin test of ``Environment.segment_is_free`` (a segment inside the free space is free iff its distance to the
+boundary is > the margin): only the boundary segments near it (``Environment._farther_than``) against the nearest
+segment of each (``STRtree.query_nearest``, ``Environment._boundary_distance``, until stop 67), on the very calls a
+train search makes, and the whole ``tmr plan --method qp`` run with each.
+
+    python benchmarks/segment_margin.py [--run narrow-far-2856891376:8] [--repeats 3] [--end-to-end 3]
+
+The run (a room of the 216-room set and a robot count; the default one's trailing references fail, so its qp plan
+follows train references, whose search makes most of these tests) is planned once in this process with ``--method
+qp`` (``tmr.plan.main``, as the CLI), every call of the margin test recorded (its segments and margins). The calls
+are then replayed, in their order, through both tests, alternating, ``--repeats`` times; the table checks that they
+agree on every segment. With ``--end-to-end R`` the whole CLI run is timed R times with each test, alternating (its
+``wall_time``), and its ``trajectories.csv`` compared byte for byte.
+
+Writes ``benchmarks/results/segment_margin.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import source_version, versions  # noqa: E402
+
+from tmr.sweep.room_runs import xy_arg  # noqa: E402
+from tmr.sweep.rooms import room_from_spec, room_set, write_geojson  # noqa: E402
+from tmr.world.environment import Environment  # noqa: E402
+
+RESULTS = Path(__file__).resolve().parent / "results"
+#: A run whose qp plan follows train references (the trailing ones fail): 17 s of its 23 s in the train search.
+RUN = "narrow-far-2856891376:8"
+
+
+def _nearest(env: Environment, lines: Any, margin: np.ndarray) -> np.ndarray:
+    """The test until stop 67: the distance to the nearest boundary segment, > the margin."""
+    return env._boundary_distance(lines) > margin
+
+
+def _plan(run: str, out: Path) -> tuple[int, float]:
+    """``tmr plan --method qp`` on ``run``, its outputs in ``out``: the exit code and the plan's ``wall_time`` [s]."""
+    from tmr.plan import main
+
+    name, robots = run.rsplit(":", 1)
+    spec = {s[0]: s for s in room_set(216)}.get(int(name.rsplit("-", 1)[1]))
+    room = room_from_spec(spec) if spec is not None else None
+    if room is None or isinstance(room, str) or room.name != name:
+        sys.exit(f"{name}: not a room of the 216-room set")
+    write_geojson(room, out.parent / "room.geojson")
+    code = main([
+        "--map", str(out.parent / "room.geojson"), f"--base={xy_arg(room.base)}", f"--goal={xy_arg(room.goal)}",
+        "--robots", robots, "--method", "qp", "--no-plots", "--out", str(out), "--seed", "0", "--quiet",
+    ])  # fmt: skip
+    wall = json.loads((out / "timings.json").read_text())["wall_time"] if (out / "timings.json").exists() else 0.0
+    return code, float(wall)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--run", default=RUN, help="ROOM:N, a room of the 216-room set and a robot count")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--end-to-end", type=int, default=0, metavar="R", help="time the whole CLI run R times with each")
+    args = ap.parse_args()
+    calls: list[tuple[Environment, Any, np.ndarray]] = []
+    original = Environment._farther_than
+
+    def spy(self: Environment, lines: Any, margin: np.ndarray) -> np.ndarray:
+        calls.append((self, lines, np.array(margin, dtype=float)))
+        return original(self, lines, margin)
+
+    with tempfile.TemporaryDirectory() as d:
+        Environment._farther_than = spy  # type: ignore[method-assign]
+        try:
+            code, _ = _plan(args.run, Path(d) / "recorded")
+        finally:
+            Environment._farther_than = original  # type: ignore[method-assign]
+        if not calls:
+            sys.exit(f"{args.run}: no margin test was made (exit {code})")
+        agree = all(np.array_equal(original(e, g, m), _nearest(e, g, m)) for e, g, m in calls)
+        times: dict[str, list[float]] = {"nearest": [], "near": []}
+        for _ in range(args.repeats):
+            for label, test in (("nearest", _nearest), ("near", original)):
+                t0 = time.perf_counter()
+                for e, g, m in calls:
+                    test(e, g, m)
+                times[label].append(time.perf_counter() - t0)
+        walls: dict[str, list[float]] = {"nearest": [], "near": []}
+        same_bytes = True
+        for r in range(args.end_to_end):
+            for label in ("nearest", "near"):
+                if label == "nearest":
+                    Environment._farther_than = _nearest  # type: ignore[method-assign,assignment]
+                try:
+                    walls[label].append(_plan(args.run, Path(d) / f"{label}{r}")[1])
+                finally:
+                    Environment._farther_than = original  # type: ignore[method-assign]
+            a, b = (Path(d) / f"{k}{r}" / "trajectories.csv" for k in ("nearest", "near"))
+            same_bytes &= a.read_bytes() == b.read_bytes()
+    tn, tm = (statistics.median(times[k]) for k in ("nearest", "near"))
+    segments = sum(len(g) for _, g, _ in calls)
+    lines = [
+        "# The margin test of `Environment.segment_is_free`: the boundary segments near each segment against the "
+        "nearest one",
+        "",
+        f"`python benchmarks/segment_margin.py --run {args.run} --repeats {args.repeats} --end-to-end "
+        f"{args.end_to_end}` — {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; {source_version()}; "
+        f"{versions(['shapely', 'numpy'])}; {platform.machine()}, {os.cpu_count()} cores.",
+        "",
+        f"`tmr plan --method qp` on `{args.run.replace(':', '` with ')} robots (exit {code}) made the margin test "
+        f"{len(calls):,} times, on {segments:,} segments (those inside the free space and clear of its boundary). "
+        f"Every call replayed in order through each test, alternating; medians of {args.repeats} repeats. Both give "
+        f"the same answer on every segment: **{'yes' if agree else 'NO'}**.",
+        "",
+        "| margin test | time [s] | per segment [µs] |",
+        "|---|---|---|",
+        *(
+            f"| {k} | {t:.2f} | {1e6 * t / segments:.2f} |"
+            for k, t in (
+                ("nearest segment (`query_nearest`, before)", tn),
+                ("segments near it (`_farther_than`, now)", tm),
+            )
+        ),  # fmt: skip
+        "",
+        f"Ratio (near / nearest): **{tm / tn:.3f}**.",
+        "",
+    ]
+    if args.end_to_end:
+        wn, wm = (statistics.median(walls[k]) for k in ("nearest", "near"))
+        lines += [
+            f"The whole CLI run (its `wall_time`, medians of {args.end_to_end}, alternating): **{wn:.1f} s** with the "
+            f"nearest segment, **{wm:.1f} s** now (ratio {wm / wn:.3f}); `trajectories.csv` the same byte for byte: "
+            f"**{'yes' if same_bytes else 'NO'}**.",
+            "",
+        ]
+    text = "\n".join(lines)
+    (RESULTS / "segment_margin.md").write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
