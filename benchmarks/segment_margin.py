@@ -9,8 +9,8 @@ The run (a room of the 216-room set and a robot count; the default one's trailin
 follows train references, whose search makes most of these tests) is planned once in this process with ``--method
 qp`` (``tmr.plan.main``, as the CLI), every call of the margin test recorded (its segments and margins). The calls
 are then replayed, in their order, through both tests, alternating, ``--repeats`` times; the table checks that they
-agree on every segment. With ``--end-to-end R`` the whole CLI run is timed R times with each test, alternating (its
-``wall_time``), and its ``trajectories.csv`` compared byte for byte.
+agree on every segment. With ``--end-to-end R`` the whole CLI run is timed R times with each test, alternating, a new
+process each (its ``wall_time``), and its ``trajectories.csv`` compared byte for byte.
 
 Writes ``benchmarks/results/segment_margin.md``.
 """
@@ -22,6 +22,7 @@ import json
 import os
 import platform
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -47,22 +48,36 @@ def _nearest(env: Environment, lines: Any, margin: np.ndarray) -> np.ndarray:
     return env._boundary_distance(lines) > margin
 
 
-def _plan(run: str, out: Path) -> tuple[int, float]:
-    """``tmr plan --method qp`` on ``run``, its outputs in ``out``: the exit code and the plan's ``wall_time`` [s]."""
-    from tmr.plan import main
-
+def _room_args(run: str, where: Path) -> list[str]:
+    """``tmr plan``'s arguments for ``run`` (its map written into ``where``), up to ``--out``."""
     name, robots = run.rsplit(":", 1)
     spec = {s[0]: s for s in room_set(216)}.get(int(name.rsplit("-", 1)[1]))
     room = room_from_spec(spec) if spec is not None else None
     if room is None or isinstance(room, str) or room.name != name:
         sys.exit(f"{name}: not a room of the 216-room set")
-    write_geojson(room, out.parent / "room.geojson")
-    code = main([
-        "--map", str(out.parent / "room.geojson"), f"--base={xy_arg(room.base)}", f"--goal={xy_arg(room.goal)}",
-        "--robots", robots, "--method", "qp", "--no-plots", "--out", str(out), "--seed", "0", "--quiet",
-    ])  # fmt: skip
-    wall = json.loads((out / "timings.json").read_text())["wall_time"] if (out / "timings.json").exists() else 0.0
-    return code, float(wall)
+    write_geojson(room, where / "room.geojson")
+    return [
+        "--map", str(where / "room.geojson"), f"--base={xy_arg(room.base)}", f"--goal={xy_arg(room.goal)}",
+        "--robots", robots, "--method", "qp", "--no-plots", "--seed", "0", "--quiet",
+    ]  # fmt: skip
+
+
+#: A child process: ``tmr plan`` with the margin test of argv[1] ("nearest": the one until stop 67).
+CHILD = """
+import sys
+from tmr.world.environment import Environment
+if sys.argv[1] == "nearest":
+    Environment._farther_than = lambda self, lines, margin: self._boundary_distance(lines) > margin
+from tmr.plan import main
+sys.exit(main(sys.argv[2:]))
+"""
+
+
+def _cold(args: list[str], label: str, out: Path) -> float:
+    """The plan's ``wall_time`` [s] of ``tmr plan`` in a new process with the margin test ``label``."""
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    subprocess.run([sys.executable, "-c", CHILD, label, *args, "--out", str(out)], check=True, env=env)
+    return float(json.loads((out / "timings.json").read_text())["wall_time"])
 
 
 def main() -> None:
@@ -79,9 +94,12 @@ def main() -> None:
         return original(self, lines, margin)
 
     with tempfile.TemporaryDirectory() as d:
+        run_args = _room_args(args.run, Path(d))
         Environment._farther_than = spy  # type: ignore[method-assign]
         try:
-            code, _ = _plan(args.run, Path(d) / "recorded")
+            from tmr.plan import main as plan_main
+
+            code = plan_main([*run_args, "--out", str(Path(d) / "recorded")])
         finally:
             Environment._farther_than = original  # type: ignore[method-assign]
         if not calls:
@@ -98,12 +116,7 @@ def main() -> None:
         same_bytes = True
         for r in range(args.end_to_end):
             for label in ("nearest", "near"):
-                if label == "nearest":
-                    Environment._farther_than = _nearest  # type: ignore[method-assign,assignment]
-                try:
-                    walls[label].append(_plan(args.run, Path(d) / f"{label}{r}")[1])
-                finally:
-                    Environment._farther_than = original  # type: ignore[method-assign]
+                walls[label].append(_cold(run_args, label, Path(d) / f"{label}{r}"))
             a, b = (Path(d) / f"{k}{r}" / "trajectories.csv" for k in ("nearest", "near"))
             same_bytes &= a.read_bytes() == b.read_bytes()
     tn, tm = (statistics.median(times[k]) for k in ("nearest", "near"))
@@ -137,9 +150,10 @@ def main() -> None:
     if args.end_to_end:
         wn, wm = (statistics.median(walls[k]) for k in ("nearest", "near"))
         lines += [
-            f"The whole CLI run (its `wall_time`, medians of {args.end_to_end}, alternating): **{wn:.1f} s** with the "
-            f"nearest segment, **{wm:.1f} s** now (ratio {wm / wn:.3f}); `trajectories.csv` the same byte for byte: "
-            f"**{'yes' if same_bytes else 'NO'}**.",
+            f"The whole CLI run (its `wall_time`, a new process each, medians of {args.end_to_end}, alternating): "
+            f"**{wn:.1f} s** with the nearest segment, **{wm:.1f} s** now (ratio {wm / wn:.3f}; each run: "
+            f"{', '.join(f'{t:.1f}' for t in walls['nearest'])} and {', '.join(f'{t:.1f}' for t in walls['near'])} s)"
+            f"; `trajectories.csv` the same byte for byte: **{'yes' if same_bytes else 'NO'}**.",
             "",
         ]
     text = "\n".join(lines)
