@@ -643,8 +643,8 @@ class Environment:
         answer as :meth:`_boundary_distance` > ``margin``, from only the boundary segments whose envelope meets the
         geometry's envelope grown by the margin (a segment within the margin has a point there; grown by 1 nm more,
         so that no rounding of the box leaves such a point out: more candidates, the same answer), each distance
-        GEOS's. ``benchmarks/segment_margin.py``: on the 7,488 tests of a train search (``narrow-far-2856891376``,
-        8 robots; 424,851 segments) half the time of the nearest segment of each (``STRtree.query_nearest``)."""
+        GEOS's. ``benchmarks/segment_margin.py``: on the 7,133 tests of a train search (``narrow-far-2856891376``,
+        8 robots; 420,467 segments) 0.46× the time of the nearest segment of each (``STRtree.query_nearest``)."""
         tree, segments = self._tree
         lo = shapely.bounds(lines)
         grow = margin + 1e-9
