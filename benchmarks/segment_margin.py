@@ -39,7 +39,7 @@ from tmr.sweep.rooms import room_from_spec, room_set, write_geojson  # noqa: E40
 from tmr.world.environment import Environment  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
-#: A run whose qp plan follows train references (the trailing ones fail): 17 s of its 23 s in the train search.
+#: A run whose qp plan follows train references (the trailing ones fail): its train search 17 of the 23 s profiled.
 RUN = "narrow-far-2856891376:8"
 
 

@@ -1014,7 +1014,7 @@ def test_a_hessian_shift_adds_it_to_the_diagonal_and_nothing_else():
     _, J0 = tr.derivatives(2.5, "exact")["jac_g"](x, [])
     _, J1 = tr.derivatives(2.5, "exact", delta)["jac_g"](x, [])
     np.testing.assert_array_equal(J0.full(), J1.full())
-    assert "hess_lag" not in tr.derivatives(2.5, "limited-memory", 0.0)
+    assert "hess_lag" not in tr.derivatives(2.5, "limited-memory", delta)  # no Hessian to shift
 
 
 def test_the_rest_jacobian_group_by_group_is_casadis_jacobian_of_the_stacked_rows():

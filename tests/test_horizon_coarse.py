@@ -169,11 +169,19 @@ def test_the_polish_curvature_test_is_its_first_attempts_alone():
     assert all("neg_curv_test_tol" not in extra for _, extra in attempts)
 
 
-def test_the_polish_hessian_shift_is_its_first_attempts_alone(problem_and_warm):
-    """``coarse_polish_hessian_shift`` δ is added to the Hessian of the polish's first attempt and of no other attempt
-    (its retry, the coarse NLP, the whole NLP without a coarse pass), recorded in every round and named in the note;
-    ``None``: no shift anywhere."""
+def test_the_polish_hessian_shift_is_its_first_attempts_alone(problem_and_warm, monkeypatch):
+    """``coarse_polish_hessian_shift`` δ is added to the Hessian of each polish round's primary attempt and of no
+    other attempt (its retry, the coarse NLP, the whole NLP without a coarse pass) — the shift the solver's
+    derivatives are built with, recorded in every round and named in the note; ``None``: no shift anywhere."""
     problem, warm, _ = problem_and_warm
+    built: list[float] = []  # the shift of every solver's derivatives, in build order
+    real = horizon_model._Transcription.derivatives
+
+    def spy(self, obj_scale, hessian=None, shift=0.0):
+        built.append(shift)
+        return real(self, obj_scale, hessian, shift)
+
+    monkeypatch.setattr(horizon_model._Transcription, "derivatives", spy)
     opts = horizon_model._options({"coarse_polish_hessian_shift": 3e-4})
     assert horizon_module._hessian_shift(opts, "polish", "primary", "exact") == 3e-4
     for phase, label, hessian in (
@@ -187,8 +195,12 @@ def test_the_polish_hessian_shift_is_its_first_attempts_alone(problem_and_warm):
     none = horizon_model._options({"coarse_polish_hessian_shift": None})
     assert horizon_module._hessian_shift(none, "polish", "primary", "exact") == 0.0
     for shift in (3e-4, None):
+        built.clear()
         d = plan_horizon(problem, warm, coarse_polish_hessian_shift=shift, **ON).diagnostics
         assert d["horizon_result"] in ("optimal", "coarse_optimal")
+        primary = sum(r["phase"] == "polish" and r["attempt"] == "primary" for r in d["round_log"])
+        assert primary and built.count(3e-4) == (primary if shift else 0)  # the coarse NLP's solvers: 0
+        assert set(built) == ({0.0, 3e-4} if shift else {0.0})
         polish = [r for r in d["round_log"] if r["phase"] == "polish"]
         assert polish and polish[0]["attempt"] == "primary"
         assert [r["hessian_shift"] for r in polish if r["attempt"] == "primary"] == [shift or 0.0] * sum(

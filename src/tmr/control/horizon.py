@@ -1439,8 +1439,8 @@ def _polish_floor(opts: HorizonOptions) -> float:
 
 
 def _hessian_shift(opts: HorizonOptions, phase: str, label: str, hessian: str) -> float:
-    """δ on the diagonal of the Hessian an attempt gives IPOPT: ``coarse_polish_hessian_shift`` in the polish's first
-    attempt (not with ``"limited-memory"``: no Hessian is given), else 0."""
+    """δ on the diagonal of the Hessian an attempt gives IPOPT: ``coarse_polish_hessian_shift`` in the primary
+    attempt of each polish round (not its retry; not with ``"limited-memory"``: no Hessian is given), else 0."""
     shift = opts.coarse_polish_hessian_shift
     if shift is None or phase != "polish" or label != "primary" or hessian == "limited-memory":
         return 0.0
@@ -1449,7 +1449,7 @@ def _hessian_shift(opts: HorizonOptions, phase: str, label: str, hessian: str) -
 
 def _shift_note(opts: HorizonOptions) -> str:
     """`` + δ I`` where the polish's first attempt shifts its Hessian (:func:`_hessian_shift`), else ``""``."""
-    shift = _hessian_shift(opts, "polish", "primary", opts.fast_hessian)
+    shift = _hessian_shift(opts, "polish", "primary", hessian_used(opts, opts.fast_hessian))
     return f" + {shift:g} I" if shift else ""
 
 

@@ -150,13 +150,14 @@ class HorizonOptions:
             regularisation and again with it wherever the Hessian is not convex enough). 10⁻⁴ on the rooms
             benchmark's 79 slowest runs with an accepted coarse optimum: about the same time in all, 4 coarse optima
             polished, 17 runs changed, 8 of them faster (``formulations/horizon.md``, "Limits", stop 66).
-        coarse_polish_hessian_shift: δ added to the diagonal of the Hessian of the Lagrangian that the polish's first
-            attempt gives IPOPT (IPOPT's scaled problem, where its regularisation δ_w I is added too; ``None``: none).
-            IPOPT factorises each iteration's KKT matrix first without regularisation and, where its inertia is
-            wrong, again with δ_w ≥ its floor; in the polish that happens at every iteration (stop 66), so with the
-            floor already in the Hessian the first factorisation passes: one an iteration instead of two. Not the
-            same steps as IPOPT's own δ_w: the slacks' block gets no δ, and an iteration that needed no
-            regularisation gets it too (``formulations/horizon.md``, "Limits", stop 67).
+        coarse_polish_hessian_shift: δ added to the diagonal of the Hessian of the Lagrangian that the primary
+            attempt of each polish round gives IPOPT (not its retry; IPOPT's scaled problem, where its regularisation
+            δ_w I is added too, and its restoration phase too; ``None``: none). IPOPT factorises each iteration's KKT
+            matrix first without regularisation and, where its inertia is wrong, again with δ_w ≥ its floor; in the
+            polish that happens at every iteration (stop 66). With δ = the polish's floor (10⁻⁴, the value measured)
+            the first factorisation passes wherever the floor would have sufficed: one an iteration instead of two.
+            Not the same steps as IPOPT's own δ_w: the slacks' block gets no δ, and an iteration that needed no
+            regularisation gets it too (``formulations/horizon.md``, "Limits", stop 67: not the default).
         coarse_polish_retry: if the polish stops without a solution, it is solved once more with these IPOPT
             options merged in and the Hessian ``retry_hessian`` — from the polish's last iterate and multipliers if
             it stopped at its cap, else from the same start (``None``, or ``retry`` False: no retry; the coarse
@@ -1335,7 +1336,9 @@ class _Transcription:
         # the start (and the equality leader) are fixed: IPOPT removes them (fixed_variable_treatment make_parameter)
         self.lbx, self.ubx = model.lbx, model.ubx
         self.nlp = {"x": model.x, "f": model.J, "g": self.g}
-        self._derivatives: dict[tuple[float, str], dict[str, Any]] = {}
+        self._derivatives: dict[tuple[float, str, float], dict[str, Any]] = {}
+        self._jac: ca.Function | None = None  # :meth:`_jac_g`
+        self._triu_of: dict[tuple[float, str], tuple[Any, Any, Any]] = {}  # :meth:`_triu`
         # the non-clearance rows' entries in the model's list of every entry (_Model.rows_hessian)
         sel = [model.rest_offset[g] + self.index[g] for g in model.rest_groups if g in self.index]
         full = np.concatenate(sel) if sel else np.zeros(0, dtype=int)
@@ -1348,46 +1351,62 @@ class _Transcription:
         class docstring) for the cost divided by ``obj_scale``; without the numpy spline or clearance rows empty
         (casadi's own), except ``hess_lag`` for ``hessian="gauss-newton"`` or a ``shift``; no ``hess_lag`` with
         ``hessian="limited-memory"``; ``hessian``: ``None`` = the options'; ``shift``: δ added to the Hessian's
-        diagonal (``HorizonOptions.coarse_polish_hessian_shift``)."""
+        diagonal (``HorizonOptions.coarse_polish_hessian_shift``). The Jacobian is built once per transcription,
+        the Hessian once per (``obj_scale``, ``hessian``): a shift only wraps it."""
         hessian = hessian or self.opts.hessian
+        if hessian == "limited-memory":  # IPOPT's quasi-Newton approximation: no Hessian to build
+            shift = 0.0
         key = (obj_scale, hessian, shift)
         if key in self._derivatives:
             return self._derivatives[key]
+        out: dict[str, ca.Function] = {}
+        jac_g = self._jac_g()
+        if jac_g is not None:
+            out["jac_g"] = jac_g
+        if hessian != "limited-memory" and (jac_g is not None or hessian == "gauss-newton" or shift):
+            out["hess_lag"] = self._hess_lag(*self._triu(obj_scale, hessian), shift)
+        self._derivatives[key] = out
+        return out
+
+    def _jac_g(self) -> ca.Function | None:
+        """casadi's ``jac_g`` with the clearance rows' Jacobian ∇c(p)ᵀ A from the numpy spline, built once (``None``
+        without the numpy spline or clearance rows: casadi's own)."""
+        if self._clr is None:
+            return None
+        if self._jac is None:
+            Ax, Ay, (_, cx, cy, *_) = self._clr
+            nb = self._rest[0].shape[0]
+            J_rest = self.rest_jacobian()
+            J_clr = ca.mtimes(ca.diag(cx), Ax) + ca.mtimes(ca.diag(cy), Ay)
+            jac = ca.vertcat(J_rest[:nb, :], J_clr, J_rest[nb:, :])
+            p = ca.MX.sym("p", 0, 1)
+            self._jac = ca.Function("nlp_jac_g", [self.model.x, p], [self.g, jac], ["x", "p"], ["g", "jac_g_x"])
+        return self._jac
+
+    def _triu(self, obj_scale: float, hessian: str) -> tuple[Any, Any, Any]:
+        """(λ_f, λ_g, the upper triangle of the Lagrangian's Hessian) for the cost divided by ``obj_scale``, built
+        once per (``obj_scale``, ``hessian``): the cost's and non-clearance rows' (:meth:`_rows_hessian`) plus the
+        clearance rows' Aᵀ (λ ∇²c(p)) A from the numpy spline, or casadi's Hessian of the clearance rows without it."""
+        key = (obj_scale, hessian)
+        if key in self._triu_of:
+            return self._triu_of[key]
         x = self.model.x
-        before, after = self._rest
-        nb, na = before.shape[0], after.shape[0]
+        nb, na = self._rest[0].shape[0], self._rest[1].shape[0]
+        n = self.size - nb - na  # the clearance rows, between the two
+        lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.size)
+        H = self._rows_hessian(obj_scale, hessian, lam_f, ca.vertcat(lam_g[:nb], lam_g[nb + n : nb + n + na]))
         if self._clr is None:  # casadi's B-spline node: casadi differentiates the clearance rows
-            if hessian == "limited-memory" or (hessian != "gauss-newton" and not shift):
-                return {}
-            lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.size)
-            n = self.size - nb - na  # the clearance rows, between the two
-            H = self._rows_hessian(obj_scale, hessian, lam_f, ca.vertcat(lam_g[:nb], lam_g[nb + n :]))
             if n:
                 H = H + ca.hessian(ca.dot(lam_g[nb : nb + n], self.g[nb : nb + n]), x)[0]
-            self._derivatives[key] = {"hess_lag": self._hess_lag(lam_f, lam_g, ca.triu(H), shift)}
-            return self._derivatives[key]
-        Ax, Ay, (_, cx, cy, cxx, cxy, cyy) = self._clr
-        n = Ax.shape[0]
-        p = ca.MX.sym("p", 0, 1)
-        J_rest = self.rest_jacobian()
-        J_clr = ca.mtimes(ca.diag(cx), Ax) + ca.mtimes(ca.diag(cy), Ay)
-        jac = ca.vertcat(J_rest[:nb, :], J_clr, J_rest[nb:, :])
-        jac_g = ca.Function("nlp_jac_g", [x, p], [self.g, jac], ["x", "p"], ["g", "jac_g_x"])
-        if hessian == "limited-memory":  # IPOPT's quasi-Newton approximation: no Hessian to build
-            self._derivatives[key] = {"jac_g": jac_g}
-            return self._derivatives[key]
-        lam_f = ca.MX.sym("lam_f")
-        lam_g = ca.MX.sym("lam_g", self.size)
-        lam_c = lam_g[nb : nb + n]
-        lam_rest = ca.vertcat(lam_g[:nb], lam_g[nb + n : nb + n + na])
-        H_rest = self._rows_hessian(obj_scale, hessian, lam_f, lam_rest)
-        AxT, AyT = Ax.T, Ay.T
-        Wxx, Wxy, Wyy = ca.diag(lam_c * cxx.T), ca.diag(lam_c * cxy.T), ca.diag(lam_c * cyy.T)
-        Hxy = ca.mtimes(AxT, ca.mtimes(Wxy, Ay))
-        H_clr = ca.mtimes(AxT, ca.mtimes(Wxx, Ax)) + ca.mtimes(AyT, ca.mtimes(Wyy, Ay)) + Hxy + Hxy.T
-        hess_lag = self._hess_lag(lam_f, lam_g, ca.triu(H_rest + H_clr), shift)
-        self._derivatives[key] = {"jac_g": jac_g, "hess_lag": hess_lag}
-        return self._derivatives[key]
+        else:
+            Ax, Ay, (_, _, _, cxx, cxy, cyy) = self._clr
+            lam_c = lam_g[nb : nb + n]
+            AxT, AyT = Ax.T, Ay.T
+            Wxx, Wxy, Wyy = ca.diag(lam_c * cxx.T), ca.diag(lam_c * cxy.T), ca.diag(lam_c * cyy.T)
+            Hxy = ca.mtimes(AxT, ca.mtimes(Wxy, Ay))
+            H = H + (ca.mtimes(AxT, ca.mtimes(Wxx, Ax)) + ca.mtimes(AyT, ca.mtimes(Wyy, Ay)) + Hxy + Hxy.T)
+        self._triu_of[key] = (lam_f, lam_g, ca.triu(H))
+        return self._triu_of[key]
 
     def rest_jacobian(self) -> Any:
         """The Jacobian (rows × variables, MX) of the NLP's non-clearance rows in their order in g (the groups before
