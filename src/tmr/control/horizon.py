@@ -1448,7 +1448,7 @@ def _hessian_shift(opts: HorizonOptions, phase: str, label: str, hessian: str) -
 
 
 def _shift_note(opts: HorizonOptions) -> str:
-    """`` + δ I`` where the polish's first attempt shifts its Hessian (:func:`_hessian_shift`), else ``""``."""
+    """`` + δ I`` where the primary attempts of the polish shift its Hessian (:func:`_hessian_shift`), else ``""``."""
     shift = _hessian_shift(opts, "polish", "primary", hessian_used(opts, opts.fast_hessian))
     return f" + {shift:g} I" if shift else ""
 
