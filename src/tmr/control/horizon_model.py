@@ -149,7 +149,8 @@ class HorizonOptions:
             from one factorisation; IPOPT's default, ``None``: the KKT matrix's inertia, factorised first without
             regularisation and again with it wherever the Hessian is not convex enough). 10⁻⁴ on the rooms
             benchmark's 79 slowest runs with an accepted coarse optimum: about the same time in all, 4 coarse optima
-            polished, 17 runs changed, 8 of them faster (``formulations/horizon.md``, "Limits", stop 66).
+            polished, 17 runs changed, 8 of them faster; on the other 91, 89 unchanged (``formulations/horizon.md``,
+            "Limits", stops 66 and 67).
         coarse_polish_hessian_shift: δ added to the diagonal of the Hessian of the Lagrangian that the primary
             attempt of each polish round gives IPOPT (not its retry; IPOPT's scaled problem, where its regularisation
             δ_w I is added too, and its restoration phase too; ``None``: none). IPOPT factorises each iteration's KKT
