@@ -169,7 +169,7 @@ def test_the_polish_curvature_test_is_its_first_attempts_alone():
     assert all("neg_curv_test_tol" not in extra for _, extra in attempts)
 
 
-def test_the_polish_hessian_shift_is_its_first_attempts_alone(problem_and_warm, monkeypatch):
+def test_the_polish_hessian_shift_is_in_its_primary_attempts_alone(problem_and_warm, monkeypatch):
     """``coarse_polish_hessian_shift`` δ is added to the Hessian of each polish round's primary attempt and of no
     other attempt (its retry, the coarse NLP, the whole NLP without a coarse pass) — the shift the solver's
     derivatives are built with, recorded in every round and named in the note; ``None``: no shift anywhere."""
