@@ -62,12 +62,14 @@ def _room_args(run: str, where: Path) -> list[str]:
     ]  # fmt: skip
 
 
-#: A child process: ``tmr plan`` with the margin test of argv[1] ("nearest": the one until stop 67).
-CHILD = """
+#: A child process: ``tmr plan`` with the margin test of argv[1] ("nearest": :func:`_nearest`, until stop 67).
+CHILD = f"""
 import sys
+sys.path.insert(0, {str(Path(__file__).resolve().parent)!r})
 from tmr.world.environment import Environment
 if sys.argv[1] == "nearest":
-    Environment._farther_than = lambda self, lines, margin: self._boundary_distance(lines) > margin
+    from segment_margin import _nearest
+    Environment._farther_than = _nearest
 from tmr.plan import main
 sys.exit(main(sys.argv[2:]))
 """

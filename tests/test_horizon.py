@@ -912,6 +912,16 @@ def full_transcription(spline: bool = True):
     return problem, su, model, xv, horizon_model._Transcription(model, masks)
 
 
+def casadis_own_hessian(model, tr, obj_scale: float, x, lam_f: float, lam):
+    """The upper triangle of the Lagrangian's Hessian λ_f J / ``obj_scale`` + λᵀ g of the transcription ``tr`` (of
+    ``model``) at ``x``, by casadi's automatic differentiation (DM)."""
+    import casadi as ca
+
+    lf, lg = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", tr.size)
+    L = lf * model.J / obj_scale + ca.dot(lg, tr.g)
+    return ca.Function("H", [model.x, lf, lg], [ca.triu(ca.hessian(L, model.x)[0])])(x, lam_f, lam)
+
+
 def test_structured_jacobian_and_hessian_equal_casadis_automatic_ones():
     """The NLP's rows, Jacobian and Lagrangian Hessian assembled from the numpy spline's derivatives and the sparse
     point maps (``_Transcription.derivatives``) are casadi's own (automatic differentiation of the same rows with
@@ -929,12 +939,9 @@ def test_structured_jacobian_and_hessian_equal_casadis_automatic_ones():
     lam = rng.normal(0.0, 1.0, tr.size)
     g1, J1 = custom["jac_g"](x, [])
     H1 = custom["hess_lag"](x, [], 0.7, lam)
-    lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", tr.size)
     rx = ref_model.x
     J2 = ca.Function("J", [rx], [ca.jacobian(ref.g, rx)])(x)
-    H2 = ca.Function(
-        "H", [rx, lam_f, lam_g], [ca.triu(ca.hessian(lam_f * ref_model.J / 2.5 + ca.dot(lam_g, ref.g), rx)[0])]
-    )(x, 0.7, lam)
+    H2 = casadis_own_hessian(ref_model, ref, 2.5, x, 0.7, lam)
     g2 = np.asarray(ca.Function("g", [rx], [ref.g])(x)).ravel()
     np.testing.assert_allclose(np.asarray(g1).ravel(), g2, rtol=0, atol=1e-12)
     np.testing.assert_allclose(np.asarray(ca.Function("g", [model.x], [tr.g])(x)).ravel(), g2, rtol=0, atol=1e-12)
@@ -985,7 +992,6 @@ def test_a_hessian_shift_adds_it_to_the_diagonal_and_nothing_else():
     """``shift`` δ (``HorizonOptions.coarse_polish_hessian_shift``) adds δ I to the Hessian of the Lagrangian given to
     IPOPT, exact or Gauss–Newton, with the clearance curvature assembled here or by casadi (whose exact Hessian then
     becomes a ``hess_lag`` of ours); the rows and their Jacobian are the same."""
-    import casadi as ca
 
     _, _, model, xv, tr = full_transcription()
     _, _, ref_model, _, ref = full_transcription(spline=False)
@@ -994,11 +1000,7 @@ def test_a_hessian_shift_adds_it_to_the_diagonal_and_nothing_else():
     lam = rng.normal(0.0, 1.0, tr.size)
     delta = 3e-4
     eye = np.eye(xv.size)
-    lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", ref.size)
-    rx = ref_model.x
-    own = ca.Function(
-        "H", [rx, lam_f, lam_g], [ca.triu(ca.hessian(lam_f * ref_model.J / 2.5 + ca.dot(lam_g, ref.g), rx)[0])]
-    )(x, 0.7, lam).full()  # casadi's exact Hessian, which ``ref`` leaves to IPOPT without a shift
+    own = casadis_own_hessian(ref_model, ref, 2.5, x, 0.7, lam).full()  # ``ref`` leaves it to IPOPT without a shift
     assert ref.derivatives(2.5, "exact") == {}
     for t in (tr, ref):
         for kind in ("exact", "gauss-newton"):

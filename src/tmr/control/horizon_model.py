@@ -1463,7 +1463,7 @@ class _Transcription:
         opts = _solver_opts(self.opts, extra, hessian)
         if self.opts.max_hessian_perturbation is not None:  # every attempt's ceiling, unless it has its own
             opts["ipopt"].setdefault("max_hessian_perturbation", float(self.opts.max_hessian_perturbation))
-        opts.update(self.derivatives(obj_scale, hessian, shift if hessian != "limited-memory" else 0.0))
+        opts.update(self.derivatives(obj_scale, hessian, shift))
         if callback is not None:
             opts["iteration_callback"] = callback
         return ca.nlpsol("horizon", "ipopt", nlp, opts)
