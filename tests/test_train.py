@@ -89,6 +89,87 @@ def test_the_fast_segment_test_decides_as_the_exact_distance(door_problem) -> No
     assert _Fast(env, 5.0).inner.is_empty
 
 
+def _repair_exhaustive(state, paths, mover: int, other: int, step: float, tries: int):
+    """The repair's definition, every grid point tested: the points within the radius that keep every limit of
+    ``mover`` (``state.valid``), each with its gain — the prefix of ``other``'s steps within the look-ahead at which
+    the two stay far enough apart and, for neighbours, their tether is free and of allowed length — ranked by
+    (−gain, distance to the mover, grid order); the first of the best ``tries`` with a positive gain that a straight
+    move reaches keeping every limit, or None."""
+    import tmr.route.train as train
+
+    X, lim, tenv = state.X, state.lim, state.tenv
+    r = np.arange(-train.REPAIR_RADIUS, train.REPAIR_RADIUS + 1e-9, train.REPAIR_GRID)
+    G = X[mover] + np.stack(np.meshgrid(r, r, indexing="ij"), axis=-1).reshape(-1, 2)
+    G = G[np.linalg.norm(G - X[mover], axis=1) <= train.REPAIR_RADIUS]
+    u = np.arange(paths.u[other] + step, min(paths.length[other], paths.u[other] + train.REPAIR_LOOKAHEAD) + 1e-9, step)
+    if not len(u):
+        return None
+    ahead = paths.at(other, u)
+    d = np.linalg.norm(G[:, None] - ahead[None], axis=2)  # (points, steps)
+    allowed = d >= lim.separation
+    if abs(mover - other) == 1:  # neighbours: their tether of allowed length and free, at the first step at least
+        lo, hi = lim.spans[max(mover, other)]
+        free = tenv.segment_is_free(np.repeat(G[:, None], len(u), axis=1), ahead[None], lim.clearance)
+        allowed &= (d >= lo) & (d <= hi) & free
+        keep = free[:, 0]
+    else:
+        keep = np.ones(len(G), dtype=bool)
+    keep &= state.valid(mover, G)
+    gain = np.cumprod(allowed, axis=1).sum(axis=1)
+    ranked = [(-int(gain[k]), float(np.linalg.norm(G[k] - X[mover])), k) for k in np.flatnonzero(keep)]
+    for gain, _, k in sorted(ranked)[:tries]:
+        if gain == 0:
+            return None
+        m = max(2, int(np.ceil(float(np.linalg.norm(G[k] - X[mover])) / step)) + 1)
+        if state.valid(mover, X[mover] + np.linspace(0.0, 1.0, m)[:, None] * (G[k] - X[mover])).all():
+            return G[k]
+    return None
+
+
+def test_a_repair_is_the_exhaustive_rankings_first_reachable_point(door_problem, monkeypatch) -> None:
+    """:func:`tmr.route.train._repair` tests the grid lazily, best first; what it returns is the definition's,
+    every point tested (``_repair_exhaustive``), for every pair of robots at every state where the door room's train
+    search repairs, and at states round it (every robot moved by up to ~0.3 m) — with batches of one point, of seven
+    and the default's, and two tries or the default's fifty."""
+    import tmr.route.train as train
+
+    rng = np.random.default_rng(5)
+    seen: list[tuple[object, object]] = []
+    unblock = train._unblock
+    checks = {"found": 0, "none": 0, "neighbours": 0, "others": 0}
+    configs = [(1, train.REPAIR_TRIES), (7, 2), (train.REPAIR_BATCH, train.REPAIR_TRIES)]
+
+    def compare(state, paths, step):
+        N = len(state.X)
+        for moved in range(4):
+            X = state.X + (rng.normal(0.0, 0.15, state.X.shape) if moved else 0.0)
+            near = train._State(state.env, state.base, X, state.lim, paths, state.tenv)
+            near.compact = state.compact
+            for mover in range(N):
+                for other in range(N):
+                    if other == mover:
+                        continue
+                    batch, tries = configs[(moved + mover + other) % len(configs)] if moved else configs[0]
+                    monkeypatch.setattr(train, "REPAIR_BATCH", batch)
+                    monkeypatch.setattr(train, "REPAIR_TRIES", tries)
+                    got = train._repair(near, paths, mover, other, step)
+                    want = _repair_exhaustive(near, paths, mover, other, step, tries)
+                    assert (got is None) == (want is None), (moved, mover, other, batch, tries, got, want)
+                    if want is not None:
+                        np.testing.assert_array_equal(got, want)
+                    checks["none" if want is None else "found"] += 1
+                    checks["neighbours" if abs(mover - other) == 1 else "others"] += 1
+        monkeypatch.setattr(train, "REPAIR_BATCH", configs[2][0])
+        monkeypatch.setattr(train, "REPAIR_TRIES", configs[2][1])
+        seen.append((state, paths))
+        return unblock(state, paths, step)
+
+    monkeypatch.setattr(train, "_unblock", compare)
+    train_problem(door_problem)
+    assert len(seen) > 1
+    assert min(checks.values()) > 0, checks
+
+
 def test_train_references_keep_every_limit_through_a_narrow_door(door_problem) -> None:
     trained = train_problem(door_problem)
     ref = trained.references

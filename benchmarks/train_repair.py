@@ -1,0 +1,187 @@
+"""The train search's repair (``tmr.route.train._repair``: the grid point within 1 m from which a blocked robot can
+advance farthest): tested lazily, best first (since stop 68), against testing every grid point (until stop 68), on
+the very calls a train search makes, and the whole ``tmr plan --method qp`` run with each.
+
+    python benchmarks/train_repair.py [--run narrow-far-2856891376:8] [--end-to-end 3]
+
+The run (a room of the 216-room set and a robot count; the default one's trailing references fail, so its qp plan
+follows train references) is planned once in this process with ``--method qp`` (``tmr.plan.main``, as the CLI). At
+every repair the search makes, both versions run on the same state, in alternating order, each timed; the table
+checks that they return the same point (or none) every time. With ``--end-to-end R`` the whole CLI run is timed R
+times with each, alternating, a new process each (its ``wall_time``), and its ``trajectories.csv`` compared byte for
+byte.
+
+Writes ``benchmarks/results/train_repair.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import source_version, versions  # noqa: E402
+from segment_margin import _room_args  # noqa: E402
+
+import tmr.route.train as train  # noqa: E402
+
+RESULTS = Path(__file__).resolve().parent / "results"
+#: A run whose qp plan follows train references (the trailing ones fail); its repairs 12.6 of the 17.2 s of its train
+#: search profiled at stop 67.
+RUN = "narrow-far-2856891376:8"
+
+
+def every_point(state: Any, paths: Any, mover: int, other: int, step: float) -> np.ndarray | None:
+    """The repair until stop 68: every grid point tested (the limits at it; for a neighbour, the tether's clearance
+    at each of ``other``'s steps while the point's prefix lasts), ranked, the first 50 tried."""
+    lim, X, tenv = state.lim, state.X, state.tenv
+    r = np.arange(-train.REPAIR_RADIUS, train.REPAIR_RADIUS + 1e-9, train.REPAIR_GRID)
+    G = X[mover] + np.stack(np.meshgrid(r, r, indexing="ij"), axis=-1).reshape(-1, 2)
+    G = G[np.linalg.norm(G - X[mover], axis=1) <= train.REPAIR_RADIUS]
+    u = np.arange(paths.u[other] + step, min(paths.length[other], paths.u[other] + train.REPAIR_LOOKAHEAD) + 1e-9, step)
+    if not len(u):
+        return None
+    ahead = paths.at(other, u)
+    neighbours = abs(mover - other) == 1
+    if neighbours:
+        G = G[tenv.segment_is_free(G, ahead[0], lim.clearance)]
+    G = G[state.valid(mover, G)] if len(G) else G
+    if not len(G):
+        return None
+    length = np.linalg.norm(G[:, None] - ahead[None], axis=2)
+    ok = length >= lim.separation
+    if neighbours:
+        lo, hi = lim.spans[max(mover, other)]
+        ok &= (length >= lo) & (length <= hi)
+    gain = np.zeros(len(G), dtype=int)
+    alive = np.arange(len(G))
+    for col in range(len(u)):
+        alive = alive[ok[alive, col]]
+        if neighbours and len(alive):
+            alive = alive[tenv.segment_is_free(G[alive], ahead[col], lim.clearance)]
+        if not len(alive):
+            break
+        gain[alive] += 1
+    order = np.lexsort((np.linalg.norm(G - X[mover], axis=1), -gain))
+    for k in order[: train.REPAIR_TRIES]:
+        if gain[k] == 0:
+            return None
+        m = max(2, math.ceil(float(np.linalg.norm(G[k] - X[mover])) / step) + 1)
+        line = X[mover] + np.linspace(0.0, 1.0, m)[:, None] * (G[k] - X[mover])
+        if state.valid(mover, line).all():
+            return G[k]
+    return None
+
+
+#: A child process: ``tmr plan`` with the repair of argv[1] ("every": :func:`every_point`, until stop 68).
+CHILD = f"""
+import sys
+sys.path.insert(0, {str(Path(__file__).resolve().parent)!r})
+import tmr.route.train as train
+if sys.argv[1] == "every":
+    from train_repair import every_point
+    train._repair = every_point
+from tmr.plan import main
+sys.exit(main(sys.argv[2:]))
+"""
+
+
+def _cold(args: list[str], label: str, out: Path) -> float:
+    """The plan's ``wall_time`` [s] of ``tmr plan`` in a new process with the repair ``label``."""
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    subprocess.run([sys.executable, "-c", CHILD, label, *args, "--out", str(out)], check=True, env=env)
+    return float(json.loads((out / "timings.json").read_text())["wall_time"])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--run", default=RUN, help="ROOM:N, a room of the 216-room set and a robot count")
+    ap.add_argument("--end-to-end", type=int, default=0, metavar="R", help="time the whole CLI run R times with each")
+    args = ap.parse_args()
+    lazy = train._repair
+    times: dict[str, list[float]] = {"every": [], "lazy": []}
+    found = [0, 0]  # repairs that return a point, that return none
+    agree = True
+
+    def both(state: Any, paths: Any, mover: int, other: int, step: float) -> np.ndarray | None:
+        nonlocal agree
+        out = {}
+        order = (("every", every_point), ("lazy", lazy))
+        for label, repair in order if len(times["lazy"]) % 2 == 0 else order[::-1]:
+            t0 = time.perf_counter()
+            out[label] = repair(state, paths, mover, other, step)
+            times[label].append(time.perf_counter() - t0)
+        a, b = out["every"], out["lazy"]
+        agree &= (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
+        found[b is None] += 1
+        return b
+
+    with tempfile.TemporaryDirectory() as d:
+        run_args = _room_args(args.run, Path(d))
+        train._repair = both
+        try:
+            from tmr.plan import main as plan_main
+
+            code = plan_main([*run_args, "--out", str(Path(d) / "recorded")])
+        finally:
+            train._repair = lazy
+        if not times["lazy"]:
+            sys.exit(f"{args.run}: the train search made no repair (exit {code})")
+        walls: dict[str, list[float]] = {"every": [], "lazy": []}
+        same_bytes = True
+        for r in range(args.end_to_end):
+            for label in ("every", "lazy"):
+                walls[label].append(_cold(run_args, label, Path(d) / f"{label}{r}"))
+            a, b = (Path(d) / f"{k}{r}" / "trajectories.csv" for k in ("every", "lazy"))
+            same_bytes &= a.read_bytes() == b.read_bytes()
+    te, tl = (sum(times[k]) for k in ("every", "lazy"))
+    ratios = [b / a for a, b in zip(times["every"], times["lazy"], strict=True)]
+    lines = [
+        "# The train search's repair: the grid tested lazily, best first, against every grid point",
+        "",
+        f"`python benchmarks/train_repair.py --run {args.run} --end-to-end {args.end_to_end}` — "
+        f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; {source_version()}; "
+        f"{versions(['shapely', 'numpy'])}; {platform.machine()}, {os.cpu_count()} cores.",
+        "",
+        f"`tmr plan --method qp` on `{args.run.replace(':', '` with ')} robots (exit {code}): its train search made "
+        f"{len(times['lazy']):,} repairs ({found[0]} found a point, {found[1]} none). At each, both versions ran on "
+        f"the same state, in alternating order. They return the same point (or none) every time: "
+        f"**{'yes' if agree else 'NO'}**.",
+        "",
+        "| repair | time, all repairs [s] | median repair [ms] |",
+        "|---|---|---|",
+        f"| every grid point tested (before) | {te:.2f} | {1e3 * statistics.median(times['every']):.1f} |",
+        f"| lazily, best first (now) | {tl:.2f} | {1e3 * statistics.median(times['lazy']):.1f} |",
+        "",
+        f"Ratio (lazy / every), all repairs: **{tl / te:.3f}**; per repair: median {statistics.median(ratios):.3f}, "
+        f"range {min(ratios):.3f}–{max(ratios):.3f}.",
+        "",
+    ]
+    if args.end_to_end:
+        we, wl = (statistics.median(walls[k]) for k in ("every", "lazy"))
+        lines += [
+            f"The whole CLI run (its `wall_time`, a new process each, medians of {args.end_to_end}, alternating): "
+            f"**{we:.1f} s** testing every point, **{wl:.1f} s** now (ratio {wl / we:.3f}; each run: "
+            f"{', '.join(f'{t:.1f}' for t in walls['every'])} and {', '.join(f'{t:.1f}' for t in walls['lazy'])} s)"
+            f"; `trajectories.csv` the same byte for byte: **{'yes' if same_bytes else 'NO'}**.",
+            "",
+        ]
+    text = "\n".join(lines)
+    (RESULTS / "train_repair.md").write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
