@@ -448,6 +448,36 @@ class _State:
             ok[idx] = test(pts[idx])
         return ok
 
+    def valid_groups(
+        self, i: int, pts: Array, owner: NDArray[np.intp], n: int, checks: _Checks | None = None
+    ) -> NDArray[np.bool_]:
+        """Whether every point of each of ``n`` groups keeps all of :meth:`tests` (``owner``: each point's group;
+        ``checks`` as in :meth:`valid`): :meth:`valid` of the points, each group passing iff all its points pass —
+        but a group that fails a check is dropped at once, so the costlier checks test only the points of groups still
+        passing."""
+        pts = np.asarray(pts, dtype=float).reshape(-1, 2)
+        alive = np.ones(n, dtype=bool)
+        idx = np.arange(len(pts))
+        for _, _, test in sorted(self._checks(i) if checks is None else checks, key=lambda check: check[1]):
+            if not len(idx):
+                break
+            alive[owner[idx[~test(pts[idx])]]] = False
+            idx = idx[alive[owner[idx]]]
+        return alive
+
+    def valid_prefix(self, i: int, pts: Array) -> int:
+        """How many of ``pts``, from the first, keep all of :meth:`tests`: the first failure of :meth:`valid` (or all
+        of them) — each check testing only the points before the first failure so far."""
+        pts = np.asarray(pts, dtype=float).reshape(-1, 2)
+        k = len(pts)
+        for _, _, test in sorted(self._checks(i), key=lambda check: check[1]):
+            if not k:
+                break
+            ok = test(pts[:k])
+            if not ok.all():
+                k = int(np.argmin(ok))
+        return k
+
 
 #: Radius [m] and grid step [m] of the positions a follower may step to, off its path, so that the robot ahead can
 #: go on (:func:`_repair`); how far ahead [m] that robot's progress is scored.
@@ -540,7 +570,7 @@ def _repair(state: _State, paths: _Paths, mover: int, other: int, step: float) -
         tried += 1
         m = max(2, math.ceil(float(np.linalg.norm(G[k] - X[mover])) / step) + 1)
         line = X[mover] + np.linspace(0.0, 1.0, m)[:, None] * (G[k] - X[mover])
-        if state.valid(mover, line, checks).all():
+        if state.valid_groups(mover, line, np.zeros(len(line), dtype=np.intp), 1, checks)[0]:
             return G[k]
     return None
 
@@ -563,8 +593,7 @@ def _search(
             if paths.u[i] >= L - 1e-9:
                 continue
             cand = np.append(np.arange(paths.u[i] + step, L - 1e-9, step), L)
-            ok = state.valid(i, paths.at(i, cand))
-            k = int(np.argmin(ok)) if not ok.all() else len(cand)
+            k = state.valid_prefix(i, paths.at(i, cand))
             if k == 0:
                 continue
             moves.append((i, paths.advance(i, float(cand[k - 1]))))
@@ -657,8 +686,7 @@ def _shortcut(state: _State, paths: _Paths, i: int, step: float) -> tuple[int, A
     owner = np.repeat(np.arange(len(targets)), counts)
     frac = (np.arange(len(owner)) - np.repeat(np.cumsum(counts) - counts, counts) + 1) / counts[owner]
     lines = here + frac[:, None] * (Q[owner] - here)  # every line's samples after ``here``, its end included
-    bad = np.bincount(owner[~state.valid(i, lines)], minlength=len(targets))
-    good = np.flatnonzero(bad == 0)
+    good = np.flatnonzero(state.valid_groups(i, lines, owner, len(targets)))
     if not len(good):
         return None
     k = int(good[-1])
@@ -695,8 +723,7 @@ def _along_tether(state: _State, i: int, reel_in: bool, step: float) -> Array | 
         return None
     t = np.append(np.arange(step, reach, step), reach)
     pts = X[mover] + (d / n)[None] * t[:, None]
-    ok = state.valid(mover, pts)
-    k = int(np.argmin(ok)) if not ok.all() else len(t)
+    k = state.valid_prefix(mover, pts)
     return pts[k - 1] if k > 0 and t[k - 1] >= step - 1e-9 else None
 
 
