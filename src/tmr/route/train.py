@@ -509,7 +509,7 @@ def _repair(state: _State, paths: _Paths, mover: int, other: int, step: float) -
     rest after a batch where none passed), and a tested point that ranks before every untested point's bound is
     the next in the ranking. The ranking is that of testing every point
     (``tests/test_train.py::test_a_repair_is_the_exhaustive_rankings_first_reachable_point``); on the 316 repairs
-    of the 8-robot train search of narrow-far-2856891376 it takes 0.27× the time
+    of the 8-robot train search of narrow-far-2856891376 it takes 0.23× the time
     (``benchmarks/train_repair.py``).
     """
     lim, X, tenv = state.lim, state.X, state.tenv
