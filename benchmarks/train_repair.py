@@ -40,8 +40,8 @@ from segment_margin import _room_args  # noqa: E402
 import tmr.route.train as train  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
-#: A run whose qp plan follows train references (the trailing ones fail); its repairs 12.6 of the 17.2 s of its train
-#: search profiled at stop 67.
+#: A run whose qp plan follows train references (the trailing ones fail); its repairs took 12.6 of the 17.2 s of its
+#: train search under stop 67's profiler (which inflates the many small calls).
 RUN = "narrow-far-2856891376:8"
 
 
@@ -160,13 +160,14 @@ def _measure(run: str, end_to_end: int) -> list[str]:
             for name in ("trajectories.csv", "metrics.json"):
                 a, b = (Path(d) / f"{k}{r}" / name for k in ("every", "lazy"))
                 same_bytes &= a.read_bytes() == b.read_bytes()
-    lines = [f"## `{run.replace(':', '` with ')} robots", ""]
+    room, robots = run.rsplit(":", 1)
+    lines = [f"## `{room}` with {'`--robots auto`' if robots == 'auto' else robots + ' robots'}", ""]
     if times["lazy"]:
         te, tl = (sum(times[k]) for k in ("every", "lazy"))
         ratios = [b / a for a, b in zip(times["every"], times["lazy"], strict=True)]
         lines += [
-            f"`tmr plan --method qp` (exit {code}): its train search made {len(times['lazy']):,} repairs ({found[0]} "
-            f"found a point, {found[1]} none). At each, both versions ran on the same state, in alternating order. "
+            f"`tmr plan --method qp` (exit {code}): its train search made {len(times['lazy']):,} repairs ({found[0]:,} "
+            f"found a point, {found[1]:,} none). At each, both versions ran on the same state, in alternating order. "
             f"They return the same point (or none) every time: **{'yes' if agree else 'NO'}**.",
             "",
             "| repair | time, all repairs [s] | median repair [ms] |",

@@ -12,7 +12,7 @@ import shapely
 
 from tmr.planner import build_problem, solve, train_problem
 from tmr.route.references import _anticipate
-from tmr.route.train import TrainError, TrainLimits, _Fast, train_reference
+from tmr.route.train import TrainError, TrainLimits, _Fast, _Paths, _State, train_reference
 from tmr.sweep.rooms import generate_room, write_geojson
 from tmr.world.scenario import load_scenario, scenario_from_map
 
@@ -89,12 +89,14 @@ def test_the_fast_segment_test_decides_as_the_exact_distance(door_problem) -> No
     assert _Fast(env, 5.0).inner.is_empty
 
 
-def _repair_exhaustive(state, paths, mover: int, other: int, step: float, tries: int):
+def _repair_exhaustive(
+    state: _State, paths: _Paths, mover: int, other: int, step: float, tries: int
+) -> tuple[np.ndarray | None, int]:
     """The repair's definition, every grid point tested: the points within the radius that keep every limit of
     ``mover`` (``state.valid``), each with its gain — the prefix of ``other``'s steps within the look-ahead at which
     the two stay far enough apart and, for neighbours, their tether is free and of allowed length — ranked by
     (−gain, distance to the mover, grid order); the first of the best ``tries`` with a positive gain that a straight
-    move reaches keeping every limit, or None."""
+    move reaches keeping every limit, or None; and how many of those points have a positive gain."""
     import tmr.route.train as train
 
     X, lim, tenv = state.X, state.lim, state.tenv
@@ -103,7 +105,7 @@ def _repair_exhaustive(state, paths, mover: int, other: int, step: float, tries:
     G = G[np.linalg.norm(G - X[mover], axis=1) <= train.REPAIR_RADIUS]
     u = np.arange(paths.u[other] + step, min(paths.length[other], paths.u[other] + train.REPAIR_LOOKAHEAD) + 1e-9, step)
     if not len(u):
-        return None
+        return None, 0
     ahead = paths.at(other, u)
     d = np.linalg.norm(G[:, None] - ahead[None], axis=2)  # (points, steps)
     allowed = d >= lim.separation
@@ -116,35 +118,46 @@ def _repair_exhaustive(state, paths, mover: int, other: int, step: float, tries:
         keep = np.ones(len(G), dtype=bool)
     keep &= state.valid(mover, G)
     gain = np.cumprod(allowed, axis=1).sum(axis=1)
-    ranked = [(-int(gain[k]), float(np.linalg.norm(G[k] - X[mover])), k) for k in np.flatnonzero(keep)]
-    for gain, _, k in sorted(ranked)[:tries]:
-        if gain == 0:
-            return None
+    dist = np.linalg.norm(G - X[mover], axis=1)  # row by row, as the ranking's distances (a 1-D norm may round apart)
+    ranked = sorted((-int(gain[k]), float(dist[k]), int(k)) for k in np.flatnonzero(keep))
+    positive = sum(g < 0 for g, _, _ in ranked)
+    for g, _, k in ranked[:tries]:
+        if g == 0:
+            return None, positive
         m = max(2, int(np.ceil(float(np.linalg.norm(G[k] - X[mover])) / step)) + 1)
         if state.valid(mover, X[mover] + np.linspace(0.0, 1.0, m)[:, None] * (G[k] - X[mover])).all():
-            return G[k]
-    return None
+            return G[k], positive
+    return None, positive
 
 
 def test_a_repair_is_the_exhaustive_rankings_first_reachable_point(door_problem, monkeypatch) -> None:
     """:func:`tmr.route.train._repair` tests the grid lazily, best first; what it returns is the definition's,
     every point tested (``_repair_exhaustive``), for every pair of robots at every state where the door room's train
-    search repairs, and at states round it (every robot moved by up to ~0.3 m) — with batches of one point, of seven
-    and the default's, and two tries or the default's fifty."""
+    search repairs, and at three states round each (every robot moved by a normal step of 0.15 m a coordinate), with
+    the slack rule off (as in a repair) and on — with batches of one point, of seven and the default's, and two tries
+    or the default's fifty. Some repairs give the costly tests fewer points than the definition ranks with a positive
+    gain: the laziness is exercised, not only the ranking."""
     import tmr.route.train as train
 
     rng = np.random.default_rng(5)
     seen: list[tuple[object, object]] = []
     unblock = train._unblock
-    checks = {"found": 0, "none": 0, "neighbours": 0, "others": 0}
+    valid = train._State.valid
+    checks = {"found": 0, "none": 0, "neighbours": 0, "others": 0, "lazy": 0}
     configs = [(1, train.REPAIR_TRIES), (7, 2), (train.REPAIR_BATCH, train.REPAIR_TRIES)]
+    costly = [0]  # points given to the costly checks (cost 2: the tethers' clearance) in one repair
+
+    def counted(self, i, pts, tests=None):
+        if tests and min(cost for _, cost, _ in tests) >= 2:
+            costly[0] += len(pts)
+        return valid(self, i, pts, tests)
 
     def compare(state, paths, step):
         N = len(state.X)
         for moved in range(4):
             X = state.X + (rng.normal(0.0, 0.15, state.X.shape) if moved else 0.0)
             near = train._State(state.env, state.base, X, state.lim, paths, state.tenv)
-            near.compact = state.compact
+            near.compact = bool(moved % 2)  # a repair runs without the slack rule (``_unblock``)
             for mover in range(N):
                 for other in range(N):
                     if other == mover:
@@ -152,18 +165,21 @@ def test_a_repair_is_the_exhaustive_rankings_first_reachable_point(door_problem,
                     batch, tries = configs[(moved + mover + other) % len(configs)] if moved else configs[0]
                     monkeypatch.setattr(train, "REPAIR_BATCH", batch)
                     monkeypatch.setattr(train, "REPAIR_TRIES", tries)
+                    costly[0] = 0
                     got = train._repair(near, paths, mover, other, step)
-                    want = _repair_exhaustive(near, paths, mover, other, step, tries)
+                    want, positive = _repair_exhaustive(near, paths, mover, other, step, tries)
                     assert (got is None) == (want is None), (moved, mover, other, batch, tries, got, want)
                     if want is not None:
                         np.testing.assert_array_equal(got, want)
                     checks["none" if want is None else "found"] += 1
                     checks["neighbours" if abs(mover - other) == 1 else "others"] += 1
+                    checks["lazy"] += costly[0] < positive
         monkeypatch.setattr(train, "REPAIR_BATCH", configs[2][0])
         monkeypatch.setattr(train, "REPAIR_TRIES", configs[2][1])
         seen.append((state, paths))
         return unblock(state, paths, step)
 
+    monkeypatch.setattr(train._State, "valid", counted)
     monkeypatch.setattr(train, "_unblock", compare)
     train_problem(door_problem)
     assert len(seen) > 1
@@ -183,6 +199,7 @@ def test_the_grouped_and_prefix_tests_are_the_pointwise_ones(door_problem, monke
 
     def compare(state, paths, step):
         for i in range(len(state.X)):
+            state.compact = bool(i % 2)  # the slack rule off (as in a repair) and on
             pts = state.X[i] + rng.normal(0.0, 0.5, (400, 2))
             owner = np.sort(rng.integers(0, 60, len(pts)))
             ok = state.valid(i, pts)
@@ -196,6 +213,7 @@ def test_the_grouped_and_prefix_tests_are_the_pointwise_ones(door_problem, monke
                 want_k = int(np.argmin(ok)) if not ok.all() else len(ray)
                 assert state.valid_prefix(i, ray) == want_k
                 seen["prefix whole" if want_k == len(ray) else "prefix short"] += 1
+        state.compact = True  # as the search left it
         return unblock(state, paths, step)
 
     monkeypatch.setattr(train, "_unblock", compare)

@@ -465,12 +465,13 @@ class _State:
             idx = idx[alive[owner[idx]]]
         return alive
 
-    def valid_prefix(self, i: int, pts: Array) -> int:
+    def valid_prefix(self, i: int, pts: Array, checks: _Checks | None = None) -> int:
         """How many of ``pts``, from the first, keep all of :meth:`tests`: the first failure of :meth:`valid` (or all
-        of them) — each check testing only the points before the first failure so far."""
+        of them) — each check testing only the points before the first failure so far; ``checks`` as in
+        :meth:`valid`."""
         pts = np.asarray(pts, dtype=float).reshape(-1, 2)
         k = len(pts)
-        for _, _, test in sorted(self._checks(i), key=lambda check: check[1]):
+        for _, _, test in sorted(self._checks(i) if checks is None else checks, key=lambda check: check[1]):
             if not k:
                 break
             ok = test(pts[:k])
@@ -484,8 +485,9 @@ class _State:
 REPAIR_RADIUS = 1.0
 REPAIR_GRID = 0.03
 REPAIR_LOOKAHEAD = 2.0
-#: How many of the best grid points a repair tries (a straight move to each); its first batch of costly tests.
+#: How many of the best grid points a repair tries (a straight move to each).
 REPAIR_TRIES = 50
+#: Grid points in a repair's first batch of costly tests (then four times as many, :func:`_repair`).
 REPAIR_BATCH = 64
 #: Longest tether [m] between a robot and a follower that has not reached its station, in a normal advance: the
 #: chain stays compact, so that no robot runs so far ahead that the one behind cannot follow it round a corner.
@@ -502,15 +504,15 @@ def _repair(state: _State, paths: _Paths, mover: int, other: int, step: float) -
     joined to it by a free tether of allowed length (ties: the nearest Q); None if no Q lets ``other`` advance.
 
     The grid points that keep every limit are ranked by (−gain, distance to the mover, grid order), and the first
-    ``REPAIR_TRIES`` are tried in turn (a straight move to each). Only the cheap limits (arithmetic, the point's
-    clearance) are tested on every point. A point's gain from the distances and spans alone bounds its gain from
-    above; the costly tests (the clearance of the mover's tethers, of the tether to each of ``other``'s steps) run
-    lazily, in the order of that bound, in batches (``REPAIR_BATCH`` points, then four times as many, or all the
-    rest after a batch where none passed), and a tested point that ranks before every untested point's bound is
-    the next in the ranking. The ranking is that of testing every point
-    (``tests/test_train.py::test_a_repair_is_the_exhaustive_rankings_first_reachable_point``); on the 316 repairs
-    of the 8-robot train search of narrow-far-2856891376 it takes 0.23× the time
-    (``benchmarks/train_repair.py``).
+    ``REPAIR_TRIES`` are tried in turn (a straight move to each). Only the cheap limits (cost ≤ 1: arithmetic, the
+    point's clearance, the order along the guide) are tested on every point. A point's gain from the distances and
+    spans alone bounds its gain from above; the costly tests (the clearance of the mover's tethers, of the tether to
+    each of ``other``'s steps) run lazily, in the order of that bound, in batches (``REPAIR_BATCH`` points, then four
+    times as many, or all the rest when no tested point is left to try), and a tested point that ranks before every
+    untested point's bound is the next in the ranking. The ranking is that of testing every point
+    (``tests/test_train.py::test_a_repair_is_the_exhaustive_rankings_first_reachable_point``). On the 316 repairs
+    of the 8-robot train search of narrow-far-2856891376 it takes 0.23× the time in all; a single repair where few
+    points pass, tested in more than one batch, can take longer (up to 1.7×; ``benchmarks/train_repair.py``).
     """
     lim, X, tenv = state.lim, state.X, state.tenv
     r = np.arange(-REPAIR_RADIUS, REPAIR_RADIUS + 1e-9, REPAIR_GRID)
@@ -520,7 +522,7 @@ def _repair(state: _State, paths: _Paths, mover: int, other: int, step: float) -
     if not len(u):
         return None
     checks = state._checks(mover)  # the state does not change here
-    cheap = [check for check in checks if check[1] < 2]  # arithmetic and point clearance: every point at once
+    cheap = [check for check in checks if check[1] < 2]  # arithmetic, the point's clearance, the guide's order
     costly = [check for check in checks if check[1] >= 2]
     G = G[state.valid(mover, G, cheap)]
     ahead = paths.at(other, u)
@@ -544,7 +546,7 @@ def _repair(state: _State, paths: _Paths, mover: int, other: int, step: float) -
         alive = np.arange(len(idx))
         for col in range(len(u)):  # column by column
             alive = alive[ok[idx[alive], col]]
-            if neighbours and len(alive):
+            if neighbours and col and len(alive):  # (step 0's tether: tested above)
                 alive = alive[tenv.segment_is_free(G[idx[alive]], ahead[col], lim.clearance)]
             if not len(alive):
                 break
@@ -558,9 +560,10 @@ def _repair(state: _State, paths: _Paths, mover: int, other: int, step: float) -
         if q >= 0 and (not ranked or ranked[0] > (-int(bound[q]), float(dist[q]), q)):
             # an untested point may rank before every tested one: test the next batch of them
             idx, gain = gains(pending[p : p + batch])
-            for k, g in zip(idx.tolist(), gain.tolist(), strict=True):
-                heapq.heappush(ranked, (-g, float(dist[k]), k))
-            p, batch = p + batch, 4 * batch if ranked else len(pending)  # none passed: likely none will, test them all
+            ranked.extend((-g, float(dist[k]), k) for k, g in zip(idx.tolist(), gain.tolist(), strict=True))
+            heapq.heapify(ranked)
+            # none left to try: few points pass here, so test all the rest at once
+            p, batch = p + batch, 4 * batch if ranked else len(pending)
             continue
         if not ranked:
             return None
@@ -570,7 +573,7 @@ def _repair(state: _State, paths: _Paths, mover: int, other: int, step: float) -
         tried += 1
         m = max(2, math.ceil(float(np.linalg.norm(G[k] - X[mover])) / step) + 1)
         line = X[mover] + np.linspace(0.0, 1.0, m)[:, None] * (G[k] - X[mover])
-        if state.valid_groups(mover, line, np.zeros(len(line), dtype=np.intp), 1, checks)[0]:
+        if state.valid_prefix(mover, line, checks) == len(line):
             return G[k]
     return None
 
