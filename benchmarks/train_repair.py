@@ -1,8 +1,9 @@
 """The train search's repair (``tmr.route.train._repair``: the grid point within 1 m from which a blocked robot can
 advance farthest): tested lazily, best first (since stop 68), against testing every grid point (until stop 68), on
 the very calls a train search makes; and the whole ``tmr plan --method qp`` run with the train search of stop 68
-against that of stop 67 (every grid point tested, and each state's limits tested on every point: no group or prefix
-dropped once its answer is known, ``_State.valid_groups`` and ``_State.valid_prefix``).
+against that of stop 67 (every grid point tested; each state's limits tested on every point: no group or prefix
+dropped once its answer is known, ``_State.valid_groups`` and ``_State.valid_prefix``; the nearest guide sample of
+each point by every sample's distance, not a k-d tree's few, ``_Paths.nearest_arcs``).
 
     python benchmarks/train_repair.py [--run narrow-far-2856891376:8 ...] [--end-to-end 3]
 
@@ -38,6 +39,7 @@ from provenance import source_version, versions  # noqa: E402
 from segment_margin import _room_args  # noqa: E402
 
 import tmr.route.train as train  # noqa: E402
+from tmr.route.route import point_at  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: A run whose qp plan follows train references (the trailing ones fail); its repairs took 12.6 of the 17.2 s of its
@@ -98,17 +100,28 @@ def every_prefix(self: Any, i: int, pts: Any) -> int:
     return int(np.argmin(ok)) if not ok.all() else len(ok)
 
 
+def every_sample(self: Any, pts: Any, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:
+    """``_Paths.nearest_arcs`` until stop 68: every guide sample's distance to every point."""
+    s = np.linspace(lo, hi, max(2, int((hi - lo) / 0.02) + 1))
+    G = point_at(self.guide, self.garcs, s)
+    out = np.empty(len(pts))
+    for k in range(0, len(pts), 256):
+        out[k : k + 256] = s[np.argmin(np.linalg.norm(pts[k : k + 256, None] - G[None], axis=2), axis=1)]
+    return s, out
+
+
 #: A child process: ``tmr plan`` with the train search of argv[1] ("every": stop 67's, :func:`every_point`,
-#: :func:`every_group`, :func:`every_prefix`).
+#: :func:`every_group`, :func:`every_prefix`, :func:`every_sample`).
 CHILD = f"""
 import sys
 sys.path.insert(0, {str(Path(__file__).resolve().parent)!r})
 import tmr.route.train as train
 if sys.argv[1] == "every":
-    from train_repair import every_group, every_point, every_prefix
+    from train_repair import every_group, every_point, every_prefix, every_sample
     train._repair = every_point
     train._State.valid_groups = every_group
     train._State.valid_prefix = every_prefix
+    train._Paths.nearest_arcs = every_sample
 from tmr.plan import main
 sys.exit(main(sys.argv[2:]))
 """

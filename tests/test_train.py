@@ -221,6 +221,62 @@ def test_the_grouped_and_prefix_tests_are_the_pointwise_ones(door_problem, monke
     assert min(seen.values()) > 0, seen
 
 
+def test_the_nearest_guide_sample_is_the_first_of_the_least_distance(door_problem, monkeypatch) -> None:
+    """``_Paths.nearest_arcs`` (a k-d tree's few nearest samples for many points) gives, for every point, the first
+    guide sample of the least distance over all samples (``np.linalg.norm``, ``np.argmin``), on random points near
+    the guide over random arc ranges, on the samples themselves, and on points equidistant from two consecutive
+    samples (exact ties among them: the first sample wins) and near the centre of a half circle whose samples are as
+    far from it up to rounding (with the tree's two nearest samples: the points whose near-ties the tree cannot
+    settle measure every sample)."""
+    import tmr.route.train as train
+    from tmr.route.route import guide_arcs, point_at
+
+    paths = _Paths(door_problem.references)
+    rng = np.random.default_rng(7)
+    L = float(paths.garcs[-1])
+    ties = 0
+    for _ in range(30):
+        lo = float(rng.uniform(0.0, 0.8 * L))
+        hi = min(L, lo + float(rng.uniform(0.05, 6.0)))
+        s = np.linspace(lo, hi, max(2, int((hi - lo) / 0.02) + 1))
+        G = point_at(paths.guide, paths.garcs, s)
+        mid = 0.5 * (G[:-1] + G[1:])
+        t = G[1:] - G[:-1]
+        normal = np.column_stack([-t[:, 1], t[:, 0]]) / np.maximum(np.linalg.norm(t, axis=1), 1e-12)[:, None]
+        pts = np.concatenate(
+            [
+                G[rng.integers(0, len(G), 40)] + rng.normal(0.0, 0.4, (40, 2)),
+                G[rng.integers(0, len(G), 10)],
+                mid + rng.uniform(-0.3, 0.3, (len(mid), 1)) * normal,  # on the bisector of two samples
+            ]
+        )
+        dist = np.linalg.norm(pts[:, None] - G[None], axis=2)
+        want = s[np.argmin(dist, axis=1)]
+        got_s, got = paths.nearest_arcs(pts, lo, hi)
+        np.testing.assert_array_equal(got_s, s)
+        np.testing.assert_array_equal(got, want)
+        ties += int(np.sum(np.sum(dist == dist.min(axis=1, keepdims=True), axis=1) > 1))
+        for q in pts[:3]:  # one point at a time
+            assert paths.nearest(q, lo, hi)[1] == s[np.argmin(np.linalg.norm(q[None, None] - G[None], axis=2))]
+    assert ties > 0
+    # near-ties of many samples: a guide along a half circle whose vertices, 2 cm apart, are its samples; its centre
+    # is as far from all of them up to rounding, more than the tree's nearest few can settle
+    monkeypatch.setattr(train, "NEAREST_K", 2)
+    n = 100
+    R = 0.01 / np.sin(np.pi / n)  # an edge of 2 cm
+    angle = np.pi * np.arange(n // 2 + 1) / n
+    paths.guide = np.column_stack([3.0 + R * np.cos(angle), 2.0 + R * np.sin(angle)])
+    paths.garcs = guide_arcs(paths.guide)
+    L = float(paths.garcs[-1])
+    s = np.linspace(0.0, L, max(2, int(L / 0.02) + 1))
+    G = point_at(paths.guide, paths.garcs, s)
+    ulps = np.arange(-3, 4) * np.spacing(3.0)  # the centre and points a few roundings off it
+    pts = np.array([3.0, 2.0]) + np.stack(np.meshgrid(ulps, ulps), axis=-1).reshape(-1, 2)
+    want = s[np.argmin(np.linalg.norm(pts[:, None] - G[None], axis=2), axis=1)]
+    np.testing.assert_array_equal(paths.nearest_arcs(pts, 0.0, L)[1], want)
+    assert len(np.unique(want)) > 1  # different samples win at different points
+
+
 def test_train_references_keep_every_limit_through_a_narrow_door(door_problem) -> None:
     trained = train_problem(door_problem)
     ref = trained.references

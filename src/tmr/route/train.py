@@ -91,6 +91,11 @@ class TrainLimits:
     clearance: float = TRAIN_CLEARANCE
 
 
+#: Fewest points for which :meth:`_Paths.nearest_arcs` uses a k-d tree, and how many nearest samples it measures.
+NEAREST_TREE = 16
+NEAREST_K = 4
+
+
 def _sub(P: Array, arcs: Array, u0: float, u1: float) -> Array:
     """The part of polyline P (arcs) between arc lengths u0 ≤ u1 [m], as a polyline."""
     inner = P[(arcs > u0 + 1e-9) & (arcs < u1 - 1e-9)]
@@ -159,13 +164,28 @@ class _Paths:
 
     def nearest_arcs(self, pts: Array, lo: float, hi: float) -> tuple[Array, Array]:
         """Guide arcs sampled every 0.02 m over [lo, hi] (lo < hi) [m] and, for each of ``pts`` (m, 2), the one
-        nearest it (256 points at a time)."""
+        nearest it: the first sample of the least distance (``np.linalg.norm`` of the differences, ``np.argmin``).
+
+        For many points, a k-d tree (``scipy.spatial.cKDTree``) gives each point its ``NEAREST_K`` nearest samples,
+        and those samples' distances, measured as above, give the same first sample of the least distance — unless
+        the k-th is no farther than the nearest up to rounding (a sample beyond the k could tie it): such points,
+        and small queries, measure every sample (256 points at a time)."""
         s = np.linspace(lo, hi, max(2, int((hi - lo) / 0.02) + 1))
         G = point_at(self.guide, self.garcs, s)
-        out = np.empty(len(pts))
-        for k in range(0, len(pts), 256):
-            out[k : k + 256] = s[np.argmin(np.linalg.norm(pts[k : k + 256, None] - G[None], axis=2), axis=1)]
-        return s, out
+        pts = np.asarray(pts, dtype=float).reshape(-1, 2)
+        best = np.empty(len(pts), dtype=np.intp)
+        every = np.arange(len(pts))
+        if len(pts) >= NEAREST_TREE and len(G) > NEAREST_K:
+            from scipy.spatial import cKDTree
+
+            d, j = cKDTree(G).query(pts, k=NEAREST_K)
+            j = np.sort(j, axis=1)  # sample order: argmin's first of the least is the first sample
+            best = j[np.arange(len(pts)), np.argmin(np.linalg.norm(pts[:, None] - G[j], axis=2), axis=1)]
+            every = np.flatnonzero(d[:, -1] <= d[:, 0] * (1.0 + 1e-9) + 1e-12)
+        for k in range(0, len(every), 256):
+            rows = every[k : k + 256]
+            best[rows] = np.argmin(np.linalg.norm(pts[rows, None] - G[None], axis=2), axis=1)
+        return s, s[best]
 
 
 def _pulled(env: Any, P: Array, clearance: float, step: float = 0.1, reach: int = 150) -> Array:
