@@ -531,8 +531,8 @@ def _repair(state: _State, paths: _Paths, mover: int, other: int, step: float) -
     times as many, or all the rest when no tested point is left to try), and a tested point that ranks before every
     untested point's bound is the next in the ranking. The ranking is that of testing every point
     (``tests/test_train.py::test_a_repair_is_the_exhaustive_rankings_first_reachable_point``). On the 316 repairs
-    of the 8-robot train search of narrow-far-2856891376 it takes 0.23× the time in all; a single repair where few
-    points pass, tested in more than one batch, can take longer (up to 1.7×; ``benchmarks/train_repair.py``).
+    of the 8-robot train search of narrow-far-2856891376 it takes 0.25× the time in all; a single repair where few
+    points pass, tested in more than one batch, can take longer (up to 1.5×; ``benchmarks/train_repair.py``).
     """
     lim, X, tenv = state.lim, state.X, state.tenv
     r = np.arange(-REPAIR_RADIUS, REPAIR_RADIUS + 1e-9, REPAIR_GRID)
