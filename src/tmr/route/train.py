@@ -91,7 +91,8 @@ class TrainLimits:
     clearance: float = TRAIN_CLEARANCE
 
 
-#: Fewest points for which :meth:`_Paths.nearest_arcs` uses a k-d tree, and how many nearest samples it measures.
+#: Fewest points for which :meth:`_Paths.nearest_arcs` uses a k-d tree, and how many nearest samples it measures
+#: (at least 2: the last is compared with the nearest).
 NEAREST_TREE = 16
 NEAREST_K = 4
 
