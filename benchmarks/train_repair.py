@@ -94,9 +94,9 @@ def every_group(self: Any, i: int, pts: Any, owner: Any, n: int, checks: Any = N
     return np.bincount(owner[~self.valid(i, pts, checks)], minlength=n) == 0
 
 
-def every_prefix(self: Any, i: int, pts: Any) -> int:
+def every_prefix(self: Any, i: int, pts: Any, checks: Any = None) -> int:
     """``_State.valid_prefix`` until stop 68: every point tested with every check, then the first failure."""
-    ok = self.valid(i, pts)
+    ok = self.valid(i, pts, checks)
     return int(np.argmin(ok)) if not ok.all() else len(ok)
 
 
