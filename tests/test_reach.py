@@ -512,3 +512,54 @@ def test_no_count_is_proven_twice_and_the_relaxed_search_runs_without_a_proof(mo
     proofs = [n for tag, n in calls if tag != "widened"]
     assert proofs == [4] and ("widened", 4) in calls
     assert route.refusal(4) is not None and "nor proven impossible" in route.refusal(4)
+
+
+def test_a_question_asked_again_is_answered_from_memory_and_the_same(monkeypatch):
+    """``--robots auto`` asks the route's proof and its search off the route the same questions twice (the precheck's
+    route for any N, then the route for N_min): the second time the answer comes from
+    ``tmr.route.witness._VERDICTS`` without a search, and it is the answer a new world gives. Span rows that differ
+    only by more copies of the last row share it (every reader repeats the last row); other rows, another count or
+    another world search again; a chain handed out is a copy."""
+    import tmr.route.reach as reach_mod
+    import tmr.route.witness as witness_mod
+    from tmr.sweep.rooms import generate_room, span_rows
+
+    room = generate_room(2845717476, "dense", "far")  # route chain 6, a chain of 5 off it (the test above)
+    env, lim = room.environment(), span_rows()
+    searches: list[str] = []
+    prove, find = reach_mod.chain_is_impossible, reach_mod.find_chain
+
+    def counted_proof(*args, **kwargs):
+        searches.append("proof")
+        return prove(*args, **kwargs)
+
+    def counted_search(*args, **kwargs):
+        searches.append("chain")
+        return find(*args, **kwargs)
+
+    monkeypatch.setattr(reach_mod, "chain_is_impossible", counted_proof)
+    monkeypatch.setattr(reach_mod, "find_chain", counted_search)
+    more = np.vstack([lim, lim[-1:], lim[-1:]])  # two more tethers like the last
+    args = (room.base, room.goal)
+
+    proof = witness_mod.proven_too_few(env, *args, lim, 4)
+    assert searches == ["proof"]
+    assert witness_mod.proven_too_few(env, *args, more, 4) == proof and searches == ["proof"]
+    chain, n = witness_mod._witness(env, *args, lim, 5, 2, 4)
+    asked = len(searches)
+    assert chain is not None and "chain" in searches
+    chain[1:-1] += 1.0  # the caller's copy
+    again, n_again = witness_mod._witness(env, *args, more, 5, 2, 4)
+    assert len(searches) == asked and n_again == n
+
+    fresh = room.environment()  # a new world searches again, and answers the same
+    assert witness_mod.proven_too_few(fresh, *args, lim, 4) == proof
+    fresh_chain, fresh_n = witness_mod._witness(fresh, *args, lim, 5, 2, 4)
+    assert len(searches) > asked + 1
+    assert fresh_n == n and np.array_equal(again, fresh_chain)
+    asked = len(searches)
+    shorter = lim.copy()
+    shorter[1:, 1] -= 0.5  # other span rows
+    witness_mod.proven_too_few(env, *args, shorter, 4)
+    witness_mod.proven_too_few(env, *args, lim, 3)  # another count
+    assert searches[asked:] == ["proof", "proof"]

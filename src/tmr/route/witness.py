@@ -12,6 +12,7 @@ find fewer chains, never a wrong one).
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -39,22 +40,62 @@ def _length_bound(L_lower: float, L: float, d_max: float) -> int:
     return max(1, math.ceil(min(L_lower, L) / d_max - 1e-9))
 
 
+#: The verdicts of :func:`proven_too_few` and :func:`_witness` already reached in this process, per world (the
+#: :class:`~tmr.world.environment.Environment` object, read-only by convention; held weakly). Both are functions of
+#: their arguments alone, and ``--robots auto`` asks the same questions twice: the precheck's route for any N, then
+#: the route for its N_min (:func:`tmr.plan.precheck`, :func:`tmr.planner.build_problem`).
+_VERDICTS: weakref.WeakKeyDictionary[Any, dict[tuple[Any, ...], Any]] = weakref.WeakKeyDictionary()
+
+
+def _rows_key(lim: ArrayLike) -> bytes:
+    """``lim``'s rows [d_lo, d_max] without the trailing rows equal to the one before: every reader of the span rows
+    takes the last row for the tethers beyond it (``_links``, ``find_chain``, ``_span_rows``, ``best_pair``), so
+    two ``lim`` with the same key give the same verdicts."""
+    rows = np.atleast_2d(np.asarray(lim, dtype=float))
+    n = len(rows)
+    while n > 1 and np.array_equal(rows[n - 1], rows[n - 2]):
+        n -= 1
+    return rows[:n].tobytes()
+
+
+def _remembered(env: Any, key: tuple[Any, ...], compute: Any) -> Any:
+    """``compute()``, or the value it gave for ``key`` in ``env`` before (:data:`_VERDICTS`)."""
+    known = _VERDICTS.setdefault(env, {})
+    if key not in known:
+        known[key] = compute()
+    return known[key]
+
+
+def _point_key(p: ArrayLike) -> bytes:
+    return np.asarray(p, dtype=float).reshape(-1).tobytes()
+
+
 def proven_too_few(env: Any, base: ArrayLike, goal: ArrayLike, lim: ArrayLike, robots: int) -> bool:
     """Whether ``robots`` robots are proven too few to chain from ``base`` to ``goal`` with the tethers' upper limits
     of ``lim`` (N, 2) [m]: :func:`tmr.route.reach.chain_is_impossible` with the refinement and narrowing budgets the
     route
     uses (``REFINE_WORK``, ``NARROW_WORK``), in the tethers' world (:func:`tether_env`: a relaxation of the low
-    obstacles, so still a proof)."""
+    obstacles, so still a proof). A question asked before in this process for this ``env`` is answered from
+    :data:`_VERDICTS`."""
     from tmr.route.reach import NARROW_WORK, REFINE_WORK, chain_is_impossible
 
-    return robots >= 1 and chain_is_impossible(
-        tether_env(env),
-        base,
-        goal,
-        np.asarray(lim, float)[:, 1],
-        robots,
-        refine_work=REFINE_WORK,
-        narrow_work=NARROW_WORK,
+    if robots < 1:
+        return False
+    key = ("too_few", _point_key(base), _point_key(goal), _rows_key(lim), int(robots))
+    return bool(
+        _remembered(
+            env,
+            key,
+            lambda: chain_is_impossible(
+                tether_env(env),
+                base,
+                goal,
+                np.asarray(lim, float)[:, 1],
+                robots,
+                refine_work=REFINE_WORK,
+                narrow_work=NARROW_WORK,
+            ),
+        )
     )
 
 
@@ -79,7 +120,17 @@ def _witness(
     one that fails uses its refinement and narrowing budgets, about 0.5–1 s on the random rooms.
 
     Returns the chain (None if none was found) and the lower bound on the robots it leaves: ``n_lower``, or the
-    chain's own count when one robot fewer is proven too few."""
+    chain's own count when one robot fewer is proven too few. A question asked before in this process for this
+    ``env`` is answered from :data:`_VERDICTS` (a copy of the chain)."""
+    key = ("witness", _point_key(base), _point_key(goal), _rows_key(lim), int(robots), int(n_lower), float(unproven))
+    chain, n = _remembered(env, key, lambda: _search_witness(env, base, goal, lim, robots, n_lower, unproven))
+    return (None if chain is None else chain.copy()), n
+
+
+def _search_witness(
+    env: Any, base: Array, goal: Array, lim: Array, robots: int, n_lower: int, unproven: float
+) -> tuple[Array | None, int]:
+    """:func:`_witness`'s search itself."""
     from tmr.route.reach import find_chain
 
     first, spans, spacing = _witness_requirements(env, base, lim)
