@@ -1317,6 +1317,9 @@ def test_a_stalled_fast_attempt_stops_and_falls_back(monkeypatch):
             plan_horizon(problem, warm, retry_first_after=bad)
         with pytest.raises(ParameterError, match="retry_first_max_iter"):
             plan_horizon(problem, warm, retry_first_max_iter=bad)
+    for bad in (0, 1, "yes", None):
+        with pytest.raises(ParameterError, match="retry_goes_on"):
+            plan_horizon(problem, warm, retry_goes_on=bad)
     for bad in (1e-2, {"max_iter": 0}, {"min_hessian_perturbation": -1.0}):
         with pytest.raises(ParameterError, match="coarse_polish_retry"):
             plan_horizon(problem, warm, coarse_polish_retry=bad)

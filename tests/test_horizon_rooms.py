@@ -204,6 +204,27 @@ def test_rounds_after_the_first_start_with_the_exact_retry(monkeypatch, tmp_path
     assert all(terms[k] <= before[k] * (1 + 1e-9) for k in ("f1", "f2", "f4"))
 
 
+def test_a_retry_that_went_first_goes_on_from_the_capped_primary(monkeypatch, tmp_path):
+    """medium-near-2724196545, 8 robots: in the fallback's round 2 the exact retry goes first and stops at its cap of
+    40, then the Gauss–Newton primary stops at its cap of 200 next to a solution (the round's rows holding). Until
+    stop 69 the procedure ended there without one: a best feasible iterate of the fast attempt (objective 4850 against
+    the warm start's 4962). Now the retry goes on from the primary's last iterate and multipliers (``retry_goes_on``)
+    and solves the round: optimal, f2 and f4 well below the ``qp`` plan's, none of f1, f2, f4 above it."""
+    problem, warm = room_problem(monkeypatch, tmp_path, 2724196545, "medium", "near", 8)
+    d = plan_horizon(problem, warm).diagnostics
+    assert d["horizon_result"] == "optimal", d["horizon_note"]
+    log = _fallback(d)
+    went_on = [r for r in log if r["from_last"] and r["round"] > 1]
+    assert went_on, log
+    rnd = [r for r in log if r["round"] == went_on[0]["round"]]
+    order = [(r["attempt"], r["status"] in _SOLVED) for r in rnd]
+    assert order == [("retry", False), ("primary", False), ("retry", True)]
+    assert rnd[0]["iterations"] == 40 and rnd[1]["iterations"] == 200
+    terms, before = d["horizon_summary"]["terms"], d["horizon_summary"]["warm_start_terms"]
+    assert all(terms[k] <= before[k] * (1 + 1e-9) for k in ("f1", "f2", "f4"))
+    assert terms["f2"] < 0.5 * before["f2"] and terms["f4"] < 0.5 * before["f4"]
+
+
 def test_a_polish_costlier_than_the_coarse_optimum_does_not_replace_it(monkeypatch, tmp_path):
     """medium-far-2319944108, 5 robots: the polish from the accepted coarse optimum converges to a KKT point of the
     whole NLP that costs more than that coarse optimum; the coarse optimum (every row holding at every knot) is the

@@ -625,8 +625,14 @@ def _plan_horizon(
                     order = sorted(attempts, key=lambda a: a[0] != "retry")
                     if opts.retry_first_max_iter is not None and order[0][0] == "retry":  # a short try, then the other
                         order[0] = ("retry", dict(order[0][1], max_iter=int(opts.retry_first_max_iter)))
+                    if order[0][0] == "retry" and len(order) == 2 and opts.retry_goes_on:
+                        # where the other attempt then stops at its cap next to a solution, the retry goes on from
+                        # there (its own cap), as it does after a capped primary in the other rounds
+                        order = [*order, next(a for a in attempts if a[0] == "retry")]
                 last_violation = math.inf  # the row violation at the last attempt's last iterate
                 for i_attempt, (label, extra) in enumerate(order):
+                    if i_attempt == 2 and not (status == _MAX_ITER and last_violation <= NEAR_ROWS):
+                        break  # the retry that went first failed, and the other attempt stopped far from a solution
                     remaining = phase_deadline - time.perf_counter()
                     # building the solver (casadi: the NLP's derivatives) cannot be interrupted: do not start one
                     # that would overrun the limit — as long as the last one took — or whose estimated build would

@@ -222,6 +222,12 @@ class HorizonOptions:
         retry_first_max_iter: the iterations that retry may take when it goes first (``None``: ``max_iter``); if it
             stops there, the primary solves the round (``dense-far-2639215061`` with 8 robots: the exact retry needed
             89 iterations where Gauss–Newton needs 19; the retries that paid converged in 10–35).
+        retry_goes_on: where the retry went first and failed and the primary then stops at its iteration cap within
+            ``NEAR_ROWS`` of the round's rows, the retry goes on once more from the primary's last iterate and
+            multipliers, with its own cap — as after a capped primary in the rounds where the primary goes first —
+            instead of the procedure ending there without a solution (``False``: it ends; stop 69,
+            ``medium-near-2724196545`` with 8 robots: ``formulations/horizon.md``, "Two regularisation floors",
+            item 7).
         leader_release: with the equality leader, a verified warm start (``success``) whose leader lags its reference by
             more than this [m] at some knot releases the leader: the NLP is solved with ``leader_tolerance`` = that
             largest lag + 1 mm instead (w3 f3 in the cost, and a plan no worse than the warm start in f3 either), so
@@ -289,6 +295,7 @@ class HorizonOptions:
     retry_hessian: str | None = "exact"
     retry_first_after: int | None = 1
     retry_first_max_iter: int | None = 40
+    retry_goes_on: bool = True
     warm_start_leader_error: float = 0.01
     expand: bool = False
     scale_objective: bool = True
@@ -345,6 +352,8 @@ class HorizonOptions:
         _positive_or_none(self.coarse_train_activation, "coarse_train_activation", " m (or None: as any plan)")
         if not isinstance(self.keep_warm_margins, bool):
             raise ParameterError(f"keep_warm_margins must be True or False, got {self.keep_warm_margins!r}")
+        if not isinstance(self.retry_goes_on, bool):
+            raise ParameterError(f"retry_goes_on must be True or False, got {self.retry_goes_on!r}")
         if not 0 <= self.rate_activation < 1:
             raise ParameterError(f"rate_activation must be in [0, 1), got {self.rate_activation}")
         if self.max_rounds < 1 or self.max_iter < 1:
