@@ -225,6 +225,27 @@ def test_a_retry_that_went_first_goes_on_from_the_capped_primary(monkeypatch, tm
     assert terms["f2"] < 0.5 * before["f2"] and terms["f4"] < 0.5 * before["f4"]
 
 
+@pytest.mark.slow
+def test_the_primary_keeps_going_first_after_a_retry_went_on_from_it(monkeypatch, tmp_path):
+    """narrow-far-3896625273, 5 robots (about 20 s): the fallback's round 1 is solved by the primary; in round 2 the
+    retry goes first and fails, the primary stops at its cap next to a solution, and the retry goes on from it and
+    solves the round (``retry_goes_on``; until stop 69 the ``qp`` plan was returned). The primary did most of that
+    round's work, so it still goes first in round 3 — before the first version of that rule the retry went first
+    there, uncapped (the retry having failed once), and ran 200 iterations in vain (29.3 against 22.5 s)."""
+    problem, warm = room_problem(monkeypatch, tmp_path, 3896625273, "narrow", "far", 5)
+    d = plan_horizon(problem, warm).diagnostics
+    assert d["horizon_result"] == "optimal", d["horizon_note"]
+    log = _fallback(d)
+    went_on = next(r for r in log if r["from_last"] and r["round"] > 1)
+    rnd = [r for r in log if r["round"] == went_on["round"]]
+    order = [(r["attempt"], r["status"] in _SOLVED) for r in rnd]
+    assert order == [("retry", False), ("primary", False), ("retry", True)]
+    after = [r for r in log if r["round"] == went_on["round"] + 1]
+    assert after and after[0]["attempt"] == "primary", log
+    terms, before = d["horizon_summary"]["terms"], d["horizon_summary"]["warm_start_terms"]
+    assert all(terms[k] <= before[k] * (1 + 1e-9) for k in ("f1", "f2", "f4"))
+
+
 def test_a_polish_costlier_than_the_coarse_optimum_does_not_replace_it(monkeypatch, tmp_path):
     """medium-far-2319944108, 5 robots: the polish from the accepted coarse optimum converges to a KKT point of the
     whole NLP that costs more than that coarse optimum; the coarse optimum (every row holding at every knot) is the

@@ -552,11 +552,14 @@ def test_a_question_asked_again_is_answered_from_memory_and_the_same(monkeypatch
     again, n_again = witness_mod._witness(env, *args, more, 5, 2, 4)
     assert len(searches) == asked and n_again == n
 
-    fresh = room.environment()  # a new world searches again, and answers the same
-    assert witness_mod.proven_too_few(fresh, *args, lim, 4) == proof
-    fresh_chain, fresh_n = witness_mod._witness(fresh, *args, lim, 5, 2, 4)
+    fresh = room.environment()  # a new world searches again, and answers the same, with the rows repeated too
+    assert witness_mod.proven_too_few(fresh, *args, more, 4) == proof
+    fresh_chain, fresh_n = witness_mod._witness(fresh, *args, more, 5, 2, 4)
     assert len(searches) > asked + 1
     assert fresh_n == n and np.array_equal(again, fresh_chain)
+    other = room.environment()
+    assert witness_mod._witness(other, *args, lim, 5, 2, 4)[1] == n
+    assert np.array_equal(witness_mod._witness(other, *args, lim, 5, 2, 4)[0], fresh_chain)
     asked = len(searches)
     shorter = lim.copy()
     shorter[1:, 1] -= 0.5  # other span rows

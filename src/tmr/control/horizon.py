@@ -594,7 +594,9 @@ def _plan_horizon(
                 now = time.perf_counter()
                 phase_deadline = now + opts.fast_time_share * max(deadline - now, 0.0)
             first_round = len(rounds)
-            retry_failed = False  # a retry of this phase stopped without a solution (it no longer goes first)
+            # a retry of this phase stopped without a solution: it no longer goes first by retry_first_after (only
+            # as the attempt that solved the round before, uncapped)
+            retry_failed = False
             for rnd in range(1, opts.max_rounds + 1):
                 if _INTERRUPT.is_set():  # a Ctrl-C while the last round was checked or this one is set up
                     raise KeyboardInterrupt
@@ -730,7 +732,9 @@ def _plan_horizon(
                 if not ok:
                     stop = "ipopt_failed"
                     break
-                if label != attempts[0][0]:  # the attempt that solved this round goes first in the next ones
+                # the attempt that solved this round goes first in the next ones — but not a retry that went on from
+                # the capped primary after its own first try failed (retry_goes_on): the primary did most of the work
+                if label != attempts[0][0] and i_attempt < 2:
                     attempts = sorted(attempts, key=lambda a: a[0] != label)
                 if not viol:
                     stop = "converged"

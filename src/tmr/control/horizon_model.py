@@ -222,10 +222,11 @@ class HorizonOptions:
         retry_first_max_iter: the iterations that retry may take when it goes first (``None``: ``max_iter``); if it
             stops there, the primary solves the round (``dense-far-2639215061`` with 8 robots: the exact retry needed
             89 iterations where Gauss–Newton needs 19; the retries that paid converged in 10–35).
-        retry_goes_on: where the retry went first and failed and the primary then stops at its iteration cap within
-            ``NEAR_ROWS`` of the round's rows, the retry goes on once more from the primary's last iterate and
-            multipliers, with its own cap — as after a capped primary in the rounds where the primary goes first —
-            instead of the procedure ending there without a solution (``False``: it ends; stop 69,
+        retry_goes_on: in the fallback's (or the default procedure's) rounds where the retry went first and failed
+            and the primary then stops at its iteration cap within ``NEAR_ROWS`` of the round's rows, the retry goes
+            on once more from the primary's last iterate and multipliers, with its own cap — as after a capped
+            primary in the rounds where the primary goes first — instead of the procedure ending there without a
+            solution; a round it solves does not put the retry first in the next ones (``False``: it ends; stop 69,
             ``medium-near-2724196545`` with 8 robots: ``formulations/horizon.md``, "Two regularisation floors",
             item 7).
         leader_release: with the equality leader, a verified warm start (``success``) whose leader lags its reference by

@@ -43,7 +43,8 @@ def _length_bound(L_lower: float, L: float, d_max: float) -> int:
 #: The verdicts of :func:`proven_too_few` and :func:`_witness` already reached in this process, per world (the
 #: :class:`~tmr.world.environment.Environment` object, read-only by convention; held weakly). Both are functions of
 #: their arguments alone, and ``--robots auto`` asks the same questions twice: the precheck's route for any N, then
-#: the route for its N_min (:func:`tmr.plan.precheck`, :func:`tmr.planner.build_problem`).
+#: the route for its N_min (:func:`tmr.plan.precheck`, :func:`tmr.planner.build_problem`). The functions they call
+#: are not in the key: code that replaces one (a test's monkeypatch) must ask with a new world.
 _VERDICTS: weakref.WeakKeyDictionary[Any, dict[tuple[Any, ...], Any]] = weakref.WeakKeyDictionary()
 
 
