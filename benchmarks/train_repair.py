@@ -89,14 +89,27 @@ def every_point(state: Any, paths: Any, mover: int, other: int, step: float) -> 
     return None
 
 
+def every_valid(self: Any, i: int, pts: Any, checks: Any = None) -> np.ndarray:
+    """``_State.valid`` of stops 67 and 68, its own loop: the cheap checks first, each on the points still passing.
+    Since stop 69 ``valid`` is ``valid_groups`` with a group per point, which the "every" child replaces."""
+    pts = np.asarray(pts, dtype=float).reshape(-1, 2)
+    ok = np.ones(len(pts), dtype=bool)
+    for _, _, test in sorted(self._checks(i) if checks is None else checks, key=lambda check: check[1]):
+        idx = np.flatnonzero(ok)
+        if not len(idx):
+            break
+        ok[idx] = test(pts[idx])
+    return ok
+
+
 def every_group(self: Any, i: int, pts: Any, owner: Any, n: int, checks: Any = None) -> np.ndarray:
     """``_State.valid_groups`` until stop 68: every point tested with every check, then grouped."""
-    return np.bincount(owner[~self.valid(i, pts, checks)], minlength=n) == 0
+    return np.bincount(owner[~every_valid(self, i, pts, checks)], minlength=n) == 0
 
 
 def every_prefix(self: Any, i: int, pts: Any, checks: Any = None) -> int:
     """``_State.valid_prefix`` until stop 68: every point tested with every check, then the first failure."""
-    ok = self.valid(i, pts, checks)
+    ok = every_valid(self, i, pts, checks)
     return int(np.argmin(ok)) if not ok.all() else len(ok)
 
 
@@ -111,14 +124,15 @@ def every_sample(self: Any, pts: Any, lo: float, hi: float) -> tuple[np.ndarray,
 
 
 #: A child process: ``tmr plan`` with the train search of argv[1] ("every": stop 67's, :func:`every_point`,
-#: :func:`every_group`, :func:`every_prefix`, :func:`every_sample`).
+#: :func:`every_valid`, :func:`every_group`, :func:`every_prefix`, :func:`every_sample`).
 CHILD = f"""
 import sys
 sys.path.insert(0, {str(Path(__file__).resolve().parent)!r})
 import tmr.route.train as train
 if sys.argv[1] == "every":
-    from train_repair import every_group, every_point, every_prefix, every_sample
+    from train_repair import every_group, every_point, every_prefix, every_sample, every_valid
     train._repair = every_point
+    train._State.valid = every_valid
     train._State.valid_groups = every_group
     train._State.valid_prefix = every_prefix
     train._Paths.nearest_arcs = every_sample

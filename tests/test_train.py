@@ -187,10 +187,11 @@ def test_a_repair_is_the_exhaustive_rankings_first_reachable_point(door_problem,
 
 
 def test_the_grouped_and_prefix_tests_are_the_pointwise_ones(door_problem, monkeypatch) -> None:
-    """``_State.valid_groups`` (a group passes iff every point of it passes :meth:`valid`) and ``valid_prefix`` (the
-    number of points before :meth:`valid`'s first failure), which drop points as soon as their answer is known, give
-    :meth:`valid`'s answers — at every state of the door room's train search that repairs, for every robot, on random
-    points near it (both answers many times), in random groups and along random rays."""
+    """``_State.valid_groups`` (a group passes iff every point of it passes every limit) and ``valid_prefix`` (the
+    number of points before the first that fails a limit), which drop points as soon as their answer is known, and
+    ``valid`` (a group per point) give the answers of every limit tested on every point (:meth:`tests`) — at every
+    state of the door room's train search that repairs, for every robot, on random points near it (both answers many
+    times), in random groups and along random rays."""
     import tmr.route.train as train
 
     rng = np.random.default_rng(11)
@@ -202,14 +203,15 @@ def test_the_grouped_and_prefix_tests_are_the_pointwise_ones(door_problem, monke
             state.compact = bool(i % 2)  # the slack rule off (as in a repair) and on
             pts = state.X[i] + rng.normal(0.0, 0.5, (400, 2))
             owner = np.sort(rng.integers(0, 60, len(pts)))
-            ok = state.valid(i, pts)
+            ok = np.logical_and.reduce([passes for _, passes in state.tests(i, pts)])
+            np.testing.assert_array_equal(state.valid(i, pts), ok)
             want = np.array([ok[owner == g].all() for g in range(60)])
             np.testing.assert_array_equal(state.valid_groups(i, pts, owner, 60), want)
             seen["groups passing"] += int(want[np.isin(np.arange(60), owner)].sum())
             seen["groups failing"] += int((~want).sum())
             for _ in range(5):
                 ray = state.X[i] + np.linspace(0.05, rng.uniform(0.5, 3.0), 40)[:, None] * rng.normal(size=2)
-                ok = state.valid(i, ray)
+                ok = np.logical_and.reduce([passes for _, passes in state.tests(i, ray)])
                 want_k = int(np.argmin(ok)) if not ok.all() else len(ray)
                 assert state.valid_prefix(i, ray) == want_k
                 seen["prefix whole" if want_k == len(ray) else "prefix short"] += 1

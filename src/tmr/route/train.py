@@ -457,29 +457,27 @@ class _State:
         """(name, passes) of every limit for robot i at each of ``pts`` (m, 2), the others where they are."""
         return [(name, test(pts)) for name, _, test in self._checks(i)]
 
+    def _ordered(self, i: int, checks: _Checks | None) -> _Checks:
+        """``checks`` (default: robot i's :meth:`_checks` in the present state), the cheapest first."""
+        return sorted(self._checks(i) if checks is None else checks, key=lambda check: check[1])
+
     def valid(self, i: int, pts: Array, checks: _Checks | None = None) -> NDArray[np.bool_]:
         """All of :meth:`tests` at once, the cheap ones first: the exact geometry only where those pass; ``checks``:
-        robot i's :meth:`_checks` in the present state, if the caller has them."""
+        robot i's :meth:`_checks` in the present state, if the caller has them. :meth:`valid_groups` with a group
+        per point."""
         pts = np.asarray(pts, dtype=float).reshape(-1, 2)
-        ok = np.ones(len(pts), dtype=bool)
-        for _, _, test in sorted(self._checks(i) if checks is None else checks, key=lambda check: check[1]):
-            idx = np.flatnonzero(ok)
-            if not len(idx):
-                break
-            ok[idx] = test(pts[idx])
-        return ok
+        return self.valid_groups(i, pts, np.arange(len(pts)), len(pts), checks)
 
     def valid_groups(
         self, i: int, pts: Array, owner: NDArray[np.intp], n: int, checks: _Checks | None = None
     ) -> NDArray[np.bool_]:
         """Whether every point of each of ``n`` groups keeps all of :meth:`tests` (``owner``: each point's group;
-        ``checks`` as in :meth:`valid`): :meth:`valid` of the points, each group passing iff all its points pass —
-        but a group that fails a check is dropped at once, so the costlier checks test only the points of groups still
-        passing."""
+        ``checks`` as in :meth:`valid`), each group passing iff all its points pass — but a group that fails a check
+        is dropped at once, so the costlier checks test only the points of groups still passing."""
         pts = np.asarray(pts, dtype=float).reshape(-1, 2)
         alive = np.ones(n, dtype=bool)
         idx = np.arange(len(pts))
-        for _, _, test in sorted(self._checks(i) if checks is None else checks, key=lambda check: check[1]):
+        for _, _, test in self._ordered(i, checks):
             if not len(idx):
                 break
             alive[owner[idx[~test(pts[idx])]]] = False
@@ -492,7 +490,7 @@ class _State:
         :meth:`valid`."""
         pts = np.asarray(pts, dtype=float).reshape(-1, 2)
         k = len(pts)
-        for _, _, test in sorted(self._checks(i) if checks is None else checks, key=lambda check: check[1]):
+        for _, _, test in self._ordered(i, checks):
             if not k:
                 break
             ok = test(pts[:k])
