@@ -19,11 +19,9 @@ Writes ``benchmarks/results/route_verdicts.md``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -32,7 +30,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from provenance import source_version, versions  # noqa: E402
-from segment_margin import _room_args  # noqa: E402
+from segment_margin import _room_args, cold_timings  # noqa: E402
 
 import tmr.route.witness as witness  # noqa: E402
 
@@ -61,15 +59,6 @@ sys.exit(main(sys.argv[2:]))
 """
 
 LABELS = ("searched", "remembered")
-
-
-def _cold(args: list[str], label: str, out: Path) -> dict[str, float]:
-    """``timings.json`` of ``tmr plan`` in a new process with the verdicts ``label`` (exit 0 or 1)."""
-    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    done = subprocess.run([sys.executable, "-c", CHILD, label, *args, "--out", str(out)], env=env)
-    if done.returncode not in (0, 1):
-        sys.exit(f"tmr plan {' '.join(args)}: exit {done.returncode}")
-    return json.loads((out / "timings.json").read_text())
 
 
 def _questions(run_args: list[str], out: Path) -> tuple[int, int, int]:
@@ -101,7 +90,7 @@ def _measure(run: str, repeats: int) -> str:
         same = True
         for r in range(repeats):
             for label in LABELS if r % 2 == 0 else LABELS[::-1]:
-                t[label].append(_cold(run_args, label, Path(d) / f"{label}{r}"))
+                t[label].append(cold_timings(CHILD, label, run_args, Path(d) / f"{label}{r}", (0, 1)))
             for name in ("trajectories.csv", "metrics.json"):
                 a, b = (Path(d) / f"{k}{r}" / name for k in LABELS)
                 same &= a.exists() == b.exists() and (not a.exists() or a.read_bytes() == b.read_bytes())

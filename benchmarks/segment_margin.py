@@ -75,11 +75,15 @@ sys.exit(main(sys.argv[2:]))
 """
 
 
-def _cold(args: list[str], label: str, out: Path) -> float:
-    """The plan's ``wall_time`` [s] of ``tmr plan`` in a new process with the margin test ``label``."""
+def cold_timings(child: str, label: str, args: list[str], out: Path, exits: tuple[int, ...] = (0,)) -> dict[str, float]:
+    """``timings.json`` of ``tmr plan`` with ``args`` written to ``out``, in a new process running ``child`` (a
+    ``python -c`` script given ``label`` and the arguments), one BLAS thread; an exit code not in ``exits`` stops the
+    benchmark. Also used by ``train_repair.py`` and ``route_verdicts.py``."""
     env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    subprocess.run([sys.executable, "-c", CHILD, label, *args, "--out", str(out)], check=True, env=env)
-    return float(json.loads((out / "timings.json").read_text())["wall_time"])
+    done = subprocess.run([sys.executable, "-c", child, label, *args, "--out", str(out)], env=env)
+    if done.returncode not in exits:
+        sys.exit(f"tmr plan {' '.join(args)}: exit {done.returncode}")
+    return json.loads((out / "timings.json").read_text())
 
 
 def main() -> None:
@@ -118,7 +122,7 @@ def main() -> None:
         same_bytes = True
         for r in range(args.end_to_end):
             for label in ("nearest", "near"):
-                walls[label].append(_cold(run_args, label, Path(d) / f"{label}{r}"))
+                walls[label].append(cold_timings(CHILD, label, run_args, Path(d) / f"{label}{r}")["wall_time"])
             a, b = (Path(d) / f"{k}{r}" / "trajectories.csv" for k in ("nearest", "near"))
             same_bytes &= a.read_bytes() == b.read_bytes()
     tn, tm = (statistics.median(times[k]) for k in ("nearest", "near"))

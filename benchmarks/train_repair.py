@@ -20,12 +20,10 @@ Writes ``benchmarks/results/train_repair.md``.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import platform
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -36,7 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from provenance import source_version, versions  # noqa: E402
-from segment_margin import _room_args  # noqa: E402
+from segment_margin import _room_args, cold_timings  # noqa: E402
 
 import tmr.route.train as train  # noqa: E402
 from tmr.route.route import point_at  # noqa: E402
@@ -141,15 +139,6 @@ sys.exit(main(sys.argv[2:]))
 """
 
 
-def _cold(args: list[str], label: str, out: Path) -> float:
-    """The plan's ``wall_time`` [s] of ``tmr plan`` in a new process with the train search ``label`` (exit 0 or 1)."""
-    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    done = subprocess.run([sys.executable, "-c", CHILD, label, *args, "--out", str(out)], env=env)
-    if done.returncode not in (0, 1):
-        sys.exit(f"tmr plan {' '.join(args)}: exit {done.returncode}")
-    return float(json.loads((out / "timings.json").read_text())["wall_time"])
-
-
 def _measure(run: str, end_to_end: int) -> list[str]:
     """The table's section for one run."""
     lazy = train._repair
@@ -183,7 +172,7 @@ def _measure(run: str, end_to_end: int) -> list[str]:
         same_bytes = True
         for r in range(end_to_end):
             for label in ("every", "lazy"):
-                walls[label].append(_cold(run_args, label, Path(d) / f"{label}{r}"))
+                walls[label].append(cold_timings(CHILD, label, run_args, Path(d) / f"{label}{r}", (0, 1))["wall_time"])
             for name in ("trajectories.csv", "metrics.json"):
                 a, b = (Path(d) / f"{k}{r}" / name for k in ("every", "lazy"))
                 same_bytes &= a.read_bytes() == b.read_bytes()
