@@ -78,7 +78,7 @@ sys.exit(main(sys.argv[2:]))
 def cold_timings(child: str, label: str, args: list[str], out: Path, exits: tuple[int, ...] = (0,)) -> dict[str, float]:
     """``timings.json`` of ``tmr plan`` with ``args`` written to ``out``, in a new process running ``child`` (a
     ``python -c`` script given ``label`` and the arguments), one BLAS thread; an exit code not in ``exits`` stops the
-    benchmark. Also used by ``train_repair.py`` and ``route_verdicts.py``."""
+    benchmark. Also used by ``train_repair.py``, ``route_verdicts.py`` and ``placement_answers.py``."""
     env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
     done = subprocess.run([sys.executable, "-c", child, label, *args, "--out", str(out)], env=env)
     if done.returncode not in exits:
