@@ -48,13 +48,16 @@ RUNS = (
 
 
 class EveryTime(references._Answers):
-    """Stop 69's search: the world asked for every candidate at every step (no answer kept)."""
+    """Stop 69's search: every candidate's clearance and every chord to it asked of the world at every step (no answer
+    kept; ``tests/test_references.py`` checks the same reference)."""
 
     def robot_clear(self, idx: Any, clear: float) -> Any:
-        return np.asarray(self.env.exact_clearance(self.S[idx]), float) > clear
+        self.clear_now = np.asarray(self.env.exact_clearance(self.S[idx]), float) > clear
+        return np.ones(len(idx), dtype=bool)  # so the search asks every chord as well
 
     def chord_free(self, k: int, idx: Any, need: float) -> Any:
-        return self.tenv.segment_is_free(np.repeat(self.S[k][None], len(idx), 0), self.S[idx], need)
+        free = self.tenv.segment_is_free(np.repeat(self.S[k][None], len(idx), 0), self.S[idx], need)
+        return free & self.clear_now
 
 
 #: A child process: ``tmr plan`` with the answers kept (argv[1] "kept") or asked every time ("asked").
@@ -147,7 +150,8 @@ def main() -> None:
         "searches along a polyline (`_along`) in one run. *Candidates*: the candidate points their steps ask about, "
         "each asked of the world as a clearance and as a chord before. *Points*, *chords*: what is asked of the world "
         "now. *Problem*: `problem_time` of `timings.json` (the problem's build, with its route and the start "
-        "placement). *Same bytes*: `trajectories.csv` and `metrics.json` of every repeat, asked against kept.",
+        "placement). *Whole run*: `wall_time` (the plan, from the route to the checked plan); *ratio*: kept / asked. "
+        "*Same bytes*: `trajectories.csv` and `metrics.json` of every repeat, asked against kept.",
         "",
         "| room | N | exit | searches | candidates | points | chords | problem [s], asked → kept | whole run [s] | "
         "ratio | same bytes |",

@@ -395,60 +395,59 @@ def test_parkings_whose_route_is_too_long_for_the_active_robots_skip_the_station
 
 def test_the_placement_search_asks_each_point_and_chord_once_and_places_the_same(monkeypatch) -> None:
     """``_along``'s depth-first search asks the clearance of the same candidate points and the same chords again and
-    again; :class:`tmr.route.references._Answers` asks the world each of them once. Reference: an ``_Answers`` that
-    asks the world at every call (the search as it was). long_walls-corner-3202507196 with 8 robots (parkings, then
-    the robots along each parking's route): the same placement, every point and every chord asked of the world at
-    most once per search, and far fewer asked in all."""
+    again; :class:`tmr.route.references._Answers` asks the world each of them once, and a chord only to a point that
+    keeps its clearance. Reference: the search as it was until stop 70, which asked the world for every candidate's
+    clearance and every chord to it at every step. long_walls-corner-3202507196 with 8 robots (parkings, then the
+    robots along each parking's route): the same placement, no point and no chord asked of the world twice in a
+    search (the world itself is watched), every answer kept the world's own, and far fewer asked in all."""
     import tmr.route.references as references
     from tmr.sweep.rooms import generate_room
 
-    asked: dict[str, list[Any]] = {"points": [], "chords": []}
+    asked: dict[str, list[list[tuple[float, ...]]]] = {"points": [], "chords": []}
     searches: list[Any] = []
 
-    class Counted(references._Answers):
-        def __init__(self, env: Any, S: Any) -> None:
-            super().__init__(env, S)
-            searches.append(self)
-            self.points: list[int] = []
-            self.chord_list: list[tuple[int, int]] = []
-            asked["points"].append(self.points)
-            asked["chords"].append(self.chord_list)
+    class Watched:  # the world as the search sees it, recording what is asked of it
+        def __init__(self, world: Any) -> None:
+            self.world = world
 
+        def exact_clearance(self, P: Any) -> Any:
+            asked["points"][-1] += [tuple(p) for p in np.asarray(P, float).reshape(-1, 2)]
+            return self.world.exact_clearance(P)
+
+        def segment_is_free(self, a: Any, b: Any, need: float) -> Any:
+            asked["chords"][-1] += [(*p, *q, need) for p, q in zip(np.asarray(a), np.asarray(b), strict=True)]
+            return self.world.segment_is_free(a, b, need)
+
+    def watched(cls: Any) -> Any:
+        class Search(cls):  # type: ignore[misc,valid-type]
+            def __init__(self, env: Any, S: Any) -> None:
+                super().__init__(env, S)
+                searches.append(self)
+                for lists in asked.values():
+                    lists.append([])
+                self.env, self.tenv = Watched(self.env), Watched(self.tenv)
+
+        return Search
+
+    class EveryTime(references._Answers):  # until stop 70: every clearance and every chord, at every step
         def robot_clear(self, idx: Any, clear: float) -> Any:
-            before = np.isnan(self.clearance[idx])
-            self.points += idx[before].tolist()
-            return super().robot_clear(idx, clear)
+            self.clear_now = np.asarray(self.env.exact_clearance(self.S[idx]), float) > clear
+            return np.ones(len(idx), dtype=bool)  # so the search asks every chord as well
 
         def chord_free(self, k: int, idx: Any, need: float) -> Any:
-            row = self.chords.get(k)
-            new = idx if row is None else idx[row[idx] < 0]
-            self.chord_list += [(k, int(c)) for c in new]
-            return super().chord_free(k, idx, need)
-
-    class EveryTime(references._Answers):  # the world asked at every call: the reference
-        def robot_clear(self, idx: Any, clear: float) -> Any:
-            asked["points"][-1] += idx.tolist()
-            return np.asarray(self.env.exact_clearance(self.S[idx]), float) > clear
-
-        def chord_free(self, k: int, idx: Any, need: float) -> Any:
-            asked["chords"][-1] += [(k, int(c)) for c in idx]
-            return self.tenv.segment_is_free(np.repeat(self.S[k][None], len(idx), 0), self.S[idx], need)
-
-        def __init__(self, env: Any, S: Any) -> None:
-            super().__init__(env, S)
-            asked["points"].append([])
-            asked["chords"].append([])
+            free = self.tenv.segment_is_free(np.repeat(self.S[k][None], len(idx), 0), self.S[idx], need)
+            return free & self.clear_now
 
     room = generate_room(3202507196, "long_walls", "corner")
     env, N = room.environment(), 8
     lim = span_limits(N, ChainParams())
     route = plan_route(env, room.base, room.goal, lim, robots=N)
     spacing = lim[:, 0].max() + 0.2
-    monkeypatch.setattr(references, "_Answers", Counted)
+    monkeypatch.setattr(references, "_Answers", watched(references._Answers))
     P, parked = start_placement(env, route, N, spacing, span_limits=lim)
     once = {key: [len(x) for x in lists] for key, lists in asked.items()}
     for lists in asked.values():
-        assert all(len(x) == len(set(x)) for x in lists)  # no point, no chord asked twice in a search
+        assert all(len(x) == len(set(x)) for x in lists)  # no point, no chord asked of the world twice in a search
     for a in searches:  # every answer kept is the world's own for that point and that chord
         i = np.flatnonzero(~np.isnan(a.clearance))
         np.testing.assert_array_equal(a.clearance[i], env.exact_clearance(a.S[i]))
@@ -462,11 +461,12 @@ def test_the_placement_search_asks_each_point_and_chord_once_and_places_the_same
             free = references.tether_env(env).segment_is_free(np.repeat(a.S[k][None], len(c), 0), a.S[c], need)
             np.testing.assert_array_equal(row[c] == 1, free)
     asked = {"points": [], "chords": []}
-    monkeypatch.setattr(references, "_Answers", EveryTime)
+    monkeypatch.setattr(references, "_Answers", watched(EveryTime))
     P0, parked0 = start_placement(env, route, N, spacing, span_limits=lim)
     every = {key: [len(x) for x in lists] for key, lists in asked.items()}
     assert parked == parked0 >= 1 and np.array_equal(P, P0)
     assert len(once["points"]) == len(every["points"]) > 1  # the same searches
+    assert every["points"] == every["chords"]  # the reference asked both of every candidate
     for key in once:
         assert all(a <= b for a, b in zip(once[key], every[key], strict=True))
-    assert sum(every["points"]) > 5 * sum(once["points"]) and sum(every["chords"]) > 1.5 * sum(once["chords"])
+    assert sum(every["points"]) > 50 * sum(once["points"]) and sum(every["chords"]) > 3 * sum(once["chords"])

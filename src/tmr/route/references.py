@@ -193,8 +193,8 @@ class _Answers:
     world once, where first asked: :func:`_along`'s depth-first search asks the same ones again and again. And a
     chord is asked only to a point that keeps its clearance. ``long_walls-corner-3202507196`` with 8 robots (11
     searches): 361,843 point clearances and as many chords before, 3,060 and 65,951 now; ``tmr plan --method qp``'s
-    problem 3.9 → 1.6 s, the same output bytes. Each answer is the world's own, per point and per chord, whichever
-    batch asks it."""
+    problem 3.93 → 1.60 s, the same output bytes (``benchmarks/placement_answers.py``). Each answer is the world's
+    own, per point and per chord, whichever batch asks it."""
 
     def __init__(self, env: Any, S: Array) -> None:
         self.env, self.tenv, self.S = env, tether_env(env), S
