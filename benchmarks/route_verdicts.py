@@ -30,7 +30,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from provenance import source_version, versions  # noqa: E402
-from segment_margin import _room_args, cold_timings  # noqa: E402
+from segment_margin import _room_args, alternating_cold_runs  # noqa: E402
 
 import tmr.route.witness as witness  # noqa: E402
 
@@ -86,14 +86,7 @@ def _measure(run: str, repeats: int) -> str:
     with tempfile.TemporaryDirectory() as d:
         run_args = _room_args(run, Path(d))
         code, asked, known = _questions(run_args, Path(d) / "counted")
-        t: dict[str, list[dict[str, float]]] = {k: [] for k in LABELS}
-        same = True
-        for r in range(repeats):
-            for label in LABELS if r % 2 == 0 else LABELS[::-1]:
-                t[label].append(cold_timings(CHILD, label, run_args, Path(d) / f"{label}{r}", (0, 1)))
-            for name in ("trajectories.csv", "metrics.json"):
-                a, b = (Path(d) / f"{k}{r}" / name for k in LABELS)
-                same &= a.exists() == b.exists() and (not a.exists() or a.read_bytes() == b.read_bytes())
+        t, same = alternating_cold_runs(CHILD, LABELS, run_args, Path(d), repeats)
 
     def med(label: str, *keys: str) -> float:
         return statistics.median(sum(x[k] for k in keys) for x in t[label])

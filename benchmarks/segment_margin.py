@@ -78,12 +78,30 @@ sys.exit(main(sys.argv[2:]))
 def cold_timings(child: str, label: str, args: list[str], out: Path, exits: tuple[int, ...] = (0,)) -> dict[str, float]:
     """``timings.json`` of ``tmr plan`` with ``args`` written to ``out``, in a new process running ``child`` (a
     ``python -c`` script given ``label`` and the arguments), one BLAS thread; an exit code not in ``exits`` stops the
-    benchmark. Also used by ``train_repair.py``, ``route_verdicts.py`` and ``placement_answers.py``."""
+    benchmark. Also used by ``train_repair.py`` and :func:`alternating_cold_runs`."""
     env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
     done = subprocess.run([sys.executable, "-c", child, label, *args, "--out", str(out)], env=env)
     if done.returncode not in exits:
         sys.exit(f"tmr plan {' '.join(args)}: exit {done.returncode}")
     return json.loads((out / "timings.json").read_text())
+
+
+def alternating_cold_runs(
+    child: str, labels: tuple[str, str], args: list[str], out: Path, repeats: int
+) -> tuple[dict[str, list[dict[str, float]]], bool]:
+    """``repeats`` :func:`cold_timings` of each of the two ``labels`` (exit 0 or 1), the order alternating from one
+    repeat to the next, written to ``out / f"{label}{r}"``: the timings per label, and whether every repeat wrote the
+    same ``trajectories.csv`` and ``metrics.json`` bytes (or neither file) with both. Used by ``route_verdicts.py``
+    and ``placement_answers.py``."""
+    t: dict[str, list[dict[str, float]]] = {k: [] for k in labels}
+    same = True
+    for r in range(repeats):
+        for label in labels if r % 2 == 0 else labels[::-1]:
+            t[label].append(cold_timings(child, label, args, out / f"{label}{r}", (0, 1)))
+        for name in ("trajectories.csv", "metrics.json"):
+            a, b = (out / f"{k}{r}" / name for k in labels)
+            same &= a.exists() == b.exists() and (not a.exists() or a.read_bytes() == b.read_bytes())
+    return t, same
 
 
 def main() -> None:
