@@ -1135,6 +1135,47 @@ def test_windowed_and_polished_equals_the_monolithic_optimum(solved, mode):
     assert windowed.params["horizon_window"] == 12 and "horizon_window" not in plan.params  # runs without: unchanged
 
 
+@pytest.mark.parametrize("a, b", [(1, 9), (12, 20), (23, 30), (1, 30)])
+def test_a_windows_own_model_has_the_whole_models_cost_derivatives_and_rows_there(a, b):
+    """``_Model.window(a, b)``: the model of knots a − 2 … b + 2 alone. At a point off the warm start, its cost's
+    gradient and Hessian in the free knots a … b equal the whole model's (the terms it leaves out are those of
+    fixed knots: constants), every row that depends on a knot of [a, b] has the whole model's value and lower bound
+    there (per-entry bounds sliced), its variable bounds are the whole model's, and it has no fitness row. With two
+    knots of padding fewer, the acceleration at knot a − 1 would be taken from rest and all of this would fail."""
+    import casadi as ca
+
+    problem, su, model, xv, _ = full_transcription()
+    rng = np.random.default_rng(3)
+    x = model.project(xv + rng.normal(0.0, 0.02, xv.size))
+    lo = model.lower("clearance") - rng.uniform(0.0, 0.01, model.lower("clearance").shape)
+    model.lo_entries["clearance"] = lo  # per-entry bounds, as keep_start_clearance sets them
+    sub, a0 = model.window(a, b)
+    w = 2 * su.N
+    b0 = a0 + sub.su.K
+    assert (a0, b0) == (max(0, a - 2), min(su.K, b + 2))
+    xs = x[a0 * w : (b0 + 1) * w]
+    free, whole = slice((a - a0) * w, (b - a0 + 1) * w), slice(a * w, (b + 1) * w)
+
+    def derivatives(m, at):
+        H, g = ca.hessian(m.J, m.x)
+        return [np.asarray(v) for v in ca.Function("d", [m.x], [g, H])(at)]
+
+    g, H = derivatives(model, x)
+    gs, Hs = derivatives(sub, xs)
+    np.testing.assert_allclose(gs[free], g[whole], rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(Hs[free, free], H[whole, whole], rtol=1e-12, atol=1e-9)
+    vals, svals = model.values(x), sub.values(xs)
+    for name in sub.rows:
+        cols = model.window_columns(sub, name, a0)
+        dep = horizon_module._window_columns(model, name, a, b)[cols]
+        assert dep.any(), name
+        np.testing.assert_allclose(svals[name][:, dep], vals[name][:, cols[dep]], rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(sub.lower(name)[:, dep], model.lower(name)[:, cols[dep]])
+    assert "fitness" in model.rows and "fitness" not in sub.rows
+    np.testing.assert_array_equal(sub.lbx, model.lbx[a0 * w : (b0 + 1) * w])
+    np.testing.assert_array_equal(sub.ubx, model.ubx[a0 * w : (b0 + 1) * w])
+
+
 def test_window_options_are_checked(solved):
     problem, warm, _, _ = solved
     for bad in ({"window": 1}, {"window": 10, "window_overlap": 10}, {"window": 10, "window_mode": "parallel"}):

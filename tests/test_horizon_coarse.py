@@ -447,6 +447,42 @@ def test_rows_failing_at_a_few_knots_of_the_interpolation_are_repaired_in_window
         assert getattr(metrics, f) <= getattr(warm_metrics, f) * (1 + 1e-9)
 
 
+def test_the_repairs_window_on_its_own_model_is_the_window_of_the_whole_model(problem_and_warm, monkeypatch):
+    """The repair solves each window on the model of its knots alone (``_windowed(mode="local")``,
+    ``_Model.window``). From the same state, the window of the whole model (``mode="sub"``: every knot a variable,
+    those outside fixed, the whole cost) takes the same IPOPT iterations to the same trajectory and row multipliers,
+    bit for bit (IPOPT drops fixed variables, and the cost's terms of fixed knots are constants)."""
+    problem, warm, _ = problem_and_warm
+    _kink(monkeypatch)
+    calls = []
+    real_windowed = horizon_module._windowed
+
+    def spy(model, masks, xv, obj_scale, pool, bar, deadline, limit, **kwargs):
+        out = real_windowed(model, masks, xv, obj_scale, pool, bar, deadline, limit, **kwargs)
+        scratch = horizon_module._Pool(8, 1e-6, np.inf)
+        whole = real_windowed(model, masks, xv, obj_scale, scratch, bar, deadline, limit, **dict(kwargs, mode="sub"))
+        calls.append((kwargs["mode"], out, whole))
+        return out
+
+    monkeypatch.setattr(horizon_module, "_windowed", spy)
+    windows = []
+    real_window = horizon_model._Model.window
+
+    def window(self, a, b):
+        windows.append((a, b))
+        return real_window(self, a, b)
+
+    monkeypatch.setattr(horizon_model._Model, "window", window)
+    plan_horizon(problem, warm, coarse_polish_iter=0, **ON)
+    assert len(calls) == 1 and windows == [(8, 22)]
+    mode, (x_own, log_own, lam_own), (x_whole, log_whole, lam_whole) = calls[0]
+    assert mode == "local" and [w["iterations"] for w in log_own] == [w["iterations"] for w in log_whole]
+    assert log_own[0]["kept"] and log_own[0]["iterations"] > 0
+    np.testing.assert_array_equal(x_own, x_whole)
+    for name in lam_whole:
+        np.testing.assert_array_equal(lam_own[name], lam_whole[name])
+
+
 def test_a_whole_horizon_row_gets_no_window_and_the_check_after_the_repair_decides(problem_and_warm, monkeypatch):
     """A kink of 0.5 m also makes f4 worse than the warm start's: a fitness row (a sum over every knot, reported at
     knot K) fails besides the local ones. The windows go round the local rows only (knots 8–22, not K); the check

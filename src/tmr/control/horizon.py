@@ -1318,7 +1318,7 @@ def _coarse_pass(
                 masks = model.near_masks(vals)  # the failing rows are near ones
                 scratch = _Pool(_POOL_SIZE, _POOL_SCREEN, math.inf)  # a window's iterates are checked here, not kept
                 args = (model, masks, xv, obj_scale, scratch, bar, until, limit)
-                xv, windows, _ = _windowed(*args, spans=spans, mode="sub", max_iter=REPAIR_MAX_ITER)
+                xv, windows, _ = _windowed(*args, spans=spans, mode="local", max_iter=REPAIR_MAX_ITER)
                 solved = float(sum(w["solve_time"] for w in windows))
                 log["solve_time"] += solved
                 log["transcription_time"] += time.perf_counter() - now - solved
@@ -1649,7 +1649,11 @@ def _windowed(
     Stops at the deadline (the iterates went to ``pool``), and before a solver whose expected build
     (:func:`_expected_build`) would overrun it. ``spans`` (default: ``window`` knots along the route, the windows of
     :func:`_window_spans`), ``mode`` (default ``window_mode``) and ``max_iter`` (IPOPT's cap per window; default
-    ``max_iter``) serve the coarse pass's repair."""
+    ``max_iter``) serve the coarse pass's repair. ``mode="local"`` (the repair's): each window is solved on its own
+    model (:meth:`_Model.window`: its knots and two on either side, those outside it fixed) instead of the whole
+    model's "sub" transcription — the same IPOPT iterates (``tests/test_horizon_coarse.py``) at a window's size; where
+    that model does not apply (differential drive) the window is the whole model's, as "sub". Its iterates go to
+    ``pool`` at the window model's size: only a scratch pool, never one whose iterates are checked."""
     su, opts = model.su, model.su.opts
     mode = opts.window_mode if mode is None else mode
     if spans is None:
@@ -1666,9 +1670,19 @@ def _windowed(
         if remaining <= 0:
             break
         t1 = time.perf_counter()
-        if mode == "sub" or tr is None:
+        local = model.window(a, b) if mode == "local" else None
+        lo, hi = 0, model.lbx.size  # the window model's variables in this model's (all of them but "local")
+        cols: dict[str, NDArray[np.int_]] = {}  # "local": this model's column of each of the window model's
+        if local is not None:
+            wmodel, a0 = local
+            lo, hi = a0 * width, (a0 + wmodel.su.K + 1) * width
+            cols = {n: model.window_columns(wmodel, n, a0) for n in wmodel.rows}
+            wmasks = {n: masks[n][:, c] & _window_columns(model, n, a, b)[c] for n, c in cols.items()}
+            tr = _Transcription(wmodel, wmasks)
+            solver = None
+        elif mode in ("sub", "local") or tr is None:
             sub = {n: m & _window_columns(model, n, a, b)[None, :] for n, m in masks.items()}
-            tr = _Transcription(model, sub if mode == "sub" else masks)
+            tr = _Transcription(model, sub if mode in ("sub", "local") else masks)
             solver = None
         if solver is None:  # "fixed": one solver (and its callback) for every window
             if math.isfinite(limit) and remaining <= _expected_build(tr.size):  # as the rounds: no build past it
@@ -1680,23 +1694,29 @@ def _windowed(
             solver = tr.solver(obj_scale, extra, callback)
         callback.label, callback.iteration = f"window {i + 1} [{a}, {b}]", 0
         bar.set_description_str(f"horizon NLP, window {i + 1} (knots {a}–{b})")
-        lbx, ubx = model.lbx.copy(), model.ubx.copy()
+        x0 = xv[lo:hi]
+        lbx, ubx = tr.lbx.copy(), tr.ubx.copy()
         out = np.ones(lbx.size, dtype=bool)
-        out[a * width : (b + 1) * width] = False
-        lbx[out] = ubx[out] = xv[out]
+        out[a * width - lo : (b + 1) * width - lo] = False
+        lbx[out] = ubx[out] = x0[out]
         t2 = time.perf_counter()
         with _ctrl_c_stops_ipopt():
-            lbg, ubg = _window_bounds(model, tr, a, b)
-            sol = solver(x0=xv, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+            lbg, ubg = (tr.lbg, tr.ubg) if local is not None else _window_bounds(model, tr, a, b)
+            sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
         t3 = time.perf_counter()
         stats = solver.stats()
         status = str(stats.get("return_status", ""))
         ok = status in _SUCCESS or (opts.accept_acceptable and status in _ACCEPTABLE)
         if ok:
-            xv = np.asarray(sol["x"], dtype=float).ravel()
+            xv = xv.copy()
+            xv[lo:hi] = np.asarray(sol["x"], dtype=float).ravel()
             lam_g = np.asarray(sol["lam_g"], dtype=float).ravel()
             for name, idx in tr.index.items():
                 rows = model.rows[name].lo.size
+                if local is not None:  # every row of the window model depends on a knot of [a, b]
+                    whole = idx % rows + rows * cols[name][idx // rows]  # this model's entries
+                    lam[name][whole] = lam_g[tr.offset[name] : tr.offset[name] + idx.size]
+                    continue
                 on = _window_columns(model, name, a, b)[idx // rows]
                 lam[name][idx[on]] = lam_g[tr.offset[name] + np.flatnonzero(on)]
         log.append(

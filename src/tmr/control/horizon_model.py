@@ -6,6 +6,7 @@ whole horizon, IPOPT's options and the warm start projected onto the leader's pa
 
 from __future__ import annotations
 
+import copy
 import math
 import numbers
 from dataclasses import dataclass, field, fields, replace
@@ -1283,6 +1284,42 @@ class _Model:
     def near_masks(self, vals: dict[str, Array]) -> dict[str, NDArray[np.bool_]]:
         """:meth:`near` of every row group at the values ``vals`` (:meth:`values`): the first transcription's rows."""
         return {name: self.near(name, vals[name]) for name in self.rows}
+
+    #: knots a window's model keeps on either side of its free knots [a, b]: every term of the cost and every row
+    #: that depends on a knot of [a, b] spans knots a − 2 … b + 2 at most (an acceleration joins k − 1, k, k + 1)
+    WINDOW_PAD = 2
+
+    def window(self, a: int, b: int) -> tuple[_Model, int] | None:
+        """The model of knots a₀ = max(0, a − 2) … b₀ = min(K, b + 2) alone, for a window whose knots a … b are free
+        and the rest fixed (``formulations/horizon.md``, "Coarse knots", *Repairing the interpolation*): its cost is
+        the terms of f1, f2, f4 (and f3) on those knots, so it differs from this model's only by terms of fixed knots,
+        constants — the same gradient and Hessian in a … b and, for the rows that depend on a knot of [a, b]
+        (:func:`tmr.control.horizon._window_columns`), the same rows as this model's, at a window's size. Its
+        variable bounds and per-entry row bounds (:attr:`lo_entries`, :attr:`constant_entries`) are this model's
+        there; it has no fitness rows (whole-horizon sums, no window's). Returns (model, a₀), or ``None`` where it
+        does not apply: differential drive (headings), a non-uniform grid (the coarse pass's), fewer than 3 knots."""
+        su = self.su
+        a0, b0 = max(0, int(a) - self.WINDOW_PAD), min(su.K, int(b) + self.WINDOW_PAD)
+        if su.drive is not None or not su.uniform or b0 - a0 < 2:
+            return None
+        ws = copy.copy(su)  # the same numbers on knots a0..b0 (its start: a fixed knot like any other outside [a, b])
+        ws.t, ws.K, ws.ref = su.t[a0 : b0 + 1], b0 - a0, su.ref[a0 : b0 + 1]
+        sub = _Model(ws, self.clr, bounds=None, spline=self.spline)
+        width = 2 * su.N
+        keep = slice(a0 * width, (b0 + 1) * width)
+        sub.lbx, sub.ubx = self.lbx[keep].copy(), self.ubx[keep].copy()
+        for mine, theirs in ((self.lo_entries, sub.lo_entries), (self.constant_entries, sub.constant_entries)):
+            theirs.clear()
+            for name, entries in mine.items():
+                theirs[name] = entries[:, self.window_columns(sub, name, a0)]
+        return sub, a0
+
+    def window_columns(self, sub: _Model, name: str, a0: int) -> NDArray[np.int_]:
+        """The column of group ``name`` of this model of every column of ``sub`` (:meth:`window` from knot ``a0``)."""
+        knots = self.rows[name].knots
+        cols = np.searchsorted(knots, sub.rows[name].knots + a0)
+        assert np.array_equal(knots[cols], sub.rows[name].knots + a0), name
+        return cols
 
 
 class _Transcription:
