@@ -892,13 +892,14 @@ def test_an_nlp_too_big_to_build_within_the_limit_is_not_started(feasible_warm, 
     assert plan_horizon(problem, warm, **WEIGHTED).diagnostics["horizon_result"] == "optimal"
 
 
-def full_transcription(spline: bool = True):
+def full_transcription(spline: bool = True, leader_tolerance: float = 0.0):
     """The small problem's NLP at its warm start with every row of every group in it (clearance included): the
     problem, its setup, model, IPOPT's initial point and the transcription; ``spline=False``: the model without the
-    numpy spline (casadi's B-spline node in the rows, differentiated by casadi)."""
+    numpy spline (casadi's B-spline node in the rows, differentiated by casadi); ``leader_tolerance`` > 0: the leader
+    free within it of its reference (its rows, f3 in the cost)."""
     problem = small_problem()
     warm, _ = solve(problem, "qp")
-    su = horizon_model._Setup(problem, horizon_model._options({}))
+    su = horizon_model._Setup(problem, horizon_model._options({"leader_tolerance": leader_tolerance}))
     Q, info = horizon_model._warm_start(su, warm)
     env = problem.env
     model = horizon_model._Model(
@@ -1135,16 +1136,18 @@ def test_windowed_and_polished_equals_the_monolithic_optimum(solved, mode):
     assert windowed.params["horizon_window"] == 12 and "horizon_window" not in plan.params  # runs without: unchanged
 
 
+@pytest.mark.parametrize("leader_tolerance", [0.0, 0.05])
 @pytest.mark.parametrize("a, b", [(1, 9), (12, 20), (23, 30), (1, 30)])
-def test_a_windows_own_model_has_the_whole_models_cost_derivatives_and_rows_there(a, b):
+def test_a_windows_own_model_has_the_whole_models_cost_derivatives_and_rows_there(a, b, leader_tolerance):
     """``_Model.window(a, b)``: the model of knots a − 2 … b + 2 alone. At a point off the warm start, its cost's
     gradient and Hessian in the free knots a … b equal the whole model's (the terms it leaves out are those of
     fixed knots: constants), every row that depends on a knot of [a, b] has the whole model's value and lower bound
-    there (per-entry bounds sliced), its variable bounds are the whole model's, and it has no fitness row. With two
-    knots of padding fewer, the acceleration at knot a − 1 would be taken from rest and all of this would fail."""
+    there (per-entry bounds sliced), its variable bounds are the whole model's, and it has no fitness row; with the
+    leader free (a leader tolerance) too, its rows and f3. With one knot of padding instead of two, the acceleration
+    at knot a − 1 would be taken from rest and all of this would fail (checked)."""
     import casadi as ca
 
-    problem, su, model, xv, _ = full_transcription()
+    problem, su, model, xv, _ = full_transcription(leader_tolerance=leader_tolerance)
     rng = np.random.default_rng(3)
     x = model.project(xv + rng.normal(0.0, 0.02, xv.size))
     lo = model.lower("clearance") - rng.uniform(0.0, 0.01, model.lower("clearance").shape)
@@ -1172,6 +1175,7 @@ def test_a_windows_own_model_has_the_whole_models_cost_derivatives_and_rows_ther
         np.testing.assert_allclose(svals[name][:, dep], vals[name][:, cols[dep]], rtol=1e-12, atol=1e-12)
         np.testing.assert_array_equal(sub.lower(name)[:, dep], model.lower(name)[:, cols[dep]])
     assert "fitness" in model.rows and "fitness" not in sub.rows
+    assert ("leader" in sub.rows) == (leader_tolerance > 0)
     np.testing.assert_array_equal(sub.lbx, model.lbx[a0 * w : (b0 + 1) * w])
     np.testing.assert_array_equal(sub.ubx, model.ubx[a0 * w : (b0 + 1) * w])
 

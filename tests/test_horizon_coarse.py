@@ -469,12 +469,13 @@ def test_the_repairs_window_on_its_own_model_is_the_window_of_the_whole_model(pr
     real_window = horizon_model._Model.window
 
     def window(self, a, b):
-        windows.append((a, b))
-        return real_window(self, a, b)
+        out = real_window(self, a, b)
+        windows.append((a, b, None if out is None else (out[0].su.K, out[1], self.su.K)))
+        return out
 
     monkeypatch.setattr(horizon_model._Model, "window", window)
     plan_horizon(problem, warm, coarse_polish_iter=0, **ON)
-    assert len(calls) == 1 and windows == [(8, 22)]
+    assert len(calls) == 1 and windows == [(8, 22, (18, 6, 30))]  # knots 6–24 of 0–30
     mode, (x_own, log_own, lam_own), (x_whole, log_whole, lam_whole) = calls[0]
     assert mode == "local" and [w["iterations"] for w in log_own] == [w["iterations"] for w in log_whole]
     assert log_own[0]["kept"] and log_own[0]["iterations"] > 0

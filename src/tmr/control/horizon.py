@@ -1209,9 +1209,10 @@ def _coarse_pass(
     """The NLP on every M-th knot (:mod:`tmr.control.horizon_coarse`; clearance bounds and separation margin +
     ``coarse_margin``, rate bounds × ``coarse_rate_scale``), solved by :func:`plan_horizon` itself (a refined grid's
     by :func:`_plan_horizon` with its start) in ``coarse_time_share`` of the time left, its optimum interpolated to
-    every knot — and where rows of the whole NLP fail there, repaired by windows of the whole NLP around those knots
-    (``coarse_repair``, :func:`_repair_spans`) — and where clearance rows still fail between coarse knots, by at
-    most ``coarse_refine_depth``, the same again on the grid cut finer round them
+    every knot — and where rows of the whole NLP fail there, repaired by windows of the whole NLP around those knots,
+    each on its own model (``coarse_repair``, :func:`_repair_spans`, :meth:`_Model.window`) — and where clearance
+    rows still fail between coarse knots, by at most ``coarse_refine_depth``, the same again on the grid cut finer
+    round them
     (:func:`tmr.control.horizon_coarse.refine`, ``coarse_refine`` times at most), from the last interpolation,
     keeping the last round's if the refined one fails deeper or finds no optimum: the candidate if every row of the
     whole NLP holds, no term is worse than the warm start's and it costs no more (else ``None``); and the log
@@ -1652,8 +1653,8 @@ def _windowed(
     ``max_iter``) serve the coarse pass's repair. ``mode="local"`` (the repair's): each window is solved on its own
     model (:meth:`_Model.window`: its knots and two on either side, those outside it fixed) instead of the whole
     model's "sub" transcription — the same IPOPT iterates (``tests/test_horizon_coarse.py``) at a window's size; where
-    that model does not apply (differential drive) the window is the whole model's, as "sub". Its iterates go to
-    ``pool`` at the window model's size: only a scratch pool, never one whose iterates are checked."""
+    that model does not apply (differential drive) the window is the whole model's, as "sub". Its iterates are of the
+    window model's size and go to a pool of their own, not to ``pool``."""
     su, opts = model.su, model.su.opts
     mode = opts.window_mode if mode is None else mode
     if spans is None:
@@ -1690,7 +1691,10 @@ def _windowed(
             extra: dict[str, Any] = {"max_wall_time": float(remaining)} if math.isfinite(limit) else {}
             if max_iter is not None:
                 extra["max_iter"] = int(max_iter)
-            callback = _IterationCallback(tr, pool, bar, "", deadline)
+            # a window model's iterates are of its size: a pool of their own, never the caller's
+            callback = _IterationCallback(
+                tr, pool if local is None else _Pool(1, _POOL_SCREEN, math.inf), bar, "", deadline
+            )
             solver = tr.solver(obj_scale, extra, callback)
         callback.label, callback.iteration = f"window {i + 1} [{a}, {b}]", 0
         bar.set_description_str(f"horizon NLP, window {i + 1} (knots {a}–{b})")

@@ -7,10 +7,11 @@ sampled there; every knot of the first and last M steps, where the chain starts 
 times fewer variables and rows. Its optimum is interpolated to every knot by a quadratic spline
 through the coarse knots (positions; a cubic spline overshoots between knots: f4 12.7 against 0.72 on a walls room
 with 8 robots), and accepted as the plan if *every* row of the whole NLP holds at every knot and it is no worse than
-the warm start in each term — rows failing at a few knots first re-solved by windows of the whole NLP around them
-(``HorizonOptions.coarse_repair``), and where tethers still graze obstacles' corners between coarse knots the coarse
-NLP solved again on a grid cut finer there (:func:`refine`, ``HorizonOptions.coarse_refine``) — otherwise
-:func:`tmr.control.horizon.plan_horizon` solves the whole NLP as before (``formulations/horizon.md``, "Coarse knots").
+the warm start in each term — rows failing at a few knots first re-solved by windows of the whole NLP around them,
+each on its own model (``HorizonOptions.coarse_repair``), and where tethers still graze obstacles' corners between
+coarse knots the coarse NLP solved again on a grid cut finer there (:func:`refine`,
+``HorizonOptions.coarse_refine``) — otherwise :func:`tmr.control.horizon.plan_horizon` solves the whole NLP as
+before (``formulations/horizon.md``, "Coarse knots").
 """
 
 from __future__ import annotations

@@ -1297,10 +1297,10 @@ class _Model:
         (:func:`tmr.control.horizon._window_columns`), the same rows as this model's, at a window's size. Its
         variable bounds and per-entry row bounds (:attr:`lo_entries`, :attr:`constant_entries`) are this model's
         there; it has no fitness rows (whole-horizon sums, no window's). Returns (model, a₀), or ``None`` where it
-        does not apply: differential drive (headings), a non-uniform grid (the coarse pass's), fewer than 3 knots."""
+        does not apply: differential drive (headings), a non-uniform grid (the coarse pass's)."""
         su = self.su
         a0, b0 = max(0, int(a) - self.WINDOW_PAD), min(su.K, int(b) + self.WINDOW_PAD)
-        if su.drive is not None or not su.uniform or b0 - a0 < 2:
+        if su.drive is not None or not su.uniform:
             return None
         ws = copy.copy(su)  # the same numbers on knots a0..b0 (its start: a fixed knot like any other outside [a, b])
         ws.t, ws.K, ws.ref = su.t[a0 : b0 + 1], b0 - a0, su.ref[a0 : b0 + 1]
