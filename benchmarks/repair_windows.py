@@ -34,8 +34,8 @@ from provenance import source_version, versions  # noqa: E402
 from segment_margin import _room_args, alternating_cold_runs  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
-#: Misses of issue 33's table (``horizon_rooms_216_64fa0ec_misses_s70``) whose coarse optimum was repaired, from
-#: one window to six.
+#: Misses of issue 33's table (``horizon_rooms_216_64fa0ec_misses_s70``) whose coarse optimum was repaired, in two
+#: windows to eight (on every grid of the coarse pass).
 RUNS = (
     "long_walls-corner-1800594380:8",
     "narrow-far-3708056060:5",
