@@ -16,21 +16,16 @@ Writes ``benchmarks/results/placement_answers.md``.
 
 from __future__ import annotations
 
-import argparse
-import os
-import platform
 import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import source_version, versions  # noqa: E402
-from segment_margin import _room_args, alternating_cold_runs  # noqa: E402
+from segment_margin import _room_args, alternating_cold_runs, comparison_table  # noqa: E402
 
 import tmr.route.references as references  # noqa: E402
 
@@ -127,35 +122,27 @@ def _measure(run: str, repeats: int) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--run", action="append", help="ROOM:N, a room of the 216-room set and a robot count")
-    ap.add_argument("--repeats", type=int, default=3, help="new processes per version and run (medians)")
-    args = ap.parse_args()
-    runs = args.run or list(RUNS)
-    lines = [
-        "# The start placement's answers kept: each candidate's clearance and each chord asked of the world once",
-        "",
-        f"`python benchmarks/placement_answers.py {' '.join(f'--run {r}' for r in runs)} --repeats {args.repeats}` "
-        f"— {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; {source_version()}; "
-        f"{versions(['shapely', 'numpy', 'scipy'])}; {platform.machine()}, {os.cpu_count()} cores.",
-        "",
-        f"`tmr plan --method qp`; medians of {args.repeats} new processes per version, alternating. *Searches*: the "
-        "searches along a polyline (`_along`) in one run. *Candidates*: the candidate points their steps ask about, "
-        "each asked of the world as a clearance and as a chord before. *Points*, *chords*: what is asked of the world "
-        "now. *Problem*: `problem_time` of `timings.json` (the problem's build, with its route and the start "
-        "placement). *Whole run*: `wall_time` (the plan, from the route to the checked plan); *ratio*: kept / asked. "
-        "*Same bytes*: `trajectories.csv` and `metrics.json` of every repeat, asked against kept.",
-        "",
-        "| room | N | exit | searches | candidates | points | chords | problem [s], asked → kept | whole run [s] | "
-        "ratio | same bytes |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for run in runs:
-        lines.append(_measure(run, args.repeats))
-        print(lines[-1], flush=True)
-    text = "\n".join(lines) + "\n"
-    (RESULTS / "placement_answers.md").write_text(text)
-    print(text)
+    comparison_table(
+        __doc__,
+        RUNS,
+        _measure,
+        RESULTS / "placement_answers.md",
+        "The start placement's answers kept: each candidate's clearance and each chord asked of the world once",
+        ["shapely", "numpy", "scipy"],
+        lambda repeats: (
+            f"`tmr plan --method qp`; medians of {repeats} new processes per version, alternating. *Searches*: the "
+            "searches along a polyline (`_along`) in one run. *Candidates*: the candidate points their steps ask "
+            "about, each asked of the world as a clearance and as a chord before. *Points*, *chords*: what is asked "
+            "of the world now. *Problem*: `problem_time` of `timings.json` (the problem's build, with its route and "
+            "the start placement). *Whole run*: `wall_time` (the plan, from the route to the checked plan); *ratio*: "
+            "kept / asked. *Same bytes*: `trajectories.csv` and `metrics.json` of every repeat, asked against kept."
+        ),
+        [
+            "| room | N | exit | searches | candidates | points | chords | problem [s], asked → kept | whole run [s] | "
+            "ratio | same bytes |",
+            "|---|---|---|---|---|---|---|---|---|---|---|",
+        ],
+    )
 
 
 if __name__ == "__main__":

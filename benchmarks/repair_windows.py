@@ -19,19 +19,14 @@ Writes ``benchmarks/results/repair_windows.md``.
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
-import platform
 import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import source_version, versions  # noqa: E402
-from segment_margin import _room_args, alternating_cold_runs  # noqa: E402
+from segment_margin import _room_args, alternating_cold_runs, comparison_table  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: Misses of issue 33's table (``horizon_rooms_216_64fa0ec_misses_s70``) whose coarse optimum was repaired, in two
@@ -82,35 +77,27 @@ def _measure(run: str, repeats: int) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--run", action="append", help="ROOM:N, a room of the 216-room set and a robot count")
-    ap.add_argument("--repeats", type=int, default=3, help="new processes per version and run (medians)")
-    args = ap.parse_args()
-    runs = args.run or list(RUNS)
-    lines = [
-        "# The coarse pass's repair on each window's own model",
-        "",
-        f"`python benchmarks/repair_windows.py {' '.join(f'--run {r}' for r in runs)} --repeats {args.repeats}` "
-        f"— {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; {source_version()}; "
-        f"{versions(['casadi', 'numpy'])}; {platform.machine()}, {os.cpu_count()} cores.",
-        "",
-        f"`tmr plan --method horizon --time-limit 60`; medians of {args.repeats} new processes per version, "
-        "alternating, one BLAS thread. *Result*: the plan's (`horizon.result` of `metrics.json`). *Windows*: the "
-        "repair's windows in the coarse pass's last grid (`horizon.coarse.repair`); *iterations*: the repair's IPOPT "
-        "iterations on every grid (`horizon.coarse.repair_iterations`). *NLP*: `nlp_time` of `timings.json` (the "
-        "whole-horizon optimiser, the coarse pass and its repair included); *whole run*: `wall_time`; *ratio*: own / "
-        "whole. *Same bytes*: `trajectories.csv` and `metrics.json` of every repeat, the whole model's windows "
-        "against the windows' own.",
-        "",
-        "| room | N | result | windows | iterations | NLP [s], whole → own | whole run [s] | ratio | same bytes |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for run in runs:
-        lines.append(_measure(run, args.repeats))
-        print(lines[-1], flush=True)
-    text = "\n".join(lines) + "\n"
-    (RESULTS / "repair_windows.md").write_text(text)
-    print(text)
+    comparison_table(
+        __doc__,
+        RUNS,
+        _measure,
+        RESULTS / "repair_windows.md",
+        "The coarse pass's repair on each window's own model",
+        ["casadi", "numpy"],
+        lambda repeats: (
+            f"`tmr plan --method horizon --time-limit 60`; medians of {repeats} new processes per version, "
+            "alternating, one BLAS thread. *Result*: the plan's (`horizon.result` of `metrics.json`). *Windows*: the "
+            "repair's windows in the coarse pass's last grid (`horizon.coarse.repair`); *iterations*: the repair's "
+            "IPOPT iterations on every grid (`horizon.coarse.repair_iterations`). *NLP*: `nlp_time` of `timings.json` "
+            "(the whole-horizon optimiser, the coarse pass and its repair included); *whole run*: `wall_time`; "
+            "*ratio*: own / whole. *Same bytes*: `trajectories.csv` and `metrics.json` of every repeat, the whole "
+            "model's windows against the windows' own."
+        ),
+        [
+            "| room | N | result | windows | iterations | NLP [s], whole → own | whole run [s] | ratio | same bytes |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ],
+    )
 
 
 if __name__ == "__main__":

@@ -18,19 +18,14 @@ Writes ``benchmarks/results/route_verdicts.md``.
 
 from __future__ import annotations
 
-import argparse
-import os
-import platform
 import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import source_version, versions  # noqa: E402
-from segment_margin import _room_args, alternating_cold_runs  # noqa: E402
+from segment_margin import _room_args, alternating_cold_runs, comparison_table  # noqa: E402
 
 import tmr.route.witness as witness  # noqa: E402
 
@@ -101,34 +96,26 @@ def _measure(run: str, repeats: int) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--run", action="append", help="ROOM:N, a room of the 216-room set and a robot count")
-    ap.add_argument("--repeats", type=int, default=3, help="new processes per version and run (medians)")
-    args = ap.parse_args()
-    runs = args.run or list(RUNS)
-    lines = [
-        "# The route's verdicts remembered: `--robots auto` asks the corner proof and the search off the route once",
-        "",
-        f"`python benchmarks/route_verdicts.py {' '.join(f'--run {r}' for r in runs)} --repeats {args.repeats}` — "
-        f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; {source_version()}; "
-        f"{versions(['shapely', 'numpy', 'scipy'])}; {platform.machine()}, {os.cpu_count()} cores.",
-        "",
-        f"`tmr plan --method qp`; medians of {args.repeats} new processes per version, alternating. *Questions*: "
-        "calls of `proven_too_few` and `_witness` in one run, and how many of them were asked before in the same "
-        "run (answered from memory now, searched again before). *Route + problem*: `route_time` + `problem_time` "
-        "of `timings.json` (the precheck's route; the problem's build, with its own route and the start placement). "
-        "*Same bytes*: `trajectories.csv` and `metrics.json` of every repeat, searched against remembered.",
-        "",
-        "| room | N | exit | questions | asked before | route + problem [s], searched → remembered | "
-        "whole run [s] | ratio | same bytes |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for run in runs:
-        lines.append(_measure(run, args.repeats))
-        print(lines[-1], flush=True)
-    text = "\n".join(lines) + "\n"
-    (RESULTS / "route_verdicts.md").write_text(text)
-    print(text)
+    comparison_table(
+        __doc__,
+        RUNS,
+        _measure,
+        RESULTS / "route_verdicts.md",
+        "The route's verdicts remembered: `--robots auto` asks the corner proof and the search off the route once",
+        ["shapely", "numpy", "scipy"],
+        lambda repeats: (
+            f"`tmr plan --method qp`; medians of {repeats} new processes per version, alternating. *Questions*: calls "
+            "of `proven_too_few` and `_witness` in one run, and how many of them were asked before in the same run "
+            "(answered from memory now, searched again before). *Route + problem*: `route_time` + `problem_time` of "
+            "`timings.json` (the precheck's route; the problem's build, with its own route and the start placement). "
+            "*Same bytes*: `trajectories.csv` and `metrics.json` of every repeat, searched against remembered."
+        ),
+        [
+            "| room | N | exit | questions | asked before | route + problem [s], searched → remembered | "
+            "whole run [s] | ratio | same bytes |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ],
+    )
 
 
 if __name__ == "__main__":

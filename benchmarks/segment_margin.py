@@ -26,6 +26,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -91,8 +92,8 @@ def alternating_cold_runs(
 ) -> tuple[dict[str, list[dict[str, float]]], bool]:
     """``repeats`` :func:`cold_timings` of each of the two ``labels`` (exit 0 or 1), the order alternating from one
     repeat to the next, written to ``out / f"{label}{r}"``: the timings per label, and whether every repeat wrote the
-    same ``trajectories.csv`` and ``metrics.json`` bytes (or neither file) with both. Used by ``route_verdicts.py``
-    and ``placement_answers.py``."""
+    same ``trajectories.csv`` and ``metrics.json`` bytes (or neither file) with both. Used by ``route_verdicts.py``,
+    ``placement_answers.py`` and ``repair_windows.py``."""
     t: dict[str, list[dict[str, float]]] = {k: [] for k in labels}
     same = True
     for r in range(repeats):
@@ -102,6 +103,46 @@ def alternating_cold_runs(
             a, b = (out / f"{k}{r}" / name for k in labels)
             same &= a.exists() == b.exists() and (not a.exists() or a.read_bytes() == b.read_bytes())
     return t, same
+
+
+def comparison_table(
+    doc: str,
+    runs: tuple[str, ...],
+    measure: Callable[[str, int], str],
+    out: Path,
+    title: str,
+    libraries: list[str],
+    legend: Callable[[int], str],
+    columns: list[str],
+) -> None:
+    """The command line of a benchmark of :func:`alternating_cold_runs` (``--run ROOM:N`` …, default ``runs``;
+    ``--repeats``) and its Markdown table, written to ``out`` (``benchmarks/results/<script>.md``) and printed:
+    ``title``, the command with the time, source and ``libraries``' versions, ``legend(repeats)``, the ``columns``
+    (header and rule) and ``measure(run, repeats)``'s row for each run, printed as it comes. ``doc``: the script's
+    docstring (its first paragraph is the command's description). Used by ``route_verdicts.py``,
+    ``placement_answers.py`` and ``repair_windows.py``."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
+    ap.add_argument("--run", action="append", help="ROOM:N, a room of the 216-room set and a robot count")
+    ap.add_argument("--repeats", type=int, default=3, help="new processes per version and run (medians)")
+    args = ap.parse_args()
+    chosen = args.run or list(runs)
+    lines = [
+        f"# {title}",
+        "",
+        f"`python benchmarks/{out.stem}.py {' '.join(f'--run {r}' for r in chosen)} --repeats {args.repeats}` — "
+        f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; {source_version()}; "
+        f"{versions(libraries)}; {platform.machine()}, {os.cpu_count()} cores.",
+        "",
+        legend(args.repeats),
+        "",
+        *columns,
+    ]
+    for run in chosen:
+        lines.append(measure(run, args.repeats))
+        print(lines[-1], flush=True)
+    text = "\n".join(lines) + "\n"
+    out.write_text(text)
+    print(text)
 
 
 def main() -> None:
