@@ -14,11 +14,13 @@ ways:
   x_0 = (start, start).
 
 Both have the same cost, Σ_k 100 ‖a_k‖² + ‖P_{k+1} − P_k‖² + 100 ‖P_N − goal‖² + 100 ‖P_N − P_{N−1}‖², and the same
-rows at every knot k ≥ 1: each robot at least 0.3 m from the centres of five discs along its way (the clearance
-rows), neighbours 0.5–0.8 m apart (the spacing rows), ‖a_k‖∞ ≤ 0.2 (the acceleration rows); the robots, a row 0.6 m
-apart, travel 12 m. The start is the straight line, which crosses the discs. Both solvers stop at tol = 10⁻⁴ (fatrop's
-default 10⁻⁸ is not reached on this OCP: its dual infeasibility stalls near 2·10⁻⁵ with the objective settled);
-IPOPT's linear solver is MUMPS with the AMD ordering, as ``horizon`` sets it; the rest are the solvers' defaults.
+rows: at every knot k ≥ 1 each robot at least 0.3 m from the centres of five discs along its way (the clearance rows)
+and neighbours 0.5–0.8 m apart (the spacing rows); ‖a_k‖∞ ≤ 0.2 for k = 0 … N − 1 (the acceleration rows). The
+robots, a row 0.6 m apart, travel 12 m. The start is the straight line, which crosses the discs. Both solvers stop at
+tol = 10⁻⁴ (fatrop's default 10⁻⁸ is not reached on this OCP: its dual infeasibility stalls near 2·10⁻⁵ with the
+objective settled); IPOPT's linear solver is MUMPS with the AMD ordering, as ``horizon`` sets it; the rest are the
+solvers' defaults — not ``horizon``'s IPOPT options (its adaptive barrier from 10⁻³, no scaling, its Hessian floors),
+so the iteration counts here are this OCP's, not ``horizon``'s. There are no whole-horizon (fitness) rows.
 
 Every run is its own process (one BLAS thread), the solver built (``casadi.nlpsol``) and then called from the start;
 build and solve are timed apart. The answer is checked here, from the positions alone, against every row (the largest
@@ -249,7 +251,8 @@ def main() -> None:
         f"`python benchmarks/stagewise_fatrop.py --stages {' '.join(map(str, args.stages))} --repeats "
         f"{args.repeats}` — {when}, {os.cpu_count()} cores, one BLAS thread, {versions(['casadi', 'numpy'])}, "
         f"{source_version()}. The OCP and both forms: the script's docstring. Medians over the repeats (the "
-        "iterations, objective and violation were the same in every repeat unless a range is shown).",
+        "iterations and objective were the same in every repeat unless a range is shown; the violation is the "
+        "largest over the repeats).",
         "",
         "| stages | run | variables | rows | build [s] | iterations | solve [s] | ms / iteration | objective | "
         "largest violation | status | solve / positional IPOPT's |",
