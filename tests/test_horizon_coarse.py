@@ -33,6 +33,11 @@ def test_stride_indices_and_the_coarse_problem(problem_and_warm):
     problem, warm, _ = problem_and_warm
     assert coarse.stride(30, 10, 10) == 3 and coarse.stride(30, 10, 32) == 1 and coarse.stride(30, None, 0) == 1
     assert coarse.stride(1126, 200, 500) == 6
+    # a shorter horizon of many robots (stop 73): knots × robots N (K + 1) ≥ from_size, the bound included
+    assert coarse.stride(483, 100, 500, 3000, 8) == 5 and coarse.stride(374, 100, 500, 3000, 8) == 4
+    assert coarse.stride(373, 100, 500, 3000, 8) == 1 and coarse.stride(483, 100, 500, 3000, 6) == 1
+    assert coarse.stride(483, 100, 500, None, 8) == 1 and coarse.stride(1126, 200, 500, None, 1) == 6
+    assert coarse.stride(2999, None, 500, 3000, 8) == 1
     np.testing.assert_array_equal(coarse.coarse_indices(30, 3), GRID)
     np.testing.assert_array_equal(coarse.coarse_indices(31, 3)[-3:], [24, 27, 31])  # a 1-step last step merged
     np.testing.assert_array_equal(coarse.coarse_indices(32, 3)[-3:], [27, 30, 32])  # a 2-step last step kept
@@ -111,6 +116,22 @@ def test_the_coarse_optimum_is_returned_only_where_every_row_holds(problem_and_w
     # no coarse pass below coarse_from: the records hold no "coarse" entry
     plain = plan_horizon(problem, warm)
     assert "coarse" not in plain.diagnostics["horizon_summary"]
+
+
+def test_a_short_horizon_of_many_robots_gets_the_same_coarse_pass(problem_and_warm):
+    """``coarse_from_size``: a horizon shorter than ``coarse_from`` gets the coarse pass where its knots × robots
+    reach the size, the very pass the knots rule gives (the same plan, bit for bit); one knot-robot short, none."""
+    problem, warm, _ = problem_and_warm
+    size = problem.chain.n_robots * 31  # K = 30
+    by_knots = plan_horizon(problem, warm, coarse_polish_iter=0, coarse_from_size=None, **ON)
+    by_size = plan_horizon(
+        problem, warm, coarse_knots=10, coarse_from=10**6, coarse_from_size=size, coarse_polish_iter=0
+    )
+    assert by_size.diagnostics["horizon_summary"]["coarse"]["stride"] == 3
+    np.testing.assert_array_equal(by_size.q, by_knots.q)
+    assert by_size.diagnostics["horizon_note"] == by_knots.diagnostics["horizon_note"]
+    below = plan_horizon(problem, warm, coarse_knots=10, coarse_from=10**6, coarse_from_size=size + 1)
+    assert "coarse" not in below.diagnostics["horizon_summary"]
 
 
 def test_the_polish_starts_with_the_rows_near_the_coarse_optimum_only(problem_and_warm, monkeypatch):

@@ -29,10 +29,12 @@ from tmr.control.horizon_model import held
 Array = NDArray[np.float64]
 
 
-def stride(K: int, coarse_knots: int | None, coarse_from: int) -> int:
-    """Knot stride M of the coarse pass for a horizon of K + 1 knots: ⌈K / coarse_knots⌉ if K + 1 ≥ ``coarse_from``
-    (and M ≥ 2), else 1 (no coarse pass)."""
-    if coarse_knots is None or K + 1 < coarse_from:
+def stride(K: int, coarse_knots: int | None, coarse_from: int, from_size: int | None = None, N: int = 1) -> int:
+    """Knot stride M of the coarse pass for a horizon of K + 1 knots and N robots: ⌈K / coarse_knots⌉ if
+    K + 1 ≥ ``coarse_from`` or N (K + 1) ≥ ``from_size`` (knots × robots; None: no such rule), else 1 (no coarse
+    pass)."""
+    big = K + 1 >= coarse_from or (from_size is not None and N * (K + 1) >= from_size)
+    if coarse_knots is None or not big:
         return 1
     return max(1, math.ceil(K / int(coarse_knots)))
 

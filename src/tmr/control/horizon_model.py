@@ -93,14 +93,18 @@ class HorizonOptions:
             L-BFGS; no Hessian built).
         fast_hessian: the fast attempt's Hessian (``"exact"``: scenario E with 6 robots in 31 iterations, 53 with
             Gauss–Newton).
-        coarse_knots: a horizon of at least ``coarse_from`` knots is solved first on every M-th knot, M =
-            ⌈K / coarse_knots⌉ (steps of M T_s; :mod:`tmr.control.horizon_coarse`), its optimum interpolated to every
-            knot; if every row of the whole NLP holds there and it is no worse than the warm start in any term, it is
-            polished (``coarse_polish_iter``) and is the plan if the polish does not converge (``"coarse_optimal"``);
-            else the whole NLP starts from it (``None``: off; ``formulations/horizon.md``, "Coarse knots"). 100 (200
-            until stop 50): with the repair and the polish's own floor, the rooms benchmark ran 57 of 59 runs under
-            10 s instead of 56, the corner walls room with 8 robots in 6.6 s instead of 12.2.
+        coarse_knots: a horizon of at least ``coarse_from`` knots (or ``coarse_from_size``) is solved first on
+            every M-th knot, M = ⌈K / coarse_knots⌉ (steps of M T_s; :mod:`tmr.control.horizon_coarse`), its optimum
+            interpolated to every knot; if every row of the whole NLP holds there and it is no worse than the warm
+            start in any term, it is polished (``coarse_polish_iter``) and is the plan if the polish does not converge
+            (``"coarse_optimal"``); else the whole NLP starts from it (``None``: off; ``formulations/horizon.md``,
+            "Coarse knots"). 100 (200 until stop 50): with the repair and the polish's own floor, the rooms benchmark
+            ran 57 of 59 runs under 10 s instead of 56, the corner walls room with 8 robots in 6.6 s instead of 12.2.
         coarse_from: the smallest horizon (knots) that gets the coarse pass.
+        coarse_from_size: a shorter horizon gets it too where knots × robots N (K + 1) reach this (``None``: no
+            such rule): the whole NLP's iterations cost about as its size, so a shorter horizon of many robots gains
+            from the coarse pass as a long one does (stop 73, ``benchmarks/coarse_size.py``; ``formulations/
+            horizon.md``, "Coarse knots").
         clearance_margin: added to d_safe [m] for every clearance sample except the equality leader's own (it
             depends on the fixed reference only); the coarse pass sets it to ``coarse_margin``.
         coarse_margin: added to the coarse NLP's clearance bounds (but the equality leader's own) and separation
@@ -304,6 +308,7 @@ class HorizonOptions:
     clearance_margin: float = 0.0
     coarse_knots: int | None = 100
     coarse_from: int = 500
+    coarse_from_size: int | None = 3000
     coarse_margin: float = 0.02
     coarse_train_activation: float | None = 1.5
     keep_warm_margins: bool = False
