@@ -1,7 +1,7 @@
 """The coarse pass for shorter horizons of many robots (``HorizonOptions.coarse_from_size``, since stop 73): until
 stop 73 a horizon got the coarse pass (``formulations/horizon.md``, "Coarse knots") only from ``coarse_from`` = 500
-knots. The whole NLP's iterations cost about as its size, knots × robots, so a horizon of 400 knots and 8 robots is as
-large as one of 640 knots and 5 robots, which got the pass. This measures, on every run of a rooms table whose horizon
+knots. The whole NLP's size is its knots × robots, so a horizon of 400 knots and 8 robots is as large as one of 640
+knots and 5 robots, which got the pass. This measures, on every run of a rooms table whose horizon
 is shorter than 500 knots, the plan without the coarse pass and with it, to choose the size from which it pays.
 
     python benchmarks/coarse_size.py [--table horizon_rooms_216_ee5f076] [--knots 200 500] [--jobs 2]

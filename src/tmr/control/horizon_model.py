@@ -102,8 +102,8 @@ class HorizonOptions:
             ran 57 of 59 runs under 10 s instead of 56, the corner walls room with 8 robots in 6.6 s instead of 12.2.
         coarse_from: the smallest horizon (knots) that gets the coarse pass.
         coarse_from_size: a shorter horizon gets it too where knots × robots N (K + 1) reach this (``None``: no
-            such rule): the whole NLP's iterations cost about as its size, so a shorter horizon of many robots gains
-            from the coarse pass as a long one does (stop 73, ``benchmarks/coarse_size.py``; ``formulations/
+            such rule): the whole NLP's size is its knots × robots, so a shorter horizon of many robots gains from the
+            coarse pass as a long one does (stop 73, ``benchmarks/coarse_size.py``; ``formulations/
             horizon.md``, "Coarse knots").
         clearance_margin: added to d_safe [m] for every clearance sample except the equality leader's own (it
             depends on the fixed reference only); the coarse pass sets it to ``coarse_margin``.
