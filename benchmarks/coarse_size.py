@@ -7,11 +7,11 @@ is shorter than 500 knots, the plan without the coarse pass and with it, to choo
     python benchmarks/coarse_size.py [--table horizon_rooms_216_ee5f076] [--knots 200 500] [--jobs 2]
                                      [--sizes 2000 3000 4000] [--out coarse_size]
 
-Each run of ``benchmarks/results/TABLE.csv`` (a room of the 216-room set and a robot count) with ``--knots`` LO ≤
-knots < HI is planned with ``tmr plan --method horizon --time-limit 60`` (as ``benchmarks/horizon.py`` runs the
+Each run of ``benchmarks/results/TABLE.csv`` (a generated room, of any seed's set, and a robot count) with ``--knots``
+LO ≤ knots < HI is planned with ``tmr plan --method horizon --time-limit 60`` (as ``benchmarks/horizon.py`` runs the
 table) twice, a new process each, one BLAS thread, the order alternating from one run to the next: *fine*, no coarse
-pass below 500 knots (the rule before stop 73), and *coarse*, the coarse pass from LO knots (M = ⌈K / 100⌉ as on
-any long horizon). ``--jobs`` runs at a time, as the table's runner. Per bucket of knots × robots: the runs, the
+pass below 500 knots (the rule before stop 73), and *coarse*, the coarse pass from LO knots (M = ⌈K / 100⌉ as on any
+long horizon). ``--jobs`` runs at a time, as the table's runner. Per bucket of knots × robots: the runs, the
 whole-process time summed and the median of coarse / fine, the plans' f1 + f2 + f4 (Caruso 2021 eq. 24, 25, 27; the
 checker's, ``metrics.json``) coarse / fine (geometric mean, least, greatest), and the runs optimal and under 10 s either
 way. Then each size of ``--sizes`` as the rule (the coarse pass where knots × robots reach it): the same sums, counts
@@ -39,7 +39,10 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from provenance import source_version, versions  # noqa: E402
-from segment_margin import _room_args, cold_timings  # noqa: E402
+from segment_margin import cold_timings  # noqa: E402
+
+from tmr.sweep.room_runs import xy_arg  # noqa: E402
+from tmr.sweep.rooms import room_from_spec, room_spec, write_geojson  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 OPTIMAL = ("optimal", "coarse_optimal")
@@ -52,13 +55,27 @@ import sys
 import tmr.control.horizon as horizon
 rule = horizon.stride
 if sys.argv[1] == "fine":
-    horizon.stride = lambda K, knots, start, size=None, N=1: rule(K, knots, start, None, N)
+    horizon.stride = lambda K, knots, start, **size: rule(K, knots, start)
 else:
     low = int(sys.argv.pop(2))
-    horizon.stride = lambda K, knots, start, size=None, N=1: rule(K, knots, min(start, low), None, N)
+    horizon.stride = lambda K, knots, start, **size: rule(K, knots, min(start, low))
 from tmr.plan import main
 sys.exit(main(sys.argv[2:]))
 """
+
+
+def _args(run: str, where: Path) -> list[str]:
+    """``tmr plan --method horizon --time-limit 60`` arguments for ``run`` ("ROOM:N", a generated room of any seed:
+    :func:`tmr.sweep.rooms.room_spec`), its map written into ``where``; up to ``--out``."""
+    name, robots = run.rsplit(":", 1)
+    room = room_from_spec(room_spec(name))
+    if isinstance(room, str):
+        sys.exit(f"{name}: {room}")
+    write_geojson(room, where / "room.geojson")
+    return [
+        "--map", str(where / "room.geojson"), f"--base={xy_arg(room.base)}", f"--goal={xy_arg(room.goal)}",
+        "--robots", robots, "--method", "horizon", "--no-plots", "--seed", "0", "--quiet", "--time-limit", "60",
+    ]  # fmt: skip
 
 
 def _plan(run: str, label: str, low: int) -> dict[str, Any]:
@@ -66,7 +83,7 @@ def _plan(run: str, label: str, low: int) -> dict[str, Any]:
     iterations, the coarse pass's result, f1 + f2 + f4 of the plan; the whole process (interpreter start to exit,
     as the table's ``wall_time``), the plan's own ``wall_time`` (``plan_time``) and its NLP's [s]."""
     with tempfile.TemporaryDirectory() as d:
-        args = [a if a != "qp" else "horizon" for a in _room_args(run, Path(d))] + ["--time-limit", "60"]
+        args = _args(run, Path(d))
         extra = [str(low)] if label == "coarse" else []
         t0 = time.perf_counter()
         t = cold_timings(CHILD, label, [*extra, *args], Path(d) / "out", (0, 1))
@@ -89,21 +106,23 @@ def _good(row: dict[str, Any], label: str) -> bool:
     return row[f"{label}_result"] in OPTIMAL and float(row[f"{label}_wall_time"]) < 10
 
 
-def _summary(rows: list[dict[str, Any]], pick: str = "coarse") -> str:
-    """runs | time fine → pick (sum) | median ratio | cost pick / fine: geometric mean, least, greatest | optimal
-    and < 10 s, fine → pick."""
+def _summary(rows: list[dict[str, Any]]) -> str:
+    """runs | time fine → coarse (sums) | median ratio | cost coarse / fine: geometric mean, least, greatest (over the
+    runs with a plan both ways; the others counted apart) | optimal and < 10 s, fine → coarse."""
     if not rows:
         return "0 | – | – | – | – |"
     tf = [float(r["fine_wall_time"]) for r in rows]
-    tc = [float(r[f"{pick}_wall_time"]) for r in rows]
-    cr = [float(r[f"{pick}_cost"]) / float(r["fine_cost"]) for r in rows]
-    geo = math.exp(statistics.fmean(math.log(c) for c in cr))
-    good = sum(_good(r, "fine") for r in rows), sum(_good(r, pick) for r in rows)
+    tc = [float(r["coarse_wall_time"]) for r in rows]
+    cr = [float(r["coarse_cost"]) / float(r["fine_cost"]) for r in rows]
+    cr = [c for c in cr if math.isfinite(c) and c > 0]
+    cost = "–"
+    if cr:
+        cost = f"{math.exp(statistics.fmean(math.log(c) for c in cr)):.3f} ({min(cr):.3f}–{max(cr):.3f})"
+    if len(cr) < len(rows):
+        cost += f"; {len(rows) - len(cr)} without a plan one way"
+    good = sum(_good(r, "fine") for r in rows), sum(_good(r, "coarse") for r in rows)
     median = statistics.median(c / f for c, f in zip(tc, tf, strict=True))
-    return (
-        f"{len(rows)} | {sum(tf):.1f} → {sum(tc):.1f} | {median:.2f} | "
-        f"{geo:.3f} ({min(cr):.3f}–{max(cr):.3f}) | {good[0]} → {good[1]} |"
-    )
+    return f"{len(rows)} | {sum(tf):.1f} → {sum(tc):.1f} | {median:.2f} | {cost} | {good[0]} → {good[1]} |"
 
 
 def main() -> None:
@@ -194,7 +213,7 @@ def main() -> None:
     ]
     for r in sorted(rows, key=lambda r: r["size"]):
         ratio = float(r["coarse_cost"]) / float(r["fine_cost"])
-        if _good(r, "fine") != _good(r, "coarse") or abs(ratio - 1) > 0.05:
+        if _good(r, "fine") != _good(r, "coarse") or not abs(ratio - 1) <= 0.05:  # NaN (no plan one way) listed
             lines.append(
                 f"| `{r['room']}` | {r['robots']} | {r['size']:,} | {r['fine_result']}, {r['fine_wall_time']:.1f}, "
                 f"{r['fine_cost']:.1f} | {r['coarse_result']}, {r['coarse_wall_time']:.1f}, {r['coarse_cost']:.1f}, "

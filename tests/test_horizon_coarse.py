@@ -34,10 +34,17 @@ def test_stride_indices_and_the_coarse_problem(problem_and_warm):
     assert coarse.stride(30, 10, 10) == 3 and coarse.stride(30, 10, 32) == 1 and coarse.stride(30, None, 0) == 1
     assert coarse.stride(1126, 200, 500) == 6
     # a shorter horizon of many robots (stop 73): knots × robots N (K + 1) ≥ from_size, the bound included
-    assert coarse.stride(483, 100, 500, 3000, 8) == 5 and coarse.stride(374, 100, 500, 3000, 8) == 4
-    assert coarse.stride(373, 100, 500, 3000, 8) == 1 and coarse.stride(483, 100, 500, 3000, 6) == 1
-    assert coarse.stride(483, 100, 500, None, 8) == 1 and coarse.stride(1126, 200, 500, None, 1) == 6
-    assert coarse.stride(2999, None, 500, 3000, 8) == 1
+    assert (
+        coarse.stride(483, 100, 500, from_size=3000, N=8) == 5
+        and coarse.stride(374, 100, 500, from_size=3000, N=8) == 4
+    )
+    assert (
+        coarse.stride(373, 100, 500, from_size=3000, N=8) == 1
+        and coarse.stride(483, 100, 500, from_size=3000, N=6) == 1
+    )
+    assert coarse.stride(483, 100, 500, N=8) == 1 and coarse.stride(2999, None, 500, from_size=3000, N=8) == 1
+    with pytest.raises(ValueError, match="needs the robots"):
+        coarse.stride(483, 100, 500, from_size=3000)
     np.testing.assert_array_equal(coarse.coarse_indices(30, 3), GRID)
     np.testing.assert_array_equal(coarse.coarse_indices(31, 3)[-3:], [24, 27, 31])  # a 1-step last step merged
     np.testing.assert_array_equal(coarse.coarse_indices(32, 3)[-3:], [27, 30, 32])  # a 2-step last step kept
@@ -590,6 +597,13 @@ def test_coarse_options_are_checked(problem_and_warm):
     problem, warm, _ = problem_and_warm
     bad_options = (
         dict(coarse_knots=1),
+        dict(coarse_from=0),
+        dict(coarse_from=True),
+        dict(coarse_from=None),
+        dict(coarse_from_size=0),
+        dict(coarse_from_size=True),
+        dict(coarse_from_size="3000"),
+        dict(coarse_from_size=2.5e3),
         dict(coarse_margin=-0.1),
         dict(coarse_rate_scale=0),
         dict(coarse_time_share=2),

@@ -961,7 +961,7 @@ def _qp_plan_returned(warm: Plan, problem: Problem, why: str, diagnostics: dict[
         min_hessian_perturbation=None,  # the plan is no IPOPT point
         fast_attempt=diagnostics.get("horizon_fast_attempt"),
     )
-    if diagnostics.get("horizon_coarse") is not None:  # long horizons: what the coarse pass did
+    if diagnostics.get("horizon_coarse") is not None:  # long or large horizons: what the coarse pass did
         warm.diagnostics["horizon_summary"]["coarse"] = diagnostics["horizon_coarse"]
     if released:
         warm.diagnostics["horizon_summary"]["leader_released"] = dict(released)

@@ -538,7 +538,7 @@ def _plan_horizon(
     coarse_c: _Candidate | None = None  # the coarse pass's interpolated optimum, if every row holds
     coarse_log: dict[str, Any] | None = None
     coarse_what = coarse_floor = ""  # what the coarse pass did, and its floor note (for the note)
-    M = stride(su.K, opts.coarse_knots, opts.coarse_from, opts.coarse_from_size, su.N)
+    M = stride(su.K, opts.coarse_knots, opts.coarse_from, from_size=opts.coarse_from_size, N=su.N)
     if M > 1 and su.drive is None and opts.window is None and not fixed_bad and time.perf_counter() < deadline:
         bar.set_description_str(f"horizon NLP, every {_nth(M)} knot")
         coarse_c, coarse_log = _coarse_pass(

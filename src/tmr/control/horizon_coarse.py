@@ -29,11 +29,15 @@ from tmr.control.horizon_model import held
 Array = NDArray[np.float64]
 
 
-def stride(K: int, coarse_knots: int | None, coarse_from: int, from_size: int | None = None, N: int = 1) -> int:
+def stride(
+    K: int, coarse_knots: int | None, coarse_from: int, *, from_size: int | None = None, N: int | None = None
+) -> int:
     """Knot stride M of the coarse pass for a horizon of K + 1 knots and N robots: ⌈K / coarse_knots⌉ if
     K + 1 ≥ ``coarse_from`` or N (K + 1) ≥ ``from_size`` (knots × robots; None: no such rule), else 1 (no coarse
-    pass)."""
-    big = K + 1 >= coarse_from or (from_size is not None and N * (K + 1) >= from_size)
+    pass). N is needed with ``from_size``."""
+    if from_size is not None and N is None:
+        raise ValueError("stride: from_size (knots × robots) needs the robots N")
+    big = K + 1 >= coarse_from or (from_size is not None and N is not None and N * (K + 1) >= from_size)
     if coarse_knots is None or not big:
         return 1
     return max(1, math.ceil(K / int(coarse_knots)))

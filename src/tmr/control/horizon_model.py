@@ -93,18 +93,19 @@ class HorizonOptions:
             L-BFGS; no Hessian built).
         fast_hessian: the fast attempt's Hessian (``"exact"``: scenario E with 6 robots in 31 iterations, 53 with
             Gauss–Newton).
-        coarse_knots: a horizon of at least ``coarse_from`` knots (or ``coarse_from_size``) is solved first on
-            every M-th knot, M = ⌈K / coarse_knots⌉ (steps of M T_s; :mod:`tmr.control.horizon_coarse`), its optimum
-            interpolated to every knot; if every row of the whole NLP holds there and it is no worse than the warm
-            start in any term, it is polished (``coarse_polish_iter``) and is the plan if the polish does not converge
-            (``"coarse_optimal"``); else the whole NLP starts from it (``None``: off; ``formulations/horizon.md``,
-            "Coarse knots"). 100 (200 until stop 50): with the repair and the polish's own floor, the rooms benchmark
-            ran 57 of 59 runs under 10 s instead of 56, the corner walls room with 8 robots in 6.6 s instead of 12.2.
+        coarse_knots: a horizon of at least ``coarse_from`` knots (or ``coarse_from_size`` knots × robots) is solved
+            first on every M-th knot, M = ⌈K / coarse_knots⌉ (steps of M T_s; :mod:`tmr.control.horizon_coarse`), its
+            optimum interpolated to every knot; if every row of the whole NLP holds there and it is no worse than the
+            warm start in any term, it is polished (``coarse_polish_iter``) and is the plan if the polish does not
+            converge (``"coarse_optimal"``); else the whole NLP starts from it (``None``: off;
+            ``formulations/horizon.md``, "Coarse knots"). 100 (200 until stop 50): with the repair and the polish's own
+            floor, the rooms benchmark ran 57 of 59 runs under 10 s instead of 56, the corner walls room with 8 robots
+            in 6.6 s instead of 12.2.
         coarse_from: the smallest horizon (knots) that gets the coarse pass.
-        coarse_from_size: a shorter horizon gets it too where knots × robots N (K + 1) reach this (``None``: no
-            such rule): the whole NLP's size is its knots × robots, so a shorter horizon of many robots gains from the
-            coarse pass as a long one does (stop 73, ``benchmarks/coarse_size.py``; ``formulations/
-            horizon.md``, "Coarse knots").
+        coarse_from_size: a shorter horizon gets it too where knots × robots N (K + 1) reach this (``None``: no such
+            rule): the whole NLP's size is its knots × robots, so a shorter horizon of many robots gains from the coarse
+            pass as a long one does (stop 73, ``benchmarks/coarse_size.py``; ``formulations/horizon.md``, "Coarse
+            knots").
         clearance_margin: added to d_safe [m] for every clearance sample except the equality leader's own (it
             depends on the fixed reference only); the coarse pass sets it to ``coarse_margin``.
         coarse_margin: added to the coarse NLP's clearance bounds (but the equality leader's own) and separation
@@ -415,6 +416,13 @@ class HorizonOptions:
             raise ParameterError(f"window_overlap must be in [0, window), got {self.window_overlap!r}")
         if self.coarse_knots is not None and (isinstance(self.coarse_knots, bool) or int(self.coarse_knots) < 2):
             raise ParameterError(f"coarse_knots must be ≥ 2 (or None: no coarse pass), got {self.coarse_knots!r}")
+        if not _positive_integer(self.coarse_from):
+            raise ParameterError(f"coarse_from must be a whole number ≥ 1 of knots, got {self.coarse_from!r}")
+        size = self.coarse_from_size
+        if size is not None and not _positive_integer(size):
+            raise ParameterError(
+                f"coarse_from_size must be a whole number ≥ 1 of knots × robots (or None: no such rule), got {size!r}"
+            )
         if isinstance(self.coarse_ends, bool) or int(self.coarse_ends) < 0:
             raise ParameterError(f"coarse_ends must be ≥ 0 steps, got {self.coarse_ends!r}")
         repair = self.coarse_repair

@@ -324,7 +324,7 @@ def run_room(spec: RoomRun) -> dict[str, Any]:
             out["horizon_result"] = hz.get("result")
             out["horizon_stop"] = hz.get("stop")
             out["horizon_iterations"] = hz.get("iterations")
-            coarse = hz.get("coarse")  # the coarse pass (long horizons): "accepted", "rejected" or "failed"
+            coarse = hz.get("coarse")  # the coarse pass (long or large horizons): "accepted", "rejected" or "failed"
             out["horizon_coarse"] = coarse.get("result") if isinstance(coarse, dict) else None
             out["nlp_time"] = _num(timings.get("nlp_time"))
             out["qp_time"] = _num(timings.get("qp_time"))
