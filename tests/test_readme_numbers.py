@@ -522,7 +522,7 @@ QUOTES = [
         r"horizon_rooms_216_(\w+).md\)\) on a machine ([\d.]+)× slower than the table's \(by the (\d+) runs with the"
         r" same result and IPOPT iterations in both\), (\d+) of (\d+) plans are optimal, (\d+) of them under 10 s"
         r" there \((\d+) at the table's speed\), and every plan is no worse than `qp`",
-        lambda: rooms_rerun("ee5f076"),
+        lambda: rooms_rerun("5173c34"),
     ),
     Quote(
         r"the remaining gap of the first sample \(one narrow room, ([\d,]+)\s+knots of train references with its"
