@@ -39,10 +39,9 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from provenance import source_version, versions  # noqa: E402
-from segment_margin import cold_timings  # noqa: E402
+from segment_margin import cold_timings, plan_args  # noqa: E402
 
-from tmr.sweep.room_runs import xy_arg  # noqa: E402
-from tmr.sweep.rooms import room_from_spec, room_spec, write_geojson  # noqa: E402
+from tmr.sweep.rooms import room_from_spec, room_spec  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 OPTIMAL = ("optimal", "coarse_optimal")
@@ -71,11 +70,7 @@ def _args(run: str, where: Path) -> list[str]:
     room = room_from_spec(room_spec(name))
     if isinstance(room, str):
         sys.exit(f"{name}: {room}")
-    write_geojson(room, where / "room.geojson")
-    return [
-        "--map", str(where / "room.geojson"), f"--base={xy_arg(room.base)}", f"--goal={xy_arg(room.goal)}",
-        "--robots", robots, "--method", "horizon", "--no-plots", "--seed", "0", "--quiet", "--time-limit", "60",
-    ]  # fmt: skip
+    return [*plan_args(room, robots, where, "horizon"), "--time-limit", "60"]
 
 
 def _plan(run: str, label: str, low: int) -> dict[str, Any]:

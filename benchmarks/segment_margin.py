@@ -56,10 +56,16 @@ def _room_args(run: str, where: Path) -> list[str]:
     room = room_from_spec(spec) if spec is not None else None
     if room is None or isinstance(room, str) or room.name != name:
         sys.exit(f"{name}: not a room of the 216-room set")
+    return plan_args(room, robots, where)
+
+
+def plan_args(room: Any, robots: str, where: Path, method: str = "qp") -> list[str]:
+    """``tmr plan``'s arguments for a generated ``room`` with ``robots`` (its map written into ``where``), up to
+    ``--out``. Also used by ``coarse_size.py``."""
     write_geojson(room, where / "room.geojson")
     return [
         "--map", str(where / "room.geojson"), f"--base={xy_arg(room.base)}", f"--goal={xy_arg(room.goal)}",
-        "--robots", robots, "--method", "qp", "--no-plots", "--seed", "0", "--quiet",
+        "--robots", robots, "--method", method, "--no-plots", "--seed", "0", "--quiet",
     ]  # fmt: skip
 
 
